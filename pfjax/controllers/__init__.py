@@ -1,0 +1,48 @@
+"""Controllers with one interface (:class:`~pfjax.controllers.base.Controller`) and a registry.
+
+``REGISTRY`` maps a controller name to ``(controller, default_params_factory)``; the
+factories take keyword gains and return the controller's parameter pytree.
+"""
+
+from pfjax.controllers.base import Controller, Observation, step
+from pfjax.controllers.linear import (
+    PAPER_K,
+    TABLE3_GAINS,
+    PIParams,
+    StateFeedbackParams,
+    pi,
+    pi_params,
+    state_feedback,
+    state_feedback_params,
+    table3_assignments,
+)
+from pfjax.controllers.trackers import (
+    PurePursuitParams,
+    RearWheelParams,
+    StanleyParams,
+    pure_pursuit,
+    pure_pursuit_params,
+    rear_wheel,
+    rear_wheel_params,
+    stanley,
+    stanley_params,
+)
+
+#: The source's PI reading adopted by default (decided by the paper-reproduction study, see README):
+#: Table 3 in printed order as Kp1, Ki1, Kp2, Ki2 with e1 = d.
+PAPER_PI = dict(kp_d=TABLE3_GAINS[0], ki_d=TABLE3_GAINS[1], kp_theta=TABLE3_GAINS[2], ki_theta=TABLE3_GAINS[3])
+
+REGISTRY = {
+    "state_feedback": (state_feedback, state_feedback_params),
+    "pi": (pi, lambda **g: pi_params(**{**PAPER_PI, **g})),
+    "stanley": (stanley, stanley_params),
+    "pure_pursuit": (pure_pursuit, pure_pursuit_params),
+    "rear_wheel": (rear_wheel, rear_wheel_params),
+}
+
+__all__ = [
+    "Controller", "Observation", "step", "PAPER_K", "TABLE3_GAINS", "PAPER_PI", "PIParams",
+    "StateFeedbackParams", "pi", "pi_params", "state_feedback", "state_feedback_params",
+    "table3_assignments", "PurePursuitParams", "RearWheelParams", "StanleyParams", "pure_pursuit",
+    "pure_pursuit_params", "rear_wheel", "rear_wheel_params", "stanley", "stanley_params", "REGISTRY",
+]

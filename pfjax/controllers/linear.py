@@ -1,0 +1,92 @@
+"""The source's two controllers: static state feedback and the MISO PI (spec §4-5)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from pfjax.controllers.base import Controller, Observation, no_rate, no_state
+
+#: The source's published mixed H2/Hinf gain (spec §4): u = K [d, theta_e].
+PAPER_K = (-2.7381, -2.0772)
+#: Table 3's GA-optimal PI gains in the order printed; the row labels were lost (spec §5).
+TABLE3_GAINS = (1.6390, 0.0230, 39.5204, 11.6124)
+
+
+class StateFeedbackParams(NamedTuple):
+    """``delta = K [d, theta_e] + feedforward * atan(L kappa)``."""
+
+    K: Array  # (2,) rad/m, rad/rad
+    feedforward: Array  # 0 (source) or 1: add the path-curvature steering atan(L kappa)
+
+
+def state_feedback_params(K=PAPER_K, feedforward=0.0) -> StateFeedbackParams:
+    return StateFeedbackParams(jnp.asarray(np.ravel(K), dtype=float), jnp.asarray(feedforward, dtype=float))
+
+
+def _sf_output(p: StateFeedbackParams, c, obs: Observation) -> Array:
+    return p.K[0] * obs.d + p.K[1] * obs.theta_e + p.feedforward * jnp.arctan(obs.L * obs.kappa)
+
+
+state_feedback = Controller("state_feedback", no_state, _sf_output, no_rate)
+"""Static state feedback ``delta = K x``, ``x = [d, theta_e]`` (source eq. 8; the design is in
+:mod:`pfjax.synthesis`)."""
+
+
+class PIParams(NamedTuple):
+    """MISO PI gains (spec §5, eq. 14)::
+
+        delta = kp_d (-d) + ki_d int(-d) + kp_theta (-theta_e) + ki_theta int(-theta_e)
+
+    ``k_aw`` is the back-calculation anti-windup gain (1/s; 0 = none, the source's PI).
+    """
+
+    kp_d: Array  # rad/m
+    ki_d: Array  # rad/(m s)
+    kp_theta: Array  # rad/rad
+    ki_theta: Array  # 1/s
+    k_aw: Array  # 1/s
+
+
+def pi_params(kp_d, ki_d, kp_theta, ki_theta, k_aw=0.0) -> PIParams:
+    return PIParams(*(jnp.asarray(g, dtype=float) for g in (kp_d, ki_d, kp_theta, ki_theta, k_aw)))
+
+
+#: The 24 ways to read Table 3 as (kp_d, ki_d, kp_theta, ki_theta); which one the source used is
+#: decided by simulation in the paper-reproduction study. ``"d:P,I|theta:P,I"`` is the printed order
+#: read as Kp1, Ki1, Kp2, Ki2 with e1 = d.
+def table3_assignments() -> dict[str, PIParams]:
+    from itertools import permutations
+
+    names = ("kp_d", "ki_d", "kp_theta", "ki_theta")
+    out = {}
+    for perm in permutations(range(4)):
+        gains = {names[j]: TABLE3_GAINS[perm[j]] for j in range(4)}
+        label = ",".join(f"{n}={gains[n]:g}" for n in names)
+        out[label] = pi_params(**gains)
+    return out
+
+
+def _pi_output(p: PIParams, c: Array, obs: Observation) -> Array:
+    # c = [int(-d) * ki_d, int(-theta_e) * ki_theta]: the integral *terms*, rad.
+    return -p.kp_d * obs.d - p.kp_theta * obs.theta_e + c[0] + c[1]
+
+
+def _pi_rate(p: PIParams, c: Array, obs: Observation, delta_cmd: Array, delta: Array) -> Array:
+    # Back-calculation: the saturation excess is fed back into the integral terms, split in
+    # proportion to their integral gains (k_aw = 0 disables it).
+    ki = jnp.abs(p.ki_d) + jnp.abs(p.ki_theta)
+    w_d = jnp.where(ki > 0, jnp.abs(p.ki_d) / jnp.where(ki > 0, ki, 1.0), 0.5)
+    aw = p.k_aw * (delta - delta_cmd)
+    return jnp.stack([-p.ki_d * obs.d + w_d * aw, -p.ki_theta * obs.theta_e + (1.0 - w_d) * aw])
+
+
+def _pi_init(p: PIParams) -> Array:
+    return jnp.zeros((2,), dtype=jnp.result_type(p.kp_d))
+
+
+pi = Controller("pi", _pi_init, _pi_output, _pi_rate)
+"""MISO PI on ``d`` and ``theta_e`` summed into the steering (spec §5, eq. 14), optional anti-windup."""

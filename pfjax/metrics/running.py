@@ -1,0 +1,117 @@
+"""Per-run metrics accumulated while the simulation runs (memory independent of the horizon).
+
+The simulator calls :func:`update` once per integrator sample ``t_k = k dt``, ``k = 0..N``, with
+the trapezoid weight ``w_k dt`` (``w = 1/2`` at both ends, 1 inside, 0 once the run has failed),
+so the integrals are the composite trapezoid rule on the samples::
+
+    IAE  = int |d| dt          ISE = int d^2 dt         ITAE = int t |d| dt
+    steering energy = int delta^2 dt                    (applied steering, rad^2 s)
+
+and the remaining metrics are sample statistics:
+
+* ``max_abs_d``: max |d| (m);
+* ``steady_abs_d``, ``steady_abs_theta_e``: time-mean of |d| (m) and |theta_e| (rad) over the
+  last ``steady_window`` seconds of the horizon;
+* ``settling_time``: first sample time after which |d| stays within ``settle_band`` (s);
+  NaN if the run ends outside the band or fails;
+* ``overshoot``: largest excursion of ``d`` past zero on the side opposite to ``d(0)`` (m, >= 0);
+* ``steer_tv``: total variation of the applied steering, sum |delta_k - delta_{k-1}| (rad);
+* ``sat_fraction``: fraction of the run's time with the command beyond the steering limit.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+
+class Accumulator(NamedTuple):
+    iae: Array
+    ise: Array
+    itae: Array
+    max_abs_d: Array
+    steady_abs_d: Array  # running weighted sum over the steady window
+    steady_abs_theta_e: Array
+    steady_weight: Array
+    settle: Array  # time of the first sample after the last out-of-band one
+    overshoot: Array
+    d0_sign: Array
+    steer_energy: Array
+    steer_tv: Array
+    prev_delta: Array
+    sat_time: Array
+    time: Array  # total weighted time
+
+
+class Metrics(NamedTuple):
+    iae: Array  # m s
+    ise: Array  # m^2 s
+    itae: Array  # m s^2
+    max_abs_d: Array  # m
+    steady_abs_d: Array  # m
+    steady_abs_theta_e: Array  # rad
+    settling_time: Array  # s (NaN: not settled)
+    overshoot: Array  # m
+    steer_energy: Array  # rad^2 s
+    steer_tv: Array  # rad
+    sat_fraction: Array  # 1
+
+
+METRIC_NAMES = Metrics._fields
+
+
+def init(d0: Array, delta0: Array) -> Accumulator:
+    z = jnp.zeros_like(d0)
+    return Accumulator(
+        iae=z, ise=z, itae=z, max_abs_d=z, steady_abs_d=z, steady_abs_theta_e=z, steady_weight=z,
+        settle=z, overshoot=z, d0_sign=jnp.sign(d0), steer_energy=z, steer_tv=z, prev_delta=delta0,
+        sat_time=z, time=z,
+    )
+
+
+def update(acc: Accumulator, t, dt, weight, d, theta_e, delta, saturated, *, band: float,
+           steady_from: float) -> Accumulator:
+    """Add sample ``k`` (time ``t``) with trapezoid weight ``weight`` (0 after a failure)."""
+    w = weight * dt
+    live = weight > 0
+    ad = jnp.abs(d)
+    ws = jnp.where(t >= steady_from - 1e-9, w, 0.0)
+    return Accumulator(
+        iae=acc.iae + w * ad,
+        ise=acc.ise + w * d * d,
+        itae=acc.itae + w * t * ad,
+        max_abs_d=jnp.where(live, jnp.maximum(acc.max_abs_d, ad), acc.max_abs_d),
+        steady_abs_d=acc.steady_abs_d + ws * ad,
+        steady_abs_theta_e=acc.steady_abs_theta_e + ws * jnp.abs(theta_e),
+        steady_weight=acc.steady_weight + ws,
+        settle=jnp.where(live & (ad > band), t + dt, acc.settle),
+        overshoot=jnp.where(live, jnp.maximum(acc.overshoot, -acc.d0_sign * d), acc.overshoot),
+        d0_sign=acc.d0_sign,
+        steer_energy=acc.steer_energy + w * delta * delta,
+        steer_tv=acc.steer_tv + jnp.where(live, jnp.abs(delta - acc.prev_delta), 0.0),
+        prev_delta=jnp.where(live, delta, acc.prev_delta),
+        sat_time=acc.sat_time + w * saturated,
+        time=acc.time + w,
+    )
+
+
+def finalize(acc: Accumulator, horizon: float, failed: Array) -> Metrics:
+    """Turn the accumulator into :class:`Metrics`."""
+    nan = jnp.nan
+    settled = (acc.settle <= horizon) & ~failed
+    sw = jnp.where(acc.steady_weight > 0, acc.steady_weight, 1.0)
+    return Metrics(
+        iae=acc.iae,
+        ise=acc.ise,
+        itae=acc.itae,
+        max_abs_d=acc.max_abs_d,
+        steady_abs_d=jnp.where(failed, nan, acc.steady_abs_d / sw),
+        steady_abs_theta_e=jnp.where(failed, nan, acc.steady_abs_theta_e / sw),
+        settling_time=jnp.where(settled, acc.settle, nan),
+        overshoot=jnp.maximum(acc.overshoot, 0.0),
+        steer_energy=acc.steer_energy,
+        steer_tv=acc.steer_tv,
+        sat_fraction=acc.sat_time / jnp.where(acc.time > 0, acc.time, 1.0),
+    )

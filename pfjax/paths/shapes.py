@@ -1,0 +1,202 @@
+"""Path shapes as pytrees: each is a regular parametric curve ``p(u)`` on ``[u_min, u_max]``.
+
+Every shape is a ``NamedTuple`` of arrays, so a batch of paths of one shape (say sines
+of different amplitude) is vmapped like any other pytree. A shape provides the curve
+and its first two derivatives in its own parameter ``u``; everything else (tangent
+angle, curvature, arc length, closest-point projection) is computed generically in
+:mod:`pfjax.paths.geometry` from those three functions, so a new shape is three
+one-line methods.
+
+Direction of travel is increasing ``u`` (spec §6: increasing ``x`` for the graphs).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+
+def _f(x) -> Array:
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+class Line(NamedTuple):
+    """Straight line ``p(u) = origin + u (cos h, sin h)``; ``u`` is arc length (m).
+
+    The source's line test uses ``y = x``: ``origin = (0, 0)``, ``heading = pi/4``.
+    """
+
+    x0: Array  # m
+    y0: Array  # m
+    heading: Array  # rad
+    u_min: Array  # m
+    u_max: Array  # m
+
+    def point(self, u):
+        return self.x0 + u * jnp.cos(self.heading), self.y0 + u * jnp.sin(self.heading)
+
+    def d1(self, u):
+        one = jnp.ones_like(u)
+        return one * jnp.cos(self.heading), one * jnp.sin(self.heading)
+
+    def d2(self, u):
+        z = jnp.zeros_like(u)
+        return z, z
+
+
+class Parabola(NamedTuple):
+    """Graph ``y = a x^2 + y0`` parameterised by ``u = x`` (m). The source's "square function" is ``a = 1``."""
+
+    a: Array  # 1/m
+    y0: Array  # m
+    u_min: Array  # m (x)
+    u_max: Array  # m (x)
+
+    def point(self, u):
+        return u, self.a * u**2 + self.y0
+
+    def d1(self, u):
+        return jnp.ones_like(u), 2.0 * self.a * u
+
+    def d2(self, u):
+        return jnp.zeros_like(u), 2.0 * self.a * jnp.ones_like(u)
+
+
+class Sine(NamedTuple):
+    """Graph ``y = A sin(w x + phi) + y0`` parameterised by ``u = x`` (m). The source's is ``A = w = 1``."""
+
+    amplitude: Array  # m
+    omega: Array  # rad/m
+    phase: Array  # rad
+    y0: Array  # m
+    u_min: Array  # m (x)
+    u_max: Array  # m (x)
+
+    def point(self, u):
+        return u, self.amplitude * jnp.sin(self.omega * u + self.phase) + self.y0
+
+    def d1(self, u):
+        return jnp.ones_like(u), self.amplitude * self.omega * jnp.cos(self.omega * u + self.phase)
+
+    def d2(self, u):
+        return jnp.zeros_like(u), -self.amplitude * self.omega**2 * jnp.sin(self.omega * u + self.phase)
+
+
+class Circle(NamedTuple):
+    """Circle of radius ``R`` about ``(cx, cy)``, travelled counter-clockwise (``direction = +1``)
+    or clockwise (``-1``), starting at polar angle ``phi0``. ``u`` is arc length (m)."""
+
+    cx: Array  # m
+    cy: Array  # m
+    radius: Array  # m
+    phi0: Array  # rad
+    direction: Array  # +1 CCW (left turn, kappa > 0), -1 CW
+    u_min: Array  # m
+    u_max: Array  # m
+
+    def _phi(self, u):
+        return self.phi0 + self.direction * u / self.radius
+
+    def point(self, u):
+        phi = self._phi(u)
+        return self.cx + self.radius * jnp.cos(phi), self.cy + self.radius * jnp.sin(phi)
+
+    def d1(self, u):
+        phi = self._phi(u)
+        return -self.direction * jnp.sin(phi), self.direction * jnp.cos(phi)
+
+    def d2(self, u):
+        phi = self._phi(u)
+        return -jnp.cos(phi) / self.radius, -jnp.sin(phi) / self.radius
+
+
+class Spline(NamedTuple):
+    """Natural cubic spline through waypoints, chord-length parameter ``u`` (m).
+
+    Piece ``i`` on ``[knots[i], knots[i+1]]`` is ``p(u) = sum_j coef[i, j] (u - knots[i])^j``
+    (per coordinate). Curvature is continuous (C2 spline), so Newton projection is well
+    behaved. Build with :func:`spline_through`.
+    """
+
+    knots: Array  # (n,) m, chord-length parameter of each waypoint
+    coef_x: Array  # (n-1, 4)
+    coef_y: Array  # (n-1, 4)
+    u_min: Array  # m
+    u_max: Array  # m
+
+    def _piece(self, u):
+        i = jnp.clip(jnp.searchsorted(self.knots, u, side="right") - 1, 0, self.knots.shape[0] - 2)
+        return self.coef_x[i], self.coef_y[i], u - self.knots[i]
+
+    def point(self, u):
+        cx, cy, t = self._piece(u)
+        ev = lambda c: ((c[..., 3] * t + c[..., 2]) * t + c[..., 1]) * t + c[..., 0]
+        return ev(cx), ev(cy)
+
+    def d1(self, u):
+        cx, cy, t = self._piece(u)
+        ev = lambda c: (3.0 * c[..., 3] * t + 2.0 * c[..., 2]) * t + c[..., 1]
+        return ev(cx), ev(cy)
+
+    def d2(self, u):
+        cx, cy, t = self._piece(u)
+        ev = lambda c: 6.0 * c[..., 3] * t + 2.0 * c[..., 2]
+        return ev(cx), ev(cy)
+
+
+# ---------------------------------------------------------------- constructors
+
+
+def line(x0=0.0, y0=0.0, heading=np.pi / 4, u_min=-20.0, u_max=80.0) -> Line:
+    """Line through ``(x0, y0)`` with direction ``heading`` (default: the source's ``y = x``)."""
+    return Line(*(_f(a) for a in (x0, y0, heading, u_min, u_max)))
+
+
+def parabola(a=1.0, y0=0.0, u_min=-10.0, u_max=10.0) -> Parabola:
+    """Parabola ``y = a x^2 + y0`` (default: the source's ``y = x^2``), ``x`` in ``[u_min, u_max]``."""
+    return Parabola(*(_f(v) for v in (a, y0, u_min, u_max)))
+
+
+def sine(amplitude=1.0, omega=1.0, phase=0.0, y0=0.0, u_min=-10.0, u_max=60.0) -> Sine:
+    """Sine ``y = A sin(w x + phase) + y0`` (default: the source's ``y = sin x``)."""
+    return Sine(*(_f(v) for v in (amplitude, omega, phase, y0, u_min, u_max)))
+
+
+def circle(radius=2.0, cx=0.0, cy=0.0, phi0=-np.pi / 2, direction=1.0, laps=3.0) -> Circle:
+    """Circle of ``radius`` about ``(cx, cy)`` starting (``u = 0``) at polar angle ``phi0``.
+
+    The valid domain is half a lap before the start to ``laps`` turns after it.
+    """
+    return Circle(*(_f(v) for v in (cx, cy, radius, phi0, direction, -np.pi * radius, laps * 2 * np.pi * radius)))
+
+
+def spline_through(waypoints) -> Spline:
+    """Natural cubic spline through ``waypoints`` (shape ``(n, 2)``, ``n >= 3``, distinct consecutive points).
+
+    Built with NumPy at the edge (``scipy.interpolate.CubicSpline``), evaluated in JAX.
+    """
+    from scipy.interpolate import CubicSpline
+
+    w = np.asarray(waypoints, dtype=float)
+    if w.ndim != 2 or w.shape[1] != 2 or w.shape[0] < 3:
+        raise ValueError(f"waypoints: expected an (n, 2) array with n >= 3, got shape {w.shape}")
+    chord = np.linalg.norm(np.diff(w, axis=0), axis=1)
+    if np.any(chord <= 0) or not np.all(np.isfinite(w)):
+        raise ValueError("waypoints: consecutive waypoints must be distinct and finite")
+    knots = np.concatenate([[0.0], np.cumsum(chord)])
+    cs = CubicSpline(knots, w, bc_type="natural")
+    # CubicSpline.c has shape (4, n-1, 2) with highest power first.
+    c = cs.c[::-1]  # (4, n-1, 2), lowest power first
+    return Spline(
+        knots=_f(knots),
+        coef_x=_f(c[:, :, 0].T),
+        coef_y=_f(c[:, :, 1].T),
+        u_min=_f(knots[0]),
+        u_max=_f(knots[-1]),
+    )
+
+
+PAPER_PATHS = {"line": line, "parabola": parabola, "sine": sine, "circle": circle}

@@ -1,0 +1,19 @@
+"""Simulation: slip profiles, the RK4 scan loop, batching, run status."""
+
+from pfjax.sim.simulate import Final, Scenario, SimConfig, SimResult, Trajectory, simulate, simulate_batch, stack, unstack
+from pfjax.sim.slip_profiles import (
+    SlipProfile,
+    constant_slip,
+    sampled_slip,
+    sinusoid_slip,
+    slip_at,
+    slip_profile,
+    step_slip,
+)
+from pfjax.sim.status import STATUS_NAMES, Status
+
+__all__ = [
+    "Final", "Scenario", "SimConfig", "SimResult", "Trajectory", "simulate", "simulate_batch", "stack",
+    "unstack", "SlipProfile", "constant_slip", "sampled_slip", "sinusoid_slip", "slip_at", "slip_profile",
+    "step_slip", "STATUS_NAMES", "Status",
+]

@@ -1,0 +1,256 @@
+"""The simulator: one ``lax.scan`` over integrator steps of the world-frame slip model.
+
+Per step ``k`` (time ``t_k = k dt``):
+
+1. measure the pose against the path (closest point, warm-started Newton, spec §2);
+2. sampled controllers: every ``control_every`` steps compute a new command and hold it
+   (zero-order hold); continuous controllers: evaluated inside every RK4 stage instead;
+3. saturate the steering at ``+-delta_max``;
+4. check the run's health (:mod:`pfjax.sim.status`) and accumulate the metrics;
+5. advance the pose (and a continuous controller's state) by one RK4 step, slip evaluated at
+   the stage times.
+
+:func:`simulate` is one run (write single-run code); :func:`simulate_batch` is the jitted,
+vmapped entry point. ``SimConfig`` fixes the shapes and is a static argument.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from pfjax.controllers.base import Controller, Observation, step
+from pfjax.metrics import running
+from pfjax.models.slip import Pose, SlipParams, world_rhs
+from pfjax.paths.geometry import Projection, closest_parameter, global_parameter, measure
+from pfjax.sim.integrators import rk4_step
+from pfjax.sim.slip_profiles import SlipProfile, slip_at
+from pfjax.sim.status import Status, classify
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Static settings (they fix array shapes; hashable so they can be jit-static).
+
+    Attributes:
+        dt: integrator step, s (default 5 ms).
+        horizon: simulated time, s (spec §6 *assumed* 20 s).
+        control_every: controller sampling period in integrator steps (zero-order hold);
+            ``None`` evaluates the controller continuously inside every RK4 stage.
+        newton_iters: Newton steps of the warm-started projection per measurement.
+        record: ``True`` returns full trajectories (memory O(horizon) per run);
+            ``False`` only the running metrics (memory independent of the horizon).
+        d_fail: |d| above which a run is flagged ``DIVERGED``, m.
+        settle_band: band on |d| for the settling time, m.
+        steady_window: final part of the run for the steady-state errors, s.
+    """
+
+    dt: float = 0.005
+    horizon: float = 20.0
+    control_every: int | None = 1
+    newton_iters: int = 3
+    record: bool = True
+    d_fail: float = 10.0
+    settle_band: float = 0.05
+    steady_window: float = 5.0
+
+    def __post_init__(self):
+        if not self.dt > 0:
+            raise ValueError(f"dt: must be > 0 s, got {self.dt}")
+        if not self.horizon >= self.dt:
+            raise ValueError(f"horizon: must be >= dt, got {self.horizon}")
+        if self.control_every is not None and (int(self.control_every) != self.control_every or self.control_every < 1):
+            raise ValueError(f"control_every: must be a positive integer or None, got {self.control_every}")
+        if int(self.newton_iters) < 1:
+            raise ValueError(f"newton_iters: must be >= 1, got {self.newton_iters}")
+
+    @property
+    def n_steps(self) -> int:
+        return int(round(self.horizon / self.dt))
+
+
+class Scenario(NamedTuple):
+    """Everything that varies between runs (a pytree; batch it along a leading axis)."""
+
+    pose0: Pose  # initial rear-axle pose (m, m, rad)
+    slip: SlipProfile  # slip angles over time
+    params: SlipParams  # v, L, delta_max, convention
+    path: Any  # a path shape from pfjax.paths
+    gains: Any  # the controller's parameter pytree
+
+
+class Trajectory(NamedTuple):
+    """Samples at ``t_k = k dt``, ``k = 0..N`` (shape ``(N+1,)`` per run)."""
+
+    t: Array  # s
+    x: Array  # m
+    y: Array  # m
+    theta: Array  # rad
+    d: Array  # m
+    theta_e: Array  # rad
+    kappa: Array  # 1/m
+    s: Array  # m
+    delta_cmd: Array  # rad, controller command (before saturation)
+    delta: Array  # rad, applied steering
+    beta_r: Array  # rad
+    beta_f: Array  # rad
+
+
+class Final(NamedTuple):
+    """State at the end of the horizon (or at the failure)."""
+
+    x: Array  # m
+    y: Array  # m
+    theta: Array  # rad
+    d: Array  # m
+    theta_e: Array  # rad
+    delta: Array  # rad, applied steering
+    s: Array  # m
+
+
+class SimResult(NamedTuple):
+    metrics: running.Metrics
+    status: Array  # int32, a pfjax.sim.status.Status
+    fail_time: Array  # s, time of the first failure (NaN if none)
+    final: Final
+    trajectory: Trajectory | None
+
+
+def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
+    p = sc.params
+    return Observation(
+        d=proj.d, theta_e=proj.theta_e, kappa=proj.kappa, s=proj.s, u=proj.u, pose=pose,
+        v=jnp.asarray(p.v, float), L=jnp.asarray(p.L, float), delta_max=jnp.asarray(p.delta_max, float),
+        path=sc.path,
+    )
+
+
+def _measure(sc: Scenario, pose: Pose, u_guess, iters) -> Projection:
+    u = closest_parameter(sc.path, pose.x, pose.y, u_guess, iters)
+    return measure(sc.path, pose.x, pose.y, pose.theta, u)
+
+
+def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResult:
+    """Simulate one run (pure, unbatched; see :func:`simulate_batch` for the entry point).
+
+    Args:
+        controller: the controller (static).
+        sc: the run's scenario.
+        config: static settings.
+
+    Returns:
+        ``SimResult`` with metrics, status, failure time, final state and (if
+        ``config.record``) the trajectory.
+    """
+    dt, n_steps, iters = config.dt, config.n_steps, config.newton_iters
+    horizon = n_steps * dt
+    continuous = config.control_every is None
+    every = 1 if continuous else int(config.control_every)
+    gains, params = sc.gains, sc.params
+    dmax = jnp.asarray(params.delta_max, float)
+
+    pose0 = Pose(*(jnp.asarray(a, float) for a in sc.pose0))
+    u0 = global_parameter(sc.path, pose0.x, pose0.y)
+    c0 = controller.init(gains)
+
+    def closed_loop_rhs(u_guess):
+        """Vector field of (pose, controller state) with the controller inside (continuous mode)."""
+
+        def f(t, y):
+            pose, c = y
+            obs = _observation(_measure(sc, pose, u_guess, iters), pose, sc)
+            cmd = controller.output(gains, c, obs)
+            delta = jnp.clip(cmd, -dmax, dmax)
+            br, bf = slip_at(sc.slip, t)
+            return world_rhs(pose, delta, br, bf, params), controller.rate(gains, c, obs, cmd, delta)
+
+        return f
+
+    def health(pose, proj):
+        finite = jnp.isfinite(pose.x) & jnp.isfinite(pose.y) & jnp.isfinite(pose.theta) & jnp.isfinite(proj.d)
+        return classify(finite, jnp.abs(proj.d), 1.0 - proj.kappa * proj.d, proj.at_end, config.d_fail)
+
+    def record_of(t, pose, proj, cmd, delta):
+        br, bf = slip_at(sc.slip, t)
+        return Trajectory(t, pose.x, pose.y, pose.theta, proj.d, proj.theta_e, proj.kappa, proj.s, cmd, delta, br, bf)
+
+    def sample(carry, t, weight, pose, proj, cmd, delta):
+        """Health check + metrics at one sample; returns the updated (acc, status, fail_time)."""
+        acc, status, fail_time = carry
+        now = health(pose, proj)
+        newly = (status == Status.OK) & (now != Status.OK)
+        status = jnp.where(newly, now, status)
+        fail_time = jnp.where(newly, t, fail_time)
+        live = status == Status.OK
+        acc = running.update(
+            acc, t, dt, jnp.where(live, weight, 0.0), jnp.where(live, proj.d, 0.0),
+            jnp.where(live, proj.theta_e, 0.0), delta, (jnp.abs(cmd) > dmax).astype(float),
+            band=config.settle_band, steady_from=horizon - config.steady_window,
+        )
+        return (acc, status, fail_time), live
+
+    def body(carry, k):
+        pose, c, u, cmd, health_carry = carry
+        t = k * dt
+        proj = _measure(sc, pose, u, iters)
+        obs = _observation(proj, pose, sc)
+        if continuous:
+            cmd = controller.output(gains, c, obs)
+        else:
+            cmd, c = jax.lax.cond(
+                k % every == 0,
+                lambda: step(controller, gains, c, obs, every * dt),
+                lambda: (cmd, c),
+            )
+        delta = jnp.clip(cmd, -dmax, dmax)
+        weight = jnp.where(k == 0, 0.5, 1.0)
+        health_carry, live = sample(health_carry, t, weight, pose, proj, cmd, delta)
+        if continuous:
+            new_pose, new_c = rk4_step(closed_loop_rhs(proj.u), t, (pose, c), dt)
+        else:
+            rhs = lambda tt, ps: world_rhs(ps, delta, *slip_at(sc.slip, tt), params)
+            new_pose, new_c = rk4_step(rhs, t, pose, dt), c
+        keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(live, a, b), new, old)
+        out = record_of(t, pose, proj, cmd, delta) if config.record else None
+        return (keep(new_pose, pose), keep(new_c, c), jnp.where(live, proj.u, u), cmd, health_carry), out
+
+    proj0 = measure(sc.path, pose0.x, pose0.y, pose0.theta, u0)
+    cmd0 = jnp.zeros_like(proj0.d)
+    acc0 = running.init(proj0.d, jnp.clip(controller.output(gains, c0, _observation(proj0, pose0, sc)), -dmax, dmax))
+    init = (pose0, c0, u0, cmd0, (acc0, jnp.int32(Status.OK), jnp.asarray(jnp.nan, proj0.d.dtype)))
+    (pose, c, u, cmd, health_carry), traj = jax.lax.scan(body, init, jnp.arange(n_steps))
+
+    # Final sample t_N (trapezoid end point).
+    t_end = jnp.asarray(horizon, proj0.d.dtype)
+    proj = _measure(sc, pose, u, iters)
+    if continuous:
+        cmd = controller.output(gains, c, _observation(proj, pose, sc))
+    delta = jnp.clip(cmd, -dmax, dmax)
+    (acc, status, fail_time), _ = sample(health_carry, t_end, 0.5, pose, proj, cmd, delta)
+    metrics = running.finalize(acc, horizon, status != Status.OK)
+    final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, delta, proj.s)
+    if config.record:
+        last = record_of(t_end, pose, proj, cmd, delta)
+        traj = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), traj, last)
+    return SimResult(metrics, status, fail_time, final, traj)
+
+
+@partial(jax.jit, static_argnames=("controller", "config"))
+def simulate_batch(scenarios: Scenario, *, controller: Controller, config: SimConfig) -> SimResult:
+    """Jitted, vmapped :func:`simulate` over a batch of scenarios (leading axis of every leaf)."""
+    return jax.vmap(lambda sc: simulate(controller, sc, config))(scenarios)
+
+
+def stack(items):
+    """Stack a list of pytrees with identical structure along a new leading axis."""
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *items)
+
+
+def unstack(tree, i: int):
+    """Run ``i`` of a batched pytree."""
+    return jax.tree_util.tree_map(lambda a: a[i], tree)

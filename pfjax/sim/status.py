@@ -1,0 +1,31 @@
+"""Run status codes: a failed run is data, never an exception (diffrax ``RESULTS`` style).
+
+The first failure wins; from that sample on the state is frozen and the metrics stop
+accumulating, so the metrics describe the run up to its failure.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+import jax.numpy as jnp
+
+
+class Status(IntEnum):
+    OK = 0  #: ran the whole horizon
+    NONFINITE = 1  #: a state or measurement became NaN or infinite
+    DIVERGED = 2  #: |d| exceeded ``SimConfig.d_fail``
+    SINGULAR = 3  #: left the Frenet model's valid region, 1 - kappa d <= 0 (inside the bend's centre)
+    PATH_END = 4  #: the closest point reached an end of the path's valid domain
+
+
+STATUS_NAMES = {int(s): s.name.lower() for s in Status}
+
+
+def classify(finite, abs_d, one_minus_kd, at_end, d_fail: float):
+    """Status of one sample (int32), checked in order of severity."""
+    return jnp.select(
+        [~finite, abs_d > d_fail, one_minus_kd <= 1e-6, at_end],
+        [Status.NONFINITE, Status.DIVERGED, Status.SINGULAR, Status.PATH_END],
+        Status.OK,
+    ).astype(jnp.int32)
