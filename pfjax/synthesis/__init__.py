@@ -1,0 +1,36 @@
+"""LMI state-feedback synthesis and system norms (cvxpy/Clarabel; NumPy in, NumPy out).
+
+Never imported by jitted code: designs are computed once, at the edges, and their gains passed
+to the simulator as plain arrays.
+"""
+
+from pfjax.synthesis.lmi import (
+    Design,
+    SynthesisError,
+    h2_state_feedback,
+    hinf_state_feedback,
+    mixed_bounds_for_gain,
+    mixed_h2_hinf,
+    synthesize,
+)
+from pfjax.synthesis.norms import closed_loop, h2_norm, hinf_norm, is_hurwitz
+from pfjax.synthesis.plant import Plant, slip_design_plant
+from pfjax.synthesis.regions import PoleRegion, region_contains
+
+__all__ = [
+    "Design",
+    "Plant",
+    "PoleRegion",
+    "SynthesisError",
+    "closed_loop",
+    "h2_norm",
+    "h2_state_feedback",
+    "hinf_norm",
+    "hinf_state_feedback",
+    "is_hurwitz",
+    "mixed_bounds_for_gain",
+    "mixed_h2_hinf",
+    "region_contains",
+    "slip_design_plant",
+    "synthesize",
+]
