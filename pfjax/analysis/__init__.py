@@ -1,0 +1,5 @@
+"""Analyses on top of the models: equilibria and local stability (spec §7)."""
+
+from pfjax.analysis.stability import Equilibrium, closed_loop_field, equilibrium, source_linearisation, stability_map
+
+__all__ = ["Equilibrium", "closed_loop_field", "equilibrium", "source_linearisation", "stability_map"]

@@ -1,0 +1,97 @@
+"""Equilibria and local stability of the state-feedback loop under constant slip (spec §7).
+
+Closed loop on a path of constant curvature ``kappa`` (0: the straight line) with
+``delta = sat(K x)``, ``x = [d, theta_e]``, in the Frenet model (eq. 6)::
+
+    d'       = v (sin theta_e + tan beta_r cos theta_e)
+    theta_e' = yaw_rate(delta, beta_r, beta_f) - kappa v (cos theta_e - tan beta_r sin theta_e) / (1 - kappa d)
+
+**True equilibrium.** ``d' = 0`` forces ``theta_e* = -beta_r`` (forward travel). On a line the yaw
+rate must vanish, so ``delta* = beta_r + beta_f`` (source convention; ``beta_r - beta_f`` in
+Lenain's), and ``K x* = delta*`` gives ``d* = (delta* + K_2 beta_r) / K_1``. The equilibrium exists
+only if ``|delta*| < delta_max``: beyond, the saturated loop has no rest point. On a curve the
+same holds with ``d*`` solved by Newton. The source instead linearises at ``[0, -beta_r]``
+(appendix B), which is not an equilibrium unless ``delta* = -K_2 beta_r``.
+
+**Local stability.** Eigenvalues of the Jacobian of the unsaturated field at the point
+(closed form for 2x2). All functions are jittable and vmap over slip grids.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from pfjax.models.slip import FrenetState, SlipParams, frenet_rhs
+
+
+class Equilibrium(NamedTuple):
+    d: Array  # m
+    theta_e: Array  # rad
+    delta: Array  # rad, steering at the equilibrium
+    exists: Array  # bool: Newton converged and |delta| < delta_max
+    eig: Array  # (2,) complex, eigenvalues of the Jacobian there
+    hurwitz: Array  # bool: exists and both real parts < 0
+
+
+def closed_loop_field(x: Array, K: Array, beta_r, beta_f, kappa, params: SlipParams, saturate=True) -> Array:
+    """``[d', theta_e']`` of the state-feedback loop (Frenet model, constant ``kappa``)."""
+    delta = K[0] * x[0] + K[1] * x[1]
+    if saturate:
+        delta = jnp.clip(delta, -params.delta_max, params.delta_max)
+    dx = frenet_rhs(FrenetState(x[0], x[1], 0.0), delta, beta_r, beta_f, kappa, params)
+    return jnp.stack([dx.d, dx.theta_e])
+
+
+def _eig2(J: Array) -> Array:
+    tr, det = J[0, 0] + J[1, 1], J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+    disc = jnp.sqrt((0.25 * tr * tr - det).astype(complex))
+    return jnp.stack([0.5 * tr + disc, 0.5 * tr - disc])
+
+
+def jacobian_eigenvalues(x: Array, K: Array, beta_r, beta_f, kappa, params: SlipParams) -> Array:
+    """Eigenvalues of the unsaturated loop's Jacobian at ``x`` (rad/s)."""
+    J = jax.jacfwd(closed_loop_field)(x, K, beta_r, beta_f, kappa, params, False)
+    return _eig2(J)
+
+
+def equilibrium(K: Array, beta_r, beta_f, params: SlipParams, kappa=0.0, iters: int = 30) -> Equilibrium:
+    """True equilibrium of the loop for constant slip (and curvature) and its local stability."""
+    K = jnp.asarray(K, float)
+    theta = -jnp.asarray(beta_r, float)
+    lenain = jnp.asarray(params.convention) == 1
+    delta_line = jnp.where(lenain, beta_r - beta_f, beta_r + beta_f)
+    d = (delta_line - K[1] * theta) / K[0]
+
+    # Newton on theta_e' = 0 in d (theta_e fixed at -beta_r makes d' = 0 exactly).
+    g = lambda dd: closed_loop_field(jnp.stack([dd, theta]), K, beta_r, beta_f, kappa, params, False)[1]
+    for _ in range(iters):
+        d = d - g(d) / jax.grad(g)(d)
+    x = jnp.stack([d, theta])
+    delta = K[0] * d + K[1] * theta
+    residual = jnp.abs(closed_loop_field(x, K, beta_r, beta_f, kappa, params, False)).max()
+    exists = (residual < 1e-9) & (jnp.abs(delta) < params.delta_max) & jnp.isfinite(d)
+    eig = jacobian_eigenvalues(x, K, beta_r, beta_f, kappa, params)
+    return Equilibrium(d, theta, delta, exists, eig, exists & jnp.all(eig.real < 0))
+
+
+def source_linearisation(K: Array, beta_r, beta_f, params: SlipParams) -> Array:
+    """Eigenvalues the source plots (appendix B, Figs. 4-5): Jacobian at ``[0, -beta_r]`` on a line."""
+    x = jnp.stack([jnp.zeros_like(jnp.asarray(beta_r, float)), -jnp.asarray(beta_r, float)])
+    return jacobian_eigenvalues(x, jnp.asarray(K, float), beta_r, beta_f, 0.0, params)
+
+
+@jax.jit
+def stability_map(K: Array, beta_r: Array, beta_f: Array, params: SlipParams) -> tuple[Equilibrium, Array]:
+    """True equilibria and the source's eigenvalues over a grid ``beta_r[i] x beta_f[j]`` (rad), on a line.
+
+    Returns:
+        ``(Equilibrium with leaves of shape (n_r, n_f[, 2]), source eigenvalues (n_r, n_f, 2))``.
+    """
+    BR, BF = jnp.meshgrid(beta_r, beta_f, indexing="ij")
+    eq = jax.vmap(jax.vmap(lambda br, bf: equilibrium(K, br, bf, params)))(BR, BF)
+    src = jax.vmap(jax.vmap(lambda br, bf: source_linearisation(K, br, bf, params)))(BR, BF)
+    return eq, src

@@ -1,0 +1,291 @@
+"""The ``pfjax`` command line.
+
+    pfjax synth --method {mixed,hinf,h2} [--v 1 --L 0.2 --alpha 10 --beta 1] [--json]
+    pfjax simulate --path {line,parabola,sine,circle} [--x0 X Y THETA] [--beta-r-deg B] [--beta-f-deg B]
+                   --controller {mixed,paper-k,pi,stanley,pure-pursuit,rear-wheel} [--gains G,...] [--T 20] [--json]
+
+Bad arguments print one line naming the flag, the value and what was expected, and exit with
+code 2 before anything is computed or written. A run that fails numerically is reported in
+its ``status``; it is not an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+EXIT_USAGE = 2
+
+CONTROLLER_CHOICES = ("mixed", "paper-k", "pi", "stanley", "pure-pursuit", "rear-wheel")
+#: CLI controller name -> (registry name, gain names in --gains order)
+GAIN_NAMES = {
+    "mixed": ("state_feedback", ("k_d", "k_theta")),
+    "paper-k": ("state_feedback", ("k_d", "k_theta")),
+    "pi": ("pi", ("kp_d", "ki_d", "kp_theta", "ki_theta", "k_aw")),
+    "stanley": ("stanley", ("k", "k_soft")),
+    "pure-pursuit": ("pure_pursuit", ("ld_gain", "ld_min")),
+    "rear-wheel": ("rear_wheel", ("k_theta", "k_d")),
+}
+
+
+class UsageError(Exception):
+    """A bad command-line value; the message names the flag."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit code 2 (argparse's own convention)
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def _finite(flag: str, value: float, *, positive=False, below=None, unit="") -> float:
+    if not math.isfinite(value):
+        raise UsageError(f"{flag}: expected a finite number, got {value}")
+    if positive and value <= 0:
+        raise UsageError(f"{flag}: must be > 0{unit}, got {value:g}")
+    if below is not None and abs(value) >= below:
+        raise UsageError(f"{flag}: magnitude must be < {below:g}{unit}, got {value:g}")
+    return value
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o).__name__)
+
+
+def _clean(o):
+    """Replace NaN/inf by None so the output is strict JSON."""
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    return o
+
+
+def dumps(obj) -> str:
+    return json.dumps(_clean(json.loads(json.dumps(obj, default=_json_default))), allow_nan=False)
+
+
+# --------------------------------------------------------------------------- synth
+
+
+def _cmd_synth(args) -> dict:
+    from pfjax.synthesis import PoleRegion, SynthesisError, synthesize
+
+    _finite("--v", args.v, positive=True, unit=" m/s")
+    _finite("--L", args.L, positive=True, unit=" m")
+    _finite("--alpha", args.alpha)
+    _finite("--beta", args.beta)
+    if args.alpha < 0 or args.beta < 0 or args.alpha + args.beta == 0:
+        raise UsageError(f"--alpha/--beta: must be >= 0 and not both 0, got {args.alpha:g}, {args.beta:g}")
+    region = None
+    if args.max_real is not None or args.disk is not None or args.sector_deg is not None:
+        if args.disk is not None and args.disk[1] <= 0:
+            raise UsageError(f"--disk: radius must be > 0, got {args.disk[1]:g}")
+        if args.sector_deg is not None and not 0 < args.sector_deg < 90:
+            raise UsageError(f"--sector-deg: expected a half-angle in (0, 90), got {args.sector_deg:g}")
+        region = PoleRegion(
+            max_real=args.max_real,
+            disk_center=None if args.disk is None else args.disk[0],
+            disk_radius=None if args.disk is None else args.disk[1],
+            sector_angle=None if args.sector_deg is None else math.radians(args.sector_deg),
+        )
+    try:
+        design = synthesize(args.method, v=args.v, L=args.L, alpha=args.alpha, beta=args.beta, region=region)
+    except SynthesisError as e:
+        raise UsageError(f"--method {args.method}: {e}") from None
+    out = design.to_dict()
+    out.update(v=args.v, L=args.L)
+    return out
+
+
+# --------------------------------------------------------------------------- simulate
+
+
+def _parse_gains(controller: str, text: str | None) -> dict:
+    names = GAIN_NAMES[controller][1]
+    if text is None:
+        return {}
+    parts = [p.strip() for p in text.split(",") if p.strip()]
+    out = {}
+    if parts and all("=" in p for p in parts):
+        for p in parts:
+            k, v = (s.strip() for s in p.split("=", 1))
+            if k not in names:
+                raise UsageError(f"--gains: unknown gain {k!r} for --controller {controller}; expected {', '.join(names)}")
+            out[k] = v
+    else:
+        if not 1 <= len(parts) <= len(names):
+            raise UsageError(
+                f"--gains: expected up to {len(names)} comma-separated numbers ({','.join(names)}) "
+                f"for --controller {controller}, got {text!r}"
+            )
+        out = dict(zip(names, parts))
+    for k, v in out.items():
+        try:
+            out[k] = _finite("--gains", float(v))
+        except ValueError:
+            raise UsageError(f"--gains: {k}={v!r} is not a number") from None
+    return out
+
+
+def _controller_and_gains(args):
+    from pfjax import controllers as C
+
+    registry_name, names = GAIN_NAMES[args.controller]
+    given = _parse_gains(args.controller, args.gains)
+    controller, factory = C.REGISTRY[registry_name]
+    if args.controller in ("mixed", "paper-k"):
+        if given:
+            K = (given.get("k_d", C.PAPER_K[0]), given.get("k_theta", C.PAPER_K[1]))
+        elif args.controller == "paper-k":
+            K = C.PAPER_K
+        else:
+            from pfjax.synthesis import synthesize
+
+            K = tuple(float(k) for k in synthesize("mixed", v=args.v, L=args.L).K.ravel())
+        gains = C.state_feedback_params(K)
+        shown = {"k_d": K[0], "k_theta": K[1]}
+    else:
+        gains = factory(**given)
+        shown = {k: float(v) for k, v in gains._asdict().items()}
+    return controller, gains, shown
+
+
+def _cmd_simulate(args) -> dict:
+    import numpy as np
+
+    from pfjax.metrics import METRIC_NAMES
+    from pfjax.scenarios import SCENARIOS, paper_scenario
+    from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack
+
+    _finite("--v", args.v, positive=True, unit=" m/s")
+    _finite("--L", args.L, positive=True, unit=" m")
+    _finite("--beta-r-deg", args.beta_r_deg, below=90, unit=" deg")
+    _finite("--beta-f-deg", args.beta_f_deg, below=90, unit=" deg")
+    _finite("--delta-max-deg", args.delta_max_deg, positive=True, below=90, unit=" deg")
+    _finite("--T", args.T, positive=True, unit=" s")
+    _finite("--dt", args.dt, positive=True, unit=" s")
+    if args.dt > args.T:
+        raise UsageError(f"--dt: must be <= --T ({args.T:g} s), got {args.dt:g}")
+    if args.T / args.dt > 2_000_000:
+        raise UsageError(f"--T/--dt: at most 2e6 steps, got {args.T / args.dt:.3g}")
+    if args.control_every is not None and args.control_every < 1:
+        raise UsageError(f"--control-every: must be a positive integer, got {args.control_every}")
+    if args.x0 is not None:
+        for flag, value in zip(("--x0 X", "--x0 Y", "--x0 THETA"), args.x0):
+            _finite(flag, value)
+    controller, gains, shown = _controller_and_gains(args)
+
+    sc = paper_scenario(
+        args.path, gains, beta_r_deg=args.beta_r_deg, beta_f_deg=args.beta_f_deg,
+        pose0=None if args.x0 is None else tuple(args.x0), v=args.v, L=args.L,
+        delta_max_deg=args.delta_max_deg, convention=args.convention,
+    )
+    cfg = SimConfig(dt=args.dt, horizon=args.T, record=False,
+                    control_every=None if args.continuous else (args.control_every or 1))
+    r = unstack(simulate_batch(stack([sc]), controller=controller, config=cfg), 0)
+    status = int(r.status)
+    metrics = {k: float(getattr(r.metrics, k)) for k in METRIC_NAMES}
+    metrics["status"] = STATUS_NAMES[status]
+    x0 = SCENARIOS[args.path][1] if args.x0 is None else args.x0
+    return {
+        "path": args.path,
+        "controller": args.controller,
+        "gains": shown,
+        "x0": {"x": x0[0], "y": x0[1], "theta": x0[2]},
+        "beta_r": math.radians(args.beta_r_deg),
+        "beta_f": math.radians(args.beta_f_deg),
+        "T": cfg.n_steps * cfg.dt,
+        "dt": cfg.dt,
+        "final": {k: float(v) for k, v in r.final._asdict().items()},
+        "metrics": metrics,
+        "status_code": status,
+        "fail_time": float(r.fail_time) if np.isfinite(r.fail_time) else None,
+    }
+
+
+# --------------------------------------------------------------------------- main
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from pfjax import __version__
+
+    p = _Parser(prog="pfjax", description="Path following in JAX: slip-robust path-following controllers.")
+    p.add_argument("--version", action="version", version=f"pfjax {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    s = sub.add_parser("synth", help="design a state feedback by LMIs (spec §4) and print K, bounds, true norms",
+                       description="State-feedback H-inf, H2 or mixed H2/H-inf design for the slip model (msfsyn convention).")
+    s.add_argument("--method", choices=("mixed", "hinf", "h2"), default="mixed")
+    s.add_argument("--v", type=float, default=1.0, help="speed, m/s (default 1)")
+    s.add_argument("--L", type=float, default=0.2, help="wheelbase, m (default 0.2)")
+    s.add_argument("--alpha", type=float, default=10.0, help="weight on gamma_inf^2 (mixed; default 10)")
+    s.add_argument("--beta", type=float, default=1.0, help="weight on gamma_2^2 (mixed; default 1)")
+    s.add_argument("--max-real", type=float, help="pole region: Re(s) < MAX_REAL")
+    s.add_argument("--disk", type=float, nargs=2, metavar=("CENTER", "RADIUS"), help="pole region: |s - CENTER| < RADIUS")
+    s.add_argument("--sector-deg", type=float, help="pole region: conic sector of this half-angle about the negative real axis")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.set_defaults(func=_cmd_synth)
+
+    m = sub.add_parser("simulate", help="simulate one run of a paper scenario and print final state and metrics",
+                       description="One closed-loop run of the slip model on a path (SI units; THETA in rad).")
+    m.add_argument("--path", choices=("line", "parabola", "sine", "circle"), required=True)
+    m.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA"), help="initial pose (m, m, rad); default: the source's")
+    m.add_argument("--beta-r-deg", type=float, default=5.0, help="rear slip angle, deg (default 5)")
+    m.add_argument("--beta-f-deg", type=float, default=5.0, help="front slip angle, deg (default 5)")
+    m.add_argument("--controller", choices=CONTROLLER_CHOICES, required=True,
+                   help="mixed: the LMI design with the source's weights; paper-k: the source's published K")
+    m.add_argument("--gains", help="comma-separated gains (or name=value pairs): " +
+                   "; ".join(f"{c}: {','.join(n)}" for c, (_, n) in GAIN_NAMES.items()))
+    m.add_argument("--T", type=float, default=20.0, help="horizon, s (default 20)")
+    m.add_argument("--dt", type=float, default=0.005, help="RK4 step, s (default 0.005)")
+    m.add_argument("--control-every", type=int, help="controller sampling period in steps (default 1)")
+    m.add_argument("--continuous", action="store_true", help="evaluate the controller inside every RK4 stage")
+    m.add_argument("--v", type=float, default=1.0, help="speed, m/s")
+    m.add_argument("--L", type=float, default=0.2, help="wheelbase, m")
+    m.add_argument("--delta-max-deg", type=float, default=30.0, help="steering limit, deg")
+    m.add_argument("--convention", choices=("source", "lenain"), default="source", help="front-slip sign convention")
+    m.add_argument("--json", action="store_true", help="print one JSON object")
+    m.set_defaults(func=_cmd_simulate)
+    return p
+
+
+def _print_human(out: dict) -> None:
+    for k, v in out.items():
+        if isinstance(v, dict):
+            print(f"{k}:")
+            for kk, vv in v.items():
+                print(f"  {kk:20s} {vv}")
+        else:
+            print(f"{k:22s} {v}")
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    try:
+        out = args.func(args)
+    except UsageError as e:
+        print(f"pfjax {args.command}: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    if args.json:
+        print(dumps(out))
+    else:
+        _print_human(out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
