@@ -1,0 +1,140 @@
+"""Matplotlib figure builders (NumPy in, ``Figure`` out; never under jit).
+
+Each builder returns a figure; :func:`save` writes it as PNG (and SVG) and closes it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+STYLE = {
+    "mixed": dict(color="#1f77b4", lw=1.8, label="mixed H2/H∞ (pfjax LMI)"),
+    "paper-k": dict(color="#17becf", lw=1.2, ls="--", label="mixed H2/H∞ (source K)"),
+    "pi": dict(color="#d62728", lw=1.6, label="MISO PI (Table 3)"),
+    "stanley": dict(color="#2ca02c", lw=1.0, label="Stanley"),
+    "pure-pursuit": dict(color="#9467bd", lw=1.0, label="pure pursuit"),
+    "rear-wheel": dict(color="#8c564b", lw=1.0, label="rear-wheel feedback"),
+}
+
+
+def save(fig, out_dir: Path, name: str, svg: bool = True) -> str:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_dir / f"{name}.png", dpi=130, bbox_inches="tight")
+    if svg:
+        fig.savefig(out_dir / f"{name}.svg", bbox_inches="tight")
+    plt.close(fig)
+    return f"{name}.png"
+
+
+def tracking_figure(title: str, path_xy: np.ndarray, trajs: dict, delta_max: float):
+    """2x2: the path and the robot's trajectories; steering; lateral error d; heading error.
+
+    Args:
+        title: figure title.
+        path_xy: (n, 2) dense samples of the path, m.
+        trajs: controller name -> dict of arrays t, x, y, delta, d, theta_e (SI units).
+        delta_max: steering limit, rad.
+    """
+    fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
+    a = ax[0, 0]
+    a.plot(path_xy[:, 0], path_xy[:, 1], color="0.6", lw=4, alpha=0.5, label="path")
+    for name, tr in trajs.items():
+        a.plot(tr["x"], tr["y"], **STYLE[name])
+    first = next(iter(trajs.values()))
+    a.plot(first["x"][0], first["y"][0], "ko", ms=5, label="start")
+    a.set(xlabel="x [m]", ylabel="y [m]", title="path and robot (rear axle)")
+    a.set_aspect("equal", adjustable="datalim")
+    a.legend(fontsize=7, loc="best")
+    panels = [
+        (ax[0, 1], "delta", np.degrees, "steering δ [deg]"),
+        (ax[1, 0], "d", lambda v: 100 * v, "lateral error d [cm]"),
+        (ax[1, 1], "theta_e", np.degrees, "heading error θₑ [deg]"),
+    ]
+    for a, key, scale, label in panels:
+        for name, tr in trajs.items():
+            a.plot(tr["t"], scale(tr[key]), **STYLE[name])
+        a.axhline(0, color="0.7", lw=0.6)
+        a.set(xlabel="t [s]", ylabel=label)
+        a.grid(alpha=0.3)
+    for s in (-1, 1):
+        ax[0, 1].axhline(s * np.degrees(delta_max), color="k", ls=":", lw=0.8)
+    # inset-like zoom on the steady state of d
+    a = ax[1, 0]
+    t = first["t"]
+    late = t > 0.5 * t[-1]
+    lo = min(float(np.min(100 * tr["d"][late])) for tr in trajs.values())
+    hi = max(float(np.max(100 * tr["d"][late])) for tr in trajs.values())
+    ins = a.inset_axes([0.45, 0.45, 0.5, 0.45])
+    for name, tr in trajs.items():
+        ins.plot(tr["t"][late], 100 * tr["d"][late], **{k: v for k, v in STYLE[name].items() if k != "label"})
+    pad = 0.1 * max(hi - lo, 1e-3)
+    ins.set_ylim(lo - pad, hi + pad)
+    ins.set_title("second half (zoom)", fontsize=7)
+    ins.tick_params(labelsize=6)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def stability_figure(beta_deg: np.ndarray, source_max_re: np.ndarray, true_max_re: np.ndarray,
+                     exists: np.ndarray, sim_converged: np.ndarray, delta_max_deg: float):
+    """Three maps over (beta_r, beta_f): the source's linearisation, the true equilibrium, simulation."""
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.6), sharey=True)
+    ext = [beta_deg[0], beta_deg[-1], beta_deg[0], beta_deg[-1]]
+    kw = dict(origin="lower", extent=ext, aspect="auto")
+    im = ax[0].imshow(source_max_re.T, cmap="viridis", **kw)
+    fig.colorbar(im, ax=ax[0], label="max Re λ [1/s]")
+    ax[0].set_title("source's analysis: Jacobian at [0, −β_r]\n(max real part; < 0 everywhere = 'Hurwitz')")
+    masked = np.where(exists, true_max_re, np.nan)
+    im = ax[1].imshow(masked.T, cmap="viridis", **kw)
+    fig.colorbar(im, ax=ax[1], label="max Re λ at the true equilibrium [1/s]")
+    ax[1].set_title("true equilibrium (white: none exists,\n|β_r+β_f| ≥ δ_max)")
+    cmap = matplotlib.colors.ListedColormap(["#d62728", "#2ca02c"])
+    ax[2].imshow(sim_converged.T.astype(float), cmap=cmap, vmin=0, vmax=1, **kw)
+    ax[2].set_title("simulation (line test, 40 s): green = converged\nto the predicted equilibrium, red = not")
+    b = np.array([beta_deg[0], beta_deg[-1]])
+    for a in ax:
+        for s in (-1, 1):
+            a.plot(b, s * delta_max_deg - b, "w--", lw=1)
+        a.set_xlabel("β_r [deg]")
+    ax[0].set_ylabel("β_f [deg]")
+    fig.tight_layout()
+    return fig
+
+
+def pi_assignment_figure(labels: list[str], line_traces: dict, ok: dict):
+    """d(t) on the line test for every reading of Table 3; consistent readings highlighted."""
+    fig, ax = plt.subplots(figsize=(10, 5))
+    for lab in labels:
+        tr = line_traces[lab]
+        if ok[lab]:
+            ax.plot(tr["t"], 100 * tr["d"], lw=2, label=lab)
+        else:
+            ax.plot(tr["t"], 100 * tr["d"], color="0.75", lw=0.7)
+    ax.plot([], [], color="0.75", lw=0.7, label="other readings")
+    ax.set(xlabel="t [s]", ylabel="d [cm]", title="Line test, all 24 readings of Table 3 (β_r = β_f = 5°)", ylim=(-100, 100))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def sine_error_figure(x: np.ndarray, d: np.ndarray, xk: np.ndarray, kappa: np.ndarray, dkappa: np.ndarray, label: str):
+    """|d| along the sine path (at closest-point x) against the path's |kappa| and |dkappa/ds| (at xk)."""
+    fig, ax = plt.subplots(figsize=(10, 4))
+    ax.plot(x, 1000 * np.abs(d), color="k", label=f"|d| ({label}) [mm]")
+    ax.set(xlabel="x [m]", ylabel="|d| [mm]")
+    ax2 = ax.twinx()
+    ax2.plot(xk, np.abs(kappa), color="#1f77b4", ls="--", label="|κ| [1/m]")
+    ax2.plot(xk, np.abs(dkappa), color="#ff7f0e", ls=":", label="|dκ/ds| [1/m²]")
+    lines = ax.get_lines() + ax2.get_lines()
+    ax.legend(lines, [l.get_label() for l in lines], fontsize=8, loc="upper right")
+    ax.set_title("Sine path after the transient: error against curvature and its rate of change")
+    fig.tight_layout()
+    return fig
