@@ -101,8 +101,8 @@ def stability_figure(beta_deg: np.ndarray, source_max_re: np.ndarray, true_max_r
     b = np.array([beta_deg[0], beta_deg[-1]])
     for a in ax:
         for s in (-1, 1):
-            a.plot(b, s * delta_max_deg - b, "w--", lw=1)
-        a.set_xlabel("β_r [deg]")
+            a.plot(b, s * delta_max_deg - b, "--", color="0.3", lw=1)
+        a.set(xlabel="β_r [deg]", xlim=(b[0], b[1]), ylim=(b[0], b[1]))
     ax[0].set_ylabel("β_f [deg]")
     fig.tight_layout()
     return fig
