@@ -88,6 +88,11 @@ def _cmd_synth(args) -> dict:
         raise UsageError(f"--alpha/--beta: must be >= 0 and not both 0, got {args.alpha:g}, {args.beta:g}")
     region = None
     if args.max_real is not None or args.disk is not None or args.sector_deg is not None:
+        if args.max_real is not None:
+            _finite("--max-real", args.max_real)
+        if args.disk is not None:
+            _finite("--disk", args.disk[0])
+            _finite("--disk", args.disk[1])
         if args.disk is not None and args.disk[1] <= 0:
             raise UsageError(f"--disk: radius must be > 0, got {args.disk[1]:g}")
         if args.sector_deg is not None and not 0 < args.sector_deg < 90:

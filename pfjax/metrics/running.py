@@ -11,7 +11,7 @@ and the remaining metrics are sample statistics:
 
 * ``max_abs_d``: max |d| (m);
 * ``steady_abs_d``, ``steady_abs_theta_e``: time-mean of |d| (m) and |theta_e| (rad) over the
-  last ``steady_window`` seconds of the horizon;
+  last ``steady_window`` seconds of the horizon (trapezoid rule on the samples in the window);
 * ``settling_time``: first sample time after which |d| stays within ``settle_band`` (s);
   NaN if the run ends outside the band or fails;
 * ``overshoot``: largest excursion of ``d`` past zero on the side opposite to ``d(0)`` (m, >= 0);
@@ -76,8 +76,14 @@ def update(acc: Accumulator, t, dt, weight, d, theta_e, delta, saturated, *, ban
     """Add sample ``k`` (time ``t``) with trapezoid weight ``weight`` (0 after a failure)."""
     w = weight * dt
     live = weight > 0
+    # A failed run's samples carry weight 0 but may be NaN (NONFINITE): mask them, 0 * NaN = NaN.
+    d, theta_e, delta, saturated = (jnp.where(live, a, 0.0) for a in (d, theta_e, delta, saturated))
     ad = jnp.abs(d)
-    ws = jnp.where(t >= steady_from - 1e-9, w, 0.0)
+    # Steady window [t_k0, t_N]: trapezoid weights on it, so the first sample in the window gets
+    # half a step (the end sample already has it), and the mean is (1/(t_N - t_k0)) int |d| dt.
+    in_window = t >= steady_from - 1e-9
+    first = in_window & (t < steady_from + dt - 1e-9)
+    ws = jnp.where(in_window, jnp.where(first, jnp.minimum(w, 0.5 * dt), w), 0.0)
     return Accumulator(
         iae=acc.iae + w * ad,
         ise=acc.ise + w * d * d,

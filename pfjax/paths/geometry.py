@@ -41,7 +41,9 @@ class Projection(NamedTuple):
 
 def wrap_angle(a: Array) -> Array:
     """Wrap an angle to ``(-pi, pi]``."""
-    return jnp.pi - jnp.mod(jnp.pi - a, 2.0 * jnp.pi)
+    w = jnp.pi - jnp.mod(jnp.pi - a, 2.0 * jnp.pi)
+    # mod can round up to 2 pi for a just above an odd multiple of pi, giving -pi: map it to pi.
+    return jnp.where(w <= -jnp.pi, w + 2.0 * jnp.pi, w)
 
 
 def tangent_angle(path, u: Array) -> Array:
@@ -71,7 +73,8 @@ def _newton_update(path, u: Array, qx: Array, qy: Array) -> Array:
     """One safeguarded Newton step on ``g(u) = (p - q) . p'``.
 
     ``g'(u) = |p'|^2 + (p - q) . p''`` is positive near a minimum of the distance; where it is
-    not (far on the inside of a bend) the step falls back to Gauss-Newton (``g' ~ |p'|^2``).
+    not, or barely (``g' < 0.01 |p'|^2``: at or beyond the centre of curvature on the inside of a
+    bend), the step falls back to Gauss-Newton (``g' ~ |p'|^2``).
     The step moves the point at most ``max(|p - q|, 0.25 m)`` along the curve and ``u`` stays
     in the domain.
     """
@@ -82,7 +85,7 @@ def _newton_update(path, u: Array, qx: Array, qy: Array) -> Array:
     speed2 = dx * dx + dy * dy
     g = ex * dx + ey * dy
     gp = speed2 + ex * ddx + ey * ddy
-    gp = jnp.where(gp > 0.25 * speed2, gp, speed2)
+    gp = jnp.where(gp > 0.01 * speed2, gp, speed2)
     step = -g / gp
     max_step = jnp.maximum(jnp.sqrt(ex * ex + ey * ey), 0.25) / jnp.sqrt(speed2)
     step = jnp.clip(step, -max_step, max_step)

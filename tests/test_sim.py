@@ -1,0 +1,243 @@
+"""The simulator's run status, freezing after a failure, batching, record modes, slip profiles,
+no-recompilation and float32.
+
+One batch of eight line scenarios (one compile) mixes healthy runs, each kind of failure the
+line allows and the three time-varying slip profiles; the circle (SINGULAR) and float32 runs
+compile once more each.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import numpy as np
+import pytest
+
+from pfjax import controllers as C
+from pfjax.paths import circle, line, spline_through
+from pfjax.scenarios import make_scenario
+from pfjax.sim import SimConfig, Status, simulate_batch, slip_profile, stack
+
+DEG = math.pi / 180
+CFG = SimConfig(dt=0.01, horizon=6.0, d_fail=3.0)
+NSEQ = 12  # every slip profile in the batch carries a sampled sequence of this length (one shape)
+SEQ_DT = 0.5035  # no sample time t_k = k dt falls on a hold boundary j * SEQ_DT within the horizon
+SEQ = np.random.default_rng(7).uniform(-5, 5, size=(NSEQ, 2)) * DEG
+LINE_POSE = (1.0, 0.0, math.pi / 2)  # the source's line test start
+
+
+def slip(**kw):
+    kw.setdefault("seq", np.zeros((NSEQ, 2)))
+    kw.setdefault("seq_dt", SEQ_DT)
+    return slip_profile(**kw)
+
+
+PAPER_SLIP = slip(constant=5 * DEG)
+STEP = dict(constant=(0.0, 0.0), step_time=2.0, step_size=(5 * DEG, 3 * DEG))
+SINE = dict(constant=(2 * DEG, -1 * DEG), sin_amp=(3 * DEG, 2 * DEG), sin_freq=(0.5, 1.3), sin_phase=(0.3, -1.0))
+
+
+def sf(K=C.PAPER_K):
+    return C.state_feedback_params(K=K)
+
+
+def healthy():
+    return make_scenario(line(), LINE_POSE, sf(), slip=PAPER_SLIP)
+
+
+#: name -> scenario. Failures: positive gains with a 3 deg steering limit (turning radius 3.8 m,
+#: so |d| passes d_fail = 3 m; with 30 deg the robot turns round and follows the line backwards,
+#: bounded), a linearly unstable K = (1, -2) (closed loop det < 0), v = NaN, a line ending at 3 m.
+ROWS = {
+    "healthy": healthy(),
+    "diverged_positive_K": make_scenario(line(), LINE_POSE, sf((2.7, 2.0)), slip=slip(), delta_max_deg=3.0),
+    "nonfinite": make_scenario(line(), LINE_POSE, sf(), slip=PAPER_SLIP, v=float("nan")),
+    "path_end": make_scenario(line(u_max=3.0), LINE_POSE, sf(), slip=PAPER_SLIP),
+    "step_slip": make_scenario(line(), LINE_POSE, sf(), slip=slip(**STEP)),
+    "sinusoid_slip": make_scenario(line(), LINE_POSE, sf(), slip=slip(**SINE)),
+    "sampled_slip": make_scenario(line(), LINE_POSE, sf(), slip=slip(seq=SEQ)),
+    "diverged_unstable_K": make_scenario(line(), LINE_POSE, sf((1.0, -2.0)), slip=slip()),
+}
+NAMES = list(ROWS)
+FAILING = {"diverged_positive_K": Status.DIVERGED, "nonfinite": Status.NONFINITE, "path_end": Status.PATH_END,
+           "diverged_unstable_K": Status.DIVERGED}
+
+
+def run(rows, config=CFG):
+    return jax.device_get(simulate_batch(stack(rows), controller=C.state_feedback, config=config))
+
+
+def row(res, name):
+    return jax.tree_util.tree_map(lambda a: a[NAMES.index(name)], res)
+
+
+@pytest.fixture(scope="module")
+def mixed():
+    return run(list(ROWS.values()))
+
+
+def test_statuses_of_the_mixed_batch(mixed):
+    """Every run comes back (nothing dropped), each with its own status; healthy runs have no
+    fail_time."""
+    assert mixed.status.shape == (len(NAMES),)
+    for name in NAMES:
+        r = row(mixed, name)
+        assert int(r.status) == FAILING.get(name, Status.OK), (name, int(r.status))
+        assert np.isnan(r.fail_time) == (name not in FAILING)
+
+
+def test_failure_times_are_the_first_failing_samples(mixed):
+    """fail_time is the first sample at which the failure is visible in the recorded trajectory."""
+    for name in ("diverged_positive_K", "diverged_unstable_K"):
+        r = row(mixed, name)
+        k = int(np.argmax(np.abs(r.trajectory.d) > CFG.d_fail))
+        assert k > 0 and np.all(np.abs(r.trajectory.d[:k]) <= CFG.d_fail)
+        assert r.fail_time == r.trajectory.t[k]
+    r = row(mixed, "nonfinite")  # v = NaN: the pose is NaN after the first step
+    assert r.fail_time == r.trajectory.t[1] and np.isfinite(r.trajectory.x[0]) and np.isnan(r.trajectory.x[1])
+    r = row(mixed, "path_end")  # the closest point reaches u_max = 3 m of the line (s = u)
+    k = int(round(r.fail_time / CFG.dt))
+    assert r.trajectory.s[k] == pytest.approx(3.0, abs=1e-12) and r.trajectory.s[k - 1] < 3.0 - 1e-3
+
+
+def test_failed_runs_are_frozen_and_their_metrics_finite(mixed):
+    """From the failing sample on, the pose (and d, s) stays at its value there, and Final is that
+    state; the metrics describe the run up to the failure: finite, except the steady-state errors
+    and settling time, which are NaN by definition for a failed run."""
+    for name in FAILING:
+        r = row(mixed, name)
+        k = int(round(r.fail_time / CFG.dt))
+        tr = r.trajectory
+        for field in ("x", "y", "theta", "d", "s"):
+            a = getattr(tr, field)
+            np.testing.assert_array_equal(a[k:], np.full_like(a[k:], a[k]), err_msg=f"{name}.{field}")
+            np.testing.assert_array_equal(getattr(r.final, field), a[k])
+        m = r.metrics
+        for field in ("iae", "ise", "itae", "max_abs_d", "overshoot", "steer_energy", "steer_tv", "sat_fraction"):
+            assert np.isfinite(getattr(m, field)), (name, field, getattr(m, field))
+        assert np.isnan(m.steady_abs_d) and np.isnan(m.steady_abs_theta_e) and np.isnan(m.settling_time)
+        assert m.max_abs_d <= CFG.d_fail
+
+
+def test_healthy_runs_do_not_depend_on_their_batch_neighbours(mixed):
+    """The same healthy scenarios in a batch without failing runs (same shapes, no recompile) give
+    bit-identical results: a failure in one run never leaks into another."""
+    alone = run([ROWS[n] if n not in FAILING else healthy() for n in NAMES])
+    for name in NAMES:
+        if name in FAILING:
+            continue
+        a, b = row(mixed, name), row(alone, name)
+        for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+            np.testing.assert_array_equal(x, y, err_msg=name)
+
+
+def test_record_false_gives_the_same_metrics(mixed):
+    """record=False (no trajectory, memory independent of the horizon) gives exactly the same
+    metrics, statuses, failure times and final states."""
+    lean = run(list(ROWS.values()), SimConfig(dt=CFG.dt, horizon=CFG.horizon, d_fail=CFG.d_fail, record=False))
+    assert lean.trajectory is None
+    for part in ("metrics", "status", "fail_time", "final"):
+        for x, y in zip(jax.tree_util.tree_leaves(getattr(mixed, part)), jax.tree_util.tree_leaves(getattr(lean, part))):
+            np.testing.assert_array_equal(x, y, err_msg=part)
+
+
+def test_time_varying_slip_profiles_in_the_trajectory(mixed):
+    """The recorded beta_r, beta_f equal the profiles' formulas at the sample times (step at 2 s,
+    sinusoid mean + amp sin(2 pi f t + phase), zero-order hold of the sampled sequence)."""
+    t = row(mixed, "healthy").trajectory.t
+    np.testing.assert_allclose(t, np.arange(t.size) * CFG.dt, atol=1e-12)
+    expect = {
+        "healthy": np.full((t.size, 2), 5 * DEG),
+        "step_slip": np.where((t >= 2.0)[:, None], [5 * DEG, 3 * DEG], 0.0),
+        "sinusoid_slip": np.asarray(SINE["constant"]) + np.asarray(SINE["sin_amp"]) * np.sin(
+            2 * np.pi * np.outer(t, SINE["sin_freq"]) + np.asarray(SINE["sin_phase"])),
+        "sampled_slip": SEQ[np.minimum((t / SEQ_DT).astype(int), NSEQ - 1)],
+    }
+    for name, e in expect.items():
+        tr = row(mixed, name).trajectory
+        np.testing.assert_allclose(np.c_[tr.beta_r, tr.beta_f], e, atol=1e-15, err_msg=name)
+        assert int(row(mixed, name).status) == Status.OK
+    # The step is really taken at 2 s: 0 before, the new value from the sample at 2 s on.
+    tr = row(mixed, "step_slip").trajectory
+    k = int(round(2.0 / CFG.dt))
+    assert tr.beta_r[k - 1] == 0.0 and tr.beta_r[k] == pytest.approx(5 * DEG, abs=1e-15)
+
+
+def test_no_recompilation_for_new_values(mixed):
+    """New values with the same shapes (gains, poses, speeds, slip, path parameters) reuse the
+    compiled simulate_batch: its jit cache does not grow."""
+    rows = [make_scenario(line(x0=0.3, heading=0.7), (0.5, -0.2, 0.1 * i), sf((-1.0 - i, -1.5)),
+                          slip=slip(constant=i * DEG, sin_amp=1 * DEG, sin_freq=0.2, seq=SEQ), v=0.5 + 0.1 * i)
+            for i in range(len(NAMES))]
+    run(list(ROWS.values()))  # the fixture's compile is in the cache
+    before = simulate_batch._cache_size()
+    r = run(rows)
+    run([ROWS[n] for n in reversed(NAMES)])
+    assert simulate_batch._cache_size() == before
+    assert np.all(r.status == Status.OK)  # the values really changed the runs
+    assert not np.allclose(r.final.x, row(mixed, "healthy").final.x)
+
+
+def test_singular_at_the_centre_of_a_circle():
+    """SINGULAR (1 - kappa d <= 1e-6) at the exact centre of a circle.
+
+    With the true closest point, 1 - kappa d = r / R >= 0 on a circle (and >= 0 at any local
+    minimum of the distance to any path), so the Frenet singularity is only reached on a centre of
+    curvature itself: here a robot driven straight (K = 0, no slip) from (0, -0.5) through the
+    centre of the unit circle reaches it at t = 0.5 s.
+
+    A robot passing 5 cm from the centre stays OK, but while it is within R/4 of the centre
+    (t in 0.26..0.74 s) the warm-started projection lags the fast-moving closest point: the
+    Newton safeguard falls back to Gauss-Newton where g' < |p'|^2 / 4 (i.e. 1 - kappa d < 1/4),
+    which converges only linearly there. d is then measured against a point that is not the
+    closest, d = R - r cos(dphi) >= R - r (an over-estimate, < 2 cm here); outside that zone d is
+    exact (R - r, inside the CCW circle is left, positive)."""
+    path = circle(radius=1.0, cx=0.0, cy=0.0)
+    g = sf((0.0, 0.0))
+    rows = [make_scenario(path, (0.0, -0.5, math.pi / 2), g), make_scenario(path, (0.05, -0.5, math.pi / 2), g)]
+    r = jax.device_get(simulate_batch(stack(rows), controller=C.state_feedback, config=SimConfig(dt=0.01, horizon=2.0)))
+    np.testing.assert_array_equal(r.status, [Status.SINGULAR, Status.OK])
+    assert r.fail_time[0] == pytest.approx(0.5, abs=1e-12)
+    tr = jax.tree_util.tree_map(lambda a: a[1], r.trajectory)
+    rad = np.hypot(tr.x, tr.y)
+    assert rad.min() == pytest.approx(0.05, abs=1e-9)
+    outside = rad > 0.25 + 1e-3
+    np.testing.assert_allclose(tr.d[outside], 1.0 - rad[outside], atol=1e-9)
+    err = tr.d - (1.0 - rad)
+    assert np.all(err > -1e-12) and err.max() < 0.02
+    # The closest point moved to the far side: theta_e against the tangent at the robot's polar
+    # angle, +84 deg before the pass, -88 deg after it.
+    te_ref = np.angle(np.exp(1j * (tr.theta - np.arctan2(tr.y, tr.x) - math.pi / 2)))
+    np.testing.assert_allclose(tr.theta_e[outside], te_ref[outside], atol=1e-9)
+    assert tr.theta_e[0] > 1.4 and tr.theta_e[-1] < -1.5
+
+
+def test_short_spline_ends_with_path_end():
+    """A robot following a 4.4 m spline reaches its end: PATH_END, at about the time the arc
+    length runs out (v = 1 m/s, tracking from on the path), frozen there."""
+    wp = np.array([[0.0, 0.0], [1.0, 0.3], [2.0, 0.1], [3.0, -0.2], [4.3, 0.0]])
+    path = spline_through(wp)
+    rows = [make_scenario(path, (0.5, 0.0, 0.3), C.state_feedback_params(), slip=slip_profile(constant=0.0))]
+    r = jax.device_get(simulate_batch(stack(rows), controller=C.state_feedback, config=SimConfig(dt=0.01, horizon=8.0)))
+    assert int(r.status[0]) == Status.PATH_END
+    s = r.trajectory.s[0]
+    k = int(round(r.fail_time[0] / 0.01))
+    total = float(path.u_max)  # chord length, <= arc length
+    assert s[k] > total and 3.5 < r.fail_time[0] < 5.5
+    np.testing.assert_array_equal(r.trajectory.x[0, k:], r.trajectory.x[0, k])
+
+
+@pytest.mark.filterwarnings("ignore:Explicitly requested dtype")
+def test_float32_agrees_with_float64():
+    """With x64 disabled the whole run is float32 and the final lateral error on the line test
+    (paper gains and slip, 6 s) agrees with float64 to 1e-4 m: float32 rounding of the ~5 m
+    positions is ~5e-7 m per step and the stable loop damps it rather than accumulating it."""
+    d64 = float(row(run(list(ROWS.values())), "healthy").final.d)
+    with jax.enable_x64(False):
+        sc = make_scenario(line(), LINE_POSE, sf(), slip=slip(constant=5 * DEG))
+        r = jax.device_get(simulate_batch(stack([sc]), controller=C.state_feedback, config=CFG))
+    assert r.trajectory.x.dtype == np.float32 and r.final.d.dtype == np.float32
+    assert int(r.status[0]) == Status.OK
+    assert abs(float(r.final.d[0]) - d64) < 1e-4, (float(r.final.d[0]), d64)
+    assert abs(d64) > 1e-3  # the steady slip offset, not a trivially zero error
