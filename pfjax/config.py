@@ -57,7 +57,7 @@ def _merge(base: dict, update: dict, prefix: str = "") -> dict:
         key = f"{prefix}{k}"
         if k not in base:
             hint = difflib.get_close_matches(k, list(base), n=1)
-            raise ConfigError(f"{key}: unknown key" + (f" (did you mean {prefix}{hint[0]!r}?)" if hint else ""))
+            raise ConfigError(f"{key}: unknown key" + (f" (did you mean {prefix + hint[0]!r}?)" if hint else ""))
         if isinstance(base[k], dict):
             if not isinstance(v, dict):
                 raise ConfigError(f"{key}: expected a table, got {v!r}")

@@ -23,8 +23,10 @@ import time
 from pathlib import Path
 
 import jax
+import matplotlib
 
 jax.config.update("jax_enable_x64", True)
+matplotlib.use("Agg")
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
@@ -39,7 +41,9 @@ from pfjax.config import ConfigError, config_hash, load  # noqa: E402
 from pfjax.models import SlipParams  # noqa: E402
 from pfjax.paths import curvature, global_parameter  # noqa: E402
 from pfjax.report import figures  # noqa: E402
-from pfjax.scenarios import PAPER_TESTS, SCENARIOS, paper_scenario  # noqa: E402
+from pfjax.paths import shapes  # noqa: E402
+from pfjax.scenarios import PAPER_TESTS, SCENARIOS, make_scenario, paper_scenario  # noqa: E402
+from pfjax.sim import constant_slip  # noqa: E402
 from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack  # noqa: E402
 from pfjax.synthesis import mixed_bounds_for_gain, mixed_h2_hinf, slip_design_plant  # noqa: E402
 from pfjax.synthesis.norms import closed_loop, h2_norm, hinf_norm  # noqa: E402
@@ -207,8 +211,12 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
     pbar.update(1)
     BR, BF = np.meshgrid(grid, grid, indexing="ij")
     gains = C.state_feedback_params(C.PAPER_K)
-    scs = stack([paper_scenario("line", gains, beta_r_deg=br, beta_f_deg=bf, v=m["v"], L=m["L"],
-                                delta_max_deg=m["delta_max_deg"], convention=m["convention"])
+    # The robot advances along the line at up to v / cos(beta_r): make the line long enough that
+    # no run reaches its end within the horizon (the default line is 80 m).
+    line = shapes.line(u_max=20.0 + 1.5 * m["v"] * st["horizon"] / math.cos(math.radians(st["grid_max_deg"])))
+    pose0 = SCENARIOS["line"][1]
+    scs = stack([make_scenario(line, pose0, gains, slip=constant_slip(math.radians(br), math.radians(bf)), v=m["v"],
+                               L=m["L"], delta_max_deg=m["delta_max_deg"], convention=m["convention"])
                  for br, bf in zip(BR.ravel(), BF.ravel())])
     r = simulate_batch(scs, controller=C.state_feedback, config=sim_config(cfg, horizon=st["horizon"], record=False))
     pbar.update(1)
@@ -392,8 +400,11 @@ def write_report(out: Path, cfg, syn, rows, pi_df, stab, verdict_rows, figs, sta
     for _, r in pi_df.head(8).iterrows():
         L.append("| " + " | ".join(("✔" if r[c] else "✘") if isinstance(r[c], (bool, np.bool_)) else
                                    (fmt(r[c], 1) if isinstance(r[c], float) else str(r[c])) for c in cols) + " |")
-    L.append(f"\n(The 8 best of 24; all in `pi_readings.csv`.) Readings that integrate θₑ strongly cannot settle: with rear slip the "
-             "loop's only rest point has θₑ = −β_r ≠ 0, so an integral on θₑ keeps winding. The reading pfjax adopts as the source's "
+    L.append(f"\n(The 8 best of 24; all in `pi_readings.csv`.) Why most readings fail: with rear slip, d' = 0 needs "
+             "θₑ = −β_r ≠ 0, so the integral on θₑ ramps at Ki_θ·β_r for ever and the PI loop has no equilibrium. The best it can do is "
+             "a quasi-equilibrium in which the integral on d ramps the other way, which needs a standing offset "
+             "d_q = (Ki_θ / Ki_d)·β_r — metres for the readings with a large Ki_θ / Ki_d — approached through a slow pole. "
+             "The reading pfjax adopts as the source's "
              f"PI (`pfjax.controllers.PAPER_PI`) is {'among the consistent ones' if pi_df[pi_df.is_default].consistent.any() else 'NOT consistent — see the table'}.\n")
     L.append(f"![pi readings](figures/{figs['pi']})\n")
     L.append("## Equilibrium and stability (spec §7)\n")
@@ -440,6 +451,12 @@ def main(argv=None) -> int:
                 raise ConfigError(f"model.{key}: magnitude must be < 90 deg, got {cfg['model'][key]:g}")
         if cfg["sim"]["dt"] <= 0 or cfg["sim"]["horizon"] < cfg["sim"]["dt"]:
             raise ConfigError(f"sim.dt/sim.horizon: need 0 < dt <= horizon, got {cfg['sim']['dt']:g}, {cfg['sim']['horizon']:g}")
+        if cfg["sim"]["horizon"] <= 5.0:  # sine_error_analysis looks at t >= 5 s
+            raise ConfigError(f"sim.horizon: must be > 5 s (the sine-error analysis uses t >= 5 s), got {cfg['sim']['horizon']:g}")
+        if cfg["sim"]["control_every"] < 0:
+            raise ConfigError(f"sim.control_every: must be >= 0 (0: continuous), got {cfg['sim']['control_every']}")
+        if cfg["stability"]["horizon"] < cfg["sim"]["dt"]:
+            raise ConfigError(f"stability.horizon: must be >= sim.dt ({cfg['sim']['dt']:g} s), got {cfg['stability']['horizon']:g}")
         if cfg["stability"]["n"] < 2:
             raise ConfigError(f"stability.n: must be >= 2, got {cfg['stability']['n']}")
     except ConfigError as e:

@@ -1,6 +1,7 @@
 """Matplotlib figure builders (NumPy in, ``Figure`` out; never under jit).
 
-Each builder returns a figure; :func:`save` writes it as PNG (and SVG) and closes it.
+Each builder returns a figure; :func:`save` writes it as PNG (and SVG) and closes it. The
+backend is left to the caller (scripts select Agg; notebooks keep their inline backend).
 """
 
 from __future__ import annotations
@@ -8,10 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 STYLE = {
     "mixed": dict(color="#1f77b4", lw=1.8, label="mixed H2/H∞ (pfjax LMI)"),
