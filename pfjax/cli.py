@@ -106,7 +106,8 @@ def _cmd_synth(args) -> dict:
     try:
         design = synthesize(args.method, v=args.v, L=args.L, alpha=args.alpha, beta=args.beta, region=region)
     except SynthesisError as e:
-        raise UsageError(f"--method {args.method}: {e}") from None
+        flags = "--max-real/--disk/--sector-deg" if region is not None else f"--method {args.method}"
+        raise UsageError(f"{flags}: no design exists ({e})") from None
     out = design.to_dict()
     out.update(v=args.v, L=args.L)
     return out
@@ -274,9 +275,22 @@ def _print_human(out: dict) -> None:
             print(f"{k:22s} {v}")
 
 
+def _join_negative_values(argv: list[str]) -> list[str]:
+    """``--gains -4,-1.5`` -> ``--gains=-4,-1.5`` (argparse would read ``-4,...`` as an option)."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--gains" and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1][1:2].isdigit():
+            out.append(f"--gains={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_negative_values(list(sys.argv[1:] if argv is None else argv)))
     import jax
 
     jax.config.update("jax_enable_x64", True)

@@ -457,6 +457,10 @@ def main(argv=None) -> int:
             raise ConfigError(f"sim.control_every: must be >= 0 (0: continuous), got {cfg['sim']['control_every']}")
         if cfg["stability"]["horizon"] < cfg["sim"]["dt"]:
             raise ConfigError(f"stability.horizon: must be >= sim.dt ({cfg['sim']['dt']:g} s), got {cfg['stability']['horizon']:g}")
+        if not 0 < cfg["sim"]["steady_window"] <= cfg["sim"]["horizon"]:
+            raise ConfigError(f"sim.steady_window: must be in (0, sim.horizon], got {cfg['sim']['steady_window']:g}")
+        if cfg["sim"]["settle_band"] <= 0:
+            raise ConfigError(f"sim.settle_band: must be > 0 m, got {cfg['sim']['settle_band']:g}")
         if cfg["stability"]["n"] < 2:
             raise ConfigError(f"stability.n: must be >= 2, got {cfg['stability']['n']}")
     except ConfigError as e:

@@ -10,7 +10,8 @@ Closed loop on a path of constant curvature ``kappa`` (0: the straight line) wit
 rate must vanish, so ``delta* = beta_r + beta_f`` (source convention; ``beta_r - beta_f`` in
 Lenain's), and ``K x* = delta*`` gives ``d* = (delta* + K_2 beta_r) / K_1``. The equilibrium exists
 only if ``|delta*| < delta_max``: beyond, the saturated loop has no rest point. On a curve the
-same holds with ``d*`` solved by Newton. The source instead linearises at ``[0, -beta_r]``
+same holds with ``d*`` solved by Newton. (The boundary ``|delta*| = delta_max``, up to 1e-9 rad, counts
+as existing: the loop rests there with the steering at its limit.) The source instead linearises at ``[0, -beta_r]``
 (appendix B), which is not an equilibrium unless ``delta* = -K_2 beta_r``.
 
 **Local stability.** Eigenvalues of the Jacobian of the unsaturated field at the point
@@ -73,7 +74,9 @@ def equilibrium(K: Array, beta_r, beta_f, params: SlipParams, kappa=0.0, iters: 
     x = jnp.stack([d, theta])
     delta = K[0] * d + K[1] * theta
     residual = jnp.abs(closed_loop_field(x, K, beta_r, beta_f, kappa, params, False)).max()
-    exists = (residual < 1e-9) & (jnp.abs(delta) < params.delta_max) & jnp.isfinite(d)
+    # On the boundary |delta*| = delta_max the steering sits exactly at its limit; rounding must not
+    # decide which side a grid point falls on, so the boundary (to 1e-9 rad) counts as existing.
+    exists = (residual < 1e-9) & (jnp.abs(delta) <= params.delta_max + 1e-9) & jnp.isfinite(d)
     eig = jacobian_eigenvalues(x, K, beta_r, beta_f, kappa, params)
     return Equilibrium(d, theta, delta, exists, eig, exists & jnp.all(eig.real < 0))
 

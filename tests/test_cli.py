@@ -1,0 +1,318 @@
+"""The ``pfjax`` command line (pfjax/cli.py): JSON contract, numbers against independent
+references, gains parsing, one-line usage errors with exit code 2.
+
+References: the closed-loop matrix ``A + B_u K`` and the norms are rebuilt here in NumPy/SciPy
+from spec §3 (no pfjax code); the line equilibrium is spec §7's closed form
+``d* = (beta_r + beta_f + K_2 beta_r) / K_1``, ``theta_e* = -beta_r``, ``delta* = beta_r + beta_f``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+from scipy.optimize import minimize_scalar
+
+from pfjax.cli import main
+
+_SCRIPT = Path(sys.executable).with_name("pfjax")
+PFJAX = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "pfjax.cli"]
+
+SOURCE_K = np.array([-2.7381, -2.0772])
+BETA = math.radians(5.0)
+CONTROLLERS = ("mixed", "paper-k", "pi", "stanley", "pure-pursuit", "rear-wheel")
+PATHS = ("line", "parabola", "sine", "circle")
+
+
+def cli(*args, timeout=180):
+    return subprocess.run([*PFJAX, *args], capture_output=True, text=True, timeout=timeout)
+
+
+def strict_json(text: str):
+    """One JSON object on one line, no NaN/Infinity tokens."""
+    assert text.count("\n") == 1 and text.endswith("\n"), text
+
+    def no_constants(c):
+        raise AssertionError(f"non-strict JSON constant {c}")
+
+    obj = json.loads(text, parse_constant=no_constants)
+    assert isinstance(obj, dict)
+    return obj
+
+
+def run_main(capsys, *args):
+    rc = main(list(args))
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    return strict_json(out)
+
+
+# ------------------------------------------------------------------ independent references (spec §3)
+
+
+def plant(v=1.0, L=0.2):
+    A = np.array([[0.0, v], [0.0, 0.0]])
+    Bu = np.array([[0.0], [v / L]])
+    Bw = np.array([[v, 0.0, 0.0], [-v / L, -v / L, -v]])
+    return A, Bu, Bw
+
+
+def ref_norms(K, v=1.0, L=0.2):
+    """(H-inf norm of w -> x, H2 norm of w -> [x; u]) of the closed loop, by SciPy.
+
+    H2: controllability Gramian. H-inf: sigma_max over a log grid of 4001 frequencies (and 0),
+    refined by a bounded scalar search around the best grid point (accurate to ~1e-8 relative).
+    """
+    A, Bu, Bw = plant(v, L)
+    K = np.asarray(K, float).reshape(1, 2)
+    Acl = A + Bu @ K
+    P = sla.solve_continuous_lyapunov(Acl, -Bw @ Bw.T)
+    C2 = np.vstack([np.eye(2), K])
+    h2 = math.sqrt(np.trace(C2 @ P @ C2.T))
+    sig = lambda w: np.linalg.svd(np.linalg.solve(1j * w * np.eye(2) - Acl, Bw), compute_uv=False)[0]
+    ws = np.concatenate([[0.0], np.logspace(-4, 4, 4001)])
+    vals = np.array([sig(w) for w in ws])
+    i = int(np.argmax(vals))
+    lo, hi = ws[max(i - 1, 0)], ws[min(i + 1, len(ws) - 1)]
+    best = vals[i]
+    if hi > lo:
+        r = minimize_scalar(lambda w: -sig(w), bounds=(lo, hi), method="bounded", options={"xatol": 1e-12})
+        best = max(best, -r.fun)
+    return best, h2, np.linalg.eigvals(Acl)
+
+
+def poles_of(out):
+    return np.array([complex(re, im) for re, im in out["closed_loop_poles"]])
+
+
+def sort_c(z):
+    z = np.asarray(z, complex)
+    return z[np.lexsort((z.imag, z.real))]
+
+
+# ------------------------------------------------------------------ synth
+
+
+def test_synth_mixed_json_reproduces_source():
+    """K within 2 % of the source's [-2.7381, -2.0772] and the bounds within 2 % of 1.1 and 4.07
+    (spec §4: the source's values are toolbox bounds from a different solver; pfjax reaches
+    K_d 1.6 %, K_theta 0.2 %, bounds < 0.1 % - the objective is flat along K_d). True norms and
+    poles against SciPy on spec §3 matrices: rel 1e-6 (norms), 1e-9 (poles)."""
+    r = cli("synth", "--method", "mixed", "--v", "1", "--L", "0.2", "--alpha", "10", "--beta", "1", "--json")
+    assert r.returncode == 0, r.stderr
+    out = strict_json(r.stdout)
+    for key in ("K", "gamma_inf", "gamma_2", "hinf_norm", "h2_norm", "closed_loop_poles"):
+        assert key in out, key
+    assert isinstance(out["K"], list)
+    K = np.asarray(out["K"], float).ravel()
+    assert K.shape == (2,)
+    np.testing.assert_allclose(K, SOURCE_K, rtol=0.02)
+    assert out["gamma_inf"] == pytest.approx(1.1, rel=0.02)
+    assert out["gamma_2"] == pytest.approx(4.07, rel=0.02)
+    # guaranteed bounds hold for the true closed-loop norms
+    assert out["hinf_norm"] <= out["gamma_inf"] * (1 + 1e-6)
+    assert out["h2_norm"] <= out["gamma_2"] * (1 + 1e-6)
+    hinf, h2, eig = ref_norms(K)
+    assert out["hinf_norm"] == pytest.approx(hinf, rel=1e-6)
+    assert out["h2_norm"] == pytest.approx(h2, rel=1e-6)
+    np.testing.assert_allclose(sort_c(poles_of(out)), sort_c(eig), rtol=1e-9, atol=1e-12)
+    assert np.all(poles_of(out).real < 0)
+
+
+@pytest.mark.parametrize("method", ["h2", "hinf"])
+def test_synth_h2_and_hinf_are_stabilising(capsys, method):
+    out = run_main(capsys, "synth", "--method", method, "--json")
+    K = np.asarray(out["K"], float).ravel()
+    _, _, eig = ref_norms(K)
+    assert np.all(eig.real < 0)
+    np.testing.assert_allclose(sort_c(poles_of(out)), sort_c(eig), rtol=1e-9)
+    bound = out["gamma_2"] if method == "h2" else out["gamma_inf"]
+    true = out["h2_norm"] if method == "h2" else out["hinf_norm"]
+    assert bound is not None and true <= bound * (1 + 1e-6)
+    # the other bound is not part of this design and is reported as null, not NaN
+    assert (out["gamma_inf"] if method == "h2" else out["gamma_2"]) is None
+
+
+def test_synth_pole_region_is_respected(capsys):
+    """A disk |s + 3| < 2.5 moves both poles into it (checked on A + B_u K rebuilt here)."""
+    out = run_main(capsys, "synth", "--method", "mixed", "--disk", "-3", "2.5", "--json")
+    _, _, eig = ref_norms(np.asarray(out["K"], float).ravel())
+    assert np.all(np.abs(eig + 3.0) < 2.5)
+
+
+# ------------------------------------------------------------------ simulate
+
+
+def test_simulate_line_paper_k_json_matches_closed_form_equilibrium():
+    """Line test with the source's K, 20 s: at the end the loop sits at spec §7's equilibrium.
+
+    Tolerances: slowest closed-loop pole ~ -1.55 1/s, so after 20 s the transient is ~e^-31 of
+    its initial size; RK4 at 5 ms is accurate to ~1e-8 here. delta to 1e-3 rad (the brief's
+    tolerance; the actual error is < 1e-9), d to 1e-5 m, theta_e to 1e-6 rad.
+    """
+    r = cli("simulate", "--path", "line", "--x0", "1", "0", "1.5707963267948966", "--beta-r-deg", "5",
+            "--beta-f-deg", "5", "--controller", "paper-k", "--T", "20", "--json")
+    assert r.returncode == 0, r.stderr
+    out = strict_json(r.stdout)
+    for key in ("d", "theta_e", "delta"):
+        assert key in out["final"], key
+    for key in ("iae", "max_abs_d", "steady_abs_d", "settling_time", "status"):
+        assert key in out["metrics"], key
+    assert out["metrics"]["status"] == "ok"
+    K1, K2 = SOURCE_K
+    d_star = (2 * BETA + K2 * BETA) / K1
+    assert out["final"]["delta"] == pytest.approx(math.radians(10.0), abs=1e-3)
+    assert out["final"]["d"] == pytest.approx(d_star, abs=1e-5)
+    assert out["final"]["theta_e"] == pytest.approx(-BETA, abs=1e-6)
+    assert out["gains"] == {"k_d": K1, "k_theta": K2}
+    # the source's start (1, 0) is 1/sqrt(2) m from y = x: the largest |d| is the initial one
+    assert out["metrics"]["max_abs_d"] == pytest.approx(1 / math.sqrt(2), rel=1e-9)
+    assert out["metrics"]["steady_abs_d"] == pytest.approx(abs(d_star), abs=1e-5)
+    assert 0 < out["metrics"]["settling_time"] < 20 and out["metrics"]["iae"] > 0
+    assert out["T"] == pytest.approx(20.0) and out["beta_r"] == pytest.approx(BETA)
+
+
+def test_every_controller_on_every_path(tmp_path):
+    """All 6 x 4 combinations run (3 s horizon) with status "ok" and finite numbers.
+
+    Run in two worker processes side by side (each compiles ~10 distinct simulators), each calling
+    pfjax.cli.main in a loop and printing one line per run.
+    """
+    worker = (
+        "import contextlib, io, json, sys\n"
+        "from pfjax.cli import main\n"
+        "for c, p in json.loads(sys.argv[1]):\n"
+        "    buf = io.StringIO()\n"
+        "    with contextlib.redirect_stdout(buf):\n"
+        "        rc = main(['simulate', '--path', p, '--controller', c, '--T', '3', '--json'])\n"
+        "    print(json.dumps({'c': c, 'p': p, 'rc': rc, 'out': buf.getvalue()}), flush=True)\n"
+    )
+    combos = [(c, p) for p in PATHS for c in CONTROLLERS]
+    halves = [[cp for cp in combos if cp[1] in PATHS[:2]], [cp for cp in combos if cp[1] in PATHS[2:]]]
+    procs = [subprocess.Popen([sys.executable, "-c", worker, json.dumps(h)], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for h in halves]
+    results = []
+    for p in procs:
+        out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+        results += [json.loads(line) for line in out.splitlines()]
+    assert sorted((r["c"], r["p"]) for r in results) == sorted(combos)
+    for r in results:
+        assert r["rc"] == 0, r
+        o = strict_json(r["out"])
+        assert (o["controller"], o["path"]) == (r["c"], r["p"])
+        assert o["metrics"]["status"] == "ok", (r["c"], r["p"], o["metrics"])
+        assert o["status_code"] == 0 and o["fail_time"] is None
+        assert all(math.isfinite(o["final"][k]) for k in ("d", "theta_e", "delta")), o["final"]
+        assert abs(o["final"]["delta"]) <= math.radians(30.0) + 1e-12
+        assert o["T"] == pytest.approx(3.0)
+
+
+def test_gains_positional_and_named(capsys):
+    """--gains as numbers in order or as name=value pairs gives the same run; the gains are used:
+    with K = (-4, -1.5) the line run ends at d* = (2 beta + K_2 beta) / K_1 (1e-5 m, as above)."""
+    base = ("simulate", "--path", "line", "--controller", "paper-k", "--json")
+    a = run_main(capsys, *base, "--gains=-4,-1.5")
+    b = run_main(capsys, *base, "--gains", "k_d=-4, k_theta=-1.5")
+    assert a == b
+    assert a["gains"] == {"k_d": -4.0, "k_theta": -1.5}
+    d_star = (2 * BETA - 1.5 * BETA) / -4.0
+    assert a["final"]["d"] == pytest.approx(d_star, abs=1e-5)
+    assert a["final"]["theta_e"] == pytest.approx(-BETA, abs=1e-6)
+    # a named subset keeps the rest at the source's K
+    c = run_main(capsys, *base, "--gains", "k_theta=-1.5")
+    assert c["gains"] == {"k_d": SOURCE_K[0], "k_theta": -1.5}
+    assert c["final"]["d"] == pytest.approx((2 * BETA - 1.5 * BETA) / SOURCE_K[0], abs=1e-5)
+
+    short = ("simulate", "--path", "line", "--controller", "stanley", "--T", "3", "--json")
+    s1 = run_main(capsys, *short, "--gains", "1.5,0.2")
+    s2 = run_main(capsys, *short, "--gains", "k_soft=0.2,k=1.5")
+    assert s1 == s2 and s1["gains"] == {"k": 1.5, "k_soft": 0.2}
+    s3 = run_main(capsys, *short, "--gains", "1.5")  # a prefix: the rest at defaults
+    assert s3["gains"] == {"k": 1.5, "k_soft": 0.1}
+    assert s3["final"] != s1["final"]
+
+
+# ------------------------------------------------------------------ usage errors
+
+SIM = ("simulate", "--path", "line", "--controller", "paper-k", "--T", "1")
+BAD = [
+    (("synth", "--v", "-1"), "--v"),
+    (("synth", "--v", "nan"), "--v"),
+    (("synth", "--L", "0"), "--L"),
+    (("synth", "--method", "foo"), "--method"),
+    (("synth", "--disk", "0", "-1"), "--disk"),
+    (("synth", "--disk", "nan", "1"), "--disk"),
+    (("synth", "--max-real", "inf"), "--max-real"),
+    (("synth", "--sector-deg", "95"), "--sector-deg"),
+    (("synth", "--alpha", "-1"), "--alpha"),
+    (("synth", "--alpha", "0", "--beta", "0"), "--beta"),
+    ((*SIM, "--beta-r-deg", "90"), "--beta-r-deg"),
+    ((*SIM, "--beta-f-deg", "-120"), "--beta-f-deg"),
+    ((*SIM, "--delta-max-deg", "0"), "--delta-max-deg"),
+    (("simulate", "--path", "line", "--controller", "paper-k", "--T", "-1"), "--T"),
+    ((*SIM, "--dt", "0"), "--dt"),
+    ((*SIM, "--dt", "2"), "--dt"),
+    ((*SIM, "--v", "inf"), "--v"),
+    ((*SIM, "--control-every", "0"), "--control-every"),
+    (("simulate", "--path", "foo", "--controller", "paper-k"), "--path"),
+    (("simulate", "--path", "line", "--controller", "foo"), "--controller"),
+    (("simulate", "--controller", "pi"), "--path"),
+    (("simulate", "--path", "line", "--controller", "pi", "--T", "1", "--gains", "1,2,3,4,5,6"), "--gains"),
+    (("simulate", "--path", "line", "--controller", "pi", "--T", "1", "--gains", "kp=3"), "--gains"),
+    (("simulate", "--path", "line", "--controller", "pi", "--T", "1", "--gains", "a,b"), "--gains"),
+    ((*SIM, "--gains", "1,nan"), "--gains"),
+    ((*SIM, "--x0", "1", "2"), "--x0"),
+    ((*SIM, "--x0", "1", "nan", "0"), "--x0"),
+]
+
+
+@pytest.fixture(scope="module")
+def bad_results():
+    """All bad-input runs, a few processes at a time (each is mostly interpreter start-up)."""
+    with ThreadPoolExecutor(max_workers=max(2, min(4, os.cpu_count() or 2))) as ex:
+        return dict(zip((a for a, _ in BAD), ex.map(lambda a: cli(*a, timeout=120), (a for a, _ in BAD))))
+
+
+@pytest.mark.parametrize("args, flag", BAD, ids=[" ".join(a) for a, _ in BAD])
+def test_bad_input_exits_2_with_one_line_naming_the_flag(bad_results, args, flag):
+    r = bad_results[args]
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1, r.stderr
+    assert flag in lines[0], lines[0]
+    assert "error" in lines[0]
+    assert r.stdout == ""
+
+
+@pytest.mark.parametrize("args", [("--help",), ("synth", "--help"), ("simulate", "--help"), ("--version",)])
+def test_help(args):
+    r = cli(*args, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip()
+    if args[-1] == "--help":
+        assert "usage: pfjax" in r.stdout
+    if args[0] == "simulate":
+        for flag in ("--path", "--controller", "--gains", "--x0", "--beta-r-deg", "--T", "--json"):
+            assert flag in r.stdout, flag
+
+
+def test_no_command_is_a_usage_error():
+    r = cli(timeout=60)
+    assert r.returncode == 2 and len(r.stderr.splitlines()) == 1 and r.stdout == ""
+
+
+def test_module_entry_point_matches_console_script():
+    r = subprocess.run([sys.executable, "-m", "pfjax.cli", "synth", "--v", "0"], capture_output=True, text=True,
+                       timeout=60, env=os.environ.copy())
+    assert r.returncode == 2 and r.stdout == ""
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("pfjax synth: error: --v")

@@ -1,0 +1,214 @@
+"""pfjax.config: defaults <- TOML file <- --set overrides, one-line errors naming the key, hashing;
+and the study script's handling of bad configuration (exit 2, one line, nothing written)."""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import importlib.util
+import json
+import math
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from pfjax.config import ConfigError, config_hash, load, parse_override
+
+ROOT = Path(__file__).resolve().parents[1]
+STUDY = ROOT / "studies" / "paper_reproduction.py"
+
+DEFAULTS = {
+    "name": "demo",
+    "seed": 0,
+    "trackers": True,
+    "model": {"v": 1.0, "L": 0.2, "convention": "source", "n": 3},
+    "source": {"K": [-2.7381, -2.0772], "flags": [True, False]},
+    "deep": {"inner": {"x": 0.5, "label": "a"}},
+}
+
+
+def write(tmp_path, text, name="cfg.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_defaults_unchanged_and_not_aliased():
+    cfg = load(DEFAULTS)
+    assert cfg == DEFAULTS and cfg is not DEFAULTS
+    before = copy.deepcopy(DEFAULTS)
+    cfg["model"]["v"] = 99.0
+    cfg["source"]["K"][0] = 0.0
+    assert DEFAULTS == before
+
+
+def test_file_then_overrides(tmp_path):
+    p = write(tmp_path, 'name = "from-file"\n[model]\nv = 2\nn = 7\n[deep.inner]\nx = 1.5\n[source]\nK = [-1, -2.5]\n')
+    cfg = load(DEFAULTS, p, ["model.v=3.5", "deep.inner.label=b", "source.flags=[false, true]", "trackers=false",
+                             "model.convention = lenain"])
+    assert cfg["name"] == "from-file"
+    assert cfg["model"] == {"v": 3.5, "L": 0.2, "convention": "lenain", "n": 7}  # --set wins over the file
+    assert cfg["deep"]["inner"] == {"x": 1.5, "label": "b"}
+    assert cfg["source"] == {"K": [-1.0, -2.5], "flags": [False, True]}
+    assert cfg["trackers"] is False
+    # ints accepted where floats are expected, and stored as floats
+    assert type(cfg["source"]["K"][0]) is float
+    assert type(load(DEFAULTS, None, ["model.v=2"])["model"]["v"]) is float
+    assert type(cfg["model"]["n"]) is int
+
+
+def test_override_values_are_toml():
+    assert parse_override("a.b.c=3") == {"a": {"b": {"c": 3}}}
+    assert parse_override("x=1e-3") == {"x": 0.001}
+    assert parse_override("x=[1, 2.5]") == {"x": [1, 2.5]}
+    assert parse_override("x=true") == {"x": True}
+    assert parse_override('x="quoted"') == {"x": "quoted"}
+    assert parse_override("x=bare word") == {"x": "bare word"}  # not TOML: taken as a string
+    assert parse_override(" x = 2 ") == {"x": 2}
+
+
+def message(excinfo) -> str:
+    msg = str(excinfo.value)
+    assert "\n" not in msg and msg.strip() == msg and msg
+    return msg
+
+
+@pytest.mark.parametrize(
+    "override, key, extra",
+    [
+        ("model.vv=1", "model.vv", "did you mean 'model.v'"),
+        ("modle.v=1", "modle", "did you mean 'model'"),
+        ("deep.inner.lable=x", "deep.inner.lable", "did you mean 'deep.inner.label'"),
+        ("zzz=1", "zzz", "unknown key"),
+        ("model.v=true", "model.v", "expected a number"),  # a bool is not a number
+        ("model.v=fast", "model.v", "expected a number"),
+        ("model.n=2.5", "model.n", "expected an integer"),
+        ("model.convention=3", "model.convention", "expected a string"),
+        ("trackers=1", "trackers", "expected a boolean"),
+        ("source.K=[1.0]", "source.K", "of length 2"),
+        ("source.K=[1.0, 2.0, 3.0]", "source.K", "of length 2"),
+        ("source.K=3.0", "source.K", "expected a list"),
+        ('source.K=[1.0, "a"]', "source.K[1]", "expected a number"),
+        ("model.v=nan", "model.v", "finite"),
+        ("model.L=-inf", "model.L", "finite"),
+        ("model=3", "model", "expected a table"),
+        ("model.v.x=1", "model.v", "expected a number"),
+        ("novalue", "--set", "key=value"),
+        ("=3", "--set", "empty key"),
+    ],
+)
+def test_override_errors_name_the_key(override, key, extra):
+    with pytest.raises(ConfigError) as e:
+        load(DEFAULTS, None, [override])
+    msg = message(e)
+    assert msg.startswith(key + ":") or msg.startswith(key + " "), msg
+    assert extra in msg, msg
+
+
+@pytest.mark.parametrize(
+    "text, key, extra",
+    [
+        ("[model]\nvv = 1.0\n", "model.vv", "did you mean 'model.v'"),
+        ("[model]\nv = 'fast'\n", "model.v", "expected a number"),
+        ("[model]\nv = nan\n", "model.v", "finite"),
+        ("[source]\nK = [1.0]\n", "source.K", "of length 2"),
+        ("[deep]\ninner = 2\n", "deep.inner", "expected a table"),
+        ("seed = 1.5\n", "seed", "expected an integer"),
+    ],
+)
+def test_file_errors_name_the_key(tmp_path, text, key, extra):
+    with pytest.raises(ConfigError) as e:
+        load(DEFAULTS, write(tmp_path, text))
+    msg = message(e)
+    assert msg.startswith(key + ":"), msg
+    assert extra in msg, msg
+
+
+def test_missing_file_and_invalid_toml(tmp_path):
+    with pytest.raises(ConfigError) as e:
+        load(DEFAULTS, tmp_path / "nope.toml")
+    assert "not found" in message(e) and "nope.toml" in str(e.value)
+    bad = write(tmp_path, "[model\nv = 1\n", "bad.toml")
+    with pytest.raises(ConfigError) as e:
+        load(DEFAULTS, bad)
+    assert "invalid TOML" in message(e) and "bad.toml" in str(e.value)
+
+
+def test_config_error_is_a_value_error():
+    assert issubclass(ConfigError, ValueError)
+
+
+def test_config_hash():
+    cfg = load(DEFAULTS)
+    h = config_hash(cfg)
+    assert len(h) == 64 and int(h, 16) >= 0
+    # the documented definition: SHA-256 of the canonical (sorted, compact) JSON
+    assert h == hashlib.sha256(json.dumps(cfg, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    # stable under key order at every level
+    rev = lambda d: {k: rev(v) for k, v in reversed(list(d.items()))} if isinstance(d, dict) else d
+    assert list(rev(cfg)) != list(cfg) and config_hash(rev(cfg)) == h
+    # stable under how a float was written (an int is stored as a float)
+    assert config_hash(load(DEFAULTS, None, ["model.v=1"])) == h
+    # changes when any value changes, however deep
+    for o in ["model.v=1.0000001", "deep.inner.label=b", "source.K=[-2.7381, -2.0773]", "trackers=false", "seed=1"]:
+        assert config_hash(load(DEFAULTS, None, [o])) != h, o
+
+
+# ------------------------------------------------------------------ the study script's CLI
+
+
+def run_study(*args, timeout=120):
+    return subprocess.run([sys.executable, str(STUDY), *args], capture_output=True, text=True, timeout=timeout)
+
+
+STUDY_BAD = {  # --set override -> the key the message must name
+    "model.v=-1": "model.v",
+    "sim.dtt=0.1": "sim.dtt",
+    "sim.horizon=nan": "sim.horizon",
+    "sim.horizon=5": "sim.horizon",  # the sine-error analysis needs samples after t = 5 s
+}
+
+
+@pytest.fixture(scope="module")
+def study_errors(tmp_path_factory):
+    """Each bad invocation in its own empty parent directory, run two at a time."""
+    jobs = {o: tmp_path_factory.mktemp("bad") for o in STUDY_BAD}
+    missing = tmp_path_factory.mktemp("missing")
+    jobs["<missing config>"] = missing
+    argv = {o: ["--set", o, "--out", str(d / "out")] for o, d in jobs.items() if o in STUDY_BAD}
+    argv["<missing config>"] = ["--config", str(missing / "missing.toml"), "--out", str(missing / "out")]
+    with ThreadPoolExecutor(max_workers=2) as ex:
+        res = dict(zip(argv, ex.map(lambda a: run_study(*a), argv.values())))
+    return {o: (res[o], jobs[o]) for o in jobs}
+
+
+@pytest.mark.parametrize("override", list(STUDY_BAD))
+def test_study_rejects_bad_config_and_writes_nothing(study_errors, override):
+    r, parent = study_errors[override]
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1, r.stderr
+    assert STUDY_BAD[override] in lines[0] and "error" in lines[0]
+    if override == "sim.dtt=0.1":
+        assert "did you mean 'sim.dt'" in lines[0]
+    assert r.stdout == ""
+    assert list(parent.iterdir()) == []  # neither --out nor a temporary directory
+
+
+def test_study_rejects_missing_config_file(study_errors):
+    r, parent = study_errors["<missing config>"]
+    assert r.returncode == 2 and len(r.stderr.splitlines()) == 1 and "missing.toml" in r.stderr
+    assert r.stdout == "" and list(parent.iterdir()) == []
+
+
+def test_study_toml_matches_script_defaults():
+    """studies/paper_reproduction.toml documents the script's defaults: loading it changes nothing."""
+    spec = importlib.util.spec_from_file_location("paper_reproduction_for_config_test", STUDY)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    cfg = load(mod.DEFAULTS, ROOT / "studies" / "paper_reproduction.toml")
+    assert config_hash(cfg) == config_hash(mod.DEFAULTS)
+    assert math.isclose(cfg["model"]["delta_max_deg"], 30.0)
