@@ -200,7 +200,7 @@ def _cmd_simulate(args) -> dict:
                     control_every=None if args.continuous else (args.control_every or 1))
     r = unstack(simulate_batch(stack([sc]), controller=controller, config=cfg), 0)
     status = int(r.status)
-    metrics = {k: float(getattr(r.metrics, k)) for k in METRIC_NAMES}
+    metrics = {k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES}
     metrics["status"] = STATUS_NAMES[status]
     x0 = SCENARIOS[args.path][1] if args.x0 is None else args.x0
     return {

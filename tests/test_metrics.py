@@ -46,7 +46,7 @@ def res():
     return jax.device_get(simulate_batch(stack(_scenarios()), controller=C.state_feedback, config=CFG))
 
 
-def reference_metrics(tr, dmax, horizon, window, band):
+def reference_metrics(tr, dmax, horizon, window, band, success_from=None, success_band=None, ok=True):
     """Every metric from the recorded samples, written independently of pfjax.metrics."""
     t, d, te, delta, cmd = tr.t, tr.d, tr.theta_e, tr.delta, tr.delta_cmd
     ad = np.abs(d)
@@ -70,6 +70,8 @@ def reference_metrics(tr, dmax, horizon, window, band):
         steer_energy=np.trapezoid(delta * delta, t),
         steer_tv=np.sum(np.abs(np.diff(delta))),
         sat_fraction=np.trapezoid((np.abs(cmd) > dmax).astype(float), t) / horizon,
+        late_max_abs_d=ad[t >= success_from - 1e-9].max(),
+        success=bool(ok and ad[t >= success_from - 1e-9].max() <= success_band),
     )
 
 
@@ -81,7 +83,8 @@ def test_metrics_equal_numpy_recomputation_from_the_trajectory(res, i):
     tr = jax.tree_util.tree_map(lambda a: a[i], res.trajectory)
     assert int(res.status[i]) == Status.OK
     dmax = float(_scenarios()[i].params.delta_max)
-    ref = reference_metrics(tr, dmax, CFG.horizon, CFG.steady_window, CFG.settle_band)
+    ref = reference_metrics(tr, dmax, CFG.horizon, CFG.steady_window, CFG.settle_band,
+                            CFG.success_start, CFG.success_band)
     got = jax.tree_util.tree_map(lambda a: a[i], res.metrics)._asdict()
     assert set(ref) == set(got) == set(running.METRIC_NAMES)
     for name, value in ref.items():
@@ -133,9 +136,9 @@ def _feed(t, d, te, delta, sat, weight, *, band, steady_from):
     def go(t, d, te, delta, sat, weight):
         acc0 = running.init(d[0], delta[0])
         body = lambda acc, x: (running.update(acc, x[0], dt, x[5], x[1], x[2], x[3], x[4], band=band,
-                                              steady_from=steady_from), None)
+                                              steady_from=steady_from, success_from=steady_from), None)
         acc, _ = jax.lax.scan(body, acc0, jnp.stack([t, d, te, delta, sat, weight], axis=1))
-        return running.finalize(acc, horizon, weight[-1] == 0)
+        return running.finalize(acc, horizon, weight[-1] == 0, band)
 
     return jax.device_get(jax.jit(go)(*(jnp.asarray(a) for a in (t, d, te, delta, sat, weight))))
 
@@ -219,3 +222,23 @@ def test_hand_computed_failure_stops_accumulating():
     for name in ("iae", "ise", "itae", "max_abs_d", "overshoot", "steer_energy", "steer_tv", "sat_fraction"):
         assert np.isfinite(getattr(m, name)), name
     assert np.isnan(m.steady_abs_d) and np.isnan(m.settling_time)
+
+
+def test_success_window_hand_computed():
+    """late_max_abs_d is the max |d| from success_from on (exp(-6) for a decreasing exp(-t));
+    success needs it within the band and no failure."""
+    h, N = 0.01, 1000
+    t = np.arange(N + 1) * h
+    w = np.ones(N + 1)
+    w[[0, -1]] = 0.5
+    d = np.exp(-t)
+    z = np.zeros_like(t)
+    m = _feed(t, d, z, z, z, w, band=0.05, steady_from=6.0)
+    np.testing.assert_allclose(m.late_max_abs_d, math.exp(-6.0), rtol=1e-12)
+    assert bool(m.success)
+    m = _feed(t, d, z, z, z, w, band=1e-3, steady_from=6.0)  # exp(-6) = 2.5e-3 > 1e-3
+    assert not bool(m.success)
+    w_failed = w.copy()
+    w_failed[-100:] = 0.0  # failed near the end: never a success
+    m = _feed(t, d, z, z, z, w_failed, band=0.05, steady_from=6.0)
+    assert not bool(m.success)

@@ -16,7 +16,9 @@ and the remaining metrics are sample statistics:
   NaN if the run ends outside the band or fails;
 * ``overshoot``: largest excursion of ``d`` past zero on the side opposite to ``d(0)`` (m, >= 0);
 * ``steer_tv``: total variation of the applied steering, sum |delta_k - delta_{k-1}| (rad);
-* ``sat_fraction``: fraction of the run's time with the command beyond the steering limit.
+* ``sat_fraction``: fraction of the run's time with the command beyond the steering limit;
+* ``late_max_abs_d``: max |d| from ``success_from`` on (m);
+* ``success``: the run did not fail and ``late_max_abs_d <= success_band``.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ class Accumulator(NamedTuple):
     prev_delta: Array
     sat_time: Array
     time: Array  # total weighted time
+    late_max_abs_d: Array  # max |d| from success_from on
 
 
 class Metrics(NamedTuple):
@@ -57,6 +60,8 @@ class Metrics(NamedTuple):
     steer_energy: Array  # rad^2 s
     steer_tv: Array  # rad
     sat_fraction: Array  # 1
+    late_max_abs_d: Array  # m
+    success: Array  # bool
 
 
 METRIC_NAMES = Metrics._fields
@@ -67,12 +72,12 @@ def init(d0: Array, delta0: Array) -> Accumulator:
     return Accumulator(
         iae=z, ise=z, itae=z, max_abs_d=z, steady_abs_d=z, steady_abs_theta_e=z, steady_weight=z,
         settle=z, overshoot=z, d0_sign=jnp.sign(d0), steer_energy=z, steer_tv=z, prev_delta=delta0,
-        sat_time=z, time=z,
+        sat_time=z, time=z, late_max_abs_d=z,
     )
 
 
 def update(acc: Accumulator, t, dt, weight, d, theta_e, delta, saturated, *, band: float,
-           steady_from: float) -> Accumulator:
+           steady_from: float, success_from: float) -> Accumulator:
     """Add sample ``k`` (time ``t``) with trapezoid weight ``weight`` (0 after a failure)."""
     w = weight * dt
     live = weight > 0
@@ -100,10 +105,11 @@ def update(acc: Accumulator, t, dt, weight, d, theta_e, delta, saturated, *, ban
         prev_delta=jnp.where(live, delta, acc.prev_delta),
         sat_time=acc.sat_time + w * saturated,
         time=acc.time + w,
+        late_max_abs_d=jnp.where(live & (t >= success_from - 1e-9), jnp.maximum(acc.late_max_abs_d, ad), acc.late_max_abs_d),
     )
 
 
-def finalize(acc: Accumulator, horizon: float, failed: Array) -> Metrics:
+def finalize(acc: Accumulator, horizon: float, failed: Array, success_band: float) -> Metrics:
     """Turn the accumulator into :class:`Metrics`."""
     nan = jnp.nan
     settled = (acc.settle <= horizon) & ~failed
@@ -120,4 +126,6 @@ def finalize(acc: Accumulator, horizon: float, failed: Array) -> Metrics:
         steer_energy=acc.steer_energy,
         steer_tv=acc.steer_tv,
         sat_fraction=acc.sat_time / jnp.where(acc.time > 0, acc.time, 1.0),
+        late_max_abs_d=acc.late_max_abs_d,
+        success=~failed & (acc.late_max_abs_d <= success_band),
     )

@@ -40,12 +40,15 @@ class SlipParams(NamedTuple):
         L: wheelbase, m (Table 1: 0.2).
         delta_max: steering saturation, rad (*assumed* 30 deg, spec §6).
         convention: ``SOURCE`` (0) or ``LENAIN`` (1) front-slip sign convention.
+        delta_rate_max: steering rate limit, rad/s (``inf``: none). Applied per integrator step to
+            sampled controllers; a continuous controller is not rate limited.
     """
 
     v: Array | float = 1.0  # m/s
     L: Array | float = 0.2  # m
     delta_max: Array | float = 0.5235987755982988  # rad (30 deg)
     convention: Array | int = SOURCE  # 0 source, 1 Lenain
+    delta_rate_max: Array | float = float("inf")  # rad/s
 
 
 class Pose(NamedTuple):

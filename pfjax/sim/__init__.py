@@ -1,6 +1,6 @@
 """Simulation: slip profiles, the RK4 scan loop, batching, run status."""
 
-from pfjax.sim.simulate import Final, Scenario, SimConfig, SimResult, Trajectory, simulate, simulate_batch, stack, unstack
+from pfjax.sim.simulate import Final, Scenario, SensorNoise, SimConfig, SimResult, Trajectory, simulate, simulate_batch, stack, unstack
 from pfjax.sim.slip_profiles import (
     SlipProfile,
     constant_slip,
@@ -13,7 +13,7 @@ from pfjax.sim.slip_profiles import (
 from pfjax.sim.status import STATUS_NAMES, Status
 
 __all__ = [
-    "Final", "Scenario", "SimConfig", "SimResult", "Trajectory", "simulate", "simulate_batch", "stack",
+    "Final", "Scenario", "SensorNoise", "SimConfig", "SimResult", "Trajectory", "simulate", "simulate_batch", "stack",
     "unstack", "SlipProfile", "constant_slip", "sampled_slip", "sinusoid_slip", "slip_at", "slip_profile",
     "step_slip", "STATUS_NAMES", "Status",
 ]

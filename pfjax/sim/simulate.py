@@ -27,7 +27,7 @@ from jax import Array
 from pfjax.controllers.base import Controller, Observation, step
 from pfjax.metrics import running
 from pfjax.models.slip import Pose, SlipParams, world_rhs
-from pfjax.paths.geometry import Projection, closest_parameter, global_parameter, measure
+from pfjax.paths.geometry import Projection, closest_parameter, global_parameter, measure, wrap_angle
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.slip_profiles import SlipProfile, slip_at
 from pfjax.sim.status import Status, classify
@@ -48,6 +48,8 @@ class SimConfig:
         d_fail: |d| above which a run is flagged ``DIVERGED``, m.
         settle_band: band on |d| for the settling time, m.
         steady_window: final part of the run for the steady-state errors, s.
+        success_band: a run succeeds if it does not fail and |d| <= this from ``success_from`` on, m.
+        success_from: start of the success window, s (``None``: the steady window's start).
     """
 
     dt: float = 0.005
@@ -58,6 +60,8 @@ class SimConfig:
     d_fail: float = 10.0
     settle_band: float = 0.05
     steady_window: float = 5.0
+    success_band: float = 0.05
+    success_from: float | None = None
 
     def __post_init__(self):
         if not self.dt > 0:
@@ -73,6 +77,19 @@ class SimConfig:
     def n_steps(self) -> int:
         return int(round(self.horizon / self.dt))
 
+    @property
+    def success_start(self) -> float:
+        return self.n_steps * self.dt - self.steady_window if self.success_from is None else self.success_from
+
+
+class SensorNoise(NamedTuple):
+    """White Gaussian noise on the controller's measurements of ``d`` and ``theta_e``, one draw per
+    integrator step from ``fold_in(key, k)`` (deterministic; O(1) memory). Metrics use the true errors."""
+
+    sigma_d: Array  # m
+    sigma_theta_e: Array  # rad
+    key: Array  # uint32[2], a jax.random.PRNGKey
+
 
 class Scenario(NamedTuple):
     """Everything that varies between runs (a pytree; batch it along a leading axis)."""
@@ -82,6 +99,7 @@ class Scenario(NamedTuple):
     params: SlipParams  # v, L, delta_max, convention
     path: Any  # a path shape from pfjax.paths
     gains: Any  # the controller's parameter pytree
+    noise: SensorNoise | None = None  # measurement noise seen by the controller (None: exact)
 
 
 class Trajectory(NamedTuple):
@@ -130,6 +148,13 @@ def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
     )
 
 
+def _noisy(obs: Observation, noise: SensorNoise | None, k) -> Observation:
+    if noise is None:
+        return obs
+    n = jax.random.normal(jax.random.fold_in(noise.key, k), (2,), dtype=obs.d.dtype)
+    return obs._replace(d=obs.d + noise.sigma_d * n[0], theta_e=wrap_angle(obs.theta_e + noise.sigma_theta_e * n[1]))
+
+
 def _measure(sc: Scenario, pose: Pose, u_guess, iters) -> Projection:
     u = closest_parameter(sc.path, pose.x, pose.y, u_guess, iters)
     return measure(sc.path, pose.x, pose.y, pose.theta, u)
@@ -153,17 +178,19 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     every = 1 if continuous else int(config.control_every)
     gains, params = sc.gains, sc.params
     dmax = jnp.asarray(params.delta_max, float)
+    rate = jnp.asarray(params.delta_rate_max, float)
+    rate_limited = jnp.isfinite(rate)
 
     pose0 = Pose(*(jnp.asarray(a, float) for a in sc.pose0))
     u0 = global_parameter(sc.path, pose0.x, pose0.y)
     c0 = controller.init(gains)
 
-    def closed_loop_rhs(u_guess):
+    def closed_loop_rhs(u_guess, k):
         """Vector field of (pose, controller state) with the controller inside (continuous mode)."""
 
         def f(t, y):
             pose, c = y
-            obs = _observation(_measure(sc, pose, u_guess, iters), pose, sc)
+            obs = _noisy(_observation(_measure(sc, pose, u_guess, iters), pose, sc), sc.noise, k)
             cmd = controller.output(gains, c, obs)
             delta = jnp.clip(cmd, -dmax, dmax)
             br, bf = slip_at(sc.slip, t)
@@ -191,14 +218,15 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
             acc, t, dt, jnp.where(live, weight, 0.0), jnp.where(live, proj.d, 0.0),
             jnp.where(live, proj.theta_e, 0.0), delta, (jnp.abs(cmd) > dmax).astype(float),
             band=config.settle_band, steady_from=horizon - config.steady_window,
+            success_from=config.success_start,
         )
         return (acc, status, fail_time), live
 
     def body(carry, k):
-        pose, c, u, cmd, health_carry = carry
+        pose, c, u, cmd, delta_prev, health_carry = carry
         t = k * dt
         proj = _measure(sc, pose, u, iters)
-        obs = _observation(proj, pose, sc)
+        obs = _noisy(_observation(proj, pose, sc), sc.noise, k)
         if continuous:
             cmd = controller.output(gains, c, obs)
         else:
@@ -208,31 +236,36 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
                 lambda: (cmd, c),
             )
         delta = jnp.clip(cmd, -dmax, dmax)
+        if not continuous:  # steering rate limit (exactly a no-op when rate = inf)
+            limited = delta_prev + jnp.clip(delta - delta_prev, -rate * dt, rate * dt)
+            delta = jnp.where(rate_limited, limited, delta)
         weight = jnp.where(k == 0, 0.5, 1.0)
         health_carry, live = sample(health_carry, t, weight, pose, proj, cmd, delta)
         if continuous:
-            new_pose, new_c = rk4_step(closed_loop_rhs(proj.u), t, (pose, c), dt)
+            new_pose, new_c = rk4_step(closed_loop_rhs(proj.u, k), t, (pose, c), dt)
         else:
             rhs = lambda tt, ps: world_rhs(ps, delta, *slip_at(sc.slip, tt), params)
             new_pose, new_c = rk4_step(rhs, t, pose, dt), c
         keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(live, a, b), new, old)
         out = record_of(t, pose, proj, cmd, delta) if config.record else None
-        return (keep(new_pose, pose), keep(new_c, c), jnp.where(live, proj.u, u), cmd, health_carry), out
+        return (keep(new_pose, pose), keep(new_c, c), jnp.where(live, proj.u, u), cmd, delta, health_carry), out
 
     proj0 = measure(sc.path, pose0.x, pose0.y, pose0.theta, u0)
     cmd0 = jnp.zeros_like(proj0.d)
     acc0 = running.init(proj0.d, jnp.clip(controller.output(gains, c0, _observation(proj0, pose0, sc)), -dmax, dmax))
-    init = (pose0, c0, u0, cmd0, (acc0, jnp.int32(Status.OK), jnp.asarray(jnp.nan, proj0.d.dtype)))
-    (pose, c, u, cmd, health_carry), traj = jax.lax.scan(body, init, jnp.arange(n_steps))
+    init = (pose0, c0, u0, cmd0, jnp.zeros_like(cmd0), (acc0, jnp.int32(Status.OK), jnp.asarray(jnp.nan, proj0.d.dtype)))
+    (pose, c, u, cmd, delta_last, health_carry), traj = jax.lax.scan(body, init, jnp.arange(n_steps))
 
     # Final sample t_N (trapezoid end point).
     t_end = jnp.asarray(horizon, proj0.d.dtype)
     proj = _measure(sc, pose, u, iters)
     if continuous:
-        cmd = controller.output(gains, c, _observation(proj, pose, sc))
-    delta = jnp.clip(cmd, -dmax, dmax)
+        cmd = controller.output(gains, c, _noisy(_observation(proj, pose, sc), sc.noise, n_steps))
+        delta = jnp.clip(cmd, -dmax, dmax)
+    else:  # the held, applied steering of the last step
+        delta = delta_last
     (acc, status, fail_time), _ = sample(health_carry, t_end, 0.5, pose, proj, cmd, delta)
-    metrics = running.finalize(acc, horizon, status != Status.OK)
+    metrics = running.finalize(acc, horizon, status != Status.OK, config.success_band)
     final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, delta, proj.s)
     if config.record:
         last = record_of(t_end, pose, proj, cmd, delta)
