@@ -108,7 +108,15 @@ def global_parameter(path, qx: Array, qy: Array, iters: int = 8) -> Array:
     """
     grid = path.u_min + (path.u_max - path.u_min) * jnp.linspace(0.0, 1.0, GLOBAL_SAMPLES)
     px, py = path.point(grid)
-    i = jnp.argmin((px - qx) ** 2 + (py - qy) ** 2)
+    dist2 = (px - qx) ** 2 + (py - qy) ** 2
+    # Closed or multi-lap paths have equally close points on every lap, and rounding must not pick a
+    # later one: take the earliest sample whose distance is within the grid's own resolution
+    # (one sample spacing of arc) of the minimum.
+    dx, dy = path.d1(grid)
+    h = (path.u_max - path.u_min) / (GLOBAL_SAMPLES - 1) * jnp.sqrt(dx * dx + dy * dy)
+    dmin = jnp.sqrt(jnp.min(dist2))
+    near = jnp.sqrt(dist2) <= dmin + h
+    i = jnp.argmax(near)
     return closest_parameter(path, qx, qy, jax.lax.stop_gradient(grid[i]), iters)
 
 

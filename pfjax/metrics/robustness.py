@@ -1,0 +1,390 @@
+"""Robustness statistics of a Monte Carlo study, per controller (NumPy/SciPy/pandas, never under jit).
+
+A study runs ``n`` independent scenarios per controller; run ``i`` succeeds (``S_i = 1``) or not.
+With ``k = sum S_i`` successes the success probability ``p = P(S = 1)`` is estimated by
+``p_hat = k / n`` and bounded by
+
+* the exact (Clopper-Pearson) binomial interval, :func:`clopper_pearson`;
+* Hoeffding's inequality ``P(p_hat - p >= eps) <= exp(-2 n eps^2)``, whose two-sided form
+  ``P(|p_hat - p| >= eps) <= 2 exp(-2 n eps^2)`` gives the sample size
+  ``N >= ln(2/delta) / (2 eps^2)`` of :func:`hoeffding_n`;
+* the zero-failure ("success run") bound: if ``P(failure) > eps`` the chance of ``n`` failure-free
+  runs is below ``(1 - eps)^n``, hence ``N >= ln(1/delta) / ln(1/(1 - eps))`` of
+  :func:`zero_failure_n`.
+
+:func:`supported_statement` turns a sample into the statement it supports, :func:`slip_margin`
+reads the largest safe slip amplitude off a batched sweep, :func:`metric_quantiles` summarises
+the per-run metrics and :func:`failure_drivers` ranks the sampled parameters that drive failure.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+__all__ = [
+    "clopper_pearson",
+    "failure_drivers",
+    "hoeffding_n",
+    "metric_quantiles",
+    "slip_margin",
+    "success_summary",
+    "supported_statement",
+    "zero_failure_n",
+]
+
+DEFAULT_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95, 0.99)
+
+
+def _check_open_unit(name: str, value: float) -> float:
+    value = float(value)
+    if not 0.0 < value < 1.0:
+        raise ValueError(f"{name} must lie in (0, 1), got {value!r}")
+    return value
+
+
+def clopper_pearson(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
+    """Exact two-sided binomial confidence interval for a success probability (Clopper-Pearson).
+
+    With ``alpha = 1 - conf`` and ``Beta^{-1}(q; a, b)`` the beta quantile function::
+
+        lo = Beta^{-1}(alpha/2;     k,     n - k + 1)     (lo = 0 if k = 0)
+        hi = Beta^{-1}(1 - alpha/2; k + 1, n - k)         (hi = 1 if k = n)
+
+    ``lo`` is the ``p`` at which ``P(Bin(n, p) >= k) = alpha/2`` and ``hi`` the one at which
+    ``P(Bin(n, p) <= k) = alpha/2``, so the interval covers the true ``p`` with probability at
+    least ``conf`` for every ``p`` (conservative). The one-sided lower bound at confidence
+    ``1 - delta`` is ``clopper_pearson(k, n, 1 - 2 delta)[0]``.
+
+    Args:
+        k: number of successes, ``0 <= k <= n``.
+        n: number of trials, ``n >= 0``.
+        conf: two-sided confidence level in (0, 1).
+
+    Returns:
+        ``(lo, hi)`` as floats; ``(nan, nan)`` when ``n = 0`` (nothing observed).
+    """
+    k, n = int(k), int(n)
+    conf = _check_open_unit("conf", conf)
+    if n < 0 or not 0 <= k <= max(n, 0):
+        raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
+    if n == 0:
+        return math.nan, math.nan
+    alpha = 1.0 - conf
+    lo = 0.0 if k == 0 else float(stats.beta.ppf(alpha / 2, k, n - k + 1))
+    hi = 1.0 if k == n else float(stats.beta.ppf(1 - alpha / 2, k + 1, n - k))
+    return lo, hi
+
+
+def success_summary(success: np.ndarray, conf: float = 0.95) -> dict:
+    """Success count, rate and its Clopper-Pearson interval.
+
+    Args:
+        success: ``(n,)`` booleans (or 0/1), one per run.
+        conf: confidence level of the interval (the key keeps the name ``success_ci95``).
+
+    Returns:
+        ``{"n", "k", "success_rate", "success_ci95": [lo, hi]}`` with ``success_rate = k / n``
+        (NaN and ``[nan, nan]`` when ``n = 0``); plain Python numbers, ready for JSON.
+    """
+    s = np.asarray(success).reshape(-1)
+    if s.dtype != bool and not np.isin(s, (0, 1)).all():
+        raise ValueError("success must be boolean or 0/1")
+    n, k = int(s.size), int(np.count_nonzero(s))
+    lo, hi = clopper_pearson(k, n, conf)
+    return {"n": n, "k": k, "success_rate": k / n if n else math.nan, "success_ci95": [lo, hi]}
+
+
+def _quantile_key(q: float) -> str:
+    """``0.05 -> "q05"``, ``0.5 -> "q50"``, ``0.975 -> "q97.5"``."""
+    pct = 100.0 * q
+    return f"q{round(pct):02d}" if abs(pct - round(pct)) < 1e-9 else f"q{pct:g}"
+
+
+def metric_quantiles(df: pd.DataFrame, columns: Sequence[str],
+                     qs: Sequence[float] = DEFAULT_QUANTILES) -> dict:
+    """NaN-aware mean, standard deviation and quantiles of per-run metrics.
+
+    Only finite values count (``settling_time`` is NaN for a run that never settles; a run
+    that failed may carry inf); their number is reported as ``n_finite`` so a reader sees how many
+    runs a statistic rests on. Over the ``m = n_finite`` finite values ``x_1..x_m``::
+
+        mean = (1/m) sum x_i        std = sqrt( sum (x_i - mean)^2 / (m - 1) )   (NaN if m < 2)
+
+    and ``q<100 q>`` is ``numpy.nanquantile`` (linear interpolation between order statistics).
+
+    Args:
+        df: one row per run.
+        columns: the metric columns to summarise.
+        qs: quantile levels in [0, 1]; keys are ``q05``, ``q50``, ``q99``, ``q97.5``, ...
+
+    Returns:
+        ``{col: {"mean", "std", "q05", ..., "n_finite"}}``; NaN statistics when ``n_finite = 0``.
+    """
+    qs = tuple(float(q) for q in qs)
+    if any(not 0.0 <= q <= 1.0 for q in qs):
+        raise ValueError(f"quantile levels must lie in [0, 1], got {qs}")
+    missing = [c for c in columns if c not in df.columns]
+    if missing:
+        raise KeyError(f"columns not in the data frame: {missing}")
+    out = {}
+    for col in columns:
+        x = df[col].to_numpy(dtype=float)
+        x = x[np.isfinite(x)]
+        m = int(x.size)
+        entry = {"mean": float(x.mean()) if m else math.nan,
+                 "std": float(x.std(ddof=1)) if m > 1 else math.nan}
+        values = np.quantile(x, qs) if m else np.full(len(qs), np.nan)
+        entry.update({_quantile_key(q): float(v) for q, v in zip(qs, values)})
+        entry["n_finite"] = m
+        out[col] = entry
+    return out
+
+
+def _smallest_n(satisfied, guess: float) -> int:
+    """Smallest ``n >= 1`` with ``satisfied(n)``, starting from the closed form ``ceil(guess)``.
+
+    The closed form is exact in real arithmetic; the +-1 correction makes the result the
+    smallest ``n`` satisfying the defining inequality as evaluated in floating point.
+    """
+    n = max(1, math.ceil(guess))
+    while not satisfied(n):
+        n += 1
+    while n > 1 and satisfied(n - 1):
+        n -= 1
+    return n
+
+
+def hoeffding_n(eps: float, delta: float) -> int:
+    """Runs needed so that ``|p_hat - p| < eps`` with probability ``>= 1 - delta`` (Hoeffding).
+
+    Hoeffding's two-sided bound ``P(|p_hat - p| >= eps) <= 2 exp(-2 n eps^2)`` is at most
+    ``delta`` once::
+
+        n >= ln(2/delta) / (2 eps^2)
+
+    Args:
+        eps: accuracy in (0, 1).
+        delta: failure probability of the statement in (0, 1).
+
+    Returns:
+        The smallest integer ``n`` with ``2 exp(-2 n eps^2) <= delta``.
+    """
+    eps, delta = _check_open_unit("eps", eps), _check_open_unit("delta", delta)
+    return _smallest_n(lambda n: 2.0 * math.exp(-2.0 * n * eps**2) <= delta,
+                       math.log(2.0 / delta) / (2.0 * eps**2))
+
+
+def zero_failure_n(eps: float, delta: float) -> int:
+    """Failure-free runs needed to claim ``P(failure) <= eps`` with confidence ``1 - delta``.
+
+    The worst-case ("success run") bound: if ``P(failure) > eps``, ``n`` runs all succeed with
+    probability below ``(1 - eps)^n``, which is at most ``delta`` once::
+
+        n >= ln(1/delta) / ln(1/(1 - eps))        (about 3/eps for delta = 0.05)
+
+    Args:
+        eps: tolerated failure probability in (0, 1).
+        delta: in (0, 1), one minus the confidence.
+
+    Returns:
+        The smallest integer ``n`` with ``(1 - eps)^n <= delta``.
+    """
+    eps, delta = _check_open_unit("eps", eps), _check_open_unit("delta", delta)
+    log1m = math.log1p(-eps)
+    return _smallest_n(lambda n: n * log1m <= math.log(delta), math.log(delta) / log1m)
+
+
+def supported_statement(n: int, k_fail: int, delta: float = 0.05) -> dict:
+    """What ``n`` runs with ``k_fail`` failures support about ``P(success)``, at confidence ``1 - delta``.
+
+    With ``p_hat = (n - k_fail) / n``:
+
+    * Hoeffding: ``P(success) >= p_hat - eps_H`` with ``eps_H = sqrt(ln(2/delta) / (2 n))``
+      (the two-sided radius of :func:`hoeffding_n` solved for ``eps``; distribution-free);
+    * zero failures only: ``P(failure) <= eps_0 = 1 - delta^(1/n)`` (:func:`zero_failure_n`
+      solved for ``eps``);
+    * Clopper-Pearson one-sided lower bound ``p_CP = Beta^{-1}(delta; n - k_fail, k_fail + 1)``
+      (0 if every run failed): ``P(success) >= p_CP``, the tightest of the three (with no
+      failures ``p_CP = delta^(1/n) = 1 - eps_0``).
+
+    Args:
+        n: number of runs, ``>= 1``.
+        k_fail: number of failed runs, ``0 <= k_fail <= n``.
+        delta: one minus the confidence, in (0, 1).
+
+    Returns:
+        ``{"n", "k_fail", "delta", "confidence", "success_rate", "hoeffding_eps",
+        "hoeffding_lower", "zero_failure_eps", "cp_lower", "text"}``; ``hoeffding_lower`` is
+        ``max(0, p_hat - eps_H)``, ``zero_failure_eps`` is None when ``k_fail > 0`` and ``text``
+        is one English sentence.
+    """
+    n, k_fail = int(n), int(k_fail)
+    delta = _check_open_unit("delta", delta)
+    if n < 1 or not 0 <= k_fail <= n:
+        raise ValueError(f"need n >= 1 and 0 <= k_fail <= n, got n={n}, k_fail={k_fail}")
+    p_hat = (n - k_fail) / n
+    eps_h = math.sqrt(math.log(2.0 / delta) / (2.0 * n))
+    eps_0 = -math.expm1(math.log(delta) / n) if k_fail == 0 else None
+    cp_lower = clopper_pearson(n - k_fail, n, 1.0 - 2.0 * delta)[0]
+    conf_pct = f"{100 * (1 - delta):g} %"
+    if k_fail == 0:
+        text = (f"No failure in {n} runs: P(failure) <= {eps_0:.3g} with {conf_pct} confidence "
+                f"(Hoeffding alone: P(success) >= {max(0.0, p_hat - eps_h):.4f}).")
+    else:
+        text = (f"{k_fail} failures in {n} runs: P(success) >= {cp_lower:.4f} with {conf_pct} "
+                f"confidence (Clopper-Pearson; Hoeffding: >= {p_hat:.4f} - {eps_h:.4f} "
+                f"= {max(0.0, p_hat - eps_h):.4f}).")
+    return {"n": n, "k_fail": k_fail, "delta": delta, "confidence": 1.0 - delta,
+            "success_rate": p_hat, "hoeffding_eps": eps_h, "hoeffding_lower": max(0.0, p_hat - eps_h),
+            "zero_failure_eps": eps_0, "cp_lower": cp_lower, "text": text}
+
+
+def _last_safe_index(passes: np.ndarray) -> int:
+    """Index of the last amplitude such that it and every smaller one pass; -1 if the first fails."""
+    fails = np.flatnonzero(~passes)
+    return (passes.size if fails.size == 0 else int(fails[0])) - 1
+
+
+def slip_margin(amplitudes: np.ndarray, successes: np.ndarray, trials: np.ndarray,
+                eps: float = 0.05, conf: float = 0.95) -> dict:
+    """Largest slip amplitude at which the success rate stays ``>= 1 - eps``, from a batched sweep.
+
+    At amplitudes ``a_1 < ... < a_m`` (deg) the sweep observed ``k_j`` successes in ``n_j`` runs.
+    For a per-amplitude rate ``r_j`` the margin is::
+
+        a* = a_J,   J = max{ j : r_i >= 1 - eps for every i <= j }
+
+    i.e. the first amplitude that fails ends the safe range even if a larger one passes again
+    (noise or a genuinely non-monotone curve: the margin promises safety at every amplitude
+    below it). It is evaluated three times:
+
+    * ``margin`` with ``r_j = p_hat_j = k_j / n_j`` (point estimate);
+    * ``margin_lo`` with the Clopper-Pearson lower bound of ``p_j`` at ``conf`` (conservative);
+    * ``margin_hi`` with its upper bound (optimistic).
+
+    Because ``lo_j <= p_hat_j <= hi_j``, ``margin_lo <= margin <= margin_hi`` always.
+
+    Edge cases: if the smallest amplitude already fails, the margin is ``0`` (no tested amplitude
+    is known to be safe; amplitudes are magnitudes, ``a_1 >= 0``). If every amplitude passes,
+    the margin is the largest amplitude tested and ``censored`` is True: the true margin is at
+    least that (right-censored).
+
+    The grid itself limits the answer: the point-estimate crossing lies between ``margin`` and
+    the next amplitude tested, and ``resolution`` is that gap (``a_{J+1} - a_J``, with
+    ``a_0 = 0``); when censored, the last grid step ``a_m - a_{m-1}`` (NaN for a single
+    amplitude).
+
+    Args:
+        amplitudes: ``(m,)`` distinct slip amplitudes, deg, ``>= 0`` (sorted here if not).
+        successes: ``(m,)`` success counts ``k_j``.
+        trials: ``(m,)`` run counts ``n_j >= 1``.
+        eps: tolerated failure rate in (0, 1).
+        conf: two-sided confidence of the per-amplitude intervals.
+
+    Returns:
+        ``{"margin", "margin_lo", "margin_hi", "resolution", "censored", "eps", "table"}`` with
+        ``table`` one dict ``{"amplitude", "n", "k", "rate", "lo", "hi"}`` per amplitude, ascending.
+    """
+    eps = _check_open_unit("eps", eps)
+    a = np.asarray(amplitudes, dtype=float).reshape(-1)
+    k = np.asarray(successes).reshape(-1)
+    n = np.asarray(trials).reshape(-1)
+    if not a.size == k.size == n.size or a.size == 0:
+        raise ValueError(f"amplitudes, successes and trials need the same non-zero length, "
+                         f"got {a.size}, {k.size}, {n.size}")
+    if not np.all(np.isfinite(a)) or np.any(a < 0):
+        raise ValueError(f"amplitudes must be finite and >= 0, got {a}")
+    if np.any(n < 1) or np.any(k < 0) or np.any(k > n):
+        raise ValueError(f"need 0 <= successes <= trials and trials >= 1, got k={k}, n={n}")
+    order = np.argsort(a, kind="stable")
+    a, k, n = a[order], k[order].astype(int), n[order].astype(int)
+    if np.any(np.diff(a) == 0):
+        raise ValueError(f"amplitudes must be distinct, got {a}")
+    rate = k / n
+    lo, hi = np.array([clopper_pearson(kj, nj, conf) for kj, nj in zip(k, n)]).T
+    grid = np.concatenate([[0.0], a])  # a_0 = 0: the margin when the smallest amplitude fails
+
+    def margin_of(r):
+        return float(grid[_last_safe_index(r >= 1.0 - eps) + 1])
+
+    j = _last_safe_index(rate >= 1.0 - eps)
+    censored = j == a.size - 1
+    if censored:
+        resolution = float(a[-1] - a[-2]) if a.size > 1 else math.nan
+    else:
+        resolution = float(grid[j + 2] - grid[j + 1])
+    table = [{"amplitude": float(a[i]), "n": int(n[i]), "k": int(k[i]), "rate": float(rate[i]),
+              "lo": float(lo[i]), "hi": float(hi[i])} for i in range(a.size)]
+    return {"margin": margin_of(rate), "margin_lo": margin_of(lo), "margin_hi": margin_of(hi),
+            "resolution": resolution, "censored": bool(censored), "eps": eps, "table": table}
+
+
+def _spearman(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Spearman ``(rho, p)`` on the rows where both are finite; NaN if either is constant there."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if x.size < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:
+        return math.nan, math.nan
+    res = stats.spearmanr(x, y)
+    return float(res.statistic), float(res.pvalue)
+
+
+def failure_drivers(df: pd.DataFrame, params: list[str], outcome: str = "success",
+                    metric: str | None = "iae") -> pd.DataFrame:
+    """Rank the sampled parameters by how strongly they drive failure.
+
+    For each parameter ``x`` (one value per run) and the failure indicator ``F = 1 - success``:
+
+    * ``rho_failure``, ``p_failure``: Spearman rank correlation of ``x`` with ``F`` and its
+      p-value (``scipy.stats.spearmanr``; ties in ``F`` get average ranks);
+    * ``rho_metric``, ``p_metric``: the same with the metric column (rows where it is finite);
+    * ``effect_size``: the point-biserial effect size
+      ``(mean(x | F = 1) - mean(x | F = 0)) / std(x)`` (``std`` over all runs, ``ddof = 1``):
+      how many standard deviations the failed runs sit above the successful ones.
+
+    Slip can hurt in either direction, so a signed parameter (negative and positive values both
+    sampled) gets a second row ``abs_<name>`` for ``|x|``: a failure driven by ``|beta_r|``
+    correlates with ``abs_beta_r`` but hardly with ``beta_r``. Statistics are NaN where undefined
+    (no failure, no success, a constant parameter, or ``metric=None``).
+
+    Args:
+        df: one row per run with the parameter columns, ``outcome`` and ``metric``.
+        params: the sampled parameter columns.
+        outcome: boolean (or 0/1) success column.
+        metric: a per-run metric column, or None.
+
+    Returns:
+        One row per parameter (and ``abs_`` variant) with columns ``parameter, rho_failure,
+        p_failure, rho_metric, p_metric, effect_size, n``, sorted by ``|rho_failure|`` descending
+        (NaN last).
+    """
+    needed = list(params) + [outcome] + ([metric] if metric is not None else [])
+    missing = [c for c in needed if c not in df.columns]
+    if missing:
+        raise KeyError(f"columns not in the data frame: {missing}")
+    fail = 1.0 - df[outcome].to_numpy(dtype=float)
+    y = df[metric].to_numpy(dtype=float) if metric is not None else None
+    rows = []
+    for name in params:
+        x = df[name].to_numpy(dtype=float)
+        variants = [(name, x)]
+        if np.any(x < 0) and np.any(x > 0):
+            variants.append((f"abs_{name}", np.abs(x)))
+        for label, v in variants:
+            rho_f, p_f = _spearman(v, fail)
+            rho_m, p_m = _spearman(v, y) if y is not None else (math.nan, math.nan)
+            ok = np.isfinite(v) & np.isfinite(fail)
+            vf, vs = v[ok & (fail > 0.5)], v[ok & (fail < 0.5)]
+            sd = np.std(v[ok], ddof=1) if ok.sum() > 1 else 0.0
+            effect = (vf.mean() - vs.mean()) / sd if vf.size and vs.size and sd > 0 else math.nan
+            rows.append({"parameter": label, "rho_failure": rho_f, "p_failure": p_f, "rho_metric": rho_m,
+                         "p_metric": p_m, "effect_size": float(effect), "n": int(ok.sum())})
+    out = pd.DataFrame(rows, columns=["parameter", "rho_failure", "p_failure", "rho_metric",
+                                      "p_metric", "effect_size", "n"])
+    order = np.argsort(-np.nan_to_num(np.abs(out["rho_failure"].to_numpy()), nan=-1.0), kind="stable")
+    return out.iloc[order].reset_index(drop=True)
