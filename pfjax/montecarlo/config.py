@@ -1,0 +1,344 @@
+"""Monte Carlo study configuration: a TOML file validated by pydantic, with ``--set`` overrides.
+
+Every uncertain quantity is a *distribution*: a bare number (constant) or a table::
+
+    beta_r_deg = {dist = "uniform", low = -10, high = 10}
+    speed      = {dist = "normal", mean = 1.0, std = 0.05}
+    L          = {dist = "truncnormal", mean = 0.2, std = 0.01, low = 0.18, high = 0.22}
+    start_s    = {dist = "choice", values = [0.0, 1.0, 2.0]}
+
+Angles are in degrees where the key says ``_deg``, everything else SI. Errors are
+:class:`pfjax.config.ConfigError` with one line naming the dotted key, the value and what was
+expected (with a "did you mean" for unknown keys).
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from pfjax.config import ConfigError, config_hash, parse_override
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Dist(_Model):
+    """A distribution of one scalar (see module docstring)."""
+
+    dist: Literal["constant", "uniform", "normal", "truncnormal", "choice"]
+    value: float | None = None
+    low: float | None = None
+    high: float | None = None
+    mean: float | None = None
+    std: float | None = None
+    values: list[float] | None = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        need = {"constant": ("value",), "uniform": ("low", "high"), "normal": ("mean", "std"),
+                "truncnormal": ("mean", "std", "low", "high"), "choice": ("values",)}[self.dist]
+        for f in need:
+            if getattr(self, f) is None:
+                raise ValueError(f"dist '{self.dist}' needs '{f}'")
+        for f in ("value", "low", "high", "mean", "std", "values"):
+            if f not in need and getattr(self, f) is not None:
+                raise ValueError(f"dist '{self.dist}' does not use '{f}' (it takes {', '.join(need)})")
+        for f in ("value", "low", "high", "mean", "std"):
+            v = getattr(self, f)
+            if v is not None and not math.isfinite(v):
+                raise ValueError(f"'{f}' must be finite, got {v}")
+        if self.low is not None and self.high is not None and not self.low < self.high:
+            raise ValueError(f"needs low < high, got low={self.low:g}, high={self.high:g}")
+        if self.std is not None and not self.std > 0:
+            raise ValueError(f"needs std > 0, got {self.std:g}")
+        if self.values is not None and (not self.values or not all(math.isfinite(v) for v in self.values)):
+            raise ValueError("'values' must be a non-empty list of finite numbers")
+        return self
+
+    def bounds(self) -> tuple[float, float]:
+        """Support of the distribution (inf for the normal)."""
+        if self.dist == "constant":
+            return self.value, self.value
+        if self.dist == "choice":
+            return min(self.values), max(self.values)
+        if self.dist == "normal":
+            return -math.inf, math.inf
+        return self.low, self.high
+
+
+def _as_dist(v: Any):
+    if isinstance(v, bool):
+        raise ValueError("expected a number or a distribution table")
+    if isinstance(v, (int, float)):
+        return Dist(dist="constant", value=float(v))
+    return v
+
+
+def dist_field(default: float):
+    return Field(default_factory=lambda: Dist(dist="constant", value=default))
+
+
+class SimSpec(_Model):
+    dt: float = Field(0.005, gt=0, description="RK4 step, s")
+    horizon: float = Field(20.0, gt=0, description="s")
+    control_every: int = Field(1, ge=1, description="controller sampling period in steps")
+    d_fail: float = Field(10.0, gt=0, description="m")
+    steady_window: float = Field(5.0, gt=0, description="s")
+    settle_band: float = Field(0.05, gt=0, description="m")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.dt > self.horizon:
+            raise ValueError(f"dt ({self.dt:g} s) must be <= horizon ({self.horizon:g} s)")
+        if self.steady_window > self.horizon:
+            raise ValueError(f"steady_window ({self.steady_window:g} s) must be <= horizon ({self.horizon:g} s)")
+        return self
+
+
+class SuccessSpec(_Model):
+    band: float = Field(0.05, gt=0, description="|d| bound, m")
+    from_s: float = Field(15.0, ge=0, description="success window start, s")
+
+
+class VehicleSpec(_Model):
+    speed: Dist = dist_field(1.0)  # m/s
+    L: Dist = dist_field(0.2)  # m
+    delta_max_deg: Dist = dist_field(30.0)
+    delta_rate_max_deg: float = Field(math.inf, gt=0, description="steering rate limit, deg/s (inf: none)")
+    convention: Literal["source", "lenain"] = "source"
+
+    _coerce = field_validator("speed", "L", "delta_max_deg", mode="before")(lambda v: _as_dist(v))
+
+    @model_validator(mode="after")
+    def _check(self):
+        for name in ("speed", "L"):
+            lo, _ = getattr(self, name).bounds()
+            if not lo > 0:
+                raise ValueError(f"{name}: must be > 0 over its whole range, got a lower bound {lo:g}")
+        lo, hi = self.delta_max_deg.bounds()
+        if not (lo > 0 and hi < 90):
+            raise ValueError(f"delta_max_deg: must lie in (0, 90) deg, got range [{lo:g}, {hi:g}]")
+        return self
+
+
+class SlipSpec(_Model):
+    """Slip per run: ``constant`` (beta_*), ``step`` (beta_* before, + step_* at step_time_s),
+    ``sinusoid`` (beta_* mean + amp_* sin(2 pi freq_hz t + phase)), ``ou`` (Ornstein-Uhlenbeck around
+    beta_* with stationary std ou_sigma_deg and time constant ou_tau_s, sampled every seq_dt)."""
+
+    kind: Literal["constant", "step", "sinusoid", "ou"] = "constant"
+    beta_r_deg: Dist = dist_field(0.0)
+    beta_f_deg: Dist = dist_field(0.0)
+    step_time_s: Dist = dist_field(5.0)
+    step_r_deg: Dist = dist_field(0.0)
+    step_f_deg: Dist = dist_field(0.0)
+    amp_r_deg: Dist = dist_field(0.0)
+    amp_f_deg: Dist = dist_field(0.0)
+    freq_hz: Dist = dist_field(0.1)
+    ou_sigma_deg: Dist = dist_field(0.0)
+    ou_tau_s: Dist = dist_field(1.0)
+    seq_dt: float = Field(0.05, gt=0, description="s, OU sampling period")
+
+    _coerce = field_validator("beta_r_deg", "beta_f_deg", "step_time_s", "step_r_deg", "step_f_deg", "amp_r_deg",
+                              "amp_f_deg", "freq_hz", "ou_sigma_deg", "ou_tau_s", mode="before")(lambda v: _as_dist(v))
+
+    @model_validator(mode="after")
+    def _check(self):
+        worst = {"constant": ("beta_r_deg", "beta_f_deg"), "step": ("beta_r_deg", "beta_f_deg", "step_r_deg", "step_f_deg"),
+                 "sinusoid": ("beta_r_deg", "beta_f_deg", "amp_r_deg", "amp_f_deg"), "ou": ("beta_r_deg", "beta_f_deg")}[self.kind]
+        for name in worst:
+            lo, hi = getattr(self, name).bounds()
+            if max(abs(lo), abs(hi)) >= 90:
+                raise ValueError(f"{name}: slip magnitudes must stay below 90 deg, got range [{lo:g}, {hi:g}]")
+        for name in ("ou_tau_s", "freq_hz"):
+            lo, _ = getattr(self, name).bounds()
+            if lo < 0 or (name == "ou_tau_s" and lo == 0):
+                raise ValueError(f"{name}: must be {'> 0' if name == 'ou_tau_s' else '>= 0'}, got a lower bound {lo:g}")
+        return self
+
+
+class InitialSpec(_Model):
+    """Start pose relative to the path's nominal start: along-path offset, lateral offset, heading error."""
+
+    start_s: Dist = dist_field(0.0)  # m along the path
+    lateral_offset: Dist = dist_field(0.0)  # m, left positive
+    heading_error_deg: Dist = dist_field(0.0)
+
+    _coerce = field_validator("start_s", "lateral_offset", "heading_error_deg", mode="before")(lambda v: _as_dist(v))
+
+
+class NoiseSpec(_Model):
+    sigma_d: float = Field(0.0, ge=0, description="m")
+    sigma_theta_e_deg: float = Field(0.0, ge=0, description="deg")
+
+
+class PathSpec(_Model):
+    """``line``, ``parabola``, ``sine`` (the source's), ``circle`` (radius), ``random`` (smooth random
+    spline paths with |kappa| <= curvature_margin * tan(delta_max) / L)."""
+
+    kind: Literal["line", "parabola", "sine", "circle", "random"]
+    name: str | None = None
+    radius: Dist = dist_field(2.0)
+    length: float = Field(40.0, gt=0, description="random paths: length, m")
+    curvature_margin: float = Field(0.5, gt=0, le=1, description="random paths: fraction of the followable curvature")
+    n_waypoints: int = Field(41, ge=4)
+
+    _coerce = field_validator("radius", mode="before")(lambda v: _as_dist(v))
+
+    @property
+    def label(self) -> str:
+        return self.name or self.kind
+
+
+class ControllerSpec(_Model):
+    """A controller to compare: ``type`` one of state_feedback (``K``), lmi (designed by mixed
+    H2/H-inf with ``alpha``, ``beta`` at the nominal speed and wheelbase), pi, stanley,
+    pure_pursuit, rear_wheel (``gains`` by name; defaults as in pfjax.controllers)."""
+
+    name: str
+    type: Literal["state_feedback", "lmi", "pi", "stanley", "pure_pursuit", "rear_wheel"]
+    K: list[float] | None = None
+    gains: dict[str, float] = Field(default_factory=dict)
+    alpha: float = Field(10.0, ge=0)
+    beta: float = Field(1.0, ge=0)
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.type == "state_feedback" and (self.K is None or len(self.K) != 2):
+            raise ValueError("state_feedback needs K = [k_d, k_theta]")
+        if self.K is not None and self.type != "state_feedback":
+            raise ValueError(f"K is only for type 'state_feedback', not {self.type!r}")
+        if any(not math.isfinite(g) for g in (self.K or []) + list(self.gains.values())):
+            raise ValueError("gains must be finite")
+        return self
+
+
+class StudySpec(_Model):
+    name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
+    n_runs: int = Field(ge=1, le=100_000_000, description="runs per controller and path")
+    seed: int = Field(ge=0)
+    chunk_size: int = Field(4096, ge=1)
+    dtype: Literal["float32", "float64"] = "float32"
+    sim: SimSpec = SimSpec()
+    success: SuccessSpec = SuccessSpec()
+    vehicle: VehicleSpec = VehicleSpec()
+    slip: SlipSpec = SlipSpec()
+    initial: InitialSpec = InitialSpec()
+    noise: NoiseSpec = NoiseSpec()
+    paths: list[PathSpec] = Field(min_length=1)
+    controllers: list[ControllerSpec] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.success.from_s > self.sim.horizon:
+            raise ValueError(f"success.from_s: must be <= sim.horizon ({self.sim.horizon:g} s), got {self.success.from_s:g}")
+        for what, items in (("controllers", [c.name for c in self.controllers]), ("paths", [p.label for p in self.paths])):
+            dup = {x for x in items if items.count(x) > 1}
+            if dup:
+                raise ValueError(f"{what}: names must be unique, repeated: {sorted(dup)}")
+        return self
+
+
+# ------------------------------------------------------------------------------- loading
+
+
+def _loc(loc) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part in ("constant", "uniform", "normal", "truncnormal", "choice", "function-after[_check(), Dist]"):
+            continue
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def _model_at(loc) -> type[BaseModel] | None:
+    model: Any = StudySpec
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        field = getattr(model, "model_fields", {}).get(part)
+        if field is None:
+            return model
+        ann = field.annotation
+        args = getattr(ann, "__args__", ())
+        nxt = next((a for a in (ann, *args) if isinstance(a, type) and issubclass(a, BaseModel)), None)
+        if nxt is None:
+            return model
+        model = nxt
+    return model
+
+
+def _format(err: ValidationError) -> str:
+    e = err.errors()[0]
+    loc = [p for p in e["loc"] if not (isinstance(p, str) and ("[" in p or p in ("constant", "uniform", "normal", "truncnormal", "choice")))]
+    key = _loc(loc) or "config"
+    if e["type"] == "extra_forbidden":
+        parent = _model_at(loc[:-1])
+        names = list(getattr(parent, "model_fields", {}))
+        hint = difflib.get_close_matches(str(loc[-1]), names, n=1)
+        prefix = _loc(loc[:-1])
+        sug = f" (did you mean '{(prefix + '.') if prefix else ''}{hint[0]}'?)" if hint else ""
+        return f"{key}: unknown key{sug}"
+    msg = e["msg"].removeprefix("Value error, ")
+    # model-level checks name their field first ("speed: must be ..."): join it to the key
+    head, sep, rest = msg.partition(": ")
+    if e["type"] == "value_error" and sep and " " not in head and "'" not in head:
+        key = head if key == "config" else f"{key}.{head}"
+        msg = rest
+    if e["type"] == "missing":
+        return f"{key}: required key is missing"
+    return f"{key}: {msg} (got {e.get('input')!r})" if e["type"] != "value_error" else f"{key}: {msg}"
+
+
+def _set_nested(d: dict, update: dict) -> dict:
+    for k, v in update.items():
+        if isinstance(v, dict) and isinstance(d.get(k), dict):
+            _set_nested(d[k], v)
+        elif "[" in k:  # controllers[0].gains.k style
+            name, idx = k.split("[", 1)
+            i = int(idx.rstrip("]"))
+            lst = d.get(name)
+            if not isinstance(lst, list) or not -len(lst) <= i < len(lst):
+                raise ConfigError(f"{k}: no such list element")
+            if isinstance(v, dict):
+                _set_nested(lst[i], v)
+            else:
+                lst[i] = v
+        else:
+            d[k] = v
+    return d
+
+
+def load_study(path: str | Path | None = None, overrides: list[str] = (), data: dict | None = None) -> tuple[StudySpec, dict]:
+    """Read, override and validate a study. Returns ``(spec, raw_dict)``; raises ConfigError."""
+    raw: dict = {} if data is None else dict(data)
+    if path is not None:
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError(f"config: file not found: {p}")
+        try:
+            raw = tomllib.loads(p.read_text())
+        except tomllib.TOMLDecodeError as e:
+            raise ConfigError(f"config: {p}: invalid TOML ({e})") from None
+    for text in overrides:
+        _set_nested(raw, parse_override(text))
+    try:
+        spec = StudySpec.model_validate(raw)
+    except ValidationError as e:
+        raise ConfigError(_format(e)) from None
+    return spec, raw
+
+
+def study_hash(spec: StudySpec) -> str:
+    """SHA-256 of the validated study (defaults filled in), so equivalent files hash alike."""
+    return config_hash(spec.model_dump(mode="json"))

@@ -1,0 +1,143 @@
+"""Run a Monte Carlo study: chunks of runs through the jitted simulator, rows streamed to Parquet.
+
+For each path, chunk of run indices and controller: sample the chunk's scenarios (shared by all
+controllers), pad the chunk to ``chunk_size`` (one compilation per controller and path shape),
+simulate with ``record=False`` (memory independent of the horizon) and append one row per run
+to ``runs.parquet``: path, controller, run index, every sampled parameter, every metric, status.
+Outputs are written to a temporary directory and moved into place when complete.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pfjax import controllers as C
+from pfjax.config import ConfigError
+from pfjax.metrics.running import METRIC_NAMES
+from pfjax.montecarlo.config import ControllerSpec, StudySpec, study_hash
+from pfjax.montecarlo.sampling import column_names, sample_runs
+from pfjax.sim.simulate import SimConfig, simulate_batch
+from pfjax.sim.status import STATUS_NAMES
+
+REGISTRY_TYPE = {"pi": "pi", "stanley": "stanley", "pure_pursuit": "pure_pursuit", "rear_wheel": "rear_wheel"}
+
+
+def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
+    """``(controller, gains pytree, gains as a flat dict)`` for a controller spec; LMI designs are
+    synthesised here (at the nominal speed and wheelbase: the distributions' means or values)."""
+    if c.type in ("state_feedback", "lmi"):
+        if c.type == "lmi":
+            from pfjax.synthesis import mixed_h2_hinf, slip_design_plant
+
+            nominal = lambda d: d.value if d.dist == "constant" else (d.mean if d.mean is not None else 0.5 * (d.low + d.high))
+            K = [float(k) for k in mixed_h2_hinf(slip_design_plant(nominal(spec.vehicle.speed), nominal(spec.vehicle.L)),
+                                                 alpha=c.alpha, beta=c.beta).K.ravel()]
+        else:
+            K = list(c.K)
+        return C.state_feedback, C.state_feedback_params(K), {"k_d": K[0], "k_theta": K[1]}
+    controller, factory = C.REGISTRY[REGISTRY_TYPE[c.type]]
+    try:
+        gains = factory(**c.gains)
+    except TypeError:
+        names = list(factory().__class__._fields) if hasattr(factory(), "_fields") else []
+        bad = next((k for k in c.gains if k not in names), next(iter(c.gains), "?"))
+        raise ConfigError(f"controllers[{index}].gains.{bad}: unknown gain for type {c.type!r}; expected one of {names}") from None
+    return controller, gains, {k: float(v) for k, v in gains._asdict().items()}
+
+
+def sim_config(spec: StudySpec) -> SimConfig:
+    s = spec.sim
+    return SimConfig(dt=s.dt, horizon=s.horizon, control_every=s.control_every, record=False, d_fail=s.d_fail,
+                     settle_band=s.settle_band, steady_window=s.steady_window, success_band=spec.success.band,
+                     success_from=spec.success.from_s)
+
+
+def precision(spec: StudySpec):
+    """Context in which the study runs: float64 enables x64; float32 disables it even if it was on."""
+    return jax.enable_x64(spec.dtype == "float64")
+
+
+def _with_gains(sc, gains, n):
+    return sc._replace(gains=jax.tree_util.tree_map(lambda g: jnp.broadcast_to(g, (n,) + jnp.shape(g)), gains))
+
+
+def _pad(tree, n_to):
+    n = jax.tree_util.tree_leaves(tree)[0].shape[0]
+    if n == n_to:
+        return tree
+    return jax.tree_util.tree_map(lambda a: jnp.concatenate([a, jnp.repeat(a[:1], n_to - n, axis=0)]), tree)
+
+
+def simulate_runs(spec: StudySpec, path_index: int, runs: np.ndarray, controllers, *, slip_override=None, chunk=None):
+    """Simulate ``runs`` of one path for every controller; yields ``(controller name, DataFrame)`` per chunk."""
+    cfg = sim_config(spec)
+    chunk = chunk or spec.chunk_size
+    for a in range(0, len(runs), chunk):
+        idx = runs[a:a + chunk]
+        over = None if slip_override is None else tuple(np.asarray(o)[a:a + chunk] for o in slip_override)
+        sampled = sample_runs(spec, path_index, idx, slip_override=over)
+        n = len(idx)
+        base = _pad(sampled.scenarios, min(chunk, len(runs)))
+        for name, (controller, gains, _) in controllers.items():
+            res = jax.device_get(simulate_batch(_with_gains(base, gains, jax.tree_util.tree_leaves(base)[0].shape[0]),
+                                                controller=controller, config=cfg))
+            df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
+            for col in column_names(spec):
+                df[col] = np.asarray(sampled.columns[col], dtype=float) if col in sampled.columns else np.nan
+            for m in METRIC_NAMES:
+                df[m] = np.asarray(getattr(res.metrics, m))[:n]
+            df["status_code"] = np.asarray(res.status)[:n].astype(np.int8)
+            df["status"] = [STATUS_NAMES[int(s)] for s in df["status_code"]]
+            df["fail_time"] = np.asarray(res.fail_time, dtype=float)[:n]
+            df["success"] = df["success"].astype(bool)
+            yield name, df
+
+
+def run_study(spec: StudySpec, out: Path, *, progress: bool | None = None, extra=None) -> dict:
+    """Run ``spec``, write ``out/runs.parquet`` and return the run table's location and timings.
+
+    ``extra(tmp_dir, runs_path)`` is called before the directory is moved into place (the
+    summary and report are written there), so a failure leaves nothing half-written at ``out``.
+    """
+    from tqdm import tqdm
+
+    t0 = time.time()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
+    try:
+        with precision(spec):
+            controllers = {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
+            total = spec.n_runs * len(spec.paths) * len(controllers)
+            writer = None
+            with tqdm(total=total, desc=spec.name, unit="run", disable=None if progress is None else not progress) as bar:
+                for p in range(len(spec.paths)):
+                    for _, df in simulate_runs(spec, p, np.arange(spec.n_runs), controllers):
+                        table = pa.Table.from_pandas(df, preserve_index=False)
+                        if writer is None:
+                            meta = {b"pfjax.config_sha256": study_hash(spec).encode()}
+                            writer = pq.ParquetWriter(tmp / "runs.parquet", table.schema.with_metadata(meta))
+                        writer.write_table(table.cast(writer.schema))
+                        bar.update(len(df))
+            writer.close()
+            info = {"wall_s_simulation": time.time() - t0, "gains": {k: v[2] for k, v in controllers.items()}}
+            if extra is not None:
+                info.update(extra(tmp, tmp / "runs.parquet", controllers) or {})
+        if out.exists():
+            shutil.rmtree(out)
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    info["wall_s"] = time.time() - t0
+    return info

@@ -1,0 +1,217 @@
+"""Sampling a study's runs: distributions -> per-run parameters -> a batch of Scenarios.
+
+Determinism: run ``i`` of path ``p`` draws every quantity from
+``fold_in(fold_in(fold_in(PRNGKey(seed), p), i), q)`` with ``q`` the quantity's fixed index, so a
+run's parameters do not depend on the chunk it falls in, and every controller sees the same runs
+(common random numbers: controller differences are not sampling noise).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
+from pfjax.montecarlo.config import Dist, PathSpec, StudySpec
+from pfjax.paths import shapes
+from pfjax.paths.geometry import arc_length, tangent_angle
+from pfjax.sim.simulate import Scenario, SensorNoise
+from pfjax.sim.slip_profiles import SlipProfile
+
+#: Fixed quantity indices (never reorder: they define the random streams).
+QUANTITIES = (
+    "speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", "step_time_s", "step_r_deg", "step_f_deg",
+    "amp_r_deg", "amp_f_deg", "freq_hz", "phase_r", "phase_f", "ou_sigma_deg", "ou_tau_s", "start_s",
+    "lateral_offset", "heading_error_deg", "radius", "path", "noise", "ou_r", "ou_f", "sign_r", "sign_f",
+)
+Q = {name: i for i, name in enumerate(QUANTITIES)}
+
+#: Nominal start parameter of each path kind (the run's start is start_s metres along from it).
+NOMINAL_START = {"line": 0.0, "parabola": -2.0, "sine": 0.0, "circle": 0.0, "random": 0.0}
+
+
+def run_keys(seed: int, path_index: int, runs: np.ndarray) -> jax.Array:
+    base = jax.random.fold_in(jax.random.PRNGKey(seed), path_index)
+    return jax.vmap(lambda i: jax.random.fold_in(base, i))(jnp.asarray(runs, dtype=jnp.uint32))
+
+
+def draw(dist: Dist, key) -> jax.Array:
+    """One scalar from ``dist`` (float)."""
+    f = jnp.result_type(float)
+    if dist.dist == "constant":
+        return jnp.asarray(dist.value, f)
+    if dist.dist == "uniform":
+        return jax.random.uniform(key, (), f, dist.low, dist.high)
+    if dist.dist == "normal":
+        return dist.mean + dist.std * jax.random.normal(key, (), f)
+    if dist.dist == "truncnormal":
+        lo, hi = (dist.low - dist.mean) / dist.std, (dist.high - dist.mean) / dist.std
+        return dist.mean + dist.std * jax.random.truncated_normal(key, lo, hi, (), f)
+    return jax.random.choice(key, jnp.asarray(dist.values, f))
+
+
+def _q(key, name):
+    return jax.random.fold_in(key, Q[name])
+
+
+def ou_sequence(key, n: int, dt: float, sigma, tau) -> jax.Array:
+    """Stationary Ornstein-Uhlenbeck samples ``x_{k+1} = a x_k + sigma sqrt(1 - a^2) n_k``, ``a = exp(-dt/tau)``
+    (exact discretisation; stationary std ``sigma``)."""
+    a = jnp.exp(-dt / tau)
+    noise = jax.random.normal(key, (n,), jnp.result_type(float))
+    x0 = sigma * noise[0]
+    step = lambda x, nk: (a * x + sigma * jnp.sqrt(1 - a * a) * nk,) * 2
+    _, xs = jax.lax.scan(step, x0, noise[1:])
+    return jnp.concatenate([x0[None], xs])
+
+
+class Sampled(NamedTuple):
+    """Per-run sampled values in config units (the columns of runs.parquet)."""
+
+    columns: dict  # name -> np.ndarray (n,)
+    scenarios: Scenario  # batched, gains = None (filled per controller)
+
+
+SLIP_COLUMNS = {"constant": (), "step": ("step_time_s", "step_r_deg", "step_f_deg"),
+                "sinusoid": ("amp_r_deg", "amp_f_deg", "freq_hz"), "ou": ("ou_sigma_deg", "ou_tau_s")}
+
+
+def column_names(spec: StudySpec) -> list[str]:
+    """The sampled-parameter columns of a study's run table (fixed for the whole study; NaN where
+    a column does not apply to a path)."""
+    cols = ["speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", *SLIP_COLUMNS[spec.slip.kind],
+            "start_s", "lateral_offset", "heading_error_deg"]
+    if any(p.kind == "circle" for p in spec.paths):
+        cols.append("radius")
+    return cols
+
+
+def _slip(spec: StudySpec, key, horizon: float):
+    s = spec.slip
+    d = lambda name: draw(getattr(s, name), _q(key, name))
+    rad = math.pi / 180
+    br, bf = d("beta_r_deg"), d("beta_f_deg")
+    cols = {"beta_r_deg": br, "beta_f_deg": bf}
+    zero2 = jnp.zeros((2,))
+    n_seq = int(math.ceil(horizon / s.seq_dt)) + 2
+    seq = jnp.zeros((1, 2))
+    step_time, step_size, amp, freq, phase = jnp.asarray(0.0), zero2, zero2, zero2, zero2
+    if s.kind == "step":
+        step_time = d("step_time_s")
+        sr, sf = d("step_r_deg"), d("step_f_deg")
+        step_size = jnp.stack([sr, sf]) * rad
+        cols.update(step_time_s=step_time, step_r_deg=sr, step_f_deg=sf)
+    elif s.kind == "sinusoid":
+        ar, af, fr = d("amp_r_deg"), d("amp_f_deg"), d("freq_hz")
+        ph = jnp.stack([jax.random.uniform(_q(key, "phase_r"), (), maxval=2 * math.pi),
+                        jax.random.uniform(_q(key, "phase_f"), (), maxval=2 * math.pi)])
+        amp, freq, phase = jnp.stack([ar, af]) * rad, jnp.stack([fr, fr]), ph
+        cols.update(amp_r_deg=ar, amp_f_deg=af, freq_hz=fr)
+    elif s.kind == "ou":
+        sig, tau = d("ou_sigma_deg"), d("ou_tau_s")
+        seq = jnp.stack([ou_sequence(_q(key, "ou_r"), n_seq, s.seq_dt, sig * rad, tau),
+                         ou_sequence(_q(key, "ou_f"), n_seq, s.seq_dt, sig * rad, tau)], axis=1)
+        cols.update(ou_sigma_deg=sig, ou_tau_s=tau)
+    profile = SlipProfile(
+        constant=jnp.stack([br, bf]) * rad, step_time=step_time, step_size=step_size, sin_amp=amp,
+        sin_freq=freq, sin_phase=phase, seq=seq, seq_dt=jnp.asarray(s.seq_dt, float),
+    )
+    return profile, cols
+
+
+def _start_pose(path, u_nominal, start_s, offset, heading_err):
+    """Pose ``offset`` metres left of the point ``start_s`` metres along from ``u_nominal``, heading
+    ``theta_p + heading_err`` (Newton on the arc length; 6 steps are exact to rounding here)."""
+    s0 = arc_length(path, u_nominal) + start_s
+    u = u_nominal + start_s
+    for _ in range(6):
+        dx, dy = path.d1(u)
+        u = u - (arc_length(path, u) - s0) / jnp.sqrt(dx * dx + dy * dy)
+    px, py = path.point(u)
+    th = tangent_angle(path, u)
+    return Pose(px - offset * jnp.sin(th), py + offset * jnp.cos(th), th + heading_err)
+
+
+def random_path(key, spec: PathSpec, kappa_max: float, dtype=float) -> shapes.Spline:
+    """A smooth random path: curvature ``kappa(s) = sum_j a_j sin(w_j s + phi_j)`` (3 modes, wavelengths
+    6-30 m) scaled so ``max|kappa| = kappa_max``, integrated from the origin heading +x, and a natural
+    cubic spline through ``n_waypoints`` points along it. Built with NumPy (SciPy spline) at the edge."""
+    rng = np.random.default_rng(np.asarray(key).astype(np.uint32).tolist())
+    s = np.linspace(0.0, spec.length, 4001)
+    w = 2 * np.pi / rng.uniform(6.0, 30.0, 3)
+    a = rng.normal(size=3)
+    phi = rng.uniform(0, 2 * np.pi, 3)
+    kappa = (a[None, :] * np.sin(w[None, :] * s[:, None] + phi[None, :])).sum(1)
+    kappa *= kappa_max / max(np.abs(kappa).max(), 1e-12)
+    ds = s[1] - s[0]
+    theta = np.concatenate([[0.0], np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * ds)])
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (np.cos(theta[1:]) + np.cos(theta[:-1])) * ds)])
+    y = np.concatenate([[0.0], np.cumsum(0.5 * (np.sin(theta[1:]) + np.sin(theta[:-1])) * ds)])
+    idx = np.linspace(0, s.size - 1, spec.n_waypoints).round().astype(int)
+    return shapes.spline_through(np.stack([x[idx], y[idx]], 1))
+
+
+def _path(spec: PathSpec, key):
+    if spec.kind == "line":
+        return shapes.line(), {}
+    if spec.kind == "parabola":
+        return shapes.parabola(), {}
+    if spec.kind == "sine":
+        return shapes.sine(), {}
+    if spec.kind == "circle":
+        r = draw(spec.radius, _q(key, "radius"))
+        return shapes.circle(radius=r, cy=r), {"radius": r}
+    raise AssertionError(spec.kind)
+
+
+def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_override=None) -> Sampled:
+    """Scenarios (without gains) and sampled columns for the given run indices of one path.
+
+    ``slip_override``: optional ``(beta_r_deg, beta_f_deg)`` arrays replacing the constant slip
+    (used by the slip-margin sweep).
+    """
+    pspec = spec.paths[path_index]
+    keys = run_keys(spec.seed, path_index, runs)
+    v = veh = spec.vehicle
+    # the followable curvature for the most restrictive vehicle in the distribution (random paths)
+    kappa_follow = math.tan(math.radians(veh.delta_max_deg.bounds()[0])) / veh.L.bounds()[1]
+    horizon = spec.sim.horizon
+    rad = math.pi / 180
+
+    def one(key):
+        d = lambda dist, name: draw(dist, _q(key, name))
+        speed, L, dmax = d(v.speed, "speed"), d(v.L, "L"), d(v.delta_max_deg, "delta_max_deg")
+        profile, cols = _slip(spec, key, horizon)
+        start_s = d(spec.initial.start_s, "start_s")
+        offset = d(spec.initial.lateral_offset, "lateral_offset")
+        herr = d(spec.initial.heading_error_deg, "heading_error_deg")
+        cols.update(speed=speed, L=L, delta_max_deg=dmax, start_s=start_s, lateral_offset=offset, heading_error_deg=herr)
+        params = SlipParams(v=speed, L=L, delta_max=dmax * rad, convention=jnp.asarray(CONVENTIONS[v.convention], jnp.int32),
+                            delta_rate_max=jnp.asarray(v.delta_rate_max_deg * rad, float))
+        return profile, params, cols, (start_s, offset, herr * rad)
+
+    profiles, params, cols, starts = jax.vmap(one)(keys)
+    if slip_override is not None:
+        br, bf = (jnp.asarray(a, float) for a in slip_override)
+        profiles = profiles._replace(constant=jnp.stack([br, bf], 1) * rad)
+        cols.update(beta_r_deg=br, beta_f_deg=bf)
+
+    if pspec.kind == "random":
+        paths = [random_path(jax.random.fold_in(k, Q["path"]), pspec, pspec.curvature_margin * kappa_follow) for k in keys]
+        path = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *paths)
+    else:
+        path, pcols = jax.vmap(lambda k: _path(pspec, k))(keys)
+        cols.update(pcols)
+    u_nom = NOMINAL_START[pspec.kind]
+    pose0 = jax.vmap(lambda p, s0, off, he: _start_pose(p, jnp.asarray(u_nom, float), s0, off, he))(path, *starts)
+    noise = None
+    if spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0:
+        n = len(runs)
+        noise = SensorNoise(jnp.full((n,), spec.noise.sigma_d, float), jnp.full((n,), spec.noise.sigma_theta_e_deg * rad, float),
+                            jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys))
+    sc = Scenario(pose0=pose0, slip=profiles, params=params, path=path, gains=None, noise=noise)
+    return Sampled({k: np.asarray(v) for k, v in cols.items()}, sc)
