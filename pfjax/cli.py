@@ -15,6 +15,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 
 EXIT_USAGE = 2
 
@@ -219,6 +220,63 @@ def _cmd_simulate(args) -> dict:
     }
 
 
+# --------------------------------------------------------------------------- study / report
+
+
+def _load_study_or_usage(args):
+    from pfjax.config import ConfigError
+    from pfjax.montecarlo.config import load_study
+
+    try:
+        spec, _ = load_study(args.config, args.set)
+    except ConfigError as e:
+        raise UsageError(str(e)) from None
+    if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():
+        raise UsageError(f"--out: {args.out} exists and is not a directory")
+    return spec
+
+
+def _headline(summary: dict, out) -> dict:
+    return {
+        "study": summary["study"], "out": str(out), "n_runs_total": summary["n_runs_total"], "seed": summary["seed"],
+        "config_sha256": summary["config_sha256"], "wall_s": summary["wall_s"],
+        "controllers": {k: {f: c[f] for f in ("success_rate", "success_ci95", "iae_mean", "iae_p95", "steady_abs_d_p95",
+                                               "slip_margin_deg")} for k, c in summary["controllers"].items()},
+    }
+
+
+def _cmd_study(args) -> dict:
+    from pfjax.config import ConfigError
+    from pfjax.montecarlo.study import run
+
+    spec = _load_study_or_usage(args)
+    out = Path(args.out) if args.out else Path("results") / spec.name
+    try:
+        summary = run(spec, out, progress=None if not args.quiet else False, report=not args.no_report)
+    except ConfigError as e:
+        raise UsageError(str(e)) from None
+    return _headline(summary, out)
+
+
+def _cmd_report(args) -> dict:
+    import pandas as pd
+
+    from pfjax.montecarlo.config import study_hash
+    from pfjax.report.study_report import write_report
+
+    spec = _load_study_or_usage(args)
+    out = Path(args.out) if args.out else Path("results") / spec.name
+    if not (out / "summary.json").is_file():
+        raise UsageError(f"--out: no finished study in {out} (run `pfjax study {args.config}` first)")
+    summary = json.loads((out / "summary.json").read_text())
+    if summary.get("config_sha256") != study_hash(spec):
+        raise UsageError(f"config: {args.config} (with --set) does not match the study in {out} (config hash differs)")
+    runs = pd.read_parquet(out / "runs.parquet")
+    sweep = pd.read_parquet(out / "margin.parquet") if (out / "margin.parquet").is_file() else None
+    write_report(out, spec, summary, runs, sweep)
+    return {"report": str(out / "report.html")}
+
+
 # --------------------------------------------------------------------------- main
 
 
@@ -262,6 +320,19 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--convention", choices=("source", "lenain"), default="source", help="front-slip sign convention")
     m.add_argument("--json", action="store_true", help="print one JSON object")
     m.set_defaults(func=_cmd_simulate)
+
+    for name, helptext in (("study", "run a Monte Carlo robustness study from a TOML config (runs, margins, summary, report)"),
+                           ("report", "rebuild the HTML report of a finished study without re-simulating")):
+        st = sub.add_parser(name, help=helptext, description=helptext)
+        st.add_argument("config", help="study TOML (e.g. studies/robustness_default.toml)")
+        st.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a config value; dotted keys, list items as controllers[0].gains.k (repeatable)")
+        st.add_argument("--out", help="output directory (default results/<name>)")
+        if name == "study":
+            st.add_argument("--no-report", action="store_true", help="skip report.html")
+            st.add_argument("--quiet", action="store_true", help="no progress bar")
+        st.add_argument("--json", action="store_true", help="print one JSON object")
+        st.set_defaults(func=_cmd_study if name == "study" else _cmd_report)
     return p
 
 

@@ -96,9 +96,9 @@ class SimSpec(_Model):
     @model_validator(mode="after")
     def _check(self):
         if self.dt > self.horizon:
-            raise ValueError(f"dt ({self.dt:g} s) must be <= horizon ({self.horizon:g} s)")
+            raise ValueError(f"dt: must be <= horizon ({self.horizon:g} s), got {self.dt:g}")
         if self.steady_window > self.horizon:
-            raise ValueError(f"steady_window ({self.steady_window:g} s) must be <= horizon ({self.horizon:g} s)")
+            raise ValueError(f"steady_window: must be <= horizon ({self.horizon:g} s), got {self.steady_window:g}")
         return self
 
 
@@ -197,6 +197,26 @@ class PathSpec(_Model):
         return self.name or self.kind
 
 
+class MarginSpec(_Model):
+    """Slip-margin sweep: at each amplitude A, ``n_per_amplitude`` runs per path with constant slip of
+    magnitude A (random sign) on the rear axle, the front axle, or both (``axes``); everything else
+    sampled as in the study. The margin is the largest A whose success rate (and every smaller A's)
+    stays >= 1 - eps."""
+
+    enabled: bool = True
+    amplitudes_deg: list[float] = Field(default_factory=lambda: [0.0, 2.5, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0, 25.0, 30.0])
+    n_per_amplitude: int = Field(200, ge=1)
+    eps: float = Field(0.05, gt=0, lt=1)
+    axes: list[Literal["rear", "front", "joint"]] = Field(default_factory=lambda: ["rear", "front", "joint"])
+
+    @field_validator("amplitudes_deg")
+    @classmethod
+    def _amps(cls, v):
+        if not v or any(not (0 <= a < 90) for a in v) or len(set(v)) != len(v):
+            raise ValueError(f"must be distinct amplitudes in [0, 90) deg, got {v}")
+        return sorted(v)
+
+
 class ControllerSpec(_Model):
     """A controller to compare: ``type`` one of state_feedback (``K``), lmi (designed by mixed
     H2/H-inf with ``alpha``, ``beta`` at the nominal speed and wheelbase), pi, stanley,
@@ -232,6 +252,7 @@ class StudySpec(_Model):
     slip: SlipSpec = SlipSpec()
     initial: InitialSpec = InitialSpec()
     noise: NoiseSpec = NoiseSpec()
+    margin: MarginSpec = MarginSpec()
     paths: list[PathSpec] = Field(min_length=1)
     controllers: list[ControllerSpec] = Field(min_length=1)
 
@@ -302,7 +323,9 @@ def _format(err: ValidationError) -> str:
 
 def _set_nested(d: dict, update: dict) -> dict:
     for k, v in update.items():
-        if isinstance(v, dict) and isinstance(d.get(k), dict):
+        if isinstance(v, dict) and "dist" in v:  # a new distribution replaces the old one whole
+            d[k] = v
+        elif isinstance(v, dict) and isinstance(d.get(k), dict):
             _set_nested(d[k], v)
         elif "[" in k:  # controllers[0].gains.k style
             name, idx = k.split("[", 1)

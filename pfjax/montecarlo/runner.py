@@ -79,16 +79,19 @@ def _pad(tree, n_to):
 
 
 def simulate_runs(spec: StudySpec, path_index: int, runs: np.ndarray, controllers, *, slip_override=None, chunk=None):
-    """Simulate ``runs`` of one path for every controller; yields ``(controller name, DataFrame)`` per chunk."""
+    """Simulate ``runs`` of one path for every controller; yields ``(controller name, DataFrame)`` per chunk.
+
+    Rows come in a canonical order (controller, then run) whatever the chunk size; each controller
+    re-samples the same chunks (deterministic), so memory stays O(chunk)."""
     cfg = sim_config(spec)
     chunk = chunk or spec.chunk_size
-    for a in range(0, len(runs), chunk):
-        idx = runs[a:a + chunk]
-        over = None if slip_override is None else tuple(np.asarray(o)[a:a + chunk] for o in slip_override)
-        sampled = sample_runs(spec, path_index, idx, slip_override=over)
-        n = len(idx)
-        base = _pad(sampled.scenarios, min(chunk, len(runs)))
-        for name, (controller, gains, _) in controllers.items():
+    for name, (controller, gains, _) in controllers.items():
+        for a in range(0, len(runs), chunk):
+            idx = runs[a:a + chunk]
+            over = None if slip_override is None else tuple(np.asarray(o)[a:a + chunk] for o in slip_override)
+            sampled = sample_runs(spec, path_index, idx, slip_override=over)
+            n = len(idx)
+            base = _pad(sampled.scenarios, min(chunk, len(runs)))
             res = jax.device_get(simulate_batch(_with_gains(base, gains, jax.tree_util.tree_leaves(base)[0].shape[0]),
                                                 controller=controller, config=cfg))
             df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
@@ -141,3 +144,42 @@ def run_study(spec: StudySpec, out: Path, *, progress: bool | None = None, extra
             shutil.rmtree(tmp, ignore_errors=True)
     info["wall_s"] = time.time() - t0
     return info
+
+
+MARGIN_RUN_OFFSET = 1 << 30  # margin runs draw from their own index range (disjoint from the study's runs)
+
+
+def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None) -> pd.DataFrame:
+    """Success counts over the slip-amplitude grid, per controller, axis and amplitude (all paths pooled).
+
+    Run ``j`` at amplitude index ``a`` on axis ``x`` uses run index ``OFFSET + (x * n_amp + a) * n + j``; its
+    slip is ``A * sign`` with the sign drawn from the run's own key (so the sweep is deterministic).
+    """
+    from tqdm import tqdm
+
+    m = spec.margin
+    n, amps = m.n_per_amplitude, np.asarray(m.amplitudes_deg)
+    rows = []
+    total = len(m.axes) * len(amps) * n * len(spec.paths) * len(controllers)
+    with tqdm(total=total, desc=f"{spec.name}: slip margin", unit="run", disable=None if progress is None else not progress) as bar:
+        for xi, axis in enumerate(m.axes):
+            runs = MARGIN_RUN_OFFSET + (xi * len(amps) + np.repeat(np.arange(len(amps)), n)) * n + np.tile(np.arange(n), len(amps))
+            amp = np.repeat(amps, n)
+            for p in range(len(spec.paths)):
+                signs = _signs(spec, p, runs)
+                br = amp * signs[:, 0] * (axis in ("rear", "joint"))
+                bf = amp * signs[:, 1] * (axis in ("front", "joint"))
+                for name, df in simulate_runs(spec, p, runs, controllers, slip_override=(br, bf)):
+                    df["axis"], df["amplitude_deg"] = axis, np.interp(df["run"].to_numpy(), runs, amp)
+                    rows.append(df[["path", "controller", "axis", "amplitude_deg", "success", "status"]])
+                    bar.update(len(df))
+    return pd.concat(rows, ignore_index=True)
+
+
+def _signs(spec: StudySpec, path_index: int, runs: np.ndarray) -> np.ndarray:
+    from pfjax.montecarlo.sampling import Q, run_keys
+
+    keys = run_keys(spec.seed, path_index, runs)
+    draw = lambda k, q: jax.random.bernoulli(jax.random.fold_in(k, Q[q]))
+    s = jax.vmap(lambda k: jnp.stack([draw(k, "sign_r"), draw(k, "sign_f")]))(keys)
+    return np.where(np.asarray(s), 1.0, -1.0)

@@ -24,7 +24,7 @@ from jax import Array
 
 ARC_PANELS = 64  # Gauss-Legendre panels between u_ref and u for the arc length
 GLOBAL_SAMPLES = 4096  # dense samples for the cold-start (global) projection
-_GL_X, _GL_W = (jnp.asarray(a) for a in np.polynomial.legendre.leggauss(8))
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)  # NumPy: cast to the working dtype at use
 
 
 class Projection(NamedTuple):
@@ -64,9 +64,10 @@ def arc_length(path, u: Array) -> Array:
     u_ref = jnp.clip(0.0, path.u_min, path.u_max)
     h = (u - u_ref) / ARC_PANELS
     mids = u_ref + h * (jnp.arange(ARC_PANELS) + 0.5)
-    w = mids[:, None] + 0.5 * h * _GL_X[None, :]
+    dtype = jnp.result_type(h)
+    w = mids[:, None] + 0.5 * h * jnp.asarray(_GL_X, dtype)[None, :]
     dx, dy = path.d1(w)
-    return 0.5 * h * jnp.sum(_GL_W * jnp.sqrt(dx * dx + dy * dy))
+    return 0.5 * h * jnp.sum(jnp.asarray(_GL_W, dtype) * jnp.sqrt(dx * dx + dy * dy))
 
 
 def _newton_update(path, u: Array, qx: Array, qy: Array) -> Array:

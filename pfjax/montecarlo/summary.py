@@ -1,0 +1,105 @@
+"""A study's ``summary.json``: robustness quantities per controller, from the run table and the margin sweep.
+
+Per controller (all paths pooled, and per path): success rate with its 95 % Clopper-Pearson
+interval, quantiles of every metric, status counts, the probabilistic statement the sample
+supports, the slip margin per axis (rear, front, joint), and which sampled parameters drive
+failure. The top-level keys follow the issue's output contract: ``study``, ``n_runs_total``,
+``seed``, ``config_sha256`` and ``controllers`` (each with ``success_rate``, ``success_ci95``,
+``iae_mean``, ``iae_p95``, ``steady_abs_d_p95``, ``slip_margin_deg``).
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+
+import jax
+import numpy as np
+import pandas as pd
+
+import pfjax
+from pfjax.metrics.robustness import (
+    failure_drivers,
+    hoeffding_n,
+    metric_quantiles,
+    slip_margin,
+    success_summary,
+    supported_statement,
+    zero_failure_n,
+)
+from pfjax.metrics.running import METRIC_NAMES
+from pfjax.montecarlo.config import StudySpec, study_hash
+from pfjax.montecarlo.sampling import column_names
+
+QUANTILE_METRICS = [m for m in METRIC_NAMES if m != "success"]
+
+
+def _block(df: pd.DataFrame) -> dict:
+    s = success_summary(df["success"].to_numpy())
+    q = metric_quantiles(df, QUANTILE_METRICS)
+    return {
+        **s,
+        "iae_mean": q["iae"]["mean"], "iae_p95": q["iae"]["q95"], "steady_abs_d_p95": q["steady_abs_d"]["q95"],
+        "status_counts": {k: int(v) for k, v in df["status"].value_counts().items()},
+        "quantiles": q,
+    }
+
+
+def margins(sweep: pd.DataFrame | None, controller: str, eps: float) -> dict:
+    if sweep is None or sweep.empty:
+        return {}
+    out = {}
+    for axis, g in sweep[sweep.controller == controller].groupby("axis", sort=False):
+        agg = g.groupby("amplitude_deg")["success"].agg(["sum", "count"]).sort_index()
+        out[axis] = slip_margin(agg.index.to_numpy(), agg["sum"].to_numpy(), agg["count"].to_numpy(), eps=eps)
+    return out
+
+
+def summarize(spec: StudySpec, runs: pd.DataFrame, sweep: pd.DataFrame | None, *, gains: dict, wall_s: float) -> dict:
+    params = [c for c in column_names(spec) if runs[c].nunique(dropna=True) > 1]
+    controllers = {}
+    for name in [c.name for c in spec.controllers]:
+        df = runs[runs.controller == name]
+        block = _block(df)
+        block["gains"] = gains.get(name, {})
+        block["per_path"] = {p: {k: v for k, v in _block(g).items() if k != "quantiles"}
+                             for p, g in df.groupby("path", sort=False)}
+        block["statement"] = supported_statement(len(df), int((~df["success"]).sum()))
+        mg = margins(sweep, name, spec.margin.eps)
+        block["slip_margin"] = mg
+        joint = mg.get("joint") or next(iter(mg.values()), None)
+        block["slip_margin_deg"] = None if joint is None else joint["margin"]
+        block["slip_margin_censored"] = None if joint is None else joint["censored"]
+        drivers = failure_drivers(df, params, metric="iae") if params else pd.DataFrame()
+        block["failure_drivers"] = drivers.head(6).replace({np.nan: None}).to_dict("records")
+        controllers[name] = block
+    return {
+        "study": spec.name,
+        "n_runs_total": int(len(runs)),
+        "n_runs_per_controller_and_path": spec.n_runs,
+        "n_margin_runs": 0 if sweep is None else int(len(sweep)),
+        "seed": spec.seed,
+        "config_sha256": study_hash(spec),
+        "pfjax_version": pfjax.__version__,
+        "dtype": spec.dtype,
+        "machine": f"{platform.machine()} {platform.system()}, {jax.device_count()} {jax.default_backend()} device(s), jax {jax.__version__}",
+        "wall_s": wall_s,
+        "config": spec.model_dump(mode="json"),
+        "paths": [p.label for p in spec.paths],
+        "controllers": controllers,
+        "sample_size": {"note": "runs needed for P(success) within eps of the estimate (Hoeffding) or for zero failures to bound P(failure) <= eps (worst case), at confidence 1 - delta = 0.95",
+                        **{f"eps={e:g}": {"hoeffding": hoeffding_n(e, 0.05), "zero_failure": zero_failure_n(e, 0.05)}
+                                           for e in (0.05, 0.01, 0.001)}},
+    }
+
+
+def headline(summary: dict) -> pd.DataFrame:
+    """One row per controller: the numbers a reader compares first."""
+    rows = []
+    for name, c in summary["controllers"].items():
+        lo, hi = c["success_ci95"]
+        rows.append({"controller": name, "runs": c["n"], "success_rate": c["success_rate"], "ci95_lo": lo, "ci95_hi": hi,
+                     "iae_mean": c["iae_mean"], "iae_p95": c["iae_p95"], "steady_abs_d_p95_mm": 1000 * c["steady_abs_d_p95"]
+                     if c["steady_abs_d_p95"] is not None and math.isfinite(c["steady_abs_d_p95"]) else math.nan,
+                     "slip_margin_deg": c["slip_margin_deg"]})
+    return pd.DataFrame(rows)

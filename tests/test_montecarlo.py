@@ -1,0 +1,200 @@
+"""Monte Carlo studies: config validation, sampling, determinism, summary contract, CLI."""
+
+import copy
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+import pytest
+
+from pfjax.config import ConfigError
+from pfjax.metrics.robustness import clopper_pearson
+from pfjax.montecarlo.config import load_study, study_hash
+from pfjax.montecarlo.runner import run_study
+from pfjax.montecarlo.sampling import ou_sequence, sample_runs
+from pfjax.montecarlo.study import run
+from pfjax.paths import project
+
+BASE = {
+    "name": "t", "n_runs": 24, "seed": 3, "chunk_size": 24,
+    "sim": {"horizon": 3.0, "steady_window": 1.0}, "success": {"from_s": 2.0, "band": 0.2},
+    "slip": {"beta_r_deg": {"dist": "uniform", "low": -5, "high": 5}, "beta_f_deg": {"dist": "truncnormal", "mean": 0, "std": 2, "low": -6, "high": 6}},
+    "initial": {"lateral_offset": {"dist": "uniform", "low": -0.3, "high": 0.3},
+                "heading_error_deg": {"dist": "uniform", "low": -20, "high": 20},
+                "start_s": {"dist": "uniform", "low": 0, "high": 1}},
+    "margin": {"amplitudes_deg": [0.0, 10.0], "n_per_amplitude": 6},
+    "paths": [{"kind": "line"}, {"kind": "circle", "radius": {"dist": "uniform", "low": 2, "high": 3}}],
+    "controllers": [{"name": "lmi", "type": "lmi"}, {"name": "stanley", "type": "stanley", "gains": {"k": 2.0}}],
+}
+
+
+def spec_of(*overrides, data=None):
+    return load_study(data=copy.deepcopy(BASE if data is None else data), overrides=list(overrides))[0]
+
+
+BAD = [
+    ("n_runz=3", "n_runz: unknown key (did you mean 'n_runs'?)"),
+    ("n_runs=0", "n_runs:"),
+    ("n_runs='many'", "n_runs:"),
+    ("seed=-1", "seed:"),
+    ("dtype='float16'", "dtype:"),
+    ("sim.dt=0", "sim.dt:"),
+    ("sim.dt=5", "sim.dt: must be <= horizon"),
+    ("sim.horizon=nan", "sim.horizon:"),
+    ("sim.steady_window=9", "sim.steady_window: must be <= horizon"),
+    ("success.from_s=9", "success.from_s: must be <= sim.horizon"),
+    ("success.band=0", "success.band:"),
+    ("vehicle.speed=-1", "vehicle.speed: must be > 0"),
+    ("vehicle.L={dist='normal', mean=0.2, std=0.01}", "vehicle.L: must be > 0 over its whole range"),
+    ("vehicle.delta_max_deg=90", "vehicle.delta_max_deg: must lie in (0, 90)"),
+    ("vehicle.convention='other'", "vehicle.convention:"),
+    ("slip.kind='random'", "slip.kind:"),
+    ("slip.beta_r_deg=95", "slip.beta_r_deg: slip magnitudes must stay below 90"),
+    ("slip.beta_r_deg={dist='uniform', low=5, high=1}", "slip.beta_r_deg: needs low < high"),
+    ("slip.beta_r_deg={dist='uniform', low=5}", "slip.beta_r_deg: dist 'uniform' needs 'high'"),
+    ("slip.beta_r_deg={dist='uniform', low=1, high=2, mean=0}", "slip.beta_r_deg: dist 'uniform' does not use 'mean'"),
+    ("slip.beta_r_deg={dist='unifrm', low=1, high=2}", "slip.beta_r_deg.dist:"),
+    ("slip.beta_f_deg={dist='truncnormal', mean=0, std=0, low=-1, high=1}", "slip.beta_f_deg: needs std > 0"),
+    ("slip.beta_f_deg={dist='normal', mean=0, std=1}", "slip.beta_f_deg: slip magnitudes must stay below 90 deg"),
+    ("slip.beta_f_deg={dist='choice', values=[]}", "slip.beta_f_deg: 'values' must be a non-empty list"),
+    ("slip.ou_tau_s=0", "slip.ou_tau_s: must be > 0"),
+    ("noise.sigma_d=-1", "noise.sigma_d:"),
+    ("paths[0].kind='spiral'", "paths[0].kind:"),
+    ("paths[1].radus=3", "paths[1].radus: unknown key (did you mean 'paths[1].radius'?)"),
+    ("controllers[0].type='mpc'", "controllers[0].type:"),
+    ("controllers[1].gainz={}", "controllers[1].gainz: unknown key (did you mean 'controllers[1].gains'?)"),
+    ("controllers[1].name='lmi'", "controllers: names must be unique"),
+    ("controllers[5].K=[1,2]", "controllers[5]: no such list element"),
+    ("margin.amplitudes_deg=[5, 5]", "margin.amplitudes_deg: must be distinct"),
+    ("margin.eps=1.5", "margin.eps:"),
+    ("margin.axes=['up']", "margin.axes[0]:"),
+    ("chunk_size=0", "chunk_size:"),
+]
+
+
+@pytest.mark.parametrize("override,expected", BAD)
+def test_bad_config_names_the_key(override, expected):
+    with pytest.raises(ConfigError) as e:
+        spec_of(override)
+    msg = str(e.value)
+    assert msg.startswith(expected.split(":")[0] + ":") or msg.startswith(expected.split(".")[0]), msg
+    assert expected in msg, msg
+    assert "\n" not in msg
+
+
+def test_bad_controller_gain_is_named_at_run_time(tmp_path):
+    spec = spec_of("controllers[1].gains={kk=2.0}")
+    with pytest.raises(ConfigError, match=r"controllers\[1\]\.gains\.kk: unknown gain"):
+        run_study(spec, tmp_path / "out", progress=False)
+    assert not (tmp_path / "out").exists() and list(tmp_path.iterdir()) == []
+
+
+def test_sampled_distributions():
+    """2000 runs: uniform within its bounds with the right mean, normal mean/std (5 sigma of the
+    estimator), truncnormal within bounds, choice only from its values."""
+    spec = spec_of("initial.lateral_offset={dist='normal', mean=1.0, std=2.0}", "vehicle.L={dist='truncnormal', mean=0.2, std=0.05, low=0.18, high=0.25}",
+                   "initial.start_s={dist='choice', values=[0.0, 0.5]}")
+    s = sample_runs(spec, 0, np.arange(2000))
+    c = s.columns
+    n = 2000
+    assert c["beta_r_deg"].min() >= -5 and c["beta_r_deg"].max() <= 5
+    assert abs(c["beta_r_deg"].mean()) < 5 * (10 / math.sqrt(12)) / math.sqrt(n)
+    assert abs(c["lateral_offset"].mean() - 1.0) < 5 * 2 / math.sqrt(n)
+    assert abs(c["lateral_offset"].std() / 2.0 - 1) < 5 / math.sqrt(2 * n)
+    assert c["L"].min() >= 0.18 and c["L"].max() <= 0.25
+    assert set(np.unique(c["start_s"])) <= {0.0, 0.5} and len(np.unique(c["start_s"])) == 2
+
+
+def test_start_pose_has_the_sampled_offset_heading_error_and_arc_position():
+    """Projecting the sampled start pose back onto the path returns d = lateral_offset,
+    theta_e = heading_error and s = start_s (the line's and circle's nominal start has s = 0)."""
+    spec = spec_of()
+    for p in range(2):
+        s = sample_runs(spec, p, np.arange(16))
+        sc = s.scenarios
+        proj = jax.vmap(lambda path, x, y, th: project(path, x, y, th))(sc.path, sc.pose0.x, sc.pose0.y, sc.pose0.theta)
+        np.testing.assert_allclose(proj.d, s.columns["lateral_offset"], atol=1e-9)
+        np.testing.assert_allclose(np.degrees(proj.theta_e), s.columns["heading_error_deg"], atol=1e-7)
+        np.testing.assert_allclose(proj.s, s.columns["start_s"], atol=1e-8)
+
+
+def test_ou_process_statistics():
+    """Exact OU discretisation: stationary std sigma and lag-1 autocorrelation exp(-dt/tau)
+    (20 000 samples; tolerances 5 standard errors, with the samples' correlation time counted)."""
+    sigma, tau, dt, n = 0.1, 0.5, 0.05, 20000
+    x = np.asarray(ou_sequence(jax.random.PRNGKey(0), n, dt, sigma, tau))
+    a = math.exp(-dt / tau)
+    n_eff = n * (1 - a) / (1 + a)
+    assert abs(x.std() / sigma - 1) < 5 / math.sqrt(2 * n_eff)
+    r1 = np.corrcoef(x[:-1], x[1:])[0, 1]
+    assert abs(r1 - a) < 5 * (1 - a * a) / math.sqrt(n)
+
+
+def test_runs_are_independent_of_chunk_size_and_shared_by_controllers(tmp_path):
+    """Same config and seed: identical runs.parquet; chunk sizes 24 and 7: identical sampled
+    parameters and statuses, metrics equal to float32 rounding (XLA may vectorise a padded batch
+    differently); every controller sees the same sampled runs (common random numbers)."""
+    a = spec_of("margin.enabled=false")
+    run_study(a, tmp_path / "a", progress=False)
+    run_study(a, tmp_path / "a2", progress=False)
+    run_study(spec_of("margin.enabled=false", "chunk_size=7"), tmp_path / "b", progress=False)
+    ra, ra2, rb = (pd.read_parquet(tmp_path / d / "runs.parquet") for d in ("a", "a2", "b"))
+    pd.testing.assert_frame_equal(ra, ra2)
+    params = ["beta_r_deg", "beta_f_deg", "lateral_offset", "heading_error_deg", "start_s", "radius"]
+    pd.testing.assert_frame_equal(ra[params + ["status", "run", "path", "controller"]], rb[params + ["status", "run", "path", "controller"]])
+    np.testing.assert_allclose(ra["iae"], rb["iae"], rtol=1e-5, atol=1e-7)
+    g = ra.groupby("controller")
+    np.testing.assert_array_equal(g.get_group("lmi")[params].to_numpy(), g.get_group("stanley")[params].to_numpy())
+    assert len(ra) == 24 * 2 * 2
+
+
+def test_summary_contract_and_numbers(tmp_path):
+    spec = spec_of()
+    summary = run(spec, tmp_path / "s", progress=False, report=False)
+    on_disk = json.loads((tmp_path / "s" / "summary.json").read_text())
+    assert on_disk["config_sha256"] == study_hash(spec) == summary["config_sha256"]
+    assert on_disk["study"] == "t" and on_disk["seed"] == 3 and on_disk["n_runs_total"] == 96
+    runs = pd.read_parquet(tmp_path / "s" / "runs.parquet")
+    sweep = pd.read_parquet(tmp_path / "s" / "margin.parquet")
+    assert len(sweep) == 2 * 6 * 3 * 2 * 2  # amplitudes x runs x axes x paths x controllers
+    for name, c in on_disk["controllers"].items():
+        df = runs[runs.controller == name]
+        k, n = int(df.success.sum()), len(df)
+        assert c["success_rate"] == pytest.approx(k / n)
+        assert c["success_ci95"] == pytest.approx(list(clopper_pearson(k, n)))
+        assert c["iae_mean"] == pytest.approx(float(df.iae.mean()), rel=1e-6)
+        assert c["iae_p95"] == pytest.approx(float(np.quantile(df.iae, 0.95)), rel=1e-6)
+        assert set(c["slip_margin"]) == {"rear", "front", "joint"}
+        assert c["slip_margin_deg"] == c["slip_margin"]["joint"]["margin"]
+    # the sweep's slip is exactly the amplitude on the swept axis
+    rear = sweep[sweep.axis == "rear"]
+    assert set(rear.amplitude_deg) == {0.0, 10.0}
+
+
+def test_cli_study_and_bad_input(tmp_path):
+    cfg = tmp_path / "s.toml"
+    cfg.write_text('name = "cli"\nn_runs = 4\nseed = 1\nchunk_size = 4\n[sim]\nhorizon = 2.0\nsteady_window = 1.0\n'
+                   '[success]\nfrom_s = 1.0\n[margin]\nenabled = false\n[[paths]]\nkind = "line"\n'
+                   '[[controllers]]\nname = "st"\ntype = "stanley"\n')
+    exe = [sys.executable, "-m", "pfjax.cli"]
+    out = tmp_path / "o"
+    r = subprocess.run(exe + ["study", str(cfg), "--out", str(out), "--no-report", "--quiet", "--json"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    head = json.loads(r.stdout)
+    assert head["n_runs_total"] == 4 and "st" in head["controllers"]
+    assert (out / "runs.parquet").is_file() and (out / "summary.json").is_file()
+    for args, flag in ((["--set", "n_runs=0"], "n_runs"), (["--set", "sim.dtt=0.1"], "sim.dtt"), (["--set", "nokey"], "--set")):
+        o2 = tmp_path / "bad"
+        r = subprocess.run(exe + ["study", str(cfg), "--out", str(o2), "--quiet"] + args, capture_output=True, text=True)
+        assert r.returncode == 2 and r.stdout == "" and len(r.stderr.strip().splitlines()) == 1 and flag in r.stderr, r.stderr
+        assert not o2.exists()
+    r = subprocess.run(exe + ["study", str(tmp_path / "missing.toml")], capture_output=True, text=True)
+    assert r.returncode == 2 and "not found" in r.stderr
+    r = subprocess.run(exe + ["report", str(cfg), "--out", str(out), "--set", "seed=2"], capture_output=True, text=True)
+    assert r.returncode == 2 and "config hash differs" in r.stderr
