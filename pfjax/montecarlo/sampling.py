@@ -31,7 +31,7 @@ QUANTITIES = (
 Q = {name: i for i, name in enumerate(QUANTITIES)}
 
 #: Nominal start parameter of each path kind (the run's start is start_s metres along from it).
-NOMINAL_START = {"line": 0.0, "parabola": -2.0, "sine": 0.0, "circle": 0.0, "random": 0.0}
+NOMINAL_START = {"line": 0.0, "parabola": -2.0, "sine": 0.0, "circle": 0.0, "random": 2.0}  # random: 2 m of path behind the start
 
 
 def run_keys(seed: int, path_index: int, runs: np.ndarray) -> jax.Array:

@@ -24,6 +24,7 @@ from jax import Array
 
 ARC_PANELS = 64  # Gauss-Legendre panels between u_ref and u for the arc length
 GLOBAL_SAMPLES = 4096  # dense samples for the cold-start (global) projection
+END_TOL = 1e-4  # m: how far past an end of the path's domain counts as having left it
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)  # NumPy: cast to the working dtype at use
 
 
@@ -36,7 +37,7 @@ class Projection(NamedTuple):
     s: Array  # m, arc length of the closest point
     u: Array  # path parameter of the closest point (warm start for the next call)
     theta_p: Array  # rad, path tangent angle at the closest point
-    at_end: Array  # bool, the closest point is an end of the valid domain
+    at_end: Array  # bool, the robot is past an end of the valid domain (closest point clamped there)
 
 
 def wrap_angle(a: Array) -> Array:
@@ -130,8 +131,11 @@ def measure(path, x: Array, y: Array, theta: Array, u: Array) -> Projection:
     px, py = path.point(u)
     theta_p = tangent_angle(path, u)
     d = -(x - px) * jnp.sin(theta_p) + (y - py) * jnp.cos(theta_p)
+    # Beyond an end: the closest point is clamped to the end AND the robot lies past it along the
+    # tangent (more than END_TOL). A robot exactly at the start is not beyond it.
+    along = (x - px) * jnp.cos(theta_p) + (y - py) * jnp.sin(theta_p)
     eps = 1e-9 * (path.u_max - path.u_min)
-    at_end = (u <= path.u_min + eps) | (u >= path.u_max - eps)
+    at_end = ((u <= path.u_min + eps) & (along < -END_TOL)) | ((u >= path.u_max - eps) & (along > END_TOL))
     return Projection(
         d=d,
         theta_e=wrap_angle(theta - theta_p),

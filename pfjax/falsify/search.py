@@ -1,0 +1,230 @@
+"""Worst-case search: gradient ascent through the simulator (a falsifier) and its random-sampling baseline.
+
+For a controller ``C`` with gains ``g`` on a path, find the scenario ``x`` in the search space
+(:mod:`pfjax.falsify.space`: slip bounded by ``A`` with bandwidth ``f_max``, initial conditions in a
+box) that maximises an error measure ``J(x)`` of the simulated run (``SimConfig(record=False)``):
+
+* ``"iae"`` (default) ``int |d| dt``; ``"ise"`` ``int d^2 dt``; ``"itae"`` ``int t |d| dt``;
+* ``"max_abs_d"`` ``max_k |d_k|`` and ``"late_max_abs_d"`` (the max from ``success_from`` on):
+  non-smooth, their gradient is that of the sample attaining the max (it switches between
+  samples as the ascent moves; adam's momentum smooths the switching).
+
+:func:`falsify` maximises ``J(x(z))`` over the unconstrained parameters ``z`` with adam
+(step cosine-decayed from ``lr`` to ``lr/10``), from ``n_restarts`` random starts vmapped into one
+batch. One ascent step (value and gradient of the batch, adam, best-so-far) is one jitted
+function, compiled once per controller, config, objective and array shapes and reused by every
+step and every later call with the same shapes (a ``lax.scan`` over the steps compiles 3-4 times
+slower on CPU for no faster run). Gradients are ``jax.value_and_grad`` through the ``lax.scan`` of
+the simulator: at the steering saturation ``clip``, the angle wrap and the closest-point
+projection's step clips JAX returns the one-sided derivative of the active branch (a
+subgradient; the saturated branch has zero derivative with respect to the command). A
+non-finite gradient component is replaced by 0 (a failed run freezes its state, so the
+metrics stay finite, but the derivative of a run through a singularity need not).
+
+Ranking: a run whose status is not ``OK`` (diverged, singular, left the path's domain, non-finite)
+is a falsifying scenario in itself and ranks above every healthy run; among equals the larger
+``J`` wins. ``objective`` in the results is ``J`` of the chosen run.
+
+Budget: one *rollout* is one simulated scenario. The falsifier spends ``n_restarts * steps``
+rollouts, each a forward pass *and* a backward pass (``n_gradients``; reverse mode through the
+scan costs a few forward passes and stores the scan's residuals, O(horizon) memory per run);
+:func:`random_search` spends ``n_samples`` forward-only rollouts. Equal ``n_rollouts`` is equal
+scenario count, not equal compute.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from jax import Array
+
+from pfjax.controllers.base import Controller
+from pfjax.models.slip import Pose, SlipParams
+from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, stack, unstack
+from pfjax.sim.status import Status
+from pfjax.falsify.space import RawParams, SearchSpace, build_scenario, ic_from_raw, init_raw, sample, search_space, slip_from_raw
+
+OBJECTIVES = ("iae", "ise", "itae", "max_abs_d", "late_max_abs_d")
+
+
+class FalsifierResult(NamedTuple):
+    """The worst scenario found and how the search got there."""
+
+    objective: Array  # () J of the worst run (units of the objective: m s for IAE)
+    status: Array  # () int32, that run's pfjax.sim.status.Status
+    slip: Array  # (n, 2) rad, its slip sequence (rear, front), held for seq_dt each
+    seq_dt: Array  # () s
+    ic: Array  # (3,) its d0 m, theta_e0 rad, u0 (path parameter)
+    pose0: Pose  # m, m, rad, its start pose
+    scenario: Scenario  # the run itself (re-simulate with worst_trajectory)
+    history: Array  # (n_hist,) J of the best run after history_rollouts[i] rollouts
+    history_rollouts: Array  # (n_hist,) int, rollouts spent at each history entry
+    n_rollouts: int  # simulated scenarios
+    n_gradients: int  # of those, how many also ran the backward pass
+    n_nonfinite_grad: int  # gradient components that were not finite (replaced by 0)
+
+
+class _Best(NamedTuple):
+    score: Array  # () +inf for a failed run, J otherwise (-inf if NaN)
+    value: Array  # () J
+    status: Array  # () int32
+    raw: RawParams
+
+
+def _score(value: Array, status: Array) -> Array:
+    score = jnp.where(status != Status.OK, jnp.inf, value)
+    return jnp.where(jnp.isnan(score), -jnp.inf, score)
+
+
+def _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise, space_kw):
+    if objective not in OBJECTIVES:
+        raise ValueError(f"objective: expected one of {list(OBJECTIVES)}, got {objective!r}")
+    space = search_space(horizon=config.n_steps * config.dt, slip_bound_deg=slip_bound_deg, f_max_hz=f_max_hz,
+                         ic_bounds=ic_bounds, **space_kw)
+    arr = lambda tree: jax.tree_util.tree_map(jnp.asarray, tree)
+    params = SlipParams() if params is None else params
+    base = Scenario(pose0=Pose(0.0, 0.0, 0.0), slip=None, params=arr(params), path=arr(path), gains=arr(gains),
+                    noise=None if noise is None else arr(noise))
+    return space, base, dataclasses.replace(config, record=False)
+
+
+def _result(space, base, seq, ic, value, status, history, history_rollouts, n_rollouts, n_gradients, n_nonfinite):
+    sc = build_scenario(space, seq, ic, base)
+    return FalsifierResult(objective=value, status=jnp.asarray(status, jnp.int32), slip=seq, seq_dt=space.seq_dt,
+                           ic=ic, pose0=sc.pose0, scenario=sc, history=jnp.asarray(history),
+                           history_rollouts=jnp.asarray(history_rollouts), n_rollouts=int(n_rollouts),
+                           n_gradients=int(n_gradients), n_nonfinite_grad=int(n_nonfinite))
+
+
+def _cosine_lr(lr: float, steps: int) -> np.ndarray:
+    """Adam's step per iteration: ``lr`` cosine-decayed to ``lr/10`` over ``steps``."""
+    k = np.arange(steps)
+    return lr * (0.1 + 0.9 * 0.5 * (1.0 + np.cos(np.pi * k / max(steps - 1, 1))))
+
+
+_ADAM = optax.scale_by_adam()
+
+
+@partial(jax.jit, static_argnames=("controller", "config", "objective"))
+def _ascent_step(raw: RawParams, opt_state, best: _Best, lr: Array, space: SearchSpace, base: Scenario, *,
+                 controller: Controller, config: SimConfig, objective: str):
+    """One adam step on ``-J`` for every start of the batch; keeps the best run evaluated so far.
+
+    Returns ``(raw, opt_state, best, n_nonfinite)``, the last the number of gradient components
+    that were not finite (replaced by 0).
+    """
+
+    def run(r: RawParams):
+        sc = build_scenario(space, slip_from_raw(space, r.slip), ic_from_raw(space, r.ic), base)
+        res = simulate(controller, sc, config)
+        return getattr(res.metrics, objective), res.status
+
+    (value, status), grad = jax.vmap(jax.value_and_grad(run, has_aux=True))(raw)
+    score = _score(value, status)
+    i = jnp.argmax(score)
+    better = score[i] > best.score
+    pick = lambda new, old: jnp.where(better, new, old)
+    best = _Best(pick(score[i], best.score), pick(value[i], best.value), pick(status[i], best.status),
+                 jax.tree_util.tree_map(lambda a, b: pick(a[i], b), raw, best.raw))
+    leaves = jax.tree_util.tree_leaves(grad)
+    n_nonfinite = sum(jnp.sum(~jnp.isfinite(g)) for g in leaves)
+    descent = jax.tree_util.tree_map(lambda g: -jnp.where(jnp.isfinite(g), g, 0.0), grad)  # of -J
+    direction, opt_state = _ADAM.update(descent, opt_state)
+    raw = jax.tree_util.tree_map(lambda p, u: p - lr * u, raw, direction)
+    return raw, opt_state, best, n_nonfinite
+
+
+def falsify(controller: Controller, gains, path, *, config: SimConfig, slip_bound_deg: float, f_max_hz: float,
+            ic_bounds: dict, objective: str = "iae", n_restarts: int = 8, steps: int = 50, lr: float = 0.2,
+            key: Array, params: SlipParams | None = None, noise=None, n_freq: int = 8, with_constant: bool = True,
+            seq_dt: float = 0.05) -> FalsifierResult:
+    """Gradient ascent on ``J`` over slip profiles and initial conditions (module docstring).
+
+    Args:
+        controller: the controller under test (static).
+        gains: its parameter pytree.
+        path: a path shape from :mod:`pfjax.paths`.
+        config: simulator settings (``record`` is forced off).
+        slip_bound_deg: slip amplitude bound ``A`` per axle, deg.
+        f_max_hz: slip bandwidth, Hz (0: constant slip).
+        ic_bounds: ``{"d": (lo, hi) m, "theta_e_deg": (lo, hi) deg, "u": (lo, hi)}``
+            (:func:`pfjax.falsify.space.search_space`).
+        objective: one of :data:`OBJECTIVES`.
+        n_restarts: random starts, ascended together as one vmapped batch.
+        steps: adam steps per start.
+        lr: adam's initial step (cosine-decayed to ``lr/10``), in units of the raw parameters.
+        key: ``jax.random.PRNGKey`` for the starts.
+        params: physical parameters (default ``SlipParams`` with a 30 deg steering limit).
+        noise: ``SensorNoise`` or ``None``.
+        n_freq, with_constant, seq_dt: the slip's basis (:func:`pfjax.falsify.space.search_space`).
+
+    Returns:
+        :class:`FalsifierResult`; ``n_rollouts = n_gradients = n_restarts * steps``, history per step.
+    """
+    if int(n_restarts) < 1 or int(steps) < 1:
+        raise ValueError(f"n_restarts and steps: must be >= 1, got {n_restarts}, {steps}")
+    space, base, config = _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise,
+                                 dict(n_freq=n_freq, with_constant=with_constant, seq_dt=seq_dt))
+    raw = init_raw(space, key, int(n_restarts))
+    dtype = space.basis.dtype
+    best = _Best(jnp.asarray(-jnp.inf, dtype), jnp.asarray(jnp.nan, dtype), jnp.int32(Status.OK), unstack(raw, 0))
+    opt_state, history, n_nonfinite = _ADAM.init(raw), [], 0
+    for lr_k in _cosine_lr(float(lr), int(steps)):
+        raw, opt_state, best, bad = _ascent_step(raw, opt_state, best, jnp.asarray(lr_k, dtype), space, base,
+                                                 controller=controller, config=config, objective=objective)
+        history.append(best.value)
+        n_nonfinite += bad
+    n = int(n_restarts) * int(steps)
+    return _result(space, base, slip_from_raw(space, best.raw.slip), ic_from_raw(space, best.raw.ic), best.value,
+                   best.status, jnp.stack(history), int(n_restarts) * np.arange(1, int(steps) + 1), n, n,
+                   int(n_nonfinite))
+
+
+@jax.jit
+def _scenarios(space: SearchSpace, seq: Array, ic: Array, base: Scenario) -> Scenario:
+    return jax.vmap(build_scenario, in_axes=(None, 0, 0, None))(space, seq, ic, base)
+
+
+def random_search(controller: Controller, gains, path, *, config: SimConfig, slip_bound_deg: float,
+                  f_max_hz: float, ic_bounds: dict, objective: str = "iae", n_samples: int, key: Array,
+                  batch_size: int = 64, params: SlipParams | None = None, noise=None, n_freq: int = 8,
+                  with_constant: bool = True, seq_dt: float = 0.05) -> FalsifierResult:
+    """The baseline: ``n_samples`` uniform draws of the same set (:func:`pfjax.falsify.space.sample`),
+    simulated with :func:`~pfjax.sim.simulate_batch` in chunks of ``batch_size`` (the last one
+    padded, so one compile), the worst kept. All draws come from ``key`` at once, so the result
+    does not depend on ``batch_size``. Arguments as :func:`falsify`; history per sample."""
+    if int(n_samples) < 1 or int(batch_size) < 1:
+        raise ValueError(f"n_samples and batch_size: must be >= 1, got {n_samples}, {batch_size}")
+    space, base, config = _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise,
+                                 dict(n_freq=n_freq, with_constant=with_constant, seq_dt=seq_dt))
+    n, b = int(n_samples), min(int(batch_size), int(n_samples))
+    seq, ic = sample(space, key, n)
+    values, statuses = [], []
+    for start in range(0, n, b):
+        idx = np.minimum(np.arange(start, start + b), n - 1)
+        res = simulate_batch(_scenarios(space, seq[idx], ic[idx], base), controller=controller, config=config)
+        keep = min(b, n - start)
+        values.append(np.asarray(getattr(res.metrics, objective))[:keep])
+        statuses.append(np.asarray(res.status)[:keep])
+    values, statuses = np.concatenate(values), np.concatenate(statuses)
+    score = np.asarray(_score(values, statuses))
+    # Running best: index of the first maximum of score[:k+1] for every k.
+    leader = np.zeros(n, dtype=int)
+    for k in range(1, n):
+        leader[k] = k if score[k] > score[leader[k - 1]] else leader[k - 1]
+    i = leader[-1]
+    return _result(space, base, seq[i], ic[i], jnp.asarray(values[i]), statuses[i], values[leader],
+                   np.arange(1, n + 1), n, 0, 0)
+
+
+def worst_trajectory(controller: Controller, result: FalsifierResult, config: SimConfig) -> SimResult:
+    """Re-simulate the worst scenario with ``record=True`` (for plotting): one unbatched ``SimResult``."""
+    res = simulate_batch(stack([result.scenario]), controller=controller,
+                         config=dataclasses.replace(config, record=True))
+    return unstack(res, 0)

@@ -1,0 +1,334 @@
+"""Figures of a Monte Carlo study report (run table and summary in, ``Figure`` out; never under jit).
+
+Every builder aggregates first (quantiles, histograms, ECDFs on a fixed grid, 2D bins) and plots
+the aggregate, so a figure costs the same for 100 runs as for 100,000 and its SVG stays small.
+Each controller keeps one colour throughout (:func:`controller_colors`, the colours of
+:data:`pfjax.report.figures.STYLE` by controller type). Figures are ``matplotlib.figure.Figure``
+objects, independent of the pyplot backend; :func:`pfjax.report.figures.save` writes them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from matplotlib.ticker import LogLocator, NullLocator
+
+from pfjax.report.figures import STYLE
+
+#: Controller type (study config) -> key of :data:`STYLE` whose colour it takes.
+TYPE_STYLE = {"lmi": "mixed", "state_feedback": "paper-k", "pi": "pi", "stanley": "stanley",
+              "pure_pursuit": "pure-pursuit", "rear_wheel": "rear-wheel"}
+_SPARE = ["#ff7f0e", "#e377c2", "#bcbd22", "#7f7f7f", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173",
+          "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94", "#f7b6d2", "#dbdb8d", "#9edae5"]
+
+AXIS_TITLE = {"rear": "rear axle only (β_r = ±A)", "front": "front axle only (β_f = ±A)",
+              "joint": "both axles (β_r = ±A, β_f = ±A)"}
+
+
+def fmt_margin(m: dict | None) -> str:
+    """A slip margin with its interval: ``"5° [2.5, 7.5]"``, ``"≥ 20° [20, 20]"`` when censored."""
+    if not m:
+        return "—"
+    return f"{'≥ ' if m['censored'] else ''}{m['margin']:g}° [{m['margin_lo']:g}, {m['margin_hi']:g}]"
+
+
+def controller_colors(controllers: list[dict]) -> dict[str, str]:
+    """One colour per controller: its type's colour in :data:`STYLE`, a spare one if already taken.
+
+    Args:
+        controllers: the study config's controller entries (``name``, ``type``).
+    """
+    used, out = set(), {}
+    spare = [c for c in _SPARE + [s["color"] for s in STYLE.values()]]
+    for i, c in enumerate(controllers):
+        col = STYLE.get(TYPE_STYLE.get(c.get("type"), ""), {}).get("color")
+        if col is None or col in used:
+            col = next((s for s in spare if s not in used), spare[i % len(spare)])
+        used.add(col)
+        out[c["name"]] = col
+    return out
+
+
+def freeze_layout(fig: Figure) -> Figure:
+    """Run the figure's constrained layout once and keep it, so that saving the figure twice (PNG
+    and SVG) does not lay it out twice (about a third of the drawing time)."""
+    engine = fig.get_layout_engine()
+    if engine is not None:
+        engine.execute(fig)
+        fig.set_layout_engine("none")
+    return fig
+
+
+def _log_axis(ax, axis="x"):
+    """Log scale with plain tick labels at 1, 2, 5 x 10^k."""
+    ax.set_xscale("log") if axis == "x" else ax.set_yscale("log")
+    a = ax.xaxis if axis == "x" else ax.yaxis
+    lo, hi = ax.get_xlim() if axis == "x" else ax.get_ylim()
+    decades = np.log10(hi / lo) if lo > 0 and hi > lo else 1.0
+    subs = (1.0, 2.0, 5.0) if decades <= 2.2 else (1.0, 3.0) if decades <= 3.5 else (1.0,)
+    a.set_major_locator(LogLocator(base=10, subs=subs))
+    a.set_major_formatter(lambda v, _: f"{v:g}")
+    a.set_minor_locator(NullLocator())
+
+
+def _fmt_pct_axis(ax, axis="x"):
+    (ax.xaxis if axis == "x" else ax.yaxis).set_major_formatter(lambda v, _: f"{100 * v:g}")
+
+
+# ------------------------------------------------------------------------------- headline
+
+
+def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
+    """Three panels sharing one row per controller: success rate with its 95 % Clopper-Pearson
+    interval (pooled, and per path as small markers), slip margin per axis with ``[lo, hi]``
+    (an arrow when censored: the margin is at least the largest amplitude tested), and the IAE
+    quantiles (box p25-p75, whiskers p05-p95, tick the median, diamond the mean)."""
+    ctrl = summary["controllers"]
+    names = list(ctrl)
+    y = np.arange(len(names))[::-1].astype(float)
+    fig = Figure(figsize=(14, 1.5 + 0.8 * len(names)), layout="constrained")
+    ax = fig.subplots(1, 3, sharey=True, gridspec_kw={"width_ratios": [1.15, 1.0, 1.0]})
+
+    a = ax[0]
+    paths = summary.get("paths", [])
+    lows = []
+    for yi, n in zip(y, names):
+        c = ctrl[n]
+        lo, hi = c["success_ci95"]
+        r = c["success_rate"]
+        lows.append(lo)
+        a.errorbar([r], [yi], xerr=[[r - lo], [hi - r]], fmt="o", ms=8, color=colors[n], capsize=4, lw=2)
+        for j, p in enumerate(paths if len(paths) > 1 else []):
+            pp = c["per_path"].get(p)
+            if pp:
+                yy = yi - 0.12 - 0.24 * j / max(1, len(paths) - 1)
+                plo, phi = pp["success_ci95"]
+                a.errorbar([pp["success_rate"]], [yy], xerr=[[pp["success_rate"] - plo], [phi - pp["success_rate"]]],
+                           fmt="s", ms=3.5, color=colors[n], alpha=0.55, lw=0.8, capsize=0)
+                a.annotate(p, (pp["success_rate"], yy), xytext=(4, 0), textcoords="offset points", fontsize=6,
+                           va="center", color="0.35")
+        a.annotate(f"{100 * r:.2f} %", (r, yi), xytext=(0, 7), textcoords="offset points", ha="center", fontsize=8,
+                   fontweight="bold")
+    left = max(0.0, min(lows) - 0.05 * max(1e-3, 1 - min(lows)) - 0.01) if lows else 0.0
+    a.set_xlim(left, 1.0 + 0.03 * (1.0 - left))
+    _fmt_pct_axis(a)
+    a.set(xlabel="success rate [%]", title="success rate, 95 % CI" + (" (small: per path)" if len(paths) > 1 else ""))
+    a.set_yticks(y, names)
+    a.grid(alpha=0.3, axis="x")
+
+    a = ax[1]
+    axes = [x for x in ("rear", "front", "joint") if any(x in ctrl[n].get("slip_margin", {}) for n in names)]
+    if axes:
+        markers = {"rear": "o", "front": "s", "joint": "D"}
+        top, eps = 1.0, None
+        for yi, n in zip(y, names):
+            for j, x in enumerate(axes):
+                m = ctrl[n].get("slip_margin", {}).get(x)
+                if m is None:
+                    continue
+                eps = m["eps"]
+                yy = yi + 0.28 - 0.56 * (j + 0.5) / len(axes)
+                a.errorbar([m["margin"]], [yy], xerr=[[m["margin"] - m["margin_lo"]], [m["margin_hi"] - m["margin"]]],
+                           fmt=markers[x], ms=6, color=colors[n], capsize=3, lw=1.5, mfc="white" if m["censored"] else colors[n])
+                a.annotate(f"{x} {'≥ ' if m['censored'] else ''}{m['margin']:g}°", (m["margin_hi"], yy), xytext=(6, 0),
+                           textcoords="offset points", fontsize=7, va="center")
+                top = max(top, m["margin_hi"])
+        a.set_xlim(-0.03 * top - 0.3, 1.3 * top + 1)
+        a.set_title("slip margin [lo, hi]" + (f", success ≥ {100 * (1 - eps):g} %" if eps else ""))
+    else:
+        a.text(0.5, 0.5, "no slip-margin sweep in this study", ha="center", va="center", transform=a.transAxes, color="0.4")
+        a.set_title("slip margin")
+    a.set(xlabel="largest safe slip amplitude A [deg]")
+    a.grid(alpha=0.3, axis="x")
+
+    a = ax[2]
+    for yi, n in zip(y, names):
+        q = ctrl[n]["quantiles"]["iae"]
+        if not q.get("n_finite"):
+            continue
+        c = colors[n]
+        a.plot([q["q05"], q["q95"]], [yi, yi], color=c, lw=1.2)
+        a.fill_betweenx([yi - 0.18, yi + 0.18], q["q25"], q["q75"], color=c, alpha=0.45, lw=0)
+        a.plot([q["q50"]] * 2, [yi - 0.22, yi + 0.22], color=c, lw=2.2)
+        a.plot([q["mean"]], [yi], "D", color="k", ms=4)
+    _log_axis(a)
+    a.set(xlabel="IAE = ∫|d| dt [m·s], log scale", title="IAE: p05–p95, p25–p75, median, ◆ mean")
+    a.grid(alpha=0.3, axis="x")
+    fig.suptitle(f"Study '{summary['study']}': {summary.get('n_runs_per_controller_and_path', '?')} runs per "
+                 f"controller and path ({len(paths)} path{'s' if len(paths) != 1 else ''})")
+    return fig
+
+
+# ------------------------------------------------------------------------------- distributions
+
+
+def _grid(values: np.ndarray, log: bool, n: int):
+    v = values[np.isfinite(values)]
+    if log:
+        v = v[v > 0]
+    if v.size == 0:
+        return None
+    lo, hi = np.quantile(v, [0.001, 1.0]) if log else (v.min(), v.max())
+    if not hi > lo:
+        lo, hi = (lo / 2, lo * 2) if log and lo > 0 else (lo - 0.5, hi + 0.5)
+    return np.geomspace(lo, hi, n) if log else np.linspace(lo, hi, n)
+
+
+def _wants_log(values: np.ndarray) -> bool:
+    v = values[np.isfinite(values) & (values > 0)]
+    if v.size < 2:
+        return False
+    q01, q99 = np.quantile(v, [0.01, 0.99])
+    return q99 > 30 * q01
+
+
+def distribution_figure(runs: pd.DataFrame, metric: str, colors: dict[str, str], paths: list[str], *,
+                        scale: float = 1.0, unit: str = "", label: str | None = None,
+                        band: float | None = None, bins: int | None = None) -> Figure:
+    """Histogram (top) and ECDF (bottom) of one metric, controllers overlaid, one column per path.
+
+    Histograms show the fraction of a controller's runs per bin (the end bins collect the clipped
+    tails); the x axis is logarithmic when the 1-99 % range of the values spans more than a
+    factor 30. ECDFs are evaluated on a 400-point grid (``searchsorted`` on the sorted values)
+    and count every run: runs with a non-finite metric count as beyond the right edge, so the
+    curve stops short of 1 by their fraction. ``band`` (metric units) draws the success band.
+    """
+    label = label or metric
+    if bins is None:  # ~1.5 sqrt(n) per controller and path, 10 to 60
+        n_max = int(runs.groupby(["path", "controller"]).size().max()) if len(runs) else 1
+        bins = int(np.clip(1.5 * np.sqrt(n_max), 10, 60))
+    ncol = max(1, len(paths))
+    fig = Figure(figsize=(4.3 * ncol + 0.8, 6.2), layout="constrained")
+    ax = np.asarray(fig.subplots(2, ncol, squeeze=False, sharex="col"))
+    for j, p in enumerate(paths):
+        sub = runs[runs.path == p]
+        allv = sub[metric].to_numpy(dtype=float) * scale
+        log = _wants_log(allv)
+        edges = _grid(allv, log, bins + 1)
+        grid = _grid(allv, log, 400)
+        h, e = ax[0, j], ax[1, j]
+        for name, g in sub.groupby("controller", sort=False):
+            v = g[metric].to_numpy(dtype=float) * scale
+            fin = v[np.isfinite(v)]
+            n_bad = v.size - fin.size
+            n_fail = int((g["status"] != "ok").sum())
+            lab = name + (f" ({n_fail} failed)" if n_fail else "") + (f", {n_bad} non-finite" if n_bad else "")
+            if edges is not None and fin.size:
+                clipped = np.clip(fin, edges[0], edges[-1])
+                counts, _ = np.histogram(clipped, edges)
+                h.stairs(counts / max(v.size, 1), edges, color=colors[name], lw=1.6, label=lab)
+                h.stairs(counts / max(v.size, 1), edges, color=colors[name], alpha=0.12, fill=True)
+                srt = np.sort(fin)
+                e.plot(grid, np.searchsorted(srt, grid, side="right") / v.size, color=colors[name], lw=1.8, label=lab)
+        for a in (h, e):
+            if log:
+                _log_axis(a)
+            if band is not None:
+                a.axvline(band, color="k", ls="--", lw=1)
+            a.grid(alpha=0.3)
+        if band is not None:
+            h.annotate("success band", (band, 0.5), xycoords=("data", "axes fraction"), xytext=(-3, 0),
+                       textcoords="offset points", fontsize=7, rotation=90, ha="right", va="center", color="0.3")
+        h.set(title=f"path '{p}'", ylabel="fraction of runs per bin" if j == 0 else None)
+        e.set(xlabel=f"{label} [{unit}]" + (", log scale" if log else ""), ylabel="ECDF: P(X ≤ x)" if j == 0 else None,
+              ylim=(0, 1.02))
+        e.legend(fontsize=7, loc="upper left")
+    fig.suptitle(f"Distribution of {label} per controller (top: histogram, bottom: empirical CDF)")
+    return fig
+
+
+# ------------------------------------------------------------------------------- margin curves
+
+
+def margin_figure(summary: dict, colors: dict[str, str]) -> Figure | None:
+    """Success rate against slip amplitude, one panel per axis (rear, front, joint), from the
+    sweep's per-amplitude tables: line and markers the rate ``k/n``, band the 95 %
+    Clopper-Pearson interval, dashed the ``1 - eps`` line, triangle each controller's margin.
+    None when the study has no sweep."""
+    ctrl = summary["controllers"]
+    axes = [x for x in ("rear", "front", "joint") if any(x in c.get("slip_margin", {}) for c in ctrl.values())]
+    if not axes:
+        return None
+    fig = Figure(figsize=(4.6 * len(axes) + 0.6, 4.3), layout="constrained")
+    ax = np.atleast_1d(fig.subplots(1, len(axes), sharey=True))
+    eps = None
+    n_per = None
+    for a, x in zip(ax, axes):
+        for name, c in ctrl.items():
+            m = c.get("slip_margin", {}).get(x)
+            if m is None:
+                continue
+            eps, n_per = m["eps"], m["table"][0]["n"]
+            t = pd.DataFrame(m["table"])
+            col = colors[name]
+            span = max(float(t["amplitude"].max() - t["amplitude"].min()), 1.0)
+            t["amplitude"] += (list(ctrl).index(name) - (len(ctrl) - 1) / 2) * 0.006 * span  # dodge overlapping curves
+            a.fill_between(t["amplitude"], t["lo"], t["hi"], color=col, alpha=0.15, lw=0)
+            a.plot(t["amplitude"], t["rate"], "o-", color=col, lw=1.8, ms=4,
+                   label=f"{name}: margin {'≥ ' if m['censored'] else ''}{m['margin']:g}° [{m['margin_lo']:g}, {m['margin_hi']:g}]")
+            a.plot([m["margin"]], [1 - m["eps"]], "v", color=col, ms=9, mec="k", mew=0.6, zorder=5)
+        if eps is not None:
+            a.axhline(1 - eps, color="k", ls="--", lw=1)
+            a.annotate(f"1 − ε = {100 * (1 - eps):g} %", (0, 1 - eps), xycoords=("axes fraction", "data"),
+                       xytext=(4, -11), textcoords="offset points", fontsize=7)
+        a.set(title=AXIS_TITLE[x], xlabel="slip amplitude A [deg]", ylim=(-0.02, 1.04))
+        _fmt_pct_axis(a, "y")
+        a.grid(alpha=0.3)
+        a.legend(fontsize=7, loc="best")
+    ax[0].set_ylabel("success rate [%]")
+    fig.suptitle(f"Slip margin: success rate vs constant slip amplitude ({n_per} runs per amplitude, all paths pooled; "
+                 "band: 95 % Clopper-Pearson; ▼ margin)")
+    return fig
+
+
+# ------------------------------------------------------------------------------- slip map
+
+
+def slip_map_figure(runs: pd.DataFrame, controllers: list[str], *, delta_max_deg: float | None = None,
+                    convention: str = "source", note: str = "") -> Figure | None:
+    """Success rate binned over the sampled ``(beta_r_deg, beta_f_deg)``, one panel per controller
+    (all paths pooled): ``rate = successes / runs`` per cell of an ``n_b x n_b`` grid,
+    ``n_b = clip(sqrt(n / 25), 4, 24)`` with ``n`` the runs per controller (about 25 runs per
+    cell); white cells hold no run. Dashed: where a straight-line equilibrium stops existing,
+    ``|beta_r +- beta_f| = delta_max`` (source / Lenain convention, nominal ``delta_max``).
+    None when neither slip angle varies."""
+    if not {"beta_r_deg", "beta_f_deg"} <= set(runs.columns):
+        return None
+    br, bf = runs["beta_r_deg"].to_numpy(float), runs["beta_f_deg"].to_numpy(float)
+    ok = np.isfinite(br) & np.isfinite(bf)
+    if not ok.any() or (np.ptp(br[ok]) == 0 and np.ptp(bf[ok]) == 0):
+        return None
+    n_per = max(1, ok.sum() // max(1, len(controllers)))
+    nb = int(np.clip(np.sqrt(n_per / 25), 4, 24))
+
+    def edges(v):
+        lo, hi = v.min(), v.max()
+        if hi == lo:
+            lo, hi = lo - 0.5, hi + 0.5
+        return np.linspace(lo, hi, nb + 1)
+
+    ex, ey = edges(br[ok]), edges(bf[ok])
+    ncol = len(controllers)
+    fig = Figure(figsize=(4.2 * ncol + 1.2, 4.2), layout="constrained")
+    ax = np.atleast_1d(fig.subplots(1, ncol, sharey=True))
+    mesh = None
+    for a, name in zip(ax, controllers):
+        g = runs[(runs.controller == name).to_numpy() & ok]
+        x, y, s = g["beta_r_deg"].to_numpy(float), g["beta_f_deg"].to_numpy(float), g["success"].to_numpy(float)
+        cnt, _, _ = np.histogram2d(x, y, [ex, ey])
+        hit, _, _ = np.histogram2d(x, y, [ex, ey], weights=s)
+        rate = np.ma.masked_where(cnt == 0, hit / np.maximum(cnt, 1))
+        mesh = a.pcolormesh(ex, ey, rate.T, cmap="RdYlGn", vmin=0, vmax=1, edgecolors="face", lw=0)
+        if delta_max_deg is not None:
+            b = np.array([ex[0], ex[-1]])
+            sign = 1 if convention == "source" else -1
+            for s_ in (-1, 1):
+                a.plot(b, sign * (s_ * delta_max_deg - b), "--", color="0.25", lw=1)
+        a.set(xlim=(ex[0], ex[-1]), ylim=(ey[0], ey[-1]), xlabel=f"β_r{note} [deg]",
+              title=f"{name}: {100 * s.mean():.1f} % overall" if s.size else name)
+    ax[0].set_ylabel(f"β_f{note} [deg]")
+    fig.colorbar(mesh, ax=list(ax), label="success rate (from simulation)", shrink=0.9)
+    fig.suptitle(f"Robustness map from simulation: success rate over sampled slip ({nb}×{nb} bins, "
+                 f"~{n_per / nb**2:.0f} runs per bin, all paths pooled)")
+    return fig
