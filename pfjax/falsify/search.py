@@ -108,7 +108,10 @@ def _cosine_lr(lr: float, steps: int) -> np.ndarray:
     return lr * (0.1 + 0.9 * 0.5 * (1.0 + np.cos(np.pi * k / max(steps - 1, 1))))
 
 
-_ADAM = optax.scale_by_adam()
+#: Adam's direction with ``b2 = 0.9`` (optax's default 0.999 remembers the large early gradients of
+#: the slip amplitude for ~1000 steps and so crawls along the flat directions that remain, e.g.
+#: the absolute phase of a worst-case sinusoid; 0.9 found a larger J on every seed tried).
+_ADAM = optax.scale_by_adam(b2=0.9)
 
 
 @partial(jax.jit, static_argnames=("controller", "config", "objective"))

@@ -125,7 +125,8 @@ def _slip(spec: StudySpec, key, horizon: float):
 
 def _start_pose(path, u_nominal, start_s, offset, heading_err):
     """Pose ``offset`` metres left of the point ``start_s`` metres along from ``u_nominal``, heading
-    ``theta_p + heading_err`` (Newton on the arc length; 6 steps are exact to rounding here)."""
+    ``theta_p + heading_err`` (Newton on the arc length; 6 steps are exact to rounding here), and
+    that point's parameter ``u`` (the simulator's initial closest-point guess)."""
     s0 = arc_length(path, u_nominal) + start_s
     u = u_nominal + start_s
     for _ in range(6):
@@ -133,7 +134,7 @@ def _start_pose(path, u_nominal, start_s, offset, heading_err):
         u = u - (arc_length(path, u) - s0) / jnp.sqrt(dx * dx + dy * dy)
     px, py = path.point(u)
     th = tangent_angle(path, u)
-    return Pose(px - offset * jnp.sin(th), py + offset * jnp.cos(th), th + heading_err)
+    return Pose(px - offset * jnp.sin(th), py + offset * jnp.cos(th), th + heading_err), u
 
 
 def random_path(key, spec: PathSpec, kappa_max: float, dtype=float) -> shapes.Spline:
@@ -207,11 +208,11 @@ def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_over
         path, pcols = jax.vmap(lambda k: _path(pspec, k))(keys)
         cols.update(pcols)
     u_nom = NOMINAL_START[pspec.kind]
-    pose0 = jax.vmap(lambda p, s0, off, he: _start_pose(p, jnp.asarray(u_nom, float), s0, off, he))(path, *starts)
+    pose0, u0 = jax.vmap(lambda p, s0, off, he: _start_pose(p, jnp.asarray(u_nom, float), s0, off, he))(path, *starts)
     noise = None
     if spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0:
         n = len(runs)
         noise = SensorNoise(jnp.full((n,), spec.noise.sigma_d, float), jnp.full((n,), spec.noise.sigma_theta_e_deg * rad, float),
                             jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys))
-    sc = Scenario(pose0=pose0, slip=profiles, params=params, path=path, gains=None, noise=noise)
+    sc = Scenario(pose0=pose0, slip=profiles, params=params, path=path, gains=None, noise=noise, u0=u0)
     return Sampled({k: np.asarray(v) for k, v in cols.items()}, sc)

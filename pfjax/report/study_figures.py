@@ -108,8 +108,7 @@ def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
                            fmt="s", ms=3.5, color=colors[n], alpha=0.55, lw=0.8, capsize=0)
                 a.annotate(p, (pp["success_rate"], yy), xytext=(4, 0), textcoords="offset points", fontsize=6,
                            va="center", color="0.35")
-        a.annotate(f"{100 * r:.2f} %", (r, yi), xytext=(0, 7), textcoords="offset points", ha="center", fontsize=8,
-                   fontweight="bold")
+        a.annotate(f"{100 * r:.2f} %", (r, yi), xytext=(0, 7), textcoords="offset points", ha="center", fontsize=8.5)
     left = max(0.0, min(lows) - 0.05 * max(1e-3, 1 - min(lows)) - 0.01) if lows else 0.0
     a.set_xlim(left, 1.0 + 0.03 * (1.0 - left))
     _fmt_pct_axis(a)
@@ -143,17 +142,21 @@ def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
     a.grid(alpha=0.3, axis="x")
 
     a = ax[2]
+    spread = []
     for yi, n in zip(y, names):
         q = ctrl[n]["quantiles"]["iae"]
         if not q.get("n_finite"):
             continue
+        spread += [q["q05"], q["q95"]]
         c = colors[n]
         a.plot([q["q05"], q["q95"]], [yi, yi], color=c, lw=1.2)
         a.fill_betweenx([yi - 0.18, yi + 0.18], q["q25"], q["q75"], color=c, alpha=0.45, lw=0)
         a.plot([q["q50"]] * 2, [yi - 0.22, yi + 0.22], color=c, lw=2.2)
         a.plot([q["mean"]], [yi], "D", color="k", ms=4)
-    _log_axis(a)
-    a.set(xlabel="IAE = ∫|d| dt [m·s], log scale", title="IAE: p05–p95, p25–p75, median, ◆ mean")
+    log = bool(spread) and min(spread) > 0 and max(spread) > 10 * min(spread)
+    if log:
+        _log_axis(a)
+    a.set(xlabel="IAE = ∫|d| dt [m·s]" + (", log scale" if log else ""), title="IAE: p05–p95, p25–p75, median, ◆ mean")
     a.grid(alpha=0.3, axis="x")
     fig.suptitle(f"Study '{summary['study']}': {summary.get('n_runs_per_controller_and_path', '?')} runs per "
                  f"controller and path ({len(paths)} path{'s' if len(paths) != 1 else ''})")
@@ -188,11 +191,14 @@ def distribution_figure(runs: pd.DataFrame, metric: str, colors: dict[str, str],
                         band: float | None = None, bins: int | None = None) -> Figure:
     """Histogram (top) and ECDF (bottom) of one metric, controllers overlaid, one column per path.
 
-    Histograms show the fraction of a controller's runs per bin (the end bins collect the clipped
-    tails); the x axis is logarithmic when the 1-99 % range of the values spans more than a
-    factor 30. ECDFs are evaluated on a 400-point grid (``searchsorted`` on the sorted values)
-    and count every run: runs with a non-finite metric count as beyond the right edge, so the
-    curve stops short of 1 by their fraction. ``band`` (metric units) draws the success band.
+    Only runs that ran to the end (status ok) enter the histograms and the ECDF's steps: a failed
+    run's metrics stop at its failure (a run that diverges at once has IAE 0), so it would look
+    like the best run. Every run counts in the denominators instead: a failed run (or a
+    non-finite value) counts as beyond the right edge, and the ECDF stops short of 1 by the
+    failed fraction (given in the legend). Histograms show the fraction of a controller's runs
+    per bin (the end bins collect the clipped tails); the x axis is logarithmic when the 1-99 %
+    range of the values spans more than a factor 30. ECDFs are evaluated on a 400-point grid
+    (``searchsorted`` on the sorted values). ``band`` (metric units) draws the success band.
     """
     label = label or metric
     if bins is None:  # ~1.5 sqrt(n) per controller and path, 10 to 60
@@ -203,24 +209,25 @@ def distribution_figure(runs: pd.DataFrame, metric: str, colors: dict[str, str],
     ax = np.asarray(fig.subplots(2, ncol, squeeze=False, sharex="col"))
     for j, p in enumerate(paths):
         sub = runs[runs.path == p]
-        allv = sub[metric].to_numpy(dtype=float) * scale
+        healthy = (sub["status"] == "ok").to_numpy()
+        allv = sub[metric].to_numpy(dtype=float)[healthy] * scale
         log = _wants_log(allv)
         edges = _grid(allv, log, bins + 1)
         grid = _grid(allv, log, 400)
         h, e = ax[0, j], ax[1, j]
         for name, g in sub.groupby("controller", sort=False):
             v = g[metric].to_numpy(dtype=float) * scale
-            fin = v[np.isfinite(v)]
-            n_bad = v.size - fin.size
-            n_fail = int((g["status"] != "ok").sum())
-            lab = name + (f" ({n_fail} failed)" if n_fail else "") + (f", {n_bad} non-finite" if n_bad else "")
+            ok = (g["status"] == "ok").to_numpy()
+            fin = v[ok & np.isfinite(v)]
+            n_fail, n_bad = int((~ok).sum()), int((ok & ~np.isfinite(v)).sum())
+            lab = name + (f" ({n_fail} failed: +∞)" if n_fail else "") + (f", {n_bad} non-finite" if n_bad else "")
             if edges is not None and fin.size:
-                clipped = np.clip(fin, edges[0], edges[-1])
-                counts, _ = np.histogram(clipped, edges)
-                h.stairs(counts / max(v.size, 1), edges, color=colors[name], lw=1.6, label=lab)
-                h.stairs(counts / max(v.size, 1), edges, color=colors[name], alpha=0.12, fill=True)
-                srt = np.sort(fin)
-                e.plot(grid, np.searchsorted(srt, grid, side="right") / v.size, color=colors[name], lw=1.8, label=lab)
+                counts, _ = np.histogram(np.clip(fin, edges[0], edges[-1]), edges)
+                h.stairs(counts / v.size, edges, color=colors[name], lw=1.6, label=lab)
+                h.stairs(counts / v.size, edges, color=colors[name], alpha=0.12, fill=True)
+                e.plot(grid, np.searchsorted(np.sort(fin), grid, side="right") / v.size, color=colors[name], lw=1.8, label=lab)
+            else:
+                e.plot([], [], color=colors[name], lw=1.8, label=lab + " (no run reached the end)")
         for a in (h, e):
             if log:
                 _log_axis(a)

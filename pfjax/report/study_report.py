@@ -282,8 +282,8 @@ def _figures(out_dir: Path, spec_cfg: dict, summary: dict, runs: pd.DataFrame, c
          "Success rate against the slip amplitude, with 95 % Clopper-Pearson bands; the dashed line is 1 − ε and "
          "each triangle a controller's margin (the largest amplitude at which it, and every smaller one, stays above)."),
         ("dist_iae", lambda: distribution_figure(runs, "iae", colors, paths, unit="m·s", label="IAE ∫|d| dt"),
-         "IAE of every run, per path: histogram (fraction of runs per bin) and empirical CDF "
-         "(further left and higher is better)."),
+         "IAE per path: histogram (fraction of runs per bin) and empirical CDF (further left and higher is better). "
+         "Failed runs count as +∞: the ECDF stops short of 1 by the failed fraction."),
         ("dist_late_max_abs_d", lambda: distribution_figure(runs, "late_max_abs_d", colors, paths, scale=1000.0, unit="mm",
                                                             label=f"max |d| from t = {spec_cfg['success']['from_s']:g} s",
                                                             band=band_mm),

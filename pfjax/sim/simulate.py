@@ -100,6 +100,8 @@ class Scenario(NamedTuple):
     path: Any  # a path shape from pfjax.paths
     gains: Any  # the controller's parameter pytree
     noise: SensorNoise | None = None  # measurement noise seen by the controller (None: exact)
+    u0: Any = None  # path parameter near the start's closest point (None: global search). Set it when
+    #                 the start is built from the path, so a path that loops back cannot capture the start.
 
 
 class Trajectory(NamedTuple):
@@ -182,7 +184,10 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     rate_limited = jnp.isfinite(rate)
 
     pose0 = Pose(*(jnp.asarray(a, float) for a in sc.pose0))
-    u0 = global_parameter(sc.path, pose0.x, pose0.y)
+    if sc.u0 is None:
+        u0 = global_parameter(sc.path, pose0.x, pose0.y)
+    else:
+        u0 = closest_parameter(sc.path, pose0.x, pose0.y, jnp.asarray(sc.u0, float), 8)
     c0 = controller.init(gains)
 
     def closed_loop_rhs(u_guess, k):
