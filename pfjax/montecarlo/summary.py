@@ -45,6 +45,26 @@ def _block(df: pd.DataFrame) -> dict:
     }
 
 
+def success_by_param(df: pd.DataFrame, param: str, max_bins: int = 8) -> list[dict]:
+    """Success rate (with its Clopper-Pearson 95 % interval) per bin of a sampled parameter:
+    one bin per value for parameters with few distinct values, else equal-count quantile bins."""
+    x = df[param].to_numpy()
+    ok = np.isfinite(x)
+    x, success = x[ok], df["success"].to_numpy()[ok]
+    values = np.unique(x)
+    if len(values) <= max_bins:
+        groups = [(v, v, x == v) for v in values]
+    else:
+        edges = np.unique(np.quantile(x, np.linspace(0, 1, max_bins + 1)))
+        idx = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+        groups = [(edges[i], edges[i + 1], idx == i) for i in range(len(edges) - 1)]
+    out = []
+    for lo, hi, m in groups:
+        s = success_summary(success[m])
+        out.append({"lo": float(lo), "hi": float(hi), "n": s["n"], "success_rate": s["success_rate"], "success_ci95": s["success_ci95"]})
+    return out
+
+
 def margins(sweep: pd.DataFrame | None, controller: str, eps: float) -> dict:
     if sweep is None or sweep.empty:
         return {}
@@ -72,6 +92,7 @@ def summarize(spec: StudySpec, runs: pd.DataFrame, sweep: pd.DataFrame | None, *
         block["slip_margin_censored"] = None if joint is None else joint["censored"]
         drivers = failure_drivers(df, params, metric="iae") if params else pd.DataFrame()
         block["failure_drivers"] = drivers.head(6).replace({np.nan: None}).to_dict("records")
+        block["success_by_param"] = {p: success_by_param(df, p) for p in params}
         controllers[name] = block
     return {
         "study": spec.name,
