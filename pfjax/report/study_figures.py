@@ -73,7 +73,7 @@ def _log_axis(ax, axis="x"):
 
 
 def _fmt_pct_axis(ax, axis="x"):
-    (ax.xaxis if axis == "x" else ax.yaxis).set_major_formatter(lambda v, _: f"{100 * v:g}")
+    (ax.xaxis if axis == "x" else ax.yaxis).set_major_formatter(lambda v, _: f"{100 * v:.10g}" if -1e-9 <= v <= 1 + 1e-9 else "")
 
 
 # ------------------------------------------------------------------------------- headline
@@ -104,13 +104,14 @@ def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
             if pp:
                 yy = yi - 0.12 - 0.24 * j / max(1, len(paths) - 1)
                 plo, phi = pp["success_ci95"]
+                lows.append(plo)
                 a.errorbar([pp["success_rate"]], [yy], xerr=[[pp["success_rate"] - plo], [phi - pp["success_rate"]]],
                            fmt="s", ms=3.5, color=colors[n], alpha=0.55, lw=0.8, capsize=0)
                 a.annotate(p, (pp["success_rate"], yy), xytext=(4, 0), textcoords="offset points", fontsize=6,
                            va="center", color="0.35")
         a.annotate(f"{100 * r:.2f} %", (r, yi), xytext=(0, 7), textcoords="offset points", ha="center", fontsize=8.5)
     left = max(0.0, min(lows) - 0.05 * max(1e-3, 1 - min(lows)) - 0.01) if lows else 0.0
-    a.set_xlim(left, 1.0 + 0.03 * (1.0 - left))
+    a.set_xlim(left, 1.0 + (0.1 if len(paths) > 1 else 0.03) * (1.0 - left))
     _fmt_pct_axis(a)
     a.set(xlabel="success rate [%]", title="success rate, 95 % CI" + (" (small: per path)" if len(paths) > 1 else ""))
     a.set_yticks(y, names)
@@ -273,7 +274,7 @@ def margin_figure(summary: dict, colors: dict[str, str]) -> Figure | None:
             t["amplitude"] += (list(ctrl).index(name) - (len(ctrl) - 1) / 2) * 0.006 * span  # dodge overlapping curves
             a.fill_between(t["amplitude"], t["lo"], t["hi"], color=col, alpha=0.15, lw=0)
             a.plot(t["amplitude"], t["rate"], "o-", color=col, lw=1.8, ms=4,
-                   label=f"{name}: margin {'≥ ' if m['censored'] else ''}{m['margin']:g}° [{m['margin_lo']:g}, {m['margin_hi']:g}]")
+                   label=f"{name}: margin {fmt_margin(m)}")
             a.plot([m["margin"]], [1 - m["eps"]], "v", color=col, ms=9, mec="k", mew=0.6, zorder=5)
         if eps is not None:
             a.axhline(1 - eps, color="k", ls="--", lw=1)
@@ -338,4 +339,51 @@ def slip_map_figure(runs: pd.DataFrame, controllers: list[str], *, delta_max_deg
     fig.colorbar(mesh, ax=list(ax), label="success rate (from simulation)", shrink=0.9)
     fig.suptitle(f"Robustness map from simulation: success rate over sampled slip ({nb}×{nb} bins, "
                  f"~{n_per / nb**2:.0f} runs per bin, all paths pooled)")
+    return fig
+
+
+# ------------------------------------------------------------------------------- success per parameter
+
+PARAM_LABEL = {"speed": "speed v [m/s]", "L": "wheelbase L [m]", "delta_max_deg": "δ_max [deg]", "beta_r_deg": "β_r [deg]",
+               "beta_f_deg": "β_f [deg]", "step_time_s": "step time [s]", "step_r_deg": "rear step [deg]",
+               "step_f_deg": "front step [deg]", "amp_r_deg": "rear amplitude [deg]", "amp_f_deg": "front amplitude [deg]",
+               "freq_hz": "slip frequency [Hz]", "ou_sigma_deg": "OU std [deg]", "ou_tau_s": "OU time constant [s]",
+               "start_s": "start along the path [m]", "lateral_offset": "initial lateral offset [m]",
+               "heading_error_deg": "initial heading error [deg]", "radius": "circle radius [m]"}
+
+
+def success_by_param_figure(summary: dict, colors: dict[str, str], ncols: int = 4) -> Figure | None:
+    """Success rate per bin of every varied sampled parameter (``success_by_param`` of the summary:
+    equal-count bins, or one per value), one panel per parameter, controllers side by side with
+    their 95 % Clopper-Pearson intervals. None when no parameter varies."""
+    ctrl = summary["controllers"]
+    params = list(dict.fromkeys(p for c in ctrl.values() for p in c.get("success_by_param", {})))
+    if not params:
+        return None
+    ncols = min(ncols, len(params))
+    nrows = -(-len(params) // ncols)
+    fig = Figure(figsize=(3.7 * ncols + 0.4, 2.9 * nrows + 0.6), layout="constrained")
+    ax = np.asarray(fig.subplots(nrows, ncols, squeeze=False, sharey=True)).ravel()
+    for a, p in zip(ax, params):
+        for i, (name, c) in enumerate(ctrl.items()):
+            bins = c.get("success_by_param", {}).get(p)
+            if not bins:
+                continue
+            t = pd.DataFrame(bins)
+            lo = np.array([ci[0] for ci in t["success_ci95"]], float)
+            hi = np.array([ci[1] for ci in t["success_ci95"]], float)
+            x = 0.5 * (t["lo"] + t["hi"]).to_numpy(float)
+            span = max(float(t["hi"].max() - t["lo"].min()), 1e-12)
+            x = x + (i - (len(ctrl) - 1) / 2) * 0.012 * span  # side by side
+            r = t["success_rate"].to_numpy(float)
+            a.errorbar(x, r, yerr=[r - lo, hi - r], fmt="o-", ms=3.5, lw=1.2, capsize=2, color=colors[name], label=name)
+        a.set(xlabel=PARAM_LABEL.get(p, p), ylim=(-0.03, 1.03))
+        _fmt_pct_axis(a, "y")
+        a.grid(alpha=0.3)
+    for a in ax[len(params):]:
+        a.set_visible(False)
+    for r in range(nrows):
+        ax[r * ncols].set_ylabel("success rate [%]")
+    ax[0].legend(fontsize=7, loc="lower left")
+    fig.suptitle("Success rate per bin of each varied parameter (equal-count bins, all paths pooled; bars: 95 % CI)")
     return fig

@@ -40,6 +40,7 @@ from pfjax.report.study_figures import (
     headline_figure,
     margin_figure,
     slip_map_figure,
+    success_by_param_figure,
 )
 from pfjax.sim.status import STATUS_NAMES
 
@@ -171,8 +172,9 @@ def _verdict(summary: dict, runs: pd.DataFrame) -> tuple[str, list[str], list[li
     """Controllers ranked by success rate (then its lower bound, then mean IAE), and how the best
     compares with each other one: sentences and a table."""
     ctrl = summary["controllers"]
-    key = lambda n: (-ctrl[n]["success_rate"], -ctrl[n]["success_ci95"][0], ctrl[n]["iae_mean"])
-    ranked = sorted(ctrl, key=lambda n: tuple(-math.inf if _bad(v) else v for v in key(n)))
+    neg = lambda v: None if _bad(v) else -v
+    key = lambda n: (neg(ctrl[n]["success_rate"]), neg(ctrl[n]["success_ci95"][0]), ctrl[n]["iae_mean"])
+    ranked = sorted(ctrl, key=lambda n: tuple(math.inf if _bad(v) else v for v in key(n)))
     best = ranked[0]
     cb = ctrl[best]
     lines, rows = [], []
@@ -266,15 +268,18 @@ def _png_base64(path: Path) -> str:
     return base64.b64encode(path.read_bytes()).decode("ascii")
 
 
-def _figures(out_dir: Path, spec_cfg: dict, summary: dict, runs: pd.DataFrame, colors: dict) -> dict[str, dict]:
+def _nominal(d) -> float:
+    """The nominal value of a distribution: its value, mean, mid-range or the mean of its choices."""
+    if d.value is not None or d.mean is not None:
+        return d.value if d.value is not None else d.mean
+    return 0.5 * (d.low + d.high) if d.low is not None else float(np.mean(d.values))
+
+
+def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, colors: dict) -> dict[str, dict]:
     fig_dir = out_dir / "figures"
     paths = list(summary.get("paths") or runs["path"].unique())
-    band_mm = 1000 * spec_cfg["success"]["band"]
-    slip_kind = spec_cfg["slip"]["kind"]
-    dmax = spec_cfg["vehicle"]["delta_max_deg"]
-    nominal_dmax = dmax.get("value", dmax.get("mean")) if isinstance(dmax, dict) else dmax
-    if nominal_dmax is None and isinstance(dmax, dict) and dmax.get("low") is not None:
-        nominal_dmax = 0.5 * (dmax["low"] + dmax["high"])
+    band_mm = 1000 * spec.success.band
+    from_s = spec.success.from_s
     todo = [
         ("headline", lambda: headline_figure(summary, colors),
          "Which controller is more robust: success rate with its 95 % interval, slip margin per axis, IAE spread."),
@@ -285,14 +290,17 @@ def _figures(out_dir: Path, spec_cfg: dict, summary: dict, runs: pd.DataFrame, c
          "IAE per path: histogram (fraction of runs per bin) and empirical CDF (further left and higher is better). "
          "Failed runs count as +∞: the ECDF stops short of 1 by the failed fraction."),
         ("dist_late_max_abs_d", lambda: distribution_figure(runs, "late_max_abs_d", colors, paths, scale=1000.0, unit="mm",
-                                                            label=f"max |d| from t = {spec_cfg['success']['from_s']:g} s",
+                                                            label=f"max |d| from t = {from_s:g} s",
                                                             band=band_mm),
          f"Largest |d| in the success window; runs left of the dashed line ({band_mm:g} mm) meet the accuracy criterion."),
-        ("slip_map", lambda: slip_map_figure(runs, list(summary["controllers"]), delta_max_deg=nominal_dmax,
-                                             convention=spec_cfg["vehicle"]["convention"],
-                                             note="" if slip_kind == "constant" else " (constant part)"),
+        ("slip_map", lambda: slip_map_figure(runs, list(summary["controllers"]), delta_max_deg=_nominal(spec.vehicle.delta_max_deg),
+                                             convention=spec.vehicle.convention,
+                                             note="" if spec.slip.kind == "constant" else " (constant part)"),
          "From simulation: success rate of the study's runs binned over their sampled slip angles (all paths pooled). "
          "Dashed, where shown: beyond it no straight-line equilibrium exists (|steering| would exceed the nominal δ_max)."),
+        ("success_by_param", lambda: success_by_param_figure(summary, colors),
+         "Where failures come from: success rate per bin of each sampled parameter (a flat curve: the parameter "
+         "does not matter; a drop: failures concentrate there)."),
     ]
     out = {}
     for name, build, caption in todo:
@@ -338,7 +346,7 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
         "sample_size": {k: v for k, v in summary.get("sample_size", {}).items() if k != "note"},
         "sample_note": summary.get("sample_size", {}).get("note", ""),
         "n_sweep": 0 if sweep is None else len(sweep),
-        "figures": _figures(out_dir, cfg, summary, runs, colors),
+        "figures": _figures(out_dir, spec, summary, runs, colors),
         "wall": fmt_num(summary.get("wall_s"), 4),
         "written": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
     }

@@ -1,0 +1,173 @@
+"""The study report: a tiny real study (2 controllers, 1 path, 40 runs each, a 3-amplitude margin
+sweep) run with ``report=True``; the page must be one self-contained, well-formed HTML file whose
+numbers are those of ``summary.json``, with every figure also on disk as PNG and SVG."""
+
+from __future__ import annotations
+
+import base64
+import json
+from html.parser import HTMLParser
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import pandas as pd  # noqa: E402
+import pytest  # noqa: E402
+
+from pfjax.montecarlo.config import load_study  # noqa: E402
+from pfjax.montecarlo.study import run  # noqa: E402
+from pfjax.montecarlo.summary import summarize  # noqa: E402
+from pfjax.report.study_report import fmt_ci, fmt_margin, fmt_pct, write_report  # noqa: E402
+
+# 30 runs in chunks of 30, and the sweep's 3 amplitudes x 10 runs per axis are 30 too: one array shape,
+# so one compilation per controller.
+CONFIG = {
+    "name": "tiny_report", "n_runs": 30, "seed": 7, "chunk_size": 30,
+    "sim": {"horizon": 4.0, "steady_window": 1.0}, "success": {"from_s": 2.0},
+    "slip": {"beta_r_deg": {"dist": "uniform", "low": -10, "high": 10},
+             "beta_f_deg": {"dist": "uniform", "low": -10, "high": 10}},
+    "initial": {"lateral_offset": {"dist": "uniform", "low": -0.2, "high": 0.2}},
+    "margin": {"n_per_amplitude": 10, "amplitudes_deg": [0, 10, 20]},
+    "paths": [{"kind": "line"}],
+    "controllers": [{"name": "lmi", "type": "lmi"}, {"name": "stanley", "type": "stanley"}],
+}
+FIGURES = ("headline", "margin_curves", "dist_iae", "dist_late_max_abs_d", "slip_map", "success_by_param")
+VOID = {"meta", "img", "br", "hr", "link", "input", "col", "area", "base", "source", "wbr"}
+
+
+class _Page(HTMLParser):
+    """Collects text, image sources and external references, and checks that tags balance."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.stack, self.errors, self.imgs, self.external, self.text = [], [], [], [], []
+        self.tables, self._cell = [], None
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "img":
+            self.imgs.append(a.get("src", ""))
+        for key in ("src", "href"):
+            v = a.get(key) or ""
+            if v and not v.startswith(("data:", "#")):
+                self.external.append((tag, key, v))
+        if tag == "link":
+            self.external.append((tag, "link", a.get("href")))
+        if tag == "table":
+            self.tables.append([])
+        elif tag == "tr" and self.tables:
+            self.tables[-1].append([])
+        elif tag in ("td", "th"):
+            self._cell = []
+        if tag not in VOID:
+            self.stack.append(tag)
+
+    def handle_endtag(self, tag):
+        if tag in VOID:
+            return
+        if tag in ("td", "th") and self._cell is not None and self.tables and self.tables[-1]:
+            self.tables[-1][-1].append("".join(self._cell).strip())
+            self._cell = None
+        if not self.stack or self.stack[-1] != tag:
+            self.errors.append(f"</{tag}> closes <{self.stack[-1] if self.stack else None}>")
+        else:
+            self.stack.pop()
+
+    def handle_data(self, data):
+        if self.stack and self.stack[-1] not in ("style", "script"):
+            self.text.append(data)
+        if self._cell is not None:
+            self._cell.append(data)
+
+
+def _parse(html: str) -> _Page:
+    p = _Page()
+    p.feed(html)
+    p.close()
+    return p
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    spec, _ = load_study(data=CONFIG)
+    out = tmp_path_factory.mktemp("report") / "out"
+    run(spec, out, progress=False, report=True)
+    summary = json.loads((out / "summary.json").read_text())
+    return spec, out, summary
+
+
+def test_report_is_one_self_contained_wellformed_file(study):
+    _, out, _ = study
+    html = (out / "report.html").read_text(encoding="utf-8")
+    page = _parse(html)
+    assert page.errors == [] and page.stack == [], (page.errors, page.stack)
+    assert html.lstrip().lower().startswith("<!doctype html>")
+    assert page.external == []
+    assert 'src="http' not in html and "url(" not in html and "@import" not in html
+    assert len(page.imgs) == len(FIGURES)
+    assert all(src.startswith("data:image/png;base64,") for src in page.imgs)
+    # the embedded images are the figures written next to the page
+    on_disk = {(out / "figures" / f"{n}.png").read_bytes() for n in FIGURES}
+    assert {base64.b64decode(src.split(",", 1)[1]) for src in page.imgs} == on_disk
+
+
+def test_every_figure_is_written_as_png_and_svg(study):
+    _, out, _ = study
+    for name in FIGURES:
+        png, svg = out / "figures" / f"{name}.png", out / "figures" / f"{name}.svg"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+        assert "<svg" in svg.read_text(encoding="utf-8")[:2000], name
+
+
+def test_report_numbers_are_those_of_summary_json(study):
+    spec, out, summary = study
+    text = "".join(_parse((out / "report.html").read_text(encoding="utf-8")).text)
+    assert summary["config_sha256"] in text
+    assert f"{summary['n_runs_total']} simulated runs" in text
+    assert f"seed {summary['seed']}" in text
+    for name, c in summary["controllers"].items():
+        assert name in text
+        lo, hi = c["success_ci95"]
+        rate = f"{100 * c['success_rate']:.2f} %"
+        assert fmt_pct(c["success_rate"]) == rate and rate in text
+        assert fmt_ci(c["success_ci95"]) == f"[{100 * lo:.2f}, {100 * hi:.2f}] %" and fmt_ci(c["success_ci95"]) in text
+        assert f"{c['k']} / {c['n']}" in text
+        assert f"{c['iae_mean']:.3g}" in text and f"{c['iae_p95']:.3g}" in text
+        assert f"{1000 * c['steady_abs_d_p95']:.1f}" in text
+        assert c["statement"]["text"] in text
+        for axis, m in c["slip_margin"].items():
+            shown = fmt_margin(m)
+            assert shown.startswith(("≥ " if m["censored"] else "") + f"{m['margin']:g}°")
+            assert shown in text
+        for k, v in c["gains"].items():
+            assert f"{k} = {v:.4g}" in text
+    # failed runs are counted, never hidden: one status row per controller, adding up to its runs
+    tables = _parse((out / "report.html").read_text(encoding="utf-8")).tables
+    status = next(t for t in tables if t[0][:4] == ["controller", "runs", "success", "ok but outside the band"])
+    runs = pd.read_parquet(out / "runs.parquet")
+    for row in status[1:]:
+        g = runs[runs.controller == row[0]]
+        counts = dict(zip(status[0][4:], map(int, row[4:])))
+        assert int(row[1]) == len(g) == sum(counts.values()) == summary["controllers"][row[0]]["n"]
+        assert int(row[2]) == int(g.success.sum())
+        assert int(row[3]) == int(((g.status == "ok") & ~g.success).sum())
+        assert counts == {f"status {k}": int((g.status == k).sum()) for k in
+                          [h.removeprefix("status ") for h in status[0][4:]]}
+    assert [r[0] for r in status[1:]] == list(summary["controllers"])
+    for heading in ("Verdict", "Set-up", "Headline per controller", "Per path", "Run status", "Distributions",
+                    "Slip margins", "Robustness map (from simulation)", "Failure drivers", "Reproducibility"):
+        assert heading in text
+
+
+def test_report_without_margin_sweep(study, tmp_path):
+    spec, out, summary = study
+    runs = pd.read_parquet(out / "runs.parquet")
+    s = summarize(spec, runs, None, gains={k: v["gains"] for k, v in summary["controllers"].items()}, wall_s=1.0)
+    write_report(tmp_path, spec, s, runs, None)
+    html = (tmp_path / "report.html").read_text(encoding="utf-8")
+    page = _parse(html)
+    assert page.errors == [] and page.external == []
+    assert not (tmp_path / "figures" / "margin_curves.png").exists()
+    assert "No slip-margin sweep" in "".join(page.text)
+    assert len(page.imgs) == len(FIGURES) - 1
