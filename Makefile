@@ -1,5 +1,6 @@
 # pfjax: two commands do all the set-up on a fresh machine with Python >= 3.11 and make.
-#   make study   creates .venv, installs pfjax, runs the default study into results/
+#   make study   creates .venv, installs pfjax, runs the paper reproduction and the default
+#                Monte Carlo robustness study into results/
 #   make test    creates .venv if needed, installs, runs the test suite
 PYTHON ?= python3
 VENV   := .venv
@@ -19,10 +20,11 @@ install: $(STAMP)
 
 study: $(STAMP)
 	$(PY) studies/paper_reproduction.py
+	$(VENV)/bin/pfjax study studies/robustness_default.toml
 
 # pytest exits 5 when it collects no test: that is a failure here too (a suite that ran nothing).
 test: $(STAMP)
 	$(PY) -m pytest -n 2 $(PYTEST_ARGS)
 
 clean:
-	rm -rf $(VENV) .pytest_cache results/paper_reproduction
+	rm -rf $(VENV) .pytest_cache results/paper_reproduction results/robustness_default
