@@ -518,6 +518,7 @@ def main(argv=None) -> int:
         if out.exists():
             shutil.rmtree(out)
         out.parent.mkdir(parents=True, exist_ok=True)
+        tmp.chmod(0o755)
         tmp.rename(out)
     finally:
         if tmp.exists():

@@ -138,6 +138,7 @@ def run_study(spec: StudySpec, out: Path, *, progress: bool | None = None, extra
                 info.update(extra(tmp, tmp / "runs.parquet", controllers) or {})
         if out.exists():
             shutil.rmtree(out)
+        tmp.chmod(0o755)  # mkdtemp makes it private; results are for everyone who can read the parent
         tmp.rename(out)
     finally:
         if tmp.exists():
