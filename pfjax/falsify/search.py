@@ -5,21 +5,23 @@ For a controller ``C`` with gains ``g`` on a path, find the scenario ``x`` in th
 box) that maximises an error measure ``J(x)`` of the simulated run (``SimConfig(record=False)``):
 
 * ``"iae"`` (default) ``int |d| dt``; ``"ise"`` ``int d^2 dt``; ``"itae"`` ``int t |d| dt``;
-* ``"max_abs_d"`` ``max_k |d_k|`` and ``"late_max_abs_d"`` (the max from ``success_from`` on):
-  non-smooth, their gradient is that of the sample attaining the max (it switches between
-  samples as the ascent moves; adam's momentum smooths the switching).
+* ``"max_abs_d"`` ``max_k |d_k|`` and ``"late_max_abs_d"`` (the max from ``success_from`` on) are
+  non-smooth: their gradient is that of the one sample attaining the max (a subgradient), so
+  each step pushes only that sample, and the maximiser can jump between samples.
 
 :func:`falsify` maximises ``J(x(z))`` over the unconstrained parameters ``z`` with adam
-(step cosine-decayed from ``lr`` to ``lr/10``), from ``n_restarts`` random starts vmapped into one
-batch. One ascent step (value and gradient of the batch, adam, best-so-far) is one jitted
-function, compiled once per controller, config, objective and array shapes and reused by every
-step and every later call with the same shapes (a ``lax.scan`` over the steps compiles 3-4 times
-slower on CPU for no faster run). Gradients are ``jax.value_and_grad`` through the ``lax.scan`` of
-the simulator: at the steering saturation ``clip``, the angle wrap and the closest-point
-projection's step clips JAX returns the one-sided derivative of the active branch (a
-subgradient; the saturated branch has zero derivative with respect to the command). A
-non-finite gradient component is replaced by 0 (a failed run freezes its state, so the
-metrics stay finite, but the derivative of a run through a singularity need not).
+(``b2 = 0.9``; step cosine-decayed from ``lr`` to ``lr/10``), from ``n_restarts`` random starts
+vmapped into one batch. One ascent step (value and gradient of the batch, adam, best so far) is
+one jitted function, compiled once per controller, config and array shapes (the objective is a
+traced index) and reused by every step and by later calls of the same shapes.
+
+Gradients are ``jax.value_and_grad`` through the simulator's ``lax.scan``. At the steering
+saturation ``clip``, the rate limit, the angle wrap and the projection's step clips JAX
+differentiates the active branch (the derivative of one side of the kink; on the saturated
+branch the steering's derivative with respect to the command is 0, so a saturated stretch of a
+run passes no gradient back through the controller). A non-finite gradient component is
+replaced by 0 and counted (``n_nonfinite_grad``): a failed run freezes its state, so its
+metrics stay finite, but the derivative of a run through a singularity need not be.
 
 Ranking: a run whose status is not ``OK`` (diverged, singular, left the path's domain, non-finite)
 is a falsifying scenario in itself and ranks above every healthy run; among equals the larger
@@ -48,7 +50,16 @@ from pfjax.controllers.base import Controller
 from pfjax.models.slip import Pose, SlipParams
 from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, stack, unstack
 from pfjax.sim.status import Status
-from pfjax.falsify.space import RawParams, SearchSpace, build_scenario, ic_from_raw, init_raw, sample, search_space, slip_from_raw
+from pfjax.falsify.space import (
+    RawParams,
+    SearchSpace,
+    build_scenario,
+    ic_from_raw,
+    init_raw,
+    sample,
+    search_space,
+    slip_from_raw,
+)
 
 OBJECTIVES = ("iae", "ise", "itae", "max_abs_d", "late_max_abs_d")
 
@@ -114,9 +125,14 @@ def _cosine_lr(lr: float, steps: int) -> np.ndarray:
 _ADAM = optax.scale_by_adam(b2=0.9)
 
 
-@partial(jax.jit, static_argnames=("controller", "config", "objective"))
-def _ascent_step(raw: RawParams, opt_state, best: _Best, lr: Array, space: SearchSpace, base: Scenario, *,
-                 controller: Controller, config: SimConfig, objective: str):
+def _objective(metrics, which: Array) -> Array:
+    """``J = metrics[OBJECTIVES[which]]`` (``which`` traced: one compile serves every objective)."""
+    return jnp.stack([getattr(metrics, name) for name in OBJECTIVES])[which]
+
+
+@partial(jax.jit, static_argnames=("controller", "config"))
+def _ascent_step(raw: RawParams, opt_state, best: _Best, lr: Array, which: Array, space: SearchSpace,
+                 base: Scenario, *, controller: Controller, config: SimConfig):
     """One adam step on ``-J`` for every start of the batch; keeps the best run evaluated so far.
 
     Returns ``(raw, opt_state, best, n_nonfinite)``, the last the number of gradient components
@@ -126,7 +142,7 @@ def _ascent_step(raw: RawParams, opt_state, best: _Best, lr: Array, space: Searc
     def run(r: RawParams):
         sc = build_scenario(space, slip_from_raw(space, r.slip), ic_from_raw(space, r.ic), base)
         res = simulate(controller, sc, config)
-        return getattr(res.metrics, objective), res.status
+        return _objective(res.metrics, which), res.status
 
     (value, status), grad = jax.vmap(jax.value_and_grad(run, has_aux=True))(raw)
     score = _score(value, status)
@@ -178,9 +194,10 @@ def falsify(controller: Controller, gains, path, *, config: SimConfig, slip_boun
     dtype = space.basis.dtype
     best = _Best(jnp.asarray(-jnp.inf, dtype), jnp.asarray(jnp.nan, dtype), jnp.int32(Status.OK), unstack(raw, 0))
     opt_state, history, n_nonfinite = _ADAM.init(raw), [], 0
+    which = jnp.int32(OBJECTIVES.index(objective))
     for lr_k in _cosine_lr(float(lr), int(steps)):
-        raw, opt_state, best, bad = _ascent_step(raw, opt_state, best, jnp.asarray(lr_k, dtype), space, base,
-                                                 controller=controller, config=config, objective=objective)
+        raw, opt_state, best, bad = _ascent_step(raw, opt_state, best, jnp.asarray(lr_k, dtype), which, space, base,
+                                                 controller=controller, config=config)
         history.append(best.value)
         n_nonfinite += bad
     n = int(n_restarts) * int(steps)
@@ -198,7 +215,7 @@ def random_search(controller: Controller, gains, path, *, config: SimConfig, sli
                   f_max_hz: float, ic_bounds: dict, objective: str = "iae", n_samples: int, key: Array,
                   batch_size: int = 64, params: SlipParams | None = None, noise=None, n_freq: int = 8,
                   with_constant: bool = True, seq_dt: float = 0.05) -> FalsifierResult:
-    """The baseline: ``n_samples`` uniform draws of the same set (:func:`pfjax.falsify.space.sample`),
+    """The baseline: ``n_samples`` random draws of the same set (:func:`pfjax.falsify.space.sample`),
     simulated with :func:`~pfjax.sim.simulate_batch` in chunks of ``batch_size`` (the last one
     padded, so one compile), the worst kept. All draws come from ``key`` at once, so the result
     does not depend on ``batch_size``. Arguments as :func:`falsify`; history per sample."""

@@ -18,11 +18,12 @@ simulator holds ``beta_a(t_i)`` on ``[t_i, t_{i+1})`` (``SlipProfile.seq``, zero
   itself adds the staircase's images near multiples of ``1/h``, weighted by ``|sinc(f h)|``
   (keep ``h << 1/f_max``; ``h <= 1/(2 f_max)`` is enforced).
 * *Coverage.* ``z -> beta`` maps onto ``{beta in span : max_i |beta(t_i)| < A}``: every
-  signal of the span whose held peak is below the bound (constants, single sinusoids of
-  any phase, near-square waves), not only those whose spectral amplitudes sum to ``< A``.
-  Along a ray ``z = r z_hat`` the peak is ``A tanh(r M(z_hat))``, so one coefficient can
-  pass through zero (a constant slip can change sign) and the box's vertices are reached
-  in the limit ``|z| -> inf``.
+  signal of the span whose held peak is below the bound (constants, single sinusoids of any
+  phase, square-like waves as far as ``m`` harmonics allow), not only those whose spectral
+  amplitudes sum to ``< A``. Along a ray ``z = r z_hat`` the peak is ``A tanh(r M(z_hat))``;
+  the map is smooth through ``z = 0``, so gradient steps can change a coefficient's sign (a
+  constant slip can go from ``-A`` to ``+A``), and the bound is approached as ``|z| -> inf``,
+  never attained.
 
 **Initial conditions.** ``w = (d0, theta_e0, u0)`` in a box ``[lo, hi]`` (m, rad, path
 parameter), ``w = lo + (hi - lo) sigmoid(z)``; the start pose is ``d0`` to the left of the
@@ -79,7 +80,7 @@ def frequencies(f_max_hz: float, n_freq: int) -> np.ndarray:
 
 
 def _box(key, value) -> tuple[float, float]:
-    lo, hi = (value, value) if np.isscalar(value) else tuple(value)
+    lo, hi = (value, value) if np.ndim(value) == 0 else tuple(value)
     lo, hi = float(lo), float(hi)
     if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
         raise ValueError(f"ic_bounds[{key!r}]: expected a number or finite (lo, hi) with lo <= hi, got {value!r}")
@@ -131,8 +132,8 @@ def _peak(s: Array) -> Array:
 def slip_from_raw(space: SearchSpace, z: Array) -> Array:
     """``beta(t_i) = A tanh(M) s(t_i) / M``, shape ``(n, 2)`` rad (module docstring).
 
-    ``M`` is a max: its gradient flows through the sample that attains it (a subgradient
-    where two samples tie). ``tanh(M)/M -> 1`` as ``M -> 0`` is evaluated safely.
+    ``M`` is a max: its gradient flows through the sample that attains it (through one of
+    them where samples tie). ``tanh(M)/M -> 1`` as ``M -> 0`` is evaluated safely.
     """
     s = space.basis @ z
     m = _peak(s)
@@ -170,7 +171,8 @@ def init_raw(space: SearchSpace, key: Array, n: int) -> RawParams:
 
 
 def sample(space: SearchSpace, key: Array, n: int) -> tuple[Array, Array]:
-    """``n`` uniform draws of the set (module docstring): slip ``(n, n_seq, 2)`` rad, ``ic`` ``(n, 3)``."""
+    """``n`` random draws of the set, as the module docstring's *Random sampling*: slip ``(n, n_seq, 2)``
+    rad, ``ic`` ``(n, 3)``."""
     k_slip, k_ic = jax.random.split(key)
     k = space.basis.shape[1]
     z = jax.random.uniform(k_slip, (n, k, 2), dtype=space.basis.dtype, minval=-1.0, maxval=1.0)
