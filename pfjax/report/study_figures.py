@@ -294,12 +294,14 @@ def margin_figure(summary: dict, colors: dict[str, str]) -> Figure | None:
 
 
 def slip_map_figure(runs: pd.DataFrame, controllers: list[str], *, delta_max_deg: float | None = None,
-                    convention: str = "source", note: str = "") -> Figure | None:
+                    convention: str = "source", note: str = "", predicted=None) -> Figure | None:
     """Success rate binned over the sampled ``(beta_r_deg, beta_f_deg)``, one panel per controller
     (all paths pooled): ``rate = successes / runs`` per cell of an ``n_b x n_b`` grid,
     ``n_b = clip(sqrt(n / 25), 4, 24)`` with ``n`` the runs per controller (about 25 runs per
     cell); white cells hold no run. Dashed: where a straight-line equilibrium stops existing,
     ``|beta_r +- beta_f| = delta_max`` (source / Lenain convention, nominal ``delta_max``).
+    ``predicted``: optional ``{controller: fn(xs_deg, ys_deg) -> bool grid (len(xs), len(ys))}``, the
+    linearised prediction of success, drawn as a solid contour next to the simulated rates.
     None when neither slip angle varies."""
     if not {"beta_r_deg", "beta_f_deg"} <= set(runs.columns):
         return None
@@ -333,6 +335,14 @@ def slip_map_figure(runs: pd.DataFrame, controllers: list[str], *, delta_max_deg
             sign = 1 if convention == "source" else -1
             for s_ in (-1, 1):
                 a.plot(b, sign * (s_ * delta_max_deg - b), "--", color="0.25", lw=1)
+        if predicted and name in predicted:
+            xs, ys = np.linspace(ex[0], ex[-1], 121), np.linspace(ey[0], ey[-1], 121)
+            grid = np.asarray(predicted[name](xs, ys), dtype=float)
+            if 0 < grid.mean() < 1:
+                a.contour(xs, ys, grid.T, levels=[0.5], colors="k", linewidths=1.4)
+            a.text(0.02, 0.02, "— linearised: success predicted inside" if 0 < grid.mean() < 1 else
+                   f"linearised: success predicted {'everywhere' if grid.mean() == 1 else 'nowhere'}",
+                   transform=a.transAxes, fontsize=7, va="bottom", bbox=dict(fc="white", alpha=0.7, lw=0))
         a.set(xlim=(ex[0], ex[-1]), ylim=(ey[0], ey[-1]), xlabel=f"β_r{note} [deg]",
               title=f"{name}: {100 * s.mean():.1f} % overall" if s.size else name)
     ax[0].set_ylabel(f"β_f{note} [deg]")

@@ -295,9 +295,12 @@ def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, 
          f"Largest |d| in the success window; runs left of the dashed line ({band_mm:g} mm) meet the accuracy criterion."),
         ("slip_map", lambda: slip_map_figure(runs, list(summary["controllers"]), delta_max_deg=_nominal(spec.vehicle.delta_max_deg),
                                              convention=spec.vehicle.convention,
-                                             note="" if spec.slip.kind == "constant" else " (constant part)"),
+                                             note="" if spec.slip.kind == "constant" else " (constant part)",
+                                             predicted=linearised_predictions(spec, summary)),
          "From simulation: success rate of the study's runs binned over their sampled slip angles (all paths pooled). "
-         "Dashed, where shown: beyond it no straight-line equilibrium exists (|steering| would exceed the nominal δ_max)."),
+         "Dashed, where shown: beyond it no straight-line equilibrium exists (|steering| would exceed the nominal δ_max). "
+         "Solid (state-feedback controllers): the linearised prediction on a straight line — the true equilibrium "
+         "exists, is Hurwitz and has |d*| within the success band (pfjax.analysis.stability_map, nominal v, L, δ_max)."),
         ("success_by_param", lambda: success_by_param_figure(summary, colors),
          "Where failures come from: success rate per bin of each sampled parameter (a flat curve: the parameter "
          "does not matter; a drop: failures concentrate there)."),
@@ -309,6 +312,30 @@ def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, 
             continue
         save(freeze_layout(fig), fig_dir, name)
         out[name] = {"name": name, "caption": caption, "b64": _png_base64(fig_dir / f"{name}.png")}
+    return out
+
+
+def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
+    """For state-feedback controllers (gains k_d, k_theta): success predicted on a straight line from
+    the true equilibrium (exists, Hurwitz, |d*| <= success band), as functions of the slip grid in deg."""
+    import jax.numpy as jnp
+
+    from pfjax.analysis import stability_map
+    from pfjax.models.slip import CONVENTIONS, SlipParams
+
+    v = spec.vehicle
+    params = SlipParams(_nominal(v.speed), _nominal(v.L), math.radians(_nominal(v.delta_max_deg)), CONVENTIONS[v.convention])
+    out = {}
+    for name, c in summary["controllers"].items():
+        g = c.get("gains") or {}
+        if {"k_d", "k_theta"} <= set(g):
+            K = jnp.asarray([g["k_d"], g["k_theta"]])
+
+            def pred(xs, ys, K=K):
+                eq, _ = stability_map(K, jnp.radians(jnp.asarray(xs)), jnp.radians(jnp.asarray(ys)), params)
+                return np.asarray(eq.hurwitz) & (np.abs(np.asarray(eq.d)) <= spec.success.band)
+
+            out[name] = pred
     return out
 
 
