@@ -14,7 +14,7 @@ matplotlib.use("Agg")
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = sorted((ROOT / "studies").glob("*.toml"))
 SMALL = ["n_runs=6", "chunk_size=6", "sim.horizon=3.0", "sim.steady_window=1.0", "success.from_s=2.0",
-         "margin.amplitudes_deg=[0.0, 10.0]", "margin.n_per_amplitude=3"]
+         "margin.amplitudes_deg=[0.0, 10.0]", "margin.n_per_amplitude=3", "falsifier.n_restarts=2", "falsifier.steps=2"]
 
 
 def test_configs_are_found():
@@ -35,4 +35,10 @@ def test_study_config_runs_small(path, tmp_path):
     on_disk = json.loads((tmp_path / "out" / "summary.json").read_text())
     for c in on_disk["controllers"].values():
         assert {"success_rate", "success_ci95", "iae_mean", "iae_p95", "steady_abs_d_p95", "slip_margin_deg"} <= set(c)
-    assert (tmp_path / "out" / "report.html").stat().st_size > 10_000
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert len(html) > 10_000
+    if small.falsifier.enabled:  # the worst-case search ran: in the summary and the report
+        for c in on_disk["controllers"].values():
+            wc = c["worst_case"]
+            assert wc["n_rollouts"] == 2 * 2 and wc["falsifier"] >= 0 and wc["random"] >= 0
+        assert "Worst cases found" in html and (tmp_path / "out" / "figures" / "worst_cases.png").is_file()

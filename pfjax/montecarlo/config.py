@@ -217,6 +217,23 @@ class MarginSpec(_Model):
         return sorted(v)
 
 
+class FalsifierSpec(_Model):
+    """Worst-case search per controller (pfjax.falsify): gradient ascent over slip profiles bounded by
+    ``slip_bound_deg`` with frequencies up to ``f_max_hz`` and initial errors in the boxes
+    +-``lateral_offset`` m, +-``heading_error_deg``, on one path (its run 0's shape and vehicle),
+    against random search with the same number of rollouts."""
+
+    enabled: bool = False
+    path: str | None = None  # a path label; default: the first path
+    slip_bound_deg: float = Field(10.0, gt=0, lt=90)
+    f_max_hz: float = Field(0.5, ge=0, le=10)
+    lateral_offset: float = Field(0.5, ge=0)
+    heading_error_deg: float = Field(30.0, ge=0, lt=90)
+    objective: Literal["iae", "ise", "itae", "max_abs_d", "late_max_abs_d"] = "iae"
+    n_restarts: int = Field(8, ge=1, le=256)
+    steps: int = Field(40, ge=1, le=10_000)
+
+
 class ControllerSpec(_Model):
     """A controller to compare: ``type`` one of state_feedback (``K``), lmi (designed by mixed
     H2/H-inf with ``alpha``, ``beta`` at the nominal speed and wheelbase), pi, stanley,
@@ -253,6 +270,7 @@ class StudySpec(_Model):
     initial: InitialSpec = InitialSpec()
     noise: NoiseSpec = NoiseSpec()
     margin: MarginSpec = MarginSpec()
+    falsifier: FalsifierSpec = FalsifierSpec()
     paths: list[PathSpec] = Field(min_length=1)
     controllers: list[ControllerSpec] = Field(min_length=1)
 
@@ -260,6 +278,8 @@ class StudySpec(_Model):
     def _check(self):
         if self.success.from_s > self.sim.horizon:
             raise ValueError(f"success.from_s: must be <= sim.horizon ({self.sim.horizon:g} s), got {self.success.from_s:g}")
+        if self.falsifier.path is not None and self.falsifier.path not in [p.label for p in self.paths]:
+            raise ValueError(f"falsifier.path: no path labelled {self.falsifier.path!r}; paths are {[p.label for p in self.paths]}")
         for what, items in (("controllers", [c.name for c in self.controllers]), ("paths", [p.label for p in self.paths])):
             dup = {x for x in items if items.count(x) > 1}
             if dup:

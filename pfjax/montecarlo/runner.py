@@ -91,7 +91,8 @@ def simulate_runs(spec: StudySpec, path_index: int, runs: np.ndarray, controller
             over = None if slip_override is None else tuple(np.asarray(o)[a:a + chunk] for o in slip_override)
             sampled = sample_runs(spec, path_index, idx, slip_override=over)
             n = len(idx)
-            base = _pad(sampled.scenarios, min(chunk, len(runs)))
+            # One batch shape per study where possible: the margin sweep pads up to the study's chunk.
+            base = _pad(sampled.scenarios, min(chunk, max(spec.n_runs, len(runs))))
             res = jax.device_get(simulate_batch(_with_gains(base, gains, jax.tree_util.tree_leaves(base)[0].shape[0]),
                                                 controller=controller, config=cfg))
             df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})

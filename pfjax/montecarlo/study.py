@@ -32,12 +32,21 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         sweep = margin_sweep(spec, controllers, progress=progress) if spec.margin.enabled else None
         if sweep is not None:
             sweep.to_parquet(tmp / "margin.parquet", index=False)
+        worst, worst_traj = {}, {}
+        if spec.falsifier.enabled:
+            from pfjax.montecarlo.runner import precision
+            from pfjax.montecarlo.worst_case import worst_cases
+
+            with precision(spec):
+                worst, worst_traj = worst_cases(spec, controllers)
         runs = pd.read_parquet(runs_path)
         summary = summarize(spec, runs, sweep, gains={k: v[2] for k, v in controllers.items()}, wall_s=time.time() - t0)
+        for name, block in worst.items():
+            summary["controllers"][name]["worst_case"] = block
         if report:
             from pfjax.report.study_report import write_report
 
-            write_report(tmp, spec, summary, runs, sweep)
+            write_report(tmp, spec, summary, runs, sweep, worst_traj)
             summary["wall_s"] = time.time() - t0
         (tmp / "summary.json").write_text(dumps(summary) + "\n")
         result["summary"] = summary

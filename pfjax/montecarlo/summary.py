@@ -71,7 +71,11 @@ def margins(sweep: pd.DataFrame | None, controller: str, eps: float) -> dict:
     out = {}
     for axis, g in sweep[sweep.controller == controller].groupby("axis", sort=False):
         agg = g.groupby("amplitude_deg")["success"].agg(["sum", "count"]).sort_index()
-        out[axis] = slip_margin(agg.index.to_numpy(), agg["sum"].to_numpy(), agg["count"].to_numpy(), eps=eps)
+        m = slip_margin(agg.index.to_numpy(), agg["sum"].to_numpy(), agg["count"].to_numpy(), eps=eps)
+        # A margin at the smallest amplitude may mean "fails even at the smallest slip" (e.g. a path
+        # it cannot follow within the band at all): say so rather than report a bare 0.
+        m["fails_at_smallest"] = bool(m["table"][0]["rate"] < 1 - eps)
+        out[axis] = m
     return out
 
 

@@ -30,6 +30,8 @@ def fmt_margin(m: dict | None) -> str:
     """A slip margin with its interval: ``"5° [2.5, 7.5]"``, ``"≥ 20° [20, 20]"`` when censored."""
     if not m:
         return "—"
+    if m.get("fails_at_smallest"):
+        return f"none: fails at {m['table'][0]['amplitude']:g}°"
     return f"{'≥ ' if m['censored'] else ''}{m['margin']:g}° [{m['margin_lo']:g}, {m['margin_hi']:g}]"
 
 

@@ -30,6 +30,7 @@ from jinja2 import Environment, FileSystemLoader, StrictUndefined
 from scipy import stats
 
 from pfjax.montecarlo.config import StudySpec
+from pfjax.report.worst_case_figures import worst_case_figure
 from pfjax.montecarlo.sampling import SLIP_COLUMNS, column_names
 from pfjax.report.figures import save
 from pfjax.report.study_figures import (
@@ -275,12 +276,30 @@ def _nominal(d) -> float:
     return 0.5 * (d.low + d.high) if d.low is not None else float(np.mean(d.values))
 
 
-def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, colors: dict) -> dict[str, dict]:
+def _worst_case_rows(summary: dict, colors: dict) -> list:
+    rows = []
+    for n, c in summary["controllers"].items():
+        wc = c.get("worst_case")
+        if wc:
+            rows.append([_cell(n, swatch=colors[n]), _cell(wc["path"]), _cell(wc["objective"]),
+                         _cell(f"{wc['falsifier']:.4g} ({wc['falsifier_status']})"), _cell(f"{wc['random']:.4g} ({wc['random_status']})"),
+                         _cell(f"{wc['ratio']:.2f}×"), _cell(str(wc["n_rollouts"])),
+                         _cell(f"d₀ = {wc['worst_ic']['d0']:+.3f} m, θₑ₀ = {wc['worst_ic']['theta_e0_deg']:+.1f}°, "
+                               f"peak |β_r|, |β_f| = {wc['worst_slip_peak_deg'][0]:.1f}°, {wc['worst_slip_peak_deg'][1]:.1f}°")])
+    return rows
+
+
+def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, colors: dict,
+             worst_trajectories: dict | None = None) -> dict[str, dict]:
     fig_dir = out_dir / "figures"
     paths = list(summary.get("paths") or runs["path"].unique())
     band_mm = 1000 * spec.success.band
     from_s = spec.success.from_s
     todo = [
+        ("worst_cases", lambda: worst_case_figure(worst_trajectories, summary, colors) if worst_trajectories else None,
+         "Worst cases found by gradient ascent through the simulator (pfjax.falsify) over bounded, band-limited slip "
+         "profiles and initial errors: the worst run's path, slip and lateral error, and the worst objective found "
+         "against the rollouts spent, compared with random search of the same budget."),
         ("headline", lambda: headline_figure(summary, colors),
          "Which controller is more robust: success rate with its 95 % interval, slip margin per axis, IAE spread."),
         ("margin_curves", lambda: margin_figure(summary, colors),
@@ -339,7 +358,8 @@ def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
     return out
 
 
-def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, sweep: pd.DataFrame | None) -> None:
+def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, sweep: pd.DataFrame | None,
+                 worst_trajectories: dict | None = None) -> None:
     """Write ``out_dir/report.html`` (self-contained) and ``out_dir/figures/<name>.png|svg``.
 
     Args:
@@ -349,6 +369,8 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
         runs: one row per run (``runs.parquet``).
         sweep: the slip-margin sweep (``margin.parquet``) or None; the margins themselves are read
             from the summary, the sweep only counts the runs spent on it.
+        worst_trajectories: the falsifier's worst runs per controller (:mod:`pfjax.montecarlo.worst_case`),
+            or None when the study did no worst-case search.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -373,7 +395,8 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
         "sample_size": {k: v for k, v in summary.get("sample_size", {}).items() if k != "note"},
         "sample_note": summary.get("sample_size", {}).get("note", ""),
         "n_sweep": 0 if sweep is None else len(sweep),
-        "figures": _figures(out_dir, spec, summary, runs, colors),
+        "figures": _figures(out_dir, spec, summary, runs, colors, worst_trajectories),
+        "worst_case_rows": _worst_case_rows(summary, colors),
         "wall": fmt_num(summary.get("wall_s"), 4),
         "written": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
     }

@@ -1,0 +1,54 @@
+"""A study's worst-case search: pfjax.falsify per controller against random search at equal budget."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import numpy as np
+
+from pfjax.falsify import falsify, random_search, worst_trajectory
+from pfjax.montecarlo.config import StudySpec
+from pfjax.montecarlo.runner import sim_config
+from pfjax.montecarlo.sampling import NOMINAL_START, sample_runs
+from pfjax.sim.simulate import unstack
+from pfjax.sim.status import STATUS_NAMES
+
+
+def worst_cases(spec: StudySpec, controllers) -> tuple[dict, dict]:
+    """Per controller: the falsifier's and random search's worst objective (same rollouts) and the
+    falsifier's worst trajectory. Returns ``(summary blocks, trajectories)``; call inside ``precision(spec)``."""
+    f = spec.falsifier
+    labels = [p.label for p in spec.paths]
+    p = labels.index(f.path) if f.path is not None else 0
+    run0 = unstack(sample_runs(spec, p, np.arange(1)).scenarios, 0)
+    cfg = sim_config(spec)
+    bounds = dict(slip_bound_deg=f.slip_bound_deg, f_max_hz=f.f_max_hz, objective=f.objective,
+                  ic_bounds={"d": (-f.lateral_offset, f.lateral_offset) if f.lateral_offset > 0 else 0.0,
+                             "theta_e_deg": (-f.heading_error_deg, f.heading_error_deg) if f.heading_error_deg > 0 else 0.0,
+                             "u": NOMINAL_START[spec.paths[p].kind]},
+                  params=run0.params, config=cfg)
+    blocks, trajs = {}, {}
+    key = jax.random.fold_in(jax.random.PRNGKey(spec.seed), 0xFA15)
+    for i, (name, (controller, gains, _)) in enumerate(controllers.items()):
+        k1, k2 = jax.random.split(jax.random.fold_in(key, i))
+        fr = falsify(controller, gains, run0.path, n_restarts=f.n_restarts, steps=f.steps, key=k1, **bounds)
+        rr = random_search(controller, gains, run0.path, n_samples=int(fr.n_rollouts), key=k2, **bounds)
+        tr = jax.device_get(worst_trajectory(controller, fr, cfg).trajectory)
+        slip = np.degrees(np.asarray(fr.slip))
+        blocks[name] = {
+            "path": labels[p], "objective": f.objective,
+            "falsifier": float(fr.objective), "falsifier_status": STATUS_NAMES[int(fr.status)],
+            "random": float(rr.objective), "random_status": STATUS_NAMES[int(rr.status)],
+            "n_rollouts": int(fr.n_rollouts), "n_gradients": int(fr.n_gradients),
+            "ratio": float(fr.objective) / float(rr.objective) if float(rr.objective) > 0 else math.nan,
+            "worst_ic": {"d0": float(fr.ic[0]), "theta_e0_deg": math.degrees(float(fr.ic[1]))},
+            "worst_slip_peak_deg": [float(np.abs(slip[:, 0]).max()), float(np.abs(slip[:, 1]).max())],
+            "history": np.asarray(fr.history).tolist(), "history_rollouts": np.asarray(fr.history_rollouts).tolist(),
+            "history_random": np.asarray(rr.history).tolist(), "history_random_rollouts": np.asarray(rr.history_rollouts).tolist(),
+        }
+        px, py = run0.path.point(np.linspace(float(run0.path.u_min), float(run0.path.u_max), 4000))
+        trajs[name] = {"t": np.asarray(tr.t), "x": np.asarray(tr.x), "y": np.asarray(tr.y), "d": np.asarray(tr.d),
+                       "beta_r": np.asarray(tr.beta_r), "beta_f": np.asarray(tr.beta_f),
+                       "path_x": np.asarray(px), "path_y": np.asarray(py)}
+    return blocks, trajs
