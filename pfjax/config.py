@@ -87,18 +87,22 @@ def parse_override(text: str) -> dict:
     return out
 
 
+def read_toml(path: str | Path) -> dict:
+    """A TOML file as a dict; ConfigError (one line) if it is missing or not valid TOML."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"config: file not found: {p}")
+    try:
+        return tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"config: {p}: invalid TOML ({e})") from None
+
+
 def load(defaults: dict, path: str | Path | None = None, overrides: list[str] = ()) -> dict:
     """Defaults <- TOML file <- ``--set`` overrides, each checked against the defaults."""
     cfg = copy.deepcopy(defaults)
     if path is not None:
-        p = Path(path)
-        if not p.is_file():
-            raise ConfigError(f"config: file not found: {p}")
-        try:
-            data = tomllib.loads(p.read_text())
-        except tomllib.TOMLDecodeError as e:
-            raise ConfigError(f"config: {p}: invalid TOML ({e})") from None
-        cfg = _merge(cfg, data)
+        cfg = _merge(cfg, read_toml(path))
     for text in overrides:
         cfg = _merge(cfg, parse_override(text))
     return cfg

@@ -16,13 +16,12 @@ from __future__ import annotations
 
 import difflib
 import math
-import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from pfjax.config import ConfigError, config_hash, parse_override
+from pfjax.config import ConfigError, config_hash, parse_override, read_toml
 
 
 class _Model(BaseModel):
@@ -366,13 +365,7 @@ def load_study(path: str | Path | None = None, overrides: list[str] = (), data: 
     """Read, override and validate a study. Returns ``(spec, raw_dict)``; raises ConfigError."""
     raw: dict = {} if data is None else dict(data)
     if path is not None:
-        p = Path(path)
-        if not p.is_file():
-            raise ConfigError(f"config: file not found: {p}")
-        try:
-            raw = tomllib.loads(p.read_text())
-        except tomllib.TOMLDecodeError as e:
-            raise ConfigError(f"config: {p}: invalid TOML ({e})") from None
+        raw = read_toml(path)
     for text in overrides:
         _set_nested(raw, parse_override(text))
     try:
