@@ -64,7 +64,8 @@ def test_rates_match_the_equations_for_random_inputs():
     delta, br, bf = (rng.uniform(-0.5, 0.5, n) for _ in range(3))
     theta, v, L = rng.uniform(-4, 4, n), rng.uniform(0.2, 3, n), rng.uniform(0.1, 2, n)
     conv = rng.integers(0, 2, n)
-    p = SlipParams(v=jnp.asarray(v), L=jnp.asarray(L), delta_max=jnp.full(n, 0.5), convention=jnp.asarray(conv))
+    p = SlipParams(v=jnp.asarray(v), L=jnp.asarray(L), delta_max=jnp.full(n, 0.5), convention=jnp.asarray(conv),
+                   delta_rate_max=jnp.full(n, jnp.inf))  # vmap maps every field: batch them all
     pose = Pose(jnp.asarray(rng.normal(size=n)), jnp.asarray(rng.normal(size=n)), jnp.asarray(theta))
     r = jax.jit(jax.vmap(world_rhs))(pose, jnp.asarray(delta), jnp.asarray(br), jnp.asarray(bf), p)
     speed = v / np.cos(br)
