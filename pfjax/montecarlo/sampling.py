@@ -137,7 +137,7 @@ def _start_pose(path, u_nominal, start_s, offset, heading_err):
     return Pose(px - offset * jnp.sin(th), py + offset * jnp.cos(th), th + heading_err), u
 
 
-def random_path(key, spec: PathSpec, kappa_max: float, dtype=float) -> shapes.Spline:
+def random_path(key, spec: PathSpec, kappa_max: float) -> shapes.Spline:
     """A smooth random path: curvature ``kappa(s) = sum_j a_j sin(w_j s + phi_j)`` (3 modes, wavelengths
     6-30 m) scaled so ``max|kappa| = kappa_max``, integrated from the origin heading +x, and a natural
     cubic spline through ``n_waypoints`` points along it. Built with NumPy (SciPy spline) at the edge."""
