@@ -12,6 +12,7 @@ its ``status``; it is not an error.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 import sys
@@ -29,6 +30,12 @@ GAIN_NAMES = {
     "pure-pursuit": ("pure_pursuit", ("ld_gain", "ld_min")),
     "rear-wheel": ("rear_wheel", ("k_theta", "k_d")),
 }
+
+
+#: Modules that add subcommands: each has ``register(sub)`` which calls ``sub.add_parser(...)``
+#: (the parser class is this module's ``_Parser``) and ``set_defaults(func=...)``; ``func(args)``
+#: returns a dict (printed as JSON with ``--json``) and raises :class:`UsageError` for bad values.
+EXTENSIONS = ("pfjax.tuning.cli", "pfjax.parking.cli", "pfjax.tracking.cli", "pfjax.bench.cli")
 
 
 class UsageError(Exception):
@@ -333,6 +340,14 @@ def build_parser() -> argparse.ArgumentParser:
             st.add_argument("--quiet", action="store_true", help="no progress bar")
         st.add_argument("--json", action="store_true", help="print one JSON object")
         st.set_defaults(func=_cmd_study if name == "study" else _cmd_report)
+    for module in EXTENSIONS:
+        try:
+            ext = importlib.import_module(module)
+        except ModuleNotFoundError as e:  # while the subsystems are being written in parallel
+            if e.name is not None and module.startswith(e.name):
+                continue
+            raise
+        ext.register(sub)
     return p
 
 
