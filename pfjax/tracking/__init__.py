@@ -1,0 +1,23 @@
+"""Vehicle tracking with a focus point (spec vehicle-tracking-focus.md; source: Ge & Lewis, ch. 8, eq. 8.4-8.7, Lemma 8.1).
+
+Rooms: :mod:`~pfjax.tracking.model` (car-like follower with steering state, optional slip),
+:mod:`~pfjax.tracking.leader` (leader motions), :mod:`~pfjax.tracking.geometry` (focus point,
+virtual connection, tracking error, input matrix), :mod:`~pfjax.tracking.controller`
+(input-output linearisation with limits), :mod:`~pfjax.tracking.simulate` (one scan, batched),
+:mod:`~pfjax.tracking.lemma` (Lemma 8.1 checks), :mod:`~pfjax.tracking.cli` (``pfjax track``).
+"""
+
+from pfjax.tracking import leader
+from pfjax.tracking.controller import FocusGains, focus_control
+from pfjax.tracking.geometry import (connection, focus_point, input_det, input_matrix, invertibility_factor,
+                                     lemma_bound, p_bound, reference_point, tracking_error)
+from pfjax.tracking.model import Follower, FollowerParams, follower_rhs
+from pfjax.tracking.simulate import (TRACK_STATUS_NAMES, SensorNoise, TrackConfig, TrackScenario, TrackStatus,
+                                     initial_state, scenario, simulate, simulate_batch, stack, unstack)
+
+__all__ = [
+    "FocusGains", "Follower", "FollowerParams", "SensorNoise", "TRACK_STATUS_NAMES", "TrackConfig", "TrackScenario",
+    "TrackStatus", "connection", "focus_control", "focus_point", "follower_rhs", "initial_state", "input_det",
+    "input_matrix", "invertibility_factor", "leader", "lemma_bound", "p_bound", "reference_point", "scenario",
+    "simulate", "simulate_batch", "stack", "tracking_error", "unstack",
+]
