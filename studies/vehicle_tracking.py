@@ -29,7 +29,6 @@ matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-from tqdm import tqdm  # noqa: E402
 
 import pfjax  # noqa: E402
 from pfjax.cli import dumps  # noqa: E402
@@ -38,33 +37,14 @@ from pfjax.metrics.robustness import metric_quantiles, success_summary  # noqa: 
 from pfjax.tracking import batches as B  # noqa: E402
 from pfjax.tracking import report as R  # noqa: E402
 from pfjax.tracking.lemma import four_way, sample_geometry  # noqa: E402
-from pfjax.tracking.simulate import TRACK_STATUS_NAMES, TrackConfig, simulate_batch  # noqa: E402
+from pfjax.tracking.simulate import TrackConfig  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_TOML = ROOT / "studies" / "vehicle_tracking.toml"
 QUICK = ["lemma.p=[-1.0, 1.0, 4.5]", "lemma.l_abs=[1.0]", "lemma.gamma_max_deg=[30.0]",
-         "lemma.offsets=[[-1.0, 1.0]]", "lemma.n_geometry=200", "mc.n_runs=40", "sim.horizon=20.0"]
+         "lemma.offsets=[[-1.0, 1.0]]", "lemma.n_geometry=200", "mc.n_runs=24", "sim.horizon=15.0", "sim.dt=0.02"]
 GRID_AXES = ("p", "l_abs", "gamma_max_deg", "offsets")
 METRICS = ["final_error_norm", "iae", "max_abs_gamma_deg", "window_max_z", "limit_fraction"]
-
-
-def run_chunks(scs, cfg: TrackConfig, chunk: int, desc: str):
-    n = int(scs.params.p.shape[0])
-    outs = []
-    for i in tqdm(range(0, n, chunk), desc=desc, leave=False):
-        part = jax.tree_util.tree_map(lambda x: x[i:i + chunk], scs)
-        m = int(part.params.p.shape[0])
-        if m < chunk:  # pad to one batch shape: one compilation
-            part = jax.tree_util.tree_map(lambda x: np.concatenate([x, np.repeat(x[-1:], chunk - m, 0)]), part)
-        cols = B.result_columns(simulate_batch(part, config=cfg))
-        outs.append({k: v[:m] for k, v in cols.items()})
-    return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
-
-
-def frame(rows, cols) -> pd.DataFrame:
-    df = pd.concat([pd.DataFrame(rows), pd.DataFrame(cols)], axis=1)
-    df["status"] = [TRACK_STATUS_NAMES[int(c)] for c in df["status_code"]]
-    return df
 
 
 def main(argv=None) -> int:
@@ -113,10 +93,10 @@ def main(argv=None) -> int:
     tcfg = TrackConfig(dt=s["dt"], horizon=s["horizon"], window=s["window"], tol_z=s["tol_z"], tol_phi=s["tol_phi"],
                        band=s["band"])
     key = jax.random.PRNGKey(cfg["seed"])
-    chunk = 512 if not args.quick else 64
+    chunk = 512 if not args.quick else 36
 
     scs, rows = B.lemma_grid(cfg, jax.random.fold_in(key, 0))
-    lemma_df = frame(rows, run_chunks(scs, tcfg, chunk, "lemma grid"))
+    lemma_df = B.frame(rows, B.run_chunks(scs, tcfg, chunk, "lemma grid"))
     lemma_df["region"] = np.where(lemma_df["inside_bound"], "|p| < pi/(2 gamma_max)", "|p| >= pi/(2 gamma_max)")
     table = four_way(lemma_df, ["mode", "region"])
 
@@ -141,7 +121,7 @@ def main(argv=None) -> int:
     mc, mc_summary = [], {}
     for f in (1, -1):
         scs, rows = B.mc_sample(cfg, f, jax.random.fold_in(key, 10 + (f > 0)))
-        df = frame(rows, run_chunks(scs, tcfg, chunk, f"Monte Carlo ({'forward' if f > 0 else 'backward'})"))
+        df = B.frame(rows, B.run_chunks(scs, tcfg, chunk, f"Monte Carlo ({'forward' if f > 0 else 'backward'})"))
         mode = "forward" if f > 0 else "backward"
         ok = df[df.status == "ok"]
         mc_summary[mode] = {**success_summary(df["success"].astype(bool).to_numpy()),

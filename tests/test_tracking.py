@@ -114,6 +114,12 @@ def test_simulation_matches_solve_ivp():
     ld = L.sine(amplitude=1.0, wavenumber=0.4)
     br, bf = math.radians(3), math.radians(-2)
     init = T.initial_state(ld, params, offset=(-0.5, 0.7), heading_error=0.3)
+    batched = T.initial_states(T.stack([ld, ld]), T.stack([params, params]), np.array([[-0.5, 0.7], [0.0, 0.0]]),
+                               np.array([0.3, 0.0]))
+    for k in ("x", "y", "theta", "gamma"):  # the batched placement is the single-run one
+        assert float(getattr(batched, k)[0]) == pytest.approx(float(getattr(init, k)), abs=1e-14)
+    on = T.unstack(batched, 1)  # no offset, no heading error: the focus point sits on z_d(0)
+    np.testing.assert_allclose(T.tracking_error(on, L.position(ld, 0.0), params), 0.0, atol=1e-14)
     sc = T.scenario(params, ld, init=init, slip=constant_slip(br, bf))
     cfg = T.TrackConfig(dt=0.02, horizon=6.0, window=1.0, record=True)
     r = T.unstack(T.simulate_batch(T.stack([sc]), config=cfg), 0)
@@ -137,21 +143,20 @@ ZD_CASES = [(f, l, p) for f in (1.0, -1.0) for l in (1.0, -1.0) for p in (-1.5, 
 def line_batch():
     """One jitted batch for every straight-line test (one compilation): per mode a small offset (no limit
     active), a large one, then the zero-dynamics cases, a singular case and a diverged one."""
-    scs, names = [], []
+    runs, names = [], []  # (params, offset, heading error)
     for f in (1.0, -1.0):
         prm = T.FollowerParams(a=1.0, f=f, l=1.0 * f, p=1.0 * f)
-        scs.append(T.scenario(prm, LINE, init=T.initial_state(LINE, prm, offset=(0.0, 0.05))))
-        scs.append(T.scenario(prm, LINE, init=T.initial_state(LINE, prm, offset=(-0.8, 1.0), heading_error=0.4)))
+        runs += [(prm, (0.0, 0.05), 0.0), (prm, (-0.8, 1.0), 0.4)]
         names += [("small", f), ("big", f)]
     for f, l, p in ZD_CASES:
-        prm = T.FollowerParams(f=f, l=0.5 * l if f > 0 else l, p=p)
-        scs.append(T.scenario(prm, LINE, init=T.initial_state(LINE, prm, offset=(0.0, 0.05))))
+        runs.append((T.FollowerParams(f=f, l=0.5 * l if f > 0 else l, p=p), (0.0, 0.05), 0.0))
         names.append(("zd", (f, l, p)))
-    sing = T.FollowerParams(f=-1.0, l=-1.0, p=3.0)  # gamma reaches pi/(2p) = gamma_max: det M = 0
-    scs.append(T.scenario(sing, LINE, init=T.initial_state(LINE, sing, offset=(-0.2, 0.3), heading_error=0.1)))
-    ok = T.FollowerParams(f=-1.0, l=-1.0, p=-1.0)
-    scs.append(T.scenario(ok, LINE, init=T.initial_state(LINE, ok, offset=(0.0, 60.0))))  # |z~0| > z_fail = 50 m
+    runs.append((T.FollowerParams(f=-1.0, l=-1.0, p=3.0), (-0.2, 0.3), 0.1))  # gamma reaches pi/(2p) = gamma_max: det M = 0
+    runs.append((T.FollowerParams(f=-1.0, l=-1.0, p=-1.0), (0.0, 60.0), 0.0))  # |z~0| > z_fail = 50 m
     names += [("singular", None), ("far", None)]
+    inits = T.initial_states(T.stack([LINE] * len(runs)), T.stack([r[0] for r in runs]),
+                             np.array([r[1] for r in runs]), np.array([r[2] for r in runs]))
+    scs = [T.scenario(r[0], LINE, init=T.unstack(inits, i)) for i, r in enumerate(runs)]
     cfg = T.TrackConfig(dt=0.01, horizon=30.0, record=True)
     return names, scs, cfg, T.simulate_batch(T.stack(scs), config=cfg)
 

@@ -20,6 +20,7 @@ def run(capsys, *args):
     return rc, out, err
 
 
+@pytest.mark.slow  # the first case compiles the simulation (~10 s here); the others reuse it
 @pytest.mark.parametrize("mode,leader", [("forward", "line"), ("backward", "line"), ("forward", "circle"),
                                          ("backward", "sine"), ("forward", "lane-change")])
 def test_track_json(capsys, mode, leader):

@@ -13,11 +13,11 @@ from pfjax.tracking.geometry import (connection, focus_point, input_det, input_m
                                      lemma_bound, p_bound, reference_point, tracking_error)
 from pfjax.tracking.model import Follower, FollowerParams, follower_rhs
 from pfjax.tracking.simulate import (TRACK_STATUS_NAMES, SensorNoise, TrackConfig, TrackScenario, TrackStatus,
-                                     initial_state, scenario, simulate, simulate_batch, stack, unstack)
+                                     initial_state, initial_states, scenario, simulate, simulate_batch, stack, unstack)
 
 __all__ = [
     "FocusGains", "Follower", "FollowerParams", "SensorNoise", "TRACK_STATUS_NAMES", "TrackConfig", "TrackScenario",
-    "TrackStatus", "connection", "focus_control", "focus_point", "follower_rhs", "initial_state", "input_det",
+    "TrackStatus", "connection", "focus_control", "focus_point", "follower_rhs", "initial_state", "initial_states", "input_det",
     "input_matrix", "invertibility_factor", "leader", "lemma_bound", "p_bound", "reference_point", "scenario",
     "simulate", "simulate_batch", "stack", "tracking_error", "unstack",
 ]

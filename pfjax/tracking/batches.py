@@ -1,7 +1,8 @@
 """Scenario batches of the tracking study: the Lemma 8.1 grid and the robustness Monte Carlo sample.
 
 Both return ``(scenarios, rows)``: a stacked :class:`TrackScenario` and one dict per run with the
-sampled settings in readable units, so results join on the run index.
+sampled settings in readable units, so results join on the run index; :func:`run_chunks` simulates
+them in fixed-size chunks and :func:`frame` joins the rows with the metrics.
 """
 
 from __future__ import annotations
@@ -10,37 +11,28 @@ import itertools
 import math
 
 import jax
-import jax.numpy as jnp
 import numpy as np
+import pandas as pd
+from tqdm import tqdm
 
 from pfjax.sim.slip_profiles import constant_slip
 from pfjax.tracking import leader as L
 from pfjax.tracking.controller import FocusGains
 from pfjax.tracking.geometry import lemma_bound, p_bound
-from pfjax.tracking.model import FollowerParams
-from pfjax.tracking.simulate import SensorNoise, TrackScenario, initial_state
+from pfjax.tracking.model import FollowerParams, as_arrays
+from pfjax.tracking.simulate import (TRACK_STATUS_NAMES, SensorNoise, TrackConfig, TrackScenario, initial_states,
+                                     simulate_batch, stack)
 
 
 def _assemble(params, leaders, offsets, heading_errors, gains, slips, noise, keys) -> TrackScenario:
-    """Stack per-run pieces and place every follower with one vmapped :func:`initial_state`."""
-    P, Ld = _np_stack(params), _np_stack(leaders)
-    off = jnp.asarray(np.asarray(offsets, dtype=float))
-    he = jnp.asarray(np.asarray(heading_errors, dtype=float))
-    init = jax.jit(jax.vmap(lambda ld, pr, o, h: initial_state(ld, pr, offset=(o[0], o[1]), heading_error=h)))(Ld, P, off, he)
+    """Stack per-run pieces and place every follower with one batched :func:`initial_states`."""
+    P, Ld = stack([as_arrays(p) for p in params]), stack(leaders)
+    init = initial_states(Ld, P, np.asarray(offsets, dtype=float), np.asarray(heading_errors, dtype=float))
     n = len(params)
-    return TrackScenario(params=P, gains=FocusGains(k=jnp.full((n,), float(gains))), leader=Ld, init=init,
-                         slip=_np_stack(slips), noise=SensorNoise(*(jnp.full((n,), float(x)) for x in (noise or (0.0, 0.0, 0.0)))),
-                         key=jnp.stack(keys))
+    return TrackScenario(params=P, gains=FocusGains(k=np.full((n,), float(gains))), leader=Ld, init=init,
+                         slip=stack(slips), noise=SensorNoise(*(np.full((n,), float(x)) for x in (noise or (0.0, 0.0, 0.0)))),
+                         key=stack(keys))
 
-
-def _np_stack(items):
-    """Stack pytrees leaf-wise in NumPy (one device transfer per leaf, not one per item)."""
-    return jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack([np.asarray(x) for x in xs])), *items)
-
-
-def _fp(**kw) -> FollowerParams:
-    p = FollowerParams(**kw)
-    return FollowerParams(*(np.int32(v) if i == 7 else np.float64(v) for i, v in enumerate(p)))
 
 MC_LEADERS = ("line", "circle", "sine", "lane-change", "stop-and-go", "random")
 
@@ -58,7 +50,7 @@ def lemma_grid(cfg: dict, key):
     for f, p, la, gdeg, (lname, ld), off in itertools.product((1, -1), g["p"], g["l_abs"], g["gamma_max_deg"],
                                                                leaders.items(), g["offsets"]):
         gm = math.radians(gdeg)
-        prms.append(_fp(a=s["a"], f=f, l=f * la, p=p, gamma_max=gm))
+        prms.append(FollowerParams(a=s["a"], f=f, l=f * la, p=p, gamma_max=gm))
         lds.append(ld)
         offs.append(off)
         lo, hi = p_bound(gm, f)
@@ -75,7 +67,7 @@ def mc_sample(cfg: dict, f: int, key):
     """``n_runs`` random scenarios of one mode; run ``i`` draws from ``fold_in(key, i)``."""
     s, m = cfg["sim"], cfg["mc"]
     gm = math.radians(m["gamma_max_deg"])
-    prm = _fp(a=s["a"], f=f, l=f * m["l_abs"], p=m["p_forward"] if f > 0 else m["p_backward"], gamma_max=gm)
+    prm = FollowerParams(a=s["a"], f=f, l=f * m["l_abs"], p=m["p_forward"] if f > 0 else m["p_backward"], gamma_max=gm)
     noise = (m["sigma_pos"], math.radians(m["sigma_theta_deg"]), math.radians(m["sigma_gamma_deg"]))
     lds, offs, hes, slips, keys, rows = [], [], [], [], [], []
     for i in range(m["n_runs"]):
@@ -113,3 +105,25 @@ def result_columns(r) -> dict:
     return m
 
 
+
+
+def run_chunks(scs: TrackScenario, cfg: TrackConfig, chunk: int, desc: str = "tracking runs") -> dict:
+    """:func:`simulate_batch` over ``chunk``-sized slices (the last one padded: one compilation), as NumPy columns."""
+    scs = jax.tree_util.tree_map(np.asarray, scs)  # slice on the host, not op by op on the device
+    n = int(scs.params.p.shape[0])
+    outs = []
+    for i in tqdm(range(0, n, chunk), desc=desc, leave=False, disable=None):
+        part = jax.tree_util.tree_map(lambda x: x[i:i + chunk], scs)
+        m = int(part.params.p.shape[0])
+        if m < chunk:
+            part = jax.tree_util.tree_map(lambda x: np.concatenate([x, np.repeat(x[-1:], chunk - m, 0)]), part)
+        cols = result_columns(simulate_batch(part, config=cfg))
+        outs.append({k: v[:m] for k, v in cols.items()})
+    return {k: np.concatenate([o[k] for o in outs]) for k in outs[0]}
+
+
+def frame(rows: list[dict], cols: dict) -> pd.DataFrame:
+    """One row per run: the sampled settings, the metrics and a readable ``status``."""
+    df = pd.concat([pd.DataFrame(rows), pd.DataFrame(cols)], axis=1)
+    df["status"] = [TRACK_STATUS_NAMES[int(c)] for c in df["status_code"]]
+    return df

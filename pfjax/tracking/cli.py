@@ -69,27 +69,31 @@ def _check(args) -> tuple[float, float]:
 
 def _cmd(args) -> dict:
     pp, ll = _check(args)
-    import jax.numpy as jnp
+    import jax
+
+    import numpy as np
 
     from pfjax.sim.slip_profiles import constant_slip
     from pfjax.tracking import leader as L
+    from pfjax.tracking.controller import FocusGains
     from pfjax.tracking.geometry import lemma_bound, p_bound
     from pfjax.tracking.lemma import zero_dynamics_stable
     from pfjax.tracking.model import FollowerParams
-    from pfjax.tracking.simulate import (TRACK_STATUS_NAMES, TrackConfig, initial_state, scenario, simulate_batch,
+    from pfjax.tracking.simulate import (TRACK_STATUS_NAMES, TrackConfig, initial_states, scenario, simulate_batch,
                                          stack, unstack)
-    from pfjax.tracking.controller import FocusGains
 
     f = 1 if args.mode == "forward" else -1
     gmax = math.radians(args.gamma_max_deg)
     params = FollowerParams(a=args.a, f=float(f), l=ll, p=pp, gamma_max=gmax, v_max=args.v_max,
                             omega_max=math.radians(args.omega_max_deg))
     ld = L.by_name(args.leader, speed=args.speed, depth=args.stop_and_go)
-    init = initial_state(ld, params, offset=tuple(args.offset), heading_error=math.radians(args.heading_error_deg))
+    host = lambda tree: jax.tree_util.tree_map(np.asarray, tree)  # noqa: E731  (index in NumPy, not op by op)
+    init = unstack(host(initial_states(stack([ld]), stack([params]), np.asarray([args.offset], dtype=float),
+                                       np.asarray([math.radians(args.heading_error_deg)]))), 0)
     slip = constant_slip(math.radians(args.beta_r_deg), math.radians(args.beta_f_deg))
     sc = scenario(params, ld, gains=FocusGains(k=args.k), init=init, slip=slip)
     cfg = TrackConfig(dt=args.dt, horizon=args.T, window=min(5.0, args.T / 3))
-    r = unstack(simulate_batch(stack([sc]), config=cfg), 0)
+    r = unstack(host(simulate_batch(stack([sc]), config=cfg)), 0)
     m = r.metrics
     lo, hi = p_bound(gmax, f)
     status = int(r.status)
@@ -106,6 +110,6 @@ def _cmd(args) -> dict:
         "input_matrix_invertible_for_all_gamma": bool(lo < pp < hi),
         "zero_dynamics_stable_straight": zero_dynamics_stable(args.speed, float(f), params),
         "tolerances": {"window_s": cfg.window, "tol_z_m": cfg.tol_z, "tol_phi_rad": cfg.tol_phi},
-        "final": {k: float(jnp.asarray(v)) for k, v in r.final._asdict().items()},
+        "final": {k: float(v) for k, v in r.final._asdict().items()},
         "T": cfg.n_steps * cfg.dt, "dt": cfg.dt,
     }

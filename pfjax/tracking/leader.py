@@ -58,10 +58,10 @@ def _leader(kind, *, x0=0.0, y0=0.0, heading=0.0, speed=1.0, depth=0.0, period=1
         if v is not None:
             v = np.atleast_1d(np.asarray(v, dtype=float))
             out[: v.size] = v
-        return jnp.asarray(out)
+        return out
 
-    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
-    return Leader(kind=jnp.asarray(kind, dtype=jnp.int32), x0=f(x0), y0=f(y0), heading=f(heading), speed=f(speed),
+    f = lambda v: np.asarray(v, dtype=float)  # noqa: E731  (NumPy leaves: no device op per leader)
+    return Leader(kind=np.asarray(kind, dtype=np.int32), x0=f(x0), y0=f(y0), heading=f(heading), speed=f(speed),
                   depth=f(depth), period=f(period), amps=vec(amps, 0.0), omegas=vec(omegas, 1.0),
                   phases=vec(phases, 0.0), radius=f(radius), lane_width=f(lane_width), lane_center=f(lane_center),
                   lane_length=f(lane_length))

@@ -27,6 +27,7 @@ and ``sigma (l + c_f a) / (l p) > 0`` (backward tracking while reversing: ``l < 
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -34,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from pfjax.tracking.geometry import connection, focus_point, tracking_error
-from pfjax.tracking.model import Follower, FollowerParams
+from pfjax.tracking.model import Follower, FollowerParams, as_arrays
 
 
 def zero_dynamics_matrix(V: float, sigma: float, params: FollowerParams) -> np.ndarray:
@@ -57,18 +58,14 @@ def zero_dynamics_stable(V: float, sigma: float, params: FollowerParams) -> bool
     return bool(np.max(np.linalg.eigvals(zero_dynamics_matrix(V, sigma, params)).real) < 0)
 
 
-def sample_geometry(key, n: int, gamma_max: float, p: float, l: float = 1.0, f: int = 1, a: float = 1.0) -> pd.DataFrame:
-    """Random states with ``z~ = 0`` and with ``phi = p gamma`` at a wrong distance (see module doc).
-
-    Returns a frame of ``n`` rows per ``kind``: ``"on_focus"`` (``z_d`` = the focus point) and
-    ``"wrong_distance"`` (``z_d`` on the focus direction at ``(1 + r) l`` from ``P_ref``,
-    ``r ~ U[0.2, 1]``), with ``gamma``, ``p_gamma``, ``phi``, ``phi_minus_pgamma``, ``z_err`` (m).
-    """
+@partial(jax.jit, static_argnums=1)
+def _geometry_samples(key, n: int, params: FollowerParams):
+    """``gamma`` and, per kind, ``(phi, |z~|)`` of ``n`` random states (one compilation per ``n``)."""
     k1, k2, k3, k4, k5 = jax.random.split(key, 5)
-    params = FollowerParams(a=a, f=float(f), l=l, p=p, gamma_max=gamma_max)
+    gm, l = params.gamma_max, params.l
     s = Follower(x=jax.random.uniform(k1, (n,), minval=-10, maxval=10), y=jax.random.uniform(k2, (n,), minval=-10, maxval=10),
                  theta=jax.random.uniform(k3, (n,), minval=-math.pi, maxval=math.pi),
-                 gamma=jax.random.uniform(k4, (n,), minval=-gamma_max, maxval=gamma_max))
+                 gamma=jax.random.uniform(k4, (n,), minval=-gm, maxval=gm))
     r = jax.random.uniform(k5, (n,), minval=0.2, maxval=1.0)
 
     def one(si, ri):
@@ -81,31 +78,41 @@ def sample_geometry(key, n: int, gamma_max: float, p: float, l: float = 1.0, f: 
             out[name] = (c.phi, jnp.hypot(e[0], e[1]))
         return out
 
-    res = jax.vmap(one)(s, r)
+    return s.gamma, jax.vmap(one)(s, r)
+
+
+def sample_geometry(key, n: int, gamma_max: float, p: float, l: float = 1.0, f: int = 1, a: float = 1.0) -> pd.DataFrame:
+    """Random states with ``z~ = 0`` and with ``phi = p gamma`` at a wrong distance (see module doc).
+
+    Returns a frame of ``n`` rows per ``kind``: ``"on_focus"`` (``z_d`` = the focus point) and
+    ``"wrong_distance"`` (``z_d`` on the focus direction at ``(1 + r) l`` from ``P_ref``,
+    ``r ~ U[0.2, 1]``), with ``gamma``, ``p_gamma``, ``phi``, ``phi_minus_pgamma``, ``z_err`` (m).
+    """
+    params = FollowerParams(a=a, f=float(f), l=l, p=p, gamma_max=gamma_max)
+    g, res = _geometry_samples(key, n, as_arrays(params))
+    g = np.asarray(g)
     rows = []
     for kind, (phi, zerr) in res.items():
-        g = np.asarray(s.gamma)
         rows.append(pd.DataFrame({"kind": kind, "gamma": g, "p_gamma": p * g, "phi": np.asarray(phi),
                                   "phi_minus_pgamma": np.asarray(phi) - p * g, "z_err": np.asarray(zerr)}))
     return pd.concat(rows, ignore_index=True)
 
 
-def four_way(df: pd.DataFrame, by: list[str]) -> pd.DataFrame:
-    """Counts of the four outcomes ``(z~ -> 0, phi - p gamma -> 0)`` per group (plus failed runs).
+def outcomes(df: pd.DataFrame) -> dict[str, pd.Series]:
+    """Boolean masks of the four outcomes ``(z~ -> 0, phi - p gamma -> 0)`` of finished runs, and ``failed``.
 
     ``df`` needs boolean ``converged``, ``phi_converged`` and a ``status`` column (``"ok"`` for a run
-    that finished). Columns: ``n``, ``both``, ``z_only``, ``phi_only``, ``neither``, ``failed`` and
-    ``equivalence_holds`` (``z_only == phi_only == 0``).
+    that finished). Keys: ``both``, ``z_only``, ``phi_only``, ``neither``, ``failed``.
     """
-    d = df.assign(ok=df["status"] == "ok")
-    g = d.groupby(by, dropna=False)
-    out = pd.DataFrame({
-        "n": g.size(),
-        "both": g.apply(lambda x: int((x.ok & x.converged & x.phi_converged).sum()), include_groups=False),
-        "z_only": g.apply(lambda x: int((x.ok & x.converged & ~x.phi_converged).sum()), include_groups=False),
-        "phi_only": g.apply(lambda x: int((x.ok & ~x.converged & x.phi_converged).sum()), include_groups=False),
-        "neither": g.apply(lambda x: int((x.ok & ~x.converged & ~x.phi_converged).sum()), include_groups=False),
-        "failed": g.apply(lambda x: int((~x.ok).sum()), include_groups=False),
-    }).reset_index()
+    ok, z, phi = df["status"] == "ok", df["converged"].astype(bool), df["phi_converged"].astype(bool)
+    return {"both": ok & z & phi, "z_only": ok & z & ~phi, "phi_only": ok & ~z & phi, "neither": ok & ~z & ~phi,
+            "failed": ~ok}
+
+
+def four_way(df: pd.DataFrame, by: list[str]) -> pd.DataFrame:
+    """Counts of the :func:`outcomes` per group, with ``n`` and ``equivalence_holds`` (``z_only == phi_only == 0``)."""
+    masks = pd.DataFrame(outcomes(df)).astype(int)
+    g = pd.concat([df[by], masks], axis=1).groupby(by, dropna=False)
+    out = g.size().rename("n").to_frame().join(g.sum()).reset_index()
     out["equivalence_holds"] = (out["z_only"] == 0) & (out["phi_only"] == 0)
     return out

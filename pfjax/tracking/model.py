@@ -17,6 +17,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from pfjax.models.slip import SOURCE, Pose, SlipParams, world_rhs
@@ -54,6 +55,12 @@ class FollowerParams(NamedTuple):
     v_max: Array | float = 3.0  # m/s
     omega_max: Array | float = 1.5707963267948966  # rad/s (90 deg/s)
     convention: Array | int = SOURCE
+
+
+def as_arrays(params: FollowerParams) -> FollowerParams:
+    """``params`` with float64 NumPy leaves and an int32 ``convention`` (what one batch row holds)."""
+    return FollowerParams(*(np.asarray(v, np.int32 if k == "convention" else np.float64)
+                            for k, v in params._asdict().items()))
 
 
 def follower_rhs(state: Follower, v: Array, omega: Array, beta_r: Array, beta_f: Array,

@@ -15,6 +15,7 @@ import pandas as pd
 from jinja2 import Environment, StrictUndefined
 
 from pfjax.report.figures import save
+from pfjax.tracking.lemma import four_way, outcomes
 
 OUTCOMES = ("both", "z_only", "phi_only", "neither", "failed")
 LABELS = {"both": "z~→0 and φ−pγ→0", "z_only": "z~→0 only", "phi_only": "φ−pγ→0 only", "neither": "neither",
@@ -36,7 +37,7 @@ def write_figures(fig_dir: Path, cfg: dict, lemma_df: pd.DataFrame, geo: pd.Data
     names = []
 
     # 1. the four outcomes per mode and region
-    tab = lemma_df.assign(ok=lemma_df.status == "ok")
+    tab = lemma_df.assign(**outcomes(lemma_df))
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=True)
     colors = ["#2a9d8f", "#e76f51", "#f4a261", "#8d99ae", "#264653"]
     for ax, mode in zip(axes, ("forward", "backward")):
@@ -47,10 +48,7 @@ def write_figures(fig_dir: Path, cfg: dict, lemma_df: pd.DataFrame, geo: pd.Data
             vals = []
             for r in regions:
                 x = d[d.region == r]
-                sel = {"both": x.ok & x.converged & x.phi_converged, "z_only": x.ok & x.converged & ~x.phi_converged,
-                       "phi_only": x.ok & ~x.converged & x.phi_converged, "neither": x.ok & ~x.converged & ~x.phi_converged,
-                       "failed": ~x.ok}[o]
-                vals.append(sel.mean() if len(x) else 0.0)
+                vals.append(x[o].mean() if len(x) else 0.0)
             ax.bar(regions, vals, bottom=bottoms, color=c, label=LABELS[o])
             bottoms += np.array(vals)
         ax.set_title(f"{mode} tracking")
@@ -139,10 +137,8 @@ def write_report(out_dir: Path, summary: dict, table: pd.DataFrame, lemma_df: pd
     figs = {n: base64.b64encode((out_dir / "figures" / f"{n}.png").read_bytes()).decode()
             for n in ("lemma_outcomes", "lemma_geometry", "mc_final_error")}
     outside = lemma_df[~lemma_df.inside_bound & (lemma_df.status == "ok")]
-    g = outside.groupby(["mode", "gamma_max_deg", "p"])
-    out_tab = pd.DataFrame({"n_ok": g.size(), "z_only": g.apply(lambda x: int((x.converged & ~x.phi_converged).sum()), include_groups=False),
-                            "phi_only": g.apply(lambda x: int((~x.converged & x.phi_converged).sum()), include_groups=False)}).reset_index()
-    out_tab = out_tab[(out_tab.z_only + out_tab.phi_only) > 0]
+    out_tab = four_way(outside, ["mode", "gamma_max_deg", "p"])[["mode", "gamma_max_deg", "p", "n", "z_only", "phi_only"]]
+    out_tab = out_tab.rename(columns={"n": "n_ok"})[(out_tab.z_only + out_tab.phi_only) > 0]
     s = json.loads(json.dumps(summary, default=lambda o: None))
     html = Environment(undefined=StrictUndefined, autoescape=True).from_string(TEMPLATE).render(
         s=_ns(s), cols=list(table.columns), rows=table.to_dict(orient="records"), figs=figs,

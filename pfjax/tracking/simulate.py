@@ -27,14 +27,16 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from pfjax.sim.integrators import rk4_step
+from pfjax.sim.simulate import unstack  # noqa: F401  (re-exported: run i of a batch)
 from pfjax.sim.slip_profiles import SlipProfile, constant_slip, slip_at
 from pfjax.tracking.controller import FocusGains, focus_control, steering_stop
-from pfjax.tracking.geometry import connection, tracking_error
-from pfjax.tracking.leader import Leader, position_velocity
-from pfjax.tracking.model import Follower, FollowerParams, follower_rhs
+from pfjax.tracking.geometry import connection, focus_point, tracking_error
+from pfjax.tracking.leader import Leader, position, position_velocity, start_heading
+from pfjax.tracking.model import Follower, FollowerParams, as_arrays, follower_rhs
 
 
 class TrackStatus(IntEnum):
@@ -122,26 +124,32 @@ def initial_state(leader: Leader, params: FollowerParams, offset=(0.0, 0.0), hea
     reverses), plus ``heading_error`` (rad). ``offset`` (m) is added to ``P_b`` in the leader's
     frame (along, left of its direction of travel).
     """
-    from pfjax.tracking.leader import start_heading
-
-    zd, _ = position_velocity(leader, jnp.zeros(()))
+    zd = position(leader, jnp.zeros(()))
     h = start_heading(leader)
     theta0 = h + jnp.where(jnp.asarray(params.f) < 0, jnp.pi, 0.0)
-    cf = 0.5 * (1.0 + jnp.asarray(params.f))
-    ang = theta0 + params.p * gamma0
-    x = zd[0] - cf * params.a * jnp.cos(theta0) - params.l * jnp.cos(ang)
-    y = zd[1] - cf * params.a * jnp.sin(theta0) - params.l * jnp.sin(ang)
+    g0 = jnp.asarray(gamma0, dtype=float) + 0.0 * zd[0]
+    lever = focus_point(Follower(0.0 * g0, 0.0 * g0, theta0, g0), params)  # z - P_b at (theta0, gamma0)
     c, s = jnp.cos(h), jnp.sin(h)
-    x = x + c * offset[0] - s * offset[1]
-    y = y + s * offset[0] + c * offset[1]
-    return Follower(x=x, y=y, theta=theta0 + heading_error, gamma=jnp.asarray(gamma0, dtype=float) + 0.0 * x)
+    x = zd[0] - lever[0] + c * offset[0] - s * offset[1]
+    y = zd[1] - lever[1] + s * offset[0] + c * offset[1]
+    return Follower(x=x, y=y, theta=theta0 + heading_error, gamma=g0)
+
+
+@jax.jit
+def initial_states(leaders: Leader, params: FollowerParams, offsets: Array, heading_errors: Array) -> Follower:
+    """Batched :func:`initial_state` (a leading axis on every argument; ``offsets`` is ``(n, 2)`` m).
+
+    One compilation per batch size; far cheaper than evaluating :func:`initial_state` op by op.
+    """
+    return jax.vmap(lambda ld, pr, o, h: initial_state(ld, pr, offset=(o[0], o[1]), heading_error=h))(
+        leaders, params, offsets, heading_errors)
 
 
 def scenario(params: FollowerParams, leader: Leader, *, gains: FocusGains = FocusGains(), init: Follower | None = None,
              slip: SlipProfile | None = None, noise: SensorNoise = SensorNoise(), key=None) -> TrackScenario:
     """A scenario with defaults: no slip, no noise, follower placed on the leader (zero error)."""
     f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
-    params = FollowerParams(*(f(v) if i != 7 else jnp.asarray(v, jnp.int32) for i, v in enumerate(params)))
+    params = as_arrays(params)
     return TrackScenario(
         params=params, gains=FocusGains(*map(f, gains)), leader=leader,
         init=Follower(*map(f, init if init is not None else initial_state(leader, params))),
@@ -250,9 +258,5 @@ def simulate_batch(scenarios: TrackScenario, *, config: TrackConfig) -> TrackRes
 
 
 def stack(items):
-    """Stack a list of pytrees along a new leading axis."""
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
-
-
-def unstack(tree, i: int):
-    return jax.tree_util.tree_map(lambda x: x[i], tree)
+    """Stack a list of pytrees along a new leading axis, leaf-wise in NumPy (no device op per item)."""
+    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *items)
