@@ -1,0 +1,1 @@
+"""Parking by switching travel direction and gain (spec: parking-time-state.md)."""

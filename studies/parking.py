@@ -1,0 +1,323 @@
+#!/usr/bin/env python
+"""Parking by switching travel direction and gain (spec: parking-time-state.md): every spec case,
+the a_f calibration, the garage X_s tries, the GA and grid searches, the start-pose map and a
+robustness Monte Carlo.
+
+    python studies/parking.py [--config studies/parking.toml] [--set key=value ...] [--out DIR] [--quick]
+
+Writes to ``results/parking/`` (or ``--out``): ``summary.json`` (config, SHA-256, seed, version),
+``cases.parquet``, ``sensitivity.parquet``, ``garage.parquet``, ``grid.parquet``, ``start_map.parquet``,
+``montecarlo.parquet``, ``figures/*.png|svg`` and ``report.md``. Outputs are assembled in a temporary
+directory and moved into place when complete; a bad key or value stops with one line, exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import matplotlib
+
+jax.config.update("jax_enable_x64", True)
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+import pfjax  # noqa: E402
+from pfjax.cli import dumps  # noqa: E402
+from pfjax.config import ConfigError, config_hash, load  # noqa: E402
+from pfjax.parking import figures as F  # noqa: E402
+from pfjax.parking.calibrate import calibrate_front, simulated_first_switch  # noqa: E402
+from pfjax.parking.maps import GARAGE, PARALLEL, to_obstacle_map  # noqa: E402
+from pfjax.parking.model import control_params  # noqa: E402
+from pfjax.parking.montecarlo import Scatter, monte_carlo, summarise  # noqa: E402
+from pfjax.parking.schedules import CASES, GARAGE_START  # noqa: E402
+from pfjax.parking.search import search_ga, search_grid, start_map  # noqa: E402
+from pfjax.parking.simulate import STATUS_NAMES, ParkingConfig, n_periods_for, run_many, run_params, run_recorded_jit, stack_params  # noqa: E402
+from pfjax.parking.summary import run_summary  # noqa: E402
+from pfjax.report.figures import save  # noqa: E402
+from pfjax.tuning.ga import GAOptions  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULTS = {
+    "name": "parking", "seed": 0,
+    "controller": {"k1": 32.0, "k2": 8.0, "speed": 0.05},
+    "sim": {"scan_period": 0.1, "t_max": 200.0, "max_switches": 10, "tol": 0.02, "n_sub": 2, "front": 0.0, "chunk": 1024},
+    "sensitivity": {"fronts": [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25], "scan_periods": [0.05, 0.1, 0.2]},
+    "garage": {"xs_values": [-0.9, -1.2, -1.8]},
+    "search": {"weight": 100.0, "population": 20, "generations": 100, "grid_n": 32, "ga_seeds": 3},
+    "start_map": {"x0": [-1.5, -1.3, -1.1, -0.9, -0.7], "theta0_deg": [-80.0, -40.0, 0.0, 40.0, 80.0], "grid_n": 10},
+    "montecarlo": {"n_runs": 1000, "pos_scatter": 0.05, "theta_scatter_deg": 5.0, "scan_lo": 0.05, "scan_hi": 0.2,
+                   "speed_lo": 0.04, "speed_hi": 0.06, "lag_probability": 0.5},
+}
+QUICK = {"sim": {"chunk": 32}, "search": {"population": 4, "generations": 2, "grid_n": 3, "ga_seeds": 1}, "start_map": {"grid_n": 2},
+         "montecarlo": {"n_runs": 16}}
+
+
+def validate(cfg: dict) -> None:
+    c, s = cfg["controller"], cfg["sim"]
+    for key, v in [("controller.k1", c["k1"]), ("controller.k2", c["k2"]), ("controller.speed", c["speed"]),
+                   ("sim.scan_period", s["scan_period"]), ("sim.t_max", s["t_max"]), ("sim.tol", s["tol"])]:
+        if v <= 0:
+            raise ConfigError(f"{key}: must be > 0, got {v}")
+    if not 0 <= s["front"] < 0.54:
+        raise ConfigError(f"sim.front: must be in [0, 0.54) (0 = calibrated), got {s['front']}")
+    if s["chunk"] < 1:
+        raise ConfigError(f"sim.chunk: must be >= 1, got {s['chunk']}")
+    if s["n_sub"] < 1 or s["max_switches"] < 1:
+        raise ConfigError("sim.n_sub: must be >= 1" if s["n_sub"] < 1 else "sim.max_switches: must be >= 1")
+    if s["t_max"] / s["scan_period"] > 20000:
+        raise ConfigError(f"sim.scan_period: t_max / scan_period must be <= 20000, got {s['t_max'] / s['scan_period']:g}")
+    for i, f in enumerate(cfg["sensitivity"]["fronts"]):
+        if not 0 < f < 0.54:
+            raise ConfigError(f"sensitivity.fronts[{i}]: must be in (0, 0.54), got {f}")
+    for i, f in enumerate(cfg["sensitivity"]["scan_periods"]):
+        if not 0 < f <= 1:
+            raise ConfigError(f"sensitivity.scan_periods[{i}]: must be in (0, 1], got {f}")
+    se = cfg["search"]
+    if se["population"] < 2 or se["generations"] < 1 or se["ga_seeds"] < 1 or not 2 <= se["grid_n"] <= 64 or se["weight"] < 0:
+        raise ConfigError(f"search: need population >= 2, generations >= 1, 2 <= grid_n <= 64, weight >= 0, got {se}")
+    for i, th in enumerate(cfg["start_map"]["theta0_deg"]):
+        if abs(th) >= 90:
+            raise ConfigError(f"start_map.theta0_deg[{i}]: magnitude must be < 90, got {th}")
+    m = cfg["montecarlo"]
+    if m["n_runs"] < 1 or not 0 < m["scan_lo"] <= m["scan_hi"] or not 0 < m["speed_lo"] <= m["speed_hi"] \
+            or not 0 <= m["lag_probability"] <= 1 or m["pos_scatter"] < 0 or m["theta_scatter_deg"] < 0:
+        raise ConfigError(f"montecarlo: invalid ranges {m}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", default=str(ROOT / "studies" / "parking.toml"))
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--out")
+    ap.add_argument("--quick", action="store_true", help="small sizes (tests)")
+    args = ap.parse_args(argv)
+    try:
+        cfg = load(DEFAULTS, args.config, args.set)
+        if args.quick:
+            for sec, vals in QUICK.items():
+                cfg[sec].update(vals)
+            cfg["start_map"]["x0"], cfg["start_map"]["theta0_deg"] = [-1.3, -0.9], [-80.0, 40.0]
+            cfg["sensitivity"]["fronts"], cfg["sensitivity"]["scan_periods"] = [0.15, 0.2], [0.1]
+        validate(cfg)
+    except ConfigError as e:
+        print(f"parking: error: {e}", file=sys.stderr)
+        return 2
+    out = Path(args.out) if args.out else ROOT / "results" / cfg["name"]
+    tmp = Path(tempfile.mkdtemp(prefix=".parking-", dir=out.parent if out.parent.exists() else None))
+    try:
+        summary = run_study(cfg, tmp, quick=args.quick)
+        if out.exists():
+            shutil.rmtree(out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        shutil.move(str(tmp), str(out))
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    print(f"wrote {out} in {summary['wall_s']:.1f} s")
+    return 0
+
+
+# ----------------------------------------------------------------------------------- parts
+
+
+def setup(cfg):
+    c, s = cfg["controller"], cfg["sim"]
+    control = control_params(k1=c["k1"], k2=c["k2"], speed=c["speed"])
+    front = s["front"] if s["front"] > 0 else None
+    pc = ParkingConfig(t_max=s["t_max"], max_switches=s["max_switches"], tol=s["tol"], n_sub=s["n_sub"])
+    return control, front, pc
+
+
+def one(cfg, x0, direction, schedule, *, xs=None, omap, front=None, scan=None):
+    control, f0, pc = setup(cfg)
+    scan = scan or cfg["sim"]["scan_period"]
+    p = run_params(x0, direction, schedule, xs=xs, front=front or f0, scan_period=scan, control=control)
+    r, tr = run_recorded_jit(p, omap, pc, n_periods_for(pc, scan))
+    return p, r, tr
+
+
+def part_cases(cfg, fig_dir, pmap, gmap):
+    rows, runs = [], {}
+    for name, c in CASES.items():
+        p, r, tr = one(cfg, c["x0"], c["direction"], c["schedule"], omap=pmap)
+        runs[name] = (p, r, tr)
+        rows.append({"case": name, "map": "parallel", "start": str(c["x0"]), "direction": "forward" if c["direction"] > 0 else "backward",
+                     "schedule": ",".join(f"{a:g}" for a in c["schedule"]), "xs": math.nan, **_flat(run_summary(r))})
+    for xs in cfg["garage"]["xs_values"]:
+        p, r, tr = one(cfg, GARAGE_START, 1, (1.0,), xs=xs, omap=gmap)
+        runs[f"garage X_s={xs:g}"] = (p, r, tr)
+        rows.append({"case": f"garage X_s={xs:g}", "map": "garage", "start": str(GARAGE_START), "direction": "forward",
+                     "schedule": "1", "xs": xs, **_flat(run_summary(r))})
+    fig, axs = plt.subplots(2, 2, figsize=(11, 8))
+    for ax, name in zip(axs.ravel(), "ABCD"):
+        p, r, tr = runs[name]
+        F.trajectory_axes(ax, PARALLEL, tr, r, p.shape, f"case {name}: {STATUS_NAMES[int(r.status)]}, {int(r.n_switches)} switches, "
+                          f"{float(r.time):.1f} s", xlim=(-1.0, 1.0), ylim=(-0.45, 1.0))
+    fig.tight_layout()
+    save(fig, fig_dir, "cases_parallel")
+    g = [k for k in runs if k.startswith("garage")]
+    fig, axs = plt.subplots(1, len(g), figsize=(5 * len(g), 4.6), squeeze=False)
+    for ax, name in zip(axs[0], g):
+        p, r, tr = runs[name]
+        F.trajectory_axes(ax, GARAGE, tr, r, p.shape, f"{name}: {STATUS_NAMES[int(r.status)]}, {int(r.n_switches)} sw., "
+                          f"{float(r.time):.1f} s", xlim=(-2.2, 0.6), ylim=(-1.0, 1.0))
+    fig.tight_layout()
+    save(fig, fig_dir, "garage_xs")
+    for name in ("D", g[0]):
+        p, r, tr = runs[name]
+        save(F.histories_figure(tr, r, p.control, f"{name}: states and inputs"), fig_dir,
+             "histories_" + name.replace(" ", "_").replace("=", "").replace(".", "p"))
+    return rows, runs
+
+
+def _flat(s: dict) -> dict:
+    return {"status": s["status"], "converged": s["converged"], "time_s": s["time_s"], "switches": s["switches"],
+            "final_x": s["final"]["x"], "final_y": s["final"]["y"], "final_theta_deg": s["final"]["theta_deg"],
+            "error": s["error"], "distance_m": s["distance_m"],
+            "switch_times_s": ",".join(f"{e['t']:.1f}" for e in s["switch_log"])}
+
+
+def part_sensitivity(cfg, pmap):
+    control, _, pc = setup(cfg)
+    items, keys = [], []
+    for f in cfg["sensitivity"]["fronts"]:
+        for ts in cfg["sensitivity"]["scan_periods"]:
+            for name, c in CASES.items():
+                items.append(run_params(c["x0"], c["direction"], c["schedule"], front=f, scan_period=ts, control=control))
+                keys.append((name, f, ts))
+    r = run_many(stack_params(items), pmap, pc, chunk=cfg["sim"]["chunk"] if len(items) <= cfg["sim"]["chunk"] else 128)
+    return pd.DataFrame({"case": [k[0] for k in keys], "front": [k[1] for k in keys], "scan_period_s": [k[2] for k in keys],
+                         "status": [STATUS_NAMES[int(s)] for s in r.status], "switches": r.n_switches.astype(int), "time_s": r.time})
+
+
+def part_search(cfg, fig_dir, gmap, key):
+    control, front, pc = setup(cfg)
+    se = cfg["search"]
+    base = run_params(GARAGE_START, 1, (1.0,), xs=-1.0, front=front, scan_period=cfg["sim"]["scan_period"], control=control)
+    t0 = time.perf_counter()
+    grid = search_grid(gmap, n=se["grid_n"], base=base, weight=se["weight"], cfg=pc, progress=True, chunk=cfg["sim"]["chunk"])
+    grid["wall_s"] = time.perf_counter() - t0
+    table = grid.pop("table")
+    f = table["fitness"]
+    runs = []
+    for i in range(se["ga_seeds"]):  # independent GA runs: the source reports several good solutions
+        t0 = time.perf_counter()
+        r = search_ga(gmap, key=jax.random.fold_in(key, i), base=base, weight=se["weight"], cfg=pc, progress=True,
+                      options=GAOptions(population_size=se["population"], generations=se["generations"]))
+        r.update(seed_index=i, wall_s=time.perf_counter() - t0, grid_fraction_better=float(np.mean(f > r["fitness"])),
+                 fitness_ratio_to_grid_best=r["fitness"] / grid["fitness"])
+        runs.append(r)
+    ga = max(runs, key=lambda r: r["fitness"])
+    save(F.search_figure(ga, table, se["grid_n"]), fig_dir, "search")
+    for d in (*runs, grid):
+        d["status"] = STATUS_NAMES[int(d["status"])]
+    df = pd.DataFrame({k: v for k, v in table.items()})
+    df["status"] = [STATUS_NAMES[int(s)] for s in df["status"]]
+    df["converged_fraction"] = None
+    return ga, runs, grid, df
+
+
+def part_start_map(cfg, fig_dir, gmap):
+    _, _, pc = setup(cfg)
+    sm = cfg["start_map"]
+    rows = start_map(gmap, sm["x0"], sm["theta0_deg"], n=sm["grid_n"], weight=cfg["search"]["weight"], cfg=pc, progress=True,
+                     chunk=cfg["sim"]["chunk"])
+    for r in rows:
+        r["status"] = STATUS_NAMES[int(r["status"])] if isinstance(r["status"], int) else r["status"]
+    save(F.start_map_figure([{**r, "status": 0 if r["status"] == "converged" else 1} for r in rows]), fig_dir, "start_map")
+    return rows
+
+
+def part_montecarlo(cfg, fig_dir, gmap, ga, grid, key):
+    """Fixed schedule vs the GA's best vs the grid's best, on the same sampled runs."""
+    control, front, pc = setup(cfg)
+    m = cfg["montecarlo"]
+    sc = Scatter(**{k: m[k] for k in ("pos_scatter", "theta_scatter_deg", "scan_lo", "scan_hi", "speed_lo", "speed_hi",
+                                       "lag_probability")})
+    scan = cfg["sim"]["scan_period"]
+    schedules = [("fixed: α=1, X_s=-0.9", -0.9, (1.0,))]
+    for lab, d in (("GA best", ga), ("grid best", grid)):
+        schedules.append((f"{lab}: X_s={d['xs']:.3f}, α₁={d['alpha1']:.3f}, α₂={d['alpha2']:.3f}", d["xs"], (1.0, d["alpha1"], d["alpha2"])))
+    dfs = [monte_carlo(gmap, run_params(GARAGE_START, 1, sched, xs=xs, front=front, scan_period=scan, control=control), key=key,
+                       n=m["n_runs"], scatter=sc, cfg=pc, progress=True, label=lab, chunk=cfg["sim"]["chunk"])
+           for lab, xs, sched in schedules]
+    df = pd.concat(dfs, ignore_index=True)
+    save(F.monte_carlo_figure(df), fig_dir, "montecarlo")
+    return df, {lab: summarise(g) for lab, g in df.groupby("schedule", sort=False)}
+
+
+def run_study(cfg: dict, out: Path, quick=False) -> dict:
+    t_start = time.perf_counter()
+    fig_dir = out / "figures"
+    fig_dir.mkdir(parents=True)
+    pmap, gmap = to_obstacle_map(list(PARALLEL.values())), to_obstacle_map(list(GARAGE.values()))
+    key = jax.random.PRNGKey(cfg["seed"])
+    k_ga, k_mc = jax.random.split(key)
+    steps = tqdm(total=6, desc="parking study", unit="part")
+    timings = {}
+
+    def tick(name, t0):
+        timings[name] = time.perf_counter() - t0
+        steps.update(1)
+
+    t0 = time.perf_counter()
+    cal = calibrate_front()
+    cal["simulated_first_switch"] = simulated_first_switch(cal["a_f"])
+    tick("calibration", t0)
+    t0 = time.perf_counter()
+    case_rows, _ = part_cases(cfg, fig_dir, pmap, gmap)
+    tick("cases", t0)
+    t0 = time.perf_counter()
+    sens = part_sensitivity(cfg, pmap)
+    tick("sensitivity", t0)
+    t0 = time.perf_counter()
+    ga, ga_runs, grid, grid_df = part_search(cfg, fig_dir, gmap, k_ga)
+    tick("search", t0)
+    t0 = time.perf_counter()
+    smap = part_start_map(cfg, fig_dir, gmap)
+    tick("start_map", t0)
+    t0 = time.perf_counter()
+    mc_df, mc = part_montecarlo(cfg, fig_dir, gmap, ga, grid, k_mc)
+    tick("montecarlo", t0)
+    steps.close()
+
+    cases = pd.DataFrame(case_rows)
+    stamp = {"config_sha256": config_hash(cfg), "seed": cfg["seed"], "pfjax_version": pfjax.__version__}
+    meta = {b"pfjax": dumps(stamp).encode()}
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    for name, df in (("cases", cases), ("sensitivity", sens), ("grid", grid_df.drop(columns=["converged_fraction"])),
+                     ("start_map", pd.DataFrame(smap)), ("montecarlo", mc_df)):
+        t = pa.Table.from_pandas(df, preserve_index=False)
+        pq.write_table(t.replace_schema_metadata({**(t.schema.metadata or {}), **meta}), out / f"{name}.parquet")
+    summary = {
+        "study": cfg["name"], **stamp, "quick": quick, "config": cfg,
+        "machine": {"python": platform.python_version(), "jax": jax.__version__, "platform": platform.platform(),
+                    "cpu_count": __import__("os").cpu_count()},
+        "calibration": cal, "cases": case_rows,
+        "sensitivity": sens.to_dict(orient="records"),
+        "search": {"ga": ga, "ga_runs": ga_runs, "grid": grid}, "start_map": smap, "montecarlo": mc,
+        "timings_s": timings, "wall_s": time.perf_counter() - t_start,
+    }
+    (out / "summary.json").write_text(dumps(summary) + "\n")
+    from pfjax.parking.report import write_report
+
+    write_report(out, summary, sens)
+    return summary
+
+
+if __name__ == "__main__":
+    sys.exit(main())
