@@ -27,6 +27,8 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
+from pfjax.numerics import elementary as E
+
 SOURCE = 0
 LENAIN = 1
 CONVENTIONS = {"source": SOURCE, "lenain": LENAIN}
@@ -76,8 +78,9 @@ def yaw_rate(delta: Array, beta_r: Array, beta_f: Array, params: SlipParams) -> 
     v, L = params.v, params.L
     lenain = jnp.asarray(params.convention) == LENAIN
     front = jnp.where(lenain, delta + beta_f, delta - beta_f)
-    scale = jnp.where(lenain, jnp.cos(beta_r), 1.0)
-    return scale * (v / L) * (jnp.tan(front) - jnp.tan(beta_r))
+    sbr, cbr = E.sincos(beta_r)  # one range reduction for tan and cos of beta_r
+    scale = jnp.where(lenain, cbr, 1.0)
+    return scale * (v / L) * (E.tan(front) - sbr / cbr)
 
 
 def world_rhs(pose: Pose, delta: Array, beta_r: Array, beta_f: Array, params: SlipParams) -> Pose:
@@ -97,8 +100,8 @@ def world_rhs(pose: Pose, delta: Array, beta_r: Array, beta_f: Array, params: Sl
         The time derivative as a ``Pose`` (m/s, m/s, rad/s).
     """
     v = params.v
-    c, s = jnp.cos(pose.theta), jnp.sin(pose.theta)
-    tbr = jnp.tan(beta_r)
+    s, c = E.sincos(pose.theta)
+    tbr = E.tan(beta_r)
     return Pose(
         x=v * (c - tbr * s),
         y=v * (s + tbr * c),
@@ -126,8 +129,8 @@ def frenet_rhs(
         params: physical parameters.
     """
     v = params.v
-    c, s = jnp.cos(state.theta_e), jnp.sin(state.theta_e)
-    tbr = jnp.tan(beta_r)
+    s, c = E.sincos(state.theta_e)
+    tbr = E.tan(beta_r)
     s_dot = v * (c - tbr * s) / (1.0 - kappa * state.d)
     return FrenetState(
         d=v * (s + tbr * c),
@@ -138,4 +141,4 @@ def frenet_rhs(
 
 def max_curvature(params: SlipParams) -> Array:
     """Largest path curvature the robot can follow without slip, 1/m (eq. 2): ``tan(delta_max)/L``."""
-    return jnp.tan(params.delta_max) / params.L
+    return E.tan(params.delta_max) / params.L

@@ -22,6 +22,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.numerics import elementary as E
+
 ARC_PANELS = 64  # Gauss-Legendre panels between u_ref and u for the arc length
 GLOBAL_SAMPLES = 4096  # dense samples for the cold-start (global) projection
 END_TOL = 1e-4  # m: how far past an end of the path's domain counts as having left it
@@ -41,23 +43,22 @@ class Projection(NamedTuple):
 
 
 def wrap_angle(a: Array) -> Array:
-    """Wrap an angle to ``(-pi, pi]``."""
-    w = jnp.pi - jnp.mod(jnp.pi - a, 2.0 * jnp.pi)
-    # mod can round up to 2 pi for a just above an odd multiple of pi, giving -pi: map it to pi.
-    return jnp.where(w <= -jnp.pi, w + 2.0 * jnp.pi, w)
+    """Wrap an angle to ``(-pi, pi]`` (:func:`pfjax.numerics.elementary.wrap_angle`)."""
+    return E.wrap_angle(a)
 
 
 def tangent_angle(path, u: Array) -> Array:
     """Path tangent angle ``theta_p(u)`` in rad."""
     dx, dy = path.d1(u)
-    return jnp.arctan2(dy, dx)
+    return E.atan2(dy, dx)
 
 
 def curvature(path, u: Array) -> Array:
     """Signed curvature ``kappa(u) = (x' y'' - y' x'') / (x'^2 + y'^2)^{3/2}`` in 1/m."""
     dx, dy = path.d1(u)
     ddx, ddy = path.d2(u)
-    return (dx * ddy - dy * ddx) / (dx * dx + dy * dy) ** 1.5
+    speed2 = dx * dx + dy * dy
+    return (dx * ddy - dy * ddx) / (speed2 * jnp.sqrt(speed2))
 
 
 def arc_length(path, u: Array) -> Array:
@@ -129,20 +130,24 @@ def measure(path, x: Array, y: Array, theta: Array, u: Array) -> Projection:
     ``d = (q - p(u)) . n`` with ``n`` the left unit normal is the signed distance.
     """
     px, py = path.point(u)
-    theta_p = tangent_angle(path, u)
-    d = -(x - px) * jnp.sin(theta_p) + (y - py) * jnp.cos(theta_p)
+    dx, dy = path.d1(u)
+    inv = jax.lax.rsqrt(dx * dx + dy * dy)
+    tx, ty = dx * inv, dy * inv  # unit tangent (cos theta_p, sin theta_p)
+    d = -(x - px) * ty + (y - py) * tx
     # Beyond an end: the closest point is clamped to the end AND the robot lies past it along the
     # tangent (more than END_TOL). A robot exactly at the start is not beyond it.
-    along = (x - px) * jnp.cos(theta_p) + (y - py) * jnp.sin(theta_p)
+    along = (x - px) * tx + (y - py) * ty
+    # theta_e = wrap(theta - theta_p) as the angle from the tangent to the heading: one atan2, no wrap.
+    sh, ch = E.sincos(theta)
     eps = 1e-9 * (path.u_max - path.u_min)
     at_end = ((u <= path.u_min + eps) & (along < -END_TOL)) | ((u >= path.u_max - eps) & (along > END_TOL))
     return Projection(
         d=d,
-        theta_e=wrap_angle(theta - theta_p),
+        theta_e=E.atan2(tx * sh - ty * ch, tx * ch + ty * sh),
         kappa=curvature(path, u),
         s=arc_length(path, u),
         u=u,
-        theta_p=theta_p,
+        theta_p=E.atan2(dy, dx),
         at_end=at_end,
     )
 

@@ -18,6 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.numerics import elementary as E
+
 
 def _f(x) -> Array:
     return jnp.asarray(x, dtype=jnp.result_type(float))
@@ -36,11 +38,13 @@ class Line(NamedTuple):
     u_max: Array  # m
 
     def point(self, u):
-        return self.x0 + u * jnp.cos(self.heading), self.y0 + u * jnp.sin(self.heading)
+        s, c = E.sincos(self.heading)
+        return self.x0 + u * c, self.y0 + u * s
 
     def d1(self, u):
         one = jnp.ones_like(u)
-        return one * jnp.cos(self.heading), one * jnp.sin(self.heading)
+        s, c = E.sincos(self.heading)
+        return one * c, one * s
 
     def d2(self, u):
         z = jnp.zeros_like(u)
@@ -75,14 +79,15 @@ class Sine(NamedTuple):
     u_min: Array  # m (x)
     u_max: Array  # m (x)
 
+    # sin and cos of the phase share one range reduction (E.sincos); XLA merges the repeats.
     def point(self, u):
-        return u, self.amplitude * jnp.sin(self.omega * u + self.phase) + self.y0
+        return u, self.amplitude * E.sin(self.omega * u + self.phase) + self.y0
 
     def d1(self, u):
-        return jnp.ones_like(u), self.amplitude * self.omega * jnp.cos(self.omega * u + self.phase)
+        return jnp.ones_like(u), self.amplitude * self.omega * E.cos(self.omega * u + self.phase)
 
     def d2(self, u):
-        return jnp.zeros_like(u), -self.amplitude * self.omega**2 * jnp.sin(self.omega * u + self.phase)
+        return jnp.zeros_like(u), -self.amplitude * self.omega**2 * E.sin(self.omega * u + self.phase)
 
 
 class Circle(NamedTuple):
@@ -101,16 +106,16 @@ class Circle(NamedTuple):
         return self.phi0 + self.direction * u / self.radius
 
     def point(self, u):
-        phi = self._phi(u)
-        return self.cx + self.radius * jnp.cos(phi), self.cy + self.radius * jnp.sin(phi)
+        s, c = E.sincos(self._phi(u))
+        return self.cx + self.radius * c, self.cy + self.radius * s
 
     def d1(self, u):
-        phi = self._phi(u)
-        return -self.direction * jnp.sin(phi), self.direction * jnp.cos(phi)
+        s, c = E.sincos(self._phi(u))
+        return -self.direction * s, self.direction * c
 
     def d2(self, u):
-        phi = self._phi(u)
-        return -jnp.cos(phi) / self.radius, -jnp.sin(phi) / self.radius
+        s, c = E.sincos(self._phi(u))
+        return -c / self.radius, -s / self.radius
 
 
 class Spline(NamedTuple):

@@ -19,6 +19,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.numerics import elementary as E
+
 
 class SlipProfile(NamedTuple):
     constant: Array  # (2,) rad
@@ -78,11 +80,14 @@ def sampled_slip(values, dt) -> SlipProfile:
 def slip_at(profile: SlipProfile, t: Array) -> tuple[Array, Array]:
     """``(beta_r(t), beta_f(t))`` in rad."""
     n = profile.seq.shape[0]
-    i = jnp.clip(jnp.floor(t / profile.seq_dt).astype(jnp.int32), 0, n - 1)
+    if n == 1:  # static: no sequence, no gather (a gather splits XLA's fused loop body)
+        held = profile.seq[0]
+    else:
+        held = profile.seq[jnp.clip(jnp.floor(t / profile.seq_dt).astype(jnp.int32), 0, n - 1)]
     beta = (
         profile.constant
         + profile.step_size * (t >= profile.step_time)
-        + profile.sin_amp * jnp.sin(2.0 * jnp.pi * profile.sin_freq * t + profile.sin_phase)
-        + profile.seq[i]
+        + profile.sin_amp * E.sin(2.0 * jnp.pi * profile.sin_freq * t + profile.sin_phase)
+        + held
     )
     return beta[0], beta[1]

@@ -1,0 +1,224 @@
+"""Fast, vectorisable elementary functions in plain ``jnp`` (sin, cos, tan, atan, atan2, angle wrap).
+
+XLA's CPU ``sin``/``cos``/``tan``/``atan2`` cost several times a multiply-add chain per element and
+each call repeats its own range reduction. These versions are short polynomial chains that XLA
+fuses with their neighbours, and ``sin``, ``cos`` and ``tan`` of one argument share one reduction
+(:func:`sincos`), so a fused kernel that needs both pays once. They work under ``jit``, ``vmap``
+and ``grad`` (the derivative of the polynomial approximates the true derivative to a few ulp).
+
+Method (classic Cody-Waite / Cephes scheme):
+
+* ``sin``, ``cos``: ``k = round(x 2/pi)``, ``r = x - k pi/2`` with ``pi/2`` split into three parts
+  so that ``k * part_1`` is exact (``|r| <= pi/4``); ``sin r = r + r z P(z)``, ``cos r = 1 + z Q(z)``
+  with ``z = r^2``; the quadrant ``k mod 4`` picks and signs them. ``tan = sin / cos``.
+* ``atan``: ``|x|`` reduced to ``|t| <= tan(pi/8)`` by ``t = -1/|x|`` (``|x| > tan(3pi/8)``) or
+  ``t = (|x|-1)/(|x|+1)`` (one division), then ``atan t = t + t z R(z)``. ``atan2`` does the same on
+  ``min(|x|,|y|) / max(|x|,|y|)`` and fixes the octant.
+* ``wrap_angle``: ``a - 2 pi round(a / 2 pi)`` with a split ``2 pi``, mapped into ``(-pi, pi]``.
+
+The polynomial coefficients are least-squares fits on Chebyshev nodes in NumPy float64, computed
+once at import (deterministic); degrees are the smallest whose fit error is below the working
+precision's rounding. Accuracy against NumPy (measured by ``tests/test_elementary.py`` over the
+whole float range; the README states the numbers): within a few ulp for ``|x| <= REDUCTION_LIMIT``
+(``sin``/``cos``/``tan``; beyond it the reduction loses accuracy gradually), everywhere for
+``atan``/``atan2``/``wrap_angle``. Special values follow IEEE/NumPy: NaN in, NaN out;
+``sin(+-inf) = NaN``; ``atan(+-inf) = +-pi/2``; ``atan2`` of zeros and infinities as NumPy.
+"""
+
+from __future__ import annotations
+
+from decimal import Decimal, getcontext
+from functools import lru_cache
+
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+_PI_DIGITS = "3.14159265358979323846264338327950288419716939937510582097494459230781640628620899863"
+
+#: Largest |x| for which sin/cos/tan keep their stated accuracy (the reduction's ``k * part_1`` is exact).
+REDUCTION_LIMIT = {np.dtype(np.float32): 2.0**12, np.dtype(np.float64): 2.0**27}
+
+
+def _split(value: Decimal, bits: tuple[int, ...], dtype) -> tuple:
+    """``value`` as a sum of ``len(bits)`` floats of ``dtype``, part ``i`` with ``bits[i]`` significant bits
+    (the last part rounded to full precision)."""
+    parts, rest = [], value
+    for i, b in enumerate(bits):
+        if i == len(bits) - 1:
+            p = float(rest)
+        else:
+            m, e = np.frexp(float(rest))
+            p = float(np.ldexp(np.floor(np.ldexp(m, b)), e - b))
+        p = float(np.dtype(dtype).type(p))
+        parts.append(p)
+        rest = rest - Decimal(p)
+    return tuple(parts)
+
+
+def _fit(f, hi: float, deg: int) -> tuple[float, ...]:
+    """Coefficients (lowest power first) of the degree-``deg`` least-squares polynomial in ``z`` on ``[0, hi]``
+    fitted to ``f(z)`` at 4 ``deg`` Chebyshev nodes."""
+    n = 4 * (deg + 1)
+    z = hi * 0.5 * (1.0 - np.cos(np.pi * (np.arange(n) + 0.5) / n))
+    z = np.concatenate([[0.0], z])
+    return tuple(float(c) for c in np.polynomial.Polynomial.fit(z, f(z).astype(np.float64), deg).convert().coef)
+
+
+def _sin_core(z):  # (sin r - r) / (r z), r = sqrt(z)
+    z = np.longdouble(z)  # extended precision: sin r - r cancels
+    r = np.sqrt(z)
+    out = np.empty_like(z)
+    small = r < 1e-3
+    out[~small] = (np.sin(r[~small]) - r[~small]) / (r[~small] * z[~small])
+    zs = z[small]
+    out[small] = -1 / 6 + zs / 120 - zs * zs / 5040
+    return out
+
+
+def _cos_core(z):  # (cos r - 1) / z
+    z = np.longdouble(z)
+    r = np.sqrt(z)
+    out = np.empty_like(z)
+    small = r < 1e-3
+    out[~small] = (np.cos(r[~small]) - 1.0) / z[~small]
+    zs = z[small]
+    out[small] = -0.5 + zs / 24 - zs * zs / 720
+    return out
+
+
+def _atan_core(z):  # (atan t - t) / (t z), t = sqrt(z)
+    z = np.longdouble(z)
+    t = np.sqrt(z)
+    out = np.empty_like(z)
+    small = t < 1e-3
+    out[~small] = (np.arctan(t[~small]) - t[~small]) / (t[~small] * z[~small])
+    zs = z[small]
+    out[small] = -1 / 3 + zs / 5 - zs * zs / 7
+    return out
+
+
+_Z_SIN = (np.pi / 4) ** 2
+_Z_ATAN = float(np.tan(np.pi / 8)) ** 2
+#: polynomial degrees in z = r^2 per dtype (the smallest with fit error below the dtype's rounding)
+_DEGREES = {
+    np.dtype(np.float32): dict(sin=3, cos=4, atan=5),
+    np.dtype(np.float64): dict(sin=6, cos=7, atan=10),
+}
+
+
+@lru_cache(maxsize=None)
+def _constants(dtype: np.dtype) -> dict:
+    getcontext().prec = 60
+    pi = Decimal(_PI_DIGITS)
+    deg = _DEGREES[dtype]
+    bits = (12, 12, 24) if dtype == np.float32 else (26, 26, 53)
+    return dict(
+        pio2=_split(pi / 2, bits, dtype),
+        twopi=_split(2 * pi, bits, dtype),
+        sin=_fit(_sin_core, _Z_SIN, deg["sin"]),
+        cos=_fit(_cos_core, _Z_SIN, deg["cos"]),
+        atan=_fit(_atan_core, _Z_ATAN, deg["atan"]),
+    )
+
+
+def _float(x) -> Array:
+    x = jnp.asarray(x)
+    return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(jnp.result_type(float))
+
+
+def _horner(coef, z):
+    acc = jnp.asarray(coef[-1], z.dtype)
+    for c in coef[-2::-1]:
+        acc = acc * z + c
+    return acc
+
+
+def _const(x: Array) -> dict:
+    return _constants(np.dtype(x.dtype))
+
+
+def sincos(x) -> tuple[Array, Array]:
+    """``(sin x, cos x)`` with one shared range reduction (x in rad)."""
+    x = _float(x)
+    c = _const(x)
+    p1, p2, p3 = c["pio2"]
+    k = jnp.round(x * (2.0 / np.pi))
+    r = ((x - k * p1) - k * p2) - k * p3
+    z = r * r
+    s = r + r * z * _horner(c["sin"], z)
+    co = 1.0 + z * _horner(c["cos"], z)
+    q = jnp.where(jnp.isfinite(k), k, 0.0).astype(jnp.int32) & 3
+    swap = (q & 1) == 1
+    sin = jnp.where(swap, co, s)
+    cos = jnp.where(swap, s, co)
+    sin = jnp.where(q >= 2, -sin, sin)
+    cos = jnp.where((q == 1) | (q == 2), -cos, cos)
+    return sin, cos
+
+
+def sin(x) -> Array:
+    """``sin x`` (x in rad)."""
+    return sincos(x)[0]
+
+
+def cos(x) -> Array:
+    """``cos x`` (x in rad)."""
+    return sincos(x)[1]
+
+
+def tan(x) -> Array:
+    """``tan x = sin x / cos x`` (x in rad; one reduction, one division)."""
+    s, c = sincos(x)
+    return s / c
+
+
+def _atan_reduced(num, den, base):
+    """``base + atan(num / den)`` for ``|num / den| <= tan(pi/8)``."""
+    t = num / den
+    z = t * t
+    return base + (t + t * z * _horner(_const(t)["atan"], z))
+
+
+def atan(x) -> Array:
+    """``arctan x`` in ``[-pi/2, pi/2]`` rad."""
+    x = _float(x)
+    a = jnp.abs(x)
+    big = a > 2.414213562373095  # tan(3 pi / 8)
+    mid = a > 0.41421356237309503  # tan(pi / 8)
+    num = jnp.where(big, -1.0, jnp.where(mid, a - 1.0, a))
+    den = jnp.where(big, jnp.where(jnp.isinf(a), 1.0, a), jnp.where(mid, a + 1.0, 1.0))
+    num = jnp.where(jnp.isinf(a), 0.0, num)  # atan(inf) = pi/2 exactly
+    base = jnp.where(big, np.pi / 2, jnp.where(mid, np.pi / 4, 0.0)).astype(x.dtype)
+    r = _atan_reduced(num, den, base)
+    return jnp.where(jnp.signbit(x), -r, r)
+
+
+def atan2(y, x) -> Array:
+    """``arctan2(y, x)`` in ``[-pi, pi]`` rad, NumPy's conventions for zeros and infinities."""
+    y, x = jnp.broadcast_arrays(_float(y), _float(x))
+    ax, ay = jnp.abs(x), jnp.abs(y)
+    both_inf = jnp.isinf(ax) & jnp.isinf(ay)
+    ax1 = jnp.where(both_inf, 1.0, ax)
+    ay1 = jnp.where(both_inf, 1.0, ay)
+    mn, mx = jnp.minimum(ax1, ay1), jnp.maximum(ax1, ay1)
+    mid = mn > 0.41421356237309503 * mx  # ratio beyond tan(pi/8): reduce by pi/4
+    zero = mx == 0.0
+    num = jnp.where(mid, mn - mx, mn)
+    den = jnp.where(mid, mn + mx, jnp.where(zero, 1.0, mx))
+    num = jnp.where(jnp.isinf(mx), 0.0, num)  # finite / inf: ratio 0 (den = inf already)
+    den = jnp.where(jnp.isinf(mx) & mid, 1.0, den)
+    a = _atan_reduced(num, den, jnp.where(mid, np.pi / 4, 0.0).astype(x.dtype))  # angle in [0, pi/4]
+    a = jnp.where(ay1 > ax1, np.pi / 2 - a, a)
+    a = jnp.where(jnp.signbit(x), np.pi - a, a)
+    return jnp.where(jnp.signbit(y), -a, a)
+
+
+def wrap_angle(a) -> Array:
+    """Wrap an angle to ``(-pi, pi]`` rad: ``a - 2 pi round(a / 2 pi)``."""
+    a = _float(a)
+    p1, p2, p3 = _const(a)["twopi"]
+    k = jnp.round(a * (0.5 / np.pi))
+    w = ((a - k * p1) - k * p2) - k * p3
+    w = jnp.where(w <= -np.pi, w + 2.0 * np.pi, w)
+    return jnp.where(w > np.pi, w - 2.0 * np.pi, w)

@@ -1,0 +1,120 @@
+"""Fast elementary functions (pfjax.numerics.elementary) against NumPy in extended precision.
+
+Inputs cover each function's whole float range: uniform on the reduced range, on the stated
+reduction range, and log-uniform magnitudes from 1e-30 to 1e30 (atan, atan2), plus the special
+values. Errors are in ulp of the correctly rounded result in the working dtype (NumPy longdouble
+as the reference; errors below the smallest normal number count as 1 ulp, XLA flushes subnormals),
+with bounds a little above the measured maxima (the README states them).
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from pfjax.numerics import elementary as E
+
+# max ulp error allowed: (float32, float64)
+ULP = {"sin": (9, 3), "cos": (7, 3), "tan": (9, 5), "atan": (3, 3), "atan2": (3, 3)}
+DTYPES = (np.float32, np.float64)
+RNG = np.random.default_rng(8)
+
+
+def _ulp_err(got, ref, dtype):
+    ref_d = ref.astype(dtype)
+    ok = np.isfinite(ref_d)
+    # XLA's CPU kernels flush subnormals to zero: an error below the smallest normal number counts as 1 ulp.
+    ulp = np.maximum(np.spacing(np.abs(ref_d)), np.finfo(dtype).tiny).astype(np.longdouble)
+    return float(np.max(np.abs(np.asarray(got, np.longdouble) - ref)[ok] / ulp[ok]))
+
+
+def _trig_inputs(dtype):
+    lim = E.REDUCTION_LIMIT[np.dtype(dtype)]
+    x = np.concatenate([RNG.uniform(-np.pi, np.pi, 60000), RNG.uniform(-lim, lim, 60000),
+                        np.sign(RNG.standard_normal(20000)) * np.exp(RNG.uniform(np.log(1e-30), np.log(lim), 20000))])
+    return x.astype(dtype)
+
+
+def _wide_inputs(dtype):
+    hi = 30 if dtype == np.float32 else 300
+    x = np.sign(RNG.standard_normal(100000)) * np.exp(RNG.uniform(-hi * np.log(10), hi * np.log(10), 100000))
+    return np.concatenate([x, RNG.uniform(-3, 3, 50000)]).astype(dtype)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("name", ["sin", "cos", "tan"])
+def test_trig_accuracy(name, dtype):
+    x = _trig_inputs(dtype)
+    got = np.asarray(jax.jit(getattr(E, name))(x))
+    assert got.dtype == dtype
+    ref = getattr(np, name)(x.astype(np.longdouble))
+    assert _ulp_err(got, ref, dtype) <= ULP[name][dtype == np.float64]
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_sincos_is_sin_and_cos(dtype):
+    x = _trig_inputs(dtype)[:5000]
+    s, c = jax.jit(E.sincos)(x)
+    # both jitted: XLA may contract a*b+c into an FMA inside a fused kernel, not op by op
+    np.testing.assert_array_equal(np.asarray(s), np.asarray(jax.jit(E.sin)(x)))
+    np.testing.assert_array_equal(np.asarray(c), np.asarray(jax.jit(E.cos)(x)))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_atan_accuracy(dtype):
+    x = _wide_inputs(dtype)
+    got = np.asarray(jax.jit(E.atan)(x))
+    assert _ulp_err(got, np.arctan(x.astype(np.longdouble)), dtype) <= ULP["atan"][dtype == np.float64]
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_atan2_accuracy_all_quadrants(dtype):
+    y, x = _wide_inputs(dtype), RNG.permutation(_wide_inputs(dtype))
+    got = np.asarray(jax.jit(E.atan2)(y, x))
+    ref = np.arctan2(y.astype(np.longdouble), x.astype(np.longdouble))
+    assert _ulp_err(got, ref, dtype) <= ULP["atan2"][dtype == np.float64]
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_special_values_match_numpy(dtype):
+    v = np.array([0.0, -0.0, 1.0, -1.0, np.inf, -np.inf, np.nan, 1e-30, -1e-30], dtype)
+    with np.errstate(invalid="ignore"):
+        for name, ref in (("sin", np.sin), ("cos", np.cos), ("tan", np.tan), ("atan", np.arctan)):
+            np.testing.assert_allclose(np.asarray(getattr(E, name)(v)), ref(v), rtol=4e-7 if dtype == np.float32 else 1e-15,
+                                       equal_nan=True, err_msg=name)
+        np.testing.assert_array_equal(np.signbit(np.asarray(E.atan(v))), np.signbit(np.arctan(v)))
+        a, b = np.meshgrid(v, v)
+        got, ref = np.asarray(E.atan2(a, b)), np.arctan2(a, b)
+        np.testing.assert_allclose(got, ref, rtol=4e-7 if dtype == np.float32 else 1e-15, equal_nan=True)
+        num = ~np.isnan(ref)
+        assert np.all(np.signbit(got[num]) == np.signbit(ref[num]))  # signed zeros and -pi vs pi as NumPy
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_wrap_angle(dtype):
+    """Same angle (sin and cos to rounding), in (-pi, pi], and the identity inside it."""
+    x = np.concatenate([_trig_inputs(dtype), np.array([np.pi, -np.pi, 3 * np.pi, -3 * np.pi, 0.0], dtype)])
+    w = np.asarray(jax.jit(E.wrap_angle)(x)).astype(np.longdouble)
+    assert np.all(w > -np.pi) and np.all(w <= np.float64(np.pi) + 1e-6 * (dtype == np.float32))
+    xl = x.astype(np.longdouble)
+    eps = np.finfo(dtype).eps
+    tol = 4 * eps * np.maximum(1.0, np.abs(xl))  # the input's own rounding bounds what can be recovered
+    assert np.all(np.abs(np.sin(w) - np.sin(xl)) <= tol) and np.all(np.abs(np.cos(w) - np.cos(xl)) <= tol)
+    inside = np.abs(x) < 3.0
+    np.testing.assert_array_equal(w[inside], xl[inside])
+
+
+@pytest.mark.parametrize("name", ["sin", "cos", "tan", "atan"])
+def test_gradients_match_xla(name):
+    x = jnp.asarray(np.concatenate([RNG.uniform(-1.4, 1.4, 400), RNG.uniform(-50, 50, 400)]))
+    mine = jax.vmap(jax.grad(getattr(E, name)))(x)
+    ref = jax.vmap(jax.grad(getattr(jnp, {"atan": "arctan"}.get(name, name))))(x)
+    np.testing.assert_allclose(mine, ref, rtol=1e-13, atol=1e-13)
+
+
+def test_atan2_gradient_matches_xla():
+    y, x = (jnp.asarray(RNG.uniform(-5, 5, 500)) for _ in range(2))
+    mine = jax.vmap(jax.grad(E.atan2, argnums=(0, 1)))(y, x)
+    ref = jax.vmap(jax.grad(jnp.arctan2, argnums=(0, 1)))(y, x)
+    for m, r in zip(mine, ref):
+        np.testing.assert_allclose(m, r, rtol=1e-13, atol=1e-13)
