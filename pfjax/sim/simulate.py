@@ -28,6 +28,7 @@ from pfjax.controllers.base import Controller, Observation, step
 from pfjax.metrics import running
 from pfjax.models.slip import Pose, SlipParams, world_rhs
 from pfjax.paths.geometry import Projection, closest_parameter, global_parameter, measure, wrap_angle
+from pfjax.sim import sharding
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.slip_profiles import SlipProfile, slip_at
 from pfjax.sim.status import Status, classify
@@ -234,6 +235,8 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
         obs = _noisy(_observation(proj, pose, sc), sc.noise, k)
         if continuous:
             cmd = controller.output(gains, c, obs)
+        elif every == 1:  # every step: no conditional (it would split XLA's fused loop body)
+            cmd, c = step(controller, gains, c, obs, dt)
         else:
             cmd, c = jax.lax.cond(
                 k % every == 0,
@@ -259,7 +262,10 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     cmd0 = jnp.zeros_like(proj0.d)
     acc0 = running.init(proj0.d, jnp.clip(controller.output(gains, c0, _observation(proj0, pose0, sc)), -dmax, dmax))
     init = (pose0, c0, u0, cmd0, jnp.zeros_like(cmd0), (acc0, jnp.int32(Status.OK), jnp.asarray(jnp.nan, proj0.d.dtype)))
-    (pose, c, u, cmd, delta_last, health_carry), traj = jax.lax.scan(body, init, jnp.arange(n_steps))
+    # Reverse mode stores only the carry per step and recomputes the step (jax.checkpoint): the
+    # residuals of a whole step would cost far more memory traffic than recomputing it.
+    (pose, c, u, cmd, delta_last, health_carry), traj = jax.lax.scan(
+        jax.checkpoint(body, prevent_cse=False), init, jnp.arange(n_steps))
 
     # Final sample t_N (trapezoid end point).
     t_end = jnp.asarray(horizon, proj0.d.dtype)
@@ -279,9 +285,23 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
 
 
 @partial(jax.jit, static_argnames=("controller", "config"))
-def simulate_batch(scenarios: Scenario, *, controller: Controller, config: SimConfig) -> SimResult:
-    """Jitted, vmapped :func:`simulate` over a batch of scenarios (leading axis of every leaf)."""
+def _simulate_vmapped(scenarios: Scenario, *, controller: Controller, config: SimConfig) -> SimResult:
     return jax.vmap(lambda sc: simulate(controller, sc, config))(scenarios)
+
+
+def simulate_batch(scenarios: Scenario, *, controller: Controller, config: SimConfig, devices=None) -> SimResult:
+    """Jitted, vmapped :func:`simulate` over a batch of scenarios (leading axis of every leaf),
+    sharded over ``devices`` (default: every device JAX sees; :mod:`pfjax.sim.sharding`).
+
+    Compiled once per controller, ``config``, batch shape and device set. Under ``jit``/``grad``
+    the batch is not re-sharded (the outer call decides). Results are the same, run for run,
+    whatever the number of devices.
+    """
+    sharded, n = sharding.shard_batch(scenarios, devices)
+    return sharding.unpad(_simulate_vmapped(sharded, controller=controller, config=config), n)
+
+
+simulate_batch._cache_size = _simulate_vmapped._cache_size  # the jitted core's compilation count
 
 
 def stack(items):
