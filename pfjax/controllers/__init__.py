@@ -16,6 +16,7 @@ from pfjax.controllers.linear import (
     state_feedback_params,
     table3_assignments,
 )
+from pfjax.controllers.integral import IntegralParams, integral, integral_params
 from pfjax.controllers.trackers import (
     PurePursuitParams,
     RearWheelParams,
@@ -40,6 +41,7 @@ REGISTRY = {
     "stanley": (stanley, stanley_params),
     "pure_pursuit": (pure_pursuit, pure_pursuit_params),
     "rear_wheel": (rear_wheel, rear_wheel_params),
+    "integral": (integral, integral_params),
 }
 
 __all__ = [

@@ -16,10 +16,26 @@ from pfjax.synthesis.lmi import (
 from pfjax.synthesis.norms import closed_loop, h2_norm, hinf_norm, is_hurwitz
 from pfjax.synthesis.plant import Plant, slip_design_plant
 from pfjax.synthesis.regions import PoleRegion, region_contains
+from pfjax.synthesis.robust import (
+    RobustDesign,
+    integral_mixed,
+    integral_plant,
+    operating_point_plant,
+    polytope_vertices,
+    polytopic_mixed,
+    robust_mixed,
+)
 
 __all__ = [
     "Design",
     "Plant",
+    "RobustDesign",
+    "integral_mixed",
+    "integral_plant",
+    "operating_point_plant",
+    "polytope_vertices",
+    "polytopic_mixed",
+    "robust_mixed",
     "PoleRegion",
     "SynthesisError",
     "closed_loop",

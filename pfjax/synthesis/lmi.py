@@ -38,7 +38,42 @@ _ACCEPTED = ("optimal", "optimal_inaccurate")
 
 
 class SynthesisError(ValueError):
-    """An LMI synthesis problem was infeasible, unbounded or the solver failed."""
+    """An LMI synthesis problem was infeasible, unbounded, numerically ill-conditioned or the solver
+    failed. ``status`` carries the solver's status (``"infeasible"``, ``"unbounded"``,
+    ``"infeasible_inaccurate"``, ``"solver_error"``, ...) or ``"ill_conditioned"``."""
+
+    def __init__(self, message: str, status: str | None = None):
+        super().__init__(message)
+        self.status = status
+
+
+#: ``cond(X)`` above which ``K = Y X^-1`` is not trusted (SynthesisError "ill_conditioned");
+#: above ``_COND_WARN`` the design carries a warning.
+_COND_MAX = 1e14
+_COND_WARN = 1e9
+#: relative tolerance of the bound check (true norm <= LMI bound), covering solver accuracy.
+_BOUND_RTOL = 1e-5
+
+
+def bound_warnings(gamma_inf, gamma_2, hinf_true, h2_true, cond_X=None) -> tuple:
+    """Disagreements between LMI bounds and the independently computed true norms.
+
+    A valid design has ``||T_inf||_inf <= gamma_inf`` and ``||T_2||_2 <= gamma_2``; a true norm
+    above its bound by more than ``_BOUND_RTOL`` (relative) means the solver's answer is not a
+    certificate. Returns one message per disagreement (empty when all agree); each is also
+    issued as a ``RuntimeWarning``.
+    """
+    import warnings
+
+    out = []
+    for name, bound, true in (("H-inf", gamma_inf, hinf_true), ("H2", gamma_2, h2_true)):
+        if bound is not None and not (true <= bound * (1 + _BOUND_RTOL) + 1e-9):
+            out.append(f"true {name} norm {true:.6g} exceeds its LMI bound {bound:.6g}")
+    if cond_X is not None and cond_X > _COND_WARN:
+        out.append(f"Lyapunov matrix ill-conditioned: cond(X) = {cond_X:.3g}")
+    for msg in out:
+        warnings.warn(msg, RuntimeWarning, stacklevel=3)
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -57,6 +92,8 @@ class Design:
         solver_status: cvxpy status (``"optimal"`` or ``"optimal_inaccurate"``).
         alpha: weight on ``gamma_inf^2`` in the mixed objective (None otherwise).
         beta: weight on ``gamma_2^2`` in the mixed objective (None otherwise).
+        warnings: disagreements of the true norms with the LMI bounds, conditioning
+            (:func:`bound_warnings`; empty for a clean design).
     """
 
     method: str
@@ -70,6 +107,7 @@ class Design:
     solver_status: str
     alpha: float | None
     beta: float | None
+    warnings: tuple = ()
 
     def to_dict(self) -> dict:
         """JSON-serialisable view: lists and floats, poles as ``[[re, im], ...]``.
@@ -97,6 +135,7 @@ class Design:
             "solver_status": self.solver_status,
             "alpha": num(self.alpha),
             "beta": num(self.beta),
+            "warnings": list(self.warnings),
         }
 
 
@@ -117,12 +156,21 @@ def _solve_or_raise(prob: cp.Problem, what: str) -> str:
     except cp.error.SolverError as exc:
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise SynthesisError(
-            f"{what} failed: solver {_SOLVER} status 'solver_error' ({msg})"
+            f"{what} failed: solver {_SOLVER} status 'solver_error' ({msg})", "solver_error"
         ) from exc
     status = str(prob.status)
     if status not in _ACCEPTED or any(v.value is None for v in prob.variables()):
-        raise SynthesisError(f"{what} failed: solver {_SOLVER} status '{status}'")
+        raise SynthesisError(f"{what} failed: solver {_SOLVER} status '{status}'", status)
     return status
+
+
+def gain_from(X, Y, what: str) -> tuple[np.ndarray, float]:
+    """``K = Y X^-1`` and ``cond(X)``; raises ``SynthesisError("ill_conditioned")`` beyond ``_COND_MAX``."""
+    Xv = 0.5 * (X + X.T)
+    cond = float(np.linalg.cond(Xv))
+    if not np.isfinite(cond) or cond > _COND_MAX:
+        raise SynthesisError(f"{what} failed: Lyapunov matrix ill-conditioned (cond(X) = {cond:.3g})", "ill_conditioned")
+    return np.linalg.solve(Xv.T, np.asarray(Y).T).T, cond
 
 
 def _hinf_lmi(plant: Plant, X, Y, g_sq, eps: float):
@@ -207,23 +255,24 @@ def _solve(
 
     status = _solve_or_raise(cp.Problem(cp.Minimize(objective), cons), f"{method} synthesis")
 
-    Xv = 0.5 * (X.value + X.value.T)
-    K = np.linalg.solve(Xv.T, Y.value.T).T  # K = Y X^-1
+    K, cond = gain_from(X.value, Y.value, f"{method} synthesis")  # K = Y X^-1
     Acl, Bw, Cinf_cl, C2_cl = closed_loop(plant, K)
     gamma_inf = float(np.sqrt(max(float(g_sq.value), 0.0))) if use_hinf else None
     gamma_2 = float(np.sqrt(max(float(np.trace(W.value)), 0.0))) if use_h2 else None
+    hn, h2n = hinf_norm(Acl, Bw, Cinf_cl), h2_norm(Acl, Bw, C2_cl)
     return Design(
         method=method,
         K=K,
         gamma_inf=gamma_inf,
         gamma_2=gamma_2,
-        hinf_norm=hinf_norm(Acl, Bw, Cinf_cl),
-        h2_norm=h2_norm(Acl, Bw, C2_cl),
+        hinf_norm=hn,
+        h2_norm=h2n,
         closed_loop_poles=np.linalg.eigvals(Acl).astype(complex),
         solver=_SOLVER,
         solver_status=status,
         alpha=None if alpha is None else float(alpha),
         beta=None if beta is None else float(beta),
+        warnings=bound_warnings(gamma_inf, gamma_2, hn, h2n, cond),
     )
 
 
