@@ -238,8 +238,13 @@ def _load_study_or_usage(args):
         spec, _ = load_study(args.config, args.set)
     except ConfigError as e:
         raise UsageError(str(e)) from None
-    if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():
-        raise UsageError(f"--out: {args.out} exists and is not a directory")
+    if args.out is not None:
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise UsageError(f"--out: {args.out} exists and is not a directory")
+        parent = next((q for q in out.absolute().parents if q.exists()), None)
+        if parent is not None and not parent.is_dir():
+            raise UsageError(f"--out: {parent} is a file, expected a directory to write {out.name} into")
     return spec
 
 
@@ -258,11 +263,15 @@ def _cmd_study(args) -> dict:
 
     spec = _load_study_or_usage(args)
     out = Path(args.out) if args.out else Path("results") / spec.name
+    warn = lambda m: print(f"pfjax study: warning: {m}", file=sys.stderr)
     try:
-        summary = run(spec, out, progress=None if not args.quiet else False, report=not args.no_report)
+        summary = run(spec, out, progress=None if not args.quiet else False, report=not args.no_report,
+                      fresh=args.fresh, warn=warn)
     except ConfigError as e:
         raise UsageError(str(e)) from None
-    return _headline(summary, out)
+    head = _headline(summary, out)
+    head.update(warnings=summary.get("warnings", []), chunks=summary.get("chunks"))
+    return head
 
 
 def _cmd_report(args) -> dict:
@@ -338,6 +347,9 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "study":
             st.add_argument("--no-report", action="store_true", help="skip report.html")
             st.add_argument("--quiet", action="store_true", help="no progress bar")
+            st.add_argument("--fresh", action="store_true",
+                            help="discard the finished chunks of an interrupted run into --out and start over "
+                                 "(default: resume them; refused if the config changed)")
         st.add_argument("--json", action="store_true", help="print one JSON object")
         st.set_defaults(func=_cmd_study if name == "study" else _cmd_report)
     for module in EXTENSIONS:

@@ -180,16 +180,46 @@ class NoiseSpec(_Model):
 
 class PathSpec(_Model):
     """``line``, ``parabola``, ``sine`` (the source's), ``circle`` (radius), ``random`` (smooth random
-    spline paths with |kappa| <= curvature_margin * tan(delta_max) / L)."""
+    spline paths with |kappa| <= curvature_margin * tan(delta_max) / L), ``spline`` (a natural cubic
+    spline through the user's ``points`` [[x, y], ...] in m, travelled from the first point)."""
 
-    kind: Literal["line", "parabola", "sine", "circle", "random"]
+    kind: Literal["line", "parabola", "sine", "circle", "random", "spline"]
     name: str | None = None
     radius: Dist = dist_field(2.0)
     length: float = Field(40.0, gt=0, description="random paths: length, m")
     curvature_margin: float = Field(0.5, gt=0, le=1, description="random paths: fraction of the followable curvature")
     n_waypoints: int = Field(41, ge=4)
+    points: list[list[float]] | None = None
 
     _coerce = field_validator("radius", mode="before")(lambda v: _as_dist(v))
+
+    @field_validator("points")
+    @classmethod
+    def _points(cls, v):
+        if v is None:
+            return v
+        if len(v) < 4:
+            raise ValueError(f"a spline needs at least 4 points [x, y], got {len(v)}")
+        for i, q in enumerate(v):
+            if len(q) != 2:
+                raise ValueError(f"[{i}]: expected a point [x, y], got {q}")
+            if not all(math.isfinite(c) for c in q):
+                raise ValueError(f"[{i}]: coordinates must be finite, got {q}")
+        for i in range(1, len(v)):
+            if math.dist(v[i], v[i - 1]) <= 0:
+                raise ValueError(f"[{i}]: repeats point [{i - 1}] {v[i]}; consecutive points must differ (arc length must increase)")
+            if i >= 2:
+                a = (v[i - 1][0] - v[i - 2][0], v[i - 1][1] - v[i - 2][1])
+                b = (v[i][0] - v[i - 1][0], v[i][1] - v[i - 1][1])
+                if a[0] * b[0] + a[1] * b[1] <= 0:
+                    raise ValueError(f"[{i}]: the path turns back by 90 deg or more at point [{i - 1}]; points must advance along the path")
+        return v
+
+    @model_validator(mode="after")
+    def _check(self):
+        if (self.kind == "spline") != (self.points is not None):
+            raise ValueError("points: required for kind 'spline'" if self.kind == "spline" else f"points: only for kind 'spline', not {self.kind!r}")
+        return self
 
     @property
     def label(self) -> str:
@@ -262,6 +292,7 @@ class StudySpec(_Model):
     seed: int = Field(ge=0)
     chunk_size: int = Field(4096, ge=1)
     dtype: Literal["float32", "float64"] = "float32"
+    f64_check_runs: int = Field(64, ge=0, le=4096, description="float32 studies: runs per controller re-simulated in float64")
     sim: SimSpec = SimSpec()
     success: SuccessSpec = SuccessSpec()
     vehicle: VehicleSpec = VehicleSpec()
@@ -333,7 +364,7 @@ def _format(err: ValidationError) -> str:
     # model-level checks name their field first ("speed: must be ..."): join it to the key
     head, sep, rest = msg.partition(": ")
     if e["type"] == "value_error" and sep and " " not in head and "'" not in head:
-        key = head if key == "config" else f"{key}.{head}"
+        key = head if key == "config" else f"{key}{'' if head.startswith('[') else '.'}{head}"
         msg = rest
     if e["type"] == "missing":
         return f"{key}: required key is missing"

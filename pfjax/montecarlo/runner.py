@@ -10,7 +10,6 @@ Outputs are written to a temporary directory and moved into place when complete.
 from __future__ import annotations
 
 import shutil
-import tempfile
 import time
 from pathlib import Path
 
@@ -18,13 +17,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pandas as pd
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from pfjax import controllers as C
 from pfjax.config import ConfigError
 from pfjax.metrics.running import METRIC_NAMES
-from pfjax.montecarlo.config import ControllerSpec, StudySpec, study_hash
+from pfjax.montecarlo.chunks import ChunkStore, file_metadata
+from pfjax.montecarlo.config import ControllerSpec, StudySpec
 from pfjax.montecarlo.sampling import column_names, sample_runs
 from pfjax.sim.simulate import SimConfig, simulate_batch
 from pfjax.sim.status import STATUS_NAMES
@@ -67,80 +65,110 @@ def precision(spec: StudySpec):
     return jax.enable_x64(spec.dtype == "float64")
 
 
+#: Batches are padded to a multiple of this many runs. XLA's CPU code runs a vmapped batch through
+#: SIMD vector lanes plus a scalar remainder loop, and the two round differently (a run's metrics
+#: moved by ~1e-6 in float32, ~3e-15 in float64 with the batch size); with every batch a multiple
+#: of the widest vector (16 float32 lanes in AVX-512; 32 for margin), every run takes the vector
+#: path and a run's numbers do not depend on the chunk size (tests/test_determinism.py).
+BATCH_ALIGN = 32
+
+
+def batch_size(n: int) -> int:
+    """``n`` rounded up to a multiple of :data:`BATCH_ALIGN`."""
+    return -(-n // BATCH_ALIGN) * BATCH_ALIGN
+
+
 def _with_gains(sc, gains, n):
     return sc._replace(gains=jax.tree_util.tree_map(lambda g: jnp.broadcast_to(g, (n,) + jnp.shape(g)), gains))
 
 
-def _pad(tree, n_to):
-    n = jax.tree_util.tree_leaves(tree)[0].shape[0]
-    if n == n_to:
-        return tree
-    return jax.tree_util.tree_map(lambda a: jnp.concatenate([a, jnp.repeat(a[:1], n_to - n, axis=0)]), tree)
+def sample_aligned(spec: StudySpec, path_index: int, idx: np.ndarray, *, slip_override=None, pad_to: int | None = None):
+    """:func:`sample_runs` on ``idx`` padded (with copies of its first run) to ``max(pad_to, batch_size(len(idx)))``
+    runs: the scenarios keep the padded batch, the columns only the ``len(idx)`` real runs. Sampling is
+    vmapped too, so it is padded like the simulation (see :data:`BATCH_ALIGN`)."""
+    n = len(idx)
+    m = max(pad_to or 0, batch_size(n))
+    pad = lambda a: np.concatenate([np.asarray(a), np.repeat(np.asarray(a)[:1], m - n)])
+    sampled = sample_runs(spec, path_index, pad(idx), slip_override=None if slip_override is None else tuple(map(pad, slip_override)))
+    return sampled._replace(columns={k: v[:n] for k, v in sampled.columns.items()})
 
 
-def simulate_runs(spec: StudySpec, path_index: int, runs: np.ndarray, controllers, *, slip_override=None, chunk=None):
-    """Simulate ``runs`` of one path for every controller; yields ``(controller name, DataFrame)`` per chunk.
+def simulate_chunk(spec: StudySpec, path_index: int, idx: np.ndarray, name: str, controller, *, slip_override=None,
+                   pad_to: int | None = None) -> pd.DataFrame:
+    """Simulate runs ``idx`` of one path with one controller; one row per run (see module docstring).
+
+    The batch is padded to ``pad_to`` runs (default: the study's chunk, or fewer for a smaller
+    study) so every chunk of a study has one shape (one compilation per controller and path)."""
+    ctrl, gains, _ = controller
+    n = len(idx)
+    sampled = sample_aligned(spec, path_index, idx, slip_override=slip_override, pad_to=pad_to)
+    m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
+    res = jax.device_get(simulate_batch(_with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec)))
+    df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
+    for col in column_names(spec):
+        df[col] = np.asarray(sampled.columns[col], dtype=float) if col in sampled.columns else np.nan
+    for m in METRIC_NAMES:
+        df[m] = np.asarray(getattr(res.metrics, m))[:n]
+    df["status_code"] = np.asarray(res.status)[:n].astype(np.int8)
+    df["status"] = [STATUS_NAMES[int(s)] for s in df["status_code"]]
+    df["fail_time"] = np.asarray(res.fail_time, dtype=float)[:n]
+    df["success"] = df["success"].astype(bool)
+    return df
+
+
+def simulate_runs(spec: StudySpec, path_index: int, runs: np.ndarray, controllers, *, slip_override=None, chunk=None,
+                  store: ChunkStore | None = None, prefix: str = "runs"):
+    """Simulate ``runs`` of one path for every controller; yields ``(controller name, chunk key, DataFrame)``.
 
     Rows come in a canonical order (controller, then run) whatever the chunk size; each controller
-    re-samples the same chunks (deterministic), so memory stays O(chunk)."""
-    cfg = sim_config(spec)
+    re-samples the same chunks (deterministic), so memory stays O(chunk). With a ``store``, chunks
+    finished earlier are read back instead of simulated (resume)."""
     chunk = chunk or spec.chunk_size
-    for name, (controller, gains, _) in controllers.items():
+    pad_to = batch_size(min(chunk, max(spec.n_runs, len(runs))))  # the margin sweep pads up to the study's chunk
+    for ci, (name, controller) in enumerate(controllers.items()):
         for a in range(0, len(runs), chunk):
             idx = runs[a:a + chunk]
             over = None if slip_override is None else tuple(np.asarray(o)[a:a + chunk] for o in slip_override)
-            sampled = sample_runs(spec, path_index, idx, slip_override=over)
-            n = len(idx)
-            # One batch shape per study where possible: the margin sweep pads up to the study's chunk.
-            base = _pad(sampled.scenarios, min(chunk, max(spec.n_runs, len(runs))))
-            res = jax.device_get(simulate_batch(_with_gains(base, gains, jax.tree_util.tree_leaves(base)[0].shape[0]),
-                                                controller=controller, config=cfg))
-            df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
-            for col in column_names(spec):
-                df[col] = np.asarray(sampled.columns[col], dtype=float) if col in sampled.columns else np.nan
-            for m in METRIC_NAMES:
-                df[m] = np.asarray(getattr(res.metrics, m))[:n]
-            df["status_code"] = np.asarray(res.status)[:n].astype(np.int8)
-            df["status"] = [STATUS_NAMES[int(s)] for s in df["status_code"]]
-            df["fail_time"] = np.asarray(res.fail_time, dtype=float)[:n]
-            df["success"] = df["success"].astype(bool)
-            yield name, df
+            key = f"{prefix}-p{path_index:03d}-c{ci:03d}-{a:010d}"
+            compute = lambda: simulate_chunk(spec, path_index, idx, name, controller, slip_override=over, pad_to=pad_to)
+            yield name, key, (compute() if store is None else store.get(key, compute))
 
 
-def run_study(spec: StudySpec, out: Path, *, progress: bool | None = None, extra=None) -> dict:
+def run_study(spec: StudySpec, out: Path, *, progress: bool | None = None, extra=None, fresh: bool = False) -> dict:
     """Run ``spec``, write ``out/runs.parquet`` and return the run table's location and timings.
 
-    ``extra(tmp_dir, runs_path)`` is called before the directory is moved into place (the
-    summary and report are written there), so a failure leaves nothing half-written at ``out``.
+    Finished chunks are kept in :class:`~pfjax.montecarlo.chunks.ChunkStore` next to ``out``, so
+    re-running after an interruption resumes (``fresh=True`` discards them first). ``extra(tmp_dir,
+    runs_path, controllers, store)`` is called before the directory is moved into place (the margin
+    sweep, summary and report are written there), so a failure leaves nothing half-written at ``out``.
     """
     from tqdm import tqdm
 
     t0 = time.time()
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
+    with precision(spec):
+        controllers = {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
+    store = ChunkStore(out, spec, fresh=fresh)
+    tmp = store.assembly_dir()
     try:
         with precision(spec):
-            controllers = {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
             total = spec.n_runs * len(spec.paths) * len(controllers)
-            writer = None
+            keys = []
             with tqdm(total=total, desc=spec.name, unit="run", disable=None if progress is None else not progress) as bar:
                 for p in range(len(spec.paths)):
-                    for _, df in simulate_runs(spec, p, np.arange(spec.n_runs), controllers):
-                        table = pa.Table.from_pandas(df, preserve_index=False)
-                        if writer is None:
-                            meta = {b"pfjax.config_sha256": study_hash(spec).encode()}
-                            writer = pq.ParquetWriter(tmp / "runs.parquet", table.schema.with_metadata(meta))
-                        writer.write_table(table.cast(writer.schema))
+                    for _, key, df in simulate_runs(spec, p, np.arange(spec.n_runs), controllers, store=store):
+                        keys.append(key)
                         bar.update(len(df))
-            writer.close()
+            store.merge(keys, tmp / "runs.parquet", file_metadata(spec))
             info = {"wall_s_simulation": time.time() - t0, "gains": {k: v[2] for k, v in controllers.items()}}
             if extra is not None:
-                info.update(extra(tmp, tmp / "runs.parquet", controllers) or {})
+                info.update(extra(tmp, tmp / "runs.parquet", controllers, store) or {})
+        info["chunks"] = {"simulated": store.computed, "resumed": store.reused}
         if out.exists():
             shutil.rmtree(out)
         tmp.chmod(0o755)  # mkdtemp makes it private; results are for everyone who can read the parent
         tmp.rename(out)
+        store.discard()
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
@@ -149,13 +177,15 @@ def run_study(spec: StudySpec, out: Path, *, progress: bool | None = None, extra
 
 
 MARGIN_RUN_OFFSET = 1 << 30  # margin runs draw from their own index range (disjoint from the study's runs)
+MARGIN_COLUMNS = ["path", "controller", "axis", "amplitude_deg", "success", "status"]
 
 
-def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None) -> pd.DataFrame:
+def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None, store: ChunkStore | None = None) -> pd.DataFrame:
     """Success counts over the slip-amplitude grid, per controller, axis and amplitude (all paths pooled).
 
     Run ``j`` at amplitude index ``a`` on axis ``x`` uses run index ``OFFSET + (x * n_amp + a) * n + j``; its
     slip is ``A * sign`` with the sign drawn from the run's own key (so the sweep is deterministic).
+    With a ``store``, finished chunks of the sweep are resumed like the study's.
     """
     from tqdm import tqdm
 
@@ -171,11 +201,27 @@ def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None) 
                 signs = _signs(spec, p, runs)
                 br = amp * signs[:, 0] * (axis in ("rear", "joint"))
                 bf = amp * signs[:, 1] * (axis in ("front", "joint"))
-                for name, df in simulate_runs(spec, p, runs, controllers, slip_override=(br, bf)):
-                    df["axis"], df["amplitude_deg"] = axis, np.interp(df["run"].to_numpy(), runs, amp)
-                    rows.append(df[["path", "controller", "axis", "amplitude_deg", "success", "status"]])
+                sweep_store = None if store is None else _Project(store, lambda df, axis=axis, runs=runs, amp=amp: _margin_rows(df, axis, runs, amp))
+                for _, _, df in simulate_runs(spec, p, runs, controllers, slip_override=(br, bf), store=sweep_store,
+                                              prefix=f"margin-{axis}"):
+                    rows.append(df if store is not None else _margin_rows(df, axis, runs, amp))
                     bar.update(len(df))
     return pd.concat(rows, ignore_index=True)
+
+
+def _margin_rows(df: pd.DataFrame, axis: str, runs: np.ndarray, amp: np.ndarray) -> pd.DataFrame:
+    df = df.assign(axis=axis, amplitude_deg=np.interp(df["run"].to_numpy(), runs, amp))
+    return df[MARGIN_COLUMNS]
+
+
+class _Project:
+    """A view of a ChunkStore that stores ``project(chunk)`` instead of the whole chunk (the sweep keeps 6 columns)."""
+
+    def __init__(self, store: ChunkStore, project):
+        self.store, self.project = store, project
+
+    def get(self, key, compute):
+        return self.store.get(key, lambda: self.project(compute()))
 
 
 def _signs(spec: StudySpec, path_index: int, runs: np.ndarray) -> np.ndarray:

@@ -31,7 +31,8 @@ QUANTITIES = (
 Q = {name: i for i, name in enumerate(QUANTITIES)}
 
 #: Nominal start parameter of each path kind (the run's start is start_s metres along from it).
-NOMINAL_START = {"line": 0.0, "parabola": -2.0, "sine": 0.0, "circle": 0.0, "random": 2.0}  # random: 2 m of path behind the start
+NOMINAL_START = {"line": 0.0, "parabola": -2.0, "sine": 0.0, "circle": 0.0, "random": 2.0,  # random: 2 m of path behind the start
+                 "spline": 0.0}  # user-defined: the first point
 
 
 def run_keys(seed: int, path_index: int, runs: np.ndarray) -> jax.Array:
@@ -166,6 +167,8 @@ def _path(spec: PathSpec, key):
     if spec.kind == "circle":
         r = draw(spec.radius, _q(key, "radius"))
         return shapes.circle(radius=r, cy=r), {"radius": r}
+    if spec.kind == "spline":  # the same user-defined path for every run
+        return shapes.spline_through(np.asarray(spec.points, float)), {}
     raise AssertionError(spec.kind)
 
 

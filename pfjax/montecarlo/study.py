@@ -20,27 +20,43 @@ from pfjax.montecarlo.summary import summarize
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = None, report: bool = True) -> dict:
-    """Run a validated study; returns the summary."""
+def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = None, report: bool = True,
+        fresh: bool = False, warn=None) -> dict:
+    """Run a validated study; returns the summary.
+
+    Resumes an interrupted run of the same study into ``out`` (its finished chunks are reused);
+    ``fresh=True`` discards them and starts over. ``warn(message)`` receives each feasibility
+    warning (:func:`pfjax.montecarlo.checks.study_warnings`) before the simulation starts; the
+    warnings are also recorded in ``summary.json``.
+    """
     from pfjax.cli import dumps
+    from pfjax.montecarlo.checks import float64_check, study_warnings
+    from pfjax.montecarlo.runner import precision
 
     out = Path(out) if out is not None else Path("results") / spec.name
     t0 = time.time()
     result = {}
+    warnings = study_warnings(spec)
+    for w in warnings:
+        (warn or (lambda m: None))(w)
 
-    def finish(tmp: Path, runs_path: Path, controllers) -> dict:
-        sweep = margin_sweep(spec, controllers, progress=progress) if spec.margin.enabled else None
+    def finish(tmp: Path, runs_path: Path, controllers, store) -> dict:
+        sweep = margin_sweep(spec, controllers, progress=progress, store=store) if spec.margin.enabled else None
         if sweep is not None:
             sweep.to_parquet(tmp / "margin.parquet", index=False)
+            _stamp(tmp / "margin.parquet", spec)
         worst, worst_traj = {}, {}
         if spec.falsifier.enabled:
-            from pfjax.montecarlo.runner import precision
             from pfjax.montecarlo.worst_case import worst_cases
 
             with precision(spec):
                 worst, worst_traj = worst_cases(spec, controllers)
-        runs = pd.read_parquet(runs_path)
+        runs = read_runs(runs_path)
+        check = float64_check(spec, controllers, runs, spec.f64_check_runs)
         summary = summarize(spec, runs, sweep, gains={k: v[2] for k, v in controllers.items()}, wall_s=time.time() - t0)
+        summary["warnings"] = warnings
+        summary["float64_check"] = check
+        summary["chunks"] = {"simulated": store.computed, "resumed": store.reused}
         for name, block in worst.items():
             summary["controllers"][name]["worst_case"] = block
         if report:
@@ -52,8 +68,23 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         result["summary"] = summary
         return {}
 
-    run_study(spec, out, progress=progress, extra=finish)
+    run_study(spec, out, progress=progress, extra=finish, fresh=fresh)
     return result["summary"]
+
+
+def read_runs(path: Path) -> pd.DataFrame:
+    """``runs.parquet`` as a DataFrame (pandas >= 3 keeps the string columns Arrow-backed, a few bytes per run)."""
+    return pd.read_parquet(path)
+
+
+def _stamp(path: Path, spec: StudySpec) -> None:
+    """Rewrite a small Parquet file with the study's config, hash, seed and version in its metadata."""
+    import pyarrow.parquet as pq
+
+    from pfjax.montecarlo.chunks import file_metadata
+
+    t = pq.read_table(path)
+    pq.write_table(t.replace_schema_metadata({**(t.schema.metadata or {}), **file_metadata(spec)}), path)
 
 
 def main_from_args(config: str, overrides: list[str], out: str | None, report: bool) -> dict:

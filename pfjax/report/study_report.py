@@ -126,7 +126,9 @@ def _setup(cfg: dict, summary: dict) -> dict:
     for p in cfg["paths"]:
         extra = {"circle": f"radius {fmt_dist(p['radius'])} m",
                  "random": f"random smooth spline, length {p['length']:g} m, |κ| ≤ {p['curvature_margin']:g} · tan(δ_max)/L, "
-                           f"{p['n_waypoints']} waypoints, one per run"}
+                           f"{p['n_waypoints']} waypoints, one per run",
+                 "spline": f"user-defined: natural cubic spline through {len(p.get('points') or [])} points, "
+                           f"from ({(p.get('points') or [[0, 0]])[0][0]:g}, {(p.get('points') or [[0, 0]])[0][1]:g}) m"}
         paths.append({"name": p.get("name") or p["kind"], "kind": p["kind"],
                       "detail": extra.get(p["kind"], "the source's path")})
     ctrls = []
@@ -226,19 +228,39 @@ def _per_path_rows(summary: dict, colors: dict) -> list[list]:
 
 
 def _status_table(runs: pd.DataFrame, colors: dict) -> tuple[list[str], list[list]]:
-    """Per controller: successes, runs that ran to the end but missed the band, and every status."""
+    """Per controller and path (and the controller's total): successes, runs that ran to the end but
+    missed the band, and the count of every status code (:mod:`pfjax.sim.status`)."""
     names = list(STATUS_NAMES.values())
-    head = ["controller", "runs", "success", "ok but outside the band"] + [f"status {s}" for s in names]
+    head = ["controller", "path", "runs", "success", "ok but outside the band"] + [f"status {s}" for s in names]
     rows = []
-    for n, g in runs.groupby("controller", sort=False):
+
+    def row(n, path, g, total=False):
         ok = (g["status"] == "ok").to_numpy()
         succ = g["success"].to_numpy(bool)
         counts = g["status"].value_counts()
-        row = [_cell(n, swatch=colors[n]), _cell(str(len(g))), _cell(str(int(succ.sum())), cls="good"),
-               _cell(str(int((ok & ~succ).sum())), cls="warn" if (ok & ~succ).any() else "")]
-        row += [_cell(str(int(counts.get(s, 0))), cls="bad" if s != "ok" and counts.get(s, 0) else "") for s in names]
-        rows.append(row)
+        r = [_cell(n, swatch=colors[n]), _cell(path, cls="total" if total else ""), _cell(str(len(g))),
+             _cell(str(int(succ.sum())), cls="good"), _cell(str(int((ok & ~succ).sum())), cls="warn" if (ok & ~succ).any() else "")]
+        return r + [_cell(str(int(counts.get(s, 0))), cls="bad" if s != "ok" and counts.get(s, 0) else "") for s in names]
+
+    for n, g in runs.groupby("controller", sort=False):
+        by_path = list(g.groupby("path", sort=False))
+        rows += [row(n, p, gp) for p, gp in by_path]
+        if len(by_path) > 1:
+            rows.append(row(n, "all paths", g, total=True))
     return head, rows
+
+
+def _precision_rows(summary: dict, colors: dict) -> list[list]:
+    """The float32-vs-float64 check (:func:`pfjax.montecarlo.checks.float64_check`), one row per controller."""
+    chk = summary.get("float64_check") or {}
+    rows = []
+    for n, c in (chk.get("controllers") or {}).items():
+        mism = ", ".join(f"{m['path']} run {m['run']}: {m['float32']} vs {m['float64']}" for m in c["status_mismatches"][:3])
+        rows.append([_cell(n, swatch=colors.get(n, "#888")), _cell(str(c["n"])), _cell(fmt_num(c["max_abs_diff_iae"], 3)),
+                     _cell(fmt_num(c["max_rel_diff_iae"], 3)), _cell(fmt_num(c["max_abs_diff_late_max_abs_d"], 3)),
+                     _cell(fmt_pct(c["status_agreement"]), cls="" if c["status_agreement"] == 1 else "warn"),
+                     _cell(fmt_pct(c["success_agreement"]), cls="" if c["success_agreement"] == 1 else "warn"), _cell(mism or DASH)])
+    return rows
 
 
 def _worst_runs(runs: pd.DataFrame, params: list[str], n_show: int = 5) -> dict[str, list[list]]:
@@ -397,6 +419,8 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
         "n_sweep": 0 if sweep is None else len(sweep),
         "figures": _figures(out_dir, spec, summary, runs, colors, worst_trajectories),
         "worst_case_rows": _worst_case_rows(summary, colors),
+        "warnings": summary.get("warnings") or [], "precision_rows": _precision_rows(summary, colors),
+        "precision": summary.get("float64_check") or {}, "chunks": summary.get("chunks") or {},
         "wall": fmt_num(summary.get("wall_s"), 4),
         "written": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
     }

@@ -1,0 +1,132 @@
+"""Checks of a study that are not errors: feasibility warnings before it runs, precision after.
+
+:func:`study_warnings` flags paths that the robot cannot follow with its steering limit: the
+slip model (eq. 2) turns with curvature at most ``kappa_max = tan(delta_max) / L``, so a path
+whose curvature exceeds it (for the most restrictive vehicle of the distributions: smallest
+``delta_max``, largest ``L``) cannot be followed even without slip. Such a study still runs
+(failures are data); the warning goes to stderr and into ``summary.json``.
+
+:func:`float64_check` re-simulates a sample of a float32 study's runs in float64 (the same
+sampled scenarios and gains, cast up) and reports how far the metrics and statuses move.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+
+from pfjax.montecarlo.config import PathSpec, StudySpec
+from pfjax.sim.status import STATUS_NAMES
+
+#: Curvature of the source's fixed paths, max over their valid domain (1/m): y = x^2 peaks at 2a = 2
+#: at the vertex; y = sin x at A w^2 = 1.
+FIXED_MAX_CURVATURE = {"line": 0.0, "parabola": 2.0, "sine": 1.0}
+
+
+def path_max_curvature(p: PathSpec) -> float:
+    """Largest |curvature| (1/m) the path can have over the support of its distributions."""
+    if p.kind in FIXED_MAX_CURVATURE:
+        return FIXED_MAX_CURVATURE[p.kind]
+    if p.kind == "circle":
+        return 1.0 / p.radius.bounds()[0]
+    if p.kind == "spline":
+        from pfjax.paths import shapes
+        from pfjax.paths.geometry import curvature
+
+        with jax.enable_x64(True):
+            path = shapes.spline_through(np.asarray(p.points, float))
+            u = jnp.linspace(path.u_min, path.u_max, 4001)
+            return float(jnp.max(jnp.abs(curvature(path, u))))
+    return math.nan  # random paths are built below the followable curvature by construction
+
+
+def path_length(p: PathSpec) -> float:
+    """Length (m) of a user-defined spline path (inf for the built-in shapes, long enough by design)."""
+    if p.kind != "spline":
+        return math.inf
+    return float(np.linalg.norm(np.diff(np.asarray(p.points, float), axis=0), axis=1).sum())
+
+
+def study_warnings(spec: StudySpec) -> list[str]:
+    """One-line warnings: paths sharper than the steering limit allows, spline paths shorter than
+    the distance a run travels. Each names the path (``paths[i]``) and the numbers."""
+    v = spec.vehicle
+    dmax_lo, L_hi = v.delta_max_deg.bounds()[0], v.L.bounds()[1]
+    kappa_follow = math.tan(math.radians(dmax_lo)) / L_hi
+    travel = v.speed.bounds()[1] * spec.sim.horizon + spec.initial.start_s.bounds()[1]
+    out = []
+    for i, p in enumerate(spec.paths):
+        k = path_max_curvature(p)
+        if math.isfinite(k) and k > kappa_follow:
+            out.append(f"paths[{i}] ({p.label}): max curvature {k:.4g} 1/m exceeds tan(delta_max)/L = "
+                       f"tan({dmax_lo:g} deg)/{L_hi:g} m = {kappa_follow:.4g} 1/m: the robot cannot follow it "
+                       f"with its steering limit, even without slip")
+        length = path_length(p)
+        if travel > length:
+            out.append(f"paths[{i}] ({p.label}): {length:.4g} m long, but a run may travel {travel:.4g} m "
+                       f"(speed x horizon + start_s): runs that reach its end stop with status path_end")
+    return out
+
+
+def _cast64(tree):
+    return jax.tree_util.tree_map(
+        lambda a: jnp.asarray(np.asarray(a), jnp.float64) if jnp.issubdtype(jnp.asarray(a).dtype, jnp.floating) else a, tree)
+
+
+def sample_indices(spec: StudySpec, n_sample: int) -> np.ndarray:
+    """Run indices checked per path: ``ceil(n_sample / n_paths)`` spread evenly over the study's runs."""
+    k = min(spec.n_runs, max(1, math.ceil(n_sample / len(spec.paths))))
+    return np.unique(np.linspace(0, spec.n_runs - 1, k).round().astype(np.int64))
+
+
+def float64_check(spec: StudySpec, controllers: dict, runs: pd.DataFrame, n_sample: int) -> dict:
+    """Re-simulate ``n_sample`` runs per controller (spread over the paths) in float64 and compare
+    with the float32 rows of ``runs``: max |dIAE| (m s), max relative dIAE, max |d late max|, and the
+    runs whose status or success differs. The scenarios are sampled in float32 (exactly those the
+    study ran) and cast up, so only the arithmetic precision differs, except measurement noise,
+    which the simulator draws at the run's precision (a different realisation in float64)."""
+    from pfjax.montecarlo.runner import _with_gains, sample_aligned, sim_config
+    from pfjax.sim.simulate import simulate_batch
+
+    if spec.dtype == "float64" or n_sample <= 0:
+        return {"checked": False, "reason": "the study runs in float64" if spec.dtype == "float64" else "disabled (f64_check_runs = 0)"}
+    idx = sample_indices(spec, n_sample)
+    per = {}
+    for p, pspec in enumerate(spec.paths):
+        with jax.enable_x64(False):
+            sampled = sample_aligned(spec, p, idx)
+        m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
+        for name, (ctrl, gains, _) in controllers.items():
+            with jax.enable_x64(True):
+                sc = _cast64(sampled.scenarios)
+                res = jax.device_get(simulate_batch(_with_gains(sc, _cast64(gains), m), controller=ctrl, config=sim_config(spec)))
+                res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:len(idx)], res)
+            f32 = runs[(runs.path == pspec.label) & (runs.controller == name)].set_index("run").loc[idx]
+            block = per.setdefault(name, {"n": 0, "iae_abs": [], "iae_rel": [], "late": [], "status_mismatch": [], "success_mismatch": 0})
+            iae64 = np.asarray(res.metrics.iae, float)
+            iae32 = f32["iae"].to_numpy(float)
+            both = np.isfinite(iae64) & np.isfinite(iae32)
+            block["n"] += len(idx)
+            block["iae_abs"] += list(np.abs(iae64 - iae32)[both])
+            block["iae_rel"] += list((np.abs(iae64 - iae32) / np.maximum(np.abs(iae64), 1e-12))[both])
+            block["late"] += list(np.abs(np.asarray(res.metrics.late_max_abs_d, float) - f32["late_max_abs_d"].to_numpy(float))[both])
+            st64 = np.asarray(res.status).astype(int)
+            for r, a, b in zip(idx, f32["status_code"].to_numpy(int), st64):
+                if a != b:
+                    block["status_mismatch"].append({"path": pspec.label, "run": int(r), "float32": STATUS_NAMES[a], "float64": STATUS_NAMES[int(b)]})
+            block["success_mismatch"] += int((np.asarray(res.metrics.success, bool) != f32["success"].to_numpy(bool)).sum())
+    out = {"checked": True, "n_per_controller": int(len(idx) * len(spec.paths)), "run_indices": idx.tolist(),
+           "noise_realisation_differs": bool(spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0), "controllers": {}}
+    for name, b in per.items():
+        mx = lambda xs: float(max(xs)) if xs else None
+        out["controllers"][name] = {
+            "n": b["n"], "max_abs_diff_iae": mx(b["iae_abs"]), "max_rel_diff_iae": mx(b["iae_rel"]),
+            "max_abs_diff_late_max_abs_d": mx(b["late"]), "status_agreement": 1 - len(b["status_mismatch"]) / b["n"],
+            "success_agreement": 1 - b["success_mismatch"] / b["n"], "status_mismatches": b["status_mismatch"][:20],
+        }
+    return out
+

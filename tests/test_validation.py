@@ -1,0 +1,169 @@
+"""Malformed input, table-driven: every case gives exit code 2, exactly one line on stderr that names
+the flag or key and contains the expected message, nothing on stdout and nothing written.
+
+Cases go through the command line entry point ``pfjax.cli.main`` in-process (argument parsing and
+validation happen before anything is computed) and, for study configs, also through
+``pfjax.montecarlo.config.load_study``. Feasibility problems that are not errors (a path sharper
+than the steering limit allows, a user path shorter than the runs travel) are warnings.
+"""
+
+import copy
+
+import pytest
+
+from pfjax.cli import main
+from pfjax.config import ConfigError
+from pfjax.montecarlo.checks import study_warnings
+from pfjax.montecarlo.config import load_study
+
+STUDY = """name = "v"
+n_runs = 4
+seed = 1
+chunk_size = 4
+[sim]
+horizon = 2.0
+steady_window = 1.0
+[success]
+from_s = 1.0
+[margin]
+enabled = false
+[[paths]]
+kind = "line"
+[[controllers]]
+name = "st"
+type = "stanley"
+"""
+DATA = {"name": "v", "n_runs": 4, "seed": 1, "chunk_size": 4, "sim": {"horizon": 2.0, "steady_window": 1.0},
+        "success": {"from_s": 1.0}, "margin": {"enabled": False}, "paths": [{"kind": "line"}],
+        "controllers": [{"name": "st", "type": "stanley"}]}
+SPLINE = "paths[0]={kind='spline', points=%s}"
+SIM = ["simulate", "--path", "line", "--controller", "pi"]
+
+#: (argv after ``pfjax``, the message expected on the one stderr line). ``CFG`` is replaced by the
+#: study file, ``FILE`` by an existing regular file.
+CLI_CASES = [
+    (["synth", "--v", "0"], "--v: must be > 0 m/s, got 0"),
+    (["synth", "--L", "-0.2"], "--L: must be > 0 m, got -0.2"),
+    (["synth", "--v", "nan"], "--v: expected a finite number, got nan"),
+    (["synth", "--alpha", "-1"], "--alpha/--beta: must be >= 0 and not both 0"),
+    (["synth", "--disk", "-5", "0"], "--disk: radius must be > 0, got 0"),
+    (["synth", "--sector-deg", "90"], "--sector-deg: expected a half-angle in (0, 90), got 90"),
+    (["synth", "--method", "lqg"], "argument --method: invalid choice: 'lqg'"),
+    (SIM + ["--beta-r-deg", "90"], "--beta-r-deg: magnitude must be < 90 deg, got 90"),
+    (SIM + ["--beta-f-deg", "-120"], "--beta-f-deg: magnitude must be < 90 deg, got -120"),
+    (SIM + ["--delta-max-deg", "90"], "--delta-max-deg: magnitude must be < 90 deg, got 90"),
+    (SIM + ["--delta-max-deg", "0"], "--delta-max-deg: must be > 0 deg, got 0"),
+    (SIM + ["--v", "-1"], "--v: must be > 0 m/s, got -1"),
+    (SIM + ["--L", "0"], "--L: must be > 0 m, got 0"),
+    (SIM + ["--dt", "0"], "--dt: must be > 0 s, got 0"),
+    (SIM + ["--T", "inf"], "--T: expected a finite number, got inf"),
+    (SIM + ["--dt", "2", "--T", "1"], "--dt: must be <= --T (1 s), got 2"),
+    (SIM + ["--control-every", "0"], "--control-every: must be a positive integer, got 0"),
+    (SIM + ["--x0", "1", "nan", "0"], "--x0 Y: expected a finite number, got nan"),
+    (SIM + ["--gains", "1,2,3,4,5,6"], "--gains: expected up to 5 comma-separated numbers"),
+    (SIM + ["--gains", "kp_d=nan"], "--gains: expected a finite number, got nan"),
+    (SIM + ["--gains", "kp=1"], "--gains: unknown gain 'kp' for --controller pi"),
+    (SIM + ["--gains", "kp_d=fast"], "--gains: kp_d='fast' is not a number"),
+    (["simulate", "--path", "spiral", "--controller", "pi"], "argument --path: invalid choice: 'spiral'"),
+    (SIM + ["--v", "fast"], "argument --v: invalid float value: 'fast'"),
+    (["study", "missing.toml"], "config: file not found: missing.toml"),
+    (["study", "CFG", "--set", "n_runz=3"], "n_runz: unknown key (did you mean 'n_runs'?)"),
+    (["study", "CFG", "--set", "nokey"], "--set: expected key=value, got 'nokey'"),
+    (["study", "CFG", "--set", "n_runs=1.5"], "n_runs: Input should be a valid integer"),
+    (["study", "CFG", "--set", "seed='x'"], "seed: Input should be a valid integer"),
+    (["study", "CFG", "--set", "vehicle.L=0"], "vehicle.L: must be > 0 over its whole range, got a lower bound 0"),
+    (["study", "CFG", "--set", "vehicle.speed={dist='uniform', low=-1, high=1}"], "vehicle.speed: must be > 0 over its whole range"),
+    (["study", "CFG", "--set", "vehicle.delta_max_deg=90"], "vehicle.delta_max_deg: must lie in (0, 90) deg, got range [90, 90]"),
+    (["study", "CFG", "--set", "slip.beta_r_deg=-90"], "slip.beta_r_deg: slip magnitudes must stay below 90 deg"),
+    (["study", "CFG", "--set", "slip.beta_r_deg={dist='uniform', low=5, high=1}"], "slip.beta_r_deg: needs low < high, got low=5, high=1"),
+    (["study", "CFG", "--set", "slip.beta_f_deg={dist='uniform', low=nan, high=1}"], "slip.beta_f_deg: 'low' must be finite, got nan"),
+    (["study", "CFG", "--set", "initial.start_s={dist='choice', values=[]}"], "initial.start_s: 'values' must be a non-empty list"),
+    (["study", "CFG", "--set", "sim.dtt=0.1"], "sim.dtt: unknown key (did you mean 'sim.dt'?)"),
+    (["study", "CFG", "--set", "paths[0].radus=3"], "paths[0].radus: unknown key (did you mean 'paths[0].radius'?)"),
+    (["study", "CFG", "--set", SPLINE % "[[0, 0], [1, 0]]"], "paths[0].points: a spline needs at least 4 points [x, y], got 2"),
+    (["study", "CFG", "--set", SPLINE % "[[0, 0], [1, 0], [1, 0], [2, 0]]"], "paths[0].points[2]: repeats point [1]"),
+    (["study", "CFG", "--set", SPLINE % "[[0, 0], [1, nan], [2, 0], [3, 0]]"], "paths[0].points[1]: coordinates must be finite"),
+    (["study", "CFG", "--set", SPLINE % "[[0, 0], [1, 0], [0.5, 0], [2, 0]]"], "paths[0].points[2]: the path turns back"),
+    (["study", "CFG", "--set", SPLINE % "[[0, 0], [1], [2, 0], [3, 0]]"], "paths[0].points[1]: expected a point [x, y]"),
+    (["study", "CFG", "--set", "paths[0]={kind='spline'}"], "paths[0].points: required for kind 'spline'"),
+    (["study", "CFG", "--set", "paths[0].points=[[0, 0], [1, 0], [2, 0], [3, 0]]"], "paths[0].points: only for kind 'spline'"),
+    (["study", "CFG", "--set", "controllers[0]={name='k', type='state_feedback', K=[1.0]}"], "controllers[0]: state_feedback needs K = [k_d, k_theta]"),
+    (["study", "CFG", "--set", "controllers[0].gains={k=nan}"], "controllers[0]: gains must be finite"),
+    (["study", "CFG", "--set", "controllers[3].K=[1, 2]"], "controllers[3]: no such list element"),
+    (["study", "CFG", "--set", "f64_check_runs=-1"], "f64_check_runs: Input should be greater than or equal to 0"),
+    (["study", "CFG", "--out", "FILE"], "--out: FILE exists and is not a directory"),
+    (["study", "CFG", "--out", "FILE/sub"], "is a file, expected a directory to write sub into"),
+    (["report", "CFG", "--out", "EMPTY"], "--out: no finished study in EMPTY"),
+]
+
+
+@pytest.fixture
+def files(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.toml").write_text(STUDY)
+    (tmp_path / "a_file").write_text("not a directory")
+    return {"CFG": "s.toml", "FILE": "a_file", "EMPTY": "empty_dir"}
+
+
+def _sub(arg: str, files: dict) -> str:
+    for k, v in files.items():
+        arg = arg.replace(k, v)
+    return arg
+
+
+@pytest.mark.parametrize("argv,expected", CLI_CASES, ids=[" ".join(a)[:60] for a, _ in CLI_CASES])
+def test_cli_rejects_malformed_input(files, tmp_path, capsys, argv, expected):
+    before = sorted(p.name for p in tmp_path.iterdir())
+    argv = [_sub(a, files) for a in argv]
+    try:
+        code = main(argv)
+    except SystemExit as e:  # argparse's own errors (invalid choice, not a number)
+        code = e.code
+    out, err = capsys.readouterr()
+    assert code == 2, (argv, err)
+    assert out == "", out
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"pfjax {argv[0]}: error: "), lines[0]
+    assert _sub(expected, files) in lines[0], lines[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written
+
+
+def test_table_has_at_least_30_cases():
+    assert len(CLI_CASES) >= 30
+
+
+STUDY_CASES = [(a[3], e) for a, e in CLI_CASES if a[0] == "study" and len(a) == 4 and a[2] == "--set" and not e.startswith("--set")]
+
+
+@pytest.mark.parametrize("override,expected", STUDY_CASES, ids=[o[:50] for o, _ in STUDY_CASES])
+def test_load_study_rejects_malformed_config(override, expected):
+    with pytest.raises(ConfigError) as e:
+        load_study(data=copy.deepcopy(DATA), overrides=[override])
+    assert str(e.value) .startswith(expected.split(":")[0] + ":"), str(e.value)
+    assert expected in str(e.value) and "\n" not in str(e.value)
+
+
+def test_malformed_toml_file(tmp_path):
+    (tmp_path / "bad.toml").write_text("name = \n")
+    with pytest.raises(ConfigError, match=r"^config: .*bad.toml: invalid TOML"):
+        load_study(tmp_path / "bad.toml")
+
+
+def test_feasibility_warnings_name_the_path_and_the_numbers():
+    """A circle tighter than the steering allows and a spline shorter than the runs travel are
+    warnings, not errors; followable paths give none."""
+    data = copy.deepcopy(DATA)
+    data["paths"] = [{"kind": "line"}, {"kind": "sine"}, {"kind": "parabola"},
+                     {"kind": "circle", "radius": {"dist": "uniform", "low": 0.3, "high": 2.0}},
+                     {"kind": "spline", "name": "u", "points": [[0, 0], [0.5, 0.1], [1, 0], [1.5, 0.1]]}]
+    spec, _ = load_study(data=data)
+    w = study_warnings(spec)
+    assert len(w) == 2, w
+    assert w[0].startswith("paths[3] (circle): max curvature 3.333 1/m exceeds tan(delta_max)/L") and "2.887 1/m" in w[0]
+    assert w[1].startswith("paths[4] (u): 1.") and "status path_end" in w[1]
+    # the parabola's vertex curvature (2 1/m) becomes unfollowable with a 20 deg steering limit: tan(20 deg)/0.2 = 1.82
+    spec, _ = load_study(data=copy.deepcopy(DATA), overrides=["paths[0].kind='parabola'", "vehicle.delta_max_deg=20"])
+    assert study_warnings(spec) == [
+        "paths[0] (parabola): max curvature 2 1/m exceeds tan(delta_max)/L = tan(20 deg)/0.2 m = 1.82 1/m: "
+        "the robot cannot follow it with its steering limit, even without slip"]
