@@ -1,0 +1,163 @@
+"""Tuning costs: a controller's parameters -> one number over a batch of scenarios.
+
+Per run ``i`` (metrics from :mod:`pfjax.metrics.running`, ``SimConfig(record=False)``)::
+
+    J_i = M_i + w_u * int delta^2 dt + P * [run i failed]
+
+with ``M`` one of IAE ``int |d| dt`` (m s, the source's eq. 15 as assumed in spec §5), ISE
+``int d^2 dt`` (m^2 s) or ITAE ``int t |d| dt`` (m s^2), ``w_u`` the control-effort weight
+(``effort``, per rad^2 s) and ``P`` the failure penalty (``fail_penalty``, in the metric's
+units; a failed run's metrics stop accumulating at the failure, so without it a run that
+diverges early would look cheap). Over the batch ``J_1..J_n``:
+
+* ``mean``: ``(1/n) sum J_i``;
+* ``quantile``: the ``level`` quantile (linear interpolation between order statistics);
+* ``cvar``: the mean of the ``k = ceil((1 - level) n)`` largest ``J_i`` (conditional value at
+  risk, the expected cost of the worst ``1 - level`` fraction).
+
+All three are piecewise smooth in ``J`` (through ``sort``), so ``jax.grad`` gives the gradient
+of the active order statistics. The same function serves the GA (batched, forward only) and
+gradient tuning, so both optimise exactly the same number.
+
+Parameters are tuned as a flat vector ``theta`` inside a box; :class:`Tunable` maps it to the
+controller's gains pytree (the other gain fields stay at their base values).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from pfjax.controllers.base import Controller
+from pfjax.sim.simulate import Scenario, SimConfig, simulate
+from pfjax.sim.status import Status
+
+METRICS = ("iae", "ise", "itae")
+AGGREGATES = ("mean", "quantile", "cvar")
+
+#: Default tunable fields and search box of each registry controller (box: the GA's bounds, the
+#: gradient's projection set). PI: around Table 3 (1.6390, 0.0230, 39.5204, 11.6124);
+#: state feedback: K < 0 (the stabilising quadrant, spec §7).
+DEFAULT_BOXES = {
+    "pi": (("kp_d", "ki_d", "kp_theta", "ki_theta"), (0.0, 0.0, 0.0, 0.0), (60.0, 5.0, 30.0, 1.0)),
+    "state_feedback": (("K",), (-20.0, -10.0), (0.0, 0.0)),
+    "integral": (("K",), (-20.0, -10.0, -20.0), (0.0, 0.0, 0.0)),
+    "stanley": (("k", "k_soft"), (0.1, 0.01), (20.0, 2.0)),
+    "pure_pursuit": (("ld_gain", "ld_min"), (0.05, 0.05), (3.0, 2.0)),
+    "rear_wheel": (("k_theta", "k_d"), (0.1, 0.1), (20.0, 40.0)),
+}
+
+
+class CostSpec(NamedTuple):
+    """What is minimised (see the module docstring)."""
+
+    metric: str = "iae"  # iae | ise | itae
+    effort: float = 0.0  # weight on int delta^2 dt (metric units per rad^2 s)
+    aggregate: str = "mean"  # mean | quantile | cvar
+    level: float = 0.9  # quantile / CVaR level
+    fail_penalty: float = 100.0  # added to a failed run's cost (metric units)
+
+    def check(self) -> "CostSpec":
+        if self.metric not in METRICS:
+            raise ValueError(f"cost.metric: value {self.metric!r}, expected one of {list(METRICS)}")
+        if self.aggregate not in AGGREGATES:
+            raise ValueError(f"cost.aggregate: value {self.aggregate!r}, expected one of {list(AGGREGATES)}")
+        if not 0.0 < self.level < 1.0:
+            raise ValueError(f"cost.level: value {self.level}, expected in (0, 1)")
+        if not self.effort >= 0.0:
+            raise ValueError(f"cost.effort: value {self.effort}, expected >= 0")
+        return self
+
+
+class Tunable(NamedTuple):
+    """A flat parameter vector ``theta`` <-> gain fields of a controller's parameter pytree."""
+
+    base: Any  # the gains pytree (a NamedTuple); untuned fields keep these values
+    fields: tuple  # names of the tuned fields, in order (each a scalar or a vector)
+
+    @property
+    def sizes(self) -> tuple:
+        return tuple(int(np.size(getattr(self.base, f))) for f in self.fields)
+
+    def flatten(self, gains=None) -> np.ndarray:
+        g = self.base if gains is None else gains
+        return np.concatenate([np.ravel(np.asarray(getattr(g, f), dtype=np.float64)) for f in self.fields])
+
+    def gains(self, theta) -> Any:
+        """The gains pytree with ``theta`` written into the tuned fields (traceable)."""
+        out, i = {}, 0
+        for f, n in zip(self.fields, self.sizes):
+            shape = jnp.shape(getattr(self.base, f))
+            out[f] = jnp.reshape(theta[i : i + n], shape)
+            i += n
+        return self.base._replace(**out)
+
+    def named(self, theta) -> dict:
+        """``{field: value}`` with vectors as lists (for JSON)."""
+        g = self.gains(np.asarray(theta, dtype=np.float64))
+        return {f: (np.asarray(getattr(g, f)).tolist()) for f in self.fields}
+
+
+def run_costs(metrics, status, spec: CostSpec):
+    """``J_i`` of each run (module docstring); ``metrics`` / ``status`` batched along axis 0."""
+    m = getattr(metrics, spec.metric)
+    failed = status != Status.OK
+    return m + spec.effort * metrics.steer_energy + spec.fail_penalty * failed.astype(m.dtype)
+
+
+def aggregate(J, spec: CostSpec):
+    """Mean / quantile / CVaR of the per-run costs ``J`` (shape ``(n,)``)."""
+    if spec.aggregate == "mean":
+        return jnp.mean(J)
+    if spec.aggregate == "quantile":
+        return jnp.quantile(J, spec.level)
+    k = max(1, int(math.ceil((1.0 - spec.level) * J.shape[0])))
+    return jnp.mean(jnp.sort(J)[-k:])
+
+
+def batch_cost(controller: Controller, tunable: Tunable, scenarios, config: SimConfig, spec: CostSpec):
+    """``cost(theta) -> scalar`` over ``scenarios`` (their ``gains`` are ignored).
+
+    ``scenarios`` is one batched :class:`Scenario` or a list of them (one per path shape: a batch
+    holds one path type); the runs of all are pooled before aggregation. Pure and traceable
+    (``jax.grad``/``jax.vmap`` it); one call simulates :func:`n_scenarios` rollouts.
+    """
+    spec = spec.check()
+    config = config if not config.record else _no_record(config)
+    batches = [scenarios] if isinstance(scenarios, Scenario) else list(scenarios)
+
+    def cost(theta):
+        g = tunable.gains(theta)
+        J = [run_costs(*_sim(controller, b, g, config), spec) for b in batches]
+        return aggregate(jnp.concatenate(J), spec)
+
+    return cost
+
+
+def population_cost(controller: Controller, tunable: Tunable, scenarios: Scenario, config: SimConfig, spec: CostSpec):
+    """Jitted ``(P, D) -> (P,)`` costs for the GA (``P x n`` rollouts per call)."""
+    cost = batch_cost(controller, tunable, scenarios, config, spec)
+    f = jax.jit(jax.vmap(cost))
+    dtype = jnp.result_type(float)
+    return lambda X: np.asarray(f(jnp.asarray(X, dtype)), dtype=np.float64)
+
+
+def _sim(controller, batch, gains, config):
+    res = jax.vmap(lambda sc: simulate(controller, sc._replace(gains=gains), config))(batch)
+    return res.metrics, res.status
+
+
+def n_scenarios(scenarios) -> int:
+    """Rollouts per cost evaluation (runs in one batch or a list of batches)."""
+    batches = [scenarios] if isinstance(scenarios, Scenario) else list(scenarios)
+    return sum(int(jax.tree_util.tree_leaves(b.pose0)[0].shape[0]) for b in batches)
+
+
+def _no_record(config: SimConfig) -> SimConfig:
+    import dataclasses
+
+    return dataclasses.replace(config, record=False)

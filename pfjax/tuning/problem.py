@@ -1,0 +1,126 @@
+"""Tuning problems: controller + scenario set + cost -> one call to the GA or to gradient descent.
+
+A :class:`Problem` bundles what both optimisers need; :func:`tune` runs either on it and returns
+a :class:`~pfjax.tuning.gradient.TuneResult` (same fields for both, so they compare directly).
+
+Scenario sets (``scenario`` argument):
+
+* ``"paper-line"``, ``"paper-parabola"``, ``"paper-sine"``: the source's test (spec §6, constant
+  slip 5°, one rollout per cost evaluation);
+* ``"paper-all"``: the three tests pooled (3 rollouts per evaluation);
+* a study TOML path (``CONFIG``): ``n_runs`` runs per path sampled by
+  :func:`pfjax.montecarlo.sampling.sample_runs` with the study's seed (a training set; held-out
+  sets use other run indices), the study's simulation settings.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import jax
+import numpy as np
+
+from pfjax import controllers as C
+from pfjax.sim.simulate import SimConfig
+from pfjax.tuning.cost import DEFAULT_BOXES, CostSpec, Tunable, batch_cost, n_scenarios, population_cost
+from pfjax.tuning.ga import GAOptions
+from pfjax.tuning.gradient import TuneResult, ga_tune, gradient_tune
+
+PAPER_SETS = {"paper-line": ("line",), "paper-parabola": ("parabola",), "paper-sine": ("sine",),
+              "paper-all": ("line", "parabola", "sine")}
+
+
+class Problem(NamedTuple):
+    controller: Any  # pfjax Controller
+    tunable: Tunable
+    scenarios: list  # batched Scenarios, one per path shape
+    config: SimConfig
+    cost: CostSpec
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @property
+    def n_per_eval(self) -> int:
+        return n_scenarios(self.scenarios)
+
+
+def make_problem(controller: str, scenario: str, *, cost: CostSpec = CostSpec(), config: SimConfig | None = None,
+                 n_runs: int = 16, run_offset: int = 0, base_gains=None, box=None) -> Problem:
+    """Build a problem (``controller``: a :data:`pfjax.controllers.REGISTRY` name).
+
+    Args:
+        controller: registry name (``pi``, ``state_feedback``, ``integral``, ``stanley``, ...).
+        scenario: a paper set name or a study TOML path (module docstring).
+        cost: what is minimised.
+        config: simulation settings (``record`` is forced off); default ``SimConfig()`` for paper
+            sets, the study's for a TOML.
+        n_runs: runs per path sampled from a study TOML; ``run_offset``: first run index.
+        base_gains: gains pytree for the untuned fields (default: the registry's defaults).
+        box: ``(fields, lower, upper)`` overriding :data:`pfjax.tuning.cost.DEFAULT_BOXES`.
+    """
+    from pfjax.sim.simulate import stack
+
+    ctrl, factory = C.REGISTRY[controller]
+    fields, lo, hi = box or DEFAULT_BOXES[controller]
+    base = factory() if base_gains is None else base_gains
+    tun = Tunable(base, tuple(fields))
+    if scenario in PAPER_SETS:
+        from pfjax.scenarios import paper_scenario
+
+        batches = [stack([paper_scenario(t, base)]) for t in PAPER_SETS[scenario]]
+        cfg = config or SimConfig(record=False)
+    else:
+        from pfjax.montecarlo.config import load_study
+        from pfjax.montecarlo.runner import sim_config
+        from pfjax.montecarlo.sampling import sample_runs
+
+        spec, _ = load_study(Path(scenario))
+        runs = np.arange(run_offset, run_offset + n_runs)
+        batches = []
+        for i in range(len(spec.paths)):
+            sc = sample_runs(spec, i, runs).scenarios
+            batches.append(sc._replace(gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(g, (n_runs,) + np.shape(g)), base)))
+        cfg = config or sim_config(spec)
+    import dataclasses
+
+    cfg = dataclasses.replace(cfg, record=False)
+    return Problem(ctrl, tun, batches, cfg, cost.check(), np.asarray(lo, float), np.asarray(hi, float))
+
+
+def evaluate(problem: Problem, theta) -> float:
+    """The problem's cost at ``theta`` (one evaluation, ``n_per_eval`` rollouts)."""
+    import jax.numpy as jnp
+
+    _cost_fns(problem)
+    return float(_COSTS[id(problem)][3](jnp.asarray(theta, jnp.result_type(float))))
+
+
+_COSTS: dict = {}
+
+
+def _cost_fns(problem: Problem):
+    """(scalar cost, population cost) of a problem, built once per Problem object so repeated
+    tuning runs (seeds) reuse the compiled functions."""
+    entry = _COSTS.get(id(problem))
+    if entry is None or entry[0] is not problem:
+        args = (problem.controller, problem.tunable, problem.scenarios, problem.config, problem.cost)
+        f = batch_cost(*args)
+        entry = (problem, f, population_cost(*args), jax.jit(f))
+        _COSTS[id(problem)] = entry
+    return entry[1], entry[2]
+
+
+def tune(problem: Problem, method: str, *, key, ga_options: GAOptions = GAOptions(), steps: int = 100,
+         n_starts: int = 1, learning_rate: float = 0.05, theta0=None, progress: bool = False) -> TuneResult:
+    """Run ``method`` (``"ga"`` or ``"gradient"``) on ``problem``; the gradient starts at ``theta0``
+    or uniformly in the box from ``key``."""
+    f_scalar, f_pop = _cost_fns(problem)
+    if method == "ga":
+        f = f_pop
+        return ga_tune(f, problem.lower, problem.upper, key=key, options=ga_options, n_per_eval=problem.n_per_eval,
+                       progress=progress)
+    if method == "gradient":
+        return gradient_tune(f_scalar, problem.lower, problem.upper, theta0=theta0, key=key, steps=steps,
+                             n_starts=n_starts, n_per_eval=problem.n_per_eval, learning_rate=learning_rate, progress=progress)
+    raise ValueError(f"method: value {method!r}, expected 'ga' or 'gradient'")

@@ -1,0 +1,112 @@
+"""Gradient tuning: gradients vs central finite differences, cost aggregates, the optimiser, `pfjax tune`."""
+
+import dataclasses
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from pfjax import controllers as C
+from pfjax.sim import SimConfig
+from pfjax.tuning.cost import CostSpec, aggregate, batch_cost
+from pfjax.tuning.gradient import gradient_tune
+from pfjax.tuning.problem import make_problem
+
+SHORT = SimConfig(dt=0.01, horizon=6.0, record=False)
+
+
+def _fd(f, th, h):
+    return np.array([(f(th.at[i].add(h)) - f(th.at[i].add(-h))) / (2 * h) for i in range(th.size)])
+
+
+def _sine_batch(controller):
+    from pfjax.scenarios import paper_scenario
+    from pfjax.sim import stack
+    from pfjax.tuning.cost import Tunable
+    from pfjax.tuning.problem import Problem
+
+    ctrl, factory = C.REGISTRY[controller]
+    base = factory()
+    batch = stack([paper_scenario("sine", base, beta_r_deg=b, beta_f_deg=-b / 2) for b in (-6.0, 0.0, 5.0, 9.0)])
+    return ctrl, base, batch
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["pi-line-iae", "integral-sine-cvar"])
+def test_gradient_matches_central_differences(case):
+    # float64, h = 1e-6 (gains of order 1-40): truncation O(h^2) and rounding O(eps/h) are both
+    # < 1e-8, so 1e-5 relative (plus 1e-8 absolute) is a tight check.
+    from pfjax.tuning.cost import Tunable
+
+    if case == "pi-line-iae":
+        pr = make_problem("pi", "paper-line", cost=CostSpec("iae"), config=SHORT)
+        ctrl, tun, scs, spec = pr.controller, pr.tunable, pr.scenarios, pr.cost
+    else:  # 4 slips on the sine, ITAE + effort, CVaR of the worst 2 (order statistics in the gradient)
+        ctrl, base, scs = _sine_batch("integral")
+        tun, spec = Tunable(base, ("K", "k_aw")), CostSpec("itae", effort=0.1, aggregate="cvar", level=0.5)
+    f = jax.jit(batch_cost(ctrl, tun, scs, SHORT, spec))
+    th = jnp.asarray(tun.flatten())
+    g = np.asarray(jax.grad(f)(th))
+    assert np.all(np.isfinite(g)) and np.any(g != 0)
+    np.testing.assert_allclose(g, _fd(f, th, 1e-6), rtol=1e-5, atol=1e-8)
+
+
+def test_aggregates_match_numpy():
+    J = jnp.asarray([3.0, 1.0, 7.0, 2.0, 5.0, 4.0, 6.0, 0.5, 9.0, 8.0])
+    assert float(aggregate(J, CostSpec(aggregate="mean"))) == pytest.approx(np.mean(J))
+    assert float(aggregate(J, CostSpec(aggregate="quantile", level=0.8))) == pytest.approx(np.quantile(J, 0.8))
+    assert float(aggregate(J, CostSpec(aggregate="cvar", level=0.8))) == pytest.approx((9.0 + 8.0) / 2)
+    assert float(aggregate(J, CostSpec(aggregate="cvar", level=0.75))) == pytest.approx((9 + 8 + 7) / 3)  # ceil(2.5)
+    with pytest.raises(ValueError, match="cost.metric"):
+        CostSpec(metric="mse").check()
+
+
+def test_failed_runs_are_penalised():
+    # a destabilising gain (K > 0) diverges: its cost carries the penalty, a stabilising one does not
+    pr = make_problem("state_feedback", "paper-line", config=SHORT, box=(("K",), (-20, -10), (20, 10)))
+    f = jax.jit(batch_cost(pr.controller, pr.tunable, pr.scenarios, dataclasses.replace(pr.config, d_fail=1.0), pr.cost))
+    assert float(f(jnp.asarray([5.0, 2.0]))) > 100.0
+    assert float(f(jnp.asarray([-2.78, -2.08]))) < 5.0
+
+
+def test_gradient_tune_quadratic_in_box():
+    # minimum of |theta - c|^2 with c outside the box in one coordinate: projection onto the box
+    c = jnp.asarray([0.3, 2.0, -0.7])
+    r = gradient_tune(lambda th: jnp.sum((th - c) ** 2), [-1, -1, -1], [1, 1, 1], key=jax.random.PRNGKey(0),
+                      steps=300, learning_rate=0.02)
+    np.testing.assert_allclose(r.theta, [0.3, 1.0, -0.7], atol=2e-3)
+    assert r.n_rollouts == 300 and np.all(np.diff(r.history) <= 0)
+
+
+@pytest.mark.slow
+def test_tune_cli_contract(capsys):
+    from pfjax.cli import main
+
+    for method in ("ga", "gradient"):
+        rc = main(["tune", "--method", method, "--controller", "state-feedback", "--scenario", "paper-line",
+                   "--generations", "2", "--population", "6", "--steps", "3", "--dt", "0.01", "--horizon", "5", "--json"])
+        assert rc == 0
+        out = json.loads(capsys.readouterr().out)
+        for k in ("gains", "cost", "n_rollouts_simulated", "wall_s", "history"):
+            assert k in out
+        assert len(out["gains"]["K"]) == 2 and np.isfinite(out["cost"])
+        assert out["n_rollouts_simulated"] == (6 + 2 * 5 if method == "ga" else 3)
+        assert out["history"] == sorted(out["history"], reverse=True) and out["cost"] == out["history"][-1]
+
+
+@pytest.mark.parametrize("argv,flag", [
+    (["--method", "sgd", "--controller", "pi"], "--method"),
+    (["--method", "ga", "--controller", "lqr"], "--controller"),
+    (["--method", "ga", "--controller", "pi", "--cost", "mse"], "--cost"),
+    (["--method", "ga", "--controller", "pi", "--level", "1.5"], "--level"),
+    (["--method", "ga", "--controller", "pi", "--population", "1"], "--population"),
+    (["--method", "ga", "--controller", "pi", "--scenario", "missing.toml"], "--scenario"),
+])
+def test_tune_cli_bad_values(argv, flag, capsys):
+    from pfjax.cli import main
+
+    assert main(["tune", *argv, "--json"]) == 2
+    err = capsys.readouterr()
+    assert err.out == "" and err.err.startswith(f"pfjax tune: error: {flag}") and err.err.count("\n") == 1
