@@ -1,0 +1,190 @@
+"""Run the benchmark: pfjax's simulator (as users call it, with metrics) against the references,
+on the same random batch, in one process.
+
+Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 steps):
+
+* pfjax ``simulate_batch`` (``record=False``: the running metrics) in float32 and float64 for each
+  batch size: the first call (compile + run) and the best of ``repeats`` further calls; compile
+  time = first call - best call;
+* the NumPy, Numba (``prange``) and SciPy references (:mod:`pfjax.bench.references`) on the
+  largest batch (NumPy and SciPy on a sample, extrapolated per step), with their agreement with
+  pfjax on the per-run IAE (max absolute difference, against a stated tolerance);
+* the gradient of the batch-mean IAE with respect to the controller gains (``jax.grad`` through
+  the simulator) over the forward pass at the same batch size;
+* the process's peak resident memory (``getrusage``).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import resource
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from pfjax.bench import problem as P
+
+#: max |IAE_ref - IAE_pfjax| (m s) accepted as agreement, per reference and dtype. float64: the
+#: implementations differ only by rounding (measured ~5e-15); float32: rounding amplified over
+#: 4000 steps (measured ~3e-6 on IAE ~ 1 m s); SciPy integrates each step to 1e-12 instead of RK4
+#: (RK4's error at 5 ms, measured ~2e-13).
+TOLERANCE = {"float32": 1e-4, "float64": 1e-10, "scipy": 1e-8}
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    sizes: tuple[int, ...] = (1000, 10000, 100000)  # batch sizes for pfjax
+    ref_size: int = 10000  # batch for Numba (NumPy: ref_numpy runs of it)
+    ref_numpy: int = 10000
+    scipy_runs: int = 3  # runs integrated by solve_ivp (extrapolated per step)
+    grad_size: int = 2000
+    horizon: float = P.HORIZON  # s
+    repeats: int = 2
+    seed: int = 0
+    quick: bool = False
+
+
+QUICK = BenchConfig(sizes=(256, 1024), ref_size=1024, ref_numpy=256, scipy_runs=1, grad_size=256, horizon=2.0,
+                    repeats=1, quick=True)
+
+
+def _timed(f, repeats):
+    t0 = time.perf_counter()
+    out = f()
+    first = time.perf_counter() - t0
+    best = np.inf if repeats else first
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = f()
+        best = min(best, time.perf_counter() - t0)
+    return out, first, best
+
+
+def _pfjax(batch, dtype, n_steps, cfg: BenchConfig):
+    import jax
+
+    from pfjax.controllers import state_feedback
+    from pfjax.sim import SimConfig, simulate_batch
+
+    sc = P.scenarios(batch, dtype)
+    sim = SimConfig(dt=P.DT, horizon=cfg.horizon, newton_iters=P.NEWTON_ITERS, record=False)
+    run = lambda: jax.block_until_ready(simulate_batch(sc, controller=state_feedback, config=sim))
+    res, first, best = _timed(run, cfg.repeats)
+    return res, first, best
+
+
+def _grad(batch, dtype, cfg: BenchConfig):
+    """Seconds of the forward pass and of the gradient of the batch-mean IAE w.r.t. K (both jitted,
+    best of ``repeats`` after a compiling call), on the same sharded batch."""
+    import jax
+    import jax.numpy as jnp
+
+    from pfjax.controllers import state_feedback
+    from pfjax.sim import SimConfig, sharding, simulate_batch
+
+    sc, _ = sharding.shard_batch(P.scenarios(batch, dtype))
+    sim = SimConfig(dt=P.DT, horizon=cfg.horizon, newton_iters=P.NEWTON_ITERS, record=False)
+
+    def loss(K, sc):
+        gains = sc.gains._replace(K=jnp.broadcast_to(K, sc.gains.K.shape))
+        return jnp.mean(simulate_batch(sc._replace(gains=gains), controller=state_feedback, config=sim).metrics.iae)
+
+    K = jnp.asarray(P.K, dtype)
+    fwd, grad = jax.jit(loss), jax.jit(jax.grad(loss))
+    _, _, t_fwd = _timed(lambda: jax.block_until_ready(fwd(K, sc)), cfg.repeats)
+    g, first, t_grad = _timed(lambda: jax.block_until_ready(grad(K, sc)), cfg.repeats)
+    return dict(forward_s=t_fwd, grad_s=t_grad, grad_compile_s=first - t_grad, grad=np.asarray(g).tolist(),
+                grad_finite=bool(np.all(np.isfinite(np.asarray(g)))))
+
+
+def machine() -> dict:
+    import jax
+
+    return dict(
+        platform=platform.platform(), processor=platform.processor() or platform.machine(),
+        cpus=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        load_average_1m=os.getloadavg()[0], jax=jax.__version__, devices=[str(d) for d in jax.devices()],
+        xla_flags=os.environ.get("XLA_FLAGS", ""),
+    )
+
+
+def run(cfg: BenchConfig, progress=None) -> dict:
+    """Run the benchmark; returns the result dict (``bench.json``'s content)."""
+    import jax
+
+    from pfjax.bench import references as R
+
+    say = progress or (lambda msg: None)
+    n_steps = P.n_steps(cfg.horizon)
+    rows, iae = [], {}
+    load0 = os.getloadavg()[0]
+    top = max(cfg.sizes)
+    for name, dtype, x64 in (("float32", np.float32, False), ("float64", np.float64, True)):
+        with jax.enable_x64(x64):
+            for b in cfg.sizes:
+                say(f"pfjax {name} B={b}")
+                res, first, best = _pfjax(P.random_batch(b, cfg.seed), dtype, n_steps, cfg)
+                rows.append(dict(impl="pfjax", dtype=name, batch=b, seconds=best, compile_s=first - best,
+                                 msteps_per_s=b * n_steps / best / 1e6,
+                                 failed_runs=int(np.sum(np.asarray(res.status) != 0))))
+                if b == top:
+                    iae[("pfjax", name)] = np.asarray(res.metrics.iae, np.float64)
+    batch = P.random_batch(top, cfg.seed)
+    nr = min(cfg.ref_size, top)
+    sub = lambda k: P.Batch(*(a[:k] for a in batch))
+    agree = {}
+    for name, dtype in (("float32", np.float32), ("float64", np.float64)):
+        ref = iae[("pfjax", name)]
+        say(f"numba {name} B={nr}")
+        out, first, best = _timed(lambda: R.iae_numba(sub(nr), dtype, n_steps), cfg.repeats)
+        rows.append(dict(impl="numba", dtype=name, batch=nr, seconds=best, compile_s=first - best,
+                         msteps_per_s=nr * n_steps / best / 1e6, failed_runs=None))
+        agree[f"numba_{name}"] = float(np.max(np.abs(out - ref[:nr])))
+        k = min(cfg.ref_numpy, top)
+        say(f"numpy {name} B={k}")
+        out, _, best = _timed(lambda: R.iae_numpy(sub(k), dtype, n_steps), 0)
+        rows.append(dict(impl="numpy", dtype=name, batch=k, seconds=best, compile_s=0.0,
+                         msteps_per_s=k * n_steps / best / 1e6, failed_runs=None))
+        agree[f"numpy_{name}"] = float(np.max(np.abs(out - ref[:k])))
+    say(f"scipy solve_ivp, {cfg.scipy_runs} run(s)")
+    t0 = time.perf_counter()
+    sc_iae = np.array([R.iae_scipy(batch, i, n_steps) for i in range(cfg.scipy_runs)])
+    t_sc = time.perf_counter() - t0
+    rows.append(dict(impl="scipy", dtype="float64", batch=cfg.scipy_runs, seconds=t_sc, compile_s=0.0,
+                     msteps_per_s=cfg.scipy_runs * n_steps / t_sc / 1e6, failed_runs=None))
+    agree["scipy_float64"] = float(np.max(np.abs(sc_iae - iae[("pfjax", "float64")][:cfg.scipy_runs])))
+    say(f"gradient B={cfg.grad_size}")
+    with jax.enable_x64(False):
+        g = _grad(P.random_batch(cfg.grad_size, cfg.seed), np.float32, cfg)
+    agreement = {k: dict(max_abs_diff=v, tolerance=TOLERANCE["scipy" if k.startswith("scipy") else k.split("_")[1]])
+                 for k, v in agree.items()}
+    for a in agreement.values():
+        a["ok"] = a["max_abs_diff"] <= a["tolerance"]
+
+    def rate(impl, dtype, batch=None):
+        c = [r for r in rows if r["impl"] == impl and r["dtype"] == dtype and (batch is None or r["batch"] == batch)]
+        return max(c, key=lambda r: r["batch"])["msteps_per_s"] if c else float("nan")
+
+    head32, head64 = rate("pfjax", "float32", top), rate("pfjax", "float64", top)
+    summary = dict(
+        msteps_per_s_f32=head32, msteps_per_s_f64=head64, batch=top,
+        numba_msteps_per_s_f32=rate("numba", "float32"), numba_msteps_per_s_f64=rate("numba", "float64"),
+        numpy_msteps_per_s_f32=rate("numpy", "float32"), numpy_msteps_per_s_f64=rate("numpy", "float64"),
+        scipy_msteps_per_s_f64=rate("scipy", "float64"),
+        ratio_vs_numba_f32=head32 / rate("numba", "float32"), ratio_vs_numba_f64=head64 / rate("numba", "float64"),
+        ratio_vs_numpy_f32=head32 / rate("numpy", "float32"), ratio_vs_numpy_f64=head64 / rate("numpy", "float64"),
+        ratio_vs_scipy_f64=head64 / rate("scipy", "float64"),
+        compile_s_f32=next(r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float32" and r["batch"] == top),
+        compile_s_f64=next(r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float64" and r["batch"] == top),
+        grad_over_forward=g["grad_s"] / g["forward_s"], gradient=g,
+        peak_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        agreement=agreement, all_agree=all(a["ok"] for a in agreement.values()),
+        failed_runs=sum(r["failed_runs"] or 0 for r in rows),
+    )
+    m = machine()
+    m["load_average_1m_start"] = load0
+    return dict(summary=summary, rows=rows, machine=m, config=asdict(cfg), n_steps=n_steps,
+                problem=dict(path="sine y = sin x", controller="state feedback K = %s" % (P.K,), dt=P.DT,
+                             newton_iters=P.NEWTON_ITERS, slip_deg="U(-10, 10) per axle, constant"))
