@@ -1,7 +1,8 @@
 """pfjax: path following in JAX.
 
 Importing pfjax before JAX asks XLA for one CPU device per core, so batches are sharded over all
-cores by default (:func:`default_host_devices`, :mod:`pfjax.sim.sharding`).
+cores by default (:func:`default_host_devices`, :mod:`pfjax.sim.sharding`). The ``pfjax`` command,
+the study scripts and the notebooks also turn on a persistent compilation cache (:mod:`pfjax.cache`).
 """
 
 import os

@@ -391,7 +391,10 @@ def main(argv=None) -> int:
     args = parser.parse_args(_join_negative_values(list(sys.argv[1:] if argv is None else argv)))
     import jax
 
+    from pfjax import cache
+
     jax.config.update("jax_enable_x64", True)
+    cache.enable()
     try:
         out = args.func(args)
     except UsageError as e:

@@ -21,10 +21,13 @@ import tempfile
 import time
 from pathlib import Path
 
+import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
+import pfjax.cache
 import jax
 import matplotlib
 
 jax.config.update("jax_enable_x64", True)
+pfjax.cache.enable()
 matplotlib.use("Agg")
 
 import jax.numpy as jnp  # noqa: E402
@@ -32,7 +35,6 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-import pfjax  # noqa: E402
 from pfjax import controllers as C  # noqa: E402
 from pfjax.analysis import equilibrium, stability_map  # noqa: E402
 from pfjax.cli import dumps  # noqa: E402

@@ -22,10 +22,13 @@ import tempfile
 import time
 from pathlib import Path
 
+import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
+import pfjax.cache
 import jax
 import matplotlib
 
 jax.config.update("jax_enable_x64", True)
+pfjax.cache.enable()
 matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
@@ -33,7 +36,6 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-import pfjax  # noqa: E402
 from pfjax.cli import dumps  # noqa: E402
 from pfjax.config import ConfigError, config_hash, load  # noqa: E402
 from pfjax.parking import figures as F  # noqa: E402

@@ -21,9 +21,12 @@ import tempfile
 import time
 from pathlib import Path
 
+import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
+import pfjax.cache
 import jax
 
 jax.config.update("jax_enable_x64", True)
+pfjax.cache.enable()
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402

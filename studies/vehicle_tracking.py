@@ -21,16 +21,18 @@ import tempfile
 import time
 from pathlib import Path
 
+import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
+import pfjax.cache
 import jax
 import matplotlib
 
 jax.config.update("jax_enable_x64", True)
+pfjax.cache.enable()
 matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-import pfjax  # noqa: E402
 from pfjax.cli import dumps  # noqa: E402
 from pfjax.config import ConfigError, config_hash, load, parse_override, read_toml  # noqa: E402
 from pfjax.metrics.robustness import metric_quantiles, success_summary  # noqa: E402

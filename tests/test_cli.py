@@ -13,7 +13,6 @@ import math
 import os
 import subprocess
 import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -180,36 +179,17 @@ def test_simulate_line_paper_k_json_matches_closed_form_equilibrium():
     assert out["T"] == pytest.approx(20.0) and out["beta_r"] == pytest.approx(BETA)
 
 
-def test_every_controller_on_every_path(tmp_path):
-    """All 6 x 4 combinations run (3 s horizon) with status "ok" and finite numbers.
-
-    Run in two worker processes side by side (each compiles ~10 distinct simulators), each calling
-    pfjax.cli.main in a loop and printing one line per run.
-    """
-    worker = (
-        "import contextlib, io, json, sys\n"
-        "from pfjax.cli import main\n"
-        "for c, p in json.loads(sys.argv[1]):\n"
-        "    buf = io.StringIO()\n"
-        "    with contextlib.redirect_stdout(buf):\n"
-        "        rc = main(['simulate', '--path', p, '--controller', c, '--T', '3', '--json'])\n"
-        "    print(json.dumps({'c': c, 'p': p, 'rc': rc, 'out': buf.getvalue()}), flush=True)\n"
-    )
-    combos = [(c, p) for p in PATHS for c in CONTROLLERS]
-    halves = [[cp for cp in combos if cp[1] in PATHS[:2]], [cp for cp in combos if cp[1] in PATHS[2:]]]
-    procs = [subprocess.Popen([sys.executable, "-c", worker, json.dumps(h)], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True) for h in halves]
-    results = []
-    for p in procs:
-        out, err = p.communicate(timeout=300)
-        assert p.returncode == 0, err
-        results += [json.loads(line) for line in out.splitlines()]
-    assert sorted((r["c"], r["p"]) for r in results) == sorted(combos)
-    for r in results:
-        assert r["rc"] == 0, r
-        o = strict_json(r["out"])
-        assert (o["controller"], o["path"]) == (r["c"], r["p"])
-        assert o["metrics"]["status"] == "ok", (r["c"], r["p"], o["metrics"])
+def test_every_controller_and_every_path(capsys):
+    """Every controller on the sine path, and every path with the PI and with pure pursuit (the
+    tracker that looks ahead along the path), 3 s horizon: status "ok" and finite numbers.
+    Controllers and paths are independent modules behind one interface, so each is run once per
+    partner kind rather than all 6 x 4 pairs (each pair is a separate compilation)."""
+    combos = sorted({(c, "sine") for c in CONTROLLERS} | {(c, p) for p in PATHS for c in ("pi", "pure-pursuit")})
+    assert {c for c, _ in combos} == set(CONTROLLERS) and {p for _, p in combos} == set(PATHS)
+    for c, p in combos:
+        o = run_main(capsys, "simulate", "--path", p, "--controller", c, "--T", "3", "--json")
+        assert (o["controller"], o["path"]) == (c, p)
+        assert o["metrics"]["status"] == "ok", (c, p, o["metrics"])
         assert o["status_code"] == 0 and o["fail_time"] is None
         assert all(math.isfinite(o["final"][k]) for k in ("d", "theta_e", "delta")), o["final"]
         assert abs(o["final"]["delta"]) <= math.radians(30.0) + 1e-12
@@ -275,22 +255,29 @@ BAD = [
 ]
 
 
-@pytest.fixture(scope="module")
-def bad_results():
-    """All bad-input runs, a few processes at a time (each is mostly interpreter start-up)."""
-    with ThreadPoolExecutor(max_workers=max(2, min(4, os.cpu_count() or 2))) as ex:
-        return dict(zip((a for a, _ in BAD), ex.map(lambda a: cli(*a, timeout=120), (a for a, _ in BAD))))
-
-
 @pytest.mark.parametrize("args, flag", BAD, ids=[" ".join(a) for a, _ in BAD])
-def test_bad_input_exits_2_with_one_line_naming_the_flag(bad_results, args, flag):
-    r = bad_results[args]
-    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
-    lines = r.stderr.splitlines()
-    assert len(lines) == 1, r.stderr
+def test_bad_input_exits_2_with_one_line_naming_the_flag(capsys, args, flag):
+    """In-process through pfjax.cli.main (validation happens before anything is computed); the
+    console script and ``python -m pfjax.cli`` are checked as subprocesses below."""
+    from pfjax.cli import main
+
+    try:
+        code = main(list(args))
+    except SystemExit as e:  # argparse's own errors
+        code = e.code
+    out, err = capsys.readouterr()
+    assert code == 2, (code, err[-2000:])
+    lines = err.splitlines()
+    assert len(lines) == 1, err
     assert flag in lines[0], lines[0]
     assert "error" in lines[0]
-    assert r.stdout == ""
+    assert out == ""
+
+
+def test_console_script_bad_input_exits_2():
+    r = cli(*SIM, "--dt", "0", timeout=60)
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.splitlines() == [r.stderr.strip()] and r.stderr.startswith("pfjax simulate: error: --dt")
 
 
 @pytest.mark.parametrize("args", [("--help",), ("synth", "--help"), ("simulate", "--help"), ("--version",)])

@@ -142,19 +142,25 @@ def test_report_numbers_are_those_of_summary_json(study):
             assert shown in text
         for k, v in c["gains"].items():
             assert f"{k} = {v:.4g}" in text
-    # failed runs are counted, never hidden: one status row per controller, adding up to its runs
+    # failed runs are counted, never hidden: one status row per controller and path (plus the
+    # controller's total over its paths), adding up to its runs
     tables = _parse((out / "report.html").read_text(encoding="utf-8")).tables
-    status = next(t for t in tables if t[0][:4] == ["controller", "runs", "success", "ok but outside the band"])
+    status = next(t for t in tables if t[0][:5] == ["controller", "path", "runs", "success", "ok but outside the band"])
     runs = pd.read_parquet(out / "runs.parquet")
+    n_paths = runs.path.nunique()
     for row in status[1:]:
         g = runs[runs.controller == row[0]]
-        counts = dict(zip(status[0][4:], map(int, row[4:])))
-        assert int(row[1]) == len(g) == sum(counts.values()) == summary["controllers"][row[0]]["n"]
-        assert int(row[2]) == int(g.success.sum())
-        assert int(row[3]) == int(((g.status == "ok") & ~g.success).sum())
+        if row[1] != "all paths":
+            g = g[g.path == row[1]]
+        counts = dict(zip(status[0][5:], map(int, row[5:])))
+        n = summary["controllers"][row[0]]["n"] if row[1] == "all paths" else summary["controllers"][row[0]]["per_path"][row[1]]["n"]
+        assert int(row[2]) == len(g) == sum(counts.values()) == n
+        assert int(row[3]) == int(g.success.sum())
+        assert int(row[4]) == int(((g.status == "ok") & ~g.success).sum())
         assert counts == {f"status {k}": int((g.status == k).sum()) for k in
-                          [h.removeprefix("status ") for h in status[0][4:]]}
-    assert [r[0] for r in status[1:]] == list(summary["controllers"])
+                          [h.removeprefix("status ") for h in status[0][5:]]}
+    assert len(status) - 1 == len(summary["controllers"]) * (n_paths + (n_paths > 1))
+    assert [r[0] for r in status[1:] if r[1] == "all paths"] == (list(summary["controllers"]) if n_paths > 1 else [])
     for heading in ("Verdict", "Set-up", "Headline per controller", "Per path", "Run status", "Distributions",
                     "Slip margins", "Robustness map (from simulation)", "Failure drivers", "Reproducibility"):
         assert heading in text

@@ -109,12 +109,14 @@ def float64_check(spec: StudySpec, controllers: dict, runs: pd.DataFrame, n_samp
             block = per.setdefault(name, {"n": 0, "iae_abs": [], "iae_rel": [], "late": [], "status_mismatch": [], "success_mismatch": 0})
             iae64 = np.asarray(res.metrics.iae, float)
             iae32 = f32["iae"].to_numpy(float)
-            both = np.isfinite(iae64) & np.isfinite(iae32)
+            st64 = np.asarray(res.status).astype(int)
+            # metrics compare only where both precisions end the same way (a run that fails at another
+            # time has metrics over another interval; the status change itself is reported below)
+            both = np.isfinite(iae64) & np.isfinite(iae32) & (st64 == f32["status_code"].to_numpy(int))
             block["n"] += len(idx)
             block["iae_abs"] += list(np.abs(iae64 - iae32)[both])
             block["iae_rel"] += list((np.abs(iae64 - iae32) / np.maximum(np.abs(iae64), 1e-12))[both])
             block["late"] += list(np.abs(np.asarray(res.metrics.late_max_abs_d, float) - f32["late_max_abs_d"].to_numpy(float))[both])
-            st64 = np.asarray(res.status).astype(int)
             for r, a, b in zip(idx, f32["status_code"].to_numpy(int), st64):
                 if a != b:
                     block["status_mismatch"].append({"path": pspec.label, "run": int(r), "float32": STATUS_NAMES[a], "float64": STATUS_NAMES[int(b)]})

@@ -30,10 +30,12 @@ from pfjax.montecarlo.config import StudySpec, study_hash
 
 
 def file_metadata(spec: StudySpec) -> dict[bytes, bytes]:
-    """Parquet key-value metadata stamped on every table a study writes: config, hash, seed, version."""
+    """Parquet key-value metadata stamped on every table a study writes: config (strict JSON), hash, seed, version."""
+    from pfjax.cli import dumps
+
     return {
         b"pfjax.config_sha256": study_hash(spec).encode(),
-        b"pfjax.config": json.dumps(spec.model_dump(mode="json"), sort_keys=True).encode(),
+        b"pfjax.config": dumps(spec.model_dump(mode="json")).encode(),
         b"pfjax.seed": str(spec.seed).encode(),
         b"pfjax.version": pfjax.__version__.encode(),
     }

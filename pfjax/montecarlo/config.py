@@ -110,10 +110,12 @@ class VehicleSpec(_Model):
     speed: Dist = dist_field(1.0)  # m/s
     L: Dist = dist_field(0.2)  # m
     delta_max_deg: Dist = dist_field(30.0)
-    delta_rate_max_deg: float = Field(math.inf, gt=0, description="steering rate limit, deg/s (inf: none)")
+    delta_rate_max_deg: float | None = Field(None, gt=0, description="steering rate limit, deg/s (None or inf: none)")
     convention: Literal["source", "lenain"] = "source"
 
     _coerce = field_validator("speed", "L", "delta_max_deg", mode="before")(lambda v: _as_dist(v))
+    # "no limit" has one spelling, None, so the validated config is strict JSON (and hashes as such)
+    _no_limit = field_validator("delta_rate_max_deg")(lambda v: None if v is not None and math.isinf(v) else v)
 
     @model_validator(mode="after")
     def _check(self):

@@ -195,7 +195,7 @@ def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_over
         herr = d(spec.initial.heading_error_deg, "heading_error_deg")
         cols.update(speed=speed, L=L, delta_max_deg=dmax, start_s=start_s, lateral_offset=offset, heading_error_deg=herr)
         params = SlipParams(v=speed, L=L, delta_max=dmax * rad, convention=jnp.asarray(CONVENTIONS[v.convention], jnp.int32),
-                            delta_rate_max=jnp.asarray(v.delta_rate_max_deg * rad, float))
+                            delta_rate_max=jnp.asarray(math.inf if v.delta_rate_max_deg is None else v.delta_rate_max_deg * rad, float))
         return profile, params, cols, (start_s, offset, herr * rad)
 
     profiles, params, cols, starts = jax.vmap(one)(keys)

@@ -104,7 +104,7 @@ def _setup(cfg: dict, summary: dict) -> dict:
     veh, slip, ini, noise, sim = cfg["vehicle"], cfg["slip"], cfg["initial"], cfg["noise"], cfg["sim"]
     rate = veh["delta_rate_max_deg"]
     rows = [("speed v [m/s]", veh["speed"]), ("wheelbase L [m]", veh["L"]), ("steering limit δ_max [deg]", veh["delta_max_deg"]),
-            ("steering rate limit [deg/s]", "none" if _bad(rate) or rate == "inf" else rate),
+            ("steering rate limit [deg/s]", "none" if rate is None or _bad(rate) or rate == "inf" else rate),
             ("slip model", f"{slip['kind']} (convention: {veh['convention']})"),
             ("rear slip β_r [deg]", slip["beta_r_deg"]), ("front slip β_f [deg]", slip["beta_f_deg"])]
     units = {"step_time_s": "step time [s]", "step_r_deg": "rear step [deg]", "step_f_deg": "front step [deg]",

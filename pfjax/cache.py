@@ -1,0 +1,58 @@
+"""A persistent XLA compilation cache for pfjax's commands, studies and tests.
+
+Compiling a batched simulation takes seconds (the scan body is large) while running a small one
+takes milliseconds, so a second ``pfjax track`` or a re-run study would spend most of its time
+compiling what it compiled before. :func:`enable` points JAX's persistent compilation cache
+(``jax_compilation_cache_dir``) at a directory, so a program compiled once is loaded from disk by
+every later process (same program, same JAX version and devices; the cache key covers them, so a
+changed pfjax never loads a stale program).
+
+The directory is ``$PFJAX_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/pfjax/xla`` (default
+``~/.cache/pfjax/xla``); ``PFJAX_CACHE_DIR=off`` disables it, and a cache the user configured
+through JAX (``JAX_COMPILATION_CACHE_DIR``) is left as it is. Only compilations longer than
+``min_compile_s`` are stored.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+ENV = "PFJAX_CACHE_DIR"
+OFF = ("off", "0", "none", "false")
+
+
+def default_dir(environ=None) -> Path | None:
+    """The cache directory :func:`enable` uses (None: disabled)."""
+    environ = os.environ if environ is None else environ
+    value = environ.get(ENV, "").strip()
+    if value.lower() in OFF:
+        return None
+    if value:
+        return Path(value).expanduser()
+    base = environ.get("XDG_CACHE_HOME", "").strip() or str(Path.home() / ".cache")
+    return Path(base) / "pfjax" / "xla"
+
+
+def enable(path: str | Path | None = None, *, min_compile_s: float = 0.5) -> Path | None:
+    """Turn on JAX's persistent compilation cache in ``path`` (default :func:`default_dir`).
+
+    Returns the directory in use, or None when disabled, already configured through JAX, or not
+    writable (the cache is an optimisation: nothing fails without it).
+    """
+    import jax
+
+    if jax.config.jax_compilation_cache_dir:
+        return Path(jax.config.jax_compilation_cache_dir)
+    target = Path(path) if path is not None else default_dir()
+    if target is None:
+        return None
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    if not os.access(target, os.W_OK):
+        return None
+    jax.config.update("jax_compilation_cache_dir", str(target))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_s))
+    return target
