@@ -410,3 +410,31 @@ def test_abs_d_is_the_distance_near_a_sine(x, off):
     p = _project_sine(qx, qy)
     assert abs(abs(float(p.d)) - math.hypot(qx - px, qy - py)) < 1e-10
     assert np.sign(float(p.d)) == np.sign(off) or abs(off) < 1e-12
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_derivatives_are_finite_with_the_robot_exactly_on_the_path(dtype):
+    """Regression: a run whose pose lands exactly on the path (p(u) = q in floating point) had a
+    NaN derivative, from d sqrt(|p - q|^2)/dq = inf times a zero tangent in the Newton step limit
+    (found by ``pfjax bench``: one float32 run in 2000 gave a NaN gradient of the batch IAE). Jitted,
+    forward and reverse mode, at poses exactly on a sine, a parabola and a circle; the derivative of
+    d with respect to (x, y) must be the left normal (the projection's gradient, as in
+    :func:`test_grad_of_d_is_the_left_normal`)."""
+    with jax.enable_x64(dtype == jnp.float64):
+        cast = lambda p: jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), p)
+        for path in (cast(sine()), cast(parabola()), cast(circle())):
+            for u in (0.3, 1.7, 7.945819854736328):
+                u = jnp.asarray(u, dtype)
+                qx, qy = path.point(u)  # exactly on the path
+
+                def d_of(q):
+                    return project(path, q[0], q[1], jnp.asarray(0.1, dtype), u, 3).d
+
+                q = jnp.stack([qx, qy])
+                g_rev = np.asarray(jax.jit(jax.grad(d_of))(q))
+                g_fwd = np.asarray(jax.jit(jax.jacfwd(d_of))(q))
+                tx, ty = (float(a) for a in path.d1(u))
+                normal = np.array([-ty, tx]) / math.hypot(tx, ty)
+                tol = 1e-5 if dtype == jnp.float32 else 1e-12
+                np.testing.assert_allclose(g_rev, normal, atol=tol)
+                np.testing.assert_allclose(g_fwd, normal, atol=tol)

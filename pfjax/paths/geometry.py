@@ -90,7 +90,10 @@ def _newton_update(path, u: Array, qx: Array, qy: Array) -> Array:
     gp = speed2 + ex * ddx + ey * ddy
     gp = jnp.where(gp > 0.01 * speed2, gp, speed2)
     step = -g / gp
-    max_step = jnp.maximum(jnp.sqrt(ex * ex + ey * ey), 0.25) / jnp.sqrt(speed2)
+    # max(|p - q|, 0.25) written as sqrt(max(|p - q|^2, 0.0625)): the same value, and a finite
+    # derivative when the robot is exactly on the path (d sqrt/dx is infinite at 0, and 0 * inf = NaN
+    # in the derivative even where the maximum picks 0.25)
+    max_step = jnp.sqrt(jnp.maximum(ex * ex + ey * ey, 0.0625)) / jnp.sqrt(speed2)
     step = jnp.clip(step, -max_step, max_step)
     return jnp.clip(u + step, path.u_min, path.u_max)
 
