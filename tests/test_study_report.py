@@ -177,3 +177,30 @@ def test_report_without_margin_sweep(study, tmp_path):
     assert not (tmp_path / "figures" / "margin_curves.png").exists()
     assert "No slip-margin sweep" in "".join(page.text)
     assert len(page.imgs) == len(FIGURES) - 1
+
+
+def test_summary_from_the_file_equals_summary_from_the_table(study):
+    """Large studies summarise ``runs.parquet`` one controller at a time (never loading it whole):
+    the same numbers as from the whole table."""
+    spec, out, summary = study
+    gains = {k: v["gains"] for k, v in summary["controllers"].items()}
+    sweep = pd.read_parquet(out / "margin.parquet") if (out / "margin.parquet").exists() else None
+    from_table = summarize(spec, pd.read_parquet(out / "runs.parquet"), sweep, gains=gains, wall_s=1.0)
+    from_file = summarize(spec, out / "runs.parquet", sweep, gains=gains, wall_s=1.0)
+    from pfjax.cli import dumps  # strict JSON (NaN -> null), so NaN quantiles compare equal
+
+    assert from_file["n_runs_total"] == from_table["n_runs_total"] == summary["n_runs_total"]
+    assert dumps(from_file) == dumps(from_table)
+
+
+def test_study_without_report_streams_and_gives_the_same_summary(study, tmp_path):
+    """``report=False`` never loads the run table whole (summary per controller, float64 check on its
+    sampled runs only): same summary, float64 check included, as the run with a report."""
+    from pfjax.cli import dumps
+
+    spec, out, summary = study
+    assert summary["float64_check"]["checked"]
+    s = run(spec, tmp_path / "noreport", progress=False, report=False)
+    assert not (tmp_path / "noreport" / "report.html").exists()
+    drop = lambda d: {k: v for k, v in d.items() if k not in ("wall_s",)}
+    assert dumps(drop(s)) == dumps(drop(json.loads(dumps(summary))))

@@ -30,7 +30,7 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
     warnings are also recorded in ``summary.json``.
     """
     from pfjax.cli import dumps
-    from pfjax.montecarlo.checks import float64_check, study_warnings
+    from pfjax.montecarlo.checks import float64_check, sample_indices, study_warnings
     from pfjax.montecarlo.runner import precision
 
     out = Path(out) if out is not None else Path("results") / spec.name
@@ -51,9 +51,14 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
 
             with precision(spec):
                 worst, worst_traj = worst_cases(spec, controllers)
-        runs = read_runs(runs_path)
-        check = float64_check(spec, controllers, runs, spec.f64_check_runs)
-        summary = summarize(spec, runs, sweep, gains={k: v[2] for k, v in controllers.items()}, wall_s=time.time() - t0)
+        # Without a report the run table is never loaded whole: the summary reads one controller at
+        # a time and the float64 check only its sampled runs (a 10^7-run study fits in ~1 GiB).
+        runs = read_runs(runs_path) if report else None
+        check_rows = runs if runs is not None or spec.dtype == "float64" or spec.f64_check_runs <= 0 else \
+            read_runs(runs_path, filters=[("run", "in", sample_indices(spec, spec.f64_check_runs).tolist())])
+        check = float64_check(spec, controllers, check_rows, spec.f64_check_runs)
+        summary = summarize(spec, runs if runs is not None else runs_path, sweep,
+                            gains={k: v[2] for k, v in controllers.items()}, wall_s=time.time() - t0)
         summary["warnings"] = warnings
         summary["float64_check"] = check
         summary["chunks"] = {"simulated": store.computed, "resumed": store.reused}
@@ -72,9 +77,10 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
     return result["summary"]
 
 
-def read_runs(path: Path) -> pd.DataFrame:
-    """``runs.parquet`` as a DataFrame (pandas >= 3 keeps the string columns Arrow-backed, a few bytes per run)."""
-    return pd.read_parquet(path)
+def read_runs(path: Path, **kw) -> pd.DataFrame:
+    """``runs.parquet`` as a DataFrame (pandas >= 3 keeps the string columns Arrow-backed, a few
+    bytes per run); ``kw`` go to :func:`pandas.read_parquet` (``columns``, ``filters``)."""
+    return pd.read_parquet(path, **kw)
 
 
 def _stamp(path: Path, spec: StudySpec) -> None:

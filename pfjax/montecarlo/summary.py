@@ -79,11 +79,26 @@ def margins(sweep: pd.DataFrame | None, controller: str, eps: float) -> dict:
     return out
 
 
-def summarize(spec: StudySpec, runs: pd.DataFrame, sweep: pd.DataFrame | None, *, gains: dict, wall_s: float) -> dict:
-    params = [c for c in column_names(spec) if runs[c].nunique(dropna=True) > 1]
-    controllers = {}
+def _controller_rows(runs, name: str) -> pd.DataFrame:
+    """One controller's rows: a slice of a DataFrame, or read from a ``runs.parquet`` path (only
+    that controller's rows are read, so memory holds one controller's runs, not the study's)."""
+    if isinstance(runs, pd.DataFrame):
+        return runs[runs.controller == name]
+    return pd.read_parquet(runs, filters=[("controller", "==", name)])
+
+
+def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict, wall_s: float) -> dict:
+    """The summary (module docstring). ``runs``: the run table as a DataFrame, or the path of
+    ``runs.parquet``, read one controller at a time (large studies: peak memory is one
+    controller's rows)."""
+    import pyarrow.parquet as pq
+
+    n_total = len(runs) if isinstance(runs, pd.DataFrame) else pq.ParquetFile(runs).metadata.num_rows
+    controllers, params = {}, None
     for name in [c.name for c in spec.controllers]:
-        df = runs[runs.controller == name]
+        df = _controller_rows(runs, name)
+        if params is None:  # every controller runs the same sampled scenarios (common random numbers)
+            params = [c for c in column_names(spec) if df[c].nunique(dropna=True) > 1]
         block = _block(df)
         block["gains"] = gains.get(name, {})
         block["per_path"] = {p: {k: v for k, v in _block(g).items() if k != "quantiles"}
@@ -100,7 +115,7 @@ def summarize(spec: StudySpec, runs: pd.DataFrame, sweep: pd.DataFrame | None, *
         controllers[name] = block
     return {
         "study": spec.name,
-        "n_runs_total": int(len(runs)),
+        "n_runs_total": int(n_total),
         "n_runs_per_controller_and_path": spec.n_runs,
         "n_margin_runs": 0 if sweep is None else int(len(sweep)),
         "seed": spec.seed,
