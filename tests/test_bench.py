@@ -1,0 +1,67 @@
+"""``pfjax bench`` at tiny sizes: the output contract, the agreement of every reference with pfjax,
+and bad input. Speed is not asserted (it is measured by the benchmark, never by tests).
+
+References: the NumPy, Numba and SciPy ``solve_ivp`` implementations of :mod:`pfjax.bench.references`
+solve the same batch independently of pfjax's simulator; the benchmark itself checks that their
+per-run IAE agrees with pfjax's (float64 to 1e-10 m s, float32 to 1e-4 m s, SciPy to 1e-8 m s;
+the reasons are in :data:`pfjax.bench.run.TOLERANCE`), and this test asserts that every check passed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+KEYS = ("msteps_per_s_f32", "msteps_per_s_f64", "numba_msteps_per_s_f32", "ratio_vs_numba_f32", "grad_over_forward",
+        "peak_rss_mib")
+
+
+def _bench(*args):
+    env = {**os.environ, "PFJAX_CACHE_DIR": str(ROOT / ".pytest_cache" / "xla")}
+    return subprocess.run([sys.executable, "-m", "pfjax.cli", "bench", *args], cwd=ROOT, capture_output=True, text=True,
+                          env=env, timeout=900)
+
+
+@pytest.mark.slow
+def test_quick_bench_contract_and_agreement(tmp_path):
+    out = tmp_path / "bench"
+    r = _bench("--quick", "--sizes", "64,128", "--out", str(out), "--json")
+    assert r.returncode == 0, r.stderr[-3000:]
+    s = json.loads(r.stdout)
+    for k in KEYS:
+        assert math.isfinite(s[k]) and s[k] > 0, k
+    assert s["all_agree"], s["agreement"]
+    assert set(s["agreement"]) == {"numba_float32", "numba_float64", "numpy_float32", "numpy_float64", "scipy_float64"}
+    assert s["gradient"]["grad_finite"] and s["failed_runs"] == 0
+    assert s["ratio_vs_numba_f32"] == pytest.approx(s["msteps_per_s_f32"] / s["numba_msteps_per_s_f32"], rel=1e-12)
+    full = json.loads((out / "bench.json").read_text())
+    assert full["summary"] == {k: v for k, v in s.items() if k not in ("out", "machine")}
+    assert full["config"]["sizes"] == [64, 128] and full["config_sha256"] and full["machine"]["cpus"] >= 1
+    rows = pd.read_parquet(out / "bench.parquet")
+    assert set(rows.impl) == {"pfjax", "numba", "numpy", "scipy"}
+    assert sorted(rows[(rows.impl == "pfjax") & (rows.dtype == "float32")].batch) == [64, 128]
+    # rollout-steps / s recomputed from the rows' seconds
+    n_steps = full["n_steps"]
+    np.testing.assert_allclose(rows.msteps_per_s, rows.batch * n_steps / rows.seconds / 1e6, rtol=1e-12)
+    assert (out / "figures" / "throughput.png").stat().st_size > 5000 and (out / "report.md").is_file()
+
+
+@pytest.mark.parametrize("args, flag", [(["--sizes", "10,x"], "--sizes"), (["--sizes", "0"], "--sizes"),
+                                        (["--seed", "-1"], "--seed")])
+def test_bench_bad_input_one_line_exit_2(tmp_path, args, flag, capsys):
+    from pfjax.cli import main
+
+    out = tmp_path / "b"
+    assert main(["bench", "--quick", *args, "--out", str(out)]) == 2
+    err = capsys.readouterr()
+    assert err.out == "" and err.err.startswith(f"pfjax bench: error: {flag}") and err.err.count("\n") == 1
+    assert not out.exists()
