@@ -1,0 +1,93 @@
+"""Smoke test of ``studies/tuning_ga_vs_gradient.py --quick`` (run as a subprocess: the study turns on
+float64 for its whole process) and of its bad-input contract.
+
+References: the config hash is recomputed with :func:`pfjax.config.config_hash` from the stored config;
+every held-out success rate and Clopper-Pearson interval is recounted from ``heldout.parquet`` with
+scipy's beta quantiles (1e-9); the GA's rollout count is the MATLAB formula P + G (P - E) with E = 1;
+the cost history of every run is non-increasing and ends at the run's reported cost.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from scipy.stats import beta
+
+from pfjax.config import config_hash
+
+ROOT = Path(__file__).resolve().parents[1]
+STUDY = ROOT / "studies" / "tuning_ga_vs_gradient.py"
+
+
+def _run(*args, cwd=ROOT):
+    env = {**os.environ, "PFJAX_CACHE_DIR": str(ROOT / ".pytest_cache" / "xla")}
+    return subprocess.run([sys.executable, str(STUDY), *args], cwd=cwd, capture_output=True, text=True, env=env, timeout=900)
+
+
+@pytest.fixture(scope="module")
+def out(tmp_path_factory):
+    d = tmp_path_factory.mktemp("tuning") / "out"
+    r = _run("--quick", "--out", str(d))
+    assert r.returncode == 0, r.stderr[-3000:]
+    return d
+
+
+@pytest.mark.slow
+def test_quick_tuning_study_outputs_consistent(out):
+    s = json.loads((out / "summary.json").read_text())
+    assert s["config_sha256"] == config_hash(s["config"])
+    for name in ("tuning_runs", "heldout", "margin"):
+        assert pq.read_schema(out / f"{name}.parquet").metadata[b"config_sha256"].decode() == s["config_sha256"]
+    assert (out / "figures" / "cost_vs_budget.png").stat().st_size > 1000
+    report = (out / "report.md").read_text()
+    assert s["config_sha256"][:16] in report
+
+    # GA budget: P + G (P - E) rollouts per seed (MATLAB ga, elite count 1); the gradient's: one per step and start
+    P, G = s["config"]["ga"]["population"], s["config"]["ga"]["generations"]
+    for r in s["tuning_runs"]:
+        assert r["n_rollouts"] == (P + G * (P - 1) if r["method"] == "ga" else s["config"]["gradient"]["steps"] * s["config"]["gradient"]["starts"])
+    hist = pd.read_parquet(out / "tuning_runs.parquet")
+    for r in s["tuning_runs"]:
+        h = hist[(hist.method == r["method"]) & (hist.seed == r["seed"])].sort_values("iteration")
+        assert (h.best_cost.diff().dropna() <= 1e-12).all()
+        assert h.best_cost.iloc[-1] == pytest.approx(r["cost"], rel=1e-9)
+
+    # every held-out number recounted from the run rows
+    df = pd.read_parquet(out / "heldout.parquet")
+    n_paths = df.path.nunique()
+    for row in s["heldout"]["table"]:
+        g = df[df.controller == row["controller"]]
+        k, n = int(g.success.sum()), len(g)
+        assert n == row["n"] == s["heldout"]["n_per_path"] * n_paths
+        assert row["success_rate"] == pytest.approx(k / n, abs=1e-12)
+        lo = 0.0 if k == 0 else beta.ppf(0.025, k, n - k + 1)
+        hi = 1.0 if k == n else beta.ppf(0.975, k + 1, n - k)
+        assert row["success_ci95"] == pytest.approx([lo, hi], abs=1e-9)
+        assert row["iae_mean"] == pytest.approx(float(g.iae.mean()), rel=1e-9)
+        assert f"{100 * row['success_rate']:.1f} %" in report
+    assert {r["controller"] for r in s["heldout"]["table"]} >= {"pi-table3 (source)", "K-paper (source)", "integral (LMI)",
+                                                              "polytopic (LMI)", "K-gradient-robust"}
+    # the integral design removes the slip offset (the issue's 0.1 mm target holds even at quick sizes)
+    assert s["targets"]["integral_steady_abs_d_m"] < 1e-4
+
+
+@pytest.mark.parametrize("setting, message", [
+    ("seeds=0", "seeds: must be >= 1"),
+    ("ga.population=1", "ga.population: too small"),
+    ("gradient.lr=-1", "gradient.lr: must be > 0"),
+    ("heldout=nope.toml", "heldout: file not found"),
+])
+def test_bad_setting_one_line_exit_2_nothing_written(tmp_path, setting, message):
+    d = tmp_path / "out"
+    r = _run("--quick", "--set", setting, "--out", str(d))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], r.stderr
+    assert not d.exists() and list(tmp_path.iterdir()) == []
