@@ -1,4 +1,8 @@
-"""Every shipped study config validates and runs end to end at a small size (with its report)."""
+"""Every shipped study config validates and runs end to end at a small size (with its report).
+
+The worst-case search costs a gradient compilation per controller, so the shipped configs run here
+without it, and one small study (one controller, the default study's falsifier settings) checks it
+end to end: in the summary, the report and the figures."""
 
 import json
 import tomllib
@@ -18,7 +22,7 @@ CONFIGS = sorted(p for p in (ROOT / "studies").glob("*.toml")
                  if {"controllers", "paths"} <= set(tomllib.loads(p.read_text())))
 SMALL = ["n_runs=6", "chunk_size=6", "sim.horizon=3.0", "sim.steady_window=1.0", "success.from_s=2.0",
          "margin.amplitudes_deg=[0.0, 10.0]", "margin.n_per_amplitude=3", "falsifier.n_restarts=2", "falsifier.steps=2",
-         "f64_check_runs=0"]  # the float64 check recompiles every simulator in float64: tested in test_determinism.py
+         "f64_check_runs=0", "falsifier.enabled=false"]  # the float64 check recompiles every simulator in float64: tested in test_determinism.py
 
 
 def test_configs_are_found():
@@ -41,8 +45,22 @@ def test_study_config_runs_small(path, tmp_path):
         assert {"success_rate", "success_ci95", "iae_mean", "iae_p95", "steady_abs_d_p95", "slip_margin_deg"} <= set(c)
     html = (tmp_path / "out" / "report.html").read_text()
     assert len(html) > 10_000
-    if small.falsifier.enabled:  # the worst-case search ran: in the summary and the report
-        for c in on_disk["controllers"].values():
-            wc = c["worst_case"]
-            assert wc["n_rollouts"] == 2 * 2 and wc["falsifier"] >= 0 and wc["random"] >= 0
-        assert "Worst cases found" in html and (tmp_path / "out" / "figures" / "worst_cases.png").is_file()
+    assert all("worst_case" not in c for c in on_disk["controllers"].values())
+
+
+def test_default_study_falsifier_small_end_to_end(tmp_path):
+    """The default study's worst-case search (its settings as shipped, 2 restarts x 2 steps), one
+    controller and the falsifier's path only: summary block, report section and figure."""
+    data = tomllib.loads((ROOT / "studies" / "robustness_default.toml").read_text())
+    assert data["falsifier"]["enabled"]
+    data["controllers"] = [c for c in data["controllers"] if c["name"] == "pi-table3"]
+    data["paths"] = [p for p in data["paths"] if p["kind"] == data["falsifier"]["path"]]
+    sets = [s for s in SMALL if not s.startswith("falsifier.enabled")] + ["margin.enabled=false"]
+    small, _ = load_study(overrides=sets, data=data)
+    summary = run(small, tmp_path / "out", progress=False, report=True)
+    wc = json.loads((tmp_path / "out" / "summary.json").read_text())["controllers"]["pi-table3"]["worst_case"]
+    assert wc == summary["controllers"]["pi-table3"]["worst_case"]
+    assert wc["path"] == "sine" and wc["n_rollouts"] == 2 * 2 and wc["falsifier"] >= 0 and wc["random"] >= 0
+    assert len(wc["history"]) == len(wc["history_rollouts"]) and max(wc["history"]) == pytest.approx(wc["falsifier"], rel=1e-6)
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "Worst cases found" in html and (tmp_path / "out" / "figures" / "worst_cases.png").is_file()
