@@ -22,9 +22,10 @@ study: $(STAMP)
 	$(PY) studies/paper_reproduction.py
 	$(VENV)/bin/pfjax study studies/robustness_default.toml
 
-# pytest exits 5 when it collects no test: that is a failure here too (a suite that ran nothing).
+# pytest exits 5 when it collects no test: .ci/run fails on it too (a suite that ran nothing).
+# --dist worksteal: an idle worker takes queued tests from the busy one (the slow tests come last).
 test: $(STAMP)
-	$(PY) -m pytest -n 2 $(PYTEST_ARGS)
+	$(PY) -m pytest -n 2 --dist worksteal $(PYTEST_ARGS)
 
 clean:
 	rm -rf $(VENV) .pytest_cache results/paper_reproduction results/robustness_default
