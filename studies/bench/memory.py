@@ -1,6 +1,6 @@
 """Peak memory of a large streamed Monte Carlo study (issue 8, "memory").
 
-    python studies/bench/memory.py [--runs 1000000] [--horizon 1.0] [--chunk 65536] [--out results/bench/memory]
+    python studies/bench/memory.py [--runs 1000000] [--horizon 1.0] [--chunk 65536] [--out results/bench_memory]
 
 Runs ``pfjax study studies/robustness_default.toml`` in a child process with ``n_runs`` set so the
 study holds about ``--runs`` runs in all (3 paths x 3 controllers), a short horizon (the cost per
@@ -37,7 +37,7 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", type=int, default=1_000_000, help="runs in all (default 10^6)")
     ap.add_argument("--horizon", type=float, default=1.0, help="simulated seconds per run (default 1)")
     ap.add_argument("--chunk", type=int, default=65536, help="runs simulated per chunk")
-    ap.add_argument("--out", default="results/bench/memory")
+    ap.add_argument("--out", default="results/bench_memory")
     args = ap.parse_args(argv)
     if args.runs < 9 or args.horizon <= 0 or args.chunk < 1:
         print("memory.py: error: --runs >= 9, --horizon > 0 and --chunk >= 1 required", file=sys.stderr)
