@@ -24,12 +24,21 @@ def throughput_figure(rows, machine: dict):
     fig, ax = plt.subplots(figsize=(7.0, 4.4), constrained_layout=True)
     for (impl, dtype), (color, ls, marker) in _STYLE.items():
         pts = sorted((r["batch"], r["msteps_per_s"]) for r in rows if r["impl"] == impl and r["dtype"] == dtype)
-        if pts:
-            b, m = zip(*pts)
-            label = f"{impl} {dtype}" + (" (per run, extrapolated)" if impl == "scipy" else "")
-            ax.plot(b, m, ls=ls, marker=marker, color=color, label=label)
+        if not pts:
+            continue
+        b, m = zip(*pts)
+        if impl == "scipy":  # one run at a time: a rate independent of the batch, drawn as a level
+            ax.axhline(m[0], ls=ls, color=color, lw=1.2, label=f"scipy solve_ivp {dtype} (one run at a time)")
+        elif len(b) == 1:  # a reference measured at one batch size: a marker with its value
+            ax.plot(b, m, ls="none", marker=marker, ms=8, color=color, label=f"{impl} {dtype}")
+            ax.annotate(f"{m[0]:.3g}", (b[0], m[0]), textcoords="offset points", fontsize=7, color=color,
+                        xytext=(8 if impl == "numpy" else -30, 3 if dtype == "float32" else -9))
+        else:
+            ax.plot(b, m, ls=ls, marker=marker, color=color, label=f"{impl} {dtype}")
+            ax.annotate(f"{m[-1]:.3g}", (b[-1], m[-1]), textcoords="offset points", xytext=(6, 4), fontsize=7, color=color)
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.margins(x=0.12)
     ax.set_xlabel("batch size (runs)")
     ax.set_ylabel("million rollout-steps / s")
     ax.set_title(f"slip model, sine path, RK4 5 ms, metrics on — {machine['cpus']} CPUs, "
