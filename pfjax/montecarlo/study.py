@@ -52,7 +52,7 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
             with precision(spec):
                 worst, worst_traj = worst_cases(spec, controllers)
         # Without a report the run table is never loaded whole: the summary reads one controller at
-        # a time and the float64 check only its sampled runs (a 10^7-run study fits in ~1 GiB).
+        # a time and the float64 check only its sampled runs (memory: one controller's rows at most).
         runs = read_runs(runs_path) if report else None
         check_rows = runs if runs is not None or spec.dtype == "float64" or spec.f64_check_runs <= 0 else \
             read_runs(runs_path, filters=[("run", "in", sample_indices(spec, spec.f64_check_runs).tolist())])
