@@ -28,8 +28,11 @@ LINE_POSE = (1.0, 0.0, math.pi / 2)  # the source's line test start
 
 
 def slip(**kw):
+    """Every term present (zeros where unused), so runs of different kinds batch together."""
     kw.setdefault("seq", np.zeros((NSEQ, 2)))
     kw.setdefault("seq_dt", SEQ_DT)
+    kw.setdefault("step_size", 0.0)
+    kw.setdefault("sin_amp", 0.0)
     return slip_profile(**kw)
 
 

@@ -62,9 +62,7 @@ def scenarios(batch: Batch, dtype=np.float32):
 
     n = batch.x0.shape[0]
     f = lambda a: jnp.asarray(np.broadcast_to(np.asarray(a, dtype), (n,) + np.shape(a)[np.ndim(a) and np.shape(a)[0] == n:]))
-    slip = constant_slip(0.0, 0.0)
-    slip = slip._replace(constant=jnp.asarray(np.stack([batch.beta_r, batch.beta_f], 1), dtype))
-    slip = slip._replace(**{k: f(getattr(slip, k)) for k in slip._fields if k != "constant"})
+    slip = constant_slip(0.0, 0.0)._replace(constant=jnp.asarray(np.stack([batch.beta_r, batch.beta_f], 1), dtype))
     path = shapes.Sine(*(f(v) for v in (1.0, 1.0, 0.0, 0.0, U_MIN, U_MAX)))
     gains = state_feedback_params(K)
     gains = type(gains)(*(f(np.asarray(g)) for g in gains))

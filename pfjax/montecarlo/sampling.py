@@ -97,30 +97,26 @@ def _slip(spec: StudySpec, key, horizon: float):
     rad = math.pi / 180
     br, bf = d("beta_r_deg"), d("beta_f_deg")
     cols = {"beta_r_deg": br, "beta_f_deg": bf}
-    zero2 = jnp.zeros((2,))
     n_seq = int(math.ceil(horizon / s.seq_dt)) + 2
-    seq = jnp.zeros((1, 2))
-    step_time, step_size, amp, freq, phase = jnp.asarray(0.0), zero2, zero2, zero2, zero2
+    terms = {}  # only the kind's own terms: an absent term is not computed in the simulator
     if s.kind == "step":
         step_time = d("step_time_s")
         sr, sf = d("step_r_deg"), d("step_f_deg")
-        step_size = jnp.stack([sr, sf]) * rad
+        terms.update(step_time=step_time, step_size=jnp.stack([sr, sf]) * rad)
         cols.update(step_time_s=step_time, step_r_deg=sr, step_f_deg=sf)
     elif s.kind == "sinusoid":
         ar, af, fr = d("amp_r_deg"), d("amp_f_deg"), d("freq_hz")
         ph = jnp.stack([jax.random.uniform(_q(key, "phase_r"), (), maxval=2 * math.pi),
                         jax.random.uniform(_q(key, "phase_f"), (), maxval=2 * math.pi)])
-        amp, freq, phase = jnp.stack([ar, af]) * rad, jnp.stack([fr, fr]), ph
+        terms.update(sin_amp=jnp.stack([ar, af]) * rad, sin_freq=jnp.stack([fr, fr]), sin_phase=ph)
         cols.update(amp_r_deg=ar, amp_f_deg=af, freq_hz=fr)
     elif s.kind == "ou":
         sig, tau = d("ou_sigma_deg"), d("ou_tau_s")
         seq = jnp.stack([ou_sequence(_q(key, "ou_r"), n_seq, s.seq_dt, sig * rad, tau),
                          ou_sequence(_q(key, "ou_f"), n_seq, s.seq_dt, sig * rad, tau)], axis=1)
+        terms.update(seq=seq, seq_dt=jnp.asarray(s.seq_dt, float))
         cols.update(ou_sigma_deg=sig, ou_tau_s=tau)
-    profile = SlipProfile(
-        constant=jnp.stack([br, bf]) * rad, step_time=step_time, step_size=step_size, sin_amp=amp,
-        sin_freq=freq, sin_phase=phase, seq=seq, seq_dt=jnp.asarray(s.seq_dt, float),
-    )
+    profile = SlipProfile(constant=jnp.stack([br, bf]) * rad, **terms)
     return profile, cols
 
 

@@ -7,8 +7,11 @@ Every profile is the superposition, per axle (index 0 rear ``beta_r``, 1 front `
               + sin_amp * sin(2 pi sin_freq t + sin_phase)
               + seq[floor(t / seq_dt)]          (zero-order hold of a sampled sequence)
 
-so constant, step, sinusoid and sampled profiles (and mixtures) share one shape and a batch
-can mix them freely. Unused terms are zeros. All angles in rad, times in s, frequencies in Hz.
+over the terms present: an absent term is ``None`` and costs nothing, so a constant slip is cheap
+(time-invariant within an RK4 step) and the time-varying terms are paid for only when used.
+Runs batched together need the same terms present (a study samples one kind for all its runs;
+give every run the same terms, zeros where a run has none, to mix kinds in one batch).
+All angles in rad, times in s, frequencies in Hz.
 """
 
 from __future__ import annotations
@@ -23,33 +26,49 @@ from pfjax.numerics import elementary as E
 
 
 class SlipProfile(NamedTuple):
+    """Slip of one run. Only ``constant`` is required; a term left ``None`` is absent (not computed).
+
+    A constant profile (``constant_slip``) does not depend on time, so within an RK4 step the
+    slip, the yaw rate and the stage headings that depend on them are computed once (XLA merges
+    the identical stage expressions); a present term, even an all-zero one, is evaluated at every
+    stage. Runs batched together must have the same terms present.
+    """
+
     constant: Array  # (2,) rad
-    step_time: Array  # () s
-    step_size: Array  # (2,) rad
-    sin_amp: Array  # (2,) rad
-    sin_freq: Array  # (2,) Hz
-    sin_phase: Array  # (2,) rad
-    seq: Array  # (n, 2) rad, held for seq_dt each; held at its last value after the end
-    seq_dt: Array  # () s
+    step_time: Array | None = None  # () s
+    step_size: Array | None = None  # (2,) rad
+    sin_amp: Array | None = None  # (2,) rad
+    sin_freq: Array | None = None  # (2,) Hz
+    sin_phase: Array | None = None  # (2,) rad
+    seq: Array | None = None  # (n, 2) rad, held for seq_dt each; held at its last value after the end
+    seq_dt: Array | None = None  # () s
 
 
 def _pair(a) -> Array:
     return jnp.broadcast_to(jnp.asarray(a, dtype=float), (2,))
 
 
-def slip_profile(constant=0.0, step_time=0.0, step_size=0.0, sin_amp=0.0, sin_freq=0.0, sin_phase=0.0,
+def slip_profile(constant=0.0, step_time=0.0, step_size=None, sin_amp=None, sin_freq=0.0, sin_phase=0.0,
                  seq=None, seq_dt=1.0) -> SlipProfile:
-    """General constructor; scalars apply to both axles, pairs are ``(rear, front)``."""
-    seq = jnp.zeros((1, 2)) if seq is None else jnp.asarray(seq, dtype=float).reshape(-1, 2)
+    """General constructor; scalars apply to both axles, pairs are ``(rear, front)``.
+
+    The step term is present when ``step_size`` is given, the sinusoid when ``sin_amp`` is given,
+    the sampled sequence when ``seq`` is given (``step_time``, ``sin_freq``, ``sin_phase`` and
+    ``seq_dt`` only complete them).
+    """
+    f = lambda a: jnp.asarray(a, dtype=float)
+    step = step_size is not None
+    sine = sin_amp is not None
+    sampled = seq is not None
     return SlipProfile(
         constant=_pair(constant),
-        step_time=jnp.asarray(step_time, dtype=float),
-        step_size=_pair(step_size),
-        sin_amp=_pair(sin_amp),
-        sin_freq=_pair(sin_freq),
-        sin_phase=_pair(sin_phase),
-        seq=seq,
-        seq_dt=jnp.asarray(seq_dt, dtype=float),
+        step_time=f(step_time) if step else None,
+        step_size=_pair(step_size) if step else None,
+        sin_amp=_pair(sin_amp) if sine else None,
+        sin_freq=_pair(sin_freq) if sine else None,
+        sin_phase=_pair(sin_phase) if sine else None,
+        seq=f(seq).reshape(-1, 2) if sampled else None,
+        seq_dt=f(seq_dt) if sampled else None,
     )
 
 
@@ -78,16 +97,16 @@ def sampled_slip(values, dt) -> SlipProfile:
 
 
 def slip_at(profile: SlipProfile, t: Array) -> tuple[Array, Array]:
-    """``(beta_r(t), beta_f(t))`` in rad."""
-    n = profile.seq.shape[0]
-    if n == 1:  # static: no sequence, no gather (a gather splits XLA's fused loop body)
-        held = profile.seq[0]
-    else:
-        held = profile.seq[jnp.clip(jnp.floor(t / profile.seq_dt).astype(jnp.int32), 0, n - 1)]
-    beta = (
-        profile.constant
-        + profile.step_size * (t >= profile.step_time)
-        + profile.sin_amp * E.sin(2.0 * jnp.pi * profile.sin_freq * t + profile.sin_phase)
-        + held
-    )
+    """``(beta_r(t), beta_f(t))`` in rad (the sum of the profile's present terms)."""
+    beta = profile.constant
+    if profile.step_size is not None:
+        beta = beta + profile.step_size * (t >= profile.step_time)
+    if profile.sin_amp is not None:
+        beta = beta + profile.sin_amp * E.sin(2.0 * jnp.pi * profile.sin_freq * t + profile.sin_phase)
+    if profile.seq is not None:
+        n = profile.seq.shape[0]
+        if n == 1:  # a single value: no gather (a gather splits XLA's fused loop body)
+            beta = beta + profile.seq[0]
+        else:
+            beta = beta + profile.seq[jnp.clip(jnp.floor(t / profile.seq_dt).astype(jnp.int32), 0, n - 1)]
     return beta[0], beta[1]
