@@ -158,6 +158,8 @@ def test_summary_contract_and_numbers(tmp_path):
     on_disk = json.loads((tmp_path / "s" / "summary.json").read_text())
     assert on_disk["config_sha256"] == study_hash(spec) == summary["config_sha256"]
     assert on_disk["study"] == "t" and on_disk["seed"] == 3 and on_disk["n_runs_total"] == 96
+    t = on_disk["timings_s"]  # wall clock per phase
+    assert list(t) == ["runs", "margin", "worst_case", "float64_check", "summary"] and min(t.values()) >= 0
     runs = pd.read_parquet(tmp_path / "s" / "runs.parquet")
     sweep = pd.read_parquet(tmp_path / "s" / "margin.parquet")
     assert len(sweep) == 2 * 6 * 3 * 2 * 2  # amplitudes x runs x axes x paths x controllers

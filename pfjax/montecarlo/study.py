@@ -41,22 +41,33 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         (warn or (lambda m: None))(w)
 
     def finish(tmp: Path, runs_path: Path, controllers, store) -> dict:
+        timings = {"runs": time.time() - t0}  # s per phase (wall clock), in summary.json
+        lap = [time.time()]
+
+        def mark(phase):
+            now = time.time()
+            timings[phase] = now - lap[0]
+            lap[0] = now
+
         sweep = margin_sweep(spec, controllers, progress=progress, store=store) if spec.margin.enabled else None
         if sweep is not None:
             sweep.to_parquet(tmp / "margin.parquet", index=False)
             _stamp(tmp / "margin.parquet", spec)
+        mark("margin")
         worst, worst_traj = {}, {}
         if spec.falsifier.enabled:
             from pfjax.montecarlo.worst_case import worst_cases
 
             with precision(spec):
                 worst, worst_traj = worst_cases(spec, controllers)
+        mark("worst_case")
         # Without a report the run table is never loaded whole: the summary reads one controller at
         # a time and the float64 check only its sampled runs (memory: one controller's rows at most).
         runs = read_runs(runs_path) if report else None
         check_rows = runs if runs is not None or spec.dtype == "float64" or spec.f64_check_runs <= 0 else \
             read_runs(runs_path, filters=[("run", "in", sample_indices(spec, spec.f64_check_runs).tolist())])
         check = float64_check(spec, controllers, check_rows, spec.f64_check_runs)
+        mark("float64_check")
         summary = summarize(spec, runs if runs is not None else runs_path, sweep,
                             gains={k: v[2] for k, v in controllers.items()}, wall_s=time.time() - t0)
         summary["warnings"] = warnings
@@ -64,11 +75,14 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         summary["chunks"] = {"simulated": store.computed, "resumed": store.reused}
         for name, block in worst.items():
             summary["controllers"][name]["worst_case"] = block
+        mark("summary")
         if report:
             from pfjax.report.study_report import write_report
 
             write_report(tmp, spec, summary, runs, sweep, worst_traj)
+            mark("report")
             summary["wall_s"] = time.time() - t0
+        summary["timings_s"] = timings
         (tmp / "summary.json").write_text(dumps(summary) + "\n")
         result["summary"] = summary
         return {}
