@@ -25,7 +25,7 @@ study: $(STAMP)
 # pytest exits 5 when it collects no test: .ci/run fails on it too (a suite that ran nothing).
 # --dist worksteal: an idle worker takes queued tests from the busy one (the slow tests come last).
 test: $(STAMP)
-	$(PY) -m pytest -n 2 --dist worksteal $(PYTEST_ARGS)
+	$(PY) -m pytest -n 2 --dist worksteal --durations=25 $(PYTEST_ARGS)
 
 clean:
 	rm -rf $(VENV) .pytest_cache results/paper_reproduction results/robustness_default

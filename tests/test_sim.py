@@ -182,6 +182,25 @@ def test_no_recompilation_for_new_values(mixed):
     assert not np.allclose(r.final.x, row(mixed, "healthy").final.x)
 
 
+def test_absent_slip_terms_cost_nothing_and_change_nothing():
+    """``constant_slip`` carries only the constant term (the others are None, not zeros), and gives
+    exactly the runs of the same profile with every term present at zero; profiles with different
+    terms present refuse to stack, with a message that says what to do."""
+    from pfjax.sim import constant_slip, slip_at
+
+    lean = constant_slip(5 * DEG, -3 * DEG)
+    assert all(getattr(lean, f) is None for f in lean._fields if f != "constant")
+    full = slip_profile(constant=(5 * DEG, -3 * DEG), step_size=0.0, sin_amp=0.0, seq=np.zeros((NSEQ, 2)), seq_dt=SEQ_DT)
+    for t in (0.0, 1.3, 7.0):
+        assert [float(b) for b in slip_at(lean, t)] == [float(b) for b in slip_at(full, t)]
+    cfg = SimConfig(dt=CFG.dt, horizon=2.0, record=False)
+    a, b = (run([make_scenario(line(), LINE_POSE, sf(), slip=p)], cfg) for p in (lean, full))
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        np.testing.assert_array_equal(x, y)
+    with pytest.raises(ValueError, match="same terms"):
+        stack([make_scenario(line(), LINE_POSE, sf(), slip=p) for p in (lean, full)])
+
+
 def test_singular_at_the_centre_of_a_circle():
     """SINGULAR (1 - kappa d <= 1e-6) at the exact centre of a circle.
 

@@ -79,12 +79,25 @@ def margins(sweep: pd.DataFrame | None, controller: str, eps: float) -> dict:
     return out
 
 
+#: run-table columns the summary does not read (the streamed reader skips them)
+_UNUSED = ("controller", "run", "status_code", "fail_time")
+
+
 def _controller_rows(runs, name: str) -> pd.DataFrame:
     """One controller's rows: a slice of a DataFrame, or read from a ``runs.parquet`` path (only
-    that controller's rows are read, so memory holds one controller's runs, not the study's)."""
+    that controller's rows and the columns the summary uses are read, and the Arrow buffers are
+    handed back as soon as pandas owns the data, so memory holds one controller's runs, not the study's)."""
     if isinstance(runs, pd.DataFrame):
         return runs[runs.controller == name]
-    return pd.read_parquet(runs, filters=[("controller", "==", name)])
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    columns = [c for c in pq.read_schema(runs).names if c not in _UNUSED]
+    table = pq.read_table(runs, columns=columns, filters=[("controller", "==", name)])
+    df = table.to_pandas(self_destruct=True, split_blocks=True)
+    del table
+    pa.default_memory_pool().release_unused()
+    return df
 
 
 def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict, wall_s: float) -> dict:
@@ -113,6 +126,7 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         block["failure_drivers"] = drivers.head(6).replace({np.nan: None}).to_dict("records")
         block["success_by_param"] = {p: success_by_param(df, p) for p in params}
         controllers[name] = block
+        del df  # before the next controller's rows are read
     return {
         "study": spec.name,
         "n_runs_total": int(n_total),
