@@ -17,7 +17,7 @@ import pytest
 from pfjax import controllers as C
 from pfjax.paths import circle, line, spline_through
 from pfjax.scenarios import make_scenario
-from pfjax.sim import SimConfig, Status, simulate_batch, slip_profile, stack
+from pfjax.sim import SimConfig, Status, simulate_batch, slip_profile, stack, unstack
 
 DEG = math.pi / 180
 CFG = SimConfig(dt=0.01, horizon=6.0, d_fail=3.0)
@@ -263,3 +263,20 @@ def test_float32_agrees_with_float64():
     assert int(r.status[0]) == Status.OK
     assert abs(float(r.final.d[0]) - d64) < 1e-4, (float(r.final.d[0]), d64)
     assert abs(d64) > 1e-3  # the steady slip offset, not a trivially zero error
+
+
+def test_unstack_is_one_gather_and_checks_the_index(mixed):
+    """unstack gives what indexing every leaf gives (device arrays: one jitted gather; NumPy leaves
+    stay NumPy), negative indices count from the end, and an index past the batch is an error
+    (a traced gather would clamp it silently)."""
+    on_device = jax.device_put(mixed)
+    for i in (0, 3, -1):
+        got, want = unstack(on_device, i), row(mixed, NAMES[i])
+        assert jax.tree_util.tree_structure(got) == jax.tree_util.tree_structure(want)
+        for x, y in zip(jax.tree_util.tree_leaves(got), jax.tree_util.tree_leaves(want)):
+            assert isinstance(x, jax.Array)
+            np.testing.assert_array_equal(np.asarray(x), y)
+    host = unstack(mixed, 2)
+    assert not any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(host))
+    with pytest.raises(IndexError, match="out of range"):
+        unstack(on_device, len(NAMES))

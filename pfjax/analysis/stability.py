@@ -20,6 +20,7 @@ as existing: the loop rests there with the steering at its limit.) The source in
 
 from __future__ import annotations
 
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -53,14 +54,19 @@ def _eig2(J: Array) -> Array:
     return jnp.stack([0.5 * tr + disc, 0.5 * tr - disc])
 
 
+@jax.jit
 def jacobian_eigenvalues(x: Array, K: Array, beta_r, beta_f, kappa, params: SlipParams) -> Array:
     """Eigenvalues of the unsaturated loop's Jacobian at ``x`` (rad/s)."""
     J = jax.jacfwd(closed_loop_field)(x, K, beta_r, beta_f, kappa, params, False)
     return _eig2(J)
 
 
+@partial(jax.jit, static_argnames="iters")
 def equilibrium(K: Array, beta_r, beta_f, params: SlipParams, kappa=0.0, iters: int = 30) -> Equilibrium:
-    """True equilibrium of the loop for constant slip (and curvature) and its local stability."""
+    """True equilibrium of the loop for constant slip (and curvature) and its local stability.
+
+    Jitted (``iters`` static): the 30 Newton steps run as one compiled program, not op by op
+    (a call from Python took 5 s eagerly)."""
     K = jnp.asarray(K, float)
     theta = -jnp.asarray(beta_r, float)
     lenain = jnp.asarray(params.convention) == 1
@@ -69,8 +75,9 @@ def equilibrium(K: Array, beta_r, beta_f, params: SlipParams, kappa=0.0, iters: 
 
     # Newton on theta_e' = 0 in d (theta_e fixed at -beta_r makes d' = 0 exactly).
     g = lambda dd: closed_loop_field(jnp.stack([dd, theta]), K, beta_r, beta_f, kappa, params, False)[1]
-    for _ in range(iters):
-        d = d - g(d) / jax.grad(g)(d)
+    # A loop, not 30 unrolled copies of the step and its derivative: the unrolled program took
+    # ~15 s to trace and compile (stability_map), the loop ~1 s.
+    d = jax.lax.fori_loop(0, iters, lambda _, dd: dd - g(dd) / jax.grad(g)(dd), d)
     x = jnp.stack([d, theta])
     delta = K[0] * d + K[1] * theta
     residual = jnp.abs(closed_loop_field(x, K, beta_r, beta_f, kappa, params, False)).max()
@@ -81,6 +88,7 @@ def equilibrium(K: Array, beta_r, beta_f, params: SlipParams, kappa=0.0, iters: 
     return Equilibrium(d, theta, delta, exists, eig, exists & jnp.all(eig.real < 0))
 
 
+@jax.jit
 def source_linearisation(K: Array, beta_r, beta_f, params: SlipParams) -> Array:
     """Eigenvalues the source plots (appendix B, Figs. 4-5): Jacobian at ``[0, -beta_r]`` on a line."""
     x = jnp.stack([jnp.zeros_like(jnp.asarray(beta_r, float)), -jnp.asarray(beta_r, float)])

@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from pfjax.controllers.base import Controller, Observation, step
@@ -316,5 +317,18 @@ def stack(items):
 
 
 def unstack(tree, i: int):
-    """Run ``i`` of a batched pytree."""
+    """Run ``i`` of a batched pytree (arrays stay on their device; NumPy leaves stay NumPy).
+
+    One jitted gather for the whole tree: indexing each leaf from Python would dispatch (and
+    compile) one program per leaf shape, seconds for a batch with trajectories."""
+    leaves = jax.tree_util.tree_leaves(tree)
+    if all(isinstance(a, np.ndarray) for a in leaves):
+        return jax.tree_util.tree_map(lambda a: a[i], tree)
+    if isinstance(i, int) and leaves and not -leaves[0].shape[0] <= i < leaves[0].shape[0]:
+        raise IndexError(f"unstack: run {i} is out of range for a batch of {leaves[0].shape[0]}")
+    return _take(tree, i)
+
+
+@jax.jit
+def _take(tree, i):
     return jax.tree_util.tree_map(lambda a: a[i], tree)
