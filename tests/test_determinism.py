@@ -50,6 +50,32 @@ def test_bit_identical_across_chunk_sizes_and_reruns(dtype):
         pd.testing.assert_frame_equal(table(chunk, dtype), ref, check_exact=True)
 
 
+def test_controllers_share_sampled_chunks_with_the_same_rows(monkeypatch):
+    """Each chunk is sampled once for all controllers (kept while it fits the memory budget), and
+    re-sampling per controller (budget 0) gives bit-identical rows: sampling is deterministic."""
+    from pfjax.montecarlo import runner
+
+    data = copy.deepcopy(BASE) | {"controllers": [{"name": "pi", "type": "pi"}, {"name": "pi2", "type": "pi"},
+                                                 {"name": "st", "type": "stanley"}]}
+    spec = load_study(data=data, overrides=["chunk_size=8"])[0]  # 20 runs: chunks of 8, 8, 4
+    calls, real = [], runner.sample_aligned
+    monkeypatch.setattr(runner, "sample_aligned", lambda *a, **k: calls.append(1) or real(*a, **k))
+
+    def rows():
+        calls.clear()
+        with precision(spec):
+            ctrls = {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
+            df = pd.concat([df for _, _, df in simulate_runs(spec, 0, np.arange(spec.n_runs), ctrls)], ignore_index=True)
+        return df, len(calls)
+
+    shared, n_shared = rows()
+    monkeypatch.setattr(runner, "SHARED_SAMPLES_BYTES", 0)
+    resampled, n_resampled = rows()
+    assert (n_shared, n_resampled) == (3, 9)
+    assert list(shared.controller.unique()) == ["pi", "pi2", "st"]
+    pd.testing.assert_frame_equal(shared, resampled, check_exact=True)
+
+
 FAILING = {
     "name": "fail", "n_runs": 8, "seed": 2, "chunk_size": 8, "f64_check_runs": 8, "dtype": "float32",
     "sim": {"horizon": 3.0, "steady_window": 1.0, "d_fail": 0.4}, "success": {"from_s": 1.0, "band": 0.3},
