@@ -278,5 +278,6 @@ def test_unstack_is_one_gather_and_checks_the_index(mixed):
             np.testing.assert_array_equal(np.asarray(x), y)
     host = unstack(mixed, 2)
     assert not any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(host))
-    with pytest.raises(IndexError, match="out of range"):
-        unstack(on_device, len(NAMES))
+    for bad in (len(NAMES), np.int64(-len(NAMES) - 1)):
+        with pytest.raises(IndexError, match="out of range"):
+            unstack(on_device, bad)

@@ -75,8 +75,8 @@ def equilibrium(K: Array, beta_r, beta_f, params: SlipParams, kappa=0.0, iters: 
 
     # Newton on theta_e' = 0 in d (theta_e fixed at -beta_r makes d' = 0 exactly).
     g = lambda dd: closed_loop_field(jnp.stack([dd, theta]), K, beta_r, beta_f, kappa, params, False)[1]
-    # A loop, not 30 unrolled copies of the step and its derivative: the unrolled program took
-    # ~15 s to trace and compile (stability_map), the loop ~1 s.
+    # A loop, not 30 unrolled copies of the step and its derivative: with the unrolled copies
+    # stability_map took ~18 s to trace and compile, with the loop ~7 s.
     d = jax.lax.fori_loop(0, iters, lambda _, dd: dd - g(dd) / jax.grad(g)(dd), d)
     x = jnp.stack([d, theta])
     delta = K[0] * d + K[1] * theta

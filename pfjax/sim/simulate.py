@@ -324,7 +324,7 @@ def unstack(tree, i: int):
     leaves = jax.tree_util.tree_leaves(tree)
     if all(isinstance(a, np.ndarray) for a in leaves):
         return jax.tree_util.tree_map(lambda a: a[i], tree)
-    if isinstance(i, int) and leaves and not -leaves[0].shape[0] <= i < leaves[0].shape[0]:
+    if isinstance(i, (int, np.integer)) and leaves and not -leaves[0].shape[0] <= i < leaves[0].shape[0]:
         raise IndexError(f"unstack: run {i} is out of range for a batch of {leaves[0].shape[0]}")
     return _take(tree, i)
 
