@@ -107,7 +107,9 @@ def _feed(d, te, delta, sat, weight):
     return running.finalize(acc, horizon, weight[-1] == 0, 0.1)
 
 
-samples = st.lists(st.floats(-2.0, 2.0, **finite), min_size=N, max_size=N)
+# No subnormals: XLA's CPU code flushes them to zero (|d| < 2.2e-308 m is 0 to the simulator, while
+# NumPy keeps it, so max |d| would differ; hypothesis found d = 2.2e-309 once).
+samples = st.lists(st.floats(-2.0, 2.0, allow_subnormal=False, **finite), min_size=N, max_size=N)
 
 
 @settings(max_examples=60, deadline=None)
