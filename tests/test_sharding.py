@@ -95,6 +95,9 @@ def test_plan_batch_splits_devices_into_blocks():
     size = placed["a"].shape[0]
     assert size % (k * blocks) == 0 and size // (k * blocks) <= 3 and size - 11 < k * blocks  # padding < 1 run per block
     np.testing.assert_array_equal(np.asarray(placed["a"])[11:], 0.0)  # copies of run 0
+    placed, _, layout = sharding.plan_batch({"a": np.arange(1001.0)}, devices, block=None)
+    per = placed["a"].shape[0] // k
+    assert layout.blocks == 1 and per % sharding.ALIGN == 0 and 0 <= per - -(-1001 // k) < sharding.ALIGN
     assert sharding.plan_batch(tree, devices[:1], block=None)[2] == sharding.Layout(None, 1)
     # block sizes: CPU_BLOCK_BYTES per array on CPU, none on another platform
     assert sharding.default_block({"x": np.zeros(3, np.float32)}, devices[:1]) == sharding.CPU_BLOCK_BYTES // 4

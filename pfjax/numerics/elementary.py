@@ -165,7 +165,26 @@ def _sincos(x):
     cos = jnp.where(swap, s, co)
     sin = jnp.where(q >= 2, -sin, sin)
     cos = jnp.where((q == 1) | (q == 2), -cos, cos)
-    return sin, cos
+    return _computed_once(sin, cos, x)
+
+
+def _computed_once(a, b, x):
+    """``(a, b)`` unchanged, but computed once per fused program.
+
+    XLA's CPU backend never shares work between two fused kernels: every kernel that uses a cheap
+    elementwise value (a polynomial sine) recomputes it from the last values held in memory, and a
+    simulator step reads the sine and cosine of one angle in up to eight kernels. An *expensive*
+    operation used more than once is computed in a kernel of its own instead. So the pair is
+    divided, as one complex number ``a + ib``, by exactly ``1 + 0i``, written from ``x`` so that XLA
+    cannot fold it away (``x == x`` is false only for NaN, and then ``a`` and ``b`` are NaN anyway):
+    one kernel computes both, the others read them. The division is exact (``r = 0/1``), so values
+    and derivatives are unchanged; it costs one complex division. Measured on the benchmark (B = 10^5,
+    blocks of 10^4): float64 12.0 -> 17.4 M rollout-steps/s, float32 47.0 -> 49.8 (README,
+    Performance).
+    """
+    one = jnp.where(x == x, 1.0, 2.0).astype(a.dtype)
+    z = jax.lax.complex(a, b) / jax.lax.complex(one, jnp.zeros_like(one))
+    return jnp.real(z), jnp.imag(z)
 
 
 @_sincos.defjvp
