@@ -118,3 +118,20 @@ def test_atan2_gradient_matches_xla():
     ref = jax.vmap(jax.grad(jnp.arctan2, argnums=(0, 1)))(y, x)
     for m, r in zip(mine, ref):
         np.testing.assert_allclose(m, r, rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_computed_once_pair_is_an_exact_identity_and_cpu_only(dtype):
+    """The (sin, cos) pair's division by 1 + 0i changes no value (NaN stays NaN, a sine of -0 stays -0), and
+    only the CPU lowering carries it (XLA's GPU backend fuses several outputs by itself)."""
+    x = np.concatenate([RNG.uniform(-1e3, 1e3, 500), [0.0, -0.0, np.inf, -np.inf, np.nan, 1e-30, -1e-30]]).astype(dtype)
+    with np.errstate(invalid="ignore"):
+        s, c = np.sin(x), np.cos(x)
+    for got, want in zip(jax.jit(E._divided_by_one)(s, c, x), (s, c)):
+        got = np.asarray(got)
+        assert got.dtype == dtype
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(np.signbit(got), np.signbit(want))
+    f = jax.jit(E.sincos)
+    lowered = {p: f.trace(x).lower(lowering_platforms=(p,)).as_text() for p in ("cpu", "cuda")}
+    assert "complex" in lowered["cpu"] and "complex" not in lowered["cuda"]
