@@ -15,7 +15,7 @@ import pytest
 from pfjax.numerics import elementary as E
 
 # max ulp error allowed: (float32, float64)
-ULP = {"sin": (9, 3), "cos": (7, 3), "tan": (9, 5), "atan": (3, 3), "atan2": (3, 3)}
+ULP = {"sin": (3, 3), "cos": (3, 3), "tan": (4, 5), "atan": (3, 3), "atan2": (3, 3)}
 DTYPES = (np.float32, np.float64)
 RNG = np.random.default_rng(8)
 
@@ -29,10 +29,19 @@ def _ulp_err(got, ref, dtype):
 
 
 def _trig_inputs(dtype):
+    """Random arguments over the reduction range, plus the floats nearest to k pi/2 and their next
+    three neighbours (where sin or cos is tiny and the reduction's own accuracy shows), the same
+    set whatever order the tests run in."""
+    rng = np.random.default_rng(8)
     lim = E.REDUCTION_LIMIT[np.dtype(dtype)]
-    x = np.concatenate([RNG.uniform(-np.pi, np.pi, 60000), RNG.uniform(-lim, lim, 60000),
-                        np.sign(RNG.standard_normal(20000)) * np.exp(RNG.uniform(np.log(1e-30), np.log(lim), 20000))])
-    return x.astype(dtype)
+    x = np.concatenate([rng.uniform(-np.pi, np.pi, 60000), rng.uniform(-lim, lim, 60000),
+                        np.sign(rng.standard_normal(20000)) * np.exp(rng.uniform(np.log(1e-30), np.log(lim), 20000))])
+    k = np.unique(np.geomspace(1, 2 * lim / np.pi - 1, 5000).astype(np.int64))
+    near = [(k * (np.longdouble(np.pi) / 2)).astype(dtype)]
+    for _ in range(3):
+        near.append(np.nextafter(near[-1], dtype(np.inf)))
+    near = np.concatenate(near)
+    return np.concatenate([x.astype(dtype), near, -near])
 
 
 def _wide_inputs(dtype):
@@ -132,6 +141,9 @@ def test_computed_once_pair_is_an_exact_identity_and_cpu_only(dtype):
         assert got.dtype == dtype
         np.testing.assert_array_equal(got, want)
         np.testing.assert_array_equal(np.signbit(got), np.signbit(want))
+    zero = np.array([0.0, -0.0], dtype)
+    for fn in (E.sin, E.tan):  # odd functions keep the sign of a zero, as NumPy
+        np.testing.assert_array_equal(np.signbit(np.asarray(jax.jit(fn)(zero))), [False, True])
     f = jax.jit(E.sincos)
     lowered = {p: f.trace(x).lower(lowering_platforms=(p,)).as_text() for p in ("cpu", "cuda")}
     assert "complex" in lowered["cpu"] and "complex" not in lowered["cuda"]

@@ -118,7 +118,7 @@ def test_blocks_and_devices_give_the_same_runs(model):
         from pfjax.sim import SimConfig, simulate_batch
 
         sc = P.scenarios(P.random_batch(11, seed=1), np.float64)
-        go = lambda **kw: simulate_batch(sc, controller=state_feedback, config=SimConfig(horizon=0.5, record=False), **kw)
+        go = lambda **kw: simulate_batch(sc, controller=state_feedback, config=SimConfig(horizon=0.5, record=True), **kw)
     else:
         from pfjax import tracking as T
         from pfjax.tracking import leader as L
