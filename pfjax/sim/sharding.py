@@ -84,7 +84,7 @@ def shard_batch(tree, devices=None):
     multiple of the device count). With one device, or under a JAX transformation, the tree is
     returned unchanged.
     """
-    tree, n, _ = plan_batch(tree, devices, block=None)
+    tree, n, _ = plan_batch(tree, devices, block=None, align=1)
     return tree, n
 
 
@@ -100,15 +100,15 @@ def default_block(tree, devices=None) -> int | None:
     return max(1, CPU_BLOCK_BYTES // itemsize)
 
 
-def plan_batch(tree, devices=None, block: int | None | str = "auto"):
+def plan_batch(tree, devices=None, block: int | None | str = "auto", align: int = ALIGN):
     """Pad and place a batch for :func:`map_runs`: ``(placed_tree, n, layout)``.
 
     ``n`` is the original batch size. The batch is split over the devices (as :func:`shard_batch`)
     and each device's share into ``layout.blocks`` equal blocks of at most ``block`` runs
     (``"auto"``: :func:`default_block`; ``None``: one block per device), rounded up to a multiple
-    of :data:`ALIGN` runs. The padding (repeats of the first run) is less than ``ALIGN + 1`` runs
-    per block and device. Under a JAX transformation the
-    tree is returned as it is, in one block.
+    of ``align`` runs when a block has more. The padding (repeats of the first run) is less than
+    ``align + 1`` runs per block and device. Under a JAX transformation the tree is returned as it
+    is, in one block.
     """
     n = jax.tree_util.tree_leaves(tree)[0].shape[0]
     if _is_traced(tree):
@@ -120,8 +120,8 @@ def plan_batch(tree, devices=None, block: int | None | str = "auto"):
     per_device = -(-n // k)
     blocks = 1 if block is None else max(1, -(-per_device // int(block)))
     size = -(-per_device // blocks)  # runs per block
-    if size > ALIGN:
-        size = -(-size // ALIGN) * ALIGN
+    if size > align:
+        size = -(-size // align) * align
     padded = _pad(tree, k * blocks * size)
     if k == 1:
         return padded, n, Layout(None, blocks)
