@@ -42,6 +42,9 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     assert s["all_agree"], s["agreement"]
     assert set(s["agreement"]) == {"numba_float32", "numba_float64", "numpy_float32", "numpy_float64", "scipy_float64"}
     assert s["gradient"]["grad_finite"] and s["failed_runs"] == 0
+    # forward mode (2 gains) and reverse mode: one derivative, float32 rounding apart
+    assert s["grad_mode"] == "forward" and s["gradient"]["modes_max_rel_diff"] < 1e-3
+    assert s["grad_over_forward_reverse"] > 0
     assert s["ratio_vs_numba_f32"] == pytest.approx(s["msteps_per_s_f32"] / s["numba_msteps_per_s_f32"], rel=1e-12)
     full = json.loads((out / "bench.json").read_text())
     assert full["summary"] == {k: v for k, v in s.items() if k not in ("out", "machine")}

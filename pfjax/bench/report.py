@@ -61,7 +61,10 @@ def markdown(result: dict) -> str:
     lines += ["", "| agreement (max abs IAE difference vs pfjax, m s) | value | tolerance | ok |", "|---|---|---|---|"]
     for k, a in s["agreement"].items():
         lines.append(f"| {k} | {a['max_abs_diff']:.2e} | {a['tolerance']:.0e} | {a['ok']} |")
-    lines += ["", f"Gradient of the batch-mean IAE w.r.t. K over the forward pass: {s['grad_over_forward']:.2f}x. "
+    g = s["gradient"]
+    lines += ["", f"Value and gradient of the batch-mean IAE w.r.t. K over the forward pass: {s['grad_over_forward']:.2f}x "
+              f"({s['grad_mode']} mode, as the tuner takes it); reverse mode {s['grad_over_forward_reverse']:.2f}x "
+              f"(the two gradients differ by {g['modes_max_rel_diff']:.1e} relative). "
               f"Peak RSS {s['peak_rss_mib']:.0f} MiB.", ""]
     return "\n".join(lines)
 

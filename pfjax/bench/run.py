@@ -9,8 +9,9 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
 * the NumPy, Numba (``prange``) and SciPy references (:mod:`pfjax.bench.references`) on the
   largest batch (NumPy and SciPy on a sample, extrapolated per step), with their agreement with
   pfjax on the per-run IAE (max absolute difference, against a stated tolerance);
-* the gradient of the batch-mean IAE with respect to the controller gains (``jax.grad`` through
-  the simulator) over the forward pass at the same batch size;
+* the value and gradient of the batch-mean IAE with respect to the controller gains over the
+  forward pass at the same batch size, as the tuner takes it (forward mode for the 2 gains,
+  :mod:`pfjax.numerics.autodiff`) and in reverse mode (``jax.value_and_grad``);
 * the process's peak resident memory (``getrusage``).
 """
 
@@ -76,12 +77,16 @@ def _pfjax(batch, dtype, n_steps, cfg: BenchConfig):
 
 
 def _grad(batch, dtype, cfg: BenchConfig):
-    """Seconds of the forward pass and of the gradient of the batch-mean IAE w.r.t. K (both jitted,
-    best of ``repeats`` after a compiling call), on the same sharded batch."""
+    """Seconds of the forward pass and of the value and gradient of the batch-mean IAE w.r.t. K
+    (all jitted, best of ``repeats`` after a compiling call), on the same sharded batch: as the
+    tuner takes it (:func:`pfjax.numerics.autodiff.value_and_grad`, ``mode="auto"``: forward mode
+    for K's 2 entries) and in reverse mode (``jax.value_and_grad``, what a loss of many parameters
+    gets)."""
     import jax
     import jax.numpy as jnp
 
     from pfjax.controllers import state_feedback
+    from pfjax.numerics import autodiff
     from pfjax.sim import SimConfig, sharding, simulate_batch
 
     sc, _ = sharding.shard_batch(P.scenarios(batch, dtype))
@@ -92,11 +97,17 @@ def _grad(batch, dtype, cfg: BenchConfig):
         return jnp.mean(simulate_batch(sc._replace(gains=gains), controller=state_feedback, config=sim).metrics.iae)
 
     K = jnp.asarray(P.K, dtype)
-    fwd, grad = jax.jit(loss), jax.jit(jax.grad(loss))
+    mode = autodiff.resolve_mode("auto", K.size)
+    fwd = jax.jit(loss)
+    auto, rev = jax.jit(autodiff.value_and_grad(loss)), jax.jit(jax.value_and_grad(loss))
     _, _, t_fwd = _timed(lambda: jax.block_until_ready(fwd(K, sc)), cfg.repeats)
-    g, first, t_grad = _timed(lambda: jax.block_until_ready(grad(K, sc)), cfg.repeats)
-    return dict(forward_s=t_fwd, grad_s=t_grad, grad_compile_s=first - t_grad, grad=np.asarray(g).tolist(),
-                grad_finite=bool(np.all(np.isfinite(np.asarray(g)))))
+    (_, g), first, t_grad = _timed(lambda: jax.block_until_ready(auto(K, sc)), cfg.repeats)
+    (_, g_rev), first_rev, t_rev = _timed(lambda: jax.block_until_ready(rev(K, sc)), cfg.repeats)
+    g, g_rev = np.asarray(g, np.float64), np.asarray(g_rev, np.float64)
+    return dict(forward_s=t_fwd, grad_s=t_grad, grad_compile_s=first - t_grad, grad=g.tolist(), mode=mode,
+                reverse_s=t_rev, reverse_compile_s=first_rev - t_rev, grad_reverse=g_rev.tolist(),
+                modes_max_rel_diff=float(np.max(np.abs(g - g_rev)) / np.max(np.abs(g_rev))),
+                grad_finite=bool(np.all(np.isfinite(g)) and np.all(np.isfinite(g_rev))))
 
 
 def machine() -> dict:
@@ -178,7 +189,8 @@ def run(cfg: BenchConfig, progress=None) -> dict:
         ratio_vs_scipy_f64=head64 / rate("scipy", "float64"),
         compile_s_f32=next(r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float32" and r["batch"] == top),
         compile_s_f64=next(r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float64" and r["batch"] == top),
-        grad_over_forward=g["grad_s"] / g["forward_s"], gradient=g,
+        grad_over_forward=g["grad_s"] / g["forward_s"], grad_mode=g["mode"],
+        grad_over_forward_reverse=g["reverse_s"] / g["forward_s"], gradient=g,
         peak_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         agreement=agreement, all_agree=all(a["ok"] for a in agreement.values()),
         failed_runs=sum(r["failed_runs"] or 0 for r in rows),

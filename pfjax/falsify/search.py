@@ -15,7 +15,8 @@ vmapped into one batch. One ascent step (value and gradient of the batch, adam, 
 one jitted function, compiled once per controller, config and array shapes (the objective is a
 traced index) and reused by every step and by later calls of the same shapes.
 
-Gradients are ``jax.value_and_grad`` through the simulator's ``lax.scan``. At the steering
+Gradients are taken through the simulator's ``lax.scan`` in reverse mode, or in forward mode when
+a scenario has at most 8 parameters (constant slip; :func:`pfjax.numerics.autodiff.value_and_grad`). At the steering
 saturation ``clip``, the rate limit, the angle wrap and the projection's step clips JAX
 differentiates the active branch (the derivative of one side of the kink; on the saturated
 branch the steering's derivative with respect to the command is 0, so a saturated stretch of a
@@ -28,8 +29,8 @@ is a falsifying scenario in itself and ranks above every healthy run; among equa
 ``J`` wins. ``objective`` in the results is ``J`` of the chosen run.
 
 Budget: one *rollout* is one simulated scenario. The falsifier spends ``n_restarts * steps``
-rollouts, each a forward pass *and* a backward pass (``n_gradients``; reverse mode through the
-scan costs a few forward passes and stores the scan's residuals, O(horizon) memory per run);
+rollouts, each a forward pass *and* its derivative (``n_gradients``; reverse mode through the
+scan costs about 4.6 forward passes and stores the scan's carries, O(horizon) memory per run);
 :func:`random_search` spends ``n_samples`` forward-only rollouts. Equal ``n_rollouts`` is equal
 scenario count, not equal compute.
 """
@@ -46,6 +47,7 @@ import numpy as np
 import optax
 from jax import Array
 
+from pfjax.numerics import autodiff
 from pfjax.controllers.base import Controller
 from pfjax.models.slip import Pose, SlipParams
 from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, stack, unstack
@@ -144,7 +146,7 @@ def _ascent_step(raw: RawParams, opt_state, best: _Best, lr: Array, which: Array
         res = simulate(controller, sc, config)
         return _objective(res.metrics, which), res.status
 
-    (value, status), grad = jax.vmap(jax.value_and_grad(run, has_aux=True))(raw)
+    (value, status), grad = jax.vmap(autodiff.value_and_grad(run, has_aux=True))(raw)
     score = _score(value, status)
     i = jnp.argmax(score)
     better = score[i] > best.score

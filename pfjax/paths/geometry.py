@@ -99,11 +99,25 @@ def _newton_update(path, u: Array, qx: Array, qy: Array) -> Array:
 
 
 def closest_parameter(path, qx: Array, qy: Array, u_guess: Array, iters: int = 3) -> Array:
-    """Local closest-point parameter by ``iters`` Newton steps from ``u_guess`` (warm start)."""
+    """Local closest-point parameter by ``iters`` Newton steps from ``u_guess`` (warm start).
+
+    **Derivative** (one-step differentiation): JAX differentiates only the last Newton step, taken
+    from the previous iterate ``u_{n-1}`` held constant (``stop_gradient``). At a root of ``g`` this
+    is the implicit-function derivative of the closest point,
+
+        du* = -(dg/dq . dq + dg/dpath . dpath) / g'(u*)        (g' the safeguarded Newton slope),
+
+    and it differs from the derivative of the unrolled iterations only by terms proportional to the
+    residual ``g(u_{n-1})`` (about 1e-9 m^2 after two warm-started steps at 5 ms; the unrolled
+    derivative's dependence on ``u_guess`` is of the same order). The values are unchanged; the
+    derivative costs one Newton step instead of ``iters`` (reverse mode through the simulator
+    4.6x instead of 7.0x the forward pass, measured; README, Performance). Where the last step is
+    clipped to the domain's end the derivative is 0, as the clip's.
+    """
     u = u_guess
-    for _ in range(iters):
+    for _ in range(iters - 1):
         u = _newton_update(path, u, qx, qy)
-    return u
+    return _newton_update(path, jax.lax.stop_gradient(u), qx, qy)
 
 
 def global_parameter(path, qx: Array, qy: Array, iters: int = 8) -> Array:
