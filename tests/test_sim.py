@@ -281,3 +281,21 @@ def test_unstack_is_one_gather_and_checks_the_index(mixed):
     for bad in (len(NAMES), np.int64(-len(NAMES) - 1)):
         with pytest.raises(IndexError, match="out of range"):
             unstack(on_device, bad)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_switching_instants_do_not_depend_on_rounding(dtype):
+    """A time a few ulps before a sample boundary or the step time (a rounded RK4 stage time at the
+    instant) gets the new value; a time well inside the previous interval keeps the old one."""
+    from pfjax.sim import slip_at
+
+    seq = np.arange(8.0)[:, None] * np.array([[1.0, -1.0]])
+    prof = jax.tree_util.tree_map(lambda a: np.asarray(a, dtype),
+                                  slip_profile(seq=seq, seq_dt=0.05, step_size=(10.0, 10.0), step_time=0.15))
+    for j in range(1, 8):
+        edge = dtype(j) * dtype(0.05)
+        for t in (edge, np.nextafter(edge, dtype(0)), np.nextafter(np.nextafter(edge, dtype(0)), dtype(0))):
+            step = 10.0 * (j >= 3)
+            assert float(slip_at(prof, t)[0]) == j + step, (j, t)
+        inside = edge - dtype(0.001)
+        assert float(slip_at(prof, inside)[0]) == j - 1 + 10.0 * (j - 1 >= 3), (j, inside)
