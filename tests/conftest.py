@@ -1,4 +1,5 @@
-"""Test configuration: float64 everywhere (references are compared to ~1e-9), CPU only, one
+"""Test configuration: float64 everywhere (references are compared to ~1e-9), CPU only, one device
+per worker with pfjax's compiler settings, one
 persistent compilation cache shared by the test workers and the notebook kernels they start
 (``.pytest_cache/xla``: a program compiled by one test is loaded, not compiled, by the next)."""
 
@@ -7,6 +8,16 @@ from pathlib import Path
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("PFJAX_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".pytest_cache" / "xla"))
+# Before JAX: the compiler settings users get (pfjax.small_loop_option), but one CPU device per
+# xdist worker (2 workers on 2 cores); subprocesses (CLI, notebooks) still get one per core.
+_host = os.environ.get("PFJAX_HOST_DEVICES")
+os.environ["PFJAX_HOST_DEVICES"] = "1"
+import pfjax  # noqa: E402,F401
+
+if _host is None:
+    del os.environ["PFJAX_HOST_DEVICES"]
+else:
+    os.environ["PFJAX_HOST_DEVICES"] = _host
 
 import jax  # noqa: E402
 

@@ -74,6 +74,21 @@ def test_default_host_devices_asks_for_one_device_per_core():
         assert env == before
 
 
+def test_small_loop_option_sets_the_threshold_unless_the_user_did():
+    env = {"XLA_FLAGS": "--xla_cpu_foo=1"}
+    assert pfjax.small_loop_option(env, modules={})
+    assert env["XLA_FLAGS"] == ("--xla_cpu_foo=1 --xla_backend_extra_options="
+                                f"xla_cpu_small_while_loop_byte_threshold={pfjax.SMALL_LOOP_BYTES}")
+    env = {"PFJAX_SMALL_LOOP_BYTES": "1000"}
+    assert pfjax.small_loop_option(env, modules={}) and env["XLA_FLAGS"].endswith("threshold=1000")
+    for env, modules in (({"PFJAX_SMALL_LOOP_BYTES": "0"}, {}),  # opted out
+                         ({"XLA_FLAGS": "--xla_backend_extra_options=xla_cpu_foo=2"}, {}),  # the user's own
+                         ({}, {"jax": object()})):  # too late: JAX is imported
+        before = dict(env)
+        assert not pfjax.small_loop_option(env, modules=modules)
+        assert env == before
+
+
 def test_shard_batch_pads_and_unpad_restores():
     tree = {"a": np.arange(5.0), "b": np.arange(10.0).reshape(5, 2)}
     sharded, n = sharding.shard_batch(tree, devices=jax.devices()[:1])
