@@ -51,6 +51,11 @@ def test_gradient_matches_central_differences(case):
     g = np.asarray(jax.grad(f)(th))
     assert np.all(np.isfinite(g)) and np.any(g != 0)
     np.testing.assert_allclose(g, _fd(f, th, 1e-6), rtol=1e-5, atol=1e-8)
+    # what gradient_tune takes for these few gains: forward mode, the same derivative up to rounding
+    from pfjax.numerics import autodiff
+
+    g_fwd = np.asarray(jax.jit(autodiff.value_and_grad(f, mode="forward"))(th)[1])
+    np.testing.assert_allclose(g_fwd, g, rtol=1e-10, atol=1e-13)
 
 
 def test_aggregates_match_numpy():
@@ -78,6 +83,11 @@ def test_gradient_tune_quadratic_in_box():
                       steps=300, learning_rate=0.02)
     np.testing.assert_allclose(r.theta, [0.3, 1.0, -0.7], atol=2e-3)
     assert r.n_rollouts == 300 and np.all(np.diff(r.history) <= 0)
+    rev = gradient_tune(lambda th: jnp.sum((th - c) ** 2), [-1, -1, -1], [1, 1, 1], key=jax.random.PRNGKey(0),
+                        steps=300, learning_rate=0.02, mode="reverse")  # "auto" took forward mode (3 gains)
+    np.testing.assert_allclose(rev.theta, r.theta, rtol=1e-12, atol=1e-14)
+    with pytest.raises(ValueError, match="^mode: "):
+        gradient_tune(lambda th: jnp.sum(th ** 2), [-1], [1], theta0=[0.5], mode="backward")
 
 
 @pytest.mark.slow

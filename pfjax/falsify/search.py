@@ -16,7 +16,8 @@ one jitted function, compiled once per controller, config and array shapes (the 
 traced index) and reused by every step and by later calls of the same shapes.
 
 Gradients are taken through the simulator's ``lax.scan`` in reverse mode, or in forward mode when
-a scenario has at most 8 parameters (constant slip; :func:`pfjax.numerics.autodiff.value_and_grad`). At the steering
+a scenario has at most 8 parameters (constant slip; :func:`pfjax.numerics.autodiff.value_and_grad`);
+the projection contributes the closest point's implicit-function derivative. At the steering
 saturation ``clip``, the rate limit, the angle wrap and the projection's step clips JAX
 differentiates the active branch (the derivative of one side of the kink; on the saturated
 branch the steering's derivative with respect to the command is 0, so a saturated stretch of a
@@ -30,7 +31,7 @@ is a falsifying scenario in itself and ranks above every healthy run; among equa
 
 Budget: one *rollout* is one simulated scenario. The falsifier spends ``n_restarts * steps``
 rollouts, each a forward pass *and* its derivative (``n_gradients``; reverse mode through the
-scan costs about 4.6 forward passes and stores the scan's carries, O(horizon) memory per run);
+scan costs about 5 forward passes and stores the scan's carries, O(horizon) memory per run);
 :func:`random_search` spends ``n_samples`` forward-only rollouts. Equal ``n_rollouts`` is equal
 scenario count, not equal compute.
 """
@@ -47,9 +48,9 @@ import numpy as np
 import optax
 from jax import Array
 
-from pfjax.numerics import autodiff
 from pfjax.controllers.base import Controller
 from pfjax.models.slip import Pose, SlipParams
+from pfjax.numerics import autodiff
 from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, stack, unstack
 from pfjax.sim.status import Status
 from pfjax.falsify.space import (

@@ -111,7 +111,7 @@ def closest_parameter(path, qx: Array, qy: Array, u_guess: Array, iters: int = 3
     residual ``g(u_{n-1})`` (about 1e-9 m^2 after two warm-started steps at 5 ms; the unrolled
     derivative's dependence on ``u_guess`` is of the same order). The values are unchanged; the
     derivative costs one Newton step instead of ``iters`` (reverse mode through the simulator
-    4.6x instead of 7.0x the forward pass, measured; README, Performance). Where the last step is
+    about 4.7x instead of 7.0x the forward pass, measured; README, Performance). Where the last step is
     clipped to the domain's end the derivative is 0, as the clip's.
     """
     u = u_guess
