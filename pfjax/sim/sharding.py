@@ -31,6 +31,7 @@ each block shape is compiled into its own vector code (an ulp in a few runs' met
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -74,7 +75,23 @@ def _pad(tree, n_to: int):
     n = jax.tree_util.tree_leaves(tree)[0].shape[0]
     if n == n_to:
         return tree
+    if all(isinstance(a, np.ndarray) for a in jax.tree_util.tree_leaves(tree)):
+        return jax.tree_util.tree_map(lambda a: np.concatenate([a, np.repeat(a[:1], n_to - n, axis=0)]), tree)
+    return _pad_jit(tree, n_to)
+
+
+# One program for the whole tree (compiled once per tree shape): padding or cutting leaf by leaf
+# dispatches a few small programs per leaf, each compiled on first use (measured 0.57 s against
+# 0.11 s for a 2,500-run scenario and its result).
+@partial(jax.jit, static_argnums=1)
+def _pad_jit(tree, n_to: int):
+    n = jax.tree_util.tree_leaves(tree)[0].shape[0]
     return jax.tree_util.tree_map(lambda a: jnp.concatenate([a, jnp.repeat(a[:1], n_to - n, axis=0)]), tree)
+
+
+@partial(jax.jit, static_argnums=1)
+def _head_jit(tree, n: int):
+    return jax.tree_util.tree_map(lambda a: a[:n], tree)
 
 
 def shard_batch(tree, devices=None):
@@ -151,9 +168,12 @@ def map_runs(fn: Callable[[Any], Any], tree, layout: Layout):
 
 def unpad(tree, n: int):
     """The first ``n`` runs of a batched pytree (undoes :func:`shard_batch`'s padding)."""
-    if jax.tree_util.tree_leaves(tree)[0].shape[0] == n:
+    leaves = jax.tree_util.tree_leaves(tree)
+    if leaves[0].shape[0] == n:
         return tree
-    return jax.tree_util.tree_map(lambda a: a[:n], tree)
+    if all(isinstance(a, np.ndarray) for a in leaves):
+        return jax.tree_util.tree_map(lambda a: a[:n], tree)
+    return _head_jit(tree, n)
 
 
 def device_count(devices=None) -> int:
