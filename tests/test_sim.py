@@ -299,3 +299,33 @@ def test_switching_instants_do_not_depend_on_rounding(dtype):
             assert float(slip_at(prof, t)[0]) == j + step, (j, t)
         inside = edge - dtype(0.001)
         assert float(slip_at(prof, inside)[0]) == j - 1 + 10.0 * (j - 1 >= 3), (j, inside)
+
+
+@pytest.mark.parametrize("control_every", [1, 3, None])
+def test_metrics_and_final_state_agree_with_the_trajectory(control_every):
+    """Samples 0 and N are iterations of the simulator's one loop (no separate first and last
+    sample): with sensor noise and a steering-rate limit, the metrics recomputed in NumPy from the
+    recorded samples (trapezoid rule, total variation of the applied steering from sample 0,
+    overshoot against the sign of d(0)) and the final state (the last sample) agree to rounding."""
+    from pfjax.sim import SensorNoise
+
+    sc = make_scenario(line(), (1.0, 0.3, math.pi / 2 + 0.4), sf(), slip=PAPER_SLIP)
+    sc = sc._replace(params=sc.params._replace(delta_rate_max=jax.numpy.asarray(0.8)),
+                     noise=SensorNoise(jax.numpy.asarray(0.01), jax.numpy.asarray(0.5 * DEG), jax.random.PRNGKey(3)))
+    cfg = SimConfig(dt=0.01, horizon=4.0, d_fail=3.0, control_every=control_every)
+    res = run([sc, sc], cfg)
+    m, tr, fin = (jax.tree_util.tree_map(lambda a: np.asarray(a)[0], x) for x in (res.metrics, res.trajectory, res.final))
+    assert int(res.status[0]) == Status.OK and tr.t.shape == (cfg.n_steps + 1,)
+    w = np.full(tr.t.shape, cfg.dt)
+    w[[0, -1]] *= 0.5
+    np.testing.assert_allclose(m.iae, np.sum(w * np.abs(tr.d)), rtol=1e-12)
+    np.testing.assert_allclose(m.itae, np.sum(w * tr.t * np.abs(tr.d)), rtol=1e-12)
+    np.testing.assert_allclose(m.steer_energy, np.sum(w * tr.delta**2), rtol=1e-12)
+    np.testing.assert_allclose(m.steer_tv, np.sum(np.abs(np.diff(tr.delta))), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(m.overshoot, max(0.0, np.max(-np.sign(tr.d[0]) * tr.d)), rtol=1e-12, atol=1e-15)
+    assert tr.t[-1] == cfg.horizon
+    if control_every is not None:  # rate-limited from 0 at sample 0; the last sample holds step N-1's command
+        assert np.abs(tr.delta[0]) <= 0.8 * cfg.dt and np.all(np.abs(np.diff(tr.delta)) <= 0.8 * cfg.dt * (1 + 1e-9))
+        assert tr.delta[-1] == tr.delta[-2] and tr.delta_cmd[-1] == tr.delta_cmd[-2]
+    for field in ("x", "y", "theta", "d", "theta_e", "delta", "s"):
+        assert getattr(fin, field) == getattr(tr, field)[-1], field

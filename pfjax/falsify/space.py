@@ -156,7 +156,8 @@ def start_pose(path, ic: Array) -> Pose:
 
 def build_scenario(space: SearchSpace, seq: Array, ic: Array, base: Scenario) -> Scenario:
     """``base`` (path, gains, physical parameters, noise) with the slip sequence ``seq`` and the start ``ic``."""
-    return base._replace(pose0=start_pose(base.path, ic), slip=slip_profile(seq=seq, seq_dt=space.seq_dt))
+    # u0 = the start's path parameter: the run is matched to p(u0), not to a global closest point
+    return base._replace(pose0=start_pose(base.path, ic), slip=slip_profile(seq=seq, seq_dt=space.seq_dt), u0=ic[2])
 
 
 def init_raw(space: SearchSpace, key: Array, n: int) -> RawParams:

@@ -120,6 +120,15 @@ def closest_parameter(path, qx: Array, qy: Array, u_guess: Array, iters: int = 3
     return _newton_update(path, jax.lax.stop_gradient(u), qx, qy)
 
 
+def polish_parameter(path, qx: Array, qy: Array, u_guess: Array, iters: int = 8) -> Array:
+    """``iters`` Newton steps from ``u_guess`` (as :func:`closest_parameter`) in a rolled loop: one
+    Newton step in the compiled program whatever ``iters``, for a one-off start-up projection. No
+    derivative flows through it (``stop_gradient``): follow it with :func:`closest_parameter`,
+    whose last step carries the derivative."""
+    u = jax.lax.fori_loop(0, int(iters), lambda _, u: _newton_update(path, u, qx, qy), u_guess)
+    return jax.lax.stop_gradient(u)
+
+
 def global_parameter(path, qx: Array, qy: Array, iters: int = 8) -> Array:
     """Global closest-point parameter: best of ``GLOBAL_SAMPLES`` dense samples, polished by Newton.
 
@@ -137,7 +146,8 @@ def global_parameter(path, qx: Array, qy: Array, iters: int = 8) -> Array:
     dmin = jnp.sqrt(jnp.min(dist2))
     near = jnp.sqrt(dist2) <= dmin + h
     i = jnp.argmax(near)
-    return closest_parameter(path, qx, qy, jax.lax.stop_gradient(grid[i]), iters)
+    # iters - 1 rolled steps, then the last one (which carries the derivative) as closest_parameter's
+    return closest_parameter(path, qx, qy, polish_parameter(path, qx, qy, grid[i], iters - 1), 1)
 
 
 def measure(path, x: Array, y: Array, theta: Array, u: Array) -> Projection:

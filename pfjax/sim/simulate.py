@@ -28,11 +28,15 @@ from jax import Array
 from pfjax.controllers.base import Controller, Observation, step
 from pfjax.metrics import running
 from pfjax.models.slip import Pose, SlipParams, world_rhs
-from pfjax.paths.geometry import Projection, closest_parameter, global_parameter, measure, wrap_angle
+from pfjax.paths.geometry import Projection, closest_parameter, global_parameter, measure, polish_parameter, wrap_angle
 from pfjax.sim import sharding
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.slip_profiles import SlipProfile, slip_at
 from pfjax.sim.status import Status, classify
+
+
+#: Newton steps that polish a scenario's given start parameter ``u0`` before sample 0.
+U0_ITERS = 8
 
 
 @dataclass(frozen=True)
@@ -188,9 +192,10 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     pose0 = Pose(*(jnp.asarray(a, float) for a in sc.pose0))
     if sc.u0 is None:
         u0 = global_parameter(sc.path, pose0.x, pose0.y)
-    else:
-        u0 = closest_parameter(sc.path, pose0.x, pose0.y, jnp.asarray(sc.u0, float), 8)
+    else:  # polish the given start parameter (a rolled loop: one Newton step in the program, not eight)
+        u0 = polish_parameter(sc.path, pose0.x, pose0.y, jnp.asarray(sc.u0, pose0.x.dtype), U0_ITERS)
     c0 = controller.init(gains)
+    t_end = jnp.asarray(horizon, pose0.x.dtype)
 
     def closed_loop_rhs(u_guess, k):
         """Vector field of (pose, controller state) with the controller inside (continuous mode)."""
@@ -213,75 +218,71 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
         br, bf = slip_at(sc.slip, t)
         return Trajectory(t, pose.x, pose.y, pose.theta, proj.d, proj.theta_e, proj.kappa, proj.s, cmd, delta, br, bf)
 
-    def sample(carry, t, weight, pose, proj, cmd, delta):
-        """Health check + metrics at one sample; returns the updated (acc, status, fail_time)."""
-        acc, status, fail_time = carry
+    def body(carry, k):
+        """Sample ``k`` (``t_k = k dt``, ``k = 0..N``): measure, command, health, metrics; then, for
+        ``k < N``, one RK4 step. Sample ``N`` only measures (the trapezoid's end point), with the
+        command held from step ``N - 1`` (sampled controllers) or evaluated there (continuous)."""
+        pose, c, u, _, cmd, delta_prev, (acc, status, fail_time) = carry
+        first, last = k == 0, k == n_steps
+        t = jnp.where(last, t_end, k * dt)
+        proj = _measure(sc, pose, u, iters)
+        obs = _noisy(_observation(proj, pose, sc), sc.noise, k)
+        if continuous:
+            cmd = controller.output(gains, c, obs)
+        else:
+            if every == 1:  # every step: no conditional (it would split XLA's fused loop body)
+                new_cmd, new_c = step(controller, gains, c, obs, dt)
+            else:
+                new_cmd, new_c = jax.lax.cond(
+                    k % every == 0,
+                    lambda: step(controller, gains, c, obs, every * dt),
+                    lambda: (cmd, c),
+                )
+            cmd, c_next = jnp.where(last, cmd, new_cmd), new_c
+        delta = jnp.clip(cmd, -dmax, dmax)
+        if not continuous:  # steering rate limit (exactly a no-op when rate = inf); held at sample N
+            limited = delta_prev + jnp.clip(delta - delta_prev, -rate * dt, rate * dt)
+            delta = jnp.where(last, delta_prev, jnp.where(rate_limited, limited, delta))
+        # health check and metrics (trapezoid weight 1/2 at both ends)
         now = health(pose, proj)
         newly = (status == Status.OK) & (now != Status.OK)
         status = jnp.where(newly, now, status)
         fail_time = jnp.where(newly, t, fail_time)
         live = status == Status.OK
+        acc = acc._replace(d0_sign=jnp.where(first, jnp.sign(proj.d), acc.d0_sign),
+                           prev_delta=jnp.where(first, delta, acc.prev_delta))
         acc = running.update(
-            acc, t, dt, jnp.where(live, weight, 0.0), jnp.where(live, proj.d, 0.0),
+            acc, t, dt, jnp.where(live, jnp.where(first | last, 0.5, 1.0), 0.0), jnp.where(live, proj.d, 0.0),
             jnp.where(live, proj.theta_e, 0.0), delta, (jnp.abs(cmd) > dmax).astype(float),
             band=config.settle_band, steady_from=horizon - config.steady_window,
             success_from=config.success_start,
         )
-        return (acc, status, fail_time), live
-
-    def body(carry, k):
-        pose, c, u, cmd, delta_prev, health_carry = carry
-        t = k * dt
-        proj = _measure(sc, pose, u, iters)
-        obs = _noisy(_observation(proj, pose, sc), sc.noise, k)
         if continuous:
-            cmd = controller.output(gains, c, obs)
-        elif every == 1:  # every step: no conditional (it would split XLA's fused loop body)
-            cmd, c = step(controller, gains, c, obs, dt)
-        else:
-            cmd, c = jax.lax.cond(
-                k % every == 0,
-                lambda: step(controller, gains, c, obs, every * dt),
-                lambda: (cmd, c),
-            )
-        delta = jnp.clip(cmd, -dmax, dmax)
-        if not continuous:  # steering rate limit (exactly a no-op when rate = inf)
-            limited = delta_prev + jnp.clip(delta - delta_prev, -rate * dt, rate * dt)
-            delta = jnp.where(rate_limited, limited, delta)
-        weight = jnp.where(k == 0, 0.5, 1.0)
-        health_carry, live = sample(health_carry, t, weight, pose, proj, cmd, delta)
-        if continuous:
-            new_pose, new_c = rk4_step(closed_loop_rhs(proj.u, k), t, (pose, c), dt)
+            new_pose, c_next = rk4_step(closed_loop_rhs(proj.u, k), t, (pose, c), dt)
         else:
             rhs = lambda tt, ps: world_rhs(ps, delta, *slip_at(sc.slip, tt), params)
-            new_pose, new_c = rk4_step(rhs, t, pose, dt), c
-        keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(live, a, b), new, old)
+            new_pose = rk4_step(rhs, t, pose, dt)
+        advance = live & ~last
+        keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(advance, a, b), new, old)
         out = record_of(t, pose, proj, cmd, delta) if config.record else None
-        return (keep(new_pose, pose), keep(new_c, c), jnp.where(live, proj.u, u), cmd, delta, health_carry), out
+        # u: warm start of the next projection (frozen after a failure); proj.u: the final state's
+        return (keep(new_pose, pose), keep(c_next, c), jnp.where(live, proj.u, u), proj.u, cmd, delta,
+                (acc, status, fail_time)), out
 
-    proj0 = measure(sc.path, pose0.x, pose0.y, pose0.theta, u0)
-    cmd0 = jnp.zeros_like(proj0.d)
-    acc0 = running.init(proj0.d, jnp.clip(controller.output(gains, c0, _observation(proj0, pose0, sc)), -dmax, dmax))
-    init = (pose0, c0, u0, cmd0, jnp.zeros_like(cmd0), (acc0, jnp.int32(Status.OK), jnp.asarray(jnp.nan, proj0.d.dtype)))
+    dtype = pose0.x.dtype
+    zero = jnp.zeros((), dtype)
+    # d0_sign and prev_delta are set by sample 0
+    acc0 = running.init(zero, zero)
+    init = (pose0, c0, u0, u0, zero, zero, (acc0, jnp.int32(Status.OK), jnp.asarray(jnp.nan, dtype)))
+    # One program for samples 0..N (no separate first and last sample: half the compile time).
     # Reverse mode stores only the carry per step and recomputes the step (jax.checkpoint): the
     # residuals of a whole step would cost far more memory traffic than recomputing it.
-    (pose, c, u, cmd, delta_last, health_carry), traj = jax.lax.scan(
-        jax.checkpoint(body, prevent_cse=False), init, jnp.arange(n_steps))
+    (pose, c, _, u_last, cmd, delta, (acc, status, fail_time)), traj = jax.lax.scan(
+        jax.checkpoint(body, prevent_cse=False), init, jnp.arange(n_steps + 1))
 
-    # Final sample t_N (trapezoid end point).
-    t_end = jnp.asarray(horizon, proj0.d.dtype)
-    proj = _measure(sc, pose, u, iters)
-    if continuous:
-        cmd = controller.output(gains, c, _noisy(_observation(proj, pose, sc), sc.noise, n_steps))
-        delta = jnp.clip(cmd, -dmax, dmax)
-    else:  # the held, applied steering of the last step
-        delta = delta_last
-    (acc, status, fail_time), _ = sample(health_carry, t_end, 0.5, pose, proj, cmd, delta)
     metrics = running.finalize(acc, horizon, status != Status.OK, config.success_band)
+    proj = measure(sc.path, pose.x, pose.y, pose.theta, u_last)  # sample N's projection
     final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, delta, proj.s)
-    if config.record:
-        last = record_of(t_end, pose, proj, cmd, delta)
-        traj = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), traj, last)
     return SimResult(metrics, status, fail_time, final, traj)
 
 
