@@ -266,7 +266,7 @@ def _cmd_study(args) -> dict:
     warn = lambda m: print(f"pfjax study: warning: {m}", file=sys.stderr)
     try:
         summary = run(spec, out, progress=None if not args.quiet else False, report=not args.no_report,
-                      fresh=args.fresh, warn=warn)
+                      fresh=args.fresh, warn=warn, overlap=not args.no_overlap)
     except ConfigError as e:
         raise UsageError(str(e)) from None
     head = _headline(summary, out)
@@ -347,6 +347,9 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "study":
             st.add_argument("--no-report", action="store_true", help="skip report.html")
             st.add_argument("--quiet", action="store_true", help="no progress bar")
+            st.add_argument("--no-overlap", action="store_true",
+                            help="run the worst-case search and the float64 check after the runs instead of "
+                                 "alongside them in a background thread (same results; slower)")
             st.add_argument("--fresh", action="store_true",
                             help="discard the finished chunks of an interrupted run into --out and start over "
                                  "(default: resume them; refused if the config changed)")

@@ -158,8 +158,10 @@ def test_summary_contract_and_numbers(tmp_path):
     on_disk = json.loads((tmp_path / "s" / "summary.json").read_text())
     assert on_disk["config_sha256"] == study_hash(spec) == summary["config_sha256"]
     assert on_disk["study"] == "t" and on_disk["seed"] == 3 and on_disk["n_runs_total"] == 96
-    t = on_disk["timings_s"]  # wall clock per phase
+    t = on_disk["timings_s"]  # wall clock per phase, and the side jobs' compute time
+    side = t.pop("side_jobs")
     assert list(t) == ["runs", "margin", "worst_case", "float64_check", "summary"] and min(t.values()) >= 0
+    assert side["overlapped"] is True and side["worst_case"] == 0 and side["float64_check"] > 0  # no falsifier here
     runs = pd.read_parquet(tmp_path / "s" / "runs.parquet")
     sweep = pd.read_parquet(tmp_path / "s" / "margin.parquet")
     assert len(sweep) == 2 * 6 * 3 * 2 * 2  # amplitudes x runs x axes x paths x controllers
@@ -175,6 +177,20 @@ def test_summary_contract_and_numbers(tmp_path):
     # the sweep's slip is exactly the amplitude on the swept axis
     rear = sweep[sweep.axis == "rear"]
     assert set(rear.amplitude_deg) == {0.0, 10.0}
+
+
+def test_side_jobs_alongside_the_runs_change_nothing(tmp_path):
+    """The worst-case search and the float64 check run in a background thread alongside the runs
+    (on one device) or after them in the main thread: the same summary, runs and sweep."""
+    spec = spec_of("falsifier.enabled=true", "falsifier.n_restarts=2", "falsifier.steps=2", "n_runs=8", "chunk_size=8")
+    both = [run(spec, tmp_path / str(o), progress=False, report=False, overlap=o) for o in (True, False)]
+    for s in both:
+        side = s.pop("timings_s").pop("side_jobs")
+        assert side["worst_case"] > 0 and side["float64_check"] > 0
+        s.pop("wall_s")
+    assert json.dumps(both[0], sort_keys=True) == json.dumps(both[1], sort_keys=True)
+    for f in ("runs.parquet", "margin.parquet"):
+        pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "True" / f), pd.read_parquet(tmp_path / "False" / f))
 
 
 def test_cli_study_and_bad_input(tmp_path):

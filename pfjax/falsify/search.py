@@ -105,7 +105,7 @@ def _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, 
     params = SlipParams() if params is None else params
     base = Scenario(pose0=Pose(0.0, 0.0, 0.0), slip=None, params=arr(params), path=arr(path), gains=arr(gains),
                     noise=None if noise is None else arr(noise))
-    return space, base, dataclasses.replace(config, record=False)
+    return space, base, config
 
 
 def _result(space, base, seq, ic, value, status, history, history_rollouts, n_rollouts, n_gradients, n_nonfinite):
@@ -193,6 +193,7 @@ def falsify(controller: Controller, gains, path, *, config: SimConfig, slip_boun
         raise ValueError(f"n_restarts and steps: must be >= 1, got {n_restarts}, {steps}")
     space, base, config = _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise,
                                  dict(n_freq=n_freq, with_constant=with_constant, seq_dt=seq_dt))
+    config = dataclasses.replace(config, record=False)
     raw = init_raw(space, key, int(n_restarts))
     dtype = space.basis.dtype
     best = _Best(jnp.asarray(-jnp.inf, dtype), jnp.asarray(jnp.nan, dtype), jnp.int32(Status.OK), unstack(raw, 0))
@@ -217,11 +218,15 @@ def _scenarios(space: SearchSpace, seq: Array, ic: Array, base: Scenario) -> Sce
 def random_search(controller: Controller, gains, path, *, config: SimConfig, slip_bound_deg: float,
                   f_max_hz: float, ic_bounds: dict, objective: str = "iae", n_samples: int, key: Array,
                   batch_size: int = 64, params: SlipParams | None = None, noise=None, n_freq: int = 8,
-                  with_constant: bool = True, seq_dt: float = 0.05) -> FalsifierResult:
+                  with_constant: bool = True, seq_dt: float = 0.05, devices=None) -> FalsifierResult:
     """The baseline: ``n_samples`` random draws of the same set (:func:`pfjax.falsify.space.sample`),
     simulated with :func:`~pfjax.sim.simulate_batch` in chunks of ``batch_size`` (the last one
     padded, so one compile), the worst kept. All draws come from ``key`` at once, so the result
-    does not depend on ``batch_size``. Arguments as :func:`falsify`; history per sample."""
+    does not depend on ``batch_size``. Arguments as :func:`falsify`; history per sample.
+
+    ``config.record`` is honoured though the trajectories are discarded: with ``record=True`` and
+    the same ``batch_size``, :func:`worst_trajectory` reuses this search's compiled program.
+    ``devices``: as :func:`~pfjax.sim.simulate_batch` (default: all)."""
     if int(n_samples) < 1 or int(batch_size) < 1:
         raise ValueError(f"n_samples and batch_size: must be >= 1, got {n_samples}, {batch_size}")
     space, base, config = _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise,
@@ -231,7 +236,8 @@ def random_search(controller: Controller, gains, path, *, config: SimConfig, sli
     values, statuses = [], []
     for start in range(0, n, b):
         idx = np.minimum(np.arange(start, start + b), n - 1)
-        res = simulate_batch(_scenarios(space, seq[idx], ic[idx], base), controller=controller, config=config)
+        res = simulate_batch(_scenarios(space, seq[idx], ic[idx], base), controller=controller, config=config,
+                             devices=devices)
         keep = min(b, n - start)
         values.append(np.asarray(getattr(res.metrics, objective))[:keep])
         statuses.append(np.asarray(res.status)[:keep])
@@ -246,8 +252,15 @@ def random_search(controller: Controller, gains, path, *, config: SimConfig, sli
                    np.arange(1, n + 1), n, 0, 0)
 
 
-def worst_trajectory(controller: Controller, result: FalsifierResult, config: SimConfig) -> SimResult:
-    """Re-simulate the worst scenario with ``record=True`` (for plotting): one unbatched ``SimResult``."""
-    res = simulate_batch(stack([result.scenario]), controller=controller,
-                         config=dataclasses.replace(config, record=True))
+def worst_trajectory(controller: Controller, result: FalsifierResult, config: SimConfig,
+                     batch_size: int = 1, devices=None) -> SimResult:
+    """Re-simulate the worst scenario with ``record=True`` (for plotting): one unbatched ``SimResult``.
+
+    ``batch_size``: the scenario is repeated to this batch size, so the replay runs a program
+    compiled before (a :func:`random_search` with ``record=True`` and this ``batch_size``)
+    instead of compiling one for a single run (seconds). ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
+    if int(batch_size) < 1:
+        raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
+    res = simulate_batch(stack([result.scenario] * int(batch_size)), controller=controller,
+                         config=dataclasses.replace(config, record=True), devices=devices)
     return unstack(res, 0)

@@ -83,28 +83,42 @@ def sample_indices(spec: StudySpec, n_sample: int) -> np.ndarray:
     return np.unique(np.linspace(0, spec.n_runs - 1, k).round().astype(np.int64))
 
 
-def float64_check(spec: StudySpec, controllers: dict, runs: pd.DataFrame, n_sample: int) -> dict:
+def float64_runs(spec: StudySpec, controllers: dict, n_sample: int, path_index: int, devices=None) -> dict:
+    """The float64 half of :func:`float64_check` for one path: ``{controller name: SimResult}`` (NumPy,
+    the :func:`sample_indices` runs only). Independent of the float32 study, so it can run before
+    or while the study does. ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
+    from pfjax.montecarlo.runner import _with_gains, sample_aligned, sim_config
+    from pfjax.sim.simulate import simulate_batch
+
+    idx = sample_indices(spec, n_sample)
+    with jax.enable_x64(False):
+        sampled = sample_aligned(spec, path_index, idx)
+    m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
+    out = {}
+    for name, (ctrl, gains, _) in controllers.items():
+        with jax.enable_x64(True):
+            sc = _cast64(sampled.scenarios)
+            res = jax.device_get(simulate_batch(_with_gains(sc, _cast64(gains), m), controller=ctrl, config=sim_config(spec),
+                                                devices=devices))
+            out[name] = jax.tree_util.tree_map(lambda a: np.asarray(a)[:len(idx)], res)
+    return out
+
+
+def float64_check(spec: StudySpec, controllers: dict, runs: pd.DataFrame, n_sample: int, sims: list | None = None) -> dict:
     """Re-simulate ``n_sample`` runs per controller (spread over the paths) in float64 and compare
     with the float32 rows of ``runs``: max |dIAE| (m s), max relative dIAE, max |d late max|, and the
     runs whose status or success differs. The scenarios are sampled in float32 (exactly those the
     study ran) and cast up, so only the arithmetic precision differs, except measurement noise,
-    which the simulator draws at the run's precision (a different realisation in float64)."""
-    from pfjax.montecarlo.runner import _with_gains, sample_aligned, sim_config
-    from pfjax.sim.simulate import simulate_batch
-
+    which the simulator draws at the run's precision (a different realisation in float64).
+    ``sims``: :func:`float64_runs` per path if already computed."""
     if spec.dtype == "float64" or n_sample <= 0:
         return {"checked": False, "reason": "the study runs in float64" if spec.dtype == "float64" else "disabled (f64_check_runs = 0)"}
     idx = sample_indices(spec, n_sample)
     per = {}
     for p, pspec in enumerate(spec.paths):
-        with jax.enable_x64(False):
-            sampled = sample_aligned(spec, p, idx)
-        m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
-        for name, (ctrl, gains, _) in controllers.items():
-            with jax.enable_x64(True):
-                sc = _cast64(sampled.scenarios)
-                res = jax.device_get(simulate_batch(_with_gains(sc, _cast64(gains), m), controller=ctrl, config=sim_config(spec)))
-                res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:len(idx)], res)
+        sim = sims[p] if sims is not None else float64_runs(spec, controllers, n_sample, p)
+        for name in controllers:
+            res = sim[name]
             f32 = runs[(runs.path == pspec.label) & (runs.controller == name)].set_index("run").loc[idx]
             block = per.setdefault(name, {"n": 0, "iae_abs": [], "iae_rel": [], "late": [], "status_mismatch": [], "success_mismatch": 0})
             iae64 = np.asarray(res.metrics.iae, float)

@@ -164,20 +164,27 @@ def _nbytes(sampled) -> int:
     return sum(int(x.nbytes) for x in leaves)
 
 
-def run_study(spec: StudySpec, out: Path, *, progress: bool | None = None, extra=None, fresh: bool = False) -> dict:
+def controllers_of(spec: StudySpec) -> dict:
+    """``{name: (controller, gains, flat gains)}`` for the study's controllers (LMI designs synthesised)."""
+    with precision(spec):
+        return {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
+
+
+def run_study(spec: StudySpec, out: Path, *, progress: bool | None = None, extra=None, fresh: bool = False,
+              controllers: dict | None = None) -> dict:
     """Run ``spec``, write ``out/runs.parquet`` and return the run table's location and timings.
 
     Finished chunks are kept in :class:`~pfjax.montecarlo.chunks.ChunkStore` next to ``out``, so
     re-running after an interruption resumes (``fresh=True`` discards them first). ``extra(tmp_dir,
     runs_path, controllers, store)`` is called before the directory is moved into place (the margin
     sweep, summary and report are written there), so a failure leaves nothing half-written at ``out``.
+    ``controllers``: :func:`controllers_of` ``(spec)`` if the caller already has them.
     """
     from tqdm import tqdm
 
     t0 = time.time()
     out = Path(out)
-    with precision(spec):
-        controllers = {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
+    controllers = controllers_of(spec) if controllers is None else controllers
     store = ChunkStore(out, spec, fresh=fresh)
     tmp = store.assembly_dir()
     try:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import jax
@@ -15,9 +16,24 @@ from pfjax.sim.simulate import unstack
 from pfjax.sim.status import STATUS_NAMES
 
 
+#: Random search's batch (runs per simulator call), also the falsifier's worst-case replay's.
+REPLAY_BATCH = 64
+
+
 def worst_cases(spec: StudySpec, controllers) -> tuple[dict, dict]:
     """Per controller: the falsifier's and random search's worst objective (same rollouts) and the
     falsifier's worst trajectory. Returns ``(summary blocks, trajectories)``; call inside ``precision(spec)``."""
+    blocks, trajs = {}, {}
+    for i, name in enumerate(controllers):
+        blocks[name], trajs[name] = worst_case(spec, controllers, i)
+    return blocks, trajs
+
+
+def worst_case(spec: StudySpec, controllers, i: int, devices=None) -> tuple[dict, dict]:
+    """:func:`worst_cases` for controller ``i`` alone (its own PRNG stream, so the controllers can
+    be searched in any order or concurrently): ``(summary block, trajectory)``. Call inside
+    ``precision(spec)``. ``devices``: where the batched simulations run (default: all devices);
+    the gradient steps run on JAX's default device."""
     f = spec.falsifier
     labels = [p.label for p in spec.paths]
     p = labels.index(f.path) if f.path is not None else 0
@@ -27,28 +43,31 @@ def worst_cases(spec: StudySpec, controllers) -> tuple[dict, dict]:
                   ic_bounds={"d": (-f.lateral_offset, f.lateral_offset) if f.lateral_offset > 0 else 0.0,
                              "theta_e_deg": (-f.heading_error_deg, f.heading_error_deg) if f.heading_error_deg > 0 else 0.0,
                              "u": NOMINAL_START[spec.paths[p].kind]},
-                  params=run0.params, config=cfg)
-    blocks, trajs = {}, {}
+                  params=run0.params)
+    record = dataclasses.replace(cfg, record=True)
     key = jax.random.fold_in(jax.random.PRNGKey(spec.seed), 0xFA15)
-    for i, (name, (controller, gains, _)) in enumerate(controllers.items()):
-        k1, k2 = jax.random.split(jax.random.fold_in(key, i))
-        fr = falsify(controller, gains, run0.path, n_restarts=f.n_restarts, steps=f.steps, key=k1, **bounds)
-        rr = random_search(controller, gains, run0.path, n_samples=int(fr.n_rollouts), key=k2, **bounds)
-        tr = jax.device_get(worst_trajectory(controller, fr, cfg).trajectory)
-        slip = np.degrees(np.asarray(fr.slip))
-        blocks[name] = {
-            "path": labels[p], "objective": f.objective,
-            "falsifier": float(fr.objective), "falsifier_status": STATUS_NAMES[int(fr.status)],
-            "random": float(rr.objective), "random_status": STATUS_NAMES[int(rr.status)],
-            "n_rollouts": int(fr.n_rollouts), "n_gradients": int(fr.n_gradients),
-            "ratio": float(fr.objective) / float(rr.objective) if float(rr.objective) > 0 else math.nan,
-            "worst_ic": {"d0": float(fr.ic[0]), "theta_e0_deg": math.degrees(float(fr.ic[1]))},
-            "worst_slip_peak_deg": [float(np.abs(slip[:, 0]).max()), float(np.abs(slip[:, 1]).max())],
-            "history": np.asarray(fr.history).tolist(), "history_rollouts": np.asarray(fr.history_rollouts).tolist(),
-            "history_random": np.asarray(rr.history).tolist(), "history_random_rollouts": np.asarray(rr.history_rollouts).tolist(),
-        }
-        px, py = run0.path.point(np.linspace(float(run0.path.u_min), float(run0.path.u_max), 4000))
-        trajs[name] = {"t": np.asarray(tr.t), "x": np.asarray(tr.x), "y": np.asarray(tr.y), "d": np.asarray(tr.d),
-                       "beta_r": np.asarray(tr.beta_r), "beta_f": np.asarray(tr.beta_f),
-                       "path_x": np.asarray(px), "path_y": np.asarray(py)}
-    return blocks, trajs
+    name, (controller, gains, _) = list(controllers.items())[i]
+    k1, k2 = jax.random.split(jax.random.fold_in(key, i))
+    fr = falsify(controller, gains, run0.path, n_restarts=f.n_restarts, steps=f.steps, key=k1, config=cfg, **bounds)
+    # random search records trajectories (discarded) so the replay of the falsifier's worst case
+    # reuses its compiled program: one simulator program per controller instead of two
+    rr = random_search(controller, gains, run0.path, n_samples=int(fr.n_rollouts), key=k2, batch_size=REPLAY_BATCH,
+                       config=record, devices=devices, **bounds)
+    tr = jax.device_get(worst_trajectory(controller, fr, cfg, batch_size=REPLAY_BATCH, devices=devices).trajectory)
+    slip = np.degrees(np.asarray(fr.slip))
+    block = {
+        "path": labels[p], "objective": f.objective,
+        "falsifier": float(fr.objective), "falsifier_status": STATUS_NAMES[int(fr.status)],
+        "random": float(rr.objective), "random_status": STATUS_NAMES[int(rr.status)],
+        "n_rollouts": int(fr.n_rollouts), "n_gradients": int(fr.n_gradients),
+        "ratio": float(fr.objective) / float(rr.objective) if float(rr.objective) > 0 else math.nan,
+        "worst_ic": {"d0": float(fr.ic[0]), "theta_e0_deg": math.degrees(float(fr.ic[1]))},
+        "worst_slip_peak_deg": [float(np.abs(slip[:, 0]).max()), float(np.abs(slip[:, 1]).max())],
+        "history": np.asarray(fr.history).tolist(), "history_rollouts": np.asarray(fr.history_rollouts).tolist(),
+        "history_random": np.asarray(rr.history).tolist(), "history_random_rollouts": np.asarray(rr.history_rollouts).tolist(),
+    }
+    px, py = run0.path.point(np.linspace(float(run0.path.u_min), float(run0.path.u_max), 4000))
+    traj = {"t": np.asarray(tr.t), "x": np.asarray(tr.x), "y": np.asarray(tr.y), "d": np.asarray(tr.d),
+            "beta_r": np.asarray(tr.beta_r), "beta_f": np.asarray(tr.beta_f),
+            "path_x": np.asarray(px), "path_y": np.asarray(py)}
+    return block, traj

@@ -380,8 +380,17 @@ def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
     return out
 
 
+def report_figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame,
+                   worst_trajectories: dict | None = None) -> dict[str, dict]:
+    """Render the report's figures into ``out_dir/figures`` (the slow part of :func:`write_report`;
+    it needs the summary's statistics but not its float64 check). Pass the result to
+    :func:`write_report` as ``figures``."""
+    cfg = summary.get("config") or spec.model_dump(mode="json")
+    return _figures(Path(out_dir), spec, summary, runs, controller_colors(cfg["controllers"]), worst_trajectories)
+
+
 def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, sweep: pd.DataFrame | None,
-                 worst_trajectories: dict | None = None) -> None:
+                 worst_trajectories: dict | None = None, figures: dict | None = None) -> None:
     """Write ``out_dir/report.html`` (self-contained) and ``out_dir/figures/<name>.png|svg``.
 
     Args:
@@ -393,6 +402,7 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
             from the summary, the sweep only counts the runs spent on it.
         worst_trajectories: the falsifier's worst runs per controller (:mod:`pfjax.montecarlo.worst_case`),
             or None when the study did no worst-case search.
+        figures: :func:`report_figures` of the same study if already rendered.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -417,7 +427,7 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
         "sample_size": {k: v for k, v in summary.get("sample_size", {}).items() if k != "note"},
         "sample_note": summary.get("sample_size", {}).get("note", ""),
         "n_sweep": 0 if sweep is None else len(sweep),
-        "figures": _figures(out_dir, spec, summary, runs, colors, worst_trajectories),
+        "figures": figures if figures is not None else _figures(out_dir, spec, summary, runs, colors, worst_trajectories),
         "worst_case_rows": _worst_case_rows(summary, colors),
         "warnings": summary.get("warnings") or [], "precision_rows": _precision_rows(summary, colors),
         "precision": summary.get("float64_check") or {}, "chunks": summary.get("chunks") or {},
