@@ -27,9 +27,10 @@ simulator holds ``beta_a(t_i)`` on ``[t_i, t_{i+1})`` (``SlipProfile.seq``, zero
 
 **Initial conditions.** ``w = (d0, theta_e0, u0)`` in a box ``[lo, hi]`` (m, rad, path
 parameter), ``w = lo + (hi - lo) sigmoid(z)``; the start pose is ``d0`` to the left of the
-path point ``p(u0)``, heading ``theta_p(u0) + theta_e0`` (so ``d0`` and ``theta_e0`` are the
-measured lateral and heading errors at ``t = 0`` wherever ``p(u0)`` is the closest point,
-i.e. ``|d0|`` below the radius of curvature).
+path point ``p(u0)``, heading ``theta_p(u0) + theta_e0``, and the run's projection starts from
+``u0`` (``Scenario.u0``), so ``d0`` and ``theta_e0`` are the measured lateral and heading errors
+at ``t = 0`` wherever ``p(u0)`` is the local closest point, i.e. ``|d0|`` below the radius of
+curvature (a path that comes back near the start cannot capture it).
 
 **Random sampling** of the same set (the baseline): ``z`` uniform in ``[-1, 1]^k`` per axle and
 ``beta = A s / max(1, M)`` (inside the bound as drawn, scaled back onto it where the draw's
