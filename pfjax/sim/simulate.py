@@ -274,7 +274,7 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     # d0_sign and prev_delta are set by sample 0
     acc0 = running.init(zero, zero)
     init = (pose0, c0, u0, u0, zero, zero, (acc0, jnp.int32(Status.OK), jnp.asarray(jnp.nan, dtype)))
-    # One program for samples 0..N (no separate first and last sample: half the compile time).
+    # One loop for samples 0..N: no separate first and last sample (a third less compile time).
     # Reverse mode stores only the carry per step and recomputes the step (jax.checkpoint): the
     # residuals of a whole step would cost far more memory traffic than recomputing it.
     (pose, c, _, u_last, cmd, delta, (acc, status, fail_time)), traj = jax.lax.scan(
