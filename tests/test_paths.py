@@ -95,12 +95,13 @@ def _quad_arc(d1, u, points=None):
     return val
 
 
-def ref_line():
+def ref_line():  # y = b x with b = tan(pi/4), u = x (a graph); the domain is arc length [-20, 80] m
     h = math.pi / 4
+    b = math.tan(h)
     return RefCurve(
-        "line", lambda u: (u * math.cos(h) + 0 * u, u * math.sin(h) + 0 * u),
-        lambda u: (math.cos(h) + 0 * u, math.sin(h) + 0 * u),
-        lambda u: u, lambda u: 0.0 * u, -20.0, 80.0,
+        "line", lambda u: (u + 0 * u, b * u + 0 * u),
+        lambda u: (1.0 + 0 * u, b + 0 * u),
+        lambda u: u * math.sqrt(1 + b * b), lambda u: 0.0 * u, -20.0 * math.cos(h), 80.0 * math.cos(h),
     )
 
 
@@ -288,7 +289,7 @@ def test_curvature_closed_forms():
 
 
 def test_arc_length_closed_forms_and_quad():
-    """s(u) from u_ref = 0: parabola x/2 sqrt(1+4x^2) + asinh(2x)/4, line and circle s = u, sine
+    """s(u) from u_ref = 0: parabola x/2 sqrt(1+4x^2) + asinh(2x)/4, line s = sqrt(2) x, circle s = u, sine
     and spline by scipy quad (spline split at its knots). Gauss-Legendre on 64 panels is exact for
     polynomials of degree 15 per panel, so smooth integrands agree to ~1e-12; the spline's speed is
     only C1 at the knots, so Gauss-Legendre panels straddling a knot lose accuracy: ~4e-7 m
@@ -298,7 +299,8 @@ def test_arc_length_closed_forms_and_quad():
     par = ref_parabola()
     np.testing.assert_allclose(np.asarray(arc(parabola(), jnp.asarray(xs))), [par.arc(x) for x in xs], rtol=1e-12, atol=1e-12)
     us = np.array([-20.0, -3.3, 0.0, 1.0, 55.5, 80.0])
-    np.testing.assert_allclose(np.asarray(arc(line(), jnp.asarray(us))), us, atol=1e-12)
+    xl = us * math.cos(math.pi / 4)  # the line's u is x: these are arc lengths us from the origin
+    np.testing.assert_allclose(np.asarray(arc(line(), jnp.asarray(xl))), us, rtol=1e-14, atol=1e-12)
     np.testing.assert_allclose(np.asarray(arc(circle(radius=1.5), jnp.asarray(us[1:4]))), us[1:4], atol=1e-12)
     sx = np.array([-10.0, -2.0, 0.5, 3.0, 17.0, 60.0])
     sref = ref_sine()

@@ -135,14 +135,46 @@ def test_healthy_runs_do_not_depend_on_their_batch_neighbours(mixed):
             np.testing.assert_array_equal(x, y, err_msg=name)
 
 
+def test_line_parabola_and_sine_share_one_program():
+    """The source's three paths are one shape (:class:`pfjax.paths.Graph`): one batch may mix them,
+    every run's result is bit-identical to the same run in a batch of its own path (same program,
+    lanes independent), and the three compile one program, not three."""
+    from pfjax.paths import Graph, parabola, sine
+    from pfjax.sim.simulate import _simulate_vmapped
+
+    cfg = SimConfig(dt=0.01, horizon=3.0, d_fail=CFG.d_fail, record=False)
+    rows = [make_scenario(line(), LINE_POSE, sf(), slip=PAPER_SLIP),
+            make_scenario(parabola(), (-1.0, 1.3, -1.0), sf(), slip=PAPER_SLIP),
+            make_scenario(sine(), (0.0, 0.3, math.pi / 4), sf(), slip=PAPER_SLIP)]
+    assert all(isinstance(r.path, Graph) for r in rows)
+    before = _simulate_vmapped._cache_size()
+    together = run(rows, cfg)
+    alone = [run([r] * 3, cfg) for r in rows]
+    assert _simulate_vmapped._cache_size() == before + 1
+    assert np.all(np.asarray(together.status) == Status.OK)
+    for i, res in enumerate(alone):
+        for x, y in zip(jax.tree_util.tree_leaves(together), jax.tree_util.tree_leaves(res)):
+            np.testing.assert_array_equal(np.asarray(x)[i], np.asarray(y)[0], err_msg=str(i))
+
+
+def test_line_must_travel_towards_increasing_x():
+    with pytest.raises(ValueError, match="heading"):
+        line(heading=math.pi)
+    with pytest.raises(ValueError, match="heading"):
+        line(heading=-math.pi / 2)
+
+
 def test_record_false_gives_the_same_metrics(mixed):
-    """record=False (no trajectory, memory independent of the horizon) gives exactly the same
-    metrics, statuses, failure times and final states."""
+    """record=False (no trajectory, memory independent of the horizon) gives the same statuses and
+    the same metrics, failure times and final states to rounding: the two are different compiled
+    programs, and XLA may fuse (and contract multiply-adds) differently in each, so a metric may
+    differ in its last bit (seen: 1 ulp in 2 of 8 runs' steady-state error)."""
     lean = run(list(ROWS.values()), SimConfig(dt=CFG.dt, horizon=CFG.horizon, d_fail=CFG.d_fail, record=False))
     assert lean.trajectory is None
-    for part in ("metrics", "status", "fail_time", "final"):
+    np.testing.assert_array_equal(mixed.status, lean.status)
+    for part in ("metrics", "fail_time", "final"):
         for x, y in zip(jax.tree_util.tree_leaves(getattr(mixed, part)), jax.tree_util.tree_leaves(getattr(lean, part))):
-            np.testing.assert_array_equal(x, y, err_msg=part)
+            np.testing.assert_allclose(x, y, rtol=1e-14, atol=1e-15, err_msg=part)
 
 
 def test_time_varying_slip_profiles_in_the_trajectory(mixed):
@@ -327,5 +359,9 @@ def test_metrics_and_final_state_agree_with_the_trajectory(control_every):
     if control_every is not None:  # rate-limited from 0 at sample 0; the last sample holds step N-1's command
         assert np.abs(tr.delta[0]) <= 0.8 * cfg.dt and np.all(np.abs(np.diff(tr.delta)) <= 0.8 * cfg.dt * (1 + 1e-9))
         assert tr.delta[-1] == tr.delta[-2] and tr.delta_cmd[-1] == tr.delta_cmd[-2]
-    for field in ("x", "y", "theta", "d", "theta_e", "delta", "s"):
+    for field in ("x", "y", "theta", "delta"):  # the state itself: the same numbers
         assert getattr(fin, field) == getattr(tr, field)[-1], field
+    # The final measurement is evaluated again after the loop, from the same pose and parameter but
+    # in its own fused kernels (XLA may contract multiply-adds differently there): equal to rounding.
+    for field in ("d", "theta_e", "s"):
+        np.testing.assert_allclose(getattr(fin, field), getattr(tr, field)[-1], rtol=1e-14, atol=1e-15, err_msg=field)

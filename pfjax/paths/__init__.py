@@ -14,9 +14,7 @@ from pfjax.paths.geometry import (
 from pfjax.paths.shapes import (
     PAPER_PATHS,
     Circle,
-    Line,
-    Parabola,
-    Sine,
+    Graph,
     Spline,
     circle,
     line,
@@ -27,6 +25,6 @@ from pfjax.paths.shapes import (
 
 __all__ = [
     "Projection", "arc_length", "closest_parameter", "curvature", "global_parameter", "measure",
-    "project", "tangent_angle", "wrap_angle", "PAPER_PATHS", "Circle", "Line", "Parabola", "Sine",
+    "project", "tangent_angle", "wrap_angle", "PAPER_PATHS", "Circle", "Graph",
     "Spline", "circle", "line", "parabola", "sine", "spline_through",
 ]
