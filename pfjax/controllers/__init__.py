@@ -8,8 +8,11 @@ from pfjax.controllers.base import Controller, Observation, step
 from pfjax.controllers.linear import (
     PAPER_K,
     TABLE3_GAINS,
+    LinearParams,
     PIParams,
     StateFeedbackParams,
+    linear,
+    linear_params,
     pi,
     pi_params,
     state_feedback,

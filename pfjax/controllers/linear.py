@@ -75,7 +75,8 @@ def _pi_output(p: PIParams, c: Array, obs: Observation) -> Array:
     return -p.kp_d * obs.d - p.kp_theta * obs.theta_e + c[0] + c[1]
 
 
-def _pi_rate(p: PIParams, c: Array, obs: Observation, delta_cmd: Array, delta: Array) -> Array:
+def _pi_rate(p, c: Array, obs: Observation, delta_cmd: Array, delta: Array) -> Array:
+    # p: PIParams or LinearParams (ki_d, ki_theta, k_aw)
     # Back-calculation: the saturation excess is fed back into the integral terms, split in
     # proportion to their integral gains (k_aw = 0 disables it).
     ki = jnp.abs(p.ki_d) + jnp.abs(p.ki_theta)
@@ -84,9 +85,47 @@ def _pi_rate(p: PIParams, c: Array, obs: Observation, delta_cmd: Array, delta: A
     return jnp.stack([-p.ki_d * obs.d + w_d * aw, -p.ki_theta * obs.theta_e + (1.0 - w_d) * aw])
 
 
-def _pi_init(p: PIParams) -> Array:
-    return jnp.zeros((2,), dtype=jnp.result_type(p.kp_d))
+def _pi_init(p) -> Array:
+    return jnp.zeros((2,), dtype=jnp.result_type(p.ki_d))
 
 
 pi = Controller("pi", _pi_init, _pi_output, _pi_rate)
 """MISO PI on ``d`` and ``theta_e`` summed into the steering (spec §5, eq. 14), optional anti-windup."""
+
+
+class LinearParams(NamedTuple):
+    """State feedback and the MISO PI as one controller (:data:`linear`)::
+
+        delta = K [d, theta_e] + feedforward atan(L kappa) + c_0 + c_1,
+        c' = [-ki_d d, -ki_theta theta_e] (+ back-calculation anti-windup, as :data:`pi`).
+
+    State feedback is ``ki_d = ki_theta = k_aw = 0`` (the integral terms stay exactly 0); the PI
+    is ``K = (-kp_d, -kp_theta)``, ``feedforward = 0``. :func:`linear_params` converts either.
+    """
+
+    K: Array  # (2,) rad/m, rad/rad
+    feedforward: Array  # 0 or 1
+    ki_d: Array  # rad/(m s)
+    ki_theta: Array  # 1/s
+    k_aw: Array  # 1/s
+
+
+def linear_params(gains: StateFeedbackParams | PIParams) -> LinearParams:
+    """The :data:`linear` form of state-feedback or PI gains (the same steering, up to rounding)."""
+    if isinstance(gains, StateFeedbackParams):
+        z = jnp.zeros_like(gains.feedforward)
+        return LinearParams(gains.K, gains.feedforward, z, z, z)
+    if isinstance(gains, PIParams):
+        return LinearParams(jnp.stack([-gains.kp_d, -gains.kp_theta]), jnp.zeros_like(gains.kp_d), gains.ki_d,
+                            gains.ki_theta, gains.k_aw)
+    raise TypeError(f"gains: expected StateFeedbackParams or PIParams, got {type(gains).__name__}")
+
+
+def _linear_output(p: LinearParams, c: Array, obs: Observation) -> Array:
+    return _sf_output(p, c, obs) + c[0] + c[1]
+
+
+linear = Controller("linear", _pi_init, _linear_output, _pi_rate)
+"""State feedback and the MISO PI as one controller (:class:`LinearParams`): a Monte Carlo study
+evaluates both with it, so they share one compiled simulator program (one compile instead of two
+for the runs, the float64 check and the worst-case search each)."""

@@ -32,7 +32,9 @@ REGISTRY_TYPE = {"pi": "pi", "stanley": "stanley", "pure_pursuit": "pure_pursuit
 
 def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
     """``(controller, gains pytree, gains as a flat dict)`` for a controller spec; LMI designs are
-    synthesised here (at the nominal speed and wheelbase: the distributions' means or values)."""
+    synthesised here (at the nominal speed and wheelbase: the distributions' means or values).
+    State feedback and PI come as :data:`pfjax.controllers.linear` (their own gains in the flat
+    dict), so a study of both compiles each of its simulator programs once for the two."""
     if c.type in ("state_feedback", "lmi"):
         if c.type == "lmi":
             from pfjax.synthesis import mixed_h2_hinf, slip_design_plant
@@ -42,7 +44,7 @@ def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
                                                  alpha=c.alpha, beta=c.beta).K.ravel()]
         else:
             K = list(c.K)
-        return C.state_feedback, C.state_feedback_params(K), {"k_d": K[0], "k_theta": K[1]}
+        return C.linear, C.linear_params(C.state_feedback_params(K)), {"k_d": K[0], "k_theta": K[1]}
     controller, factory = C.REGISTRY[REGISTRY_TYPE[c.type]]
     try:
         gains = factory(**c.gains)
@@ -50,7 +52,10 @@ def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
         names = list(factory().__class__._fields) if hasattr(factory(), "_fields") else []
         bad = next((k for k in c.gains if k not in names), next(iter(c.gains), "?"))
         raise ConfigError(f"controllers[{index}].gains.{bad}: unknown gain for type {c.type!r}; expected one of {names}") from None
-    return controller, gains, {k: float(v) for k, v in gains._asdict().items()}
+    flat = {k: float(v) for k, v in gains._asdict().items()}
+    if controller is C.pi:  # state feedback and PI as one controller: one compiled program for both
+        return C.linear, C.linear_params(gains), flat
+    return controller, gains, flat
 
 
 def sim_config(spec: StudySpec) -> SimConfig:

@@ -41,7 +41,7 @@ class SideJobs:
     Only the main thread launches multi-device programs.
     """
 
-    def __init__(self, spec: StudySpec, controllers: dict, *, overlap: bool = True):
+    def __init__(self, spec: StudySpec, controllers: dict, *, overlap: bool = True, report: bool = True):
         from concurrent.futures import ThreadPoolExecutor
 
         from pfjax.montecarlo.checks import float64_runs
@@ -53,15 +53,27 @@ class SideJobs:
 
         device = jax.local_devices()[-1]
 
-        def task(phase, fn, *args):
+        def task(phase, fn, *args, pinned=True):
             def timed():
                 t = time.perf_counter()
-                with precision(spec), jax.default_device(device):
-                    value = fn(*args, devices=[device])
-                self.seconds[phase] += time.perf_counter() - t
+                with precision(spec):
+                    if pinned:
+                        with jax.default_device(device):
+                            value = fn(*args, devices=[device])
+                    else:
+                        value = fn(*args)
+                self.seconds[phase] = self.seconds.get(phase, 0.0) + time.perf_counter() - t
                 return value
             return self._pool.submit(timed) if self._pool is not None else _Deferred(timed)
 
+        # first, as the report needs it soonest: compile the slip map's linearised prediction (1-2 s),
+        # with JAX's default device as the report has it, so that the report's call finds it compiled
+        self.report_warmup = None
+        if report:
+            from pfjax.report.study_report import warm_predictions
+
+            self.report_warmup = task("report_warmup", warm_predictions, spec, {k: v[2] for k, v in controllers.items()},
+                                      pinned=False)
         self.worst = {name: task("worst_case", worst_case, spec, controllers, i)
                       for i, name in enumerate(controllers)} if spec.falsifier.enabled else {}
         checked = spec.dtype != "float64" and spec.f64_check_runs > 0
@@ -117,7 +129,7 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
     for w in warnings:
         (warn or (lambda m: None))(w)
     controllers = controllers_of(spec)
-    side = SideJobs(spec, controllers, overlap=overlap)
+    side = SideJobs(spec, controllers, overlap=overlap, report=report)
 
     def finish(tmp: Path, runs_path: Path, controllers, store) -> dict:
         timings = {"runs": time.time() - t0}  # s per phase (wall clock), in summary.json
@@ -133,8 +145,6 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
             sweep.to_parquet(tmp / "margin.parquet", index=False)
             _stamp(tmp / "margin.parquet", spec)
         mark("margin")
-        worst, worst_traj = side.worst_cases()
-        mark("worst_case")
         # Without a report the run table is never loaded whole: the summary reads one controller at
         # a time and the float64 check only its sampled runs (memory: one controller's rows at most).
         runs = read_runs(runs_path) if report else None
@@ -143,13 +153,18 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         summary["warnings"] = warnings
         summary["float64_check"] = None  # below: its float64 runs may still be running in the background
         summary["chunks"] = {"simulated": store.computed, "resumed": store.reused}
+        mark("summary")
+        if report:  # the figures first, those of the runs while the worst-case search may still run
+            from pfjax.report.study_report import FIGURES, ordered_figures, report_figures, write_report
+
+            figures = report_figures(tmp, spec, summary, runs, names=[n for n in FIGURES if n != "worst_cases"])
+            mark("report")
+        worst, worst_traj = side.worst_cases()
         for name, block in worst.items():
             summary["controllers"][name]["worst_case"] = block
-        mark("summary")
-        if report:  # the figures first: they do not need the float64 check
-            from pfjax.report.study_report import report_figures, write_report
-
-            figures = report_figures(tmp, spec, summary, runs, worst_traj)
+        mark("worst_case")
+        if report:
+            figures = ordered_figures(report_figures(tmp, spec, summary, runs, worst_traj, names=["worst_cases"]), figures)
             mark("report")
         check_rows = runs if runs is not None or spec.dtype == "float64" or spec.f64_check_runs <= 0 else \
             read_runs(runs_path, filters=[("run", "in", sample_indices(spec, spec.f64_check_runs).tolist())])

@@ -295,6 +295,10 @@ def margin_figure(summary: dict, colors: dict[str, str]) -> Figure | None:
 # ------------------------------------------------------------------------------- slip map
 
 
+#: Points per axis at which :func:`slip_map_figure` evaluates the linearised prediction.
+PREDICTION_GRID = 121
+
+
 def slip_map_figure(runs: pd.DataFrame, controllers: list[str], *, delta_max_deg: float | None = None,
                     convention: str = "source", note: str = "", predicted=None) -> Figure | None:
     """Success rate binned over the sampled ``(beta_r_deg, beta_f_deg)``, one panel per controller
@@ -338,7 +342,7 @@ def slip_map_figure(runs: pd.DataFrame, controllers: list[str], *, delta_max_deg
             for s_ in (-1, 1):
                 a.plot(b, sign * (s_ * delta_max_deg - b), "--", color="0.25", lw=1)
         if predicted and name in predicted:
-            xs, ys = np.linspace(ex[0], ex[-1], 121), np.linspace(ey[0], ey[-1], 121)
+            xs, ys = np.linspace(ex[0], ex[-1], PREDICTION_GRID), np.linspace(ey[0], ey[-1], PREDICTION_GRID)
             grid = np.asarray(predicted[name](xs, ys), dtype=float)
             if 0 < grid.mean() < 1:
                 a.contour(xs, ys, grid.T, levels=[0.5], colors="k", linewidths=1.4)

@@ -312,7 +312,7 @@ def _worst_case_rows(summary: dict, colors: dict) -> list:
 
 
 def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, colors: dict,
-             worst_trajectories: dict | None = None) -> dict[str, dict]:
+             worst_trajectories: dict | None = None, names=None) -> dict[str, dict]:
     fig_dir = out_dir / "figures"
     paths = list(summary.get("paths") or runs["path"].unique())
     band_mm = 1000 * spec.success.band
@@ -348,12 +348,26 @@ def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, 
     ]
     out = {}
     for name, build, caption in todo:
+        if names is not None and name not in names:
+            continue
         fig = build()
         if fig is None:
             continue
         save(freeze_layout(fig), fig_dir, name)
         out[name] = {"name": name, "caption": caption, "b64": _png_base64(fig_dir / f"{name}.png")}
     return out
+
+
+def warm_predictions(spec: StudySpec, gains: dict) -> None:
+    """Compile the slip map's linearised predictions (:func:`linearised_predictions`) for the grid
+    its figure evaluates (:data:`~pfjax.report.study_figures.PREDICTION_GRID` points per axis), so
+    that the report finds them compiled: a study calls this alongside its runs. ``gains``: per
+    controller, the summary's flat gains."""
+    from pfjax.report.study_figures import PREDICTION_GRID
+
+    grid = np.zeros(PREDICTION_GRID)
+    for pred in linearised_predictions(spec, {"controllers": {n: {"gains": g} for n, g in gains.items()}}).values():
+        pred(grid, grid)
 
 
 def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
@@ -380,13 +394,25 @@ def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
     return out
 
 
+#: The report's figures, in the report's order.
+FIGURES = ("worst_cases", "headline", "margin_curves", "dist_iae", "dist_late_max_abs_d", "slip_map", "success_by_param")
+
+
 def report_figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame,
-                   worst_trajectories: dict | None = None) -> dict[str, dict]:
+                   worst_trajectories: dict | None = None, names=None) -> dict[str, dict]:
     """Render the report's figures into ``out_dir/figures`` (the slow part of :func:`write_report`;
     it needs the summary's statistics but not its float64 check). Pass the result to
-    :func:`write_report` as ``figures``."""
+    :func:`write_report` as ``figures``. ``names``: render only these (of :data:`FIGURES`; default
+    all), so a study can draw the others before its worst-case search has finished; merge the parts
+    with :func:`ordered_figures`."""
     cfg = summary.get("config") or spec.model_dump(mode="json")
-    return _figures(Path(out_dir), spec, summary, runs, controller_colors(cfg["controllers"]), worst_trajectories)
+    return _figures(Path(out_dir), spec, summary, runs, controller_colors(cfg["controllers"]), worst_trajectories, names)
+
+
+def ordered_figures(*parts: dict) -> dict[str, dict]:
+    """Merge :func:`report_figures` results into the report's order (:data:`FIGURES`)."""
+    merged = {k: v for part in parts for k, v in part.items()}
+    return {k: merged[k] for k in FIGURES if k in merged}
 
 
 def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, sweep: pd.DataFrame | None,
