@@ -38,7 +38,12 @@ NOMINAL_START = {"line": 0.0, "parabola": -2.0, "sine": 0.0, "circle": 0.0, "ran
 
 def run_keys(seed: int, path_index: int, runs: np.ndarray) -> jax.Array:
     base = jax.random.fold_in(jax.random.PRNGKey(seed), path_index)
-    return jax.vmap(lambda i: jax.random.fold_in(base, i))(jnp.asarray(runs, dtype=jnp.uint32))
+    return _fold_runs(base, jnp.asarray(runs, dtype=jnp.uint32))
+
+
+@jax.jit
+def _fold_runs(base, runs):
+    return jax.vmap(lambda i: jax.random.fold_in(base, i))(runs)
 
 
 def draw(dist: Dist, key) -> jax.Array:
@@ -198,8 +203,10 @@ def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_over
     else:
         path = _fixed_path(pspec)
         circle = _Static(pspec.radius) if path is None else None
-    over = None if slip_override is None else tuple(jnp.asarray(a, float) for a in slip_override)
-    cols, sc = _draw_runs(keys, path, jnp.asarray(NOMINAL_START[pspec.kind], float), over,
+    # the override is always passed (zeros and a false flag when absent): one program for both
+    over = (np.zeros(len(runs)),) * 2 if slip_override is None else slip_override
+    over = tuple(jnp.asarray(a, float) for a in over)
+    cols, sc = _draw_runs(keys, path, jnp.asarray(NOMINAL_START[pspec.kind], float), over, slip_override is not None,
                           study=_Static(spec), circle=circle, batched_path=pspec.kind == "random")
     return Sampled({k: np.asarray(v) for k, v in cols.items()}, sc)
 
@@ -211,9 +218,11 @@ def _kappa_follow(spec: StudySpec) -> float:
 
 
 @partial(jax.jit, static_argnames=("study", "circle", "batched_path"))
-def _draw_runs(keys, path, u_nom, slip_override, *, study: _Static, circle: _Static | None, batched_path: bool):
+def _draw_runs(keys, path, u_nom, slip_override, use_override, *, study: _Static, circle: _Static | None,
+               batched_path: bool):
     """Every run's draws (vmapped over ``keys``) and its start pose on ``path`` (batched if
-    ``batched_path``; a circle of drawn radius if ``circle`` is its radius distribution)."""
+    ``batched_path``; a circle of drawn radius if ``circle`` is its radius distribution); the
+    constant slip replaced by ``slip_override`` (deg) where ``use_override``."""
     spec = study.model
     v = spec.vehicle
     horizon = spec.sim.horizon
@@ -233,10 +242,10 @@ def _draw_runs(keys, path, u_nom, slip_override, *, study: _Static, circle: _Sta
 
     profiles, params, cols, starts = jax.vmap(one)(keys)
     n = keys.shape[0]
-    if slip_override is not None:
-        br, bf = slip_override
-        profiles = profiles._replace(constant=jnp.stack([br, bf], 1) * rad)
-        cols.update(beta_r_deg=br, beta_f_deg=bf)
+    br = jnp.where(use_override, slip_override[0], cols["beta_r_deg"])
+    bf = jnp.where(use_override, slip_override[1], cols["beta_f_deg"])
+    profiles = profiles._replace(constant=jnp.where(use_override, jnp.stack([br, bf], 1) * rad, profiles.constant))
+    cols.update(beta_r_deg=br, beta_f_deg=bf)
     if circle is not None:
         r = jax.vmap(lambda k: draw(circle.model, _q(k, "radius")))(keys)
         path, batched_path = jax.vmap(lambda r: shapes.circle(radius=r, cy=r))(r), True
