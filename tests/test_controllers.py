@@ -226,3 +226,26 @@ def test_pi_anti_windup_in_the_simulator(runs):
     assert r.metrics.sat_fraction[n + 1] < r.metrics.sat_fraction[n]
     assert r.metrics.overshoot[n + 1] < 0.5 * r.metrics.overshoot[n]
     np.testing.assert_array_equal(r.status[n:], 0)
+
+
+@pytest.mark.parametrize("gains", [C.state_feedback_params(C.PAPER_K, feedforward=1.0),
+                                   C.pi_params(**WINDUP_GAINS, k_aw=5.0), C.pi_params(**C.PAPER_PI)],
+                         ids=["state_feedback", "pi_anti_windup", "pi_table3"])
+def test_linear_controller_reproduces_state_feedback_and_pi(gains):
+    """``linear`` with :func:`linear_params` is the same controller (a study runs both kinds as it,
+    one compiled program for the two): from a start with saturation and slip, in the simulator
+    (sampled every step, float64), the same metrics and final state as the original to 1e-12 relative
+    (they are one formula up to the order of exact zero terms; the compiler may fuse them differently)."""
+    original = C.state_feedback if isinstance(gains, C.StateFeedbackParams) else C.pi
+    rows = [paper_scenario("sine", gains, beta_r_deg=4.0, beta_f_deg=-3.0, pose0=p) for p in (WINDUP_POSE, (0.0, 0.5, 0.3))]
+    a = simulate_batch(stack(rows), controller=original, config=CFG)
+    lin = [r._replace(gains=C.linear_params(r.gains)) for r in rows]
+    b = simulate_batch(stack(lin), controller=C.linear, config=CFG)
+    np.testing.assert_array_equal(a.status, b.status)
+    for x, y in zip(jax.tree_util.tree_leaves((a.metrics, a.final)), jax.tree_util.tree_leaves((b.metrics, b.final))):
+        np.testing.assert_allclose(np.asarray(y), np.asarray(x), rtol=1e-12, atol=1e-14)
+
+
+def test_linear_params_rejects_other_gains():
+    with pytest.raises(TypeError, match="gains"):
+        C.linear_params(C.stanley_params())

@@ -179,6 +179,23 @@ def test_summary_contract_and_numbers(tmp_path):
     assert set(rear.amplitude_deg) == {0.0, 10.0}
 
 
+def test_state_feedback_and_pi_run_as_one_controller():
+    """A study's state-feedback (LMI) and PI controllers are both ``pfjax.controllers.linear`` with
+    gains of one pytree structure, so they share every compiled simulator program; the summary
+    keeps each controller's own gain names."""
+    from pfjax import controllers as C
+    from pfjax.montecarlo.runner import controllers_of
+
+    data = copy.deepcopy(BASE)
+    data["controllers"] = [{"name": "lmi", "type": "lmi"}, {"name": "pi", "type": "pi"},
+                           {"name": "stanley", "type": "stanley", "gains": {"k": 2.0}}]
+    ctrls = controllers_of(spec_of(data=data))
+    assert ctrls["lmi"][0] is C.linear and ctrls["pi"][0] is C.linear and ctrls["stanley"][0] is C.stanley
+    assert jax.tree_util.tree_structure(ctrls["lmi"][1]) == jax.tree_util.tree_structure(ctrls["pi"][1])
+    assert set(ctrls["lmi"][2]) == {"k_d", "k_theta"} and set(ctrls["pi"][2]) == {"kp_d", "ki_d", "kp_theta", "ki_theta", "k_aw"}
+    assert np.asarray(ctrls["pi"][1].K).tolist() == pytest.approx([-C.PAPER_PI["kp_d"], -C.PAPER_PI["kp_theta"]])
+
+
 def test_side_jobs_alongside_the_runs_change_nothing(tmp_path):
     """The worst-case search and the float64 check run in a background thread alongside the runs
     (on one device) or after them in the main thread: the same summary, runs and sweep."""
