@@ -162,7 +162,7 @@ def random_path(key, spec: PathSpec, kappa_max: float) -> shapes.Spline:
 def _fixed_path(spec: PathSpec):
     """The path every run of a non-random kind shares (``None`` for ``circle``: its radius is drawn per run)."""
     if spec.kind in ("line", "parabola", "sine"):
-        return {"line": shapes.line, "parabola": shapes.parabola, "sine": shapes.sine}[spec.kind]()
+        return shapes.PAPER_PATHS[spec.kind]()
     if spec.kind == "spline":  # the same user-defined path for every run
         return shapes.spline_through(np.asarray(spec.points, float))
     if spec.kind == "circle":
