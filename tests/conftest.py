@@ -8,6 +8,9 @@ from pathlib import Path
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 os.environ.setdefault("PFJAX_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".pytest_cache" / "xla"))
+# Studies draw their report figures in-process here (each figure worker costs ~2 s of CPU to start);
+# tests/test_study_report.py runs its study with the worker and checks it against in-process figures.
+os.environ.setdefault("PFJAX_FIGURE_WORKER", "0")
 # Before JAX: the compiler settings users get (pfjax.small_loop_option), but one CPU device per
 # xdist worker (2 workers on 2 cores); subprocesses (CLI, notebooks) still get one per core.
 _host = os.environ.get("PFJAX_HOST_DEVICES")

@@ -227,6 +227,52 @@ def test_side_jobs_alongside_the_runs_change_nothing(tmp_path):
         pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "True" / f), pd.read_parquet(tmp_path / "False" / f))
 
 
+def test_main_thread_takes_over_side_jobs_not_started():
+    """A side job the background thread has not started when its result is asked for is computed
+    by the asking thread (once: asking again returns it); one it has started is waited for."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from pfjax.montecarlo.study import _Stealable
+
+    pool, gate, ran = ThreadPoolExecutor(1), threading.Event(), []
+
+    def job(name):
+        def fn():
+            if name == "first":
+                gate.wait(10)
+            ran.append((name, threading.current_thread() is threading.main_thread()))
+            return name
+        return _Stealable(pool.submit(fn), fn)
+
+    first, second, third = job("first"), job("second"), job("third")
+    third.take_over()  # the background thread is busy with the first: the main thread computes the third
+    assert ran == [("third", True)]
+    third.take_over()  # already computed: not again
+    assert third.result() == "third" and ran == [("third", True)]
+    gate.set()
+    assert first.result() == "first" and second.result() == "second"
+    assert ("first", False) in ran and len(ran) == 3
+    pool.shutdown()
+
+
+def test_few_runs_are_sampled_by_the_chunk_program_exactly():
+    """The float64 check and the worst-case search sample a few runs through the program of the
+    study's chunks (padded, then cut to an aligned batch): the same scenarios as a batch of their own."""
+    from pfjax.montecarlo.runner import batch_size, sample_aligned, sample_few
+
+    spec = spec_of("n_runs=200", "chunk_size=100")  # chunks padded to 128 runs, the few to 32
+    idx = np.array([3, 170, 5])
+    few, own = sample_few(spec, 0, idx), sample_aligned(spec, 0, idx)
+    leaves = jax.tree_util.tree_leaves(few.scenarios)
+    assert all(np.shape(x)[0] == batch_size(len(idx)) for x in leaves)
+    for a, b in zip(leaves, jax.tree_util.tree_leaves(own.scenarios)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert few.columns.keys() == own.columns.keys()
+    for k in few.columns:
+        np.testing.assert_array_equal(few.columns[k], own.columns[k])
+
+
 def test_cli_study_and_bad_input(tmp_path):
     cfg = tmp_path / "s.toml"
     cfg.write_text('name = "cli"\nn_runs = 4\nseed = 1\nchunk_size = 4\n[sim]\nhorizon = 2.0\nsteady_window = 1.0\n'

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import base64
 import json
+import os
 from html.parser import HTMLParser
 
 import matplotlib
@@ -16,7 +17,9 @@ import pandas as pd  # noqa: E402
 import pytest  # noqa: E402
 
 from pfjax.montecarlo.config import load_study  # noqa: E402
-from pfjax.montecarlo.study import run  # noqa: E402
+from pfjax.montecarlo.study import RUN_FIGURES, WORKER_SUMMARY_FIGURES, run  # noqa: E402
+from pfjax.report import figure_worker  # noqa: E402
+from pfjax.report.figure_set import report_figures  # noqa: E402
 from pfjax.montecarlo.summary import summarize  # noqa: E402
 from pfjax.report.study_report import fmt_ci, fmt_margin, fmt_pct, write_report  # noqa: E402
 
@@ -90,11 +93,67 @@ def _parse(html: str) -> _Page:
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
+    """The tiny study with its report, its run figures drawn by the figure worker process."""
     spec, _ = load_study(data=CONFIG)
     out = tmp_path_factory.mktemp("report") / "out"
-    run(spec, out, progress=False, report=True)
+    before = os.environ.get(figure_worker.ENV)
+    os.environ[figure_worker.ENV] = "1"
+    try:
+        run(spec, out, progress=False, report=True)
+    finally:
+        if before is None:
+            del os.environ[figure_worker.ENV]
+        else:
+            os.environ[figure_worker.ENV] = before
     summary = json.loads((out / "summary.json").read_text())
     return spec, out, summary
+
+
+def _in_process(spec, out, summary, dest):
+    """The figures the worker drew, drawn again in this process into ``dest``."""
+    runs = pd.read_parquet(out / "runs.parquet")
+    return report_figures(dest, spec, summary, runs, names=RUN_FIGURES + WORKER_SUMMARY_FIGURES)
+
+
+def test_figures_from_the_worker_equal_those_drawn_in_process(study, tmp_path):
+    spec, out, summary = study
+    here = _in_process(spec, out, summary, tmp_path)
+    assert set(here) == set(RUN_FIGURES + WORKER_SUMMARY_FIGURES)
+    for name in here:  # same code, same data: the same bytes
+        assert (tmp_path / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes(), name
+
+
+def test_figure_worker_that_cannot_start_or_dies_falls_back_to_this_process(study, tmp_path):
+    spec, out, summary = study
+    want = {n: (out / "figures" / f"{n}.png").read_bytes() for n in RUN_FIGURES}
+    # a worker that cannot start: one warning, the figures drawn here
+    with pytest.warns(RuntimeWarning, match="figure worker could not start"):
+        w = figure_worker.FigureWorker(python=str(tmp_path / "no-such-python"))
+    got = w.submit(tmp_path / "a", spec, summary, out / "runs.parquet", RUN_FIGURES).result()
+    w.close()
+    assert list(got) == RUN_FIGURES
+    assert all((tmp_path / "a" / "figures" / f"{n}.png").read_bytes() == b for n, b in want.items())
+    # a worker that dies before it answers: one warning naming its exit code, the figures drawn here
+    w = figure_worker.FigureWorker()
+    w._proc.kill()
+    w._proc.wait()
+    with pytest.warns(RuntimeWarning, match="figure worker exited with code -9"):
+        got = w.submit(tmp_path / "b", spec, summary, out / "runs.parquet", RUN_FIGURES).result()
+    w.close()
+    assert list(got) == RUN_FIGURES
+    assert all((tmp_path / "b" / "figures" / f"{n}.png").read_bytes() == b for n, b in want.items())
+
+
+def test_figure_worker_reports_a_failed_request_and_the_figures_are_drawn_here(study, tmp_path):
+    spec, out, summary = study
+    with figure_worker.FigureWorker() as w:
+        bad = w.submit(tmp_path / "c", spec, summary, tmp_path / "missing.parquet", RUN_FIGURES)
+        good = w.submit(tmp_path / "d", spec, summary, out / "runs.parquet", ["dist_iae"])
+        with pytest.warns(RuntimeWarning, match="figure worker failed: FileNotFoundError"):
+            with pytest.raises(FileNotFoundError):  # drawn here: the same error, raised where it belongs
+                bad.result()
+        assert list(good.result()) == ["dist_iae"]  # the worker goes on with the next request
+    assert (tmp_path / "d" / "figures" / "dist_iae.png").read_bytes() == (out / "figures" / "dist_iae.png").read_bytes()
 
 
 def test_report_is_one_self_contained_wellformed_file(study):

@@ -87,12 +87,12 @@ def float64_runs(spec: StudySpec, controllers: dict, n_sample: int, path_index: 
     """The float64 half of :func:`float64_check` for one path: ``{controller name: SimResult}`` (NumPy,
     the :func:`sample_indices` runs only). Independent of the float32 study, so it can run before
     or while the study does. ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
-    from pfjax.montecarlo.runner import _with_gains, sample_aligned, sim_config
+    from pfjax.montecarlo.runner import _with_gains, sample_few, sim_config
     from pfjax.sim.simulate import simulate_batch
 
     idx = sample_indices(spec, n_sample)
     with jax.enable_x64(False):
-        sampled = sample_aligned(spec, path_index, idx)
+        sampled = sample_few(spec, path_index, idx)
     m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
     out = {}
     for name, (ctrl, gains, _) in controllers.items():

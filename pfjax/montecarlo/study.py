@@ -17,8 +17,14 @@ import pandas as pd
 from pfjax.montecarlo.config import StudySpec, load_study
 from pfjax.montecarlo.runner import margin_sweep, run_study
 from pfjax.montecarlo.summary import summarize
+from pfjax.report import figure_worker
 
 ROOT = Path(__file__).resolve().parents[2]
+#: Report figures drawn by the figure worker (:mod:`pfjax.report.figure_worker`) when there is
+#: one: those that need only the runs, asked for as soon as the runs are written, and the slowest
+#: of those that need the summary (measured on the default study: 1.7, 1.4 and 1.2 s of the 8-10 s).
+RUN_FIGURES = ["dist_iae", "dist_late_max_abs_d"]
+WORKER_SUMMARY_FIGURES = ["success_by_param"]
 #: The phases of ``timings_s`` in summary.json (main-thread wall clock, s).
 PHASES = ("runs", "margin", "worst_case", "float64_check", "summary", "report")
 
@@ -39,6 +45,12 @@ class SideJobs:
     synchronise them (all-gathers), and two threads launching such programs can interleave them
     differently on each device and deadlock (seen: XLA's CPU rendezvous aborted the process).
     Only the main thread launches multi-device programs.
+
+    When the main thread asks for a result, it first takes over every task the background thread
+    has not started (the latest first; the background thread works from the front): it cancels the
+    task there and computes it itself, the same function on the same device, so the same result.
+    Whichever thread is free works, and the study does not wait for a queue that one thread would
+    work through alone.
     """
 
     def __init__(self, spec: StudySpec, controllers: dict, *, overlap: bool = True, report: bool = True):
@@ -49,6 +61,7 @@ class SideJobs:
         from pfjax.montecarlo.worst_case import worst_case
 
         self.seconds = {"worst_case": 0.0, "float64_check": 0.0}
+        self._queued = []  # tasks the main thread may take over, in submission order
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="pfjax-study") if overlap else None
 
         device = jax.local_devices()[-1]
@@ -64,13 +77,17 @@ class SideJobs:
                         value = fn(*args)
                 self.seconds[phase] = self.seconds.get(phase, 0.0) + time.perf_counter() - t
                 return value
-            return self._pool.submit(timed) if self._pool is not None else _Deferred(timed)
+            if self._pool is None:
+                return _Deferred(timed)
+            job = _Stealable(self._pool.submit(timed), timed)
+            self._queued.append(job)
+            return job
 
         # first, as the report needs it soonest: compile the slip map's linearised prediction (1-2 s),
         # with JAX's default device as the report has it, so that the report's call finds it compiled
         self.report_warmup = None
         if report:
-            from pfjax.report.study_report import warm_predictions
+            from pfjax.report.figure_set import warm_predictions
 
             self.report_warmup = task("report_warmup", warm_predictions, spec, {k: v[2] for k, v in controllers.items()},
                                       pinned=False)
@@ -80,20 +97,44 @@ class SideJobs:
         self.float64 = [task("float64_check", float64_runs, spec, controllers, spec.f64_check_runs, p)
                         for p in range(len(spec.paths))] if checked else None
 
+    def _take_over(self) -> None:
+        """Compute here every task the background thread has not started, the latest first."""
+        for job in reversed(self._queued):
+            job.take_over()
+
     def worst_cases(self) -> tuple[dict, dict]:
         """``(summary blocks, trajectories)`` per controller, as :func:`pfjax.montecarlo.worst_case.worst_cases`."""
+        self._take_over()
         blocks, trajs = {}, {}
         for name, f in self.worst.items():
             blocks[name], trajs[name] = f.result()
         return blocks, trajs
 
     def float64_runs(self) -> list | None:
+        self._take_over()
         return None if self.float64 is None else [f.result() for f in self.float64]
 
     def close(self) -> None:
         """Cancel the tasks not yet started (the running one finishes: at most one task's time)."""
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+class _Stealable:
+    """A task submitted to the background thread that the calling thread can take over."""
+
+    def __init__(self, future, fn):
+        self._future, self._fn = future, fn
+
+    def take_over(self) -> None:
+        """Compute the task here, now, if the background thread has not started it."""
+        if not isinstance(self._future, _Deferred) and self._future.cancel():
+            self._future = _Deferred(self._fn)
+            self._future.result()
+
+    def result(self):
+        self.take_over()
+        return self._future.result()
 
 
 class _Deferred:
@@ -130,10 +171,16 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         (warn or (lambda m: None))(w)
     controllers = controllers_of(spec)
     side = SideJobs(spec, controllers, overlap=overlap, report=report)
+    worker = None
+    if report and overlap and figure_worker.enabled():
+        worker = figure_worker.FigureWorker()  # imports matplotlib now, draws once the runs are written
 
     def finish(tmp: Path, runs_path: Path, controllers, store) -> dict:
         timings = {"runs": time.time() - t0}  # s per phase (wall clock), in summary.json
         lap = [time.time()]
+        # the figures of the runs alone, drawn by the worker process during the margin sweep
+        early = worker.submit(tmp, spec, {"paths": [p.label for p in spec.paths]}, runs_path, RUN_FIGURES) \
+            if worker is not None else None
 
         def mark(phase):
             now = time.time()
@@ -155,16 +202,23 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         summary["chunks"] = {"simulated": store.computed, "resumed": store.reused}
         mark("summary")
         if report:  # the figures first, those of the runs while the worst-case search may still run
-            from pfjax.report.study_report import FIGURES, ordered_figures, report_figures, write_report
+            from pfjax.report.figure_set import FIGURES, ordered_figures, report_figures
+            from pfjax.report.study_report import write_report
 
-            figures = report_figures(tmp, spec, summary, runs, names=[n for n in FIGURES if n != "worst_cases"])
+            here = [n for n in FIGURES if n != "worst_cases"]
+            parts = []
+            if worker is not None:  # the worker: the run figures (asked above) and the slowest of the summary's
+                parts = [early, worker.submit(tmp, spec, summary, runs_path, WORKER_SUMMARY_FIGURES)]
+                here = [n for n in here if n not in RUN_FIGURES + WORKER_SUMMARY_FIGURES]
+            figures = report_figures(tmp, spec, summary, runs, names=here)
             mark("report")
         worst, worst_traj = side.worst_cases()
         for name, block in worst.items():
             summary["controllers"][name]["worst_case"] = block
         mark("worst_case")
         if report:
-            figures = ordered_figures(report_figures(tmp, spec, summary, runs, worst_traj, names=["worst_cases"]), figures)
+            figures = ordered_figures(report_figures(tmp, spec, summary, runs, worst_traj, names=["worst_cases"]), figures,
+                                      *(part.result() for part in parts))
             mark("report")
         check_rows = runs if runs is not None or spec.dtype == "float64" or spec.f64_check_runs <= 0 else \
             read_runs(runs_path, filters=[("run", "in", sample_indices(spec, spec.f64_check_runs).tolist())])
@@ -185,6 +239,8 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         run_study(spec, out, progress=progress, extra=finish, fresh=fresh, controllers=controllers)
     finally:
         side.close()
+        if worker is not None:
+            worker.close()
     return result["summary"]
 
 

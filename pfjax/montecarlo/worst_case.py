@@ -9,7 +9,7 @@ import numpy as np
 
 from pfjax.falsify import falsify, random_search, worst_trajectory
 from pfjax.montecarlo.config import StudySpec
-from pfjax.montecarlo.runner import sample_aligned, sim_config
+from pfjax.montecarlo.runner import sample_few, sim_config
 from pfjax.montecarlo.sampling import NOMINAL_START
 from pfjax.sim.simulate import unstack
 from pfjax.sim.status import STATUS_NAMES
@@ -36,7 +36,7 @@ def worst_case(spec: StudySpec, controllers, i: int, devices=None) -> tuple[dict
     f = spec.falsifier
     labels = [p.label for p in spec.paths]
     p = labels.index(f.path) if f.path is not None else 0
-    run0 = unstack(sample_aligned(spec, p, np.arange(1)).scenarios, 0)  # padded: the float64 check's sampler
+    run0 = unstack(sample_few(spec, p, np.arange(1)).scenarios, 0)
     cfg = sim_config(spec)
     bounds = dict(slip_bound_deg=f.slip_bound_deg, f_max_hz=f.f_max_hz, objective=f.objective,
                   ic_bounds={"d": (-f.lateral_offset, f.lateral_offset) if f.lateral_offset > 0 else 0.0,

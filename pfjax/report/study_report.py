@@ -19,7 +19,6 @@ in ``b + c`` trials at ``p = 1/2``.
 
 from __future__ import annotations
 
-import base64
 import datetime as _dt
 import math
 from pathlib import Path
@@ -30,19 +29,9 @@ from jinja2 import Environment, FileSystemLoader, StrictUndefined
 from scipy import stats
 
 from pfjax.montecarlo.config import StudySpec
-from pfjax.report.worst_case_figures import worst_case_figure
 from pfjax.montecarlo.sampling import SLIP_COLUMNS, column_names
-from pfjax.report.figures import save
-from pfjax.report.study_figures import (
-    controller_colors,
-    distribution_figure,
-    fmt_margin,
-    freeze_layout,
-    headline_figure,
-    margin_figure,
-    slip_map_figure,
-    success_by_param_figure,
-)
+from pfjax.report.figure_set import _figures
+from pfjax.report.study_figures import controller_colors, fmt_margin
 from pfjax.sim.status import STATUS_NAMES
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
@@ -287,17 +276,6 @@ def _drivers(summary: dict) -> dict[str, list[list]]:
     return out
 
 
-def _png_base64(path: Path) -> str:
-    return base64.b64encode(path.read_bytes()).decode("ascii")
-
-
-def _nominal(d) -> float:
-    """The nominal value of a distribution: its value, mean, mid-range or the mean of its choices."""
-    if d.value is not None or d.mean is not None:
-        return d.value if d.value is not None else d.mean
-    return 0.5 * (d.low + d.high) if d.low is not None else float(np.mean(d.values))
-
-
 def _worst_case_rows(summary: dict, colors: dict) -> list:
     rows = []
     for n, c in summary["controllers"].items():
@@ -309,110 +287,6 @@ def _worst_case_rows(summary: dict, colors: dict) -> list:
                          _cell(f"d₀ = {wc['worst_ic']['d0']:+.3f} m, θₑ₀ = {wc['worst_ic']['theta_e0_deg']:+.1f}°, "
                                f"peak |β_r|, |β_f| = {wc['worst_slip_peak_deg'][0]:.1f}°, {wc['worst_slip_peak_deg'][1]:.1f}°")])
     return rows
-
-
-def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, colors: dict,
-             worst_trajectories: dict | None = None, names=None) -> dict[str, dict]:
-    fig_dir = out_dir / "figures"
-    paths = list(summary.get("paths") or runs["path"].unique())
-    band_mm = 1000 * spec.success.band
-    from_s = spec.success.from_s
-    todo = [
-        ("worst_cases", lambda: worst_case_figure(worst_trajectories, summary, colors) if worst_trajectories else None,
-         "Worst cases found by gradient ascent through the simulator (pfjax.falsify) over bounded, band-limited slip "
-         "profiles and initial errors: the worst run's path, slip and lateral error, and the worst objective found "
-         "against the rollouts spent, compared with random search of the same budget."),
-        ("headline", lambda: headline_figure(summary, colors),
-         "Which controller is more robust: success rate with its 95 % interval, slip margin per axis, IAE spread."),
-        ("margin_curves", lambda: margin_figure(summary, colors),
-         "Success rate against the slip amplitude, with 95 % Clopper-Pearson bands; the dashed line is 1 − ε and "
-         "each triangle a controller's margin (the largest amplitude at which it, and every smaller one, stays above)."),
-        ("dist_iae", lambda: distribution_figure(runs, "iae", colors, paths, unit="m·s", label="IAE ∫|d| dt"),
-         "IAE per path: histogram (fraction of runs per bin) and empirical CDF (further left and higher is better). "
-         "Failed runs count as +∞: the ECDF stops short of 1 by the failed fraction."),
-        ("dist_late_max_abs_d", lambda: distribution_figure(runs, "late_max_abs_d", colors, paths, scale=1000.0, unit="mm",
-                                                            label=f"max |d| from t = {from_s:g} s",
-                                                            band=band_mm),
-         f"Largest |d| in the success window; runs left of the dashed line ({band_mm:g} mm) meet the accuracy criterion."),
-        ("slip_map", lambda: slip_map_figure(runs, list(summary["controllers"]), delta_max_deg=_nominal(spec.vehicle.delta_max_deg),
-                                             convention=spec.vehicle.convention,
-                                             note="" if spec.slip.kind == "constant" else " (constant part)",
-                                             predicted=linearised_predictions(spec, summary)),
-         "From simulation: success rate of the study's runs binned over their sampled slip angles (all paths pooled). "
-         "Dashed, where shown: beyond it no straight-line equilibrium exists (|steering| would exceed the nominal δ_max). "
-         "Solid (state-feedback controllers): the linearised prediction on a straight line — the true equilibrium "
-         "exists, is Hurwitz and has |d*| within the success band (pfjax.analysis.stability_map, nominal v, L, δ_max)."),
-        ("success_by_param", lambda: success_by_param_figure(summary, colors),
-         "Where failures come from: success rate per bin of each sampled parameter (a flat curve: the parameter "
-         "does not matter; a drop: failures concentrate there)."),
-    ]
-    out = {}
-    for name, build, caption in todo:
-        if names is not None and name not in names:
-            continue
-        fig = build()
-        if fig is None:
-            continue
-        save(freeze_layout(fig), fig_dir, name)
-        out[name] = {"name": name, "caption": caption, "b64": _png_base64(fig_dir / f"{name}.png")}
-    return out
-
-
-def warm_predictions(spec: StudySpec, gains: dict) -> None:
-    """Compile the slip map's linearised predictions (:func:`linearised_predictions`) for the grid
-    its figure evaluates (:data:`~pfjax.report.study_figures.PREDICTION_GRID` points per axis), so
-    that the report finds them compiled: a study calls this alongside its runs. ``gains``: per
-    controller, the summary's flat gains."""
-    from pfjax.report.study_figures import PREDICTION_GRID
-
-    grid = np.zeros(PREDICTION_GRID)
-    for pred in linearised_predictions(spec, {"controllers": {n: {"gains": g} for n, g in gains.items()}}).values():
-        pred(grid, grid)
-
-
-def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
-    """For state-feedback controllers (gains k_d, k_theta): success predicted on a straight line from
-    the true equilibrium (exists, Hurwitz, |d*| <= success band), as functions of the slip grid in deg."""
-    import jax.numpy as jnp
-
-    from pfjax.analysis import stability_map
-    from pfjax.models.slip import CONVENTIONS, SlipParams
-
-    v = spec.vehicle
-    params = SlipParams(_nominal(v.speed), _nominal(v.L), math.radians(_nominal(v.delta_max_deg)), CONVENTIONS[v.convention])
-    out = {}
-    for name, c in summary["controllers"].items():
-        g = c.get("gains") or {}
-        if {"k_d", "k_theta"} <= set(g):
-            K = jnp.asarray([g["k_d"], g["k_theta"]])
-
-            def pred(xs, ys, K=K):
-                eq, _ = stability_map(K, jnp.radians(jnp.asarray(xs)), jnp.radians(jnp.asarray(ys)), params)
-                return np.asarray(eq.hurwitz) & (np.abs(np.asarray(eq.d)) <= spec.success.band)
-
-            out[name] = pred
-    return out
-
-
-#: The report's figures, in the report's order.
-FIGURES = ("worst_cases", "headline", "margin_curves", "dist_iae", "dist_late_max_abs_d", "slip_map", "success_by_param")
-
-
-def report_figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame,
-                   worst_trajectories: dict | None = None, names=None) -> dict[str, dict]:
-    """Render the report's figures into ``out_dir/figures`` (the slow part of :func:`write_report`;
-    it needs the summary's statistics but not its float64 check). Pass the result to
-    :func:`write_report` as ``figures``. ``names``: render only these (of :data:`FIGURES`; default
-    all), so a study can draw the others before its worst-case search has finished; merge the parts
-    with :func:`ordered_figures`."""
-    cfg = summary.get("config") or spec.model_dump(mode="json")
-    return _figures(Path(out_dir), spec, summary, runs, controller_colors(cfg["controllers"]), worst_trajectories, names)
-
-
-def ordered_figures(*parts: dict) -> dict[str, dict]:
-    """Merge :func:`report_figures` results into the report's order (:data:`FIGURES`)."""
-    merged = {k: v for part in parts for k, v in part.items()}
-    return {k: merged[k] for k in FIGURES if k in merged}
 
 
 def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, sweep: pd.DataFrame | None,
@@ -428,7 +302,7 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
             from the summary, the sweep only counts the runs spent on it.
         worst_trajectories: the falsifier's worst runs per controller (:mod:`pfjax.montecarlo.worst_case`),
             or None when the study did no worst-case search.
-        figures: :func:`report_figures` of the same study if already rendered.
+        figures: :func:`pfjax.report.figure_set.report_figures` of the same study if already rendered.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
