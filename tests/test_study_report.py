@@ -7,6 +7,7 @@ from __future__ import annotations
 import base64
 import json
 import os
+import warnings
 from html.parser import HTMLParser
 
 import matplotlib
@@ -99,7 +100,10 @@ def study(tmp_path_factory):
     before = os.environ.get(figure_worker.ENV)
     os.environ[figure_worker.ENV] = "1"
     try:
-        run(spec, out, progress=False, report=True)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            run(spec, out, progress=False, report=True)
+        assert not [w for w in caught if "figure worker" in str(w.message)]  # the worker drew, no fallback
     finally:
         if before is None:
             del os.environ[figure_worker.ENV]
@@ -121,6 +125,32 @@ def test_figures_from_the_worker_equal_those_drawn_in_process(study, tmp_path):
     assert set(here) == set(RUN_FIGURES + WORKER_SUMMARY_FIGURES)
     for name in here:  # same code, same data: the same bytes
         assert (tmp_path / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes(), name
+
+
+def test_worst_case_figure_from_the_worker_equals_the_one_drawn_here(study, tmp_path):
+    """The worker draws the worst-case figure from the trajectories it is sent (no run table)."""
+    import numpy as np
+
+    spec, out, summary = study
+    summary = json.loads(json.dumps(summary))
+    t = np.linspace(0.0, 4.0, 801)
+    trajs = {}
+    for i, name in enumerate(summary["controllers"]):
+        summary["controllers"][name]["worst_case"] = {
+            "path": "line", "objective": "iae", "falsifier": 1.0 + i, "falsifier_status": "ok", "random": 0.5,
+            "ratio": 2.0 + 2 * i, "n_rollouts": 6,
+            "history": [0.2, 0.7, 1.0 + i], "history_rollouts": [2, 4, 6],
+            "history_random": [0.1, 0.4, 0.5], "history_random_rollouts": [2, 4, 6]}
+        trajs[name] = {"t": t, "x": t, "y": 0.1 * np.sin(t), "d": 0.05 * np.sin(2 * t + i), "beta_r": 0.1 * np.sin(t),
+                       "beta_f": -0.1 * np.cos(t), "path_x": t, "path_y": 0 * t}
+    with figure_worker.FigureWorker() as w, warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # no fallback: the worker drew it
+        got = w.submit(tmp_path / "w", spec, summary, tmp_path / "no-runs-needed.parquet", ["worst_cases"],
+                       worst_trajectories=trajs).result()
+    here = report_figures(tmp_path / "h", spec, summary, None, trajs, names=["worst_cases"])
+    assert list(got) == list(here) == ["worst_cases"]
+    assert (tmp_path / "w" / "figures" / "worst_cases.png").read_bytes() == \
+        (tmp_path / "h" / "figures" / "worst_cases.png").read_bytes()
 
 
 def test_figure_worker_that_cannot_start_or_dies_falls_back_to_this_process(study, tmp_path):

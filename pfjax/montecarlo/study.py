@@ -21,10 +21,12 @@ from pfjax.report import figure_worker
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Report figures drawn by the figure worker (:mod:`pfjax.report.figure_worker`) when there is
-#: one: those that need only the runs, asked for as soon as the runs are written, and the slowest
-#: of those that need the summary (measured on the default study: 1.7, 1.4 and 1.2 s of the 8-10 s).
+#: one: those that need only the runs, asked for as soon as the runs are written, and those that
+#: need only the summary (2.9 s of drawing on the default study). The main thread draws the slip
+#: map (its prediction is a JAX program) and the worst cases (3-4 s, after the search), and
+#: meanwhile computes the side jobs the background thread has not started.
 RUN_FIGURES = ["dist_iae", "dist_late_max_abs_d"]
-WORKER_SUMMARY_FIGURES = ["success_by_param"]
+WORKER_SUMMARY_FIGURES = ["headline", "margin_curves", "success_by_param"]
 #: The phases of ``timings_s`` in summary.json (main-thread wall clock, s).
 PHASES = ("runs", "margin", "worst_case", "float64_check", "summary", "report")
 
@@ -97,21 +99,21 @@ class SideJobs:
         self.float64 = [task("float64_check", float64_runs, spec, controllers, spec.f64_check_runs, p)
                         for p in range(len(spec.paths))] if checked else None
 
-    def _take_over(self) -> None:
+    def take_over(self) -> None:
         """Compute here every task the background thread has not started, the latest first."""
         for job in reversed(self._queued):
             job.take_over()
 
     def worst_cases(self) -> tuple[dict, dict]:
         """``(summary blocks, trajectories)`` per controller, as :func:`pfjax.montecarlo.worst_case.worst_cases`."""
-        self._take_over()
+        self.take_over()
         blocks, trajs = {}, {}
         for name, f in self.worst.items():
             blocks[name], trajs[name] = f.result()
         return blocks, trajs
 
     def float64_runs(self) -> list | None:
-        self._take_over()
+        self.take_over()
         return None if self.float64 is None else [f.result() for f in self.float64]
 
     def close(self) -> None:
@@ -201,15 +203,19 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         summary["float64_check"] = None  # below: its float64 runs may still be running in the background
         summary["chunks"] = {"simulated": store.computed, "resumed": store.reused}
         mark("summary")
-        if report:  # the figures first, those of the runs while the worst-case search may still run
+        parts = []
+        if report:
             from pfjax.report.figure_set import FIGURES, ordered_figures, report_figures
             from pfjax.report.study_report import write_report
 
             here = [n for n in FIGURES if n != "worst_cases"]
-            parts = []
-            if worker is not None:  # the worker: the run figures (asked above) and the slowest of the summary's
+            if worker is not None:
+                # the worker draws the run figures (asked above) and the summary's; meanwhile this
+                # thread computes the side jobs not started yet (SideJobs), then draws the others
                 parts = [early, worker.submit(tmp, spec, summary, runs_path, WORKER_SUMMARY_FIGURES)]
                 here = [n for n in here if n not in RUN_FIGURES + WORKER_SUMMARY_FIGURES]
+                side.take_over()
+            # the figures before the wait for the worst-case search, which may still run
             figures = report_figures(tmp, spec, summary, runs, names=here)
             mark("report")
         worst, worst_traj = side.worst_cases()

@@ -31,6 +31,8 @@ from pfjax.report.worst_case_figures import worst_case_figure
 
 #: The report's figures, in the report's order.
 FIGURES = ("worst_cases", "headline", "margin_curves", "dist_iae", "dist_late_max_abs_d", "slip_map", "success_by_param")
+#: The figures drawn from the run table (the others need only the summary and the worst cases).
+NEEDS_RUNS = {"dist_iae", "dist_late_max_abs_d", "slip_map"}
 
 
 def _png_base64(path: Path) -> str:
@@ -80,7 +82,7 @@ def figure_entries(out_dir: Path, spec: StudySpec, names) -> dict[str, dict]:
 def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, colors: dict,
              worst_trajectories: dict | None = None, names=None) -> dict[str, dict]:
     fig_dir = out_dir / "figures"
-    paths = list(summary.get("paths") or runs["path"].unique())
+    paths = list(summary.get("paths") or ([] if runs is None else runs["path"].unique()))
     band_mm = 1000 * spec.success.band
     from_s = spec.success.from_s
     build = {
@@ -152,7 +154,7 @@ def report_figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataF
     it needs the summary's statistics but not its float64 check). Pass the result to
     :func:`write_report` as ``figures``. ``names``: render only these (of :data:`FIGURES`; default
     all), so a study can draw the others before its worst-case search has finished; merge the parts
-    with :func:`ordered_figures`."""
+    with :func:`ordered_figures`. ``runs`` may be None when ``names`` has none of :data:`NEEDS_RUNS`."""
     cfg = summary.get("config") or spec.model_dump(mode="json")
     return _figures(Path(out_dir), spec, summary, runs, controller_colors(cfg["controllers"]), worst_trajectories, names)
 

@@ -11,7 +11,7 @@ The worker runs at the study's priority: a lower one (``nice 10``) starved it wh
 two threads kept both cores busy, so it drew everything at the end (measured: report 8-10 s).
 
 Protocol: the parent writes one line per request to the child's stdin, the path of a pickled
-request ``(out_dir, spec, summary, runs_path, names)``; the child renders with
+request ``(out_dir, spec, summary, runs_path, names, worst_trajectories)``; the child renders with
 :func:`pfjax.report.figure_set.report_figures` into ``out_dir/figures`` and answers with one
 JSON line per request, in order: ``{"ok": true, "names": [...]}`` or ``{"ok": false, "error": ...}``.
 The figures themselves are the files; the parent reads the PNGs back for the report.
@@ -77,9 +77,11 @@ class FigureWorker:
             self._proc = None
             self._warn(f"could not start ({e})")
 
-    def submit(self, out_dir: Path, spec, summary: dict, runs_path: Path, names) -> FigureRequest:
-        """Ask for figures ``names`` (of :data:`~pfjax.report.figure_set.FIGURES`); returns at once."""
-        args = (Path(out_dir).resolve(), spec, summary, Path(runs_path).resolve(), list(names))
+    def submit(self, out_dir: Path, spec, summary: dict, runs_path: Path, names,
+               worst_trajectories: dict | None = None) -> FigureRequest:
+        """Ask for figures ``names`` (of :data:`~pfjax.report.figure_set.FIGURES`); returns at once.
+        Arguments as :func:`~pfjax.report.figure_set.report_figures`, with the run table's file."""
+        args = (Path(out_dir).resolve(), spec, summary, Path(runs_path).resolve(), list(names), worst_trajectories)
         sent = False
         if self._proc is not None and self._proc.poll() is not None:
             self._died()
@@ -118,8 +120,7 @@ class FigureWorker:
             return None
         from pfjax.report.figure_set import figure_entries
 
-        out_dir, spec, summary, runs_path, names = request._args
-        return figure_entries(out_dir, spec, answer["names"])
+        return figure_entries(request._args[0], request._args[1], answer["names"])
 
     def _died(self) -> None:
         """The child has exited: warn with its exit code and last line of stderr; forget its requests."""
@@ -166,12 +167,13 @@ class FigureWorker:
         self.close()
 
 
-def _render_here(out_dir: Path, spec, summary: dict, runs_path: Path, names) -> dict[str, dict]:
+def _render_here(out_dir: Path, spec, summary: dict, runs_path: Path, names, worst_trajectories=None) -> dict[str, dict]:
     import pandas as pd
 
-    from pfjax.report.figure_set import report_figures
+    from pfjax.report.figure_set import NEEDS_RUNS, report_figures
 
-    return report_figures(out_dir, spec, summary, pd.read_parquet(runs_path), names=names)
+    runs = pd.read_parquet(runs_path) if set(names) & NEEDS_RUNS else None
+    return report_figures(out_dir, spec, summary, runs, worst_trajectories, names=names)
 
 
 def main() -> None:
@@ -185,8 +187,7 @@ def main() -> None:
 
     for line in sys.stdin:
         try:
-            out_dir, spec, summary, runs_path, names = pickle.loads(Path(line.strip()).read_bytes())
-            done = _render_here(out_dir, spec, summary, runs_path, names)
+            done = _render_here(*pickle.loads(Path(line.strip()).read_bytes()))
             msg = {"ok": True, "names": list(done)}
         except Exception as e:  # reported to the parent, which draws the figures itself
             msg = {"ok": False, "error": f"{type(e).__name__}: {e}"}
