@@ -259,14 +259,19 @@ def _headline(summary: dict, out) -> dict:
 
 def _cmd_study(args) -> dict:
     from pfjax.config import ConfigError
-    from pfjax.montecarlo.study import run
+    from pfjax.report import figure_worker
 
     spec = _load_study_or_usage(args)
+    # the figure worker imports matplotlib while this process imports JAX (both about 2 s)
+    worker = figure_worker.FigureWorker() if not args.no_report and not args.no_overlap and figure_worker.enabled() \
+        else None
+    from pfjax.montecarlo.study import run
+
     out = Path(args.out) if args.out else Path("results") / spec.name
     warn = lambda m: print(f"pfjax study: warning: {m}", file=sys.stderr)
     try:
         summary = run(spec, out, progress=None if not args.quiet else False, report=not args.no_report,
-                      fresh=args.fresh, warn=warn, overlap=not args.no_overlap)
+                      fresh=args.fresh, warn=warn, overlap=not args.no_overlap, worker=worker)
     except ConfigError as e:
         raise UsageError(str(e)) from None
     head = _headline(summary, out)

@@ -127,6 +127,33 @@ def test_figures_from_the_worker_equal_those_drawn_in_process(study, tmp_path):
         assert (tmp_path / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes(), name
 
 
+def test_cli_study_starts_the_worker_before_its_imports_and_draws_the_same_report(study, tmp_path, monkeypatch, capsys):
+    """``pfjax study`` starts the figure worker itself and hands it to the study: the same figures."""
+    from pfjax import cli
+
+    spec, out, _ = study
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text('name = "x"\n')
+    monkeypatch.setenv(figure_worker.ENV, "1")
+    started = []
+    monkeypatch.setattr(figure_worker.FigureWorker, "__init__",
+                        lambda self, _init=figure_worker.FigureWorker.__init__, **kw: (started.append(1), _init(self, **kw))[1])
+    def toml(v):  # a TOML inline value
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{k} = {toml(x)}" for k, x in v.items()) + "}"
+        if isinstance(v, list):
+            return "[" + ", ".join(map(toml, v)) + "]"
+        return json.dumps(v)
+
+    sets = [f"{k}={toml(v)}" for k, v in CONFIG.items()]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        assert cli.main(["study", str(cfg), "--out", str(tmp_path / "cli"), "--quiet"] + sum((["--set", a] for a in sets), [])) == 0
+    assert started == [1]  # one worker, started by the CLI
+    for name in FIGURES:
+        assert (tmp_path / "cli" / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes(), name
+
+
 def test_worst_case_figure_from_the_worker_equals_the_one_drawn_here(study, tmp_path):
     """The worker draws the worst-case figure from the trajectories it is sent (no run table)."""
     import numpy as np

@@ -152,7 +152,7 @@ class _Deferred:
 
 
 def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = None, report: bool = True,
-        fresh: bool = False, warn=None, overlap: bool = True) -> dict:
+        fresh: bool = False, warn=None, overlap: bool = True, worker: figure_worker.FigureWorker | None = None) -> dict:
     """Run a validated study; returns the summary.
 
     Resumes an interrupted run of the same study into ``out`` (its finished chunks are reused);
@@ -160,7 +160,23 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
     warning (:func:`pfjax.montecarlo.checks.study_warnings`) before the simulation starts; the
     warnings are also recorded in ``summary.json``. ``overlap``: run the worst-case search and the
     float64 check alongside the runs (:class:`SideJobs`; the same results either way).
+    ``worker``: a :class:`~pfjax.report.figure_worker.FigureWorker` the caller started (the CLI
+    starts it before it imports JAX, so that both imports overlap); ``run`` closes it. By default
+    ``run`` starts one when it writes a report with ``overlap`` and ``PFJAX_FIGURE_WORKER`` is not ``0``.
     """
+    if worker is not None and not (report and overlap):
+        worker.close()
+        worker = None
+    if worker is None and report and overlap and figure_worker.enabled():
+        worker = figure_worker.FigureWorker()  # imports matplotlib now, draws once the runs are written
+    try:
+        return _run(spec, out, progress=progress, report=report, fresh=fresh, warn=warn, overlap=overlap, worker=worker)
+    finally:
+        if worker is not None:
+            worker.close()
+
+
+def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, overlap, worker) -> dict:
     from pfjax.cli import dumps
     from pfjax.montecarlo.checks import float64_check, sample_indices, study_warnings
     from pfjax.montecarlo.runner import controllers_of
@@ -173,9 +189,6 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         (warn or (lambda m: None))(w)
     controllers = controllers_of(spec)
     side = SideJobs(spec, controllers, overlap=overlap, report=report)
-    worker = None
-    if report and overlap and figure_worker.enabled():
-        worker = figure_worker.FigureWorker()  # imports matplotlib now, draws once the runs are written
 
     def finish(tmp: Path, runs_path: Path, controllers, store) -> dict:
         timings = {"runs": time.time() - t0}  # s per phase (wall clock), in summary.json
@@ -245,8 +258,6 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
         run_study(spec, out, progress=progress, extra=finish, fresh=fresh, controllers=controllers)
     finally:
         side.close()
-        if worker is not None:
-            worker.close()
     return result["summary"]
 
 
