@@ -5,8 +5,10 @@ of the study's process run one after another with the study's own Python work (m
 default study's seven figures take 8-10 s, and threads gave no speed-up). A
 :class:`FigureWorker` is a child Python process (``python -m pfjax.report.figure_worker``)
 that imports matplotlib and pandas while the study simulates (about 2 s of CPU, without JAX) and
-then draws the figures it is asked for, alongside the study. The study asks for the figures that
-need only the runs (``runs.parquet``) as soon as the runs are written, and draws the rest itself.
+then draws the figures it is asked for, alongside the study. A study
+(:func:`pfjax.montecarlo.study.run`) asks for the figures that need only the runs
+(``runs.parquet``) as soon as the runs are written and for those that need only the summary once
+it exists, and draws the slip map and the worst cases itself.
 The worker runs at the study's priority: a lower one (``nice 10``) starved it while the study's
 two threads kept both cores busy, so it drew everything at the end (measured: report 8-10 s).
 
