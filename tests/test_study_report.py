@@ -8,6 +8,7 @@ import base64
 import json
 import os
 import warnings
+from pathlib import Path
 from html.parser import HTMLParser
 
 import matplotlib
@@ -320,3 +321,75 @@ def test_study_without_report_streams_and_gives_the_same_summary(study, tmp_path
     assert not (tmp_path / "noreport" / "report.html").exists()
     drop = lambda d: {k: v for k, v in d.items() if k not in ("wall_s", "timings_s")}
     assert dumps(drop(s)) == dumps(drop(json.loads(dumps(summary))))
+
+
+def test_worst_case_figure_asked_of_the_worker_by_the_last_search_equals_the_one_drawn_here(tmp_path, monkeypatch):
+    """With a falsifier, the worker draws the worst-case figure (asked for by whichever thread ends
+    the search): every figure of the report is the same as a study's without a worker."""
+    data = {**CONFIG, "n_runs": 8, "chunk_size": 8, "sim": {"horizon": 2.0, "steady_window": 1.0},
+            "success": {"from_s": 1.0}, "margin": {"enabled": False},
+            "controllers": [{"name": "lmi", "type": "lmi"}],
+            "falsifier": {"enabled": True, "path": "line", "n_restarts": 2, "steps": 2}}
+    spec, _ = load_study(data=data)
+    asked = []
+    submit = figure_worker.FigureWorker.submit
+    monkeypatch.setattr(figure_worker.FigureWorker, "submit", lambda self, *a, **k: (asked.append(list(a[4])), submit(self, *a, **k))[1])
+    monkeypatch.setenv(figure_worker.ENV, "1")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # no fallback: the worker drew them
+        run(spec, tmp_path / "worker", progress=False, report=True)
+    assert ["worst_cases"] in asked
+    monkeypatch.setenv(figure_worker.ENV, "0")
+    run(spec, tmp_path / "here", progress=False, report=True)
+    pngs = sorted(p.name for p in (tmp_path / "here" / "figures").glob("*.png"))
+    assert "worst_cases.png" in pngs
+    assert pngs == sorted(p.name for p in (tmp_path / "worker" / "figures").glob("*.png"))
+    for name in pngs:
+        assert (tmp_path / "worker" / "figures" / name).read_bytes() == (tmp_path / "here" / "figures" / name).read_bytes(), name
+
+
+def test_worst_figure_is_asked_for_once_when_the_searches_and_the_directory_are_there():
+    """:class:`~pfjax.montecarlo.study._WorstFigure` submits one request, from the thread that
+    completes it (the last search or the directory), with the controllers' blocks in their order."""
+    import threading
+
+    from pfjax.montecarlo.study import _WorstFigure
+
+    class Fake:
+        def __init__(self):
+            self.calls = []
+
+        def submit(self, out, spec, summary, runs_path, names, trajs):
+            self.calls.append((out, summary, runs_path, names, list(trajs), threading.current_thread().name))
+            return type("R", (), {"result": lambda self: {"worst_cases": {"name": "worst_cases"}}})()
+
+    for order in (["a", "dir", "b"], ["dir", "b", "a"], ["b", "a", "dir"]):
+        w = _WorstFigure(fake := Fake(), None, ["a", "b"])
+        for step in order:
+            if step == "dir":
+                w.start(Path("/out"), Path("/out/runs.parquet"))
+            else:  # a search ends in another thread
+                t = threading.Thread(target=w.found, args=(step, ({"falsifier": step}, {"t": step})), name=f"search-{step}")
+                t.start()
+                t.join()
+            assert len(fake.calls) == (step == order[-1])  # asked for only once everything is there
+        out, summary, runs_path, names, trajs, thread = fake.calls[0]
+        assert (out, runs_path, names, trajs) == (Path("/out"), Path("/out/runs.parquet"), ["worst_cases"], ["a", "b"])
+        assert summary == {"controllers": {"a": {"worst_case": {"falsifier": "a"}}, "b": {"worst_case": {"falsifier": "b"}}}}
+        assert thread == ("MainThread" if order[-1] == "dir" else f"search-{order[-1]}")
+        assert w.result() == {"worst_cases": {"name": "worst_cases"}} and len(fake.calls) == 1
+    assert _WorstFigure(None, None, ["a"]).result() is None  # no worker: the study draws it
+
+
+def test_figure_worker_answers_can_be_collected_in_any_order(study, tmp_path):
+    """Results asked for out of order (a later request first) are each the worker's, not redrawn here."""
+    spec, out, summary = study
+    with figure_worker.FigureWorker() as w, warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        first = w.submit(tmp_path / "e", spec, summary, out / "runs.parquet", ["dist_iae"])
+        second = w.submit(tmp_path / "f", spec, summary, out / "runs.parquet", ["headline"])
+        assert list(second.result()) == ["headline"]
+        assert first._answer is not None  # read on the way to the second's
+        assert list(first.result()) == ["dist_iae"]
+    for d, name in (("e", "dist_iae"), ("f", "headline")):
+        assert (tmp_path / d / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes()

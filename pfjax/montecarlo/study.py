@@ -8,6 +8,7 @@ slip-margin sweep), ``summary.json`` (strict JSON) and, unless disabled, ``repor
 
 from __future__ import annotations
 
+import threading
 import time
 from pathlib import Path
 
@@ -21,10 +22,11 @@ from pfjax.report import figure_worker
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Report figures drawn by the figure worker (:mod:`pfjax.report.figure_worker`) when there is
-#: one: those that need only the runs, asked for as soon as the runs are written, and those that
-#: need only the summary (2.9 s of drawing on the default study). The main thread draws the slip
-#: map (its prediction is a JAX program) and the worst cases (3-4 s, after the search), and
-#: meanwhile computes the side jobs the background thread has not started.
+#: one: those that need only the runs, asked for as soon as the runs are written, the worst-case
+#: figure (3-4 s), asked for by whichever thread finishes the last worst-case search
+#: (:class:`_WorstFigure`), and those that need only the summary (2.9 s of drawing on the default
+#: study). The main thread draws the slip map (its prediction is a JAX program) and meanwhile
+#: computes the side jobs the background thread has not started.
 RUN_FIGURES = ["dist_iae", "dist_late_max_abs_d"]
 WORKER_SUMMARY_FIGURES = ["headline", "margin_curves", "success_by_param"]
 #: The phases of ``timings_s`` in summary.json (main-thread wall clock, s).
@@ -55,7 +57,8 @@ class SideJobs:
     work through alone.
     """
 
-    def __init__(self, spec: StudySpec, controllers: dict, *, overlap: bool = True, report: bool = True):
+    def __init__(self, spec: StudySpec, controllers: dict, *, overlap: bool = True, report: bool = True,
+                 worker: figure_worker.FigureWorker | None = None):
         from concurrent.futures import ThreadPoolExecutor
 
         from pfjax.montecarlo.checks import float64_runs
@@ -93,7 +96,10 @@ class SideJobs:
 
             self.report_warmup = task("report_warmup", warm_predictions, spec, {k: v[2] for k, v in controllers.items()},
                                       pinned=False)
-        self.worst = {name: task("worst_case", worst_case, spec, controllers, i)
+        self.worst_figure = _WorstFigure(worker, spec, list(controllers)) if report and spec.falsifier.enabled else None
+        found = (lambda name, value: value) if self.worst_figure is None else self.worst_figure.found
+        self.worst = {name: task("worst_case", lambda *a, name=name, **k: found(name, worst_case(*a, **k)), spec,
+                                 controllers, i)
                       for i, name in enumerate(controllers)} if spec.falsifier.enabled else {}
         checked = spec.dtype != "float64" and spec.f64_check_runs > 0
         self.float64 = [task("float64_check", float64_runs, spec, controllers, spec.f64_check_runs, p)
@@ -120,6 +126,48 @@ class SideJobs:
         """Cancel the tasks not yet started (the running one finishes: at most one task's time)."""
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+class _WorstFigure:
+    """The worst-case figure, asked of the figure worker as soon as every controller's worst-case
+    search has finished and the study's output directory exists, by whichever thread gets there
+    last (a search's thread, or the main thread when it names the directory). Without a worker
+    :meth:`result` returns None and the study draws the figure itself."""
+
+    def __init__(self, worker, spec: StudySpec, names: list[str]):
+        self._worker, self._spec, self._names = worker, spec, names
+        self._lock = threading.Lock()
+        self._found: dict = {}
+        self._out = self._request = None
+
+    def found(self, name: str, value):
+        """Record one controller's ``(summary block, trajectory)``; returns ``value``."""
+        with self._lock:
+            self._found[name] = value
+        self._maybe_submit()
+        return value
+
+    def start(self, out_dir: Path, runs_path: Path) -> None:
+        """The directory the figure goes to (``out_dir/figures``) and the run table's file."""
+        with self._lock:
+            self._out = (out_dir, runs_path)
+        self._maybe_submit()
+
+    def _maybe_submit(self) -> None:
+        with self._lock:
+            if self._worker is None or self._out is None or self._request is not None or \
+                    len(self._found) < len(self._names):
+                return
+            # the figure reads only the summary's worst-case blocks, in the controllers' order
+            summary = {"controllers": {n: {"worst_case": self._found[n][0]} for n in self._names}}
+            trajs = {n: self._found[n][1] for n in self._names}
+            self._request = self._worker.submit(*self._out[:1], self._spec, summary, self._out[1], ["worst_cases"], trajs)
+
+    def result(self) -> dict | None:
+        """The figure's entry (as :func:`~pfjax.report.figure_set.report_figures`), or None if it
+        was not asked of a worker."""
+        self._maybe_submit()
+        return None if self._request is None else self._request.result()
 
 
 class _Stealable:
@@ -188,7 +236,7 @@ def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, ov
     for w in warnings:
         (warn or (lambda m: None))(w)
     controllers = controllers_of(spec)
-    side = SideJobs(spec, controllers, overlap=overlap, report=report)
+    side = SideJobs(spec, controllers, overlap=overlap, report=report, worker=worker)
 
     def finish(tmp: Path, runs_path: Path, controllers, store) -> dict:
         timings = {"runs": time.time() - t0}  # s per phase (wall clock), in summary.json
@@ -196,6 +244,8 @@ def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, ov
         # the figures of the runs alone, drawn by the worker process during the margin sweep
         early = worker.submit(tmp, spec, {"paths": [p.label for p in spec.paths]}, runs_path, RUN_FIGURES) \
             if worker is not None else None
+        if side.worst_figure is not None:
+            side.worst_figure.start(tmp, runs_path)  # asked of the worker now if the search is done, else when it is
 
         def mark(phase):
             now = time.time()
@@ -236,8 +286,10 @@ def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, ov
             summary["controllers"][name]["worst_case"] = block
         mark("worst_case")
         if report:
-            figures = ordered_figures(report_figures(tmp, spec, summary, runs, worst_traj, names=["worst_cases"]), figures,
-                                      *(part.result() for part in parts))
+            worst_figure = side.worst_figure.result() if side.worst_figure is not None else None
+            if worst_figure is None:
+                worst_figure = report_figures(tmp, spec, summary, runs, worst_traj, names=["worst_cases"])
+            figures = ordered_figures(worst_figure, figures, *(part.result() for part in parts))
             mark("report")
         check_rows = runs if runs is not None or spec.dtype == "float64" or spec.f64_check_runs <= 0 else \
             read_runs(runs_path, filters=[("run", "in", sample_indices(spec, spec.f64_check_runs).tolist())])

@@ -7,8 +7,10 @@ default study's seven figures take 8-10 s, and threads gave no speed-up). A
 that imports matplotlib and pandas while the study simulates (about 2 s of CPU, without JAX) and
 then draws the figures it is asked for, alongside the study. A study
 (:func:`pfjax.montecarlo.study.run`) asks for the figures that need only the runs
-(``runs.parquet``) as soon as the runs are written and for those that need only the summary once
-it exists, and draws the slip map and the worst cases itself.
+(``runs.parquet``) as soon as the runs are written, for the worst-case figure as soon as the
+worst-case search has finished (from whichever thread finishes it), and for those that need only
+the summary once it exists; it draws the slip map itself (its prediction is a JAX program).
+Requests may come from several threads and their results be collected in any order.
 The worker runs at the study's priority: a lower one (``nice 10``) starved it while the study's
 two threads kept both cores busy, so it drew everything at the end (measured: report 8-10 s).
 
@@ -33,6 +35,7 @@ import pickle
 import subprocess
 import sys
 import tempfile
+import threading
 import warnings
 from pathlib import Path
 
@@ -50,6 +53,7 @@ class FigureRequest:
 
     def __init__(self, worker: "FigureWorker", args: tuple, sent: bool):
         self._worker, self._args, self._sent, self._value = worker, args, sent, None
+        self._answer = None  # the child's JSON answer, once read
 
     def result(self) -> dict[str, dict]:
         """``{name: {"name", "caption", "b64"}}`` as :func:`~pfjax.report.figure_set.report_figures`."""
@@ -62,9 +66,11 @@ class FigureRequest:
 
 class FigureWorker:
     """A child process that draws report figures (module docstring). Use as a context manager or
-    call :meth:`close`."""
+    call :meth:`close`. Requests may be submitted and their results asked for from several threads,
+    in any order."""
 
     def __init__(self, *, python: str = sys.executable):
+        self._lock = threading.RLock()  # the pipes, the request count and the pending list
         self._pending: list[FigureRequest] = []
         self._tmp = Path(tempfile.mkdtemp(prefix="pfjax-figures-"))
         self._count = 0
@@ -85,39 +91,40 @@ class FigureWorker:
         Arguments as :func:`~pfjax.report.figure_set.report_figures`, with the run table's file."""
         args = (Path(out_dir).resolve(), spec, summary, Path(runs_path).resolve(), list(names), worst_trajectories)
         sent = False
-        if self._proc is not None and self._proc.poll() is not None:
-            self._died()
-        if self._proc is not None:
-            self._count += 1
-            req = self._tmp / f"request-{self._count}.pkl"
-            req.write_bytes(pickle.dumps(args))
-            try:
-                self._proc.stdin.write(f"{req}\n")
-                self._proc.stdin.flush()
-                sent = True
-            except OSError:  # the pipe broke: the child has exited
+        with self._lock:
+            if self._proc is not None and self._proc.poll() is not None:
                 self._died()
-        request = FigureRequest(self, args, sent)
-        if sent:
-            self._pending.append(request)
+            if self._proc is not None:
+                self._count += 1
+                req = self._tmp / f"request-{self._count}.pkl"
+                req.write_bytes(pickle.dumps(args))
+                try:
+                    self._proc.stdin.write(f"{req}\n")
+                    self._proc.stdin.flush()
+                    sent = True
+                except OSError:  # the pipe broke: the child has exited
+                    self._died()
+            request = FigureRequest(self, args, sent)
+            if sent:
+                self._pending.append(request)
         return request
 
     def _collect(self, request: FigureRequest) -> dict | None:
-        """Read the child's answers up to ``request``'s; None if the child failed it."""
-        answer = None
-        while request in self._pending:
-            head = self._pending.pop(0)
-            if self._proc is None:
-                return None
-            line = self._proc.stdout.readline()
-            if not line:
-                self._died()
-                return None
-            msg = json.loads(line)
-            if not msg.get("ok"):
-                self._warn(f"failed: {msg.get('error')}")
-            if head is request:
-                answer = msg
+        """Read the child's answers up to ``request``'s (keeping the earlier requests' answers for
+        their own :meth:`FigureRequest.result`); None if the child failed it or died first."""
+        with self._lock:
+            while request in self._pending:
+                head = self._pending.pop(0)
+                if self._proc is None:
+                    return None
+                line = self._proc.stdout.readline()
+                if not line:
+                    self._died()
+                    return None
+                head._answer = json.loads(line)
+                if not head._answer.get("ok"):
+                    self._warn(f"failed: {head._answer.get('error')}")
+        answer = request._answer
         if answer is None or not answer.get("ok"):
             return None
         from pfjax.report.figure_set import figure_entries
@@ -145,22 +152,23 @@ class FigureWorker:
 
     def close(self) -> None:
         """Let the child finish its requests and exit; remove its request files."""
-        if self._proc is not None:
-            try:
-                self._proc.stdin.close()
-            except OSError:
-                pass
-            try:
-                self._proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self._proc.kill()
-                self._proc.wait()
-            self._proc.stdout.close()
-            self._proc = None
-        self._stderr.close()
-        for f in self._tmp.glob("*"):
-            f.unlink()
-        self._tmp.rmdir()
+        with self._lock:
+            if self._proc is not None:
+                try:
+                    self._proc.stdin.close()
+                except OSError:
+                    pass
+                try:
+                    self._proc.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    self._proc.kill()
+                    self._proc.wait()
+                self._proc.stdout.close()
+                self._proc = None
+            self._stderr.close()
+            for f in self._tmp.glob("*"):
+                f.unlink()
+            self._tmp.rmdir()
 
     def __enter__(self):
         return self
