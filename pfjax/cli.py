@@ -12,9 +12,12 @@ its ``status``; it is not an error.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import ctypes
 import importlib
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -257,25 +260,98 @@ def _headline(summary: dict, out) -> dict:
     }
 
 
+@contextlib.contextmanager
+def _stdout_to_stderr(active: bool):
+    """Send everything written to file descriptor 1 (by Python or by C++ libraries) to stderr."""
+    if not active:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        ctypes.CDLL(None).fflush(None)  # C stdio buffers (std::cout writes through them)
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _distributed(args) -> tuple[int, int]:
+    """Join a multi-process study if the flags ask for one; ``(process index, process count)``."""
+    flags = {"--coordinator": args.coordinator, "--num-processes": args.num_processes, "--process-id": args.process_id}
+    given = [k for k, v in flags.items() if v is not None]
+    if not given and not args.distributed:
+        return 0, 1
+    if given and len(given) < 3:
+        missing = next(k for k, v in flags.items() if v is None)
+        raise UsageError(f"{missing}: required with {given[0]} (give --coordinator, --num-processes and --process-id "
+                         f"together, or --distributed to detect them)")
+    if given:
+        host, _, port = args.coordinator.rpartition(":")
+        if not host or not port.isdigit():
+            raise UsageError(f"--coordinator: expected HOST:PORT, got {args.coordinator!r}")
+        if args.num_processes < 1:
+            raise UsageError(f"--num-processes: expected >= 1, got {args.num_processes}")
+        if not 0 <= args.process_id < args.num_processes:
+            raise UsageError(f"--process-id: expected 0..{args.num_processes - 1}, got {args.process_id}")
+    import jax
+
+    from pfjax.sim import sharding
+
+    try:
+        sharding.initialize_distributed(args.coordinator, args.num_processes, args.process_id)
+    except Exception as e:  # cannot reach the coordinator, or no cluster to detect
+        flag = "--coordinator" if given else "--distributed"
+        raise UsageError(f"{flag}: could not join the distributed run ({str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__})") from None
+    return jax.process_index(), jax.process_count()
+
+
 def _cmd_study(args) -> dict:
+    # A distributed run's libraries (Gloo) print to stdout: there it carries only the result (--json)
+    distributed = args.distributed or any(v is not None for v in (args.coordinator, args.num_processes, args.process_id))
+    with _stdout_to_stderr(distributed):
+        return _study(args)
+
+
+def _study(args) -> dict:
+    import shutil
+    import tempfile
+
     from pfjax.config import ConfigError
     from pfjax.report import figure_worker
 
     spec = _load_study_or_usage(args)
+    index, count = _distributed(args)
+    lead = index == 0  # the process that writes; the others only lend their devices
+    report = not args.no_report and lead
     # the figure worker imports matplotlib while this process imports JAX (both about 2 s)
-    worker = figure_worker.FigureWorker() if not args.no_report and not args.no_overlap and figure_worker.enabled() \
-        else None
+    worker = figure_worker.FigureWorker() if report and not args.no_overlap and figure_worker.enabled() else None
     from pfjax.montecarlo.study import run
 
     out = Path(args.out) if args.out else Path("results") / spec.name
-    warn = lambda m: print(f"pfjax study: warning: {m}", file=sys.stderr)
+    scratch = None
+    if not lead:  # same runs and margin sweep (every process calls the same sharded programs), nothing kept
+        scratch = Path(tempfile.mkdtemp(prefix=f"pfjax-study-process{index}-"))
+        out = scratch / "out"
+        spec = spec.model_copy(update={"f64_check_runs": 0,
+                                       "falsifier": spec.falsifier.model_copy(update={"enabled": False})})
+    warn = (lambda m: print(f"pfjax study: warning: {m}", file=sys.stderr)) if lead else None
     try:
-        summary = run(spec, out, progress=None if not args.quiet else False, report=not args.no_report,
-                      fresh=args.fresh, warn=warn, overlap=not args.no_overlap, worker=worker)
+        summary = run(spec, out, progress=None if not args.quiet and lead else False, report=report,
+                      fresh=args.fresh or count > 1, warn=warn, overlap=not args.no_overlap, worker=worker)
     except ConfigError as e:
         raise UsageError(str(e)) from None
+    finally:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
+    if not lead:
+        return {"process_index": index, "process_count": count, "written_by": "process 0"}
     head = _headline(summary, out)
     head.update(warnings=summary.get("warnings", []), chunks=summary.get("chunks"))
+    if count > 1:
+        head.update(process_count=count)
     return head
 
 
@@ -358,6 +434,15 @@ def build_parser() -> argparse.ArgumentParser:
             st.add_argument("--fresh", action="store_true",
                             help="discard the finished chunks of an interrupted run into --out and start over "
                                  "(default: resume them; refused if the config changed)")
+            dist = st.add_argument_group(
+                "several processes or hosts", "every process runs the same command with its own --process-id; "
+                "the runs are sharded over the devices of all of them and process 0 writes the results "
+                "(no resume: each run starts fresh)")
+            dist.add_argument("--coordinator", metavar="HOST:PORT", help="address of process 0 (jax.distributed)")
+            dist.add_argument("--num-processes", type=int, metavar="N", help="number of processes")
+            dist.add_argument("--process-id", type=int, metavar="I", help="this process, 0..N-1 (0 writes)")
+            dist.add_argument("--distributed", action="store_true",
+                              help="join a distributed run whose coordinator, size and rank JAX detects (SLURM, Open MPI)")
         st.add_argument("--json", action="store_true", help="print one JSON object")
         st.set_defaults(func=_cmd_study if name == "study" else _cmd_report)
     for module in EXTENSIONS:

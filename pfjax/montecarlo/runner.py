@@ -24,6 +24,7 @@ from pfjax.metrics.running import METRIC_NAMES
 from pfjax.montecarlo.chunks import ChunkStore, file_metadata
 from pfjax.montecarlo.config import ControllerSpec, StudySpec
 from pfjax.montecarlo.sampling import column_names, sample_runs
+from pfjax.sim import sharding
 from pfjax.sim.simulate import SimConfig, simulate_batch
 from pfjax.sim.status import STATUS_NAMES
 
@@ -125,7 +126,7 @@ def simulate_chunk(spec: StudySpec, path_index: int, idx: np.ndarray, name: str,
     if sampled is None:
         sampled = sample_aligned(spec, path_index, idx, slip_override=slip_override, pad_to=pad_to)
     m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
-    res = jax.device_get(simulate_batch(_with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec)))
+    res = sharding.gather(simulate_batch(_with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec)))
     df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
     for col in column_names(spec):
         df[col] = np.asarray(sampled.columns[col], dtype=float) if col in sampled.columns else np.nan

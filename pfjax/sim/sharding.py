@@ -10,10 +10,12 @@ until the caller gathers the results. The same code runs on:
   (:func:`pfjax.default_host_devices`) when JAX is not yet imported and the user has not set it;
   set ``PFJAX_HOST_DEVICES=1`` (or your own ``XLA_FLAGS``) to opt out. Import pfjax first.
 * **GPUs**: every visible GPU is a device; nothing to set (``CUDA_VISIBLE_DEVICES`` selects them).
-* **several hosts**: call ``jax.distributed.initialize()`` on every host first (coordinator
-  address, number of processes, process id; automatic under SLURM / Cloud TPU); the mesh then
-  spans ``jax.devices()`` of all hosts. Each process must pass the same global batch (same
-  config and seed), and reads back its own rows (``addressable_shards``) or gathers them.
+* **several hosts** (or several processes on one): call :func:`initialize_distributed` (JAX's
+  ``jax.distributed.initialize``: coordinator address, number of processes, process id; automatic
+  under SLURM and Open MPI) in every process before any JAX work; the mesh then spans
+  ``jax.devices()`` of all processes. Each process must pass the same global batch (same config
+  and seed) in the same order, and :func:`gather` copies the whole result to every process.
+  ``pfjax study --coordinator/--num-processes/--process-id`` runs a study this way (README).
 
 A batch whose size is not a multiple of the device count is padded by repeating its first run
 and the padding is cut off again, so callers see exactly their runs. Inside a JAX transformation
@@ -174,6 +176,31 @@ def unpad(tree, n: int):
     if all(isinstance(a, np.ndarray) for a in leaves):
         return jax.tree_util.tree_map(lambda a: a[:n], tree)
     return _head_jit(tree, n)
+
+
+def initialize_distributed(coordinator: str | None = None, num_processes: int | None = None,
+                           process_id: int | None = None) -> None:
+    """Join a multi-process JAX run (several hosts, or several processes on one host).
+
+    ``jax.distributed.initialize`` with the given coordinator (``host:port`` of process 0), number
+    of processes and this process's id; all ``None`` lets JAX detect them (SLURM, Open MPI). Call it
+    in every process before any JAX work. CPU devices exchange data through Gloo (JAX's default CPU
+    backend has no cross-process collectives); GPUs use NCCL as usual.
+    """
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes, process_id=process_id)
+
+
+def gather(tree):
+    """A NumPy copy of a (sharded) result pytree in this process: ``jax.device_get`` when every
+    shard is here, else an all-gather over processes (every process must call it, in the same
+    order, as for the program that made the result)."""
+    leaves = jax.tree_util.tree_leaves(tree)
+    if all(not isinstance(a, jax.Array) or a.is_fully_addressable for a in leaves):
+        return jax.device_get(tree)
+    from jax.experimental import multihost_utils
+
+    return jax.tree_util.tree_map(np.asarray, multihost_utils.process_allgather(tree, tiled=True))
 
 
 def device_count(devices=None) -> int:
