@@ -316,9 +316,6 @@ def _cmd_study(args) -> dict:
 
 
 def _study(args) -> dict:
-    import shutil
-    import tempfile
-
     from pfjax.config import ConfigError
     from pfjax.report import figure_worker
 
@@ -331,23 +328,27 @@ def _study(args) -> dict:
     from pfjax.montecarlo.study import run
 
     out = Path(args.out) if args.out else Path("results") / spec.name
-    scratch = None
-    if not lead:  # same runs and margin sweep (every process calls the same sharded programs), nothing kept
-        scratch = Path(tempfile.mkdtemp(prefix=f"pfjax-study-process{index}-"))
-        out = scratch / "out"
-        spec = spec.model_copy(update={"f64_check_runs": 0,
-                                       "falsifier": spec.falsifier.model_copy(update={"enabled": False})})
-    warn = (lambda m: print(f"pfjax study: warning: {m}", file=sys.stderr)) if lead else None
+    warn = lambda m: print(f"pfjax study: warning: {m}", file=sys.stderr)
     try:
-        summary = run(spec, out, progress=None if not args.quiet and lead else False, report=report,
-                      fresh=args.fresh or count > 1, warn=warn, overlap=not args.no_overlap, worker=worker)
+        if not lead:  # simulates process 0's unfinished chunks with it, keeps nothing
+            from pfjax.montecarlo.processes import follow
+
+            return {"process_index": index, "process_count": count, "written_by": "process 0", "chunks": follow(spec)}
+        controllers = None
+        if count > 1:  # tell the others which chunks are finished (resume) and the gains
+            from pfjax.montecarlo.processes import lead as hand_over
+
+            try:
+                controllers = hand_over(spec, out, fresh=args.fresh)
+            except BaseException:
+                if worker is not None:
+                    worker.close()
+                raise
+        summary = run(spec, out, progress=None if not args.quiet else False, report=report,
+                      fresh=args.fresh and count == 1, warn=warn, overlap=not args.no_overlap, worker=worker,
+                      controllers=controllers)
     except ConfigError as e:
         raise UsageError(str(e)) from None
-    finally:
-        if scratch is not None:
-            shutil.rmtree(scratch, ignore_errors=True)
-    if not lead:
-        return {"process_index": index, "process_count": count, "written_by": "process 0"}
     head = _headline(summary, out)
     head.update(warnings=summary.get("warnings", []), chunks=summary.get("chunks"))
     if count > 1:
@@ -437,7 +438,7 @@ def build_parser() -> argparse.ArgumentParser:
             dist = st.add_argument_group(
                 "several processes or hosts", "every process runs the same command with its own --process-id; "
                 "the runs are sharded over the devices of all of them and process 0 writes the results "
-                "(no resume: each run starts fresh)")
+                "(and resumes an interrupted run from its --out; the others follow it)")
             dist.add_argument("--coordinator", metavar="HOST:PORT", help="address of process 0 (jax.distributed)")
             dist.add_argument("--num-processes", type=int, metavar="N", help="number of processes")
             dist.add_argument("--process-id", type=int, metavar="I", help="this process, 0..N-1 (0 writes)")

@@ -10,10 +10,15 @@ import socket
 import subprocess
 import sys
 
+import numpy as np
 import pandas as pd
 import pytest
 
 from pfjax.cli import EXIT_USAGE, main
+from pfjax.montecarlo import runner
+from pfjax.montecarlo.chunks import partial_dir
+from pfjax.montecarlo.config import load_study
+from pfjax.montecarlo.study import run
 
 STUDY = """name = "dist"
 n_runs = 20
@@ -68,7 +73,8 @@ def test_two_processes_give_the_runs_of_two_devices_and_only_process_0_writes(tm
     outs = [p.communicate(timeout=600) for p in procs]
     assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
     lead, other = (json.loads(o[0]) for o in outs)  # stdout is one JSON object each (Gloo's lines went to stderr)
-    assert other == {"process_index": 1, "process_count": 2, "written_by": "process 0"}
+    assert other == {"process_index": 1, "process_count": 2, "written_by": "process 0", "chunks": lead["chunks"]}
+    assert lead["chunks"] == {"simulated": 5, "resumed": 0}  # 2 chunks of runs, 3 of the margin sweep (one per axis)
     assert lead["process_count"] == 2 and lead["out"] == str(tmp_path / "p0")
     assert not (tmp_path / "p1").exists() and not list(scratch.iterdir())  # process 1 kept nothing
     one = _cli(["study", str(cfg), "--out", str(tmp_path / "one"), "--quiet", "--json"], {**env, "PFJAX_HOST_DEVICES": "2"})
@@ -81,6 +87,70 @@ def test_two_processes_give_the_runs_of_two_devices_and_only_process_0_writes(tm
     a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("p0", "one"))
     assert strip(a) == strip(b)  # worst-case search and float64 check included (process 0's own device)
     assert a["controllers"]["lmi"]["worst_case"]["n_rollouts"] == 4 and a["float64_check"]["checked"]
+
+
+def _pair(cfg, out, env, *extra):
+    coord = f"127.0.0.1:{_free_port()}"
+    procs = [_cli(["study", str(cfg), "--out", str(out), "--quiet", "--json", "--no-report", "--coordinator", coord,
+                   "--num-processes", "2", "--process-id", str(i), *extra], {**env, "PFJAX_HOST_DEVICES": "1"})
+             for i in (0, 1)]
+    return procs, [p.communicate(timeout=600) for p in procs]
+
+
+class Interrupt(BaseException):
+    """Stands for a kill."""
+
+
+def test_two_processes_resume_process_0s_interrupted_run(tmp_path, monkeypatch):
+    """Process 0 finds 3 of the 5 chunks finished in its partial directory (an interrupted run) and
+    tells process 1, which skips the same chunks (else their sharded programs would fall out of
+    step); the LMI gains come from process 0. The resumed study equals an uninterrupted one."""
+    cfg = tmp_path / "dist.toml"
+    cfg.write_text(STUDY.replace('dtype = "float32"', 'dtype = "float64"').replace("enabled = true", "enabled = false"))
+    spec = load_study(cfg)[0]
+    out = tmp_path / "out"
+    real, calls = runner.simulate_chunk, []
+
+    def dies_after_3(*a, **k):
+        if len(calls) == 3:
+            raise Interrupt
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(runner, "simulate_chunk", dies_after_3)
+    with pytest.raises(Interrupt):
+        run(spec, out, progress=False, report=False)
+    monkeypatch.undo()
+    assert len(list(partial_dir(out).glob("*.parquet"))) == 3 and not out.exists()
+    run(spec, tmp_path / "ref", progress=False, report=False)
+
+    procs, outs = _pair(cfg, out, {**os.environ, "PFJAX_FIGURE_WORKER": "0"})
+    assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
+    lead, other = (json.loads(o[0]) for o in outs)
+    assert lead["chunks"] == other["chunks"] == {"simulated": 2, "resumed": 3}
+    assert not partial_dir(out).exists()
+    for f in ("runs.parquet", "margin.parquet"):
+        a, b = pd.read_parquet(out / f), pd.read_parquet(tmp_path / "ref" / f)
+        num = [c for c in a.columns if a[c].dtype.kind == "f"]
+        pd.testing.assert_frame_equal(a.drop(columns=num), b.drop(columns=num), check_exact=True)
+        # one device here, two there: other vector code for the blocks, float64 rounding at most
+        np.testing.assert_allclose(a[num].to_numpy(), b[num].to_numpy(), rtol=1e-12, atol=1e-12)
+
+
+def test_a_refused_resume_stops_every_process_with_one_line(tmp_path):
+    """Process 0's partial directory holds another config's chunks: process 0 refuses (one line
+    naming --out, exit 2) and sends the error, so process 1 stops with it instead of waiting."""
+    cfg = tmp_path / "dist.toml"
+    cfg.write_text(STUDY)
+    out = tmp_path / "out"
+    partial_dir(out).mkdir()
+    (partial_dir(out) / "manifest.json").write_text(json.dumps({"config_sha256": "0" * 64, "pfjax_version": "0"}))
+    procs, outs = _pair(cfg, out, {**os.environ, "PFJAX_FIGURE_WORKER": "0"})
+    assert [p.returncode for p in procs] == [EXIT_USAGE, EXIT_USAGE], [o[1][-2000:] for o in outs]
+    for _, err in outs:
+        line = [x for x in err.strip().splitlines() if x.startswith("pfjax study:")]
+        assert len(line) == 1 and line[0].startswith("pfjax study: error: --out: ") and "--fresh" in line[0], err[-2000:]
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("flags, flag", [

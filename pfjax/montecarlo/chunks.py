@@ -95,6 +95,10 @@ class ChunkStore:
             shutil.rmtree(stale, ignore_errors=True)
         return Path(tempfile.mkdtemp(prefix="assembly-", dir=self.dir))
 
+    def finished(self) -> list[str]:
+        """The keys of the chunks finished on disk (sorted)."""
+        return sorted(f.stem for f in self.dir.glob("*.parquet") if not f.name.startswith("."))
+
     def path(self, key: str) -> Path:
         return self.dir / f"{key}.parquet"
 

@@ -200,7 +200,8 @@ class _Deferred:
 
 
 def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = None, report: bool = True,
-        fresh: bool = False, warn=None, overlap: bool = True, worker: figure_worker.FigureWorker | None = None) -> dict:
+        fresh: bool = False, warn=None, overlap: bool = True, worker: figure_worker.FigureWorker | None = None,
+        controllers: dict | None = None) -> dict:
     """Run a validated study; returns the summary.
 
     Resumes an interrupted run of the same study into ``out`` (its finished chunks are reused);
@@ -211,6 +212,7 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
     ``worker``: a :class:`~pfjax.report.figure_worker.FigureWorker` the caller started (the CLI
     starts it before it imports JAX, so that both imports overlap); ``run`` closes it. By default
     ``run`` starts one when it writes a report with ``overlap`` and ``PFJAX_FIGURE_WORKER`` is not ``0``.
+    ``controllers``: :func:`pfjax.montecarlo.runner.controllers_of` ``(spec)`` if the caller has them.
     """
     if worker is not None and not (report and overlap):
         worker.close()
@@ -218,13 +220,14 @@ def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = Non
     if worker is None and report and overlap and figure_worker.enabled():
         worker = figure_worker.FigureWorker()  # imports matplotlib now, draws once the runs are written
     try:
-        return _run(spec, out, progress=progress, report=report, fresh=fresh, warn=warn, overlap=overlap, worker=worker)
+        return _run(spec, out, progress=progress, report=report, fresh=fresh, warn=warn, overlap=overlap, worker=worker,
+                    controllers=controllers)
     finally:
         if worker is not None:
             worker.close()
 
 
-def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, overlap, worker) -> dict:
+def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, overlap, worker, controllers) -> dict:
     from pfjax.cli import dumps
     from pfjax.montecarlo.checks import float64_check, sample_indices, study_warnings
     from pfjax.montecarlo.runner import controllers_of
@@ -235,7 +238,7 @@ def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, ov
     warnings = study_warnings(spec)
     for w in warnings:
         (warn or (lambda m: None))(w)
-    controllers = controllers_of(spec)
+    controllers = controllers_of(spec) if controllers is None else controllers
     side = SideJobs(spec, controllers, overlap=overlap, report=report, worker=worker)
 
     def finish(tmp: Path, runs_path: Path, controllers, store) -> dict:

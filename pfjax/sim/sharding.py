@@ -203,5 +203,22 @@ def gather(tree):
     return jax.tree_util.tree_map(np.asarray, multihost_utils.process_allgather(tree, tiled=True))
 
 
+def broadcast_json(obj=None):
+    """Process 0's ``obj`` (any JSON value) in every process; the others pass ``None``. Every
+    process must call it at the same point (a collective: its length, then its UTF-8 bytes).
+    In a single process it returns ``obj`` unchanged."""
+    import json
+
+    if jax.process_count() == 1:
+        return obj
+    from jax.experimental import multihost_utils
+
+    lead = jax.process_index() == 0
+    data = np.frombuffer(json.dumps(obj).encode(), dtype=np.uint8) if lead else None
+    n = int(multihost_utils.broadcast_one_to_all(np.int32(len(data) if lead else 0)))
+    data = multihost_utils.broadcast_one_to_all(data if lead else np.zeros(n, np.uint8))
+    return json.loads(np.asarray(data, dtype=np.uint8).tobytes().decode())
+
+
 def device_count(devices=None) -> int:
     return len(jax.devices()) if devices is None else len(list(devices))
