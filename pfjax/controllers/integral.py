@@ -20,6 +20,7 @@ import numpy as np
 from jax import Array
 
 from pfjax.controllers.base import Controller, Observation
+from pfjax.numerics import elementary as E
 
 
 class IntegralParams(NamedTuple):
@@ -45,7 +46,7 @@ def _init(p: IntegralParams) -> Array:
 
 
 def _output(p: IntegralParams, c: Array, obs: Observation) -> Array:
-    return p.K[0] * obs.d + p.K[1] * obs.theta_e + c[0] + p.feedforward * jnp.arctan(obs.L * obs.kappa)
+    return p.K[0] * obs.d + p.K[1] * obs.theta_e + c[0] + p.feedforward * E.atan(obs.L * obs.kappa)
 
 
 def _rate(p: IntegralParams, c: Array, obs: Observation, delta_cmd: Array, delta: Array) -> Array:

@@ -9,6 +9,7 @@ import numpy as np
 from jax import Array
 
 from pfjax.controllers.base import Controller, Observation, no_rate, no_state
+from pfjax.numerics import elementary as E
 
 #: The source's published mixed H2/Hinf gain (spec §4): u = K [d, theta_e].
 PAPER_K = (-2.7381, -2.0772)
@@ -28,7 +29,7 @@ def state_feedback_params(K=PAPER_K, feedforward=0.0) -> StateFeedbackParams:
 
 
 def _sf_output(p: StateFeedbackParams, c, obs: Observation) -> Array:
-    return p.K[0] * obs.d + p.K[1] * obs.theta_e + p.feedforward * jnp.arctan(obs.L * obs.kappa)
+    return p.K[0] * obs.d + p.K[1] * obs.theta_e + p.feedforward * E.atan(obs.L * obs.kappa)
 
 
 state_feedback = Controller("state_feedback", no_state, _sf_output, no_rate)

@@ -14,6 +14,7 @@ from jax import Array
 
 from pfjax.controllers.base import Controller, Observation, no_rate, no_state
 from pfjax.paths.geometry import closest_parameter, measure
+from pfjax.numerics import elementary as E
 
 
 class StanleyParams(NamedTuple):
@@ -29,13 +30,13 @@ def stanley_params(k=2.5, k_soft=0.1) -> StanleyParams:
 
 def _stanley_output(p: StanleyParams, c, obs: Observation) -> Array:
     path, pose = obs.path, obs.pose
-    fx = pose.x + obs.L * jnp.cos(pose.theta)
-    fy = pose.y + obs.L * jnp.sin(pose.theta)
+    fx = pose.x + obs.L * E.cos(pose.theta)
+    fy = pose.y + obs.L * E.sin(pose.theta)
     # Front-axle closest point, warm-started one wheelbase ahead of the rear axle's.
     dx, dy = path.d1(obs.u)
     u0 = jnp.clip(obs.u + obs.L / jnp.sqrt(dx * dx + dy * dy), path.u_min, path.u_max)
     front = measure(path, fx, fy, pose.theta, closest_parameter(path, fx, fy, u0, iters=4))
-    return -front.theta_e - jnp.arctan(p.k * front.d / (p.k_soft + jnp.abs(obs.v)))
+    return -front.theta_e - E.atan(p.k * front.d / (p.k_soft + jnp.abs(obs.v)))
 
 
 stanley = Controller("stanley", no_state, _stanley_output, no_rate)
@@ -68,8 +69,8 @@ def _pure_pursuit_output(p: PurePursuitParams, c, obs: Observation) -> Array:
         hp = jnp.where(hp > 1e-3 * ld, hp, 1e-3 * ld)
         u = jnp.clip(u - h / hp, obs.u, path.u_max)
     gx, gy = path.point(u)
-    alpha = jnp.arctan2(gy - pose.y, gx - pose.x) - pose.theta
-    return jnp.arctan(2.0 * obs.L * jnp.sin(alpha) / ld)
+    alpha = E.atan2(gy - pose.y, gx - pose.x) - pose.theta
+    return E.atan(2.0 * obs.L * E.sin(alpha) / ld)
 
 
 pure_pursuit = Controller("pure_pursuit", no_state, _pure_pursuit_output, no_rate)
@@ -94,11 +95,11 @@ def _rear_wheel_output(p: RearWheelParams, c, obs: Observation) -> Array:
     v, te = obs.v, obs.theta_e
     sinc = jnp.sinc(te / jnp.pi)  # sin(te)/te, 1 at 0
     omega = (
-        v * obs.kappa * jnp.cos(te) / (1.0 - obs.kappa * obs.d)
+        v * obs.kappa * E.cos(te) / (1.0 - obs.kappa * obs.d)
         - p.k_theta * jnp.abs(v) * te
         - p.k_d * v * sinc * obs.d
     )
-    return jnp.arctan(obs.L * omega / v)
+    return E.atan(obs.L * omega / v)
 
 
 rear_wheel = Controller("rear_wheel", no_state, _rear_wheel_output, no_rate)
