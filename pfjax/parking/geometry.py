@@ -19,6 +19,8 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
+from pfjax.numerics import elementary as E
+
 Array = jnp.ndarray
 
 #: Robot area of the source (spec §3), metres.
@@ -64,7 +66,7 @@ def half_corners(pose, shape: RobotShape, half):
     w = 0.5 * shape.width
     bx = jnp.stack([lo, hi, hi, lo])
     by = jnp.stack([-w, -w, w, w])
-    c, s = jnp.cos(th), jnp.sin(th)
+    s, c = E.sincos(th)
     return jnp.stack([x + c * bx - s * by, y + s * bx + c * by], axis=-1)
 
 

@@ -26,6 +26,8 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
+from pfjax.numerics import elementary as E
+
 Array = jnp.ndarray
 
 
@@ -47,8 +49,8 @@ def control_params(k1=32.0, k2=8.0, speed=0.05, kp=0.8, ki=16.0, lag=False) -> C
 
 def yaw_rate_command(theta, y, v1, alpha, k1, k2):
     """v₂ = −v₁ cos³θ (k₁ y + sgn(v₁) α k₂ tan θ) in rad/s (source eq. 2-3). Shapes broadcast."""
-    c = jnp.cos(theta)
-    return -v1 * c**3 * (k1 * y + jnp.sign(v1) * alpha * k2 * jnp.tan(theta))
+    s, c = E.sincos(theta)
+    return -v1 * c**3 * (k1 * y + jnp.sign(v1) * alpha * k2 * (s / c))
 
 
 def actual_yaw_rate(v2, q, p: ControlParams):
@@ -62,14 +64,15 @@ def vector_field(state, v1, alpha, p: ControlParams):
     v2 = yaw_rate_command(th, y, v1, alpha, p.k1, p.k2)
     w = actual_yaw_rate(v2, q, p)
     dq = jnp.where(p.lag > 0.5, v2 - w, 0.0)
-    return jnp.stack([v1 * jnp.cos(th), v1 * jnp.sin(th), w, dq])
+    s, c = E.sincos(th)
+    return jnp.stack([v1 * c, v1 * s, w, dq])
 
 
 def lyapunov(y, theta, k1):
     """V = k₁ z₁² + z₂² with z₁ = y, z₂ = tan θ (spec §2); non-increasing along closed-loop runs."""
-    return k1 * y**2 + jnp.tan(theta) ** 2
+    return k1 * y**2 + E.tan(theta) ** 2
 
 
 def parking_error(x, y, theta):
     """|x| + sqrt(y² + tan²θ) (m-like); the robot stops when it is below the tolerance (0.02)."""
-    return jnp.abs(x) + jnp.sqrt(y**2 + jnp.tan(theta) ** 2)
+    return jnp.abs(x) + jnp.sqrt(y**2 + E.tan(theta) ** 2)
