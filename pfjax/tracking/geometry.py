@@ -37,6 +37,8 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
+from pfjax.numerics import elementary as E
+
 from pfjax.tracking.model import Follower, FollowerParams
 
 
@@ -54,21 +56,21 @@ def _cf(params: FollowerParams) -> Array:
 def reference_point(s: Follower, params: FollowerParams) -> tuple[Array, Array]:
     """``P_ref``: front-axle centre (``f = +1``) or rear-axle centre (``f = -1``), m."""
     ca = _cf(params) * params.a
-    return s.x + ca * jnp.cos(s.theta), s.y + ca * jnp.sin(s.theta)
+    return s.x + ca * E.cos(s.theta), s.y + ca * E.sin(s.theta)
 
 
 def focus_point(s: Follower, params: FollowerParams) -> Array:
     """The output ``z = P_r`` (eq. 8.5), shape ``(2,)``, m."""
     rx, ry = reference_point(s, params)
     ang = s.theta + params.p * s.gamma
-    return jnp.stack([rx + params.l * jnp.cos(ang), ry + params.l * jnp.sin(ang)])
+    return jnp.stack([rx + params.l * E.cos(ang), ry + params.l * E.sin(ang)])
 
 
 def body_vector(s: Follower, zd: Array, params: FollowerParams) -> Array:
     """``w = R(theta) (z_d - P_ref)``: the leader's point in the follower's body frame, ``(2,)`` m."""
     rx, ry = reference_point(s, params)
     dx, dy = zd[0] - rx, zd[1] - ry
-    c, sn = jnp.cos(s.theta), jnp.sin(s.theta)
+    c, sn = E.cos(s.theta), E.sin(s.theta)
     return jnp.stack([c * dx + sn * dy, -sn * dx + c * dy])
 
 
@@ -77,7 +79,7 @@ def connection(s: Follower, zd: Array, params: FollowerParams) -> Connection:
     w = body_vector(s, zd, params)
     flip = (w[0] < 0) | ((w[0] == 0) & (w[1] < 0))  # the half-line representative in (-pi/2, pi/2]
     wx, wy = jnp.where(flip, -w[0], w[0]), jnp.where(flip, -w[1], w[1])
-    phi = jnp.arctan2(wy, wx)
+    phi = E.atan2(wy, wx)
     d = jnp.asarray(params.f) * jnp.where(flip, -1.0, 1.0) * jnp.hypot(wx, wy)
     return Connection(d=d, phi=phi)
 
@@ -91,20 +93,20 @@ def tracking_error_from_connection(s: Follower, conn: Connection, params: Follow
     """Eq. 8.7 written with the connection: ``R^T(theta) [l cos pg - f d cos phi; l sin pg - f d sin phi]``."""
     pg = params.p * s.gamma
     fd = jnp.asarray(params.f) * conn.d
-    bx = params.l * jnp.cos(pg) - fd * jnp.cos(conn.phi)
-    by = params.l * jnp.sin(pg) - fd * jnp.sin(conn.phi)
-    c, sn = jnp.cos(s.theta), jnp.sin(s.theta)
+    bx = params.l * E.cos(pg) - fd * E.cos(conn.phi)
+    by = params.l * E.sin(pg) - fd * E.sin(conn.phi)
+    c, sn = E.cos(s.theta), E.sin(s.theta)
     return jnp.stack([c * bx - sn * by, sn * bx + c * by])
 
 
 def input_matrix(theta: Array, gamma: Array, params: FollowerParams) -> Array:
     """``M(theta, gamma)`` with ``z' = M [v; omega]`` (slip-free model), ``(2, 2)``; columns in m/m, m/rad."""
-    tg = jnp.tan(gamma)
+    tg = E.tan(gamma)
     ang = theta + params.p * gamma
     cf = _cf(params)
-    e = jnp.stack([jnp.cos(theta), jnp.sin(theta)])
-    n = jnp.stack([-jnp.sin(theta), jnp.cos(theta)])
-    nf = jnp.stack([-jnp.sin(ang), jnp.cos(ang)])
+    e = jnp.stack([E.cos(theta), E.sin(theta)])
+    n = jnp.stack([-E.sin(theta), E.cos(theta)])
+    nf = jnp.stack([-E.sin(ang), E.cos(ang)])
     col_v = e + cf * tg * n + (params.l / params.a) * tg * nf
     col_w = params.l * params.p * nf
     return jnp.stack([col_v, col_w], axis=1)
@@ -113,13 +115,13 @@ def input_matrix(theta: Array, gamma: Array, params: FollowerParams) -> Array:
 def input_det(gamma: Array, params: FollowerParams) -> Array:
     """Closed form ``det M = l p (cos(p gamma) + c_f tan(gamma) sin(p gamma))`` (independent of ``theta``)."""
     pg = params.p * gamma
-    return params.l * params.p * (jnp.cos(pg) + _cf(params) * jnp.tan(gamma) * jnp.sin(pg))
+    return params.l * params.p * (E.cos(pg) + _cf(params) * E.tan(gamma) * E.sin(pg))
 
 
 def invertibility_factor(gamma: Array, params: FollowerParams) -> Array:
     """``det M / (l p)``: ``cos(p gamma)`` backward, ``cos((p - 1) gamma) / cos(gamma)`` forward."""
     pg = params.p * gamma
-    return jnp.cos(pg) + _cf(params) * jnp.tan(gamma) * jnp.sin(pg)
+    return E.cos(pg) + _cf(params) * E.tan(gamma) * E.sin(pg)
 
 
 def p_bound(gamma_max: float, f: int) -> tuple[float, float]:

@@ -29,6 +29,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.numerics import elementary as E
+
 GRAPH, CIRCLE, LANE_CHANGE = 0, 1, 2
 N_TERMS = 3  # sinusoids of a graph leader
 KINDS = ("line", "circle", "sine", "lane-change", "random")
@@ -109,13 +111,13 @@ def by_name(name: str, **kw) -> Leader:
 def progress(ld: Leader, t: Array) -> Array:
     """``s(t)`` (see module doc), m."""
     T = ld.period
-    return ld.speed * (t - ld.depth * (0.5 * t - T / (4.0 * jnp.pi) * jnp.sin(2.0 * jnp.pi * t / T)))
+    return ld.speed * (t - ld.depth * (0.5 * t - T / (4.0 * jnp.pi) * E.sin(2.0 * jnp.pi * t / T)))
 
 
 def _curve(ld: Leader, u: Array) -> Array:
-    graph = jnp.stack([u, jnp.sum(ld.amps * jnp.sin(ld.omegas * u + ld.phases))])
+    graph = jnp.stack([u, jnp.sum(ld.amps * E.sin(ld.omegas * u + ld.phases))])
     R = ld.radius
-    circ = jnp.stack([R * jnp.sin(u / R), R * (1.0 - jnp.cos(u / R))])
+    circ = jnp.stack([R * E.sin(u / R), R * (1.0 - E.cos(u / R))])
     lane = jnp.stack([u, 0.5 * ld.lane_width * (1.0 + jnp.tanh((u - ld.lane_center) / ld.lane_length))])
     return jnp.select([ld.kind == CIRCLE, ld.kind == LANE_CHANGE], [circ, lane], graph)
 
@@ -123,7 +125,7 @@ def _curve(ld: Leader, u: Array) -> Array:
 def curve_point(ld: Leader, u: Array) -> Array:
     """World point of the leader's curve at parameter ``u``, ``(2,)`` m."""
     loc = _curve(ld, u) - _curve(ld, jnp.zeros_like(u))
-    c, s = jnp.cos(ld.heading), jnp.sin(ld.heading)
+    c, s = E.cos(ld.heading), E.sin(ld.heading)
     return jnp.stack([ld.x0 + c * loc[0] - s * loc[1], ld.y0 + s * loc[0] + c * loc[1]])
 
 
@@ -141,4 +143,4 @@ def position_velocity(ld: Leader, t: Array) -> tuple[Array, Array]:
 def start_heading(ld: Leader) -> Array:
     """Direction of travel at ``t = 0``, rad."""
     _, du = jax.jvp(lambda u: curve_point(ld, u), (jnp.zeros(()),), (jnp.ones(()),))
-    return jnp.arctan2(du[1], du[0])
+    return E.atan2(du[1], du[0])

@@ -31,6 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.numerics import elementary as E
+
 from pfjax.sim import sharding
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.simulate import unstack  # noqa: F401  (re-exported: run i of a batch)
@@ -131,7 +133,7 @@ def initial_state(leader: Leader, params: FollowerParams, offset=(0.0, 0.0), hea
     theta0 = h + jnp.where(jnp.asarray(params.f) < 0, jnp.pi, 0.0)
     g0 = jnp.asarray(gamma0, dtype=float) + 0.0 * zd[0]
     lever = focus_point(Follower(0.0 * g0, 0.0 * g0, theta0, g0), params)  # z - P_b at (theta0, gamma0)
-    c, s = jnp.cos(h), jnp.sin(h)
+    c, s = E.cos(h), E.sin(h)
     x = zd[0] - lever[0] + c * offset[0] - s * offset[1]
     y = zd[1] - lever[1] + s * offset[0] + c * offset[1]
     return Follower(x=x, y=y, theta=theta0 + heading_error, gamma=g0)
