@@ -147,3 +147,67 @@ def test_computed_once_pair_is_an_exact_identity_and_cpu_only(dtype):
     f = jax.jit(E.sincos)
     lowered = {p: f.trace(x).lower(lowering_platforms=(p,)).as_text() for p in ("cpu", "cuda")}
     assert "complex" in lowered["cpu"] and "complex" not in lowered["cuda"]
+
+
+# XLA's own trigonometric primitives; pfjax's simulators must not contain any (their CPU versions
+# cost several times the polynomial chains above, per element and per fused kernel that uses them)
+XLA_TRIG = ("sin", "cos", "tan", "atan", "atan2", "asin", "acos")
+
+
+def _xla_trig(jaxpr) -> set[str]:
+    """The XLA trigonometric primitives in a closed jaxpr, nested jaxprs (scan, while, pjit) included."""
+    found = set()
+
+    def walk(j):
+        for eqn in j.eqns:
+            if eqn.primitive.name in XLA_TRIG:
+                found.add(eqn.primitive.name)
+            for sub in _subjaxprs(eqn.params):
+                walk(sub)
+
+    walk(jaxpr.jaxpr)
+    return found
+
+
+def _subjaxprs(params):
+    """The jaxprs in an equation's parameters (scan/while/cond/pjit/custom_jvp/checkpoint bodies)."""
+    for v in params.values():
+        for x in v if isinstance(v, (tuple, list)) else (v,):
+            if hasattr(x, "jaxpr") and hasattr(x.jaxpr, "eqns"):
+                yield x.jaxpr
+            elif hasattr(x, "eqns"):
+                yield x
+
+
+def test_the_trace_walker_finds_xla_trigonometry():
+    assert _xla_trig(jax.make_jaxpr(lambda x: jax.lax.scan(lambda c, _: (jnp.arctan(c), None), x, None, 3))(0.5)) == {"atan"}
+    assert _xla_trig(jax.make_jaxpr(lambda x: E.atan2(E.sin(x), E.cos(x)) + E.tan(x) + E.atan(x))(0.5)) == set()
+
+
+@pytest.mark.parametrize("name", ["state_feedback", "pi", "stanley", "pure_pursuit", "rear_wheel", "integral", "linear"])
+def test_slip_simulator_uses_no_xla_trigonometry(name):
+    """Every controller in the path-following simulator (the whole traced run: model, projection,
+    controller, metrics) computes its sines, cosines and arctangents with pfjax's functions."""
+    from pfjax import controllers as C
+    from pfjax.scenarios import paper_scenario
+    from pfjax.sim import SimConfig
+    from pfjax.sim.simulate import simulate
+
+    ctrl, gains = (C.linear, C.linear_params(C.state_feedback_params())) if name == "linear" else \
+        (C.REGISTRY[name][0], C.REGISTRY[name][1]())
+    sc = paper_scenario("sine", gains)
+    assert _xla_trig(jax.make_jaxpr(lambda s: simulate(ctrl, s, SimConfig(dt=0.01, horizon=0.1)))(sc)) == set()
+
+
+def test_parking_and_tracking_simulators_use_no_xla_trigonometry():
+    from pfjax import tracking as T
+    from pfjax.parking.maps import PARALLEL, to_obstacle_map
+    from pfjax.parking.simulate import ParkingConfig, run, run_params
+    from pfjax.tracking import leader as L
+
+    omap = to_obstacle_map(list(PARALLEL.values()))
+    assert _xla_trig(jax.make_jaxpr(lambda p: run(p, omap, ParkingConfig()))(run_params((-0.4, 0.5, 0.0), 1, (1.0,)))) == set()
+    params = T.FollowerParams(a=1.0, f=1.0, l=1.0, p=1.0)
+    sc = T.scenario(params, L.sine(), init=T.initial_state(L.sine(), params))
+    cfg = T.TrackConfig(dt=0.02, horizon=0.2, window=0.1)
+    assert _xla_trig(jax.make_jaxpr(lambda s: T.simulate(s, cfg))(sc)) == set()

@@ -93,7 +93,8 @@ def rear_wheel_params(k_theta=3.0, k_d=4.0) -> RearWheelParams:
 
 def _rear_wheel_output(p: RearWheelParams, c, obs: Observation) -> Array:
     v, te = obs.v, obs.theta_e
-    sinc = jnp.sinc(te / jnp.pi)  # sin(te)/te, 1 at 0
+    nonzero = jnp.where(te == 0.0, 1.0, te)
+    sinc = jnp.where(te == 0.0, 1.0, E.sin(te) / nonzero)  # sin(te)/te, 1 at 0
     omega = (
         v * obs.kappa * E.cos(te) / (1.0 - obs.kappa * obs.d)
         - p.k_theta * jnp.abs(v) * te
