@@ -49,8 +49,8 @@ def control_params(k1=32.0, k2=8.0, speed=0.05, kp=0.8, ki=16.0, lag=False) -> C
 
 def yaw_rate_command(theta, y, v1, alpha, k1, k2):
     """v₂ = −v₁ cos³θ (k₁ y + sgn(v₁) α k₂ tan θ) in rad/s (source eq. 2-3). Shapes broadcast."""
-    s, c = E.sincos(theta)
-    return -v1 * c**3 * (k1 * y + jnp.sign(v1) * alpha * k2 * (s / c))
+    c = E.cos(theta)  # pfjax's cos and tan share one range reduction (pfjax.numerics.elementary)
+    return -v1 * c**3 * (k1 * y + jnp.sign(v1) * alpha * k2 * E.tan(theta))
 
 
 def actual_yaw_rate(v2, q, p: ControlParams):
