@@ -149,6 +149,33 @@ def test_computed_once_pair_is_an_exact_identity_and_cpu_only(dtype):
     assert "complex" in lowered["cpu"] and "complex" not in lowered["cuda"]
 
 
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_rsqrt_accuracy_and_special_values(dtype):
+    """1/sqrt(x) over the whole normal range (log-uniform 1e-300..1e300 in float64, 1e-37..1e38 in
+    float32, and near 1) and at the exponent extremes where the float64 path rescales by 2^+-1000."""
+    lo, hi = (-37.5, 38.2) if dtype == np.float32 else (-307.5, 308.2)
+    x = np.concatenate([10.0 ** RNG.uniform(lo, hi, 100000), RNG.uniform(0.5, 2.0, 50000),
+                        [2.0**1000, 2.0**-1000, np.nextafter(2.0**1000, 0), np.nextafter(2.0**-1000, 1)] if dtype == np.float64 else [],
+                        [np.finfo(dtype).max, np.finfo(dtype).tiny]]).astype(dtype)
+    got = np.asarray(jax.jit(E.rsqrt)(x))
+    assert got.dtype == dtype
+    ref = 1.0 / np.sqrt(x.astype(np.longdouble))
+    # measured: 0.85 ulp in float64 (sqrt(1/x)); 1.64 in float32, XLA's own rsqrt
+    assert _ulp_err(got, ref, dtype) <= (2.0 if dtype == np.float32 else 1.0)
+    special = np.array([0.0, np.inf, -1.0, -np.inf, np.nan], dtype)
+    np.testing.assert_array_equal(np.asarray(E.rsqrt(special)), np.array([np.inf, 0.0, np.nan, np.nan, np.nan], dtype))
+
+
+def test_rsqrt_derivative_and_lowering():
+    x = np.array([0.25, 1.0, 7.0, 1e200, 1e-200])
+    np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(E.rsqrt))(x)), -0.5 * x**-1.5, rtol=1e-15)
+    f = jax.jit(E.rsqrt)
+    lowered = {p: f.trace(x).lower(lowering_platforms=(p,)).as_text() for p in ("cpu", "cuda")}
+    op = "stablehlo.rsqrt"
+    assert op not in lowered["cpu"] and op in lowered["cuda"]  # float64 on CPU: sqrt(1/x)
+    assert op in f.trace(x.astype(np.float32)).lower(lowering_platforms=("cpu",)).as_text()
+
+
 # XLA's own trigonometric primitives; pfjax's simulators must not contain any (their CPU versions
 # cost several times the polynomial chains above, per element and per fused kernel that uses them)
 XLA_TRIG = ("sin", "cos", "tan", "atan", "atan2", "asin", "acos")
@@ -197,6 +224,29 @@ def test_slip_simulator_uses_no_xla_trigonometry(name):
         (C.REGISTRY[name][0], C.REGISTRY[name][1]())
     sc = paper_scenario("sine", gains)
     assert _xla_trig(jax.make_jaxpr(lambda s: simulate(ctrl, s, SimConfig(dt=0.01, horizon=0.1)))(sc)) == set()
+
+
+@pytest.mark.parametrize("name", ["state_feedback", "pi", "stanley", "pure_pursuit", "rear_wheel", "integral", "linear"])
+def test_float64_slip_simulator_compiles_without_rsqrt(name):
+    """No float64 ``rsqrt`` in the compiled CPU program of any controller's run. XLA evaluates it
+    element by element (4x a division and a square root) and rewrites every ``a / sqrt(b)`` into
+    one, so a stray ``/ jnp.sqrt`` in the model, projection or a controller shows up here
+    (:func:`pfjax.numerics.elementary.rsqrt` is the vectorised form)."""
+    import re
+
+    from pfjax import controllers as C
+    from pfjax.scenarios import paper_scenario
+    from pfjax.sim import SimConfig
+    from pfjax.sim.simulate import simulate
+
+    if jax.default_backend() != "cpu":
+        pytest.skip("a CPU code-generation check")
+    ctrl, gains = (C.linear, C.linear_params(C.state_feedback_params())) if name == "linear" else \
+        (C.REGISTRY[name][0], C.REGISTRY[name][1]())
+    sc = paper_scenario("sine", gains)
+    assert jnp.asarray(sc.pose0.x).dtype == jnp.float64
+    hlo = jax.jit(lambda s: simulate(ctrl, s, SimConfig(dt=0.01, horizon=0.1))).lower(sc).compile().as_text()
+    assert " sqrt(" in hlo and not re.search(r"= f64\S* rsqrt\(", hlo)
 
 
 def test_parking_and_tracking_simulators_use_no_xla_trigonometry():

@@ -34,7 +34,7 @@ def _stanley_output(p: StanleyParams, c, obs: Observation) -> Array:
     fy = pose.y + obs.L * E.sin(pose.theta)
     # Front-axle closest point, warm-started one wheelbase ahead of the rear axle's.
     dx, dy = path.d1(obs.u)
-    u0 = jnp.clip(obs.u + obs.L / jnp.sqrt(dx * dx + dy * dy), path.u_min, path.u_max)
+    u0 = jnp.clip(obs.u + obs.L * E.rsqrt(dx * dx + dy * dy), path.u_min, path.u_max)
     front = measure(path, fx, fy, pose.theta, closest_parameter(path, fx, fy, u0, iters=4))
     return -front.theta_e - E.atan(p.k * front.d / (p.k_soft + jnp.abs(obs.v)))
 
@@ -59,7 +59,7 @@ def _pure_pursuit_output(p: PurePursuitParams, c, obs: Observation) -> Array:
     # Goal: the path point ahead of the closest one at distance l_d from the rear axle,
     # h(u) = |p(u) - q|^2 - l_d^2 = 0, by Newton from the arc-length guess.
     dx, dy = path.d1(obs.u)
-    u = obs.u + ld / jnp.sqrt(dx * dx + dy * dy)
+    u = obs.u + ld * E.rsqrt(dx * dx + dy * dy)
     for _ in range(4):
         px, py = path.point(u)
         tx, ty = path.d1(u)

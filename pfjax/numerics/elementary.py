@@ -1,4 +1,5 @@
-"""Fast, vectorisable elementary functions in plain ``jnp`` (sin, cos, tan, atan, atan2, angle wrap).
+"""Fast, vectorisable elementary functions in plain ``jnp`` (sin, cos, tan, atan, atan2, angle wrap,
+reciprocal square root).
 
 XLA's CPU ``sin``/``cos``/``tan``/``atan2`` cost several times a multiply-add chain per element and
 each call repeats its own range reduction. These versions are short polynomial chains that XLA
@@ -16,6 +17,7 @@ Method (classic Cody-Waite / Cephes scheme):
   ``t = (|x|-1)/(|x|+1)`` (one division), then ``atan t = t + t z R(z)``. ``atan2`` does the same on
   ``min(|x|,|y|) / max(|x|,|y|)`` and fixes the octant.
 * ``wrap_angle``: ``a - 2 pi round(a / 2 pi)`` with a split ``2 pi``, mapped into ``(-pi, pi]``.
+* ``rsqrt``: ``1 / sqrt(x)``; in float64 on CPU as ``sqrt(1 / x)`` (see :func:`rsqrt`).
 
 Derivatives are exact formulas on the primal outputs (``jax.custom_jvp``): ``d sin = cos dx``,
 ``d cos = -sin dx``, ``d atan = dx / (1 + x^2)``, ``d atan2 = (x dy - y dx) / (x^2 + y^2)``,
@@ -317,3 +319,48 @@ def _wrap_jvp(primals, tangents):
 
 
 _wrap_jit = jax.jit(_wrap)
+
+
+_RSQRT_SCALE = 2.0**1000  # |log2 x| beyond 1000: scale x by 2^-+1000 so that 1 / x stays a normal number
+
+
+def rsqrt(x) -> Array:
+    """``1 / sqrt(x)`` (``inf`` at 0, 0 at ``inf``, NaN below 0).
+
+    XLA's CPU backend evaluates a float64 ``rsqrt`` one element at a time, and its simplifier
+    rewrites every ``a / sqrt(x)`` into ``a * rsqrt(x)``: 4.2 ns per element on this machine against
+    1.1 ns for ``sqrt(1 / x)``, one vector division and one vector square root (the closest-point
+    Newton step, which bounds its step by such a ratio, cost 8.7 ns against 1.5 ns; README,
+    Performance). So on CPU a float64 ``x`` is computed as ``sqrt(1 / x)``, with ``x`` scaled by an
+    exact power of 2 beyond ``2^+-1000`` so that ``1 / x`` neither overflows nor loses bits as a
+    subnormal: within 1 ulp of the correctly rounded value over the whole range (two roundings, the
+    first halved by the square root; 0.85 ulp measured by ``tests/test_elementary.py``, against 1.5
+    for ``lax.rsqrt``). Float32, and every dtype on other platforms, use ``lax.rsqrt`` (float32 on
+    CPU: within 1.64 ulp, as fast as ``sqrt(1 / x)``, and float32 results stay as they were). Derivative: ``d rsqrt = -r^3 dx / 2`` on the output ``r``.
+    """
+    return _rsqrt_jit(_float(x))
+
+
+@jax.custom_jvp
+def _rsqrt(x):
+    if x.dtype != np.float64:
+        return jax.lax.rsqrt(x)
+    return jax.lax.platform_dependent(x, cpu=_rsqrt_by_division, default=jax.lax.rsqrt)
+
+
+def _rsqrt_by_division(x):
+    big, small = x > _RSQRT_SCALE, x < 1.0 / _RSQRT_SCALE
+    xs = jnp.where(big, x * (1.0 / _RSQRT_SCALE), jnp.where(small, x * _RSQRT_SCALE, x))
+    r = jnp.sqrt(1.0 / xs)  # -inf gives sqrt(-0) = -0: NaN, as every x < 0
+    scale = jnp.where(big, 2.0**-500, jnp.where(small, 2.0**500, 1.0)).astype(x.dtype)
+    return jnp.where(x < 0.0, np.nan, r * scale)
+
+
+@_rsqrt.defjvp
+def _rsqrt_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    r = _rsqrt(x)
+    return r, -0.5 * r * r * r * dx
+
+
+_rsqrt_jit = jax.jit(_rsqrt)

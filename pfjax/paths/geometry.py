@@ -90,10 +90,12 @@ def _newton_update(path, u: Array, qx: Array, qy: Array) -> Array:
     gp = speed2 + ex * ddx + ey * ddy
     gp = jnp.where(gp > 0.01 * speed2, gp, speed2)
     step = -g / gp
-    # max(|p - q|, 0.25) written as sqrt(max(|p - q|^2, 0.0625)): the same value, and a finite
-    # derivative when the robot is exactly on the path (d sqrt/dx is infinite at 0, and 0 * inf = NaN
-    # in the derivative even where the maximum picks 0.25)
-    max_step = jnp.sqrt(jnp.maximum(ex * ex + ey * ey, 0.0625)) / jnp.sqrt(speed2)
+    # max(|p - q|, 0.25) / |p'| written as sqrt(max(|p - q|^2, 0.0625) / |p'|^2): the same value, a
+    # finite derivative when the robot is exactly on the path (d sqrt/dx is infinite at 0, and
+    # 0 * inf = NaN in the derivative even where the maximum picks 0.25), and one square root and no
+    # rsqrt (XLA rewrites sqrt(a) / sqrt(b) into sqrt(a) * rsqrt(b): slow in float64 on CPU, see
+    # pfjax.numerics.elementary.rsqrt)
+    max_step = jnp.sqrt(jnp.maximum(ex * ex + ey * ey, 0.0625) / speed2)
     step = jnp.clip(step, -max_step, max_step)
     return jnp.clip(u + step, path.u_min, path.u_max)
 
@@ -158,7 +160,7 @@ def measure(path, x: Array, y: Array, theta: Array, u: Array) -> Projection:
     """
     px, py = path.point(u)
     dx, dy = path.d1(u)
-    inv = jax.lax.rsqrt(dx * dx + dy * dy)
+    inv = E.rsqrt(dx * dx + dy * dy)
     tx, ty = dx * inv, dy * inv  # unit tangent (cos theta_p, sin theta_p)
     d = -(x - px) * ty + (y - py) * tx
     # Beyond an end: the closest point is clamped to the end AND the robot lies past it along the
