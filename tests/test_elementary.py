@@ -173,7 +173,7 @@ def test_rsqrt_derivative_and_lowering():
     lowered = {p: f.trace(x).lower(lowering_platforms=(p,)).as_text() for p in ("cpu", "cuda")}
     op = "stablehlo.rsqrt"
     assert op not in lowered["cpu"] and op in lowered["cuda"]  # float64 on CPU: sqrt(1/x)
-    assert op in f.trace(x.astype(np.float32)).lower(lowering_platforms=("cpu",)).as_text()
+    assert op in f.trace(x[:3].astype(np.float32)).lower(lowering_platforms=("cpu",)).as_text()
 
 
 # XLA's own trigonometric primitives; pfjax's simulators must not contain any (their CPU versions
