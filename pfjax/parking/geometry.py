@@ -77,17 +77,24 @@ def rectangle_corners(pose, shape: RobotShape):
 
 
 def points_in_polygons(pts, omap: ObstacleMap):
-    """(N, P) bool: point n inside or on polygon p (crossing number; boundary counted as inside)."""
-    p = pts[:, None, None, :]
-    a, b = omap.a[None], omap.b[None]
-    ay, by_ = a[..., 1], b[..., 1]
-    straddle = (ay > p[..., 1]) != (by_ > p[..., 1])
-    dy = jnp.where(by_ == ay, 1.0, by_ - ay)
-    x_cross = a[..., 0] + (p[..., 1] - ay) * (b[..., 0] - a[..., 0]) / dy
-    crossings = jnp.sum(straddle & (p[..., 0] < x_cross) & omap.valid[None], axis=-1)
-    # on an edge: collinear and inside its bounding box
-    on = (jnp.abs(_cross(a, b, p)) <= 1e-12) & _in_box(p, a, b) & omap.valid[None]
-    return (crossings % 2 == 1) | jnp.any(on, axis=-1)
+    """(N, P) bool: point n inside or on polygon p (crossing number; boundary counted as inside).
+
+    A loop over the (static, padded) edge index: every operation is elementwise over the points,
+    polygons and (under ``vmap``) runs, and only whole arrays are combined, so XLA's CPU backend
+    vectorises it over the runs instead of reducing a short edge axis per run (see
+    :func:`quad_hits_map`)."""
+    p = pts[:, None, :]
+    crossings, on = 0, False
+    for e in range(omap.a.shape[1]):
+        a, b, valid = omap.a[:, e], omap.b[:, e], omap.valid[:, e]
+        ay, by_ = a[..., 1], b[..., 1]
+        straddle = (ay > p[..., 1]) != (by_ > p[..., 1])
+        dy = jnp.where(by_ == ay, 1.0, by_ - ay)
+        x_cross = a[..., 0] + (p[..., 1] - ay) * (b[..., 0] - a[..., 0]) / dy
+        crossings = crossings + (straddle & (p[..., 0] < x_cross) & valid).astype(jnp.int32)
+        # on an edge: collinear and inside its bounding box
+        on = on | ((jnp.abs(_cross(a, b, p)) <= 1e-12) & _in_box(p, a, b) & valid)
+    return (crossings % 2 == 1) | on
 
 
 def _in_box(p, a, b):
@@ -97,9 +104,10 @@ def _in_box(p, a, b):
 
 def _points_in_convex(pts, quad):
     """(...) bool: points (..., 2) inside or on the convex CCW quadrilateral ``quad`` (4, 2)."""
-    shape = (4,) + (1,) * (pts.ndim - 1) + (2,)
-    q0, q1 = quad.reshape(shape), jnp.roll(quad, -1, axis=0).reshape(shape)
-    return jnp.all(_cross(q0, q1, pts[None]) >= -1e-12, axis=0)
+    inside = True
+    for i in range(4):
+        inside = inside & (_cross(quad[i], quad[(i + 1) % 4], pts) >= -1e-12)
+    return inside
 
 
 def _segments_meet(p1, p2, q1, q2):
@@ -115,12 +123,17 @@ def _segments_meet(p1, p2, q1, q2):
 
 
 def quad_hits_map(quad, omap: ObstacleMap):
-    """True when the convex CCW quadrilateral ``quad`` (4, 2) meets any obstacle polygon (closed sets)."""
-    vert_in_quad = jnp.any(_points_in_convex(omap.a, quad) & omap.valid)
-    quad_in_poly = jnp.any(points_in_polygons(quad, omap))
-    q1, q2 = quad[:, None, None, :], jnp.roll(quad, -1, axis=0)[:, None, None, :]
-    edges_meet = jnp.any(_segments_meet(q1, q2, omap.a[None], omap.b[None]) & omap.valid[None])
-    return vert_in_quad | quad_in_poly | edges_meet
+    """True when the convex CCW quadrilateral ``quad`` (4, 2) meets any obstacle polygon (closed sets).
+
+    The tests over the quadrilateral's 4 corners and edges are a Python loop of whole-array
+    operations, and one ``any`` over the (polygon, edge) arrays ends it: reducing the 4-long axes per
+    run made XLA's CPU backend evaluate them run by run, the most expensive kernels of a parking
+    step (README, Performance)."""
+    hit = _points_in_convex(omap.a, quad)  # a vertex of a polygon in the quadrilateral, (P, E)
+    for i in range(4):  # an edge of the quadrilateral meets an edge of a polygon
+        hit = hit | _segments_meet(quad[i], quad[(i + 1) % 4], omap.a, omap.b)
+    quad_in_poly = points_in_polygons(quad, omap)  # a corner of the quadrilateral in a polygon, (4, P)
+    return jnp.any(hit & omap.valid) | jnp.any(quad_in_poly)
 
 
 def obstacle_ahead(pose, shape: RobotShape, direction, omap: ObstacleMap):
