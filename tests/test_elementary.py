@@ -211,10 +211,12 @@ def test_the_trace_walker_finds_xla_trigonometry():
     assert _xla_trig(jax.make_jaxpr(lambda x: E.atan2(E.sin(x), E.cos(x)) + E.tan(x) + E.atan(x))(0.5)) == set()
 
 
-@pytest.mark.parametrize("name", ["state_feedback", "pi", "stanley", "pure_pursuit", "rear_wheel", "integral", "linear"])
-def test_slip_simulator_uses_no_xla_trigonometry(name):
-    """Every controller in the path-following simulator (the whole traced run: model, projection,
-    controller, metrics) computes its sines, cosines and arctangents with pfjax's functions."""
+SLIP_CONTROLLERS = ["state_feedback", "pi", "stanley", "pure_pursuit", "rear_wheel", "integral", "linear"]
+
+
+def _slip_run(name):
+    """``(run, scenario)``: a short path-following run of controller ``name`` on the paper's sine
+    scenario (``run(scenario)`` simulates it; the scenario in the tests' default float64)."""
     from pfjax import controllers as C
     from pfjax.scenarios import paper_scenario
     from pfjax.sim import SimConfig
@@ -222,11 +224,18 @@ def test_slip_simulator_uses_no_xla_trigonometry(name):
 
     ctrl, gains = (C.linear, C.linear_params(C.state_feedback_params())) if name == "linear" else \
         (C.REGISTRY[name][0], C.REGISTRY[name][1]())
-    sc = paper_scenario("sine", gains)
-    assert _xla_trig(jax.make_jaxpr(lambda s: simulate(ctrl, s, SimConfig(dt=0.01, horizon=0.1)))(sc)) == set()
+    return (lambda s: simulate(ctrl, s, SimConfig(dt=0.01, horizon=0.1))), paper_scenario("sine", gains)
 
 
-@pytest.mark.parametrize("name", ["state_feedback", "pi", "stanley", "pure_pursuit", "rear_wheel", "integral", "linear"])
+@pytest.mark.parametrize("name", SLIP_CONTROLLERS)
+def test_slip_simulator_uses_no_xla_trigonometry(name):
+    """Every controller in the path-following simulator (the whole traced run: model, projection,
+    controller, metrics) computes its sines, cosines and arctangents with pfjax's functions."""
+    run, sc = _slip_run(name)
+    assert _xla_trig(jax.make_jaxpr(run)(sc)) == set()
+
+
+@pytest.mark.parametrize("name", SLIP_CONTROLLERS)
 def test_float64_slip_simulator_compiles_without_rsqrt(name):
     """No float64 ``rsqrt`` in the compiled CPU program of any controller's run. XLA evaluates it
     element by element (4x a division and a square root) and rewrites every ``a / sqrt(b)`` into
@@ -234,18 +243,11 @@ def test_float64_slip_simulator_compiles_without_rsqrt(name):
     (:func:`pfjax.numerics.elementary.rsqrt` is the vectorised form)."""
     import re
 
-    from pfjax import controllers as C
-    from pfjax.scenarios import paper_scenario
-    from pfjax.sim import SimConfig
-    from pfjax.sim.simulate import simulate
-
     if jax.default_backend() != "cpu":
         pytest.skip("a CPU code-generation check")
-    ctrl, gains = (C.linear, C.linear_params(C.state_feedback_params())) if name == "linear" else \
-        (C.REGISTRY[name][0], C.REGISTRY[name][1]())
-    sc = paper_scenario("sine", gains)
+    run, sc = _slip_run(name)
     assert jnp.asarray(sc.pose0.x).dtype == jnp.float64
-    hlo = jax.jit(lambda s: simulate(ctrl, s, SimConfig(dt=0.01, horizon=0.1))).lower(sc).compile().as_text()
+    hlo = jax.jit(run).lower(sc).compile().as_text()
     assert " sqrt(" in hlo and not re.search(r"= f64\S* rsqrt\(", hlo)
 
 

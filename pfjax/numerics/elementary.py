@@ -336,7 +336,8 @@ def rsqrt(x) -> Array:
     subnormal: within 1 ulp of the correctly rounded value over the whole range (two roundings, the
     first halved by the square root; 0.85 ulp measured by ``tests/test_elementary.py``, against 1.5
     for ``lax.rsqrt``). Float32, and every dtype on other platforms, use ``lax.rsqrt`` (float32 on
-    CPU: within 1.64 ulp, as fast as ``sqrt(1 / x)``, and float32 results stay as they were). Derivative: ``d rsqrt = -r^3 dx / 2`` on the output ``r``.
+    CPU: within 1.64 ulp, as fast as ``sqrt(1 / x)``, and float32 results stay as they were).
+    Derivative: ``d rsqrt = -r^3 dx / 2`` on the output ``r``.
     """
     return _rsqrt_jit(_float(x))
 
