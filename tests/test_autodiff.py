@@ -62,3 +62,43 @@ def test_projection_derivative_is_the_implicit_derivative():
               (conv(qx, qy, A + h) - conv(qx, qy, A - h)) / (2 * h)]
         np.testing.assert_allclose(np.asarray(grad[:3], float), fd, rtol=1e-7, atol=1e-8)
         assert float(grad[3]) == 0.0
+
+
+def test_reverse_mode_carries_small_scenario_leaves_run_by_run():
+    """Reverse mode through the simulator accumulates the cotangent of every loop-invariant input in
+    the backward loop's carry, one update per step. A per-run input with a short trailing axis (the
+    gain ``K``, ``(2,)`` per run; the slip's (rear, front) pairs) must be carried as ``(runs,)``
+    arrays: XLA's CPU backend does not vectorise a ``(runs, 2)`` update over the runs (one such
+    kernel was 29 % of the benchmark's backward step; README, Performance). The compiled program's
+    backward loop must carry no ``(runs, 2)`` array, and the split must not change the gradient
+    (checked against forward mode)."""
+    import re
+
+    from pfjax import controllers as C
+    from pfjax.paths import sine
+    from pfjax.scenarios import make_scenario
+    from pfjax.sim import SimConfig, constant_slip, simulate_batch, stack
+
+    n = 5  # runs: a size no other axis of the program has
+    rows = [make_scenario(sine(), (0.0, 0.1 * i, 0.0), C.state_feedback_params(K=C.PAPER_K),
+                          slip=constant_slip(0.02 * i, -0.01 * i)) for i in range(n)]
+    batch = stack(rows)
+    cfg = SimConfig(dt=0.01, horizon=0.5, record=False)
+
+    def loss(p):
+        sc = batch._replace(gains=batch.gains._replace(K=p["K"]), slip=batch.slip._replace(constant=p["slip"]))
+        return jnp.sum(simulate_batch(sc, controller=C.state_feedback, config=cfg).metrics.iae)
+
+    p = {"K": batch.gains.K, "slip": batch.slip.constant}
+    assert p["K"].shape == (n, 2) and p["slip"].shape == (n, 2)
+    hlo = jax.jit(jax.grad(loss)).lower(p).compile().as_text()
+    backward = [line for line in hlo.split("\n") if " while(" in line and "transpose(" in line]
+    assert backward, "no backward loop found in the compiled program"
+    for line in backward:
+        carry = line.split(" while(")[0]
+        assert not re.search(rf"\[{n},2\]", carry), f"a ({n}, 2) cotangent in the backward loop's carry: {carry[:300]}"
+    g_rev = jax.jit(jax.grad(loss))(p)
+    _, g_fwd = jax.jit(autodiff.value_and_grad(loss, mode="forward"))(p)
+    for k in p:
+        assert np.all(np.asarray(g_rev[k]) != 0)
+        np.testing.assert_allclose(np.asarray(g_rev[k]), np.asarray(g_fwd[k]), rtol=1e-9, atol=1e-12)

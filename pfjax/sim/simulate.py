@@ -168,6 +168,30 @@ def _measure(sc: Scenario, pose: Pose, u_guess, iters) -> Projection:
     return measure(sc.path, pose.x, pose.y, pose.theta, u)
 
 
+#: Largest per-run leaf that :func:`_scalar_leaves` splits into scalars.
+SCALAR_LEAF_MAX = 16
+
+
+def _scalar_leaves(tree):
+    """Split each small array leaf of ``tree`` (at most :data:`SCALAR_LEAF_MAX` elements) into a tuple
+    of scalars; returns ``(parts, join)`` with ``join(parts)`` rebuilding the tree.
+
+    Reverse mode accumulates the cotangent of every loop-invariant input in the backward loop's
+    carry, one update per step. For a leaf with a short trailing axis (a gain matrix ``K`` of shape
+    ``(2,)`` per run, the slip's ``(2,)`` pairs) that update is a kernel over a ``(runs, 2)`` array,
+    which XLA's CPU backend does not vectorise over the runs. Scalars give ``(runs,)`` updates."""
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    shapes = [jnp.shape(a) for a in leaves]
+    split = [0 < int(np.prod(s)) <= SCALAR_LEAF_MAX and len(s) > 0 for s in shapes]
+    parts = [tuple(jnp.ravel(a)) if sp else a for a, sp in zip(leaves, split)]
+
+    def join(parts):
+        leaves = [jnp.stack(p).reshape(s) if sp else p for p, s, sp in zip(parts, shapes, split)]
+        return jax.tree_util.tree_unflatten(treedef, leaves)
+
+    return parts, join
+
+
 def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResult:
     """Simulate one run (pure, unbatched; see :func:`simulate_batch` for the entry point).
 
@@ -184,90 +208,95 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     horizon = n_steps * dt
     continuous = config.control_every is None
     every = 1 if continuous else int(config.control_every)
-    gains, params = sc.gains, sc.params
-    dmax = jnp.asarray(params.delta_max, float)
-    rate = jnp.asarray(params.delta_rate_max, float)
-    rate_limited = jnp.isfinite(rate)
-
     pose0 = Pose(*(jnp.asarray(a, float) for a in sc.pose0))
     if sc.u0 is None:
         u0 = global_parameter(sc.path, pose0.x, pose0.y)
     else:  # polish the given start parameter (a rolled loop: one Newton step in the program, not eight)
         u0 = polish_parameter(sc.path, pose0.x, pose0.y, jnp.asarray(sc.u0, pose0.x.dtype), U0_ITERS)
-    c0 = controller.init(gains)
+    c0 = controller.init(sc.gains)
     t_end = jnp.asarray(horizon, pose0.x.dtype)
 
-    def closed_loop_rhs(u_guess, k):
-        """Vector field of (pose, controller state) with the controller inside (continuous mode)."""
+    def make_body(sc: Scenario):
+        """The loop body, reading the run's inputs from ``sc`` (rebuilt inside the loop: see
+        :func:`_scalar_leaves`)."""
+        gains, params = sc.gains, sc.params
+        dmax = jnp.asarray(params.delta_max, float)
+        rate = jnp.asarray(params.delta_rate_max, float)
+        rate_limited = jnp.isfinite(rate)
 
-        def f(t, y):
-            pose, c = y
-            obs = _noisy(_observation(_measure(sc, pose, u_guess, iters), pose, sc), sc.noise, k)
-            cmd = controller.output(gains, c, obs)
-            delta = jnp.clip(cmd, -dmax, dmax)
+        def closed_loop_rhs(u_guess, k):
+            """Vector field of (pose, controller state) with the controller inside (continuous mode)."""
+
+            def f(t, y):
+                pose, c = y
+                obs = _noisy(_observation(_measure(sc, pose, u_guess, iters), pose, sc), sc.noise, k)
+                cmd = controller.output(gains, c, obs)
+                delta = jnp.clip(cmd, -dmax, dmax)
+                br, bf = slip_at(sc.slip, t)
+                return world_rhs(pose, delta, br, bf, params), controller.rate(gains, c, obs, cmd, delta)
+
+            return f
+
+        def health(pose, proj):
+            finite = jnp.isfinite(pose.x) & jnp.isfinite(pose.y) & jnp.isfinite(pose.theta) & jnp.isfinite(proj.d)
+            return classify(finite, jnp.abs(proj.d), 1.0 - proj.kappa * proj.d, proj.at_end, config.d_fail)
+
+        def record_of(t, pose, proj, cmd, delta):
             br, bf = slip_at(sc.slip, t)
-            return world_rhs(pose, delta, br, bf, params), controller.rate(gains, c, obs, cmd, delta)
+            return Trajectory(t, pose.x, pose.y, pose.theta, proj.d, proj.theta_e, proj.kappa, proj.s, cmd, delta, br, bf)
 
-        return f
-
-    def health(pose, proj):
-        finite = jnp.isfinite(pose.x) & jnp.isfinite(pose.y) & jnp.isfinite(pose.theta) & jnp.isfinite(proj.d)
-        return classify(finite, jnp.abs(proj.d), 1.0 - proj.kappa * proj.d, proj.at_end, config.d_fail)
-
-    def record_of(t, pose, proj, cmd, delta):
-        br, bf = slip_at(sc.slip, t)
-        return Trajectory(t, pose.x, pose.y, pose.theta, proj.d, proj.theta_e, proj.kappa, proj.s, cmd, delta, br, bf)
-
-    def body(carry, k):
-        """Sample ``k`` (``t_k = k dt``, ``k = 0..N``): measure, command, health, metrics; then, for
-        ``k < N``, one RK4 step. Sample ``N`` only measures (the trapezoid's end point), with the
-        command held from step ``N - 1`` (sampled controllers) or evaluated there (continuous)."""
-        pose, c, u, _, cmd, delta_prev, (acc, status, fail_time) = carry
-        first, last = k == 0, k == n_steps
-        t = jnp.where(last, t_end, k * dt)
-        proj = _measure(sc, pose, u, iters)
-        obs = _noisy(_observation(proj, pose, sc), sc.noise, k)
-        if continuous:
-            cmd = controller.output(gains, c, obs)
-        else:
-            if every == 1:  # every step: no conditional (it would split XLA's fused loop body)
-                new_cmd, new_c = step(controller, gains, c, obs, dt)
+        def body(carry, k):
+            """Sample ``k`` (``t_k = k dt``, ``k = 0..N``): measure, command, health, metrics; then, for
+            ``k < N``, one RK4 step. Sample ``N`` only measures (the trapezoid's end point), with the
+            command held from step ``N - 1`` (sampled controllers) or evaluated there (continuous)."""
+            pose, c, u, _, cmd, delta_prev, (acc, status, fail_time) = carry
+            first, last = k == 0, k == n_steps
+            t = jnp.where(last, t_end, k * dt)
+            proj = _measure(sc, pose, u, iters)
+            obs = _noisy(_observation(proj, pose, sc), sc.noise, k)
+            if continuous:
+                cmd = controller.output(gains, c, obs)
             else:
-                new_cmd, new_c = jax.lax.cond(
-                    k % every == 0,
-                    lambda: step(controller, gains, c, obs, every * dt),
-                    lambda: (cmd, c),
-                )
-            cmd, c_next = jnp.where(last, cmd, new_cmd), new_c
-        delta = jnp.clip(cmd, -dmax, dmax)
-        if not continuous:  # steering rate limit (exactly a no-op when rate = inf); held at sample N
-            limited = delta_prev + jnp.clip(delta - delta_prev, -rate * dt, rate * dt)
-            delta = jnp.where(last, delta_prev, jnp.where(rate_limited, limited, delta))
-        # health check and metrics (trapezoid weight 1/2 at both ends)
-        now = health(pose, proj)
-        newly = (status == Status.OK) & (now != Status.OK)
-        status = jnp.where(newly, now, status)
-        fail_time = jnp.where(newly, t, fail_time)
-        live = status == Status.OK
-        acc = acc._replace(d0_sign=jnp.where(first, jnp.sign(proj.d), acc.d0_sign),
-                           prev_delta=jnp.where(first, delta, acc.prev_delta))
-        acc = running.update(
-            acc, t, dt, jnp.where(live, jnp.where(first | last, 0.5, 1.0), 0.0), jnp.where(live, proj.d, 0.0),
-            jnp.where(live, proj.theta_e, 0.0), delta, (jnp.abs(cmd) > dmax).astype(float),
-            band=config.settle_band, steady_from=horizon - config.steady_window,
-            success_from=config.success_start,
-        )
-        if continuous:
-            new_pose, c_next = rk4_step(closed_loop_rhs(proj.u, k), t, (pose, c), dt)
-        else:
-            rhs = lambda tt, ps: world_rhs(ps, delta, *slip_at(sc.slip, tt), params)
-            new_pose = rk4_step(rhs, t, pose, dt)
-        advance = live & ~last
-        keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(advance, a, b), new, old)
-        out = record_of(t, pose, proj, cmd, delta) if config.record else None
-        # u: warm start of the next projection (frozen after a failure); proj.u: the final state's
-        return (keep(new_pose, pose), keep(c_next, c), jnp.where(live, proj.u, u), proj.u, cmd, delta,
-                (acc, status, fail_time)), out
+                if every == 1:  # every step: no conditional (it would split XLA's fused loop body)
+                    new_cmd, new_c = step(controller, gains, c, obs, dt)
+                else:
+                    new_cmd, new_c = jax.lax.cond(
+                        k % every == 0,
+                        lambda: step(controller, gains, c, obs, every * dt),
+                        lambda: (cmd, c),
+                    )
+                cmd, c_next = jnp.where(last, cmd, new_cmd), new_c
+            delta = jnp.clip(cmd, -dmax, dmax)
+            if not continuous:  # steering rate limit (exactly a no-op when rate = inf); held at sample N
+                limited = delta_prev + jnp.clip(delta - delta_prev, -rate * dt, rate * dt)
+                delta = jnp.where(last, delta_prev, jnp.where(rate_limited, limited, delta))
+            # health check and metrics (trapezoid weight 1/2 at both ends)
+            now = health(pose, proj)
+            newly = (status == Status.OK) & (now != Status.OK)
+            status = jnp.where(newly, now, status)
+            fail_time = jnp.where(newly, t, fail_time)
+            live = status == Status.OK
+            acc = acc._replace(d0_sign=jnp.where(first, jnp.sign(proj.d), acc.d0_sign),
+                               prev_delta=jnp.where(first, delta, acc.prev_delta))
+            acc = running.update(
+                acc, t, dt, jnp.where(live, jnp.where(first | last, 0.5, 1.0), 0.0), jnp.where(live, proj.d, 0.0),
+                jnp.where(live, proj.theta_e, 0.0), delta, (jnp.abs(cmd) > dmax).astype(float),
+                band=config.settle_band, steady_from=horizon - config.steady_window,
+                success_from=config.success_start,
+            )
+            if continuous:
+                new_pose, c_next = rk4_step(closed_loop_rhs(proj.u, k), t, (pose, c), dt)
+            else:
+                rhs = lambda tt, ps: world_rhs(ps, delta, *slip_at(sc.slip, tt), params)
+                new_pose = rk4_step(rhs, t, pose, dt)
+            advance = live & ~last
+            keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(advance, a, b), new, old)
+            out = record_of(t, pose, proj, cmd, delta) if config.record else None
+            # u: warm start of the next projection (frozen after a failure); proj.u: the final state's
+            return (keep(new_pose, pose), keep(c_next, c), jnp.where(live, proj.u, u), proj.u, cmd, delta,
+                    (acc, status, fail_time)), out
+
+        return body
 
     dtype = pose0.x.dtype
     zero = jnp.zeros((), dtype)
@@ -277,6 +306,8 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     # One loop for samples 0..N: no separate first and last sample (a third less compile time).
     # Reverse mode stores only the carry per step and recomputes the step (jax.checkpoint): the
     # residuals of a whole step would cost far more memory traffic than recomputing it.
+    parts, join = _scalar_leaves(sc)
+    body = lambda carry, k: make_body(join(parts))(carry, k)
     (pose, c, _, u_last, cmd, delta, (acc, status, fail_time)), traj = jax.lax.scan(
         jax.checkpoint(body, prevent_cse=False), init, jnp.arange(n_steps + 1))
 
