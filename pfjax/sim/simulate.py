@@ -28,6 +28,7 @@ from jax import Array
 from pfjax.controllers.base import Controller, Observation, step
 from pfjax.metrics import running
 from pfjax.models.slip import Pose, SlipParams, world_rhs
+from pfjax.numerics.layout import as_scalars
 from pfjax.paths.geometry import Projection, closest_parameter, global_parameter, measure, polish_parameter, wrap_angle
 from pfjax.sim import sharding
 from pfjax.sim.integrators import rk4_step
@@ -168,30 +169,6 @@ def _measure(sc: Scenario, pose: Pose, u_guess, iters) -> Projection:
     return measure(sc.path, pose.x, pose.y, pose.theta, u)
 
 
-#: Largest per-run leaf that :func:`_scalar_leaves` splits into scalars.
-SCALAR_LEAF_MAX = 16
-
-
-def _scalar_leaves(tree):
-    """Split each small array leaf of ``tree`` (at most :data:`SCALAR_LEAF_MAX` elements) into a tuple
-    of scalars; returns ``(parts, join)`` with ``join(parts)`` rebuilding the tree.
-
-    Reverse mode accumulates the cotangent of every loop-invariant input in the backward loop's
-    carry, one update per step. For a leaf with a short trailing axis (a gain matrix ``K`` of shape
-    ``(2,)`` per run, the slip's ``(2,)`` pairs) that update is a kernel over a ``(runs, 2)`` array,
-    which XLA's CPU backend does not vectorise over the runs. Scalars give ``(runs,)`` updates."""
-    leaves, treedef = jax.tree_util.tree_flatten(tree)
-    shapes = [jnp.shape(a) for a in leaves]
-    split = [0 < int(np.prod(s)) <= SCALAR_LEAF_MAX and len(s) > 0 for s in shapes]
-    parts = [tuple(jnp.ravel(a)) if sp else a for a, sp in zip(leaves, split)]
-
-    def join(parts):
-        leaves = [jnp.stack(p).reshape(s) if sp else p for p, s, sp in zip(parts, shapes, split)]
-        return jax.tree_util.tree_unflatten(treedef, leaves)
-
-    return parts, join
-
-
 def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResult:
     """Simulate one run (pure, unbatched; see :func:`simulate_batch` for the entry point).
 
@@ -218,7 +195,7 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
 
     def make_body(sc: Scenario):
         """The loop body, reading the run's inputs from ``sc`` (rebuilt inside the loop: see
-        :func:`_scalar_leaves`)."""
+        :mod:`pfjax.numerics.layout`)."""
         gains, params = sc.gains, sc.params
         dmax = jnp.asarray(params.delta_max, float)
         rate = jnp.asarray(params.delta_rate_max, float)
@@ -306,7 +283,9 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     # One loop for samples 0..N: no separate first and last sample (a third less compile time).
     # Reverse mode stores only the carry per step and recomputes the step (jax.checkpoint): the
     # residuals of a whole step would cost far more memory traffic than recomputing it.
-    parts, join = _scalar_leaves(sc)
+    # The run's small inputs enter the loop as scalars, so reverse mode accumulates their cotangents
+    # as (runs,) arrays (pfjax.numerics.layout).
+    parts, join = as_scalars(sc)
     body = lambda carry, k: make_body(join(parts))(carry, k)
     (pose, c, _, u_last, cmd, delta, (acc, status, fail_time)), traj = jax.lax.scan(
         jax.checkpoint(body, prevent_cse=False), init, jnp.arange(n_steps + 1))
