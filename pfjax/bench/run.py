@@ -11,7 +11,9 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
   pfjax on the per-run IAE (max absolute difference, against a stated tolerance);
 * the value and gradient of the batch-mean IAE with respect to the controller gains over the
   forward pass at the same batch size, as the tuner takes it (forward mode for the 2 gains,
-  :mod:`pfjax.numerics.autodiff`) and in reverse mode (``jax.value_and_grad``);
+  :mod:`pfjax.numerics.autodiff`) and in reverse mode (``jax.value_and_grad``): the three called
+  in turn ``grad_rounds`` times, best of each, so the ratios survive a shared machine's slow
+  periods;
 * the process's peak resident memory (``getrusage``).
 """
 
@@ -43,12 +45,13 @@ class BenchConfig:
     grad_size: int = 2000
     horizon: float = P.HORIZON  # s
     repeats: int = 2
+    grad_rounds: int = 5  # interleaved rounds of forward / gradient / reverse-mode calls (best of each)
     seed: int = 0
     quick: bool = False
 
 
 QUICK = BenchConfig(sizes=(256, 1024), ref_size=1024, ref_numpy=256, scipy_runs=1, grad_size=256, horizon=2.0,
-                    repeats=1, quick=True)
+                    repeats=1, grad_rounds=1, quick=True)
 
 
 def _timed(f, repeats):
@@ -61,6 +64,24 @@ def _timed(f, repeats):
         out = f()
         best = min(best, time.perf_counter() - t0)
     return out, first, best
+
+
+def _timed_interleaved(fs, rounds):
+    """Like :func:`_timed` for several functions, called in turn ``rounds`` times after a first call
+    each: a slow period of a shared machine then slows every function alike instead of one, and the
+    ratios of their best times are not skewed by it."""
+    outs, firsts, bests = [], [], []
+    for f in fs:
+        t0 = time.perf_counter()
+        outs.append(f())
+        firsts.append(time.perf_counter() - t0)
+    bests = list(firsts) if not rounds else [np.inf] * len(fs)
+    for _ in range(rounds):
+        for i, f in enumerate(fs):
+            t0 = time.perf_counter()
+            outs[i] = f()
+            bests[i] = min(bests[i], time.perf_counter() - t0)
+    return outs, firsts, bests
 
 
 def _pfjax(batch, dtype, n_steps, cfg: BenchConfig):
@@ -78,10 +99,10 @@ def _pfjax(batch, dtype, n_steps, cfg: BenchConfig):
 
 def _grad(batch, dtype, cfg: BenchConfig):
     """Seconds of the forward pass and of the value and gradient of the batch-mean IAE w.r.t. K
-    (all jitted, best of ``repeats`` after a compiling call), on the same sharded batch: as the
-    tuner takes it (:func:`pfjax.numerics.autodiff.value_and_grad`, ``mode="auto"``: forward mode
-    for K's 2 entries) and in reverse mode (``jax.value_and_grad``, what a loss of many parameters
-    gets)."""
+    (all jitted; best of ``grad_rounds`` interleaved calls after a compiling call each), on the same
+    sharded batch: as the tuner takes it (:func:`pfjax.numerics.autodiff.value_and_grad`,
+    ``mode="auto"``: forward mode for K's 2 entries) and in reverse mode (``jax.value_and_grad``,
+    what a loss of many parameters gets)."""
     import jax
     import jax.numpy as jnp
 
@@ -100,9 +121,8 @@ def _grad(batch, dtype, cfg: BenchConfig):
     mode = autodiff.resolve_mode("auto", K.size)
     fwd = jax.jit(loss)
     auto, rev = jax.jit(autodiff.value_and_grad(loss)), jax.jit(jax.value_and_grad(loss))
-    _, _, t_fwd = _timed(lambda: jax.block_until_ready(fwd(K, sc)), cfg.repeats)
-    (_, g), first, t_grad = _timed(lambda: jax.block_until_ready(auto(K, sc)), cfg.repeats)
-    (_, g_rev), first_rev, t_rev = _timed(lambda: jax.block_until_ready(rev(K, sc)), cfg.repeats)
+    calls = [lambda f=f: jax.block_until_ready(f(K, sc)) for f in (fwd, auto, rev)]
+    (_, (_, g), (_, g_rev)), (_, first, first_rev), (t_fwd, t_grad, t_rev) = _timed_interleaved(calls, cfg.grad_rounds)
     g, g_rev = np.asarray(g, np.float64), np.asarray(g_rev, np.float64)
     return dict(forward_s=t_fwd, grad_s=t_grad, grad_compile_s=first - t_grad, grad=g.tolist(), mode=mode,
                 reverse_s=t_rev, reverse_compile_s=first_rev - t_rev, grad_reverse=g_rev.tolist(),
