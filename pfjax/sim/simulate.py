@@ -29,6 +29,7 @@ from pfjax.controllers.base import Controller, Observation, step
 from pfjax.metrics import running
 from pfjax.models.slip import Pose, SlipParams, world_rhs
 from pfjax.numerics.layout import as_scalars
+from pfjax.numerics.random import step_normals
 from pfjax.paths.geometry import Projection, closest_parameter, global_parameter, measure, polish_parameter, wrap_angle
 from pfjax.sim import sharding
 from pfjax.sim.integrators import rk4_step
@@ -91,7 +92,8 @@ class SimConfig:
 
 class SensorNoise(NamedTuple):
     """White Gaussian noise on the controller's measurements of ``d`` and ``theta_e``, one draw per
-    integrator step from ``fold_in(key, k)`` (deterministic; O(1) memory). Metrics use the true errors."""
+    integrator step from ``(key, k)`` (:func:`pfjax.numerics.random.step_normals`; deterministic, O(1)
+    memory). Metrics use the true errors."""
 
     sigma_d: Array  # m
     sigma_theta_e: Array  # rad
@@ -160,7 +162,7 @@ def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
 def _noisy(obs: Observation, noise: SensorNoise | None, k) -> Observation:
     if noise is None:
         return obs
-    n = jax.random.normal(jax.random.fold_in(noise.key, k), (2,), dtype=obs.d.dtype)
+    n = step_normals(noise.key, k, 2, obs.d.dtype)
     return obs._replace(d=obs.d + noise.sigma_d * n[0], theta_e=wrap_angle(obs.theta_e + noise.sigma_theta_e * n[1]))
 
 

@@ -32,6 +32,7 @@ import numpy as np
 from jax import Array
 
 from pfjax.numerics import elementary as E
+from pfjax.numerics.random import step_normals
 
 from pfjax.sim import sharding
 from pfjax.sim.integrators import rk4_step
@@ -71,6 +72,9 @@ class TrackConfig:
 
 
 class SensorNoise(NamedTuple):
+    """White Gaussian noise on the follower's measured pose and steering angle: one draw per integrator
+    step ``k`` and quantity from ``(key, k)`` (:func:`pfjax.numerics.random.step_normals`)."""
+
     sigma_pos: Array | float = 0.0  # m, on x and y
     sigma_theta: Array | float = 0.0  # rad
     sigma_gamma: Array | float = 0.0  # rad
@@ -191,7 +195,7 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
 
     def step(c: _Carry, k):
         t = k * dt
-        eps = jax.random.normal(jax.random.fold_in(sc.key, k), (4,), dtype=fz.dtype)
+        eps = step_normals(sc.key, k, 4, fz.dtype)
         ns = sc.noise
         meas = Follower(c.s.x + ns.sigma_pos * eps[0], c.s.y + ns.sigma_pos * eps[1],
                         c.s.theta + ns.sigma_theta * eps[2], c.s.gamma + ns.sigma_gamma * eps[3])

@@ -1,0 +1,78 @@
+"""Per-step Gaussian draws inside a simulator loop, cheap under ``vmap``.
+
+A simulator with sensor noise needs a few standard normal numbers per run and integrator step,
+reproducible from the run's PRNG key and the step index alone (no key in the carry, O(1) memory).
+``jax.random.normal(jax.random.fold_in(key, k), (n,))`` does that, but under ``vmap`` over the
+runs' keys its bit generation cost about 15x the ``fold_in`` (measured, 2,000 runs x 3,000 steps
+x 4 draws on 2 CPU devices: 1.07-1.42 s against 0.20 s for the draws below; the whole noisy tracking
+Monte Carlo ran 1.2 s with it and 0.4 s with no noise at all).
+
+:func:`step_normals` takes its random bits straight from ``fold_in``, which is the threefry-2x32
+hash of (key, counter) that JAX's own bit generation uses: one ``fold_in(key, m k + j)`` gives 64
+bits, ``j = 0..m-1``. Each 32-bit (float32) or 64-bit (float64) word becomes a uniform ``u`` on a
+grid of ``2^-23`` (``2^-52``) offset by half a step, so ``0 < u < 1``, and the normal is the inverse
+distribution function ``sqrt(2) erfinv(2u - 1)``: exact in distribution up to that grid, with
+tails to ``|z| = 5.3`` (float32) and ``8.1`` (float64). Tested against the normal distribution
+(Kolmogorov-Smirnov), for independence between components and steps, and for determinism.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+
+def _key_data(key: Array) -> Array:
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        return jax.random.key_data(key)
+    return key
+
+
+def _words(key: Array, k, n_words: int) -> list[Array]:
+    """``n_words`` independent uint32 words for counter ``k`` (two per ``fold_in``)."""
+    m = (n_words + 1) // 2
+    base = jnp.asarray(k, jnp.uint32) * jnp.uint32(m)
+    out = []
+    for j in range(m):
+        w = jax.random.fold_in(_key_data(key), base + jnp.uint32(j))
+        out += [w[..., 0], w[..., 1]]
+    return out[:n_words]
+
+
+def _uniform_open(words: list[Array], dtype) -> Array:
+    """``0 < u < 1`` from one 32-bit word (float32) or two (float64): the top 23 (52) bits as a
+    grid point ``i 2^-23`` plus half a grid step."""
+    if np.dtype(dtype) == np.float32:
+        (w,) = words
+        u = jax.lax.bitcast_convert_type((w >> 9) | jnp.uint32(0x3F800000), jnp.float32) - 1.0
+        return u + jnp.float32(2.0**-24)
+    hi, lo = words
+    bits = (hi.astype(jnp.uint64) >> 12 << 32) | lo.astype(jnp.uint64) | jnp.uint64(0x3FF0000000000000)
+    return jax.lax.bitcast_convert_type(bits, jnp.float64) - 1.0 + 2.0**-53
+
+
+def step_normals(key: Array, k, n: int, dtype=jnp.float32) -> Array:
+    """``n`` independent standard normal draws, shape ``(n,)``, for step ``k`` of the run keyed ``key``.
+
+    Args:
+        key: the run's PRNG key (a raw ``uint32[2]`` key or a typed key).
+        k: the step index (non-negative integer, traced or not; ``k * ceil(n w / 2) < 2^32`` with ``w``
+            the words per draw, 1 for float32 and 2 for float64).
+        n: draws per step (static).
+        dtype: float32 or float64.
+
+    Returns:
+        The draws; the same ``(key, k)`` always gives the same numbers, and different ``k`` (or keys)
+        independent ones.
+    """
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise ValueError(f"dtype: must be float32 or float64, got {dtype}")
+    per = 1 if dtype == np.float32 else 2
+    words = _words(key, k, n * per)
+    u = jnp.stack([_uniform_open(words[i * per:(i + 1) * per], dtype) for i in range(n)])
+    return jnp.asarray(math.sqrt(2.0), dtype) * jax.lax.erf_inv(2.0 * u - 1.0)
