@@ -11,7 +11,7 @@ A simulated loss ``J(theta)`` of ``D`` parameters has two ways to its gradient:
 
 Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices;
 README, Performance): forward mode costs 1.52 / 1.99 / 2.66 / 3.65 forward passes for D = 1 / 2 / 4 / 8
-(value and all D derivatives), reverse mode 4.6 for any D. ``mode="auto"`` therefore takes forward
+(value and all D derivatives), reverse mode 4.6-4.8 for any D. ``mode="auto"`` therefore takes forward
 mode up to :data:`FORWARD_MAX` parameters (controller gains) and reverse mode above it (a
 falsifier's scenario parameters). Both give the same derivative up to rounding (tested).
 """
