@@ -4,8 +4,8 @@ A simulator with sensor noise needs a few standard normal numbers per run and in
 reproducible from the run's PRNG key and the step index alone (no key in the carry, O(1) memory).
 ``jax.random.normal(jax.random.fold_in(key, k), (n,))`` does that, but under ``vmap`` over the
 runs' keys its bit generation cost about 15x the ``fold_in`` (measured, 2,000 runs x 3,000 steps
-x 4 draws on 2 CPU devices: 1.07-1.42 s against 0.20 s for the draws below; the whole noisy tracking
-Monte Carlo ran 1.2 s with it and 0.4 s with no noise at all).
+x 4 draws on 2 CPU devices: 0.97-1.42 s against 0.25 s for the draws below; the whole noisy tracking
+Monte Carlo ran 1.1-1.2 s per mode with it, 0.5 s with these draws and 0.3-0.4 s with no noise).
 
 :func:`step_normals` takes its random bits straight from ``fold_in``, which is the threefry-2x32
 hash of (key, counter) that JAX's own bit generation uses: one ``fold_in(key, m k + j)`` gives 64
