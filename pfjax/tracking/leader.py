@@ -114,19 +114,27 @@ def progress(ld: Leader, t: Array) -> Array:
     return ld.speed * (t - ld.depth * (0.5 * t - T / (4.0 * jnp.pi) * E.sin(2.0 * jnp.pi * t / T)))
 
 
-def _curve(ld: Leader, u: Array) -> Array:
-    graph = jnp.stack([u, jnp.sum(ld.amps * E.sin(ld.omegas * u + ld.phases))])
+def _curve(ld: Leader, u: Array) -> tuple[Array, Array]:
+    """``c(u)`` as its two components, m. Component by component and one sinusoid at a time: every
+    operation is an array over the runs (a ``(runs, 2)`` stack or a ``(runs, N_TERMS)`` sine and its
+    sum do not vectorise over the runs on CPU; see :mod:`pfjax.numerics.layout`)."""
+    gy = sum(ld.amps[..., i] * E.sin(ld.omegas[..., i] * u + ld.phases[..., i]) for i in range(ld.amps.shape[-1]))
     R = ld.radius
-    circ = jnp.stack([R * E.sin(u / R), R * (1.0 - E.cos(u / R))])
-    lane = jnp.stack([u, 0.5 * ld.lane_width * (1.0 + jnp.tanh((u - ld.lane_center) / ld.lane_length))])
-    return jnp.select([ld.kind == CIRCLE, ld.kind == LANE_CHANGE], [circ, lane], graph)
+    cs, cc = E.sincos(u / R)
+    ly = 0.5 * ld.lane_width * (1.0 + jnp.tanh((u - ld.lane_center) / ld.lane_length))
+    circle, lane = ld.kind == CIRCLE, ld.kind == LANE_CHANGE
+    x = jnp.where(circle, R * cs, u)
+    y = jnp.where(circle, R * (1.0 - cc), jnp.where(lane, ly, gy))
+    return x, y
 
 
 def curve_point(ld: Leader, u: Array) -> Array:
     """World point of the leader's curve at parameter ``u``, ``(2,)`` m."""
-    loc = _curve(ld, u) - _curve(ld, jnp.zeros_like(u))
-    c, s = E.cos(ld.heading), E.sin(ld.heading)
-    return jnp.stack([ld.x0 + c * loc[0] - s * loc[1], ld.y0 + s * loc[0] + c * loc[1]])
+    x, y = _curve(ld, u)
+    x0, y0 = _curve(ld, jnp.zeros_like(u))
+    lx, ly = x - x0, y - y0
+    s, c = E.sincos(ld.heading)
+    return jnp.stack([ld.x0 + c * lx - s * ly, ld.y0 + s * lx + c * ly])
 
 
 def position(ld: Leader, t: Array) -> Array:

@@ -22,6 +22,7 @@ the state and the metrics; it never raises.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from enum import IntEnum
 from functools import partial
 from typing import NamedTuple
@@ -209,8 +210,10 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
         enorm = jnp.hypot(err[0], err[1])
         conn = connection(s1, zd1, p)
         phi_err = conn.phi - p.p * s1.gamma
-        finite = jnp.all(jnp.isfinite(jnp.stack(list(s1))))
-        new_status = jnp.select([~finite, enorm > config.z_fail, cmd.singular], [1, 2, 3], 0).astype(jnp.int32)
+        # elementwise over the state's fields and a where chain, not a reduction over a stacked short
+        # axis (no vectorisation over the runs on CPU; see pfjax.numerics.layout)
+        finite = functools.reduce(jnp.logical_and, [jnp.isfinite(v) for v in s1])
+        new_status = jnp.where(~finite, 1, jnp.where(enorm > config.z_fail, 2, jnp.where(cmd.singular, 3, 0))).astype(jnp.int32)
         ok = c.status == 0
         fail_now = ok & (new_status != 0)
         live = ok & ~fail_now
