@@ -120,3 +120,26 @@ def test_as_scalars_round_trips_and_keeps_large_leaves_whole():
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     again, _ = as_scalars(back)  # a loop carry: the same structure after a round trip
     assert jax.tree_util.tree_structure(again) == jax.tree_util.tree_structure(parts)
+
+
+def test_first_true_and_all_true_equal_select_and_all_without_a_short_axis_reduction():
+    """Every combination of 4 conditions (first true wins, default when none), under vmap, against
+    jnp.select / jnp.all; and the compiled status check reduces over no stacked axis."""
+    from pfjax.numerics.layout import all_true, first_true
+    from pfjax.sim.status import classify
+
+    combos = np.array(np.meshgrid(*[[False, True]] * 4, indexing="ij")).reshape(4, -1)  # (4, 16)
+    conds = [jnp.asarray(c) for c in combos]
+    got = first_true(conds, [1, 2, 3, 4], jnp.int32(0))
+    want = jnp.select(conds, [1, 2, 3, 4], 0)
+    assert got.dtype == jnp.int32
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    np.testing.assert_array_equal(np.asarray(all_true(conds)), combos.all(axis=0))
+
+    f = jax.jit(jax.vmap(lambda fin, a, o, e: classify(fin, a, o, e, 10.0)))
+    args = (jnp.asarray(combos[0]), jnp.asarray(np.where(combos[1], 11.0, 1.0)), jnp.asarray(np.where(combos[2], 0.0, 1.0)),
+            jnp.asarray(combos[3]))
+    np.testing.assert_array_equal(np.asarray(f(*args)), np.asarray(jnp.select([~args[0], args[1] > 10.0, args[2] <= 1e-6, args[3]],
+                                                                               [1, 2, 3, 4], 0)))
+    hlo = f.lower(*args).compile().as_text()
+    assert " reduce(" not in hlo and "argmax" not in hlo

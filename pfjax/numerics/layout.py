@@ -10,9 +10,15 @@ each update is a ``(runs,)`` array operation.
 
 :func:`as_scalars` splits a tree's small array leaves into tuples of scalars and returns the
 function that rebuilds the tree; inside a loop body, rebuild, compute, and split again.
+:func:`first_true` and :func:`all_true` are ``jnp.select`` and ``jnp.all`` over a handful of per-run
+conditions written elementwise, for the same reason: ``jnp.select`` stacks its conditions and takes
+an ``argmax`` over them, and ``jnp.all`` of a per-run ``(k,)`` array is a reduction over the short
+axis, both evaluated run by run.
 """
 
 from __future__ import annotations
+
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -43,3 +49,19 @@ def as_scalars(tree, max_size: int = SCALAR_LEAF_MAX):
         return jax.tree_util.tree_unflatten(treedef, rebuilt)
 
     return parts, join
+
+
+def first_true(conditions, values, default):
+    """``values[i]`` for the first ``conditions[i]`` that holds, else ``default``, elementwise: the
+    result of ``jnp.select(conditions, values, default)`` as a chain of ``jnp.where`` (no stacked
+    conditions, no ``argmax``). The result has ``default``'s dtype (give a typed default)."""
+    out = jnp.asarray(default)
+    for cond, value in reversed(list(zip(conditions, values))):
+        out = jnp.where(cond, jnp.asarray(value, out.dtype), out)
+    return out
+
+
+def all_true(conditions):
+    """Elementwise AND of an iterable of boolean arrays (``jnp.all`` of their stack, without the
+    stack and the reduction over its short axis)."""
+    return functools.reduce(jnp.logical_and, conditions)

@@ -10,6 +10,8 @@ from enum import IntEnum
 
 import jax.numpy as jnp
 
+from pfjax.numerics.layout import first_true
+
 
 class Status(IntEnum):
     OK = 0  #: ran the whole horizon
@@ -23,9 +25,9 @@ STATUS_NAMES = {int(s): s.name.lower() for s in Status}
 
 
 def classify(finite, abs_d, one_minus_kd, at_end, d_fail: float):
-    """Status of one sample (int32), checked in order of severity."""
-    return jnp.select(
+    """Status of one sample (int32), checked in order of severity (the first that holds wins)."""
+    return first_true(
         [~finite, abs_d > d_fail, one_minus_kd <= 1e-6, at_end],
         [Status.NONFINITE, Status.DIVERGED, Status.SINGULAR, Status.PATH_END],
-        Status.OK,
-    ).astype(jnp.int32)
+        jnp.int32(Status.OK),
+    )

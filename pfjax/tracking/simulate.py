@@ -22,7 +22,6 @@ the state and the metrics; it never raises.
 from __future__ import annotations
 
 import dataclasses
-import functools
 from enum import IntEnum
 from functools import partial
 from typing import NamedTuple
@@ -33,6 +32,7 @@ import numpy as np
 from jax import Array
 
 from pfjax.numerics import elementary as E
+from pfjax.numerics.layout import all_true, first_true
 from pfjax.numerics.random import step_normals
 
 from pfjax.sim import sharding
@@ -212,8 +212,8 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
         phi_err = conn.phi - p.p * s1.gamma
         # elementwise over the state's fields and a where chain, not a reduction over a stacked short
         # axis (no vectorisation over the runs on CPU; see pfjax.numerics.layout)
-        finite = functools.reduce(jnp.logical_and, [jnp.isfinite(v) for v in s1])
-        new_status = jnp.where(~finite, 1, jnp.where(enorm > config.z_fail, 2, jnp.where(cmd.singular, 3, 0))).astype(jnp.int32)
+        finite = all_true(jnp.isfinite(v) for v in s1)
+        new_status = first_true([~finite, enorm > config.z_fail, cmd.singular], [1, 2, 3], jnp.int32(0))
         ok = c.status == 0
         fail_now = ok & (new_status != 0)
         live = ok & ~fail_now
