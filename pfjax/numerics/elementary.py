@@ -194,6 +194,20 @@ def _computed_once(a, b, x):
     return jax.lax.platform_dependent(a, b, x, cpu=_divided_by_one, default=lambda a, b, x: (a, b))
 
 
+def computed_once(x):
+    """``x`` unchanged, but computed once per fused program on CPU, and so is its cotangent.
+
+    ``x`` is divided by an exact 1 written from ``x`` (as in :func:`_computed_once`), so XLA's CPU
+    backend computes it in a kernel of its own instead of again in every kernel that reads it. Its
+    tangent is divided by the same 1, so the transpose of that division puts reverse mode's cotangent
+    of ``x`` in a kernel of its own too: the backward step then sums the cotangent's contributions
+    once instead of recomputing them in each kernel that needs it. Values and derivatives are exact
+    (the division by 1 is). Used for the simulator's steering command and closest-point parameter:
+    measured on the benchmark's reverse-mode gradient, 22 % less CPU time, the forward pass
+    unchanged (README, Performance). Identity off CPU."""
+    return jax.lax.platform_dependent(x, cpu=lambda x: x / jnp.where(x == x, 1.0, 2.0).astype(x.dtype), default=lambda x: x)
+
+
 def _divided_by_one(sin, cos, x):
     """``(sin, cos)`` as ``(cos + i sin) / (1 + 0i)``: real ``cos + sin * 0``, imaginary ``sin - cos * 0``
     (exactly ``sin`` and ``cos``; a zero sine keeps its sign since then ``x = +-0`` and ``cos = 1``)."""
