@@ -16,7 +16,7 @@ one jitted function, compiled once per controller, config and array shapes (the 
 traced index) and reused by every step and by later calls of the same shapes.
 
 Gradients are taken through the simulator's ``lax.scan`` in reverse mode, or in forward mode when
-a scenario has at most 8 parameters (constant slip; :func:`pfjax.numerics.autodiff.value_and_grad`);
+a scenario has at most 4 parameters (``autodiff.FORWARD_MAX``; :func:`pfjax.numerics.autodiff.value_and_grad`);
 the projection contributes the closest point's implicit-function derivative. At the steering
 saturation ``clip``, the rate limit, the angle wrap and the projection's step clips JAX
 differentiates the active branch (the derivative of one side of the kink; on the saturated

@@ -10,8 +10,10 @@ A simulated loss ``J(theta)`` of ``D`` parameters has two ways to its gradient:
   the forward pass whatever ``D``, memory O(horizon) per run.
 
 Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices;
-README, Performance): forward mode costs 1.52 / 1.99 / 2.66 / 3.65 forward passes for D = 1 / 2 / 4 / 8
-(value and all D derivatives), reverse mode 4.6-4.8 for any D. ``mode="auto"`` therefore takes forward
+README, Performance): forward mode cost 1.52 / 1.99 / 2.66 / 3.65 forward passes for D = 1 / 2 / 4 / 8
+(value and all D derivatives), reverse mode 4.6-4.8 for any D; since the simulator computes its
+command, steering and closest point once (:func:`pfjax.numerics.elementary.computed_once`) forward
+mode costs about 13 % more (1.97 at D = 2) and reverse mode about 30 % less (3.2-3.5). ``mode="auto"`` therefore takes forward
 mode up to :data:`FORWARD_MAX` parameters (controller gains) and reverse mode above it (a
 falsifier's scenario parameters). Both give the same derivative up to rounding (tested).
 """
@@ -24,9 +26,12 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-#: Parameters up to which ``mode="auto"`` uses forward mode (measured crossover about 12; 8 leaves
-#: a margin for models whose tangent pass costs more).
-FORWARD_MAX = 8
+#: Parameters up to which ``mode="auto"`` uses forward mode. Measured on the benchmark (CPU time,
+#: value and gradient over the forward pass): forward mode 1.33 / 2.19 / 3.03 / 4.87 for D = 1 / 2 /
+#: 4 / 8, reverse mode 3.2-3.4 for any D, so the crossover is about 5 (it was about 12, with forward
+#: 8, before the simulator computed its command, steering and closest point once, which made reverse
+#: mode about 30 % cheaper and forward mode about 13 % dearer).
+FORWARD_MAX = 4
 MODES = ("auto", "forward", "reverse")
 
 

@@ -10,9 +10,9 @@ learning rate suits gains of different magnitudes. One step::
 The result is the best ``theta`` evaluated (the iterate with the lowest ``J``), not the last.
 ``n_starts`` starts are descended together (vmapped, one batched call per step). Budget: each
 step simulates ``n`` rollouts per start (the batch), so ``n_rollouts = steps * n * n_starts``. With
-a few gains (``mode="auto"``: at most 8) the gradient is taken in forward mode, one tangent per
-gain alongside the forward pass (2 gains: 2.0 forward passes for value and gradient, O(1) memory
-in the horizon); with more, in reverse mode (4.6 forward passes, O(horizon) memory per run for
+a few gains (``mode="auto"``: at most 4) the gradient is taken in forward mode, one tangent per
+gain alongside the forward pass (2 gains: 2.0-2.2 forward passes for value and gradient, O(1) memory
+in the horizon); with more, in reverse mode (3.2-3.4 forward passes, O(horizon) memory per run for
 the scan's carries). Measured: :mod:`pfjax.numerics.autodiff`.
 
 Non-smooth points, and what the gradient is there (JAX's derivative of the active branch):
@@ -94,7 +94,7 @@ def gradient_tune(
             (ignored if ``optimizer`` is given).
         optimizer: an optax transformation on the normalised coordinates (default: that adam).
         progress: tqdm bar over the steps.
-        mode: differentiation mode, ``"auto"`` (forward mode for at most 8 parameters, reverse
+        mode: differentiation mode, ``"auto"`` (forward mode for at most 4 parameters, reverse
             above), ``"forward"`` or ``"reverse"`` (:func:`pfjax.numerics.autodiff.value_and_grad`).
     """
     t0 = time.perf_counter()
