@@ -10,12 +10,11 @@ A simulated loss ``J(theta)`` of ``D`` parameters has two ways to its gradient:
   the forward pass whatever ``D``, memory O(horizon) per run.
 
 Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices;
-README, Performance): forward mode cost 1.52 / 1.99 / 2.66 / 3.65 forward passes for D = 1 / 2 / 4 / 8
-(value and all D derivatives), reverse mode 4.6-4.8 for any D; since the simulator computes its
-command, steering and closest point once (:func:`pfjax.numerics.elementary.computed_once`) forward
-mode costs about 13 % more (1.97 at D = 2) and reverse mode about 30 % less (3.2-3.5). ``mode="auto"`` therefore takes forward
-mode up to :data:`FORWARD_MAX` parameters (controller gains) and reverse mode above it (a
-falsifier's scenario parameters). Both give the same derivative up to rounding (tested).
+README, Performance): forward mode costs 1.33 / 2.19 / 3.03 / 4.87 forward passes for D = 1 / 2 / 4 / 8
+(value and all D derivatives, CPU time), reverse mode 3.2-3.4 for any D (see :data:`FORWARD_MAX`).
+``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters (controller
+gains) and reverse mode above it (a falsifier's scenario parameters). Both give the same derivative
+up to rounding (tested).
 """
 
 from __future__ import annotations

@@ -170,7 +170,8 @@ def _noisy(obs: Observation, noise: SensorNoise | None, k) -> Observation:
 def _measure(sc: Scenario, pose: Pose, u_guess, iters) -> Projection:
     # the closest point and (below) the command and the applied steering are read by many of the
     # step's kernels, and their cotangents by many of the backward step's: each is computed once
-    # (E.computed_once; measured: reverse mode about a third cheaper, the forward pass unchanged)
+    # (E.computed_once; measured: reverse mode about 30 % cheaper, forward mode about 13 % dearer,
+    # the forward pass 1-2.5 % slower)
     u = E.computed_once(closest_parameter(sc.path, pose.x, pose.y, u_guess, iters))
     return measure(sc.path, pose.x, pose.y, pose.theta, u)
 
