@@ -21,12 +21,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
+from jax.ad_checkpoint import checkpoint_name
 
 from pfjax.numerics import elementary as E
 
 ARC_PANELS = 64  # Gauss-Legendre panels between u_ref and u for the arc length
 GLOBAL_SAMPLES = 4096  # dense samples for the cold-start (global) projection
 END_TOL = 1e-4  # m: how far past an end of the path's domain counts as having left it
+#: ``jax.checkpoint`` name of the projection's last-but-one Newton iterate, the point its
+#: differentiated last step starts from (a checkpoint policy may save it; see pfjax.sim.simulate)
+NEWTON_START = "pfjax_closest_parameter_newton_start"
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)  # NumPy: cast to the working dtype at use
 
 
@@ -119,7 +123,7 @@ def closest_parameter(path, qx: Array, qy: Array, u_guess: Array, iters: int = 3
     u = u_guess
     for _ in range(iters - 1):
         u = _newton_update(path, u, qx, qy)
-    return _newton_update(path, jax.lax.stop_gradient(u), qx, qy)
+    return _newton_update(path, checkpoint_name(jax.lax.stop_gradient(u), NEWTON_START), qx, qy)
 
 
 def polish_parameter(path, qx: Array, qy: Array, u_guess: Array, iters: int = 8) -> Array:
