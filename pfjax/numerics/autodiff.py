@@ -11,7 +11,8 @@ A simulated loss ``J(theta)`` of ``D`` parameters has two ways to its gradient:
 
 Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices;
 README, Performance): forward mode costs 1.33 / 2.19 / 3.03 / 4.87 forward passes for D = 1 / 2 / 4 / 8
-(value and all D derivatives, CPU time), reverse mode 3.2-3.4 for any D (see :data:`FORWARD_MAX`).
+(value and all D derivatives, CPU time), reverse mode 3.2-3.4 for any D (see :data:`FORWARD_MAX`;
+about 5 % less since reverse mode saves the projection's last-but-one Newton iterate).
 ``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters (controller
 gains) and reverse mode above it (a falsifier's scenario parameters). Both give the same derivative
 up to rounding (tested).
