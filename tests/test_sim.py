@@ -365,3 +365,55 @@ def test_metrics_and_final_state_agree_with_the_trajectory(control_every):
     # in its own fused kernels (XLA may contract multiply-adds differently there): equal to rounding.
     for field in ("d", "theta_e", "s"):
         np.testing.assert_allclose(getattr(fin, field), getattr(tr, field)[-1], rtol=1e-14, atol=1e-15, err_msg=field)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_first_failure_keeps_the_first_failure_and_its_time(dtype):
+    """The status helper of both car-like simulators: over a sequence of per-sample statuses the
+    first failure wins and keeps its time; the float status code is exact."""
+    import jax.numpy as jnp
+
+    from pfjax.sim.status import first_failure
+
+    now = np.array([[0, 0, 2, 1, 0], [0, 0, 0, 0, 0], [4, 3, 0, 0, 0], [0, 0, 0, 0, 1]], np.int32)
+    t = np.arange(5, dtype=dtype) * dtype(0.1)
+
+    def scan(now_row):
+        def body(c, x):
+            return first_failure(*c, x[0], x[1]), None
+        return jax.lax.scan(body, (jnp.zeros((), dtype), jnp.asarray(np.nan, dtype)), (now_row, t))[0]
+
+    status, fail_time = jax.jit(jax.vmap(scan))(now)
+    assert status.dtype == dtype and fail_time.dtype == dtype
+    np.testing.assert_array_equal(np.asarray(status), [2, 0, 4, 1])
+    np.testing.assert_array_equal(np.asarray(fail_time), [t[2], np.nan, t[0], t[4]])
+
+
+@pytest.mark.parametrize("model", ["slip", "tracking"])
+def test_status_checks_are_compiled_once(model):
+    """XLA's CPU backend recomputes a cheap value in every kernel that reads it; the run's status
+    (read by everything a step freezes or accumulates) is computed once
+    (:func:`pfjax.sim.status.first_failure`), so the status checks, marked here by a distinctive
+    failure threshold, appear in one fused kernel of the compiled program (before: 2 in the slip
+    simulator, whose failure time repeated them, and 14 in the tracking simulator)."""
+    import re
+
+    if jax.default_backend() != "cpu":
+        pytest.skip("a CPU code-generation check")
+    if model == "slip":
+        from pfjax.sim.simulate import _simulate_vmapped
+
+        cfg = SimConfig(dt=0.01, horizon=0.5, d_fail=7.8125, record=False)
+        lowered = _simulate_vmapped.lower(stack([healthy()] * 8), controller=C.state_feedback, config=cfg)
+    else:
+        from pfjax import tracking as T
+        from pfjax.tracking import leader as L
+        from pfjax.tracking.simulate import _simulate_vmapped
+
+        params = T.FollowerParams(a=1.0, f=1.0, l=1.0, p=1.0)
+        sc = T.scenario(params, L.sine(), init=T.initial_state(L.sine(), params))
+        cfg = T.TrackConfig(dt=0.02, horizon=0.5, window=0.1, z_fail=7.8125)
+        lowered = _simulate_vmapped.lower(stack([sc] * 8), config=cfg)
+    fused = [c for c in re.split(r"\n(?=\S)", lowered.compile().as_text()) if c.lstrip("%").startswith("fused")]
+    marked = [c.split()[0] for c in fused if re.search(r"constant\(7\.8125\)", c)]
+    assert len(marked) == 1, marked

@@ -10,6 +10,7 @@ from enum import IntEnum
 
 import jax.numpy as jnp
 
+from pfjax.numerics import elementary as E
 from pfjax.numerics.layout import first_true
 
 
@@ -31,3 +32,20 @@ def classify(finite, abs_d, one_minus_kd, at_end, d_fail: float):
         [Status.NONFINITE, Status.DIVERGED, Status.SINGULAR, Status.PATH_END],
         jnp.int32(Status.OK),
     )
+
+
+def first_failure(status, fail_time, now, t):
+    """``(status, fail_time)`` after a sample whose own status is ``now`` (time ``t``, s): the first
+    failure wins, and ``fail_time`` keeps its sample time.
+
+    ``status`` is carried as a *float* code (``Status`` values are small integers, exact in any float
+    type; convert to int32 for output) so that it can be computed once (:func:`pfjax.numerics.
+    elementary.computed_once`): every value a simulator step freezes or accumulates reads whether the
+    run is still live, and XLA's CPU backend would otherwise recompute the status checks (finiteness,
+    distances, the Frenet singularity, the path's end) in each kernel that reads it, and the failure
+    time from the checks again. Measured on the benchmark (README, Performance): float32 about 5 %
+    more rollout-steps/s. Values are exact.
+    """
+    ok = status == Status.OK
+    new = E.computed_once(jnp.where(ok, jnp.asarray(now).astype(status.dtype), status))
+    return new, jnp.where(ok & (new != Status.OK), t, fail_time)

@@ -39,6 +39,7 @@ from pfjax.sim import sharding
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.simulate import unstack  # noqa: F401  (re-exported: run i of a batch)
 from pfjax.sim.slip_profiles import SlipProfile, constant_slip, slip_at
+from pfjax.sim.status import first_failure
 from pfjax.tracking.controller import FocusGains, focus_control, steering_stop
 from pfjax.tracking.geometry import connection, focus_point, tracking_error
 from pfjax.tracking.leader import Leader, position, position_velocity, start_heading
@@ -213,17 +214,17 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
         # elementwise over the state's fields and a where chain, not a reduction over a stacked short
         # axis (no vectorisation over the runs on CPU; see pfjax.numerics.layout)
         finite = all_true(jnp.isfinite(v) for v in s1)
-        new_status = first_true([~finite, enorm > config.z_fail, cmd.singular], [1, 2, 3], jnp.int32(0))
+        now = first_true([~finite, enorm > config.z_fail, cmd.singular], [1, 2, 3], jnp.int32(0))
         ok = c.status == 0
-        fail_now = ok & (new_status != 0)
-        live = ok & ~fail_now
+        status, fail_time = first_failure(c.status, c.fail_time, now, t + dt)  # status: a float code
+        live = status == 0
         in_win = (t + dt) >= config.horizon - config.window - 1e-9
         limited = (cmd.v != cmd.v_cmd) | (w != cmd.omega_cmd)
         upd = lambda new, old: jnp.where(live, new, old)  # noqa: E731
         c2 = _Carry(
             s=jax.tree_util.tree_map(upd, s1, c.s),
-            status=jnp.where(fail_now, new_status, c.status),
-            fail_time=jnp.where(fail_now, t + dt, c.fail_time),
+            status=status,
+            fail_time=fail_time,
             iae=upd(c.iae + enorm * dt, c.iae),
             max_g=upd(jnp.maximum(c.max_g, jnp.abs(s1.gamma)), c.max_g),
             win_z=upd(jnp.where(in_win, jnp.maximum(c.win_z, enorm), c.win_z), c.win_z),
@@ -241,7 +242,7 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
     zd0, _ = position_velocity(sc.leader, 0.0 * fz)
     e0 = tracking_error(z0, zd0, p)
     conn0 = connection(z0, zd0, p)
-    c0 = _Carry(s=z0, status=jnp.zeros((), jnp.int32), fail_time=fz + jnp.inf, iae=fz, max_g=jnp.abs(z0.gamma),
+    c0 = _Carry(s=z0, status=fz, fail_time=fz + jnp.inf, iae=fz, max_g=jnp.abs(z0.gamma),
                 win_z=fz, win_phi=fz, min_fac=fz + jnp.inf, n_lim=fz, z_err=jnp.hypot(e0[0], e0[1]),
                 phi_err=conn0.phi - p.p * z0.gamma, d=conn0.d)
     cN, rec = jax.lax.scan(step, c0, jnp.arange(n))
@@ -259,7 +260,7 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
     if config.record:
         t, st, zd, err, d, phi, v, w = rec
         traj = TrackTrajectory(t=t, state=st, zd=zd, z_err=err, d=d, phi=phi, v=v, omega=w)
-    return TrackResult(final=cN.s, metrics=metrics, status=cN.status, fail_time=cN.fail_time, trajectory=traj)
+    return TrackResult(final=cN.s, metrics=metrics, status=cN.status.astype(jnp.int32), fail_time=cN.fail_time, trajectory=traj)
 
 
 @partial(jax.jit, static_argnames=("config", "layout"))
