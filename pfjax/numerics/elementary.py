@@ -173,11 +173,13 @@ def _sincos(x):
     sin = jnp.where(q >= 2, -sin, sin)
     sin = jnp.where(x == 0.0, x, sin)  # sin(+-0) = +-0 (the reduction and the polynomial give +0)
     cos = jnp.where((q == 1) | (q == 2), -cos, cos)
-    return _computed_once(sin, cos, x)
+    return computed_once_pair(sin, cos, x)
 
 
-def _computed_once(a, b, x):
-    """``(a, b)`` unchanged, but computed once per fused program.
+def computed_once_pair(a, b, x):
+    """``(a, b)`` unchanged, but computed once per fused program (``a`` and ``b`` of one shape and
+    float dtype; exact where both are finite or both NaN, since an infinite one makes the other
+    ``inf * 0 = NaN``). Used for the sine-cosine pair and the simulators' random draws.
 
     XLA's CPU backend never shares work between two fused kernels: every kernel that uses a cheap
     elementwise value (a polynomial sine) recomputes it from the last values held in memory, and a
@@ -197,7 +199,7 @@ def _computed_once(a, b, x):
 def computed_once(x):
     """``x`` unchanged, but computed once per fused program on CPU, and so is its cotangent.
 
-    ``x`` is divided by an exact 1 written from ``x`` (as in :func:`_computed_once`), so XLA's CPU
+    ``x`` is divided by an exact 1 written from ``x`` (as in :func:`computed_once_pair`), so XLA's CPU
     backend computes it in a kernel of its own instead of again in every kernel that reads it. Its
     tangent is divided by the same 1, so the transpose of that division puts reverse mode's cotangent
     of ``x`` in a kernel of its own too: the backward step then sums the cotangent's contributions

@@ -25,11 +25,47 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.numerics import elementary as E
+
 
 def _key_data(key: Array) -> Array:
     if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
         return jax.random.key_data(key)
     return key
+
+
+_ROTATIONS = ((13, 15, 26, 6), (17, 29, 16, 24))
+
+
+def threefry2x32(k0: Array, k1: Array, x0: Array, x1: Array) -> tuple[Array, Array]:
+    """The Threefry-2x32 hash (20 rounds; Salmon et al. 2011) of the counter pair ``(x0, x1)`` under
+    the key ``(k0, k1)``, all uint32, elementwise: the hash behind ``jax.random`` (bit-identical to
+    its ``threefry2x32`` primitive, tested).
+
+    Written out in plain ``jnp`` integer operations: JAX lowers its primitive on CPU as a rolled loop
+    of 5 iterations, which XLA's CPU backend runs as a nested loop of its own inside a simulator's
+    step (measured: two such loops took about 35 % of a noisy tracking step). Unrolled, the hash is
+    ordinary elementwise work that XLA fuses with its neighbours.
+    """
+    k0, k1, x0, x1 = (jnp.asarray(a, jnp.uint32) for a in (k0, k1, x0, x1))
+    ks = (k0, k1, k0 ^ k1 ^ jnp.uint32(0x1BD11BDA))
+    x0, x1 = x0 + ks[0], x1 + ks[1]
+    for i in range(5):
+        for r in _ROTATIONS[i % 2]:
+            x0 = x0 + x1
+            x1 = (x1 << jnp.uint32(r)) | (x1 >> jnp.uint32(32 - r))
+            x1 = x0 ^ x1
+        x0 = x0 + ks[(i + 1) % 3]
+        x1 = x1 + ks[(i + 2) % 3] + jnp.uint32(i + 1)
+    return x0, x1
+
+
+def fold_in(key: Array, data) -> Array:
+    """``jax.random.fold_in(key, data)`` for a raw ``uint32[..., 2]`` key (or a typed key), as the
+    unrolled :func:`threefry2x32` of the counter pair ``(0, data)``: the same bits, shape ``(..., 2)``."""
+    kd = _key_data(key)
+    w0, w1 = threefry2x32(kd[..., 0], kd[..., 1], jnp.zeros_like(jnp.asarray(data, jnp.uint32)), data)
+    return jnp.stack([w0, w1], axis=-1)
 
 
 def _words(key: Array, k, n_words: int) -> list[Array]:
@@ -38,7 +74,7 @@ def _words(key: Array, k, n_words: int) -> list[Array]:
     base = jnp.asarray(k, jnp.uint32) * jnp.uint32(m)
     out = []
     for j in range(m):
-        w = jax.random.fold_in(_key_data(key), base + jnp.uint32(j))
+        w = fold_in(key, base + jnp.uint32(j))
         out += [w[..., 0], w[..., 1]]
     return out[:n_words]
 
@@ -74,5 +110,16 @@ def step_normals(key: Array, k, n: int, dtype=jnp.float32) -> Array:
         raise ValueError(f"dtype: must be float32 or float64, got {dtype}")
     per = 1 if dtype == np.float32 else 2
     words = _words(key, k, n * per)
-    u = jnp.stack([_uniform_open(words[i * per:(i + 1) * per], dtype) for i in range(n)])
-    return jnp.asarray(math.sqrt(2.0), dtype) * jax.lax.erf_inv(2.0 * u - 1.0)
+    # Each draw on its own, stacked last: under vmap a (runs, n) array has a short minor axis, which
+    # XLA's CPU backend evaluates element by element. The uniforms (so the hash) and the normals are
+    # computed once (pfjax.numerics.elementary), else XLA repeats the hash in every kernel reading a draw.
+    u = _once([_uniform_open(words[i * per:(i + 1) * per], dtype) for i in range(n)])
+    return jnp.stack(_once([jnp.asarray(math.sqrt(2.0), dtype) * jax.lax.erf_inv(2.0 * ui - 1.0) for ui in u]))
+
+
+def _once(values: list[Array]) -> list[Array]:
+    """``values`` (finite), computed once per fused program, two at a time."""
+    out = []
+    for i in range(0, len(values) - 1, 2):
+        out += list(E.computed_once_pair(values[i], values[i + 1], values[i]))
+    return out + ([E.computed_once(values[-1])] if len(values) % 2 else [])
