@@ -36,7 +36,8 @@ def classify(finite, abs_d, one_minus_kd, at_end, d_fail: float):
 
 def first_failure(status, fail_time, now, t):
     """``(status, fail_time)`` after a sample whose own status is ``now`` (time ``t``, s): the first
-    failure wins, and ``fail_time`` keeps its sample time.
+    failure wins, and ``fail_time`` keeps its sample time. Any status enumeration whose OK is 0
+    (:class:`Status`, the tracking simulator's ``TrackStatus``).
 
     ``status`` is carried as a *float* code (``Status`` values are small integers, exact in any float
     type; convert to int32 for output) so that it can be computed once (:func:`pfjax.numerics.
