@@ -91,9 +91,10 @@ class _Best(NamedTuple):
     raw: RawParams
 
 
-def _score(value: Array, status: Array) -> Array:
-    score = jnp.where(status != Status.OK, jnp.inf, value)
-    return jnp.where(jnp.isnan(score), -jnp.inf, score)
+def _score(value: Array, status: Array, xp=jnp) -> Array:
+    """The ranking key (module docstring); ``xp``: ``jnp``, or ``np`` for host arrays."""
+    score = xp.where(status != Status.OK, xp.inf, value)
+    return xp.where(xp.isnan(score), -xp.inf, score)
 
 
 def _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise, space_kw):
@@ -108,8 +109,24 @@ def _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, 
     return space, base, config
 
 
+# The search's own small steps are jitted, each one program: op by op, every operation of a new
+# shape is compiled on its own, about 40 of them per search (seconds in a cold process, measured).
+_build_scenario = jax.jit(build_scenario)
+
+
+@jax.jit
+def _from_raw(space: SearchSpace, raw: RawParams) -> tuple[Array, Array]:
+    return slip_from_raw(space, raw.slip), ic_from_raw(space, raw.ic)
+
+
+@partial(jax.jit, static_argnames="n")
+def _repeat(tree, n: int):
+    """``n`` copies of an unbatched pytree along a new leading axis."""
+    return jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (n,) + jnp.shape(a)), tree)
+
+
 def _result(space, base, seq, ic, value, status, history, history_rollouts, n_rollouts, n_gradients, n_nonfinite):
-    sc = build_scenario(space, seq, ic, base)
+    sc = _build_scenario(space, seq, ic, base)
     return FalsifierResult(objective=value, status=jnp.asarray(status, jnp.int32), slip=seq, seq_dt=space.seq_dt,
                            ic=ic, pose0=sc.pose0, scenario=sc, history=jnp.asarray(history),
                            history_rollouts=jnp.asarray(history_rollouts), n_rollouts=int(n_rollouts),
@@ -126,6 +143,7 @@ def _cosine_lr(lr: float, steps: int) -> np.ndarray:
 #: the slip amplitude for ~1000 steps and so crawls along the flat directions that remain, e.g.
 #: the absolute phase of a worst-case sinusoid; 0.9 found a larger J on every seed tried).
 _ADAM = optax.scale_by_adam(b2=0.9)
+_adam_init = jax.jit(_ADAM.init)
 
 
 def _objective(metrics, which: Array) -> Array:
@@ -197,22 +215,22 @@ def falsify(controller: Controller, gains, path, *, config: SimConfig, slip_boun
     raw = init_raw(space, key, int(n_restarts))
     dtype = space.basis.dtype
     best = _Best(jnp.asarray(-jnp.inf, dtype), jnp.asarray(jnp.nan, dtype), jnp.int32(Status.OK), unstack(raw, 0))
-    opt_state, history, n_nonfinite = _ADAM.init(raw), [], 0
+    opt_state, history, nonfinite = _adam_init(raw), [], []
     which = jnp.int32(OBJECTIVES.index(objective))
     for lr_k in _cosine_lr(float(lr), int(steps)):
         raw, opt_state, best, bad = _ascent_step(raw, opt_state, best, jnp.asarray(lr_k, dtype), which, space, base,
                                                  controller=controller, config=config)
         history.append(best.value)
-        n_nonfinite += bad
+        nonfinite.append(bad)
     n = int(n_restarts) * int(steps)
-    return _result(space, base, slip_from_raw(space, best.raw.slip), ic_from_raw(space, best.raw.ic), best.value,
-                   best.status, jnp.stack(history), int(n_restarts) * np.arange(1, int(steps) + 1), n, n,
-                   int(n_nonfinite))
+    return _result(space, base, *_from_raw(space, best.raw), best.value, best.status, np.stack(jax.device_get(history)),
+                   int(n_restarts) * np.arange(1, int(steps) + 1), n, n, int(np.sum(jax.device_get(nonfinite))))
 
 
 @jax.jit
-def _scenarios(space: SearchSpace, seq: Array, ic: Array, base: Scenario) -> Scenario:
-    return jax.vmap(build_scenario, in_axes=(None, 0, 0, None))(space, seq, ic, base)
+def _scenarios(space: SearchSpace, seq: Array, ic: Array, idx: Array, base: Scenario) -> Scenario:
+    """The scenarios of draws ``idx`` of ``(seq, ic)``."""
+    return jax.vmap(build_scenario, in_axes=(None, 0, 0, None))(space, seq[idx], ic[idx], base)
 
 
 def random_search(controller: Controller, gains, path, *, config: SimConfig, slip_bound_deg: float,
@@ -236,19 +254,19 @@ def random_search(controller: Controller, gains, path, *, config: SimConfig, sli
     values, statuses = [], []
     for start in range(0, n, b):
         idx = np.minimum(np.arange(start, start + b), n - 1)
-        res = simulate_batch(_scenarios(space, seq[idx], ic[idx], base), controller=controller, config=config,
+        res = simulate_batch(_scenarios(space, seq, ic, idx, base), controller=controller, config=config,
                              devices=devices)
         keep = min(b, n - start)
         values.append(np.asarray(getattr(res.metrics, objective))[:keep])
         statuses.append(np.asarray(res.status)[:keep])
     values, statuses = np.concatenate(values), np.concatenate(statuses)
-    score = np.asarray(_score(values, statuses))
+    score = _score(values, statuses, np)
     # Running best: index of the first maximum of score[:k+1] for every k.
     leader = np.zeros(n, dtype=int)
     for k in range(1, n):
         leader[k] = k if score[k] > score[leader[k - 1]] else leader[k - 1]
     i = leader[-1]
-    return _result(space, base, seq[i], ic[i], jnp.asarray(values[i]), statuses[i], values[leader],
+    return _result(space, base, *unstack((seq, ic), i), jnp.asarray(values[i]), statuses[i], values[leader],
                    np.arange(1, n + 1), n, 0, 0)
 
 
@@ -261,6 +279,6 @@ def worst_trajectory(controller: Controller, result: FalsifierResult, config: Si
     instead of compiling one for a single run (seconds). ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
     if int(batch_size) < 1:
         raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
-    res = simulate_batch(stack([result.scenario] * int(batch_size)), controller=controller,
+    res = simulate_batch(_repeat(result.scenario, int(batch_size)), controller=controller,
                          config=dataclasses.replace(config, record=True), devices=devices)
     return unstack(res, 0)

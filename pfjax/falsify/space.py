@@ -40,6 +40,7 @@ peak exceeds it; for a constant slip this is uniform on ``[-A, A]``); ``w`` unif
 from __future__ import annotations
 
 import math
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -161,9 +162,11 @@ def build_scenario(space: SearchSpace, seq: Array, ic: Array, base: Scenario) ->
     return base._replace(pose0=start_pose(base.path, ic), slip=slip_profile(seq=seq, seq_dt=space.seq_dt), u0=ic[2])
 
 
+@partial(jax.jit, static_argnames="n")
 def init_raw(space: SearchSpace, key: Array, n: int) -> RawParams:
     """``n`` random starting points: ``z ~ N(0, 1/k)`` (peak ``A tanh(M)`` with ``M`` of order 1-2),
-    logits uniform on ``[-2, 2]`` (``w`` spread over the middle 76 % of each box)."""
+    logits uniform on ``[-2, 2]`` (``w`` spread over the middle 76 % of each box). One jitted program
+    (op by op, each of its operations would be compiled on its own: seconds in a cold process)."""
     k_slip, k_ic = jax.random.split(key)
     k = space.basis.shape[1]
     return RawParams(
@@ -172,9 +175,10 @@ def init_raw(space: SearchSpace, key: Array, n: int) -> RawParams:
     )
 
 
+@partial(jax.jit, static_argnames="n")
 def sample(space: SearchSpace, key: Array, n: int) -> tuple[Array, Array]:
     """``n`` random draws of the set, as the module docstring's *Random sampling*: slip ``(n, n_seq, 2)``
-    rad, ``ic`` ``(n, 3)``."""
+    rad, ``ic`` ``(n, 3)``. One jitted program, as :func:`init_raw`."""
     k_slip, k_ic = jax.random.split(key)
     k = space.basis.shape[1]
     z = jax.random.uniform(k_slip, (n, k, 2), dtype=space.basis.dtype, minval=-1.0, maxval=1.0)

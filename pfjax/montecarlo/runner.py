@@ -283,9 +283,16 @@ class _Project:
 
 
 def _signs(spec: StudySpec, path_index: int, runs: np.ndarray) -> np.ndarray:
-    from pfjax.montecarlo.sampling import Q, run_keys
+    from pfjax.montecarlo.sampling import run_keys
 
-    keys = run_keys(spec.seed, path_index, runs)
+    return np.where(np.asarray(_sign_draws(run_keys(spec.seed, path_index, runs))), 1.0, -1.0)
+
+
+@jax.jit
+def _sign_draws(keys):
+    """Per run (rear, front): a fair coin from the run's key (one program; op by op, each operation
+    would be compiled on its own)."""
+    from pfjax.montecarlo.sampling import Q
+
     draw = lambda k, q: jax.random.bernoulli(jax.random.fold_in(k, Q[q]))
-    s = jax.vmap(lambda k: jnp.stack([draw(k, "sign_r"), draw(k, "sign_f")]))(keys)
-    return np.where(np.asarray(s), 1.0, -1.0)
+    return jax.vmap(lambda k: jnp.stack([draw(k, "sign_r"), draw(k, "sign_f")]))(keys)

@@ -18,6 +18,9 @@ from pfjax.sim.status import STATUS_NAMES
 #: Random search's batch (runs per simulator call).
 SEARCH_BATCH = 64
 
+#: The path's points for the figure, one jitted program (op by op: one compile per operation).
+_points = jax.jit(lambda path, u: path.point(u))
+
 
 def worst_cases(spec: StudySpec, controllers) -> tuple[dict, dict]:
     """Per controller: the falsifier's and random search's worst objective (same rollouts) and the
@@ -65,7 +68,7 @@ def worst_case(spec: StudySpec, controllers, i: int, devices=None) -> tuple[dict
         "history": np.asarray(fr.history).tolist(), "history_rollouts": np.asarray(fr.history_rollouts).tolist(),
         "history_random": np.asarray(rr.history).tolist(), "history_random_rollouts": np.asarray(rr.history_rollouts).tolist(),
     }
-    px, py = run0.path.point(np.linspace(float(run0.path.u_min), float(run0.path.u_max), 4000))
+    px, py = _points(run0.path, np.linspace(float(run0.path.u_min), float(run0.path.u_max), 4000))
     traj = {"t": np.asarray(tr.t), "x": np.asarray(tr.x), "y": np.asarray(tr.y), "d": np.asarray(tr.d),
             "beta_r": np.asarray(tr.beta_r), "beta_f": np.asarray(tr.beta_f),
             "path_x": np.asarray(px), "path_y": np.asarray(py)}
