@@ -292,6 +292,16 @@ def test_help(args):
             assert flag in r.stdout, flag
 
 
+def test_help_and_the_simulator_do_not_import_scipy_stats():
+    """``scipy.stats`` takes about 2 s to import (half of ``pfjax --help`` before it was deferred):
+    building the parser and importing the simulator must not load it."""
+    code = ("import sys; from pfjax.cli import build_parser; import pfjax.sim; build_parser(); "
+            "print('scipy.stats' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=os.environ.copy())
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "False"
+
+
 def test_no_command_is_a_usage_error():
     r = cli(timeout=60)
     assert r.returncode == 2 and len(r.stderr.splitlines()) == 1 and r.stdout == ""

@@ -24,7 +24,6 @@ from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
 __all__ = [
     "clopper_pearson",
@@ -75,6 +74,8 @@ def clopper_pearson(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
     if n == 0:
         return math.nan, math.nan
     alpha = 1.0 - conf
+    from scipy import stats  # imported here: scipy.stats takes about 2 s to import, and the simulator imports this module
+
     lo = 0.0 if k == 0 else float(stats.beta.ppf(alpha / 2, k, n - k + 1))
     hi = 1.0 if k == n else float(stats.beta.ppf(1 - alpha / 2, k + 1, n - k))
     return lo, hi
@@ -330,6 +331,8 @@ def _spearman(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     x, y = x[ok], y[ok]
     if x.size < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:
         return math.nan, math.nan
+    from scipy import stats
+
     res = stats.spearmanr(x, y)
     return float(res.statistic), float(res.pvalue)
 
