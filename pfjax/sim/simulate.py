@@ -334,14 +334,18 @@ simulate_batch._cache_size = _simulate_vmapped._cache_size  # the jitted core's 
 
 
 def stack(items):
-    """Stack a list of pytrees with identical structure along a new leading axis."""
+    """Stack a list of pytrees with identical structure along a new leading axis: NumPy arrays, one
+    per leaf, built on the host (``simulate_batch`` places them on the devices).
+
+    In NumPy because JAX would compile one small program per leaf shape and item count
+    (``jnp.stack``): 13 compilations and about 4.6 s of the paper reproduction's cold run, measured."""
     items = list(items)
     first = jax.tree_util.tree_structure(items[0])
     for i, item in enumerate(items[1:], 1):
         if jax.tree_util.tree_structure(item) != first:
             raise ValueError(f"stack: item {i} has a different structure from item 0 (e.g. a slip profile with other "
                              f"terms present: give every run the same terms, zeros where unused)")
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *items)
+    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *items)
 
 
 def unstack(tree, i: int):

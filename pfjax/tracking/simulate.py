@@ -37,7 +37,7 @@ from pfjax.numerics.random import step_normals
 
 from pfjax.sim import sharding
 from pfjax.sim.integrators import rk4_step
-from pfjax.sim.simulate import unstack  # noqa: F401  (re-exported: run i of a batch)
+from pfjax.sim.simulate import stack, unstack  # noqa: F401  (re-exported: a batch of runs, run i of a batch)
 from pfjax.sim.slip_profiles import SlipProfile, constant_slip, slip_at
 from pfjax.sim.status import first_failure
 from pfjax.tracking.controller import FocusGains, focus_control, steering_stop
@@ -279,8 +279,3 @@ def simulate_batch(scenarios: TrackScenario, *, config: TrackConfig, devices=Non
 
 
 simulate_batch._cache_size = _simulate_vmapped._cache_size  # the jitted core's compilation count
-
-
-def stack(items):
-    """Stack a list of pytrees along a new leading axis, leaf-wise in NumPy (no device op per item)."""
-    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *items)
