@@ -259,12 +259,14 @@ def sine_error_analysis(trajs, settle_t=5.0) -> dict:
     path = SCENARIOS["sine"][0]()
     tr = trajs["sine"]["mixed"]
     late = tr["t"] >= settle_t
-    u = np.asarray(jax.vmap(lambda qx, qy: global_parameter(path, qx, qy))(jnp.asarray(tr["x"][late]), jnp.asarray(tr["y"][late])))
+    # each a jitted program: op by op, JAX would compile each operation of a new shape on its own
+    # (about 60 small programs, 3 s)
+    u = np.asarray(jax.jit(jax.vmap(lambda qx, qy: global_parameter(path, qx, qy)))(tr["x"][late], tr["y"][late]))
     ad = np.abs(tr["d"][late])
     # the path's own |kappa| and |dkappa/ds| on a dense grid of x over the same stretch
     xs = np.linspace(u.min(), u.max(), 20001)
-    kap = np.asarray(jax.vmap(lambda uu: curvature(path, uu))(jnp.asarray(xs)))
-    dk = np.asarray(jax.vmap(jax.grad(lambda uu: curvature(path, uu)))(jnp.asarray(xs))) / np.sqrt(1 + np.cos(xs) ** 2)
+    kap = np.asarray(jax.jit(jax.vmap(lambda uu: curvature(path, uu)))(xs))
+    dk = np.asarray(jax.jit(jax.vmap(jax.grad(lambda uu: curvature(path, uu))))(xs)) / np.sqrt(1 + np.cos(xs) ** 2)
     peaks = _local_maxima(u, ad)
     k_max, dk_max = _local_maxima(xs, np.abs(kap), 0.9), _local_maxima(xs, np.abs(dk), 0.9)
     nearest = lambda p, ref: float(np.median([np.min(np.abs(ref - q)) for q in p])) if len(p) and len(ref) else math.nan
