@@ -51,7 +51,7 @@ from jax import Array
 from pfjax.controllers.base import Controller
 from pfjax.models.slip import Pose, SlipParams
 from pfjax.numerics import autodiff
-from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, stack, unstack
+from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, unstack
 from pfjax.sim.status import Status
 from pfjax.falsify.space import (
     RawParams,
