@@ -297,6 +297,26 @@ def test_float32_agrees_with_float64():
     assert abs(d64) > 1e-3  # the steady slip offset, not a trivially zero error
 
 
+def test_stack_builds_numpy_leaves_and_compiles_nothing():
+    """``stack`` is host-side NumPy (one array per leaf, each item's values in order), so building a
+    batch compiles no program (``jnp.stack`` compiled one per leaf shape and item count)."""
+    items = [make_scenario(line(), LINE_POSE, sf(), slip=slip(constant=b * DEG)) for b in (1.0, 2.0, 3.0)]
+    events = []
+    listener = lambda name, secs, **kw: events.append(name) if name == "/jax/core/compile/backend_compile_duration" else None
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        batch = stack(items)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert events == []
+    for leaf, *per_item in zip(jax.tree_util.tree_leaves(batch), *(jax.tree_util.tree_leaves(i) for i in items)):
+        assert isinstance(leaf, np.ndarray) and leaf.shape[0] == 3
+        for k, x in enumerate(per_item):
+            np.testing.assert_array_equal(leaf[k], np.asarray(x))
+    with pytest.raises(ValueError, match="item 1 has a different structure"):
+        stack([items[0], make_scenario(line(), LINE_POSE, sf(), slip=slip_profile(constant=DEG))])
+
+
 def test_unstack_is_one_gather_and_checks_the_index(mixed):
     """unstack gives what indexing every leaf gives (device arrays: one jitted gather; NumPy leaves
     stay NumPy), negative indices count from the end, and an index past the batch is an error
