@@ -107,7 +107,12 @@ def test_failure_times_are_the_first_failing_samples(mixed):
 def test_failed_runs_are_frozen_and_their_metrics_finite(mixed):
     """From the failing sample on, the pose (and d, s) stays at its value there, and Final is that
     state; the metrics describe the run up to the failure: finite, except the steady-state errors
-    and settling time, which are NaN by definition for a failed run."""
+    and settling time, which are NaN by definition for a failed run.
+
+    Final's pose is the frozen pose, bit for bit. Its d and s come from projecting that pose again
+    after the loop (warm-started from the last closest point, in another compiled program than the
+    loop's projection), so they equal the trajectory's to rounding: bit for bit with jax 0.10.2,
+    an ulp apart with jax 0.10.0 (s = 3 against 3 + 4.4e-16 m)."""
     for name in FAILING:
         r = row(mixed, name)
         k = int(round(r.fail_time / CFG.dt))
@@ -115,7 +120,10 @@ def test_failed_runs_are_frozen_and_their_metrics_finite(mixed):
         for field in ("x", "y", "theta", "d", "s"):
             a = getattr(tr, field)
             np.testing.assert_array_equal(a[k:], np.full_like(a[k:], a[k]), err_msg=f"{name}.{field}")
-            np.testing.assert_array_equal(getattr(r.final, field), a[k])
+            if field in ("x", "y", "theta"):
+                np.testing.assert_array_equal(getattr(r.final, field), a[k], err_msg=f"{name}.{field}")
+            else:  # float64, positions of a few metres: 1e-12 m is a few thousand ulps
+                np.testing.assert_allclose(getattr(r.final, field), a[k], rtol=0, atol=1e-12, err_msg=f"{name}.{field}")
         m = r.metrics
         for field in ("iae", "ise", "itae", "max_abs_d", "overshoot", "steer_energy", "steer_tv", "sat_fraction"):
             assert np.isfinite(getattr(m, field)), (name, field, getattr(m, field))
