@@ -53,7 +53,8 @@ def markdown(result: dict) -> str:
     lines = [
         "# pfjax benchmark", "",
         f"Machine: {m['processor']}, {m['cpus']} CPUs, JAX {m['jax']} with {len(m['devices'])} device(s); "
-        f"1-min load average {m['load_average_1m_start']:.1f} at the start, {m['load_average_1m']:.1f} at the end.", "",
+        f"1-min load average {m['load_average_1m_start']:.1f} at the start, {m['load_average_1m']:.1f} at the end. "
+        f"AVX-512: {'yes' if m.get('avx512') else 'no'}; simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}.", "",
         "| implementation | dtype | batch | M rollout-steps/s | compile s |", "|---|---|---|---|---|",
     ]
     for r in result["rows"]:

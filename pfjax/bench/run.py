@@ -107,7 +107,7 @@ def _grad(batch, dtype, cfg: BenchConfig):
     import jax.numpy as jnp
 
     from pfjax.controllers import state_feedback
-    from pfjax.numerics import autodiff
+    from pfjax.numerics import autodiff, compiler
     from pfjax.sim import SimConfig, sharding, simulate_batch
 
     sc, _ = sharding.shard_batch(P.scenarios(batch, dtype))
@@ -119,8 +119,10 @@ def _grad(batch, dtype, cfg: BenchConfig):
 
     K = jnp.asarray(P.K, dtype)
     mode = autodiff.resolve_mode("auto", K.size)
-    fwd = jax.jit(loss)
-    auto, rev = jax.jit(autodiff.value_and_grad(loss)), jax.jit(jax.value_and_grad(loss))
+    # the simulator's compiler options (pfjax.numerics.compiler): a jit around simulate_batch
+    # compiles with its own options, so the three programs take the same ones
+    fwd = compiler.jit(loss)
+    auto, rev = compiler.jit(autodiff.value_and_grad(loss)), compiler.jit(jax.value_and_grad(loss))
     calls = [lambda f=f: jax.block_until_ready(f(K, sc)) for f in (fwd, auto, rev)]
     (_, (_, g), (_, g_rev)), (_, first, first_rev), (t_fwd, t_grad, t_rev) = _timed_interleaved(calls, cfg.grad_rounds)
     g, g_rev = np.asarray(g, np.float64), np.asarray(g_rev, np.float64)
@@ -133,11 +135,14 @@ def _grad(batch, dtype, cfg: BenchConfig):
 def machine() -> dict:
     import jax
 
+    from pfjax.numerics import compiler
+
     return dict(
         platform=platform.platform(), processor=platform.processor() or platform.machine(),
         cpus=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
         load_average_1m=os.getloadavg()[0], jax=jax.__version__, devices=[str(d) for d in jax.devices()],
-        xla_flags=os.environ.get("XLA_FLAGS", ""),
+        xla_flags=os.environ.get("XLA_FLAGS", ""), avx512=compiler.has_avx512(),
+        compiler_options=dict(compiler.OPTIONS),  # the simulator programs' (512-bit vectors on AVX-512)
     )
 
 

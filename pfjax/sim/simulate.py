@@ -17,7 +17,6 @@ vmapped entry point. ``SimConfig`` fixes the shapes and is a static argument.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
 from typing import Any, NamedTuple
 
 import jax
@@ -27,6 +26,7 @@ from jax import Array
 
 from pfjax.controllers.base import Controller, Observation, step
 from pfjax.metrics import running
+from pfjax.numerics import compiler
 from pfjax.models.slip import Pose, SlipParams, world_rhs
 from pfjax.numerics import elementary as E
 from pfjax.numerics.layout import as_scalars
@@ -308,7 +308,7 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     return SimResult(metrics, status.astype(jnp.int32), fail_time, final, traj)
 
 
-@partial(jax.jit, static_argnames=("controller", "config", "layout"))
+@compiler.jit(static_argnames=("controller", "config", "layout"))
 def _simulate_vmapped(scenarios: Scenario, *, controller: Controller, config: SimConfig,
                       layout: sharding.Layout = sharding.Layout(None, 1)) -> SimResult:
     return sharding.map_runs(lambda sc: simulate(controller, sc, config), scenarios, layout)

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import dataclasses
 from enum import IntEnum
-from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -31,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.numerics import compiler
 from pfjax.numerics import elementary as E
 from pfjax.numerics.layout import all_true, first_true
 from pfjax.numerics.random import step_normals
@@ -263,7 +263,7 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
     return TrackResult(final=cN.s, metrics=metrics, status=cN.status.astype(jnp.int32), fail_time=cN.fail_time, trajectory=traj)
 
 
-@partial(jax.jit, static_argnames=("config", "layout"))
+@compiler.jit(static_argnames=("config", "layout"))
 def _simulate_vmapped(scenarios: TrackScenario, *, config: TrackConfig,
                       layout: sharding.Layout = sharding.Layout(None, 1)) -> TrackResult:
     return sharding.map_runs(lambda sc: simulate(sc, config), scenarios, layout)

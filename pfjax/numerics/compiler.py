@@ -1,0 +1,120 @@
+"""XLA compiler options for pfjax's simulator programs: 512-bit vectors on CPUs with AVX-512.
+
+XLA's CPU backend vectorises for 256-bit registers by default, also where the CPU has AVX-512
+(its ``xla_cpu_prefer_vector_width`` option, default 256). pfjax's simulators are long chains of
+elementwise arithmetic over the runs of a block, so twice the lanes per instruction pays:
+measured on a 2-core AMD EPYC (Zen 4, AVX-512), jax 0.10.2, the benchmark's slip model at
+B = 10^5, 78.4 -> 92.2 M rollout-steps/s in float32 and 35.5 -> 44.6 in float64 (README,
+Performance; docs/performance.md).
+
+**Why per program, not in ``XLA_FLAGS``.** With 512-bit vectors XLA's own arctangent
+(``jnp.arctan``, the ``atan`` primitive) is wrong: a maximum relative error of 2e8 in float32 and
+5e9 in float64 on random arguments, measured with jax 0.10.2 (sin, cos, tan, atan2, exp, log,
+tanh, sqrt and hypot stayed within 3.5 ulp, as without the option). A process-wide flag would
+break a user's own programs in the same process. pfjax's simulators contain none of XLA's
+trigonometric primitives (they use :mod:`pfjax.numerics.elementary`, plain ``jnp`` arithmetic;
+``tests/test_elementary.py`` fails if one is left), so their entry points are compiled with the
+option (:func:`jit`, ``jax.jit(..., compiler_options=OPTIONS)``) and nothing else is.
+``tests/test_compiler.py`` checks pfjax's elementary functions and every simulator against the
+same programs compiled without it.
+
+``PFJAX_VECTOR_WIDTH`` overrides the choice: ``0`` leaves XLA's default, a positive number asks
+for that width in bits (read when this module is first imported). Other backends ignore the
+option (it is a CPU code-generation option; GPUs compile as before).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import warnings
+from functools import partial
+
+import jax
+
+VECTOR_WIDTH_ENV = "PFJAX_VECTOR_WIDTH"
+_OPTION = "xla_cpu_prefer_vector_width"
+CPUINFO = "/proc/cpuinfo"
+
+
+def has_avx512(cpuinfo: str = CPUINFO) -> bool:
+    """Whether the CPU has AVX-512 Foundation (``avx512f`` among the flags of ``/proc/cpuinfo``;
+    False where that file does not exist, e.g. macOS, or cannot be read)."""
+    try:
+        with open(cpuinfo) as f:
+            for line in f:
+                if line.startswith("flags"):
+                    return "avx512f" in line.split(":", 1)[-1].split()
+    except OSError:
+        pass
+    return False
+
+
+def vector_width(environ=None, cpuinfo: str = CPUINFO) -> int | None:
+    """The vector width in bits pfjax asks XLA's CPU backend for, or ``None`` for XLA's default.
+
+    ``PFJAX_VECTOR_WIDTH`` when set (``0``: XLA's default; a positive number: that width); else
+    512 on a CPU with AVX-512 (:func:`has_avx512`), else XLA's default. A value that is not a
+    whole number >= 0 is ignored with a warning naming the variable."""
+    environ = os.environ if environ is None else environ
+    want = environ.get(VECTOR_WIDTH_ENV, "").strip()
+    if want:
+        if want.isdigit():
+            return int(want) or None
+        warnings.warn(f"{VECTOR_WIDTH_ENV}: value {want!r} ignored, expected a whole number of bits >= 0",
+                      stacklevel=2)
+    return 512 if has_avx512(cpuinfo) else None
+
+
+def options(environ=None, cpuinfo: str = CPUINFO) -> dict:
+    """The compiler options of pfjax's simulator programs (``{}`` where XLA's defaults stand)."""
+    width = vector_width(environ, cpuinfo)
+    return {} if width is None else {_OPTION: width}
+
+
+#: The options every simulator entry point is compiled with (decided once, at import).
+OPTIONS: dict = options()
+
+
+def at_top_level() -> bool:
+    """Whether no JAX transformation is tracing now, so a jitted function called now is the
+    outermost program (JAX accepts compiler options only there). Reads JAX's trace state
+    (``jax._src.core.trace_state_clean``; tests/test_compiler.py fails if a JAX release moves it);
+    where it cannot be read, False: the options are then never used, and results are unchanged."""
+    try:
+        from jax._src.core import trace_state_clean
+    except ImportError:  # pragma: no cover - a JAX release that moved it
+        return False
+    return trace_state_clean()
+
+
+class _Jitted:
+    """``fun`` jitted twice: with :data:`OPTIONS` for calls made outside any JAX transformation, and
+    plain for calls inside one (another ``jit``, ``grad``, ``vmap``), which JAX compiles with the
+    outermost program's options. Attributes (``lower``, ``trace``, ``_cache_size``, ...) are the
+    first's."""
+
+    def __init__(self, fun, options, kwargs):
+        functools.update_wrapper(self, fun)
+        self.top = jax.jit(fun, compiler_options=options, **kwargs)
+        self.nested = jax.jit(fun, **kwargs)
+
+    def __call__(self, *args, **kwargs):
+        return (self.top if at_top_level() else self.nested)(*args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self.top, name)
+
+
+def jit(fun=None, **kwargs):
+    """``jax.jit`` with :data:`OPTIONS` for programs free of XLA's trigonometric primitives (see the
+    module docstring). Usable as ``jit(f, ...)`` or as a decorator ``@jit(...)``.
+
+    Called from inside another ``jit`` (or ``grad``, ``vmap``), the function is traced into that
+    program, which keeps its own compiler options: wrap the outer function in :func:`jit` too to
+    give it these. Where :data:`OPTIONS` is empty this is plain ``jax.jit``."""
+    if fun is None:
+        return partial(jit, **kwargs)
+    if not OPTIONS:
+        return jax.jit(fun, **kwargs)
+    return _Jitted(fun, dict(OPTIONS), kwargs)

@@ -1,0 +1,167 @@
+"""The simulators' compiler options (pfjax.numerics.compiler): 512-bit vectors on AVX-512 CPUs.
+
+XLA's own atan is wrong under the option, so the option is set per program and never in
+``XLA_FLAGS``; these tests check the choice of the option, that every simulator entry point
+carries it, and that each simulator gives the same results with and without it (float64 to
+1e-12 relative: the same arithmetic in other vector lanes; float32 to rounding accumulated over
+the run). pfjax's elementary functions are checked under it in tests/test_elementary.py.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pfjax
+from pfjax.numerics import compiler
+
+WIDE = {"xla_cpu_prefer_vector_width": 512}
+
+
+def _cpuinfo(tmp_path, flags):
+    p = tmp_path / "cpuinfo"
+    p.write_text(f"processor\t: 0\nmodel name\t: test\nflags\t\t: {flags}\n\nprocessor\t: 1\nflags\t\t: {flags}\n")
+    return str(p)
+
+
+def test_avx512_is_read_from_the_cpu_flags(tmp_path):
+    assert compiler.has_avx512(_cpuinfo(tmp_path, "fpu sse2 avx2 fma avx512f avx512dq avx512vl"))
+    assert not compiler.has_avx512(_cpuinfo(tmp_path, "fpu sse2 avx2 fma"))
+    assert not compiler.has_avx512(_cpuinfo(tmp_path, "fpu avx512_bf16"))  # not Foundation
+    assert not compiler.has_avx512(str(tmp_path / "missing"))
+
+
+def test_vector_width_choice_and_override(tmp_path):
+    wide, narrow = _cpuinfo(tmp_path, "avx2 avx512f"), str(tmp_path / "missing")
+    assert compiler.options({}, wide) == WIDE
+    assert compiler.options({}, narrow) == {}
+    assert compiler.options({"PFJAX_VECTOR_WIDTH": "0"}, wide) == {}
+    assert compiler.options({"PFJAX_VECTOR_WIDTH": "256"}, wide) == {"xla_cpu_prefer_vector_width": 256}
+    assert compiler.options({"PFJAX_VECTOR_WIDTH": "512"}, narrow) == WIDE
+    with pytest.warns(UserWarning, match="PFJAX_VECTOR_WIDTH"):
+        assert compiler.options({"PFJAX_VECTOR_WIDTH": "wide"}, narrow) == {}
+
+
+def test_the_option_is_not_process_wide():
+    """A user's own program in the same process keeps XLA's defaults (and a correct jnp.arctan)."""
+    import os
+
+    assert "prefer_vector_width" not in os.environ.get("XLA_FLAGS", "")
+    x = np.linspace(-50.0, 50.0, 4096)
+    np.testing.assert_allclose(np.asarray(jax.jit(jnp.arctan)(x)), np.arctan(x), rtol=1e-15)
+
+
+def _kvs(f):
+    kvs = getattr(getattr(f, "_jit_info", None), "compiler_options_kvs", None)
+    if kvs is None:
+        pytest.skip("this JAX keeps a jitted function's compiler options elsewhere")
+    return dict(kvs)
+
+
+def test_every_simulator_entry_point_carries_the_options():
+    from importlib import import_module
+
+    # the modules (the packages export functions of the same name)
+    slip, tracking, parking = (import_module(f"pfjax.{p}.simulate") for p in ("sim", "tracking", "parking"))
+    for f in (slip._simulate_vmapped, tracking._simulate_vmapped, parking.run_jit, parking.run_recorded_jit,
+              parking.run_batch):
+        assert _kvs(f) == compiler.OPTIONS
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(compiler, "OPTIONS", dict(WIDE))
+        f = compiler.jit(lambda x: x)
+        assert _kvs(f) == WIDE and _kvs(f.top) == WIDE and _kvs(f.nested) == {}
+        assert _kvs(compiler.jit(static_argnums=1)(lambda x, n: x * n)) == WIDE
+        m.setattr(compiler, "OPTIONS", {})
+        assert _kvs(compiler.jit(lambda x: x)) == {}
+
+
+def test_top_level_is_read_from_jax():
+    from jax._src.core import trace_state_clean  # noqa: F401  (at_top_level reads it: moved, this fails)
+
+    seen = []
+    spy = lambda x: (seen.append(compiler.at_top_level()), x)[1]
+    assert compiler.at_top_level()
+    jax.jit(spy)(1.0), jax.vmap(spy)(np.ones(2)), jax.grad(spy)(1.0)
+    assert seen == [False, False, False]
+
+
+def test_a_wide_program_runs_inside_other_transformations():
+    """JAX accepts compiler options on the outermost jit only: inside a user's jit, grad or vmap,
+    or with a batch closed over as a constant, the simulator is traced plainly into that program."""
+    from pfjax.bench import problem as P
+    from pfjax.controllers import state_feedback
+    from pfjax.sim import SimConfig, simulate_batch
+
+    cfg = SimConfig(dt=0.01, horizon=0.5, record=False)
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(compiler, "OPTIONS", dict(WIDE))
+        f = compiler.jit(lambda sc: simulate_batch(sc, controller=state_feedback, config=cfg, block=None).metrics.iae)
+        sc = P.scenarios(P.random_batch(8, 1), np.float64)
+        top = np.asarray(f(sc))
+        inner = np.asarray(jax.jit(lambda s: f(s))(sc))
+        const = np.asarray(jax.jit(lambda: f(sc))())
+        mapped = np.asarray(jax.vmap(f)(jax.tree_util.tree_map(lambda a: a[None], sc)))[0]
+        g = jax.grad(lambda K: jnp.sum(f(sc._replace(gains=sc.gains._replace(K=jnp.broadcast_to(K, sc.gains.K.shape))))))(
+            jnp.asarray(P.K))
+    for other in (inner, const, mapped):
+        np.testing.assert_allclose(other, top, rtol=1e-12)
+    assert np.all(np.isfinite(np.asarray(g)))
+
+
+def _both(f, *args):
+    """``f(*args)`` compiled with XLA's default vector width and with 512 bits, as float64 NumPy."""
+    out = [jax.tree_util.tree_map(lambda a: np.asarray(a, np.float64), jax.jit(f, compiler_options=o)(*args))
+           for o in (None, WIDE)]
+    return out
+
+
+def _assert_close(a, b, rtol, atol):
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        np.testing.assert_allclose(y, x, rtol=rtol, atol=atol)
+
+
+# The same per-run arithmetic in wider vectors: measured bit-identical here (64-4096 runs, float32
+# and float64, Zen 4 and jax 0.10.2); in the benchmark's 10^5 runs over 4000 steps the float32
+# IAE moved by ~2e-6 relative (the loops' remainders), float64 not at all. The tolerances allow
+# for rounding differences on other CPUs and XLA versions.
+TOL = {"float64": (1e-12, 1e-12), "float32": (2e-4, 2e-5)}
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+@pytest.mark.parametrize("name", ["state_feedback", "stanley"])
+def test_slip_simulator_agrees_with_and_without_wide_vectors(name, dtype):
+    from pfjax import controllers as C
+    from pfjax.bench import problem as P
+    from pfjax.sim import SimConfig
+    from pfjax.sim.simulate import simulate
+
+    sc = P.scenarios(P.random_batch(64, 3), np.dtype(dtype))
+    ctrl, gains = C.REGISTRY[name][0], C.REGISTRY[name][1]()
+    if name != "state_feedback":
+        sc = sc._replace(gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(np.asarray(g, dtype), (64,) + np.shape(g)), gains))
+    cfg = SimConfig(dt=0.01, horizon=2.0, record=False)
+    a, b = _both(jax.vmap(lambda s: simulate(ctrl, s, cfg)), sc)
+    np.testing.assert_array_equal(b.status, a.status)
+    _assert_close(a.metrics, b.metrics, *TOL[dtype])
+    _assert_close(a.final, b.final, *TOL[dtype])
+
+
+def test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors():
+    from pfjax import tracking as T
+    from pfjax.parking.maps import PARALLEL, to_obstacle_map
+    from pfjax.parking.simulate import ParkingConfig, run, run_params
+    from pfjax.sim import stack
+    from pfjax.tracking import leader as L
+
+    params = T.FollowerParams(a=1.0, f=1.0, l=1.0, p=1.0)
+    sc = stack([T.scenario(params, L.sine(), init=T.initial_state(L.sine(), params, offset=(dx, 0.3), heading_error=0.2))
+                for dx in np.linspace(-0.5, 0.5, 16)])
+    cfg = T.TrackConfig(dt=0.02, horizon=4.0, window=1.0)
+    a, b = _both(jax.vmap(lambda s: T.simulate(s, cfg)), sc)
+    np.testing.assert_array_equal(b.status, a.status)
+    _assert_close(a.metrics, b.metrics, *TOL["float64"])
+
+    omap = to_obstacle_map(list(PARALLEL.values()))
+    ps = stack([run_params((x, y, 0.0), 1, (1.0,)) for x in (-0.6, -0.4) for y in (0.4, 0.6)])
+    a, b = _both(jax.vmap(lambda p: run(p, omap, ParkingConfig())), ps)
+    _assert_close(a, b, *TOL["float64"])
