@@ -23,11 +23,13 @@ and the padding is cut off again, so callers see exactly their runs. Inside a JA
 
 **Blocks (CPU).** XLA's CPU backend compiles one integrator step into a few dozen loop kernels,
 each a pass over the batch. On one device the runs are therefore simulated in blocks of
-:data:`CPU_BLOCK_BYTES` per array (10,000 runs in float32, 5,000 in float64), one block after
-another (``lax.map``), so the arrays a step touches stay in the core's L2 cache instead of
-streaming through L3 and memory: 35 % more rollout-steps/s in float32 at 10^5 runs
-(README, Performance). A GPU takes the whole per-device batch at once (no blocks). Results do
-not depend on the blocking beyond rounding: every run is computed by the same per-run code, but
+:data:`CPU_BLOCK_BYTES` per array (1,250 runs in float32, 625 in float64), one block after
+another (``lax.map``). A block's loop is then small enough for XLA to compile it into one function
+(the small-loop threshold that ``import pfjax`` raises, :data:`pfjax.SMALL_LOOP_BYTES`) and its
+arrays stay in the core's L1 and L2 caches: 1.3x the rollout-steps/s of 10,000-run blocks in
+float32 and 1.2x in float64 at 10^5 runs (README, Performance). A GPU takes the whole per-device
+batch at once (no blocks). Results do not depend on the blocking beyond rounding: every run is
+computed by the same per-run code, but
 each block shape is compiled into its own vector code (an ulp in a few runs' metrics, measured).
 """
 
@@ -42,10 +44,13 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 AXIS = "runs"
-#: Bytes per batched array in one CPU block: ~40 kB keeps the few dozen arrays one integrator step
-#: reads and writes within a 1 MiB L2 cache (measured: 5,000-10,000 float32 runs per block are
-#: equally fast, 2,500 and 25,000 slower; README, Performance).
-CPU_BLOCK_BYTES = 40_000
+#: Bytes per batched array in one CPU block. Measured (2-core AMD EPYC with AVX-512, 512-bit vectors,
+#: 2 devices, the benchmark's slip model at 10^5 runs, M rollout-steps/s): float32 blocks of 312-3,750
+#: runs 195-207, 4,000-10,000 runs 150-165, 20,000 runs 154; float64 625 runs 91, 1,250 runs 89,
+#: 2,500-5,000 runs 73-76. Blocks past the small-loop threshold fall back to a kernel launch per
+#: kernel and step. Until stop 29 this was 40 kB, measured on an AVX2 CPU before the threshold was
+#: raised (5,000-10,000 float32 runs fastest there, 2,500 slower; docs/performance.md).
+CPU_BLOCK_BYTES = 5_000
 #: Runs per block are rounded up to a multiple of this (blocks of more runs than this). XLA's CPU
 #: code for an odd number of runs per device is about 3x slower (measured, float32: 50,001 runs per
 #: device 10.8 M rollout-steps/s, 50,002 runs 34.5; 1,251 runs 14.6, 1,252 runs 44.3).
