@@ -7,6 +7,7 @@ carries it, and that each simulator gives the same results with and without it (
 the run). pfjax's elementary functions are checked under it in tests/test_elementary.py.
 """
 
+import os
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -29,6 +30,16 @@ def test_avx512_is_read_from_the_cpu_flags(tmp_path):
     assert not compiler.has_avx512(_cpuinfo(tmp_path, "fpu sse2 avx2 fma"))
     assert not compiler.has_avx512(_cpuinfo(tmp_path, "fpu avx512_bf16"))  # not Foundation
     assert not compiler.has_avx512(str(tmp_path / "missing"))
+
+
+def test_cpu_info_reads_the_first_processor(tmp_path):
+    p = tmp_path / "cpuinfo"
+    p.write_text("processor\t: 0\nvendor_id\t: AuthenticAMD\ncpu family\t: 26\nmodel\t\t: 2\nmodel name\t: AMD EPYC\n"
+                 "flags\t\t: fpu avx512f\n\nprocessor\t: 1\ncpu family\t: 25\nmodel name\t: other\n")
+    assert compiler.cpu_info(str(p)) == {"cpu family": "26", "model": "2", "model name": "AMD EPYC", "flags": "fpu avx512f"}
+    assert compiler.cpu_info(str(tmp_path / "missing")) == {}
+    if os.path.exists(compiler.CPUINFO):  # this machine's: the bench records it
+        assert compiler.cpu_info()["flags"]
 
 
 def test_vector_width_choice_and_override(tmp_path):

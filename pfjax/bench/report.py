@@ -52,7 +52,8 @@ def markdown(result: dict) -> str:
     s, m = result["summary"], result["machine"]
     lines = [
         "# pfjax benchmark", "",
-        f"Machine: {m['processor']}, {m['cpus']} CPUs, JAX {m['jax']} with {len(m['devices'])} device(s); "
+        f"Machine: {m['processor']}, {m.get('cpu_model') or 'CPU model unknown'}"
+        f"{' (family ' + m['cpu_family'] + ', model ' + m['cpu_model_number'] + ')' if m.get('cpu_family') else ''}, {m['cpus']} CPUs, JAX {m['jax']} with {len(m['devices'])} device(s); "
         f"1-min load average {m['load_average_1m_start']:.1f} at the start, {m['load_average_1m']:.1f} at the end. "
         f"AVX-512: {'yes' if m.get('avx512') else 'no'}; simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}.", "",
         "| implementation | dtype | batch | M rollout-steps/s | compile s |", "|---|---|---|---|---|",

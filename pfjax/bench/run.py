@@ -137,7 +137,9 @@ def machine() -> dict:
 
     from pfjax.numerics import compiler
 
+    cpu = compiler.cpu_info()
     return dict(
+        cpu_model=cpu.get("model name", ""), cpu_family=cpu.get("cpu family", ""), cpu_model_number=cpu.get("model", ""),
         platform=platform.platform(), processor=platform.processor() or platform.machine(),
         cpus=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
         load_average_1m=os.getloadavg()[0], jax=jax.__version__, devices=[str(d) for d in jax.devices()],

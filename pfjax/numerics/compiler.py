@@ -37,17 +37,29 @@ _OPTION = "xla_cpu_prefer_vector_width"
 CPUINFO = "/proc/cpuinfo"
 
 
-def has_avx512(cpuinfo: str = CPUINFO) -> bool:
-    """Whether the CPU has AVX-512 Foundation (``avx512f`` among the flags of ``/proc/cpuinfo``;
-    False where that file does not exist, e.g. macOS, or cannot be read)."""
+def cpu_info(cpuinfo: str = CPUINFO) -> dict:
+    """The first CPU's ``model name``, ``cpu family``, ``model`` and ``flags`` from ``/proc/cpuinfo``
+    (``{}`` where that file does not exist, e.g. macOS, or cannot be read). The family tells CPU
+    generations apart where the model name does not (a VM's "AMD EPYC": 25 is Zen 3/4, 26 Zen 5)."""
+    out = {}
     try:
         with open(cpuinfo) as f:
             for line in f:
-                if line.startswith("flags"):
-                    return "avx512f" in line.split(":", 1)[-1].split()
+                if not line.strip():
+                    break  # the first processor's block ends here
+                key, _, value = line.partition(":")
+                key = key.strip()
+                if key in ("model name", "cpu family", "model", "flags"):
+                    out[key] = value.strip()
     except OSError:
         pass
-    return False
+    return out
+
+
+def has_avx512(cpuinfo: str = CPUINFO) -> bool:
+    """Whether the CPU has AVX-512 Foundation (``avx512f`` among the flags of ``/proc/cpuinfo``;
+    False where that file does not exist or cannot be read)."""
+    return "avx512f" in cpu_info(cpuinfo).get("flags", "").split()
 
 
 def vector_width(environ=None, cpuinfo: str = CPUINFO) -> int | None:
