@@ -119,6 +119,15 @@ def test_a_wide_program_runs_inside_other_transformations():
     assert np.all(np.isfinite(np.asarray(g)))
 
 
+def test_other_backends_get_the_plain_program(monkeypatch):
+    """Where JAX's default backend is not the CPU, the wide program is never compiled or called."""
+    monkeypatch.setattr(compiler, "OPTIONS", dict(WIDE))
+    f = compiler.jit(lambda x: 2.0 * x)
+    assert np.asarray(f(np.float32(1.5))) == 3.0 and f.top._cache_size() == 1 and f.nested._cache_size() == 0
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert np.asarray(f(np.float32(2.5))) == 5.0 and f.top._cache_size() == 1 and f.nested._cache_size() == 1
+
+
 def _both(f, *args):
     """``f(*args)`` compiled with XLA's default vector width and with 512 bits, as float64 NumPy."""
     out = [jax.tree_util.tree_map(lambda a: np.asarray(a, np.float64), jax.jit(f, compiler_options=o)(*args))

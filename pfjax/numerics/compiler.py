@@ -19,8 +19,9 @@ option (:func:`jit`, ``jax.jit(..., compiler_options=OPTIONS)``) and nothing els
 same programs compiled without it.
 
 ``PFJAX_VECTOR_WIDTH`` overrides the choice: ``0`` leaves XLA's default, a positive number asks
-for that width in bits (read when this module is first imported). Other backends ignore the
-option (it is a CPU code-generation option; GPUs compile as before).
+for that width in bits (read when this module is first imported). The option is a CPU
+code-generation option: where JAX's default backend is not the CPU (a GPU), the programs are
+compiled without it, exactly as before this module existed.
 """
 
 from __future__ import annotations
@@ -101,10 +102,10 @@ def at_top_level() -> bool:
 
 
 class _Jitted:
-    """``fun`` jitted twice: with :data:`OPTIONS` for calls made outside any JAX transformation, and
-    plain for calls inside one (another ``jit``, ``grad``, ``vmap``), which JAX compiles with the
-    outermost program's options. Attributes (``lower``, ``trace``, ``_cache_size``, ...) are the
-    first's."""
+    """``fun`` jitted twice: with :data:`OPTIONS` for calls made outside any JAX transformation with
+    the CPU as JAX's default backend; plain otherwise, i.e. on a GPU and for calls inside a
+    transformation (another ``jit``, ``grad``, ``vmap``), which JAX compiles with the outermost
+    program's options. Attributes (``lower``, ``trace``, ``_cache_size``, ...) are the first's."""
 
     def __init__(self, fun, options, kwargs):
         functools.update_wrapper(self, fun)
@@ -112,7 +113,8 @@ class _Jitted:
         self.nested = jax.jit(fun, **kwargs)
 
     def __call__(self, *args, **kwargs):
-        return (self.top if at_top_level() else self.nested)(*args, **kwargs)
+        wide = at_top_level() and jax.default_backend() == "cpu"
+        return (self.top if wide else self.nested)(*args, **kwargs)
 
     def __getattr__(self, name):
         return getattr(self.top, name)
