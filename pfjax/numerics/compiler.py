@@ -3,9 +3,9 @@
 XLA's CPU backend vectorises for 256-bit registers by default, also where the CPU has AVX-512
 (its ``xla_cpu_prefer_vector_width`` option, default 256). pfjax's simulators are long chains of
 elementwise arithmetic over the runs of a block, so twice the lanes per instruction pays:
-measured on a 2-core AMD EPYC (Zen 4, AVX-512), jax 0.10.2, the benchmark's slip model at
-B = 10^5, 78.4 -> 92.2 M rollout-steps/s in float32 and 35.5 -> 44.6 in float64 (README,
-Performance; docs/performance.md).
+measured with ``pfjax bench`` on a 2-core AMD EPYC (Zen 5, AVX-512), jax 0.10.2, the slip model
+at B = 10^5, 118.6 -> 199-205 M rollout-steps/s in float32 and 49.5 -> 87.5-90.5 in float64
+(README, Performance; docs/performance.md).
 
 **Why per program, not in ``XLA_FLAGS``.** With 512-bit vectors XLA's own arctangent
 (``jnp.arctan``, the ``atan`` primitive) is wrong: a maximum relative error of 2e8 in float32 and
@@ -15,8 +15,8 @@ break a user's own programs in the same process. pfjax's simulators contain none
 trigonometric primitives (they use :mod:`pfjax.numerics.elementary`, plain ``jnp`` arithmetic;
 ``tests/test_elementary.py`` fails if one is left), so their entry points are compiled with the
 option (:func:`jit`, ``jax.jit(..., compiler_options=OPTIONS)``) and nothing else is.
-``tests/test_compiler.py`` checks pfjax's elementary functions and every simulator against the
-same programs compiled without it.
+``tests/test_compiler.py`` checks every simulator against the same program compiled without it,
+``tests/test_elementary.py`` pfjax's elementary functions under both widths.
 
 ``PFJAX_VECTOR_WIDTH`` overrides the choice: ``0`` leaves XLA's default, a positive number asks
 for that width in bits (read when this module is first imported). The option is a CPU

@@ -26,8 +26,8 @@ from jax import Array
 
 from pfjax.controllers.base import Controller, Observation, step
 from pfjax.metrics import running
-from pfjax.numerics import compiler
 from pfjax.models.slip import Pose, SlipParams, world_rhs
+from pfjax.numerics import compiler
 from pfjax.numerics import elementary as E
 from pfjax.numerics.layout import as_scalars
 from pfjax.numerics.random import step_normals
