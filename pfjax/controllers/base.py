@@ -31,7 +31,13 @@ from pfjax.models.slip import Pose
 
 
 class Observation(NamedTuple):
-    """What a controller sees at one instant."""
+    """What a controller sees at one instant.
+
+    With sensor noise (:class:`pfjax.sim.simulate.SensorNoise`) ``d``, ``theta_e`` and ``pose`` are
+    the measured ones, consistent with each other (the measured pose's errors against the path are
+    ``d`` and ``theta_e``); ``kappa``, ``s`` and ``u`` are the true closest point's, which is also the
+    measured pose's closest point (``u`` is a warm start for a tracker's own projections).
+    """
 
     d: Array  # m, lateral error (left positive)
     theta_e: Array  # rad, heading error

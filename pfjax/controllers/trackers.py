@@ -18,7 +18,15 @@ from pfjax.numerics import elementary as E
 
 
 class StanleyParams(NamedTuple):
-    """Stanley: ``delta = -theta_e,f - atan(k d_f / (k_soft + v))`` on the front-axle errors."""
+    """Stanley: ``delta = -theta_e,f - atan(k d_f / (k_soft + v))`` on the front-axle errors.
+
+    The front axle is projected from the observed rear-axle pose ``(x, y, theta)``:
+    ``(x + L cos theta, y + L sin theta)`` (m) with heading ``theta``, its closest path point found
+    by Newton from one wheelbase ahead of ``obs.u``; ``d_f`` (m) and ``theta_e,f`` (rad) are its
+    lateral and heading errors. With sensor noise the observed pose is the measured one
+    (:class:`pfjax.sim.simulate.SensorNoise`), so both come from the noisy position and heading;
+    ``obs.d`` and ``obs.theta_e`` are not read.
+    """
 
     k: Array  # 1/s, cross-track gain
     k_soft: Array  # m/s, softening speed
@@ -43,7 +51,14 @@ stanley = Controller("stanley", no_state, _stanley_output, no_rate)
 
 
 class PurePursuitParams(NamedTuple):
-    """Pure pursuit: ``delta = atan(2 L sin(alpha) / l_d)``, ``l_d = max(ld_min, ld_gain v)``."""
+    """Pure pursuit: ``delta = atan(2 L sin(alpha) / l_d)``, ``l_d = max(ld_min, ld_gain v)``.
+
+    The goal is the path point ahead of ``obs.u`` at distance ``l_d`` (m) from the observed
+    rear-axle position ``(x, y)``, and ``alpha = atan2(g_y - y, g_x - x) - theta`` (rad) its bearing
+    from the observed heading ``theta``. With sensor noise the observed pose is the measured one
+    (:class:`pfjax.sim.simulate.SensorNoise`): the goal and ``alpha`` come from the noisy position
+    and heading; ``obs.d`` and ``obs.theta_e`` are not read.
+    """
 
     ld_gain: Array  # s, look-ahead time
     ld_min: Array  # m, minimum look-ahead distance

@@ -2,7 +2,8 @@
 
 Per step ``k`` (time ``t_k = k dt``):
 
-1. measure the pose against the path (closest point, warm-started Newton, spec §2);
+1. measure the pose against the path (closest point, warm-started Newton, spec §2) and, with
+   :class:`SensorNoise`, give the controller the noisy measurement (:func:`_noisy`);
 2. sampled controllers: every ``control_every`` steps compute a new command and hold it
    (zero-order hold); continuous controllers: evaluated inside every RK4 stage instead;
 3. saturate the steering at ``+-delta_max``;
@@ -95,9 +96,33 @@ class SimConfig:
 
 
 class SensorNoise(NamedTuple):
-    """White Gaussian noise on the controller's measurements of ``d`` and ``theta_e``, one draw per
-    integrator step from ``(key, k)`` (:func:`pfjax.numerics.random.step_normals`; deterministic, O(1)
-    memory). Metrics use the true errors."""
+    """White Gaussian noise on the measured rear-axle pose: one pair of standard normals
+    ``(n0, n1)`` per integrator step ``k`` from ``(key, k)``
+    (:func:`pfjax.numerics.random.step_normals`; deterministic, O(1) memory).
+
+    The sensor measures the pose; every controller sees the same noisy measurement. The measured
+    pose is the true one displaced by ``e_d = sigma_d n0`` (m) along the path's left unit normal at
+    the closest point and rotated by ``e_theta = sigma_theta_e n1`` (rad)::
+
+        psi_p   = theta - theta_e                  (rad, path tangent angle at the closest point)
+        x_m     = x - e_d sin(psi_p)               (m)
+        y_m     = y + e_d cos(psi_p)               (m)
+        theta_m = theta + e_theta                  (rad)
+
+    so the measured errors are ``d_m = d + e_d`` (m) and ``theta_e,m = wrap(theta_e + e_theta)``
+    (rad): the measured pose projects onto the same closest point (while ``|d + e_d|`` stays below
+    the path's radius of curvature there), at signed distance ``d + e_d``, with heading error
+    ``theta_e + e_theta``. Controllers on ``(d, theta_e)`` see noise of std
+    ``sigma_d`` and ``sigma_theta_e`` on them; the geometric trackers (Stanley, pure pursuit) compute
+    their commands from the measured pose, consistent with those errors (see :func:`_noisy`).
+    The noise is white: independent between steps and between ``d`` and ``theta_e``. The metrics
+    and the health checks use the true errors.
+
+    Attributes:
+        sigma_d: std of the lateral (path-normal) position error ``e_d``, m.
+        sigma_theta_e: std of the heading error ``e_theta``, rad.
+        key: ``uint32[2]``, a ``jax.random.PRNGKey``.
+    """
 
     sigma_d: Array  # m
     sigma_theta_e: Array  # rad
@@ -164,10 +189,40 @@ def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
 
 
 def _noisy(obs: Observation, noise: SensorNoise | None, k) -> Observation:
+    """The observation the controllers see at step ``k``: the exact one (``noise is None``), or the
+    one measured from the noisy pose of :class:`SensorNoise`.
+
+    With ``(n0, n1) = step_normals(noise.key, k, 2)``, ``e_d = sigma_d n0`` (m) and
+    ``e_theta = sigma_theta_e n1`` (rad), the measured observation is::
+
+        d_m       = d + e_d                                   (m)
+        theta_e,m = wrap(theta_e + e_theta)                   (rad)
+        pose_m    = (x - e_d sin(psi_p), y + e_d cos(psi_p), theta + e_theta),
+                    psi_p = theta - theta_e                   (m, m, rad)
+
+    ``psi_p`` is the path tangent angle at the closest point (modulo 2 pi), so the pose is displaced
+    along the path's left unit normal ``(-sin psi_p, cos psi_p)`` there: the measured pose's closest
+    point is the same point ``p(u)`` (locally: ``|d + e_d| kappa < 1``), its signed distance is
+    ``d + e_d`` and its heading error ``theta_e + e_theta``. ``kappa``, ``s`` and ``u`` (the closest point's) are therefore unchanged;
+    ``u`` is only the trackers' warm start for their own projections of the measured pose.
+
+    Args:
+        obs: the exact observation at step ``k`` (true pose, true errors).
+        noise: the run's sensor noise, or ``None``.
+        k: integrator step index (the noise's counter; in continuous mode every RK4 stage of step
+            ``k`` sees the same draw).
+
+    Returns:
+        The observation the controllers read; ``obs`` itself when ``noise is None`` (no operations).
+    """
     if noise is None:
         return obs
     n = step_normals(noise.key, k, 2, obs.d.dtype)
-    return obs._replace(d=obs.d + noise.sigma_d * n[0], theta_e=wrap_angle(obs.theta_e + noise.sigma_theta_e * n[1]))
+    e_d, e_theta = noise.sigma_d * n[0], noise.sigma_theta_e * n[1]
+    pose = obs.pose
+    sin_p, cos_p = E.sincos(pose.theta - obs.theta_e)  # the path tangent at the closest point
+    measured = Pose(pose.x - e_d * sin_p, pose.y + e_d * cos_p, pose.theta + e_theta)
+    return obs._replace(d=obs.d + e_d, theta_e=wrap_angle(obs.theta_e + e_theta), pose=measured)
 
 
 def _measure(sc: Scenario, pose: Pose, u_guess, iters) -> Projection:
