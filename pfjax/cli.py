@@ -18,10 +18,12 @@ import importlib
 import json
 import math
 import os
+import re
 import sys
 from pathlib import Path
 
-EXIT_USAGE = 2
+from pfjax.errors import EXIT_USAGE, InputError, command_main, one_line
+from pfjax.jsonio import dumps
 
 CONTROLLER_CHOICES = ("mixed", "paper-k", "pi", "stanley", "pure-pursuit", "rear-wheel")
 #: CLI controller name -> (registry name, gain names in --gains order)
@@ -41,7 +43,7 @@ GAIN_NAMES = {
 EXTENSIONS = ("pfjax.tuning.cli", "pfjax.parking.cli", "pfjax.tracking.cli", "pfjax.bench.cli")
 
 
-class UsageError(Exception):
+class UsageError(InputError):
     """A bad command-line value; the message names the flag."""
 
 
@@ -51,74 +53,61 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _finite(flag: str, value: float, *, positive=False, below=None, unit="") -> float:
-    if not math.isfinite(value):
-        raise UsageError(f"{flag}: expected a finite number, got {value}")
-    if positive and value <= 0:
-        raise UsageError(f"{flag}: must be > 0{unit}, got {value:g}")
-    if below is not None and abs(value) >= below:
-        raise UsageError(f"{flag}: magnitude must be < {below:g}{unit}, got {value:g}")
-    return value
+    """A flag's number checked as the library checks numbers (:func:`pfjax.errors.number`)."""
+    from pfjax import errors
+
+    return errors.number(flag, value, positive=positive, below=below, unit=unit)
 
 
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o).__name__)
-
-
-def _clean(o):
-    """Replace NaN/inf by None so the output is strict JSON."""
-    if isinstance(o, float):
-        return o if math.isfinite(o) else None
-    if isinstance(o, dict):
-        return {k: _clean(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    return o
-
-
-def dumps(obj) -> str:
-    return json.dumps(_clean(json.loads(json.dumps(obj, default=_json_default))), allow_nan=False)
+@contextlib.contextmanager
+def as_flags(flags: dict[str, str]):
+    """Name flags, not the library's argument names, in the library's one-line errors: an
+    :class:`~pfjax.errors.InputError` whose key (its first part, ``gains`` of ``gains.kp_d``) is in
+    ``flags`` is raised again as ``<flag>: <rest of the key>: <message>``. The checks themselves
+    are the library's, so the command line and the Python API judge a value alike."""
+    try:
+        yield
+    except InputError as e:
+        key, text = e.key or "", str(e)
+        base = re.split(r"[.\[]", key, maxsplit=1)[0]
+        if base not in flags:
+            raise
+        body = text[len(key) + 2:] if text.startswith(key + ": ") else text
+        for name, other in flags.items():  # other settings the message mentions, by their flags too
+            if len(name) > 1:
+                body = re.sub(rf"(?<![\w.-]){re.escape(name)}(?![\w.-])", other, body)
+        sub = key[len(base):]
+        flag = flags[base] + (sub if sub.startswith("[") else "")
+        sub = "" if sub.startswith("[") else sub.lstrip(".")
+        raise UsageError(f"{flag}: {sub + ': ' if sub else ''}{body}", flags[base]) from None
 
 
 # --------------------------------------------------------------------------- synth
 
 
+SYNTH_FLAGS = {"method": "--method", "v": "--v", "L": "--L", "alpha": "--alpha", "beta": "--beta",
+               "max_real": "--max-real", "disk_center": "--disk", "disk_radius": "--disk"}
+
+
 def _cmd_synth(args) -> dict:
     from pfjax.synthesis import PoleRegion, SynthesisError, synthesize
 
-    _finite("--v", args.v, positive=True, unit=" m/s")
-    _finite("--L", args.L, positive=True, unit=" m")
-    _finite("--alpha", args.alpha)
-    _finite("--beta", args.beta)
-    if args.alpha < 0 or args.beta < 0 or args.alpha + args.beta == 0:
-        raise UsageError(f"--alpha/--beta: must be >= 0 and not both 0, got {args.alpha:g}, {args.beta:g}")
     region = None
-    if args.max_real is not None or args.disk is not None or args.sector_deg is not None:
-        if args.max_real is not None:
-            _finite("--max-real", args.max_real)
-        if args.disk is not None:
-            _finite("--disk", args.disk[0])
-            _finite("--disk", args.disk[1])
-        if args.disk is not None and args.disk[1] <= 0:
-            raise UsageError(f"--disk: radius must be > 0, got {args.disk[1]:g}")
-        if args.sector_deg is not None and not 0 < args.sector_deg < 90:
+    with as_flags(SYNTH_FLAGS):
+        if args.sector_deg is not None and not 0 < _finite("--sector-deg", args.sector_deg) < 90:
             raise UsageError(f"--sector-deg: expected a half-angle in (0, 90), got {args.sector_deg:g}")
-        region = PoleRegion(
-            max_real=args.max_real,
-            disk_center=None if args.disk is None else args.disk[0],
-            disk_radius=None if args.disk is None else args.disk[1],
-            sector_angle=None if args.sector_deg is None else math.radians(args.sector_deg),
-        )
-    try:
-        design = synthesize(args.method, v=args.v, L=args.L, alpha=args.alpha, beta=args.beta, region=region)
-    except SynthesisError as e:
-        flags = "--max-real/--disk/--sector-deg" if region is not None else f"--method {args.method}"
-        raise UsageError(f"{flags}: no design exists ({e})") from None
+        if args.max_real is not None or args.disk is not None or args.sector_deg is not None:
+            region = PoleRegion(
+                max_real=args.max_real,
+                disk_center=None if args.disk is None else args.disk[0],
+                disk_radius=None if args.disk is None else args.disk[1],
+                sector_angle=None if args.sector_deg is None else math.radians(args.sector_deg),
+            )
+        try:
+            design = synthesize(args.method, v=args.v, L=args.L, alpha=args.alpha, beta=args.beta, region=region)
+        except SynthesisError as e:
+            flags = "--max-real/--disk/--sector-deg" if region is not None else f"--method {args.method}"
+            raise UsageError(f"{flags}: no design exists ({e})") from None
     out = design.to_dict()
     out.update(v=args.v, L=args.L)
     return out
@@ -128,27 +117,34 @@ def _cmd_synth(args) -> dict:
 
 
 def _parse_gains(controller: str, text: str | None) -> dict:
+    """``--gains``: every gain of the controller as comma-separated numbers in order, or some of
+    them as ``name=value`` pairs (the others keep their defaults); values checked by the library."""
     names = GAIN_NAMES[controller][1]
     if text is None:
         return {}
-    parts = [p.strip() for p in text.split(",") if p.strip()]
-    out = {}
-    if parts and all("=" in p for p in parts):
-        for p in parts:
-            k, v = (s.strip() for s in p.split("=", 1))
-            if k not in names:
-                raise UsageError(f"--gains: unknown gain {k!r} for --controller {controller}; expected {', '.join(names)}")
-            out[k] = v
+    parts = [p.strip() for p in text.split(",")]
+    if not any(parts):
+        raise UsageError(f"--gains: empty; expected {','.join(names)} or name=value pairs")
+    if "" in parts:
+        raise UsageError(f"--gains: an empty item in {text!r}")
+    named = ["=" in p for p in parts]
+    if any(named) and not all(named):
+        raise UsageError(f"--gains: mixes name=value pairs and bare numbers in {text!r}; use one form")
+    if all(named):
+        pairs = [tuple(s.strip() for s in p.split("=", 1)) for p in parts]
     else:
-        if not 1 <= len(parts) <= len(names):
-            raise UsageError(
-                f"--gains: expected up to {len(names)} comma-separated numbers ({','.join(names)}) "
-                f"for --controller {controller}, got {text!r}"
-            )
-        out = dict(zip(names, parts))
-    for k, v in out.items():
+        if len(parts) != len(names):
+            raise UsageError(f"--gains: expected all {len(names)} gains of --controller {controller} in order "
+                             f"({','.join(names)}), got {len(parts)}; give some as name=value pairs instead")
+        pairs = list(zip(names, parts))
+    out = {}
+    for k, v in pairs:
+        if k not in names:
+            raise UsageError(f"--gains: unknown gain {k!r} for --controller {controller}; expected {', '.join(names)}")
+        if k in out:
+            raise UsageError(f"--gains: {k} is given twice")
         try:
-            out[k] = _finite("--gains", float(v))
+            out[k] = float(v)
         except ValueError:
             raise UsageError(f"--gains: {k}={v!r} is not a number") from None
     return out
@@ -160,21 +156,29 @@ def _controller_and_gains(args):
     registry_name, names = GAIN_NAMES[args.controller]
     given = _parse_gains(args.controller, args.gains)
     controller, factory = C.REGISTRY[registry_name]
-    if args.controller in ("mixed", "paper-k"):
-        if given:
-            K = (given.get("k_d", C.PAPER_K[0]), given.get("k_theta", C.PAPER_K[1]))
-        elif args.controller == "paper-k":
-            K = C.PAPER_K
-        else:
-            from pfjax.synthesis import synthesize
+    with as_flags({"gains": "--gains", "K": "--gains"}):
+        if args.controller in ("mixed", "paper-k"):
+            if given:
+                K = (given.get("k_d", C.PAPER_K[0]), given.get("k_theta", C.PAPER_K[1]))
+            elif args.controller == "paper-k":
+                K = C.PAPER_K
+            else:
+                from pfjax.synthesis import synthesize
 
-            K = tuple(float(k) for k in synthesize("mixed", v=args.v, L=args.L).K.ravel())
-        gains = C.state_feedback_params(K)
-        shown = {"k_d": K[0], "k_theta": K[1]}
-    else:
-        gains = factory(**given)
-        shown = {k: float(v) for k, v in gains._asdict().items()}
+                with as_flags(SYNTH_FLAGS):
+                    K = tuple(float(k) for k in synthesize("mixed", v=args.v, L=args.L).K.ravel())
+            gains = factory(K=K)
+            shown = {"k_d": K[0], "k_theta": K[1]}
+        else:
+            gains = factory(**given)
+            shown = {k: float(v) for k, v in gains._asdict().items()}
     return controller, gains, shown
+
+
+#: ``pfjax simulate``'s flags by the library argument they set.
+SIMULATE_FLAGS = {"v": "--v", "L": "--L", "beta_r_deg": "--beta-r-deg", "beta_f_deg": "--beta-f-deg",
+                  "delta_max_deg": "--delta-max-deg", "pose0": "--x0", "horizon": "--T", "dt": "--dt",
+                  "control_every": "--control-every", "convention": "--convention", "gains": "--gains"}
 
 
 def _cmd_simulate(args) -> dict:
@@ -184,31 +188,18 @@ def _cmd_simulate(args) -> dict:
     from pfjax.scenarios import SCENARIOS, paper_scenario
     from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack
 
-    _finite("--v", args.v, positive=True, unit=" m/s")
-    _finite("--L", args.L, positive=True, unit=" m")
-    _finite("--beta-r-deg", args.beta_r_deg, below=90, unit=" deg")
-    _finite("--beta-f-deg", args.beta_f_deg, below=90, unit=" deg")
-    _finite("--delta-max-deg", args.delta_max_deg, positive=True, below=90, unit=" deg")
-    _finite("--T", args.T, positive=True, unit=" s")
-    _finite("--dt", args.dt, positive=True, unit=" s")
-    if args.dt > args.T:
-        raise UsageError(f"--dt: must be <= --T ({args.T:g} s), got {args.dt:g}")
-    if args.T / args.dt > 2_000_000:
-        raise UsageError(f"--T/--dt: at most 2e6 steps, got {args.T / args.dt:.3g}")
-    if args.control_every is not None and args.control_every < 1:
-        raise UsageError(f"--control-every: must be a positive integer, got {args.control_every}")
-    if args.x0 is not None:
-        for flag, value in zip(("--x0 X", "--x0 Y", "--x0 THETA"), args.x0):
-            _finite(flag, value)
-    controller, gains, shown = _controller_and_gains(args)
-
-    sc = paper_scenario(
-        args.path, gains, beta_r_deg=args.beta_r_deg, beta_f_deg=args.beta_f_deg,
-        pose0=None if args.x0 is None else tuple(args.x0), v=args.v, L=args.L,
-        delta_max_deg=args.delta_max_deg, convention=args.convention,
-    )
-    cfg = SimConfig(dt=args.dt, horizon=args.T, record=False,
-                    control_every=None if args.continuous else (args.control_every or 1))
+    if args.continuous and args.control_every is not None:
+        raise UsageError("--control-every: not with --continuous (a continuous controller is evaluated inside every "
+                         "RK4 stage, not sampled)")
+    with as_flags(SIMULATE_FLAGS):
+        cfg = SimConfig(dt=args.dt, horizon=args.T, record=False,
+                        control_every=None if args.continuous else (1 if args.control_every is None else args.control_every))
+        controller, gains, shown = _controller_and_gains(args)
+        sc = paper_scenario(
+            args.path, gains, beta_r_deg=args.beta_r_deg, beta_f_deg=args.beta_f_deg,
+            pose0=None if args.x0 is None else tuple(args.x0), v=args.v, L=args.L,
+            delta_max_deg=args.delta_max_deg, convention=args.convention,
+        )
     r = unstack(simulate_batch(stack([sc]), controller=controller, config=cfg), 0)
     status = int(r.status)
     metrics = {k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES}
@@ -234,20 +225,9 @@ def _cmd_simulate(args) -> dict:
 
 
 def _load_study_or_usage(args):
-    from pfjax.config import ConfigError
     from pfjax.montecarlo.config import load_study
 
-    try:
-        spec, _ = load_study(args.config, args.set)
-    except ConfigError as e:
-        raise UsageError(str(e)) from None
-    if args.out is not None:
-        out = Path(args.out)
-        if out.exists() and not out.is_dir():
-            raise UsageError(f"--out: {args.out} exists and is not a directory")
-        parent = next((q for q in out.absolute().parents if q.exists()), None)
-        if parent is not None and not parent.is_dir():
-            raise UsageError(f"--out: {parent} is a file, expected a directory to write {out.name} into")
+    spec, _ = load_study(args.config, args.set)
     return spec
 
 
@@ -296,15 +276,19 @@ def _distributed(args) -> tuple[int, int]:
             raise UsageError(f"--num-processes: expected >= 1, got {args.num_processes}")
         if not 0 <= args.process_id < args.num_processes:
             raise UsageError(f"--process-id: expected 0..{args.num_processes - 1}, got {args.process_id}")
+    timeout = _finite("--coordinator-timeout", args.coordinator_timeout, positive=True, unit=" s")
     import jax
 
     from pfjax.sim import sharding
 
     try:
-        sharding.initialize_distributed(args.coordinator, args.num_processes, args.process_id)
-    except Exception as e:  # cannot reach the coordinator, or no cluster to detect
+        with as_flags({"coordinator": "--coordinator"}):
+            sharding.initialize_distributed(args.coordinator, args.num_processes, args.process_id, timeout_s=timeout)
+    except InputError:
+        raise
+    except Exception as e:  # no cluster to detect, or JAX refused the settings
         flag = "--coordinator" if given else "--distributed"
-        raise UsageError(f"{flag}: could not join the distributed run ({str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__})") from None
+        raise UsageError(f"{flag}: could not join the distributed run ({one_line(e)})") from None
     return jax.process_index(), jax.process_count()
 
 
@@ -316,40 +300,35 @@ def _cmd_study(args) -> dict:
 
 
 def _study(args) -> dict:
-    from pfjax.config import ConfigError
+    from pfjax.montecarlo.runner import study_output
+    from pfjax.outputs import check_target
     from pfjax.report import figure_worker
 
+    from pfjax.montecarlo.checks import check_resources
+
     spec = _load_study_or_usage(args)
+    check_resources(spec, report=not args.no_report)  # every process alike, before any joins
+    output = study_output(spec, args.out, overwrite=args.overwrite)
     index, count = _distributed(args)
     lead = index == 0  # the process that writes; the others only lend their devices
+    if lead and count == 1:  # refused before anything starts (several processes: process 0 tells the others)
+        check_target(output.target, command=output.command, config_sha256=output.config_sha256,
+                     overwrite=args.overwrite)
     report = not args.no_report and lead
     # the figure worker imports matplotlib while this process imports JAX (both about 2 s)
     worker = figure_worker.FigureWorker() if report and not args.no_overlap and figure_worker.enabled() else None
     from pfjax.montecarlo.study import run
 
-    out = Path(args.out) if args.out else Path("results") / spec.name
     warn = lambda m: print(f"pfjax study: warning: {m}", file=sys.stderr)
-    try:
-        if not lead:  # simulates process 0's unfinished chunks with it, keeps nothing
-            from pfjax.montecarlo.processes import follow
+    if not lead:  # simulates process 0's unfinished chunks with it, keeps nothing
+        if worker is not None:
+            worker.close()
+        from pfjax.montecarlo.processes import follow
 
-            return {"process_index": index, "process_count": count, "written_by": "process 0", "chunks": follow(spec)}
-        controllers = None
-        if count > 1:  # tell the others which chunks are finished (resume) and the gains
-            from pfjax.montecarlo.processes import lead as hand_over
-
-            try:
-                controllers = hand_over(spec, out, fresh=args.fresh)
-            except BaseException:
-                if worker is not None:
-                    worker.close()
-                raise
-        summary = run(spec, out, progress=None if not args.quiet else False, report=report,
-                      fresh=args.fresh and count == 1, warn=warn, overlap=not args.no_overlap, worker=worker,
-                      controllers=controllers)
-    except ConfigError as e:
-        raise UsageError(str(e)) from None
-    head = _headline(summary, out)
+        return {"process_index": index, "process_count": count, "written_by": "process 0", "chunks": follow(spec)}
+    summary = run(spec, output, progress=None if not args.quiet else False, report=report, fresh=args.fresh,
+                  warn=warn, overlap=not args.no_overlap, worker=worker, distributed=count > 1)
+    head = _headline(summary, output.target)
     head.update(warnings=summary.get("warnings", []), chunks=summary.get("chunks"))
     if count > 1:
         head.update(process_count=count)
@@ -357,22 +336,18 @@ def _study(args) -> dict:
 
 
 def _cmd_report(args) -> dict:
-    import pandas as pd
-
     from pfjax.montecarlo.config import study_hash
-    from pfjax.report.study_report import write_report
+    from pfjax.montecarlo.study import rewrite_report
+    from pfjax.outputs import read_marker
 
     spec = _load_study_or_usage(args)
     out = Path(args.out) if args.out else Path("results") / spec.name
-    if not (out / "summary.json").is_file():
+    marker = read_marker(out) if out.is_dir() else None
+    if marker is None or marker.get("command") != "study":
         raise UsageError(f"--out: no finished study in {out} (run `pfjax study {args.config}` first)")
-    summary = json.loads((out / "summary.json").read_text())
-    if summary.get("config_sha256") != study_hash(spec):
+    if marker.get("config_sha256") != study_hash(spec):
         raise UsageError(f"config: {args.config} (with --set) does not match the study in {out} (config hash differs)")
-    runs = pd.read_parquet(out / "runs.parquet")
-    sweep = pd.read_parquet(out / "margin.parquet") if (out / "margin.parquet").is_file() else None
-    write_report(out, spec, summary, runs, sweep)
-    return {"report": str(out / "report.html")}
+    return {"report": str(rewrite_report(out, spec, overwrite=args.overwrite) / "report.html")}
 
 
 # --------------------------------------------------------------------------- main
@@ -426,6 +401,9 @@ def build_parser() -> argparse.ArgumentParser:
         st.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a config value; dotted keys, list items as controllers[0].gains.k (repeatable)")
         st.add_argument("--out", help="output directory (default results/<name>)")
+        st.add_argument("--overwrite", action="store_true",
+                        help="replace a pfjax output of another config or command in --out (pfjax never replaces "
+                             "anything it did not write)")
         if name == "study":
             st.add_argument("--no-report", action="store_true", help="skip report.html")
             st.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -442,6 +420,8 @@ def build_parser() -> argparse.ArgumentParser:
             dist.add_argument("--coordinator", metavar="HOST:PORT", help="address of process 0 (jax.distributed)")
             dist.add_argument("--num-processes", type=int, metavar="N", help="number of processes")
             dist.add_argument("--process-id", type=int, metavar="I", help="this process, 0..N-1 (0 writes)")
+            dist.add_argument("--coordinator-timeout", type=float, default=60.0, metavar="S",
+                              help="seconds to wait for the coordinator and the other processes (default 60)")
             dist.add_argument("--distributed", action="store_true",
                               help="join a distributed run whose coordinator, size and rank JAX detects (SLURM, Open MPI)")
         st.add_argument("--json", action="store_true", help="print one JSON object")
@@ -489,16 +469,17 @@ def main(argv=None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     cache.enable()
-    try:
+    resume = "re-run the same command to resume" if args.command == "study" else "nothing was written"
+
+    def body() -> int:
         out = args.func(args)
-    except UsageError as e:
-        print(f"pfjax {args.command}: error: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    if args.json:
-        print(dumps(out))
-    else:
-        _print_human(out)
-    return 0
+        if args.json:
+            print(dumps(out))
+        else:
+            _print_human(out)
+        return 0
+
+    return command_main(f"pfjax {args.command}", body, interrupted=resume)
 
 
 if __name__ == "__main__":

@@ -14,11 +14,15 @@ import difflib
 import hashlib
 import json
 import math
+import re
 import tomllib
 from pathlib import Path
 
+from pfjax import errors
+from pfjax.errors import InputError
 
-class ConfigError(ValueError):
+
+class ConfigError(InputError):
     """A configuration error; the message is one line and names the key."""
 
 
@@ -28,17 +32,26 @@ def _type_name(v) -> str:
     )
 
 
+def _short(value, limit: int = 60) -> str:
+    """``repr(value)``, cut to ``limit`` characters (a 400-digit number stays one readable line)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit - 15]}... ({len(text)} characters)"
+
+
 def _check(key: str, value, default):
     if isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, float):
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         if ok:
-            value = float(value)
-            if not math.isfinite(value):
-                raise ConfigError(f"{key}: expected a finite number, got {value}")
+            try:
+                value = errors.number(key, value)  # finite, within pfjax's magnitude bounds
+            except InputError as e:
+                raise ConfigError(str(e)) from None
     elif isinstance(default, int):
         ok = isinstance(value, int) and not isinstance(value, bool)
+        if ok and abs(value) > errors.MAX_SEED:
+            raise ConfigError(f"{key}: expected an integer of magnitude <= 2**63 - 1, got one of {len(str(abs(value)))} digits")
     elif isinstance(default, list):
         ok = isinstance(value, list) and (not default or len(value) == len(default))
         if ok and default:
@@ -47,7 +60,7 @@ def _check(key: str, value, default):
         ok = isinstance(value, type(default))
     if not ok:
         extra = f" of length {len(default)}" if isinstance(default, list) and default else ""
-        raise ConfigError(f"{key}: expected {_type_name(default)}{extra}, got {value!r}")
+        raise ConfigError(f"{key}: expected {_type_name(default)}{extra}, got {_short(value)}")
     return value
 
 
@@ -67,13 +80,21 @@ def _merge(base: dict, update: dict, prefix: str = "") -> dict:
     return out
 
 
+#: One part of a ``--set`` key: a name, optionally a list index (``controllers[0]``).
+KEY_PART = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\[-?[0-9]{1,9}\])?$")
+
+
 def parse_override(text: str) -> dict:
-    """``"a.b=3"`` -> ``{"a": {"b": 3}}``; the value is parsed as TOML (bare words as strings)."""
-    if "=" not in text:
+    """``"a.b=3"`` -> ``{"a": {"b": 3}}``; the value is parsed as TOML (bare words as strings).
+    Keys are dotted names, list items written ``name[index]`` (``controllers[0].gains.k``)."""
+    if not isinstance(text, str) or "=" not in text:
         raise ConfigError(f"--set: expected key=value, got {text!r}")
     key, raw = (s.strip() for s in text.split("=", 1))
     if not key:
         raise ConfigError(f"--set: empty key in {text!r}")
+    bad = next((p for p in key.split(".") if not KEY_PART.match(p)), None)
+    if bad is not None:
+        raise ConfigError(f"--set: malformed key {key!r} at {bad!r} (expected dotted names, list items as name[0])")
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
@@ -87,15 +108,28 @@ def parse_override(text: str) -> dict:
     return out
 
 
-def read_toml(path: str | Path) -> dict:
-    """A TOML file as a dict; ConfigError (one line) if it is missing or not valid TOML."""
+def read_text(path: str | Path, key: str = "config") -> str:
+    """A UTF-8 text file's contents; ConfigError (one line naming ``key``) if it is missing, not a
+    file, unreadable or not UTF-8."""
     p = Path(path)
     if not p.is_file():
-        raise ConfigError(f"config: file not found: {p}")
+        raise ConfigError(f"{key}: file not found: {p}" if not p.exists() else f"{key}: {p} is not a file")
     try:
-        return tomllib.loads(p.read_text())
+        return p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{key}: {p} is not UTF-8 text (byte {e.start}: {e.reason})") from None
+    except OSError as e:
+        raise ConfigError(f"{key}: {p} cannot be read ({e.strerror})") from None
+
+
+def read_toml(path: str | Path, key: str = "config") -> dict:
+    """A TOML file as a dict; ConfigError (one line) if it is missing, unreadable, not UTF-8 or not
+    valid TOML."""
+    text = read_text(path, key)
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"config: {p}: invalid TOML ({e})") from None
+        raise ConfigError(f"{key}: {path}: invalid TOML ({e})") from None
 
 
 def load(defaults: dict, path: str | Path | None = None, overrides: list[str] = ()) -> dict:

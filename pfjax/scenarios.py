@@ -15,8 +15,11 @@ from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 
+from pfjax import errors
+from pfjax.errors import InputError
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
 from pfjax.paths import shapes
 from pfjax.sim.simulate import Scenario
@@ -34,11 +37,41 @@ SCENARIOS = {
 }
 
 
+def check_gains(gains, key: str = "gains") -> None:
+    """:class:`~pfjax.errors.InputError` naming ``key.<field>`` unless every gain is a finite number
+    within pfjax's magnitude bound (a controller's parameter NamedTuple, or any pytree of numbers)."""
+    fields = gains._asdict().items() if hasattr(gains, "_asdict") else [("", gains)]
+    for name, value in fields:
+        for leaf in jax.tree_util.tree_leaves(value):
+            errors.numbers(f"{key}.{name}" if name else key, leaf)
+
+
 def make_scenario(path, pose0, gains, *, slip: SlipProfile | None = None, v=1.0, L=0.2,
                   delta_max_deg=30.0, convention="source") -> Scenario:
-    """One scenario from plain values (angles in ``pose0`` in rad; ``delta_max_deg`` in degrees)."""
+    """One scenario from plain values, checked (:class:`~pfjax.errors.InputError` naming the
+    argument: ``v`` and ``L`` > 0, ``0 < delta_max_deg < 90``, ``pose0`` three finite numbers, slip
+    angles below 90 deg, gains finite).
+
+    Args:
+        path: a path shape (:mod:`pfjax.paths.shapes`).
+        pose0: start pose ``(x, y, theta)``, m, m, rad.
+        gains: the controller's parameter pytree.
+        slip: slip profile (rad); default none.
+        v: speed, m/s. L: wheelbase, m. delta_max_deg: steering limit, deg.
+        convention: front-slip sign convention, ``"source"`` or ``"lenain"``.
+    """
     if convention not in CONVENTIONS:
-        raise ValueError(f"convention: expected one of {sorted(CONVENTIONS)}, got {convention!r}")
+        raise InputError(f"convention: expected one of {sorted(CONVENTIONS)}, got {convention!r}")
+    errors.numbers("v", v, positive=True, unit=" m/s")
+    errors.numbers("L", L, positive=True, unit=" m")
+    errors.numbers("delta_max_deg", delta_max_deg, positive=True, below=90, unit=" deg")
+    if not errors.is_traced(pose0) and (not hasattr(pose0, "__len__") or len(pose0) != 3):
+        raise InputError(f"pose0: expected (x, y, theta), got {pose0!r}")
+    for name, value in zip(("pose0[0]", "pose0[1]", "pose0[2]"), pose0):
+        errors.numbers(name, value)
+    if slip is not None:
+        errors.numbers("slip.constant", slip.constant, below=math.pi / 2, unit=" rad")
+    check_gains(gains)
     f = lambda a: jnp.asarray(a, dtype=float)
     return Scenario(
         pose0=Pose(*(f(a) for a in pose0)),
@@ -52,9 +85,12 @@ def make_scenario(path, pose0, gains, *, slip: SlipProfile | None = None, v=1.0,
 
 def paper_scenario(test: str, gains, *, beta_r_deg=PAPER_SLIP_DEG, beta_f_deg=PAPER_SLIP_DEG, pose0=None,
                    **kwargs) -> Scenario:
-    """The source's ``test`` ("line", "parabola", "sine"; or pfjax's "circle") with constant slip."""
+    """The source's ``test`` ("line", "parabola", "sine"; or pfjax's "circle") with constant slip
+    ``beta_r_deg``, ``beta_f_deg`` (deg, magnitude below 90); ``kwargs`` as :func:`make_scenario`."""
     if test not in SCENARIOS:
-        raise ValueError(f"path: expected one of {sorted(SCENARIOS)}, got {test!r}")
+        raise InputError(f"path: expected one of {sorted(SCENARIOS)}, got {test!r}")
+    errors.numbers("beta_r_deg", beta_r_deg, below=90, unit=" deg")
+    errors.numbers("beta_f_deg", beta_f_deg, below=90, unit=" deg")
     factory, default_pose = SCENARIOS[test]
     slip = constant_slip(math.radians(beta_r_deg), math.radians(beta_f_deg))
     return make_scenario(factory(), default_pose if pose0 is None else pose0, gains, slip=slip, **kwargs)

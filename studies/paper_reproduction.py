@@ -15,9 +15,7 @@ from __future__ import annotations
 import argparse
 import math
 import platform
-import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -37,10 +35,12 @@ from tqdm import tqdm  # noqa: E402
 
 from pfjax import controllers as C  # noqa: E402
 from pfjax.analysis import equilibrium, stability_map  # noqa: E402
-from pfjax.cli import dumps  # noqa: E402
 from pfjax.config import ConfigError, config_hash, load  # noqa: E402
+from pfjax.errors import command_main  # noqa: E402
+from pfjax.jsonio import dumps  # noqa: E402
 from pfjax.models import SlipParams  # noqa: E402
 from pfjax.paths import curvature, global_parameter  # noqa: E402
+from pfjax.outputs import OutputDir, check_name  # noqa: E402
 from pfjax.report import figures  # noqa: E402
 from pfjax.paths import shapes  # noqa: E402
 from pfjax.scenarios import PAPER_TESTS, SCENARIOS, make_scenario, paper_scenario  # noqa: E402
@@ -441,39 +441,48 @@ def main(argv=None) -> int:
     ap.add_argument("--config", default=str(ROOT / "studies" / "paper_reproduction.toml"))
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value (dotted keys)")
     ap.add_argument("--out", help="output directory (default results/<name>)")
+    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
     args = ap.parse_args(argv)
-    try:
-        cfg = load(DEFAULTS, args.config, args.set)
-        if cfg["model"]["convention"] not in ("source", "lenain"):
-            raise ConfigError(f"model.convention: expected 'source' or 'lenain', got {cfg['model']['convention']!r}")
-        for key in ("v", "L"):
-            if cfg["model"][key] <= 0:
-                raise ConfigError(f"model.{key}: must be > 0, got {cfg['model'][key]:g}")
-        for key in ("beta_r_deg", "beta_f_deg", "delta_max_deg"):
-            if abs(cfg["model"][key]) >= 90:
-                raise ConfigError(f"model.{key}: magnitude must be < 90 deg, got {cfg['model'][key]:g}")
-        if cfg["sim"]["dt"] <= 0 or cfg["sim"]["horizon"] < cfg["sim"]["dt"]:
-            raise ConfigError(f"sim.dt/sim.horizon: need 0 < dt <= horizon, got {cfg['sim']['dt']:g}, {cfg['sim']['horizon']:g}")
-        if cfg["sim"]["horizon"] <= 5.0:  # sine_error_analysis looks at t >= 5 s
-            raise ConfigError(f"sim.horizon: must be > 5 s (the sine-error analysis uses t >= 5 s), got {cfg['sim']['horizon']:g}")
-        if cfg["sim"]["control_every"] < 0:
-            raise ConfigError(f"sim.control_every: must be >= 0 (0: continuous), got {cfg['sim']['control_every']}")
-        if cfg["stability"]["horizon"] < cfg["sim"]["dt"]:
-            raise ConfigError(f"stability.horizon: must be >= sim.dt ({cfg['sim']['dt']:g} s), got {cfg['stability']['horizon']:g}")
-        if not 0 < cfg["sim"]["steady_window"] <= cfg["sim"]["horizon"]:
-            raise ConfigError(f"sim.steady_window: must be in (0, sim.horizon], got {cfg['sim']['steady_window']:g}")
-        if cfg["sim"]["settle_band"] <= 0:
-            raise ConfigError(f"sim.settle_band: must be > 0 m, got {cfg['sim']['settle_band']:g}")
-        if cfg["stability"]["n"] < 2:
-            raise ConfigError(f"stability.n: must be >= 2, got {cfg['stability']['n']}")
-    except ConfigError as e:
-        print(f"paper_reproduction: error: {e}", file=sys.stderr)
-        return 2
+    return command_main("paper_reproduction", lambda: run(args))
+
+
+def check(cfg: dict) -> None:
+    """ConfigError (one line naming the key) for values the schema's types do not exclude."""
+    if cfg["model"]["convention"] not in ("source", "lenain"):
+        raise ConfigError(f"model.convention: expected 'source' or 'lenain', got {cfg['model']['convention']!r}")
+    for key in ("v", "L"):
+        if cfg["model"][key] <= 0:
+            raise ConfigError(f"model.{key}: must be > 0, got {cfg['model'][key]:g}")
+    for key in ("beta_r_deg", "beta_f_deg", "delta_max_deg"):
+        if abs(cfg["model"][key]) >= 90:
+            raise ConfigError(f"model.{key}: magnitude must be < 90 deg, got {cfg['model'][key]:g}")
+    if cfg["sim"]["dt"] <= 0 or cfg["sim"]["horizon"] < cfg["sim"]["dt"]:
+        raise ConfigError(f"sim.dt/sim.horizon: need 0 < dt <= horizon, got {cfg['sim']['dt']:g}, {cfg['sim']['horizon']:g}")
+    if cfg["sim"]["horizon"] <= 5.0:  # sine_error_analysis looks at t >= 5 s
+        raise ConfigError(f"sim.horizon: must be > 5 s (the sine-error analysis uses t >= 5 s), got {cfg['sim']['horizon']:g}")
+    if cfg["sim"]["control_every"] < 0:
+        raise ConfigError(f"sim.control_every: must be >= 0 (0: continuous), got {cfg['sim']['control_every']}")
+    if cfg["stability"]["horizon"] < cfg["sim"]["dt"]:
+        raise ConfigError(f"stability.horizon: must be >= sim.dt ({cfg['sim']['dt']:g} s), got {cfg['stability']['horizon']:g}")
+    if not 0 < cfg["sim"]["steady_window"] <= cfg["sim"]["horizon"]:
+        raise ConfigError(f"sim.steady_window: must be in (0, sim.horizon], got {cfg['sim']['steady_window']:g}")
+    if cfg["sim"]["settle_band"] <= 0:
+        raise ConfigError(f"sim.settle_band: must be > 0 m, got {cfg['sim']['settle_band']:g}")
+    if cfg["stability"]["n"] < 2:
+        raise ConfigError(f"stability.n: must be >= 2, got {cfg['stability']['n']}")
+
+
+def run(args) -> int:
+    cfg = load(DEFAULTS, args.config, args.set)
+    check(cfg)
+    check_name("name", cfg["name"])
     out = Path(args.out) if args.out else ROOT / "results" / cfg["name"]
     t0 = time.time()
-    # Write into a temporary directory and move it into place at the end: nothing half-written.
-    tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=out.parent if out.parent.exists() else None))
-    try:
+    # Assembled beside the target and moved into place at the end: nothing half-written, nothing
+    # that pfjax did not write replaced (pfjax.outputs).
+    with OutputDir(out, command="paper-reproduction", config_sha256=config_hash(cfg), overwrite=args.overwrite,
+                   extra={"seed": cfg["seed"]}) as output:
+        tmp = output.staging
         with tqdm(total=3 * (6 if cfg["trackers"] else 3) + 3 + 1, desc="paper reproduction", disable=None) as pbar:
             syn = part_synthesis(cfg)
             rows, trajs = part_paper_runs(cfg, syn["ours"]["K"], pbar)
@@ -518,14 +527,7 @@ def main(argv=None) -> int:
                    "stability": stab, "sine_error": sine_out, "verdicts": verdict_rows}
         (tmp / "summary.json").write_text(dumps(summary) + "\n")
         write_report(tmp, cfg, syn, rows, pi_df, stab, verdict_rows, figs, stamp)
-        if out.exists():
-            shutil.rmtree(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp.chmod(0o755)
-        tmp.rename(out)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
+        output.commit()
     print(f"wrote {out} ({time.time() - t0:.0f} s)")
     for v in verdict_rows:
         print(f"  [{v['verdict']:>13s}] {v['claim']}")

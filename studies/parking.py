@@ -16,9 +16,7 @@ from __future__ import annotations
 import argparse
 import math
 import platform
-import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -36,8 +34,10 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from pfjax.cli import dumps  # noqa: E402
 from pfjax.config import ConfigError, config_hash, load  # noqa: E402
+from pfjax.errors import command_main  # noqa: E402
+from pfjax.jsonio import dumps  # noqa: E402
+from pfjax.outputs import OutputDir, check_name  # noqa: E402
 from pfjax.parking import figures as F  # noqa: E402
 from pfjax.parking.calibrate import calibrate_front, simulated_first_switch  # noqa: E402
 from pfjax.parking.maps import GARAGE, PARALLEL, to_obstacle_map  # noqa: E402
@@ -104,29 +104,25 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out")
     ap.add_argument("--quick", action="store_true", help="small sizes (tests)")
+    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
     args = ap.parse_args(argv)
-    try:
-        cfg = load(DEFAULTS, args.config, args.set)
-        if args.quick:
-            for sec, vals in QUICK.items():
-                cfg[sec].update(vals)
-            cfg["start_map"]["x0"], cfg["start_map"]["theta0_deg"] = [-1.3, -0.9], [-80.0, 40.0]
-            cfg["sensitivity"]["fronts"], cfg["sensitivity"]["scan_periods"] = [0.15, 0.2], [0.1]
-        validate(cfg)
-    except ConfigError as e:
-        print(f"parking: error: {e}", file=sys.stderr)
-        return 2
+    return command_main("parking", lambda: run(args))
+
+
+def run(args) -> int:
+    cfg = load(DEFAULTS, args.config, args.set)
+    if args.quick:
+        for sec, vals in QUICK.items():
+            cfg[sec].update(vals)
+        cfg["start_map"]["x0"], cfg["start_map"]["theta0_deg"] = [-1.3, -0.9], [-80.0, 40.0]
+        cfg["sensitivity"]["fronts"], cfg["sensitivity"]["scan_periods"] = [0.15, 0.2], [0.1]
+    validate(cfg)
+    check_name("name", cfg["name"])
     out = Path(args.out) if args.out else ROOT / "results" / cfg["name"]
-    tmp = Path(tempfile.mkdtemp(prefix=".parking-", dir=out.parent if out.parent.exists() else None))
-    try:
-        summary = run_study(cfg, tmp, quick=args.quick)
-        if out.exists():
-            shutil.rmtree(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        shutil.move(str(tmp), str(out))
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
+    with OutputDir(out, command="parking-study", config_sha256=config_hash(cfg), overwrite=args.overwrite,
+                   extra={"seed": cfg["seed"]}) as output:
+        summary = run_study(cfg, output.staging, quick=args.quick)
+        out = output.commit()
     print(f"wrote {out} in {summary['wall_s']:.1f} s")
     return 0
 

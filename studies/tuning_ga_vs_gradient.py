@@ -4,8 +4,10 @@
                                             [--out results/tuning] [--quick]
 
 Writes ``summary.json``, ``tuning_runs.parquet`` (cost history of every GA / gradient run),
-``heldout.parquet`` (one row per held-out run and controller), ``margin.parquet``,
-``figures/*.png|svg`` and ``report.md`` into a temporary directory moved into place at the end.
+``heldout.parquet`` (one row per held-out run and controller), ``margin.parquet`` (the slip-margin
+sweep's successes ``k`` of ``n`` runs per controller, axis and amplitude), ``figures/*.png|svg`` and
+``report.md``, assembled beside the output directory and moved into place at the end
+(:class:`pfjax.outputs.OutputDir`).
 """
 
 from __future__ import annotations
@@ -15,9 +17,7 @@ import dataclasses
 import json
 import math
 import platform
-import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -33,6 +33,9 @@ import pandas as pd  # noqa: E402
 
 from pfjax import __version__  # noqa: E402
 from pfjax.config import ConfigError, config_hash, load  # noqa: E402
+from pfjax.errors import command_main  # noqa: E402
+from pfjax.jsonio import dumps  # noqa: E402
+from pfjax.outputs import OutputDir  # noqa: E402
 
 DEFAULTS = {
     "heldout": "studies/tuning_heldout.toml",
@@ -328,8 +331,6 @@ def run(cfg: dict, out: Path, progress: bool) -> dict:
         tab = pa.Table.from_pandas(frame, preserve_index=False)
         pq.write_table(tab.replace_schema_metadata({**(tab.schema.metadata or {}), **meta}), out / f"{name}.parquet")
     _figures(hist, out)
-    from pfjax.cli import dumps
-
     (out / "summary.json").write_text(dumps(summary) + "\n")
     (out / "report.md").write_text(_report(summary))
     return summary
@@ -341,25 +342,19 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default=None)
     ap.add_argument("--quick", action="store_true", help="tiny sizes (seconds of simulation; used by the tests)")
+    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
     args = ap.parse_args(argv)
-    try:
-        cfg = load(DEFAULTS, args.config, (QUICK if args.quick else []) + args.set)
-        _validate(cfg)
-    except ConfigError as e:
-        print(f"tuning_ga_vs_gradient: error: {e}", file=sys.stderr)
-        return 2
+    return command_main("tuning_ga_vs_gradient", lambda: main_checked(args))
+
+
+def main_checked(args) -> int:
+    cfg = load(DEFAULTS, args.config, (QUICK if args.quick else []) + args.set)
+    _validate(cfg)
     out = Path(args.out or ("results/tuning_quick" if args.quick else "results/tuning"))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
-    try:
-        summary = run(cfg, tmp, progress=sys.stderr.isatty())
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.chmod(0o755)
-        tmp.rename(out)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
+    with OutputDir(out, command="tuning-study", config_sha256=config_hash(cfg), overwrite=args.overwrite,
+                   extra={"seeds": cfg["seeds"]}) as output:
+        summary = run(cfg, output.staging, progress=sys.stderr.isatty())
+        out = output.commit()
     print(json.dumps({"out": str(out), "wall_s": round(summary["wall_s"], 1), "targets": summary["targets"]}, indent=1))
     return 0
 

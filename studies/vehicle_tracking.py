@@ -15,9 +15,7 @@ from __future__ import annotations
 import argparse
 import math
 import platform
-import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -33,8 +31,10 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from pfjax.cli import dumps  # noqa: E402
 from pfjax.config import ConfigError, config_hash, load, parse_override, read_toml  # noqa: E402
+from pfjax.errors import command_main  # noqa: E402
+from pfjax.jsonio import dumps  # noqa: E402
+from pfjax.outputs import OutputDir, check_name  # noqa: E402
 from pfjax.metrics.robustness import metric_quantiles, success_summary  # noqa: E402
 from pfjax.tracking import batches as B  # noqa: E402
 from pfjax.tracking import report as R  # noqa: E402
@@ -55,41 +55,55 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out")
     ap.add_argument("--quick", action="store_true", help="small grid and sample (for tests)")
+    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
     args = ap.parse_args(argv)
-    try:
-        defaults = read_toml(DEFAULT_TOML)
-        for k in GRID_AXES:  # grid axes: any length (checked below)
-            defaults["lemma"][k] = []
-        cfg = load(defaults, args.config)
-        for text in (QUICK if args.quick else []) + args.set:  # a grid axis may change length
-            lem = parse_override(text).get("lemma", {})
-            for k in GRID_AXES:
-                if isinstance(lem, dict) and k in lem:
-                    cfg["lemma"][k] = []
-            cfg = load(cfg, None, [text])
-        for k in ("p", "l_abs", "gamma_max_deg"):
-            v = cfg["lemma"][k]
-            if not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v):
-                raise ConfigError(f"lemma.{k}: expected a non-empty list of numbers, got {v!r}")
-            cfg["lemma"][k] = [float(x) for x in v]
-        offs = cfg["lemma"]["offsets"]
-        if not offs or not all(isinstance(o, list) and len(o) == 2 and all(isinstance(x, (int, float)) for x in o) for o in offs):
-            raise ConfigError(f"lemma.offsets: expected a non-empty list of [along, left] pairs, got {offs!r}")
-        cfg["lemma"]["offsets"] = [[float(x) for x in o] for o in offs]
-        for key, vals in (("lemma.p", cfg["lemma"]["p"]), ("lemma.l_abs", cfg["lemma"]["l_abs"])):
-            if any(v == 0 for v in vals):
-                raise ConfigError(f"{key}: values must be nonzero, got {vals}")
-        if not all(0 < g < 90 for g in cfg["lemma"]["gamma_max_deg"] + [cfg["mc"]["gamma_max_deg"]]):
-            raise ConfigError("lemma.gamma_max_deg / mc.gamma_max_deg: expected values in (0, 90) deg")
-        for k in ("dt", "horizon", "window", "tol_z", "tol_phi", "band", "k", "a"):
-            if cfg["sim"][k] <= 0:
-                raise ConfigError(f"sim.{k}: must be > 0, got {cfg['sim'][k]}")
-        if cfg["mc"]["n_runs"] < 1:
-            raise ConfigError(f"mc.n_runs: must be >= 1, got {cfg['mc']['n_runs']}")
-    except ConfigError as e:
-        print(f"vehicle_tracking: error: {e}", file=sys.stderr)
-        return 2
+    return command_main("vehicle_tracking", lambda: run(args))
+
+
+def load_config(args) -> dict:
+    """The validated config (defaults <- --config <- --set); ConfigError naming the key."""
+    defaults = read_toml(DEFAULT_TOML)
+    for k in GRID_AXES:  # grid axes: any length (checked below)
+        defaults["lemma"][k] = []
+    cfg = load(defaults, args.config)
+    for text in (QUICK if args.quick else []) + args.set:  # a grid axis may change length
+        lem = parse_override(text).get("lemma", {})
+        for k in GRID_AXES:
+            if isinstance(lem, dict) and k in lem:
+                cfg["lemma"][k] = []
+        cfg = load(cfg, None, [text])
+    for k in ("p", "l_abs", "gamma_max_deg"):
+        v = cfg["lemma"][k]
+        if not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v):
+            raise ConfigError(f"lemma.{k}: expected a non-empty list of numbers, got {v!r}")
+        cfg["lemma"][k] = [float(x) for x in v]
+    offs = cfg["lemma"]["offsets"]
+    if not offs or not all(isinstance(o, list) and len(o) == 2 and all(isinstance(x, (int, float)) for x in o) for o in offs):
+        raise ConfigError(f"lemma.offsets: expected a non-empty list of [along, left] pairs, got {offs!r}")
+    cfg["lemma"]["offsets"] = [[float(x) for x in o] for o in offs]
+    for key, vals in (("lemma.p", cfg["lemma"]["p"]), ("lemma.l_abs", cfg["lemma"]["l_abs"])):
+        if any(v == 0 for v in vals):
+            raise ConfigError(f"{key}: values must be nonzero, got {vals}")
+    if not all(0 < g < 90 for g in cfg["lemma"]["gamma_max_deg"] + [cfg["mc"]["gamma_max_deg"]]):
+        raise ConfigError("lemma.gamma_max_deg / mc.gamma_max_deg: expected values in (0, 90) deg")
+    for k in ("dt", "horizon", "window", "tol_z", "tol_phi", "band", "k", "a"):
+        if cfg["sim"][k] <= 0:
+            raise ConfigError(f"sim.{k}: must be > 0, got {cfg['sim'][k]}")
+    if cfg["mc"]["n_runs"] < 1:
+        raise ConfigError(f"mc.n_runs: must be >= 1, got {cfg['mc']['n_runs']}")
+    return cfg
+
+
+def run(args) -> int:
+    cfg = load_config(args)
+    check_name("name", cfg["name"])
     out = Path(args.out) if args.out else ROOT / "results" / cfg["name"]
+    with OutputDir(out, command="vehicle-tracking", config_sha256=config_hash(cfg), overwrite=args.overwrite,
+                   extra={"seed": cfg["seed"]}) as output:
+        return study(cfg, args, output)
+
+
+def study(cfg: dict, args, output) -> int:
     t0 = time.time()
     s = cfg["sim"]
     tcfg = TrackConfig(dt=s["dt"], horizon=s["horizon"], window=s["window"], tol_z=s["tol_z"], tol_phi=s["tol_phi"],
@@ -144,23 +158,16 @@ def main(argv=None) -> int:
         "lemma_grid": {"n_runs": int(len(lemma_df)), "table": table.to_dict(orient="records")},
         "geometry": geometry, "monte_carlo": mc_summary,
     }
-    tmp = Path(tempfile.mkdtemp(prefix=".vehicle_tracking.", dir=out.parent if out.parent.exists() else None))
-    try:
-        meta = {"config_sha256": summary["config_sha256"], "seed": str(cfg["seed"]), "pfjax_version": pfjax.__version__}
-        for name, df in (("lemma_runs", lemma_df), ("lemma_table", table), ("geometry", geo), ("mc_runs", mc)):
-            R.write_parquet(df, tmp / f"{name}.parquet", meta)
-        table.to_csv(tmp / "lemma_table.csv", index=False)
-        summary["figures"] = R.write_figures(tmp / "figures", cfg, lemma_df, geo, mc)
-        summary["wall_s"] = time.time() - t0
-        (tmp / "summary.json").write_text(dumps(summary))
-        R.write_report(tmp, summary, table, lemma_df)
-        if out.exists():
-            shutil.rmtree(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp.rename(out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    tmp = output.staging
+    meta = {"config_sha256": summary["config_sha256"], "seed": str(cfg["seed"]), "pfjax_version": pfjax.__version__}
+    for name, df in (("lemma_runs", lemma_df), ("lemma_table", table), ("geometry", geo), ("mc_runs", mc)):
+        R.write_parquet(df, tmp / f"{name}.parquet", meta)
+    table.to_csv(tmp / "lemma_table.csv", index=False)
+    summary["figures"] = R.write_figures(tmp / "figures", cfg, lemma_df, geo, mc)
+    summary["wall_s"] = time.time() - t0
+    (tmp / "summary.json").write_text(dumps(summary))
+    R.write_report(tmp, summary, table, lemma_df)
+    out = output.commit()
     print(dumps({"out": str(out), "wall_s": summary["wall_s"], "lemma_table": summary["lemma_grid"]["table"],
                  "geometry": geometry, "monte_carlo": {k: {kk: v[kk] for kk in ("n", "success_rate", "success_ci95", "status_counts")}
                                                       for k, v in mc_summary.items()}}))

@@ -216,9 +216,14 @@ def test_gains_positional_and_named(capsys):
     s1 = run_main(capsys, *short, "--gains", "1.5,0.2")
     s2 = run_main(capsys, *short, "--gains", "k_soft=0.2,k=1.5")
     assert s1 == s2 and s1["gains"] == {"k": 1.5, "k_soft": 0.2}
-    s3 = run_main(capsys, *short, "--gains", "1.5")  # a prefix: the rest at defaults
+    s3 = run_main(capsys, *short, "--gains", "k=1.5")  # a named subset: the rest at defaults
     assert s3["gains"] == {"k": 1.5, "k_soft": 0.1}
     assert s3["final"] != s1["final"]
+    # a bare prefix is refused (which gains it meant is a guess), and so is a gain given twice
+    for gains, say in (("1.5", "expected all 2 gains"), ("k=1,k=2", "k is given twice"), ("1,k=2", "mixes")):
+        assert main([*short, "--gains", gains]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("pfjax simulate: error: --gains: ") and say in err[0], err
 
 
 # ------------------------------------------------------------------ usage errors

@@ -137,20 +137,29 @@ def test_two_processes_resume_process_0s_interrupted_run(tmp_path, monkeypatch):
         np.testing.assert_allclose(a[num].to_numpy(), b[num].to_numpy(), rtol=1e-12, atol=1e-12)
 
 
-def test_a_refused_resume_stops_every_process_with_one_line(tmp_path):
-    """Process 0's partial directory holds another config's chunks: process 0 refuses (one line
-    naming --out, exit 2) and sends the error, so process 1 stops with it instead of waiting."""
+@pytest.mark.parametrize("case", ["other config's chunks", "a user directory"])
+def test_a_refused_resume_stops_every_process_with_one_line(case, tmp_path):
+    """Process 0 refuses its --out (its partial directory holds another config's chunks, or --out is
+    a directory pfjax did not write): one line naming --out, exit 2, and it sends the error, so
+    process 1 stops with it instead of waiting."""
     cfg = tmp_path / "dist.toml"
     cfg.write_text(STUDY)
     out = tmp_path / "out"
-    partial_dir(out).mkdir()
-    (partial_dir(out) / "manifest.json").write_text(json.dumps({"config_sha256": "0" * 64, "pfjax_version": "0"}))
+    if case == "a user directory":
+        out.mkdir()
+        (out / "thesis.tex").write_text("data")
+    else:
+        partial_dir(out).mkdir()
+        (partial_dir(out) / "manifest.json").write_text(json.dumps({"config_sha256": "0" * 64, "pfjax_version": "0"}))
+        (partial_dir(out) / "runs-p000-c000-0000000000.parquet").write_bytes(b"a finished chunk")
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
     procs, outs = _pair(cfg, out, {**os.environ, "PFJAX_FIGURE_WORKER": "0"})
     assert [p.returncode for p in procs] == [EXIT_USAGE, EXIT_USAGE], [o[1][-2000:] for o in outs]
     for _, err in outs:
         line = [x for x in err.strip().splitlines() if x.startswith("pfjax study:")]
-        assert len(line) == 1 and line[0].startswith("pfjax study: error: --out: ") and "--fresh" in line[0], err[-2000:]
-    assert not out.exists()
+        assert len(line) == 1 and line[0].startswith("pfjax study: error: --out: "), err[-2000:]
+        assert ("--fresh" in line[0]) == (case != "a user directory"), line
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
 
 
 @pytest.mark.parametrize("flags, flag", [

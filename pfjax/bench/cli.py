@@ -18,6 +18,8 @@ def register(sub) -> None:
     p.add_argument("--sizes", default=None, help="comma-separated pfjax batch sizes (default 1000,10000,100000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random batch")
     p.add_argument("--out", default="results/bench", help="output directory (default results/bench)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a pfjax output of another config or command in --out (never anything else)")
     p.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     p.set_defaults(func=_cmd)
 
@@ -26,34 +28,31 @@ def _sizes(text: str):
     from pfjax.cli import UsageError
 
     try:
-        sizes = tuple(int(s) for s in text.split(","))
+        return tuple(int(s) for s in text.split(","))
     except ValueError:
         raise UsageError(f"--sizes: value {text!r}, expected comma-separated positive integers") from None
-    if not sizes or min(sizes) < 1:
-        raise UsageError(f"--sizes: value {text!r}, expected comma-separated positive integers")
-    return sizes
 
 
 def _cmd(args) -> dict:
     from dataclasses import replace
 
-    from pfjax.cli import UsageError
-
     from pfjax.bench.run import QUICK, BenchConfig
+    from pfjax.cli import as_flags
 
     cfg = QUICK if args.quick else BenchConfig()
-    if args.sizes is not None:
-        sizes = _sizes(args.sizes)
-        cfg = replace(cfg, sizes=sizes, ref_size=min(cfg.ref_size, max(sizes)), ref_numpy=min(cfg.ref_numpy, max(sizes)))
-    if args.seed < 0:
-        raise UsageError(f"--seed: value {args.seed}, expected an integer >= 0")
-    cfg = replace(cfg, seed=args.seed)
+    with as_flags({"sizes": "--sizes", "seed": "--seed"}):
+        if args.sizes is not None:
+            sizes = _sizes(args.sizes)
+            cfg = replace(cfg, sizes=sizes, ref_size=min(cfg.ref_size, max(sizes, default=1)),
+                          ref_numpy=min(cfg.ref_numpy, max(sizes, default=1)))
+        cfg = replace(cfg, seed=args.seed)
 
     from pfjax.bench import report, run
 
-    t0 = time.perf_counter()
-    say = lambda m: print(f"[bench {time.perf_counter() - t0:6.1f} s] {m}", file=sys.stderr, flush=True)
-    result = run.run(cfg, progress=say)
-    out = report.write(result, args.out)
+    with report.output_dir(args.out, cfg, overwrite=args.overwrite) as output:  # refused before any work
+        t0 = time.perf_counter()
+        say = lambda m: print(f"[bench {time.perf_counter() - t0:6.1f} s] {m}", file=sys.stderr, flush=True)
+        result = run.run(cfg, progress=say)
+        out = report.write(result, output)
     s = result["summary"]
     return dict(s, out=str(out), machine=result["machine"])

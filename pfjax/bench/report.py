@@ -1,15 +1,17 @@
 """Write a benchmark result: ``bench.json`` (strict JSON, with the config, its hash, the seed and the
 pfjax version), ``bench.parquet`` (one row per implementation, dtype and batch size),
 ``figures/throughput.png|svg`` (rollout-steps/s against batch size) and ``report.md``.
-Assembled in a temporary directory and moved into place when complete."""
+Written through :class:`pfjax.outputs.OutputDir`: assembled beside the target and moved into place
+when complete, never over anything pfjax did not write."""
 
 from __future__ import annotations
 
-import shutil
-import tempfile
-from pathlib import Path
+from dataclasses import asdict
 
 import pfjax
+from pfjax.config import config_hash
+from pfjax.jsonio import dumps
+from pfjax.outputs import OutputDir
 
 _STYLE = {("pfjax", "float32"): ("C0", "-", "o"), ("pfjax", "float64"): ("C0", "--", "s"),
           ("numba", "float32"): ("C1", "-", "^"), ("numba", "float64"): ("C1", "--", "v"),
@@ -71,35 +73,31 @@ def markdown(result: dict) -> str:
     return "\n".join(lines)
 
 
-def write(result: dict, out: Path) -> Path:
-    """Write ``result`` under ``out`` (replacing it); returns ``out``."""
+def output_dir(out, cfg, *, overwrite: bool = False) -> OutputDir:
+    """The (unopened) :class:`~pfjax.outputs.OutputDir` of a benchmark of ``cfg`` (a
+    :class:`~pfjax.bench.run.BenchConfig`): open it before running the benchmark, so a bad
+    ``--out`` is refused before minutes of work."""
+    return OutputDir(out, command="bench", config_sha256=config_hash(asdict(cfg)), overwrite=overwrite,
+                     extra={"seed": cfg.seed})
+
+
+def write(result: dict, output: OutputDir):
+    """Write ``result`` into ``output`` (opened) and move it into place; returns the directory."""
     import matplotlib.pyplot as plt
     import pandas as pd
 
-    from pfjax.cli import dumps
-    from pfjax.config import config_hash
-
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     result = dict(result, config_sha256=config_hash(result["config"]), seed=result["config"]["seed"],
                   pfjax_version=pfjax.__version__)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
-    try:
-        (tmp / "figures").mkdir()
-        (tmp / "bench.json").write_text(dumps(result) + "\n")
-        df = pd.DataFrame(result["rows"])
-        df.attrs = {}
-        table = df.assign(config_sha256=result["config_sha256"], pfjax_version=pfjax.__version__)
-        table.to_parquet(tmp / "bench.parquet", index=False)
-        fig = throughput_figure(result["rows"], result["machine"])
-        for ext in ("png", "svg"):
-            fig.savefig(tmp / "figures" / f"throughput.{ext}", dpi=150)
-        plt.close(fig)
-        (tmp / "report.md").write_text(markdown(result))
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.rename(out)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
-    return out
+    tmp = output.staging
+    (tmp / "figures").mkdir()
+    (tmp / "bench.json").write_text(dumps(result) + "\n")
+    df = pd.DataFrame(result["rows"])
+    df.attrs = {}
+    table = df.assign(config_sha256=result["config_sha256"], pfjax_version=pfjax.__version__)
+    table.to_parquet(tmp / "bench.parquet", index=False)
+    fig = throughput_figure(result["rows"], result["machine"])
+    for ext in ("png", "svg"):
+        fig.savefig(tmp / "figures" / f"throughput.{ext}", dpi=150)
+    plt.close(fig)
+    (tmp / "report.md").write_text(markdown(result))
+    return output.commit()

@@ -49,6 +49,23 @@ class BenchConfig:
     seed: int = 0
     quick: bool = False
 
+    def __post_init__(self):
+        """Checks the sizes and the seed before any work (:class:`~pfjax.errors.InputError` naming
+        the field); the largest batch must fit the memory budget (:mod:`pfjax.resources`)."""
+        from pfjax import errors, resources
+
+        if not self.sizes:
+            raise errors.InputError("sizes: expected at least one batch size")
+        for name, value in (("sizes", max(self.sizes, default=0)), ("sizes", min(self.sizes, default=1)),
+                            ("ref_size", self.ref_size), ("ref_numpy", self.ref_numpy), ("grad_size", self.grad_size),
+                            ("scipy_runs", self.scipy_runs), ("repeats", self.repeats), ("grad_rounds", self.grad_rounds)):
+            errors.integer(name, value, low=0 if name in ("repeats", "grad_rounds") else 1, high=100_000_000)
+        errors.number("horizon", self.horizon, positive=True, unit=" s")
+        errors.seed("seed", self.seed)
+        n_steps = resources.check_steps(self.horizon, P.DT)
+        resources.check_memory("sizes", 2 * max(self.sizes) * resources.run_bytes(n_steps),
+                               f"a batch of {max(self.sizes)} runs", "give smaller --sizes")
+
 
 QUICK = BenchConfig(sizes=(256, 1024), ref_size=1024, ref_numpy=256, scipy_runs=1, grad_size=256, horizon=2.0,
                     repeats=1, grad_rounds=1, quick=True)

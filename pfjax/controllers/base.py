@@ -58,6 +58,16 @@ class Controller(NamedTuple):
     init: Callable[[Any], Any]  # params -> c0
     output: Callable[[Any, Any, Observation], Array]  # -> delta_cmd, rad
     rate: Callable[[Any, Any, Observation, Array, Array], Any]  # -> c', same pytree as c
+    params: type | None = None  # the parameter NamedTuple it takes (None: any pytree)
+
+    def check_params(self, params) -> None:
+        """:class:`~pfjax.errors.InputError` naming ``gains`` if ``params`` is not this controller's
+        parameter type (a PI given state-feedback gains, say)."""
+        if self.params is not None and not isinstance(params, self.params):
+            from pfjax.errors import InputError
+
+            raise InputError(f"gains: controller {self.name!r} takes {self.params.__name__}, got "
+                             f"{type(params).__name__}", "gains")
 
 
 def no_state(params) -> Array:

@@ -53,5 +53,5 @@ def _rate(p: IntegralParams, c: Array, obs: Observation, delta_cmd: Array, delta
     return jnp.stack([p.K[2] * obs.d + p.k_aw * (delta - delta_cmd)])
 
 
-integral = Controller("integral", _init, _output, _rate)
+integral = Controller("integral", _init, _output, _rate, IntegralParams)
 """State feedback with integral of ``d`` (see the module docstring)."""

@@ -32,7 +32,7 @@ def _sf_output(p: StateFeedbackParams, c, obs: Observation) -> Array:
     return p.K[0] * obs.d + p.K[1] * obs.theta_e + p.feedforward * E.atan(obs.L * obs.kappa)
 
 
-state_feedback = Controller("state_feedback", no_state, _sf_output, no_rate)
+state_feedback = Controller("state_feedback", no_state, _sf_output, no_rate, StateFeedbackParams)
 """Static state feedback ``delta = K x``, ``x = [d, theta_e]`` (source eq. 8; the design is in
 :mod:`pfjax.synthesis`)."""
 
@@ -90,7 +90,7 @@ def _pi_init(p) -> Array:
     return jnp.zeros((2,), dtype=jnp.result_type(p.ki_d))
 
 
-pi = Controller("pi", _pi_init, _pi_output, _pi_rate)
+pi = Controller("pi", _pi_init, _pi_output, _pi_rate, PIParams)
 """MISO PI on ``d`` and ``theta_e`` summed into the steering (spec §5, eq. 14), optional anti-windup."""
 
 
@@ -126,7 +126,7 @@ def _linear_output(p: LinearParams, c: Array, obs: Observation) -> Array:
     return _sf_output(p, c, obs) + c[0] + c[1]
 
 
-linear = Controller("linear", _pi_init, _linear_output, _pi_rate)
+linear = Controller("linear", _pi_init, _linear_output, _pi_rate, LinearParams)
 """State feedback and the MISO PI as one controller (:class:`LinearParams`): a Monte Carlo study
 evaluates both with it, so they share one compiled simulator program (one compile instead of two
 for the runs, the float64 check and the worst-case search each)."""

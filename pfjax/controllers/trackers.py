@@ -47,7 +47,7 @@ def _stanley_output(p: StanleyParams, c, obs: Observation) -> Array:
     return -front.theta_e - E.atan(p.k * front.d / (p.k_soft + jnp.abs(obs.v)))
 
 
-stanley = Controller("stanley", no_state, _stanley_output, no_rate)
+stanley = Controller("stanley", no_state, _stanley_output, no_rate, StanleyParams)
 
 
 class PurePursuitParams(NamedTuple):
@@ -88,7 +88,7 @@ def _pure_pursuit_output(p: PurePursuitParams, c, obs: Observation) -> Array:
     return E.atan(2.0 * obs.L * E.sin(alpha) / ld)
 
 
-pure_pursuit = Controller("pure_pursuit", no_state, _pure_pursuit_output, no_rate)
+pure_pursuit = Controller("pure_pursuit", no_state, _pure_pursuit_output, no_rate, PurePursuitParams)
 
 
 class RearWheelParams(NamedTuple):
@@ -118,4 +118,4 @@ def _rear_wheel_output(p: RearWheelParams, c, obs: Observation) -> Array:
     return E.atan(obs.L * omega / v)
 
 
-rear_wheel = Controller("rear_wheel", no_state, _rear_wheel_output, no_rate)
+rear_wheel = Controller("rear_wheel", no_state, _rear_wheel_output, no_rate, RearWheelParams)

@@ -51,6 +51,34 @@ def path_length(p: PathSpec) -> float:
     return float(np.linalg.norm(np.diff(np.asarray(p.points, float), axis=0), axis=1).sum())
 
 
+def check_resources(spec: StudySpec, *, report: bool = True) -> None:
+    """Refuse a study whose memory need exceeds :func:`pfjax.resources.memory_budget`, before it
+    starts (:class:`~pfjax.errors.InputError` naming the key). The runs stream chunk by chunk, so
+    a chunk bounds the simulation's memory (its batch of scenarios, slip sequences and paths, the
+    simulator's state and the chunk's table); the report loads the whole run table; the slip-margin
+    sweep holds its run indices."""
+    from pfjax.resources import check_memory, run_bytes
+
+    s = spec.sim
+    n_steps = int(round(s.horizon / s.dt))
+    seq = int(math.ceil(s.horizon / spec.slip.seq_dt)) + 2 if spec.slip.kind == "ou" else 0
+    path_numbers = max((16 * p.n_waypoints if p.kind == "random" else 16 * len(p.points or ())) for p in spec.paths)
+    chunk = min(spec.chunk_size, spec.n_runs)
+    # a chunk: sampled scenarios (kept for the next controller), the simulator's batch, its table:
+    # 8 runs' worth per run (measured: 10^7 runs in chunks of 65,536 peaked at 1.8 GiB, 18 kB per run
+    # of a chunk above the process's 0.6 GiB)
+    check_memory("chunk_size", 8 * chunk * run_bytes(n_steps, seq_len=seq, path_numbers=path_numbers),
+                 f"a chunk of {chunk} runs", "lower chunk_size (the runs stream chunk by chunk)")
+    if report:
+        rows = spec.n_runs * len(spec.paths) * len(spec.controllers)
+        check_memory("n_runs", 8 * 64 * rows, f"the report's run table ({rows:.3g} rows)",
+                     "run without the report (pfjax study --no-report), or lower n_runs")
+    if spec.margin.enabled:
+        per_axis = spec.margin.n_per_amplitude * len(spec.margin.amplitudes_deg)
+        check_memory("margin.n_per_amplitude", 8 * 6 * per_axis, f"the slip-margin sweep's {per_axis:.3g} runs per axis",
+                     "lower margin.n_per_amplitude")
+
+
 def study_warnings(spec: StudySpec) -> list[str]:
     """One-line warnings: paths sharper than the steering limit allows, spline paths shorter than
     the distance a run travels. Each names the path (``paths[i]``) and the numbers."""

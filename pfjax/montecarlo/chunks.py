@@ -4,11 +4,18 @@ A study's work is a fixed list of chunks (path x controller x block of run indic
 slip-margin sweep's). Each finished chunk is one Parquet file in the *partial directory*
 ``<out>/../.<out name>.partial/``, written under a temporary name and ``os.replace``d into
 place, so a file either is complete or does not exist (a kill at any instant loses at most the
-chunks in flight). ``manifest.json`` there records the config hash, seed and pfjax version; a
-re-run of the same command reuses every finished chunk, while a changed config (or pfjax
-version) is refused with a one-line :class:`pfjax.config.ConfigError` unless the caller asks to
-start afresh. When the study is complete the chunk files are merged, one Parquet row group per
-chunk (memory O(chunk)), into the final ``runs.parquet``, and the partial directory is removed.
+chunks in flight). Every chunk file records, in its Parquet metadata, the config hash, seed and
+pfjax version it was computed with, and is reused only if all three match the study being run:
+no sequence of commands can produce a ``runs.parquet`` that mixes two configurations.
+``manifest.json`` there records the same three for the whole directory: a re-run of the same
+command reuses every finished chunk, while a changed config (or pfjax version) is refused with a
+one-line :class:`pfjax.config.ConfigError` naming ``--out`` unless the caller asks to start afresh
+(a partial directory with no finished chunk holds nothing to lose and is replaced silently). When
+the study is complete the chunk files are merged, one Parquet row group per chunk (memory
+O(chunk)), into the final ``runs.parquet``, and the partial directory is removed.
+
+The partial directory is only touched by the process that holds the output's lock
+(:class:`pfjax.outputs.OutputDir`).
 """
 
 from __future__ import annotations
@@ -26,13 +33,16 @@ import pyarrow.parquet as pq
 
 import pfjax
 from pfjax.config import ConfigError
+from pfjax.jsonio import dumps
 from pfjax.montecarlo.config import StudySpec, study_hash
+from pfjax.outputs import sibling
+
+#: The Parquet metadata keys that identify what a chunk was computed with.
+IDENTITY = (b"pfjax.config_sha256", b"pfjax.seed", b"pfjax.version")
 
 
 def file_metadata(spec: StudySpec) -> dict[bytes, bytes]:
     """Parquet key-value metadata stamped on every table a study writes: config (strict JSON), hash, seed, version."""
-    from pfjax.cli import dumps
-
     return {
         b"pfjax.config_sha256": study_hash(spec).encode(),
         b"pfjax.config": dumps(spec.model_dump(mode="json")).encode(),
@@ -43,8 +53,7 @@ def file_metadata(spec: StudySpec) -> dict[bytes, bytes]:
 
 def partial_dir(out: Path) -> Path:
     """Where the unfinished chunks of the study whose results go to ``out`` live."""
-    out = Path(out)
-    return out.parent / f".{out.name}.partial"
+    return sibling(Path(out).absolute(), "partial")
 
 
 class ChunkStore:
@@ -63,10 +72,14 @@ class ChunkStore:
         self.dir = partial_dir(out)
         self.manifest = {"study": spec.name, "config_sha256": study_hash(spec), "seed": spec.seed,
                          "pfjax_version": pfjax.__version__}
+        self.identity = {k: v for k, v in file_metadata(spec).items() if k in IDENTITY}
         self.computed = 0  #: chunks simulated by this process
         self.reused = 0  #: chunks found finished on disk (resumed)
-        if fresh and self.dir.exists():
-            shutil.rmtree(self.dir)
+        if self.dir.is_symlink() or (self.dir.exists() and not self.dir.is_dir()):
+            raise ConfigError(f"--out: {self.dir} (where pfjax keeps a study's finished chunks) exists and is not a "
+                              f"directory; move it away")
+        if self.dir.exists() and (fresh or not self._chunk_files()):
+            self._discard_checked(out)
         if self.dir.exists():
             self._check_manifest(out)
         else:
@@ -74,6 +87,18 @@ class ChunkStore:
             tmp = Path(tempfile.mkdtemp(prefix=f"{self.dir.name}-", dir=self.dir.parent))
             (tmp / "manifest.json").write_text(json.dumps(self.manifest, indent=1) + "\n")
             os.replace(tmp, self.dir)
+
+    def _chunk_files(self) -> list[Path]:
+        return [f for f in self.dir.iterdir() if f.suffix == ".parquet" and not f.name.startswith(".")]
+
+    def _discard_checked(self, out: Path) -> None:
+        """Remove the partial directory if it holds only what a study writes there."""
+        foreign = [f.name for f in self.dir.iterdir()
+                   if not (f.name == "manifest.json" or (f.is_file() and ".parquet" in f.name))]
+        if foreign:
+            raise ConfigError(f"--out: {self.dir} (where pfjax keeps the finished chunks of {out}) holds "
+                              f"{foreign[0]!r}, which pfjax did not write; move it away")
+        shutil.rmtree(self.dir)
 
     def _check_manifest(self, out: Path) -> None:
         try:
@@ -87,30 +112,32 @@ class ChunkStore:
                     f"({str(old.get(key))[:12]} there, {self.manifest[key][:12]} now) in {self.dir}; "
                     f"re-run the original command to resume it, or add --fresh to discard it and start over")
 
-    def assembly_dir(self) -> Path:
-        """A fresh private directory inside the partial directory where the final outputs are
-        assembled before being renamed to ``out`` (same filesystem); a kill leaves it inside the
-        partial directory, and the next run removes it."""
-        for stale in self.dir.glob("assembly-*"):
-            shutil.rmtree(stale, ignore_errors=True)
-        return Path(tempfile.mkdtemp(prefix="assembly-", dir=self.dir))
+    def _valid(self, f: Path) -> bool:
+        """Whether chunk file ``f`` was computed with this study's config, seed and pfjax version."""
+        try:
+            meta = pq.read_schema(f).metadata or {}
+        except (OSError, pa.ArrowException):
+            return False
+        return all(meta.get(k) == v for k, v in self.identity.items())
 
     def finished(self) -> list[str]:
         """The keys of the chunks finished on disk (sorted)."""
-        return sorted(f.stem for f in self.dir.glob("*.parquet") if not f.name.startswith("."))
+        return sorted(f.stem for f in self._chunk_files() if self._valid(f))
 
     def path(self, key: str) -> Path:
         return self.dir / f"{key}.parquet"
 
     def get(self, key: str, compute: Callable[[], pd.DataFrame]) -> pd.DataFrame:
-        """The chunk ``key``: read back if finished, else ``compute()``d and written atomically."""
+        """The chunk ``key``: read back if finished with this study's identity, else ``compute()``d
+        and written atomically (replacing a chunk file of another identity)."""
         f = self.path(key)
-        if f.is_file():
+        if f.is_file() and self._valid(f):
             self.reused += 1
             return pd.read_parquet(f)
         df = compute()
         tmp = f.with_name(f".{f.name}.tmp{os.getpid()}")
-        df.to_parquet(tmp, index=False)
+        table = pa.Table.from_pandas(df, preserve_index=False)
+        pq.write_table(table.replace_schema_metadata({**(table.schema.metadata or {}), **self.identity}), tmp)
         os.replace(tmp, f)
         self.computed += 1
         return df
@@ -118,21 +145,39 @@ class ChunkStore:
     def merge(self, keys: Iterable[str], dest: Path, metadata: dict[bytes, bytes]) -> int:
         """Stream the chunks ``keys`` (in that order) into one Parquet file, one row group per chunk;
         returns the number of rows. Memory holds one chunk at a time."""
-        writer, n = None, 0
-        try:
+        with ParquetAppender(dest, metadata) as sink:
             for key in keys:
-                table = pq.read_table(self.path(key))
-                if writer is None:
-                    writer = pq.ParquetWriter(dest, table.schema.with_metadata({**(table.schema.metadata or {}), **metadata}))
-                writer.write_table(table.cast(writer.schema))
-                n += table.num_rows
-        finally:
-            if writer is not None:
-                writer.close()
-        if writer is None:  # no chunk: an empty table still records the config
-            pq.write_table(pa.table({}).replace_schema_metadata(metadata), dest)
-        return n
+                sink.write(pq.read_table(self.path(key)))
+        return sink.rows
 
     def discard(self) -> None:
         """Remove the chunks (after the finished study has been moved into place)."""
         shutil.rmtree(self.dir, ignore_errors=True)
+
+
+class ParquetAppender:
+    """Tables appended to one Parquet file as they come, one row group each (memory: one table);
+    the file's schema is the first table's, with ``metadata`` added. A context manager; with no
+    table at all, an empty table that still carries ``metadata`` is written."""
+
+    def __init__(self, dest: Path, metadata: dict[bytes, bytes]):
+        self.dest, self.metadata, self.rows = Path(dest), metadata, 0
+        self._writer = None
+
+    def write(self, table: pa.Table | pd.DataFrame) -> None:
+        if isinstance(table, pd.DataFrame):
+            table = pa.Table.from_pandas(table, preserve_index=False)
+        if self._writer is None:
+            schema = table.schema.with_metadata({**(table.schema.metadata or {}), **self.metadata})
+            self._writer = pq.ParquetWriter(self.dest, schema)
+        self._writer.write_table(table.cast(self._writer.schema))
+        self.rows += table.num_rows
+
+    def __enter__(self) -> ParquetAppender:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._writer is not None:
+            self._writer.close()
+        elif exc[0] is None:
+            pq.write_table(pa.table({}).replace_schema_metadata(self.metadata), self.dest)

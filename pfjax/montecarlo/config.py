@@ -17,27 +17,45 @@ from __future__ import annotations
 import difflib
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from pfjax.config import ConfigError, config_hash, parse_override, read_toml
+from pfjax.config import ConfigError, _short, config_hash, parse_override, read_toml
+from pfjax.errors import MAX_MAGNITUDE, MAX_SEED, MIN_POSITIVE
+from pfjax.resources import check_steps
+
+
+
+def _real(v: float) -> float:
+    if not math.isfinite(v):
+        raise ValueError(f"expected a finite number, got {v}")
+    if abs(v) > MAX_MAGNITUDE:
+        raise ValueError(f"expected a magnitude <= {MAX_MAGNITUDE:g}, got {v:g}")
+    return v
+
+
+#: A number as every study key takes it: finite, magnitude at most :data:`pfjax.errors.MAX_MAGNITUDE`
+#: (booleans and strings are not numbers: the schema is strict).
+Real = Annotated[float, AfterValidator(_real)]
+#: A positive step, length or tolerance: at least :data:`pfjax.errors.MIN_POSITIVE`.
+POSITIVE = MIN_POSITIVE
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 class Dist(_Model):
     """A distribution of one scalar (see module docstring)."""
 
     dist: Literal["constant", "uniform", "normal", "truncnormal", "choice"]
-    value: float | None = None
-    low: float | None = None
-    high: float | None = None
-    mean: float | None = None
-    std: float | None = None
-    values: list[float] | None = None
+    value: Real | None = None
+    low: Real | None = None
+    high: Real | None = None
+    mean: Real | None = None
+    std: Real | None = None
+    values: list[Real] | None = None
 
     @model_validator(mode="after")
     def _check(self):
@@ -57,6 +75,9 @@ class Dist(_Model):
             raise ValueError(f"needs low < high, got low={self.low:g}, high={self.high:g}")
         if self.std is not None and not self.std > 0:
             raise ValueError(f"needs std > 0, got {self.std:g}")
+        if self.dist == "truncnormal" and not self.low <= self.mean <= self.high:
+            raise ValueError(f"needs low <= mean <= high (the mean of the normal it truncates), got mean={self.mean:g} "
+                             f"outside [{self.low:g}, {self.high:g}]")
         if self.values is not None and (not self.values or not all(math.isfinite(v) for v in self.values)):
             raise ValueError("'values' must be a non-empty list of finite numbers")
         return self
@@ -85,12 +106,12 @@ def dist_field(default: float):
 
 
 class SimSpec(_Model):
-    dt: float = Field(0.005, gt=0, description="RK4 step, s")
-    horizon: float = Field(20.0, gt=0, description="s")
+    dt: Real = Field(0.005, ge=POSITIVE, description="RK4 step, s")
+    horizon: Real = Field(20.0, ge=POSITIVE, description="s")
     control_every: int = Field(1, ge=1, description="controller sampling period in steps")
-    d_fail: float = Field(10.0, gt=0, description="m")
-    steady_window: float = Field(5.0, gt=0, description="s")
-    settle_band: float = Field(0.05, gt=0, description="m")
+    d_fail: Real = Field(10.0, ge=POSITIVE, description="m")
+    steady_window: Real = Field(5.0, ge=POSITIVE, description="s")
+    settle_band: Real = Field(0.05, ge=POSITIVE, description="m")
 
     @model_validator(mode="after")
     def _check(self):
@@ -98,24 +119,26 @@ class SimSpec(_Model):
             raise ValueError(f"dt: must be <= horizon ({self.horizon:g} s), got {self.dt:g}")
         if self.steady_window > self.horizon:
             raise ValueError(f"steady_window: must be <= horizon ({self.horizon:g} s), got {self.steady_window:g}")
+        check_steps(self.horizon, self.dt)
         return self
 
 
 class SuccessSpec(_Model):
-    band: float = Field(0.05, gt=0, description="|d| bound, m")
-    from_s: float = Field(15.0, ge=0, description="success window start, s")
+    band: Real = Field(0.05, ge=POSITIVE, description="|d| bound, m")
+    from_s: Real = Field(15.0, ge=0, description="success window start, s")
 
 
 class VehicleSpec(_Model):
     speed: Dist = dist_field(1.0)  # m/s
     L: Dist = dist_field(0.2)  # m
     delta_max_deg: Dist = dist_field(30.0)
-    delta_rate_max_deg: float | None = Field(None, gt=0, description="steering rate limit, deg/s (None or inf: none)")
+    delta_rate_max_deg: Real | None = Field(None, ge=POSITIVE, description="steering rate limit, deg/s (None or inf: none)")
     convention: Literal["source", "lenain"] = "source"
 
     _coerce = field_validator("speed", "L", "delta_max_deg", mode="before")(lambda v: _as_dist(v))
     # "no limit" has one spelling, None, so the validated config is strict JSON (and hashes as such)
-    _no_limit = field_validator("delta_rate_max_deg")(lambda v: None if v is not None and math.isinf(v) else v)
+    _no_limit = field_validator("delta_rate_max_deg", mode="before")(
+        lambda v: None if isinstance(v, float) and v == math.inf else v)
 
     @model_validator(mode="after")
     def _check(self):
@@ -127,6 +150,11 @@ class VehicleSpec(_Model):
         if not (lo > 0 and hi < 90):
             raise ValueError(f"delta_max_deg: must lie in (0, 90) deg, got range [{lo:g}, {hi:g}]")
         return self
+
+
+#: How far the Ornstein-Uhlenbeck slip term is taken to reach when the total slip is checked: its
+#: stationary std times this (a 6-sigma excursion has probability about 2e-9 per sample).
+OU_REACH = 6.0
 
 
 class SlipSpec(_Model):
@@ -145,22 +173,41 @@ class SlipSpec(_Model):
     freq_hz: Dist = dist_field(0.1)
     ou_sigma_deg: Dist = dist_field(0.0)
     ou_tau_s: Dist = dist_field(1.0)
-    seq_dt: float = Field(0.05, gt=0, description="s, OU sampling period")
+    seq_dt: Real = Field(0.05, ge=POSITIVE, description="s, OU sampling period")
 
     _coerce = field_validator("beta_r_deg", "beta_f_deg", "step_time_s", "step_r_deg", "step_f_deg", "amp_r_deg",
                               "amp_f_deg", "freq_hz", "ou_sigma_deg", "ou_tau_s", mode="before")(lambda v: _as_dist(v))
 
     @model_validator(mode="after")
     def _check(self):
-        worst = {"constant": ("beta_r_deg", "beta_f_deg"), "step": ("beta_r_deg", "beta_f_deg", "step_r_deg", "step_f_deg"),
-                 "sinusoid": ("beta_r_deg", "beta_f_deg", "amp_r_deg", "amp_f_deg"), "ou": ("beta_r_deg", "beta_f_deg")}[self.kind]
-        for name in worst:
-            lo, hi = getattr(self, name).bounds()
-            if max(abs(lo), abs(hi)) >= 90:
-                raise ValueError(f"{name}: slip magnitudes must stay below 90 deg, got range [{lo:g}, {hi:g}]")
-        for name in ("ou_tau_s", "freq_hz"):
+        added = {"constant": None, "step": "step", "sinusoid": "amp", "ou": "ou_sigma"}[self.kind]
+        for axis in ("r", "f"):
+            lo, hi = getattr(self, f"beta_{axis}_deg").bounds()
+            reach = max(abs(lo), abs(hi))
+            if reach >= 90:
+                raise ValueError(f"beta_{axis}_deg: slip magnitudes must stay below 90 deg over the distribution's "
+                                 f"support, got range [{lo:g}, {hi:g}]")
+            if added is None:
+                continue
+            name = f"{added}_{axis}_deg" if added != "ou_sigma" else "ou_sigma_deg"
+            alo, ahi = getattr(self, name).bounds()
+            if added == "step":  # before the step beta, after it beta + step
+                total = max(reach, abs(lo + alo), abs(hi + ahi))
+                rule = f"max |beta_{axis}_deg + {name}|"
+            elif added == "amp":  # beta + amp sin(.) reaches |beta| + |amp|
+                total = reach + max(abs(alo), abs(ahi))
+                rule = f"max |beta_{axis}_deg| + max |{name}|"
+            else:
+                if alo < 0:
+                    raise ValueError(f"{name}: must be >= 0, got a lower bound {alo:g}")
+                total = reach + OU_REACH * ahi
+                rule = f"max |beta_{axis}_deg| + {OU_REACH:g} max {name}"
+            if not total < 90:
+                raise ValueError(f"{name}: the total slip must stay below 90 deg over the distributions' support, "
+                                 f"got {rule} = {total:g} deg")
+        for name in ("ou_tau_s", "freq_hz", "step_time_s"):
             lo, _ = getattr(self, name).bounds()
-            if lo < 0 or (name == "ou_tau_s" and lo == 0):
+            if lo < 0 or (name == "ou_tau_s" and lo < POSITIVE):
                 raise ValueError(f"{name}: must be {'> 0' if name == 'ou_tau_s' else '>= 0'}, got a lower bound {lo:g}")
         return self
 
@@ -176,8 +223,17 @@ class InitialSpec(_Model):
 
 
 class NoiseSpec(_Model):
-    sigma_d: float = Field(0.0, ge=0, description="m")
-    sigma_theta_e_deg: float = Field(0.0, ge=0, description="deg")
+    """White Gaussian sensor noise on the measured rear-axle pose, drawn afresh at every integrator
+    step (:class:`pfjax.sim.simulate.SensorNoise`): the measured pose is the true one displaced by
+    ``e_d ~ N(0, sigma_d^2)`` (m) along the path's left normal at the closest point and rotated by
+    ``e_theta ~ N(0, sigma_theta_e_deg^2)`` (deg, converted to rad), so the measured lateral error
+    is ``d + e_d`` and the measured heading error ``theta_e + e_theta``. Every controller sees this
+    one noisy measurement: the state-feedback, PI, integral and rear-wheel controllers through
+    ``(d, theta_e)``, Stanley and pure pursuit through the noisy pose. The metrics use the true
+    errors. Both sigmas 0: no noise."""
+
+    sigma_d: Real = Field(0.0, ge=0, description="m")
+    sigma_theta_e_deg: Real = Field(0.0, ge=0, le=180, description="deg")
 
 
 class PathSpec(_Model):
@@ -188,10 +244,10 @@ class PathSpec(_Model):
     kind: Literal["line", "parabola", "sine", "circle", "random", "spline"]
     name: str | None = None
     radius: Dist = dist_field(2.0)
-    length: float = Field(40.0, gt=0, description="random paths: length, m")
-    curvature_margin: float = Field(0.5, gt=0, le=1, description="random paths: fraction of the followable curvature")
-    n_waypoints: int = Field(41, ge=4)
-    points: list[list[float]] | None = None
+    length: Real = Field(40.0, ge=POSITIVE, description="random paths: length, m")
+    curvature_margin: Real = Field(0.5, ge=POSITIVE, le=1, description="random paths: fraction of the followable curvature")
+    n_waypoints: int = Field(41, ge=4, le=10_000)
+    points: list[list[Real]] | None = None
 
     _coerce = field_validator("radius", mode="before")(lambda v: _as_dist(v))
 
@@ -219,6 +275,8 @@ class PathSpec(_Model):
 
     @model_validator(mode="after")
     def _check(self):
+        if self.kind == "circle" and not self.radius.bounds()[0] >= POSITIVE:
+            raise ValueError(f"radius: must be > 0 m over its whole range, got a lower bound {self.radius.bounds()[0]:g}")
         if (self.kind == "spline") != (self.points is not None):
             raise ValueError("points: required for kind 'spline'" if self.kind == "spline" else f"points: only for kind 'spline', not {self.kind!r}")
         return self
@@ -235,9 +293,9 @@ class MarginSpec(_Model):
     stays >= 1 - eps."""
 
     enabled: bool = True
-    amplitudes_deg: list[float] = Field(default_factory=lambda: [0.0, 2.5, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0, 25.0, 30.0])
-    n_per_amplitude: int = Field(200, ge=1)
-    eps: float = Field(0.05, gt=0, lt=1)
+    amplitudes_deg: list[Real] = Field(default_factory=lambda: [0.0, 2.5, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0, 25.0, 30.0])
+    n_per_amplitude: int = Field(200, ge=1, le=100_000_000)
+    eps: Real = Field(0.05, ge=POSITIVE, lt=1)
     axes: list[Literal["rear", "front", "joint"]] = Field(default_factory=lambda: ["rear", "front", "joint"])
 
     @field_validator("amplitudes_deg")
@@ -246,6 +304,13 @@ class MarginSpec(_Model):
         if not v or any(not (0 <= a < 90) for a in v) or len(set(v)) != len(v):
             raise ValueError(f"must be distinct amplitudes in [0, 90) deg, got {v}")
         return sorted(v)
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.n_per_amplitude * len(self.amplitudes_deg) > 100_000_000:
+            raise ValueError(f"n_per_amplitude: at most 1e8 runs per axis and path (n_per_amplitude x "
+                             f"{len(self.amplitudes_deg)} amplitudes), got {self.n_per_amplitude * len(self.amplitudes_deg):.3g}")
+        return self
 
 
 class FalsifierSpec(_Model):
@@ -256,10 +321,10 @@ class FalsifierSpec(_Model):
 
     enabled: bool = False
     path: str | None = None  # a path label; default: the first path
-    slip_bound_deg: float = Field(10.0, gt=0, lt=90)
-    f_max_hz: float = Field(0.5, ge=0, le=10)
-    lateral_offset: float = Field(0.5, ge=0)
-    heading_error_deg: float = Field(30.0, ge=0, lt=90)
+    slip_bound_deg: Real = Field(10.0, ge=POSITIVE, lt=90)
+    f_max_hz: Real = Field(0.5, ge=0, le=10)
+    lateral_offset: Real = Field(0.5, ge=0)
+    heading_error_deg: Real = Field(30.0, ge=0, lt=90)
     objective: Literal["iae", "ise", "itae", "max_abs_d", "late_max_abs_d"] = "iae"
     n_restarts: int = Field(8, ge=1, le=256)
     steps: int = Field(40, ge=1, le=10_000)
@@ -272,10 +337,10 @@ class ControllerSpec(_Model):
 
     name: str
     type: Literal["state_feedback", "lmi", "pi", "stanley", "pure_pursuit", "rear_wheel"]
-    K: list[float] | None = None
-    gains: dict[str, float] = Field(default_factory=dict)
-    alpha: float = Field(10.0, ge=0)
-    beta: float = Field(1.0, ge=0)
+    K: list[Real] | None = None
+    gains: dict[str, Real] = Field(default_factory=dict)
+    alpha: Real = Field(10.0, ge=0)
+    beta: Real = Field(1.0, ge=0)
 
     @model_validator(mode="after")
     def _check(self):
@@ -289,10 +354,10 @@ class ControllerSpec(_Model):
 
 
 class StudySpec(_Model):
-    name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
+    name: str  # names results/<name>: checked by pfjax.outputs.check_name
     n_runs: int = Field(ge=1, le=100_000_000, description="runs per controller and path")
-    seed: int = Field(ge=0)
-    chunk_size: int = Field(4096, ge=1)
+    seed: int = Field(ge=0, le=MAX_SEED)
+    chunk_size: int = Field(4096, ge=1, le=10_000_000)
     dtype: Literal["float32", "float64"] = "float32"
     f64_check_runs: int = Field(64, ge=0, le=4096, description="float32 studies: runs per controller re-simulated in float64")
     sim: SimSpec = SimSpec()
@@ -305,6 +370,16 @@ class StudySpec(_Model):
     falsifier: FalsifierSpec = FalsifierSpec()
     paths: list[PathSpec] = Field(min_length=1)
     controllers: list[ControllerSpec] = Field(min_length=1)
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v):
+        from pfjax.outputs import NAME_PATTERN
+
+        if not NAME_PATTERN.match(v):
+            raise ValueError("expected 1-100 letters, digits, '_', '.' or '-' starting with a letter or digit "
+                             "(it names the output directory results/<name>)")
+        return v
 
     @model_validator(mode="after")
     def _check(self):
@@ -370,7 +445,15 @@ def _format(err: ValidationError) -> str:
         msg = rest
     if e["type"] == "missing":
         return f"{key}: required key is missing"
-    return f"{key}: {msg} (got {e.get('input')!r})" if e["type"] != "value_error" else f"{key}: {msg}"
+    bound = _BOUNDS.get(e["type"])
+    if bound is not None:  # pydantic writes 1e-12 as 0.000000000001
+        limit = e["ctx"][bound[1]]
+        msg = f"must be {bound[0]} {limit:g}" if isinstance(limit, float) else f"must be {bound[0]} {limit}"
+    return f"{key}: {msg} (got {_short(e.get('input'))})" if e["type"] != "value_error" else f"{key}: {msg}"
+
+
+_BOUNDS = {"greater_than": (">", "gt"), "greater_than_equal": (">=", "ge"), "less_than": ("<", "lt"),
+           "less_than_equal": ("<=", "le")}
 
 
 def _set_nested(d: dict, update: dict) -> dict:

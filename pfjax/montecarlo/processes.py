@@ -23,11 +23,10 @@ check: process 0 runs them on its own device), no summary, no report, nothing wr
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from pfjax.config import ConfigError
+from pfjax.errors import InputError
 from pfjax.montecarlo.config import ControllerSpec, StudySpec
 from pfjax.sim import sharding
 
@@ -51,8 +50,9 @@ class _Skip:
         return pd.DataFrame()
 
 
-def lead(spec: StudySpec, out: Path, *, fresh: bool = False) -> dict:
-    """Process 0's side of the hand-over: open (or resume) the study's chunk store, synthesise the
+def lead(spec: StudySpec, output, *, fresh: bool = False) -> dict:
+    """Process 0's side of the hand-over: open (lock) the study's output
+    (:class:`~pfjax.outputs.OutputDir`), open (or resume) its chunk store, synthesise the
     controllers and send the finished chunks' keys and the gains to the other processes. Returns
     :func:`pfjax.montecarlo.runner.controllers_of` ``(spec)`` (to pass on to the study).
 
@@ -61,10 +61,11 @@ def lead(spec: StudySpec, out: Path, *, fresh: bool = False) -> dict:
     from pfjax.montecarlo.runner import controllers_of
 
     try:
-        store = ChunkStore(out, spec, fresh=fresh)
+        output.open()
+        store = ChunkStore(output.target, spec, fresh=fresh)
         controllers = controllers_of(spec)
     except Exception as e:
-        sharding.broadcast_json({"error": str(e), "usage": isinstance(e, ConfigError)})
+        sharding.broadcast_json({"error": str(e), "usage": isinstance(e, InputError)})
         raise
     gains = {c.name: controllers[c.name][2] for c in spec.controllers}
     sharding.broadcast_json({"finished": store.finished(), "gains": gains})

@@ -9,9 +9,8 @@ Outputs are written to a temporary directory and moved into place when complete.
 
 from __future__ import annotations
 
-import shutil
+import contextlib
 import time
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -20,10 +19,12 @@ import pandas as pd
 
 from pfjax import controllers as C
 from pfjax.config import ConfigError
+from pfjax.errors import InputError
 from pfjax.metrics.running import METRIC_NAMES
 from pfjax.montecarlo.chunks import ChunkStore, file_metadata
 from pfjax.montecarlo.config import ControllerSpec, StudySpec
 from pfjax.montecarlo.sampling import column_names, sample_runs
+from pfjax.outputs import OutputDir
 from pfjax.sim import sharding
 from pfjax.sim.simulate import SimConfig, simulate_batch
 from pfjax.sim.status import STATUS_NAMES
@@ -49,10 +50,8 @@ def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
     controller, factory = C.REGISTRY[REGISTRY_TYPE[c.type]]
     try:
         gains = factory(**c.gains)
-    except TypeError:
-        names = list(factory().__class__._fields) if hasattr(factory(), "_fields") else []
-        bad = next((k for k in c.gains if k not in names), next(iter(c.gains), "?"))
-        raise ConfigError(f"controllers[{index}].gains.{bad}: unknown gain for type {c.type!r}; expected one of {names}") from None
+    except InputError as e:  # names gains.<gain>: the study's key is controllers[i].gains.<gain>
+        raise ConfigError(f"controllers[{index}].{e}") from None
     flat = {k: float(v) for k, v in gains._asdict().items()}
     if controller is C.pi:  # state feedback and PI as one controller: one compiled program for both
         return C.linear, C.linear_params(gains), flat
@@ -191,67 +190,90 @@ def controllers_of(spec: StudySpec) -> dict:
         return {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
 
 
-def run_study(spec: StudySpec, out: Path, *, progress: bool | None = None, extra=None, fresh: bool = False,
-              controllers: dict | None = None) -> dict:
+def run_study(spec: StudySpec, out, *, progress: bool | None = None, extra=None, fresh: bool = False,
+              controllers: dict | None = None, overwrite: bool = False) -> dict:
     """Run ``spec``, write ``out/runs.parquet`` and return the run table's location and timings.
 
+    ``out``: the output directory, or an :class:`~pfjax.outputs.OutputDir` the caller opened (it
+    is committed here, and closed by its owner). A directory path is checked and locked as
+    :class:`~pfjax.outputs.OutputDir` describes (``overwrite``: replace another pfjax output).
     Finished chunks are kept in :class:`~pfjax.montecarlo.chunks.ChunkStore` next to ``out``, so
     re-running after an interruption resumes (``fresh=True`` discards them first). ``extra(tmp_dir,
     runs_path, controllers, store)`` is called before the directory is moved into place (the margin
     sweep, summary and report are written there), so a failure leaves nothing half-written at ``out``.
     ``controllers``: :func:`controllers_of` ``(spec)`` if the caller already has them.
     """
+    if isinstance(out, OutputDir) and out.is_open:
+        return _run_study(spec, out, progress=progress, extra=extra, fresh=fresh, controllers=controllers)
+    with out if isinstance(out, OutputDir) else study_output(spec, out, overwrite=overwrite) as output:
+        return _run_study(spec, output, progress=progress, extra=extra, fresh=fresh, controllers=controllers)
+
+
+def study_output(spec: StudySpec, out=None, *, overwrite: bool = False, flag: str = "--out") -> OutputDir:
+    """The (unopened) :class:`~pfjax.outputs.OutputDir` of a study: ``out`` or ``results/<name>``."""
+    from pathlib import Path
+
+    from pfjax.montecarlo.config import study_hash
+
+    target = Path("results") / spec.name if out is None else out
+    return OutputDir(target, command="study", config_sha256=study_hash(spec), overwrite=overwrite, flag=flag,
+                     extra={"study": spec.name, "seed": spec.seed})
+
+
+def _run_study(spec: StudySpec, output: OutputDir, *, progress, extra, fresh, controllers) -> dict:
     from tqdm import tqdm
 
     t0 = time.time()
-    out = Path(out)
     controllers = controllers_of(spec) if controllers is None else controllers
-    store = ChunkStore(out, spec, fresh=fresh)
-    tmp = store.assembly_dir()
-    try:
-        with precision(spec):
-            total = spec.n_runs * len(spec.paths) * len(controllers)
-            keys = []
-            with tqdm(total=total, desc=spec.name, unit="run", disable=None if progress is None else not progress) as bar:
-                for p in range(len(spec.paths)):
-                    for _, key, df in simulate_runs(spec, p, np.arange(spec.n_runs), controllers, store=store):
-                        keys.append(key)
-                        bar.update(len(df))
-            store.merge(keys, tmp / "runs.parquet", file_metadata(spec))
-            info = {"wall_s_simulation": time.time() - t0, "gains": {k: v[2] for k, v in controllers.items()}}
-            if extra is not None:
-                info.update(extra(tmp, tmp / "runs.parquet", controllers, store) or {})
-        info["chunks"] = {"simulated": store.computed, "resumed": store.reused}
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.chmod(0o755)  # mkdtemp makes it private; results are for everyone who can read the parent
-        tmp.rename(out)
-        store.discard()
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
+    store = ChunkStore(output.target, spec, fresh=fresh)
+    tmp = output.staging
+    with precision(spec):
+        total = spec.n_runs * len(spec.paths) * len(controllers)
+        keys = []
+        with tqdm(total=total, desc=spec.name, unit="run", disable=None if progress is None else not progress) as bar:
+            for p in range(len(spec.paths)):
+                for _, key, df in simulate_runs(spec, p, np.arange(spec.n_runs), controllers, store=store):
+                    keys.append(key)
+                    bar.update(len(df))
+        store.merge(keys, tmp / "runs.parquet", file_metadata(spec))
+        info = {"wall_s_simulation": time.time() - t0, "gains": {k: v[2] for k, v in controllers.items()}}
+        if extra is not None:
+            info.update(extra(tmp, tmp / "runs.parquet", controllers, store) or {})
+    info["chunks"] = {"simulated": store.computed, "resumed": store.reused}
+    output.commit()
+    store.discard()
     info["wall_s"] = time.time() - t0
     return info
 
 
 MARGIN_RUN_OFFSET = 1 << 30  # margin runs draw from their own index range (disjoint from the study's runs)
 MARGIN_COLUMNS = ["path", "controller", "axis", "amplitude_deg", "success", "status"]
+#: The slip-margin sweep's success counts: per controller, axis and amplitude, paths pooled.
+SWEEP_COUNT_KEYS = ["controller", "axis", "amplitude_deg"]
 
 
-def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None, store: ChunkStore | None = None) -> pd.DataFrame:
-    """Success counts over the slip-amplitude grid, per controller, axis and amplitude (all paths pooled).
+def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None, store: ChunkStore | None = None,
+                 dest=None) -> pd.DataFrame:
+    """Success counts over the slip-amplitude grid, per controller, axis and amplitude (all paths
+    pooled): columns ``controller, axis, amplitude_deg, k`` (successes) and ``n`` (runs).
 
     Run ``j`` at amplitude index ``a`` on axis ``x`` uses run index ``OFFSET + (x * n_amp + a) * n + j``; its
     slip is ``A * sign`` with the sign drawn from the run's own key (so the sweep is deterministic).
-    With a ``store``, finished chunks of the sweep are resumed like the study's.
+    The sweep streams like the study: one chunk of runs in memory at a time; its run rows
+    (:data:`MARGIN_COLUMNS`) go to the Parquet file ``dest`` if given. With a ``store``, finished
+    chunks of the sweep are resumed like the study's.
     """
     from tqdm import tqdm
 
+    from pfjax.montecarlo.chunks import ParquetAppender
+
     m = spec.margin
     n, amps = m.n_per_amplitude, np.asarray(m.amplitudes_deg)
-    rows = []
+    counts = []
     total = len(m.axes) * len(amps) * n * len(spec.paths) * len(controllers)
-    with tqdm(total=total, desc=f"{spec.name}: slip margin", unit="run", disable=None if progress is None else not progress) as bar:
+    sink = ParquetAppender(dest, file_metadata(spec)) if dest is not None else contextlib.nullcontext()
+    with sink, tqdm(total=total, desc=f"{spec.name}: slip margin", unit="run",
+                    disable=None if progress is None else not progress) as bar:
         for xi, axis in enumerate(m.axes):
             runs = MARGIN_RUN_OFFSET + (xi * len(amps) + np.repeat(np.arange(len(amps)), n)) * n + np.tile(np.arange(n), len(amps))
             amp = np.repeat(amps, n)
@@ -259,12 +281,19 @@ def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None, 
                 signs = _signs(spec, p, runs)
                 br = amp * signs[:, 0] * (axis in ("rear", "joint"))
                 bf = amp * signs[:, 1] * (axis in ("front", "joint"))
-                sweep_store = None if store is None else _Project(store, lambda df, axis=axis, runs=runs, amp=amp: _margin_rows(df, axis, runs, amp))
+                rows_of = lambda df, axis=axis, runs=runs, amp=amp: _margin_rows(df, axis, runs, amp)
+                sweep_store = None if store is None else _Project(store, rows_of)
                 for _, _, df in simulate_runs(spec, p, runs, controllers, slip_override=(br, bf), store=sweep_store,
                                               prefix=f"margin-{axis}"):
-                    rows.append(df if store is not None else _margin_rows(df, axis, runs, amp))
+                    rows = df if store is not None else rows_of(df)
+                    if not rows.empty:  # (empty: a chunk another process computes)
+                        if dest is not None:
+                            sink.write(rows)
+                        counts.append(rows.groupby(SWEEP_COUNT_KEYS, sort=False)["success"].agg(k="sum", n="count"))
                     bar.update(len(df))
-    return pd.concat(rows, ignore_index=True)
+    if not counts:
+        return pd.DataFrame(columns=SWEEP_COUNT_KEYS + ["k", "n"])
+    return pd.concat(counts).groupby(level=SWEEP_COUNT_KEYS, sort=False).sum().reset_index()
 
 
 def _margin_rows(df: pd.DataFrame, axis: str, runs: np.ndarray, amp: np.ndarray) -> pd.DataFrame:

@@ -199,40 +199,60 @@ class _Deferred:
         return self._value
 
 
-def run(spec: StudySpec, out: Path | None = None, *, progress: bool | None = None, report: bool = True,
+def run(spec: StudySpec, out=None, *, progress: bool | None = None, report: bool = True,
         fresh: bool = False, warn=None, overlap: bool = True, worker: figure_worker.FigureWorker | None = None,
-        controllers: dict | None = None) -> dict:
+        controllers: dict | None = None, overwrite: bool = False, distributed: bool = False) -> dict:
     """Run a validated study; returns the summary.
 
-    Resumes an interrupted run of the same study into ``out`` (its finished chunks are reused);
-    ``fresh=True`` discards them and starts over. ``warn(message)`` receives each feasibility
-    warning (:func:`pfjax.montecarlo.checks.study_warnings`) before the simulation starts; the
-    warnings are also recorded in ``summary.json``. ``overlap``: run the worst-case search and the
-    float64 check alongside the runs (:class:`SideJobs`; the same results either way).
-    ``worker``: a :class:`~pfjax.report.figure_worker.FigureWorker` the caller started (the CLI
-    starts it before it imports JAX, so that both imports overlap); ``run`` closes it. By default
-    ``run`` starts one when it writes a report with ``overlap`` and ``PFJAX_FIGURE_WORKER`` is not ``0``.
-    ``controllers``: :func:`pfjax.montecarlo.runner.controllers_of` ``(spec)`` if the caller has them.
+    ``out``: the output directory (default ``results/<name>``), or an
+    :class:`~pfjax.outputs.OutputDir` the caller opened. It is checked and locked before anything
+    is computed, and replaced only as :mod:`pfjax.outputs` allows (``overwrite``: replace a pfjax
+    output of another config or command). Resumes an interrupted run of the same study into
+    ``out`` (its finished chunks are reused); ``fresh=True`` discards them and starts over.
+    ``warn(message)`` receives each feasibility warning
+    (:func:`pfjax.montecarlo.checks.study_warnings`) before the simulation starts; the warnings are
+    also recorded in ``summary.json``. ``overlap``: run the worst-case search and the float64 check
+    alongside the runs (:class:`SideJobs`; the same results either way). ``worker``: a
+    :class:`~pfjax.report.figure_worker.FigureWorker` the caller started (the CLI starts it before
+    it imports JAX, so that both imports overlap); ``run`` closes it. By default ``run`` starts one
+    when it writes a report with ``overlap`` and ``PFJAX_FIGURE_WORKER`` is not ``0``.
+    ``controllers``: :func:`pfjax.montecarlo.runner.controllers_of` ``(spec)`` if the caller has
+    them. ``distributed``: this is process 0 of a multi-process study
+    (:func:`pfjax.montecarlo.processes.lead` tells the others what to simulate).
     """
+    from pfjax.montecarlo.checks import check_resources
+    from pfjax.montecarlo.runner import study_output
+    from pfjax.outputs import OutputDir
+
+    check_resources(spec, report=report)  # before anything is written or allocated
+    output = out if isinstance(out, OutputDir) else study_output(spec, out, overwrite=overwrite)
+    opened_here = not output.is_open
     if worker is not None and not (report and overlap):
         worker.close()
         worker = None
-    if worker is None and report and overlap and figure_worker.enabled():
-        worker = figure_worker.FigureWorker()  # imports matplotlib now, draws once the runs are written
     try:
-        return _run(spec, out, progress=progress, report=report, fresh=fresh, warn=warn, overlap=overlap, worker=worker,
-                    controllers=controllers)
+        if distributed:
+            from pfjax.montecarlo.processes import lead
+
+            controllers = lead(spec, output, fresh=fresh)  # opens (locks) the output, or tells the others why not
+            fresh = False
+        output.open()
+        if worker is None and report and overlap and figure_worker.enabled():
+            worker = figure_worker.FigureWorker()  # imports matplotlib now, draws once the runs are written
+        return _run(spec, output, progress=progress, report=report, fresh=fresh, warn=warn, overlap=overlap,
+                    worker=worker, controllers=controllers)
     finally:
         if worker is not None:
             worker.close()
+        if opened_here:
+            output.close()
 
 
-def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, overlap, worker, controllers) -> dict:
-    from pfjax.cli import dumps
+def _run(spec: StudySpec, output, *, progress, report, fresh, warn, overlap, worker, controllers) -> dict:
+    from pfjax.jsonio import dumps
     from pfjax.montecarlo.checks import float64_check, sample_indices, study_warnings
     from pfjax.montecarlo.runner import controllers_of
 
-    out = Path(out) if out is not None else Path("results") / spec.name
     t0 = time.time()
     result = {}
     warnings = study_warnings(spec)
@@ -255,10 +275,8 @@ def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, ov
             timings[phase] = timings.get(phase, 0.0) + now - lap[0]
             lap[0] = now
 
-        sweep = margin_sweep(spec, controllers, progress=progress, store=store) if spec.margin.enabled else None
-        if sweep is not None:
-            sweep.to_parquet(tmp / "margin.parquet", index=False)
-            _stamp(tmp / "margin.parquet", spec)
+        sweep = margin_sweep(spec, controllers, progress=progress, store=store, dest=tmp / "margin.parquet") \
+            if spec.margin.enabled else None
         mark("margin")
         # Without a report the run table is never loaded whole: the summary reads one controller at
         # a time and the float64 check only its sampled runs (memory: one controller's rows at most).
@@ -299,7 +317,7 @@ def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, ov
         summary["float64_check"] = float64_check(spec, controllers, check_rows, spec.f64_check_runs, sims=side.float64_runs())
         mark("float64_check")
         if report:
-            write_report(tmp, spec, summary, runs, sweep, worst_traj, figures=figures)
+            write_report(tmp, spec, summary, runs, worst_traj, figures=figures)
             mark("report")
             summary["wall_s"] = time.time() - t0
         timings = {k: timings[k] for k in PHASES if k in timings}
@@ -310,7 +328,7 @@ def _run(spec: StudySpec, out: Path | None, *, progress, report, fresh, warn, ov
         return {}
 
     try:
-        run_study(spec, out, progress=progress, extra=finish, fresh=fresh, controllers=controllers)
+        run_study(spec, output, progress=progress, extra=finish, fresh=fresh, controllers=controllers)
     finally:
         side.close()
     return result["summary"]
@@ -322,16 +340,48 @@ def read_runs(path: Path, **kw) -> pd.DataFrame:
     return pd.read_parquet(path, **kw)
 
 
-def _stamp(path: Path, spec: StudySpec) -> None:
-    """Rewrite a small Parquet file with the study's config, hash, seed and version in its metadata."""
-    import pyarrow.parquet as pq
+def read_finished(out) -> tuple[dict, pd.DataFrame]:
+    """A finished study's ``(summary, runs)`` from its output directory;
+    :class:`~pfjax.errors.InputError` naming ``--out`` (one line) if a file is missing or corrupt."""
+    import json
 
-    from pfjax.montecarlo.chunks import file_metadata
+    from pfjax.errors import InputError, one_line
 
-    t = pq.read_table(path)
-    pq.write_table(t.replace_schema_metadata({**(t.schema.metadata or {}), **file_metadata(spec)}), path)
+    out = Path(out)
+
+    def load(name, reader):
+        f = out / name
+        if not f.is_file():
+            raise InputError(f"--out: {f} is missing; re-run the study (pfjax study CONFIG --out {out})")
+        try:
+            return reader(f)
+        except (OSError, ValueError, UnicodeDecodeError) as e:  # pyarrow's errors are ValueErrors too
+            raise InputError(f"--out: {f} cannot be read ({one_line(e)}); re-run the study") from None
+
+    summary = load("summary.json", lambda f: json.loads(f.read_text(encoding="utf-8")))
+    if not isinstance(summary, dict) or not isinstance(summary.get("controllers"), dict):
+        raise InputError(f"--out: {out / 'summary.json'} is not a study summary; re-run the study")
+    return summary, load("runs.parquet", read_runs)
 
 
-def main_from_args(config: str, overrides: list[str], out: str | None, report: bool) -> dict:
-    spec, _ = load_study(config, overrides)
-    return run(spec, None if out is None else Path(out), report=report)
+def rewrite_report(out, spec: StudySpec, *, overwrite: bool = False) -> Path:
+    """Render the report of the finished study in ``out`` again (``pfjax report``), without
+    simulating: the figures that need only the summary and runs are redrawn, the worst-case figure
+    (which needs the search's trajectories) is kept. The output is replaced whole, as a study's
+    (:class:`~pfjax.outputs.OutputDir`); returns its directory."""
+    from pfjax.montecarlo.runner import study_output
+    from pfjax.report.figure_set import FIGURES, figure_entries, ordered_figures, report_figures
+    from pfjax.report.study_report import write_report
+
+    output = study_output(spec, out, overwrite=overwrite)
+    with output:
+        summary, runs = read_finished(output.target)
+        redraw = [n for n in FIGURES if n != "worst_cases"]
+        output.start_from_existing(lambda rel: rel != "report.html" and not (
+            rel.startswith("figures/") and Path(rel).stem in redraw))
+        tmp = output.staging
+        figures = report_figures(tmp, spec, summary, runs, names=redraw)
+        if (tmp / "figures" / "worst_cases.png").is_file():
+            figures = ordered_figures(figure_entries(tmp, spec, ["worst_cases"]), figures)
+        write_report(tmp, spec, summary, runs, figures=figures)
+        return output.commit()

@@ -65,13 +65,15 @@ def success_by_param(df: pd.DataFrame, param: str, max_bins: int = 8) -> list[di
     return out
 
 
-def margins(sweep: pd.DataFrame | None, controller: str, eps: float) -> dict:
-    if sweep is None or sweep.empty:
+def margins(counts: pd.DataFrame | None, controller: str, eps: float) -> dict:
+    """Slip margins of ``controller`` per axis, from the sweep's success counts
+    (:func:`pfjax.montecarlo.runner.margin_sweep`: columns controller, axis, amplitude_deg, k, n)."""
+    if counts is None or counts.empty:
         return {}
     out = {}
-    for axis, g in sweep[sweep.controller == controller].groupby("axis", sort=False):
-        agg = g.groupby("amplitude_deg")["success"].agg(["sum", "count"]).sort_index()
-        m = slip_margin(agg.index.to_numpy(), agg["sum"].to_numpy(), agg["count"].to_numpy(), eps=eps)
+    for axis, g in counts[counts.controller == controller].groupby("axis", sort=False):
+        agg = g.groupby("amplitude_deg")[["k", "n"]].sum().sort_index()
+        m = slip_margin(agg.index.to_numpy(), agg["k"].to_numpy(), agg["n"].to_numpy(), eps=eps)
         # A margin at the smallest amplitude may mean "fails even at the smallest slip" (e.g. a path
         # it cannot follow within the band at all): say so rather than report a bare 0.
         m["fails_at_smallest"] = bool(m["table"][0]["rate"] < 1 - eps)
@@ -103,7 +105,8 @@ def _controller_rows(runs, name: str) -> pd.DataFrame:
 def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict, wall_s: float) -> dict:
     """The summary (module docstring). ``runs``: the run table as a DataFrame, or the path of
     ``runs.parquet``, read one controller at a time (large studies: peak memory is one
-    controller's rows)."""
+    controller's rows). ``sweep``: the slip-margin sweep's success counts
+    (:func:`pfjax.montecarlo.runner.margin_sweep`), or None."""
     import pyarrow.parquet as pq
 
     n_total = len(runs) if isinstance(runs, pd.DataFrame) else pq.ParquetFile(runs).metadata.num_rows
@@ -131,7 +134,7 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         "study": spec.name,
         "n_runs_total": int(n_total),
         "n_runs_per_controller_and_path": spec.n_runs,
-        "n_margin_runs": 0 if sweep is None else int(len(sweep)),
+        "n_margin_runs": 0 if sweep is None else int(sweep["n"].sum()),
         "seed": spec.seed,
         "config_sha256": study_hash(spec),
         "pfjax_version": pfjax.__version__,

@@ -289,7 +289,7 @@ def _worst_case_rows(summary: dict, colors: dict) -> list:
     return rows
 
 
-def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, sweep: pd.DataFrame | None,
+def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame,
                  worst_trajectories: dict | None = None, figures: dict | None = None) -> None:
     """Write ``out_dir/report.html`` (self-contained) and ``out_dir/figures/<name>.png|svg``.
 
@@ -298,8 +298,6 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
         spec: the validated study.
         summary: the study summary (:func:`pfjax.montecarlo.summary.summarize`).
         runs: one row per run (``runs.parquet``).
-        sweep: the slip-margin sweep (``margin.parquet``) or None; the margins themselves are read
-            from the summary, the sweep only counts the runs spent on it.
         worst_trajectories: the falsifier's worst runs per controller (:mod:`pfjax.montecarlo.worst_case`),
             or None when the study did no worst-case search.
         figures: :func:`pfjax.report.figure_set.report_figures` of the same study if already rendered.
@@ -326,7 +324,7 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
         "drivers": _drivers(summary), "worst": _worst_runs(runs, params), "worst_params": params,
         "sample_size": {k: v for k, v in summary.get("sample_size", {}).items() if k != "note"},
         "sample_note": summary.get("sample_size", {}).get("note", ""),
-        "n_sweep": 0 if sweep is None else len(sweep),
+        "n_sweep": summary.get("n_margin_runs", 0),
         "figures": figures if figures is not None else _figures(out_dir, spec, summary, runs, colors, worst_trajectories),
         "worst_case_rows": _worst_case_rows(summary, colors),
         "warnings": summary.get("warnings") or [], "precision_rows": _precision_rows(summary, colors),

@@ -36,6 +36,8 @@ up to a few tens of ulp in float32 metrics, float64 bit-identical; tests/test_sh
 
 from __future__ import annotations
 
+import math
+
 from functools import partial
 from typing import Any, Callable, NamedTuple
 
@@ -184,17 +186,57 @@ def unpad(tree, n: int):
     return _head_jit(tree, n)
 
 
+#: Seconds a process waits for the coordinator (and process 0 for the others) by default.
+COORDINATOR_TIMEOUT_S = 60
+
+
+def reach_coordinator(coordinator: str, process_id: int, timeout_s: float) -> None:
+    """Check, before JAX tries (JAX aborts the whole process when it cannot connect), that this
+    process can take part: process 0 can listen on the coordinator's port, the others can connect
+    to it within ``timeout_s`` seconds (retrying while process 0 starts up). Raises
+    :class:`~pfjax.errors.InputError` naming ``coordinator``."""
+    import socket
+    import time
+
+    from pfjax.errors import InputError
+
+    host, _, port = coordinator.rpartition(":")
+    host = host.strip("[]")
+    if process_id == 0:
+        try:
+            with socket.create_server(("", int(port)), reuse_port=hasattr(socket, "SO_REUSEPORT")):
+                pass
+        except OSError as e:
+            raise InputError(f"coordinator: process 0 cannot listen on port {port} ({e.strerror})") from None
+        return
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            with socket.create_connection((host, int(port)), timeout=min(5.0, max(timeout_s, 0.1))):
+                return
+        except OSError as e:
+            if time.monotonic() >= deadline:
+                raise InputError(f"coordinator: could not reach {coordinator} within {timeout_s:g} s "
+                                 f"({e.strerror or type(e).__name__}); is process 0 running?") from None
+            time.sleep(0.2)
+
+
 def initialize_distributed(coordinator: str | None = None, num_processes: int | None = None,
-                           process_id: int | None = None) -> None:
+                           process_id: int | None = None, timeout_s: float = COORDINATOR_TIMEOUT_S) -> None:
     """Join a multi-process JAX run (several hosts, or several processes on one host).
 
     ``jax.distributed.initialize`` with the given coordinator (``host:port`` of process 0), number
     of processes and this process's id; all ``None`` lets JAX detect them (SLURM, Open MPI). Call it
     in every process before any JAX work. CPU devices exchange data through Gloo (JAX's default CPU
-    backend has no cross-process collectives); GPUs use NCCL as usual.
+    backend has no cross-process collectives); GPUs use NCCL as usual. With an explicit
+    coordinator, :func:`reach_coordinator` checks it first, and JAX waits at most ``timeout_s``
+    seconds for the processes to register.
     """
+    if coordinator is not None and process_id is not None:
+        reach_coordinator(coordinator, process_id, timeout_s)
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
-    jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes, process_id=process_id)
+    jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes, process_id=process_id,
+                               initialization_timeout=max(1, int(math.ceil(timeout_s))))
 
 
 def gather(tree):

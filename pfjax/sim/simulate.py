@@ -25,7 +25,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax import errors, resources
 from pfjax.controllers.base import Controller, Observation, step
+from pfjax.errors import InputError
 from pfjax.metrics import running
 from pfjax.models.slip import Pose, SlipParams, world_rhs
 from pfjax.numerics import compiler
@@ -77,14 +79,19 @@ class SimConfig:
     success_from: float | None = None
 
     def __post_init__(self):
-        if not self.dt > 0:
-            raise ValueError(f"dt: must be > 0 s, got {self.dt}")
+        """Checks every setting (:class:`~pfjax.errors.InputError` naming it)."""
+        errors.number("dt", self.dt, positive=True, unit=" s")
+        errors.number("horizon", self.horizon, positive=True, unit=" s")
         if not self.horizon >= self.dt:
-            raise ValueError(f"horizon: must be >= dt, got {self.horizon}")
-        if self.control_every is not None and (int(self.control_every) != self.control_every or self.control_every < 1):
-            raise ValueError(f"control_every: must be a positive integer or None, got {self.control_every}")
-        if int(self.newton_iters) < 1:
-            raise ValueError(f"newton_iters: must be >= 1, got {self.newton_iters}")
+            raise InputError(f"horizon: must be >= dt ({self.dt:g} s), got {self.horizon:g}")
+        resources.check_steps(self.horizon, self.dt)
+        if self.control_every is not None:
+            errors.integer("control_every", self.control_every, low=1, high=resources.MAX_STEPS)
+        errors.integer("newton_iters", self.newton_iters, low=1, high=100)
+        for name in ("d_fail", "settle_band", "steady_window", "success_band"):
+            errors.number(name, getattr(self, name), positive=True)
+        if self.success_from is not None:
+            errors.number("success_from", self.success_from, nonnegative=True, unit=" s")
 
     @property
     def n_steps(self) -> int:
@@ -248,6 +255,7 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
         ``SimResult`` with metrics, status, failure time, final state and (if
         ``config.record``) the trajectory.
     """
+    controller.check_params(sc.gains)  # at trace time: a PI given state-feedback gains is bad input
     dt, n_steps, iters = config.dt, config.n_steps, config.newton_iters
     horizon = n_steps * dt
     continuous = config.control_every is None
@@ -381,6 +389,11 @@ def simulate_batch(scenarios: Scenario, *, controller: Controller, config: SimCo
     the same, run for run, whatever the number of devices and blocks, up to rounding (XLA compiles
     each block shape into its own vector code: at most an ulp or two in a metric, measured).
     """
+    if config.record and not errors.is_traced(scenarios):
+        n_runs = int(np.shape(jax.tree_util.tree_leaves(scenarios)[0])[0])
+        resources.check_memory("record", n_runs * resources.run_bytes(config.n_steps, record=True),
+                               f"recording {n_runs} runs of {config.n_steps + 1} samples",
+                               "simulate with record=False (the metrics need no trajectory), or fewer runs")
     placed, n, layout = sharding.plan_batch(scenarios, devices, block)
     return sharding.unpad(_simulate_vmapped(placed, controller=controller, config=config, layout=layout), n)
 

@@ -429,14 +429,23 @@ def synthesize(
         region: optional pole region.
 
     Raises:
-        ValueError: unknown ``method``.
+        InputError: unknown ``method``, or a value out of range (the message names it).
         SynthesisError: the LMIs are infeasible or the solver fails.
     """
+    from pfjax import errors
+
+    if method not in _METHODS:
+        raise errors.InputError(f"method: expected one of {', '.join(_METHODS)}, got {method!r}")
+    errors.number("v", v, positive=True, unit=" m/s")
+    errors.number("L", L, positive=True, unit=" m")
+    if method == "mixed":
+        errors.number("alpha", alpha, nonnegative=True)
+        errors.number("beta", beta, nonnegative=True)
+        if alpha + beta == 0:
+            raise errors.InputError("alpha: must not be 0 together with beta (the mixed objective would be empty)")
     plant = slip_design_plant(v=v, L=L)
     if method == "hinf":
         return hinf_state_feedback(plant, region=region)
     if method == "h2":
         return h2_state_feedback(plant, region=region)
-    if method == "mixed":
-        return mixed_h2_hinf(plant, alpha=alpha, beta=beta, region=region)
-    raise ValueError(f"unknown synthesis method {method!r}; expected one of {_METHODS}")
+    return mixed_h2_hinf(plant, alpha=alpha, beta=beta, region=region)

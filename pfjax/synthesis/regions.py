@@ -36,14 +36,18 @@ class PoleRegion:
     sector_angle: float | None = None
 
     def __post_init__(self):
+        """Checks the fields (:class:`~pfjax.errors.InputError` naming the field)."""
+        from pfjax import errors
+
         if (self.disk_center is None) != (self.disk_radius is None):
-            raise ValueError("PoleRegion needs both disk_center and disk_radius, or neither")
-        if self.disk_radius is not None and not self.disk_radius > 0:
-            raise ValueError(f"PoleRegion disk_radius must be > 0, got {self.disk_radius}")
-        if self.sector_angle is not None and not 0.0 < self.sector_angle <= math.pi / 2:
-            raise ValueError(
-                f"PoleRegion sector_angle must be in (0, pi/2], got {self.sector_angle}"
-            )
+            raise errors.InputError("disk_radius: give disk_center and disk_radius together, or neither")
+        for name in ("max_real", "disk_center"):
+            if getattr(self, name) is not None:
+                errors.number(name, getattr(self, name), unit=" 1/s")
+        if self.disk_radius is not None:
+            errors.number("disk_radius", self.disk_radius, positive=True, unit=" 1/s")
+        if self.sector_angle is not None:
+            errors.number("sector_angle", self.sector_angle, positive=True, high=math.pi / 2, unit=" rad")
 
 
 def region_contains(region: PoleRegion, poles, tol: float = 0.0) -> bool:

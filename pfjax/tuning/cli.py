@@ -46,65 +46,40 @@ def register(sub) -> None:
     p.set_defaults(func=_cmd)
 
 
-def _check(args):
-    from pfjax.cli import UsageError, _finite
-    from pfjax.tuning.cost import AGGREGATES, METRICS
-
-    if args.method not in ("ga", "gradient"):
-        raise UsageError(f"--method: value {args.method!r}, expected ga or gradient")
-    if args.controller not in CONTROLLERS:
-        raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(CONTROLLERS)}")
-    if args.scenario not in SCENARIOS:
-        path = Path(args.scenario)
-        if path.suffix != ".toml" or not path.is_file():
-            raise UsageError(f"--scenario: value {args.scenario!r}, expected one of {', '.join(SCENARIOS)} or an existing study .toml")
-    if args.cost not in METRICS:
-        raise UsageError(f"--cost: value {args.cost!r}, expected one of {', '.join(METRICS)}")
-    if args.aggregate not in AGGREGATES:
-        raise UsageError(f"--aggregate: value {args.aggregate!r}, expected one of {', '.join(AGGREGATES)}")
-    if not 0.0 < _finite("--level", args.level) < 1.0:
-        raise UsageError(f"--level: value {args.level:g}, expected in (0, 1)")
-    if _finite("--effort", args.effort) < 0:
-        raise UsageError(f"--effort: value {args.effort:g}, expected >= 0")
-    for flag, v, lo in (("--generations", args.generations, 0), ("--population", args.population, 2),
-                        ("--steps", args.steps, 1), ("--starts", args.starts, 1), ("--n-runs", args.n_runs, 1)):
-        if v < lo:
-            raise UsageError(f"{flag}: value {v}, expected >= {lo}")
-    _finite("--lr", args.lr, positive=True)
-    for flag, v in (("--dt", args.dt), ("--horizon", args.horizon)):
-        if v is not None:
-            _finite(flag, v, positive=True, unit=" s")
+#: ``pfjax tune``'s flags by the library argument they set.
+FLAGS = {"method": "--method", "controller": "--controller", "scenario": "--scenario", "metric": "--cost",
+         "aggregate": "--aggregate", "level": "--level", "effort": "--effort", "population_size": "--population",
+         "generations": "--generations", "steps": "--steps", "n_starts": "--starts", "learning_rate": "--lr",
+         "n_runs": "--n-runs", "dt": "--dt", "horizon": "--horizon"}
 
 
 def _cmd(args) -> dict:
-    _check(args)
     import dataclasses
 
     import jax
 
-    from pfjax import __version__
-    from pfjax.config import ConfigError
-    from pfjax.cli import UsageError
+    from pfjax import __version__, errors
+    from pfjax.cli import UsageError, as_flags
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
     from pfjax.tuning.problem import make_problem, tune
 
-    cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level)
-    try:
+    if args.controller not in CONTROLLERS:
+        raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(CONTROLLERS)}")
+    if args.method not in ("ga", "gradient"):
+        raise UsageError(f"--method: value {args.method!r}, expected ga or gradient")
+    key = jax.random.PRNGKey(errors.seed("--seed", args.seed))
+    with as_flags(FLAGS):
+        cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
         problem = make_problem(CONTROLLERS[args.controller], args.scenario, cost=cost, n_runs=args.n_runs)
-    except ConfigError as e:
-        raise UsageError(f"--scenario: {e}") from None
-    changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
-    if changes:
-        try:
+        changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
+        if changes:
             problem = problem._replace(config=dataclasses.replace(problem.config, **changes))
-        except ValueError as e:
-            raise UsageError(f"--dt/--horizon: {e}") from None
-    progress = (not args.json) and sys.stderr.isatty()
-    key = jax.random.PRNGKey(args.seed)
-    theta0 = problem.tunable.flatten() if args.from_default else None
-    r = tune(problem, args.method, key=key, ga_options=GAOptions(population_size=args.population, generations=args.generations),
-             steps=args.steps, n_starts=args.starts, learning_rate=args.lr, theta0=theta0, progress=progress)
+        progress = (not args.json) and sys.stderr.isatty()
+        theta0 = problem.tunable.flatten() if args.from_default else None
+        options = GAOptions(population_size=args.population, generations=args.generations)
+        r = tune(problem, args.method, key=key, ga_options=options, steps=args.steps, n_starts=args.starts,
+                 learning_rate=args.lr, theta0=theta0, progress=progress)
     return {
         "method": args.method, "controller": args.controller, "scenario": args.scenario,
         "cost_spec": cost._asdict(), "gains": problem.tunable.named(r.theta), "cost": r.cost,

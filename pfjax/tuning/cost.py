@@ -62,14 +62,17 @@ class CostSpec(NamedTuple):
     fail_penalty: float = 100.0  # added to a failed run's cost (metric units)
 
     def check(self) -> "CostSpec":
+        """``self`` if every field is valid; :class:`~pfjax.errors.InputError` naming the field."""
+        from pfjax import errors
+
         if self.metric not in METRICS:
-            raise ValueError(f"cost.metric: value {self.metric!r}, expected one of {list(METRICS)}")
+            raise errors.InputError(f"metric: value {self.metric!r}, expected one of {', '.join(METRICS)}")
         if self.aggregate not in AGGREGATES:
-            raise ValueError(f"cost.aggregate: value {self.aggregate!r}, expected one of {list(AGGREGATES)}")
-        if not 0.0 < self.level < 1.0:
-            raise ValueError(f"cost.level: value {self.level}, expected in (0, 1)")
-        if not self.effort >= 0.0:
-            raise ValueError(f"cost.effort: value {self.effort}, expected >= 0")
+            raise errors.InputError(f"aggregate: value {self.aggregate!r}, expected one of {', '.join(AGGREGATES)}")
+        if not 0.0 < errors.number("level", self.level) < 1.0:
+            raise errors.InputError(f"level: value {self.level:g}, expected in (0, 1)")
+        errors.number("effort", self.effort, nonnegative=True)
+        errors.number("fail_penalty", self.fail_penalty, nonnegative=True)
         return self
 
 

@@ -93,18 +93,22 @@ class GAResult(NamedTuple):
     costs: np.ndarray  # its costs, (P,)
 
 
+#: Largest population and number of generations the GA accepts.
+MAX_POPULATION = 1_000_000
+MAX_GENERATIONS = 1_000_000
+
+
 def _validate(options: GAOptions) -> tuple[int, int, int]:
-    P, E, G = int(options.population_size), int(options.elite_count), int(options.generations)
-    if P < 2:
-        raise ValueError(f"population_size: value {P}, expected >= 2")
-    if not 0 <= E < P:
-        raise ValueError(f"elite_count: value {E}, expected 0 <= elite_count < population_size ({P})")
-    if G < 0:
-        raise ValueError(f"generations: value {G}, expected >= 0")
-    if not 0.0 <= options.crossover_fraction <= 1.0:
-        raise ValueError(f"crossover_fraction: value {options.crossover_fraction}, expected in [0, 1]")
-    if not 0.0 <= options.mutation_rate <= 1.0:
-        raise ValueError(f"mutation_rate: value {options.mutation_rate}, expected in [0, 1]")
+    """``(population, elites, generations)``; :class:`~pfjax.errors.InputError` naming a bad option."""
+    from pfjax import errors
+
+    P = errors.integer("population_size", options.population_size, low=2, high=MAX_POPULATION)
+    E = errors.integer("elite_count", options.elite_count, low=0, high=P - 1)
+    G = errors.integer("generations", options.generations, low=0, high=MAX_GENERATIONS)
+    errors.number("crossover_fraction", options.crossover_fraction, low=0.0, high=1.0)
+    errors.number("mutation_rate", options.mutation_rate, low=0.0, high=1.0)
+    errors.number("mutation_scale", options.mutation_scale, nonnegative=True)
+    errors.number("mutation_shrink", options.mutation_shrink, low=0.0, high=1.0)
     return P, E, G
 
 

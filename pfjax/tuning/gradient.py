@@ -48,6 +48,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from pfjax import errors
+
 from pfjax.numerics import autodiff
 
 
@@ -100,12 +102,12 @@ def gradient_tune(
     t0 = time.perf_counter()
     lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
     span = hi - lo
-    n_starts = int(n_starts)
+    n_starts = errors.integer("n_starts", n_starts, low=1, high=1_000_000)
+    errors.integer("steps", steps, low=1, high=1_000_000)
+    errors.number("learning_rate", learning_rate, positive=True)
     autodiff.resolve_mode(mode, lo.size)
-    if n_starts < 1:
-        raise ValueError(f"n_starts: value {n_starts}, expected >= 1")
     if key is None and (theta0 is None or n_starts > 1):
-        raise ValueError("key: required for random starts")
+        raise errors.InputError("key: required for random starts")
     starts = [] if theta0 is None else [np.asarray(theta0, np.float64)]
     if len(starts) < n_starts:
         u = np.asarray(jax.random.uniform(key, (n_starts - len(starts),) + lo.shape), np.float64)

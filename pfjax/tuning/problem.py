@@ -59,8 +59,16 @@ def make_problem(controller: str, scenario: str, *, cost: CostSpec = CostSpec(),
         base_gains: gains pytree for the untuned fields (default: the registry's defaults).
         box: ``(fields, lower, upper)`` overriding :data:`pfjax.tuning.cost.DEFAULT_BOXES`.
     """
+    from pfjax import errors
     from pfjax.sim.simulate import stack
 
+    if controller not in C.REGISTRY:
+        raise errors.InputError(f"controller: value {controller!r}, expected one of {', '.join(C.REGISTRY)}")
+    if scenario not in PAPER_SETS and not (Path(scenario).suffix == ".toml" and Path(scenario).is_file()):
+        raise errors.InputError(f"scenario: value {scenario!r}, expected one of {', '.join(PAPER_SETS)} or an "
+                                f"existing study .toml")
+    errors.integer("n_runs", n_runs, low=1, high=1_000_000)
+    errors.integer("run_offset", run_offset, low=0, high=errors.MAX_SEED - n_runs)
     ctrl, factory = C.REGISTRY[controller]
     fields, lo, hi = box or DEFAULT_BOXES[controller]
     base = factory() if base_gains is None else base_gains
@@ -75,7 +83,10 @@ def make_problem(controller: str, scenario: str, *, cost: CostSpec = CostSpec(),
         from pfjax.montecarlo.runner import sim_config
         from pfjax.montecarlo.sampling import sample_runs
 
-        spec, _ = load_study(Path(scenario))
+        try:
+            spec, _ = load_study(Path(scenario))
+        except errors.InputError as e:
+            raise errors.InputError(f"scenario: {e}", "scenario") from None
         runs = np.arange(run_offset, run_offset + n_runs)
         batches = []
         for i in range(len(spec.paths)):
@@ -114,7 +125,24 @@ def _cost_fns(problem: Problem):
 def tune(problem: Problem, method: str, *, key, ga_options: GAOptions = GAOptions(), steps: int = 100,
          n_starts: int = 1, learning_rate: float = 0.05, theta0=None, progress: bool = False) -> TuneResult:
     """Run ``method`` (``"ga"`` or ``"gradient"``) on ``problem``; the gradient starts at ``theta0``
-    or uniformly in the box from ``key``."""
+    or uniformly in the box from ``key``. Refused before any work (:class:`~pfjax.errors.InputError`
+    naming the argument) for an unknown method or settings, or batches beyond the memory budget
+    (:mod:`pfjax.resources`: the GA simulates a whole population at once, the gradient every start
+    with one tangent per tuned gain)."""
+    from pfjax import errors, resources
+    from pfjax.tuning.ga import _validate
+
+    if method not in ("ga", "gradient"):
+        raise errors.InputError(f"method: value {method!r}, expected ga or gradient")
+    per_run = resources.run_bytes(problem.config.n_steps)
+    if method == "ga":
+        population = _validate(ga_options)[0]
+        resources.check_memory("population_size", 2 * population * problem.n_per_eval * per_run,
+                               f"a GA population of {population} x {problem.n_per_eval} runs")
+    else:
+        n = errors.integer("n_starts", n_starts, low=1, high=1_000_000)
+        resources.check_memory("n_starts", 2 * n * problem.n_per_eval * per_run * (1 + problem.lower.size),
+                               f"{n} starts x {problem.n_per_eval} runs with {problem.lower.size} tangents")
     f_scalar, f_pop = _cost_fns(problem)
     if method == "ga":
         f = f_pop
@@ -123,4 +151,4 @@ def tune(problem: Problem, method: str, *, key, ga_options: GAOptions = GAOption
     if method == "gradient":
         return gradient_tune(f_scalar, problem.lower, problem.upper, theta0=theta0, key=key, steps=steps,
                              n_starts=n_starts, n_per_eval=problem.n_per_eval, learning_rate=learning_rate, progress=progress)
-    raise ValueError(f"method: value {method!r}, expected 'ga' or 'gradient'")
+    raise AssertionError(method)

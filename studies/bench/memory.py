@@ -1,4 +1,4 @@
-"""Peak memory of a large streamed Monte Carlo study (issue 8, "memory").
+"""Peak memory of a large streamed Monte Carlo study.
 
     python studies/bench/memory.py [--runs 1000000] [--horizon 1.0] [--chunk 65536] [--out results/bench_memory]
 
@@ -7,7 +7,7 @@ study holds about ``--runs`` runs in all (3 paths x 3 controllers), a short hori
 run does not change what is held in memory: the metrics mode keeps O(batch) state whatever the
 horizon), no margin sweep, falsifier, float64 check or report; samples the child's resident memory
 every 0.2 s from ``/proc`` and takes its peak from ``getrusage``. Writes ``memory.json`` (runs,
-wall time, peak RSS, the RSS trace, the size of ``runs.parquet``) next to the study's output.
+wall time, peak RSS, the RSS trace, the size of ``runs.parquet``) beside the study's output (``--out``/study).
 """
 
 from __future__ import annotations
@@ -20,6 +20,10 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from pfjax.config import config_hash
+from pfjax.errors import InputError, command_main
+from pfjax.outputs import OutputDir
 
 
 def rss_mib(pid: int) -> float:
@@ -38,19 +42,31 @@ def main(argv=None) -> int:
     ap.add_argument("--horizon", type=float, default=1.0, help="simulated seconds per run (default 1)")
     ap.add_argument("--chunk", type=int, default=65536, help="runs simulated per chunk")
     ap.add_argument("--out", default="results/bench_memory")
+    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
     args = ap.parse_args(argv)
+    return command_main("memory.py", lambda: run(args))
+
+
+def run(args) -> int:
     if args.runs < 9 or args.horizon <= 0 or args.chunk < 1:
-        print("memory.py: error: --runs >= 9, --horizon > 0 and --chunk >= 1 required", file=sys.stderr)
-        return 2
+        raise InputError("--runs/--horizon/--chunk: --runs >= 9, --horizon > 0 and --chunk >= 1 required")
+    cfg = {"runs": args.runs, "horizon": args.horizon, "chunk": args.chunk}
+    with OutputDir(args.out, command="bench-memory", config_sha256=config_hash(cfg), overwrite=args.overwrite) as output:
+        code = measure(args, output.staging)
+        if code == 0:
+            print(f"wrote {output.commit()}", file=sys.stderr)
+        return code
+
+
+def measure(args, out: Path) -> int:
+    """Run the study in a child process into ``out/study`` and write ``out/memory.json``."""
     n_runs = args.runs // 9
-    out = Path(args.out)
     study_out = out / "study"
     h = args.horizon
     sets = [f"n_runs={n_runs}", f"chunk_size={args.chunk}", f"sim.horizon={h}", f"sim.steady_window={h / 2}",
             f"success.from_s={h / 2}", "margin.enabled=false", "falsifier.enabled=false", "f64_check_runs=0"]
     cmd = [sys.executable, "-m", "pfjax.cli", "study", "studies/robustness_default.toml", "--no-report", "--fresh",
            "--out", str(study_out), "--json"] + [a for s in sets for a in ("--set", s)]
-    out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     trace = []

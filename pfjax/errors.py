@@ -1,0 +1,183 @@
+"""User-facing errors and the checks that raise them.
+
+Bad input is never a traceback: every check in pfjax raises :class:`InputError` (a
+``ValueError``) whose message is one line, ``"<key>: <what is wrong> ..."``, naming the config
+key, function argument or command-line flag at fault. The ``pfjax`` command prints it after
+``pfjax <command>: error:`` and exits with code 2; Python callers get the same message.
+
+The checks here are shared by the configuration schema, the library functions and the command
+line, so a value is judged the same way wherever it enters.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers as _numbers
+
+#: Exit code of a command refused for bad input (argparse's convention).
+EXIT_USAGE = 2
+#: Exit code of a command stopped by Ctrl-C (128 + SIGINT).
+EXIT_INTERRUPTED = 130
+
+#: Largest magnitude any physical quantity in pfjax may take: far beyond anything meaningful in
+#: SI units for a wheeled robot, and small enough that squares and products stay finite in float32
+#: (3.4e38) and sums of a million of them in float64.
+MAX_MAGNITUDE = 1e12
+#: Smallest positive magnitude a step, length or tolerance may take (below it float32 flushes to
+#: zero or loses every digit against quantities of order one).
+MIN_POSITIVE = 1e-12
+#: Seeds and counts: JAX keys take 64-bit seeds; counts above this exhaust any machine.
+MAX_SEED = 2**63 - 1
+
+
+class InputError(ValueError):
+    """Bad input: the message is one line and starts with the key, argument or flag at fault.
+
+    Attributes:
+        key: the key, argument or flag named at the start of the message (None if unknown).
+    """
+
+    def __init__(self, message: str, key: str | None = None):
+        message = " ".join(str(message).split())  # one line, whatever the parts contained
+        super().__init__(message)
+        if key is None:
+            head, sep, _ = message.partition(": ")
+            key = head if sep and " " not in head else None
+        self.key = key
+
+
+def is_number(value) -> bool:
+    """A real number that is not a boolean (``True`` is not 1 here)."""
+    return isinstance(value, _numbers.Real) and not isinstance(value, bool)
+
+
+def number(key: str, value, *, positive: bool = False, nonnegative: bool = False, below: float | None = None,
+           low: float | None = None, high: float | None = None, unit: str = "") -> float:
+    """``value`` as a finite float within pfjax's magnitude bounds; :class:`InputError` otherwise.
+
+    Args:
+        key: the name the message starts with.
+        value: the value to check (an int, float or NumPy scalar; not a bool or a string).
+        positive: require ``value > 0`` (and at least :data:`MIN_POSITIVE`).
+        nonnegative: require ``value >= 0``.
+        below: require ``|value| < below``.
+        low, high: require ``low <= value <= high``.
+        unit: appended to the bounds in the message (e.g. ``" deg"``).
+    """
+    if not is_number(value):
+        raise InputError(f"{key}: expected a number, got {value!r}", key)
+    try:
+        x = float(value)
+    except OverflowError:
+        raise InputError(f"{key}: expected a number of magnitude <= {MAX_MAGNITUDE:g}{unit}, got an integer of "
+                         f"{len(str(abs(int(value))))} digits", key) from None
+    if not math.isfinite(x):
+        raise InputError(f"{key}: expected a finite number, got {x}", key)
+    if abs(x) > MAX_MAGNITUDE:
+        raise InputError(f"{key}: expected a magnitude <= {MAX_MAGNITUDE:g}{unit}, got {x:g}", key)
+    if positive and not x > 0:
+        raise InputError(f"{key}: must be > 0{unit}, got {x:g}", key)
+    if positive and not x >= MIN_POSITIVE:
+        raise InputError(f"{key}: must be at least {MIN_POSITIVE:g}{unit}, got {x:g}", key)
+    if nonnegative and x < 0:
+        raise InputError(f"{key}: must be >= 0{unit}, got {x:g}", key)
+    if below is not None and not abs(x) < below:
+        raise InputError(f"{key}: magnitude must be < {below:g}{unit}, got {x:g}", key)
+    if low is not None and x < low:
+        raise InputError(f"{key}: must be >= {low:g}{unit}, got {x:g}", key)
+    if high is not None and x > high:
+        raise InputError(f"{key}: must be <= {high:g}{unit}, got {x:g}", key)
+    return x
+
+
+def is_traced(value) -> bool:
+    """Whether ``value`` is (or holds) a JAX tracer: its numbers are not known yet (inside ``jit``,
+    ``grad`` or ``vmap``), so they cannot be checked here."""
+    import jax
+
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(value))
+
+
+def numbers(key: str, value, *, positive: bool = False, nonnegative: bool = False, below: float | None = None,
+            low: float | None = None, high: float | None = None, unit: str = ""):
+    """Like :func:`number` for a scalar or an array of numbers (every element checked; the first
+    bad one is named). Values under a JAX transformation are not checked (:func:`is_traced`).
+    Returns ``value`` unchanged."""
+    import numpy as np
+
+    if value is None or is_traced(value):
+        return value
+    if is_number(value):
+        number(key, value, positive=positive, nonnegative=nonnegative, below=below, low=low, high=high, unit=unit)
+        return value
+    try:
+        a = np.asarray(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{key}: expected numbers, got {value!r}", key) from None
+    if a.dtype == bool or a.dtype.kind not in "iuf":
+        raise InputError(f"{key}: expected numbers, got an array of {a.dtype}", key)
+    flat = a.reshape(-1)
+    bad = ~np.isfinite(flat.astype(float))
+    for check, fail in ((True, bad), (True, np.abs(flat) > MAX_MAGNITUDE), (positive, flat < MIN_POSITIVE),
+                        (nonnegative, flat < 0), (below is not None, np.abs(flat) >= (below or 0)),
+                        (low is not None, flat < (low if low is not None else 0)),
+                        (high is not None, flat > (high if high is not None else 0))):
+        if check and np.any(fail):
+            i = int(np.argmax(fail))
+            index = ", ".join(str(int(j)) for j in np.unravel_index(i, a.shape))
+            where = f"{key}[{index}]" if a.ndim else key
+            number(where, flat[i].item(), positive=positive, nonnegative=nonnegative, below=below, low=low, high=high,
+                   unit=unit)
+    return value
+
+
+def integer(key: str, value, *, low: int | None = None, high: int | None = None) -> int:
+    """``value`` as an int within ``[low, high]``; :class:`InputError` for booleans, floats and
+    values out of range (the message shows at most 20 digits of a huge integer)."""
+    if isinstance(value, bool) or not isinstance(value, _numbers.Integral):
+        raise InputError(f"{key}: expected an integer, got {value!r}", key)
+    n = int(value)
+    shown = str(n) if len(str(n)) <= 20 else f"an integer of {len(str(abs(n)))} digits"
+    if low is not None and n < low:
+        raise InputError(f"{key}: must be >= {low}, got {shown}", key)
+    if high is not None and n > high:
+        raise InputError(f"{key}: must be <= {high}, got {shown}", key)
+    return n
+
+
+def seed(key: str, value) -> int:
+    """A PRNG seed: an integer in ``[0, 2**63 - 1]``."""
+    return integer(key, value, low=0, high=MAX_SEED)
+
+
+def unique(key: str, names) -> None:
+    """:class:`InputError` naming the first repeated name in ``names`` (controllers, paths, obstacles)."""
+    seen: dict = {}
+    for i, name in enumerate(names):
+        if name in seen:
+            raise InputError(f"{key}[{i}]: name {name!r} repeats {key}[{seen[name]}]; names must be unique", key)
+        seen[name] = i
+
+
+def one_line(exc: BaseException) -> str:
+    """The first non-empty line of an exception's message (its type name if it has none)."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def command_main(prog: str, body, *, interrupted: str = "nothing was written") -> int:
+    """Run ``body()`` (which returns an exit code) as a command's main function: bad input
+    (:class:`InputError`) prints one line ``<prog>: error: <message>`` on stderr and returns
+    :data:`EXIT_USAGE`; Ctrl-C prints ``<prog>: interrupted; <interrupted>`` and returns
+    :data:`EXIT_INTERRUPTED`. No traceback either way."""
+    import sys
+
+    try:
+        return body()
+    except InputError as e:
+        print(f"{prog}: error: {one_line(e)}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        sys.stderr.write("\n")  # below a progress bar's partial line
+        print(f"{prog}: interrupted; {interrupted}", file=sys.stderr)
+        return EXIT_INTERRUPTED

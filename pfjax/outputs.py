@@ -1,0 +1,353 @@
+"""Output directories: written whole or not at all, never over anything pfjax did not write.
+
+Every pfjax command and study that writes files (``pfjax study``, ``report``, ``bench``, the
+study scripts) writes them through :class:`OutputDir`:
+
+1. **The target is checked before anything is computed or written** (:func:`check_target`):
+
+   - it may not exist yet, or be an empty directory;
+   - or it is a directory pfjax wrote: it holds the marker file ``.pfjax-output.json`` (the
+     command, config hash, pfjax version, time, and every file pfjax wrote there with its size and
+     modification time). It is replaced when it holds the output of the same command and config (a
+     re-run); another command's or config's output is replaced only with ``overwrite=True``
+     (``--overwrite``), and so is one whose files changed since pfjax wrote them;
+   - anything else is refused: a file, a symbolic link, a non-empty directory without the marker,
+     a marked directory that also holds files the marker does not list (even with ``overwrite``),
+     the current directory or one that contains it, the home directory, a filesystem root, and a
+     path ending in ``.`` or ``..``.
+
+   A refusal is an :class:`~pfjax.errors.InputError` naming the flag (``--out``), and nothing is
+   touched.
+2. **One writer at a time.** The target's lock file ``.<name>.lock`` beside it is held with
+   ``fcntl.flock`` for the whole command, so a second process writing to the same target is
+   refused (:class:`OutputBusy`, naming the running process's pid and start time). The operating
+   system releases the lock when the process ends, however it ends: a killed run never leaves a
+   stale lock.
+3. **Assembled beside the target, moved into place when complete.** Files are written to a
+   private staging directory ``.<name>.pfjax-staging-*`` beside the target (same filesystem),
+   the marker is written last, and :meth:`OutputDir.commit` renames it into place. A run that
+   stops early (an error, Ctrl-C, a kill) leaves the previous output as it was; its staging
+   directory is removed on the way out, or, after a kill, by the next run that holds the lock.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import re
+import shutil
+import socket
+import tempfile
+from pathlib import Path
+
+from pfjax.errors import InputError
+
+MARKER = ".pfjax-output.json"
+#: Version of the marker's format (its ``format`` field).
+MARKER_FORMAT = 1
+STAGING = "pfjax-staging"
+_OLD = "pfjax-old"
+
+#: Names of studies and outputs: a letter or digit, then letters, digits, ``_``, ``.``, ``-``.
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
+
+
+class OutputBusy(InputError):
+    """Another process holds the output's lock (it is writing there now)."""
+
+
+def check_name(key: str, name) -> str:
+    """A study or output name used as a directory name: 1-100 characters, a letter or digit first,
+    then letters, digits, ``_``, ``.`` or ``-`` (so never ``.``, ``..``, empty, hidden, or with a
+    path separator)."""
+    if not isinstance(name, str) or not NAME_PATTERN.match(name):
+        raise InputError(f"{key}: expected a name of 1-100 letters, digits, '_', '.' or '-' starting with a "
+                         f"letter or digit (it names a directory), got {name!r}", key)
+    return name
+
+
+def sibling(target: Path, kind: str) -> Path:
+    """The hidden entry ``.<name>.<kind>`` beside ``target`` (lock file, partial results, staging)."""
+    return target.parent / f".{target.name}.{kind}"
+
+
+def read_marker(directory: Path) -> dict | None:
+    """The marker of a pfjax output directory, or None if it has none (or an unreadable one)."""
+    try:
+        m = json.loads((Path(directory) / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(m, dict) or not isinstance(m.get("files"), dict) or not isinstance(m.get("dirs"), list):
+        return None
+    return m
+
+
+def _entries(directory: Path) -> tuple[dict[str, os.stat_result], set[str]]:
+    """Files (and links) and directories under ``directory``, as paths relative to it."""
+    files, dirs = {}, set()
+    for root, dnames, fnames in os.walk(directory):
+        rel = Path(root).relative_to(directory)
+        for d in list(dnames):
+            p = Path(root) / d
+            if p.is_symlink():  # a link to a directory is an entry, not a place to walk
+                dnames.remove(d)
+                files[str(rel / d)] = p.lstat()
+            else:
+                dirs.add(str(rel / d))
+        for f in fnames:
+            files[str(rel / f)] = (Path(root) / f).lstat()
+    files.pop(MARKER, None)
+    return files, dirs
+
+
+def _describe(marker: dict) -> str:
+    sha = str(marker.get("config_sha256") or "")[:12]
+    return f"the output of `pfjax {marker.get('command', '?')}`" + (f" (config {sha})" if sha else "")
+
+
+def check_target(target, *, command: str, config_sha256: str | None, overwrite: bool = False,
+                 flag: str = "--out") -> Path:
+    """Check that ``target`` may receive a new output of ``command`` (see the module docstring).
+
+    Touches nothing. Returns the target as an absolute path (symbolic links in its parents
+    resolved). Raises :class:`~pfjax.errors.InputError` naming ``flag``.
+    """
+    given = Path(target)
+    last = str(target).rstrip("/" + os.sep).rsplit(os.sep, 1)[-1].rsplit("/", 1)[-1]
+    if str(target).strip() == "" or last in ("", ".", ".."):
+        raise InputError(f"{flag}: {str(target)!r} does not name a new directory (it ends in '.' or '..' or is "
+                         f"empty); give a directory name such as results/my_study", flag)
+    path = Path(os.path.abspath(given))
+    resolved = path.parent.resolve() / path.name
+    if resolved == Path(resolved.anchor):
+        raise InputError(f"{flag}: {target} is a filesystem root; pfjax writes only into a directory of its own", flag)
+    if resolved == Path.home().resolve():
+        raise InputError(f"{flag}: {target} is the home directory; pfjax writes only into a directory of its own", flag)
+    cwd = Path.cwd().resolve()
+    if resolved == cwd or resolved in cwd.parents:
+        raise InputError(f"{flag}: {target} is the current directory or contains it; give a directory of its own "
+                         f"such as results/my_study", flag)
+    for parent in resolved.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise InputError(f"{flag}: {parent} is not a directory (cannot create {resolved.name} in it)", flag)
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise InputError(f"{flag}: {parent} is not writable", flag)
+            break
+    if resolved.is_symlink():
+        raise InputError(f"{flag}: {target} is a symbolic link; give the directory it points to, or another name", flag)
+    if not resolved.exists():
+        return resolved
+    if not resolved.is_dir():
+        raise InputError(f"{flag}: {target} exists and is not a directory", flag)
+    try:
+        empty = not any(resolved.iterdir())
+    except OSError as e:
+        raise InputError(f"{flag}: {target} cannot be read ({e.strerror})", flag) from None
+    if empty:
+        return resolved
+    marker = read_marker(resolved)
+    if marker is None:
+        raise InputError(f"{flag}: {target} is not empty and was not written by pfjax (it has no {MARKER}); "
+                         f"choose another {flag}, or empty it yourself", flag)
+    files, dirs = _entries(resolved)
+    listed = marker["files"]
+    foreign = sorted(set(files) - set(listed)) + sorted(dirs - set(marker["dirs"]))
+    if foreign:
+        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+        raise InputError(f"{flag}: {target} holds {foreign[0]!r}{more}, which pfjax did not write there; move it "
+                         f"away or choose another {flag} (pfjax never deletes what it did not write)", flag)
+    changed = [f for f, st in files.items()
+               if not (isinstance(listed.get(f), list) and listed[f] == [st.st_size, st.st_mtime_ns])]
+    if not overwrite:
+        if changed:
+            raise InputError(f"{flag}: {target}/{changed[0]} changed after pfjax wrote it; add --overwrite to replace "
+                             f"{target}, or choose another {flag}", flag)
+        if marker.get("command") != command or marker.get("config_sha256") != config_sha256:
+            raise InputError(f"{flag}: {target} holds {_describe(marker)}; add --overwrite to replace it, or choose "
+                             f"another {flag}", flag)
+    return resolved
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+class OutputLock:
+    """An exclusive lock on an output target, held by this process (``fcntl.flock`` on the lock file
+    ``.<name>.lock`` beside the target, which records the holder's pid, host, command and start
+    time). Released by :meth:`release` or by the end of the process."""
+
+    def __init__(self, target: Path, *, command: str, flag: str = "--out"):
+        self.target, self.command, self.flag = Path(target), command, flag
+        self.path = sibling(self.target, "lock")
+        self._fd: int | None = None
+
+    def acquire(self) -> None:
+        import fcntl
+
+        while self._fd is None:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = self._holder(fd)
+                os.close(fd)
+                raise OutputBusy(f"{self.flag}: a pfjax {holder.get('command', 'command')} is running into "
+                                 f"{self.target} (pid {holder.get('pid', '?')} on {holder.get('host', '?')}, started "
+                                 f"{holder.get('started', '?')}); wait for it to finish, or choose another {self.flag}",
+                                 self.flag) from None
+            try:  # the file may have been removed by its previous holder after we opened it
+                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if not same:
+                os.close(fd)
+                continue
+            info = {"pid": os.getpid(), "host": socket.gethostname(), "command": self.command, "started": _now()}
+            os.ftruncate(fd, 0)
+            os.write(fd, (json.dumps(info) + "\n").encode())
+            self._fd = fd
+
+    @staticmethod
+    def _holder(fd: int) -> dict:
+        try:
+            os.lseek(fd, 0, os.SEEK_SET)
+            data = json.loads(os.read(fd, 4096).decode() or "{}")
+            return data if isinstance(data, dict) else {}
+        except (OSError, ValueError):
+            return {}
+
+    def release(self) -> None:
+        if self._fd is None:
+            return
+        try:
+            os.unlink(self.path)  # while still held: a waiting process re-checks the inode
+        except FileNotFoundError:
+            pass
+        os.close(self._fd)
+        self._fd = None
+
+
+class OutputDir:
+    """One output directory being written (see the module docstring); a context manager.
+
+    Example::
+
+        with OutputDir("results/my_study", command="study", config_sha256=h) as out:
+            (out.staging / "summary.json").write_text(text)
+            out.commit()
+
+    Args:
+        target: the directory the output goes to.
+        command: what writes it (``"study"``, ``"bench"``, ``"paper-reproduction"``, ...), recorded in
+            the marker; a re-run of the same command and config replaces its own output.
+        config_sha256: the hash of the config the output comes from (recorded in the marker).
+        overwrite: replace a pfjax output of another command or config, or one whose files changed.
+        flag: the flag or key named in error messages.
+        extra: more fields for the marker (e.g. the study name, the seed).
+    """
+
+    def __init__(self, target, *, command: str, config_sha256: str | None, overwrite: bool = False,
+                 flag: str = "--out", extra: dict | None = None):
+        self.command, self.config_sha256, self.overwrite, self.flag = command, config_sha256, overwrite, flag
+        self.target = check_target(target, command=command, config_sha256=config_sha256, overwrite=overwrite, flag=flag)
+        self.extra = dict(extra or {})
+        self._lock = OutputLock(self.target, command=command, flag=flag)
+        self._staging: Path | None = None
+        self.committed = False
+
+    # -- life cycle
+    @property
+    def is_open(self) -> bool:
+        """Whether this process holds the target's lock (between :meth:`open` and :meth:`close`)."""
+        return self._lock._fd is not None
+
+    def open(self) -> OutputDir:
+        """Take the lock (re-checking the target under it), remove staging directories that killed
+        runs left behind. Idempotent."""
+        if self.is_open:
+            return self
+        self.target.parent.mkdir(parents=True, exist_ok=True)
+        self._lock.acquire()
+        try:
+            check_target(self.target, command=self.command, config_sha256=self.config_sha256,
+                         overwrite=self.overwrite, flag=self.flag)
+            for kind in (STAGING, _OLD):  # only this target's, and nobody else holds its lock
+                for stale in self.target.parent.glob(f".{glob_escape(self.target.name)}.{kind}-*"):
+                    shutil.rmtree(stale, ignore_errors=True)
+        except BaseException:
+            self._lock.release()
+            raise
+        return self
+
+    def __enter__(self) -> OutputDir:
+        return self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Remove the staging directory if it was not committed; release the lock."""
+        if self._staging is not None and not self.committed:
+            shutil.rmtree(self._staging, ignore_errors=True)
+        self._lock.release()
+
+    # -- writing
+    @property
+    def staging(self) -> Path:
+        """The private directory the output is assembled in (created on first use)."""
+        if not self.is_open:
+            raise RuntimeError("OutputDir: open() it (or use it as a context manager) before writing")
+        if self._staging is None:
+            self._staging = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.{STAGING}-", dir=self.target.parent))
+        return self._staging
+
+    def start_from_existing(self, keep) -> None:
+        """Fill the staging directory with the current output's files for which ``keep(relative
+        path)`` is true (hard links where the filesystem allows, else copies): to rewrite part of an
+        output (``pfjax report``) and still replace it whole."""
+        current = read_marker(self.target) if self.target.is_dir() else None
+        for rel in (current or {}).get("files", {}):
+            src = self.target / rel
+            if keep(rel) and src.is_file():
+                dst = self.staging / rel
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                try:
+                    os.link(src, dst)
+                except OSError:
+                    shutil.copy2(src, dst)
+
+    def commit(self, **extra) -> Path:
+        """Write the marker (with ``extra`` fields) and move the staging directory into place,
+        replacing the previous output. Returns the target."""
+        staging = self.staging
+        files, dirs = _entries(staging)
+        marker = {"format": MARKER_FORMAT, "command": self.command, "config_sha256": self.config_sha256,
+                  **self.extra, **extra, "pfjax_version": _version(), "written": _now(),
+                  "files": {f: [st.st_size, st.st_mtime_ns] for f, st in sorted(files.items())}, "dirs": sorted(dirs)}
+        (staging / MARKER).write_text(json.dumps(marker, indent=1) + "\n", encoding="utf-8")
+        staging.chmod(0o755)  # mkdtemp makes it private; results are for everyone who can read the parent
+        old = None
+        if self.target.exists():
+            check_target(self.target, command=self.command, config_sha256=self.config_sha256,
+                         overwrite=self.overwrite, flag=self.flag)  # nothing foreign arrived meanwhile
+            old = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.{_OLD}-", dir=self.target.parent))
+            os.replace(self.target, old / "output")
+        os.replace(staging, self.target)
+        self.committed = True
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+        return self.target
+
+
+def glob_escape(name: str) -> str:
+    """``name`` with glob's special characters escaped."""
+    return re.sub(r"([*?\[])", r"[\1]", name)
+
+
+def _version() -> str:
+    from pfjax import __version__
+
+    return __version__

@@ -1,0 +1,90 @@
+"""Memory guards: refuse, before allocating, work that cannot fit in this machine's memory.
+
+A batch of runs, a recorded trajectory or a run table whose size the user sets (``n_runs``,
+``chunk_size``, ``--population``, ``--sizes``, horizons) is estimated from those sizes first; if
+the estimate exceeds :func:`memory_budget` the command stops with one line naming the key or flag
+(an :class:`~pfjax.errors.InputError`), instead of swapping or being killed by the operating
+system an hour later. Work that streams (a study's runs, chunk by chunk) is bounded by its chunk,
+not its total.
+
+The estimates are upper bounds of the arrays pfjax itself holds (inputs, per-run state, outputs,
+and XLA's temporaries counted as a factor); they are meant to catch orders of magnitude, not to
+predict the peak to the byte.
+"""
+
+from __future__ import annotations
+
+import os
+
+from pfjax.errors import InputError
+
+#: Environment variable: the memory budget in bytes (default: half the machine's physical memory).
+ENV = "PFJAX_MEMORY_BUDGET"
+#: Bytes a float64 run of the slip simulator holds besides its slip sequence and path: scenario,
+#: loop carry, running metrics and XLA's temporaries in the scan body. Measured (peak resident
+#: memory of ``simulate_batch`` on the benchmark problem, metrics only): 2.4 kB per run at 10^5
+#: runs, 1.1 kB at 10^6.
+RUN_BYTES = 2400
+#: Bytes per recorded sample of a trajectory (12 float64 fields).
+SAMPLE_BYTES = 8 * 12
+#: Most integrator steps one run may take (``horizon / dt``): a 20 s run at 10 us.
+MAX_STEPS = 2_000_000
+
+
+def check_steps(horizon: float, dt: float) -> int:
+    """The number of integrator steps ``horizon / dt``; :class:`~pfjax.errors.InputError` naming
+    ``dt`` above :data:`MAX_STEPS`."""
+    n = horizon / dt
+    if n > MAX_STEPS:
+        raise InputError(f"dt: at most {MAX_STEPS:.0e} integrator steps per run (horizon / dt), got "
+                         f"{horizon:g} / {dt:g} = {n:.3g}", "dt")
+    return int(round(n))
+
+
+def physical_memory() -> int:
+    """This machine's physical memory, bytes (0 if the platform does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, OSError, ValueError):
+        return 0
+
+
+def memory_budget(environ=None) -> int:
+    """The most memory one allocation plan may take: ``$PFJAX_MEMORY_BUDGET`` bytes if set, else
+    half the physical memory (the rest is the operating system's, XLA's code and the user's)."""
+    environ = os.environ if environ is None else environ
+    text = environ.get(ENV, "").strip()
+    if text.isdigit():
+        return int(text)
+    total = physical_memory()
+    return total // 2 if total else 1 << 62
+
+
+def fmt_bytes(n: float) -> str:
+    for unit, size in (("TiB", 1 << 40), ("GiB", 1 << 30), ("MiB", 1 << 20), ("kiB", 1 << 10)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n:.0f} B"
+
+
+def check_memory(key: str, nbytes: float, what: str, hint: str = "") -> None:
+    """:class:`~pfjax.errors.InputError` naming ``key`` if ``nbytes`` exceeds :func:`memory_budget`.
+
+    Args:
+        key: the key or flag whose value sets the size.
+        nbytes: the estimate, bytes.
+        what: what needs it (``"a chunk of 10^8 runs"``).
+        hint: what to do instead (``"lower chunk_size"``).
+    """
+    budget = memory_budget()
+    if nbytes > budget:
+        raise InputError(f"{key}: {what} needs about {fmt_bytes(nbytes)}, more than the memory budget of "
+                         f"{fmt_bytes(budget)} (half this machine's memory, or ${ENV})" + (f"; {hint}" if hint else ""),
+                         key)
+
+
+def run_bytes(n_steps: int, *, record: bool = False, seq_len: int = 0, path_numbers: int = 0) -> int:
+    """Upper bound of the bytes one run of the slip simulator holds: its state and metrics, its
+    slip sequence (``seq_len`` samples of two axes), its path (``path_numbers`` numbers) and, with
+    ``record``, its trajectory (``n_steps + 1`` samples)."""
+    return RUN_BYTES + 8 * (2 * seq_len + path_numbers) + (SAMPLE_BYTES * (n_steps + 1) if record else 0)

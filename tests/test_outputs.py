@@ -1,0 +1,381 @@
+"""Output directories (pfjax.outputs): pfjax never deletes or overwrites what it did not write,
+replaces its own outputs whole, holds one writer per output, and leaves nothing behind that a
+later run does not clean up. With real processes for the lock, Ctrl-C and kills."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from pfjax import cli
+from pfjax.errors import EXIT_INTERRUPTED, EXIT_USAGE, InputError
+from pfjax.montecarlo.chunks import partial_dir
+from pfjax.montecarlo.config import load_study
+from pfjax.montecarlo.study import run
+from pfjax.outputs import MARKER, OutputBusy, OutputDir, check_name, check_target, read_marker, sibling
+
+STUDY = """name = "outputs"
+n_runs = 24
+seed = 7
+chunk_size = 8
+f64_check_runs = 0
+[sim]
+horizon = 2.0
+steady_window = 1.0
+[success]
+from_s = 1.0
+band = 0.2
+[slip]
+beta_r_deg = { dist = "uniform", low = -5, high = 5 }
+[initial]
+lateral_offset = { dist = "uniform", low = -0.3, high = 0.3 }
+[margin]
+enabled = false
+[[paths]]
+kind = "line"
+[[controllers]]
+name = "st"
+type = "stanley"
+"""
+
+
+def _write(out: Path, files: dict, *, command="study", sha="a" * 64) -> None:
+    with OutputDir(out, command=command, config_sha256=sha, overwrite=True) as o:
+        for name, text in files.items():
+            (o.staging / name).parent.mkdir(parents=True, exist_ok=True)
+            (o.staging / name).write_text(text)
+        o.commit()
+
+
+def _tree(root: Path) -> dict:
+    """Every entry under ``root`` with its bytes (directories as None): "byte-identical" checks."""
+    return {str(p.relative_to(root)): (None if p.is_dir() else p.read_bytes()) for p in sorted(root.rglob("*"))}
+
+
+# ------------------------------------------------------------------------------ check_target
+
+
+def test_new_and_empty_targets_are_accepted(tmp_path):
+    assert check_target(tmp_path / "new", command="study", config_sha256="x") == tmp_path / "new"
+    (tmp_path / "empty").mkdir()
+    assert check_target(tmp_path / "empty", command="study", config_sha256="x") == tmp_path / "empty"
+
+
+def test_a_directory_pfjax_did_not_write_is_refused_even_with_overwrite(tmp_path):
+    keep = tmp_path / "keep"
+    keep.mkdir()
+    (keep / "thesis.tex").write_text("data")
+    for overwrite in (False, True):
+        with pytest.raises(InputError, match=r"^--out: .*keep is not empty and was not written by pfjax") as e:
+            check_target(keep, command="study", config_sha256="x", overwrite=overwrite)
+        assert e.value.key == "--out"
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(InputError, match="exists and is not a directory"):
+        check_target(tmp_path / "file", command="study", config_sha256="x", overwrite=True)
+    (tmp_path / "link").symlink_to(keep)
+    with pytest.raises(InputError, match="symbolic link"):
+        check_target(tmp_path / "link", command="study", config_sha256="x", overwrite=True)
+
+
+@pytest.mark.parametrize("target", [".", "..", "", "results/..", "a/."])
+def test_dot_targets_are_refused(target, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(InputError, match=r"^--out: .*does not name a new directory"):
+        check_target(target, command="study", config_sha256="x", overwrite=True)
+
+
+def test_root_home_and_directories_containing_the_working_directory_are_refused(tmp_path, monkeypatch):
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    _write(tmp_path / "a" / "b" / "out", {"x.txt": "1"})  # even a directory holding pfjax outputs
+    for target, what in ((tmp_path / "a", "contains it"), (work, "current directory"),
+                         (Path("/"), "does not name a new directory|filesystem root")):
+        with pytest.raises(InputError, match=what):
+            check_target(target, command="study", config_sha256="x", overwrite=True)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    (tmp_path / "home").mkdir()
+    with pytest.raises(InputError, match="home directory"):
+        check_target(tmp_path / "home", command="study", config_sha256="x", overwrite=True)
+
+
+def test_own_outputs_are_replaced_by_a_rerun_and_others_only_with_overwrite(tmp_path):
+    out = tmp_path / "out"
+    _write(out, {"summary.json": "{}", "figures/a.png": "png"}, sha="a" * 64)
+    assert read_marker(out)["files"].keys() == {"summary.json", "figures/a.png"}
+    check_target(out, command="study", config_sha256="a" * 64)  # a re-run of the same config
+    for command, sha in (("study", "b" * 64), ("bench", "a" * 64)):
+        with pytest.raises(InputError, match=r"^--out: .* holds the output of `pfjax study` \(config aaaaaaaaaaaa\); "
+                                             r"add --overwrite"):
+            check_target(out, command=command, config_sha256=sha)
+        check_target(out, command=command, config_sha256=sha, overwrite=True)
+
+
+def test_foreign_and_changed_files_in_an_output(tmp_path):
+    out = tmp_path / "out"
+    _write(out, {"summary.json": "{}", "figures/a.png": "png"})
+    (out / "figures" / "notes.txt").write_text("mine")
+    with pytest.raises(InputError, match=r"holds 'figures/notes.txt', which pfjax did not write"):
+        check_target(out, command="study", config_sha256="a" * 64, overwrite=True)
+    (out / "figures" / "notes.txt").unlink()
+    (out / "mine").mkdir()
+    with pytest.raises(InputError, match=r"holds 'mine'"):
+        check_target(out, command="study", config_sha256="a" * 64, overwrite=True)
+    (out / "mine").rmdir()
+    (out / "summary.json").write_text('{"edited": 1}')
+    with pytest.raises(InputError, match=r"summary.json changed after pfjax wrote it; add --overwrite"):
+        check_target(out, command="study", config_sha256="a" * 64)
+    check_target(out, command="study", config_sha256="a" * 64, overwrite=True)
+
+
+@pytest.mark.parametrize("name", ["", ".", "..", "a/b", "../x", ".hidden", "a b", "x" * 101, 3, None])
+def test_bad_names(name):
+    with pytest.raises(InputError, match=r"^name: expected a name"):
+        check_name("name", name)
+
+
+# ------------------------------------------------------------------------------ OutputDir
+
+
+def test_a_failed_write_leaves_the_previous_output_and_no_staging(tmp_path):
+    out = tmp_path / "out"
+    _write(out, {"summary.json": "old"})
+    before = _tree(out)
+    with pytest.raises(RuntimeError):
+        with OutputDir(out, command="study", config_sha256="a" * 64) as o:
+            (o.staging / "summary.json").write_text("new")
+            raise RuntimeError("boom")
+    assert _tree(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no staging, no lock file
+
+
+def test_stale_staging_of_a_killed_run_is_removed_by_the_next_writer(tmp_path):
+    out = tmp_path / "out"
+    stale = [sibling(out, "pfjax-staging-abc123"), sibling(out, "pfjax-old-def456")]
+    for s in stale:
+        s.mkdir()
+        (s / "x").write_text("left by a kill")
+    other = tmp_path / ".outer.pfjax-staging-xyz"  # another target's: not this writer's business
+    other.mkdir()
+    _write(out, {"a": "1"})
+    assert not any(s.exists() for s in stale) and other.exists()
+
+
+def test_the_lock_refuses_a_second_writer_in_another_process(tmp_path):
+    out = tmp_path / "out"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from pfjax.outputs import OutputDir; "
+         f"o = OutputDir({str(out)!r}, command='study', config_sha256='x').open(); print('held', flush=True); "
+         "sys.stdin.readline(); o.close()"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(OutputBusy, match=rf"^--out: a pfjax study is running into .*out \(pid {holder.pid} on "):
+            OutputDir(out, command="study", config_sha256="x").open()
+    finally:
+        holder.communicate("\n", timeout=30)
+    assert holder.returncode == 0
+    OutputDir(out, command="study", config_sha256="x").open().close()  # released: free again
+    assert not sibling(out, "lock").exists()
+
+
+def test_a_killed_holder_releases_the_lock(tmp_path):
+    out = tmp_path / "out"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import time; from pfjax.outputs import OutputDir; "
+         f"o = OutputDir({str(out)!r}, command='study', config_sha256='x').open(); print('held', flush=True); "
+         "time.sleep(600)"], stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline().strip() == "held"
+    holder.kill()
+    holder.wait()
+    assert sibling(out, "lock").exists()  # the file stays; the lock went with the process
+    with OutputDir(out, command="study", config_sha256="x") as o:
+        (o.staging / "a").write_text("1")
+        o.commit()
+    assert not sibling(out, "lock").exists()
+
+
+# ------------------------------------------------------------------------------ commands
+
+
+@pytest.fixture
+def study_toml(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text(STUDY)
+    return p
+
+
+def _cli(argv, capsys):
+    code = cli.main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    return code, err
+
+
+@pytest.mark.parametrize("command", [
+    ["study", "{toml}", "--no-report"],
+    ["report", "{toml}"],
+    ["bench", "--quick"],
+])
+def test_commands_refuse_a_user_directory_and_touch_nothing(command, study_toml, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    keep = tmp_path / "keep"
+    keep.mkdir()
+    (keep / "thesis.tex").write_text("data")
+    before = _tree(tmp_path)
+    code, err = _cli([a.format(toml=study_toml) for a in command] + ["--out", "keep"], capsys)
+    assert code == EXIT_USAGE and len(err) == 1 and err[0].startswith(f"pfjax {command[0]}: error: --out: "), err
+    assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("out", [".", ".."])
+def test_study_refuses_dot_outputs(out, study_toml, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(study_toml.parent)
+    before = _tree(tmp_path)
+    code, err = _cli(["study", str(study_toml), "--out", out, "--no-report"], capsys)
+    assert code == EXIT_USAGE and len(err) == 1 and "--out: " in err[0]
+    assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("name", ['".."', '"."', '"a/b"', '""'])
+def test_study_names_that_are_not_directory_names_are_refused(name, study_toml, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    before = _tree(tmp_path)
+    code, err = _cli(["study", str(study_toml), "--set", f"name={name}"], capsys)
+    assert code == EXIT_USAGE and len(err) == 1 and err[0].startswith("pfjax study: error: name: "), err
+    assert _tree(tmp_path) == before
+
+
+def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, capsys):
+    out = tmp_path / "out"
+    spec = load_study(study_toml)[0]
+    run(spec, out, progress=False, report=False)
+    code, err = _cli(["report", str(study_toml), "--out", str(out)], capsys)
+    assert code == 0 and (out / "report.html").is_file()
+    assert read_marker(out)["files"].keys() >= {"report.html", "runs.parquet", "summary.json"}
+    for name, text in (("runs.parquet", b"not parquet"), ("summary.json", b"{")):
+        saved = (out / name).read_bytes()
+        (out / name).write_bytes(text)
+        before = _tree(out)
+        code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)
+        assert code == EXIT_USAGE and len(err) == 1 and err[0].startswith(f"pfjax report: error: --out: ") \
+            and name in err[0], err
+        assert _tree(out) == before
+        (out / name).write_bytes(saved)
+    (out / "runs.parquet").unlink()
+    code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)
+    assert code == EXIT_USAGE and "runs.parquet is missing" in err[0]
+    code, err = _cli(["report", str(study_toml), "--out", str(tmp_path / "nothing")], capsys)
+    assert code == EXIT_USAGE and "no finished study" in err[0]
+
+
+def test_a_bad_config_leaves_no_partial_directory_behind(study_toml, tmp_path, capsys):
+    out = tmp_path / "out"
+    code, err = _cli(["study", str(study_toml), "--out", str(out), "--set", "sim.dt=-1"], capsys)
+    assert code == EXIT_USAGE and err[0].startswith("pfjax study: error: sim.dt")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
+
+
+def test_chunks_of_another_config_are_never_reused(study_toml, tmp_path):
+    """A partial directory whose manifest matches but whose chunk files were computed with another
+    seed (what a second process's --fresh could leave): every such chunk is recomputed, and the
+    result equals a clean run's."""
+    spec = load_study(study_toml)[0]
+    other = spec.model_copy(update={"seed": 99})
+    ref = tmp_path / "ref"
+    run(spec, ref, progress=False, report=False)
+
+    class Stop(BaseException):
+        pass
+
+    out = tmp_path / "out"
+    from pfjax.montecarlo import runner
+
+    real = runner.simulate_chunk
+    calls = []
+
+    def dies_after_2(*a, **k):
+        if len(calls) == 2:
+            raise Stop
+        calls.append(1)
+        return real(*a, **k)
+
+    runner.simulate_chunk = dies_after_2
+    try:
+        with pytest.raises(Stop):
+            run(other, out, progress=False, report=False)  # 2 chunks of seed 99
+    finally:
+        runner.simulate_chunk = real
+    manifest = partial_dir(out) / "manifest.json"
+    m = json.loads(manifest.read_text())
+    m.update(config_sha256=json.loads((ref / "summary.json").read_text())["config_sha256"], seed=7)
+    manifest.write_text(json.dumps(m))  # the directory now claims to be the seed-7 study's
+    summary = run(spec, out, progress=False, report=False)
+    assert summary["chunks"] == {"simulated": 3, "resumed": 0}
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "runs.parquet"), pd.read_parquet(ref / "runs.parquet"))
+
+
+# ------------------------------------------------------------------------------ real processes
+
+
+def _env(tmp_path):
+    return {**os.environ, "PFJAX_FIGURE_WORKER": "0", "JAX_COMPILATION_CACHE_DIR": str(tmp_path / "jax_cache"),
+            "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0", "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0"}
+
+
+@pytest.mark.slow
+def test_two_concurrent_studies_on_one_out_never_mix(study_toml, tmp_path):
+    """Two real ``pfjax study`` processes started together on one --out, with different seeds (the
+    second with --fresh --overwrite): whichever runs, the result is wholly one configuration's, and
+    a refused process says a study is running."""
+    out = tmp_path / "out"
+    base = [sys.executable, "-m", "pfjax.cli", "study", str(study_toml), "--out", str(out), "--no-report", "--quiet",
+            "--json", "--set", "n_runs=400", "--set", "chunk_size=40"]
+    env = _env(tmp_path)
+    a = subprocess.Popen(base, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    while not sibling(out, "lock").exists() and a.poll() is None:
+        time.sleep(0.01)
+    b = subprocess.Popen(base + ["--set", "seed=99", "--fresh", "--overwrite"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=env)
+    results = [p.communicate(timeout=600) + (p.returncode,) for p in (a, b)]
+    assert any(rc == 0 for *_, rc in results)
+    for _, err, rc in results:
+        assert rc in (0, EXIT_USAGE), err[-2000:]
+        if rc == EXIT_USAGE:
+            line = err.strip().splitlines()
+            assert len(line) == 1 and "a pfjax study is running into" in line[0], err
+    summary = json.loads((out / "summary.json").read_text())
+    spec = load_study(study_toml, ["n_runs=400", "chunk_size=40", f"seed={summary['seed']}"])[0]
+    ref = tmp_path / "ref"
+    run(spec, ref, progress=False, report=False)
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "runs.parquet"), pd.read_parquet(ref / "runs.parquet"))
+
+
+@pytest.mark.slow
+def test_ctrl_c_is_one_line_exit_130_and_resumable(study_toml, tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "pfjax.cli", "study", str(study_toml), "--out", str(out), "--no-report", "--quiet",
+           "--json", "--set", "n_runs=4000", "--set", "chunk_size=40"]
+    env = _env(tmp_path)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    t0 = time.time()
+    while time.time() - t0 < 300 and proc.poll() is None and len(list(partial_dir(out).glob("*.parquet"))) < 2:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == EXIT_INTERRUPTED, err[-2000:]
+    assert err.strip().splitlines()[-1] == "pfjax study: interrupted; re-run the same command to resume", err
+    assert "Traceback" not in err
+    done = len(list(partial_dir(out).glob("*.parquet")))
+    assert done >= 2 and not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".out.partial", "jax_cache", "s.toml"]  # no staging, no lock
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads(r.stdout)["chunks"]["resumed"] == done
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["jax_cache", "out", "s.toml"]
+    assert MARKER in os.listdir(out)
