@@ -19,7 +19,7 @@ import pandas as pd
 import pytest
 
 from pfjax.cli import main
-from pfjax.parking.maps import GARAGE, to_obstacle_map
+from pfjax.parking.maps import GARAGE, MAX_VERTICES, to_obstacle_map
 from pfjax.parking.search import fitness, lattice
 from pfjax.parking.simulate import ParkingConfig, run_jit, run_params
 
@@ -101,6 +101,44 @@ def test_bad_map_file_names_key(capsys, tmp_path):
     m.write_text("[[obstacles]]\nvertices = [[0, 0], [1, 0], [1, 1]]\n")
     rc, out, err = run_cli(capsys, "parking", "--map", str(m), "--x0", "-1", "0", "0")
     assert rc == 2 and err.strip() == "pfjax parking: error: --map: obstacles[0].vertices: polygon not closed (the last vertex must repeat the first, [0.0, 0.0])"
+
+
+def _poly_file(path, polygons, names=None):
+    obs = [{"vertices": [list(v) for v in poly] + [list(poly[0])]} for poly in polygons]
+    for o, n in zip(obs, names or []):
+        o["name"] = n
+    path.write_text(json.dumps({"obstacles": obs}))
+    return str(path)
+
+
+def test_bad_maps_and_starts_exit_2_one_line(capsys, tmp_path):
+    """Map contents and start poses refused before anything is simulated, one line naming the flag and key."""
+    box = [(1.0, 1.0), (2.0, 1.0), (2.0, 2.0), (1.0, 2.0)]
+    far = [(5.0, 1.0), (6.0, 1.0), (6.0, 2.0), (5.0, 2.0)]
+    ring = [(30 * math.cos(a), 30 * math.sin(a)) for a in np.linspace(0, 2 * math.pi, 20_000, endpoint=False)]
+    (tmp_path / "latin1.toml").write_bytes('name = "caf\xe9"\n'.encode("latin-1"))
+    (tmp_path / "folder.json").mkdir()
+    cases = [
+        (["parking", "--map", _poly_file(tmp_path / "dup.json", [box, far], ["kerb", "kerb"]), "--x0", "0", "0", "0"],
+         "--map: obstacles[1].name: duplicate obstacle name 'kerb' (also obstacles[0])"),
+        (["parking", "--map", _poly_file(tmp_path / "dflt.json", [far, box], ["obstacle_1"]), "--x0", "0", "0", "0"],
+         "--map: obstacles[1].name: missing, and the default name 'obstacle_1' is taken by obstacles[0]"),
+        (["parking", "--map", str(tmp_path / "latin1.toml"), "--x0", "0", "0", "0"],
+         f"--map: map: {tmp_path / 'latin1.toml'}: not UTF-8 text (byte 0xe9 at offset 11"),
+        (["parking", "--map", str(tmp_path / "folder.json"), "--x0", "0", "0", "0"],
+         f"--map: map: {tmp_path / 'folder.json'}: is a directory"),
+        (["parking-search", "--method", "grid", "--map", _poly_file(tmp_path / "ring.json", [ring]), "--x0", "0", "0", "0"],
+         f"--map: obstacles[0].vertices: at most {MAX_VERTICES} vertices per polygon, got 20000"),
+        (["parking", "--x0", "0", "0", "60"], "--x0: the robot's body at the start pose overlaps obstacle 'kerb'"),
+        (["parking", "--x0", "0", "0.3", "0", "--front", "0.53"],
+         "--x0: the robot's body at the start pose overlaps obstacle 'car_ahead'"),
+        (["parking-search", "--method", "ga", "--x0", "-0.7", "0.6", "40"],
+         "--x0: the robot's body at the start pose overlaps obstacle 'wall_left'"),
+    ]
+    for args, msg in cases:
+        rc, out, err = run_cli(capsys, *args, "--json")
+        assert rc == 2 and out == "", (args, err)
+        assert err.count("\n") == 1 and err.startswith(f"pfjax {args[0]}: error: {msg}"), (args, err)
 
 
 def test_grid_search_against_brute_force(capsys):

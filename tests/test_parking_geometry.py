@@ -152,6 +152,7 @@ def test_map_files_and_validation(tmp_path):
         parse_map({"obstacle": []})
     with pytest.raises(MapError, match=r"^obstacles\[0\].vertex: unknown key"):
         parse_map({"obstacles": [{"vertex": []}]})
+    shape = robot_shape(0.17, width=0.37, length=0.54)
     with pytest.raises(MapError, match="start point .* inside obstacle 'kerb'"):
-        check_start(PARALLEL, 0.0, -0.5)
-    check_start(PARALLEL, -0.4, 0.5)
+        check_start(PARALLEL, (0.0, -0.5, 0.0), shape)
+    check_start(PARALLEL, (-0.4, 0.5, 0.0), shape)

@@ -77,8 +77,11 @@ def _checked(args, default_start):
     else:
         x0 = tuple(_finite("--x0", v) for v in args.x0)
         _finite("--x0", x0[2], below=90.0, unit=" deg")
+    from pfjax.parking.simulate import run_params
+
+    shape = run_params(x0, front=args.front).shape  # the rectangle the run will simulate
     try:
-        check_start(polygons, x0[0], x0[1])
+        check_start(polygons, x0, shape)
     except MapError as e:
         raise _usage(str(e)) from None
     return name, polygons, to_obstacle_map(list(polygons.values())), x0
