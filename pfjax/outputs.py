@@ -27,7 +27,8 @@ study scripts) writes them through :class:`OutputDir`:
    private staging directory ``.<name>.pfjax-staging-*`` beside the target (same filesystem),
    the marker is written last, and :meth:`OutputDir.commit` renames it into place. A run that
    stops early (an error, Ctrl-C, a kill) leaves the previous output as it was; its staging
-   directory is removed on the way out, or, after a kill, by the next run that holds the lock.
+   directory is removed on the way out, or, after a kill, by the next run that holds the lock
+   (with any half-created partial directory ``.<name>.partial-*`` of a study's chunks).
 """
 
 from __future__ import annotations
@@ -274,7 +275,7 @@ class OutputDir:
         try:
             check_target(self.target, command=self.command, config_sha256=self.config_sha256,
                          overwrite=self.overwrite, flag=self.flag)
-            for kind in (STAGING, _OLD):  # only this target's, and nobody else holds its lock
+            for kind in (STAGING, _OLD, "partial"):  # only this target's, and nobody else holds its lock
                 for stale in self.target.parent.glob(f".{glob_escape(self.target.name)}.{kind}-*"):
                     shutil.rmtree(stale, ignore_errors=True)
         except BaseException:

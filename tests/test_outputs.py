@@ -379,3 +379,28 @@ def test_ctrl_c_is_one_line_exit_130_and_resumable(study_toml, tmp_path):
     assert json.loads(r.stdout)["chunks"]["resumed"] == done
     assert sorted(p.name for p in tmp_path.iterdir()) == ["jax_cache", "out", "s.toml"]
     assert MARKER in os.listdir(out)
+
+
+def test_figure_worker_directories_of_killed_studies_are_removed(tmp_path, monkeypatch):
+    import tempfile
+
+    from pfjax.report import figure_worker
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale, live, other = (tmp_path / f"pfjax-figures-{dead.pid}-x1", tmp_path / f"pfjax-figures-{os.getppid()}-x2",
+                          tmp_path / "pfjax-figures-notapid")
+    for d in (stale, live, other):
+        d.mkdir()
+    figure_worker.remove_stale_dirs()
+    assert not stale.exists() and live.exists() and other.exists()
+
+
+def test_a_half_created_partial_directory_is_removed_by_the_next_writer(tmp_path):
+    out = tmp_path / "out"
+    half = sibling(out, "partial-k1ll3d")  # ChunkStore's temporary name before its atomic rename
+    half.mkdir()
+    (half / "manifest.json").write_text("{}")
+    _write(out, {"a": "1"})
+    assert not half.exists()

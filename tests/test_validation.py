@@ -94,6 +94,45 @@ CLI_CASES = [
     (["study", "CFG", "--out", "FILE"], "--out: FILE exists and is not a directory"),
     (["study", "CFG", "--out", "FILE/sub"], "a_file is not a directory (cannot create sub in it)"),
     (["report", "CFG", "--out", "EMPTY"], "--out: no finished study in EMPTY"),
+    # the total slip over the distributions' support, not each term alone
+    (["study", "CFG", "--set", "slip.kind='sinusoid'", "--set", "slip.beta_r_deg=60", "--set", "slip.amp_r_deg=60"],
+     "slip.amp_r_deg: the total slip must stay below 90 deg over the distributions' support, got max |beta_r_deg| + "
+     "max |amp_r_deg| = 120 deg"),
+    (["study", "CFG", "--set", "slip.kind='step'", "--set", "slip.beta_f_deg=50", "--set", "slip.step_f_deg=45"],
+     "slip.step_f_deg: the total slip must stay below 90 deg"),
+    (["study", "CFG", "--set", "slip.kind='ou'", "--set", "slip.ou_sigma_deg=1e6"],
+     "slip.ou_sigma_deg: the total slip must stay below 90 deg over the distributions' support, got max |beta_r_deg| + 6"),
+    (["study", "CFG", "--set", "initial.lateral_offset={dist='truncnormal', mean=5, std=1, low=-1, high=1}"],
+     "initial.lateral_offset: needs low <= mean <= high"),
+    # numbers: booleans, strings, overflow, underflow, huge integers
+    (["study", "CFG", "--set", "n_runs=true"], "n_runs: Input should be a valid integer (got True)"),
+    (["study", "CFG", "--set", "seed=9223372036854775808"], "seed: must be <= 9223372036854775807"),
+    (["study", "CFG", "--set", "seed=" + "9" * 400], "seed: must be <= 9223372036854775807 (got 99999"),
+    (["study", "CFG", "--set", "vehicle.speed=" + "9" * 400], "vehicle.speed: expected a number of magnitude <= 1e+12, got an integer of 400 digits"),
+    (["study", "CFG", "--set", "sim.dt=1e-300"], "sim.dt: must be >= 1e-12 (got 1e-300)"),
+    (["study", "CFG", "--set", "sim.horizon=1e308"], "sim.horizon: expected a magnitude <= 1e+12, got 1e+308"),
+    (["study", "CFG", "--set", "sim.horizon=inf"], "sim.horizon: expected a finite number, got inf"),
+    (["study", "CFG", "--set", "sim.dt=1e-9"], "sim.dt: at most 2e+06 integrator steps per run"),
+    (["study", "CFG", "--set", "noise.sigma_d=-0.1"], "noise.sigma_d: must be >= 0"),
+    (["study", "CFG", "--set", "chunk_size=100000000"], "chunk_size: must be <= 10000000"),
+    # names
+    (["study", "CFG", "--set", "name='..'"], "name: expected 1-100 letters"),
+    (["study", "CFG", "--set", "name='a/b'"], "name: expected 1-100 letters"),
+    (["study", "CFG", "--set", "controllers[1]={name='st', type='pi'}"], "controllers[1]: no such list element"),
+    # malformed --set keys
+    (["study", "CFG", "--set", "controllers[abc].name=x"], "--set: malformed key 'controllers[abc].name'"),
+    (["study", "CFG", "--set", "controllers[].name=x"], "--set: malformed key 'controllers[].name'"),
+    (["study", "CFG", "--set", "n_runs[0]={dist='uniform'}"], "n_runs[0]: n_runs is not a list"),
+    # flags that conflict, gains given partly or twice
+    (SIM + ["--continuous", "--control-every", "2"], "--control-every: not with --continuous"),
+    (SIM + ["--gains", "kp_d=1,kp_d=2"], "--gains: kp_d is given twice"),
+    (SIM + ["--gains", "1,2"], "--gains: expected all 5 gains of --controller pi in order"),
+    (SIM + ["--controller", "stanley", "--gains", "1,k_soft=2"], "--gains: mixes name=value pairs and bare numbers"),
+    (["tune", "--method", "gradient", "--controller", "pi", "--seed", "9223372036854775808"], "--seed: must be <= 9223372036854775807"),
+    (["tune", "--method", "ga", "--controller", "pi", "--population", "100000000"], "--population: must be <= 1000000"),
+    (["bench", "--sizes", "1,0"], "--sizes: must be >= 1, got 0"),
+    (["study", "CFG", "--coordinator", "127.0.0.1:1", "--num-processes", "2", "--process-id", "1",
+      "--coordinator-timeout", "0.5"], "--coordinator: could not reach 127.0.0.1:1 within 0.5 s"),
 ]
 
 
@@ -167,3 +206,47 @@ def test_feasibility_warnings_name_the_path_and_the_numbers():
     assert study_warnings(spec) == [
         "paths[0] (parabola): max curvature 2 1/m exceeds tan(delta_max)/L = tan(20 deg)/0.2 m = 1.82 1/m: "
         "the robot cannot follow it with its steering limit, even without slip"]
+
+
+def test_a_config_that_is_not_utf8_is_one_line(files, tmp_path, capsys):
+    (tmp_path / "latin1.toml").write_bytes(b'name = "caf\xe9"\n')
+    assert main(["study", "latin1.toml"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["pfjax study: error: config: latin1.toml is not UTF-8 text (byte 11: invalid continuation byte)"]
+
+
+def test_memory_guard_names_the_key(files, tmp_path, capsys, monkeypatch):
+    """Sizes whose arrays exceed the memory budget are refused before anything is allocated."""
+    monkeypatch.setenv("PFJAX_MEMORY_BUDGET", str(50 << 20))
+    for argv, key in ((["study", "CFG", "--set", "chunk_size=4096", "--set", "n_runs=4096"], "chunk_size"),
+                      (["study", "CFG", "--set", "n_runs=1000000", "--set", "chunk_size=8"], "n_runs"),
+                      (["bench", "--sizes", "100000"], "--sizes")):
+        assert main([_sub(a, files) for a in argv]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"error: {key}: " in err[0] and "memory budget of 50 MiB" in err[0], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "s.toml"]
+
+
+def test_the_python_api_rejects_what_the_cli_rejects():
+    """The same checks from Python, with the argument's name where the CLI names its flag."""
+    from pfjax import controllers as C
+    from pfjax.errors import InputError
+    from pfjax.scenarios import paper_scenario
+    from pfjax.sim import SimConfig, simulate_batch, stack
+    from pfjax.synthesis import synthesize
+
+    pi = C.REGISTRY["pi"][1]()
+    with pytest.raises(InputError, match=r"^beta_r_deg: magnitude must be < 90 deg, got 95$"):
+        paper_scenario("line", pi, beta_r_deg=95)
+    with pytest.raises(InputError, match=r"^gains: controller 'pi' takes PIParams, got StateFeedbackParams$"):
+        simulate_batch(stack([paper_scenario("line", C.state_feedback_params())]), controller=C.pi, config=SimConfig())
+    with pytest.raises(InputError, match=r"^gains\.kp_d: expected a finite number, got nan$"):
+        C.REGISTRY["pi"][1](kp_d=float("nan"))
+    with pytest.raises(InputError, match=r"^gains\.kp: unknown gain for controller 'pi'"):
+        C.REGISTRY["pi"][1](kp=1.0)
+    with pytest.raises(InputError, match=r"^horizon: expected a finite number, got inf$"):
+        SimConfig(horizon=float("inf"))
+    with pytest.raises(InputError, match=r"^v: must be > 0 m/s, got 0$"):
+        synthesize("mixed", v=0.0)
+    with pytest.raises(InputError, match=r"^pose0\[2\]: expected a finite number, got nan$"):
+        paper_scenario("line", pi, pose0=(0.0, 0.0, float("nan")))

@@ -39,8 +39,8 @@ def _cmd(args) -> dict:
     from pfjax.bench.run import QUICK, BenchConfig
     from pfjax.cli import as_flags
 
-    cfg = QUICK if args.quick else BenchConfig()
     with as_flags({"sizes": "--sizes", "seed": "--seed"}):
+        cfg = QUICK if args.quick else BenchConfig()
         if args.sizes is not None:
             sizes = _sizes(args.sizes)
             cfg = replace(cfg, sizes=sizes, ref_size=min(cfg.ref_size, max(sizes, default=1)),

@@ -97,6 +97,12 @@ def _as_dist(v: Any):
     if isinstance(v, bool):
         raise ValueError("expected a number or a distribution table")
     if isinstance(v, (int, float)):
+        from pfjax.errors import number
+
+        try:
+            number("value", v)
+        except ValueError as e:
+            raise ValueError(str(e).removeprefix("value: ")) from None
         return Dist(dist="constant", value=float(v))
     return v
 
@@ -108,7 +114,7 @@ def dist_field(default: float):
 class SimSpec(_Model):
     dt: Real = Field(0.005, ge=POSITIVE, description="RK4 step, s")
     horizon: Real = Field(20.0, ge=POSITIVE, description="s")
-    control_every: int = Field(1, ge=1, description="controller sampling period in steps")
+    control_every: int = Field(1, ge=1, le=2_000_000, description="controller sampling period in steps")
     d_fail: Real = Field(10.0, ge=POSITIVE, description="m")
     steady_window: Real = Field(5.0, ge=POSITIVE, description="s")
     settle_band: Real = Field(0.05, ge=POSITIVE, description="m")
@@ -458,20 +464,20 @@ _BOUNDS = {"greater_than": (">", "gt"), "greater_than_equal": (">=", "ge"), "les
 
 def _set_nested(d: dict, update: dict) -> dict:
     for k, v in update.items():
-        if isinstance(v, dict) and "dist" in v:  # a new distribution replaces the old one whole
-            d[k] = v
-        elif isinstance(v, dict) and isinstance(d.get(k), dict):
-            _set_nested(d[k], v)
-        elif "[" in k:  # controllers[0].gains.k style
+        if "[" in k:  # controllers[0].gains.k style
             name, idx = k.split("[", 1)
             i = int(idx.rstrip("]"))
             lst = d.get(name)
             if not isinstance(lst, list) or not -len(lst) <= i < len(lst):
-                raise ConfigError(f"{k}: no such list element")
-            if isinstance(v, dict):
+                raise ConfigError(f"{k}: no such list element" if isinstance(lst, list) else f"{k}: {name} is not a list")
+            if isinstance(v, dict) and "dist" not in v and isinstance(lst[i], dict):
                 _set_nested(lst[i], v)
             else:
                 lst[i] = v
+        elif isinstance(v, dict) and "dist" in v:  # a new distribution replaces the old one whole
+            d[k] = v
+        elif isinstance(v, dict) and isinstance(d.get(k), dict):
+            _set_nested(d[k], v)
         else:
             d[k] = v
     return d

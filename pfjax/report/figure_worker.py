@@ -41,6 +41,25 @@ from pathlib import Path
 
 #: Environment variable: ``0`` draws every figure in the study's process.
 ENV = "PFJAX_FIGURE_WORKER"
+#: The request directories' name prefix in the system's temporary directory (then the owner's pid).
+TMP_PREFIX = "pfjax-figures-"
+
+
+def remove_stale_dirs() -> None:
+    """Remove request directories whose owning process has ended (a study killed before it could
+    remove its own): ``<tmp>/pfjax-figures-<pid>-*`` with no process ``pid``."""
+    import shutil
+
+    for d in Path(tempfile.gettempdir()).glob(f"{TMP_PREFIX}*-*"):
+        pid = d.name[len(TMP_PREFIX):].split("-", 1)[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            shutil.rmtree(d, ignore_errors=True)
+        except OSError:  # alive, someone else's
+            pass
 
 
 def enabled(environ=None) -> bool:
@@ -72,7 +91,8 @@ class FigureWorker:
     def __init__(self, *, python: str = sys.executable):
         self._lock = threading.RLock()  # the pipes, the request count and the pending list
         self._pending: list[FigureRequest] = []
-        self._tmp = Path(tempfile.mkdtemp(prefix="pfjax-figures-"))
+        remove_stale_dirs()
+        self._tmp = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}{os.getpid()}-"))
         self._count = 0
         self._warned = False
         env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
@@ -187,7 +207,11 @@ def _render_here(out_dir: Path, spec, summary: dict, runs_path: Path, names, wor
 
 
 def main() -> None:
-    """The child: answer each request line on stdin (module docstring) until stdin closes."""
+    """The child: answer each request line on stdin (module docstring) until stdin closes. Ctrl-C
+    is the parent's to handle (it closes stdin): the child ignores SIGINT."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     import matplotlib
 
     matplotlib.use("Agg")

@@ -389,6 +389,7 @@ def simulate_batch(scenarios: Scenario, *, controller: Controller, config: SimCo
     the same, run for run, whatever the number of devices and blocks, up to rounding (XLA compiles
     each block shape into its own vector code: at most an ulp or two in a metric, measured).
     """
+    controller.check_params(scenarios.gains)  # here, not at trace time: JAX would add to the message
     if config.record and not errors.is_traced(scenarios):
         n_runs = int(np.shape(jax.tree_util.tree_leaves(scenarios)[0])[0])
         resources.check_memory("record", n_runs * resources.run_bytes(config.n_steps, record=True),

@@ -134,6 +134,10 @@ def tune(problem: Problem, method: str, *, key, ga_options: GAOptions = GAOption
 
     if method not in ("ga", "gradient"):
         raise errors.InputError(f"method: value {method!r}, expected ga or gradient")
+    _validate(ga_options)  # every setting is checked, whichever method uses it
+    errors.integer("steps", steps, low=1, high=1_000_000)
+    errors.integer("n_starts", n_starts, low=1, high=1_000_000)
+    errors.number("learning_rate", learning_rate, positive=True)
     per_run = resources.run_bytes(problem.config.n_steps)
     if method == "ga":
         population = _validate(ga_options)[0]
