@@ -36,11 +36,12 @@ from tqdm import tqdm  # noqa: E402
 from pfjax import controllers as C  # noqa: E402
 from pfjax.analysis import equilibrium, stability_map  # noqa: E402
 from pfjax.config import ConfigError, config_hash, load  # noqa: E402
-from pfjax.errors import command_main  # noqa: E402
+from pfjax.errors import InputError, command_main  # noqa: E402
 from pfjax.jsonio import dumps  # noqa: E402
 from pfjax.models import SlipParams  # noqa: E402
 from pfjax.paths import curvature, global_parameter  # noqa: E402
 from pfjax.outputs import OutputDir, check_name  # noqa: E402
+from pfjax.resources import check_memory, check_steps, run_bytes  # noqa: E402
 from pfjax.report import figures  # noqa: E402
 from pfjax.paths import shapes  # noqa: E402
 from pfjax.scenarios import PAPER_TESTS, SCENARIOS, make_scenario, paper_scenario  # noqa: E402
@@ -470,6 +471,13 @@ def check(cfg: dict) -> None:
         raise ConfigError(f"sim.settle_band: must be > 0 m, got {cfg['sim']['settle_band']:g}")
     if cfg["stability"]["n"] < 2:
         raise ConfigError(f"stability.n: must be >= 2, got {cfg['stability']['n']}")
+    for section in ("sim", "stability"):
+        try:
+            n_steps = check_steps(cfg[section]["horizon"], cfg["sim"]["dt"])
+        except InputError as e:
+            raise ConfigError(f"{section}.horizon: {str(e).removeprefix('dt: ')}") from None
+    check_memory("stability.n", 2 * cfg["stability"]["n"] ** 2 * run_bytes(n_steps),
+                 f"a stability grid of {cfg['stability']['n'] ** 2:.3g} runs", "lower stability.n")
 
 
 def run(args) -> int:

@@ -75,7 +75,7 @@ def check_resources(spec: StudySpec, *, report: bool = True) -> None:
                      "run without the report (pfjax study --no-report), or lower n_runs")
     if spec.margin.enabled:
         per_axis = spec.margin.n_per_amplitude * len(spec.margin.amplitudes_deg)
-        check_memory("margin.n_per_amplitude", 8 * 6 * per_axis, f"the slip-margin sweep's {per_axis:.3g} runs per axis",
+        check_memory("margin.n_per_amplitude", 8 * 6 * per_axis, f"a slip-margin sweep of {per_axis:.3g} runs per axis",
                      "lower margin.n_per_amplitude")
 
 
