@@ -185,3 +185,40 @@ def test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors():
     ps = stack([run_params((x, y, 0.0), 1, (1.0,)) for x in (-0.6, -0.4) for y in (0.4, 0.6)])
     a, b = _both(jax.vmap(lambda p: run(p, omap, ParkingConfig())), ps)
     _assert_close(a, b, *TOL["float64"])
+
+
+#: Every program pfjax compiles with the wide-vector option, and the tests that check it both against
+#: the same program at XLA's default width (float64) and against an independent NumPy/SciPy
+#: computation. A new ``compiler.jit`` program without an entry here fails
+#: :func:`test_every_wide_program_is_audited`.
+AUDITED = {
+    "pfjax.sim.simulate._simulate_vmapped": (
+        "test_slip_simulator_agrees_with_and_without_wide_vectors",
+        "tests/test_sim_reference.py (solve_ivp of an independent closed loop)"),
+    "pfjax.tracking.simulate._simulate_vmapped": (
+        "test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors",
+        "tests/test_tracking.py::test_simulation_matches_solve_ivp"),
+    "pfjax.parking.simulate.run": (
+        "test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors",
+        "tests/test_parking_control.py::test_switched_run_against_solve_ivp"),
+    "pfjax.parking.simulate.run_recorded": (
+        "test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors",
+        "tests/test_parking_control.py (case A's first leg against its closed form)"),
+    "pfjax.bench.run._grad.<locals>.loss": (
+        "test_slip_simulator_agrees_with_and_without_wide_vectors (the program it wraps)",
+        "tests/test_bench.py::test_quick_bench_contract_and_agreement (NumPy, Numba and SciPy references)"),
+}
+
+
+def test_every_wide_program_is_audited():
+    from importlib import import_module
+
+    for m in ("pfjax.sim.simulate", "pfjax.tracking.simulate", "pfjax.parking.simulate", "pfjax.bench.run"):
+        import_module(m)
+    wide = {p for p in compiler.PROGRAMS if not p.startswith(("tests.", "test_"))}
+    names = {p.replace("value_and_grad.<locals>.", "") for p in wide}
+    missing = sorted(n for n in names if n not in AUDITED and not n.startswith("pfjax.numerics.autodiff"))
+    assert not missing, f"wide-vector programs without an audit entry: {missing}"
+    here = {n for n in globals() if n.startswith("test_")}
+    for name, (same_program, _) in AUDITED.items():
+        assert same_program.split(" ")[0] in here, name

@@ -228,3 +228,39 @@ def test_equilibrium_on_a_circle(br_deg, bf_deg):
     assert float(r.final.d) == pytest.approx(float(eq.d), abs=1e-4)
     assert float(r.final.theta_e) == pytest.approx(-br, abs=1e-4)
     assert float(r.final.delta) == pytest.approx(float(eq.delta), abs=1e-3)
+
+
+def _numpy_map(grid_deg, params: SlipParams):
+    """(exists, hurwitz) on a line, independently: the closed-form equilibrium (d* from K x* = delta*,
+    theta_e* = -beta_r), its existence |delta*| <= delta_max, and numpy.linalg.eigvals of a central
+    finite-difference Jacobian of :func:`field_np` (unsaturated)."""
+    n = len(grid_deg)
+    exists, hurwitz, margin = np.zeros((n, n), bool), np.zeros((n, n), bool), np.zeros((n, n))
+    for i, br in enumerate(np.radians(grid_deg)):
+        for j, bf in enumerate(np.radians(grid_deg)):
+            delta = br + bf if params.convention == 0 else br - bf
+            x = np.array([(delta + K[1] * br) / K[0], -br])
+            h = 1e-6
+            J = np.stack([(field_np(x + e, br, bf, 0.0, params, False) - field_np(x - e, br, bf, 0.0, params, False)) / (2 * h)
+                          for e in np.eye(2) * h], axis=1)
+            exists[i, j] = abs(delta) <= params.delta_max
+            hurwitz[i, j] = exists[i, j] and np.all(np.linalg.eigvals(J).real < 0)
+            margin[i, j] = abs(abs(delta) - params.delta_max)
+    return exists, hurwitz, margin
+
+
+@pytest.mark.parametrize("grid_max", [10.0, 89.0])
+def test_stability_map_is_right_in_float32_and_float64(grid_max):
+    """The Hurwitz mask the report draws: float32 and float64 agree with an independent NumPy
+    computation at every grid point off the steering-limit boundary (where rounding may decide).
+    (A residual tolerance fixed at 1e-9 once made float32 reject most equilibria: a scrambled mask.)"""
+    grid = np.linspace(-grid_max, grid_max, 48)
+    exists, hurwitz, margin = _numpy_map(grid, SOURCE)
+    clear = margin > 1e-4  # rad away from |delta*| = delta_max
+    for x64 in (False, True):
+        with jax.enable_x64(x64):
+            eq, _ = stability_map(jnp.asarray(K, float), jnp.radians(jnp.asarray(grid, float)),
+                                  jnp.radians(jnp.asarray(grid, float)), SOURCE)
+            np.testing.assert_array_equal(np.asarray(eq.exists)[clear], exists[clear])
+            np.testing.assert_array_equal(np.asarray(eq.hurwitz)[clear], hurwitz[clear])
+    assert clear.mean() > 0.9 and hurwitz[clear].any()

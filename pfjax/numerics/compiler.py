@@ -120,6 +120,11 @@ class _Jitted:
         return getattr(self.top, name)
 
 
+#: Every function compiled with :data:`OPTIONS` so far, by ``module.qualname``: each must be
+#: checked against XLA's default width and an independent reference (``tests/test_compiler.py``).
+PROGRAMS: set = set()
+
+
 def jit(fun=None, **kwargs):
     """``jax.jit`` with :data:`OPTIONS` for programs free of XLA's trigonometric primitives (see the
     module docstring). Usable as ``jit(f, ...)`` or as a decorator ``@jit(...)``.
@@ -129,6 +134,7 @@ def jit(fun=None, **kwargs):
     give it these. Where :data:`OPTIONS` is empty this is plain ``jax.jit``."""
     if fun is None:
         return partial(jit, **kwargs)
+    PROGRAMS.add(f"{getattr(fun, '__module__', '?')}.{getattr(fun, '__qualname__', type(fun).__name__)}")
     if not OPTIONS:
         return jax.jit(fun, **kwargs)
     return _Jitted(fun, dict(OPTIONS), kwargs)
