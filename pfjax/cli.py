@@ -236,7 +236,8 @@ def _headline(summary: dict, out) -> dict:
         "study": summary["study"], "out": str(out), "n_runs_total": summary["n_runs_total"], "seed": summary["seed"],
         "config_sha256": summary["config_sha256"], "wall_s": summary["wall_s"],
         "controllers": {k: {f: c[f] for f in ("success_rate", "success_ci95", "iae_mean", "iae_p95", "steady_abs_d_p95",
-                                               "slip_margin_deg")} for k, c in summary["controllers"].items()},
+                                               "slip_margin_deg", "slip_margin_fails_at_deg")}
+                        for k, c in summary["controllers"].items()},
     }
 
 

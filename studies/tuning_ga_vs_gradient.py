@@ -155,7 +155,8 @@ def heldout(cfg, spec, controllers, progress):
         table.append({"controller": name, "success_rate": k / n, "success_ci95": [float(lo), float(hi)], "n": n,
                       "iae_mean": float(g.iae.mean()), "iae_p95": float(g.iae.quantile(0.95)),
                       "steady_abs_d_p95_mm": float(1e3 * g.steady_abs_d.quantile(0.95)),
-                      "slip_margin_deg": m.get("margin"), "margin_fails_at_smallest": m.get("fails_at_smallest")})
+                      "slip_margin_deg": None if m.get("fails_at_smallest") else m.get("margin"),
+                      "margin_fails_at_smallest": m.get("fails_at_smallest")})
     return df, sweep, table
 
 
@@ -201,8 +202,9 @@ def _figures(hist: pd.DataFrame, out: Path) -> list[str]:
 
 
 def _md_table(rows, cols, fmt):
-    head = "| " + " | ".join(cols) + " |\n|" + "---|" * len(cols) + "\n"
-    return head + "".join("| " + " | ".join(fmt(r, c) for c in cols) + " |\n" for r in rows)
+    from pfjax.report.markdown import table
+
+    return table(cols, [[fmt(r, c) for c in cols] for r in rows]) + "\n"
 
 
 def _report(summary: dict) -> str:

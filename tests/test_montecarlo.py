@@ -173,7 +173,11 @@ def test_summary_contract_and_numbers(tmp_path):
         assert c["iae_mean"] == pytest.approx(float(df.iae.mean()), rel=1e-6)
         assert c["iae_p95"] == pytest.approx(float(np.quantile(df.iae, 0.95)), rel=1e-6)
         assert set(c["slip_margin"]) == {"rear", "front", "joint"}
-        assert c["slip_margin_deg"] == c["slip_margin"]["joint"]["margin"]
+        joint = c["slip_margin"]["joint"]
+        if joint["fails_at_smallest"]:  # no margin: null, and the amplitude where it already fails
+            assert c["slip_margin_deg"] is None and c["slip_margin_fails_at_deg"] == joint["table"][0]["amplitude"]
+        else:
+            assert c["slip_margin_deg"] == joint["margin"] and c["slip_margin_fails_at_deg"] is None
     # the sweep's slip is exactly the amplitude on the swept axis
     rear = sweep[sweep.axis == "rear"]
     assert set(rear.amplitude_deg) == {0.0, 10.0}

@@ -12,6 +12,7 @@ import pfjax
 from pfjax.config import config_hash
 from pfjax.jsonio import dumps
 from pfjax.outputs import OutputDir
+from pfjax.report.markdown import table
 
 _STYLE = {("pfjax", "float32"): ("C0", "-", "o"), ("pfjax", "float64"): ("C0", "--", "s"),
           ("numba", "float32"): ("C1", "-", "^"), ("numba", "float64"): ("C1", "--", "v"),
@@ -58,13 +59,12 @@ def markdown(result: dict) -> str:
         f"{' (family ' + m['cpu_family'] + ', model ' + m['cpu_model_number'] + ')' if m.get('cpu_family') else ''}, {m['cpus']} CPUs, JAX {m['jax']} with {len(m['devices'])} device(s); "
         f"1-min load average {m['load_average_1m_start']:.1f} at the start, {m['load_average_1m']:.1f} at the end. "
         f"AVX-512: {'yes' if m.get('avx512') else 'no'}; simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}.", "",
-        "| implementation | dtype | batch | M rollout-steps/s | compile s |", "|---|---|---|---|---|",
+        table(["implementation", "dtype", "batch", "M rollout-steps/s", "compile s"],
+              [[r["impl"], r["dtype"], r["batch"], f"{r['msteps_per_s']:.3g}", f"{r['compile_s']:.2f}"] for r in result["rows"]]),
+        "",
+        table(["agreement (max abs IAE difference vs pfjax, m s)", "value", "tolerance", "ok"],
+              [[k, f"{a['max_abs_diff']:.2e}", f"{a['tolerance']:.0e}", a["ok"]] for k, a in s["agreement"].items()]),
     ]
-    for r in result["rows"]:
-        lines.append(f"| {r['impl']} | {r['dtype']} | {r['batch']} | {r['msteps_per_s']:.3g} | {r['compile_s']:.2f} |")
-    lines += ["", "| agreement (max abs IAE difference vs pfjax, m s) | value | tolerance | ok |", "|---|---|---|---|"]
-    for k, a in s["agreement"].items():
-        lines.append(f"| {k} | {a['max_abs_diff']:.2e} | {a['tolerance']:.0e} | {a['ok']} |")
     g = s["gradient"]
     lines += ["", f"Value and gradient of the batch-mean IAE w.r.t. K over the forward pass: {s['grad_over_forward']:.2f}x "
               f"({s['grad_mode']} mode, as the tuner takes it); reverse mode {s['grad_over_forward_reverse']:.2f}x "

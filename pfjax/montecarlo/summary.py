@@ -3,9 +3,11 @@
 Per controller (all paths pooled, and per path): success rate with its 95 % Clopper-Pearson
 interval, quantiles of every metric, status counts, the probabilistic statement the sample
 supports, the slip margin per axis (rear, front, joint), and which sampled parameters drive
-failure. The top-level keys follow the issue's output contract: ``study``, ``n_runs_total``,
-``seed``, ``config_sha256`` and ``controllers`` (each with ``success_rate``, ``success_ci95``,
-``iae_mean``, ``iae_p95``, ``steady_abs_d_p95``, ``slip_margin_deg``).
+failure. The top-level keys: ``study``, ``n_runs_total``, ``seed``, ``config_sha256`` and
+``controllers`` (each with ``success_rate``, ``success_ci95``, ``iae_mean``, ``iae_p95``,
+``steady_abs_d_p95``, ``slip_margin_deg`` and ``slip_margin_fails_at_deg``: the joint-axis margin,
+or null with the smallest amplitude tested in ``slip_margin_fails_at_deg`` when the controller
+already fails there).
 """
 
 from __future__ import annotations
@@ -123,7 +125,10 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         mg = margins(sweep, name, spec.margin.eps)
         block["slip_margin"] = mg
         joint = mg.get("joint") or next(iter(mg.values()), None)
-        block["slip_margin_deg"] = None if joint is None else joint["margin"]
+        # a controller that fails at the smallest amplitude has no margin: say so, not a bare 0
+        fails = joint is not None and joint["fails_at_smallest"]
+        block["slip_margin_deg"] = None if joint is None or fails else joint["margin"]
+        block["slip_margin_fails_at_deg"] = joint["table"][0]["amplitude"] if fails else None
         block["slip_margin_censored"] = None if joint is None else joint["censored"]
         drivers = failure_drivers(df, params, metric="iae") if params else pd.DataFrame()
         block["failure_drivers"] = drivers.head(6).replace({np.nan: None}).to_dict("records")

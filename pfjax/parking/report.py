@@ -13,9 +13,9 @@ def _f(x, nd=1):
 
 
 def _table(header: list[str], rows: list[list]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
-    return "\n".join(lines)
+    from pfjax.report.markdown import table
+
+    return table(header, rows)
 
 
 def sensitivity_table(sens: pd.DataFrame) -> str:

@@ -109,8 +109,10 @@ def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
                 lows.append(plo)
                 a.errorbar([pp["success_rate"]], [yy], xerr=[[pp["success_rate"] - plo], [phi - pp["success_rate"]]],
                            fmt="s", ms=3.5, color=colors[n], alpha=0.55, lw=0.8, capsize=0)
-                a.annotate(p, (pp["success_rate"], yy), xytext=(4, 0), textcoords="offset points", fontsize=6,
-                           va="center", color="0.35")
+                right = pp["success_rate"] > 0.85  # near 100 %: label on the left, inside the panel
+                a.annotate(p, (plo if right else pp["success_rate"], yy), xytext=(-4 if right else 4, 0),
+                           textcoords="offset points", fontsize=6, va="center", ha="right" if right else "left",
+                           color="0.35")
         a.annotate(f"{100 * r:.2f} %", (r, yi), xytext=(0, 7), textcoords="offset points", ha="center", fontsize=8.5)
     left = max(0.0, min(lows) - 0.05 * max(1e-3, 1 - min(lows)) - 0.01) if lows else 0.0
     a.set_xlim(left, 1.0 + (0.1 if len(paths) > 1 else 0.03) * (1.0 - left))
@@ -133,8 +135,9 @@ def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
                 yy = yi + 0.28 - 0.56 * (j + 0.5) / len(axes)
                 a.errorbar([m["margin"]], [yy], xerr=[[m["margin"] - m["margin_lo"]], [m["margin_hi"] - m["margin"]]],
                            fmt=markers[x], ms=6, color=colors[n], capsize=3, lw=1.5, mfc="white" if m["censored"] else colors[n])
-                a.annotate(f"{x} {'≥ ' if m['censored'] else ''}{m['margin']:g}°", (m["margin_hi"], yy), xytext=(6, 0),
-                           textcoords="offset points", fontsize=7, va="center")
+                label = (f"{x}: fails at {m['table'][0]['amplitude']:g}°" if m.get("fails_at_smallest") else
+                         f"{x} {'≥ ' if m['censored'] else ''}{m['margin']:g}°")
+                a.annotate(label, (m["margin_hi"], yy), xytext=(6, 0), textcoords="offset points", fontsize=7, va="center")
                 top = max(top, m["margin_hi"])
         a.set_xlim(-0.03 * top - 0.3, 1.3 * top + 1)
         a.set_title("slip margin [lo, hi]" + (f", success ≥ {100 * (1 - eps):g} %" if eps else ""))
@@ -200,8 +203,10 @@ def distribution_figure(runs: pd.DataFrame, metric: str, colors: dict[str, str],
     non-finite value) counts as beyond the right edge, and the ECDF stops short of 1 by the
     failed fraction (given in the legend). Histograms show the fraction of a controller's runs
     per bin (the end bins collect the clipped tails); the x axis is logarithmic when the 1-99 %
-    range of the values spans more than a factor 30. ECDFs are evaluated on a 400-point grid
-    (``searchsorted`` on the sorted values). ``band`` (metric units) draws the success band.
+    range of the values of all paths pooled spans more than a factor 30 (one scale for every path
+    of the figure, so the panels compare). ECDFs are evaluated on a 400-point grid
+    (``searchsorted`` on the sorted values). ``band`` (metric units) draws the success band, named
+    in the ECDF legend.
     """
     label = label or metric
     if bins is None:  # ~1.5 sqrt(n) per controller and path, 10 to 60
@@ -210,11 +215,12 @@ def distribution_figure(runs: pd.DataFrame, metric: str, colors: dict[str, str],
     ncol = max(1, len(paths))
     fig = Figure(figsize=(4.3 * ncol + 0.8, 6.2), layout="constrained")
     ax = np.asarray(fig.subplots(2, ncol, squeeze=False, sharex="col"))
+    pooled = runs[runs.path.isin(paths) & (runs["status"] == "ok")][metric].to_numpy(dtype=float) * scale
+    log = _wants_log(pooled)  # one scale for the whole figure
     for j, p in enumerate(paths):
         sub = runs[runs.path == p]
         healthy = (sub["status"] == "ok").to_numpy()
         allv = sub[metric].to_numpy(dtype=float)[healthy] * scale
-        log = _wants_log(allv)
         edges = _grid(allv, log, bins + 1)
         grid = _grid(allv, log, 400)
         h, e = ax[0, j], ax[1, j]
@@ -235,11 +241,8 @@ def distribution_figure(runs: pd.DataFrame, metric: str, colors: dict[str, str],
             if log:
                 _log_axis(a)
             if band is not None:
-                a.axvline(band, color="k", ls="--", lw=1)
+                a.axvline(band, color="k", ls="--", lw=1, label=f"success band: {band:g} {unit}" if a is e else None)
             a.grid(alpha=0.3)
-        if band is not None:
-            h.annotate("success band", (band, 0.5), xycoords=("data", "axes fraction"), xytext=(-3, 0),
-                       textcoords="offset points", fontsize=7, rotation=90, ha="right", va="center", color="0.3")
         h.set(title=f"path '{p}'", ylabel="fraction of runs per bin" if j == 0 else None)
         e.set(xlabel=f"{label} [{unit}]" + (", log scale" if log else ""), ylabel="ECDF: P(X ≤ x)" if j == 0 else None,
               ylim=(0, 1.02))

@@ -157,7 +157,16 @@ def _paired(runs: pd.DataFrame, a: str, b: str) -> dict:
 
 
 def fmt_p(p: float) -> str:
-    return DASH if _bad(p) else ("< 1e-4" if p < 1e-4 else f"{p:.2g}")
+    """A p-value: two significant digits, ``< 1e-16`` below double precision's resolution of 1 - p
+    (a smaller number printed there would carry no information)."""
+    if _bad(p):
+        return DASH
+    return "< 1e-16" if p < 1e-16 else (f"{p:.1e}" if p < 1e-3 else f"{p:.2g}")
+
+
+def fmt_times(x: float) -> str:
+    """A ratio as "4,150×" or "2.35×" (never in exponent notation)."""
+    return f"{x:,.0f}×" if x >= 100 else f"{x:.3g}×"
 
 
 def _verdict(summary: dict, runs: pd.DataFrame) -> tuple[str, list[str], list[list]]:
@@ -177,7 +186,7 @@ def _verdict(summary: dict, runs: pd.DataFrame) -> tuple[str, list[str], list[li
         pr = _paired(runs, best, other)
         sig = pr["p"] < 0.05
         f_best, f_other = 1 - cb["success_rate"], 1 - co["success_rate"]
-        ratio = (f"{other} fails {f_other / f_best:.3g}× as often" if f_best > 0 else
+        ratio = (f"{other} fails {fmt_times(f_other / f_best)} as often" if f_best > 0 else
                  (f"{best} never failed, {other} did in {fmt_pct(f_other)} of runs" if f_other > 0 else "neither failed"))
         mb, mo = cb.get("slip_margin", {}).get("joint"), co.get("slip_margin", {}).get("joint")
         margin = f" Joint slip margin: {best} {fmt_margin(mb)}, {other} {fmt_margin(mo)}." if mb and mo else ""
@@ -186,7 +195,7 @@ def _verdict(summary: dict, runs: pd.DataFrame) -> tuple[str, list[str], list[li
             f"{fmt_pct(co['success_rate'])} {fmt_ci(co['success_ci95'])}: {100 * pr['diff']:.2f} percentage points "
             f"{'more' if sig else 'apart, not a significant difference'} (paired 95 % CI [{100 * pr['ci'][0]:.2f}, "
             f"{100 * pr['ci'][1]:.2f}]; {ratio}). On the same {pr['n']} scenarios, {best} succeeded where {other} failed "
-            f"{pr['only_a']} times and the reverse happened {pr['only_b']} times (exact McNemar p {'= ' if pr['p'] >= 1e-4 else ''}"
+            f"{pr['only_a']} times and the reverse happened {pr['only_b']} times (exact McNemar p {'= ' if pr['p'] >= 1e-16 else ''}"
             f"{fmt_p(pr['p'])}).{margin}")
         rows.append([_cell(other), _cell(f"{-100 * pr['diff']:+.2f} pp"),
                      _cell(f"[{-100 * pr['ci'][1]:+.2f}, {-100 * pr['ci'][0]:+.2f}] pp"), _cell(f"{pr['only_a']} / {pr['only_b']}"),
@@ -270,8 +279,8 @@ def _worst_runs(runs: pd.DataFrame, params: list[str], n_show: int = 5) -> dict[
 def _drivers(summary: dict) -> dict[str, list[list]]:
     out = {}
     for n, c in summary["controllers"].items():
-        out[n] = [[_cell(d["parameter"]), _cell(fmt_num(d["rho_failure"], 2)), _cell(fmt_num(d["p_failure"], 2)),
-                   _cell(fmt_num(d["rho_metric"], 2)), _cell(fmt_num(d["p_metric"], 2)), _cell(fmt_num(d["effect_size"], 2))]
+        out[n] = [[_cell(d["parameter"]), _cell(fmt_num(d["rho_failure"], 2)), _cell(fmt_p(d["p_failure"])),
+                   _cell(fmt_num(d["rho_metric"], 2)), _cell(fmt_p(d["p_metric"])), _cell(fmt_num(d["effect_size"], 2))]
                   for d in c.get("failure_drivers", [])]
     return out
 

@@ -1,0 +1,48 @@
+"""One verdict on one claim of a source: a row of a reproduction's verdict table."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from pfjax.report.markdown import table
+
+#: What a verdict says. ``holds`` / ``does not hold``: pfjax's number meets / misses the criterion.
+#: ``reproduced`` / ``not reproduced``: pfjax's number matches / misses the source's number within the
+#: tolerance the criterion states. ``no verdict``: the data cannot decide (stated why).
+VERDICTS = ("holds", "does not hold", "reproduced", "not reproduced", "no verdict")
+#: Whether a row is evidence. ``independent``: nothing in pfjax was chosen from it.
+#: ``used to choose the convention``: the source's statement fixed a modelling convention, so the row
+#: agrees by construction. ``chosen by filters from the source``: the row checks a reading selected
+#: with criteria taken from the same source statements. ``assumed``: the criterion rests on a
+#: parameter the source does not give (named in the criterion).
+BASES = ("independent", "used to choose the convention", "chosen by filters from the source", "assumed")
+
+
+class Verdict(NamedTuple):
+    """One row: ``claim`` (the source's words), ``path`` (or ``"—"``), ``subject`` (controller or
+    case), ``criterion`` (what is compared, with units, stated before any number), ``pfjax`` and
+    ``source`` (numbers as text; ``"—"`` where the source gives none), ``verdict``
+    (:data:`VERDICTS`) and ``basis`` (:data:`BASES`)."""
+
+    claim: str
+    path: str
+    subject: str
+    criterion: str
+    pfjax: str
+    source: str
+    verdict: str
+    basis: str = "independent"
+
+    def check(self) -> "Verdict":
+        if self.verdict not in VERDICTS:
+            raise ValueError(f"verdict: {self.verdict!r} is not one of {VERDICTS}")
+        if self.basis not in BASES:
+            raise ValueError(f"basis: {self.basis!r} is not one of {BASES}")
+        return self
+
+
+def verdict_table(rows: list[Verdict]) -> str:
+    """The verdict table in Markdown (cells escaped: evidence such as ``|d|`` stays in its cell)."""
+    head = ["claim", "path", "subject", "criterion", "pfjax", "source", "verdict", "basis"]
+    return table(head, [[r.claim, r.path, r.subject, r.criterion, r.pfjax, r.source, f"**{r.verdict}**",
+                         "" if r.basis == "independent" else r.basis] for r in rows])
