@@ -6,7 +6,8 @@ robustness Monte Carlo.
     python studies/parking.py [--config studies/parking.toml] [--set key=value ...] [--out DIR] [--quick]
 
 Writes to ``results/parking/`` (or ``--out``): ``summary.json`` (config, SHA-256, seed, version),
-``cases.parquet``, ``sensitivity.parquet``, ``garage.parquet``, ``grid.parquet``, ``start_map.parquet``,
+``cases.parquet``, ``assumptions.parquet`` (cases A-D under every combination of the open assumptions),
+``grid.parquet``, ``start_map.parquet``,
 ``montecarlo.parquet``, ``figures/*.png|svg`` and ``report.md``. Outputs are assembled in a temporary
 directory and moved into place when complete; a bad key or value stops with one line, exit 2.
 """
@@ -42,28 +43,36 @@ from pfjax.parking import figures as F  # noqa: E402
 from pfjax.parking.calibrate import calibrate_front, simulated_first_switch  # noqa: E402
 from pfjax.parking.maps import GARAGE, PARALLEL, to_obstacle_map  # noqa: E402
 from pfjax.parking.model import control_params  # noqa: E402
+from pfjax.parking.assumptions import ZONES, case_sweep, sweep_summary  # noqa: E402
 from pfjax.parking.montecarlo import Scatter, monte_carlo, summarise  # noqa: E402
 from pfjax.parking.schedules import CASES, GARAGE_START  # noqa: E402
 from pfjax.parking.search import search_ga, search_grid, start_map  # noqa: E402
-from pfjax.parking.simulate import STATUS_NAMES, ParkingConfig, n_periods_for, run_many, run_params, run_recorded_jit, stack_params  # noqa: E402
+from pfjax.parking.simulate import STATUS_NAMES, ParkingConfig, n_periods_for, run_jit, run_params, run_recorded_jit  # noqa: E402
 from pfjax.parking.summary import run_summary  # noqa: E402
 from pfjax.report.figures import save  # noqa: E402
+from pfjax.reproduce.parking import GA_SOLUTIONS  # noqa: E402
+from pfjax.reproduce.parking import verdicts as parking_verdicts  # noqa: E402
 from pfjax.tuning.ga import GAOptions  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULTS = {
     "name": "parking", "seed": 0,
     "controller": {"k1": 32.0, "k2": 8.0, "speed": 0.05},
-    "sim": {"scan_period": 0.1, "t_max": 200.0, "max_switches": 10, "tol": 0.02, "n_sub": 2, "front": 0.0, "chunk": 1024},
-    "sensitivity": {"fronts": [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25], "scan_periods": [0.05, 0.1, 0.2]},
+    "sim": {"scan_period": 0.1, "t_max": 200.0, "tol": 0.02, "n_sub": 2, "front": 0.0, "chunk": 1024,
+            "stuck_switches": 4, "stuck_travel": 0.1},
+    # the open assumptions of spec §3, swept over the four cases (pfjax.parking.assumptions)
+    "assumptions": {"fronts": [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25], "zones": ["middle", "axle", "whole"],
+                    "scan_periods": [0.05, 0.1, 0.2], "decision_delays": [False, True], "lags": [False, True],
+                    "pauses": [0.0, 1.0]},
     "garage": {"xs_values": [-0.9, -1.2, -1.8]},
-    "search": {"weight": 100.0, "population": 20, "generations": 100, "grid_n": 32, "ga_seeds": 3},
+    "experiment": {"pause": 1.0},  # s standing at each reversal in the source's experiments
+    "search": {"weight": 100.0, "population": 20, "generations": 100, "grid_n": 32, "ga_seeds": 3, "max_switches": 10},
     "start_map": {"x0": [-1.5, -1.3, -1.1, -0.9, -0.7], "theta0_deg": [-80.0, -40.0, 0.0, 40.0, 80.0], "grid_n": 10},
     "montecarlo": {"n_runs": 1000, "pos_scatter": 0.05, "theta_scatter_deg": 5.0, "scan_lo": 0.05, "scan_hi": 0.2,
                    "speed_lo": 0.04, "speed_hi": 0.06, "lag_probability": 0.5},
 }
-QUICK = {"sim": {"chunk": 32}, "search": {"population": 4, "generations": 2, "grid_n": 3, "ga_seeds": 1}, "start_map": {"grid_n": 2},
-         "montecarlo": {"n_runs": 16}}
+QUICK = {"sim": {"chunk": 32}, "search": {"population": 4, "generations": 2, "grid_n": 3, "ga_seeds": 2},
+         "start_map": {"grid_n": 2}, "montecarlo": {"n_runs": 16}}
 
 
 def validate(cfg: dict) -> None:
@@ -76,16 +85,31 @@ def validate(cfg: dict) -> None:
         raise ConfigError(f"sim.front: must be in [0, 0.54) (0 = calibrated), got {s['front']}")
     if s["chunk"] < 1:
         raise ConfigError(f"sim.chunk: must be >= 1, got {s['chunk']}")
-    if s["n_sub"] < 1 or s["max_switches"] < 1:
-        raise ConfigError("sim.n_sub: must be >= 1" if s["n_sub"] < 1 else "sim.max_switches: must be >= 1")
+    if s["n_sub"] < 1:
+        raise ConfigError(f"sim.n_sub: must be >= 1, got {s['n_sub']}")
+    if s["stuck_switches"] < 1 or s["stuck_travel"] < 0:
+        raise ConfigError("sim.stuck_switches: must be >= 1, and sim.stuck_travel >= 0")
+    if cfg["search"]["max_switches"] < 1:
+        raise ConfigError(f"search.max_switches: must be >= 1, got {cfg['search']['max_switches']}")
+    if cfg["experiment"]["pause"] < 0:
+        raise ConfigError(f"experiment.pause: must be >= 0 s, got {cfg['experiment']['pause']}")
     if s["t_max"] / s["scan_period"] > 20000:
         raise ConfigError(f"sim.scan_period: t_max / scan_period must be <= 20000, got {s['t_max'] / s['scan_period']:g}")
-    for i, f in enumerate(cfg["sensitivity"]["fronts"]):
+    a = cfg["assumptions"]
+    for i, f in enumerate(a["fronts"]):
         if not 0 < f < 0.54:
-            raise ConfigError(f"sensitivity.fronts[{i}]: must be in (0, 0.54), got {f}")
-    for i, f in enumerate(cfg["sensitivity"]["scan_periods"]):
+            raise ConfigError(f"assumptions.fronts[{i}]: must be in (0, 0.54), got {f}")
+    for i, f in enumerate(a["scan_periods"]):
         if not 0 < f <= 1:
-            raise ConfigError(f"sensitivity.scan_periods[{i}]: must be in (0, 1], got {f}")
+            raise ConfigError(f"assumptions.scan_periods[{i}]: must be in (0, 1], got {f}")
+    for i, z in enumerate(a["zones"]):
+        if z not in ZONES:
+            raise ConfigError(f"assumptions.zones[{i}]: expected one of {', '.join(ZONES)}, got {z!r}")
+    for key in ("decision_delays", "lags"):
+        if not a[key] or not all(isinstance(v, bool) for v in a[key]):
+            raise ConfigError(f"assumptions.{key}: expected a non-empty list of booleans, got {a[key]!r}")
+    if not a["pauses"] or not all(isinstance(v, (int, float)) and v >= 0 for v in a["pauses"]):
+        raise ConfigError(f"assumptions.pauses: expected a non-empty list of times >= 0 s, got {a['pauses']!r}")
     se = cfg["search"]
     if se["population"] < 2 or se["generations"] < 1 or se["ga_seeds"] < 1 or not 2 <= se["grid_n"] <= 64 or se["weight"] < 0:
         raise ConfigError(f"search: need population >= 2, generations >= 1, 2 <= grid_n <= 64, weight >= 0, got {se}")
@@ -115,7 +139,8 @@ def run(args) -> int:
         for sec, vals in QUICK.items():
             cfg[sec].update(vals)
         cfg["start_map"]["x0"], cfg["start_map"]["theta0_deg"] = [-1.3, -0.9], [-80.0, 40.0]
-        cfg["sensitivity"]["fronts"], cfg["sensitivity"]["scan_periods"] = [0.15, 0.2], [0.1]
+        cfg["assumptions"].update(fronts=[0.15, 0.2], scan_periods=[0.1], decision_delays=[False], lags=[False],
+                                  pauses=[0.0])
     validate(cfg)
     check_name("name", cfg["name"])
     out = Path(args.out) if args.out else ROOT / "results" / cfg["name"]
@@ -131,15 +156,21 @@ def run(args) -> int:
 
 
 def setup(cfg):
+    """``(control, front, config of single runs, config of the search)``: single runs, cases, maps
+    and the Monte Carlo run until they converge, get stuck or time out; the search also fails a
+    candidate at its (max_switches + 1)-th switch (the source's search cut-off)."""
     c, s = cfg["controller"], cfg["sim"]
     control = control_params(k1=c["k1"], k2=c["k2"], speed=c["speed"])
     front = s["front"] if s["front"] > 0 else None
-    pc = ParkingConfig(t_max=s["t_max"], max_switches=s["max_switches"], tol=s["tol"], n_sub=s["n_sub"])
-    return control, front, pc
+    pc = ParkingConfig(t_max=s["t_max"], tol=s["tol"], n_sub=s["n_sub"], stuck_switches=s["stuck_switches"],
+                       stuck_travel=s["stuck_travel"])
+    search = ParkingConfig(t_max=s["t_max"], tol=s["tol"], n_sub=s["n_sub"], max_switches=cfg["search"]["max_switches"],
+                           stuck_switches=None)
+    return control, front, pc, search
 
 
 def one(cfg, x0, direction, schedule, *, xs=None, omap, front=None, scan=None):
-    control, f0, pc = setup(cfg)
+    control, f0, pc, _ = setup(cfg)
     scan = scan or cfg["sim"]["scan_period"]
     p = run_params(x0, direction, schedule, xs=xs, front=front or f0, scan_period=scan, control=control)
     r, tr = run_recorded_jit(p, omap, pc, n_periods_for(pc, scan))
@@ -187,21 +218,47 @@ def _flat(s: dict) -> dict:
             "switch_times_s": ",".join(f"{e['t']:.1f}" for e in s["switch_log"])}
 
 
-def part_sensitivity(cfg, pmap):
-    control, _, pc = setup(cfg)
-    items, keys = [], []
-    for f in cfg["sensitivity"]["fronts"]:
-        for ts in cfg["sensitivity"]["scan_periods"]:
-            for name, c in CASES.items():
-                items.append(run_params(c["x0"], c["direction"], c["schedule"], front=f, scan_period=ts, control=control))
-                keys.append((name, f, ts))
-    r = run_many(stack_params(items), pmap, pc, chunk=cfg["sim"]["chunk"] if len(items) <= cfg["sim"]["chunk"] else 128)
-    return pd.DataFrame({"case": [k[0] for k in keys], "front": [k[1] for k in keys], "scan_period_s": [k[2] for k in keys],
-                         "status": [STATUS_NAMES[int(s)] for s in r.status], "switches": r.n_switches.astype(int), "time_s": r.time})
+def part_assumptions(cfg, pmap):
+    """Cases A-D under every combination of the open assumptions (pfjax.parking.assumptions)."""
+    control, _, pc, _ = setup(cfg)
+    a = cfg["assumptions"]
+    grid = {"front": a["fronts"], "zone": a["zones"], "scan_period": a["scan_periods"],
+            "decision_delay": a["decision_delays"], "lag": a["lags"], "pause": a["pauses"]}
+    c = cfg["controller"]
+    df = case_sweep(pmap, grid, control_kw={"k1": c["k1"], "k2": c["k2"], "speed": c["speed"]}, cfg=pc,
+                    chunk=cfg["sim"]["chunk"], progress=True)
+    return df, sweep_summary(df)
+
+
+def part_outcomes(cfg, pmap, gmap) -> dict:
+    """Every scenario whose outcome the source reports (spec §4), at pfjax's defaults, and the
+    experiments' with a stop at each reversal (``experiment.pause``)."""
+    control, front, pc, _ = setup(cfg)
+    scan, pause = cfg["sim"]["scan_period"], cfg["experiment"]["pause"]
+    runs = {}
+    for name, c in CASES.items():
+        runs[name] = (pmap, run_params(c["x0"], c["direction"], c["schedule"], front=front, scan_period=scan, control=control))
+    c = CASES["D"]
+    runs["D+pause"] = (pmap, run_params(c["x0"], c["direction"], c["schedule"], front=front, scan_period=scan,
+                                        control=control, pause=pause))
+    for xs in (-0.9, -1.2, -1.8):
+        for suffix, ps in (("", 0.0), ("+pause", pause)):
+            runs[f"garage {xs:g}{suffix}"] = (gmap, run_params(GARAGE_START, 1, (1.0,), xs=xs, front=front, scan_period=scan,
+                                                               control=control, pause=ps))
+    for xs, a1, a2 in GA_SOLUTIONS:
+        for suffix, ps in (("", 0.0), ("+pause", pause)):
+            runs[f"GA solution ({xs:g}, {a1:g}, {a2:g}){suffix}"] = (
+                gmap, run_params(GARAGE_START, 1, (1.0, a1, a2), xs=xs, front=front, scan_period=scan, control=control,
+                                 pause=ps))
+    out = {}
+    for name, (omap, p) in runs.items():
+        r = run_jit(p, omap, pc)
+        out[name] = {"status": STATUS_NAMES[int(r.status)], "switches": int(r.n_switches), "time_s": float(r.time)}
+    return out
 
 
 def part_search(cfg, fig_dir, gmap, key):
-    control, front, pc = setup(cfg)
+    control, front, _, pc = setup(cfg)
     se = cfg["search"]
     base = run_params(GARAGE_START, 1, (1.0,), xs=-1.0, front=front, scan_period=cfg["sim"]["scan_period"], control=control)
     t0 = time.perf_counter()
@@ -228,7 +285,7 @@ def part_search(cfg, fig_dir, gmap, key):
 
 
 def part_start_map(cfg, fig_dir, gmap):
-    _, _, pc = setup(cfg)
+    _, _, _, pc = setup(cfg)
     sm = cfg["start_map"]
     rows = start_map(gmap, sm["x0"], sm["theta0_deg"], n=sm["grid_n"], weight=cfg["search"]["weight"], cfg=pc, progress=True,
                      chunk=cfg["sim"]["chunk"])
@@ -240,7 +297,7 @@ def part_start_map(cfg, fig_dir, gmap):
 
 def part_montecarlo(cfg, fig_dir, gmap, ga, grid, key):
     """Fixed schedule vs the GA's best vs the grid's best, on the same sampled runs."""
-    control, front, pc = setup(cfg)
+    control, front, pc, _ = setup(cfg)
     m = cfg["montecarlo"]
     sc = Scatter(**{k: m[k] for k in ("pos_scatter", "theta_scatter_deg", "scan_lo", "scan_hi", "speed_lo", "speed_hi",
                                        "lag_probability")})
@@ -278,8 +335,9 @@ def run_study(cfg: dict, out: Path, quick=False) -> dict:
     case_rows, _ = part_cases(cfg, fig_dir, pmap, gmap)
     tick("cases", t0)
     t0 = time.perf_counter()
-    sens = part_sensitivity(cfg, pmap)
-    tick("sensitivity", t0)
+    outcomes = part_outcomes(cfg, pmap, gmap)
+    sens, sweep = part_assumptions(cfg, pmap)
+    tick("assumptions", t0)
     t0 = time.perf_counter()
     ga, ga_runs, grid, grid_df = part_search(cfg, fig_dir, gmap, k_ga)
     tick("search", t0)
@@ -297,7 +355,7 @@ def run_study(cfg: dict, out: Path, quick=False) -> dict:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    for name, df in (("cases", cases), ("sensitivity", sens), ("grid", grid_df.drop(columns=["converged_fraction"])),
+    for name, df in (("cases", cases), ("assumptions", sens), ("grid", grid_df.drop(columns=["converged_fraction"])),
                      ("start_map", pd.DataFrame(smap)), ("montecarlo", mc_df)):
         t = pa.Table.from_pandas(df, preserve_index=False)
         pq.write_table(t.replace_schema_metadata({**(t.schema.metadata or {}), **meta}), out / f"{name}.parquet")
@@ -306,10 +364,12 @@ def run_study(cfg: dict, out: Path, quick=False) -> dict:
         "machine": {"python": platform.python_version(), "jax": jax.__version__, "platform": platform.platform(),
                     "cpu_count": __import__("os").cpu_count()},
         "calibration": cal, "cases": case_rows,
-        "sensitivity": sens.to_dict(orient="records"),
+        "assumptions": sweep, "source_outcomes": outcomes,
         "search": {"ga": ga, "ga_runs": ga_runs, "grid": grid}, "start_map": smap, "montecarlo": mc,
         "timings_s": timings, "wall_s": time.perf_counter() - t_start,
     }
+    rows = parking_verdicts(outcomes, cal, sweep, {"runs": ga_runs})
+    summary["verdicts"] = [v._asdict() for v in rows]
     (out / "summary.json").write_text(dumps(summary) + "\n")
     from pfjax.parking.report import write_report
 

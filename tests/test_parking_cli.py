@@ -20,7 +20,7 @@ import pytest
 
 from pfjax.cli import main
 from pfjax.parking.maps import GARAGE, MAX_VERTICES, to_obstacle_map
-from pfjax.parking.search import fitness, lattice
+from pfjax.parking.search import SEARCH_CONFIG, fitness, lattice
 from pfjax.parking.simulate import ParkingConfig, run_jit, run_params
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -153,7 +153,7 @@ def test_grid_search_against_brute_force(capsys):
 
 
 def _single_fitness(xs, a1, a2):
-    r = run_jit(run_params((-0.9, 0.6, -85.0), 1, (1.0, a1, a2), xs=xs), GMAP, ParkingConfig())
+    r = run_jit(run_params((-0.9, 0.6, -85.0), 1, (1.0, a1, a2), xs=xs), GMAP, SEARCH_CONFIG)
     return float(fitness(np.asarray(r.status), np.asarray(r.time), np.asarray(r.error)))
 
 

@@ -121,21 +121,29 @@ def test_substeps_converge():
 
 
 def test_statuses():
-    # a corridor around (10, 10) shorter than the robot: both halves touch, so it switches every period
+    # a corridor around (10, 0) 2 cm longer than the robot (body x_b in [a_f - 0.54, a_f], a_f = 0.1746):
+    # it touches one end, reverses, touches the other after about 2 cm, ... reversing in place
     box = lambda x0, y0, x1, y1: [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]  # noqa: E731
-    omap = to_obstacle_map([box(10.15, 9.0, 11.0, 11.0), box(9.0, 9.0, 9.7, 11.0), box(50.0, 50.0, 51.0, 51.0)])
+    front, rear = 10.0 + A_F + 0.01, 10.0 + A_F - 0.54 - 0.01
+    omap = to_obstacle_map([box(front, -1.0, 11.0, 1.0), box(9.0, -1.0, rear, 1.0), box(50.0, 50.0, 51.0, 51.0)])
     runs = [
         run_params((0.0, 0.3, 90.0), 1, (1.0,)),  # heading limit: the controller is undefined at θ = π/2
         run_params((-1.0, 0.3, 0.0), 1, (1.0,), control=control_params(speed=float("nan"))),  # non-finite
         run_params((-12.0, 0.3, 0.0), 1, (1.0,)),  # 200 s at 0.05 m/s is 10 m: cannot arrive -> timeout
-        run_params((10.0, 10.0, 0.0), 1, (1.0,)),  # trapped: the 11th switch fails the run
+        run_params((10.0, 0.0, 0.0), 1, (1.0,)),  # in the corridor: stuck
+        run_params((10.0, 0.0, 0.0), 1, (1.0,), length=0.6),  # a longer robot starts touching both ends
     ]
     r = run_batch(stack_params(runs), omap, ParkingConfig())
     assert [Status(int(s)) for s in r.status] == [Status.HEADING_LIMIT, Status.NONFINITE, Status.TIMEOUT,
-                                                  Status.TOO_MANY_SWITCHES]
+                                                  Status.STUCK, Status.START_OVERLAP]
     assert float(r.time[2]) == pytest.approx(200.0, abs=1e-6)
-    assert int(r.n_switches[3]) == 11 and float(r.time[3]) == pytest.approx(1.0, abs=1e-9)
-    np.testing.assert_allclose(np.asarray(r.log_t[3]), np.arange(11) * 0.1, atol=1e-9)
+    # stuck at the 4th reversal (legs of 1, 2, 2, 2 cm: less than 0.1 m in all), long before any cut-off
+    legs = np.diff(np.concatenate([[0.0], np.asarray(r.log_t[3])[: int(r.n_switches[3])]])) * 0.05
+    assert int(r.n_switches[3]) == 4 and legs.sum() < 0.1 and np.all(legs > 0.005), legs
+    assert float(r.time[4]) == 0.0 and int(r.n_switches[4]) == 0
+    # the search's cut-off: the same trap fails at the 11th switch instead (no progress test there)
+    r = run_batch(stack_params(runs[3:4]), omap, ParkingConfig(max_switches=10, stuck_switches=None))
+    assert Status(int(r.status[0])) == Status.TOO_MANY_SWITCHES and int(r.n_switches[0]) == 11
 
 
 def test_schedules_drive_alpha():
@@ -198,3 +206,51 @@ def test_batch_matches_single_and_does_not_recompile():
     size = run_batch._cache_size()
     run_batch(jax.tree_util.tree_map(lambda a: a * 1.0, batch), PMAP, ParkingConfig())
     assert run_batch._cache_size() == size
+
+
+def test_a_pause_at_each_reversal_shifts_the_run_in_time():
+    """Standing still ``pause`` s at each reversal (the source's experiments: 1 s) changes nothing but
+    the clock: the same switch poses, every switch and the end later by pause times the switches before."""
+    c = CASES["D"]
+    a = run_jit(run_params(c["x0"], c["direction"], c["schedule"]), PMAP, ParkingConfig())
+    b = run_jit(run_params(c["x0"], c["direction"], c["schedule"], pause=1.0), PMAP, ParkingConfig())
+    n = int(a.n_switches)
+    assert int(b.n_switches) == n and Status(int(b.status)) == Status.CONVERGED
+    np.testing.assert_allclose(np.asarray(b.log_pose)[:n], np.asarray(a.log_pose)[:n], atol=1e-9)
+    np.testing.assert_allclose(np.asarray(b.log_t)[:n], np.asarray(a.log_t)[:n] + np.arange(n), atol=1e-6)
+    assert float(b.time) == pytest.approx(float(a.time) + n, abs=1e-6)
+    assert float(b.distance) == pytest.approx(float(a.distance), abs=1e-9)
+
+
+def test_decision_delay_and_detection_zone():
+    """A scanner deciding on the pose one period old switches one period later; a detection zone of
+    the whole rectangle reverses on contact behind the robot too."""
+    c = CASES["A"]
+    a = run_jit(run_params(c["x0"], c["direction"], c["schedule"]), PMAP, ParkingConfig())
+    b = run_jit(run_params(c["x0"], c["direction"], c["schedule"], decision_delay=True), PMAP, ParkingConfig())
+    assert float(b.log_t[0]) == pytest.approx(float(a.log_t[0]) + 0.1, abs=1e-9)
+    from pfjax.parking.geometry import obstacle_ahead
+
+    box = lambda x0, y0, x1, y1: [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]  # noqa: E731
+    behind = to_obstacle_map([box(-1.0, -1.0, A_F - 0.54 + 0.01, 1.0)])  # 1 cm into the rear end
+    pose = jnp.zeros(3)
+    seen = {zone: bool(obstacle_ahead(pose, robot_shape(A_F, zone=zone), 1.0, behind)) for zone in (0.0, 0.54)}
+    assert seen == {0.0: False, 0.54: True}  # travelling forward: only the whole rectangle sees it
+    assert bool(obstacle_ahead(pose, robot_shape(A_F), -1.0, behind))  # backing: the rear half sees it
+    axle = robot_shape(A_F, split=0.0)  # split at the axle: the rear zone is everything behind it
+    near_axle = to_obstacle_map([box(-0.05, -1.0, -0.01, 1.0)])
+    assert not bool(obstacle_ahead(pose, axle, 1.0, near_axle)) and bool(obstacle_ahead(pose, axle, -1.0, near_axle))
+
+
+def test_case_sweep_counts_the_source_outcomes():
+    from pfjax.parking.assumptions import case_sweep, sweep_summary
+
+    grid = {"front": [A_F], "zone": ["middle", "whole"], "scan_period": [0.1], "decision_delay": [False],
+            "lag": [False], "pause": [0.0]}
+    df = case_sweep(PMAP, grid)
+    assert len(df) == 2 * 4 and set(df.case) == {"A", "B", "C", "D"}
+    mid = df[df.zone == "middle"].set_index("case")
+    assert mid.loc["C", "status"] == "converged" and int(mid.loc["C", "switches"]) == 19
+    s = sweep_summary(df)
+    assert s["n_combinations"] == 2 and s["status_counts"]["A"]["converged"] >= 1
+    assert all(c["zone"] == "whole" for c in s["all_four_reproduced"])

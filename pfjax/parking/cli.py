@@ -118,12 +118,13 @@ def _cmd_parking(args) -> dict:
 
 
 def _cmd_search(args) -> dict:
+    import dataclasses
+
     import jax
 
     from pfjax.cli import _finite
     from pfjax.parking.schedules import GARAGE_START
-    from pfjax.parking.search import search_ga, search_grid
-    from pfjax.parking.simulate import ParkingConfig
+    from pfjax.parking.search import SEARCH_CONFIG, search_ga, search_grid
 
     _finite("--weight", args.weight)
     if args.weight < 0:
@@ -138,7 +139,7 @@ def _cmd_search(args) -> dict:
     from pfjax.parking.simulate import run_params
 
     base = run_params(x0, 1, (1.0,), xs=-1.0, front=args.front, scan_period=args.scan_period, control=_control(args))
-    cfg = ParkingConfig(t_max=args.t_max)
+    cfg = dataclasses.replace(SEARCH_CONFIG, t_max=args.t_max)
     if args.method == "ga":
         from pfjax.tuning.ga import GAOptions
 

@@ -2,8 +2,11 @@
 
 The robot's area (spec §3) is a rectangle of width L₁ and length L₂ in the body frame (x_b ahead,
 y_b to the left of the wheel-axle midpoint): ``x_b ∈ [a_f − L₂, a_f]``, ``y_b ∈ [−L₁/2, L₁/2]``.
-It is split at its geometric middle ``x_b = a_f − L₂/2`` into a front and a rear half; the robot
-reverses when an obstacle lies in the half toward which it travels (:func:`travel_half`).
+It is split into a front and a rear half at ``x_b = split`` (**assumed**; default its geometric
+middle ``a_f − L₂/2``, or at the wheel axle ``x_b = 0``); the robot reverses when an obstacle lies
+in the half toward which it travels (:func:`obstacle_ahead`). ``zone`` widens each half's detection
+zone past the split into the other half (default 0; ``L₂``: any contact with the rectangle
+reverses, the "whole rectangle" reading of the rule).
 
 Obstacles are simple polygons (not necessarily convex) stored as padded edge arrays so a map is a
 fixed-shape pytree: ``a, b: (P, E, 2)`` edge end points in m, ``valid: (P, E)``. A convex
@@ -34,11 +37,14 @@ class RobotShape(NamedTuple):
     width: Array  # m, L₁ (across)
     length: Array  # m, L₂ (along)
     front: Array  # m, a_f: how far the rectangle reaches ahead of the wheel axle
+    split: Array  # m, body-frame x of the boundary between the front and the rear half
+    zone: Array  # m, how far each half's detection zone reaches past the split into the other half
 
 
-def robot_shape(front, width=L1_WIDTH, length=L2_LENGTH) -> RobotShape:
+def robot_shape(front, width=L1_WIDTH, length=L2_LENGTH, split=None, zone=0.0) -> RobotShape:
+    """The rectangle; ``split`` (m, body frame) defaults to its geometric middle ``front − length/2``."""
     f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
-    return RobotShape(f(width), f(length), f(front))
+    return RobotShape(f(width), f(length), f(front), f(front - 0.5 * length if split is None else split), f(zone))
 
 
 class ObstacleMap(NamedTuple):
@@ -60,8 +66,9 @@ def half_corners(pose, shape: RobotShape, half):
     ``pose = (x, y, θ)`` in m, m, rad; ``half`` may be traced (±1).
     """
     x, y, th = pose[0], pose[1], pose[2]
-    mid = shape.front - 0.5 * shape.length
-    far = jnp.where(half > 0, shape.front, shape.front - shape.length)
+    rear_end = shape.front - shape.length
+    mid = jnp.clip(shape.split - jnp.sign(half) * shape.zone, rear_end, shape.front)
+    far = jnp.where(half > 0, shape.front, rear_end)
     lo, hi = jnp.minimum(mid, far), jnp.maximum(mid, far)
     w = 0.5 * shape.width
     bx = jnp.stack([lo, hi, hi, lo])

@@ -352,7 +352,7 @@ def robot_rectangle(x0, shape) -> np.ndarray:
         shape: (width m, length m, front m): a :class:`~pfjax.parking.geometry.RobotShape` (such as
             ``run_params(...).shape``) or a tuple in that order.
     """
-    width, length, front = (float(s) for s in shape)
+    width, length, front = (float(s) for s in tuple(shape)[:3])
     x, y, th = float(x0[0]), float(x0[1]), math.radians(float(x0[2]))
     bx = np.array([front - length, front, front, front - length])
     by = np.array([-0.5, -0.5, 0.5, 0.5]) * width

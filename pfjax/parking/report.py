@@ -18,20 +18,50 @@ def _table(header: list[str], rows: list[list]) -> str:
     return table(header, rows)
 
 
-def sensitivity_table(sens: pd.DataFrame) -> str:
-    """Outcome of each case per (a_f, T_s): 'switches/time' or the failure."""
+def assumptions_table(sweep: pd.DataFrame) -> str:
+    """Per detection zone and reach a_f: how often each case parks, gets stuck or times out over the
+    other assumptions (scanner period, decision delay, yaw-rate loop, stop at reversal)."""
     rows = []
-    for (f, ts), g in sens.groupby(["front", "scan_period_s"]):
+    for (zone, f), g in sweep.groupby(["zone", "front"], sort=False):
         cells = []
         for case in "ABCD":
-            r = g[g["case"] == case].iloc[0]
-            cells.append(f"{int(r['switches'])} sw, {r['time_s']:.1f} s" if r["status"] == "converged"
-                         else f"**{r['status'].replace('_', ' ')}** ({int(r['switches'])} sw)")
-        rows.append([f"{f:.3f}", f"{ts:g}", *cells])
-    return _table(["a_f [m]", "T_s [s]", "A", "B", "C", "D"], rows)
+            counts = g[g["case"] == case]["status"].value_counts()
+            n = int(counts.sum())
+            cells.append(", ".join(f"{k.replace('_', ' ')} {v}/{n}" for k, v in counts.items()))
+        rows.append([zone, f"{f:.3f}", *cells])
+    return _table(["detection zone", "a_f [m]", "A", "B", "C", "D"], rows)
 
 
-def write_report(out: Path, s: dict, sens: pd.DataFrame) -> Path:
+def _zone_sentence(a: dict) -> str:
+    """How case B and the cases the source reports parking fare under each detection zone."""
+    parts = []
+    for zone, by_case in a["by_zone"].items():
+        n = sum(by_case["B"].values())
+        stuck = {c: by_case[c].get("stuck", 0) for c in "ABCD"}
+        parts.append(f"with the **{zone}** zone, B is stuck in {stuck['B']} of {n} combinations, and A, C, D (which the "
+                     f"source reports parking) in {stuck['A']}, {stuck['C']}, {stuck['D']}")
+    return ("Over all combinations case B's shortest leg between two reversals is "
+            f"{100 * a['b_min_leg_m']:.1f} cm; " + "; ".join(parts) + ".")
+
+
+def _b_verdict(a: dict, b_outcome: str) -> str:
+    k, n = len(a["all_four_reproduced"]), a["n_combinations"]
+    per_zone = {z: sum(c["zone"] == z for c in a["all_four_reproduced"]) / max(1, sum(v["B"].values()))
+                for z, v in a["by_zone"].items()}
+    best = max(per_zone, key=per_zone.get) if per_zone else None
+    share = (f"; the most in one detection zone: {100 * per_zone[best]:.0f} % of the {best} zone's combinations"
+             if k else "")
+    return (f"**Verdict on case B**: not reproduced with pfjax's reading (the half toward the travel direction, "
+            f"split at the middle, decisions on the current pose, no stop; chosen from the spec before and "
+            f"independently of these outcomes), under which B {b_outcome}. {k} of the {n} combinations reproduce "
+            f"all four outcomes together{share}.")
+
+
+def write_report(out: Path, s: dict, sweep: pd.DataFrame) -> Path:
+    from pfjax.reproduce import Verdict, verdict_table
+
+    verdicts = verdict_table([Verdict(**v) for v in s["verdicts"]])
+    a = s["assumptions"]
     cal, ga, grid = s["calibration"], s["search"]["ga"], s["search"]["grid"]
     sw = cal["simulated_first_switch"]
     cases = _table(["case", "start (x, y, θ°)", "first direction", "α schedule", "X_s", "outcome", "switches", "time [s]",
@@ -63,7 +93,17 @@ Config SHA-256 `{s['config_sha256']}`, seed {s['seed']}, pfjax {s['pfjax_version
 wall time {s['wall_s']:.0f} s on {s['machine']['cpu_count']} CPU cores (jax {s['machine']['jax']}).
 Controller k₁ = {cfg['controller']['k1']:g}, k₂ = {cfg['controller']['k2']:g}, |v₁| = {cfg['controller']['speed']:g} m/s;
 scanner period {cfg['sim']['scan_period']:g} s, {cfg['sim']['n_sub']} RK4 steps per period; timeout {cfg['sim']['t_max']:g} s;
-failure beyond {cfg['sim']['max_switches']} switches; stop when |x| + √(y² + tan²θ) < {cfg['sim']['tol']:g}.
+stop when |x| + √(y² + tan²θ) < {cfg['sim']['tol']:g}. Runs end converged, stuck (less than {cfg['sim']['stuck_travel']:g} m of
+travel over the last {cfg['sim']['stuck_switches']} legs between reversals: reversing in place), timed out, at the heading limit,
+non-finite, or not started (the rectangle meets an obstacle at the start pose); only the search fails a candidate
+beyond {cfg['search']['max_switches']} switches (the source's search cut-off).
+
+## Verdicts on the source's reported outcomes
+
+One row per outcome and criterion. Times count as reproduced within ±10 %. The source's experiments stood
+{cfg['experiment']['pause']:g} s at each reversal; pfjax models that stop as an option and shows both.
+
+{verdicts}
 
 ## Calibration of a_f
 
@@ -84,20 +124,22 @@ and 0.1 s scanner sampling, the first switch happens at t = {sw['t']:.1f} s with
 
 ![case D histories](figures/histories_D.png)
 
-### Where the simulation differs from the source, and why
+### Case B: what would make it stuck
 
-The spec carries the source's qualitative claims but not its per-case switch counts and times, so the comparison
-below is with its statements. **Case B**: the source reports the robot stuck switching repeatedly in place. With
-the calibrated a_f the simulated case B is as in the table above; the outcome depends on the unknown rectangle
-geometry and on the scanner period, as the sweep shows (each cell: switches and parking time, or the failure):
+The source reports case B stuck, switching repeatedly in place, "because it turns sharply at each switch and, not
+being round, touches again". pfjax's case B parks ({by_case.get('B', '—')}). Which of the assumptions the source
+leaves open (spec §3) could change that? The study simulates cases A-D under all {a['n_combinations']} combinations of:
+the rectangle's reach a_f, the detection zone checked toward the travel direction (the half beyond the middle,
+the part beyond the wheel axle, or the whole rectangle), the scanner period, a decision taken on the pose one
+period old, the yaw-rate PI loop of the experiments, and a stop at each reversal. Counts per detection zone and a_f
+(over the other assumptions):
 
-{sensitivity_table(sens)}
+{assumptions_table(sweep)}
 
-The switching rule (which half of the rectangle is checked) and the 0.1 s sampling are readings of the source
-(spec §3, assumed); a reach a_f that differs by a few centimetres changes where each switch happens and hence the
-heading at the next leg, which decides whether the robot touches again right after a switch. Cases C and D use
-α = 0.5 after the first switch (a gentler turn) and, for D, α = 8 then 1: in this simulation case C ends
-{by_case.get('C', '—')} and case D {by_case.get('D', '—')}; case B {by_case.get('B', '—')}.
+{_zone_sentence(a)}
+{len(a['all_four_reproduced'])} of the {a['n_combinations']} combinations give all four of the source's outcomes at once
+(A, C and D park, B stuck){': ' + '; '.join(', '.join(f'{k}={v}' for k, v in c.items()) for c in a['all_four_reproduced'][:8]) if a['all_four_reproduced'] else ''}.
+{_b_verdict(a, by_case.get('B', '—'))}
 
 ## Search of (X_s, α₁, α₂) in the garage
 

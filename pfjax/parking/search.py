@@ -5,8 +5,9 @@ Fitness (the source's formula was lost; **assumed**, configurable weight ``w``):
     J = 1 / (t_e + w · (|x_e| + sqrt(y_e² + tan²θ_e)))      (w = 100)
 
 with the end time t_e (s) and end pose of the run; J = 0 when the run fails by too many
-switches, by the heading limit or by a non-finite state (a timeout keeps its J, which is then
-small: t_e = 200 s plus the end error). The GA (:func:`pfjax.tuning.ga.ga_bits`) minimises −J.
+switches (more than 10: the source's search cut-off, :data:`SEARCH_CONFIG`), by the heading
+limit, by a non-finite state or stuck (a timeout keeps its J, which is then small: t_e = 200 s
+plus the end error). The grid and the start map share the fitness and the cut-off. The GA (:func:`pfjax.tuning.ga.ga_bits`) minimises −J.
 The grid evaluates every combination of ``n`` levels per gene chosen on the chromosome's own
 lattice (ξ = round(linspace(0, 255, n))), so the GA's optimum and the grid's are comparable and
 any GA result can be re-simulated exactly.
@@ -20,10 +21,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pfjax.parking.simulate import ParkingConfig, RunParams, Status, run_many, run_params
+from pfjax.parking.simulate import SEARCH_MAX_SWITCHES, ParkingConfig, RunParams, Status, run_many, run_params
 from pfjax.parking.schedules import ALPHA_MAX, GARAGE_START, XS_MAX, XS_MIN, decode_bits, three_phase
 
-FAILED = (int(Status.TOO_MANY_SWITCHES), int(Status.HEADING_LIMIT), int(Status.NONFINITE))
+FAILED = (int(Status.TOO_MANY_SWITCHES), int(Status.HEADING_LIMIT), int(Status.NONFINITE), int(Status.STUCK),
+          int(Status.START_OVERLAP))
+#: The search's simulation settings: the source's cut-off at 10 switches decides what a repeatedly
+#: switching candidate is, so the progress test (``stuck``) is off.
+SEARCH_CONFIG = ParkingConfig(max_switches=SEARCH_MAX_SWITCHES, stuck_switches=None)
 
 
 def fitness(status, time, error, weight: float = 100.0):
@@ -47,7 +52,7 @@ def garage_base(start=GARAGE_START, **kw) -> RunParams:
     return run_params(start, 1, (1.0,), xs=-1.0, **kw)
 
 
-def search_ga(omap, *, key, start=GARAGE_START, options=None, weight=100.0, cfg=ParkingConfig(),
+def search_ga(omap, *, key, start=GARAGE_START, options=None, weight=100.0, cfg=SEARCH_CONFIG,
               progress=False, base: RunParams | None = None) -> dict:
     """The source's GA: 24 bits, n = 20, N = 100 by default; returns the best decoded parameters."""
     from pfjax.tuning.ga import GAOptions, ga_bits
@@ -69,7 +74,7 @@ def search_ga(omap, *, key, start=GARAGE_START, options=None, weight=100.0, cfg=
             "history_mean_fitness": (-np.asarray(res.history_mean)).tolist()}
 
 
-def evaluate(omap, base: RunParams, xs, alpha1, alpha2, *, cfg=ParkingConfig(), weight=100.0, pose0=None,
+def evaluate(omap, base: RunParams, xs, alpha1, alpha2, *, cfg=SEARCH_CONFIG, weight=100.0, pose0=None,
              chunk=1024, progress=False) -> dict:
     """Batched runs at the given parameters -> NumPy columns (status, time_s, switches, fitness, ...)."""
     r = run_many(batch_params(base, xs, alpha1, alpha2, pose0), omap, cfg, chunk=chunk, progress=progress, desc="grid")
@@ -84,7 +89,7 @@ def lattice(n: int) -> tuple[np.ndarray, np.ndarray]:
     return XS_MIN + (XS_MAX - XS_MIN) * xi / 255.0, ALPHA_MAX * (xi + 1) / 256.0
 
 
-def search_grid(omap, *, n=32, start=GARAGE_START, weight=100.0, cfg=ParkingConfig(), chunk=1024, progress=False,
+def search_grid(omap, *, n=32, start=GARAGE_START, weight=100.0, cfg=SEARCH_CONFIG, chunk=1024, progress=False,
                 base: RunParams | None = None) -> dict:
     """Exhaustive n × n × n grid over (X_s, α₁, α₂); returns the best and every evaluation."""
     base = base if base is not None else garage_base(start)
@@ -98,7 +103,7 @@ def search_grid(omap, *, n=32, start=GARAGE_START, weight=100.0, cfg=ParkingConf
             "table": table}
 
 
-def start_map(omap, x0s, theta0s_deg, *, y0=GARAGE_START[1], n=12, weight=100.0, cfg=ParkingConfig(), chunk=1024,
+def start_map(omap, x0s, theta0s_deg, *, y0=GARAGE_START[1], n=12, weight=100.0, cfg=SEARCH_CONFIG, chunk=1024,
               progress=False) -> list[dict]:
     """For each start (x₀, θ₀): the best (X_s, α₁, α₂) on an n³ grid, its parking time, and α = 1 / X_s = −0.9 for reference."""
     base = garage_base()

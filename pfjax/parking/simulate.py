@@ -5,10 +5,28 @@ Time is divided into scanner periods T_s (spec §3: 0.1 s). At the start of each
 it travels, or — in the garage rule — when, after it has once switched to backward, it travels
 backward and ``x ≤ X_s``; (2) then integrates the closed loop (:func:`pfjax.parking.model.vector_field`)
 over the period with ``n_sub`` RK4 steps, direction and α held. After every RK4 step it stops
-with a status: converged (``|x| + sqrt(y² + tan²θ) < tol``), heading limit (``|θ| ≥ π/2``,
-where the controller is undefined), non-finite state, or timeout (``t ≥ t_max``); a switch that
-would be the (max_switches + 1)-th fails the run with ``TOO_MANY_SWITCHES``. Every switch is
-logged (time, pose, cause) in fixed-size arrays, so the log batches too.
+with a status:
+
+* ``converged``: ``|x| + sqrt(y² + tan²θ) < tol``;
+* ``heading_limit``: ``|θ| ≥ π/2``, where the controller is undefined;
+* ``nonfinite``: the state became NaN or infinite;
+* ``stuck``: switching repeatedly in place (:class:`ParkingConfig`): the robot has travelled less
+  than ``stuck_travel`` metres over its last ``stuck_switches`` legs between reversals — it reverses
+  again before getting anywhere (the source's case B: "switches repeatedly in place"). Travel is
+  the progress measure: while it moves, the source's Lyapunov function decreases (its Theorem), so
+  a run that keeps moving keeps progressing, however many times it reverses;
+* ``timeout``: ``t ≥ t_max`` (200 s);
+* ``start_overlap``: the rectangle meets an obstacle at the start pose (a start in a sweep over
+  poses; a single run's start is refused with an error instead, :func:`pfjax.parking.maps.check_start`);
+* ``too_many_switches``: only with a cut-off ``max_switches`` (the GA search's: the source's
+  search "terminates the simulation if the number of switching operations exceeds 10"); single
+  runs, cases, maps over starts and the Monte Carlo have none.
+
+Two **assumed** timings are options (:class:`RunParams`): ``pause``, seconds the robot stands still
+at each reversal (the source's experiment stops 1 s), and ``decision_delay``, the scanner deciding
+on the pose one period old (a scan's latency). Every switch is logged (time, pose, cause) in
+fixed-size arrays (:attr:`ParkingConfig.log_len` entries; later switches are counted, not logged),
+so the log batches too.
 """
 
 from __future__ import annotations
@@ -36,9 +54,11 @@ class Status(IntEnum):
     RUNNING = -1  #: internal only
     CONVERGED = 0  #: |x| + sqrt(y² + tan²θ) < tol
     TIMEOUT = 1  #: not converged after t_max (200 s)
-    TOO_MANY_SWITCHES = 2  #: more than max_switches (10) direction switches
+    TOO_MANY_SWITCHES = 2  #: more than max_switches direction switches (the GA search's cut-off only)
     HEADING_LIMIT = 3  #: |θ| ≥ π/2, where the controller is undefined
     NONFINITE = 4  #: the state became NaN or infinite
+    STUCK = 5  #: reversing repeatedly without progress (see the module docstring)
+    START_OVERLAP = 6  #: the robot's rectangle meets an obstacle at the start pose (not simulated)
 
 
 STATUS_NAMES = {int(s): s.name.lower() for s in Status if s is not Status.RUNNING}
@@ -52,17 +72,38 @@ class SwitchCause(IntEnum):
 
 @dataclass(frozen=True)
 class ParkingConfig:
-    """Settings that fix shapes and loop lengths (static under jit)."""
+    """Settings that fix shapes and loop lengths (static under jit).
 
-    t_max: float = 200.0  # s
-    max_switches: int = 10
-    tol: float = 0.02  # stop when |x| + sqrt(y² + tan²θ) < tol
-    n_sub: int = 2  # RK4 steps per scanner period (0.05 s at T_s = 0.1 s; n_sub = 10 agrees, see tests)
-    max_samples: int = 20000  # hard loop bound (scanner periods)
+    Attributes:
+        t_max: timeout, s.
+        max_switches: fail a run at its (max_switches + 1)-th reversal (``TOO_MANY_SWITCHES``);
+            None: no cut-off. The GA search uses 10 (:data:`SEARCH_MAX_SWITCHES`).
+        tol: stop when ``|x| + sqrt(y² + tan²θ) < tol``.
+        n_sub: RK4 steps per scanner period (0.05 s at T_s = 0.1 s; n_sub = 10 agrees, see tests).
+        max_samples: hard loop bound (scanner periods).
+        stuck_switches: the legs between reversals over which travel is measured (``stuck``, module
+            docstring); None disables the status.
+        stuck_travel: m, travel over those legs below which a run is stuck (0.1 m: 2 s at the
+            source's 0.05 m/s, against legs of 0.2-0.7 m when it parks).
+        log_capacity: switches logged when there is no cut-off.
+    """
+
+    t_max: float = 200.0
+    max_switches: int | None = None
+    tol: float = 0.02
+    n_sub: int = 2
+    max_samples: int = 20000
+    stuck_switches: int | None = 4
+    stuck_travel: float = 0.1
+    log_capacity: int = 32
 
     @property
     def log_len(self) -> int:
-        return self.max_switches + 1
+        return self.log_capacity if self.max_switches is None else self.max_switches + 1
+
+
+#: The GA search's cut-off (spec §5): more than 10 switches and the candidate counts as failed.
+SEARCH_MAX_SWITCHES = 10
 
 
 class RunParams(NamedTuple):
@@ -76,6 +117,8 @@ class RunParams(NamedTuple):
     scan_period: Array  # s, scanner sampling period T_s
     control: ControlParams
     shape: RobotShape
+    pause: Array  # s the robot stands still at each reversal (0: none)
+    decision_delay: Array  # 1.0: the scanner decides on the pose one period old; 0.0: on the current pose
 
 
 class Carry(NamedTuple):
@@ -90,6 +133,9 @@ class Carry(NamedTuple):
     log_t: Array  # (M,) s, NaN where unused
     log_pose: Array  # (M, 3) pose at each switch
     log_cause: Array  # (M,) SwitchCause
+    prev_pose: Array  # (3,) pose at the start of the previous period (the delayed scanner's view)
+    pause_left: Array  # s still to stand at the current reversal
+    travel_at: Array  # (K,) m travelled at the last K reversals, a ring (stuck test)
 
 
 class RunResult(NamedTuple):
@@ -114,14 +160,16 @@ class Trajectory(NamedTuple):
     running: Array  # (K,) bool
 
 
-def _init(p: RunParams, cfg: ParkingConfig) -> Carry:
+def _init(p: RunParams, omap: ObstacleMap, cfg: ParkingConfig) -> Carry:
     m = cfg.log_len
     dt = p.pose0.dtype
+    overlap = obstacle_ahead(p.pose0, p.shape, 1.0, omap) | obstacle_ahead(p.pose0, p.shape, -1.0, omap)
     return Carry(
         k=jnp.asarray(0), t=jnp.asarray(0.0, dt), state=jnp.concatenate([p.pose0, jnp.zeros(1, dt)]),
         direction=jnp.asarray(p.direction0, dt), n_switches=jnp.asarray(0), backed=jnp.asarray(False),
-        status=jnp.asarray(int(Status.RUNNING)), distance=jnp.asarray(0.0, dt),
+        status=jnp.where(overlap, int(Status.START_OVERLAP), int(Status.RUNNING)), distance=jnp.asarray(0.0, dt),
         log_t=jnp.full(m, jnp.nan, dt), log_pose=jnp.full((m, 3), jnp.nan, dt), log_cause=jnp.zeros(m, jnp.int32),
+        prev_pose=p.pose0, pause_left=jnp.asarray(0.0, dt), travel_at=jnp.zeros(max(cfg.stuck_switches or 1, 1), dt),
     )
 
 
@@ -129,42 +177,58 @@ def _period(c: Carry, p: RunParams, omap: ObstacleMap, cfg: ParkingConfig) -> Ca
     """One scanner period: switch decision, then ``n_sub`` RK4 steps (frozen once stopped)."""
     running = c.status == Status.RUNNING
     pose = c.state[:3]
-    hit = obstacle_ahead(pose, p.shape, c.direction, omap)
-    at_xs = (p.use_xs > 0.5) & c.backed & (c.direction < 0) & (pose[0] <= p.xs)
-    switch = running & (hit | at_xs)
+    seen = jnp.where(p.decision_delay > 0.5, c.prev_pose, pose)  # what the scanner decides on
+    paused = c.pause_left > 1e-9  # standing at a reversal: no new decision
+    hit = obstacle_ahead(seen, p.shape, c.direction, omap)
+    at_xs = (p.use_xs > 0.5) & c.backed & (c.direction < 0) & (seen[0] <= p.xs)
+    switch = running & ~paused & (hit | at_xs)
     direction = jnp.where(switch, -c.direction, c.direction)
     n = c.n_switches + switch.astype(c.n_switches.dtype)
     i = jnp.minimum(n - 1, cfg.log_len - 1)
-    log_t = jnp.where(switch, c.log_t.at[i].set(c.t), c.log_t)
-    log_pose = jnp.where(switch, c.log_pose.at[i].set(pose), c.log_pose)
+    logged = switch & (n <= cfg.log_len)
+    log_t = jnp.where(logged, c.log_t.at[i].set(c.t), c.log_t)
+    log_pose = jnp.where(logged, c.log_pose.at[i].set(pose), c.log_pose)
     cause = jnp.where(hit, int(SwitchCause.OBSTACLE), int(SwitchCause.SWITCH_POINT))
-    log_cause = jnp.where(switch, c.log_cause.at[i].set(cause), c.log_cause)
-    status = jnp.where(running & (n > cfg.max_switches), int(Status.TOO_MANY_SWITCHES), c.status)
+    log_cause = jnp.where(logged, c.log_cause.at[i].set(cause), c.log_cause)
+    status = c.status
+    if cfg.max_switches is not None:
+        status = jnp.where(running & (n > cfg.max_switches), int(Status.TOO_MANY_SWITCHES), status)
+    travel_at = c.travel_at
+    if cfg.stuck_switches is not None:  # travel over the last K legs: now minus at the K-th last reversal
+        k = cfg.stuck_switches
+        slot = n % k
+        stuck = switch & (n >= k) & (c.distance - travel_at[slot] < cfg.stuck_travel)
+        travel_at = jnp.where(switch, travel_at.at[slot].set(c.distance), travel_at)
+        status = jnp.where(running & (status == Status.RUNNING) & stuck, int(Status.STUCK), status)
+    pause_left = jnp.where(switch, p.pause, c.pause_left)
 
     alpha = alpha_at(p.schedule, n)
     v1 = direction * p.control.speed
     h = p.scan_period / cfg.n_sub
 
-    def rhs(_t, s):
-        return vector_field(s, v1, alpha, p.control)
+    def rhs(_t, s, moving):
+        return vector_field(s, jnp.where(moving, v1, 0.0 * v1), alpha, p.control)
 
     def step(_, carry):
-        state, t, st, dist = carry
+        state, t, st, dist, left = carry
         run = st == Status.RUNNING
-        new = rk4_step(rhs, t, state, h)
+        moving = left <= 1e-9
+        new = rk4_step(lambda tt, s: rhs(tt, s, moving), t, state, h)
         t_new = t + h
         finite = jnp.all(jnp.isfinite(new))
         code = jnp.select(
-            [~finite, jnp.abs(new[2]) >= 0.5 * math.pi, parking_error(new[0], new[1], new[2]) < cfg.tol, t_new >= cfg.t_max - 1e-9],
+            [~finite, jnp.abs(new[2]) >= 0.5 * math.pi, parking_error(new[0], new[1], new[2]) < cfg.tol,
+             t_new >= cfg.t_max - 1e-9],
             [int(Status.NONFINITE), int(Status.HEADING_LIMIT), int(Status.CONVERGED), int(Status.TIMEOUT)],
             int(Status.RUNNING),
         )
         keep = run & finite
         return (jnp.where(keep, new, state), jnp.where(run, t_new, t), jnp.where(run, code, st),
-                dist + jnp.where(run, p.control.speed * h, 0.0))
+                dist + jnp.where(run & moving, p.control.speed * h, 0.0), jnp.maximum(left - h, 0.0))
 
-    state, t, status, dist = lax.fori_loop(0, cfg.n_sub, step, (c.state, c.t, status, c.distance))
-    return Carry(c.k + 1, t, state, direction, n, c.backed | (switch & (direction < 0)), status, dist, log_t, log_pose, log_cause)
+    state, t, status, dist, pause_left = lax.fori_loop(0, cfg.n_sub, step, (c.state, c.t, status, c.distance, pause_left))
+    return Carry(c.k + 1, t, state, direction, n, c.backed | (switch & (direction < 0)), status, dist, log_t, log_pose,
+                 log_cause, pose, pause_left, travel_at)
 
 
 def _result(c: Carry, cfg: ParkingConfig) -> RunResult:
@@ -176,7 +240,7 @@ def _result(c: Carry, cfg: ParkingConfig) -> RunResult:
 def run(p: RunParams, omap: ObstacleMap, cfg: ParkingConfig = ParkingConfig()) -> RunResult:
     """Simulate one run until it stops (``lax.while_loop``; vmapped, it runs until every run has stopped)."""
     final = lax.while_loop(lambda c: (c.status == Status.RUNNING) & (c.k < cfg.max_samples),
-                           lambda c: _period(c, p, omap, cfg), _init(p, cfg))
+                           lambda c: _period(c, p, omap, cfg), _init(p, omap, cfg))
     return _result(final, cfg)
 
 
@@ -188,7 +252,7 @@ def run_recorded(p: RunParams, omap: ObstacleMap, cfg: ParkingConfig, n_periods:
         a = alpha_at(p.schedule, c2.n_switches)
         return c2, Trajectory(c.t, c.state, c2.direction, a, c.status == Status.RUNNING)
 
-    final, traj = lax.scan(body, _init(p, cfg), None, length=n_periods)
+    final, traj = lax.scan(body, _init(p, omap, cfg), None, length=n_periods)
     return _result(final, cfg), traj
 
 
@@ -226,8 +290,14 @@ def run_many(params: RunParams, omap: ObstacleMap, cfg: ParkingConfig = ParkingC
 
 
 def run_params(x0, direction=1, schedule=(1.0,), *, xs=None, front=None, scan_period=0.1, control=None,
-               theta_in_degrees=True, width=None, length=None) -> RunParams:
-    """Convenience constructor of one run's parameters (``x0 = (x m, y m, θ deg)`` by default)."""
+               theta_in_degrees=True, width=None, length=None, split=None, zone=0.0, pause=0.0,
+               decision_delay=False) -> RunParams:
+    """Convenience constructor of one run's parameters (``x0 = (x m, y m, θ deg)`` by default).
+
+    ``front``: the rectangle's reach ahead of the axle, m (default the calibrated a_f); ``split``:
+    body-frame x of the boundary between its halves, m (default the middle); ``zone``: m each half's
+    detection zone reaches into the other (``length``: the whole rectangle); ``pause``: s standing
+    still at each reversal; ``decision_delay``: the scanner decides on the pose one period old."""
     from pfjax.parking.calibrate import A_F
     from pfjax.parking.geometry import L1_WIDTH, L2_LENGTH, robot_shape
     from pfjax.parking.model import control_params
@@ -240,7 +310,9 @@ def run_params(x0, direction=1, schedule=(1.0,), *, xs=None, front=None, scan_pe
         pose0=f([x, y, th]), direction0=f(1.0 if direction > 0 else -1.0), schedule=f(pad_schedule(schedule)),
         xs=f(0.0 if xs is None else xs), use_xs=f(0.0 if xs is None else 1.0), scan_period=f(scan_period),
         control=control if control is not None else control_params(),
-        shape=robot_shape(A_F if front is None else front, L1_WIDTH if width is None else width, L2_LENGTH if length is None else length),
+        shape=robot_shape(A_F if front is None else front, L1_WIDTH if width is None else width,
+                          L2_LENGTH if length is None else length, split, zone),
+        pause=f(pause), decision_delay=f(1.0 if decision_delay else 0.0),
     )
 
 

@@ -13,9 +13,12 @@ VERDICTS = ("holds", "does not hold", "reproduced", "not reproduced", "no verdic
 #: Whether a row is evidence. ``independent``: nothing in pfjax was chosen from it.
 #: ``used to choose the convention``: the source's statement fixed a modelling convention, so the row
 #: agrees by construction. ``chosen by filters from the source``: the row checks a reading selected
-#: with criteria taken from the same source statements. ``assumed``: the criterion rests on a
-#: parameter the source does not give (named in the criterion).
-BASES = ("independent", "used to choose the convention", "chosen by filters from the source", "assumed")
+#: with criteria taken from the same source statements. ``used to calibrate a parameter``: the
+#: source's number set one of pfjax's parameters (named in the criterion), so matching it is by
+#: construction. ``assumed``: the criterion rests on a parameter the source does not give (named in
+#: the criterion).
+BASES = ("independent", "used to choose the convention", "chosen by filters from the source",
+         "used to calibrate a parameter", "assumed")
 
 
 class Verdict(NamedTuple):
