@@ -40,14 +40,15 @@ from pfjax.errors import command_main  # noqa: E402
 from pfjax.jsonio import dumps  # noqa: E402
 from pfjax.outputs import OutputDir, check_name  # noqa: E402
 from pfjax.parking import figures as F  # noqa: E402
-from pfjax.parking.calibrate import calibrate_front, simulated_first_switch  # noqa: E402
+from pfjax.parking.calibrate import calibrate_front  # noqa: E402
 from pfjax.parking.maps import GARAGE, PARALLEL, to_obstacle_map  # noqa: E402
 from pfjax.parking.model import control_params  # noqa: E402
 from pfjax.parking.assumptions import ZONES, case_sweep, sweep_summary  # noqa: E402
 from pfjax.parking.montecarlo import Scatter, monte_carlo, summarise  # noqa: E402
 from pfjax.parking.schedules import CASES, GARAGE_START  # noqa: E402
 from pfjax.parking.search import search_ga, search_grid, start_map  # noqa: E402
-from pfjax.parking.simulate import STATUS_NAMES, ParkingConfig, n_periods_for, run_jit, run_params, run_recorded_jit  # noqa: E402
+from pfjax.parking.simulate import (STATUS_NAMES, ParkingConfig, n_periods_for, run_jit, run_params,  # noqa: E402
+                                    run_recorded_jit, simulated_first_switch)
 from pfjax.parking.summary import run_summary  # noqa: E402
 from pfjax.report.figures import save  # noqa: E402
 from pfjax.reproduce.parking import GA_SOLUTIONS  # noqa: E402

@@ -1,4 +1,4 @@
-"""The ``pfjax`` command line (pfjax/cli.py): JSON contract, numbers against independent
+"""The ``pfjax`` command line (the pfjax.cli package): JSON contract, numbers against independent
 references, gains parsing, one-line usage errors with exit code 2.
 
 References: the closed-loop matrix ``A + B_u K`` and the norms are rebuilt here in NumPy/SciPy

@@ -18,12 +18,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from pfjax.parking.calibrate import A_F, calibrate_front, case_a_pose, simulated_first_switch
+from pfjax.parking.calibrate import A_F, calibrate_front, case_a_pose
 from pfjax.parking.geometry import half_corners, quad_hits_map, robot_shape
 from pfjax.parking.maps import PARALLEL, to_obstacle_map
 from pfjax.parking.model import control_params, lyapunov, vector_field
 from pfjax.parking.schedules import CASES, alpha_at, decode_bits, pad_schedule, parse_schedule, three_phase
 from pfjax.parking.simulate import (ParkingConfig, Status, n_periods_for, run_batch, run_jit, run_recorded_jit, run_params,
+                                    simulated_first_switch,
                                     stack_params)
 from pfjax.sim.integrators import rk4_step
 

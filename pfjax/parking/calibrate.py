@@ -11,7 +11,8 @@ happens when the rectangle's right front corner reaches an obstacle with the rob
 y + a_f sin θ − (L₁/2) cos θ)``; a_f is the smallest reach for which it touches an obstacle
 edge at that pose: the kerb ``y = −0.2`` or the car ahead ``x = 0.5``. The closed form also
 checks the model: it predicts y at x = 0.074 independently of a_f, to compare with the source's
-0.047. The simulation then confirms where the sampled (0.1 s) detection switches.
+0.047. :func:`pfjax.parking.simulate.simulated_first_switch` then confirms where the sampled
+(0.1 s) detection switches.
 """
 
 from __future__ import annotations
@@ -44,16 +45,6 @@ def calibrate_front(switch_xy=SOURCE_SWITCH, width=0.370, kerb_y=-0.2, car_x=0.5
     which = min(valid, key=valid.get)
     return {"a_f": valid[which], "obstacle": which, "reach_per_obstacle": reach, "theta_deg_at_switch": math.degrees(th),
             "y_closed_form_at_switch_x": y, "y_source": y_src, "switch_x": x}
-
-
-def simulated_first_switch(front: float) -> dict:
-    """Case A simulated with reach ``front``: pose of the first (sampled) switch."""
-    from pfjax.parking.maps import PARALLEL, to_obstacle_map
-    from pfjax.parking.simulate import ParkingConfig, run_jit, run_params
-
-    r = run_jit(run_params((-0.4, 0.5, 0.0), 1, (1.0,), front=front), to_obstacle_map(list(PARALLEL.values())), ParkingConfig())
-    x, y, th = (float(v) for v in r.log_pose[0])
-    return {"t": float(r.log_t[0]), "x": x, "y": y, "theta_deg": math.degrees(th)}
 
 
 #: The calibrated reach (m) used by default everywhere in pfjax.parking.

@@ -318,3 +318,15 @@ def run_params(x0, direction=1, schedule=(1.0,), *, xs=None, front=None, scan_pe
 
 def stack_params(items: list[RunParams]) -> RunParams:
     return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *items)
+
+
+def simulated_first_switch(front: float) -> dict:
+    """Case A (:data:`pfjax.parking.schedules.CASES`) simulated with reach ``front`` (m): time (s)
+    and pose (m, m, deg) of its first sampled switch, to check the calibration of a_f
+    (:mod:`pfjax.parking.calibrate`) against the source's point."""
+    from pfjax.parking.maps import PARALLEL, to_obstacle_map
+
+    r = run_jit(run_params((-0.4, 0.5, 0.0), 1, (1.0,), front=front), to_obstacle_map(list(PARALLEL.values())),
+                ParkingConfig())
+    x, y, th = (float(v) for v in r.log_pose[0])
+    return {"t": float(r.log_t[0]), "x": x, "y": y, "theta_deg": math.degrees(th)}

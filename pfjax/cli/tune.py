@@ -12,8 +12,9 @@ generation / step) and ``history_rollouts``; a progress bar on stderr when it is
 
 from __future__ import annotations
 
+from pfjax.cli.common import UsageError, as_flags
+
 import sys
-from pathlib import Path
 
 CONTROLLERS = {"pi": "pi", "state-feedback": "state_feedback", "integral": "integral", "stanley": "stanley",
                "pure-pursuit": "pure_pursuit", "rear-wheel": "rear_wheel"}
@@ -59,7 +60,6 @@ def _cmd(args) -> dict:
     import jax
 
     from pfjax import __version__, errors
-    from pfjax.cli import UsageError, as_flags
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
     from pfjax.tuning.problem import make_problem, tune

@@ -7,10 +7,10 @@
 
 from __future__ import annotations
 
+from pfjax.cli.common import UsageError, finite
+
 
 def _usage(msg):
-    from pfjax.cli import UsageError
-
     return UsageError(msg)
 
 
@@ -54,14 +54,13 @@ def register(sub) -> None:
 
 
 def _checked(args, default_start):
-    from pfjax.cli import _finite
     from pfjax.parking.maps import MapError, check_start, load_map, to_obstacle_map
 
     for flag, v in (("--k1", args.k1), ("--k2", args.k2), ("--speed", args.speed), ("--scan-period", args.scan_period),
                     ("--t-max", args.t_max)):
-        _finite(flag, v, positive=True)
+        finite(flag, v, positive=True)
     if args.front is not None:
-        _finite("--front", args.front, positive=True)
+        finite("--front", args.front, positive=True)
         if args.front >= 0.540:
             raise _usage(f"--front: must be < 0.54 (the rectangle length), got {args.front:g}")
     if args.scan_period > 10 or args.t_max / args.scan_period > 20000:
@@ -75,8 +74,8 @@ def _checked(args, default_start):
             raise _usage(f"--x0: required (no default start for map {args.map!r})")
         x0 = default_start[args.map]
     else:
-        x0 = tuple(_finite("--x0", v) for v in args.x0)
-        _finite("--x0", x0[2], below=90.0, unit=" deg")
+        x0 = tuple(finite("--x0", v) for v in args.x0)
+        finite("--x0", x0[2], below=90.0, unit=" deg")
     from pfjax.parking.simulate import run_params
 
     shape = run_params(x0, front=args.front).shape  # the rectangle the run will simulate
@@ -94,7 +93,6 @@ def _control(args):
 
 
 def _cmd_parking(args) -> dict:
-    from pfjax.cli import _finite
     from pfjax.parking.schedules import CASES, GARAGE_START, parse_schedule
 
     try:
@@ -102,7 +100,7 @@ def _cmd_parking(args) -> dict:
     except ValueError as e:
         raise _usage(f"--alpha-schedule: {e}") from None
     if args.xs is not None:
-        _finite("--xs", args.xs)
+        finite("--xs", args.xs)
     name, _, omap, x0 = _checked(args, {"parallel": CASES["A"]["x0"], "garage": GARAGE_START})
     xs = args.xs if args.xs is not None else (-0.9 if args.map == "garage" else None)  # the garage always has its X_s rule
 
@@ -122,11 +120,10 @@ def _cmd_search(args) -> dict:
 
     import jax
 
-    from pfjax.cli import _finite
     from pfjax.parking.schedules import GARAGE_START
     from pfjax.parking.search import SEARCH_CONFIG, search_ga, search_grid
 
-    _finite("--weight", args.weight)
+    finite("--weight", args.weight)
     if args.weight < 0:
         raise _usage(f"--weight: must be >= 0, got {args.weight:g}")
     if not 2 <= args.n <= 64:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pfjax.cli.common import UsageError, as_flags
+
 import sys
 import time
 
@@ -25,7 +27,6 @@ def register(sub) -> None:
 
 
 def _sizes(text: str):
-    from pfjax.cli import UsageError
 
     try:
         return tuple(int(s) for s in text.split(","))
@@ -37,7 +38,6 @@ def _cmd(args) -> dict:
     from dataclasses import replace
 
     from pfjax.bench.run import QUICK, BenchConfig
-    from pfjax.cli import as_flags
 
     with as_flags({"sizes": "--sizes", "seed": "--seed"}):
         cfg = QUICK if args.quick else BenchConfig()

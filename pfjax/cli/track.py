@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from pfjax.cli import UsageError, _finite
+from pfjax.cli.common import UsageError, finite
 
 LEADERS = ("line", "circle", "sine", "lane-change")
 
@@ -44,22 +44,22 @@ def register(sub) -> None:
 
 def _check(args) -> tuple[float, float]:
     f = 1 if args.mode == "forward" else -1
-    pp = float(f) if args.p is None else _finite("--p", args.p)
-    ll = float(f) if args.l is None else _finite("--l", args.l)
+    pp = float(f) if args.p is None else finite("--p", args.p)
+    ll = float(f) if args.l is None else finite("--l", args.l)
     if pp == 0:
         raise UsageError("--p: must be nonzero (M is singular at p = 0), got 0")
     if ll == 0:
         raise UsageError("--l: must be nonzero (M is singular at l = 0), got 0")
-    _finite("--gamma-max-deg", args.gamma_max_deg, positive=True, below=90, unit=" deg")
+    finite("--gamma-max-deg", args.gamma_max_deg, positive=True, below=90, unit=" deg")
     for flag, v in (("--speed", args.speed), ("--a", args.a), ("--k", args.k), ("--v-max", args.v_max),
                     ("--omega-max-deg", args.omega_max_deg), ("--T", args.T), ("--dt", args.dt)):
-        _finite(flag, v, positive=True)
+        finite(flag, v, positive=True)
     if not 0.0 <= args.stop_and_go <= 1.0:
         raise UsageError(f"--stop-and-go: expected a depth in [0, 1], got {args.stop_and_go:g}")
     for flag, v in (("--offset", args.offset[0]), ("--offset", args.offset[1]), ("--heading-error-deg", args.heading_error_deg)):
-        _finite(flag, v)
-    _finite("--beta-r-deg", args.beta_r_deg, below=90, unit=" deg")
-    _finite("--beta-f-deg", args.beta_f_deg, below=90, unit=" deg")
+        finite(flag, v)
+    finite("--beta-r-deg", args.beta_r_deg, below=90, unit=" deg")
+    finite("--beta-f-deg", args.beta_f_deg, below=90, unit=" deg")
     if args.dt > args.T:
         raise UsageError(f"--dt: must be <= --T ({args.T:g} s), got {args.dt:g}")
     if args.T / args.dt > 2_000_000:

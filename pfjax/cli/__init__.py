@@ -1,0 +1,65 @@
+"""The ``pfjax`` command line: a package at the top of pfjax that imports the library and is
+imported by nothing in it.
+
+    pfjax synth --method {mixed,hinf,h2} [--v 1 --L 0.2 --alpha 10 --beta 1] [--json]
+    pfjax simulate --path {line,parabola,sine,circle} --controller NAME [--gains G,...] [--T 20] [--json]
+    pfjax study CONFIG.toml [--set key=value ...] [--out DIR] [--json]
+    pfjax report CONFIG.toml [--out DIR]
+    pfjax tune | parking | parking-search | track | bench ...   (pfjax SUBCOMMAND --help)
+
+One module per subcommand (or pair of subcommands), each with ``register(sub)``. Bad arguments
+print one line naming the flag, the value and what was expected, and exit with code 2 before
+anything is computed or written (the checks are the library's: :mod:`pfjax.errors`). A run that
+fails numerically is reported in its ``status``; it is not an error.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+from pfjax.cli.common import EXIT_USAGE, Parser, UsageError, as_flags, join_negative_values, print_human
+from pfjax.errors import command_main
+from pfjax.jsonio import dumps
+
+__all__ = ["EXIT_USAGE", "UsageError", "as_flags", "build_parser", "main"]
+
+#: The subcommand modules, in the order of ``pfjax --help``.
+SUBCOMMANDS = ("synth", "simulate", "study", "tune", "parking", "track", "bench")
+
+
+def build_parser():
+    from pfjax import __version__
+
+    p = Parser(prog="pfjax", description="Path following in JAX: slip-robust path-following controllers.")
+    p.add_argument("--version", action="version", version=f"pfjax {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
+    for name in SUBCOMMANDS:
+        importlib.import_module(f"pfjax.cli.{name}").register(sub)
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(join_negative_values(list(sys.argv[1:] if argv is None else argv)))
+    import jax
+
+    from pfjax import cache
+
+    jax.config.update("jax_enable_x64", True)
+    cache.enable()
+    resume = "re-run the same command to resume" if args.command == "study" else "nothing was written"
+
+    def body() -> int:
+        out = args.func(args)
+        if args.json:
+            print(dumps(out))
+        else:
+            print_human(out)
+        return 0
+
+    return command_main(f"pfjax {args.command}", body, interrupted=resume)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

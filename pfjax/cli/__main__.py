@@ -1,0 +1,7 @@
+"""``python -m pfjax.cli``: the ``pfjax`` command."""
+
+import sys
+
+from pfjax.cli import main
+
+sys.exit(main())

@@ -1,0 +1,74 @@
+"""What every subcommand of the command line shares: the one-line parser, flag checks and the
+mapping of the library's argument names to flags."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import re
+
+from pfjax.errors import EXIT_USAGE, InputError
+
+__all__ = ["EXIT_USAGE", "UsageError", "Parser", "finite", "as_flags", "print_human", "join_negative_values"]
+
+
+class UsageError(InputError):
+    """A bad command-line value; the message names the flag."""
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit code 2 (argparse's own convention)
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def finite(flag: str, value: float, *, positive=False, below=None, unit="") -> float:
+    """A flag's number checked as the library checks numbers (:func:`pfjax.errors.number`)."""
+    from pfjax import errors
+
+    return errors.number(flag, value, positive=positive, below=below, unit=unit)
+
+
+@contextlib.contextmanager
+def as_flags(flags: dict[str, str]):
+    """Name flags, not the library's argument names, in the library's one-line errors: an
+    :class:`~pfjax.errors.InputError` whose key (its first part, ``gains`` of ``gains.kp_d``) is in
+    ``flags`` is raised again as ``<flag>: <rest of the key>: <message>``. The checks themselves
+    are the library's, so the command line and the Python API judge a value alike."""
+    try:
+        yield
+    except InputError as e:
+        key, text = e.key or "", str(e)
+        base = re.split(r"[.\[]", key, maxsplit=1)[0]
+        if base not in flags:
+            raise
+        body = text[len(key) + 2:] if text.startswith(key + ": ") else text
+        for name, other in flags.items():  # other settings the message mentions, by their flags too
+            if len(name) > 1:
+                body = re.sub(rf"(?<![\w.-]){re.escape(name)}(?![\w.-])", other, body)
+        sub = key[len(base):]
+        flag = flags[base] + (sub if sub.startswith("[") else "")
+        sub = "" if sub.startswith("[") else sub.lstrip(".")
+        raise UsageError(f"{flag}: {sub + ': ' if sub else ''}{body}", flags[base]) from None
+
+
+def print_human(out: dict) -> None:
+    for k, v in out.items():
+        if isinstance(v, dict):
+            print(f"{k}:")
+            for kk, vv in v.items():
+                print(f"  {kk:20s} {vv}")
+        else:
+            print(f"{k:22s} {v}")
+
+
+def join_negative_values(argv: list[str]) -> list[str]:
+    """``--gains -4,-1.5`` -> ``--gains=-4,-1.5`` (argparse would read ``-4,...`` as an option)."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == "--gains" and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1][1:2].isdigit():
+            out.append(f"--gains={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out

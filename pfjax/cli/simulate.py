@@ -1,0 +1,153 @@
+"""``pfjax simulate``: one closed-loop run of a paper scenario, its final state and metrics."""
+
+from __future__ import annotations
+
+import math
+
+from pfjax.cli.common import UsageError, as_flags
+from pfjax.cli.synth import SYNTH_FLAGS
+
+
+CONTROLLER_CHOICES = ("mixed", "paper-k", "pi", "stanley", "pure-pursuit", "rear-wheel")
+#: CLI controller name -> (registry name, gain names in --gains order)
+GAIN_NAMES = {
+    "mixed": ("state_feedback", ("k_d", "k_theta")),
+    "paper-k": ("state_feedback", ("k_d", "k_theta")),
+    "pi": ("pi", ("kp_d", "ki_d", "kp_theta", "ki_theta", "k_aw")),
+    "stanley": ("stanley", ("k", "k_soft")),
+    "pure-pursuit": ("pure_pursuit", ("ld_gain", "ld_min")),
+    "rear-wheel": ("rear_wheel", ("k_theta", "k_d")),
+}
+
+
+#: Modules that add subcommands: each has ``register(sub)`` which calls ``sub.add_parser(...)``
+#: (the parser class is this module's ``_Parser``) and ``set_defaults(func=...)``; ``func(args)``
+#: returns a dict (printed as JSON with ``--json``) and raises :class:`UsageError` for bad values.
+
+
+def _parse_gains(controller: str, text: str | None) -> dict:
+    """``--gains``: every gain of the controller as comma-separated numbers in order, or some of
+    them as ``name=value`` pairs (the others keep their defaults); values checked by the library."""
+    names = GAIN_NAMES[controller][1]
+    if text is None:
+        return {}
+    parts = [p.strip() for p in text.split(",")]
+    if not any(parts):
+        raise UsageError(f"--gains: empty; expected {','.join(names)} or name=value pairs")
+    if "" in parts:
+        raise UsageError(f"--gains: an empty item in {text!r}")
+    named = ["=" in p for p in parts]
+    if any(named) and not all(named):
+        raise UsageError(f"--gains: mixes name=value pairs and bare numbers in {text!r}; use one form")
+    if all(named):
+        pairs = [tuple(s.strip() for s in p.split("=", 1)) for p in parts]
+    else:
+        if len(parts) != len(names):
+            raise UsageError(f"--gains: expected all {len(names)} gains of --controller {controller} in order "
+                             f"({','.join(names)}), got {len(parts)}; give some as name=value pairs instead")
+        pairs = list(zip(names, parts))
+    out = {}
+    for k, v in pairs:
+        if k not in names:
+            raise UsageError(f"--gains: unknown gain {k!r} for --controller {controller}; expected {', '.join(names)}")
+        if k in out:
+            raise UsageError(f"--gains: {k} is given twice")
+        try:
+            out[k] = float(v)
+        except ValueError:
+            raise UsageError(f"--gains: {k}={v!r} is not a number") from None
+    return out
+
+
+def _controller_and_gains(args):
+    from pfjax import controllers as C
+
+    registry_name, names = GAIN_NAMES[args.controller]
+    given = _parse_gains(args.controller, args.gains)
+    controller, factory = C.REGISTRY[registry_name]
+    with as_flags({"gains": "--gains", "K": "--gains"}):
+        if args.controller in ("mixed", "paper-k"):
+            if given:
+                K = (given.get("k_d", C.PAPER_K[0]), given.get("k_theta", C.PAPER_K[1]))
+            elif args.controller == "paper-k":
+                K = C.PAPER_K
+            else:
+                from pfjax.synthesis import synthesize
+
+                with as_flags(SYNTH_FLAGS):
+                    K = tuple(float(k) for k in synthesize("mixed", v=args.v, L=args.L).K.ravel())
+            gains = factory(K=K)
+            shown = {"k_d": K[0], "k_theta": K[1]}
+        else:
+            gains = factory(**given)
+            shown = {k: float(v) for k, v in gains._asdict().items()}
+    return controller, gains, shown
+
+
+SIMULATE_FLAGS = {"v": "--v", "L": "--L", "beta_r_deg": "--beta-r-deg", "beta_f_deg": "--beta-f-deg",
+                  "delta_max_deg": "--delta-max-deg", "pose0": "--x0", "horizon": "--T", "dt": "--dt",
+                  "control_every": "--control-every", "convention": "--convention", "gains": "--gains"}
+
+
+def cmd(args) -> dict:
+    import numpy as np
+
+    from pfjax.metrics import METRIC_NAMES
+    from pfjax.scenarios import SCENARIOS, paper_scenario
+    from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack
+
+    if args.continuous and args.control_every is not None:
+        raise UsageError("--control-every: not with --continuous (a continuous controller is evaluated inside every "
+                         "RK4 stage, not sampled)")
+    with as_flags(SIMULATE_FLAGS):
+        cfg = SimConfig(dt=args.dt, horizon=args.T, record=False,
+                        control_every=None if args.continuous else (1 if args.control_every is None else args.control_every))
+        controller, gains, shown = _controller_and_gains(args)
+        sc = paper_scenario(
+            args.path, gains, beta_r_deg=args.beta_r_deg, beta_f_deg=args.beta_f_deg,
+            pose0=None if args.x0 is None else tuple(args.x0), v=args.v, L=args.L,
+            delta_max_deg=args.delta_max_deg, convention=args.convention,
+        )
+    r = unstack(simulate_batch(stack([sc]), controller=controller, config=cfg), 0)
+    status = int(r.status)
+    metrics = {k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES}
+    metrics["status"] = STATUS_NAMES[status]
+    x0 = SCENARIOS[args.path][1] if args.x0 is None else args.x0
+    return {
+        "path": args.path,
+        "controller": args.controller,
+        "gains": shown,
+        "x0": {"x": x0[0], "y": x0[1], "theta": x0[2]},
+        "beta_r": math.radians(args.beta_r_deg),
+        "beta_f": math.radians(args.beta_f_deg),
+        "T": cfg.n_steps * cfg.dt,
+        "dt": cfg.dt,
+        "final": {k: float(v) for k, v in r.final._asdict().items()},
+        "metrics": metrics,
+        "status_code": status,
+        "fail_time": float(r.fail_time) if np.isfinite(r.fail_time) else None,
+    }
+
+
+def register(sub) -> None:
+    m = sub.add_parser("simulate", help="simulate one run of a paper scenario and print final state and metrics",
+                       description="One closed-loop run of the slip model on a path (SI units; THETA in rad).")
+    m.add_argument("--path", choices=("line", "parabola", "sine", "circle"), required=True)
+    m.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA"), help="initial pose (m, m, rad); default: the source's")
+    m.add_argument("--beta-r-deg", type=float, default=5.0, help="rear slip angle, deg (default 5)")
+    m.add_argument("--beta-f-deg", type=float, default=5.0, help="front slip angle, deg (default 5)")
+    m.add_argument("--controller", choices=CONTROLLER_CHOICES, required=True,
+                   help="mixed: the LMI design with the source's weights; paper-k: the source's published K")
+    m.add_argument("--gains", help="comma-separated gains (or name=value pairs): " +
+                   "; ".join(f"{c}: {','.join(n)}" for c, (_, n) in GAIN_NAMES.items()))
+    m.add_argument("--T", type=float, default=20.0, help="horizon, s (default 20)")
+    m.add_argument("--dt", type=float, default=0.005, help="RK4 step, s (default 0.005)")
+    m.add_argument("--control-every", type=int, help="controller sampling period in steps (default 1)")
+    m.add_argument("--continuous", action="store_true", help="evaluate the controller inside every RK4 stage")
+    m.add_argument("--v", type=float, default=1.0, help="speed, m/s")
+    m.add_argument("--L", type=float, default=0.2, help="wheelbase, m")
+    m.add_argument("--delta-max-deg", type=float, default=30.0, help="steering limit, deg")
+    m.add_argument("--convention", choices=("source", "lenain"), default="source", help="front-slip sign convention")
+    m.add_argument("--json", action="store_true", help="print one JSON object")
+    m.set_defaults(func=cmd)
+

@@ -1,0 +1,51 @@
+"""``pfjax synth``: a state feedback designed by LMIs, with its bounds and true norms."""
+
+from __future__ import annotations
+
+import math
+
+from pfjax.cli.common import UsageError, as_flags, finite
+
+
+SYNTH_FLAGS = {"method": "--method", "v": "--v", "L": "--L", "alpha": "--alpha", "beta": "--beta",
+               "max_real": "--max-real", "disk_center": "--disk", "disk_radius": "--disk"}
+
+
+def cmd(args) -> dict:
+    from pfjax.synthesis import PoleRegion, SynthesisError, synthesize
+
+    region = None
+    with as_flags(SYNTH_FLAGS):
+        if args.sector_deg is not None and not 0 < finite("--sector-deg", args.sector_deg) < 90:
+            raise UsageError(f"--sector-deg: expected a half-angle in (0, 90), got {args.sector_deg:g}")
+        if args.max_real is not None or args.disk is not None or args.sector_deg is not None:
+            region = PoleRegion(
+                max_real=args.max_real,
+                disk_center=None if args.disk is None else args.disk[0],
+                disk_radius=None if args.disk is None else args.disk[1],
+                sector_angle=None if args.sector_deg is None else math.radians(args.sector_deg),
+            )
+        try:
+            design = synthesize(args.method, v=args.v, L=args.L, alpha=args.alpha, beta=args.beta, region=region)
+        except SynthesisError as e:
+            flags = "--max-real/--disk/--sector-deg" if region is not None else f"--method {args.method}"
+            raise UsageError(f"{flags}: no design exists ({e})") from None
+    out = design.to_dict()
+    out.update(v=args.v, L=args.L)
+    return out
+
+
+def register(sub) -> None:
+    s = sub.add_parser("synth", help="design a state feedback by LMIs (spec §4) and print K, bounds, true norms",
+                       description="State-feedback H-inf, H2 or mixed H2/H-inf design for the slip model (msfsyn convention).")
+    s.add_argument("--method", choices=("mixed", "hinf", "h2"), default="mixed")
+    s.add_argument("--v", type=float, default=1.0, help="speed, m/s (default 1)")
+    s.add_argument("--L", type=float, default=0.2, help="wheelbase, m (default 0.2)")
+    s.add_argument("--alpha", type=float, default=10.0, help="weight on gamma_inf^2 (mixed; default 10)")
+    s.add_argument("--beta", type=float, default=1.0, help="weight on gamma_2^2 (mixed; default 1)")
+    s.add_argument("--max-real", type=float, help="pole region: Re(s) < MAX_REAL")
+    s.add_argument("--disk", type=float, nargs=2, metavar=("CENTER", "RADIUS"), help="pole region: |s - CENTER| < RADIUS")
+    s.add_argument("--sector-deg", type=float, help="pole region: conic sector of this half-angle about the negative real axis")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.set_defaults(func=cmd)
+

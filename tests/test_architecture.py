@@ -1,0 +1,119 @@
+"""The house's shape, checked from the source (AST, nothing imported): the command line is on top
+and imported by nothing in the library, and the library's modules import one another without
+circles (an import inside a function counts: it is still a dependency).
+
+A ``from pfjax.pkg import name`` of a name a package re-exports is followed to the module that
+defines it, so a package's ``__init__`` is not mistaken for a dependency on all its modules.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1] / "pfjax"
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for f in ROOT.rglob("*.py"):
+        rel = f.relative_to(ROOT.parent).with_suffix("")
+        parts = list(rel.parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = f
+    return out
+
+
+MODULES = _modules()
+
+
+def _imports(path: Path) -> list[tuple[str, list[str]]]:
+    """``(module, [names])`` of every pfjax import in the file (names empty for ``import x``)."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out += [(a.name, []) for a in node.names if a.name.startswith("pfjax")]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0 and node.module.startswith("pfjax"):
+            out.append((node.module, [a.name for a in node.names]))
+    return out
+
+
+def _reexports(package: str) -> dict[str, str]:
+    """name -> defining module, for the names a package's ``__init__`` imports from its modules."""
+    path = MODULES.get(package)
+    if path is None or path.name != "__init__.py":
+        return {}
+    out = {}
+    for mod, names in _imports(path):
+        for n in names:
+            target = f"{mod}.{n}" if f"{mod}.{n}" in MODULES else mod
+            out[n] = _reexports(mod).get(n, target) if MODULES.get(mod, Path()).name == "__init__.py" else target
+    return out
+
+
+def _edges() -> dict[str, set[str]]:
+    graph = {m: set() for m in MODULES}
+    for m, path in MODULES.items():
+        for mod, names in _imports(path):
+            if not names:
+                graph[m].add(mod)
+                continue
+            for n in names:
+                if f"{mod}.{n}" in MODULES:
+                    graph[m].add(f"{mod}.{n}")
+                else:
+                    graph[m].add(_reexports(mod).get(n, mod))
+    for m in graph:  # a package's __init__ depends on what it re-exports; the rest is not a cycle
+        graph[m].discard(m)
+    return {m: {t for t in ts if t in MODULES} for m, ts in graph.items()}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_nothing_in_the_library_imports_the_command_line():
+    graph = _edges()
+    offenders = sorted(m for m, ts in graph.items() if not m.startswith("pfjax.cli")
+                       and any(t == "pfjax.cli" or t.startswith("pfjax.cli.") for t in ts))
+    assert not offenders, offenders
+
+
+def test_the_library_has_no_import_circles():
+    graph = _edges()
+    library = {m: {t for t in ts if not t.startswith("pfjax.cli")} for m, ts in graph.items()}
+    assert _cycles(library) == []
+
+
+def test_the_analysis_finds_a_circle_when_there_is_one():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert _cycles(graph) == [["a", "b", "c"]]
