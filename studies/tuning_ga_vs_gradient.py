@@ -1,4 +1,4 @@
-"""Tuning study (issue 4): GA vs gradient, Table 3 check, single vs robust tuning, new designs.
+"""Tuning study: GA vs gradient, Table 3 check, single vs robust tuning, new designs.
 
     python studies/tuning_ga_vs_gradient.py [--config studies/tuning_ga_vs_gradient.toml] [--set key=value ...]
                                             [--out results/tuning] [--quick]

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Vehicle tracking with a focus point (issue #6): Lemma 8.1 by batched simulation and by geometry,
+"""Vehicle tracking with a focus point: Lemma 8.1 by batched simulation and by geometry,
 and a robustness Monte Carlo of pfjax's input-output linearising controller.
 
     python studies/vehicle_tracking.py [--config studies/vehicle_tracking.toml] [--set key=value ...] [--out DIR] [--quick]

@@ -21,7 +21,7 @@ CELL_TIMEOUT_S = 600
 def test_notebook_is_valid_with_unique_cell_ids(path: Path):
     """nbformat 4.5 or later, every cell with its own id, and valid against nbformat's schema. A
     missing id is only a warning in today's nbformat (it adds one on reading), a hard error in a
-    later one; 03_tuning.ipynb had one cell without an id until stop 28."""
+    later one."""
     import json
     import warnings
 

@@ -31,7 +31,7 @@ def test_integral_design_bounds_and_default_gain():
 
 
 def test_integral_design_removes_constant_slip_offset():
-    # target of issue 4: steady |d| below 0.1 mm under constant slip (line: constant curvature)
+    # the design's purpose: steady |d| below 0.1 mm under constant slip (line: constant curvature)
     import jax
 
     from pfjax import controllers as C

@@ -11,7 +11,7 @@ The assumptions swept (each a :func:`pfjax.parking.simulate.run_params` argument
 * ``scan_period`` — the scanner's sampling period, s (0.1 s in the source's hardware);
 * ``decision_delay`` — the decision taken on the pose one scanner period old;
 * ``lag`` — the experiment's yaw-rate PI loop (k_P 0.8, k_I 16) on, so the robot turns late;
-* ``pause`` — seconds standing still at each reversal (the source's experiment stops 1 s).
+* ``pause`` — seconds standing still at each reversal (the source's experiments stood still 1 s).
 
 :func:`case_sweep` simulates cases A-D (spec §4) for every combination; :func:`sweep_summary` counts,
 for each case, the combinations in which it parks, gets stuck or times out, and lists the

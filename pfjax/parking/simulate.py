@@ -23,7 +23,7 @@ with a status:
   runs, cases, maps over starts and the Monte Carlo have none.
 
 Two **assumed** timings are options (:class:`RunParams`): ``pause``, seconds the robot stands still
-at each reversal (the source's experiment stops 1 s), and ``decision_delay``, the scanner deciding
+at each reversal (the source's experiments stood still 1 s), and ``decision_delay``, the scanner deciding
 on the pose one period old (a scan's latency). Every switch is logged (time, pose, cause) in
 fixed-size arrays (:attr:`ParkingConfig.log_len` entries; later switches are counted, not logged),
 so the log batches too.

@@ -51,8 +51,8 @@ AXIS = "runs"
 #: 2 devices, the benchmark's slip model at 10^5 runs, M rollout-steps/s): float32 blocks of 312-3,750
 #: runs 195-207, 4,000-10,000 runs 150-165, 20,000 runs 154; float64 625 runs 91, 1,250 runs 89,
 #: 2,500-5,000 runs 73-76. Blocks past the small-loop threshold fall back to a kernel launch per
-#: kernel and step. Until stop 29 this was 40 kB, measured on an AVX2 CPU before the threshold was
-#: raised (5,000-10,000 float32 runs fastest there, 2,500 slower; docs/performance.md).
+#: kernel and step. On an AVX2 CPU with 40 kB blocks and XLA's default loop threshold, 5,000-10,000
+#: float32 runs were fastest and 2,500 slower (docs/performance.md).
 CPU_BLOCK_BYTES = 5_000
 #: Runs per block are rounded up to a multiple of this (blocks of more runs than this). XLA's CPU
 #: code for an odd number of runs per device is about 3x slower (measured, float32: 50,001 runs per

@@ -49,7 +49,7 @@ Where this departs from MATLAB, and why:
   so the scale is ``upper − lower`` per coordinate.
 * **Shrink formula.** The documentation writes ``σ_k = σ_{k−1}(1 − shrink·k/G)``; the shipped
   ``mutationgaussian.m`` uses the linear ``σ_k = σ_0 (1 − shrink·k/G)``. pfjax follows the code
-  (the linear rule, also what the issue asks for).
+  (the linear rule).
 * **Stopping.** Only the generation limit. MATLAB also stops on stall (``StallGenLimit`` 50 with
   ``TolFun`` 1e-6), a time limit or a fitness limit; none is implemented, so pfjax may run
   longer than MATLAB would (never shorter).
