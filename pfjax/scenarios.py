@@ -21,20 +21,13 @@ import jax.numpy as jnp
 from pfjax import errors
 from pfjax.errors import InputError
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
-from pfjax.paths import shapes
+from pfjax import paths
 from pfjax.sim.simulate import Scenario
 from pfjax.sim.slip_profiles import SlipProfile, constant_slip
 
 PAPER_SLIP_DEG = 5.0
-PAPER_TESTS = ("line", "parabola", "sine")
-
-#: name -> (path factory, (x0, y0, theta0))
-SCENARIOS = {
-    "line": (shapes.line, (1.0, 0.0, math.pi / 2)),
-    "parabola": (shapes.parabola, (-2.0, 3.0, -math.pi / 2)),
-    "sine": (shapes.sine, (0.0, -0.2, math.pi / 4)),
-    "circle": (lambda: shapes.circle(radius=2.0, cy=2.0), (0.0, -0.3, 0.0)),
-}
+#: The source's three tests (:func:`pfjax.paths.source_tests`).
+PAPER_TESTS = paths.source_tests()
 
 
 def check_gains(gains, key: str = "gains") -> None:
@@ -85,12 +78,14 @@ def make_scenario(path, pose0, gains, *, slip: SlipProfile | None = None, v=1.0,
 
 def paper_scenario(test: str, gains, *, beta_r_deg=PAPER_SLIP_DEG, beta_f_deg=PAPER_SLIP_DEG, pose0=None,
                    **kwargs) -> Scenario:
-    """The source's ``test`` ("line", "parabola", "sine"; or pfjax's "circle") with constant slip
-    ``beta_r_deg``, ``beta_f_deg`` (deg, magnitude below 90); ``kwargs`` as :func:`make_scenario`."""
-    if test not in SCENARIOS:
-        raise InputError(f"path: expected one of {sorted(SCENARIOS)}, got {test!r}")
+    """The registered fixed path ``test`` (:data:`pfjax.paths.PATHS`: the source's "line",
+    "parabola", "sine", pfjax's "circle", any registered path) from its start pose (or ``pose0``)
+    with constant slip ``beta_r_deg``, ``beta_f_deg`` (deg, magnitude below 90); ``kwargs`` as
+    :func:`make_scenario`."""
+    if test not in paths.fixed_paths():
+        raise InputError(f"path: expected one of {', '.join(paths.fixed_paths())}, got {test!r}")
     errors.numbers("beta_r_deg", beta_r_deg, below=90, unit=" deg")
     errors.numbers("beta_f_deg", beta_f_deg, below=90, unit=" deg")
-    factory, default_pose = SCENARIOS[test]
+    e = paths.entry(test)
     slip = constant_slip(math.radians(beta_r_deg), math.radians(beta_f_deg))
-    return make_scenario(factory(), default_pose if pose0 is None else pose0, gains, slip=slip, **kwargs)
+    return make_scenario(e.build(), e.start_pose if pose0 is None else pose0, gains, slip=slip, **kwargs)

@@ -46,7 +46,8 @@ from pfjax.report import figures  # noqa: E402
 from pfjax.report.markdown import table  # noqa: E402
 from pfjax.reproduce import path_following, verdict_table  # noqa: E402
 from pfjax.paths import shapes  # noqa: E402
-from pfjax.scenarios import PAPER_TESTS, SCENARIOS, make_scenario, paper_scenario  # noqa: E402
+from pfjax import paths  # noqa: E402
+from pfjax.scenarios import PAPER_TESTS, make_scenario, paper_scenario  # noqa: E402
 from pfjax.sim import constant_slip  # noqa: E402
 from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack  # noqa: E402
 from pfjax.synthesis import mixed_bounds_for_gain, mixed_h2_hinf, slip_design_plant  # noqa: E402
@@ -74,9 +75,7 @@ DEFAULTS = {
     "ga": {"seeds": 3, "scenario": "paper-line", "population": 50, "generations": 100},
 }
 
-TRACKERS = {"stanley": C.stanley_params(), "pure-pursuit": C.pure_pursuit_params(), "rear-wheel": C.rear_wheel_params()}
-CONTROLLER_OF = {"mixed": C.state_feedback, "paper-k": C.state_feedback, "pi": C.pi, "stanley": C.stanley,
-                 "pure-pursuit": C.pure_pursuit, "rear-wheel": C.rear_wheel}
+TRACKERS = ("stanley", "pure-pursuit", "rear-wheel")
 
 
 def rel(a, b):
@@ -157,11 +156,11 @@ def part_paper_runs(cfg, K_ours, pbar) -> tuple[list[dict], dict]:
         "pi": (C.pi_params(**C.PAPER_PI), dict(C.PAPER_PI)),
     }
     if cfg["trackers"]:
-        entries.update({k: (v, {n: float(g) for n, g in v._asdict().items()}) for k, v in TRACKERS.items()})
+        entries.update({k: (C.entry(k).make_params(), C.flat_gains(C.entry(k))) for k in TRACKERS})
     rows, trajs = [], {t: {} for t in PAPER_TESTS}
     for name, (gains, shown) in entries.items():
         for test in PAPER_TESTS:
-            r = unstack(run_batch(CONTROLLER_OF[name], [gains], test, cfg, config), 0)
+            r = unstack(run_batch(C.resolve(name)[0].controller, [gains], test, cfg, config), 0)
             rows.append(row_of(r, test, name, shown, dmax))
             trajs[test][name] = traj_dict(r)
             pbar.update(1)
@@ -258,7 +257,7 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
     # The robot advances along the line at up to v / cos(beta_r): make the line long enough that
     # no run reaches its end within the horizon (the default line is 80 m).
     line = shapes.line(u_max=20.0 + 1.5 * m["v"] * st["horizon"] / math.cos(math.radians(st["grid_max_deg"])))
-    pose0 = SCENARIOS["line"][1]
+    pose0 = paths.entry("line").start_pose
     scs = stack([make_scenario(line, pose0, gains, slip=constant_slip(math.radians(br), math.radians(bf)), v=m["v"],
                                L=m["L"], delta_max_deg=m["delta_max_deg"], convention=m["convention"])
                  for br, bf in zip(BR.ravel(), BF.ravel())])
@@ -308,7 +307,7 @@ def part_long_pi(cfg) -> dict:
     settles (|d| within 5 % of its final value from then on)."""
     h, m = cfg["long_horizon"], cfg["model"]
     line = shapes.line(u_max=20.0 + 1.5 * m["v"] * h)  # long enough not to end within the horizon
-    sc = make_scenario(line, SCENARIOS["line"][1], C.pi_params(**C.PAPER_PI),
+    sc = make_scenario(line, paths.entry("line").start_pose, C.pi_params(**C.PAPER_PI),
                        slip=constant_slip(math.radians(m["beta_r_deg"]), math.radians(m["beta_f_deg"])), v=m["v"],
                        L=m["L"], delta_max_deg=m["delta_max_deg"], convention=m["convention"])
     r = unstack(simulate_batch(stack([sc]), controller=C.pi, config=sim_config(cfg, horizon=h)), 0)
@@ -352,7 +351,7 @@ def _local_maxima(x, y, frac=0.5):
 def sine_error_analysis(trajs, settle_t=5.0) -> dict:
     """Where does |d| peak on the sine after the transient: at the |kappa| maxima (the sine's extrema)
     or at the |dkappa/ds| maxima (where the curvature changes fastest)?"""
-    path = SCENARIOS["sine"][0]()
+    path = paths.entry("sine").build()
     tr = trajs["sine"]["mixed"]
     late = tr["t"] >= settle_t
     # each a jitted program: op by op, JAX would compile each operation of a new shape on its own
@@ -560,7 +559,7 @@ def run(args) -> int:
             figdir = tmp / "figures"
             figs = {}
             for test in PAPER_TESTS:
-                factory = SCENARIOS[test][0]
+                factory = paths.entry(test).build
                 p = factory()
                 uu = jnp.linspace(-3.0 if test != "line" else -1.0, 16.0, 2000)
                 if test == "parabola":

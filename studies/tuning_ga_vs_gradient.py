@@ -274,9 +274,9 @@ def run(cfg: dict, out: Path, progress: bool) -> dict:
     sf = lambda K: (C.state_feedback, C.state_feedback_params(K), {"K": list(map(float, np.ravel(K)))})
     integ = lambda K: (C.integral, C.integral_params(K), {"K": list(map(float, np.ravel(K)))})
     controllers = {
-        "pi-table3 (source)": (C.pi, C.REGISTRY["pi"][1](), dict(C.PAPER_PI)),
-        "pi-ga": (C.pi, C.REGISTRY["pi"][1](**best("ga")), best("ga")),
-        "pi-gradient": (C.pi, C.REGISTRY["pi"][1](**best("gradient")), best("gradient")),
+        "pi-table3 (source)": (C.pi, C.entry("pi").make_params(), dict(C.PAPER_PI)),
+        "pi-ga": (C.pi, C.entry("pi").make_params(**best("ga")), best("ga")),
+        "pi-gradient": (C.pi, C.entry("pi").make_params(**best("gradient")), best("gradient")),
         "K-paper (source)": sf(C.PAPER_K),
         "K-lmi-mixed": sf(des["lmi-mixed"]["K"]),
         "K-gradient-single": sf(ks["K-gradient-single"]["K"]),

@@ -174,7 +174,7 @@ def runs():
     """Every registered controller on the line with zero slip from POSES; the PI batch also holds
     the windup scenario with and without anti-windup (one compile per controller)."""
     out = {}
-    for name, (ctrl, make) in C.REGISTRY.items():
+    for name, (ctrl, make, *_) in C.REGISTRY.items():
         rows = [paper_scenario("line", make(), beta_r_deg=0.0, beta_f_deg=0.0, pose0=p) for p in POSES]
         if name == "pi":
             rows += [paper_scenario("line", C.pi_params(**WINDUP_GAINS, k_aw=k), beta_r_deg=0.0, beta_f_deg=0.0,

@@ -85,7 +85,7 @@ FAILING = {
     "vehicle": {"speed": {"dist": "choice", "values": [1.0, 1.0, 1.0, 1e12]}},
     "margin": {"enabled": False},
     "paths": [
-        {"kind": "line", "name": "blowup"},  # state feedback with overflowing gains
+        {"kind": "line", "name": "blowup"},  # state feedback with gains at the bound
         {"kind": "line", "name": "away"},  # positive feedback drives |d| past d_fail
         {"kind": "circle", "radius": 0.12},  # tighter than the steering limit: the robot passes the centre (1 - kappa d <= 0)
         {"kind": "spline", "name": "short", "points": [[0, 0], [0.5, 0.05], [1.0, 0.0], [1.5, 0.05]]},  # ends after 1.6 m
@@ -101,10 +101,9 @@ def failing(tmp_path_factory):
     spec = load_study(data=copy.deepcopy(FAILING))[0]
     # Values no config may hold (the schema bounds every number by 1e12) but the simulator may still
     # meet through the Python API: they must end as statuses, not exceptions.
+    # (Gains are checked again where the controller is built, so they stay within the bound.)
     speed = spec.vehicle.speed.model_copy(update={"values": [1.0, 1.0, 1.0, 3e38]})
-    bad = spec.controllers[0].model_copy(update={"K": [3e38, -3e38]})
-    spec = spec.model_copy(update={"vehicle": spec.vehicle.model_copy(update={"speed": speed}),
-                                   "controllers": [bad, *spec.controllers[1:]]})
+    spec = spec.model_copy(update={"vehicle": spec.vehicle.model_copy(update={"speed": speed})})
     return spec, out, run(spec, out, progress=False, report=True)
 
 

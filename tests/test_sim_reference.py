@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from pfjax import controllers as C
-from pfjax.scenarios import SCENARIOS, paper_scenario
+from pfjax import paths
+from pfjax.scenarios import paper_scenario
 from pfjax.sim import SimConfig, simulate_batch, stack, unstack
 
 from reference import closed_loop
@@ -29,7 +30,7 @@ def test_state_feedback_matches_solve_ivp(test):
     cfg = SimConfig(control_every=None)
     r = run(test, C.state_feedback, C.state_feedback_params(), cfg)
     t = np.asarray(r.trajectory.t)
-    ref = closed_loop(test, SCENARIOS[test][1], BETA, BETA, K=C.PAPER_K, t_eval=t)
+    ref = closed_loop(test, paths.entry(test).start_pose, BETA, BETA, K=C.PAPER_K, t_eval=t)
     assert ref.success
     err = np.hypot(np.asarray(r.trajectory.x) - ref.y[0], np.asarray(r.trajectory.y) - ref.y[1])
     assert int(r.status) == 0
@@ -43,7 +44,7 @@ def test_pi_matches_solve_ivp():
     gains = dict(kp_d=1.639, ki_d=0.023, kp_theta=39.5204, ki_theta=11.6124)
     r = run("line", C.pi, C.pi_params(**gains), cfg)
     t = np.asarray(r.trajectory.t)
-    ref = closed_loop("line", SCENARIOS["line"][1], BETA, BETA, pi=tuple(gains.values()), T=10.0, t_eval=t)
+    ref = closed_loop("line", paths.entry("line").start_pose, BETA, BETA, pi=tuple(gains.values()), T=10.0, t_eval=t)
     err = np.hypot(np.asarray(r.trajectory.x) - ref.y[0], np.asarray(r.trajectory.y) - ref.y[1])
     assert err.max() < 1e-5, err.max()
 

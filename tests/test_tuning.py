@@ -27,7 +27,7 @@ def _sine_batch(controller):
     from pfjax.tuning.cost import Tunable
     from pfjax.tuning.problem import Problem
 
-    ctrl, factory = C.REGISTRY[controller]
+    ctrl, factory = C.REGISTRY[controller][:2]
     base = factory()
     batch = stack([paper_scenario("sine", base, beta_r_deg=b, beta_f_deg=-b / 2) for b in (-6.0, 0.0, 5.0, 9.0)])
     return ctrl, base, batch

@@ -11,6 +11,9 @@ One module per subcommand (or pair of subcommands), each with ``register(sub)``.
 print one line naming the flag, the value and what was expected, and exit with code 2 before
 anything is computed or written (the checks are the library's: :mod:`pfjax.errors`). A run that
 fails numerically is reported in its ``status``; it is not an error.
+
+Controllers and paths registered by plugin modules (:mod:`pfjax.plugins`: ``PFJAX_PLUGINS`` or
+the ``pfjax.plugins`` entry points) appear in every subcommand's choices.
 """
 
 from __future__ import annotations
@@ -40,6 +43,11 @@ def build_parser():
 
 
 def main(argv=None) -> int:
+    from pfjax import plugins
+
+    loaded = command_main("pfjax", lambda: plugins.load() and 0)
+    if loaded:  # a plugin that cannot be imported: one line, exit 2
+        return loaded
     parser = build_parser()
     args = parser.parse_args(join_negative_values(list(sys.argv[1:] if argv is None else argv)))
     import jax

@@ -8,16 +8,11 @@ from pfjax.cli.common import UsageError, as_flags
 from pfjax.cli.synth import SYNTH_FLAGS
 
 
-CONTROLLER_CHOICES = ("mixed", "paper-k", "pi", "stanley", "pure-pursuit", "rear-wheel")
-#: CLI controller name -> (registry name, gain names in --gains order)
-GAIN_NAMES = {
-    "mixed": ("state_feedback", ("k_d", "k_theta")),
-    "paper-k": ("state_feedback", ("k_d", "k_theta")),
-    "pi": ("pi", ("kp_d", "ki_d", "kp_theta", "ki_theta", "k_aw")),
-    "stanley": ("stanley", ("k", "k_soft")),
-    "pure-pursuit": ("pure_pursuit", ("ld_gain", "ld_min")),
-    "rear-wheel": ("rear_wheel", ("k_theta", "k_d")),
-}
+def _gain_names(controller: str) -> tuple[str, ...]:
+    """The gains ``--gains`` takes for a command-line controller name, in order."""
+    from pfjax import controllers as C
+
+    return C.resolve(controller, "--controller")[0].gains
 
 
 #: Modules that add subcommands: each has ``register(sub)`` which calls ``sub.add_parser(...)``
@@ -28,7 +23,7 @@ GAIN_NAMES = {
 def _parse_gains(controller: str, text: str | None) -> dict:
     """``--gains``: every gain of the controller as comma-separated numbers in order, or some of
     them as ``name=value`` pairs (the others keep their defaults); values checked by the library."""
-    names = GAIN_NAMES[controller][1]
+    names = _gain_names(controller)
     if text is None:
         return {}
     parts = [p.strip() for p in text.split(",")]
@@ -60,28 +55,20 @@ def _parse_gains(controller: str, text: str | None) -> dict:
 
 
 def _controller_and_gains(args):
+    """``(controller, parameter pytree, gains shown)``: the registry entry's defaults, a design's
+    gains (:data:`pfjax.controllers.DESIGNS`, made at ``--v``, ``--L``) and ``--gains`` on top."""
     from pfjax import controllers as C
 
-    registry_name, names = GAIN_NAMES[args.controller]
+    e, d = C.resolve(args.controller, "--controller")
     given = _parse_gains(args.controller, args.gains)
-    controller, factory = C.REGISTRY[registry_name]
     with as_flags({"gains": "--gains", "K": "--gains"}):
-        if args.controller in ("mixed", "paper-k"):
-            if given:
-                K = (given.get("k_d", C.PAPER_K[0]), given.get("k_theta", C.PAPER_K[1]))
-            elif args.controller == "paper-k":
-                K = C.PAPER_K
-            else:
-                from pfjax.synthesis import synthesize
-
-                with as_flags(SYNTH_FLAGS):
-                    K = tuple(float(k) for k in synthesize("mixed", v=args.v, L=args.L).K.ravel())
-            gains = factory(K=K)
-            shown = {"k_d": K[0], "k_theta": K[1]}
-        else:
-            gains = factory(**given)
-            shown = {k: float(v) for k, v in gains._asdict().items()}
-    return controller, gains, shown
+        flat = C.flat_gains(e)
+        if d is not None and not set(e.gains) <= set(given):
+            with as_flags(SYNTH_FLAGS):
+                flat.update(d.make(args.v, args.L))
+        flat.update(given)
+        gains = C.params_from_flat(e, **flat)
+    return e.controller, gains, {k: flat[k] for k in e.gains}
 
 
 SIMULATE_FLAGS = {"v": "--v", "L": "--L", "beta_r_deg": "--beta-r-deg", "beta_f_deg": "--beta-f-deg",
@@ -93,7 +80,8 @@ def cmd(args) -> dict:
     import numpy as np
 
     from pfjax.metrics import METRIC_NAMES
-    from pfjax.scenarios import SCENARIOS, paper_scenario
+    from pfjax import paths
+    from pfjax.scenarios import paper_scenario
     from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack
 
     if args.continuous and args.control_every is not None:
@@ -112,7 +100,7 @@ def cmd(args) -> dict:
     status = int(r.status)
     metrics = {k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES}
     metrics["status"] = STATUS_NAMES[status]
-    x0 = SCENARIOS[args.path][1] if args.x0 is None else args.x0
+    x0 = paths.entry(args.path).start_pose if args.x0 is None else args.x0
     return {
         "path": args.path,
         "controller": args.controller,
@@ -132,14 +120,20 @@ def cmd(args) -> dict:
 def register(sub) -> None:
     m = sub.add_parser("simulate", help="simulate one run of a paper scenario and print final state and metrics",
                        description="One closed-loop run of the slip model on a path (SI units; THETA in rad).")
-    m.add_argument("--path", choices=("line", "parabola", "sine", "circle"), required=True)
+    from pfjax import paths
+
+    m.add_argument("--path", choices=paths.fixed_paths(), required=True,
+                   help="a registered path: the source's line, parabola, sine; pfjax's circle (radius 2 m)")
     m.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA"), help="initial pose (m, m, rad); default: the source's")
     m.add_argument("--beta-r-deg", type=float, default=5.0, help="rear slip angle, deg (default 5)")
     m.add_argument("--beta-f-deg", type=float, default=5.0, help="front slip angle, deg (default 5)")
-    m.add_argument("--controller", choices=CONTROLLER_CHOICES, required=True,
-                   help="mixed: the LMI design with the source's weights; paper-k: the source's published K")
+    from pfjax import controllers as C
+
+    m.add_argument("--controller", choices=C.cli_names(), required=True,
+                   help="mixed: the LMI design with the source's weights; paper-k: the source's published K; "
+                        "integral-mixed: the LMI design with integral action; the others: registered controllers")
     m.add_argument("--gains", help="comma-separated gains (or name=value pairs): " +
-                   "; ".join(f"{c}: {','.join(n)}" for c, (_, n) in GAIN_NAMES.items()))
+                   "; ".join(f"{c}: {','.join(_gain_names(c))}" for c in C.cli_names()))
     m.add_argument("--T", type=float, default=20.0, help="horizon, s (default 20)")
     m.add_argument("--dt", type=float, default=0.005, help="RK4 step, s (default 0.005)")
     m.add_argument("--control-every", type=int, help="controller sampling period in steps (default 1)")

@@ -16,9 +16,14 @@ from pfjax.cli.common import UsageError, as_flags
 
 import sys
 
-CONTROLLERS = {"pi": "pi", "state-feedback": "state_feedback", "integral": "integral", "stanley": "stanley",
-               "pure-pursuit": "pure_pursuit", "rear-wheel": "rear_wheel"}
-SCENARIOS = ("paper-line", "paper-parabola", "paper-sine", "paper-all")
+
+
+def _controllers() -> dict:
+    """Command-line name -> registry name of every controller with a tuning box."""
+    from pfjax import controllers as C
+
+    return {e.cli_name: n for n, e in C.REGISTRY.items() if e.box is not None}
+
 
 
 def register(sub) -> None:
@@ -27,8 +32,9 @@ def register(sub) -> None:
         description="Tune a controller's gains on a scenario set by MATLAB-style GA or projected adam on "
                     "jax.grad of the simulated cost; prints the gains, cost, rollouts and wall time.")
     p.add_argument("--method", required=True, help="ga | gradient")
-    p.add_argument("--controller", required=True, help=" | ".join(CONTROLLERS))
-    p.add_argument("--scenario", default="paper-line", help=" | ".join(SCENARIOS) + " | a study TOML (CONFIG)")
+    p.add_argument("--controller", required=True, help="a controller with a tuning box: " + " | ".join(_controllers()))
+    p.add_argument("--scenario", default="paper-line", help="paper-line | paper-parabola | paper-sine | paper-all | "
+                   "a registered path's name (one run from its start pose) | a study TOML (CONFIG)")
     p.add_argument("--cost", default="iae", help="iae | ise | itae (per run, plus --effort * int delta^2 dt)")
     p.add_argument("--aggregate", default="mean", help="mean | quantile | cvar over the scenario batch")
     p.add_argument("--level", type=float, default=0.9, help="quantile / CVaR level in (0, 1)")
@@ -64,14 +70,15 @@ def _cmd(args) -> dict:
     from pfjax.tuning.ga import GAOptions
     from pfjax.tuning.problem import make_problem, tune
 
-    if args.controller not in CONTROLLERS:
-        raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(CONTROLLERS)}")
+    controllers = _controllers()
+    if args.controller not in controllers:
+        raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}")
     if args.method not in ("ga", "gradient"):
         raise UsageError(f"--method: value {args.method!r}, expected ga or gradient")
     key = jax.random.PRNGKey(errors.seed("--seed", args.seed))
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
-        problem = make_problem(CONTROLLERS[args.controller], args.scenario, cost=cost, n_runs=args.n_runs)
+        problem = make_problem(controllers[args.controller], args.scenario, cost=cost, n_runs=args.n_runs)
         changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
         if changes:
             problem = problem._replace(config=dataclasses.replace(problem.config, **changes))

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from pfjax.controllers.base import Controller, Observation, no_rate, no_state
+from pfjax.controllers.registry import register
 from pfjax.paths.geometry import closest_parameter, measure
 from pfjax.numerics import elementary as E
 
@@ -48,6 +49,8 @@ def _stanley_output(p: StanleyParams, c, obs: Observation) -> Array:
 
 
 stanley = Controller("stanley", no_state, _stanley_output, no_rate, StanleyParams)
+register(stanley, stanley_params, box=(("k", "k_soft"), (0.1, 0.01), (20.0, 2.0)),
+         style={"color": "#2ca02c", "lw": 1.0, "label": "Stanley"})
 
 
 class PurePursuitParams(NamedTuple):
@@ -89,6 +92,8 @@ def _pure_pursuit_output(p: PurePursuitParams, c, obs: Observation) -> Array:
 
 
 pure_pursuit = Controller("pure_pursuit", no_state, _pure_pursuit_output, no_rate, PurePursuitParams)
+register(pure_pursuit, pure_pursuit_params, box=(("ld_gain", "ld_min"), (0.05, 0.05), (3.0, 2.0)),
+         style={"color": "#9467bd", "lw": 1.0, "label": "pure pursuit"})
 
 
 class RearWheelParams(NamedTuple):
@@ -119,3 +124,5 @@ def _rear_wheel_output(p: RearWheelParams, c, obs: Observation) -> Array:
 
 
 rear_wheel = Controller("rear_wheel", no_state, _rear_wheel_output, no_rate, RearWheelParams)
+register(rear_wheel, rear_wheel_params, box=(("k_theta", "k_d"), (0.1, 0.1), (20.0, 40.0)),
+         style={"color": "#8c564b", "lw": 1.0, "label": "rear-wheel feedback"})

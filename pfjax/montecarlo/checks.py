@@ -22,15 +22,15 @@ import pandas as pd
 from pfjax.montecarlo.config import PathSpec, StudySpec
 from pfjax.sim.status import STATUS_NAMES
 
-#: Curvature of the source's fixed paths, max over their valid domain (1/m): y = x^2 peaks at 2a = 2
-#: at the vertex; y = sin x at A w^2 = 1.
-FIXED_MAX_CURVATURE = {"line": 0.0, "parabola": 2.0, "sine": 1.0}
 
 
 def path_max_curvature(p: PathSpec) -> float:
     """Largest |curvature| (1/m) the path can have over the support of its distributions."""
-    if p.kind in FIXED_MAX_CURVATURE:
-        return FIXED_MAX_CURVATURE[p.kind]
+    from pfjax import paths
+
+    bound = paths.entry(p.kind).max_curvature  # the registry's, for a fixed path
+    if bound is not None:
+        return bound
     if p.kind == "circle":
         return 1.0 / p.radius.bounds()[0]
     if p.kind == "spline":

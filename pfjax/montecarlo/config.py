@@ -243,11 +243,13 @@ class NoiseSpec(_Model):
 
 
 class PathSpec(_Model):
-    """``line``, ``parabola``, ``sine`` (the source's), ``circle`` (radius), ``random`` (smooth random
-    spline paths with |kappa| <= curvature_margin * tan(delta_max) / L), ``spline`` (a natural cubic
-    spline through the user's ``points`` [[x, y], ...] in m, travelled from the first point)."""
+    """A registered path kind (:data:`pfjax.paths.PATHS`): ``line``, ``parabola``, ``sine`` (the
+    source's), ``circle`` (radius), ``random`` (smooth random spline paths with |kappa| <=
+    curvature_margin * tan(delta_max) / L), ``spline`` (a natural cubic spline through the user's
+    ``points`` [[x, y], ...] in m, travelled from the first point), or any path registered with
+    :func:`pfjax.paths.register`."""
 
-    kind: Literal["line", "parabola", "sine", "circle", "random", "spline"]
+    kind: str  # a registered path kind (pfjax.paths.PATHS)
     name: str | None = None
     radius: Dist = dist_field(2.0)
     length: Real = Field(40.0, ge=POSITIVE, description="random paths: length, m")
@@ -256,6 +258,15 @@ class PathSpec(_Model):
     points: list[list[Real]] | None = None
 
     _coerce = field_validator("radius", mode="before")(lambda v: _as_dist(v))
+
+    @field_validator("kind")
+    @classmethod
+    def _known_kind(cls, v):
+        from pfjax.paths import PATHS
+
+        if v not in PATHS:
+            raise ValueError(f"unknown path kind {v!r}; expected one of {', '.join(PATHS)}")
+        return v
 
     @field_validator("points")
     @classmethod
@@ -337,26 +348,46 @@ class FalsifierSpec(_Model):
 
 
 class ControllerSpec(_Model):
-    """A controller to compare: ``type`` one of state_feedback (``K``), lmi (designed by mixed
-    H2/H-inf with ``alpha``, ``beta`` at the nominal speed and wheelbase), pi, stanley,
-    pure_pursuit, rear_wheel (``gains`` by name; defaults as in pfjax.controllers)."""
+    """A controller to compare. ``type``: a registered controller (state_feedback, pi, integral,
+    stanley, pure_pursuit, rear_wheel, ...; :data:`pfjax.controllers.REGISTRY`) or a design
+    (lmi: mixed H2/H-inf with ``alpha``, ``beta`` at the nominal speed and wheelbase; integral_lmi;
+    paper_k: the source's published gain; :data:`pfjax.controllers.DESIGNS`). ``gains`` by name
+    override the defaults or the design; ``K`` is the vector gain of state_feedback and integral."""
 
     name: str
-    type: Literal["state_feedback", "lmi", "pi", "stanley", "pure_pursuit", "rear_wheel"]
+    type: str
     K: list[Real] | None = None
     gains: dict[str, Real] = Field(default_factory=dict)
     alpha: Real = Field(10.0, ge=0)
     beta: Real = Field(1.0, ge=0)
 
+    @field_validator("type")
+    @classmethod
+    def _known(cls, v):
+        from pfjax.controllers import controller_types
+
+        if v not in controller_types():
+            raise ValueError(f"unknown controller type {v!r}; expected one of {', '.join(controller_types())}")
+        return v
+
     @model_validator(mode="after")
     def _check(self):
-        if self.type == "state_feedback" and (self.K is None or len(self.K) != 2):
-            raise ValueError("state_feedback needs K = [k_d, k_theta]")
-        if self.K is not None and self.type != "state_feedback":
-            raise ValueError(f"K is only for type 'state_feedback', not {self.type!r}")
-        if any(not math.isfinite(g) for g in (self.K or []) + list(self.gains.values())):
-            raise ValueError("gains must be finite")
+        from pfjax.controllers import resolve
+
+        e, d = resolve(self.type)
+        if self.K is not None:
+            if d is not None or "K" not in e.labels:
+                raise ValueError(f"K is only for types with a vector gain K "
+                                 f"({', '.join(n for n, x in _registry().items() if 'K' in x.labels)}), not {self.type!r}")
+            if len(self.K) != len(e.labels["K"]):
+                raise ValueError(f"{self.type} needs K = [{', '.join(e.labels['K'])}]")
         return self
+
+
+def _registry():
+    from pfjax.controllers import REGISTRY
+
+    return REGISTRY
 
 
 class StudySpec(_Model):

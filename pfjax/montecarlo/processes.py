@@ -58,6 +58,7 @@ def lead(spec: StudySpec, output, *, fresh: bool = False) -> dict:
 
     Raises what it raises, after telling the other processes."""
     from pfjax.montecarlo.chunks import ChunkStore
+    from pfjax import controllers as C
     from pfjax.montecarlo.runner import controllers_of
 
     try:
@@ -81,14 +82,16 @@ def follow(spec: StudySpec) -> dict:
         ConfigError: process 0 stopped on a config error (its message).
         RuntimeError: process 0 stopped on any other error.
     """
+    from pfjax import controllers as C
     from pfjax.montecarlo.runner import controllers_of, margin_sweep, precision, simulate_runs
 
     msg = sharding.broadcast_json(None)
     if "error" in msg:
         raise (ConfigError if msg["usage"] else RuntimeError)(msg["error"])
+    designed = lambda c: C.DESIGNS[c.type].controller  # process 0's design, its gains broadcast
     spec = spec.model_copy(update={"controllers": [
-        ControllerSpec(name=c.name, type="state_feedback", K=[msg["gains"][c.name]["k_d"], msg["gains"][c.name]["k_theta"]])
-        if c.type == "lmi" else c for c in spec.controllers]})
+        ControllerSpec(name=c.name, type=designed(c), gains=msg["gains"][c.name]) if c.type in C.DESIGNS else c
+        for c in spec.controllers]})
     controllers = controllers_of(spec)
     skip = _Skip(msg["finished"])
     with precision(spec):

@@ -29,33 +29,32 @@ from pfjax.sim import sharding
 from pfjax.sim.simulate import SimConfig, simulate_batch
 from pfjax.sim.status import STATUS_NAMES
 
-REGISTRY_TYPE = {"pi": "pi", "stanley": "stanley", "pure_pursuit": "pure_pursuit", "rear_wheel": "rear_wheel"}
+def _nominal(d) -> float:
+    """A distribution's nominal value: its value, mean or midpoint."""
+    return d.value if d.dist == "constant" else (d.mean if d.mean is not None else 0.5 * (d.low + d.high))
 
 
 def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
-    """``(controller, gains pytree, gains as a flat dict)`` for a controller spec; LMI designs are
-    synthesised here (at the nominal speed and wheelbase: the distributions' means or values).
-    State feedback and PI come as :data:`pfjax.controllers.linear` (their own gains in the flat
-    dict), so a study of both compiles each of its simulator programs once for the two."""
-    if c.type in ("state_feedback", "lmi"):
-        if c.type == "lmi":
-            from pfjax.synthesis import mixed_h2_hinf, slip_design_plant
-
-            nominal = lambda d: d.value if d.dist == "constant" else (d.mean if d.mean is not None else 0.5 * (d.low + d.high))
-            K = [float(k) for k in mixed_h2_hinf(slip_design_plant(nominal(spec.vehicle.speed), nominal(spec.vehicle.L)),
-                                                 alpha=c.alpha, beta=c.beta).K.ravel()]
-        else:
-            K = list(c.K)
-        return C.linear, C.linear_params(C.state_feedback_params(K)), {"k_d": K[0], "k_theta": K[1]}
-    controller, factory = C.REGISTRY[REGISTRY_TYPE[c.type]]
+    """``(controller, gains pytree, gains as a flat dict)`` for a controller spec, from the registry
+    (:mod:`pfjax.controllers.registry`); a design (:data:`pfjax.controllers.DESIGNS`) is made here
+    at the nominal speed and wheelbase (the distributions' values, means or midpoints). The flat
+    dict holds the entry's scalar gains (designed, configured or default) and any other given. State feedback and PI come
+    as :data:`pfjax.controllers.linear`, so a study of both compiles each simulator program once."""
+    e, d = C.resolve(c.type, f"controllers[{index}].type")
+    flat = C.flat_gains(e)
+    if d is not None:
+        flat.update(d.make(_nominal(spec.vehicle.speed), _nominal(spec.vehicle.L), alpha=c.alpha, beta=c.beta))
+    if c.K is not None:
+        flat.update(zip(e.labels["K"], c.K))
+    flat.update(c.gains)
     try:
-        gains = factory(**c.gains)
-    except InputError as e:  # names gains.<gain>: the study's key is controllers[i].gains.<gain>
-        raise ConfigError(f"controllers[{index}].{e}") from None
-    flat = {k: float(v) for k, v in gains._asdict().items()}
-    if controller is C.pi:  # state feedback and PI as one controller: one compiled program for both
+        gains = C.params_from_flat(e, **flat)
+    except InputError as err:  # names gains.<gain>: the study's key is controllers[i].gains.<gain>
+        raise ConfigError(f"controllers[{index}].{err}") from None
+    flat = {k: float(v) for k, v in flat.items() if k in e.gains or k in c.gains}
+    if e.name in ("state_feedback", "pi"):
         return C.linear, C.linear_params(gains), flat
-    return controller, gains, flat
+    return e.controller, gains, flat
 
 
 def sim_config(spec: StudySpec) -> SimConfig:

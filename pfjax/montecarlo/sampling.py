@@ -18,6 +18,7 @@ import numpy as np
 
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
 from pfjax.montecarlo.config import Dist, PathSpec, StudySpec
+from pfjax import paths
 from pfjax.paths import shapes
 from pfjax.paths.geometry import arc_length, tangent_angle
 from pfjax.sim.simulate import Scenario, SensorNoise
@@ -31,9 +32,6 @@ QUANTITIES = (
 )
 Q = {name: i for i, name in enumerate(QUANTITIES)}
 
-#: Nominal start parameter of each path kind (the run's start is start_s metres along from it).
-NOMINAL_START = {"line": 0.0, "parabola": -2.0, "sine": 0.0, "circle": 0.0, "random": 2.0,  # random: 2 m of path behind the start
-                 "spline": 0.0}  # user-defined: the first point
 
 
 def run_keys(seed: int, path_index: int, runs: np.ndarray) -> jax.Array:
@@ -161,8 +159,9 @@ def random_path(key, spec: PathSpec, kappa_max: float) -> shapes.Spline:
 
 def _fixed_path(spec: PathSpec):
     """The path every run of a non-random kind shares (``None`` for ``circle``: its radius is drawn per run)."""
-    if spec.kind in ("line", "parabola", "sine"):
-        return shapes.PAPER_PATHS[spec.kind]()
+    e = paths.entry(spec.kind)
+    if not e.parametric:
+        return e.build()
     if spec.kind == "spline":  # the same user-defined path for every run
         return shapes.spline_through(np.asarray(spec.points, float))
     if spec.kind == "circle":
@@ -203,15 +202,15 @@ def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_over
     pspec = spec.paths[path_index]
     keys = run_keys(spec.seed, path_index, runs)
     if pspec.kind == "random":
-        paths = [random_path(jax.random.fold_in(k, Q["path"]), pspec, pspec.curvature_margin * _kappa_follow(spec)) for k in keys]
-        path, circle = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *paths), None
+        drawn = [random_path(jax.random.fold_in(k, Q["path"]), pspec, pspec.curvature_margin * _kappa_follow(spec)) for k in keys]
+        path, circle = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *drawn), None
     else:
         path = _fixed_path(pspec)
         circle = _Static(pspec.radius) if path is None else None
     # the override is always passed (zeros and a false flag when absent): one program for both
     over = (np.zeros(len(runs)),) * 2 if slip_override is None else slip_override
     over = tuple(jnp.asarray(a, float) for a in over)
-    cols, sc = _draw_runs(keys, path, jnp.asarray(NOMINAL_START[pspec.kind], float), over, slip_override is not None,
+    cols, sc = _draw_runs(keys, path, jnp.asarray(paths.entry(pspec.kind).start_u, float), over, slip_override is not None,
                           study=_Static(spec), circle=circle, batched_path=pspec.kind == "random")
     return Sampled({k: np.asarray(v) for k, v in cols.items()}, sc)
 

@@ -10,7 +10,7 @@ import numpy as np
 from pfjax.falsify import falsify, random_search, worst_trajectory
 from pfjax.montecarlo.config import StudySpec
 from pfjax.montecarlo.runner import sample_few, sim_config
-from pfjax.montecarlo.sampling import NOMINAL_START
+from pfjax import paths
 from pfjax.sim.simulate import unstack
 from pfjax.sim.status import STATUS_NAMES
 
@@ -44,7 +44,7 @@ def worst_case(spec: StudySpec, controllers, i: int, devices=None) -> tuple[dict
     bounds = dict(slip_bound_deg=f.slip_bound_deg, f_max_hz=f.f_max_hz, objective=f.objective,
                   ic_bounds={"d": (-f.lateral_offset, f.lateral_offset) if f.lateral_offset > 0 else 0.0,
                              "theta_e_deg": (-f.heading_error_deg, f.heading_error_deg) if f.heading_error_deg > 0 else 0.0,
-                             "u": NOMINAL_START[spec.paths[p].kind]},
+                             "u": paths.entry(spec.paths[p].kind).start_u},
                   params=run0.params)
     key = jax.random.fold_in(jax.random.PRNGKey(spec.seed), 0xFA15)
     name, (controller, gains, _) = list(controllers.items())[i]

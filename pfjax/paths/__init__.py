@@ -12,7 +12,6 @@ from pfjax.paths.geometry import (
     wrap_angle,
 )
 from pfjax.paths.shapes import (
-    PAPER_PATHS,
     Circle,
     Graph,
     Spline,
@@ -22,9 +21,11 @@ from pfjax.paths.shapes import (
     sine,
     spline_through,
 )
+from pfjax.paths.registry import PATHS, PathEntry, entry, fixed_paths, register, source_tests
 
 __all__ = [
     "Projection", "arc_length", "closest_parameter", "curvature", "global_parameter", "measure",
-    "project", "tangent_angle", "wrap_angle", "PAPER_PATHS", "Circle", "Graph",
+    "project", "tangent_angle", "wrap_angle", "Circle", "Graph",
     "Spline", "circle", "line", "parabola", "sine", "spline_through",
+    "PATHS", "PathEntry", "entry", "fixed_paths", "register", "source_tests",
 ]

@@ -182,5 +182,3 @@ def spline_through(waypoints) -> Spline:
         u_max=_f(knots[-1]),
     )
 
-
-PAPER_PATHS = {"line": line, "parabola": parabola, "sine": sine, "circle": circle}

@@ -125,19 +125,21 @@ def warm_predictions(spec: StudySpec, gains: dict) -> None:
 
 
 def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
-    """For state-feedback controllers (gains k_d, k_theta): success predicted on a straight line from
+    """For state-feedback controllers (registry ``state_feedback`` and its designs): success predicted on a straight line from
     the true equilibrium (exists, Hurwitz, |d*| <= success band), as functions of the slip grid in deg."""
     import jax.numpy as jnp
 
     from pfjax.analysis import stability_map
+    from pfjax.controllers.designs import resolve
     from pfjax.models.slip import CONVENTIONS, SlipParams
 
     v = spec.vehicle
     params = SlipParams(_nominal(v.speed), _nominal(v.L), math.radians(_nominal(v.delta_max_deg)), CONVENTIONS[v.convention])
     out = {}
+    types = {c.name: c.type for c in spec.controllers}
     for name, c in summary["controllers"].items():
         g = c.get("gains") or {}
-        if {"k_d", "k_theta"} <= set(g):
+        if name in types and resolve(types[name])[0].name == "state_feedback":
             K = jnp.asarray([g["k_d"], g["k_theta"]])
 
             def pred(xs, ys, K=K):

@@ -12,14 +12,11 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
-STYLE = {
-    "mixed": dict(color="#1f77b4", lw=1.8, label="mixed H2/H∞ (pfjax LMI)"),
-    "paper-k": dict(color="#17becf", lw=1.2, ls="--", label="mixed H2/H∞ (source K)"),
-    "pi": dict(color="#d62728", lw=1.6, label="MISO PI (Table 3)"),
-    "stanley": dict(color="#2ca02c", lw=1.0, label="Stanley"),
-    "pure-pursuit": dict(color="#9467bd", lw=1.0, label="pure pursuit"),
-    "rear-wheel": dict(color="#8c564b", lw=1.0, label="rear-wheel feedback"),
-}
+def _style(name: str) -> dict:
+    """Plot style of a controller (:func:`pfjax.controllers.style`: registry or design name)."""
+    from pfjax.controllers import style
+
+    return style(name)
 
 
 def save(fig, out_dir: Path, name: str, svg: bool = True) -> str:
@@ -44,7 +41,7 @@ def tracking_figure(title: str, path_xy: np.ndarray, trajs: dict, delta_max: flo
     a = ax[0, 0]
     a.plot(path_xy[:, 0], path_xy[:, 1], color="0.6", lw=4, alpha=0.5, label="path")
     for name, tr in trajs.items():
-        a.plot(tr["x"], tr["y"], **STYLE[name])
+        a.plot(tr["x"], tr["y"], **_style(name))
     first = next(iter(trajs.values()))
     a.plot(first["x"][0], first["y"][0], "ko", ms=5, label="start")
     a.set(xlabel="x [m]", ylabel="y [m]", title="path and robot (rear axle)")
@@ -57,7 +54,7 @@ def tracking_figure(title: str, path_xy: np.ndarray, trajs: dict, delta_max: flo
     ]
     for a, key, scale, label in panels:
         for name, tr in trajs.items():
-            a.plot(tr["t"], scale(tr[key]), **STYLE[name])
+            a.plot(tr["t"], scale(tr[key]), **_style(name))
         a.axhline(0, color="0.7", lw=0.6)
         a.set(xlabel="t [s]", ylabel=label)
         a.grid(alpha=0.3)
@@ -71,7 +68,7 @@ def tracking_figure(title: str, path_xy: np.ndarray, trajs: dict, delta_max: flo
     hi = max(float(np.max(100 * tr["d"][late])) for tr in trajs.values())
     ins = a.inset_axes([0.45, 0.45, 0.5, 0.45])
     for name, tr in trajs.items():
-        ins.plot(tr["t"][late], 100 * tr["d"][late], **{k: v for k, v in STYLE[name].items() if k != "label"})
+        ins.plot(tr["t"][late], 100 * tr["d"][late], **{k: v for k, v in _style(name).items() if k != "label"})
     pad = 0.1 * max(hi - lo, 1e-3)
     ins.set_ylim(lo - pad, hi + pad)
     ins.set_title("second half (zoom)", fontsize=7)

@@ -3,7 +3,7 @@
 Every builder aggregates first (quantiles, histograms, ECDFs on a fixed grid, 2D bins) and plots
 the aggregate, so a figure costs the same for 100 runs as for 100,000 and its SVG stays small.
 Each controller keeps one colour throughout (:func:`controller_colors`, the colours of
-:data:`pfjax.report.figures.STYLE` by controller type). Figures are ``matplotlib.figure.Figure``
+:func:`pfjax.controllers.style` of its type). Figures are ``matplotlib.figure.Figure``
 objects, independent of the pyplot backend; :func:`pfjax.report.figures.save` writes them.
 """
 
@@ -14,11 +14,6 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogLocator, NullLocator
 
-from pfjax.report.figures import STYLE
-
-#: Controller type (study config) -> key of :data:`STYLE` whose colour it takes.
-TYPE_STYLE = {"lmi": "mixed", "state_feedback": "paper-k", "pi": "pi", "stanley": "stanley",
-              "pure_pursuit": "pure-pursuit", "rear_wheel": "rear-wheel"}
 _SPARE = ["#ff7f0e", "#e377c2", "#bcbd22", "#7f7f7f", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173",
           "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94", "#f7b6d2", "#dbdb8d", "#9edae5"]
 
@@ -36,15 +31,18 @@ def fmt_margin(m: dict | None) -> str:
 
 
 def controller_colors(controllers: list[dict]) -> dict[str, str]:
-    """One colour per controller: its type's colour in :data:`STYLE`, a spare one if already taken.
+    """One colour per controller: its type's colour (:func:`pfjax.controllers.style`), a spare one if
+    already taken.
 
     Args:
         controllers: the study config's controller entries (``name``, ``type``).
     """
+    from pfjax.controllers import style
+
     used, out = set(), {}
-    spare = [c for c in _SPARE + [s["color"] for s in STYLE.values()]]
+    spare = list(_SPARE)
     for i, c in enumerate(controllers):
-        col = STYLE.get(TYPE_STYLE.get(c.get("type"), ""), {}).get("color")
+        col = style(c.get("type", "")).get("color")
         if col is None or col in used:
             col = next((s for s in spare if s not in used), spare[i % len(spare)])
         used.add(col)

@@ -32,6 +32,7 @@ from pfjax.montecarlo.config import StudySpec
 from pfjax.montecarlo.sampling import SLIP_COLUMNS, column_names
 from pfjax.report.figure_set import _figures
 from pfjax.report.study_figures import controller_colors, fmt_margin
+from pfjax.controllers import style
 from pfjax.sim.status import STATUS_NAMES
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
@@ -81,6 +82,13 @@ def fmt_dist(d) -> str:
     return "one of {" + ", ".join(f"{v:g}" for v in d["values"]) + "} (equally likely)"
 
 
+def _path_description(kind: str) -> str:
+    """A registered path's one-line description (:data:`pfjax.paths.PATHS`)."""
+    from pfjax.paths import PATHS
+
+    return PATHS[kind].description if kind in PATHS else kind
+
+
 def _cell(text, *, cls: str = "", swatch: str | None = None) -> dict:
     return {"text": text, "cls": cls, "swatch": swatch}
 
@@ -119,12 +127,12 @@ def _setup(cfg: dict, summary: dict) -> dict:
                  "spline": f"user-defined: natural cubic spline through {len(p.get('points') or [])} points, "
                            f"from ({(p.get('points') or [[0, 0]])[0][0]:g}, {(p.get('points') or [[0, 0]])[0][1]:g}) m"}
         paths.append({"name": p.get("name") or p["kind"], "kind": p["kind"],
-                      "detail": extra.get(p["kind"], "the source's path")})
+                      "detail": extra.get(p["kind"]) or _path_description(p["kind"])})
     ctrls = []
     for c in cfg["controllers"]:
         gains = summary["controllers"].get(c["name"], {}).get("gains", {})
         how = {"lmi": f"mixed H2/H∞ LMI design (α = {c['alpha']:g}, β = {c['beta']:g}) at the nominal speed and wheelbase",
-               "state_feedback": "state feedback δ = K [d, θ_e]"}.get(c["type"], c["type"].replace("_", " "))
+               "state_feedback": "state feedback δ = K [d, θ_e]"}.get(c["type"]) or style(c["type"])["label"]
         ctrls.append({"name": c["name"], "type": c["type"], "how": how,
                       "gains": ", ".join(f"{k} = {v:.4g}" for k, v in gains.items()) or "defaults"})
     m = cfg["margin"]

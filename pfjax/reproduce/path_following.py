@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 
 from pfjax.reproduce.verdict import Verdict
+from pfjax.paths import source_tests
 
 CONTROLLERS = ("mixed", "pi")
 LABEL = {"mixed": "mixed H2/H∞ (pfjax's K)", "paper-k": "mixed H2/H∞ (source's K)", "pi": "PI (Table 3)"}
@@ -41,7 +42,7 @@ def _s(x: float) -> str:
 def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi: dict, ga: dict) -> list[Verdict]:
     """Every verdict row of the reproduction (module docstring)."""
     R = {(r["path"], r["controller"]): r for r in rows}
-    paths = ("line", "parabola", "sine")
+    paths = source_tests()
     dmax_deg = cfg["model"]["delta_max_deg"]
     band = cfg["sim"]["settle_band"]
     window = cfg["sim"]["steady_window"]

@@ -39,19 +39,6 @@ from pfjax.sim.status import Status
 METRICS = ("iae", "ise", "itae")
 AGGREGATES = ("mean", "quantile", "cvar")
 
-#: Default tunable fields and search box of each registry controller (box: the GA's bounds, the
-#: gradient's projection set). PI: around Table 3 (1.6390, 0.0230, 39.5204, 11.6124);
-#: state feedback: K < 0 (the stabilising quadrant, spec §7).
-DEFAULT_BOXES = {
-    "pi": (("kp_d", "ki_d", "kp_theta", "ki_theta"), (0.0, 0.0, 0.0, 0.0), (60.0, 5.0, 30.0, 1.0)),
-    "state_feedback": (("K",), (-20.0, -10.0), (0.0, 0.0)),
-    "integral": (("K",), (-20.0, -10.0, -20.0), (0.0, 0.0, 0.0)),
-    "stanley": (("k", "k_soft"), (0.1, 0.01), (20.0, 2.0)),
-    "pure_pursuit": (("ld_gain", "ld_min"), (0.05, 0.05), (3.0, 2.0)),
-    "rear_wheel": (("k_theta", "k_d"), (0.1, 0.1), (20.0, 40.0)),
-}
-
-
 class CostSpec(NamedTuple):
     """What is minimised (see the module docstring)."""
 

@@ -23,12 +23,18 @@ import numpy as np
 
 from pfjax import controllers as C
 from pfjax.sim.simulate import SimConfig
-from pfjax.tuning.cost import DEFAULT_BOXES, CostSpec, Tunable, batch_cost, n_scenarios, population_cost
+from pfjax.tuning.cost import CostSpec, Tunable, batch_cost, n_scenarios, population_cost
 from pfjax.tuning.ga import GAOptions
 from pfjax.tuning.gradient import TuneResult, ga_tune, gradient_tune
 
-PAPER_SETS = {"paper-line": ("line",), "paper-parabola": ("parabola",), "paper-sine": ("sine",),
-              "paper-all": ("line", "parabola", "sine")}
+def scenario_sets() -> dict[str, tuple[str, ...]]:
+    """Named scenario sets (one run per path, from its start pose with the source's 5 deg slip):
+    ``paper-<test>`` and ``paper-all`` for the source's tests, and every fixed path
+    (:func:`pfjax.paths.fixed_paths`) by its own name."""
+    from pfjax import paths
+
+    tests = paths.source_tests()
+    return {**{f"paper-{t}": (t,) for t in tests}, "paper-all": tests, **{n: (n,) for n in paths.fixed_paths()}}
 
 
 class Problem(NamedTuple):
@@ -50,33 +56,35 @@ def make_problem(controller: str, scenario: str, *, cost: CostSpec = CostSpec(),
     """Build a problem (``controller``: a :data:`pfjax.controllers.REGISTRY` name).
 
     Args:
-        controller: registry name (``pi``, ``state_feedback``, ``integral``, ``stanley``, ...).
+        controller: registry name with a tuning box (``pi``, ``state_feedback``, ``integral``, ``stanley``, ...).
         scenario: a paper set name or a study TOML path (module docstring).
         cost: what is minimised.
         config: simulation settings (``record`` is forced off); default ``SimConfig()`` for paper
             sets, the study's for a TOML.
         n_runs: runs per path sampled from a study TOML; ``run_offset``: first run index.
         base_gains: gains pytree for the untuned fields (default: the registry's defaults).
-        box: ``(fields, lower, upper)`` overriding :data:`pfjax.tuning.cost.DEFAULT_BOXES`.
+        box: ``(fields, lower, upper)`` overriding the registry entry's ``box``.
     """
     from pfjax import errors
     from pfjax.sim.simulate import stack
 
-    if controller not in C.REGISTRY:
-        raise errors.InputError(f"controller: value {controller!r}, expected one of {', '.join(C.REGISTRY)}")
-    if scenario not in PAPER_SETS and not (Path(scenario).suffix == ".toml" and Path(scenario).is_file()):
-        raise errors.InputError(f"scenario: value {scenario!r}, expected one of {', '.join(PAPER_SETS)} or an "
+    tunable = [n for n, e in C.REGISTRY.items() if e.box is not None]
+    if controller not in tunable:
+        raise errors.InputError(f"controller: value {controller!r}, expected one of {', '.join(tunable)}")
+    sets = scenario_sets()
+    if scenario not in sets and not (Path(scenario).suffix == ".toml" and Path(scenario).is_file()):
+        raise errors.InputError(f"scenario: value {scenario!r}, expected one of {', '.join(sets)} or an "
                                 f"existing study .toml")
     errors.integer("n_runs", n_runs, low=1, high=1_000_000)
     errors.integer("run_offset", run_offset, low=0, high=errors.MAX_SEED - n_runs)
-    ctrl, factory = C.REGISTRY[controller]
-    fields, lo, hi = box or DEFAULT_BOXES[controller]
+    ctrl, factory = C.REGISTRY[controller][:2]
+    fields, lo, hi = box or C.REGISTRY[controller].box
     base = factory() if base_gains is None else base_gains
     tun = Tunable(base, tuple(fields))
-    if scenario in PAPER_SETS:
+    if scenario in sets:
         from pfjax.scenarios import paper_scenario
 
-        batches = [stack([paper_scenario(t, base)]) for t in PAPER_SETS[scenario]]
+        batches = [stack([paper_scenario(t, base)]) for t in sets[scenario]]
         cfg = config or SimConfig(record=False)
     else:
         from pfjax.montecarlo.config import load_study

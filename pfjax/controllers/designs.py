@@ -1,0 +1,97 @@
+"""Designed controllers: gains computed by a synthesis (LMIs, cvxpy) for a registered controller.
+
+A study's ``controllers[i].type`` and ``pfjax simulate --controller`` take these names beside the
+registry's (:mod:`pfjax.controllers.registry`): ``lmi`` (``mixed`` on the command line) is the
+mixed H2/H∞ state feedback of the source's design problem at the nominal speed and wheelbase,
+``integral_lmi`` the same criterion on the plant augmented with the integral of ``d`` (integral
+action), ``paper_k`` the state feedback with the source's published gain (no synthesis). The synthesis is imported only when a design is made (cvxpy takes seconds to import).
+"""
+
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+
+class DesignEntry(NamedTuple):
+    """One design: ``make(v, L, alpha, beta) -> scalar gains`` of ``controller`` (a registry name)."""
+
+    name: str
+    controller: str
+    cli_name: str
+    make: Callable[..., dict]
+    style: dict
+
+
+def _mixed(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict:
+    from pfjax.synthesis import mixed_h2_hinf, slip_design_plant
+
+    K = mixed_h2_hinf(slip_design_plant(v, L), alpha=alpha, beta=beta).K.ravel()
+    return {"k_d": float(K[0]), "k_theta": float(K[1])}
+
+
+def _paper_k(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict:
+    from pfjax.controllers.linear import PAPER_K
+
+    return {"k_d": PAPER_K[0], "k_theta": PAPER_K[1]}
+
+
+def _integral(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict:
+    from pfjax.synthesis import integral_mixed
+
+    K = integral_mixed(v, L, alpha=alpha, beta=beta).K.ravel()
+    return {"k_d": float(K[0]), "k_theta": float(K[1]), "k_i": float(K[2])}
+
+
+#: name -> design.
+DESIGNS: dict[str, DesignEntry] = {
+    "lmi": DesignEntry("lmi", "state_feedback", "mixed", _mixed,
+                       {"color": "#1f77b4", "lw": 1.8, "label": "mixed H2/H∞ (pfjax LMI)"}),
+    "paper_k": DesignEntry("paper_k", "state_feedback", "paper-k", _paper_k,
+                           {"color": "#17becf", "lw": 1.2, "ls": "--", "label": "mixed H2/H∞ (source K)"}),
+    "integral_lmi": DesignEntry("integral_lmi", "integral", "integral-mixed", _integral,
+                                {"color": "#ff7f0e", "lw": 1.6, "label": "mixed H2/H∞ with integral action (LMI)"}),
+}
+
+
+def controller_types() -> list[str]:
+    """Every name a study's controller ``type`` may take: the registry's and the designs'."""
+    from pfjax.controllers.registry import REGISTRY
+
+    return list(REGISTRY) + list(DESIGNS)
+
+
+def cli_names() -> list[str]:
+    """Every command-line controller name: the designs' then the registry's."""
+    from pfjax.controllers.registry import REGISTRY
+
+    return [d.cli_name for d in DESIGNS.values()] + [e.cli_name for e in REGISTRY.values()]
+
+
+def design(name: str) -> DesignEntry | None:
+    """The design called ``name`` (config or command-line name), None if it is not a design."""
+    return DESIGNS.get(name) or next((d for d in DESIGNS.values() if d.cli_name == name), None)
+
+
+def resolve(name: str, key: str = "controller"):
+    """``(registry entry, design or None)`` of any controller name (registry, design, config or
+    command-line spelling); :class:`~pfjax.errors.InputError` naming ``key`` if unknown."""
+    from pfjax import errors
+    from pfjax.controllers.registry import REGISTRY, entry
+
+    d = design(name)
+    if d is not None:
+        return REGISTRY[d.controller], d
+    if name in REGISTRY or any(e.cli_name == name for e in REGISTRY.values()):
+        return entry(name, key), None
+    raise errors.InputError(f"{key}: unknown controller {name!r}; expected one of "
+                            f"{', '.join(controller_types())}", key)
+
+
+def style(name: str) -> dict:
+    """The plot style (matplotlib ``color``, ``lw``, ``ls``, ``label``) of any controller name;
+    grey for an unknown one."""
+    try:
+        e, d = resolve(name)
+    except ValueError:
+        return {"color": "#7f7f7f", "lw": 1.0, "label": name}
+    return dict((d or e).style)

@@ -1,0 +1,109 @@
+"""The path registry: one entry per path kind, carrying what the rest of pfjax needs of it (the
+builder, the nominal start, the curvature bound). The study config's ``paths[i].kind``, the
+command line's ``--path`` choices, the tuning scenario sets and the source's test list are read
+from here, so adding a path is its builder plus one :func:`register` call.
+
+Two sorts of entry:
+
+- *fixed* paths (``build`` is a function of no arguments): the source's line, parabola and sine,
+  pfjax's circle of radius 2 m, and any path a user registers. A single run starts at
+  ``start_pose``; a study's runs start ``start_s`` metres along the path from parameter
+  ``start_u``, displaced by their lateral offset and heading error.
+- *parametric* kinds (``parametric=True``): built per study from the path config's own fields
+  (``circle`` with a drawn radius, ``random`` splines, user ``spline`` points) by
+  :mod:`pfjax.montecarlo.sampling`; they have no single-run command-line form beyond the circle's
+  default.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple
+
+from pfjax import errors
+
+
+class PathEntry(NamedTuple):
+    """One path kind.
+
+    Attributes:
+        name: config and command-line name (``paths[i].kind``, ``--path``).
+        build: ``() -> path`` (a :mod:`pfjax.paths.shapes` pytree), or None for a kind built only
+            from a study's path config.
+        start_pose: single runs' start ``(x, y, theta)`` (m, m, rad), or None.
+        start_u: path parameter from which a study's ``start_s`` is measured.
+        max_curvature: largest |curvature| over the path (1/m), or None when it depends on the
+            study's path config (computed by :func:`pfjax.montecarlo.checks.path_max_curvature`).
+        source: one of the source's three test paths.
+        parametric: built from the study's path config (``circle``, ``random``, ``spline``).
+        description: one line for reports.
+    """
+
+    name: str
+    build: Callable | None
+    start_pose: tuple[float, float, float] | None
+    start_u: float
+    max_curvature: float | None
+    source: bool
+    parametric: bool
+    description: str
+
+
+#: name -> entry, in registration order.
+PATHS: dict[str, PathEntry] = {}
+
+
+def register(name: str, build: Callable | None = None, *, start_pose=None, start_u: float = 0.0,
+             max_curvature: float | None = None, source: bool = False, parametric: bool = False,
+             description: str = "") -> PathEntry:
+    """Add a path kind (replacing one of the same name) and return its entry (see :class:`PathEntry`).
+
+    Raises:
+        ValueError: a name that is not a lower-case identifier, a fixed path without a start pose.
+    """
+    if not name.replace("_", "").isalnum() or not name.islower():
+        raise ValueError(f"name: a path kind is a lower-case identifier, got {name!r}")
+    if build is not None and start_pose is None:
+        raise ValueError(f"start_pose: a fixed path ({name!r}) needs a single-run start pose (x, y, theta)")
+    e = PathEntry(name, build, None if start_pose is None else tuple(float(v) for v in start_pose), float(start_u),
+                  None if max_curvature is None else float(max_curvature), source, parametric, description or name)
+    PATHS[name] = e
+    return e
+
+
+def entry(name: str, key: str = "path") -> PathEntry:
+    """The entry of ``name``; :class:`~pfjax.errors.InputError` naming ``key`` if there is none."""
+    if name not in PATHS:
+        raise errors.InputError(f"{key}: unknown path {name!r}; expected one of {', '.join(PATHS)}", key)
+    return PATHS[name]
+
+
+def fixed_paths() -> list[str]:
+    """Names of the paths a single run can use (those with a builder and a start pose)."""
+    return [n for n, e in PATHS.items() if e.build is not None]
+
+
+def source_tests() -> tuple[str, ...]:
+    """The source's test paths, in the source's order (line, parabola, sine)."""
+    return tuple(n for n, e in PATHS.items() if e.source)
+
+
+def _register_builtins() -> None:
+    from pfjax.paths import shapes
+
+    register("line", shapes.line, start_pose=(1.0, 0.0, math.pi / 2), max_curvature=0.0, source=True,
+             description="the source's line y = x")
+    # y = x^2 peaks at curvature 2a = 2 at the vertex; runs start 2 m before it (x = -2)
+    register("parabola", shapes.parabola, start_pose=(-2.0, 3.0, -math.pi / 2), start_u=-2.0, max_curvature=2.0,
+             source=True, description="the source's parabola y = x^2")
+    # y = sin x: curvature at most A w^2 = 1
+    register("sine", shapes.sine, start_pose=(0.0, -0.2, math.pi / 4), max_curvature=1.0, source=True,
+             description="the source's sine y = sin x")
+    register("circle", lambda: shapes.circle(radius=2.0, cy=2.0), start_pose=(0.0, -0.3, 0.0), parametric=True,
+             description="circle about (0, R) from the origin, counter-clockwise (pfjax's; single runs: R = 2 m)")
+    # random: 2 m of path behind the start
+    register("random", start_u=2.0, parametric=True, description="random smooth spline, one per run")
+    register("spline", parametric=True, description="natural cubic spline through the config's points")
+
+
+_register_builtins()
