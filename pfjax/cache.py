@@ -34,6 +34,17 @@ def default_dir(environ=None) -> Path | None:
     return Path(base) / "pfjax" / "xla"
 
 
+def usable(target: Path | None) -> Path | None:
+    """``target`` created if need be, or None if it is None or cannot be written."""
+    if target is None:
+        return None
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None
+    return target if os.access(target, os.W_OK) else None
+
+
 def enable(path: str | Path | None = None, *, min_compile_s: float = 0.5) -> Path | None:
     """Turn on JAX's persistent compilation cache in ``path`` (default :func:`default_dir`).
 
@@ -44,14 +55,8 @@ def enable(path: str | Path | None = None, *, min_compile_s: float = 0.5) -> Pat
 
     if jax.config.jax_compilation_cache_dir:
         return Path(jax.config.jax_compilation_cache_dir)
-    target = Path(path) if path is not None else default_dir()
+    target = usable(Path(path) if path is not None else default_dir())
     if target is None:
-        return None
-    try:
-        target.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return None
-    if not os.access(target, os.W_OK):
         return None
     jax.config.update("jax_compilation_cache_dir", str(target))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_s))

@@ -47,7 +47,7 @@ from pfjax.report.markdown import table  # noqa: E402
 from pfjax.reproduce import path_following, verdict_table  # noqa: E402
 from pfjax.paths import shapes  # noqa: E402
 from pfjax import paths  # noqa: E402
-from pfjax.scenarios import PAPER_TESTS, make_scenario, paper_scenario  # noqa: E402
+from pfjax.sim.scenario import PAPER_TESTS, make_scenario, paper_scenario  # noqa: E402
 from pfjax.sim import constant_slip  # noqa: E402
 from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack  # noqa: E402
 from pfjax.synthesis import mixed_bounds_for_gain, mixed_h2_hinf, slip_design_plant  # noqa: E402

@@ -46,7 +46,7 @@ from pfjax.parking.model import control_params  # noqa: E402
 from pfjax.parking.assumptions import ZONES, case_sweep, sweep_summary  # noqa: E402
 from pfjax.parking.montecarlo import Scatter, monte_carlo, summarise  # noqa: E402
 from pfjax.parking.schedules import CASES, GARAGE_START  # noqa: E402
-from pfjax.parking.search import search_ga, search_grid, start_map  # noqa: E402
+from pfjax.parking.switch_search import search_ga, search_grid, start_map  # noqa: E402
 from pfjax.parking.simulate import (STATUS_NAMES, ParkingConfig, n_periods_for, run_jit, run_params,  # noqa: E402
                                     run_recorded_jit, simulated_first_switch)
 from pfjax.parking.summary import run_summary  # noqa: E402

@@ -100,9 +100,9 @@ def ga_vs_gradient(cfg, progress):
 
     # Table 3: cost, gradient, and where descent from it goes
     th3 = pr.tunable.flatten(pr.tunable.base._replace(**{k: PAPER_PI[k] for k in pr.tunable.fields}))
-    from pfjax.tuning.problem import _cost_fns
+    from pfjax.tuning.problem import cost_functions
 
-    g3 = np.asarray(jax.grad(_cost_fns(pr)[0])(jax.numpy.asarray(th3)))
+    g3 = np.asarray(jax.grad(cost_functions(pr)[0])(jax.numpy.asarray(th3)))
     r3 = tune(pr, "gradient", key=jax.random.PRNGKey(0), theta0=th3, steps=cfg["gradient"]["table3_steps"],
               learning_rate=0.01, progress=progress)
     table3 = {"gains": pr.tunable.named(th3), "cost": evaluate(pr, th3), "gradient": g3.tolist(),
@@ -247,7 +247,7 @@ def _report(summary: dict) -> str:
 
 def integral_steady(cfg) -> float:
     from pfjax import controllers as C
-    from pfjax.scenarios import paper_scenario
+    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import SimConfig, simulate_batch, stack
     from pfjax.synthesis import integral_mixed
 

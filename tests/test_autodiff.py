@@ -76,7 +76,7 @@ def test_reverse_mode_carries_small_scenario_leaves_run_by_run():
 
     from pfjax import controllers as C
     from pfjax.paths import sine
-    from pfjax.scenarios import make_scenario
+    from pfjax.sim.scenario import make_scenario
     from pfjax.sim import SimConfig, constant_slip, simulate_batch, stack
 
     n = 5  # runs: a size no other axis of the program has

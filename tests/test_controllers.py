@@ -21,7 +21,7 @@ from pfjax import controllers as C
 from pfjax.controllers import Observation
 from pfjax.models import Pose
 from pfjax.paths import circle, line, project
-from pfjax.scenarios import paper_scenario
+from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SimConfig, simulate_batch, stack
 
 DMAX = math.radians(30.0)

@@ -251,7 +251,7 @@ def _slip_run(name):
     """``(run, scenario)``: a short path-following run of controller ``name`` on the paper's sine
     scenario (``run(scenario)`` simulates it; the scenario in the tests' default float64)."""
     from pfjax import controllers as C
-    from pfjax.scenarios import paper_scenario
+    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import SimConfig
     from pfjax.sim.simulate import simulate
 

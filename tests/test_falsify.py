@@ -1,4 +1,4 @@
-"""The falsifier (pfjax.falsify): known worst cases on a linear loop found by brute force, the
+"""The falsifier (pfjax.falsification): known worst cases on a linear loop found by brute force, the
 paper's sine case against random search at the same number of rollouts, bounds, finite
 gradients, determinism and one compile per search shape.
 
@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 
 from pfjax import controllers as C
-from pfjax.falsify import OBJECTIVES, falsify, random_search, search_space, worst_trajectory
-from pfjax.falsify import search as falsify_search
+from pfjax.falsification import OBJECTIVES, falsify, random_search, search_space, worst_trajectory
+from pfjax.falsification import search as falsify_search
 from pfjax.paths import line, sine
-from pfjax.scenarios import make_scenario
+from pfjax.sim.scenario import make_scenario
 from pfjax.sim import SimConfig, sampled_slip, simulate_batch
 
 DEG = math.pi / 180

@@ -17,7 +17,7 @@ import pytest
 from pfjax import controllers as C
 from pfjax.metrics import running
 from pfjax.paths import sine
-from pfjax.scenarios import make_scenario
+from pfjax.sim.scenario import make_scenario
 from pfjax.sim import SimConfig, Status, constant_slip, simulate_batch, stack
 
 DEG = math.pi / 180

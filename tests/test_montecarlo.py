@@ -212,7 +212,7 @@ def test_sampler_scratch_memory_is_bounded_for_large_chunks():
     spec, n = spec_of(), 65536
     keys = S.run_keys(spec.seed, 0, np.arange(n))
     z = jnp.zeros(n)
-    compiled = S._draw_runs.lower(keys, S._fixed_path(spec.paths[0]), jnp.asarray(0.0), (z, z), False,
+    compiled = S._draw_runs.lower(keys, {}, S._fixed_path(spec.paths[0]), jnp.asarray(0.0), (z, z), False,
                                   study=S._Static(spec), circle=None, batched_path=False).compile()
     assert compiled.memory_analysis().temp_size_in_bytes < 256 * 2**20
 

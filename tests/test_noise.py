@@ -20,7 +20,7 @@ from pfjax.models.slip import Pose
 from pfjax.numerics.random import step_normals
 from pfjax.paths import shapes
 from pfjax.paths.geometry import closest_parameter, curvature, global_parameter, measure, wrap_angle
-from pfjax.scenarios import paper_scenario
+from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SensorNoise, SimConfig, simulate_batch, stack
 from pfjax.sim.simulate import _noisy
 

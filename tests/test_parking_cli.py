@@ -20,7 +20,7 @@ import pytest
 
 from pfjax.cli import main
 from pfjax.parking.maps import GARAGE, MAX_VERTICES, to_obstacle_map
-from pfjax.parking.search import SEARCH_CONFIG, fitness, lattice
+from pfjax.parking.switch_search import SEARCH_CONFIG, fitness, lattice
 from pfjax.parking.simulate import ParkingConfig, run_jit, run_params
 
 ROOT = Path(__file__).resolve().parents[1]

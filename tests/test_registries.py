@@ -72,7 +72,7 @@ def test_unknown_names_are_one_line_errors():
 
 
 def test_dummy_single_run(dummy):
-    from pfjax.scenarios import paper_scenario
+    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import SimConfig, simulate_batch, stack, unstack
 
     e = C.entry("dummy_heading")

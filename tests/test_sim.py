@@ -16,7 +16,7 @@ import pytest
 
 from pfjax import controllers as C
 from pfjax.paths import circle, line, spline_through
-from pfjax.scenarios import make_scenario
+from pfjax.sim.scenario import make_scenario
 from pfjax.sim import SimConfig, Status, simulate_batch, slip_profile, stack, unstack
 
 DEG = math.pi / 180

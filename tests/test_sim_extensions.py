@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from pfjax import controllers as C
-from pfjax.scenarios import paper_scenario
+from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SensorNoise, SimConfig, simulate_batch, stack
 
 K = np.array(C.PAPER_K)

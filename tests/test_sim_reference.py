@@ -7,7 +7,7 @@ import pytest
 
 from pfjax import controllers as C
 from pfjax import paths
-from pfjax.scenarios import paper_scenario
+from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SimConfig, simulate_batch, stack, unstack
 
 from reference import closed_loop

@@ -39,7 +39,7 @@ from scipy.optimize import brentq
 from pfjax import controllers as C
 from pfjax.analysis import closed_loop_field, equilibrium, source_linearisation, stability_map
 from pfjax.models.slip import FrenetState, SlipParams, frenet_rhs
-from pfjax.scenarios import paper_scenario
+from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SimConfig, simulate_batch, stack, unstack
 
 K = np.array(C.PAPER_K, dtype=float)  # source's K = [-2.7381, -2.0772]

@@ -35,7 +35,7 @@ def test_integral_design_removes_constant_slip_offset():
     import jax
 
     from pfjax import controllers as C
-    from pfjax.scenarios import paper_scenario
+    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import SimConfig, simulate_batch, stack
 
     with jax.enable_x64(True):

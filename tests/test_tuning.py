@@ -22,7 +22,7 @@ def _fd(f, th, h):
 
 
 def _sine_batch(controller):
-    from pfjax.scenarios import paper_scenario
+    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import stack
     from pfjax.tuning.cost import Tunable
     from pfjax.tuning.problem import Problem

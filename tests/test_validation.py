@@ -231,7 +231,7 @@ def test_the_python_api_rejects_what_the_cli_rejects():
     """The same checks from Python, with the argument's name where the CLI names its flag."""
     from pfjax import controllers as C
     from pfjax.errors import InputError
-    from pfjax.scenarios import paper_scenario
+    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import SimConfig, simulate_batch, stack
     from pfjax.synthesis import synthesize
 

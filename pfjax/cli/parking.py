@@ -7,11 +7,10 @@
 
 from __future__ import annotations
 
-from pfjax.cli.common import UsageError, finite
+import contextlib
 
-
-def _usage(msg):
-    return UsageError(msg)
+from pfjax.cli.common import UsageError, as_flags
+from pfjax.errors import InputError
 
 
 def _common(p):
@@ -53,102 +52,56 @@ def register(sub) -> None:
     s.set_defaults(func=_cmd_search)
 
 
-def _checked(args, default_start):
-    from pfjax.parking.maps import MapError, check_start, load_map, to_obstacle_map
-
-    for flag, v in (("--k1", args.k1), ("--k2", args.k2), ("--speed", args.speed), ("--scan-period", args.scan_period),
-                    ("--t-max", args.t_max)):
-        finite(flag, v, positive=True)
-    if args.front is not None:
-        finite("--front", args.front, positive=True)
-        if args.front >= 0.540:
-            raise _usage(f"--front: must be < 0.54 (the rectangle length), got {args.front:g}")
-    if args.scan_period > 10 or args.t_max / args.scan_period > 20000:
-        raise _usage(f"--scan-period: value {args.scan_period:g}, expected t_max / scan_period <= 20000 and <= 10 s")
-    try:
-        name, polygons = load_map(args.map)
-    except MapError as e:
-        raise _usage(f"--map: {e}") from None
-    if args.x0 is None:
-        if default_start.get(args.map) is None:
-            raise _usage(f"--x0: required (no default start for map {args.map!r})")
-        x0 = default_start[args.map]
-    else:
-        x0 = tuple(finite("--x0", v) for v in args.x0)
-        finite("--x0", x0[2], below=90.0, unit=" deg")
-    from pfjax.parking.simulate import run_params
-
-    shape = run_params(x0, front=args.front).shape  # the rectangle the run will simulate
-    try:
-        check_start(polygons, x0, shape)
-    except MapError as e:
-        raise _usage(str(e)) from None
-    return name, polygons, to_obstacle_map(list(polygons.values())), x0
+#: ``pfjax parking``'s flags by the argument of :func:`pfjax.parking.run` they set (``map`` aside: see
+#: :func:`_flags`).
+RUN_FLAGS = {"x0": "--x0", "direction": "--direction", "alpha_schedule": "--alpha-schedule", "xs": "--xs",
+             "k1": "--k1", "k2": "--k2", "speed": "--speed", "scan_period": "--scan-period", "front": "--front",
+             "lag": "--lag", "t_max": "--t-max"}
+#: ``pfjax parking-search``'s flags by the argument of :func:`pfjax.parking.switch_search` they set.
+SEARCH_FLAGS = {"method": "--method", "x0": "--x0", "n": "--n", "generations": "--generations",
+                "population": "--population", "seed": "--seed", "weight": "--weight", "k1": "--k1", "k2": "--k2",
+                "speed": "--speed", "scan_period": "--scan-period", "front": "--front", "lag": "--lag",
+                "t_max": "--t-max"}
 
 
-def _control(args):
-    from pfjax.parking.model import control_params
+@contextlib.contextmanager
+def _flags(flags: dict[str, str]):
+    """:func:`~pfjax.cli.common.as_flags`, with the map's errors told as the map check tells them:
+    a :class:`~pfjax.parking.maps.MapError` (a map file that cannot be read or is invalid, a start
+    pose in an obstacle) becomes ``--map: <its message>`` or ``--x0: <its message>``, with the
+    names in it (keys of the file, obstacles) left as they are, not read as arguments. ``map`` is
+    not in the tables for the same reason: as_flags would rewrite the word in other messages
+    (``--x0: required (no default start for map 'parallel')``)."""
+    with as_flags(flags):
+        try:
+            yield
+        except InputError as e:
+            from pfjax.parking.maps import MapError
 
-    return control_params(k1=args.k1, k2=args.k2, speed=args.speed, lag=bool(args.lag))
+            if not isinstance(e, MapError) or e.key not in ("map", "x0"):
+                raise
+            text = str(e)
+            if e.key == "x0" and text.startswith("x0: "):
+                text = text[len("x0: "):]
+            flag = f"--{e.key}"
+            raise UsageError(f"{flag}: {text}", flag) from None
+
+
+def _common_args(args) -> dict:
+    return {"map": args.map, "x0": args.x0, "k1": args.k1, "k2": args.k2, "speed": args.speed,
+            "scan_period": args.scan_period, "front": args.front, "lag": bool(args.lag), "t_max": args.t_max}
 
 
 def _cmd_parking(args) -> dict:
-    from pfjax.parking.schedules import CASES, GARAGE_START, parse_schedule
+    from pfjax.parking.api import run
 
-    try:
-        schedule = parse_schedule(args.alpha_schedule)
-    except ValueError as e:
-        raise _usage(f"--alpha-schedule: {e}") from None
-    if args.xs is not None:
-        finite("--xs", args.xs)
-    name, _, omap, x0 = _checked(args, {"parallel": CASES["A"]["x0"], "garage": GARAGE_START})
-    xs = args.xs if args.xs is not None else (-0.9 if args.map == "garage" else None)  # the garage always has its X_s rule
-
-    from pfjax.parking.summary import run_summary
-    from pfjax.parking.simulate import ParkingConfig, run_jit, run_params
-
-    p = run_params(x0, 1 if args.direction == "forward" else -1, list(schedule), xs=xs, front=args.front,
-                   scan_period=args.scan_period, control=_control(args))
-    r = run_jit(p, omap, ParkingConfig(t_max=args.t_max))
-    return {"map": name, "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]}, "direction": args.direction,
-            "alpha_schedule": [float(a) for a in schedule], "xs": xs, "a_f": float(p.shape.front),
-            **run_summary(r)}
+    with _flags(RUN_FLAGS):
+        return run(direction=args.direction, alpha_schedule=args.alpha_schedule, xs=args.xs, **_common_args(args))
 
 
 def _cmd_search(args) -> dict:
-    import dataclasses
+    from pfjax.parking.api import search
 
-    import jax
-
-    from pfjax.parking.schedules import GARAGE_START
-    from pfjax.parking.search import SEARCH_CONFIG, search_ga, search_grid
-
-    finite("--weight", args.weight)
-    if args.weight < 0:
-        raise _usage(f"--weight: must be >= 0, got {args.weight:g}")
-    if not 2 <= args.n <= 64:
-        raise _usage(f"--n: value {args.n}, expected 2..64")
-    if args.population < 2:
-        raise _usage(f"--population: value {args.population}, expected >= 2")
-    if args.generations < 1:
-        raise _usage(f"--generations: value {args.generations}, expected >= 1")
-    name, _, omap, x0 = _checked(args, {"garage": GARAGE_START, "parallel": None})
-    from pfjax.parking.simulate import run_params
-
-    base = run_params(x0, 1, (1.0,), xs=-1.0, front=args.front, scan_period=args.scan_period, control=_control(args))
-    cfg = dataclasses.replace(SEARCH_CONFIG, t_max=args.t_max)
-    if args.method == "ga":
-        from pfjax.tuning.ga import GAOptions
-
-        out = search_ga(omap, key=jax.random.PRNGKey(args.seed), base=base, weight=args.weight, cfg=cfg,
-                        options=GAOptions(population_size=args.population, generations=args.generations))
-        out["seed"] = args.seed
-    else:
-        out = search_grid(omap, n=args.n, base=base, weight=args.weight, cfg=cfg, chunk=min(1024, args.n**3))
-        out.pop("table")
-    from pfjax.parking.simulate import STATUS_NAMES
-
-    out["status"] = STATUS_NAMES[int(out["status"])]
-    out["converged"] = out["status"] == "converged"
-    return {"map": name, "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]}, **out}
-
+    with _flags(SEARCH_FLAGS):
+        return search(args.method, n=args.n, generations=args.generations, population=args.population,
+                      seed=args.seed, weight=args.weight, **_common_args(args))

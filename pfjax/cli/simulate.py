@@ -81,7 +81,7 @@ def cmd(args) -> dict:
 
     from pfjax.metrics import METRIC_NAMES
     from pfjax import paths
-    from pfjax.scenarios import paper_scenario
+    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack
 
     if args.continuous and args.control_every is not None:

@@ -1,14 +1,15 @@
-"""``pfjax track``: one focus-point tracking run, final error, phi - p gamma and the steering used.
+"""``pfjax track``: one focus-point tracking run, final error, phi - p gamma and the steering used
+(:func:`pfjax.tracking.run`, which checks the values; its errors name the flags here).
 
     pfjax track --mode {forward,backward} --p P --l L --gamma-max-deg G --leader {line,circle,sine,lane-change} --json
 """
 
 from __future__ import annotations
 
-import math
+from pfjax.cli.common import as_flags
 
-from pfjax.cli.common import UsageError, finite
-
+#: The ``--leader`` choices: :data:`pfjax.tracking.api.LEADERS`, written out so that building the
+#: parser does not import the simulator (a test checks that the two agree).
 LEADERS = ("line", "circle", "sine", "lane-change")
 
 
@@ -42,74 +43,20 @@ def register(sub) -> None:
     p.set_defaults(func=_cmd)
 
 
-def _check(args) -> tuple[float, float]:
-    f = 1 if args.mode == "forward" else -1
-    pp = float(f) if args.p is None else finite("--p", args.p)
-    ll = float(f) if args.l is None else finite("--l", args.l)
-    if pp == 0:
-        raise UsageError("--p: must be nonzero (M is singular at p = 0), got 0")
-    if ll == 0:
-        raise UsageError("--l: must be nonzero (M is singular at l = 0), got 0")
-    finite("--gamma-max-deg", args.gamma_max_deg, positive=True, below=90, unit=" deg")
-    for flag, v in (("--speed", args.speed), ("--a", args.a), ("--k", args.k), ("--v-max", args.v_max),
-                    ("--omega-max-deg", args.omega_max_deg), ("--T", args.T), ("--dt", args.dt)):
-        finite(flag, v, positive=True)
-    if not 0.0 <= args.stop_and_go <= 1.0:
-        raise UsageError(f"--stop-and-go: expected a depth in [0, 1], got {args.stop_and_go:g}")
-    for flag, v in (("--offset", args.offset[0]), ("--offset", args.offset[1]), ("--heading-error-deg", args.heading_error_deg)):
-        finite(flag, v)
-    finite("--beta-r-deg", args.beta_r_deg, below=90, unit=" deg")
-    finite("--beta-f-deg", args.beta_f_deg, below=90, unit=" deg")
-    if args.dt > args.T:
-        raise UsageError(f"--dt: must be <= --T ({args.T:g} s), got {args.dt:g}")
-    if args.T / args.dt > 2_000_000:
-        raise UsageError(f"--T/--dt: at most 2e6 steps, got {args.T / args.dt:.3g}")
-    return pp, ll
+#: ``pfjax track``'s flags by the :func:`pfjax.tracking.run` argument they set (``horizon/dt``: the step count).
+FLAGS = {"mode": "--mode", "p": "--p", "l": "--l", "gamma_max_deg": "--gamma-max-deg", "leader": "--leader",
+         "speed": "--speed", "stop_and_go": "--stop-and-go", "a": "--a", "k": "--k", "v_max": "--v-max",
+         "omega_max_deg": "--omega-max-deg", "offset": "--offset", "heading_error_deg": "--heading-error-deg",
+         "beta_r_deg": "--beta-r-deg", "beta_f_deg": "--beta-f-deg", "horizon": "--T", "dt": "--dt",
+         "horizon/dt": "--T/--dt"}
 
 
 def _cmd(args) -> dict:
-    pp, ll = _check(args)
-    import jax
+    from pfjax.tracking.api import run
 
-    import numpy as np
-
-    from pfjax.sim.slip_profiles import constant_slip
-    from pfjax.tracking import leader as L
-    from pfjax.tracking.controller import FocusGains
-    from pfjax.tracking.geometry import lemma_bound, p_bound
-    from pfjax.tracking.lemma import zero_dynamics_stable
-    from pfjax.tracking.model import FollowerParams
-    from pfjax.tracking.simulate import (TRACK_STATUS_NAMES, TrackConfig, initial_states, scenario, simulate_batch,
-                                         stack, unstack)
-
-    f = 1 if args.mode == "forward" else -1
-    gmax = math.radians(args.gamma_max_deg)
-    params = FollowerParams(a=args.a, f=float(f), l=ll, p=pp, gamma_max=gmax, v_max=args.v_max,
-                            omega_max=math.radians(args.omega_max_deg))
-    ld = L.by_name(args.leader, speed=args.speed, depth=args.stop_and_go)
-    host = lambda tree: jax.tree_util.tree_map(np.asarray, tree)  # noqa: E731  (index in NumPy, not op by op)
-    init = unstack(host(initial_states(stack([ld]), stack([params]), np.asarray([args.offset], dtype=float),
-                                       np.asarray([math.radians(args.heading_error_deg)]))), 0)
-    slip = constant_slip(math.radians(args.beta_r_deg), math.radians(args.beta_f_deg))
-    sc = scenario(params, ld, gains=FocusGains(k=args.k), init=init, slip=slip)
-    cfg = TrackConfig(dt=args.dt, horizon=args.T, window=min(5.0, args.T / 3))
-    r = unstack(host(simulate_batch(stack([sc]), config=cfg)), 0)
-    m = r.metrics
-    lo, hi = p_bound(gmax, f)
-    status = int(r.status)
-    return {
-        "mode": args.mode, "f": f, "p": pp, "l": ll, "gamma_max_deg": args.gamma_max_deg, "leader": args.leader,
-        "converged": bool(m.converged), "phi_converged": bool(m.phi_converged),
-        "final_error_norm": float(m.final_error_norm), "final_phi_minus_pgamma": float(m.final_phi_minus_pgamma),
-        "max_abs_gamma_deg": math.degrees(float(m.max_abs_gamma)),
-        "window_max_error": float(m.window_max_z), "window_max_abs_phi_minus_pgamma": float(m.window_max_phi_err),
-        "iae": float(m.iae), "final_d": float(m.final_d), "limit_fraction": float(m.limit_fraction),
-        "min_abs_det_factor": float(m.min_abs_factor), "status": TRACK_STATUS_NAMES[status], "status_code": status,
-        "fail_time": float(r.fail_time) if math.isfinite(float(r.fail_time)) else None,
-        "lemma_p_bound": lemma_bound(gmax), "inside_lemma_bound": abs(pp) < lemma_bound(gmax),
-        "input_matrix_invertible_for_all_gamma": bool(lo < pp < hi),
-        "zero_dynamics_stable_straight": zero_dynamics_stable(args.speed, float(f), params),
-        "tolerances": {"window_s": cfg.window, "tol_z_m": cfg.tol_z, "tol_phi_rad": cfg.tol_phi},
-        "final": {k: float(v) for k, v in r.final._asdict().items()},
-        "T": cfg.n_steps * cfg.dt, "dt": cfg.dt,
-    }
+    with as_flags(FLAGS):
+        return run(args.mode, p=args.p, l=args.l, gamma_max_deg=args.gamma_max_deg, leader=args.leader,
+                   speed=args.speed, stop_and_go=args.stop_and_go, a=args.a, k=args.k, v_max=args.v_max,
+                   omega_max_deg=args.omega_max_deg, offset=tuple(args.offset),
+                   heading_error_deg=args.heading_error_deg, beta_r_deg=args.beta_r_deg,
+                   beta_f_deg=args.beta_f_deg, horizon=args.T, dt=args.dt)

@@ -115,7 +115,7 @@ def float64_runs(spec: StudySpec, controllers: dict, n_sample: int, path_index: 
     """The float64 half of :func:`float64_check` for one path: ``{controller name: SimResult}`` (NumPy,
     the :func:`sample_indices` runs only). Independent of the float32 study, so it can run before
     or while the study does. ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
-    from pfjax.montecarlo.runner import _with_gains, sample_few, sim_config
+    from pfjax.montecarlo.runner import with_gains, sample_few, sim_config
     from pfjax.sim.simulate import simulate_batch
 
     idx = sample_indices(spec, n_sample)
@@ -126,7 +126,7 @@ def float64_runs(spec: StudySpec, controllers: dict, n_sample: int, path_index: 
     for name, (ctrl, gains, _) in controllers.items():
         with jax.enable_x64(True):
             sc = _cast64(sampled.scenarios)
-            res = jax.device_get(simulate_batch(_with_gains(sc, _cast64(gains), m), controller=ctrl, config=sim_config(spec),
+            res = jax.device_get(simulate_batch(with_gains(sc, _cast64(gains), m), controller=ctrl, config=sim_config(spec),
                                                 devices=devices))
             out[name] = jax.tree_util.tree_map(lambda a: np.asarray(a)[:len(idx)], res)
     return out

@@ -331,7 +331,7 @@ class MarginSpec(_Model):
 
 
 class FalsifierSpec(_Model):
-    """Worst-case search per controller (pfjax.falsify): gradient ascent over slip profiles bounded by
+    """Worst-case search per controller (pfjax.falsification): gradient ascent over slip profiles bounded by
     ``slip_bound_deg`` with frequencies up to ``f_max_hz`` and initial errors in the boxes
     +-``lateral_offset`` m, +-``heading_error_deg``, on one path (its run 0's shape and vehicle),
     against random search with the same number of rollouts."""

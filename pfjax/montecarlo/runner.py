@@ -82,7 +82,8 @@ def batch_size(n: int) -> int:
     return -(-n // BATCH_ALIGN) * BATCH_ALIGN
 
 
-def _with_gains(sc, gains, n):
+def with_gains(sc, gains, n):
+    """Scenarios ``sc`` (a batch of ``n``) with every run's gains set to ``gains``."""
     return sc._replace(gains=jax.tree_util.tree_map(lambda g: jnp.broadcast_to(g, (n,) + jnp.shape(g)), gains))
 
 
@@ -124,10 +125,17 @@ def simulate_chunk(spec: StudySpec, path_index: int, idx: np.ndarray, name: str,
     if sampled is None:
         sampled = sample_aligned(spec, path_index, idx, slip_override=slip_override, pad_to=pad_to)
     m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
-    res = sharding.gather(simulate_batch(_with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec)))
+    res = sharding.gather(simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec)))
     df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
     for col in column_names(spec):
         df[col] = np.asarray(sampled.columns[col], dtype=float) if col in sampled.columns else np.nan
+    return add_results(df, res, n)
+
+
+def add_results(df: pd.DataFrame, res, n: int) -> pd.DataFrame:
+    """``df`` (one row per run) with the first ``n`` runs of a :class:`~pfjax.sim.SimResult` added
+    as columns: every metric (:data:`~pfjax.metrics.running.METRIC_NAMES`), ``status_code``,
+    ``status`` (its name) and ``fail_time`` (s, NaN without failure); the run table's layout."""
     for m in METRIC_NAMES:
         df[m] = np.asarray(getattr(res.metrics, m))[:n]
     df["status_code"] = np.asarray(res.status)[:n].astype(np.int8)

@@ -95,9 +95,10 @@ def column_names(spec: StudySpec) -> list[str]:
     return cols
 
 
-def _slip(spec: StudySpec, key, horizon: float):
+def _slip(spec: StudySpec, key, horizon: float, given=None):
     s = spec.slip
-    d = lambda name: draw(getattr(s, name), _q(key, name))
+    given = given or {}
+    d = lambda name: given[name] if name in given else draw(getattr(s, name), _q(key, name))
     rad = math.pi / 180
     br, bf = d("beta_r_deg"), d("beta_f_deg")
     cols = {"beta_r_deg": br, "beta_f_deg": bf}
@@ -189,18 +190,26 @@ class _Static:
         return isinstance(other, _Static) and other._json == self._json
 
 
-def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_override=None) -> Sampled:
+#: Quantities :func:`sample_runs` can take per run (``given``) instead of drawing them.
+GIVEN = ("speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", "start_s", "lateral_offset", "heading_error_deg")
+
+
+def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_override=None, key=None,
+                given: dict | None = None) -> Sampled:
     """Scenarios (without gains) and sampled columns for the given run indices of one path.
 
     ``slip_override``: optional ``(beta_r_deg, beta_f_deg)`` arrays replacing the constant slip
-    (used by the slip-margin sweep).
+    (used by the slip-margin sweep). ``key``: a JAX PRNG key to draw from instead of the study's
+    seed (run ``i`` draws from ``fold_in(key, i)``). ``given``: per-run values (arrays of
+    ``len(runs)``, config units) of some of :data:`GIVEN`, used instead of drawing them.
 
     The draws are one jitted program (:func:`_draw_runs`) per study, batch shape and precision, shared
     by the paths of one shape (line, parabola and sine pass their path in): a chunk of 2,500 runs costs
     milliseconds instead of the ~0.2 s of some hundred op-by-op dispatches.
     """
     pspec = spec.paths[path_index]
-    keys = run_keys(spec.seed, path_index, runs)
+    keys = run_keys(spec.seed, path_index, runs) if key is None else _fold_runs(key, jnp.asarray(runs, dtype=jnp.uint32))
+    given = {k: jnp.asarray(v, jnp.result_type(float)) for k, v in (given or {}).items()}
     if pspec.kind == "random":
         drawn = [random_path(jax.random.fold_in(k, Q["path"]), pspec, pspec.curvature_margin * _kappa_follow(spec)) for k in keys]
         path, circle = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *drawn), None
@@ -210,7 +219,7 @@ def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_over
     # the override is always passed (zeros and a false flag when absent): one program for both
     over = (np.zeros(len(runs)),) * 2 if slip_override is None else slip_override
     over = tuple(jnp.asarray(a, float) for a in over)
-    cols, sc = _draw_runs(keys, path, jnp.asarray(paths.entry(pspec.kind).start_u, float), over, slip_override is not None,
+    cols, sc = _draw_runs(keys, given, path, jnp.asarray(paths.entry(pspec.kind).start_u, float), over, slip_override is not None,
                           study=_Static(spec), circle=circle, batched_path=pspec.kind == "random")
     return Sampled({k: np.asarray(v) for k, v in cols.items()}, sc)
 
@@ -222,9 +231,9 @@ def _kappa_follow(spec: StudySpec) -> float:
 
 
 @partial(jax.jit, static_argnames=("study", "circle", "batched_path"))
-def _draw_runs(keys, path, u_nom, slip_override, use_override, *, study: _Static, circle: _Static | None,
+def _draw_runs(keys, given, path, u_nom, slip_override, use_override, *, study: _Static, circle: _Static | None,
                batched_path: bool):
-    """Every run's draws (vmapped over ``keys``) and its start pose on ``path`` (batched if
+    """Every run's draws (vmapped over ``keys``; per-run ``given`` values instead where given) and its start pose on ``path`` (batched if
     ``batched_path``; a circle of drawn radius if ``circle`` is its radius distribution); the
     constant slip replaced by ``slip_override`` (deg) where ``use_override``."""
     spec = study.model
@@ -232,10 +241,10 @@ def _draw_runs(keys, path, u_nom, slip_override, use_override, *, study: _Static
     horizon = spec.sim.horizon
     rad = math.pi / 180
 
-    def one(key):
-        d = lambda dist, name: draw(dist, _q(key, name))
+    def one(key, given):
+        d = lambda dist, name: given[name] if name in given else draw(dist, _q(key, name))
         speed, L, dmax = d(v.speed, "speed"), d(v.L, "L"), d(v.delta_max_deg, "delta_max_deg")
-        profile, cols = _slip(spec, key, horizon)
+        profile, cols = _slip(spec, key, horizon, given)
         start_s = d(spec.initial.start_s, "start_s")
         offset = d(spec.initial.lateral_offset, "lateral_offset")
         herr = d(spec.initial.heading_error_deg, "heading_error_deg")
@@ -244,7 +253,7 @@ def _draw_runs(keys, path, u_nom, slip_override, use_override, *, study: _Static
                             delta_rate_max=jnp.asarray(math.inf if v.delta_rate_max_deg is None else v.delta_rate_max_deg * rad, float))
         return profile, params, cols, (start_s, offset, herr * rad)
 
-    profiles, params, cols, starts = jax.vmap(one)(keys)
+    profiles, params, cols, starts = jax.vmap(one)(keys, given)
     n = keys.shape[0]
     br = jnp.where(use_override, slip_override[0], cols["beta_r_deg"])
     bf = jnp.where(use_override, slip_override[1], cols["beta_f_deg"])

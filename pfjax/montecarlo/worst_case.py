@@ -1,4 +1,4 @@
-"""A study's worst-case search: pfjax.falsify per controller against random search at equal budget."""
+"""A study's worst-case search: pfjax.falsification.falsify per controller against random search at equal budget."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import jax
 import numpy as np
 
-from pfjax.falsify import falsify, random_search, worst_trajectory
+from pfjax.falsification import falsify, random_search, worst_trajectory
 from pfjax.montecarlo.config import StudySpec
 from pfjax.montecarlo.runner import sample_few, sim_config
 from pfjax import paths

@@ -50,7 +50,7 @@ def captions(spec: StudySpec) -> dict[str, str]:
     """The caption under each figure of :data:`FIGURES` in ``report.html``."""
     band_mm = 1000 * spec.success.band
     return {
-        "worst_cases": "Worst cases found by gradient ascent through the simulator (pfjax.falsify) over bounded, "
+        "worst_cases": "Worst cases found by gradient ascent through the simulator (pfjax.falsification) over bounded, "
         "band-limited slip profiles and initial errors: the worst run's path, slip and lateral error, and the worst "
         "objective found against the rollouts spent, compared with random search of the same budget.",
         "headline": "Which controller is more robust: success rate with its 95 % interval, slip margin per axis, IAE spread.",

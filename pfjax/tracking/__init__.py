@@ -4,10 +4,12 @@ Rooms: :mod:`~pfjax.tracking.model` (car-like follower with steering state, opti
 :mod:`~pfjax.tracking.leader` (leader motions), :mod:`~pfjax.tracking.geometry` (focus point,
 virtual connection, tracking error, input matrix), :mod:`~pfjax.tracking.controller`
 (input-output linearisation with limits), :mod:`~pfjax.tracking.simulate` (one scan, batched),
-:mod:`~pfjax.tracking.lemma` (Lemma 8.1 checks), :mod:`~pfjax.tracking.cli` (``pfjax track``).
+:mod:`~pfjax.tracking.lemma` (Lemma 8.1 checks), :mod:`~pfjax.tracking.api` (:func:`run`: one checked run
+from plain arguments, the library behind ``pfjax track``).
 """
 
 from pfjax.tracking import leader
+from pfjax.tracking.api import run
 from pfjax.tracking.controller import FocusGains, focus_control
 from pfjax.tracking.geometry import (connection, focus_point, input_det, input_matrix, invertibility_factor,
                                      lemma_bound, p_bound, reference_point, tracking_error)
@@ -18,6 +20,6 @@ from pfjax.tracking.simulate import (TRACK_STATUS_NAMES, SensorNoise, TrackConfi
 __all__ = [
     "FocusGains", "Follower", "FollowerParams", "SensorNoise", "TRACK_STATUS_NAMES", "TrackConfig", "TrackScenario",
     "TrackStatus", "connection", "focus_control", "focus_point", "follower_rhs", "initial_state", "initial_states", "input_det",
-    "input_matrix", "invertibility_factor", "leader", "lemma_bound", "p_bound", "reference_point", "scenario",
-    "simulate", "simulate_batch", "stack", "tracking_error", "unstack",
+    "input_matrix", "invertibility_factor", "leader", "lemma_bound", "p_bound", "reference_point", "run",
+    "scenario", "simulate", "simulate_batch", "stack", "tracking_error", "unstack",
 ]

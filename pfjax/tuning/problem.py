@@ -82,7 +82,7 @@ def make_problem(controller: str, scenario: str, *, cost: CostSpec = CostSpec(),
     base = factory() if base_gains is None else base_gains
     tun = Tunable(base, tuple(fields))
     if scenario in sets:
-        from pfjax.scenarios import paper_scenario
+        from pfjax.sim.scenario import paper_scenario
 
         batches = [stack([paper_scenario(t, base)]) for t in sets[scenario]]
         cfg = config or SimConfig(record=False)
@@ -111,14 +111,14 @@ def evaluate(problem: Problem, theta) -> float:
     """The problem's cost at ``theta`` (one evaluation, ``n_per_eval`` rollouts)."""
     import jax.numpy as jnp
 
-    _cost_fns(problem)
+    cost_functions(problem)
     return float(_COSTS[id(problem)][3](jnp.asarray(theta, jnp.result_type(float))))
 
 
 _COSTS: dict = {}
 
 
-def _cost_fns(problem: Problem):
+def cost_functions(problem: Problem):
     """(scalar cost, population cost) of a problem, built once per Problem object so repeated
     tuning runs (seeds) reuse the compiled functions."""
     entry = _COSTS.get(id(problem))
@@ -155,7 +155,7 @@ def tune(problem: Problem, method: str, *, key, ga_options: GAOptions = GAOption
         n = errors.integer("n_starts", n_starts, low=1, high=1_000_000)
         resources.check_memory("n_starts", 2 * n * problem.n_per_eval * per_run * (1 + problem.lower.size),
                                f"{n} starts x {problem.n_per_eval} runs with {problem.lower.size} tangents")
-    f_scalar, f_pop = _cost_fns(problem)
+    f_scalar, f_pop = cost_functions(problem)
     if method == "ga":
         f = f_pop
         return ga_tune(f, problem.lower, problem.upper, key=key, options=ga_options, n_per_eval=problem.n_per_eval,

@@ -1,7 +1,7 @@
 """Worst-case search: gradient ascent through the simulator (a falsifier) and its random-sampling baseline.
 
 For a controller ``C`` with gains ``g`` on a path, find the scenario ``x`` in the search space
-(:mod:`pfjax.falsify.space`: slip bounded by ``A`` with bandwidth ``f_max``, initial conditions in a
+(:mod:`pfjax.falsification.space`: slip bounded by ``A`` with bandwidth ``f_max``, initial conditions in a
 box) that maximises an error measure ``J(x)`` of the simulated run (``SimConfig(record=False)``):
 
 * ``"iae"`` (default) ``int |d| dt``; ``"ise"`` ``int d^2 dt``; ``"itae"`` ``int t |d| dt``;
@@ -53,7 +53,7 @@ from pfjax.models.slip import Pose, SlipParams
 from pfjax.numerics import autodiff
 from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, unstack
 from pfjax.sim.status import Status
-from pfjax.falsify.space import (
+from pfjax.falsification.space import (
     RawParams,
     SearchSpace,
     build_scenario,
@@ -194,7 +194,7 @@ def falsify(controller: Controller, gains, path, *, config: SimConfig, slip_boun
         slip_bound_deg: slip amplitude bound ``A`` per axle, deg.
         f_max_hz: slip bandwidth, Hz (0: constant slip).
         ic_bounds: ``{"d": (lo, hi) m, "theta_e_deg": (lo, hi) deg, "u": (lo, hi)}``
-            (:func:`pfjax.falsify.space.search_space`).
+            (:func:`pfjax.falsification.space.search_space`).
         objective: one of :data:`OBJECTIVES`.
         n_restarts: random starts, ascended together as one vmapped batch.
         steps: adam steps per start.
@@ -202,7 +202,7 @@ def falsify(controller: Controller, gains, path, *, config: SimConfig, slip_boun
         key: ``jax.random.PRNGKey`` for the starts.
         params: physical parameters (default ``SlipParams`` with a 30 deg steering limit).
         noise: ``SensorNoise`` or ``None``.
-        n_freq, with_constant, seq_dt: the slip's basis (:func:`pfjax.falsify.space.search_space`).
+        n_freq, with_constant, seq_dt: the slip's basis (:func:`pfjax.falsification.space.search_space`).
 
     Returns:
         :class:`FalsifierResult`; ``n_rollouts = n_gradients = n_restarts * steps``, history per step.
@@ -237,7 +237,7 @@ def random_search(controller: Controller, gains, path, *, config: SimConfig, sli
                   f_max_hz: float, ic_bounds: dict, objective: str = "iae", n_samples: int, key: Array,
                   batch_size: int = 64, params: SlipParams | None = None, noise=None, n_freq: int = 8,
                   with_constant: bool = True, seq_dt: float = 0.05, devices=None) -> FalsifierResult:
-    """The baseline: ``n_samples`` random draws of the same set (:func:`pfjax.falsify.space.sample`),
+    """The baseline: ``n_samples`` random draws of the same set (:func:`pfjax.falsification.space.sample`),
     simulated with :func:`~pfjax.sim.simulate_batch` in chunks of ``batch_size`` (the last one
     padded, so one compile), the worst kept. All draws come from ``key`` at once, so the result
     does not depend on ``batch_size``. Arguments as :func:`falsify`; history per sample.

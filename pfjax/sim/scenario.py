@@ -1,4 +1,4 @@
-"""The source's test scenarios (spec §6) and a builder for single scenarios.
+"""Single scenarios: the source's tests from their start poses (spec §6) and a checked builder.
 
 | test     | path        | initial (x, y) | initial theta |
 |----------|-------------|----------------|---------------|

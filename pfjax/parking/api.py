@@ -1,0 +1,262 @@
+"""The parking subsystem's entry points for Python callers: one run (:func:`run`) and the search of
+the garage's switching parameters (:func:`search`), checked as the command line checks them.
+
+``pfjax parking`` and ``pfjax parking-search`` are these two functions: every bad argument raises
+:class:`~pfjax.errors.InputError` with one line starting with the argument's name (``"x0: ..."``,
+``"front: must be < 0.54 ..."``), which the command line reprints with the flag's name. Errors in a
+map file, or in the start pose against the map, raise its subclass
+:class:`~pfjax.parking.maps.MapError`: the message is the map check's own (it names the key in
+the file, e.g. ``obstacles[1].name: ...``) and the ``key`` is ``"map"`` or ``"x0"``.
+
+Nothing is simulated before every argument has been checked. The results are computed in the
+precision JAX is configured for; the command line enables float64 (``jax_enable_x64``), and a
+caller that does the same gets the command line's numbers.
+
+Only :mod:`pfjax.errors` is imported here at module level: importing :mod:`pfjax.parking` stays cheap.
+"""
+
+from __future__ import annotations
+
+import os
+
+from pfjax import errors
+from pfjax.errors import InputError
+
+__all__ = ["run", "search"]
+
+#: Travel directions :func:`run` accepts, with their sign.
+DIRECTIONS = {"forward": 1, "backward": -1}
+#: Search methods :func:`search` accepts.
+METHODS = ("ga", "grid")
+#: Most scanner periods one run may take (``t_max / scan_period``; the simulator's loop bound).
+MAX_PERIODS = 20000
+#: Longest scanner period, s.
+MAX_SCAN_PERIOD = 10.0
+#: Garage rule of :func:`run` on the built-in garage: switch back to forward when backing past this x, m.
+GARAGE_XS = -0.9
+
+
+def _map_spec(map) -> str:
+    """``map`` as the string :func:`pfjax.parking.maps.load_map` takes (a name or a path)."""
+    spec = os.fspath(map) if isinstance(map, (str, os.PathLike)) else None
+    if not isinstance(spec, str):
+        raise InputError(f"map: expected 'parallel', 'garage' or a TOML/JSON file path, got {map!r:.80}", "map")
+    return spec
+
+
+def _start(x0, spec: str, default_start: dict) -> tuple[float, float, float]:
+    """The start pose (x m, y m, theta deg), checked, or the map's default when ``x0`` is None."""
+    if x0 is None:
+        start = default_start.get(spec)
+        if start is None:
+            raise InputError(f"x0: required (no default start for map {spec!r})", "x0")
+        return tuple(float(v) for v in start)
+    try:
+        values = None if isinstance(x0, (str, bytes)) else list(x0)
+    except TypeError:
+        values = None
+    if values is None or len(values) != 3:
+        raise InputError(f"x0: expected 3 numbers (x m, y m, theta deg), got {x0!r:.80}", "x0")
+    x, y, theta = (errors.number("x0", v) for v in values)
+    errors.number("x0", theta, below=90.0, unit=" deg")
+    return x, y, theta
+
+
+def _schedule(alpha_schedule):
+    """The alpha schedule, padded (:func:`pfjax.parking.schedules.pad_schedule`)."""
+    from pfjax.parking.schedules import pad_schedule, parse_schedule
+
+    if isinstance(alpha_schedule, str):
+        try:
+            return parse_schedule(alpha_schedule)
+        except ValueError as e:
+            raise InputError(f"alpha_schedule: {e}", "alpha_schedule") from None
+    if errors.is_number(alpha_schedule):
+        alpha_schedule = (alpha_schedule,)
+    try:
+        values = None if isinstance(alpha_schedule, bytes) else list(alpha_schedule)
+    except TypeError:
+        values = None
+    if values is None:
+        raise InputError(f"alpha_schedule: expected numbers or a comma-separated string, got {alpha_schedule!r:.80}",
+                         "alpha_schedule")
+    values = [errors.number(f"alpha_schedule[{i}]", v, positive=True) for i, v in enumerate(values)]
+    try:
+        return pad_schedule(values)
+    except ValueError as e:
+        raise InputError(f"alpha_schedule: {e}", "alpha_schedule") from None
+
+
+def _checked(map, x0, *, k1, k2, speed, scan_period, front, lag, t_max, default_start: dict) -> dict:
+    """The arguments :func:`run` and :func:`search` share, checked in the command line's order;
+    the map loaded and the start pose checked against it."""
+    import numpy as np
+
+    from pfjax.parking.geometry import L2_LENGTH
+    from pfjax.parking.maps import MapError, check_start, load_map, to_obstacle_map
+
+    k1, k2, speed, scan_period, t_max = (errors.number(key, v, positive=True) for key, v in (
+        ("k1", k1), ("k2", k2), ("speed", speed), ("scan_period", scan_period), ("t_max", t_max)))
+    if front is not None:
+        front = errors.number("front", front, positive=True)
+        if front >= L2_LENGTH:
+            raise InputError(f"front: must be < {L2_LENGTH:g} (the rectangle length), got {front:g}", "front")
+    if scan_period > MAX_SCAN_PERIOD or t_max / scan_period > MAX_PERIODS:
+        raise InputError(f"scan_period: value {scan_period:g}, expected t_max / scan_period <= {MAX_PERIODS} "
+                         f"and <= {MAX_SCAN_PERIOD:g} s", "scan_period")
+    if not isinstance(lag, (bool, np.bool_)):
+        raise InputError(f"lag: expected True or False, got {lag!r:.80}", "lag")
+    spec = _map_spec(map)
+    try:
+        name, polygons = load_map(spec)
+    except MapError as e:
+        raise MapError(str(e), "map") from None
+    x0 = _start(x0, spec, default_start)
+    from pfjax.parking.model import control_params
+    from pfjax.parking.simulate import run_params
+
+    shape = run_params(x0, front=front).shape  # the rectangle the run will simulate
+    try:
+        check_start(polygons, x0, shape, key="x0")
+    except MapError as e:
+        raise MapError(str(e), "x0") from None
+    return {"name": name, "spec": spec, "omap": to_obstacle_map(list(polygons.values())), "x0": x0, "front": front,
+            "scan_period": scan_period, "t_max": t_max,
+            "control": control_params(k1=k1, k2=k2, speed=speed, lag=bool(lag))}
+
+
+def run(map="parallel", x0=None, *, direction="forward", alpha_schedule=(1.0,), xs=None, k1=32.0, k2=8.0,
+        speed=0.05, scan_period=0.1, front=None, lag=False, t_max=200.0) -> dict:
+    """One run of the switching parking controller (``pfjax parking``): outcome, parking time and
+    the log of direction switches.
+
+    Args:
+        map: ``"parallel"`` (the parallel-parking slot), ``"garage"``, or the path (str or
+            path-like) of a TOML/JSON map file (:mod:`pfjax.parking.maps`).
+        x0: start pose (x m, y m, theta deg), ``|theta| < 90 deg``; None: case A's
+            (-0.4 m, 0.5 m, 0 deg) on ``"parallel"``, (-0.9 m, 0.6 m, -85 deg) on ``"garage"``
+            (required for a map file). The robot's body must not overlap an obstacle there.
+        direction: first travel direction, ``"forward"`` or ``"backward"``.
+        alpha_schedule: the gain factor alpha (dimensionless, each > 0) at the start, then after
+            each direction switch, the last one holding from then on; 1 to 8 numbers, or the
+            command line's comma-separated string (``"1,0.5,8,1"``).
+        xs: garage rule, m: after the first switch to backward, switch back to forward when
+            backing past ``x = xs``; None: no such rule, except on ``"garage"`` (-0.9 m).
+        k1: gain on y, 1/m^2 (> 0).
+        k2: gain on tan(theta), 1/m (> 0).
+        speed: travel speed |v1|, m/s (> 0).
+        scan_period: the scanner's sampling period, s (> 0, at most 10 s and ``t_max / 20000``).
+        front: reach a_f of the robot's rectangle ahead of the axle, m, in (0, 0.54); None: the
+            calibrated value (:mod:`pfjax.parking.calibrate`).
+        lag: True: the yaw rate follows the command through the PI loop (kP 0.8, kI 16 1/s).
+        t_max: timeout, s (> 0).
+
+    Returns:
+        What ``pfjax parking --json`` prints: ``map`` (name), ``x0`` ({x m, y m, theta_deg}),
+        ``direction``, ``alpha_schedule`` (padded to 8 values), ``xs`` (m or None), ``a_f`` (m),
+        then :func:`pfjax.parking.summary.run_summary`: ``converged``, ``status``, ``time_s``,
+        ``switches``, ``switch_log`` ([{t s, x m, y m, theta_deg, cause}]), ``final``
+        ({x m, y m, theta_deg}), ``error`` (``|x| + sqrt(y^2 + tan^2 theta)``) and ``distance_m``.
+
+    Raises:
+        InputError: a bad argument; the message starts with its name. A map file that cannot be
+            read or is invalid, and a start pose in an obstacle, raise its subclass
+            :class:`~pfjax.parking.maps.MapError` with key ``"map"`` or ``"x0"``.
+    """
+    from pfjax.parking.schedules import CASES, GARAGE_START
+
+    if not isinstance(direction, str) or direction not in DIRECTIONS:
+        raise InputError(f"direction: expected 'forward' or 'backward', got {direction!r:.80}", "direction")
+    schedule = _schedule(alpha_schedule)
+    if xs is not None:
+        xs = errors.number("xs", xs)
+    c = _checked(map, x0, k1=k1, k2=k2, speed=speed, scan_period=scan_period, front=front, lag=lag, t_max=t_max,
+                 default_start={"parallel": CASES["A"]["x0"], "garage": GARAGE_START})
+    if xs is None and c["spec"] == "garage":  # the garage always has its X_s rule
+        xs = GARAGE_XS
+
+    from pfjax.parking.simulate import ParkingConfig, run_jit, run_params
+    from pfjax.parking.summary import run_summary
+
+    x0 = c["x0"]
+    p = run_params(x0, DIRECTIONS[direction], list(schedule), xs=xs, front=c["front"], scan_period=c["scan_period"],
+                   control=c["control"])
+    r = run_jit(p, c["omap"], ParkingConfig(t_max=c["t_max"]))
+    return {"map": c["name"], "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]}, "direction": direction,
+            "alpha_schedule": [float(a) for a in schedule], "xs": xs, "a_f": float(p.shape.front), **run_summary(r)}
+
+
+def search(method, *, map="garage", x0=None, n=32, generations=100, population=20, seed=0, weight=100.0, k1=32.0,
+           k2=8.0, speed=0.05, scan_period=0.1, front=None, lag=False, t_max=200.0) -> dict:
+    """Search of the garage's switching parameters (X_s, alpha1, alpha2) (``pfjax parking-search``):
+    the source's 24-bit GA or an exhaustive ``n x n x n`` grid on the chromosome lattice
+    (:mod:`pfjax.parking.switch_search`), maximising ``J = 1 / (t_e + weight * e)``.
+
+    Each candidate runs forward from ``x0`` with alpha = 1, then alpha1 after the first switch and
+    alpha2 from the second on, and the garage rule at X_s; more than 10 switches fail it.
+
+    Args:
+        method: ``"ga"`` or ``"grid"``.
+        map: ``"garage"``, ``"parallel"`` or the path (str or path-like) of a TOML/JSON map file.
+        x0: start pose (x m, y m, theta deg), ``|theta| < 90 deg``; None: (-0.9 m, 0.6 m, -85 deg)
+            on ``"garage"`` (required for any other map).
+        n: grid levels per parameter, 2..64 (grid only; ``n^3`` runs).
+        generations: GA generations N, >= 1 (GA only).
+        population: GA population size n, >= 2 (GA only).
+        seed: PRNG seed of the GA, 0..2^63 - 1 (GA only).
+        weight: end-error weight w in J, s/m (>= 0).
+        k1: gain on y, 1/m^2 (> 0).
+        k2: gain on tan(theta), 1/m (> 0).
+        speed: travel speed |v1|, m/s (> 0).
+        scan_period: the scanner's sampling period, s (> 0, at most 10 s and ``t_max / 20000``).
+        front: reach a_f of the robot's rectangle ahead of the axle, m, in (0, 0.54); None: the
+            calibrated value.
+        lag: True: the yaw rate follows the command through the PI loop (kP 0.8, kI 16 1/s).
+        t_max: timeout of each run, s (> 0).
+
+    Returns:
+        What ``pfjax parking-search --json`` prints: ``map`` (name), ``x0`` ({x m, y m,
+        theta_deg}), ``method``, the best ``xs`` (m), ``alpha1``, ``alpha2``, its ``fitness``,
+        ``time_s``, ``status`` (name), ``converged``, ``switches`` and ``error``, and
+        ``n_simulations``; the grid adds ``n``, the GA ``bits`` (24), ``history_best_fitness``,
+        ``history_mean_fitness`` (per generation) and ``seed``.
+
+    Raises:
+        InputError: a bad argument; the message starts with its name. A map file that cannot be
+            read or is invalid, and a start pose in an obstacle, raise its subclass
+            :class:`~pfjax.parking.maps.MapError` with key ``"map"`` or ``"x0"``.
+    """
+    if not isinstance(method, str) or method not in METHODS:
+        raise InputError(f"method: expected 'ga' or 'grid', got {method!r:.80}", "method")
+    weight = errors.number("weight", weight, nonnegative=True)
+    n = errors.integer("n", n, low=2, high=64)
+    population = errors.integer("population", population, low=2)
+    generations = errors.integer("generations", generations, low=1)
+    seed = errors.seed("seed", seed)
+    from pfjax.parking.schedules import GARAGE_START
+
+    c = _checked(map, x0, k1=k1, k2=k2, speed=speed, scan_period=scan_period, front=front, lag=lag, t_max=t_max,
+                 default_start={"garage": GARAGE_START, "parallel": None})
+
+    import dataclasses
+
+    import jax
+
+    from pfjax.parking.switch_search import SEARCH_CONFIG, search_ga, search_grid
+    from pfjax.parking.simulate import STATUS_NAMES, run_params
+
+    base = run_params(c["x0"], 1, (1.0,), xs=-1.0, front=c["front"], scan_period=c["scan_period"], control=c["control"])
+    cfg = dataclasses.replace(SEARCH_CONFIG, t_max=c["t_max"])
+    if method == "ga":
+        from pfjax.tuning.ga import GAOptions
+
+        out = search_ga(c["omap"], key=jax.random.PRNGKey(seed), base=base, weight=weight, cfg=cfg,
+                        options=GAOptions(population_size=population, generations=generations))
+        out["seed"] = seed
+    else:
+        out = search_grid(c["omap"], n=n, base=base, weight=weight, cfg=cfg, chunk=min(1024, n**3))
+        out.pop("table")
+    out["status"] = STATUS_NAMES[int(out["status"])]
+    out["converged"] = out["status"] == "converged"
+    x0 = c["x0"]
+    return {"map": c["name"], "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]}, **out}
