@@ -90,7 +90,7 @@ def design_mixed(v: float = 1.0, L: float = 0.2, alpha: float = 10.0, beta: floa
 
 #: :func:`scenarios`'s arguments -> the study config's keys.
 _SCENARIO_KEYS = {"speed": "vehicle.speed", "L": "vehicle.L", "delta_max_deg": "vehicle.delta_max_deg",
-                  "beta_r_deg": "slip.beta_r_deg", "beta_f_deg": "slip.beta_f_deg", "start_s": "initial.start_s",
+                  "beta_r_deg": "slip.beta_r_deg", "beta_f_deg": "slip.beta_f_deg", "start_along_m": "initial.start_along_m",
                   "lateral_offset": "initial.lateral_offset", "heading_error_deg": "initial.heading_error_deg"}
 
 
@@ -107,7 +107,7 @@ class Scenarios(NamedTuple):
 
 
 def scenarios(path: str = "sine", n: int = 1, *, beta_r_deg=5.0, beta_f_deg=5.0, lateral_offset=0.0,
-              heading_error_deg=0.0, start_s=0.0, speed=1.0, L=0.2, delta_max_deg=30.0, convention: str = "source",
+              heading_error_deg=0.0, start_along_m=0.0, speed=1.0, L=0.2, delta_max_deg=30.0, convention: str = "source",
               horizon: float = 20.0, key=0) -> Scenarios:
     """``n`` runs on a registered path (:data:`pfjax.paths.PATHS`), vectorised: each quantity is a
     number (every run), an array of ``n`` numbers (run by run), or a distribution
@@ -119,7 +119,7 @@ def scenarios(path: str = "sine", n: int = 1, *, beta_r_deg=5.0, beta_f_deg=5.0,
         n: number of runs.
         beta_r_deg, beta_f_deg: constant rear and front slip angles, deg.
         lateral_offset: start offset left of the path, m. heading_error_deg: start heading error, deg.
-        start_s: start, m along the path from its nominal start.
+        start_along_m: start, m along the path from its nominal start.
         speed: m/s. L: wheelbase, m. delta_max_deg: steering limit, deg.
         convention: front-slip sign convention (``source`` or ``lenain``).
         horizon: s, only to size slip sequences (the simulation's horizon is :func:`simulate`'s).
@@ -133,7 +133,7 @@ def scenarios(path: str = "sine", n: int = 1, *, beta_r_deg=5.0, beta_f_deg=5.0,
 
     n = errors.integer("n", n, low=1, high=100_000_000)
     values = dict(speed=speed, L=L, delta_max_deg=delta_max_deg, beta_r_deg=beta_r_deg, beta_f_deg=beta_f_deg,
-                  start_s=start_s, lateral_offset=lateral_offset, heading_error_deg=heading_error_deg)
+                  start_along_m=start_along_m, lateral_offset=lateral_offset, heading_error_deg=heading_error_deg)
     dists, given = {}, {}
     for name, v in values.items():
         if isinstance(v, (Dist, dict)):
@@ -155,7 +155,7 @@ def scenarios(path: str = "sine", n: int = 1, *, beta_r_deg=5.0, beta_f_deg=5.0,
             "vehicle": {"speed": dists["speed"], "L": dists["L"], "delta_max_deg": dists["delta_max_deg"],
                         "convention": convention},
             "slip": {"beta_r_deg": dists["beta_r_deg"], "beta_f_deg": dists["beta_f_deg"]},
-            "initial": {k: dists[k] for k in ("start_s", "lateral_offset", "heading_error_deg")}}
+            "initial": {k: dists[k] for k in ("start_along_m", "lateral_offset", "heading_error_deg")}}
     try:
         spec, _ = load_study(data=data)
     except errors.InputError as e:

@@ -11,9 +11,6 @@ from __future__ import annotations
 
 import copy
 import difflib
-import hashlib
-import json
-import math
 import re
 import tomllib
 from pathlib import Path
@@ -142,6 +139,3 @@ def load(defaults: dict, path: str | Path | None = None, overrides: list[str] = 
     return cfg
 
 
-def config_hash(cfg: dict) -> str:
-    """SHA-256 of the canonical JSON of ``cfg``."""
-    return hashlib.sha256(json.dumps(cfg, sort_keys=True, separators=(",", ":")).encode()).hexdigest()

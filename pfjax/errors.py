@@ -181,3 +181,22 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
         sys.stderr.write("\n")  # below a progress bar's partial line
         print(f"{prog}: interrupted; {interrupted}", file=sys.stderr)
         return EXIT_INTERRUPTED
+
+
+class PfjaxDeprecationWarning(FutureWarning):
+    """An old spelling of a config key, flag or argument that pfjax still reads (for one release)."""
+
+
+def deprecated(old: str, new: str) -> None:
+    """Warn once per spelling that ``old`` is read as ``new`` and will be removed."""
+    import warnings
+
+    if (old, new) in _DEPRECATIONS:
+        return
+    _DEPRECATIONS.add((old, new))
+    # one line on stderr, not the location inside pydantic or argparse that read the old spelling
+    warnings.warn_explicit(f"{old} is deprecated: it is read as {new}, and will be refused in the next release",
+                           PfjaxDeprecationWarning, "pfjax", 0, module="pfjax")
+
+
+_DEPRECATIONS: set = set()

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import platform
 import sys
 import time
 from pathlib import Path
@@ -35,7 +34,8 @@ from tqdm import tqdm  # noqa: E402
 
 from pfjax import controllers as C  # noqa: E402
 from pfjax.analysis import equilibrium, stability_map  # noqa: E402
-from pfjax.config import ConfigError, config_hash, load  # noqa: E402
+from pfjax.config import ConfigError, load  # noqa: E402
+from pfjax.provenance import config_hash  # noqa: E402
 from pfjax.errors import InputError, command_main  # noqa: E402
 from pfjax.jsonio import dumps  # noqa: E402
 from pfjax.models import SlipParams  # noqa: E402
@@ -52,6 +52,8 @@ from pfjax.sim import constant_slip  # noqa: E402
 from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack  # noqa: E402
 from pfjax.synthesis import mixed_bounds_for_gain, mixed_h2_hinf, slip_design_plant  # noqa: E402
 from pfjax.synthesis.norms import closed_loop, h2_norm, hinf_norm  # noqa: E402
+from pfjax.provenance import parquet_metadata, stamp as provenance_stamp  # noqa: E402
+from pfjax.tables import write_parquet  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -411,7 +413,7 @@ def write_report(out: Path, cfg, syn, rows, pi_df, stab, verdict_rows, figs, sta
                     "final δ [deg]", "max |δ_cmd| (command) [deg]", "max |δ| (applied) [deg]", "∫δ² dt [rad²·s]",
                     "TV(δ) [rad]", "saturated"],
                    [[r["path"], r["controller"], r["status"], fmt(r["iae"]), fmt(1000 * r["steady_abs_d"], 2),
-                     fmt(math.degrees(r["steady_abs_theta_e"]), 2), fmt(r["settling_time"], 2),
+                     fmt(math.degrees(r["steady_abs_theta_e_rad"]), 2), fmt(r["settling_time"], 2),
                      fmt(math.degrees(r["final_delta"]), 2), fmt(math.degrees(r["max_abs_delta_cmd"]), 1),
                      fmt(math.degrees(r["max_abs_delta"]), 1), fmt(r["steer_energy"]), fmt(r["steer_tv"]),
                      f"{100 * r['sat_fraction']:.1f} %"] for r in rows]))
@@ -578,15 +580,14 @@ def run(args) -> int:
             figs["pi"] = figures.save(figures.pi_assignment_figure(list(pi_df.reading), line_traces, ok), figdir, "pi_readings")
             figs["sine_error"] = figures.save(figures.sine_error_figure(sine["x"], sine["abs_d"], sine["kappa_x"], sine["kappa"], sine["dkappa_ds"], "mixed"), figdir, "sine_error")
             pbar.update(1)
-        stamp = {"pfjax_version": pfjax.__version__, "config_sha256": config_hash(cfg), "seed": cfg["seed"],
-                 "machine": f"{platform.machine()} {platform.system()}, {jax.device_count()} {jax.default_backend()} device(s), jax {jax.__version__}",
-                 "wall_s": time.time() - t0}
+        stamp = {**provenance_stamp(cfg, cfg["seed"]), "wall_s": time.time() - t0}
         runs = pd.DataFrame(rows)
         runs.insert(0, "config_sha256", stamp["config_sha256"])
-        runs.to_parquet(tmp / "runs.parquet", index=False)
+        meta = parquet_metadata(cfg, cfg["seed"])
+        write_parquet(runs, tmp / "runs.parquet", meta)
         runs.to_csv(tmp / "runs.csv", index=False)
         pi_df.to_csv(tmp / "pi_readings.csv", index=False)
-        stab_df.to_parquet(tmp / "stability.parquet", index=False)
+        write_parquet(stab_df, tmp / "stability.parquet", meta)
         sine_out = {k: v for k, v in sine.items() if not isinstance(v, np.ndarray)}
         summary = {"study": cfg["name"], **stamp, "config": cfg, "synthesis": syn,
                    "runs": rows, "pi_consistent_readings": list(pi_df[pi_df.consistent].reading),

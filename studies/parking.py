@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import platform
 import sys
 import time
 from pathlib import Path
@@ -35,7 +34,8 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from pfjax.config import ConfigError, config_hash, load  # noqa: E402
+from pfjax.config import ConfigError, load  # noqa: E402
+from pfjax.provenance import config_hash  # noqa: E402
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.jsonio import dumps  # noqa: E402
 from pfjax.outputs import OutputDir, check_name  # noqa: E402
@@ -54,6 +54,8 @@ from pfjax.report.figures import save  # noqa: E402
 from pfjax.reproduce.parking import GA_SOLUTIONS  # noqa: E402
 from pfjax.reproduce.parking import verdicts as parking_verdicts  # noqa: E402
 from pfjax.tuning.ga import GAOptions  # noqa: E402
+from pfjax.provenance import parquet_metadata, stamp as provenance_stamp  # noqa: E402
+from pfjax.tables import write_parquet  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULTS = {
@@ -351,19 +353,13 @@ def run_study(cfg: dict, out: Path, quick=False) -> dict:
     steps.close()
 
     cases = pd.DataFrame(case_rows)
-    stamp = {"config_sha256": config_hash(cfg), "seed": cfg["seed"], "pfjax_version": pfjax.__version__}
-    meta = {b"pfjax": dumps(stamp).encode()}
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
+    stamp = provenance_stamp(cfg, cfg["seed"])
+    meta = parquet_metadata(cfg, cfg["seed"])
     for name, df in (("cases", cases), ("assumptions", sens), ("grid", grid_df.drop(columns=["converged_fraction"])),
                      ("start_map", pd.DataFrame(smap)), ("montecarlo", mc_df)):
-        t = pa.Table.from_pandas(df, preserve_index=False)
-        pq.write_table(t.replace_schema_metadata({**(t.schema.metadata or {}), **meta}), out / f"{name}.parquet")
+        write_parquet(df, out / f"{name}.parquet", meta)
     summary = {
         "study": cfg["name"], **stamp, "quick": quick, "config": cfg,
-        "machine": {"python": platform.python_version(), "jax": jax.__version__, "platform": platform.platform(),
-                    "cpu_count": __import__("os").cpu_count()},
         "calibration": cal, "cases": case_rows,
         "assumptions": sweep, "source_outcomes": outcomes,
         "search": {"ga": ga, "ga_runs": ga_runs, "grid": grid}, "start_map": smap, "montecarlo": mc,

@@ -13,9 +13,7 @@ sweep's successes ``k`` of ``n`` runs per controller, axis and amplitude), ``fig
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
-import math
 import platform
 import sys
 import time
@@ -32,10 +30,13 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from pfjax import __version__  # noqa: E402
-from pfjax.config import ConfigError, config_hash, load  # noqa: E402
+from pfjax.config import ConfigError, load  # noqa: E402
+from pfjax.provenance import config_hash  # noqa: E402
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.jsonio import dumps  # noqa: E402
 from pfjax.outputs import OutputDir  # noqa: E402
+from pfjax.provenance import parquet_metadata  # noqa: E402
+from pfjax.tables import write_parquet  # noqa: E402
 
 DEFAULTS = {
     "heldout": "studies/tuning_heldout.toml",
@@ -213,7 +214,7 @@ def _report(summary: dict) -> str:
     gr = [r for r in s["tuning_runs"] if r["method"] == "gradient"]
     t = s["targets"]
     f = lambda x, d=4: "n/a" if x is None else (f"{x:.{d}f}" if isinstance(x, float) else str(x))
-    lines = [f"# Tuning study: GA vs gradient, robust designs\n",
+    lines = ["# Tuning study: GA vs gradient, robust designs\n",
              f"pfjax {s['pfjax_version']}, config sha256 `{s['config_sha256'][:16]}…`, {s['machine']}, total {s['wall_s']:.0f} s.\n",
              "## 1. PI on the source's line test (IAE, slip 5°)\n",
              _md_table(s["tuning_runs"], ["method", "seed", "cost", "n_rollouts", "wall_s", "gains"],
@@ -325,13 +326,9 @@ def run(cfg: dict, out: Path, progress: bool) -> dict:
     }
     summary["wall_s"] = time.time() - t0
     out.mkdir(parents=True, exist_ok=True)
-    meta = {b"pfjax_version": __version__.encode(), b"config_sha256": summary["config_sha256"].encode()}
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
+    meta = parquet_metadata(cfg, None, config_sha256=summary["config_sha256"])
     for name, frame in (("tuning_runs", hist), ("heldout", df), ("margin", sweep)):
-        tab = pa.Table.from_pandas(frame, preserve_index=False)
-        pq.write_table(tab.replace_schema_metadata({**(tab.schema.metadata or {}), **meta}), out / f"{name}.parquet")
+        write_parquet(frame, out / f"{name}.parquet", meta)
     _figures(hist, out)
     (out / "summary.json").write_text(dumps(summary) + "\n")
     (out / "report.md").write_text(_report(summary))

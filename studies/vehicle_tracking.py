@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import platform
 import sys
 import time
 from pathlib import Path
@@ -31,7 +30,8 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from pfjax.config import ConfigError, config_hash, load, parse_override, read_toml  # noqa: E402
+from pfjax.config import ConfigError, load, parse_override, read_toml  # noqa: E402
+from pfjax.provenance import config_hash  # noqa: E402
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.jsonio import dumps  # noqa: E402
 from pfjax.outputs import OutputDir, check_name  # noqa: E402
@@ -40,6 +40,8 @@ from pfjax.tracking import batches as B  # noqa: E402
 from pfjax.tracking import report as R  # noqa: E402
 from pfjax.tracking.lemma import four_way, sample_geometry  # noqa: E402
 from pfjax.tracking.simulate import TrackConfig  # noqa: E402
+from pfjax.provenance import machine, parquet_metadata  # noqa: E402
+from pfjax.tables import write_parquet  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_TOML = ROOT / "studies" / "vehicle_tracking.toml"
@@ -150,7 +152,7 @@ def study(cfg: dict, args, output) -> int:
 
     summary = {
         "study": cfg["name"], "seed": cfg["seed"], "config": cfg, "config_sha256": config_hash(cfg),
-        "pfjax_version": pfjax.__version__, "machine": f"{platform.machine()}, {platform.python_version()}, jax {jax.__version__}",
+        "pfjax_version": pfjax.__version__, "machine": machine(),
         "quick": args.quick, "definitions": {
             "z_to_0": f"max |z~| over the last {s['window']} s <= {s['tol_z']} m",
             "phi_minus_pgamma_to_0": f"max |phi - p gamma| over the last {s['window']} s <= {s['tol_phi']} rad",
@@ -159,9 +161,9 @@ def study(cfg: dict, args, output) -> int:
         "geometry": geometry, "monte_carlo": mc_summary,
     }
     tmp = output.staging
-    meta = {"config_sha256": summary["config_sha256"], "seed": str(cfg["seed"]), "pfjax_version": pfjax.__version__}
+    meta = parquet_metadata(cfg, cfg["seed"])
     for name, df in (("lemma_runs", lemma_df), ("lemma_table", table), ("geometry", geo), ("mc_runs", mc)):
-        R.write_parquet(df, tmp / f"{name}.parquet", meta)
+        write_parquet(df, tmp / f"{name}.parquet", meta)
     table.to_csv(tmp / "lemma_table.csv", index=False)
     summary["figures"] = R.write_figures(tmp / "figures", cfg, lemma_df, geo, mc)
     summary["wall_s"] = time.time() - t0

@@ -123,6 +123,13 @@ def test_run_load_and_replay_a_study(tmp_path):
     res = pfjax.run_study(config, tmp_path / "out", n_runs=24, chunk_size=24, f64_check_runs=0, margin__enabled=False,
                           sim__horizon=6.0, success__from_s=2.0, progress=False, report=False)
     assert len(res.runs) == 24 * len(res.summary["config"]["paths"]) * len(res.summary["config"]["controllers"])
+    # every column of the run table says its unit and meaning; angles in degrees say so in their names
+    from pfjax.tables import units
+
+    u = units(tmp_path / "out" / "runs.parquet")
+    assert set(u) == set(res.runs.columns)
+    assert (u["start_along_m"]["unit"], u["steady_abs_theta_e_rad"]["unit"], u["beta_r_deg"]["unit"]) == ("m", "rad", "deg")
+    assert all(v["description"] for v in u.values())
     again = pfjax.load_study(tmp_path / "out")
     assert again.summary == res.summary and list(again.headline.columns) == list(res.headline.columns)
     row = res.runs.iloc[5]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -105,7 +106,8 @@ def test_synth_mixed_json_reproduces_source():
     (spec §4: the source's values are toolbox bounds from a different solver; pfjax reaches
     K_d 1.6 %, K_theta 0.2 %, bounds < 0.1 % - the objective is flat along K_d). True norms and
     poles against SciPy on spec §3 matrices: rel 1e-6 (norms), 1e-9 (poles)."""
-    r = cli("synth", "--method", "mixed", "--v", "1", "--L", "0.2", "--alpha", "10", "--beta", "1", "--json")
+    r = cli("synth", "--method", "mixed", "--speed", "1", "--wheelbase", "0.2", "--alpha", "10", "--beta", "1",
+            "--json")
     assert r.returncode == 0, r.stderr
     out = strict_json(r.stdout)
     for key in ("K", "gamma_inf", "gamma_2", "hinf_norm", "h2_norm", "closed_loop_poles"):
@@ -157,8 +159,8 @@ def test_simulate_line_paper_k_json_matches_closed_form_equilibrium():
     its initial size; RK4 at 5 ms is accurate to ~1e-8 here. delta to 1e-3 rad (the brief's
     tolerance; the actual error is < 1e-9), d to 1e-5 m, theta_e to 1e-6 rad.
     """
-    r = cli("simulate", "--path", "line", "--x0", "1", "0", "1.5707963267948966", "--beta-r-deg", "5",
-            "--beta-f-deg", "5", "--controller", "paper-k", "--T", "20", "--json")
+    r = cli("simulate", "--path", "line", "--x0", "1", "0", "90", "--beta-r-deg", "5",
+            "--beta-f-deg", "5", "--controller", "paper-k", "--horizon", "20", "--json")
     assert r.returncode == 0, r.stderr
     out = strict_json(r.stdout)
     for key in ("d", "theta_e", "delta"):
@@ -177,6 +179,7 @@ def test_simulate_line_paper_k_json_matches_closed_form_equilibrium():
     assert out["metrics"]["steady_abs_d"] == pytest.approx(abs(d_star), abs=1e-5)
     assert 0 < out["metrics"]["settling_time"] < 20 and out["metrics"]["iae"] > 0
     assert out["T"] == pytest.approx(20.0) and out["beta_r"] == pytest.approx(BETA)
+    assert out["x0"] == {"x": 1.0, "y": 0.0, "theta_deg": 90.0}  # --x0's THETA is in degrees
 
 
 def test_every_controller_and_every_path(capsys):
@@ -187,7 +190,7 @@ def test_every_controller_and_every_path(capsys):
     combos = sorted({(c, "sine") for c in CONTROLLERS} | {(c, p) for p in PATHS for c in ("pi", "pure-pursuit")})
     assert {c for c, _ in combos} == set(CONTROLLERS) and {p for _, p in combos} == set(PATHS)
     for c, p in combos:
-        o = run_main(capsys, "simulate", "--path", p, "--controller", c, "--T", "3", "--json")
+        o = run_main(capsys, "simulate", "--path", p, "--controller", c, "--horizon", "3", "--json")
         assert (o["controller"], o["path"]) == (c, p)
         assert o["metrics"]["status"] == "ok", (c, p, o["metrics"])
         assert o["status_code"] == 0 and o["fail_time"] is None
@@ -212,7 +215,7 @@ def test_gains_positional_and_named(capsys):
     assert c["gains"] == {"k_d": SOURCE_K[0], "k_theta": -1.5}
     assert c["final"]["d"] == pytest.approx((2 * BETA - 1.5 * BETA) / SOURCE_K[0], abs=1e-5)
 
-    short = ("simulate", "--path", "line", "--controller", "stanley", "--T", "3", "--json")
+    short = ("simulate", "--path", "line", "--controller", "stanley", "--horizon", "3", "--json")
     s1 = run_main(capsys, *short, "--gains", "1.5,0.2")
     s2 = run_main(capsys, *short, "--gains", "k_soft=0.2,k=1.5")
     assert s1 == s2 and s1["gains"] == {"k": 1.5, "k_soft": 0.2}
@@ -228,11 +231,11 @@ def test_gains_positional_and_named(capsys):
 
 # ------------------------------------------------------------------ usage errors
 
-SIM = ("simulate", "--path", "line", "--controller", "paper-k", "--T", "1")
+SIM = ("simulate", "--path", "line", "--controller", "paper-k", "--horizon", "1")
 BAD = [
-    (("synth", "--v", "-1"), "--v"),
-    (("synth", "--v", "nan"), "--v"),
-    (("synth", "--L", "0"), "--L"),
+    (("synth", "--speed", "-1"), "--speed"),
+    (("synth", "--speed", "nan"), "--speed"),
+    (("synth", "--wheelbase", "0"), "--wheelbase"),
     (("synth", "--method", "foo"), "--method"),
     (("synth", "--disk", "0", "-1"), "--disk"),
     (("synth", "--disk", "nan", "1"), "--disk"),
@@ -243,17 +246,17 @@ BAD = [
     ((*SIM, "--beta-r-deg", "90"), "--beta-r-deg"),
     ((*SIM, "--beta-f-deg", "-120"), "--beta-f-deg"),
     ((*SIM, "--delta-max-deg", "0"), "--delta-max-deg"),
-    (("simulate", "--path", "line", "--controller", "paper-k", "--T", "-1"), "--T"),
+    (("simulate", "--path", "line", "--controller", "paper-k", "--horizon", "-1"), "--horizon"),
     ((*SIM, "--dt", "0"), "--dt"),
     ((*SIM, "--dt", "2"), "--dt"),
-    ((*SIM, "--v", "inf"), "--v"),
+    ((*SIM, "--speed", "inf"), "--speed"),
     ((*SIM, "--control-every", "0"), "--control-every"),
     (("simulate", "--path", "foo", "--controller", "paper-k"), "--path"),
     (("simulate", "--path", "line", "--controller", "foo"), "--controller"),
     (("simulate", "--controller", "pi"), "--path"),
-    (("simulate", "--path", "line", "--controller", "pi", "--T", "1", "--gains", "1,2,3,4,5,6"), "--gains"),
-    (("simulate", "--path", "line", "--controller", "pi", "--T", "1", "--gains", "kp=3"), "--gains"),
-    (("simulate", "--path", "line", "--controller", "pi", "--T", "1", "--gains", "a,b"), "--gains"),
+    (("simulate", "--path", "line", "--controller", "pi", "--horizon", "1", "--gains", "1,2,3,4,5,6"), "--gains"),
+    (("simulate", "--path", "line", "--controller", "pi", "--horizon", "1", "--gains", "kp=3"), "--gains"),
+    (("simulate", "--path", "line", "--controller", "pi", "--horizon", "1", "--gains", "a,b"), "--gains"),
     ((*SIM, "--gains", "1,nan"), "--gains"),
     ((*SIM, "--x0", "1", "2"), "--x0"),
     ((*SIM, "--x0", "1", "nan", "0"), "--x0"),
@@ -293,7 +296,7 @@ def test_help(args):
     if args[-1] == "--help":
         assert "usage: pfjax" in r.stdout
     if args[0] == "simulate":
-        for flag in ("--path", "--controller", "--gains", "--x0", "--beta-r-deg", "--T", "--json"):
+        for flag in ("--path", "--controller", "--gains", "--x0", "--beta-r-deg", "--horizon", "--json"):
             assert flag in r.stdout, flag
 
 
@@ -313,8 +316,148 @@ def test_no_command_is_a_usage_error():
 
 
 def test_module_entry_point_matches_console_script():
-    r = subprocess.run([sys.executable, "-m", "pfjax.cli", "synth", "--v", "0"], capture_output=True, text=True,
+    r = subprocess.run([sys.executable, "-m", "pfjax.cli", "synth", "--speed", "0"], capture_output=True, text=True,
                        timeout=60, env=os.environ.copy())
     assert r.returncode == 2 and r.stdout == ""
     lines = r.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("pfjax synth: error: --v")
+    assert len(lines) == 1 and lines[0].startswith("pfjax synth: error: --speed")
+
+
+# ------------------------------------------------------------------ deprecated spellings
+
+#: Per subcommand: ``(argv without the flag, old spelling, canonical flag, value)`` for every old
+#: spelling of a flag, read for one release as the canonical flag (:class:`pfjax.cli.common.Aliased`).
+_SIM_FAST = ("simulate", "--path", "line", "--controller", "stanley", "--dt", "0.05", "--json")
+_TRACK_FAST = ("track", "--dt", "0.05", "--json")
+RENAMED = {
+    "synth": [(("synth", "--json"), "--v", "--speed", "1.2"),
+              (("synth", "--json"), "--L", "--wheelbase", "0.25")],
+    "simulate": [(_SIM_FAST, "--T", "--horizon", "2"),
+                 ((*_SIM_FAST, "--horizon", "2"), "--v", "--speed", "1.5"),
+                 ((*_SIM_FAST, "--horizon", "2"), "--L", "--wheelbase", "0.3")],
+    "track": [(_TRACK_FAST, "--T", "--horizon", "3"),
+              ((*_TRACK_FAST, "--horizon", "3"), "--a", "--wheelbase", "1.5")],
+    "parking": [(("parking", "--json"), "--t-max", "--horizon", "20")],
+    "parking-search": [(("parking-search", "--method", "grid", "--n", "2", "--json"), "--t-max", "--horizon", "20")],
+}
+#: Per subcommand: ``(argv with a bad value through an old spelling, the flag the error names)``.
+RENAMED_BAD = {
+    "synth": [(("synth", "--v", "0"), "--speed"), (("synth", "--L", "abc"), "argument --wheelbase/--L")],
+    "simulate": [((*_SIM_FAST, "--T", "-1"), "--horizon"), ((*_SIM_FAST, "--v", "inf"), "--speed"),
+                 ((*_SIM_FAST, "--L", "0"), "--wheelbase"), ((*_SIM_FAST, "--T", "soon"), "argument --horizon/--T")],
+    "track": [((*_TRACK_FAST, "--T", "-1"), "--horizon"), ((*_TRACK_FAST, "--a", "0"), "--wheelbase")],
+    "parking": [(("parking", "--t-max", "0"), "--horizon")],
+    "parking-search": [(("parking-search", "--method", "grid", "--t-max", "nan"), "--horizon")],
+}
+
+#: Runs ``pfjax.cli.main`` on each argv of a JSON list in one fresh interpreter (no pytest warning
+#: capture: a warning goes to stderr as it would from the console script) and prints
+#: ``[[exit code, stdout, stderr], ...]``. The once-per-spelling memory is cleared before each
+#: call, so that each call prints what a command of its own would.
+_DRIVER = """
+import contextlib, io, json, sys
+from pfjax import errors
+from pfjax.cli import main
+results = []
+for argv in json.loads(sys.argv[1]):
+    errors._DEPRECATIONS.clear()
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as e:
+            code = e.code
+    results.append([code, out.getvalue(), err.getvalue()])
+print(json.dumps(results))
+"""
+
+
+def _run_each(argvs: list[list[str]]) -> list[tuple[int, str, str]]:
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
+    r = subprocess.run([sys.executable, "-c", _DRIVER, json.dumps(argvs)], capture_output=True, text=True,
+                       timeout=600, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return [tuple(x) for x in json.loads(r.stdout.strip().splitlines()[-1])]
+
+
+def _names(line: str, flag: str) -> bool:
+    """Whether ``line`` names ``flag`` as a whole flag (``--v`` is not in ``--v-max``)."""
+    return re.search(rf"(?<![\w-]){re.escape(flag)}(?![\w-])", line) is not None
+
+
+def _deprecation_lines(err: str) -> list[str]:
+    return [line for line in err.splitlines() if "PfjaxDeprecationWarning" in line]
+
+
+def test_console_script_warns_once_per_old_spelling():
+    """The console script itself: one deprecation line per old spelling on stderr (``--v`` given
+    twice still prints one), the JSON of the canonical flags on stdout."""
+    old = cli("synth", "--v", "1", "--v", "1.2", "--L", "0.25", "--json", timeout=120)
+    new = cli("synth", "--speed", "1.2", "--wheelbase", "0.25", "--json", timeout=120)
+    assert old.returncode == 0 and new.returncode == 0, (old.stderr, new.stderr)
+    assert old.stdout == new.stdout and new.stderr == ""
+    lines = old.stderr.splitlines()
+    assert len(lines) == 2 and lines == _deprecation_lines(old.stderr), old.stderr
+    assert _names(lines[0], "--v") and _names(lines[0], "--speed"), lines
+    assert _names(lines[1], "--L") and _names(lines[1], "--wheelbase"), lines
+
+
+@pytest.mark.parametrize("command", sorted(RENAMED))
+def test_old_spellings_still_work_with_one_deprecation_line(command):
+    """Each old spelling gives the same JSON as its canonical flag and prints exactly one
+    deprecation line on stderr naming both; the canonical flag prints nothing on stderr. A bad
+    value through an old spelling is still refused with exit code 2 and one error line naming
+    the canonical flag (beside the deprecation line when the value was read as a number)."""
+    cases = RENAMED[command]
+    bad = RENAMED_BAD[command]
+    argvs = [argv for base, old, new, value in cases for argv in ([*base, old, value], [*base, new, value])]
+    results = _run_each(argvs + [list(a) for a, _ in bad])
+    for i, (base, old, new, value) in enumerate(cases):
+        (old_code, old_out, old_err), (new_code, new_out, new_err) = results[2 * i], results[2 * i + 1]
+        assert old_code == 0 and new_code == 0, (base, old, old_err, new, new_err)
+        assert new_err == "", (new, new_err)  # the canonical flag: no deprecation line, nothing else
+        assert old_out == new_out, (base, old, new)
+        strict_json(old_out)
+        lines = old_err.splitlines()
+        assert len(lines) == 1 and lines == _deprecation_lines(old_err), (old, old_err)
+        assert _names(lines[0], old) and _names(lines[0], new), lines[0]
+    olds = {old for _, old, _, _ in cases}
+    for (argv, flag), (code, out, err) in zip(bad, results[len(argvs):]):
+        old = next(a for a in argv if a in olds)
+        assert code == 2 and out == "" and "Traceback" not in err, (argv, code, err)
+        deprecations = _deprecation_lines(err)
+        errors = [line for line in err.splitlines() if line not in deprecations]
+        assert len(errors) == 1 and errors[0].startswith(f"pfjax {command}: error: {flag}"), (argv, err)
+        if flag.startswith("argument"):  # argparse refuses a non-number before the flag is read
+            assert deprecations == [], (argv, err)
+        else:
+            assert len(deprecations) == 1 and _names(deprecations[0], old), (argv, err)
+
+
+#: Per subcommand: ``(canonical flag, its old spellings)`` that ``--help`` lists.
+HELP_FLAGS = {
+    "synth": [("--speed", ["--v"]), ("--wheelbase", ["--L"])],
+    "simulate": [("--horizon", ["--T"]), ("--speed", ["--v"]), ("--wheelbase", ["--L"]), ("--x0", [])],
+    "track": [("--horizon", ["--T"]), ("--speed", []), ("--wheelbase", ["--a"])],
+    "parking": [("--horizon", ["--t-max"]), ("--speed", []), ("--x0", [])],
+    "parking-search": [("--horizon", ["--t-max"]), ("--speed", []), ("--x0", [])],
+    "tune": [("--horizon", [])],
+}
+
+
+@pytest.mark.parametrize("command", sorted(HELP_FLAGS))
+def test_help_lists_the_canonical_flag_first(capsys, command):
+    with pytest.raises(SystemExit) as e:
+        main([command, "--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    flat = " ".join(text.split())
+    usage = " ".join(text.split("\n\n", 1)[0].split())
+    for flag, old in HELP_FLAGS[command]:
+        assert f"[{flag} " in usage or f" {flag} " in usage, (flag, usage)
+        for o in old:  # the invocation: the canonical flag, then the old spelling; the note names it
+            assert re.search(rf"{re.escape(flag)} [A-Z_]+, {re.escape(o)} [A-Z_]+", flat), (flag, o, flat)
+            assert f"({o}: deprecated spelling)" in flat, (o, flat)
+            assert not _names(usage, o), (o, usage)
+    if command in ("simulate", "parking", "parking-search"):
+        assert "--x0 X Y THETA_DEG" in flat

@@ -13,7 +13,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import pfjax
 from pfjax.numerics import compiler
 
 WIDE = {"xla_cpu_prefer_vector_width": 512}

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from pfjax.config import ConfigError, config_hash, load, parse_override
+from pfjax.config import ConfigError, load, parse_override
+from pfjax.provenance import config_hash
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "studies" / "paper_reproduction.py"

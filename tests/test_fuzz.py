@@ -31,7 +31,7 @@ from hypothesis import strategies as st
 
 from pfjax.cli import main
 from pfjax.errors import MAX_MAGNITUDE, MAX_SEED, InputError
-from pfjax.montecarlo.config import Dist, StudySpec, load_study
+from pfjax.montecarlo.config import StudySpec, load_study
 from pfjax.parking.maps import parse_map
 
 EXAMPLES = int(os.environ.get("PFJAX_FUZZ_EXAMPLES", "0")) or None
@@ -52,7 +52,7 @@ KEYS = ["name", "n_runs", "seed", "chunk_size", "dtype", "f64_check_runs",
         "vehicle.speed", "vehicle.L", "vehicle.delta_max_deg", "vehicle.delta_rate_max_deg", "vehicle.convention",
         "slip.kind", "slip.beta_r_deg", "slip.beta_f_deg", "slip.step_time_s", "slip.step_r_deg", "slip.amp_r_deg",
         "slip.freq_hz", "slip.ou_sigma_deg", "slip.ou_tau_s", "slip.seq_dt",
-        "initial.start_s", "initial.lateral_offset", "initial.heading_error_deg",
+        "initial.start_along_m", "initial.lateral_offset", "initial.heading_error_deg",
         "noise.sigma_d", "noise.sigma_theta_e_deg",
         "margin.enabled", "margin.amplitudes_deg", "margin.n_per_amplitude", "margin.eps", "margin.axes",
         "falsifier.enabled", "falsifier.slip_bound_deg", "falsifier.f_max_hz", "falsifier.steps", "falsifier.n_restarts",
@@ -215,24 +215,25 @@ def test_cli_study_refuses_bad_configs_and_outputs(root, changes, out):
 #: Per subcommand: the flags and values none of which may be accepted (each example uses one or
 #: more of them, with otherwise valid arguments).
 BAD_FLAGS = {
-    "simulate": {"--v": ["0", "-1", "nan", "inf", "1e308"], "--L": ["0", "-0.2", "nan"],
+    "simulate": {"--speed": ["0", "-1", "nan", "inf", "1e308"], "--wheelbase": ["0", "-0.2", "nan"],
                  "--beta-r-deg": ["90", "-95", "nan", "1e400"], "--beta-f-deg": ["91", "inf"],
-                 "--delta-max-deg": ["0", "90", "-5"], "--T": ["0", "-1", "inf", "1e308"],
+                 "--delta-max-deg": ["0", "90", "-5"], "--horizon": ["0", "-1", "inf", "1e308"],
                  "--dt": ["0", "-0.1", "1e-300", "nan"], "--control-every": ["0", "-3"],
                  "--gains": ["", ",", "1,2", "kp_d=1,kp_d=2", "nan,1,1,1,1", "x=1", "1,kp_d=2", "1e999,0,0,0,0"],
-                 "--x0": [["0", "nan", "0"], ["inf", "0", "0"], ["1e308", "0", "0"]]},
-    "synth": {"--v": ["0", "nan"], "--L": ["-1", "inf"], "--alpha": ["-1", "nan"], "--beta": ["-2"],
+                 "--x0": [["0", "nan", "0"], ["inf", "0", "0"], ["1e308", "0", "0"],
+                          ["0", "0", "1e13"]]},  # THETA in deg
+    "synth": {"--speed": ["0", "nan"], "--wheelbase": ["-1", "inf"], "--alpha": ["-1", "nan"], "--beta": ["-2"],
               "--disk": [["0", "-1"], ["nan", "1"]], "--sector-deg": ["0", "95", "nan"], "--max-real": ["inf"]},
     "tune": {"--population": ["1", "0", "100000000"], "--generations": ["-1"], "--steps": ["0"], "--starts": ["0"],
              "--lr": ["0", "nan", "-1"], "--level": ["0", "1", "2"], "--effort": ["-1", "inf"], "--n-runs": ["0"],
              "--seed": ["-1", "9223372036854775808"], "--horizon": ["0", "inf"], "--dt": ["0", "1e-300"],
              "--cost": ["mse"], "--aggregate": ["max"]},
     "bench": {"--sizes": ["0", "-5", ",", "1e6", "100000000000"], "--seed": ["-1"]},
-    "parking": {"--k1": ["0", "nan"], "--speed": ["-1", "inf"], "--scan-period": ["0", "100"], "--t-max": ["0"],
+    "parking": {"--k1": ["0", "nan"], "--speed": ["-1", "inf"], "--scan-period": ["0", "100"], "--horizon": ["0"],
                 "--front": ["0", "0.6", "nan"], "--x0": [["0", "0", "95"], ["0", "0", "nan"], ["1e308", "0", "0"]],
                 "--alpha-schedule": ["", "a", "nan"]},
     "track": {"--p": ["0", "nan"], "--l": ["0"], "--gamma-max-deg": ["0", "90"], "--speed": ["0", "-1"],
-              "--k": ["0"], "--dt": ["0", "inf"], "--T": ["-1"], "--stop-and-go": ["2", "-1"]},
+              "--k": ["0"], "--dt": ["0", "inf"], "--horizon": ["-1"], "--stop-and-go": ["2", "-1"]},
 }
 REQUIRED = {"simulate": ["--path", "line", "--controller", "pi"], "synth": [], "tune": ["--method", "ga", "--controller", "pi"],
             "bench": ["--quick", "--out", "b"], "parking": [], "track": []}

@@ -64,7 +64,7 @@ def reference_metrics(tr, dmax, horizon, window, band, success_from=None, succes
         itae=np.trapezoid(t * ad, t),
         max_abs_d=ad.max(),
         steady_abs_d=np.trapezoid(ad[win], t[win]) / (t[win][-1] - t[win][0]),
-        steady_abs_theta_e=np.trapezoid(np.abs(te[win]), t[win]) / (t[win][-1] - t[win][0]),
+        steady_abs_theta_e_rad=np.trapezoid(np.abs(te[win]), t[win]) / (t[win][-1] - t[win][0]),
         settling_time=settling,
         overshoot=max(0.0, np.max(-np.sign(d[0]) * d)),
         steer_energy=np.trapezoid(delta * delta, t),
@@ -98,7 +98,7 @@ def test_the_runs_exercise_every_metric(res):
     assert m.sat_fraction[1] > 0.01 and m.overshoot[1] > 0.01 and m.overshoot[0] > 0
     assert np.all(np.isfinite(m.settling_time[:2])) and np.all(m.settling_time[:2] > 0.1)
     assert np.isnan(m.settling_time[2])
-    assert np.all(m.steady_abs_theta_e[:3] > 0.01)  # slip: the heading error settles away from 0
+    assert np.all(m.steady_abs_theta_e_rad[:3] > 0.01)  # slip: the heading error settles away from 0
 
 
 def test_metrics_stop_at_the_failure(res):
@@ -123,7 +123,7 @@ def test_metrics_stop_at_the_failure(res):
     np.testing.assert_allclose(m.max_abs_d, ad.max(), rtol=RTOL)
     sat = (np.abs(tr.delta_cmd[:k]) > 3 * DEG).astype(float)
     np.testing.assert_allclose(m.sat_fraction, np.sum(w * sat) / np.sum(w), rtol=RTOL)
-    assert np.isnan(m.steady_abs_d) and np.isnan(m.steady_abs_theta_e) and np.isnan(m.settling_time)
+    assert np.isnan(m.steady_abs_d) and np.isnan(m.steady_abs_theta_e_rad) and np.isnan(m.settling_time)
 
 
 # ------------------------------------------------------------------------- a hand-computed case
@@ -175,7 +175,7 @@ def test_hand_computed_exponential_decay():
     # Steady window [6, 10]: trapezoid time-mean; exact mean (e^-6 - e^-10) / 4.
     k0 = N - 400
     np.testing.assert_allclose(m.steady_abs_d, geo(r, k0) / 4.0, rtol=RTOL)
-    np.testing.assert_allclose(m.steady_abs_theta_e, 0.5 * geo(r * r, k0) / 4.0, rtol=RTOL)
+    np.testing.assert_allclose(m.steady_abs_theta_e_rad, 0.5 * geo(r * r, k0) / 4.0, rtol=RTOL)
     assert abs(m.steady_abs_d - (math.exp(-6) - math.exp(-10)) / 4) < h * h / 12 * math.exp(-6)
     # exp(-t) > 0.05 up to t = ln 20 = 2.9957: the last sample out of the band is t = 2.99.
     np.testing.assert_allclose(m.settling_time, 3.0, rtol=RTOL)

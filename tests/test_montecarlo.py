@@ -25,7 +25,7 @@ BASE = {
     "slip": {"beta_r_deg": {"dist": "uniform", "low": -5, "high": 5}, "beta_f_deg": {"dist": "truncnormal", "mean": 0, "std": 2, "low": -6, "high": 6}},
     "initial": {"lateral_offset": {"dist": "uniform", "low": -0.3, "high": 0.3},
                 "heading_error_deg": {"dist": "uniform", "low": -20, "high": 20},
-                "start_s": {"dist": "uniform", "low": 0, "high": 1}},
+                "start_along_m": {"dist": "uniform", "low": 0, "high": 1}},
     "margin": {"amplitudes_deg": [0.0, 10.0], "n_per_amplitude": 6},
     "paths": [{"kind": "line"}, {"kind": "circle", "radius": {"dist": "uniform", "low": 2, "high": 3}}],
     "controllers": [{"name": "lmi", "type": "lmi"}, {"name": "stanley", "type": "stanley", "gains": {"k": 2.0}}],
@@ -97,7 +97,7 @@ def test_sampled_distributions():
     """2000 runs: uniform within its bounds with the right mean, normal mean/std (5 sigma of the
     estimator), truncnormal within bounds, choice only from its values."""
     spec = spec_of("initial.lateral_offset={dist='normal', mean=1.0, std=2.0}", "vehicle.L={dist='truncnormal', mean=0.2, std=0.05, low=0.18, high=0.25}",
-                   "initial.start_s={dist='choice', values=[0.0, 0.5]}")
+                   "initial.start_along_m={dist='choice', values=[0.0, 0.5]}")
     s = sample_runs(spec, 0, np.arange(2000))
     c = s.columns
     n = 2000
@@ -106,12 +106,12 @@ def test_sampled_distributions():
     assert abs(c["lateral_offset"].mean() - 1.0) < 5 * 2 / math.sqrt(n)
     assert abs(c["lateral_offset"].std() / 2.0 - 1) < 5 / math.sqrt(2 * n)
     assert c["L"].min() >= 0.18 and c["L"].max() <= 0.25
-    assert set(np.unique(c["start_s"])) <= {0.0, 0.5} and len(np.unique(c["start_s"])) == 2
+    assert set(np.unique(c["start_along_m"])) <= {0.0, 0.5} and len(np.unique(c["start_along_m"])) == 2
 
 
 def test_start_pose_has_the_sampled_offset_heading_error_and_arc_position():
     """Projecting the sampled start pose back onto the path returns d = lateral_offset,
-    theta_e = heading_error and s = start_s (the line's and circle's nominal start has s = 0)."""
+    theta_e = heading_error and s = start_along_m (the line's and circle's nominal start has s = 0)."""
     spec = spec_of()
     for p in range(2):
         s = sample_runs(spec, p, np.arange(16))
@@ -119,7 +119,7 @@ def test_start_pose_has_the_sampled_offset_heading_error_and_arc_position():
         proj = jax.vmap(lambda path, x, y, th: project(path, x, y, th))(sc.path, sc.pose0.x, sc.pose0.y, sc.pose0.theta)
         np.testing.assert_allclose(proj.d, s.columns["lateral_offset"], atol=1e-9)
         np.testing.assert_allclose(np.degrees(proj.theta_e), s.columns["heading_error_deg"], atol=1e-7)
-        np.testing.assert_allclose(proj.s, s.columns["start_s"], atol=1e-8)
+        np.testing.assert_allclose(proj.s, s.columns["start_along_m"], atol=1e-8)
 
 
 def test_ou_process_statistics():
@@ -144,7 +144,7 @@ def test_runs_are_independent_of_chunk_size_and_shared_by_controllers(tmp_path):
     run_study(spec_of("margin.enabled=false", "chunk_size=7"), tmp_path / "b", progress=False)
     ra, ra2, rb = (pd.read_parquet(tmp_path / d / "runs.parquet") for d in ("a", "a2", "b"))
     pd.testing.assert_frame_equal(ra, ra2)
-    params = ["beta_r_deg", "beta_f_deg", "lateral_offset", "heading_error_deg", "start_s", "radius"]
+    params = ["beta_r_deg", "beta_f_deg", "lateral_offset", "heading_error_deg", "start_along_m", "radius"]
     pd.testing.assert_frame_equal(ra[params + ["status", "run", "path", "controller"]], rb[params + ["status", "run", "path", "controller"]])
     np.testing.assert_allclose(ra["iae"], rb["iae"], rtol=1e-5, atol=1e-7)
     g = ra.groupby("controller")

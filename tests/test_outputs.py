@@ -263,7 +263,7 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
         (out / name).write_bytes(text)
         before = _tree(out)
         code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)
-        assert code == EXIT_USAGE and len(err) == 1 and err[0].startswith(f"pfjax report: error: --out: ") \
+        assert code == EXIT_USAGE and len(err) == 1 and err[0].startswith("pfjax report: error: --out: ") \
             and name in err[0], err
         assert _tree(out) == before
         (out / name).write_bytes(saved)

@@ -147,6 +147,7 @@ def test_cli_names_the_flags(capsys):
         (["parking", "--x0", "0", "-0.5", "0"], "--x0: start point (0, -0.5) lies inside obstacle 'kerb'"),
         (["parking", "--map", "nowhere.toml"], "--map: map: not 'parallel', 'garage' or an existing file: nowhere.toml"),
         (["parking-search", "--method", "grid", "--n", "1"], "--n: must be >= 2, got 1"),
+        (["parking", "--horizon", "-1"], "--horizon: must be > 0, got -1"),  # the API's t_max
     ]:
         rc = main(args)
         out, err = capsys.readouterr()

@@ -82,6 +82,8 @@ def test_parking_garage_user_map(capsys, tmp_path):
     (["parking-search", "--method", "ga", "--population", "1"], "--population"),
     (["parking-search", "--method", "grid", "--map", "parallel"], "--x0"),
     (["parking", "--scan-period", "0.001"], "--scan-period"),
+    (["parking", "--horizon", "0"], "--horizon"),  # the timeout (once --t-max)
+    (["parking-search", "--method", "grid", "--horizon", "nan"], "--horizon"),
 ])
 def test_bad_values_exit_2_one_line(capsys, args, flag):
     rc, out, err = run_cli(capsys, *args, "--json")

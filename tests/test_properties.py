@@ -139,6 +139,6 @@ def test_running_metrics_equal_numpy_trapezoid(d, te, delta, sat, fail_at):
     failed = fail_at is not None
     assert bool(m.success) == (not failed and m.late_max_abs_d <= 0.1)
     if failed:
-        assert np.isnan(m.steady_abs_d) and np.isnan(m.steady_abs_theta_e) and np.isnan(m.settling_time)
+        assert np.isnan(m.steady_abs_d) and np.isnan(m.steady_abs_theta_e_rad) and np.isnan(m.settling_time)
     else:
-        assert np.isfinite(m.steady_abs_d) and np.isfinite(m.steady_abs_theta_e)
+        assert np.isfinite(m.steady_abs_d) and np.isfinite(m.steady_abs_theta_e_rad)

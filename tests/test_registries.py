@@ -124,7 +124,7 @@ def test_dummy_through_the_command_line(tmp_path):
            "PYTHONPATH": os.pathsep.join([str(PLUGINS), os.environ.get("PYTHONPATH", "")])}
     cli = [sys.executable, "-m", "pfjax.cli"]
     out = subprocess.run(cli + ["simulate", "--path", "gentle", "--controller", "dummy-heading", "--gains", "k_h=-2",
-                                "--T", "5", "--json"], env=env, capture_output=True, text=True, timeout=300)
+                                "--horizon", "5", "--json"], env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
     assert r["gains"] == {"k_d": -1.5, "k_h": -2.0} and r["metrics"]["status"] == "ok"

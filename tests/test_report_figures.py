@@ -64,7 +64,7 @@ def study():
             else:
                 ok = np.abs(bf) < 12
             df = pd.DataFrame({"path": p, "controller": name, "run": np.arange(N // 2), "beta_r_deg": br, "beta_f_deg": bf,
-                               "speed": 1.0, "L": 0.2, "delta_max_deg": DMAX, "start_s": 0.0, "lateral_offset": 0.0,
+                               "speed": 1.0, "L": 0.2, "delta_max_deg": DMAX, "start_along_m": 0.0, "lateral_offset": 0.0,
                                "heading_error_deg": 0.0})
             for m in METRIC_NAMES:
                 df[m] = rng.lognormal(-1.0 if name == "sf" else 0.0, 0.8, N // 2)

@@ -129,7 +129,7 @@ def test_failed_runs_are_frozen_and_their_metrics_finite(mixed):
         m = r.metrics
         for field in ("iae", "ise", "itae", "max_abs_d", "overshoot", "steer_energy", "steer_tv", "sat_fraction"):
             assert np.isfinite(getattr(m, field)), (name, field, getattr(m, field))
-        assert np.isnan(m.steady_abs_d) and np.isnan(m.steady_abs_theta_e) and np.isnan(m.settling_time)
+        assert np.isnan(m.steady_abs_d) and np.isnan(m.steady_abs_theta_e_rad) and np.isnan(m.settling_time)
         assert m.max_abs_d <= CFG.d_fail
 
 

@@ -24,7 +24,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pfjax.config import config_hash, load
+from pfjax.config import load
+from pfjax.provenance import config_hash
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "studies" / "paper_reproduction.py"

@@ -28,7 +28,7 @@ def test_run_is_exported():
     ("backward", ["--p", "-0.5", "--offset", "0.2", "-0.3", "--beta-r-deg", "2"]),
 ])
 def test_run_equals_cli_json(capsys, mode, extra):
-    rc = main(["track", "--mode", mode, "--T", "3", "--dt", "0.05", *extra, "--json"])
+    rc = main(["track", "--mode", mode, "--horizon", "3", "--dt", "0.05", *extra, "--json"])
     out, err = capsys.readouterr()
     assert rc == 0 and err == ""
     cli = json.loads(out)
@@ -61,17 +61,17 @@ def test_bad_argument_raises_input_error_naming_it(monkeypatch, kw, key):
 
 @pytest.mark.parametrize("kw,argv,line", [
     ({"p": 0}, ["--p", "0"], "--p: must be nonzero (M is singular at p = 0), got 0"),
-    ({"dt": 5.0}, ["--dt", "5"], "--dt: must be <= --T (3 s), got 5"),
+    ({"dt": 5.0}, ["--dt", "5"], "--dt: must be <= --horizon (3 s), got 5"),
     ({"stop_and_go": 1.5}, ["--stop-and-go", "1.5"], "--stop-and-go: expected a depth in [0, 1], got 1.5"),
     ({"gamma_max_deg": 95}, ["--gamma-max-deg", "95"], "--gamma-max-deg: magnitude must be < 90 deg, got 95"),
     ({"offset": (0.0, math.nan)}, ["--offset", "0", "nan"], "--offset: expected a finite number, got nan"),
-    ({"horizon": 1e6, "dt": 0.1}, ["--T", "1e6", "--dt", "0.1"], "--T/--dt: at most 2e6 steps, got 1e+07"),
+    ({"horizon": 1e6, "dt": 0.1}, ["--horizon", "1e6", "--dt", "0.1"], "--horizon/--dt: at most 2e6 steps, got 1e+07"),
 ])
 def test_cli_names_the_flags_in_the_library_message(capsys, kw, argv, line):
     """The command line's one line is the library's message with the flags named (as before the move)."""
     with pytest.raises(InputError) as e:
         run(**{**FAST, **kw})
-    assert main(["track", "--T", "3", "--dt", "0.05", *argv, "--json"]) == 2
+    assert main(["track", "--horizon", "3", "--dt", "0.05", *argv, "--json"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err == f"pfjax track: error: {line}\n"
-    assert str(e.value).split(": ", 1)[1] == line.split(": ", 1)[1].replace("--T", "horizon")
+    assert str(e.value).split(": ", 1)[1] == line.split(": ", 1)[1].replace("--horizon", "horizon")

@@ -11,7 +11,7 @@ from pfjax.cli import main
 
 KEYS = {"converged", "final_error_norm", "final_phi_minus_pgamma", "max_abs_gamma_deg", "status", "phi_converged",
         "inside_lemma_bound", "lemma_p_bound"}
-FAST = ["--T", "12", "--dt", "0.02"]
+FAST = ["--horizon", "12", "--dt", "0.02"]
 
 
 def run(capsys, *args):
@@ -39,6 +39,7 @@ def test_track_json(capsys, mode, leader):
     (["--p", "0"], "--p"), (["--l", "0"], "--l"), (["--gamma-max-deg", "90"], "--gamma-max-deg"),
     (["--gamma-max-deg", "-3"], "--gamma-max-deg"), (["--leader", "spiral"], "--leader"), (["--mode", "sideways"], "--mode"),
     (["--dt", "0"], "--dt"), (["--stop-and-go", "1.5"], "--stop-and-go"), (["--p", "nan"], "--p"),
+    (["--wheelbase", "0"], "--wheelbase"), (["--horizon", "-1"], "--horizon"),
 ])
 def test_track_bad_flags(capsys, args, flag):
     with pytest.raises(SystemExit) as e:  # argparse choices exit directly; value checks return 2

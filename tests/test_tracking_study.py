@@ -1,7 +1,7 @@
 """Smoke test of ``studies/vehicle_tracking.py --quick``: every output is written, pandas reads it, and the
 numbers agree across files (summary.json vs the Parquet tables vs a recomputation from the run rows).
 
-References: the config hash is recomputed with :func:`pfjax.config.config_hash` from the stored config;
+References: the config hash is recomputed with :func:`pfjax.provenance.config_hash` from the stored config;
 the four-outcome table is recounted from ``lemma_runs.parquet``; Clopper-Pearson success is recounted
 from ``mc_runs.parquet`` with scipy's beta quantiles; the geometric check must find no counterexample inside the bound (1e-12 rad).
 """
@@ -17,7 +17,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from pfjax.config import config_hash
+from pfjax.provenance import config_hash
 from scipy.stats import beta
 
 STUDY = Path(__file__).resolve().parents[1] / "studies" / "vehicle_tracking.py"
@@ -45,7 +45,7 @@ def test_quick_study_outputs_consistent(out):
     frames = {}
     for name in TABLES:
         meta = pq.read_schema(out / f"{name}.parquet").metadata
-        assert meta[b"config_sha256"].decode() == s["config_sha256"] and meta[b"seed"].decode() == str(s["seed"])
+        assert meta[b"pfjax.config_sha256"].decode() == s["config_sha256"] and meta[b"pfjax.seed"].decode() == str(s["seed"])
         frames[name] = pd.read_parquet(out / f"{name}.parquet")
     assert not list(out.parent.glob(".vehicle_tracking.*"))  # the temporary directory was renamed away
 

@@ -24,8 +24,6 @@ def _fd(f, th, h):
 def _sine_batch(controller):
     from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import stack
-    from pfjax.tuning.cost import Tunable
-    from pfjax.tuning.problem import Problem
 
     ctrl, factory = C.REGISTRY[controller][:2]
     base = factory()

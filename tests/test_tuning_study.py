@@ -1,7 +1,7 @@
 """Smoke test of ``studies/tuning_ga_vs_gradient.py --quick`` (run as a subprocess: the study turns on
 float64 for its whole process) and of its bad-input contract.
 
-References: the config hash is recomputed with :func:`pfjax.config.config_hash` from the stored config;
+References: the config hash is recomputed with :func:`pfjax.provenance.config_hash` from the stored config;
 every held-out success rate and Clopper-Pearson interval is recounted from ``heldout.parquet`` with
 scipy's beta quantiles (1e-9); the GA's rollout count is the MATLAB formula P + G (P - E) with E = 1;
 the cost history of every run is non-increasing and ends at the run's reported cost.
@@ -20,7 +20,7 @@ import pyarrow.parquet as pq
 import pytest
 from scipy.stats import beta
 
-from pfjax.config import config_hash
+from pfjax.provenance import config_hash
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "studies" / "tuning_ga_vs_gradient.py"
@@ -44,7 +44,7 @@ def test_quick_tuning_study_outputs_consistent(out):
     s = json.loads((out / "summary.json").read_text())
     assert s["config_sha256"] == config_hash(s["config"])
     for name in ("tuning_runs", "heldout", "margin"):
-        assert pq.read_schema(out / f"{name}.parquet").metadata[b"config_sha256"].decode() == s["config_sha256"]
+        assert pq.read_schema(out / f"{name}.parquet").metadata[b"pfjax.config_sha256"].decode() == s["config_sha256"]
     assert (out / "figures" / "cost_vs_budget.png").stat().st_size > 1000
     report = (out / "report.md").read_text()
     assert s["config_sha256"][:16] in report

@@ -9,10 +9,12 @@ from __future__ import annotations
 from dataclasses import asdict
 
 import pfjax
-from pfjax.config import config_hash
+from pfjax.provenance import config_hash
 from pfjax.jsonio import dumps
 from pfjax.outputs import OutputDir
 from pfjax.report.markdown import table
+from pfjax.provenance import parquet_metadata
+from pfjax.tables import write_parquet
 
 _STYLE = {("pfjax", "float32"): ("C0", "-", "o"), ("pfjax", "float64"): ("C0", "--", "s"),
           ("numba", "float32"): ("C1", "-", "^"), ("numba", "float64"): ("C1", "--", "v"),
@@ -94,7 +96,7 @@ def write(result: dict, output: OutputDir):
     df = pd.DataFrame(result["rows"])
     df.attrs = {}
     table = df.assign(config_sha256=result["config_sha256"], pfjax_version=pfjax.__version__)
-    table.to_parquet(tmp / "bench.parquet", index=False)
+    write_parquet(table, tmp / "bench.parquet", parquet_metadata(result["config"], result["seed"], config_sha256=result["config_sha256"]))
     fig = throughput_figure(result["rows"], result["machine"])
     for ext in ("png", "svg"):
         fig.savefig(tmp / "figures" / f"throughput.{ext}", dpi=150)

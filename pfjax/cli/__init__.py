@@ -1,8 +1,9 @@
 """The ``pfjax`` command line: a package at the top of pfjax that imports the library and is
 imported by nothing in it.
 
-    pfjax synth --method {mixed,hinf,h2} [--v 1 --L 0.2 --alpha 10 --beta 1] [--json]
-    pfjax simulate --path {line,parabola,sine,circle} --controller NAME [--gains G,...] [--T 20] [--json]
+    pfjax synth --method {mixed,hinf,h2} [--speed 1 --wheelbase 0.2 --alpha 10 --beta 1] [--json]
+    pfjax simulate --path {line,parabola,sine,circle} --controller NAME [--gains G,...] [--x0 X Y THETA_DEG]
+                   [--horizon 20] [--json]
     pfjax study CONFIG.toml [--set key=value ...] [--out DIR] [--json]
     pfjax report CONFIG.toml [--out DIR]
     pfjax tune | parking | parking-search | track | bench ...   (pfjax SUBCOMMAND --help)
@@ -11,6 +12,11 @@ One module per subcommand (or pair of subcommands), each with ``register(sub)``.
 print one line naming the flag, the value and what was expected, and exit with code 2 before
 anything is computed or written (the checks are the library's: :mod:`pfjax.errors`). A run that
 fails numerically is reported in its ``status``; it is not an error.
+
+One spelling per quantity in every subcommand: ``--horizon`` (s), ``--speed`` (m/s),
+``--wheelbase`` (m), ``--x0 X Y THETA_DEG`` (m, m, deg). The old spellings (``--T``, ``--v``,
+``--L``, ``--a``, ``--t-max``) are read for one release as deprecated aliases
+(:class:`pfjax.cli.common.Aliased`): each prints one ``PfjaxDeprecationWarning`` line on stderr.
 
 Controllers and paths registered by plugin modules (:mod:`pfjax.plugins`: ``PFJAX_PLUGINS`` or
 the ``pfjax.plugins`` entry points) appear in every subcommand's choices.

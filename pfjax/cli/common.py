@@ -9,7 +9,8 @@ import re
 
 from pfjax.errors import EXIT_USAGE, InputError
 
-__all__ = ["EXIT_USAGE", "UsageError", "Parser", "finite", "as_flags", "print_human", "join_negative_values"]
+__all__ = ["EXIT_USAGE", "UsageError", "Parser", "Aliased", "finite", "as_flags", "print_human",
+           "join_negative_values"]
 
 
 class UsageError(InputError):
@@ -19,6 +20,31 @@ class UsageError(InputError):
 class Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit code 2 (argparse's own convention)
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+class Aliased(argparse._StoreAction):
+    """A flag with deprecated spellings, read for one release: the first option string is the
+    canonical flag, every later one an old spelling that sets the same ``dest`` and prints one
+    :class:`~pfjax.errors.PfjaxDeprecationWarning` line naming both (once per spelling, by
+    :func:`pfjax.errors.deprecated`)::
+
+        p.add_argument("--horizon", "--T", action=Aliased, dest="horizon", type=float, default=20.0,
+                       help="horizon, s (default 20)")
+
+    ``--help`` lists the canonical flag first and adds ``(--T: deprecated spelling)``."""
+
+    def __init__(self, option_strings, dest, help=None, **kwargs):
+        old = list(option_strings[1:])
+        if old and help is not None and help is not argparse.SUPPRESS:
+            help = f"{help} ({', '.join(old)}: deprecated spelling{'s' if len(old) > 1 else ''})"
+        super().__init__(option_strings, dest, help=help, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if option_string is not None and option_string != self.option_strings[0]:
+            from pfjax.errors import deprecated
+
+            deprecated(option_string, self.option_strings[0])
+        super().__call__(parser, namespace, values, option_string)
 
 
 def finite(flag: str, value: float, *, positive=False, below=None, unit="") -> float:

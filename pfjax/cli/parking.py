@@ -1,15 +1,18 @@
 """``pfjax parking`` (one run, with its switch log) and ``pfjax parking-search`` (GA or grid).
 
     pfjax parking --map {parallel,garage,FILE} --x0 X Y THETA_DEG --direction {forward,backward}
-                  [--alpha-schedule 1,0.5,8,1] [--xs -1.2] [--json]
-    pfjax parking-search --method {ga,grid} [--n 32] [--generations 100] [--population 20] [--seed 0] [--json]
+                  [--alpha-schedule 1,0.5,8,1] [--xs -1.2] [--speed 0.05] [--horizon 200] [--json]
+    pfjax parking-search --method {ga,grid} [--n 32] [--generations 100] [--population 20] [--seed 0]
+                         [--horizon 200] [--json]
+
+``--t-max`` is a deprecated spelling of ``--horizon`` (the timeout; read for one release).
 """
 
 from __future__ import annotations
 
 import contextlib
 
-from pfjax.cli.common import UsageError, as_flags
+from pfjax.cli.common import Aliased, UsageError, as_flags
 from pfjax.errors import InputError
 
 
@@ -20,7 +23,8 @@ def _common(p):
     p.add_argument("--scan-period", type=float, default=0.1, help="scanner sampling period, s (default 0.1)")
     p.add_argument("--front", type=float, help="a_f: reach of the rectangle ahead of the axle, m (default: calibrated)")
     p.add_argument("--lag", action="store_true", help="yaw-rate PI loop (kP 0.8, kI 16) on")
-    p.add_argument("--t-max", type=float, default=200.0, help="timeout, s (default 200)")
+    p.add_argument("--horizon", "--t-max", action=Aliased, dest="horizon", type=float, default=200.0,
+                   help="horizon: the run's timeout, s (default 200)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -42,7 +46,8 @@ def register(sub) -> None:
                                    "(n = 20, N = 100) or an exhaustive N x N x N grid on the chromosome lattice.")
     s.add_argument("--method", choices=("ga", "grid"), required=True)
     s.add_argument("--map", default="garage", help="garage (default) or a TOML/JSON map file")
-    s.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"), help="start pose (default -0.9 0.6 -85)")
+    s.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"),
+                   help="start pose, m m deg (default -0.9 0.6 -85)")
     s.add_argument("--n", type=int, default=32, help="grid levels per parameter (default 32)")
     s.add_argument("--generations", type=int, default=100, help="GA generations N (default 100)")
     s.add_argument("--population", type=int, default=20, help="GA population n (default 20)")
@@ -56,12 +61,12 @@ def register(sub) -> None:
 #: :func:`_flags`).
 RUN_FLAGS = {"x0": "--x0", "direction": "--direction", "alpha_schedule": "--alpha-schedule", "xs": "--xs",
              "k1": "--k1", "k2": "--k2", "speed": "--speed", "scan_period": "--scan-period", "front": "--front",
-             "lag": "--lag", "t_max": "--t-max"}
+             "lag": "--lag", "t_max": "--horizon"}
 #: ``pfjax parking-search``'s flags by the argument of :func:`pfjax.parking.switch_search` they set.
 SEARCH_FLAGS = {"method": "--method", "x0": "--x0", "n": "--n", "generations": "--generations",
                 "population": "--population", "seed": "--seed", "weight": "--weight", "k1": "--k1", "k2": "--k2",
                 "speed": "--speed", "scan_period": "--scan-period", "front": "--front", "lag": "--lag",
-                "t_max": "--t-max"}
+                "t_max": "--horizon"}
 
 
 @contextlib.contextmanager
@@ -89,7 +94,7 @@ def _flags(flags: dict[str, str]):
 
 def _common_args(args) -> dict:
     return {"map": args.map, "x0": args.x0, "k1": args.k1, "k2": args.k2, "speed": args.speed,
-            "scan_period": args.scan_period, "front": args.front, "lag": bool(args.lag), "t_max": args.t_max}
+            "scan_period": args.scan_period, "front": args.front, "lag": bool(args.lag), "t_max": args.horizon}
 
 
 def _cmd_parking(args) -> dict:

@@ -1,10 +1,18 @@
-"""``pfjax simulate``: one closed-loop run of a paper scenario, its final state and metrics."""
+"""``pfjax simulate``: one closed-loop run of a paper scenario, its final state and metrics.
+
+    pfjax simulate --path {line,parabola,sine,circle} --controller NAME [--gains G,...]
+                   [--x0 X Y THETA_DEG] [--beta-r-deg 5] [--beta-f-deg 5] [--horizon 20] [--dt 0.005]
+                   [--speed 1] [--wheelbase 0.2] [--delta-max-deg 30] [--json]
+
+``--T``, ``--v`` and ``--L`` are deprecated spellings of ``--horizon``, ``--speed`` and
+``--wheelbase`` (read for one release). ``--x0``'s THETA is in degrees, as in ``pfjax parking``.
+"""
 
 from __future__ import annotations
 
 import math
 
-from pfjax.cli.common import UsageError, as_flags
+from pfjax.cli.common import Aliased, UsageError, as_flags, finite
 from pfjax.cli.synth import SYNTH_FLAGS
 
 
@@ -56,7 +64,7 @@ def _parse_gains(controller: str, text: str | None) -> dict:
 
 def _controller_and_gains(args):
     """``(controller, parameter pytree, gains shown)``: the registry entry's defaults, a design's
-    gains (:data:`pfjax.controllers.DESIGNS`, made at ``--v``, ``--L``) and ``--gains`` on top."""
+    gains (:data:`pfjax.controllers.DESIGNS`, made at ``--speed``, ``--wheelbase``) and ``--gains`` on top."""
     from pfjax import controllers as C
 
     e, d = C.resolve(args.controller, "--controller")
@@ -65,14 +73,14 @@ def _controller_and_gains(args):
         flat = C.flat_gains(e)
         if d is not None and not set(e.gains) <= set(given):
             with as_flags(SYNTH_FLAGS):
-                flat.update(d.make(args.v, args.L))
+                flat.update(d.make(args.speed, args.wheelbase))
         flat.update(given)
         gains = C.params_from_flat(e, **flat)
     return e.controller, gains, {k: flat[k] for k in e.gains}
 
 
-SIMULATE_FLAGS = {"v": "--v", "L": "--L", "beta_r_deg": "--beta-r-deg", "beta_f_deg": "--beta-f-deg",
-                  "delta_max_deg": "--delta-max-deg", "pose0": "--x0", "horizon": "--T", "dt": "--dt",
+SIMULATE_FLAGS = {"v": "--speed", "L": "--wheelbase", "beta_r_deg": "--beta-r-deg", "beta_f_deg": "--beta-f-deg",
+                  "delta_max_deg": "--delta-max-deg", "pose0": "--x0", "horizon": "--horizon", "dt": "--dt",
                   "control_every": "--control-every", "convention": "--convention", "gains": "--gains"}
 
 
@@ -87,25 +95,33 @@ def cmd(args) -> dict:
     if args.continuous and args.control_every is not None:
         raise UsageError("--control-every: not with --continuous (a continuous controller is evaluated inside every "
                          "RK4 stage, not sampled)")
+    pose0 = None
+    if args.x0 is not None:  # THETA in degrees, checked as given; the library takes radians
+        x, y, theta_deg = (finite(f"--x0[{i}]", v, unit=" deg" if i == 2 else "") for i, v in enumerate(args.x0))
+        pose0 = (x, y, math.radians(theta_deg))
     with as_flags(SIMULATE_FLAGS):
-        cfg = SimConfig(dt=args.dt, horizon=args.T, record=False,
+        cfg = SimConfig(dt=args.dt, horizon=args.horizon, record=False,
                         control_every=None if args.continuous else (1 if args.control_every is None else args.control_every))
         controller, gains, shown = _controller_and_gains(args)
         sc = paper_scenario(
             args.path, gains, beta_r_deg=args.beta_r_deg, beta_f_deg=args.beta_f_deg,
-            pose0=None if args.x0 is None else tuple(args.x0), v=args.v, L=args.L,
+            pose0=pose0, v=args.speed, L=args.wheelbase,
             delta_max_deg=args.delta_max_deg, convention=args.convention,
         )
     r = unstack(simulate_batch(stack([sc]), controller=controller, config=cfg), 0)
     status = int(r.status)
     metrics = {k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES}
     metrics["status"] = STATUS_NAMES[status]
-    x0 = paths.entry(args.path).start_pose if args.x0 is None else args.x0
+    if args.x0 is None:
+        start = paths.entry(args.path).start_pose
+        x0 = (start[0], start[1], math.degrees(start[2]))
+    else:
+        x0 = args.x0
     return {
         "path": args.path,
         "controller": args.controller,
         "gains": shown,
-        "x0": {"x": x0[0], "y": x0[1], "theta": x0[2]},
+        "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]},
         "beta_r": math.radians(args.beta_r_deg),
         "beta_f": math.radians(args.beta_f_deg),
         "T": cfg.n_steps * cfg.dt,
@@ -119,12 +135,13 @@ def cmd(args) -> dict:
 
 def register(sub) -> None:
     m = sub.add_parser("simulate", help="simulate one run of a paper scenario and print final state and metrics",
-                       description="One closed-loop run of the slip model on a path (SI units; THETA in rad).")
+                       description="One closed-loop run of the slip model on a path (SI units; angles in degrees).")
     from pfjax import paths
 
     m.add_argument("--path", choices=paths.fixed_paths(), required=True,
                    help="a registered path: the source's line, parabola, sine; pfjax's circle (radius 2 m)")
-    m.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA"), help="initial pose (m, m, rad); default: the source's")
+    m.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"),
+                   help="initial pose (m, m, deg); default: the source's")
     m.add_argument("--beta-r-deg", type=float, default=5.0, help="rear slip angle, deg (default 5)")
     m.add_argument("--beta-f-deg", type=float, default=5.0, help="front slip angle, deg (default 5)")
     from pfjax import controllers as C
@@ -134,12 +151,15 @@ def register(sub) -> None:
                         "integral-mixed: the LMI design with integral action; the others: registered controllers")
     m.add_argument("--gains", help="comma-separated gains (or name=value pairs): " +
                    "; ".join(f"{c}: {','.join(_gain_names(c))}" for c in C.cli_names()))
-    m.add_argument("--T", type=float, default=20.0, help="horizon, s (default 20)")
+    m.add_argument("--horizon", "--T", action=Aliased, dest="horizon", type=float, default=20.0,
+                   help="horizon, s (default 20)")
     m.add_argument("--dt", type=float, default=0.005, help="RK4 step, s (default 0.005)")
     m.add_argument("--control-every", type=int, help="controller sampling period in steps (default 1)")
     m.add_argument("--continuous", action="store_true", help="evaluate the controller inside every RK4 stage")
-    m.add_argument("--v", type=float, default=1.0, help="speed, m/s")
-    m.add_argument("--L", type=float, default=0.2, help="wheelbase, m")
+    m.add_argument("--speed", "--v", action=Aliased, dest="speed", type=float, default=1.0,
+                   help="speed, m/s (default 1)")
+    m.add_argument("--wheelbase", "--L", action=Aliased, dest="wheelbase", type=float, default=0.2,
+                   help="wheelbase, m (default 0.2)")
     m.add_argument("--delta-max-deg", type=float, default=30.0, help="steering limit, deg")
     m.add_argument("--convention", choices=("source", "lenain"), default="source", help="front-slip sign convention")
     m.add_argument("--json", action="store_true", help="print one JSON object")

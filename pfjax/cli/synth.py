@@ -1,13 +1,19 @@
-"""``pfjax synth``: a state feedback designed by LMIs, with its bounds and true norms."""
+"""``pfjax synth``: a state feedback designed by LMIs, with its bounds and true norms.
+
+    pfjax synth --method {mixed,hinf,h2} [--speed 1] [--wheelbase 0.2] [--alpha 10] [--beta 1]
+                [--max-real R] [--disk CENTER RADIUS] [--sector-deg DEG] [--json]
+
+``--v`` and ``--L`` are deprecated spellings of ``--speed`` and ``--wheelbase`` (read for one release).
+"""
 
 from __future__ import annotations
 
 import math
 
-from pfjax.cli.common import UsageError, as_flags, finite
+from pfjax.cli.common import Aliased, UsageError, as_flags, finite
 
 
-SYNTH_FLAGS = {"method": "--method", "v": "--v", "L": "--L", "alpha": "--alpha", "beta": "--beta",
+SYNTH_FLAGS = {"method": "--method", "v": "--speed", "L": "--wheelbase", "alpha": "--alpha", "beta": "--beta",
                "max_real": "--max-real", "disk_center": "--disk", "disk_radius": "--disk"}
 
 
@@ -26,12 +32,13 @@ def cmd(args) -> dict:
                 sector_angle=None if args.sector_deg is None else math.radians(args.sector_deg),
             )
         try:
-            design = synthesize(args.method, v=args.v, L=args.L, alpha=args.alpha, beta=args.beta, region=region)
+            design = synthesize(args.method, v=args.speed, L=args.wheelbase, alpha=args.alpha, beta=args.beta,
+                                region=region)
         except SynthesisError as e:
             flags = "--max-real/--disk/--sector-deg" if region is not None else f"--method {args.method}"
             raise UsageError(f"{flags}: no design exists ({e})") from None
     out = design.to_dict()
-    out.update(v=args.v, L=args.L)
+    out.update(v=args.speed, L=args.wheelbase)
     return out
 
 
@@ -39,8 +46,10 @@ def register(sub) -> None:
     s = sub.add_parser("synth", help="design a state feedback by LMIs (spec §4) and print K, bounds, true norms",
                        description="State-feedback H-inf, H2 or mixed H2/H-inf design for the slip model (msfsyn convention).")
     s.add_argument("--method", choices=("mixed", "hinf", "h2"), default="mixed")
-    s.add_argument("--v", type=float, default=1.0, help="speed, m/s (default 1)")
-    s.add_argument("--L", type=float, default=0.2, help="wheelbase, m (default 0.2)")
+    s.add_argument("--speed", "--v", action=Aliased, dest="speed", type=float, default=1.0,
+                   help="speed, m/s (default 1)")
+    s.add_argument("--wheelbase", "--L", action=Aliased, dest="wheelbase", type=float, default=0.2,
+                   help="wheelbase, m (default 0.2)")
     s.add_argument("--alpha", type=float, default=10.0, help="weight on gamma_inf^2 (mixed; default 10)")
     s.add_argument("--beta", type=float, default=1.0, help="weight on gamma_2^2 (mixed; default 1)")
     s.add_argument("--max-real", type=float, help="pole region: Re(s) < MAX_REAL")

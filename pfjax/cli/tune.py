@@ -3,7 +3,7 @@
     pfjax tune --method {ga,gradient} --controller {pi,state-feedback,integral,stanley,pure-pursuit,rear-wheel}
                --scenario {paper-line,paper-parabola,paper-sine,paper-all,CONFIG.toml}
                [--cost iae] [--aggregate mean] [--effort 0] [--seed 0] [--generations 100] [--population 50]
-               [--steps 100] [--lr 0.05] [--n-runs 16] [--json]
+               [--steps 100] [--lr 0.05] [--n-runs 16] [--dt 0.005] [--horizon 20] [--json]
 
 Prints ``gains``, ``cost``, ``n_rollouts_simulated``, ``wall_s``, ``history`` (best cost so far per
 generation / step) and ``history_rollouts``; a progress bar on stderr when it is a terminal and

@@ -10,7 +10,7 @@ so the integrals are the composite trapezoid rule on the samples::
 and the remaining metrics are sample statistics:
 
 * ``max_abs_d``: max |d| (m);
-* ``steady_abs_d``, ``steady_abs_theta_e``: time-mean of |d| (m) and |theta_e| (rad) over the
+* ``steady_abs_d``, ``steady_abs_theta_e_rad``: time-mean of |d| (m) and |theta_e| (rad) over the
   last ``steady_window`` seconds of the horizon (trapezoid rule on the samples in the window);
 * ``settling_time``: first sample time after which |d| stays within ``settle_band`` (s);
   NaN if the run ends outside the band or fails;
@@ -35,7 +35,7 @@ class Accumulator(NamedTuple):
     itae: Array
     max_abs_d: Array
     steady_abs_d: Array  # running weighted sum over the steady window
-    steady_abs_theta_e: Array
+    steady_abs_theta_e_rad: Array
     steady_weight: Array
     settle: Array  # time of the first sample after the last out-of-band one
     overshoot: Array
@@ -54,7 +54,7 @@ class Metrics(NamedTuple):
     itae: Array  # m s^2
     max_abs_d: Array  # m
     steady_abs_d: Array  # m
-    steady_abs_theta_e: Array  # rad
+    steady_abs_theta_e_rad: Array  # rad
     settling_time: Array  # s (NaN: not settled)
     overshoot: Array  # m
     steer_energy: Array  # rad^2 s
@@ -70,7 +70,7 @@ METRIC_NAMES = Metrics._fields
 def init(d0: Array, delta0: Array) -> Accumulator:
     z = jnp.zeros_like(d0)
     return Accumulator(
-        iae=z, ise=z, itae=z, max_abs_d=z, steady_abs_d=z, steady_abs_theta_e=z, steady_weight=z,
+        iae=z, ise=z, itae=z, max_abs_d=z, steady_abs_d=z, steady_abs_theta_e_rad=z, steady_weight=z,
         settle=z, overshoot=z, d0_sign=jnp.sign(d0), steer_energy=z, steer_tv=z, prev_delta=delta0,
         sat_time=z, time=z, late_max_abs_d=z,
     )
@@ -95,7 +95,7 @@ def update(acc: Accumulator, t, dt, weight, d, theta_e, delta, saturated, *, ban
         itae=acc.itae + w * t * ad,
         max_abs_d=jnp.where(live, jnp.maximum(acc.max_abs_d, ad), acc.max_abs_d),
         steady_abs_d=acc.steady_abs_d + ws * ad,
-        steady_abs_theta_e=acc.steady_abs_theta_e + ws * jnp.abs(theta_e),
+        steady_abs_theta_e_rad=acc.steady_abs_theta_e_rad + ws * jnp.abs(theta_e),
         steady_weight=acc.steady_weight + ws,
         settle=jnp.where(live & (ad > band), t + dt, acc.settle),
         overshoot=jnp.where(live, jnp.maximum(acc.overshoot, -acc.d0_sign * d), acc.overshoot),
@@ -120,7 +120,7 @@ def finalize(acc: Accumulator, horizon: float, failed: Array, success_band: floa
         itae=acc.itae,
         max_abs_d=acc.max_abs_d,
         steady_abs_d=jnp.where(failed, nan, acc.steady_abs_d / sw),
-        steady_abs_theta_e=jnp.where(failed, nan, acc.steady_abs_theta_e / sw),
+        steady_abs_theta_e_rad=jnp.where(failed, nan, acc.steady_abs_theta_e_rad / sw),
         settling_time=jnp.where(settled, acc.settle, nan),
         overshoot=jnp.maximum(acc.overshoot, 0.0),
         steer_energy=acc.steer_energy,

@@ -85,7 +85,7 @@ def study_warnings(spec: StudySpec) -> list[str]:
     v = spec.vehicle
     dmax_lo, L_hi = v.delta_max_deg.bounds()[0], v.L.bounds()[1]
     kappa_follow = math.tan(math.radians(dmax_lo)) / L_hi
-    travel = v.speed.bounds()[1] * spec.sim.horizon + spec.initial.start_s.bounds()[1]
+    travel = v.speed.bounds()[1] * spec.sim.horizon + spec.initial.start_along_m.bounds()[1]
     out = []
     for i, p in enumerate(spec.paths):
         k = path_max_curvature(p)
@@ -96,7 +96,7 @@ def study_warnings(spec: StudySpec) -> list[str]:
         length = path_length(p)
         if travel > length:
             out.append(f"paths[{i}] ({p.label}): {length:.4g} m long, but a run may travel {travel:.4g} m "
-                       f"(speed x horizon + start_s): runs that reach its end stop with status path_end")
+                       f"(speed x horizon + start_along_m): runs that reach its end stop with status path_end")
     return out
 
 

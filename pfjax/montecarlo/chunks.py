@@ -33,22 +33,19 @@ import pyarrow.parquet as pq
 
 import pfjax
 from pfjax.config import ConfigError
-from pfjax.jsonio import dumps
 from pfjax.montecarlo.config import StudySpec, study_hash
 from pfjax.outputs import sibling
+from pfjax.provenance import parquet_metadata
+from pfjax.tables import ParquetAppender
 
 #: The Parquet metadata keys that identify what a chunk was computed with.
 IDENTITY = (b"pfjax.config_sha256", b"pfjax.seed", b"pfjax.version")
 
 
 def file_metadata(spec: StudySpec) -> dict[bytes, bytes]:
-    """Parquet key-value metadata stamped on every table a study writes: config (strict JSON), hash, seed, version."""
-    return {
-        b"pfjax.config_sha256": study_hash(spec).encode(),
-        b"pfjax.config": dumps(spec.model_dump(mode="json")).encode(),
-        b"pfjax.seed": str(spec.seed).encode(),
-        b"pfjax.version": pfjax.__version__.encode(),
-    }
+    """Parquet key-value metadata stamped on every table a study writes: config (strict JSON), hash,
+    seed, version (:func:`pfjax.provenance.parquet_metadata`)."""
+    return parquet_metadata(spec.model_dump(mode="json"), spec.seed, config_sha256=study_hash(spec))
 
 
 def partial_dir(out: Path) -> Path:
@@ -153,31 +150,3 @@ class ChunkStore:
     def discard(self) -> None:
         """Remove the chunks (after the finished study has been moved into place)."""
         shutil.rmtree(self.dir, ignore_errors=True)
-
-
-class ParquetAppender:
-    """Tables appended to one Parquet file as they come, one row group each (memory: one table);
-    the file's schema is the first table's, with ``metadata`` added. A context manager; with no
-    table at all, an empty table that still carries ``metadata`` is written."""
-
-    def __init__(self, dest: Path, metadata: dict[bytes, bytes]):
-        self.dest, self.metadata, self.rows = Path(dest), metadata, 0
-        self._writer = None
-
-    def write(self, table: pa.Table | pd.DataFrame) -> None:
-        if isinstance(table, pd.DataFrame):
-            table = pa.Table.from_pandas(table, preserve_index=False)
-        if self._writer is None:
-            schema = table.schema.with_metadata({**(table.schema.metadata or {}), **self.metadata})
-            self._writer = pq.ParquetWriter(self.dest, schema)
-        self._writer.write_table(table.cast(self._writer.schema))
-        self.rows += table.num_rows
-
-    def __enter__(self) -> ParquetAppender:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self._writer is not None:
-            self._writer.close()
-        elif exc[0] is None:
-            pq.write_table(pa.table({}).replace_schema_metadata(self.metadata), self.dest)

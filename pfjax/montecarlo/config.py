@@ -5,7 +5,7 @@ Every uncertain quantity is a *distribution*: a bare number (constant) or a tabl
     beta_r_deg = {dist = "uniform", low = -10, high = 10}
     speed      = {dist = "normal", mean = 1.0, std = 0.05}
     L          = {dist = "truncnormal", mean = 0.2, std = 0.01, low = 0.18, high = 0.22}
-    start_s    = {dist = "choice", values = [0.0, 1.0, 2.0]}
+    start_along_m    = {dist = "choice", values = [0.0, 1.0, 2.0]}
 
 Angles are in degrees where the key says ``_deg``, everything else SI. Errors are
 :class:`pfjax.config.ConfigError` with one line naming the dotted key, the value and what was
@@ -17,11 +17,12 @@ from __future__ import annotations
 import difflib
 import math
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from pfjax.config import ConfigError, _short, config_hash, parse_override, read_toml
+from pfjax.config import ConfigError, _short, parse_override, read_toml
+from pfjax.provenance import config_hash
 from pfjax.errors import MAX_MAGNITUDE, MAX_SEED, MIN_POSITIVE
 from pfjax.resources import check_steps
 
@@ -44,6 +45,23 @@ POSITIVE = MIN_POSITIVE
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+    #: old key -> new key: an old spelling is read for one release, with a deprecation warning
+    RENAMED: ClassVar[dict[str, str]] = {}
+
+    @model_validator(mode="before")
+    @classmethod
+    def _renamed(cls, data):
+        if cls.RENAMED and isinstance(data, dict) and any(k in data for k in cls.RENAMED):
+            from pfjax.errors import deprecated
+
+            data = dict(data)
+            for old, new in cls.RENAMED.items():
+                if old in data:
+                    if new in data:
+                        raise ValueError(f"{old}: the old name of {new}; give only {new}")
+                    deprecated(old, new)
+                    data[new] = data.pop(old)
+        return data
 
 
 class Dist(_Model):
@@ -221,11 +239,12 @@ class SlipSpec(_Model):
 class InitialSpec(_Model):
     """Start pose relative to the path's nominal start: along-path offset, lateral offset, heading error."""
 
-    start_s: Dist = dist_field(0.0)  # m along the path
+    RENAMED: ClassVar[dict[str, str]] = {"start_s": "start_along_m"}
+    start_along_m: Dist = dist_field(0.0)  # m along the path
     lateral_offset: Dist = dist_field(0.0)  # m, left positive
     heading_error_deg: Dist = dist_field(0.0)
 
-    _coerce = field_validator("start_s", "lateral_offset", "heading_error_deg", mode="before")(lambda v: _as_dist(v))
+    _coerce = field_validator("start_along_m", "lateral_offset", "heading_error_deg", mode="before")(lambda v: _as_dist(v))
 
 
 class NoiseSpec(_Model):

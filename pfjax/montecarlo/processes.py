@@ -58,7 +58,6 @@ def lead(spec: StudySpec, output, *, fresh: bool = False) -> dict:
 
     Raises what it raises, after telling the other processes."""
     from pfjax.montecarlo.chunks import ChunkStore
-    from pfjax import controllers as C
     from pfjax.montecarlo.runner import controllers_of
 
     try:

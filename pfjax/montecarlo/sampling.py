@@ -27,7 +27,7 @@ from pfjax.sim.slip_profiles import SlipProfile
 #: Fixed quantity indices (never reorder: they define the random streams).
 QUANTITIES = (
     "speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", "step_time_s", "step_r_deg", "step_f_deg",
-    "amp_r_deg", "amp_f_deg", "freq_hz", "phase_r", "phase_f", "ou_sigma_deg", "ou_tau_s", "start_s",
+    "amp_r_deg", "amp_f_deg", "freq_hz", "phase_r", "phase_f", "ou_sigma_deg", "ou_tau_s", "start_along_m",
     "lateral_offset", "heading_error_deg", "radius", "path", "noise", "ou_r", "ou_f", "sign_r", "sign_f",
 )
 Q = {name: i for i, name in enumerate(QUANTITIES)}
@@ -89,7 +89,7 @@ def column_names(spec: StudySpec) -> list[str]:
     """The sampled-parameter columns of a study's run table (fixed for the whole study; NaN where
     a column does not apply to a path)."""
     cols = ["speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", *SLIP_COLUMNS[spec.slip.kind],
-            "start_s", "lateral_offset", "heading_error_deg"]
+            "start_along_m", "lateral_offset", "heading_error_deg"]
     if any(p.kind == "circle" for p in spec.paths):
         cols.append("radius")
     return cols
@@ -125,12 +125,12 @@ def _slip(spec: StudySpec, key, horizon: float, given=None):
     return profile, cols
 
 
-def _start_pose(path, u_nominal, start_s, offset, heading_err):
-    """Pose ``offset`` metres left of the point ``start_s`` metres along from ``u_nominal``, heading
+def _start_pose(path, u_nominal, start_along_m, offset, heading_err):
+    """Pose ``offset`` metres left of the point ``start_along_m`` metres along from ``u_nominal``, heading
     ``theta_p + heading_err`` (Newton on the arc length; 6 steps are exact to rounding here), and
     that point's parameter ``u`` (the simulator's initial closest-point guess)."""
-    s0 = arc_length(path, u_nominal) + start_s
-    u = u_nominal + start_s
+    s0 = arc_length(path, u_nominal) + start_along_m
+    u = u_nominal + start_along_m
     for _ in range(6):
         dx, dy = path.d1(u)
         u = u - (arc_length(path, u) - s0) / jnp.sqrt(dx * dx + dy * dy)
@@ -191,7 +191,7 @@ class _Static:
 
 
 #: Quantities :func:`sample_runs` can take per run (``given``) instead of drawing them.
-GIVEN = ("speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", "start_s", "lateral_offset", "heading_error_deg")
+GIVEN = ("speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", "start_along_m", "lateral_offset", "heading_error_deg")
 
 
 def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_override=None, key=None,
@@ -245,13 +245,13 @@ def _draw_runs(keys, given, path, u_nom, slip_override, use_override, *, study: 
         d = lambda dist, name: given[name] if name in given else draw(dist, _q(key, name))
         speed, L, dmax = d(v.speed, "speed"), d(v.L, "L"), d(v.delta_max_deg, "delta_max_deg")
         profile, cols = _slip(spec, key, horizon, given)
-        start_s = d(spec.initial.start_s, "start_s")
+        start_along_m = d(spec.initial.start_along_m, "start_along_m")
         offset = d(spec.initial.lateral_offset, "lateral_offset")
         herr = d(spec.initial.heading_error_deg, "heading_error_deg")
-        cols.update(speed=speed, L=L, delta_max_deg=dmax, start_s=start_s, lateral_offset=offset, heading_error_deg=herr)
+        cols.update(speed=speed, L=L, delta_max_deg=dmax, start_along_m=start_along_m, lateral_offset=offset, heading_error_deg=herr)
         params = SlipParams(v=speed, L=L, delta_max=dmax * rad, convention=jnp.asarray(CONVENTIONS[v.convention], jnp.int32),
                             delta_rate_max=jnp.asarray(math.inf if v.delta_rate_max_deg is None else v.delta_rate_max_deg * rad, float))
-        return profile, params, cols, (start_s, offset, herr * rad)
+        return profile, params, cols, (start_along_m, offset, herr * rad)
 
     profiles, params, cols, starts = jax.vmap(one)(keys, given)
     n = keys.shape[0]

@@ -15,7 +15,7 @@ from pathlib import Path
 import jax
 import pandas as pd
 
-from pfjax.montecarlo.config import StudySpec, load_study
+from pfjax.montecarlo.config import StudySpec
 from pfjax.montecarlo.runner import margin_sweep, run_study
 from pfjax.montecarlo.summary import summarize
 from pfjax.report import figure_worker

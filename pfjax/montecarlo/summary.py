@@ -13,9 +13,7 @@ already fails there).
 from __future__ import annotations
 
 import math
-import platform
 
-import jax
 import numpy as np
 import pandas as pd
 
@@ -32,6 +30,7 @@ from pfjax.metrics.robustness import (
 from pfjax.metrics.running import METRIC_NAMES
 from pfjax.montecarlo.config import StudySpec, study_hash
 from pfjax.montecarlo.sampling import column_names
+from pfjax.provenance import machine
 
 QUANTILE_METRICS = [m for m in METRIC_NAMES if m != "success"]
 
@@ -144,7 +143,7 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         "config_sha256": study_hash(spec),
         "pfjax_version": pfjax.__version__,
         "dtype": spec.dtype,
-        "machine": f"{platform.machine()} {platform.system()}, {jax.device_count()} {jax.default_backend()} device(s), jax {jax.__version__}",
+        "machine": machine(),
         "wall_s": wall_s,
         "config": spec.model_dump(mode="json"),
         "paths": [p.label for p in spec.paths],

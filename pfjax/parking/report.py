@@ -90,7 +90,7 @@ def write_report(out: Path, s: dict, sweep: pd.DataFrame) -> Path:
     text = f"""# Parking by switching travel direction and gain — pfjax study
 
 Config SHA-256 `{s['config_sha256']}`, seed {s['seed']}, pfjax {s['pfjax_version']}{' (**quick mode: small sizes**)' if s['quick'] else ''};
-wall time {s['wall_s']:.0f} s on {s['machine']['cpu_count']} CPU cores (jax {s['machine']['jax']}).
+wall time {s['wall_s']:.0f} s on {s['machine']}.
 Controller k₁ = {cfg['controller']['k1']:g}, k₂ = {cfg['controller']['k2']:g}, |v₁| = {cfg['controller']['speed']:g} m/s;
 scanner period {cfg['sim']['scan_period']:g} s, {cfg['sim']['n_sub']} RK4 steps per period; timeout {cfg['sim']['t_max']:g} s;
 stop when |x| + √(y² + tan²θ) < {cfg['sim']['tol']:g}. Runs end converged, stuck (less than {cfg['sim']['stuck_travel']:g} m of

@@ -7,7 +7,7 @@ Two sorts of entry:
 
 - *fixed* paths (``build`` is a function of no arguments): the source's line, parabola and sine,
   pfjax's circle of radius 2 m, and any path a user registers. A single run starts at
-  ``start_pose``; a study's runs start ``start_s`` metres along the path from parameter
+  ``start_pose``; a study's runs start ``start_along_m`` metres along the path from parameter
   ``start_u``, displaced by their lateral offset and heading error.
 - *parametric* kinds (``parametric=True``): built per study from the path config's own fields
   (``circle`` with a drawn radius, ``random`` splines, user ``spline`` points) by
@@ -31,7 +31,7 @@ class PathEntry(NamedTuple):
         build: ``() -> path`` (a :mod:`pfjax.paths.shapes` pytree), or None for a kind built only
             from a study's path config.
         start_pose: single runs' start ``(x, y, theta)`` (m, m, rad), or None.
-        start_u: path parameter from which a study's ``start_s`` is measured.
+        start_u: path parameter from which a study's ``start_along_m`` is measured.
         max_curvature: largest |curvature| over the path (1/m), or None when it depends on the
             study's path config (computed by :func:`pfjax.montecarlo.checks.path_max_curvature`).
         source: one of the source's three test paths.

@@ -365,7 +365,7 @@ PARAM_LABEL = {"speed": "speed v [m/s]", "L": "wheelbase L [m]", "delta_max_deg"
                "beta_f_deg": "β_f [deg]", "step_time_s": "step time [s]", "step_r_deg": "rear step [deg]",
                "step_f_deg": "front step [deg]", "amp_r_deg": "rear amplitude [deg]", "amp_f_deg": "front amplitude [deg]",
                "freq_hz": "slip frequency [Hz]", "ou_sigma_deg": "OU std [deg]", "ou_tau_s": "OU time constant [s]",
-               "start_s": "start along the path [m]", "lateral_offset": "initial lateral offset [m]",
+               "start_along_m": "start along the path [m]", "lateral_offset": "initial lateral offset [m]",
                "heading_error_deg": "initial heading error [deg]", "radius": "circle radius [m]"}
 
 

@@ -112,7 +112,7 @@ def _setup(cfg: dict, summary: dict) -> dict:
         rows.append(("sinusoid phase", "uniform on [0, 2π), per axle"))
     if slip["kind"] == "ou":
         rows.append(("OU sampling period [s]", slip["seq_dt"]))
-    rows += [("start along the path [m]", ini["start_s"]), ("initial lateral offset [m]", ini["lateral_offset"]),
+    rows += [("start along the path [m]", ini["start_along_m"]), ("initial lateral offset [m]", ini["lateral_offset"]),
              ("initial heading error [deg]", ini["heading_error_deg"]),
              ("measurement noise on d [m]", f"normal, std {noise['sigma_d']:g}" if noise["sigma_d"] else "none"),
              ("measurement noise on θ_e [deg]",

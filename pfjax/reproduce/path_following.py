@@ -4,7 +4,7 @@
 The inputs are plain dicts and frames the study computes (``studies/paper_reproduction.py``):
 
 * ``rows``: one dict per (path, controller) with the run's metrics (``status``, ``settling_time``
-  s, ``steady_abs_d`` m and ``steady_abs_theta_e`` rad over the final window, ``final_delta`` and
+  s, ``steady_abs_d`` m and ``steady_abs_theta_e_rad`` rad over the final window, ``final_delta`` and
   ``final_theta_e`` rad, ``max_abs_delta_cmd`` the peak commanded steering before saturation and
   ``max_abs_delta`` the peak applied steering, rad, ``steer_energy`` ∫δ² dt of the applied
   steering in rad²·s, ``sat_fraction`` the fraction of the run with the command beyond the limit);
@@ -80,7 +80,7 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
     claim = "The mixed design has the smaller yaw error"
     for p in paths:
         m, q = R[(p, "mixed")], R[(p, "pi")]
-        dm, dq = math.degrees(m["steady_abs_theta_e"]), math.degrees(q["steady_abs_theta_e"])
+        dm, dq = math.degrees(m["steady_abs_theta_e_rad"]), math.degrees(q["steady_abs_theta_e_rad"])
         add(claim, p, "mixed vs PI", f"steady |θₑ| (mean over the last {window:g} s): mixed < PI",
             f"{dm:.3f}° vs {dq:.3f}°", "—", _holds(dm < dq))
     claim = "The mixed design needs less steering effort than the PI"

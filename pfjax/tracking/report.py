@@ -22,14 +22,6 @@ LABELS = {"both": "z~→0 and φ−pγ→0", "z_only": "z~→0 only", "phi_only"
           "failed": "failed (status)"}
 
 
-def write_parquet(df: pd.DataFrame, path: Path, meta: dict) -> None:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    t = pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False)
-    pq.write_table(t.replace_schema_metadata({**(t.schema.metadata or {}), **{k: str(v) for k, v in meta.items()}}), path)
-
-
 def write_figures(fig_dir: Path, cfg: dict, lemma_df: pd.DataFrame, geo: pd.DataFrame, mc: pd.DataFrame) -> list[str]:
     import matplotlib.pyplot as plt
 
@@ -161,4 +153,4 @@ class _ns(dict):
             raise AttributeError(k) from None
 
 
-__all__ = ["write_figures", "write_parquet", "write_report"]
+__all__ = ["write_figures", "write_report"]

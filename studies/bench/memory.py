@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from pfjax.config import config_hash
+from pfjax.provenance import config_hash
 from pfjax.errors import InputError, command_main
 from pfjax.outputs import OutputDir
 

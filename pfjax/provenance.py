@@ -1,0 +1,51 @@
+"""Provenance: what every output of pfjax records about how it was made.
+
+:func:`stamp` is the one record (pfjax and JAX versions, the config's SHA-256, the seed, the
+machine) that a study's ``summary.json`` carries at its top level; :func:`parquet_metadata` is the
+same record as Parquet key-value metadata (with the config itself as strict JSON), stamped on every
+table pfjax writes (:func:`pfjax.tables.write_parquet`). Same config and seed, same hash: the hash
+is over the canonical JSON of the validated config (defaults filled in, keys sorted).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+
+
+def config_hash(cfg: dict) -> str:
+    """SHA-256 of the canonical JSON of ``cfg`` (keys sorted, no spaces)."""
+    return hashlib.sha256(json.dumps(cfg, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def machine() -> str:
+    """One line: CPU architecture and OS, the JAX devices, the JAX and Python versions."""
+    import jax
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return (f"{platform.machine()} {platform.system()}, {cores} CPU(s), {jax.device_count()} {jax.default_backend()} "
+            f"device(s), jax {jax.__version__}, Python {platform.python_version()}")
+
+
+def stamp(config: dict, seed: int | None = None) -> dict:
+    """The provenance record of an output made from ``config`` (a JSON-able dict) and ``seed``."""
+    import pfjax
+
+    return {"pfjax_version": pfjax.__version__, "config_sha256": config_hash(config), "seed": seed,
+            "machine": machine()}
+
+
+def parquet_metadata(config: dict, seed: int | None = None, *, config_sha256: str | None = None) -> dict[bytes, bytes]:
+    """Parquet key-value metadata: ``pfjax.config_sha256``, ``pfjax.config`` (strict JSON),
+    ``pfjax.seed`` and ``pfjax.version``."""
+    import pfjax
+    from pfjax.jsonio import dumps
+
+    return {
+        b"pfjax.config_sha256": (config_sha256 or config_hash(config)).encode(),
+        b"pfjax.config": dumps(config).encode(),
+        b"pfjax.seed": str(seed).encode(),
+        b"pfjax.version": pfjax.__version__.encode(),
+    }

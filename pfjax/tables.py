@@ -1,0 +1,134 @@
+"""Tables pfjax writes: one Parquet writer, and the unit and meaning of every column it knows.
+
+Every Parquet file pfjax writes goes through :func:`write_parquet` (or, streamed chunk by chunk,
+:func:`schema_with_units`): each column carries field metadata ``unit`` and ``description``
+(from :data:`COLUMNS`, or the caller's), and the file carries the provenance record
+(:func:`pfjax.provenance.parquet_metadata`). Read them back with
+``pyarrow.parquet.read_schema(path).field(name).metadata`` or :func:`units`.
+
+Naming: SI units unless the name ends in a unit suffix (``_deg``, ``_rad`` where an angle could be
+mistaken for degrees, ``_hz``, ``_m``/``_s`` where the quantity could be mistaken for another).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+#: column -> (unit, description). Units: "1" dimensionless, "" text or code.
+COLUMNS: dict[str, tuple[str, str]] = {
+    # a study's run table: identity
+    "path": ("", "path label"),
+    "controller": ("", "controller name"),
+    "run": ("", "run index (the random stream of the run)"),
+    # sampled quantities
+    "speed": ("m/s", "rear-axle speed"),
+    "L": ("m", "wheelbase"),
+    "delta_max_deg": ("deg", "steering limit"),
+    "beta_r_deg": ("deg", "rear slip angle (constant part)"),
+    "beta_f_deg": ("deg", "front slip angle (constant part)"),
+    "step_time_s": ("s", "time of the slip step"),
+    "step_r_deg": ("deg", "rear slip step"),
+    "step_f_deg": ("deg", "front slip step"),
+    "amp_r_deg": ("deg", "rear slip sinusoid amplitude"),
+    "amp_f_deg": ("deg", "front slip sinusoid amplitude"),
+    "freq_hz": ("Hz", "slip sinusoid frequency"),
+    "ou_sigma_deg": ("deg", "Ornstein-Uhlenbeck slip: stationary standard deviation"),
+    "ou_tau_s": ("s", "Ornstein-Uhlenbeck slip: time constant"),
+    "start_along_m": ("m", "start, along the path from its nominal start"),
+    "lateral_offset": ("m", "start offset left of the path"),
+    "heading_error_deg": ("deg", "start heading error"),
+    "radius": ("m", "circle radius"),
+    # metrics (pfjax.metrics.running)
+    "iae": ("m s", "integral of |d| over the run"),
+    "ise": ("m^2 s", "integral of d^2 over the run"),
+    "itae": ("m s^2", "integral of t |d| over the run"),
+    "max_abs_d": ("m", "largest |d|"),
+    "steady_abs_d": ("m", "mean |d| over the steady window (the last steady_window s)"),
+    "steady_abs_theta_e_rad": ("rad", "mean |heading error| over the steady window"),
+    "settling_time": ("s", "time after which |d| stays within settle_band (NaN: never)"),
+    "overshoot": ("m", "largest lateral error past the path, opposite to the initial one"),
+    "steer_energy": ("rad^2 s", "integral of delta^2"),
+    "steer_tv": ("rad", "total variation of the applied steering"),
+    "sat_fraction": ("1", "fraction of the run at the steering limit"),
+    "late_max_abs_d": ("m", "largest |d| from the success window's start on"),
+    "success": ("", "no failure and |d| <= success band from success.from_s on"),
+    "status_code": ("", "run status code (pfjax.sim.status)"),
+    "status": ("", "run status name: ok, nonfinite, diverged, singular, path_end"),
+    "fail_time": ("s", "time of the first failure (NaN: none)"),
+    # the margin sweep
+    "amplitude_deg": ("deg", "slip amplitude A of the sweep"),
+    "axis": ("", "slipping axle(s): rear, front or joint"),
+    "n": ("", "runs"),
+    "k": ("", "successful runs"),
+}
+
+
+def units(path: str | Path) -> dict[str, dict[str, str]]:
+    """``{column: {"unit": ..., "description": ...}}`` of a Parquet file pfjax wrote."""
+    out = {}
+    for f in pq.read_schema(path):
+        md = f.metadata or {}
+        if b"unit" in md or b"description" in md:
+            out[f.name] = {"unit": md.get(b"unit", b"").decode(), "description": md.get(b"description", b"").decode()}
+    return out
+
+
+def schema_with_units(schema, extra: dict[str, tuple[str, str]] | None = None, metadata: dict | None = None):
+    """``schema`` with each known column's unit and description as field metadata (``extra``
+    first, then :data:`COLUMNS`) and ``metadata`` added to the schema's key-value metadata."""
+    known = {**COLUMNS, **(extra or {})}
+    fields = []
+    for f in schema:
+        if f.name in known:
+            unit, desc = known[f.name]
+            f = f.with_metadata({**(f.metadata or {}), b"unit": unit.encode(), b"description": desc.encode()})
+        fields.append(f)
+    md = {**(schema.metadata or {}), **{(k if isinstance(k, bytes) else str(k).encode()):
+                                         (v if isinstance(v, bytes) else str(v).encode()) for k, v in (metadata or {}).items()}}
+    return pa.schema(fields, metadata=md)
+
+
+def to_arrow(df, extra: dict[str, tuple[str, str]] | None = None, metadata: dict | None = None):
+    """A pandas DataFrame as an Arrow table with units (:func:`schema_with_units`), no index."""
+    t = pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False)
+    return t.cast(schema_with_units(t.schema, extra, metadata))
+
+
+def write_parquet(df, path: str | Path, metadata: dict | None = None, *,
+                  units: dict[str, tuple[str, str]] | None = None) -> None:
+    """Write ``df`` (pandas) to ``path`` with column units and ``metadata``
+    (:func:`pfjax.provenance.parquet_metadata`)."""
+    pq.write_table(to_arrow(df, units, metadata), path)
+
+
+class ParquetAppender:
+    """Tables appended to one Parquet file as they come, one row group each (memory: one table);
+    the file's schema is the first table's, with units (:func:`schema_with_units`) and ``metadata``
+    added. A context manager; with no table at all, an empty table that still carries ``metadata``
+    is written."""
+
+    def __init__(self, dest: Path, metadata: dict[bytes, bytes]):
+        self.dest, self.metadata, self.rows = Path(dest), metadata, 0
+        self._writer = None
+
+    def write(self, table: pa.Table | pd.DataFrame) -> None:
+        if isinstance(table, pd.DataFrame):
+            table = pa.Table.from_pandas(table, preserve_index=False)
+        if self._writer is None:
+            schema = schema_with_units(table.schema, metadata=self.metadata)
+            self._writer = pq.ParquetWriter(self.dest, schema)
+        self._writer.write_table(table.cast(self._writer.schema))
+        self.rows += table.num_rows
+
+    def __enter__(self) -> ParquetAppender:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._writer is not None:
+            self._writer.close()
+        elif exc[0] is None:
+            pq.write_table(pa.table({}).replace_schema_metadata(self.metadata), self.dest)
