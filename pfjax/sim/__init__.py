@@ -1,6 +1,7 @@
 """Simulation: slip profiles, the RK4 scan loop, batching, run status."""
 
-from pfjax.sim.simulate import Final, Scenario, SensorNoise, SimConfig, SimResult, Trajectory, simulate, simulate_batch, stack, unstack
+from pfjax.sim.loop import stack, unstack
+from pfjax.sim.simulate import Final, Scenario, SensorNoise, SimConfig, SimResult, Trajectory, simulate, simulate_batch
 from pfjax.sim.slip_profiles import (
     SlipProfile,
     constant_slip,

@@ -1,15 +1,14 @@
-"""The simulator: one ``lax.scan`` over integrator steps of the world-frame slip model.
+"""The slip vehicle: the world-frame slip model on the simulation loop (:mod:`pfjax.sim.loop`).
 
-Per step ``k`` (time ``t_k = k dt``):
+Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_step`:
 
-1. measure the pose against the path (closest point, warm-started Newton, spec §2) and, with
+1. measure the pose against the path (closest point, warm-started Newton, docs/reproductions/path-following.md §2) and, with
    :class:`SensorNoise`, give the controller the noisy measurement (:func:`_noisy`);
 2. sampled controllers: every ``control_every`` steps compute a new command and hold it
    (zero-order hold); continuous controllers: evaluated inside every RK4 stage instead;
-3. saturate the steering at ``+-delta_max``;
-4. check the run's health (:mod:`pfjax.sim.status`) and accumulate the metrics;
-5. advance the pose (and a continuous controller's state) by one RK4 step, slip evaluated at
-   the stage times.
+3. saturate the steering at ``+-delta_max``; check the run's health (:mod:`pfjax.sim.status`);
+4. propose one RK4 step of the pose (and a continuous controller's state), slip evaluated at the
+   stage times; the loop accumulates the metrics (:func:`_update`) and freezes a failed run.
 
 :func:`simulate` is one run (write single-run code); :func:`simulate_batch` is the jitted,
 vmapped entry point. ``SimConfig`` fixes the shapes and is a static argument.
@@ -17,7 +16,9 @@ vmapped entry point. ``SimConfig`` fixes the shapes and is a static argument.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, NamedTuple
 
 import jax
@@ -32,19 +33,21 @@ from pfjax.metrics import running
 from pfjax.models.slip import Pose, SlipParams, world_rhs
 from pfjax.numerics import compiler
 from pfjax.numerics import elementary as E
-from pfjax.numerics.layout import as_scalars
 from pfjax.numerics.random import step_normals
 from pfjax.paths.geometry import NEWTON_START, Projection, closest_parameter, global_parameter, measure, polish_parameter, wrap_angle
-from pfjax.sim import sharding
+from pfjax.sim import loop, sharding
 from pfjax.sim.integrators import rk4_step
+from pfjax.sim.loop import stack, unstack  # noqa: F401  (re-exported: a batch of runs, run i of a batch)
 from pfjax.sim.slip_profiles import SlipProfile, slip_at
-from pfjax.sim.status import Status, classify, first_failure
+from pfjax.sim.status import classify
 
 
 #: Newton steps that polish a scenario's given start parameter ``u0`` before sample 0.
 U0_ITERS = 8
 
-#: What reverse mode saves per step besides the carry (see the ``lax.scan`` in :func:`simulate`).
+#: What reverse mode saves per step besides the carry: the projection's last-but-one Newton iterate,
+#: so the backward step recomputes only the differentiated last Newton step (measured: 5 % less CPU
+#: time for the benchmark's gradient); a whole step's residuals would cost far more memory traffic.
 _SAVED = jax.checkpoint_policies.save_only_these_names(NEWTON_START)
 
 
@@ -54,7 +57,7 @@ class SimConfig:
 
     Attributes:
         dt: integrator step, s (default 5 ms).
-        horizon: simulated time, s (spec §6 *assumed* 20 s).
+        horizon: simulated time, s (docs/reproductions/path-following.md §6: *assumed* 20 s).
         control_every: controller sampling period in integrator steps (zero-order hold);
             ``None`` evaluates the controller continuously inside every RK4 stage.
         newton_iters: Newton steps of the warm-started projection per measurement.
@@ -197,30 +200,14 @@ def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
 
 def _noisy(obs: Observation, noise: SensorNoise | None, k) -> Observation:
     """The observation the controllers see at step ``k``: the exact one (``noise is None``), or the
-    one measured from the noisy pose of :class:`SensorNoise`.
+    one measured from the noisy pose (:class:`SensorNoise`'s equations), with
+    ``(n0, n1) = step_normals(noise.key, k, 2)``: ``d_m = d + e_d``, ``theta_e,m = wrap(theta_e + e_theta)``
+    and the pose displaced by ``e_d`` (m) along the path's left normal and rotated by ``e_theta``
+    (rad). ``kappa``, ``s`` and ``u`` (the closest point's) are unchanged: the measured pose
+    projects onto the same point (locally); ``u`` is only the trackers' warm start.
 
-    With ``(n0, n1) = step_normals(noise.key, k, 2)``, ``e_d = sigma_d n0`` (m) and
-    ``e_theta = sigma_theta_e n1`` (rad), the measured observation is::
-
-        d_m       = d + e_d                                   (m)
-        theta_e,m = wrap(theta_e + e_theta)                   (rad)
-        pose_m    = (x - e_d sin(psi_p), y + e_d cos(psi_p), theta + e_theta),
-                    psi_p = theta - theta_e                   (m, m, rad)
-
-    ``psi_p`` is the path tangent angle at the closest point (modulo 2 pi), so the pose is displaced
-    along the path's left unit normal ``(-sin psi_p, cos psi_p)`` there: the measured pose's closest
-    point is the same point ``p(u)`` (locally: ``|d + e_d| kappa < 1``), its signed distance is
-    ``d + e_d`` and its heading error ``theta_e + e_theta``. ``kappa``, ``s`` and ``u`` (the closest point's) are therefore unchanged;
-    ``u`` is only the trackers' warm start for their own projections of the measured pose.
-
-    Args:
-        obs: the exact observation at step ``k`` (true pose, true errors).
-        noise: the run's sensor noise, or ``None``.
-        k: integrator step index (the noise's counter; in continuous mode every RK4 stage of step
-            ``k`` sees the same draw).
-
-    Returns:
-        The observation the controllers read; ``obs`` itself when ``noise is None`` (no operations).
+    ``k`` is the integrator step (the noise's counter; in continuous mode every RK4 stage of step
+    ``k`` sees the same draw). Returns ``obs`` itself when ``noise is None`` (no operations).
     """
     if noise is None:
         return obs
@@ -243,132 +230,161 @@ def _measure(sc: Scenario, pose: Pose, u_guess, iters) -> Projection:
     return proj._replace(theta_e=E.computed_once(proj.theta_e))
 
 
-def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResult:
-    """Simulate one run (pure, unbatched; see :func:`simulate_batch` for the entry point).
+class _State(NamedTuple):
+    """What the loop freezes at a failure."""
 
-    Args:
-        controller: the controller (static).
-        sc: the run's scenario.
-        config: static settings.
+    pose: Pose  # rear-axle pose (m, m, rad)
+    c: Any  # controller state
+    u: Array  # path parameter, warm start of the next projection
 
-    Returns:
-        ``SimResult`` with metrics, status, failure time, final state and (if
-        ``config.record``) the trajectory.
-    """
-    controller.check_params(sc.gains)  # at trace time: a PI given state-feedback gains is bad input
-    dt, n_steps, iters = config.dt, config.n_steps, config.newton_iters
-    horizon = n_steps * dt
-    continuous = config.control_every is None
-    every = 1 if continuous else int(config.control_every)
+
+class _Held(NamedTuple):
+    """Carried on whatever the status (the loop's ``aux``)."""
+
+    u_last: Array  # path parameter of the last sample's closest point (the final state's projection)
+    cmd: Array  # rad, the (held) command
+    delta: Array  # rad, the applied steering (the rate limit's previous value)
+
+
+class _Out(NamedTuple):
+    """Sample ``k`` as the metrics and the record read it."""
+
+    t: Array  # s
+    first: Array  # bool, k == 0
+    last: Array  # bool, k == N
+    pose: Pose  # (m, m, rad)
+    proj: Projection  # the pose's closest point
+    cmd: Array  # rad, controller command (before saturation)
+    delta: Array  # rad, applied steering
+    saturated: Array  # 1.0 where |cmd| > delta_max, else 0.0
+
+
+def _start(controller: Controller, sc: Scenario) -> loop.Start:
+    """The pose, its path parameter (polished ``u0`` or a global search) and the controller's state;
+    the command, the steering and the metrics' ``d0_sign`` and ``prev_delta`` are set by sample 0."""
     pose0 = Pose(*(jnp.asarray(a, float) for a in sc.pose0))
     if sc.u0 is None:
         u0 = global_parameter(sc.path, pose0.x, pose0.y)
     else:  # polish the given start parameter (a rolled loop: one Newton step in the program, not eight)
         u0 = polish_parameter(sc.path, pose0.x, pose0.y, jnp.asarray(sc.u0, pose0.x.dtype), U0_ITERS)
-    c0 = controller.init(sc.gains)
-    t_end = jnp.asarray(horizon, pose0.x.dtype)
+    zero = jnp.zeros((), pose0.x.dtype)
+    return loop.Start(_State(pose0, controller.init(sc.gains), u0), running.init(zero, zero), zero,
+                      _Held(u0, zero, zero))
 
-    def make_body(sc: Scenario):
-        """The loop body, reading the run's inputs from ``sc`` (rebuilt inside the loop: see
-        :mod:`pfjax.numerics.layout`)."""
-        gains, params = sc.gains, sc.params
-        dmax = jnp.asarray(params.delta_max, float)
-        rate = jnp.asarray(params.delta_rate_max, float)
-        rate_limited = jnp.isfinite(rate)
 
-        def closed_loop_rhs(u_guess, k):
-            """Vector field of (pose, controller state) with the controller inside (continuous mode)."""
+def _closed_loop_rhs(controller: Controller, sc: Scenario, u_guess, k, iters):
+    """Vector field of (pose, controller state) with the controller inside (continuous mode)."""
+    dmax = jnp.asarray(sc.params.delta_max, float)
 
-            def f(t, y):
-                pose, c = y
-                obs = _noisy(_observation(_measure(sc, pose, u_guess, iters), pose, sc), sc.noise, k)
-                cmd = E.computed_once(controller.output(gains, c, obs))
-                delta = jnp.clip(cmd, -dmax, dmax)
-                br, bf = slip_at(sc.slip, t)
-                return world_rhs(pose, delta, br, bf, params), controller.rate(gains, c, obs, cmd, delta)
+    def f(t, y):
+        pose, c = y
+        obs = _noisy(_observation(_measure(sc, pose, u_guess, iters), pose, sc), sc.noise, k)
+        cmd = E.computed_once(controller.output(sc.gains, c, obs))
+        delta = jnp.clip(cmd, -dmax, dmax)
+        br, bf = slip_at(sc.slip, t)
+        return world_rhs(pose, delta, br, bf, sc.params), controller.rate(sc.gains, c, obs, cmd, delta)
 
-            return f
+    return f
 
-        def health(pose, proj):
-            finite = jnp.isfinite(pose.x) & jnp.isfinite(pose.y) & jnp.isfinite(pose.theta) & jnp.isfinite(proj.d)
-            return classify(finite, jnp.abs(proj.d), 1.0 - proj.kappa * proj.d, proj.at_end, config.d_fail)
 
-        def record_of(t, pose, proj, cmd, delta):
-            br, bf = slip_at(sc.slip, t)
-            return Trajectory(t, pose.x, pose.y, pose.theta, proj.d, proj.theta_e, proj.kappa, proj.s, cmd, delta, br, bf)
+def _sampled_command(controller: Controller, config: SimConfig, sc: Scenario, c, obs, held: _Held, k, last):
+    """Sampled controller: ``(cmd, c_next, delta)`` at sample ``k``: a new command every
+    ``control_every`` steps, held in between (zero-order hold) and at sample ``N``; saturated at
+    ``+-delta_max`` and rate limited, ``|delta_k - delta_{k-1}| <= delta_rate_max dt``."""
+    dt, every = config.dt, int(config.control_every)
+    if every == 1:  # every step: no conditional (it would split XLA's fused loop body)
+        new_cmd, c_next = step(controller, sc.gains, c, obs, dt)
+    else:
+        new_cmd, c_next = jax.lax.cond(k % every == 0, lambda: step(controller, sc.gains, c, obs, every * dt),
+                                       lambda: (held.cmd, c))
+    cmd = jnp.where(last, held.cmd, E.computed_once(new_cmd))
+    dmax = jnp.asarray(sc.params.delta_max, float)
+    rate = jnp.asarray(sc.params.delta_rate_max, float)
+    delta, prev = jnp.clip(cmd, -dmax, dmax), held.delta
+    # steering rate limit (exactly a no-op when rate = inf); held at sample N
+    limited = prev + jnp.clip(delta - prev, -rate * dt, rate * dt)
+    delta = E.computed_once(jnp.where(last, prev, jnp.where(jnp.isfinite(rate), limited, delta)))
+    return cmd, c_next, delta
 
-        def body(carry, k):
-            """Sample ``k`` (``t_k = k dt``, ``k = 0..N``): measure, command, health, metrics; then, for
-            ``k < N``, one RK4 step. Sample ``N`` only measures (the trapezoid's end point), with the
-            command held from step ``N - 1`` (sampled controllers) or evaluated there (continuous)."""
-            pose, c, u, _, cmd, delta_prev, (acc, status, fail_time) = carry
-            first, last = k == 0, k == n_steps
-            t = jnp.where(last, t_end, k * dt)
-            proj = _measure(sc, pose, u, iters)
-            obs = _noisy(_observation(proj, pose, sc), sc.noise, k)
-            if continuous:
-                cmd = E.computed_once(controller.output(gains, c, obs))
-            else:
-                if every == 1:  # every step: no conditional (it would split XLA's fused loop body)
-                    new_cmd, new_c = step(controller, gains, c, obs, dt)
-                else:
-                    new_cmd, new_c = jax.lax.cond(
-                        k % every == 0,
-                        lambda: step(controller, gains, c, obs, every * dt),
-                        lambda: (cmd, c),
-                    )
-                cmd, c_next = jnp.where(last, cmd, E.computed_once(new_cmd)), new_c
-            delta = jnp.clip(cmd, -dmax, dmax)
-            if not continuous:  # steering rate limit (exactly a no-op when rate = inf); held at sample N
-                limited = delta_prev + jnp.clip(delta - delta_prev, -rate * dt, rate * dt)
-                delta = E.computed_once(jnp.where(last, delta_prev, jnp.where(rate_limited, limited, delta)))
-            # health check and metrics (trapezoid weight 1/2 at both ends)
-            status, fail_time = first_failure(status, fail_time, health(pose, proj), t)  # status: a float code
-            live = status == Status.OK
-            acc = acc._replace(d0_sign=jnp.where(first, jnp.sign(proj.d), acc.d0_sign),
-                               prev_delta=jnp.where(first, delta, acc.prev_delta))
-            acc = running.update(
-                acc, t, dt, jnp.where(live, jnp.where(first | last, 0.5, 1.0), 0.0), jnp.where(live, proj.d, 0.0),
-                jnp.where(live, proj.theta_e, 0.0), delta, (jnp.abs(cmd) > dmax).astype(float),
-                band=config.settle_band, steady_from=horizon - config.steady_window,
-                success_from=config.success_start,
-            )
-            if continuous:
-                new_pose, c_next = rk4_step(closed_loop_rhs(proj.u, k), t, (pose, c), dt)
-            else:
-                rhs = lambda tt, ps: world_rhs(ps, delta, *slip_at(sc.slip, tt), params)
-                new_pose = rk4_step(rhs, t, pose, dt)
-            advance = live & ~last
-            keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(advance, a, b), new, old)
-            out = record_of(t, pose, proj, cmd, delta) if config.record else None
-            # u: warm start of the next projection (frozen after a failure); proj.u: the final state's
-            return (keep(new_pose, pose), keep(c_next, c), jnp.where(live, proj.u, u), proj.u, cmd, delta,
-                    (acc, status, fail_time)), out
 
-        return body
+def _step(controller: Controller, config: SimConfig, sc: Scenario, carry: loop.LoopCarry, k) -> loop.Sample:
+    """Sample ``k`` (``t_k = k dt``, ``k = 0..N``): measure, command, health; the proposed RK4 step
+    to ``t_{k+1}``. Sample ``N`` only measures (the trapezoid's end point; ``keep``), with the command
+    held from step ``N - 1`` (sampled controllers) or evaluated there (continuous)."""
+    pose, c, u = carry.state
+    dt, n_steps, iters = config.dt, config.n_steps, config.newton_iters
+    dmax = jnp.asarray(sc.params.delta_max, float)
+    first, last = k == 0, k == n_steps
+    t = jnp.where(last, jnp.asarray(n_steps * dt, pose.x.dtype), k * dt)
+    proj = _measure(sc, pose, u, iters)
+    obs = _noisy(_observation(proj, pose, sc), sc.noise, k)
+    if config.control_every is None:
+        cmd = E.computed_once(controller.output(sc.gains, c, obs))
+        delta = jnp.clip(cmd, -dmax, dmax)
+        new_pose, c_next = rk4_step(_closed_loop_rhs(controller, sc, proj.u, k, iters), t, (pose, c), dt)
+    else:
+        cmd, c_next, delta = _sampled_command(controller, config, sc, c, obs, carry.aux, k, last)
+        rhs = lambda tt, ps: world_rhs(ps, delta, *slip_at(sc.slip, tt), sc.params)
+        new_pose = rk4_step(rhs, t, pose, dt)
+    finite = jnp.isfinite(pose.x) & jnp.isfinite(pose.y) & jnp.isfinite(pose.theta) & jnp.isfinite(proj.d)
+    health = classify(finite, jnp.abs(proj.d), 1.0 - proj.kappa * proj.d, proj.at_end, config.d_fail)
+    out = _Out(t, first, last, pose, proj, cmd, delta, (jnp.abs(cmd) > dmax).astype(float))
+    # u: warm start of the next projection (frozen after a failure); proj.u: the final state's
+    return loop.Sample(_State(new_pose, c_next, proj.u), health, t, out, _Held(proj.u, cmd, delta), keep=last)
 
-    dtype = pose0.x.dtype
-    zero = jnp.zeros((), dtype)
-    # d0_sign and prev_delta are set by sample 0
-    acc0 = running.init(zero, zero)
-    init = (pose0, c0, u0, u0, zero, zero, (acc0, zero + Status.OK, jnp.asarray(jnp.nan, dtype)))
-    # One loop for samples 0..N: no separate first and last sample (a third less compile time).
-    # Reverse mode stores only the carry per step and recomputes the step (jax.checkpoint): the
-    # residuals of a whole step would cost far more memory traffic than recomputing it. It also
-    # stores the projection's last-but-one Newton iterate (one value per run and step), so the
-    # backward step recomputes only the differentiated last Newton step: measured 5 % less CPU time
-    # for the benchmark's reverse-mode gradient (with the values computed once; no gain before).
-    # The run's small inputs enter the loop as scalars, so reverse mode accumulates their cotangents
-    # as (runs,) arrays (pfjax.numerics.layout).
-    parts, join = as_scalars(sc)
-    body = lambda carry, k: make_body(join(parts))(carry, k)
-    (pose, c, _, u_last, cmd, delta, (acc, status, fail_time)), traj = jax.lax.scan(
-        jax.checkpoint(body, prevent_cse=False, policy=_SAVED), init, jnp.arange(n_steps + 1))
 
-    metrics = running.finalize(acc, horizon, status != Status.OK, config.success_band)
-    proj = measure(sc.path, pose.x, pose.y, pose.theta, u_last)  # sample N's projection
-    final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, delta, proj.s)
-    return SimResult(metrics, status.astype(jnp.int32), fail_time, final, traj)
+def _update(config: SimConfig, sc: Scenario, acc: running.Accumulator, s: loop.Sample, live, was_live):
+    """Accumulate sample ``k``'s metrics (trapezoid weight 1/2 at both ends, 0 after a failure)."""
+    o = s.out
+    acc = acc._replace(d0_sign=jnp.where(o.first, jnp.sign(o.proj.d), acc.d0_sign),
+                       prev_delta=jnp.where(o.first, o.delta, acc.prev_delta))
+    return running.update(
+        acc, o.t, config.dt, jnp.where(live, jnp.where(o.first | o.last, 0.5, 1.0), 0.0), jnp.where(live, o.proj.d, 0.0),
+        jnp.where(live, o.proj.theta_e, 0.0), o.delta, o.saturated,
+        band=config.settle_band, steady_from=config.n_steps * config.dt - config.steady_window,
+        success_from=config.success_start,
+    )
+
+
+def _record(sc: Scenario, s: loop.Sample, state: _State) -> Trajectory:
+    o = s.out
+    br, bf = slip_at(sc.slip, o.t)
+    return Trajectory(o.t, o.pose.x, o.pose.y, o.pose.theta, o.proj.d, o.proj.theta_e, o.proj.kappa, o.proj.s,
+                      o.cmd, o.delta, br, bf)
+
+
+def _finish(config: SimConfig, sc: Scenario, r: loop.Run) -> SimResult:
+    metrics = running.finalize(r.metrics, config.n_steps * config.dt, r.failed, config.success_band)
+    pose = r.state.pose
+    proj = measure(sc.path, pose.x, pose.y, pose.theta, r.aux.u_last)  # sample N's projection
+    final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, r.aux.delta, proj.s)
+    return SimResult(metrics, r.status, r.fail_time, final, r.records)
+
+
+def system(controller: Controller, config: SimConfig) -> loop.System:
+    """The slip vehicle as a :class:`pfjax.sim.loop.System` (inputs: a :class:`Scenario`)."""
+    return loop.System(init=partial(_start, controller), step=partial(_step, controller, config),
+                       update=partial(_update, config), record=_record, finish=partial(_finish, config),
+                       no_failure=math.nan)
+
+
+def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResult:
+    """Simulate one run (pure, unbatched; see :func:`simulate_batch` for the entry point): samples
+    ``k = 0..N`` of :func:`system` through :func:`pfjax.sim.loop.run`.
+
+    One loop for samples 0..N (no separate first and last sample: a third less compile time); reverse
+    mode stores the carry and ``_SAVED`` per step and recomputes the step; the small inputs enter the
+    loop as scalars (:mod:`pfjax.numerics.layout`).
+
+    Args:
+        controller, sc, config: the controller (static), the run's scenario, static settings.
+
+    Returns:
+        ``SimResult``: metrics, status, failure time, final state, trajectory (if ``config.record``).
+    """
+    controller.check_params(sc.gains)  # at trace time: a PI given state-feedback gains is bad input
+    return loop.run(system(controller, config), sc, config.n_steps + 1, record=config.record,
+                    scalar_inputs=True, checkpoint_policy=_SAVED)
 
 
 @compiler.jit(static_argnames=("controller", "config", "layout"))
@@ -401,35 +417,3 @@ def simulate_batch(scenarios: Scenario, *, controller: Controller, config: SimCo
 
 simulate_batch._cache_size = _simulate_vmapped._cache_size  # the jitted core's compilation count
 
-
-def stack(items):
-    """Stack a list of pytrees with identical structure along a new leading axis: NumPy arrays, one
-    per leaf, built on the host (``simulate_batch`` places them on the devices).
-
-    In NumPy because JAX would compile one small program per leaf shape and item count
-    (``jnp.stack``): 13 compilations in the paper reproduction, 4.6 s by JAX's compile log."""
-    items = list(items)
-    first = jax.tree_util.tree_structure(items[0])
-    for i, item in enumerate(items[1:], 1):
-        if jax.tree_util.tree_structure(item) != first:
-            raise ValueError(f"stack: item {i} has a different structure from item 0 (e.g. a slip profile with other "
-                             f"terms present: give every run the same terms, zeros where unused)")
-    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *items)
-
-
-def unstack(tree, i: int):
-    """Run ``i`` of a batched pytree (arrays stay on their device; NumPy leaves stay NumPy).
-
-    One jitted gather for the whole tree: indexing each leaf from Python would dispatch (and
-    compile) one program per leaf shape, seconds for a batch with trajectories."""
-    leaves = jax.tree_util.tree_leaves(tree)
-    if all(isinstance(a, np.ndarray) for a in leaves):
-        return jax.tree_util.tree_map(lambda a: a[i], tree)
-    if isinstance(i, (int, np.integer)) and leaves and not -leaves[0].shape[0] <= i < leaves[0].shape[0]:
-        raise IndexError(f"unstack: run {i} is out of range for a batch of {leaves[0].shape[0]}")
-    return _take(tree, i)
-
-
-@jax.jit
-def _take(tree, i):
-    return jax.tree_util.tree_map(lambda a: a[i], tree)

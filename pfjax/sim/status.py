@@ -1,7 +1,8 @@
 """Run status codes: a failed run is data, never an exception (diffrax ``RESULTS`` style).
 
 The first failure wins; from that sample on the state is frozen and the metrics stop
-accumulating, so the metrics describe the run up to its failure.
+accumulating, so the metrics describe the run up to its failure (:mod:`pfjax.sim.loop`, whose
+docstring has the one status table of every system on the loop).
 """
 
 from __future__ import annotations

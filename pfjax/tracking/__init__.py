@@ -1,4 +1,4 @@
-"""Vehicle tracking with a focus point (spec vehicle-tracking-focus.md; source: Ge & Lewis, ch. 8, eq. 8.4-8.7, Lemma 8.1).
+"""Vehicle tracking with a focus point (docs/reproductions/vehicle-tracking.md; source: Ge & Lewis, ch. 8, eq. 8.4-8.7, Lemma 8.1).
 
 Rooms: :mod:`~pfjax.tracking.model` (car-like follower with steering state, optional slip),
 :mod:`~pfjax.tracking.leader` (leader motions), :mod:`~pfjax.tracking.geometry` (focus point,

@@ -1,4 +1,5 @@
-"""One tracking run as one ``lax.scan``; ``simulate_batch`` is its jit(vmap), sharded over every
+"""One tracking run on the simulation loop (:mod:`pfjax.sim.loop`: one ``lax.scan``, the first failure
+freezes the run); ``simulate_batch`` is its jit(vmap), sharded over every
 device and, on CPU, evaluated in cache-sized blocks (:mod:`pfjax.sim.sharding`), like the slip model's.
 
 Each step ``k`` (``t_k = k dt``): measure the state (plus white noise), read the leader's
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 from enum import IntEnum
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -33,19 +35,20 @@ from pfjax.numerics import compiler
 from pfjax.numerics import elementary as E
 from pfjax.numerics.layout import all_true, first_true
 from pfjax.numerics.random import step_normals
-
-from pfjax.sim import sharding
+from pfjax.sim import loop, sharding
 from pfjax.sim.integrators import rk4_step
-from pfjax.sim.simulate import stack, unstack  # noqa: F401  (re-exported: a batch of runs, run i of a batch)
+from pfjax.sim.loop import stack, unstack  # noqa: F401  (re-exported: a batch of runs, run i of a batch)
 from pfjax.sim.slip_profiles import SlipProfile, constant_slip, slip_at
-from pfjax.sim.status import first_failure
-from pfjax.tracking.controller import FocusGains, focus_control, steering_stop
-from pfjax.tracking.geometry import connection, focus_point, tracking_error
+from pfjax.tracking.controller import Command, FocusGains, focus_control, steering_stop
+from pfjax.tracking.geometry import Connection, connection, focus_point, tracking_error
 from pfjax.tracking.leader import Leader, position, position_velocity, start_heading
 from pfjax.tracking.model import Follower, FollowerParams, as_arrays, follower_rhs
 
 
 class TrackStatus(IntEnum):
+    """The tracker's run status (codes shared with :class:`pfjax.sim.status.Status`; the one table is in
+    :mod:`pfjax.sim.loop`)."""
+
     OK = 0  #: ran the whole horizon
     NONFINITE = 1  #: a state became NaN or infinite
     DIVERGED = 2  #: |z~| exceeded TrackConfig.z_fail
@@ -167,99 +170,120 @@ def scenario(params: FollowerParams, leader: Leader, *, gains: FocusGains = Focu
     )
 
 
-class _Carry(NamedTuple):
-    s: Follower
-    status: Array
-    fail_time: Array
-    iae: Array
-    max_g: Array
-    win_z: Array
-    win_phi: Array
-    min_fac: Array
-    n_lim: Array
-    z_err: Array
-    phi_err: Array
-    d: Array
+class _Running(NamedTuple):
+    """The running metrics (the loop's ``metrics``), after the last sample counted."""
+
+    iae: Array  # m s, sum |z~| dt
+    max_g: Array  # rad, max |gamma|
+    win_z: Array  # m, max |z~| over the final window
+    win_phi: Array  # rad, max |phi - p gamma| over the final window
+    min_fac: Array  # -, min |det M / (l p)| (counted up to and including the failing step)
+    n_lim: Array  # steps with a limit active
+    z_err: Array  # m, |z~| at the last sample
+    phi_err: Array  # rad, phi - p gamma at the last sample
+    d: Array  # m, the connection's d at the last sample
 
 
-def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
-    """One run (see module doc); pure, for ``vmap``."""
-    dt, n = config.dt, config.n_steps
-    p = sc.params
+class _Out(NamedTuple):
+    """Step ``k`` as the metrics and the record read it (the state after the step, at ``t_{k+1}``)."""
+
+    t: Array  # s, t_{k+1}
+    zd: Array  # (2,) m, z_d(t_{k+1})
+    err: Array  # (2,) m, z~
+    enorm: Array  # m, |z~|
+    conn: Connection  # phi (rad), d (m)
+    phi_err: Array  # rad, phi - p gamma
+    cmd: Command  # the focus-point law's command
+    w: Array  # rad/s, the applied steering rate
+
+
+def _start(sc: TrackScenario) -> loop.Start:
+    """The follower at ``sc.init``; the metrics' last-sample values are those of ``t = 0``."""
     fz = jnp.zeros(()) + 0.0 * sc.init.x
-
-    def rhs_for(v, w):
-        def rhs(t, s):
-            br, bf = slip_at(sc.slip, t)
-            return follower_rhs(s, v, w, br, bf, p)
-        return rhs
-
-    def step(c: _Carry, k):
-        t = k * dt
-        eps = step_normals(sc.key, k, 4, fz.dtype)
-        ns = sc.noise
-        meas = Follower(c.s.x + ns.sigma_pos * eps[0], c.s.y + ns.sigma_pos * eps[1],
-                        c.s.theta + ns.sigma_theta * eps[2], c.s.gamma + ns.sigma_gamma * eps[3])
-        zd, zd_dot = position_velocity(sc.leader, t)
-        cmd = focus_control(meas, zd, zd_dot, p, sc.gains, config.sing_tol)
-        w = steering_stop(cmd.omega, c.s.gamma, p.gamma_max, dt)
-        s1 = rk4_step(rhs_for(cmd.v, w), t, c.s, dt)
-        s1 = s1._replace(gamma=jnp.clip(s1.gamma, -p.gamma_max, p.gamma_max))  # round-off only
-        zd1, _ = position_velocity(sc.leader, t + dt)
-        err = tracking_error(s1, zd1, p)
-        enorm = jnp.hypot(err[0], err[1])
-        conn = connection(s1, zd1, p)
-        phi_err = conn.phi - p.p * s1.gamma
-        # elementwise over the state's fields and a where chain, not a reduction over a stacked short
-        # axis (no vectorisation over the runs on CPU; see pfjax.numerics.layout)
-        finite = all_true(jnp.isfinite(v) for v in s1)
-        now = first_true([~finite, enorm > config.z_fail, cmd.singular], [1, 2, 3], jnp.int32(0))
-        ok = c.status == 0
-        status, fail_time = first_failure(c.status, c.fail_time, now, t + dt)  # status: a float code
-        live = status == 0
-        in_win = (t + dt) >= config.horizon - config.window - 1e-9
-        limited = (cmd.v != cmd.v_cmd) | (w != cmd.omega_cmd)
-        upd = lambda new, old: jnp.where(live, new, old)  # noqa: E731
-        c2 = _Carry(
-            s=jax.tree_util.tree_map(upd, s1, c.s),
-            status=status,
-            fail_time=fail_time,
-            iae=upd(c.iae + enorm * dt, c.iae),
-            max_g=upd(jnp.maximum(c.max_g, jnp.abs(s1.gamma)), c.max_g),
-            win_z=upd(jnp.where(in_win, jnp.maximum(c.win_z, enorm), c.win_z), c.win_z),
-            win_phi=upd(jnp.where(in_win, jnp.maximum(c.win_phi, jnp.abs(phi_err)), c.win_phi), c.win_phi),
-            min_fac=jnp.where(ok, jnp.minimum(c.min_fac, jnp.abs(cmd.factor)), c.min_fac),
-            n_lim=upd(c.n_lim + limited, c.n_lim),
-            z_err=upd(enorm, c.z_err), phi_err=upd(phi_err, c.phi_err), d=upd(conn.d, c.d),
-        )
-        rec = None
-        if config.record:
-            rec = (t + dt, c2.s, zd1, err, conn.d, conn.phi, cmd.v, w)
-        return c2, rec
-
-    z0 = sc.init
+    z0, p = sc.init, sc.params
     zd0, _ = position_velocity(sc.leader, 0.0 * fz)
     e0 = tracking_error(z0, zd0, p)
     conn0 = connection(z0, zd0, p)
-    c0 = _Carry(s=z0, status=fz, fail_time=fz + jnp.inf, iae=fz, max_g=jnp.abs(z0.gamma),
-                win_z=fz, win_phi=fz, min_fac=fz + jnp.inf, n_lim=fz, z_err=jnp.hypot(e0[0], e0[1]),
-                phi_err=conn0.phi - p.p * z0.gamma, d=conn0.d)
-    cN, rec = jax.lax.scan(step, c0, jnp.arange(n))
-    failed = cN.status != 0
-    nanf = lambda x: jnp.where(failed, jnp.nan, x)  # noqa: E731
-    win_z, win_phi = nanf(cN.win_z), nanf(cN.win_phi)
-    metrics = TrackMetrics(
-        iae=jnp.where(failed, jnp.inf, cN.iae), max_abs_gamma=cN.max_g, window_max_z=win_z, window_max_phi_err=win_phi,
-        final_error_norm=cN.z_err, final_phi_minus_pgamma=cN.phi_err, final_d=cN.d, min_abs_factor=cN.min_fac,
-        limit_fraction=cN.n_lim / n,
-        converged=~failed & (cN.win_z <= config.tol_z), phi_converged=~failed & (cN.win_phi <= config.tol_phi),
-        success=~failed & (cN.win_z <= config.band),
+    m0 = _Running(iae=fz, max_g=jnp.abs(z0.gamma), win_z=fz, win_phi=fz, min_fac=fz + jnp.inf, n_lim=fz,
+                  z_err=jnp.hypot(e0[0], e0[1]), phi_err=conn0.phi - p.p * z0.gamma, d=conn0.d)
+    return loop.Start(state=z0, metrics=m0, zero=fz)
+
+
+def _step(config: TrackConfig, sc: TrackScenario, carry: loop.LoopCarry, k) -> loop.Sample:
+    """Step ``k``: measure, command, RK4 to ``t_{k+1}``, then check the new state there."""
+    dt, p, s, ns = config.dt, sc.params, carry.state, sc.noise
+    t = k * dt
+    eps = step_normals(sc.key, k, 4, carry.status.dtype)  # the run's float type (the status's)
+    meas = Follower(s.x + ns.sigma_pos * eps[0], s.y + ns.sigma_pos * eps[1],
+                    s.theta + ns.sigma_theta * eps[2], s.gamma + ns.sigma_gamma * eps[3])
+    zd, zd_dot = position_velocity(sc.leader, t)
+    cmd = focus_control(meas, zd, zd_dot, p, sc.gains, config.sing_tol)
+    w = steering_stop(cmd.omega, s.gamma, p.gamma_max, dt)
+
+    def rhs(tt, st):
+        br, bf = slip_at(sc.slip, tt)
+        return follower_rhs(st, cmd.v, w, br, bf, p)
+
+    s1 = rk4_step(rhs, t, s, dt)
+    s1 = s1._replace(gamma=jnp.clip(s1.gamma, -p.gamma_max, p.gamma_max))  # round-off only
+    t1 = t + dt
+    zd1, _ = position_velocity(sc.leader, t1)
+    err = tracking_error(s1, zd1, p)
+    enorm = jnp.hypot(err[0], err[1])
+    conn = connection(s1, zd1, p)
+    # elementwise over the state's fields and a where chain, not a reduction over a stacked short
+    # axis (no vectorisation over the runs on CPU; see pfjax.numerics.layout)
+    finite = all_true(jnp.isfinite(v) for v in s1)
+    now = first_true([~finite, enorm > config.z_fail, cmd.singular],
+                     [TrackStatus.NONFINITE, TrackStatus.DIVERGED, TrackStatus.SINGULAR], jnp.int32(TrackStatus.OK))
+    return loop.Sample(s1, now, t1, _Out(t1, zd1, err, enorm, conn, conn.phi - p.p * s1.gamma, cmd, w))
+
+
+def _update(config: TrackConfig, sc: TrackScenario, m: _Running, s: loop.Sample, live, was_live) -> _Running:
+    """Accumulate step ``k``'s metrics while the run is live (``min_fac`` also at the failing step)."""
+    o = s.out
+    in_win = o.t >= config.horizon - config.window - 1e-9
+    limited = (o.cmd.v != o.cmd.v_cmd) | (o.w != o.cmd.omega_cmd)
+    upd = partial(loop.freeze, live)  # new while live, else old
+    return _Running(
+        iae=upd(m.iae + o.enorm * config.dt, m.iae),
+        max_g=upd(jnp.maximum(m.max_g, jnp.abs(s.state.gamma)), m.max_g),
+        win_z=upd(jnp.where(in_win, jnp.maximum(m.win_z, o.enorm), m.win_z), m.win_z),
+        win_phi=upd(jnp.where(in_win, jnp.maximum(m.win_phi, jnp.abs(o.phi_err)), m.win_phi), m.win_phi),
+        min_fac=jnp.where(was_live, jnp.minimum(m.min_fac, jnp.abs(o.cmd.factor)), m.min_fac),
+        n_lim=upd(m.n_lim + limited, m.n_lim),
+        z_err=upd(o.enorm, m.z_err), phi_err=upd(o.phi_err, m.phi_err), d=upd(o.conn.d, m.d),
     )
-    traj = None
-    if config.record:
-        t, st, zd, err, d, phi, v, w = rec
-        traj = TrackTrajectory(t=t, state=st, zd=zd, z_err=err, d=d, phi=phi, v=v, omega=w)
-    return TrackResult(final=cN.s, metrics=metrics, status=cN.status.astype(jnp.int32), fail_time=cN.fail_time, trajectory=traj)
+
+
+def _record(sc: TrackScenario, s: loop.Sample, state: Follower) -> TrackTrajectory:
+    o = s.out
+    return TrackTrajectory(t=o.t, state=state, zd=o.zd, z_err=o.err, d=o.conn.d, phi=o.conn.phi, v=o.cmd.v, omega=o.w)
+
+
+def _finish(config: TrackConfig, sc: TrackScenario, r: loop.Run) -> TrackResult:
+    m, failed = r.metrics, r.failed
+    nanf = lambda x: jnp.where(failed, jnp.nan, x)
+    metrics = TrackMetrics(
+        iae=jnp.where(failed, jnp.inf, m.iae), max_abs_gamma=m.max_g, window_max_z=nanf(m.win_z),
+        window_max_phi_err=nanf(m.win_phi), final_error_norm=m.z_err, final_phi_minus_pgamma=m.phi_err,
+        final_d=m.d, min_abs_factor=m.min_fac, limit_fraction=m.n_lim / config.n_steps,
+        converged=~failed & (m.win_z <= config.tol_z), phi_converged=~failed & (m.win_phi <= config.tol_phi),
+        success=~failed & (m.win_z <= config.band),
+    )
+    return TrackResult(final=r.state, metrics=metrics, status=r.status, fail_time=r.fail_time, trajectory=r.records)
+
+
+def system(config: TrackConfig) -> loop.System:
+    """The focus-point tracker as a :class:`pfjax.sim.loop.System` (inputs: a :class:`TrackScenario`)."""
+    return loop.System(init=_start, step=partial(_step, config), update=partial(_update, config), record=_record,
+                       finish=partial(_finish, config), no_failure=float("inf"))
+
+
+def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
+    """One run (see module doc); pure, for ``vmap``: steps ``k = 0..N-1`` of :func:`system` through
+    :func:`pfjax.sim.loop.run`."""
+    return loop.run(system(config), sc, config.n_steps, record=config.record)
 
 
 @compiler.jit(static_argnames=("config", "layout"))

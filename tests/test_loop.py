@@ -1,0 +1,170 @@
+"""The simulation loop (:mod:`pfjax.sim.loop`): a third, tiny system (a 1-D linear ODE with a failure
+threshold, one Euler step per sample) run through the loop against a hand-written NumPy loop; the
+slip vehicle and the tracker run through the same loop; its status table is the enumerations'."""
+
+from __future__ import annotations
+
+import importlib
+import math
+import re
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from pfjax.sim import loop
+from pfjax.sim.status import Status
+
+DT, N, X_FAIL = 0.1, 30, 2.0
+
+
+class Params(NamedTuple):
+    x0: float  # initial state
+    a: float  # 1/s, x' = a x + b
+    b: float  # 1/s
+
+
+class Out(NamedTuple):
+    t: jax.Array  # s
+    x: jax.Array  # the sample's state
+
+
+def integrator(keep_last: bool) -> loop.System:
+    """``x' = a x + b``, Euler steps of ``DT``; each sample checks its own state (check, then step):
+    NONFINITE if not finite, DIVERGED if ``|x| > X_FAIL``. Metrics: ``sum x dt`` over the live samples
+    and the number of samples the run entered live. ``aux``: the proposed next state (never frozen)."""
+
+    def init(p):
+        zero = jnp.zeros((), jnp.result_type(float))
+        return loop.Start(state=p.x0 + zero, metrics=(zero, zero), zero=zero, aux=zero)
+
+    def step(p, carry, k):
+        x, t = carry.state, k * DT
+        proposed = x + DT * (p.a * x + p.b)
+        health = jnp.where(~jnp.isfinite(x), int(Status.NONFINITE), jnp.where(jnp.abs(x) > X_FAIL, int(Status.DIVERGED), 0))
+        return loop.Sample(proposed, health.astype(jnp.int32), t, Out(t, x), aux=proposed,
+                           keep=(k == N - 1) if keep_last else None)
+
+    def update(p, m, s, live, was_live):
+        integral, entered = m
+        return integral + jnp.where(live, s.out.x * DT, 0.0), entered + was_live
+
+    return loop.System(init, step, update, record=lambda p, s, state: (s.out.t, state),
+                       finish=lambda p, r: r, no_failure=math.nan)
+
+
+def numpy_loop(p: Params, keep_last: bool):
+    """The same run written out by hand."""
+    x, status, fail_time, integral, entered, aux = p.x0, 0, math.nan, 0.0, 0.0, 0.0
+    ts, xs = [], []
+    for k in range(N):
+        t = k * DT
+        proposed = x + DT * (p.a * x + p.b)
+        health = 1 if not np.isfinite(x) else 2 if abs(x) > X_FAIL else 0
+        entered += status == 0
+        if status == 0 and health != 0:
+            status, fail_time = health, t
+        if status == 0:
+            integral += x * DT
+            if not (keep_last and k == N - 1):
+                x = proposed
+        aux = proposed
+        ts.append(t)
+        xs.append(x)
+    return status, fail_time, x, aux, integral, entered, np.array(ts), np.array(xs)
+
+
+CASES = [Params(1.0, -1.0, 0.0),  # decays: OK
+         Params(1.0, 1.0, 0.0),  # grows past X_FAIL at sample 8: DIVERGED, frozen
+         Params(0.5, 0.0, 1.0),  # ramp, reaches X_FAIL later
+         Params(1.0, math.inf, 0.0),  # inf after one step: NONFINITE at sample 1
+         Params(math.nan, 0.0, 0.0),  # NaN from the start: NONFINITE at sample 0
+         Params(5.0, 0.0, 0.0)]  # beyond the threshold at sample 0
+
+
+@pytest.mark.parametrize("keep_last", [False, True])
+def test_dummy_system_matches_a_numpy_loop(keep_last):
+    ps = Params(*(np.array(v, float) for v in zip(*CASES)))
+    run = jax.jit(jax.vmap(lambda p: loop.run(integrator(keep_last), p, N, record=True)))
+    r = run(ps)
+    assert isinstance(r, loop.Run) and r.status.dtype == jnp.int32
+    for i, p in enumerate(CASES):
+        status, fail_time, x, aux, integral, entered, ts, xs = numpy_loop(p, keep_last)
+        assert int(r.status[i]) == status and bool(r.failed[i]) == (status != 0)
+        np.testing.assert_array_equal(r.fail_time[i], fail_time)  # the failing sample's own time (NaN: none)
+        np.testing.assert_allclose(r.state[i], x, rtol=1e-14)  # frozen at the failure
+        np.testing.assert_allclose(r.aux[i], aux, rtol=1e-14)  # never frozen
+        np.testing.assert_allclose(r.metrics[0][i], integral, rtol=1e-13)
+        assert float(r.metrics[1][i]) == entered
+        np.testing.assert_array_equal(r.records[0][i], ts)
+        np.testing.assert_allclose(r.records[1][i], xs, rtol=1e-14)
+    assert [int(s) for s in r.status] == [0, 2, 2, 1, 1, 2]
+
+
+def test_recording_switch_scalar_inputs_and_checkpointing_change_nothing():
+    p = Params(*(jnp.asarray(v, float) for v in (1.0, 0.5, 0.1)))
+    ref = loop.run(integrator(False), p, N, record=True)
+    off = loop.run(integrator(False), p, N, record=False)
+    assert off.records is None
+    np.testing.assert_array_equal(off.metrics, ref.metrics)
+    opts = loop.run(integrator(False), p, N, record=False, scalar_inputs=True,
+                    checkpoint_policy=jax.checkpoint_policies.nothing_saveable)
+    np.testing.assert_array_equal(opts.metrics, ref.metrics)
+
+    def loss(b, **kw):
+        return loop.run(integrator(False), p._replace(b=b), N, record=False, **kw).metrics[0]
+
+    g = jax.grad(loss)(0.1)
+    h = 1e-6
+    assert float(g) == pytest.approx((float(loss(0.1 + h)) - float(loss(0.1 - h))) / (2 * h), rel=1e-6)
+    g2 = jax.grad(lambda b: loss(b, scalar_inputs=True, checkpoint_policy=jax.checkpoint_policies.nothing_saveable))(0.1)
+    assert float(g2) == pytest.approx(float(g), rel=1e-12)
+
+
+def test_the_carry_is_named():
+    assert loop.LoopCarry._fields == ("state", "aux", "metrics", "status", "fail_time")
+
+
+def test_slip_vehicle_and_tracker_run_through_the_loop(monkeypatch):
+    from pfjax import controllers as C
+    from pfjax import tracking as T
+    from pfjax.sim import SimConfig
+    from pfjax.sim.scenario import paper_scenario
+    from pfjax.tracking import leader as L
+
+    slip = importlib.import_module("pfjax.sim.simulate")  # the modules (their packages export functions of that name)
+    tracking = importlib.import_module("pfjax.tracking.simulate")
+
+    calls = []
+    real = loop.run
+
+    def spy(system, inputs, n_samples, **kw):
+        calls.append((system, n_samples, kw))
+        return real(system, inputs, n_samples, **kw)
+
+    monkeypatch.setattr(loop, "run", spy)
+    cfg = SimConfig(dt=0.01, horizon=0.1, record=False)
+    out = jax.eval_shape(lambda s: slip.simulate(C.state_feedback, s, cfg), paper_scenario("sine", C.state_feedback_params()))
+    assert isinstance(out, slip.SimResult)
+    params = T.FollowerParams(a=1.0, f=1.0, l=1.0, p=1.0)
+    tcfg = T.TrackConfig(dt=0.02, horizon=0.2, window=0.1)
+    out = jax.eval_shape(lambda s: tracking.simulate(s, tcfg), T.scenario(params, L.sine()))
+    assert isinstance(out, tracking.TrackResult)
+    assert [(isinstance(s, loop.System), n) for s, n, _ in calls] == [(True, cfg.n_steps + 1), (True, tcfg.n_steps)]
+    assert calls[0][2]["scalar_inputs"] and calls[0][2]["checkpoint_policy"] is not None  # the slip's tuning kept
+    assert math.isnan(calls[0][0].no_failure) and calls[1][0].no_failure == math.inf
+
+
+def test_one_status_table_for_both_systems():
+    """The loop's docstring table lists every code of :class:`Status` and ``TrackStatus`` under its
+    name, and the codes the two share mean the same name."""
+    from pfjax.tracking.simulate import TrackStatus
+
+    rows = re.findall(r"^\s{4}(\d+)\s+(\w+)\s+(.+?)\s{2,}(.+)$", loop.__doc__, re.MULTILINE)
+    table = {int(code): name for code, name, _, _ in rows}
+    tracker = {int(code) for code, _, _, track in rows if track.strip() != "-"}
+    assert table == {int(s): s.name.lower() for s in Status}
+    assert tracker == {int(s) for s in TrackStatus}
+    assert all(TrackStatus(c).name == Status(c).name for c in tracker)
