@@ -68,3 +68,42 @@ def test_bench_bad_input_one_line_exit_2(tmp_path, args, flag, capsys):
     err = capsys.readouterr()
     assert err.out == "" and err.err.startswith(f"pfjax bench: error: {flag}") and err.err.count("\n") == 1
     assert not out.exists()
+
+
+# ------------------------------------------------------------------------- without Numba (optional)
+
+NUMBA_MISSING = "numba not installed: pip install 'pfjax[bench]'"
+
+
+def test_numba_reference_reports_a_missing_numba(monkeypatch):
+    from pfjax.bench import problem as P
+    from pfjax.bench import references as R
+
+    monkeypatch.setitem(sys.modules, "numba", None)  # `import numba` raises ImportError
+    monkeypatch.delitem(sys.modules, "pfjax.bench.numba_ref", raising=False)
+    assert R.NUMBA_MISSING == NUMBA_MISSING and not R.numba_available()
+    with pytest.raises(ImportError, match=r"^numba not installed: pip install 'pfjax\[bench\]'$"):
+        R.iae_numba(P.random_batch(2, 0), np.float64, 10)
+
+
+@pytest.mark.slow
+def test_quick_bench_without_numba_skips_its_reference_with_a_note(tmp_path):
+    out = tmp_path / "bench"
+    env = {**os.environ, "PFJAX_CACHE_DIR": str(ROOT / ".pytest_cache" / "xla")}
+    no_numba = ("import sys; sys.modules['numba'] = None; from pfjax.cli import main; "
+                "rc = main(sys.argv[1:]); assert sys.modules['numba'] is None; sys.exit(rc)")
+    r = subprocess.run([sys.executable, "-c", no_numba, "bench", "--quick", "--sizes", "64", "--out", str(out), "--json"],
+                       cwd=ROOT, capture_output=True, text=True, env=env, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert NUMBA_MISSING in r.stderr and "Traceback" not in r.stderr
+    s = json.loads(r.stdout)
+    assert s["notes"] == [NUMBA_MISSING]
+    # the other references still run and agree; Numba's rates and ratios are null (strict JSON)
+    assert set(s["agreement"]) == {"numpy_float32", "numpy_float64", "scipy_float64"} and s["all_agree"]
+    for k in ("numba_msteps_per_s_f32", "numba_msteps_per_s_f64", "ratio_vs_numba_f32", "ratio_vs_numba_f64"):
+        assert s[k] is None, k
+    assert math.isfinite(s["msteps_per_s_f32"]) and math.isfinite(s["ratio_vs_numpy_f64"])
+    assert set(pd.read_parquet(out / "bench.parquet").impl) == {"pfjax", "numpy", "scipy"}
+    assert json.loads((out / "bench.json").read_text())["summary"]["notes"] == [NUMBA_MISSING]
+    assert f"Note: {NUMBA_MISSING}" in (out / "report.md").read_text()
+    assert (out / "figures" / "throughput.png").is_file()

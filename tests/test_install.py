@@ -32,9 +32,15 @@ def pins() -> dict[str, str]:
     return out
 
 
+#: The extras ``make install`` installs (and constraints.txt pins): the tests, the benchmark's Numba
+#: reference and the documentation.
+EXTRAS = ("test", "bench", "docs")
+
+
 def declared() -> list[Requirement]:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    return [Requirement(r) for r in project["dependencies"] + project["optional-dependencies"]["test"]]
+    extras = project["optional-dependencies"]
+    return [Requirement(r) for r in project["dependencies"] + [r for e in EXTRAS for r in extras[e]]]
 
 
 def test_every_declared_dependency_is_pinned_inside_its_range():
@@ -56,8 +62,18 @@ def test_make_installs_with_the_constraints():
     make = (ROOT / "Makefile").read_text()
     stamp = re.search(r"^\$\(STAMP\):(.*)$", make, re.M)
     assert stamp and "constraints.txt" in stamp[1].split()  # editing the pins reinstalls
-    install = [ln for ln in make.splitlines() if "pip install" in ln and '".[test]"' in ln and "-e" in ln]
+    extras = f'".[{",".join(EXTRAS)}]"'
+    install = [ln for ln in make.splitlines() if "pip install" in ln and extras in ln and "-e" in ln]
     assert install and all("-c constraints.txt" in ln for ln in install), install
+    lock = [ln for ln in make.splitlines() if "LOCK_VENV" in ln and "pip install" in ln and "upgrade" not in ln]
+    assert lock and all(extras in ln for ln in lock), lock  # make lock pins what make install installs
+
+
+def test_numba_is_the_bench_extra_not_a_core_dependency():
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    core = {canonicalize_name(Requirement(r).name) for r in project["dependencies"]}
+    assert "numba" not in core and "scipy" in core  # SciPy: the synthesis, the paths and the statistics use it
+    assert [Requirement(r).name for r in project["optional-dependencies"]["bench"]] == ["numba"]
 
 
 @pytest.mark.skipif(Path(sys.prefix).resolve() != (ROOT / ".venv").resolve(),

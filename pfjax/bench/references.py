@@ -14,6 +14,9 @@ Each returns the per-run IAE (m s). Per step ``k`` (``t_k = k dt``), exactly as 
    ``th' = (v/L)(tan(delta - b_f) - tan b_r)`` (SciPy: ``solve_ivp`` DOP853 over the step instead).
 
 The float32 versions compute in float32 throughout (inputs, constants and arithmetic).
+
+Numba is optional (the ``bench`` extra): without it :func:`numba_available` is False and the
+benchmark skips the Numba reference with the note :data:`NUMBA_MISSING`.
 """
 
 from __future__ import annotations
@@ -21,6 +24,18 @@ from __future__ import annotations
 import numpy as np
 
 from pfjax.bench import problem as P
+
+#: The note of a benchmark run without Numba (its output and report carry it).
+NUMBA_MISSING = "numba not installed: pip install 'pfjax[bench]'"
+
+
+def numba_available() -> bool:
+    """Whether the Numba reference can run: ``numba`` imports (it is the ``bench`` extra)."""
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def _consts(dtype):
@@ -96,7 +111,10 @@ def iae_numba(batch: P.Batch, dtype=np.float64, n_steps: int | None = None) -> n
     on-disk cache, on first use)."""
     n_steps = P.n_steps() if n_steps is None else n_steps
     c = _consts(dtype)
-    from pfjax.bench import numba_ref
+    try:
+        from pfjax.bench import numba_ref
+    except ImportError as e:
+        raise ImportError(NUMBA_MISSING) from e
 
     consts = np.array([c[k] for k in numba_ref.CONSTANTS], dtype)
     return numba_ref.kernel(*(np.ascontiguousarray(a, dtype) for a in batch), consts, n_steps)

@@ -72,6 +72,8 @@ def markdown(result: dict) -> str:
               f"({s['grad_mode']} mode, as the tuner takes it); reverse mode {s['grad_over_forward_reverse']:.2f}x "
               f"(the two gradients differ by {g['modes_max_rel_diff']:.1e} relative). "
               f"Peak RSS {s['peak_rss_mib']:.0f} MiB.", ""]
+    for note in s.get("notes", []):  # a reference that was skipped (Numba not installed)
+        lines += [f"Note: {note} (the Numba reference was skipped; its rates and ratios are null).", ""]
     return "\n".join(lines)
 
 

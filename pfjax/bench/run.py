@@ -8,7 +8,9 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
   time = first call - best call;
 * the NumPy, Numba (``prange``) and SciPy references (:mod:`pfjax.bench.references`) on the
   largest batch (NumPy and SciPy on a sample, extrapolated per step), with their agreement with
-  pfjax on the per-run IAE (max absolute difference, against a stated tolerance);
+  pfjax on the per-run IAE (max absolute difference, against a stated tolerance); without Numba
+  (an optional dependency, the ``bench`` extra) its reference is skipped, its rates and ratios are
+  null and the result's ``summary["notes"]`` says so;
 * the value and gradient of the batch-mean IAE with respect to the controller gains over the
   forward pass at the same batch size, as the tuner takes it (forward mode for the 2 gains,
   :mod:`pfjax.numerics.autodiff`) and in reverse mode (``jax.value_and_grad``): the three called
@@ -172,6 +174,10 @@ def run(cfg: BenchConfig, progress=None) -> dict:
     from pfjax.bench import references as R
 
     say = progress or (lambda msg: None)
+    have_numba = R.numba_available()
+    notes = [] if have_numba else [R.NUMBA_MISSING]
+    if not have_numba:
+        say(f"{R.NUMBA_MISSING} (the Numba reference is skipped)")
     n_steps = P.n_steps(cfg.horizon)
     rows, iae = [], {}
     load0 = os.getloadavg()[0]
@@ -192,11 +198,12 @@ def run(cfg: BenchConfig, progress=None) -> dict:
     agree = {}
     for name, dtype in (("float32", np.float32), ("float64", np.float64)):
         ref = iae[("pfjax", name)]
-        say(f"numba {name} B={nr}")
-        out, first, best = _timed(lambda: R.iae_numba(sub(nr), dtype, n_steps), cfg.repeats)
-        rows.append(dict(impl="numba", dtype=name, batch=nr, seconds=best, compile_s=first - best,
-                         msteps_per_s=nr * n_steps / best / 1e6, failed_runs=None))
-        agree[f"numba_{name}"] = float(np.max(np.abs(out - ref[:nr])))
+        if have_numba:
+            say(f"numba {name} B={nr}")
+            out, first, best = _timed(lambda: R.iae_numba(sub(nr), dtype, n_steps), cfg.repeats)
+            rows.append(dict(impl="numba", dtype=name, batch=nr, seconds=best, compile_s=first - best,
+                             msteps_per_s=nr * n_steps / best / 1e6, failed_runs=None))
+            agree[f"numba_{name}"] = float(np.max(np.abs(out - ref[:nr])))
         k = min(cfg.ref_numpy, top)
         say(f"numpy {name} B={k}")
         out, _, best = _timed(lambda: R.iae_numpy(sub(k), dtype, n_steps), 0)
@@ -237,7 +244,7 @@ def run(cfg: BenchConfig, progress=None) -> dict:
         grad_over_forward_reverse=g["reverse_s"] / g["forward_s"], gradient=g,
         peak_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         agreement=agreement, all_agree=all(a["ok"] for a in agreement.values()),
-        failed_runs=sum(r["failed_runs"] or 0 for r in rows),
+        failed_runs=sum(r["failed_runs"] or 0 for r in rows), notes=notes,
     )
     m = machine()
     m["load_average_1m_start"] = load0

@@ -34,7 +34,7 @@ from pfjax.jsonio import dumps
 __all__ = ["EXIT_USAGE", "UsageError", "as_flags", "build_parser", "main"]
 
 #: The subcommand modules, in the order of ``pfjax --help``.
-SUBCOMMANDS = ("synth", "simulate", "study", "tune", "parking", "track", "bench")
+SUBCOMMANDS = ("synth", "simulate", "study", "examples", "tune", "parking", "track", "bench")
 
 
 def build_parser():

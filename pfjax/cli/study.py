@@ -1,5 +1,6 @@
-"""``pfjax study`` and ``pfjax report``: a Monte Carlo robustness study from a TOML config, on one
-process or several, and its report rebuilt without simulating."""
+"""``pfjax study`` and ``pfjax report``: a Monte Carlo robustness study from a TOML config (or a
+study packaged with pfjax, ``--example NAME``: :mod:`pfjax.examples`), on one process or several,
+and its report rebuilt without simulating."""
 
 from __future__ import annotations
 
@@ -13,10 +14,31 @@ from pfjax.cli.common import UsageError, as_flags, finite
 from pfjax.errors import InputError, one_line
 
 
+def _config(args):
+    """The study TOML the flags name: the CONFIG path, or the packaged example ``--example NAME``
+    (one of the two)."""
+    if args.example is None:
+        if args.config is None:
+            raise UsageError("config: expected a study TOML path or --example NAME (pfjax examples lists them)")
+        return args.config
+    if args.config is not None:
+        raise UsageError(f"--example: give a study TOML ({args.config}) or --example {args.example}, not both")
+    from pfjax import examples
+
+    if args.example not in examples.FILES:
+        raise UsageError(f"--example: unknown example {args.example!r}; expected one of {', '.join(examples.names())}")
+    return examples.path(args.example)
+
+
+def _source(args) -> str:
+    """How the command line named the study, for messages."""
+    return f"--example {args.example}" if args.example is not None else str(args.config)
+
+
 def _load_study_or_usage(args):
     from pfjax.montecarlo.config import load_study
 
-    spec, _ = load_study(args.config, args.set)
+    spec, _ = load_study(_config(args), args.set)
     return spec
 
 
@@ -134,9 +156,9 @@ def _cmd_report(args) -> dict:
     out = Path(args.out) if args.out else Path("results") / spec.name
     marker = read_marker(out) if out.is_dir() else None
     if marker is None or marker.get("command") != "study":
-        raise UsageError(f"--out: no finished study in {out} (run `pfjax study {args.config}` first)")
+        raise UsageError(f"--out: no finished study in {out} (run `pfjax study {_source(args)}` first)")
     if marker.get("config_sha256") != study_hash(spec):
-        raise UsageError(f"config: {args.config} (with --set) does not match the study in {out} (config hash differs)")
+        raise UsageError(f"config: {_source(args)} (with --set) does not match the study in {out} (config hash differs)")
     return {"report": str(rewrite_report(out, spec, overwrite=args.overwrite) / "report.html")}
 
 
@@ -144,7 +166,11 @@ def register(sub) -> None:
     for name, helptext in (("study", "run a Monte Carlo robustness study from a TOML config (runs, margins, summary, report)"),
                            ("report", "rebuild the HTML report of a finished study without re-simulating")):
         st = sub.add_parser(name, help=helptext, description=helptext)
-        st.add_argument("config", help="study TOML (e.g. studies/robustness_default.toml)")
+        st.add_argument("config", nargs="?", help="study TOML (e.g. studies/robustness_default.toml); "
+                                                  "or give --example NAME instead")
+        st.add_argument("--example", metavar="NAME",
+                        help="a study packaged with pfjax instead of CONFIG (pfjax examples lists them: "
+                             "default, heldout, ...)")
         st.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a config value; dotted keys, list items as controllers[0].gains.k (repeatable)")
         st.add_argument("--out", help="output directory (default results/<name>)")
