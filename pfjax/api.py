@@ -117,10 +117,14 @@ def scenarios(path: str = "sine", n: int = 1, *, beta_r_deg=5.0, beta_f_deg=5.0,
     Args:
         path: a registered path kind (``line``, ``parabola``, ``sine``, ``circle``, ...).
         n: number of runs.
-        beta_r_deg, beta_f_deg: constant rear and front slip angles, deg.
-        lateral_offset: start offset left of the path, m. heading_error_deg: start heading error, deg.
+        beta_r_deg: constant rear slip angle, deg.
+        beta_f_deg: constant front slip angle, deg.
+        lateral_offset: start offset left of the path, m.
+        heading_error_deg: start heading error, deg.
         start_along_m: start, m along the path from its nominal start.
-        speed: m/s. L: wheelbase, m. delta_max_deg: steering limit, deg.
+        speed: rear-axle speed, m/s.
+        L: wheelbase, m.
+        delta_max_deg: steering limit, deg.
         convention: front-slip sign convention (``source`` or ``lenain``).
         horizon: s, only to size slip sequences (the simulation's horizon is :func:`simulate`'s).
         key: an int seed or a JAX PRNG key; run ``i`` draws from ``fold_in(key, i)``, so the first
@@ -384,23 +388,23 @@ def run_study(config, out=None, *, overwrite: bool = False, fresh: bool = False,
         fresh: discard the finished chunks of an interrupted run instead of resuming.
         progress: progress bars (default: when stderr is a terminal). report: write report.html.
         overrides: config values by key, nested keys with ``__`` (``n_runs=1000``,
-            ``sim__horizon=30``), as ``--set key=value``.
+            ``sim__horizon=30``, ``paths=[{"kind": "line"}]``), as ``--set key=value`` but with
+            Python values.
     """
-    import json
     from pathlib import Path
 
     from pfjax.montecarlo.config import StudySpec, load_study as load_config
     from pfjax.montecarlo.study import run
 
-    sets = [f"{k.replace('__', '.')}={json.dumps(v)}" for k, v in overrides.items()]
+    values = {k.replace("__", "."): v for k, v in overrides.items()}
     if isinstance(config, StudySpec):
-        spec = load_config(data=config.model_dump(mode="json"), overrides=sets)[0]
+        spec = load_config(data=config.model_dump(mode="json"), values=values)[0]
     elif isinstance(config, dict):
-        spec = load_config(data=config, overrides=sets)[0]
+        spec = load_config(data=config, values=values)[0]
     elif isinstance(config, (str, Path)):
         if not Path(config).is_file():
             raise errors.InputError(f"config: no such file {str(config)!r}", "config")
-        spec = load_config(Path(config), overrides=sets)[0]
+        spec = load_config(Path(config), values=values)[0]
     else:
         raise errors.InputError(f"config: expected a TOML path, a dict or a StudySpec, got {type(config).__name__}",
                                 "config")

@@ -96,6 +96,15 @@ def parse_override(text: str) -> dict:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw
+    return nested(key, value)
+
+
+def nested(key: str, value) -> dict:
+    """``("a.b", 3)`` -> ``{"a": {"b": 3}}`` (list items written ``name[index]``); ConfigError for a
+    malformed key."""
+    bad = next((p for p in key.split(".") if not KEY_PART.match(p)), None)
+    if not key or bad is not None:
+        raise ConfigError(f"{key}: malformed key (expected dotted names, list items as name[0])")
     out: dict = {}
     node = out
     parts = key.split(".")

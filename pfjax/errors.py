@@ -61,7 +61,8 @@ def number(key: str, value, *, positive: bool = False, nonnegative: bool = False
         positive: require ``value > 0`` (and at least :data:`MIN_POSITIVE`).
         nonnegative: require ``value >= 0``.
         below: require ``|value| < below``.
-        low, high: require ``low <= value <= high``.
+        low: require ``value >= low``.
+        high: require ``value <= high``.
         unit: appended to the bounds in the message (e.g. ``" deg"``).
     """
     if not is_number(value):
