@@ -2,20 +2,22 @@
 #   make study   creates .venv, installs pfjax, runs the paper reproduction and the default
 #                Monte Carlo robustness study into results/
 #   make test    creates .venv if needed, installs, runs the test suite
-# Both install the exact versions in constraints.txt (the ones the tests and the README's numbers
-# come from); make lock refreshes them to the newest that pyproject.toml's ranges allow.
+#   make docs    builds the documentation site into site/ (executing the notebooks)
+# Both install pfjax with its test, bench (Numba) and docs extras at the exact versions in
+# constraints.txt (the ones the tests and the README's numbers come from); make lock refreshes them
+# to the newest that pyproject.toml's ranges allow.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 PYTEST_ARGS ?=
 
-.PHONY: study test install clean lock
+.PHONY: study test docs install clean lock
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -c constraints.txt -e ".[test]"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[test,bench,docs]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -29,17 +31,25 @@ study: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -n 2 --dist worksteal --durations=25 $(PYTEST_ARGS)
 
+# The documentation site: mkdocs-material, the API reference from the docstrings (mkdocstrings),
+# the notebooks executed and rendered (mkdocs-jupyter). --strict: a broken link, a missing page or
+# reference, or a docstring warning fails the build. The test suite builds it too (without
+# executing the notebooks, which tests/test_notebooks.py runs).
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
+
 # The newest versions pip resolves for pyproject.toml's ranges, written to constraints.txt (its
-# comment lines kept); then run make test and commit both.
+# comment lines kept; --all: setuptools is a test dependency, pip freeze leaves it out otherwise);
+# then run make test and commit both.
 LOCK_VENV := .venv-lock
 lock:
 	rm -rf $(LOCK_VENV)
 	$(PYTHON) -m venv $(LOCK_VENV)
 	$(LOCK_VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(LOCK_VENV)/bin/python -m pip install --quiet ".[test]"
-	{ grep '^#' constraints.txt; $(LOCK_VENV)/bin/python -m pip freeze --exclude-editable | grep -v -i '^pfjax[ =@]'; } > constraints.txt.new
+	$(LOCK_VENV)/bin/python -m pip install --quiet ".[test,bench,docs]"
+	{ grep '^#' constraints.txt; $(LOCK_VENV)/bin/python -m pip freeze --all --exclude-editable | grep -v -i -E '^(pfjax|pip)[ =@]'; } > constraints.txt.new
 	mv constraints.txt.new constraints.txt
 	rm -rf $(LOCK_VENV) build
 
 clean:
-	rm -rf $(VENV) .pytest_cache results/paper_reproduction results/robustness_default
+	rm -rf $(VENV) .pytest_cache site .cache results/paper_reproduction results/robustness_default

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Parking by switching travel direction and gain (spec: parking-time-state.md): every spec case,
+"""Parking by switching travel direction and gain (docs/reproductions/parking.md): every case of its §4,
 the a_f calibration, the garage X_s tries, the GA and grid searches, the start-pose map and a
 robustness Monte Carlo.
 
@@ -63,7 +63,7 @@ DEFAULTS = {
     "controller": {"k1": 32.0, "k2": 8.0, "speed": 0.05},
     "sim": {"scan_period": 0.1, "t_max": 200.0, "tol": 0.02, "n_sub": 2, "front": 0.0, "chunk": 1024,
             "stuck_switches": 4, "stuck_travel": 0.1},
-    # the open assumptions of spec §3, swept over the four cases (pfjax.parking.assumptions)
+    # the open assumptions of docs/reproductions/parking.md §3, swept over the four cases (pfjax.parking.assumptions)
     "assumptions": {"fronts": [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25], "zones": ["middle", "axle", "whole"],
                     "scan_periods": [0.05, 0.1, 0.2], "decision_delays": [False, True], "lags": [False, True],
                     "pauses": [0.0, 1.0]},
@@ -234,7 +234,7 @@ def part_assumptions(cfg, pmap):
 
 
 def part_outcomes(cfg, pmap, gmap) -> dict:
-    """Every scenario whose outcome the source reports (spec §4), at pfjax's defaults, and the
+    """Every scenario whose outcome the source reports (docs/reproductions/parking.md §4), at pfjax's defaults, and the
     experiments' with a stop at each reversal (``experiment.pause``)."""
     control, front, pc, _ = setup(cfg)
     scan, pause = cfg["sim"]["scan_period"], cfg["experiment"]["pause"]

@@ -2,7 +2,7 @@
 references, gains parsing, one-line usage errors with exit code 2.
 
 References: the closed-loop matrix ``A + B_u K`` and the norms are rebuilt here in NumPy/SciPy
-from spec §3 (no pfjax code); the line equilibrium is spec §7's closed form
+from docs/reproductions/path-following.md §3 (no pfjax code); the line equilibrium is the closed form of its §7
 ``d* = (beta_r + beta_f + K_2 beta_r) / K_1``, ``theta_e* = -beta_r``, ``delta* = beta_r + beta_f``.
 """
 
@@ -55,7 +55,7 @@ def run_main(capsys, *args):
     return strict_json(out)
 
 
-# ------------------------------------------------------------------ independent references (spec §3)
+# ------------------------------------------------------------------ independent references (docs/reproductions/path-following.md §3)
 
 
 def plant(v=1.0, L=0.2):
@@ -103,9 +103,9 @@ def sort_c(z):
 
 def test_synth_mixed_json_reproduces_source():
     """K within 2 % of the source's [-2.7381, -2.0772] and the bounds within 2 % of 1.1 and 4.07
-    (spec §4: the source's values are toolbox bounds from a different solver; pfjax reaches
+    (docs/reproductions/path-following.md §4: the source's values are toolbox bounds from a different solver; pfjax reaches
     K_d 1.6 %, K_theta 0.2 %, bounds < 0.1 % - the objective is flat along K_d). True norms and
-    poles against SciPy on spec §3 matrices: rel 1e-6 (norms), 1e-9 (poles)."""
+    poles against SciPy on docs/reproductions/path-following.md §3 matrices: rel 1e-6 (norms), 1e-9 (poles)."""
     r = cli("synth", "--method", "mixed", "--speed", "1", "--wheelbase", "0.2", "--alpha", "10", "--beta", "1",
             "--json")
     assert r.returncode == 0, r.stderr
@@ -153,7 +153,7 @@ def test_synth_pole_region_is_respected(capsys):
 
 
 def test_simulate_line_paper_k_json_matches_closed_form_equilibrium():
-    """Line test with the source's K, 20 s: at the end the loop sits at spec §7's equilibrium.
+    """Line test with the source's K, 20 s: at the end the loop sits at docs/reproductions/path-following.md §7's equilibrium.
 
     Tolerances: slowest closed-loop pole ~ -1.55 1/s, so after 20 s the transient is ~e^-31 of
     its initial size; RK4 at 5 ms is accurate to ~1e-8 here. delta to 1e-3 rad (the brief's
@@ -461,3 +461,50 @@ def test_help_lists_the_canonical_flag_first(capsys, command):
             assert not _names(usage, o), (o, usage)
     if command in ("simulate", "parking", "parking-search"):
         assert "--x0 X Y THETA_DEG" in flat
+
+
+# ------------------------------------------------------------------ packaged example studies
+
+ROOT_STUDIES = Path(__file__).resolve().parents[1] / "studies"
+
+
+def test_examples_lists_every_packaged_example_with_one_line(capsys):
+    from pfjax import examples
+
+    out = run_main(capsys, "examples", "--json")
+    assert list(out) == examples.names() and out["default"].startswith("Default Monte Carlo robustness study")
+    assert all(isinstance(v, str) and v and "\n" not in v for v in out.values())
+    assert main(["examples"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split()[0] for ln in lines] == examples.names()
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["--example", "nope"], "--example: unknown example 'nope'; expected one of default, heldout, "),
+    (["studies/robustness_default.toml", "--example", "default"], "--example: give a study TOML"),
+    ([], "config: expected a study TOML path or --example NAME"),
+])
+@pytest.mark.parametrize("command", ["study", "report"])
+def test_study_example_bad_use_is_one_line_exit_2(tmp_path, capsys, command, argv, expected):
+    out = tmp_path / "o"
+    assert main([command, *argv, "--out", str(out)]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err.count("\n") == 1, cap.err
+    assert cap.err.startswith(f"pfjax {command}: error: {expected}"), cap.err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_study_example_runs_the_packaged_config(tmp_path, capsys):
+    out = tmp_path / "heldout"
+    head = run_main(capsys, "study", "--example", "heldout", "--set", "n_runs=4", "--set", "chunk_size=4",
+                    "--set", "f64_check_runs=0", "--set", "margin.enabled=false", "--no-report", "--quiet",
+                    "--out", str(out), "--json")
+    assert head["study"] == "tuning_heldout" and head["out"] == str(out) and head["n_runs_total"] == 4 * 3
+    # the same study as from the repository's file, by its config hash
+    from pfjax.montecarlo.config import load_study, study_hash
+
+    spec, _ = load_study(ROOT_STUDIES / "tuning_heldout.toml",
+                         ["n_runs=4", "chunk_size=4", "f64_check_runs=0", "margin.enabled=false"])
+    assert head["config_sha256"] == study_hash(spec)
+    assert (out / "runs.parquet").is_file() and (out / "summary.json").is_file()

@@ -1,6 +1,6 @@
-"""The slip models (spec §1-2) against hand-derived steady states, closed forms and solve_ivp.
+"""The slip models (docs/reproductions/path-following.md §1-2) against hand-derived steady states, closed forms and solve_ivp.
 
-References are written here from the spec's equations (or derived independently, e.g. the
+References are written here from the equations of docs/reproductions/path-following.md (or derived independently, e.g. the
 velocity as speed ``v / cos beta_r`` along the course angle ``theta + beta_r``), never by
 calling pfjax. Tolerances: closed forms at 1e-13 (a few ulps of the trigonometry); solve_ivp
 comparisons at 1e-8 with DOP853 at rtol 1e-12, atol 1e-13 over 6 s (a sign error or a

@@ -1,7 +1,7 @@
 """pfjax.parking controller and simulation: Lyapunov decrease under random switching, closed forms,
 solve_ivp replay of a switched run, statuses, schedules, calibration, batching.
 
-References: V = k₁ y² + tan²θ must be non-increasing (spec §2 Theorem) — checked along RK4 runs
+References: V = k₁ y² + tan²θ must be non-increasing (docs/reproductions/parking.md §2 Theorem) — checked along RK4 runs
 with random direction/α switching every 0.1 s (tolerance 1e-10 relative: RK4's local error at
 h = 0.02 s) and along the simulated cases; case A's first leg against the closed-form solution of
 z₁'' + 8 z₁' + 32 z₁ = 0 (1e-7 m); a switched run (case D) replayed by scipy solve_ivp between the

@@ -1,8 +1,8 @@
-"""Equilibria and local stability of the state-feedback loop under constant slip (spec §7).
+"""Equilibria and local stability of the state-feedback loop under constant slip (docs/reproductions/path-following.md §7).
 
 References used here, none taken from pfjax.analysis:
 
-* **Closed-form equilibrium on a line** (derived from spec §2 eq. 6): ``d' = 0`` with forward
+* **Closed-form equilibrium on a line** (derived from docs/reproductions/path-following.md §2 eq. 6): ``d' = 0`` with forward
   travel forces ``theta_e* = -beta_r``; ``theta_e' = 0`` with ``kappa = 0`` forces the yaw rate to
   vanish, ``tan(delta* - beta_f) = tan(beta_r)`` -> ``delta* = beta_r + beta_f`` (source
   convention) or ``tan(delta* + beta_f) = tan(beta_r)`` -> ``delta* = beta_r - beta_f`` (Lenain);
@@ -21,7 +21,7 @@ References used here, none taken from pfjax.analysis:
   ``delta* + beta_f = beta_r``, so ``a = (v/L) / cos(beta_r)``. At the source's point
   ``[0, -beta_r]`` (not an equilibrium) the same algebra gives ``a = (v/L) sec^2(-K_2 beta_r - beta_f)``.
 * **Central finite differences** of ``closed_loop_field`` and ``numpy.linalg.eigvals``.
-* **A NumPy transcription of the Frenet model** (spec §2) to check the field itself.
+* **A NumPy transcription of the Frenet model** (docs/reproductions/path-following.md §2) to check the field itself.
 * **scipy ``brentq``** on the scalar equilibrium equation on a circle, and pfjax's simulator
   (world-frame model, measured against the path) for convergence to it.
 """
@@ -55,7 +55,7 @@ field_jit = jax.jit(closed_loop_field, static_argnames="saturate")
 
 
 def field_np(x, br, bf, kappa, params: SlipParams, saturate=True):
-    """Spec §2 eq. 6 with delta = sat(K x), written in NumPy (independent of pfjax)."""
+    """docs/reproductions/path-following.md §2 eq. 6 with delta = sat(K x), written in NumPy (independent of pfjax)."""
     d, th = x
     v, Lw, dmax = params.v, params.L, params.delta_max
     delta = K[0] * d + K[1] * th
@@ -100,7 +100,7 @@ def grid_map(request):
 
 
 def test_field_matches_numpy_transcription_of_spec():
-    """The field the analysis linearises is spec §2 eq. 6 (both conventions, line and circle, saturated)."""
+    """The field the analysis linearises is docs/reproductions/path-following.md §2 eq. 6 (both conventions, line and circle, saturated)."""
     rng = np.random.default_rng(0)
     for params in (SOURCE, LENAIN):
         for _ in range(6):

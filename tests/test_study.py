@@ -4,9 +4,9 @@ The two runs are separate processes sharing a JAX persistent compilation cache i
 directory (the second run loads the first run's executables instead of recompiling; the results
 must not, and do not, depend on that).
 
-Numbers are checked against closed forms where one exists: spec §7's line equilibrium
+Numbers are checked against closed forms where one exists: docs/reproductions/path-following.md §7's line equilibrium
 (``theta_e* = -beta_r``, ``d* = (beta_r + beta_f + K_2 beta_r) / K_1``) for the stability grid,
-and the source's published design values (spec §4) within 2 %.
+and the source's published design values (docs/reproductions/path-following.md §4) within 2 %.
 """
 
 from __future__ import annotations
@@ -134,7 +134,7 @@ def test_verdicts(runs, summary):
 
 
 def test_synthesis_close_to_source(summary):
-    """spec §4: K, gamma_inf, gamma_2 within 2 % of the source (pfjax: K_d 1.6 %, the rest < 0.3 %)."""
+    """docs/reproductions/path-following.md §4: K, gamma_inf, gamma_2 within 2 % of the source (pfjax: K_d 1.6 %, the rest < 0.3 %)."""
     syn = summary["synthesis"]
     assert set(syn["rel_diff"]) == {"K_d", "K_theta", "gamma_inf", "gamma_2"}
     for k, x in syn["rel_diff"].items():
@@ -155,7 +155,7 @@ def test_tables(runs, summary):
     assert list(csv.columns) == list(df.columns) and len(csv) == len(df)
     num = df.select_dtypes("number").columns
     np.testing.assert_allclose(csv[num].to_numpy(float), df[num].to_numpy(float), rtol=1e-12, equal_nan=True)
-    # line, source K: after 6 s (slowest pole -1.55 1/s) the loop is near spec §7's equilibrium
+    # line, source K: after 6 s (slowest pole -1.55 1/s) the loop is near docs/reproductions/path-following.md §7's equilibrium
     b = math.radians(5.0)
     row = df[(df.path == "line") & (df.controller == "paper-k")].iloc[0]
     assert row.status == "ok"

@@ -1,5 +1,5 @@
 """LMI state-feedback designs (source eq. 8-13): guarantees, pole regions, infeasibility, and the
-reproduction of the source's mixed H2/H-infinity design (spec section 4)."""
+reproduction of the source's mixed H2/H-infinity design (docs/reproductions/path-following.md §4)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from pfjax.synthesis import (
 )
 
 BOUND_RTOL = 1e-6  # true norm <= LMI bound * (1 + BOUND_RTOL)
-SOURCE_K = np.array([[-2.7381, -2.0772]])  # source eq. 13 result (spec section 4)
+SOURCE_K = np.array([[-2.7381, -2.0772]])  # source eq. 13 result (docs/reproductions/path-following.md §4)
 SOURCE_GAMMA_INF = 1.1
 SOURCE_GAMMA_2 = 4.07
 
@@ -145,7 +145,7 @@ def test_region_contains_geometry():
         PoleRegion(disk_center=-1.0)
 
 
-# --- reproduction of the source (spec section 4) ----------------------------------------------
+# --- reproduction of the source (docs/reproductions/path-following.md §4) ----------------------------------------------
 
 
 def test_mixed_reproduces_source_within_2_percent(mixed):

@@ -2,7 +2,7 @@
 
 References: hand-computed focus point and connection; central finite differences of the output map
 for M(theta, gamma) and numpy's det for the closed form; scipy solve_ivp (RK45, rtol 1e-11) of the
-spec §1 model written here in NumPy for the simulator; exp(-k t) for the linearised error; the
+docs/reproductions/vehicle-tracking.md §1 model written here in NumPy for the simulator; exp(-k t) for the linearised error; the
 linearised zero dynamics' eigenvalues against simulated convergence.
 """
 
@@ -103,7 +103,7 @@ def test_leader_velocity_and_shapes():
     assert float(jnp.hypot(*v)) < 1e-12  # stop-and-go stops at T/2
 
 
-def _numpy_rhs(s, v, w, a, br, bf):  # spec §1 with slip (source convention), written independently
+def _numpy_rhs(s, v, w, a, br, bf):  # docs/reproductions/vehicle-tracking.md §1 with slip (source convention), written independently
     x, y, th, g = s
     return [v * (math.cos(th) - math.tan(br) * math.sin(th)), v * (math.sin(th) + math.tan(br) * math.cos(th)),
             v / a * (math.tan(g - bf) - math.tan(br)), w]

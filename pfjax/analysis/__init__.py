@@ -1,4 +1,4 @@
-"""Analyses on top of the models: equilibria and local stability (spec §7)."""
+"""Analyses on top of the models: equilibria and local stability (docs/reproductions/path-following.md §7)."""
 
 from pfjax.analysis.stability import Equilibrium, closed_loop_field, equilibrium, source_linearisation, stability_map
 

@@ -1,4 +1,4 @@
-"""Equilibria and local stability of the state-feedback loop under constant slip (spec §7).
+"""Equilibria and local stability of the state-feedback loop under constant slip (docs/reproductions/path-following.md §7).
 
 Closed loop on a path of constant curvature ``kappa`` (0: the straight line) with
 ``delta = sat(K x)``, ``x = [d, theta_e]``, in the Frenet model (eq. 6)::

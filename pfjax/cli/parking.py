@@ -30,7 +30,7 @@ def _common(p):
 
 def register(sub) -> None:
     p = sub.add_parser("parking", help="simulate one parking run (time-state controller with direction/gain switching)",
-                       description="One run of the switching parking controller (spec parking-time-state.md); "
+                       description="One run of the switching parking controller (docs/reproductions/parking.md); "
                                    "prints the outcome, parking time and the log of direction switches.")
     p.add_argument("--map", default="parallel", help="parallel, garage, or a TOML/JSON map file (default parallel)")
     p.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"),
@@ -42,7 +42,7 @@ def register(sub) -> None:
     p.set_defaults(func=_cmd_parking)
 
     s = sub.add_parser("parking-search", help="search (X_s, alpha1, alpha2) for the garage by the 24-bit GA or a grid",
-                       description="Search of the garage switching parameters (spec §5): the source's 24-bit GA "
+                       description="Search of the garage switching parameters (docs/reproductions/parking.md §5): the source's 24-bit GA "
                                    "(n = 20, N = 100) or an exhaustive N x N x N grid on the chromosome lattice.")
     s.add_argument("--method", choices=("ga", "grid"), required=True)
     s.add_argument("--map", default="garage", help="garage (default) or a TOML/JSON map file")

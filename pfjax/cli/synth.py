@@ -43,7 +43,7 @@ def cmd(args) -> dict:
 
 
 def register(sub) -> None:
-    s = sub.add_parser("synth", help="design a state feedback by LMIs (spec §4) and print K, bounds, true norms",
+    s = sub.add_parser("synth", help="design a state feedback by LMIs (docs/reproductions/path-following.md §4) and print K, bounds, true norms",
                        description="State-feedback H-inf, H2 or mixed H2/H-inf design for the slip model (msfsyn convention).")
     s.add_argument("--method", choices=("mixed", "hinf", "h2"), default="mixed")
     s.add_argument("--speed", "--v", action=Aliased, dest="speed", type=float, default=1.0,

@@ -1,4 +1,4 @@
-"""The source's two controllers: static state feedback and the MISO PI (spec §4-5)."""
+"""The source's two controllers: static state feedback and the MISO PI (docs/reproductions/path-following.md §4-5)."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ from pfjax.controllers.base import Controller, Observation, no_rate, no_state
 from pfjax.controllers.registry import register
 from pfjax.numerics import elementary as E
 
-#: The source's published mixed H2/Hinf gain (spec §4): u = K [d, theta_e].
+#: The source's published mixed H2/Hinf gain (docs/reproductions/path-following.md §4): u = K [d, theta_e].
 PAPER_K = (-2.7381, -2.0772)
-#: Table 3's GA-optimal PI gains in the order printed; the row labels were lost (spec §5).
+#: Table 3's GA-optimal PI gains in the order printed; the row labels were lost (docs/reproductions/path-following.md §5).
 TABLE3_GAINS = (1.6390, 0.0230, 39.5204, 11.6124)
-#: The reading of Table 3 adopted as the source's PI. The labels were lost (spec §5); the
+#: The reading of Table 3 adopted as the source's PI. The labels were lost (docs/reproductions/path-following.md §5); the
 #: paper-reproduction study simulates all 24 readings and this is the one consistent with the
 #: claims the source makes about its PI (the reproduction's verdict table says how sensitive that
 #: choice is): Table 3's printed order is (Ki_d, Ki_theta, Kp_d, Kp_theta).
@@ -47,7 +47,7 @@ register(state_feedback, state_feedback_params, box=(("K",), (-20.0, -10.0), (0.
 
 
 class PIParams(NamedTuple):
-    """MISO PI gains (spec §5, eq. 14)::
+    """MISO PI gains (docs/reproductions/path-following.md §5, eq. 14)::
 
         delta = kp_d (-d) + ki_d int(-d) + kp_theta (-theta_e) + ki_theta int(-theta_e)
 
@@ -100,7 +100,7 @@ def _pi_init(p) -> Array:
 
 
 pi = Controller("pi", _pi_init, _pi_output, _pi_rate, PIParams)
-"""MISO PI on ``d`` and ``theta_e`` summed into the steering (spec §5, eq. 14), optional anti-windup."""
+"""MISO PI on ``d`` and ``theta_e`` summed into the steering (docs/reproductions/path-following.md §5, eq. 14), optional anti-windup."""
 register(pi, pi_params, defaults=PAPER_PI,
          box=(("kp_d", "ki_d", "kp_theta", "ki_theta"), (0.0, 0.0, 0.0, 0.0), (60.0, 5.0, 30.0, 1.0)),
          style={"color": "#d62728", "lw": 1.6, "label": "MISO PI (Table 3)"})

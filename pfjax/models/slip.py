@@ -1,4 +1,4 @@
-"""Car-like robot with front and rear wheel slip (spec §1-2, source eq. 1-6).
+"""Car-like robot with front and rear wheel slip (docs/reproductions/path-following.md §1-2, source eq. 1-6).
 
 Two descriptions of the same robot:
 
@@ -11,7 +11,7 @@ Sign conventions (``params.convention``):
 
 * ``SOURCE`` (0, default): the source's form ``theta' = v/L (tan(delta - beta_f) - tan beta_r)``.
   Its sign is fixed by the source's line test, where with ``beta_r = beta_f = 5 deg``
-  the steering settles at 10 deg (spec §1, *derived*).
+  the steering settles at 10 deg (docs/reproductions/path-following.md §1, *derived*).
 * ``LENAIN`` (1): the model the source cites (Lenain et al.),
   ``theta' = v cos(beta_r)/L (tan(delta + beta_f) - tan beta_r)``: front slip enters
   with the opposite sign and the yaw rate carries an extra ``cos beta_r``. The
@@ -40,7 +40,7 @@ class SlipParams(NamedTuple):
     Attributes:
         v: longitudinal speed of the rear axle, m/s (Table 1: 1).
         L: wheelbase, m (Table 1: 0.2).
-        delta_max: steering saturation, rad (*assumed* 30 deg, spec §6).
+        delta_max: steering saturation, rad (*assumed* 30 deg, docs/reproductions/path-following.md §6).
         convention: ``SOURCE`` (0) or ``LENAIN`` (1) front-slip sign convention.
         delta_rate_max: steering rate limit, rad/s (``inf``: none). Applied per integrator step to
             sampled controllers; a continuous controller is not rate limited.
@@ -62,7 +62,7 @@ class Pose(NamedTuple):
 
 
 class FrenetState(NamedTuple):
-    """Path-relative state (spec §2)."""
+    """Path-relative state (docs/reproductions/path-following.md §2)."""
 
     d: Array  # m, signed lateral distance, left of the path positive
     theta_e: Array  # rad, heading error theta - theta_p(s), wrapped to (-pi, pi]

@@ -21,7 +21,7 @@ from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from pfjax.config import ConfigError, _short, parse_override, read_toml
+from pfjax.config import ConfigError, _short, nested, parse_override, read_toml
 from pfjax.provenance import config_hash
 from pfjax.errors import MAX_MAGNITUDE, MAX_SEED, MIN_POSITIVE
 from pfjax.resources import check_steps
@@ -125,17 +125,17 @@ def _as_dist(v: Any):
     return v
 
 
-def dist_field(default: float):
-    return Field(default_factory=lambda: Dist(dist="constant", value=default))
+def dist_field(default: float, description: str | None = None):
+    return Field(default_factory=lambda: Dist(dist="constant", value=default), description=description)
 
 
 class SimSpec(_Model):
-    dt: Real = Field(0.005, ge=POSITIVE, description="RK4 step, s")
-    horizon: Real = Field(20.0, ge=POSITIVE, description="s")
-    control_every: int = Field(1, ge=1, le=2_000_000, description="controller sampling period in steps")
-    d_fail: Real = Field(10.0, ge=POSITIVE, description="m")
-    steady_window: Real = Field(5.0, ge=POSITIVE, description="s")
-    settle_band: Real = Field(0.05, ge=POSITIVE, description="m")
+    dt: Real = Field(0.005, ge=POSITIVE, description="RK4 integrator step, s")
+    horizon: Real = Field(20.0, ge=POSITIVE, description="simulated time per run, s")
+    control_every: int = Field(1, ge=1, le=2_000_000, description="controller sampling period, integrator steps (zero-order hold)")
+    d_fail: Real = Field(10.0, ge=POSITIVE, description="|d| above which a run fails with status diverged, m")
+    steady_window: Real = Field(5.0, ge=POSITIVE, description="final part of the run for the steady-state errors, s")
+    settle_band: Real = Field(0.05, ge=POSITIVE, description="band on |d| for the settling time, m")
 
     @model_validator(mode="after")
     def _check(self):
@@ -148,16 +148,16 @@ class SimSpec(_Model):
 
 
 class SuccessSpec(_Model):
-    band: Real = Field(0.05, ge=POSITIVE, description="|d| bound, m")
-    from_s: Real = Field(15.0, ge=0, description="success window start, s")
+    band: Real = Field(0.05, ge=POSITIVE, description="a run succeeds if |d| stays within this band from from_s on, m")
+    from_s: Real = Field(15.0, ge=0, description="start of the success window, s")
 
 
 class VehicleSpec(_Model):
-    speed: Dist = dist_field(1.0)  # m/s
-    L: Dist = dist_field(0.2)  # m
-    delta_max_deg: Dist = dist_field(30.0)
+    speed: Dist = dist_field(1.0, "rear-axle speed, m/s (a distribution)")
+    L: Dist = dist_field(0.2, "wheelbase, m (a distribution)")
+    delta_max_deg: Dist = dist_field(30.0, "steering limit, deg (a distribution)")
     delta_rate_max_deg: Real | None = Field(None, ge=POSITIVE, description="steering rate limit, deg/s (None or inf: none)")
-    convention: Literal["source", "lenain"] = "source"
+    convention: Literal["source", "lenain"] = Field("source", description="front-slip sign convention: source or lenain")
 
     _coerce = field_validator("speed", "L", "delta_max_deg", mode="before")(lambda v: _as_dist(v))
     # "no limit" has one spelling, None, so the validated config is strict JSON (and hashes as such)
@@ -186,18 +186,18 @@ class SlipSpec(_Model):
     ``sinusoid`` (beta_* mean + amp_* sin(2 pi freq_hz t + phase)), ``ou`` (Ornstein-Uhlenbeck around
     beta_* with stationary std ou_sigma_deg and time constant ou_tau_s, sampled every seq_dt)."""
 
-    kind: Literal["constant", "step", "sinusoid", "ou"] = "constant"
-    beta_r_deg: Dist = dist_field(0.0)
-    beta_f_deg: Dist = dist_field(0.0)
-    step_time_s: Dist = dist_field(5.0)
-    step_r_deg: Dist = dist_field(0.0)
-    step_f_deg: Dist = dist_field(0.0)
-    amp_r_deg: Dist = dist_field(0.0)
-    amp_f_deg: Dist = dist_field(0.0)
-    freq_hz: Dist = dist_field(0.1)
-    ou_sigma_deg: Dist = dist_field(0.0)
-    ou_tau_s: Dist = dist_field(1.0)
-    seq_dt: Real = Field(0.05, ge=POSITIVE, description="s, OU sampling period")
+    kind: Literal["constant", "step", "sinusoid", "ou"] = Field("constant", description="slip profile: constant, step, sinusoid or ou (Ornstein-Uhlenbeck)")
+    beta_r_deg: Dist = dist_field(0.0, "rear slip angle (constant part, or the mean), deg")
+    beta_f_deg: Dist = dist_field(0.0, "front slip angle (constant part, or the mean), deg")
+    step_time_s: Dist = dist_field(5.0, "step: time of the step, s")
+    step_r_deg: Dist = dist_field(0.0, "step: rear slip added at the step, deg")
+    step_f_deg: Dist = dist_field(0.0, "step: front slip added at the step, deg")
+    amp_r_deg: Dist = dist_field(0.0, "sinusoid: rear amplitude, deg")
+    amp_f_deg: Dist = dist_field(0.0, "sinusoid: front amplitude, deg")
+    freq_hz: Dist = dist_field(0.1, "sinusoid: frequency, Hz")
+    ou_sigma_deg: Dist = dist_field(0.0, "ou: stationary standard deviation, deg")
+    ou_tau_s: Dist = dist_field(1.0, "ou: time constant, s")
+    seq_dt: Real = Field(0.05, ge=POSITIVE, description="ou: sampling period of the slip sequence, s")
 
     _coerce = field_validator("beta_r_deg", "beta_f_deg", "step_time_s", "step_r_deg", "step_f_deg", "amp_r_deg",
                               "amp_f_deg", "freq_hz", "ou_sigma_deg", "ou_tau_s", mode="before")(lambda v: _as_dist(v))
@@ -240,9 +240,9 @@ class InitialSpec(_Model):
     """Start pose relative to the path's nominal start: along-path offset, lateral offset, heading error."""
 
     RENAMED: ClassVar[dict[str, str]] = {"start_s": "start_along_m"}
-    start_along_m: Dist = dist_field(0.0)  # m along the path
-    lateral_offset: Dist = dist_field(0.0)  # m, left positive
-    heading_error_deg: Dist = dist_field(0.0)
+    start_along_m: Dist = dist_field(0.0, "start, m along the path from its nominal start")
+    lateral_offset: Dist = dist_field(0.0, "start offset left of the path, m")
+    heading_error_deg: Dist = dist_field(0.0, "start heading error, deg")
 
     _coerce = field_validator("start_along_m", "lateral_offset", "heading_error_deg", mode="before")(lambda v: _as_dist(v))
 
@@ -257,8 +257,8 @@ class NoiseSpec(_Model):
     ``(d, theta_e)``, Stanley and pure pursuit through the noisy pose. The metrics use the true
     errors. Both sigmas 0: no noise."""
 
-    sigma_d: Real = Field(0.0, ge=0, description="m")
-    sigma_theta_e_deg: Real = Field(0.0, ge=0, le=180, description="deg")
+    sigma_d: Real = Field(0.0, ge=0, description="standard deviation of the measured lateral position, m")
+    sigma_theta_e_deg: Real = Field(0.0, ge=0, le=180, description="standard deviation of the measured heading, deg")
 
 
 class PathSpec(_Model):
@@ -268,13 +268,13 @@ class PathSpec(_Model):
     ``points`` [[x, y], ...] in m, travelled from the first point), or any path registered with
     :func:`pfjax.paths.register`."""
 
-    kind: str  # a registered path kind (pfjax.paths.PATHS)
-    name: str | None = None
-    radius: Dist = dist_field(2.0)
+    kind: str = Field(description="a registered path kind: line, parabola, sine, circle, random, spline, ...")
+    name: str | None = Field(None, description="label in outputs (default: the kind)")
+    radius: Dist = dist_field(2.0, "circle: radius, m")
     length: Real = Field(40.0, ge=POSITIVE, description="random paths: length, m")
     curvature_margin: Real = Field(0.5, ge=POSITIVE, le=1, description="random paths: fraction of the followable curvature")
-    n_waypoints: int = Field(41, ge=4, le=10_000)
-    points: list[list[Real]] | None = None
+    n_waypoints: int = Field(41, ge=4, le=10_000, description="random paths: spline waypoints")
+    points: list[list[Real]] | None = Field(None, description="spline: the points [[x, y], ...] it passes through, m")
 
     _coerce = field_validator("radius", mode="before")(lambda v: _as_dist(v))
 
@@ -328,11 +328,13 @@ class MarginSpec(_Model):
     sampled as in the study. The margin is the largest A whose success rate (and every smaller A's)
     stays >= 1 - eps."""
 
-    enabled: bool = True
-    amplitudes_deg: list[Real] = Field(default_factory=lambda: [0.0, 2.5, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0, 25.0, 30.0])
-    n_per_amplitude: int = Field(200, ge=1, le=100_000_000)
-    eps: Real = Field(0.05, ge=POSITIVE, lt=1)
-    axes: list[Literal["rear", "front", "joint"]] = Field(default_factory=lambda: ["rear", "front", "joint"])
+    enabled: bool = Field(True, description="run the slip-margin sweep")
+    amplitudes_deg: list[Real] = Field(default_factory=lambda: [0.0, 2.5, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0, 25.0, 30.0],
+                                       description="slip amplitudes A swept, deg")
+    n_per_amplitude: int = Field(200, ge=1, le=100_000_000, description="runs per amplitude, path, controller and axis")
+    eps: Real = Field(0.05, ge=POSITIVE, lt=1, description="tolerated failure rate: the margin is the largest A with success >= 1 - eps")
+    axes: list[Literal["rear", "front", "joint"]] = Field(default_factory=lambda: ["rear", "front", "joint"],
+                                                          description="slipping axles: rear, front, joint (both)")
 
     @field_validator("amplitudes_deg")
     @classmethod
@@ -355,15 +357,15 @@ class FalsifierSpec(_Model):
     +-``lateral_offset`` m, +-``heading_error_deg``, on one path (its run 0's shape and vehicle),
     against random search with the same number of rollouts."""
 
-    enabled: bool = False
-    path: str | None = None  # a path label; default: the first path
-    slip_bound_deg: Real = Field(10.0, ge=POSITIVE, lt=90)
-    f_max_hz: Real = Field(0.5, ge=0, le=10)
-    lateral_offset: Real = Field(0.5, ge=0)
-    heading_error_deg: Real = Field(30.0, ge=0, lt=90)
-    objective: Literal["iae", "ise", "itae", "max_abs_d", "late_max_abs_d"] = "iae"
-    n_restarts: int = Field(8, ge=1, le=256)
-    steps: int = Field(40, ge=1, le=10_000)
+    enabled: bool = Field(False, description="run the worst-case search")
+    path: str | None = Field(None, description="label of the path searched (default: the first path)")
+    slip_bound_deg: Real = Field(10.0, ge=POSITIVE, lt=90, description="bound on each axle's slip, deg")
+    f_max_hz: Real = Field(0.5, ge=0, le=10, description="slip bandwidth, Hz (0: constant slip)")
+    lateral_offset: Real = Field(0.5, ge=0, description="start offsets searched within +-this, m")
+    heading_error_deg: Real = Field(30.0, ge=0, lt=90, description="start heading errors searched within +-this, deg")
+    objective: Literal["iae", "ise", "itae", "max_abs_d", "late_max_abs_d"] = Field("iae", description="what the search maximises")
+    n_restarts: int = Field(8, ge=1, le=256, description="random starts of the gradient ascent")
+    steps: int = Field(40, ge=1, le=10_000, description="adam steps per start")
 
 
 class ControllerSpec(_Model):
@@ -373,12 +375,12 @@ class ControllerSpec(_Model):
     paper_k: the source's published gain; :data:`pfjax.controllers.DESIGNS`). ``gains`` by name
     override the defaults or the design; ``K`` is the vector gain of state_feedback and integral."""
 
-    name: str
-    type: str
-    K: list[Real] | None = None
-    gains: dict[str, Real] = Field(default_factory=dict)
-    alpha: Real = Field(10.0, ge=0)
-    beta: Real = Field(1.0, ge=0)
+    name: str = Field(description="label in outputs")
+    type: str = Field(description="a registered controller or design: lmi, paper_k, state_feedback, pi, integral, stanley, ...")
+    K: list[Real] | None = Field(None, description="vector gain of state_feedback [k_d rad/m, k_theta rad/rad] or integral")
+    gains: dict[str, Real] = Field(default_factory=dict, description="scalar gains by name (the others: defaults or the design's)")
+    alpha: Real = Field(10.0, ge=0, description="designs: weight on gamma_inf^2")
+    beta: Real = Field(1.0, ge=0, description="designs: weight on gamma_2^2")
 
     @field_validator("type")
     @classmethod
@@ -410,11 +412,11 @@ def _registry():
 
 
 class StudySpec(_Model):
-    name: str  # names results/<name>: checked by pfjax.outputs.check_name
+    name: str = Field(description="study name: the default output directory is results/<name>")
     n_runs: int = Field(ge=1, le=100_000_000, description="runs per controller and path")
-    seed: int = Field(ge=0, le=MAX_SEED)
-    chunk_size: int = Field(4096, ge=1, le=10_000_000)
-    dtype: Literal["float32", "float64"] = "float32"
+    seed: int = Field(ge=0, le=MAX_SEED, description="seed of every random draw (run i of path p draws from fold_in(fold_in(seed, p), i))")
+    chunk_size: int = Field(4096, ge=1, le=10_000_000, description="runs simulated (and saved for resuming) at once")
+    dtype: Literal["float32", "float64"] = Field("float32", description="floating-point precision of the simulation")
     f64_check_runs: int = Field(64, ge=0, le=4096, description="float32 studies: runs per controller re-simulated in float64")
     sim: SimSpec = SimSpec()
     success: SuccessSpec = SuccessSpec()
@@ -533,13 +535,24 @@ def _set_nested(d: dict, update: dict) -> dict:
     return d
 
 
-def load_study(path: str | Path | None = None, overrides: list[str] = (), data: dict | None = None) -> tuple[StudySpec, dict]:
-    """Read, override and validate a study. Returns ``(spec, raw_dict)``; raises ConfigError."""
-    raw: dict = {} if data is None else dict(data)
+def load_study(path: str | Path | None = None, overrides: list[str] = (), data: dict | None = None,
+               values: dict | None = None) -> tuple[StudySpec, dict]:
+    """Read, override and validate a study. Returns ``(spec, raw_dict)``; raises ConfigError.
+
+    Args:
+        path: a TOML file (else ``data``, a dict).
+        overrides: ``--set`` texts ``"key=value"`` (the value parsed as TOML).
+        values: overrides as Python values by dotted key (``{"sim.horizon": 30, "paths": [...]}``).
+    """
+    import copy
+
+    raw: dict = {} if data is None else copy.deepcopy(dict(data))
     if path is not None:
         raw = read_toml(path)
     for text in overrides:
         _set_nested(raw, parse_override(text))
+    for key, value in (values or {}).items():
+        _set_nested(raw, nested(key, value))
     try:
         spec = StudySpec.model_validate(raw)
     except ValidationError as e:

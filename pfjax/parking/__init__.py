@@ -1,4 +1,4 @@
-"""Parking by switching travel direction and gain (spec: parking-time-state.md).
+"""Parking by switching travel direction and gain (docs/reproductions/parking.md).
 
 The entry points (:mod:`pfjax.parking.api`, cheap to import): :func:`run`, one run with its log of
 direction switches (``pfjax parking``), and :func:`search`, the GA or grid search of the garage's

@@ -1,5 +1,5 @@
 """What the parking cases' outcomes depend on: the source's four cases under every combination of
-the modelling assumptions the source leaves open (spec §3), in one batch.
+the modelling assumptions the source leaves open (docs/reproductions/parking.md §3), in one batch.
 
 The assumptions swept (each a :func:`pfjax.parking.simulate.run_params` argument):
 
@@ -13,7 +13,7 @@ The assumptions swept (each a :func:`pfjax.parking.simulate.run_params` argument
 * ``lag`` — the experiment's yaw-rate PI loop (k_P 0.8, k_I 16) on, so the robot turns late;
 * ``pause`` — seconds standing still at each reversal (the source's experiments stood still 1 s).
 
-:func:`case_sweep` simulates cases A-D (spec §4) for every combination; :func:`sweep_summary` counts,
+:func:`case_sweep` simulates cases A-D (docs/reproductions/parking.md §4) for every combination; :func:`sweep_summary` counts,
 for each case, the combinations in which it parks, gets stuck or times out, and lists the
 combinations that reproduce all four of the source's outcomes at once (A, C, D park; B stuck).
 """
@@ -30,7 +30,7 @@ from pfjax.parking.model import control_params
 from pfjax.parking.schedules import CASES
 from pfjax.parking.simulate import STATUS_NAMES, ParkingConfig, run_many, run_params, stack_params
 
-#: The source's outcome per case (spec §4): what a combination must give to reproduce it.
+#: The source's outcome per case (docs/reproductions/parking.md §4): what a combination must give to reproduce it.
 SOURCE_OUTCOME = {"A": "converged", "B": "stuck", "C": "converged", "D": "converged"}
 ZONES = {"middle": {}, "axle": {"split": 0.0}, "whole": {"zone": L2_LENGTH}}
 DEFAULT_GRID = {"front": [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25], "zone": list(ZONES),

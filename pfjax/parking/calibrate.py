@@ -1,4 +1,4 @@
-"""Calibration of a_f, the reach of the robot rectangle ahead of the wheel axle (spec §3, derived).
+"""Calibration of a_f, the reach of the robot rectangle ahead of the wheel axle (docs/reproductions/parking.md §3, derived).
 
 Source fact: in case A (start (−0.4, 0.5, 0°), forward, α = 1, k₁ = 32, k₂ = 8) the first switch
 happens when the rectangle's right front corner reaches an obstacle with the robot at

@@ -1,6 +1,6 @@
 """Robot rectangle, polygon obstacle maps and the exact rectangle–polygon intersection test.
 
-The robot's area (spec §3) is a rectangle of width L₁ and length L₂ in the body frame (x_b ahead,
+The robot's area (docs/reproductions/parking.md §3) is a rectangle of width L₁ and length L₂ in the body frame (x_b ahead,
 y_b to the left of the wheel-axle midpoint): ``x_b ∈ [a_f − L₂, a_f]``, ``y_b ∈ [−L₁/2, L₁/2]``.
 It is split into a front and a rear half at ``x_b = split`` (**assumed**; default its geometric
 middle ``a_f − L₂/2``, or at the wheel axle ``x_b = 0``); the robot reverses when an obstacle lies
@@ -26,7 +26,7 @@ from pfjax.numerics import elementary as E
 
 Array = jnp.ndarray
 
-#: Robot area of the source (spec §3), metres.
+#: Robot area of the source (docs/reproductions/parking.md §3), metres.
 L1_WIDTH = 0.370
 L2_LENGTH = 0.540
 
@@ -144,6 +144,6 @@ def quad_hits_map(quad, omap: ObstacleMap):
 
 
 def obstacle_ahead(pose, shape: RobotShape, direction, omap: ObstacleMap):
-    """The detection rule (spec §3, assumed): an obstacle lies in the half toward ``direction`` (±1)."""
+    """The detection rule (docs/reproductions/parking.md §3, assumed): an obstacle lies in the half toward ``direction`` (±1)."""
     return quad_hits_map(half_corners(pose, shape, direction), omap)
 

@@ -1,4 +1,4 @@
-"""Obstacle maps: the source's parallel-parking slot and garage (spec §4) and user maps from files.
+"""Obstacle maps: the source's parallel-parking slot and garage (docs/reproductions/parking.md §4) and user maps from files.
 
 A map file is UTF-8 TOML or JSON with a list of polygons, each a closed vertex list (first vertex
 repeated last), in metres::
@@ -28,7 +28,7 @@ import numpy as np
 from pfjax.errors import InputError
 from pfjax.parking.geometry import ObstacleMap
 
-#: Half-size (m) of the box the built-in obstacles extend to (the "everything else" of spec §4).
+#: Half-size (m) of the box the built-in obstacles extend to (the "everything else" of docs/reproductions/parking.md §4).
 FAR = 3.0
 
 
@@ -40,13 +40,13 @@ def _box(x0, y0, x1, y1):
     return [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
 
 
-#: Parallel parking (spec §4, source Figs. 3-8): free = road y > 0.2 plus the slot |x| ≤ 0.5, |y| ≤ 0.2.
+#: Parallel parking (docs/reproductions/parking.md §4, source Figs. 3-8): free = road y > 0.2 plus the slot |x| ≤ 0.5, |y| ≤ 0.2.
 PARALLEL = {
     "car_behind": _box(-FAR, -FAR, -0.5, 0.2),
     "car_ahead": _box(0.5, -FAR, FAR, 0.2),
     "kerb": _box(-0.5, -FAR, 0.5, -0.2),
 }
-#: Garage (spec §4, source Figs. 12-17): free = x < −0.5 plus the garage −0.5 ≤ x ≤ 0.3, |y| ≤ 0.3.
+#: Garage (docs/reproductions/parking.md §4, source Figs. 12-17): free = x < −0.5 plus the garage −0.5 ≤ x ≤ 0.3, |y| ≤ 0.3.
 GARAGE = {
     "wall_left": _box(-0.5, 0.3, FAR, FAR),
     "wall_right": _box(-0.5, -FAR, FAR, -0.3),

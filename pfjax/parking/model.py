@@ -1,4 +1,4 @@
-"""Unicycle model and the time-state switching controller (spec §1-2; source eq. 1-3).
+"""Unicycle model and the time-state switching controller (docs/reproductions/parking.md §1-2; source eq. 1-3).
 
 Model (source eq. 1), reference point the midpoint of the driving wheels::
 
@@ -69,7 +69,7 @@ def vector_field(state, v1, alpha, p: ControlParams):
 
 
 def lyapunov(y, theta, k1):
-    """V = k₁ z₁² + z₂² with z₁ = y, z₂ = tan θ (spec §2); non-increasing along closed-loop runs."""
+    """V = k₁ z₁² + z₂² with z₁ = y, z₂ = tan θ (docs/reproductions/parking.md §2); non-increasing along closed-loop runs."""
     return k1 * y**2 + E.tan(theta) ** 2
 
 

@@ -52,7 +52,7 @@ def _b_verdict(a: dict, b_outcome: str) -> str:
     share = (f"; the most in one detection zone: {100 * per_zone[best]:.0f} % of the {best} zone's combinations"
              if k else "")
     return (f"**Verdict on case B**: not reproduced with pfjax's reading (the half toward the travel direction, "
-            f"split at the middle, decisions on the current pose, no stop; chosen from the spec before and "
+            f"split at the middle, decisions on the current pose, no stop; chosen from the model's reading before and "
             f"independently of these outcomes), under which B {b_outcome}. {k} of the {n} combinations reproduce "
             f"all four outcomes together{share}.")
 
@@ -114,7 +114,7 @@ reach a_f for which the rectangle's right front corner touches an obstacle at th
 and 0.1 s scanner sampling, the first switch happens at t = {sw['t']:.1f} s with the robot at
 ({sw['x']:.4f}, {sw['y']:.4f}), θ = {sw['theta_deg']:.2f}° — within one scanner period of travel (5 mm) of the source's point.
 
-## Every spec case
+## Every source case
 
 {cases}
 
@@ -128,7 +128,7 @@ and 0.1 s scanner sampling, the first switch happens at t = {sw['t']:.1f} s with
 
 The source reports case B stuck, switching repeatedly in place, "because it turns sharply at each switch and, not
 being round, touches again". pfjax's case B parks ({by_case.get('B', '—')}). Which of the assumptions the source
-leaves open (spec §3) could change that? The study simulates cases A-D under all {a['n_combinations']} combinations of:
+leaves open (docs/reproductions/parking.md §3) could change that? The study simulates cases A-D under all {a['n_combinations']} combinations of:
 the rectangle's reach a_f, the detection zone checked toward the travel direction (the half beyond the middle,
 the part beyond the wheel axle, or the whole rectangle), the scanner period, a decision taken on the pose one
 period old, the yaw-rate PI loop of the experiments, and a stop at each reversal. Counts per detection zone and a_f

@@ -1,4 +1,4 @@
-"""α schedules (spec §4) and the 24-bit chromosome decoding of the GA search (spec §5).
+"""α schedules (docs/reproductions/parking.md §4) and the 24-bit chromosome decoding of the GA search (docs/reproductions/parking.md §5).
 
 A schedule lists α at the start and then after each direction switch; the last value holds from
 then on (case C: ``1, 0.5``; case D: ``1, 0.5, 8, 1``). Inside the simulation it is a fixed-length
@@ -15,7 +15,7 @@ import numpy as np
 
 SCHEDULE_LEN = 8
 
-#: The source's cases (spec §4).
+#: The source's cases (docs/reproductions/parking.md §4).
 CASES = {
     "A": {"map": "parallel", "x0": (-0.4, 0.5, 0.0), "direction": 1, "schedule": (1.0,)},
     "B": {"map": "parallel", "x0": (0.1, 0.5, 0.0), "direction": -1, "schedule": (1.0,)},
@@ -24,7 +24,7 @@ CASES = {
 }
 GARAGE_START = (-0.9, 0.6, -85.0)  # x m, y m, θ deg
 
-#: Decoding ranges of the 24-bit chromosome (spec §5, assumed).
+#: Decoding ranges of the 24-bit chromosome (docs/reproductions/parking.md §5, assumed).
 XS_MIN, XS_MAX, ALPHA_MAX = -1.2, -0.6, 10.0
 
 
@@ -60,7 +60,7 @@ def three_phase(alpha1, alpha2):
 
 
 def decode_bits(bits):
-    """(..., 24) bits (most significant first per 8-bit field) -> (X_s m, α₁, α₂) (spec §5).
+    """(..., 24) bits (most significant first per 8-bit field) -> (X_s m, α₁, α₂) (docs/reproductions/parking.md §5).
 
     ``X_s = X_smin + (X_smax − X_smin) ξ₁ / 255``, ``α_i = α_max (ξ_{i+1} + 1) / 256``.
     """

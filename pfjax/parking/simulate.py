@@ -1,6 +1,6 @@
 """One parking run as a pure, jittable, vmappable function; batched entry points.
 
-Time is divided into scanner periods T_s (spec §3: 0.1 s). At the start of each period the robot
+Time is divided into scanner periods T_s (docs/reproductions/parking.md §3: 0.1 s). At the start of each period the robot
 (1) reverses its travel direction when an obstacle lies in the half of its rectangle toward which
 it travels, or — in the garage rule — when, after it has once switched to backward, it travels
 backward and ``x ≤ X_s``; (2) then integrates the closed loop (:func:`pfjax.parking.model.vector_field`)
@@ -102,7 +102,7 @@ class ParkingConfig:
         return self.log_capacity if self.max_switches is None else self.max_switches + 1
 
 
-#: The GA search's cut-off (spec §5): more than 10 switches and the candidate counts as failed.
+#: The GA search's cut-off (docs/reproductions/parking.md §5): more than 10 switches and the candidate counts as failed.
 SEARCH_MAX_SWITCHES = 10
 
 

@@ -1,4 +1,4 @@
-"""Search of the garage switching parameters (X_s, α₁, α₂): the source's 24-bit GA and a grid (spec §5).
+"""Search of the garage switching parameters (X_s, α₁, α₂): the source's 24-bit GA and a grid (docs/reproductions/parking.md §5).
 
 Fitness (the source's formula was lost; **assumed**, configurable weight ``w``)::
 

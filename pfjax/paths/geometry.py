@@ -35,7 +35,7 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)  # NumPy: cast to the working 
 
 
 class Projection(NamedTuple):
-    """The robot's pose measured against its closest path point (spec §2)."""
+    """The robot's pose measured against its closest path point (docs/reproductions/path-following.md §2)."""
 
     d: Array  # m, signed lateral distance, left of the direction of travel positive
     theta_e: Array  # rad, heading error theta - theta_p, wrapped to (-pi, pi]

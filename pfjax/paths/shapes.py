@@ -7,7 +7,7 @@ angle, curvature, arc length, closest-point projection) is computed generically 
 :mod:`pfjax.paths.geometry` from those three functions, so a new shape is three
 one-line methods.
 
-Direction of travel is increasing ``u`` (spec §6: increasing ``x`` for the graphs: line, parabola, sine).
+Direction of travel is increasing ``u`` (docs/reproductions/path-following.md §6: increasing ``x`` for the graphs: line, parabola, sine).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Verdicts on the parking source's reported outcomes (Yamakawa & Ebara 2017; spec §4's table):
+"""Verdicts on the parking source's reported outcomes (Yamakawa & Ebara 2017; docs/reproductions/parking.md §4's table):
 one row per outcome and criterion, from the parking study's runs.
 
 Inputs (``studies/parking.py``): ``outcomes``, the source's scenarios simulated by pfjax, keyed as

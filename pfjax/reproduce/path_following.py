@@ -1,5 +1,5 @@
 """Verdicts on the claims of the path-following source (Fakharian et al.; model documentation:
-``docs/``): one row per claim, path and criterion, from the paper reproduction's runs.
+``docs/reproductions/path-following.md``): one row per claim, path and criterion, from the paper reproduction's runs.
 
 The inputs are plain dicts and frames the study computes (``studies/paper_reproduction.py``):
 

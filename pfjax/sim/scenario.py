@@ -1,4 +1,4 @@
-"""Single scenarios: the source's tests from their start poses (spec §6) and a checked builder.
+"""Single scenarios: the source's tests from their start poses (docs/reproductions/path-following.md §6) and a checked builder.
 
 | test     | path        | initial (x, y) | initial theta |
 |----------|-------------|----------------|---------------|

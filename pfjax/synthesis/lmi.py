@@ -341,7 +341,7 @@ def mixed_h2_hinf(
     "no bound". The returned ``gamma_inf`` and ``gamma_2 = sqrt(trace W)`` are the guaranteed
     bounds (the toolbox's "guaranteed H-inf / H2 performance").
 
-    Reproduction (spec section 4, ``v = 1 m/s``, ``L = 0.2 m``, ``alpha = 10``, ``beta = 1``):
+    Reproduction (docs/reproductions/path-following.md §4, ``v = 1 m/s``, ``L = 0.2 m``, ``alpha = 10``, ``beta = 1``):
     ``K = [-2.7826, -2.0819]``, ``gamma_inf = 1.1008``, ``gamma_2 = 4.0670`` (true norms 1.0820
     and 3.5954) against the source's ``K = [-2.7381, -2.0772]``, 1.1 and 4.07. The objective is
     flat along ``k1``: the source gain is certified by :func:`mixed_bounds_for_gain` at

@@ -1,4 +1,4 @@
-"""Input-output linearisation of the focus point, with speed, steering-rate and steering limits (spec §4).
+"""Input-output linearisation of the focus point, with speed, steering-rate and steering limits (docs/reproductions/vehicle-tracking.md §4).
 
 The page defines the output, not the controller; pfjax designs it. With ``z' = M(theta, gamma) u``,
 ``u = [v; omega]`` (see :mod:`pfjax.tracking.geometry`), the law::

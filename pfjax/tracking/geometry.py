@@ -1,4 +1,4 @@
-"""Focus point, virtual connection, tracking error and the focus point's input matrix (spec §2, §4).
+"""Focus point, virtual connection, tracking error and the focus point's input matrix (docs/reproductions/vehicle-tracking.md §2, §4).
 
 Reference point (``c_f = (1 + f)/2``: 1 forward, 0 backward)::
 

@@ -1,4 +1,4 @@
-"""Car-like follower with a steering state (spec §1), optional wheel slip.
+"""Car-like follower with a steering state (docs/reproductions/vehicle-tracking.md §1), optional wheel slip.
 
 State ``Follower(x, y, theta, gamma)``: rear-axle centre ``P_b = (x, y)`` (m), heading ``theta``
 (rad), steering angle ``gamma`` (rad, ``|gamma| <= gamma_max < pi/2``). Inputs: rear-axle speed
@@ -7,7 +7,7 @@ State ``Follower(x, y, theta, gamma)``: rear-axle centre ``P_b = (x, y)`` (m), h
     x' = v cos theta,   y' = v sin theta,   theta' = (v / a) tan gamma,   gamma' = omega
 
 With slip angles ``beta_r, beta_f`` the translational and yaw equations are exactly those of the
-path-following model (spec path-following-slip.md §1, :func:`pfjax.models.slip.world_rhs`, with
+path-following model (docs/reproductions/path-following.md §1, :func:`pfjax.models.slip.world_rhs`, with
 the steering angle ``gamma`` in place of ``delta`` and the wheelbase ``a`` in place of ``L``); the
 steering state is unaffected by slip.
 """
@@ -65,7 +65,7 @@ def as_arrays(params: FollowerParams) -> FollowerParams:
 
 def follower_rhs(state: Follower, v: Array, omega: Array, beta_r: Array, beta_f: Array,
                  params: FollowerParams) -> Follower:
-    """Time derivative of the follower state (spec §1; slip as in :func:`world_rhs`).
+    """Time derivative of the follower state (docs/reproductions/vehicle-tracking.md §1; slip as in :func:`world_rhs`).
 
     Args:
         state: current state (m, m, rad, rad).

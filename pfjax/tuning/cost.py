@@ -4,7 +4,7 @@ Per run ``i`` (metrics from :mod:`pfjax.metrics.running`, ``SimConfig(record=Fal
 
     J_i = M_i + w_u * int delta^2 dt + P * [run i failed]
 
-with ``M`` one of IAE ``int |d| dt`` (m s, the source's eq. 15 as assumed in spec §5), ISE
+with ``M`` one of IAE ``int |d| dt`` (m s, the source's eq. 15 as assumed in docs/reproductions/path-following.md §5), ISE
 ``int d^2 dt`` (m^2 s) or ITAE ``int t |d| dt`` (m s^2), ``w_u`` the control-effort weight
 (``effort``, per rad^2 s) and ``P`` the failure penalty (``fail_penalty``, in the metric's
 units; a failed run's metrics stop accumulating at the failure, so without it a run that

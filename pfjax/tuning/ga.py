@@ -1,4 +1,4 @@
-"""A genetic algorithm faithful to MATLAB's ``ga`` as the source configured it (spec §5, Table 2).
+"""A genetic algorithm faithful to MATLAB's ``ga`` as the source configured it (docs/reproductions/path-following.md §5, Table 2).
 
 Two entry points share one generation step:
 
@@ -70,7 +70,7 @@ import numpy as np
 
 
 class GAOptions(NamedTuple):
-    """Settings; defaults are the source's MATLAB ``ga`` settings (spec §5, Table 2)."""
+    """Settings; defaults are the source's MATLAB ``ga`` settings (docs/reproductions/path-following.md §5, Table 2)."""
 
     population_size: int = 50
     generations: int = 100

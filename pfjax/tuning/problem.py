@@ -5,7 +5,7 @@ a :class:`~pfjax.tuning.gradient.TuneResult` (same fields for both, so they comp
 
 Scenario sets (``scenario`` argument):
 
-* ``"paper-line"``, ``"paper-parabola"``, ``"paper-sine"``: the source's test (spec §6, constant
+* ``"paper-line"``, ``"paper-parabola"``, ``"paper-sine"``: the source's test (docs/reproductions/path-following.md §6, constant
   slip 5°, one rollout per cost evaluation);
 * ``"paper-all"``: the three tests pooled (3 rollouts per evaluation);
 * a study TOML path (``CONFIG``): ``n_runs`` runs per path sampled by

@@ -1,0 +1,95 @@
+"""MkDocs hooks: tables generated from the code at build time, so the docs cannot drift from it.
+
+- ``<!-- config-reference -->``: every key of a study config (:class:`pfjax.montecarlo.config.StudySpec`)
+  with its default and its description (units included), read from the pydantic schema;
+- ``<!-- column-reference -->``: every column of the run and margin tables with its unit and meaning
+  (:data:`pfjax.tables.COLUMNS`, the same metadata the Parquet files carry);
+- ``<!-- controller-reference -->`` and ``<!-- path-reference -->``: the registries.
+"""
+
+from __future__ import annotations
+
+import typing
+
+
+def _default(field) -> str:
+    from pydantic_core import PydanticUndefined
+
+    if field.default is PydanticUndefined and field.default_factory is None:
+        return "required"
+    value = field.get_default(call_default_factory=True)
+    if hasattr(value, "dist"):  # a distribution: its constant value
+        return f"`{value.value:g}`" if value.dist == "constant" else f"`{value.dist}`"
+    if isinstance(value, list):
+        return "`[" + ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value) + "]`" if value else "`[]`"
+    if isinstance(value, dict):
+        return "`{}`"
+    if isinstance(value, float):
+        return f"`{value:g}`"
+    return "none" if value is None else f"`{value}`"
+
+
+def _rows(model, prefix=""):
+    from pydantic import BaseModel
+
+    for name, f in model.model_fields.items():
+        sub = next((a for a in (f.annotation, *typing.get_args(f.annotation))
+                    if isinstance(a, type) and issubclass(a, BaseModel) and a.__name__ != "Dist"), None)
+        key = prefix + name
+        if sub is not None:
+            if typing.get_origin(f.annotation) is list:
+                key += "[i]"
+            yield from _rows(sub, key + ".")
+        else:
+            dist = " (a number or a distribution)" if "Dist" in str(f.annotation) else ""
+            yield key, _default(f), (f.description or "") + dist
+
+
+def config_reference() -> str:
+    from pfjax.montecarlo.config import StudySpec
+
+    lines = ["| key | default | meaning and unit |", "|---|---|---|"]
+    lines += [f"| `{k}` | {d} | {m.replace('|', '&#124;')} |" for k, d, m in _rows(StudySpec)]
+    return "\n".join(lines)
+
+
+def column_reference() -> str:
+    from pfjax.tables import COLUMNS
+
+    lines = ["| column | unit | meaning |", "|---|---|---|"]
+    lines += [f"| `{c}` | {u or '—'} | {d.replace('|', '&#124;')} |" for c, (u, d) in COLUMNS.items()]
+    return "\n".join(lines)
+
+
+def controller_reference() -> str:
+    from pfjax import controllers as C
+
+    lines = ["| name | command line | gains (`--gains` order) | tuning box |", "|---|---|---|---|"]
+    for n, e in C.REGISTRY.items():
+        box = "—" if e.box is None else ", ".join(f"{f}" for f in e.box[0])
+        lines.append(f"| `{n}` | `{e.cli_name}` | {', '.join(e.gains)} | {box} |")
+    for n, d in C.DESIGNS.items():
+        lines.append(f"| `{n}` (design) | `{d.cli_name}` | those of `{d.controller}` | — |")
+    return "\n".join(lines)
+
+
+def path_reference() -> str:
+    from pfjax import paths
+
+    lines = ["| kind | single-run start (x m, y m, θ rad) | max curvature, 1/m | description |", "|---|---|---|---|"]
+    for n, e in paths.PATHS.items():
+        start = "—" if e.start_pose is None else ", ".join(f"{v:.4g}" for v in e.start_pose)
+        kmax = "from the config" if e.max_curvature is None else f"{e.max_curvature:g}"
+        lines.append(f"| `{n}` | {start} | {kmax} | {e.description} |")
+    return "\n".join(lines)
+
+
+MARKERS = {"<!-- config-reference -->": config_reference, "<!-- column-reference -->": column_reference,
+           "<!-- controller-reference -->": controller_reference, "<!-- path-reference -->": path_reference}
+
+
+def on_page_markdown(markdown: str, **kwargs) -> str:
+    for marker, make in MARKERS.items():
+        if marker in markdown:
+            markdown = markdown.replace(marker, make())
+    return markdown
