@@ -12,7 +12,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 PYTEST_ARGS ?=
 
-.PHONY: study test docs install clean lock
+.PHONY: study test docs lint install clean lock
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +37,12 @@ test: $(STAMP)
 # executing the notebooks, which tests/test_notebooks.py runs).
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
+
+# Lint and types (also run by the test suite, tests/test_lint.py); the rules are in pyproject.toml.
+LINT_TARGETS := pfjax studies tests docs/hooks.py
+lint: $(STAMP)
+	$(VENV)/bin/ruff check $(LINT_TARGETS)
+	$(VENV)/bin/ruff format --check $(LINT_TARGETS)
 
 # The newest versions pip resolves for pyproject.toml's ranges, written to constraints.txt (its
 # comment lines kept; --all: setuptools is a test dependency, pip freeze leaves it out otherwise);

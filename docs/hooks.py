@@ -33,8 +33,14 @@ def _rows(model, prefix=""):
     from pydantic import BaseModel
 
     for name, f in model.model_fields.items():
-        sub = next((a for a in (f.annotation, *typing.get_args(f.annotation))
-                    if isinstance(a, type) and issubclass(a, BaseModel) and a.__name__ != "Dist"), None)
+        sub = next(
+            (
+                a
+                for a in (f.annotation, *typing.get_args(f.annotation))
+                if isinstance(a, type) and issubclass(a, BaseModel) and a.__name__ != "Dist"
+            ),
+            None,
+        )
         key = prefix + name
         if sub is not None:
             if typing.get_origin(f.annotation) is list:
@@ -84,8 +90,12 @@ def path_reference() -> str:
     return "\n".join(lines)
 
 
-MARKERS = {"<!-- config-reference -->": config_reference, "<!-- column-reference -->": column_reference,
-           "<!-- controller-reference -->": controller_reference, "<!-- path-reference -->": path_reference}
+MARKERS = {
+    "<!-- config-reference -->": config_reference,
+    "<!-- column-reference -->": column_reference,
+    "<!-- controller-reference -->": controller_reference,
+    "<!-- path-reference -->": path_reference,
+}
 
 
 def on_page_markdown(markdown: str, **kwargs) -> str:

@@ -18,8 +18,15 @@ itself is fast.
 
 import importlib
 
-from pfjax.host import (HOST_DEVICES_ENV, SMALL_LOOP_BYTES, SMALL_LOOP_ENV, HostWarning, default_host_devices,
-                        setup, small_loop_option)
+from pfjax.host import (
+    HOST_DEVICES_ENV,
+    SMALL_LOOP_BYTES,
+    SMALL_LOOP_ENV,
+    HostWarning,
+    default_host_devices,
+    setup,
+    small_loop_option,
+)
 
 __version__ = "0.1.0"
 
@@ -27,20 +34,66 @@ setup()
 
 #: public name -> module that defines it (loaded on first use)
 _LAZY = {
-    **{name: "pfjax.api" for name in (
-        "design_mixed", "scenarios", "simulate", "success_rate", "run_study", "load_study", "replay", "tune", "falsify",
-        "uniform", "normal", "truncnormal", "choice", "Scenarios", "Simulation", "SuccessRate", "StudyResult")},
+    **{
+        name: "pfjax.api"
+        for name in (
+            "design_mixed",
+            "scenarios",
+            "simulate",
+            "success_rate",
+            "run_study",
+            "load_study",
+            "replay",
+            "tune",
+            "falsify",
+            "uniform",
+            "normal",
+            "truncnormal",
+            "choice",
+            "Scenarios",
+            "Simulation",
+            "SuccessRate",
+            "StudyResult",
+        )
+    },
     "InputError": "pfjax.errors",
     "SimConfig": "pfjax.sim.simulate",
     "register_controller": ("pfjax.controllers.registry", "register"),
     "register_path": ("pfjax.paths.registry", "register"),
 }
 #: subpackages reachable as attributes (``pfjax.parking.run``)
-_SUBPACKAGES = ("analysis", "cache", "controllers", "falsification", "metrics", "models", "montecarlo", "parking", "paths",
-                "reproduce", "sim", "synthesis", "tracking", "tuning")
+_SUBPACKAGES = (
+    "analysis",
+    "cache",
+    "controllers",
+    "falsification",
+    "metrics",
+    "models",
+    "montecarlo",
+    "parking",
+    "paths",
+    "reproduce",
+    "sim",
+    "synthesis",
+    "tracking",
+    "tuning",
+)
 
-__all__ = [*_LAZY, "parking", "tracking", "controllers", "paths", "setup", "HostWarning", "default_host_devices",
-           "small_loop_option", "HOST_DEVICES_ENV", "SMALL_LOOP_BYTES", "SMALL_LOOP_ENV", "__version__"]
+__all__ = [
+    *_LAZY,
+    "parking",
+    "tracking",
+    "controllers",
+    "paths",
+    "setup",
+    "HostWarning",
+    "default_host_devices",
+    "small_loop_option",
+    "HOST_DEVICES_ENV",
+    "SMALL_LOOP_BYTES",
+    "SMALL_LOOP_ENV",
+    "__version__",
+]
 
 
 def __getattr__(name):

@@ -89,9 +89,16 @@ def design_mixed(v: float = 1.0, L: float = 0.2, alpha: float = 10.0, beta: floa
 # ----------------------------------------------------------------------------- scenarios
 
 #: :func:`scenarios`'s arguments -> the study config's keys.
-_SCENARIO_KEYS = {"speed": "vehicle.speed", "L": "vehicle.L", "delta_max_deg": "vehicle.delta_max_deg",
-                  "beta_r_deg": "slip.beta_r_deg", "beta_f_deg": "slip.beta_f_deg", "start_along_m": "initial.start_along_m",
-                  "lateral_offset": "initial.lateral_offset", "heading_error_deg": "initial.heading_error_deg"}
+_SCENARIO_KEYS = {
+    "speed": "vehicle.speed",
+    "L": "vehicle.L",
+    "delta_max_deg": "vehicle.delta_max_deg",
+    "beta_r_deg": "slip.beta_r_deg",
+    "beta_f_deg": "slip.beta_f_deg",
+    "start_along_m": "initial.start_along_m",
+    "lateral_offset": "initial.lateral_offset",
+    "heading_error_deg": "initial.heading_error_deg",
+}
 
 
 class Scenarios(NamedTuple):
@@ -106,9 +113,22 @@ class Scenarios(NamedTuple):
         return len(self.table)
 
 
-def scenarios(path: str = "sine", n: int = 1, *, beta_r_deg=5.0, beta_f_deg=5.0, lateral_offset=0.0,
-              heading_error_deg=0.0, start_along_m=0.0, speed=1.0, L=0.2, delta_max_deg=30.0, convention: str = "source",
-              horizon: float = 20.0, key=0) -> Scenarios:
+def scenarios(
+    path: str = "sine",
+    n: int = 1,
+    *,
+    beta_r_deg=5.0,
+    beta_f_deg=5.0,
+    lateral_offset=0.0,
+    heading_error_deg=0.0,
+    start_along_m=0.0,
+    speed=1.0,
+    L=0.2,
+    delta_max_deg=30.0,
+    convention: str = "source",
+    horizon: float = 20.0,
+    key=0,
+) -> Scenarios:
     """``n`` runs on a registered path (:data:`pfjax.paths.PATHS`), vectorised: each quantity is a
     number (every run), an array of ``n`` numbers (run by run), or a distribution
     (:func:`uniform`, :func:`normal`, :func:`truncnormal`, :func:`choice`, or a study config's
@@ -136,8 +156,16 @@ def scenarios(path: str = "sine", n: int = 1, *, beta_r_deg=5.0, beta_f_deg=5.0,
     from pfjax.montecarlo.sampling import sample_runs
 
     n = errors.integer("n", n, low=1, high=100_000_000)
-    values = dict(speed=speed, L=L, delta_max_deg=delta_max_deg, beta_r_deg=beta_r_deg, beta_f_deg=beta_f_deg,
-                  start_along_m=start_along_m, lateral_offset=lateral_offset, heading_error_deg=heading_error_deg)
+    values = dict(
+        speed=speed,
+        L=L,
+        delta_max_deg=delta_max_deg,
+        beta_r_deg=beta_r_deg,
+        beta_f_deg=beta_f_deg,
+        start_along_m=start_along_m,
+        lateral_offset=lateral_offset,
+        heading_error_deg=heading_error_deg,
+    )
     dists, given = {}, {}
     for name, v in values.items():
         if isinstance(v, (Dist, dict)):
@@ -147,19 +175,31 @@ def scenarios(path: str = "sine", n: int = 1, *, beta_r_deg=5.0, beta_f_deg=5.0,
         if a.ndim == 0:
             dists[name] = {"dist": "constant", "value": float(a)}
         elif a.shape != (n,):
-            raise errors.InputError(f"{name}: expected a number or {n} numbers (one per run), got shape {a.shape}", name)
+            raise errors.InputError(
+                f"{name}: expected a number or {n} numbers (one per run), got shape {a.shape}", name
+            )
         else:  # the config sees the values' range (its bounds are checked), the runs get the values
             lo, hi = float(a.min()), float(a.max())
             dists[name] = {"dist": "constant", "value": lo} if lo == hi else {"dist": "uniform", "low": lo, "high": hi}
             given[name] = a
     seed = key if isinstance(key, (int, np.integer)) and not isinstance(key, bool) else 0
     errors.seed("key", seed)
-    data = {"name": "scenarios", "n_runs": n, "seed": int(seed), "paths": [{"kind": path}],
-            "controllers": [{"name": "none", "type": "state_feedback"}], "sim": {"horizon": horizon},
-            "vehicle": {"speed": dists["speed"], "L": dists["L"], "delta_max_deg": dists["delta_max_deg"],
-                        "convention": convention},
-            "slip": {"beta_r_deg": dists["beta_r_deg"], "beta_f_deg": dists["beta_f_deg"]},
-            "initial": {k: dists[k] for k in ("start_along_m", "lateral_offset", "heading_error_deg")}}
+    data = {
+        "name": "scenarios",
+        "n_runs": n,
+        "seed": int(seed),
+        "paths": [{"kind": path}],
+        "controllers": [{"name": "none", "type": "state_feedback"}],
+        "sim": {"horizon": horizon},
+        "vehicle": {
+            "speed": dists["speed"],
+            "L": dists["L"],
+            "delta_max_deg": dists["delta_max_deg"],
+            "convention": convention,
+        },
+        "slip": {"beta_r_deg": dists["beta_r_deg"], "beta_f_deg": dists["beta_f_deg"]},
+        "initial": {k: dists[k] for k in ("start_along_m", "lateral_offset", "heading_error_deg")},
+    }
     try:
         spec, _ = load_study(data=data)
     except errors.InputError as e:
@@ -175,8 +215,11 @@ def _renamed(e: errors.InputError) -> errors.InputError:
     text = str(e)
     for arg, key in _SCENARIO_KEYS.items():
         text = text.replace(key, arg)
-    text = text.replace("paths[0].kind", "path").replace("sim.horizon", "horizon").replace("vehicle.convention",
-                                                                                              "convention")
+    text = (
+        text.replace("paths[0].kind", "path")
+        .replace("sim.horizon", "horizon")
+        .replace("vehicle.convention", "convention")
+    )
     return errors.InputError(text, text.split(":", 1)[0].split(".", 1)[0])
 
 
@@ -210,13 +253,16 @@ def _gains_of(e, d, gains, v: float, L: float) -> tuple[Any, dict]:
         flat.update(zip(e.labels["K"], np.ravel(np.asarray(gains.K, float)).tolist()))
     else:
         kind = e.controller.params.__name__ if e.controller.params is not None else "parameter pytree"
-        raise errors.InputError(f"gains: expected a dict of {', '.join(e.gains)}, a {kind} "
-                                f"or a design with K, got {type(gains).__name__}", "gains")
+        raise errors.InputError(
+            f"gains: expected a dict of {', '.join(e.gains)}, a {kind} or a design with K, got {type(gains).__name__}",
+            "gains",
+        )
     return C.params_from_flat(e, **flat), {k: float(v) for k, v in flat.items()}
 
 
-def simulate(scenarios: Scenarios, controller="state_feedback", gains=None, config=None, *,
-             trajectories: bool = False) -> Simulation:
+def simulate(
+    scenarios: Scenarios, controller="state_feedback", gains=None, config=None, *, trajectories: bool = False
+) -> Simulation:
     """Simulate every run of ``scenarios`` in closed loop with ``controller``.
 
     Args:
@@ -243,18 +289,24 @@ def simulate(scenarios: Scenarios, controller="state_feedback", gains=None, conf
     from pfjax.sim import SimConfig, simulate_batch
 
     if not isinstance(scenarios, Scenarios):
-        raise errors.InputError(f"scenarios: expected the result of pfjax.scenarios(...), got {type(scenarios).__name__}",
-                                "scenarios")
+        raise errors.InputError(
+            f"scenarios: expected the result of pfjax.scenarios(...), got {type(scenarios).__name__}", "scenarios"
+        )
     e, d = C.resolve(controller) if isinstance(controller, str) else (None, None)
     if e is None:
-        raise errors.InputError(f"controller: expected a controller name, got {type(controller).__name__}", "controller")
+        raise errors.InputError(
+            f"controller: expected a controller name, got {type(controller).__name__}", "controller"
+        )
     if config is None:
         config = SimConfig()
     elif isinstance(config, dict):
         unknown = set(config) - {f.name for f in dataclasses.fields(SimConfig)}
         if unknown:
-            raise errors.InputError(f"config.{sorted(unknown)[0]}: unknown setting; expected one of "
-                                    f"{', '.join(f.name for f in dataclasses.fields(SimConfig))}", "config")
+            raise errors.InputError(
+                f"config.{sorted(unknown)[0]}: unknown setting; expected one of "
+                f"{', '.join(f.name for f in dataclasses.fields(SimConfig))}",
+                "config",
+            )
         config = SimConfig(**config)
     elif not isinstance(config, SimConfig):
         raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
@@ -265,8 +317,12 @@ def simulate(scenarios: Scenarios, controller="state_feedback", gains=None, conf
     m = batch_size(n)  # padded like a study's chunks: every run takes the same vector code
     pad = lambda a: np.concatenate([np.asarray(a), np.repeat(np.asarray(a)[:1], m - n, axis=0)])
     batch = jax.tree_util.tree_map(pad, scenarios.batch)
-    batch = batch._replace(gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(np.asarray(g), (m,) + np.shape(g)), params))
-    res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:n], simulate_batch(batch, controller=e.controller, config=config))
+    batch = batch._replace(
+        gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(np.asarray(g), (m,) + np.shape(g)), params)
+    )
+    res = jax.tree_util.tree_map(
+        lambda a: np.asarray(a)[:n], simulate_batch(batch, controller=e.controller, config=config)
+    )
     return Simulation(add_results(t.copy(), res, n), res, e.name, {k: flat[k] for k in e.gains})
 
 
@@ -285,7 +341,8 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
     import jax
     import pandas as pd
 
-    from pfjax.montecarlo.config import StudySpec, load_study as load_config
+    from pfjax.montecarlo.config import StudySpec
+    from pfjax.montecarlo.config import load_study as load_config
     from pfjax.montecarlo.runner import add_results, controller_of, precision, sample_few, sim_config, with_gains
     from pfjax.sim import simulate_batch
 
@@ -295,10 +352,15 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
     labels = [p.label for p in spec.paths]
     names = [c.name for c in spec.controllers]
     if path not in labels:
-        raise errors.InputError(f"path: {path!r} is not a path of study {spec.name!r}; expected one of {', '.join(labels)}", "path")
+        raise errors.InputError(
+            f"path: {path!r} is not a path of study {spec.name!r}; expected one of {', '.join(labels)}", "path"
+        )
     if controller not in names:
-        raise errors.InputError(f"controller: {controller!r} is not a controller of study {spec.name!r}; expected one of "
-                                f"{', '.join(names)}", "controller")
+        raise errors.InputError(
+            f"controller: {controller!r} is not a controller of study {spec.name!r}; expected one of "
+            f"{', '.join(names)}",
+            "controller",
+        )
     idx = np.atleast_1d(np.asarray(runs))
     for r in idx.tolist():
         errors.integer("runs", r, low=0, high=spec.n_runs - 1)
@@ -311,8 +373,14 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
         res = simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
     n = len(idx)
     res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:n], res)
-    table = pd.DataFrame({"path": path, "controller": controller, "run": idx,
-                          **{k: np.asarray(v, float) for k, v in sampled.columns.items()}})
+    table = pd.DataFrame(
+        {
+            "path": path,
+            "controller": controller,
+            "run": idx,
+            **{k: np.asarray(v, float) for k, v in sampled.columns.items()},
+        }
+    )
     return Simulation(add_results(table, res, n), res, spec.controllers[c].type, flat)
 
 
@@ -327,8 +395,10 @@ class SuccessRate(NamedTuple):
     conf: float
 
     def __str__(self) -> str:
-        return (f"{100 * self.rate:.1f} % of {self.n} runs succeed "
-                f"({100 * self.conf:g} % interval {100 * self.lo:.1f}-{100 * self.hi:.1f} %)")
+        return (
+            f"{100 * self.rate:.1f} % of {self.n} runs succeed "
+            f"({100 * self.conf:g} % interval {100 * self.lo:.1f}-{100 * self.hi:.1f} %)"
+        )
 
 
 def success_rate(x, conf: float = 0.95) -> SuccessRate:
@@ -377,8 +447,16 @@ def load_study(out) -> StudyResult:
     return StudyResult(out, summary, pd.read_parquet(out / "runs.parquet"), margin, headline(summary))
 
 
-def run_study(config, out=None, *, overwrite: bool = False, fresh: bool = False, progress: bool | None = None,
-              report: bool = True, **overrides) -> StudyResult:
+def run_study(
+    config,
+    out=None,
+    *,
+    overwrite: bool = False,
+    fresh: bool = False,
+    progress: bool | None = None,
+    report: bool = True,
+    **overrides,
+) -> StudyResult:
     """Run a Monte Carlo study and return its outputs, as ``pfjax study`` does.
 
     Args:
@@ -393,7 +471,8 @@ def run_study(config, out=None, *, overwrite: bool = False, fresh: bool = False,
     """
     from pathlib import Path
 
-    from pfjax.montecarlo.config import StudySpec, load_study as load_config
+    from pfjax.montecarlo.config import StudySpec
+    from pfjax.montecarlo.config import load_study as load_config
     from pfjax.montecarlo.study import run
 
     values = {k.replace("__", "."): v for k, v in overrides.items()}
@@ -406,16 +485,30 @@ def run_study(config, out=None, *, overwrite: bool = False, fresh: bool = False,
             raise errors.InputError(f"config: no such file {str(config)!r}", "config")
         spec = load_config(Path(config), values=values)[0]
     else:
-        raise errors.InputError(f"config: expected a TOML path, a dict or a StudySpec, got {type(config).__name__}",
-                                "config")
+        raise errors.InputError(
+            f"config: expected a TOML path, a dict or a StudySpec, got {type(config).__name__}", "config"
+        )
     out = Path("results") / spec.name if out is None else Path(out)
     run(spec, out, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
     return load_study(out)
 
 
-def tune(controller: str = "pi", scenario: str = "paper-line", method: str = "gradient", *, key=0, cost=None,
-         config=None, n_runs: int = 16, steps: int = 100, n_starts: int = 1, learning_rate: float = 0.05,
-         generations: int = 100, population: int = 50, progress: bool = False) -> dict:
+def tune(
+    controller: str = "pi",
+    scenario: str = "paper-line",
+    method: str = "gradient",
+    *,
+    key=0,
+    cost=None,
+    config=None,
+    n_runs: int = 16,
+    steps: int = 100,
+    n_starts: int = 1,
+    learning_rate: float = 0.05,
+    generations: int = 100,
+    population: int = 50,
+    progress: bool = False,
+) -> dict:
     """Tune a controller's gains by the GA or by gradient descent through the simulator, as
     ``pfjax tune`` does.
 
@@ -436,22 +529,52 @@ def tune(controller: str = "pi", scenario: str = "paper-line", method: str = "gr
     from pfjax import controllers as C
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import make_problem, tune as run_tune
+    from pfjax.tuning.problem import make_problem
+    from pfjax.tuning.problem import tune as run_tune
 
     name = C.resolve(controller)[0].name if isinstance(controller, str) else controller
     problem = make_problem(name, scenario, cost=cost or CostSpec(), config=config, n_runs=n_runs)
     k = jax.random.PRNGKey(errors.seed("key", key)) if isinstance(key, (int, np.integer)) else key
-    res = run_tune(problem, method, key=k, ga_options=GAOptions(population_size=population, generations=generations),
-                   steps=steps, n_starts=n_starts, learning_rate=learning_rate, progress=progress)
+    res = run_tune(
+        problem,
+        method,
+        key=k,
+        ga_options=GAOptions(population_size=population, generations=generations),
+        steps=steps,
+        n_starts=n_starts,
+        learning_rate=learning_rate,
+        progress=progress,
+    )
     gains = C.flat_gains(C.entry(name), problem.tunable.gains(res.theta))
-    return {"gains": gains, "cost": float(res.cost), "n_rollouts": int(res.n_rollouts), "wall_s": float(res.wall_s),
-            "history": np.asarray(res.history), "history_rollouts": np.asarray(res.history_rollouts), "result": res}
+    return {
+        "gains": gains,
+        "cost": float(res.cost),
+        "n_rollouts": int(res.n_rollouts),
+        "wall_s": float(res.wall_s),
+        "history": np.asarray(res.history),
+        "history_rollouts": np.asarray(res.history_rollouts),
+        "result": res,
+    }
 
 
-def falsify(controller: str = "state_feedback", path: str = "sine", *, gains=None, slip_bound_deg: float = 10.0,
-            f_max_hz: float = 0.5, lateral_offset: float = 0.1, heading_error_deg: float = 5.0, objective: str = "iae",
-            restarts: int = 8, steps: int = 50, key=0, config=None, speed: float = 1.0, L: float = 0.2,
-            delta_max_deg: float = 30.0):
+def falsify(
+    controller: str = "state_feedback",
+    path: str = "sine",
+    *,
+    gains=None,
+    slip_bound_deg: float = 10.0,
+    f_max_hz: float = 0.5,
+    lateral_offset: float = 0.1,
+    heading_error_deg: float = 5.0,
+    objective: str = "iae",
+    restarts: int = 8,
+    steps: int = 50,
+    key=0,
+    config=None,
+    speed: float = 1.0,
+    L: float = 0.2,
+    delta_max_deg: float = 30.0,
+):
     """Search for a controller's worst case on a registered path: gradient ascent of ``objective``
     through the simulator over slip profiles bounded by ``slip_bound_deg`` (deg, per axle) with
     frequencies up to ``f_max_hz`` (Hz; 0: constant slip) and start errors within
@@ -472,8 +595,10 @@ def falsify(controller: str = "state_feedback", path: str = "sine", *, gains=Non
     e, d = C.resolve(controller)
     entry = paths.entry(path)
     if entry.build is None:
-        raise errors.InputError(f"path: {path!r} is built only from a study config; expected one of "
-                                f"{', '.join(paths.fixed_paths())}", "path")
+        raise errors.InputError(
+            f"path: {path!r} is built only from a study config; expected one of {', '.join(paths.fixed_paths())}",
+            "path",
+        )
     errors.number("speed", speed, positive=True, unit=" m/s")
     errors.number("L", L, positive=True, unit=" m")
     errors.number("delta_max_deg", delta_max_deg, positive=True, below=90, unit=" deg")
@@ -482,11 +607,27 @@ def falsify(controller: str = "state_feedback", path: str = "sine", *, gains=Non
     restarts = errors.integer("restarts", restarts, low=1, high=4096)
     steps = errors.integer("steps", steps, low=1, high=100_000)
     params, _ = _gains_of(e, d, gains, speed, L)
-    sp = SlipParams(*(np.asarray(x, float) for x in (speed, L, math.radians(delta_max_deg))),
-                    convention=np.asarray(CONVENTIONS["source"], np.int32))
+    sp = SlipParams(
+        *(np.asarray(x, float) for x in (speed, L, math.radians(delta_max_deg))),
+        convention=np.asarray(CONVENTIONS["source"], np.int32),
+    )
     k = jax.random.PRNGKey(errors.seed("key", key)) if isinstance(key, (int, np.integer)) else key
-    ic = {"d": (-lateral_offset, lateral_offset), "theta_e_deg": (-heading_error_deg, heading_error_deg),
-          "u": entry.start_u}
-    return run_falsify(e.controller, params, entry.build(), config=config or SimConfig(record=False),
-                       slip_bound_deg=slip_bound_deg, f_max_hz=f_max_hz, ic_bounds=ic, objective=objective,
-                       n_restarts=restarts, steps=steps, key=k, params=sp)
+    ic = {
+        "d": (-lateral_offset, lateral_offset),
+        "theta_e_deg": (-heading_error_deg, heading_error_deg),
+        "u": entry.start_u,
+    }
+    return run_falsify(
+        e.controller,
+        params,
+        entry.build(),
+        config=config or SimConfig(record=False),
+        slip_bound_deg=slip_bound_deg,
+        f_max_hz=f_max_hz,
+        ic_bounds=ic,
+        objective=objective,
+        n_restarts=restarts,
+        steps=steps,
+        key=k,
+        params=sp,
+    )

@@ -24,15 +24,20 @@ class ConfigError(InputError):
 
 
 def _type_name(v) -> str:
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list", dict: "a table"}.get(
-        type(v), type(v).__name__
-    )
+    return {
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+        str: "a string",
+        list: "a list",
+        dict: "a table",
+    }.get(type(v), type(v).__name__)
 
 
 def _short(value, limit: int = 60) -> str:
     """``repr(value)``, cut to ``limit`` characters (a 400-digit number stays one readable line)."""
     text = repr(value)
-    return text if len(text) <= limit else f"{text[:limit - 15]}... ({len(text)} characters)"
+    return text if len(text) <= limit else f"{text[: limit - 15]}... ({len(text)} characters)"
 
 
 def _check(key: str, value, default):
@@ -48,7 +53,9 @@ def _check(key: str, value, default):
     elif isinstance(default, int):
         ok = isinstance(value, int) and not isinstance(value, bool)
         if ok and abs(value) > errors.MAX_SEED:
-            raise ConfigError(f"{key}: expected an integer of magnitude <= 2**63 - 1, got one of {len(str(abs(value)))} digits")
+            raise ConfigError(
+                f"{key}: expected an integer of magnitude <= 2**63 - 1, got one of {len(str(abs(value)))} digits"
+            )
     elif isinstance(default, list):
         ok = isinstance(value, list) and (not default or len(value) == len(default))
         if ok and default:
@@ -146,5 +153,3 @@ def load(defaults: dict, path: str | Path | None = None, overrides: list[str] = 
     for text in overrides:
         cfg = _merge(cfg, parse_override(text))
     return cfg
-
-

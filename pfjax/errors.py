@@ -51,8 +51,17 @@ def is_number(value) -> bool:
     return isinstance(value, _numbers.Real) and not isinstance(value, bool)
 
 
-def number(key: str, value, *, positive: bool = False, nonnegative: bool = False, below: float | None = None,
-           low: float | None = None, high: float | None = None, unit: str = "") -> float:
+def number(
+    key: str,
+    value,
+    *,
+    positive: bool = False,
+    nonnegative: bool = False,
+    below: float | None = None,
+    low: float | None = None,
+    high: float | None = None,
+    unit: str = "",
+) -> float:
     """``value`` as a finite float within pfjax's magnitude bounds; :class:`InputError` otherwise.
 
     Args:
@@ -70,8 +79,11 @@ def number(key: str, value, *, positive: bool = False, nonnegative: bool = False
     try:
         x = float(value)
     except OverflowError:
-        raise InputError(f"{key}: expected a number of magnitude <= {MAX_MAGNITUDE:g}{unit}, got an integer of "
-                         f"{len(str(abs(int(value))))} digits", key) from None
+        raise InputError(
+            f"{key}: expected a number of magnitude <= {MAX_MAGNITUDE:g}{unit}, got an integer of "
+            f"{len(str(abs(int(value))))} digits",
+            key,
+        ) from None
     if not math.isfinite(x):
         raise InputError(f"{key}: expected a finite number, got {x}", key)
     if abs(x) > MAX_MAGNITUDE:
@@ -99,8 +111,17 @@ def is_traced(value) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(value))
 
 
-def numbers(key: str, value, *, positive: bool = False, nonnegative: bool = False, below: float | None = None,
-            low: float | None = None, high: float | None = None, unit: str = ""):
+def numbers(
+    key: str,
+    value,
+    *,
+    positive: bool = False,
+    nonnegative: bool = False,
+    below: float | None = None,
+    low: float | None = None,
+    high: float | None = None,
+    unit: str = "",
+):
     """Like :func:`number` for a scalar or an array of numbers (every element checked; the first
     bad one is named). Values under a JAX transformation are not checked (:func:`is_traced`).
     Returns ``value`` unchanged."""
@@ -119,16 +140,29 @@ def numbers(key: str, value, *, positive: bool = False, nonnegative: bool = Fals
         raise InputError(f"{key}: expected numbers, got an array of {a.dtype}", key)
     flat = a.reshape(-1)
     bad = ~np.isfinite(flat.astype(float))
-    for check, fail in ((True, bad), (True, np.abs(flat) > MAX_MAGNITUDE), (positive, flat < MIN_POSITIVE),
-                        (nonnegative, flat < 0), (below is not None, np.abs(flat) >= (below or 0)),
-                        (low is not None, flat < (low if low is not None else 0)),
-                        (high is not None, flat > (high if high is not None else 0))):
+    for check, fail in (
+        (True, bad),
+        (True, np.abs(flat) > MAX_MAGNITUDE),
+        (positive, flat < MIN_POSITIVE),
+        (nonnegative, flat < 0),
+        (below is not None, np.abs(flat) >= (below or 0)),
+        (low is not None, flat < (low if low is not None else 0)),
+        (high is not None, flat > (high if high is not None else 0)),
+    ):
         if check and np.any(fail):
             i = int(np.argmax(fail))
             index = ", ".join(str(int(j)) for j in np.unravel_index(i, a.shape))
             where = f"{key}[{index}]" if a.ndim else key
-            number(where, flat[i].item(), positive=positive, nonnegative=nonnegative, below=below, low=low, high=high,
-                   unit=unit)
+            number(
+                where,
+                flat[i].item(),
+                positive=positive,
+                nonnegative=nonnegative,
+                below=below,
+                low=low,
+                high=high,
+                unit=unit,
+            )
     return value
 
 
@@ -196,8 +230,13 @@ def deprecated(old: str, new: str) -> None:
         return
     _DEPRECATIONS.add((old, new))
     # one line on stderr, not the location inside pydantic or argparse that read the old spelling
-    warnings.warn_explicit(f"{old} is deprecated: it is read as {new}, and will be refused in the next release",
-                           PfjaxDeprecationWarning, "pfjax", 0, module="pfjax")
+    warnings.warn_explicit(
+        f"{old} is deprecated: it is read as {new}, and will be refused in the next release",
+        PfjaxDeprecationWarning,
+        "pfjax",
+        0,
+        module="pfjax",
+    )
 
 
 _DEPRECATIONS: set = set()

@@ -139,13 +139,22 @@ def setup(environ=None, modules=None, *, cache: bool = True) -> HostSetup:
     devices = default_host_devices(environ, modules)
     late = backend_started(modules)
     cache_dir = compilation_cache(environ, modules) if cache else None
-    if late and not _warned and environ.get(HOST_DEVICES_ENV, "").strip() != "1" and _FLAG not in environ.get("XLA_FLAGS", ""):
+    if (
+        late
+        and not _warned
+        and environ.get(HOST_DEVICES_ENV, "").strip() != "1"
+        and _FLAG not in environ.get("XLA_FLAGS", "")
+    ):
         import jax
 
         n = _cores()
         if n > 1 and jax.default_backend() == "cpu" and jax.local_device_count() == 1:
             _warned = True
-            warnings.warn(f"JAX started before pfjax was imported, so XLA uses 1 CPU device of the {n} cores here; "
-                          f"import pfjax before running anything in JAX, or set XLA_FLAGS="
-                          f"{_FLAG}={n} before starting Python, to use all cores", HostWarning, stacklevel=3)
+            warnings.warn(
+                f"JAX started before pfjax was imported, so XLA uses 1 CPU device of the {n} cores here; "
+                f"import pfjax before running anything in JAX, or set XLA_FLAGS="
+                f"{_FLAG}={n} before starting Python, to use all cores",
+                HostWarning,
+                stacklevel=3,
+            )
     return HostSetup(devices, loops, cache_dir, late)

@@ -63,8 +63,11 @@ def check_name(key: str, name) -> str:
     then letters, digits, ``_``, ``.`` or ``-`` (so never ``.``, ``..``, empty, hidden, or with a
     path separator)."""
     if not isinstance(name, str) or not NAME_PATTERN.match(name):
-        raise InputError(f"{key}: expected a name of 1-100 letters, digits, '_', '.' or '-' starting with a "
-                         f"letter or digit (it names a directory), got {name!r}", key)
+        raise InputError(
+            f"{key}: expected a name of 1-100 letters, digits, '_', '.' or '-' starting with a "
+            f"letter or digit (it names a directory), got {name!r}",
+            key,
+        )
     return name
 
 
@@ -107,8 +110,9 @@ def _describe(marker: dict) -> str:
     return f"the output of `pfjax {marker.get('command', '?')}`" + (f" (config {sha})" if sha else "")
 
 
-def check_target(target, *, command: str, config_sha256: str | None, overwrite: bool = False,
-                 flag: str = "--out") -> Path:
+def check_target(
+    target, *, command: str, config_sha256: str | None, overwrite: bool = False, flag: str = "--out"
+) -> Path:
     """Check that ``target`` may receive a new output of ``command`` (see the module docstring).
 
     Touches nothing. Returns the target as an absolute path (symbolic links in its parents
@@ -117,8 +121,11 @@ def check_target(target, *, command: str, config_sha256: str | None, overwrite: 
     given = Path(target)
     last = str(target).rstrip("/" + os.sep).rsplit(os.sep, 1)[-1].rsplit("/", 1)[-1]
     if str(target).strip() == "" or last in ("", ".", ".."):
-        raise InputError(f"{flag}: {str(target)!r} does not name a new directory (it ends in '.' or '..' or is "
-                         f"empty); give a directory name such as results/my_study", flag)
+        raise InputError(
+            f"{flag}: {str(target)!r} does not name a new directory (it ends in '.' or '..' or is "
+            f"empty); give a directory name such as results/my_study",
+            flag,
+        )
     path = Path(os.path.abspath(given))
     resolved = path.parent.resolve() / path.name
     if resolved == Path(resolved.anchor):
@@ -127,8 +134,11 @@ def check_target(target, *, command: str, config_sha256: str | None, overwrite: 
         raise InputError(f"{flag}: {target} is the home directory; pfjax writes only into a directory of its own", flag)
     cwd = Path.cwd().resolve()
     if resolved == cwd or resolved in cwd.parents:
-        raise InputError(f"{flag}: {target} is the current directory or contains it; give a directory of its own "
-                         f"such as results/my_study", flag)
+        raise InputError(
+            f"{flag}: {target} is the current directory or contains it; give a directory of its own "
+            f"such as results/my_study",
+            flag,
+        )
     for parent in resolved.parents:
         if parent.exists():
             if not parent.is_dir():
@@ -150,29 +160,43 @@ def check_target(target, *, command: str, config_sha256: str | None, overwrite: 
         return resolved
     marker = read_marker(resolved)
     if marker is None:
-        raise InputError(f"{flag}: {target} is not empty and was not written by pfjax (it has no {MARKER}); "
-                         f"choose another {flag}, or empty it yourself", flag)
+        raise InputError(
+            f"{flag}: {target} is not empty and was not written by pfjax (it has no {MARKER}); "
+            f"choose another {flag}, or empty it yourself",
+            flag,
+        )
     files, dirs = _entries(resolved)
     listed = marker["files"]
     foreign = sorted(set(files) - set(listed)) + sorted(dirs - set(marker["dirs"]))
     if foreign:
         more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
-        raise InputError(f"{flag}: {target} holds {foreign[0]!r}{more}, which pfjax did not write there; move it "
-                         f"away or choose another {flag} (pfjax never deletes what it did not write)", flag)
-    changed = [f for f, st in files.items()
-               if not (isinstance(listed.get(f), list) and listed[f] == [st.st_size, st.st_mtime_ns])]
+        raise InputError(
+            f"{flag}: {target} holds {foreign[0]!r}{more}, which pfjax did not write there; move it "
+            f"away or choose another {flag} (pfjax never deletes what it did not write)",
+            flag,
+        )
+    changed = [
+        f
+        for f, st in files.items()
+        if not (isinstance(listed.get(f), list) and listed[f] == [st.st_size, st.st_mtime_ns])
+    ]
     if not overwrite:
         if changed:
-            raise InputError(f"{flag}: {target}/{changed[0]} changed after pfjax wrote it; add --overwrite to replace "
-                             f"{target}, or choose another {flag}", flag)
+            raise InputError(
+                f"{flag}: {target}/{changed[0]} changed after pfjax wrote it; add --overwrite to replace "
+                f"{target}, or choose another {flag}",
+                flag,
+            )
         if marker.get("command") != command or marker.get("config_sha256") != config_sha256:
-            raise InputError(f"{flag}: {target} holds {_describe(marker)}; add --overwrite to replace it, or choose "
-                             f"another {flag}", flag)
+            raise InputError(
+                f"{flag}: {target} holds {_describe(marker)}; add --overwrite to replace it, or choose another {flag}",
+                flag,
+            )
     return resolved
 
 
 def _now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
 class OutputLock:
@@ -195,10 +219,12 @@ class OutputLock:
             except OSError:
                 holder = self._holder(fd)
                 os.close(fd)
-                raise OutputBusy(f"{self.flag}: a pfjax {holder.get('command', 'command')} is running into "
-                                 f"{self.target} (pid {holder.get('pid', '?')} on {holder.get('host', '?')}, started "
-                                 f"{holder.get('started', '?')}); wait for it to finish, or choose another {self.flag}",
-                                 self.flag) from None
+                raise OutputBusy(
+                    f"{self.flag}: a pfjax {holder.get('command', 'command')} is running into "
+                    f"{self.target} (pid {holder.get('pid', '?')} on {holder.get('host', '?')}, started "
+                    f"{holder.get('started', '?')}); wait for it to finish, or choose another {self.flag}",
+                    self.flag,
+                ) from None
             try:  # the file may have been removed by its previous holder after we opened it
                 same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
             except FileNotFoundError:
@@ -250,8 +276,16 @@ class OutputDir:
         extra: more fields for the marker (e.g. the study name, the seed).
     """
 
-    def __init__(self, target, *, command: str, config_sha256: str | None, overwrite: bool = False,
-                 flag: str = "--out", extra: dict | None = None):
+    def __init__(
+        self,
+        target,
+        *,
+        command: str,
+        config_sha256: str | None,
+        overwrite: bool = False,
+        flag: str = "--out",
+        extra: dict | None = None,
+    ):
         self.command, self.config_sha256, self.overwrite, self.flag = command, config_sha256, overwrite, flag
         self.target = check_target(target, command=command, config_sha256=config_sha256, overwrite=overwrite, flag=flag)
         self.extra = dict(extra or {})
@@ -273,8 +307,13 @@ class OutputDir:
         self.target.parent.mkdir(parents=True, exist_ok=True)
         self._lock.acquire()
         try:
-            check_target(self.target, command=self.command, config_sha256=self.config_sha256,
-                         overwrite=self.overwrite, flag=self.flag)
+            check_target(
+                self.target,
+                command=self.command,
+                config_sha256=self.config_sha256,
+                overwrite=self.overwrite,
+                flag=self.flag,
+            )
             for kind in (STAGING, _OLD, "partial"):  # only this target's, and nobody else holds its lock
                 for stale in self.target.parent.glob(f".{glob_escape(self.target.name)}.{kind}-*"):
                     shutil.rmtree(stale, ignore_errors=True)
@@ -325,15 +364,28 @@ class OutputDir:
         replacing the previous output. Returns the target."""
         staging = self.staging
         files, dirs = _entries(staging)
-        marker = {"format": MARKER_FORMAT, "command": self.command, "config_sha256": self.config_sha256,
-                  **self.extra, **extra, "pfjax_version": _version(), "written": _now(),
-                  "files": {f: [st.st_size, st.st_mtime_ns] for f, st in sorted(files.items())}, "dirs": sorted(dirs)}
+        marker = {
+            "format": MARKER_FORMAT,
+            "command": self.command,
+            "config_sha256": self.config_sha256,
+            **self.extra,
+            **extra,
+            "pfjax_version": _version(),
+            "written": _now(),
+            "files": {f: [st.st_size, st.st_mtime_ns] for f, st in sorted(files.items())},
+            "dirs": sorted(dirs),
+        }
         (staging / MARKER).write_text(json.dumps(marker, indent=1) + "\n", encoding="utf-8")
         staging.chmod(0o755)  # mkdtemp makes it private; results are for everyone who can read the parent
         old = None
         if self.target.exists():
-            check_target(self.target, command=self.command, config_sha256=self.config_sha256,
-                         overwrite=self.overwrite, flag=self.flag)  # nothing foreign arrived meanwhile
+            check_target(
+                self.target,
+                command=self.command,
+                config_sha256=self.config_sha256,
+                overwrite=self.overwrite,
+                flag=self.flag,
+            )  # nothing foreign arrived meanwhile
             old = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.{_OLD}-", dir=self.target.parent))
             os.replace(self.target, old / "output")
         os.replace(staging, self.target)

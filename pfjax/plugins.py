@@ -45,7 +45,8 @@ def load(environ=None) -> list[str]:
         try:
             ep.load()
         except Exception as e:
-            raise InputError(f"entry point {GROUP}:{ep.name}: cannot import {ep.value!r}: {type(e).__name__}: {e}",
-                             GROUP) from None
+            raise InputError(
+                f"entry point {GROUP}:{ep.name}: cannot import {ep.value!r}: {type(e).__name__}: {e}", GROUP
+            ) from None
         loaded.append(ep.value)
     return loaded

@@ -25,16 +25,22 @@ def machine() -> str:
     import jax
 
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return (f"{platform.machine()} {platform.system()}, {cores} CPU(s), {jax.device_count()} {jax.default_backend()} "
-            f"device(s), jax {jax.__version__}, Python {platform.python_version()}")
+    return (
+        f"{platform.machine()} {platform.system()}, {cores} CPU(s), {jax.device_count()} {jax.default_backend()} "
+        f"device(s), jax {jax.__version__}, Python {platform.python_version()}"
+    )
 
 
 def stamp(config: dict, seed: int | None = None) -> dict:
     """The provenance record of an output made from ``config`` (a JSON-able dict) and ``seed``."""
     import pfjax
 
-    return {"pfjax_version": pfjax.__version__, "config_sha256": config_hash(config), "seed": seed,
-            "machine": machine()}
+    return {
+        "pfjax_version": pfjax.__version__,
+        "config_sha256": config_hash(config),
+        "seed": seed,
+        "machine": machine(),
+    }
 
 
 def parquet_metadata(config: dict, seed: int | None = None, *, config_sha256: str | None = None) -> dict[bytes, bytes]:

@@ -36,8 +36,10 @@ def check_steps(horizon: float, dt: float) -> int:
     ``dt`` above :data:`MAX_STEPS`."""
     n = horizon / dt
     if n > MAX_STEPS:
-        raise InputError(f"dt: at most {MAX_STEPS:.0e} integrator steps per run (horizon / dt), got "
-                         f"{horizon:g} / {dt:g} = {n:.3g}", "dt")
+        raise InputError(
+            f"dt: at most {MAX_STEPS:.0e} integrator steps per run (horizon / dt), got {horizon:g} / {dt:g} = {n:.3g}",
+            "dt",
+        )
     return int(round(n))
 
 
@@ -78,9 +80,11 @@ def check_memory(key: str, nbytes: float, what: str, hint: str = "") -> None:
     """
     budget = memory_budget()
     if nbytes > budget:
-        raise InputError(f"{key}: {what} needs about {fmt_bytes(nbytes)}, more than the memory budget of "
-                         f"{fmt_bytes(budget)} (half this machine's memory, or ${ENV})" + (f"; {hint}" if hint else ""),
-                         key)
+        raise InputError(
+            f"{key}: {what} needs about {fmt_bytes(nbytes)}, more than the memory budget of "
+            f"{fmt_bytes(budget)} (half this machine's memory, or ${ENV})" + (f"; {hint}" if hint else ""),
+            key,
+        )
 
 
 def run_bytes(n_steps: int, *, record: bool = False, seq_len: int = 0, path_numbers: int = 0) -> int:

@@ -87,8 +87,13 @@ def schema_with_units(schema, extra: dict[str, tuple[str, str]] | None = None, m
             unit, desc = known[f.name]
             f = f.with_metadata({**(f.metadata or {}), b"unit": unit.encode(), b"description": desc.encode()})
         fields.append(f)
-    md = {**(schema.metadata or {}), **{(k if isinstance(k, bytes) else str(k).encode()):
-                                         (v if isinstance(v, bytes) else str(v).encode()) for k, v in (metadata or {}).items()}}
+    md = {
+        **(schema.metadata or {}),
+        **{
+            (k if isinstance(k, bytes) else str(k).encode()): (v if isinstance(v, bytes) else str(v).encode())
+            for k, v in (metadata or {}).items()
+        },
+    }
     return pa.schema(fields, metadata=md)
 
 
@@ -98,8 +103,9 @@ def to_arrow(df, extra: dict[str, tuple[str, str]] | None = None, metadata: dict
     return t.cast(schema_with_units(t.schema, extra, metadata))
 
 
-def write_parquet(df, path: str | Path, metadata: dict | None = None, *,
-                  units: dict[str, tuple[str, str]] | None = None) -> None:
+def write_parquet(
+    df, path: str | Path, metadata: dict | None = None, *, units: dict[str, tuple[str, str]] | None = None
+) -> None:
     """Write ``df`` (pandas) to ``path`` with column units and ``metadata``
     (:func:`pfjax.provenance.parquet_metadata`)."""
     pq.write_table(to_arrow(df, units, metadata), path)

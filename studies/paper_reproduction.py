@@ -18,10 +18,11 @@ import sys
 import time
 from pathlib import Path
 
-import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
-import pfjax.cache
 import jax
 import matplotlib
+
+import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
+import pfjax.cache
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -33,26 +34,38 @@ import pandas as pd  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from pfjax import controllers as C  # noqa: E402
+from pfjax import paths  # noqa: E402
 from pfjax.analysis import equilibrium, stability_map  # noqa: E402
 from pfjax.config import ConfigError, load  # noqa: E402
-from pfjax.provenance import config_hash  # noqa: E402
 from pfjax.errors import InputError, command_main  # noqa: E402
 from pfjax.jsonio import dumps  # noqa: E402
 from pfjax.models import SlipParams  # noqa: E402
-from pfjax.paths import curvature, global_parameter  # noqa: E402
 from pfjax.outputs import OutputDir, check_name  # noqa: E402
-from pfjax.resources import check_memory, check_steps, run_bytes  # noqa: E402
+from pfjax.paths import (  # noqa: E402
+    curvature,
+    global_parameter,
+    shapes,
+)
+from pfjax.provenance import (  # noqa: E402
+    config_hash,
+    parquet_metadata,
+)
+from pfjax.provenance import stamp as provenance_stamp  # noqa: E402
 from pfjax.report import figures  # noqa: E402
 from pfjax.report.markdown import table  # noqa: E402
 from pfjax.reproduce import path_following, verdict_table  # noqa: E402
-from pfjax.paths import shapes  # noqa: E402
-from pfjax import paths  # noqa: E402
+from pfjax.resources import check_memory, check_steps, run_bytes  # noqa: E402
+from pfjax.sim import (  # noqa: E402
+    STATUS_NAMES,
+    SimConfig,
+    constant_slip,
+    simulate_batch,
+    stack,
+    unstack,
+)
 from pfjax.sim.scenario import PAPER_TESTS, make_scenario, paper_scenario  # noqa: E402
-from pfjax.sim import constant_slip  # noqa: E402
-from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack  # noqa: E402
 from pfjax.synthesis import mixed_bounds_for_gain, mixed_h2_hinf, slip_design_plant  # noqa: E402
 from pfjax.synthesis.norms import closed_loop, h2_norm, hinf_norm  # noqa: E402
-from pfjax.provenance import parquet_metadata, stamp as provenance_stamp  # noqa: E402
 from pfjax.tables import write_parquet  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,13 +79,24 @@ DEFAULTS = {
     "synthesis": {"alpha": 10.0, "beta": 1.0},
     "trackers": True,
     "source": {
-        "K": [-2.7381, -2.0772], "gamma_inf": 1.1, "gamma_2": 4.07,
+        "K": [-2.7381, -2.0772],
+        "gamma_inf": 1.1,
+        "gamma_2": 4.07,
         "table3": [1.6390, 0.0230, 39.5204, 11.6124],
-        "line_ss_mixed_mm_below": 3.0, "line_ss_pi_mm": 8.0, "line_delta_deg": 10.0,
+        "line_ss_mixed_mm_below": 3.0,
+        "line_ss_pi_mm": 8.0,
+        "line_delta_deg": 10.0,
         "eig_max_re": [-1.3185, -5.1930],
     },
-    "stability": {"grid_max_deg": 60.0, "n": 31, "horizon": 40.0, "tol_d": 0.001, "tol_theta_deg": 0.1,
-                  "eig_grid_max_deg": 89.9, "eig_n": 721},
+    "stability": {
+        "grid_max_deg": 60.0,
+        "n": 31,
+        "horizon": 40.0,
+        "tol_d": 0.001,
+        "tol_theta_deg": 0.1,
+        "eig_grid_max_deg": 89.9,
+        "eig_n": 721,
+    },
     "long_horizon": 300.0,  # s: the PI's line test run until it settles
     "ga": {"seeds": 3, "scenario": "paper-line", "population": 50, "generations": 100},
 }
@@ -86,16 +110,27 @@ def rel(a, b):
 
 def sim_config(cfg, **kw) -> SimConfig:
     s = cfg["sim"]
-    base = dict(dt=s["dt"], horizon=s["horizon"], control_every=None if s["control_every"] == 0 else s["control_every"],
-                settle_band=s["settle_band"], steady_window=s["steady_window"])
+    base = dict(
+        dt=s["dt"],
+        horizon=s["horizon"],
+        control_every=None if s["control_every"] == 0 else s["control_every"],
+        settle_band=s["settle_band"],
+        steady_window=s["steady_window"],
+    )
     base.update(kw)
     return SimConfig(**base)
 
 
 def scenario_kw(cfg):
     m = cfg["model"]
-    return dict(beta_r_deg=m["beta_r_deg"], beta_f_deg=m["beta_f_deg"], v=m["v"], L=m["L"],
-                delta_max_deg=m["delta_max_deg"], convention=m["convention"])
+    return dict(
+        beta_r_deg=m["beta_r_deg"],
+        beta_f_deg=m["beta_f_deg"],
+        v=m["v"],
+        L=m["L"],
+        delta_max_deg=m["delta_max_deg"],
+        convention=m["convention"],
+    )
 
 
 def run_batch(controller, gains_list, test, cfg, config: SimConfig):
@@ -105,16 +140,24 @@ def run_batch(controller, gains_list, test, cfg, config: SimConfig):
 
 def traj_dict(r) -> dict:
     t = r.trajectory
-    return {k: np.asarray(getattr(t, k)) for k in ("t", "x", "y", "theta", "d", "theta_e", "kappa", "s", "delta_cmd", "delta")}
+    return {
+        k: np.asarray(getattr(t, k))
+        for k in ("t", "x", "y", "theta", "d", "theta_e", "kappa", "s", "delta_cmd", "delta")
+    }
 
 
 def row_of(r, test, name, gains: dict, delta_max) -> dict:
     m = {k: float(v) for k, v in r.metrics._asdict().items()}
     tr = r.trajectory
     return {
-        "path": test, "controller": name, **{f"gain_{k}": float(v) for k, v in gains.items()},
-        **m, "status": STATUS_NAMES[int(r.status)],
-        "final_d": float(r.final.d), "final_theta_e": float(r.final.theta_e), "final_delta": float(r.final.delta),
+        "path": test,
+        "controller": name,
+        **{f"gain_{k}": float(v) for k, v in gains.items()},
+        **m,
+        "status": STATUS_NAMES[int(r.status)],
+        "final_d": float(r.final.d),
+        "final_theta_e": float(r.final.theta_e),
+        "final_delta": float(r.final.delta),
         "max_abs_delta_cmd": float(np.max(np.abs(np.asarray(tr.delta_cmd)))) if tr is not None else math.nan,
         "max_abs_delta": float(np.max(np.abs(np.asarray(tr.delta)))) if tr is not None else math.nan,
         "delta_max": delta_max,
@@ -138,13 +181,19 @@ def part_synthesis(cfg) -> dict:
         "ours": {**ours, "K": K, "objective": a * design.gamma_inf**2 + b * design.gamma_2**2},
         "source_published": {"K": src["K"], "gamma_inf": src["gamma_inf"], "gamma_2": src["gamma_2"]},
         "source_K_checked_by_pfjax": {
-            "gamma_inf_certified": g_src[0], "gamma_2_certified": g_src[1],
+            "gamma_inf_certified": g_src[0],
+            "gamma_2_certified": g_src[1],
             "objective": a * g_src[0] ** 2 + b * g_src[1] ** 2,
-            "hinf_norm": hinf_norm(A, Bw, Ci), "h2_norm": h2_norm(A, Bw, C2),
+            "hinf_norm": hinf_norm(A, Bw, Ci),
+            "h2_norm": h2_norm(A, Bw, C2),
             "closed_loop_poles": [[p.real, p.imag] for p in np.linalg.eigvals(A)],
         },
-        "rel_diff": {"K_d": rel(K[0], src["K"][0]), "K_theta": rel(K[1], src["K"][1]),
-                     "gamma_inf": rel(design.gamma_inf, src["gamma_inf"]), "gamma_2": rel(design.gamma_2, src["gamma_2"])},
+        "rel_diff": {
+            "K_d": rel(K[0], src["K"][0]),
+            "K_theta": rel(K[1], src["K"][1]),
+            "gamma_inf": rel(design.gamma_inf, src["gamma_inf"]),
+            "gamma_2": rel(design.gamma_2, src["gamma_2"]),
+        },
     }
 
 
@@ -201,7 +250,7 @@ def part_pi_readings(cfg, rows, pbar) -> tuple[pd.DataFrame, dict]:
         rec["c_converges_all"] = conv
         rec["c_steering_within_limit"] = sat_ok
         rec["c_line_delta_10deg"] = abs(math.degrees(float(line.final.delta)) - src["line_delta_deg"]) < 0.5
-        rec["c_line_ss_near_source"] = (src["line_ss_pi_mm"] / 3 <= ss_mm <= 3 * src["line_ss_pi_mm"])
+        rec["c_line_ss_near_source"] = src["line_ss_pi_mm"] / 3 <= ss_mm <= 3 * src["line_ss_pi_mm"]
         # Not a criterion: "mixed beats PI" is a claim under test, so it must not pick the reading.
         rec["info_mixed_better_iae_all"] = better
         crit = [k for k in rec if k.startswith("c_")]
@@ -222,20 +271,27 @@ PI_THRESHOLDS = {"sat": 0.05, "delta_deg": 0.5, "ss_factor": 3.0}
 
 def _pi_consistent(df: pd.DataFrame, src: dict, sat: float, delta_deg: float, ss_factor: float) -> pd.Series:
     ss = df["line_steady_abs_d_mm"]
-    return (df.c_converges_all & (df.max_sat_fraction < sat)
-            & ((df.line_final_delta_deg - src["line_delta_deg"]).abs() < delta_deg)
-            & (ss >= src["line_ss_pi_mm"] / ss_factor) & (ss <= src["line_ss_pi_mm"] * ss_factor))
+    return (
+        df.c_converges_all
+        & (df.max_sat_fraction < sat)
+        & ((df.line_final_delta_deg - src["line_delta_deg"]).abs() < delta_deg)
+        & (ss >= src["line_ss_pi_mm"] / ss_factor)
+        & (ss <= src["line_ss_pi_mm"] * ss_factor)
+    )
 
 
 def pi_filter_stats(df: pd.DataFrame, src: dict) -> dict:
     """How many of the 24 readings pass each filter, which pass all, and whether the choice holds
     when each threshold is halved or doubled (the others at their values)."""
     t = PI_THRESHOLDS
-    passing = {"converges on all three paths": int(df.c_converges_all.sum()),
-               f"saturated < {100 * t['sat']:g} % of every run": int(df.c_steering_within_limit.sum()),
-               f"line steering within {t['delta_deg']:g}° of {src['line_delta_deg']:g}°": int(df.c_line_delta_10deg.sum()),
-               f"line steady |d| within a factor {t['ss_factor']:g} of {src['line_ss_pi_mm']:g} mm":
-                   int(df.c_line_ss_near_source.sum())}
+    passing = {
+        "converges on all three paths": int(df.c_converges_all.sum()),
+        f"saturated < {100 * t['sat']:g} % of every run": int(df.c_steering_within_limit.sum()),
+        f"line steering within {t['delta_deg']:g}° of {src['line_delta_deg']:g}°": int(df.c_line_delta_10deg.sum()),
+        f"line steady |d| within a factor {t['ss_factor']:g} of {src['line_ss_pi_mm']:g} mm": int(
+            df.c_line_ss_near_source.sum()
+        ),
+    }
     chosen = set(df[df.consistent].reading)
     cases, unique = 0, 0
     for name in t:
@@ -243,8 +299,14 @@ def pi_filter_stats(df: pd.DataFrame, src: dict) -> dict:
             ok = _pi_consistent(df, src, **{**t, name: t[name] * f})
             cases += 1
             unique += int(set(df[ok].reading) == chosen and len(chosen) == 1)
-    return {"passing": passing, "consistent": len(chosen), "consistent_readings": sorted(chosen),
-            "sensitivity_cases": cases, "sensitivity_unique": unique, "thresholds": dict(t)}
+    return {
+        "passing": passing,
+        "consistent": len(chosen),
+        "consistent_readings": sorted(chosen),
+        "sensitivity_cases": cases,
+        "sensitivity_unique": unique,
+        "thresholds": dict(t),
+    }
 
 
 def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
@@ -260,23 +322,45 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
     # no run reaches its end within the horizon (the default line is 80 m).
     line = shapes.line(u_max=20.0 + 1.5 * m["v"] * st["horizon"] / math.cos(math.radians(st["grid_max_deg"])))
     pose0 = paths.entry("line").start_pose
-    scs = stack([make_scenario(line, pose0, gains, slip=constant_slip(math.radians(br), math.radians(bf)), v=m["v"],
-                               L=m["L"], delta_max_deg=m["delta_max_deg"], convention=m["convention"])
-                 for br, bf in zip(BR.ravel(), BF.ravel())])
+    scs = stack(
+        [
+            make_scenario(
+                line,
+                pose0,
+                gains,
+                slip=constant_slip(math.radians(br), math.radians(bf)),
+                v=m["v"],
+                L=m["L"],
+                delta_max_deg=m["delta_max_deg"],
+                convention=m["convention"],
+            )
+            for br, bf in zip(BR.ravel(), BF.ravel())
+        ]
+    )
     r = simulate_batch(scs, controller=C.state_feedback, config=sim_config(cfg, horizon=st["horizon"], record=False))
     pbar.update(1)
     d_star, th_star = np.asarray(eq.d).ravel(), np.asarray(eq.theta_e).ravel()
-    conv = ((np.asarray(r.status) == 0) & (np.abs(np.asarray(r.final.d) - d_star) < st["tol_d"])
-            & (np.abs(np.asarray(r.final.theta_e) - th_star) < math.radians(st["tol_theta_deg"])))
-    df = pd.DataFrame({
-        "beta_r_deg": BR.ravel(), "beta_f_deg": BF.ravel(),
-        "source_max_re": np.asarray(src_eig.real.max(-1)).ravel(),
-        "eq_exists": np.asarray(eq.exists).ravel(), "eq_d": d_star, "eq_theta_e": th_star,
-        "eq_delta": np.asarray(eq.delta).ravel(),
-        "eq_max_re": np.asarray(eq.eig.real.max(-1)).ravel(), "eq_hurwitz": np.asarray(eq.hurwitz).ravel(),
-        "sim_status": [STATUS_NAMES[int(s)] for s in np.asarray(r.status)],
-        "sim_final_d": np.asarray(r.final.d), "sim_converged": conv,
-    })
+    conv = (
+        (np.asarray(r.status) == 0)
+        & (np.abs(np.asarray(r.final.d) - d_star) < st["tol_d"])
+        & (np.abs(np.asarray(r.final.theta_e) - th_star) < math.radians(st["tol_theta_deg"]))
+    )
+    df = pd.DataFrame(
+        {
+            "beta_r_deg": BR.ravel(),
+            "beta_f_deg": BF.ravel(),
+            "source_max_re": np.asarray(src_eig.real.max(-1)).ravel(),
+            "eq_exists": np.asarray(eq.exists).ravel(),
+            "eq_d": d_star,
+            "eq_theta_e": th_star,
+            "eq_delta": np.asarray(eq.delta).ravel(),
+            "eq_max_re": np.asarray(eq.eig.real.max(-1)).ravel(),
+            "eq_hurwitz": np.asarray(eq.hurwitz).ravel(),
+            "sim_status": [STATUS_NAMES[int(s)] for s in np.asarray(r.status)],
+            "sim_final_d": np.asarray(r.final.d),
+            "sim_converged": conv,
+        }
+    )
     e5 = equilibrium(K, math.radians(m["beta_r_deg"]), math.radians(m["beta_f_deg"]), params)
     # The source's Figs. 4-5 over its whole (open) slip square: the maxima of the real parts of the
     # slower (lambda_1) and faster (lambda_2) eigenvalue of its linearisation at [0, -beta_r]
@@ -284,11 +368,17 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
     _, eig = stability_map(K, jnp.radians(eg), jnp.radians(eg), params)
     re = np.sort(np.asarray(eig.real), axis=-1)  # ascending: [faster, slower]
     at = lambda a: [float(eg[i]) for i in np.unravel_index(int(np.argmax(a)), a.shape)]
-    eigen_maxima = {"grid_max_deg": float(eg[-1]), "n": int(st["eig_n"]), "hurwitz_fraction": float((re < 0).all(-1).mean()),
-                    "max_re_slow": float(re[..., 1].max()), "max_re_slow_at": at(re[..., 1]),
-                    "max_re_fast": float(re[..., 0].max()), "max_re_fast_at": at(re[..., 0]),
-                    "source_max_re_slow": float(cfg["source"]["eig_max_re"][0]),
-                    "source_max_re_fast": float(cfg["source"]["eig_max_re"][1])}
+    eigen_maxima = {
+        "grid_max_deg": float(eg[-1]),
+        "n": int(st["eig_n"]),
+        "hurwitz_fraction": float((re < 0).all(-1).mean()),
+        "max_re_slow": float(re[..., 1].max()),
+        "max_re_slow_at": at(re[..., 1]),
+        "max_re_fast": float(re[..., 0].max()),
+        "max_re_fast_at": at(re[..., 0]),
+        "source_max_re_slow": float(cfg["source"]["eig_max_re"][0]),
+        "source_max_re_fast": float(cfg["source"]["eig_max_re"][1]),
+    }
     info = {
         "grid_deg": [float(grid[0]), float(grid[-1]), int(st["n"])],
         "source_hurwitz_fraction": float((df.source_max_re < 0).mean()),
@@ -296,8 +386,12 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
         "hurwitz_where_exists_fraction": float(df.eq_hurwitz[df.eq_exists].mean()),
         "sim_converged_fraction": float(df.sim_converged.mean()),
         "sim_agrees_with_analysis_fraction": float((df.sim_converged == df.eq_hurwitz).mean()),
-        "paper_case": {"d_star": float(e5.d), "theta_e_star": float(e5.theta_e), "delta_star": float(e5.delta),
-                       "eig": [[float(z.real), float(z.imag)] for z in np.asarray(e5.eig)]},
+        "paper_case": {
+            "d_star": float(e5.d),
+            "theta_e_star": float(e5.theta_e),
+            "delta_star": float(e5.delta),
+            "eig": [[float(z.real), float(z.imag)] for z in np.asarray(e5.eig)],
+        },
         "eigen_maxima": eigen_maxima,
         "grid": (grid, BR.shape),
     }
@@ -309,16 +403,28 @@ def part_long_pi(cfg) -> dict:
     settles (|d| within 5 % of its final value from then on)."""
     h, m = cfg["long_horizon"], cfg["model"]
     line = shapes.line(u_max=20.0 + 1.5 * m["v"] * h)  # long enough not to end within the horizon
-    sc = make_scenario(line, paths.entry("line").start_pose, C.pi_params(**C.PAPER_PI),
-                       slip=constant_slip(math.radians(m["beta_r_deg"]), math.radians(m["beta_f_deg"])), v=m["v"],
-                       L=m["L"], delta_max_deg=m["delta_max_deg"], convention=m["convention"])
+    sc = make_scenario(
+        line,
+        paths.entry("line").start_pose,
+        C.pi_params(**C.PAPER_PI),
+        slip=constant_slip(math.radians(m["beta_r_deg"]), math.radians(m["beta_f_deg"])),
+        v=m["v"],
+        L=m["L"],
+        delta_max_deg=m["delta_max_deg"],
+        convention=m["convention"],
+    )
     r = unstack(simulate_batch(stack([sc]), controller=C.pi, config=sim_config(cfg, horizon=h)), 0)
     t, d = np.asarray(r.trajectory.t), np.asarray(r.trajectory.d)
     final = float(d[-1])
     out = np.nonzero(np.abs(d - final) > 0.05 * abs(final))[0]
     settle = float(t[out[-1] + 1]) if len(out) and out[-1] + 1 < len(t) else (0.0 if not len(out) else math.inf)
-    return {"horizon_s": h, "steady_abs_d_mm": 1000 * float(r.metrics.steady_abs_d), "final_d_mm": 1000 * final,
-            "settle_time_s": settle, "status": STATUS_NAMES[int(r.status)]}
+    return {
+        "horizon_s": h,
+        "steady_abs_d_mm": 1000 * float(r.metrics.steady_abs_d),
+        "final_d_mm": 1000 * final,
+        "settle_time_s": settle,
+        "status": STATUS_NAMES[int(r.status)],
+    }
 
 
 def part_ga_readings(cfg) -> dict:
@@ -336,8 +442,13 @@ def part_ga_readings(cfg) -> dict:
         runs = [tune(problem, "ga", key=jax.random.PRNGKey(seed), ga_options=opts) for seed in range(g["seeds"])]
         costs = [float(r.cost) for r in runs]
         best = runs[int(np.argmin(costs))]
-        out[name] = {"crossover_fraction": fraction, "costs": costs, "median_cost": float(np.median(costs)),
-                     "best_gains": problem.tunable.named(best.theta), "n_rollouts": int(sum(r.n_rollouts for r in runs))}
+        out[name] = {
+            "crossover_fraction": fraction,
+            "costs": costs,
+            "median_cost": float(np.median(costs)),
+            "best_gains": problem.tunable.named(best.theta),
+            "n_rollouts": int(sum(r.n_rollouts for r in runs)),
+        }
     a, b = out["crossover"]["best_gains"], out["none"]["best_gains"]
     change = {k: abs(a[k] - b[k]) / max(abs(a[k]), abs(b[k]), 1e-12) for k in a}
     worst = max(change, key=change.get)
@@ -367,8 +478,16 @@ def sine_error_analysis(trajs, settle_t=5.0) -> dict:
     peaks = _local_maxima(u, ad)
     k_max, dk_max = _local_maxima(xs, np.abs(kap), 0.9), _local_maxima(xs, np.abs(dk), 0.9)
     nearest = lambda p, ref: float(np.median([np.min(np.abs(ref - q)) for q in p])) if len(p) and len(ref) else math.nan
-    return {"x": u, "abs_d": ad, "kappa_x": xs, "kappa": kap, "dkappa_ds": dk, "peak_x": peaks.tolist(),
-            "median_peak_to_kappa_max_m": nearest(peaks, k_max), "median_peak_to_dkappa_max_m": nearest(peaks, dk_max)}
+    return {
+        "x": u,
+        "abs_d": ad,
+        "kappa_x": xs,
+        "kappa": kap,
+        "dkappa_ds": dk,
+        "peak_x": peaks.tolist(),
+        "median_peak_to_kappa_max_m": nearest(peaks, k_max),
+        "median_peak_to_dkappa_max_m": nearest(peaks, dk_max),
+    }
 
 
 # ---------------------------------------------------------------------------------- report
@@ -383,109 +502,230 @@ def write_report(out: Path, cfg, syn, rows, pi_df, stab, verdict_rows, figs, sta
     o, s, c = syn["ours"], syn["source_published"], syn["source_K_checked_by_pfjax"]
     L = []
     L.append("# Paper reproduction: path following under wheel slip\n")
-    L.append(f"Source: Fakharian et al. (`docs/reproductions/path-following.md`). Generated by `studies/paper_reproduction.py`; "
-             f"pfjax {stamp['pfjax_version']}, config SHA-256 `{stamp['config_sha256'][:16]}…`, {stamp['machine']}, "
-             f"wall time {stamp['wall_s']:.0f} s. Slip β_r = {cfg['model']['beta_r_deg']:g}°, β_f = {cfg['model']['beta_f_deg']:g}°, "
-             f"v = {cfg['model']['v']:g} m/s, L = {cfg['model']['L']:g} m, δ_max = {cfg['model']['delta_max_deg']:g}° (assumed), "
-             f"horizon {cfg['sim']['horizon']:g} s, RK4 step {1000*cfg['sim']['dt']:g} ms, controller "
-             f"{'continuous' if cfg['sim']['control_every'] == 0 else 'sampled every %d steps' % cfg['sim']['control_every']}.\n")
+    L.append(
+        f"Source: Fakharian et al. (`docs/reproductions/path-following.md`). Generated by `studies/paper_reproduction.py`; "
+        f"pfjax {stamp['pfjax_version']}, config SHA-256 `{stamp['config_sha256'][:16]}…`, {stamp['machine']}, "
+        f"wall time {stamp['wall_s']:.0f} s. Slip β_r = {cfg['model']['beta_r_deg']:g}°, β_f = {cfg['model']['beta_f_deg']:g}°, "
+        f"v = {cfg['model']['v']:g} m/s, L = {cfg['model']['L']:g} m, δ_max = {cfg['model']['delta_max_deg']:g}° (assumed), "
+        f"horizon {cfg['sim']['horizon']:g} s, RK4 step {1000 * cfg['sim']['dt']:g} ms, controller "
+        f"{'continuous' if cfg['sim']['control_every'] == 0 else 'sampled every %d steps' % cfg['sim']['control_every']}.\n"
+    )
     L.append("## Verdicts on the source's claims\n")
-    L.append("One row per claim, path and criterion; the criterion is stated before the number. *Basis*: empty for "
-             "independent evidence; \"used to choose the convention\" where the source's statement fixed pfjax's model "
-             "convention (so it agrees by construction); \"chosen by filters from the source\" where the row checks a "
-             "reading selected with the source's own statements; \"assumed\" where the criterion rests on a value the "
-             "source does not give (the steering limit, the horizon).\n")
+    L.append(
+        "One row per claim, path and criterion; the criterion is stated before the number. *Basis*: empty for "
+        "independent evidence; \"used to choose the convention\" where the source's statement fixed pfjax's model "
+        'convention (so it agrees by construction); "chosen by filters from the source" where the row checks a '
+        'reading selected with the source\'s own statements; "assumed" where the criterion rests on a value the '
+        "source does not give (the steering limit, the horizon).\n"
+    )
     L.append(verdict_table(verdict_rows) + "\n")
     L.append("\n## Mixed H2/H∞ design (α = %g, β = %g)\n" % (cfg["synthesis"]["alpha"], cfg["synthesis"]["beta"]))
-    L.append(table(["", "K_d", "K_θ", "γ∞ bound", "γ₂ bound", "true ‖T∞‖∞", "true ‖T₂‖₂", "objective α γ∞² + β γ₂²"], [
-        ["source (published)", f"{s['K'][0]:.4f}", f"{s['K'][1]:.4f}", f"{s['gamma_inf']:g}", f"{s['gamma_2']:g}", "", "", ""],
-        ["pfjax LMI (Clarabel)", f"{o['K'][0]:.4f}", f"{o['K'][1]:.4f}", f"{o['gamma_inf']:.4f}", f"{o['gamma_2']:.4f}",
-         f"{o['hinf_norm']:.4f}", f"{o['h2_norm']:.4f}", f"{o['objective']:.5f}"],
-        ["source K, bounds certified by pfjax", f"{s['K'][0]:.4f}", f"{s['K'][1]:.4f}", f"{c['gamma_inf_certified']:.4f}",
-         f"{c['gamma_2_certified']:.4f}", f"{c['hinf_norm']:.4f}", f"{c['h2_norm']:.4f}", f"{c['objective']:.5f}"]]))
+    L.append(
+        table(
+            ["", "K_d", "K_θ", "γ∞ bound", "γ₂ bound", "true ‖T∞‖∞", "true ‖T₂‖₂", "objective α γ∞² + β γ₂²"],
+            [
+                [
+                    "source (published)",
+                    f"{s['K'][0]:.4f}",
+                    f"{s['K'][1]:.4f}",
+                    f"{s['gamma_inf']:g}",
+                    f"{s['gamma_2']:g}",
+                    "",
+                    "",
+                    "",
+                ],
+                [
+                    "pfjax LMI (Clarabel)",
+                    f"{o['K'][0]:.4f}",
+                    f"{o['K'][1]:.4f}",
+                    f"{o['gamma_inf']:.4f}",
+                    f"{o['gamma_2']:.4f}",
+                    f"{o['hinf_norm']:.4f}",
+                    f"{o['h2_norm']:.4f}",
+                    f"{o['objective']:.5f}",
+                ],
+                [
+                    "source K, bounds certified by pfjax",
+                    f"{s['K'][0]:.4f}",
+                    f"{s['K'][1]:.4f}",
+                    f"{c['gamma_inf_certified']:.4f}",
+                    f"{c['gamma_2_certified']:.4f}",
+                    f"{c['hinf_norm']:.4f}",
+                    f"{c['h2_norm']:.4f}",
+                    f"{c['objective']:.5f}",
+                ],
+            ],
+        )
+    )
     rd = syn["rel_diff"]
-    L.append(f"\nRelative differences from the source: K_d {100*rd['K_d']:.2f} %, K_θ {100*rd['K_theta']:.2f} %, "
-             f"γ∞ {100*rd['gamma_inf']:.2f} %, γ₂ {100*rd['gamma_2']:.2f} %. The objective is very flat along K_d: the source's gain "
-             f"certifies an objective only {c['objective'] - o['objective']:.2e} above pfjax's optimum, so the K_d difference is where each "
-             f"solver stopped on a flat optimum, not a different formulation. Both true norms sit below both sets of bounds.\n")
+    L.append(
+        f"\nRelative differences from the source: K_d {100 * rd['K_d']:.2f} %, K_θ {100 * rd['K_theta']:.2f} %, "
+        f"γ∞ {100 * rd['gamma_inf']:.2f} %, γ₂ {100 * rd['gamma_2']:.2f} %. The objective is very flat along K_d: the source's gain "
+        f"certifies an objective only {c['objective'] - o['objective']:.2e} above pfjax's optimum, so the K_d difference is where each "
+        f"solver stopped on a flat optimum, not a different formulation. Both true norms sit below both sets of bounds.\n"
+    )
     L.append("## Steady state, settling and effort on the three tests\n")
-    L.append(table(["path", "controller", "status", "IAE [m·s]", "steady |d| [mm]", "steady |θₑ| [deg]", "settling (5 cm) [s]",
-                    "final δ [deg]", "max |δ_cmd| (command) [deg]", "max |δ| (applied) [deg]", "∫δ² dt [rad²·s]",
-                    "TV(δ) [rad]", "saturated"],
-                   [[r["path"], r["controller"], r["status"], fmt(r["iae"]), fmt(1000 * r["steady_abs_d"], 2),
-                     fmt(math.degrees(r["steady_abs_theta_e_rad"]), 2), fmt(r["settling_time"], 2),
-                     fmt(math.degrees(r["final_delta"]), 2), fmt(math.degrees(r["max_abs_delta_cmd"]), 1),
-                     fmt(math.degrees(r["max_abs_delta"]), 1), fmt(r["steer_energy"]), fmt(r["steer_tv"]),
-                     f"{100 * r['sat_fraction']:.1f} %"] for r in rows]))
-    L.append("\n(Stanley, pure pursuit and rear-wheel feedback are pfjax's additions with textbook default gains; none compensates slip.)\n")
+    L.append(
+        table(
+            [
+                "path",
+                "controller",
+                "status",
+                "IAE [m·s]",
+                "steady |d| [mm]",
+                "steady |θₑ| [deg]",
+                "settling (5 cm) [s]",
+                "final δ [deg]",
+                "max |δ_cmd| (command) [deg]",
+                "max |δ| (applied) [deg]",
+                "∫δ² dt [rad²·s]",
+                "TV(δ) [rad]",
+                "saturated",
+            ],
+            [
+                [
+                    r["path"],
+                    r["controller"],
+                    r["status"],
+                    fmt(r["iae"]),
+                    fmt(1000 * r["steady_abs_d"], 2),
+                    fmt(math.degrees(r["steady_abs_theta_e_rad"]), 2),
+                    fmt(r["settling_time"], 2),
+                    fmt(math.degrees(r["final_delta"]), 2),
+                    fmt(math.degrees(r["max_abs_delta_cmd"]), 1),
+                    fmt(math.degrees(r["max_abs_delta"]), 1),
+                    fmt(r["steer_energy"]),
+                    fmt(r["steer_tv"]),
+                    f"{100 * r['sat_fraction']:.1f} %",
+                ]
+                for r in rows
+            ],
+        )
+    )
+    L.append(
+        "\n(Stanley, pure pursuit and rear-wheel feedback are pfjax's additions with textbook default gains; none compensates slip.)\n"
+    )
     for test in PAPER_TESTS:
         L.append(f"![{test}](figures/{figs[test]})\n")
     L.append("## Which reading of Table 3 did the source use?\n")
-    L.append(f"Table 3 prints {', '.join(f'{g:g}' for g in src['table3'])} without row labels. pfjax simulates all 24 assignments "
-             "to (Kp_d, Ki_d, Kp_θ, Ki_θ) on the three tests and checks each against what the source says of its PI: converges on all "
-             "three paths (settles within the band), saturates < 5 % of the time, steering settles within 0.5° of 10° on the line, "
-             f"line steady |d| within a factor 3 of {src['line_ss_pi_mm']:g} mm. (Whether the mixed design beats it is a claim under test, "
-             "shown for information only.)\n")
-    cols = ["reading", "c_converges_all", "c_steering_within_limit", "c_line_delta_10deg", "c_line_ss_near_source",
-            "info_mixed_better_iae_all", "line_steady_abs_d_mm", "parabola_steady_abs_d_mm", "sine_steady_abs_d_mm", "n_criteria_met"]
-    L.append(table([c.replace("c_", "").replace("info_", "(info) ") for c in cols],
-                   [[("✔" if r[c] else "✘") if isinstance(r[c], (bool, np.bool_)) else
-                     (fmt(r[c], 1) if isinstance(r[c], float) else str(r[c])) for c in cols]
-                    for _, r in pi_df.head(8).iterrows()]))
+    L.append(
+        f"Table 3 prints {', '.join(f'{g:g}' for g in src['table3'])} without row labels. pfjax simulates all 24 assignments "
+        "to (Kp_d, Ki_d, Kp_θ, Ki_θ) on the three tests and checks each against what the source says of its PI: converges on all "
+        "three paths (settles within the band), saturates < 5 % of the time, steering settles within 0.5° of 10° on the line, "
+        f"line steady |d| within a factor 3 of {src['line_ss_pi_mm']:g} mm. (Whether the mixed design beats it is a claim under test, "
+        "shown for information only.)\n"
+    )
+    cols = [
+        "reading",
+        "c_converges_all",
+        "c_steering_within_limit",
+        "c_line_delta_10deg",
+        "c_line_ss_near_source",
+        "info_mixed_better_iae_all",
+        "line_steady_abs_d_mm",
+        "parabola_steady_abs_d_mm",
+        "sine_steady_abs_d_mm",
+        "n_criteria_met",
+    ]
+    L.append(
+        table(
+            [c.replace("c_", "").replace("info_", "(info) ") for c in cols],
+            [
+                [
+                    ("✔" if r[c] else "✘")
+                    if isinstance(r[c], (bool, np.bool_))
+                    else (fmt(r[c], 1) if isinstance(r[c], float) else str(r[c]))
+                    for c in cols
+                ]
+                for _, r in pi_df.head(8).iterrows()
+            ],
+        )
+    )
     f = pi_df.attrs["filters"]
-    L.append("\nReadings passing each filter: " + "; ".join(f"{k}: {v} of 24" for k, v in f["passing"].items())
-             + f". All four: {f['consistent']} ({', '.join(f['consistent_readings'])}). With each threshold halved or doubled "
-             f"(the others kept), that reading stays the only one in {f['sensitivity_unique']} of {f['sensitivity_cases']} "
-             "settings. The filters come from the source's own statements about its PI, so this selects a reading; it does "
-             "not confirm those statements.")
-    L.append(f"\n(The 8 best of 24; all in `pi_readings.csv`.) Why most readings fail: with rear slip, d' = 0 needs "
-             "θₑ = −β_r ≠ 0, so the integral on θₑ ramps at Ki_θ·β_r for ever and the PI loop has no equilibrium. The best it can do is "
-             "a quasi-equilibrium in which the integral on d ramps the other way, which needs a standing offset "
-             "d_q = (Ki_θ / Ki_d)·β_r — metres for the readings with a large Ki_θ / Ki_d — approached through a slow pole. "
-             "The reading pfjax adopts as the source's "
-             f"PI (`pfjax.controllers.PAPER_PI`) is {'among the consistent ones' if pi_df[pi_df.is_default].consistent.any() else 'NOT consistent — see the table'}.\n")
+    L.append(
+        "\nReadings passing each filter: "
+        + "; ".join(f"{k}: {v} of 24" for k, v in f["passing"].items())
+        + f". All four: {f['consistent']} ({', '.join(f['consistent_readings'])}). With each threshold halved or doubled "
+        f"(the others kept), that reading stays the only one in {f['sensitivity_unique']} of {f['sensitivity_cases']} "
+        "settings. The filters come from the source's own statements about its PI, so this selects a reading; it does "
+        "not confirm those statements."
+    )
+    L.append(
+        f"\n(The 8 best of 24; all in `pi_readings.csv`.) Why most readings fail: with rear slip, d' = 0 needs "
+        "θₑ = −β_r ≠ 0, so the integral on θₑ ramps at Ki_θ·β_r for ever and the PI loop has no equilibrium. The best it can do is "
+        "a quasi-equilibrium in which the integral on d ramps the other way, which needs a standing offset "
+        "d_q = (Ki_θ / Ki_d)·β_r — metres for the readings with a large Ki_θ / Ki_d — approached through a slow pole. "
+        "The reading pfjax adopts as the source's "
+        f"PI (`pfjax.controllers.PAPER_PI`) is {'among the consistent ones' if pi_df[pi_df.is_default].consistent.any() else 'NOT consistent — see the table'}.\n"
+    )
     L.append(f"![pi readings](figures/{figs['pi']})\n")
     L.append("## Equilibrium and stability (docs/reproductions/path-following.md §7)\n")
     pc = stab["paper_case"]
-    L.append(f"For the source's K and β_r = β_f = 5°, the true equilibrium is d* = {1000*pc['d_star']:.3f} mm, θₑ* = "
-             f"{math.degrees(pc['theta_e_star']):.3f}°, δ* = {math.degrees(pc['delta_star']):.3f}°, with eigenvalues "
-             f"{', '.join(f'{z[0]:.3f}' for z in pc['eig'])} 1/s — not the source's [0, −β_r]. Over the ±{stab['grid_deg'][1]:g}° grid "
-             f"({stab['grid_deg'][2]}² points): the source's linearisation is Hurwitz on {100*stab['source_hurwitz_fraction']:.0f} %; "
-             f"an equilibrium exists on {100*stab['equilibrium_exists_fraction']:.1f} % (the band |β_r + β_f| < δ_max between the dashed lines); "
-             f"where it exists it is Hurwitz on {100*stab['hurwitz_where_exists_fraction']:.0f} %; simulation of the line test for "
-             f"{cfg['stability']['horizon']:g} s converges to the predicted equilibrium on {100*stab['sim_converged_fraction']:.1f} % and agrees "
-             f"with the analysis on {100*stab['sim_agrees_with_analysis_fraction']:.1f} %.\n")
+    L.append(
+        f"For the source's K and β_r = β_f = 5°, the true equilibrium is d* = {1000 * pc['d_star']:.3f} mm, θₑ* = "
+        f"{math.degrees(pc['theta_e_star']):.3f}°, δ* = {math.degrees(pc['delta_star']):.3f}°, with eigenvalues "
+        f"{', '.join(f'{z[0]:.3f}' for z in pc['eig'])} 1/s — not the source's [0, −β_r]. Over the ±{stab['grid_deg'][1]:g}° grid "
+        f"({stab['grid_deg'][2]}² points): the source's linearisation is Hurwitz on {100 * stab['source_hurwitz_fraction']:.0f} %; "
+        f"an equilibrium exists on {100 * stab['equilibrium_exists_fraction']:.1f} % (the band |β_r + β_f| < δ_max between the dashed lines); "
+        f"where it exists it is Hurwitz on {100 * stab['hurwitz_where_exists_fraction']:.0f} %; simulation of the line test for "
+        f"{cfg['stability']['horizon']:g} s converges to the predicted equilibrium on {100 * stab['sim_converged_fraction']:.1f} % and agrees "
+        f"with the analysis on {100 * stab['sim_agrees_with_analysis_fraction']:.1f} %.\n"
+    )
     em = stab["eigen_maxima"]
-    L.append(f"The source's Figs. 4-5 plot the eigenvalues of its linearisation over the whole slip square. Over the open "
-             f"square (±{em['grid_max_deg']:g}°, {em['n']}² points) pfjax finds max Re λ₁ = {em['max_re_slow']:.4f} 1/s "
-             f"(slower eigenvalue; source {em['source_max_re_slow']:.4f}) at β_r, β_f = {em['max_re_slow_at'][0]:.1f}°, "
-             f"{em['max_re_slow_at'][1]:.1f}°, and max Re λ₂ = {em['max_re_fast']:.4f} 1/s (source {em['source_max_re_fast']:.4f}) "
-             f"at {em['max_re_fast_at'][0]:.1f}°, {em['max_re_fast_at'][1]:.1f}°.\n")
+    L.append(
+        f"The source's Figs. 4-5 plot the eigenvalues of its linearisation over the whole slip square. Over the open "
+        f"square (±{em['grid_max_deg']:g}°, {em['n']}² points) pfjax finds max Re λ₁ = {em['max_re_slow']:.4f} 1/s "
+        f"(slower eigenvalue; source {em['source_max_re_slow']:.4f}) at β_r, β_f = {em['max_re_slow_at'][0]:.1f}°, "
+        f"{em['max_re_slow_at'][1]:.1f}°, and max Re λ₂ = {em['max_re_fast']:.4f} 1/s (source {em['source_max_re_fast']:.4f}) "
+        f"at {em['max_re_fast_at'][0]:.1f}°, {em['max_re_fast_at'][1]:.1f}°.\n"
+    )
     L.append(f"![stability](figures/{figs['stability']})\n")
     L.append(f"![sine error](figures/{figs['sine_error']})\n")
     L.append("## The PI's steady error once settled\n")
-    L.append(f"At the {cfg['sim']['horizon']:g} s horizon the PI's line error is still drifting (the integral on θₑ ramps). "
-             f"Run for {long_pi['horizon_s']:g} s, |d| settles (within 5 % of its final value from then on) at "
-             f"t = {long_pi['settle_time_s']:.1f} s, to a steady |d| of {long_pi['steady_abs_d_mm']:.2f} mm (final d = "
-             f"{long_pi['final_d_mm']:.2f} mm); the source reports about {cfg['source']['line_ss_pi_mm']:g} mm.\n")
+    L.append(
+        f"At the {cfg['sim']['horizon']:g} s horizon the PI's line error is still drifting (the integral on θₑ ramps). "
+        f"Run for {long_pi['horizon_s']:g} s, |d| settles (within 5 % of its final value from then on) at "
+        f"t = {long_pi['settle_time_s']:.1f} s, to a steady |d| of {long_pi['steady_abs_d_mm']:.2f} mm (final d = "
+        f"{long_pi['final_d_mm']:.2f} mm); the source reports about {cfg['source']['line_ss_pi_mm']:g} mm.\n"
+    )
     L.append("## Table 2: the GA's crossover\n")
     a, b = ga["crossover"], ga["none"]
-    L.append("Table 2 lists a crossover fraction of 0.8 beside a row \"Crossover Operation: none\". pfjax adopts "
-             "MATLAB's default crossover function (scattered) with fraction 0.8 and offers the other reading, no crossover "
-             "(every non-elite child made by mutation), as `GAOptions(crossover_fraction=0)`. The PI tuned on "
-             f"`{ga['scenario']}` ({ga['cost']}) with the same seeds:\n")
-    L.append(table(["reading", "crossover fraction", "costs per seed", "median cost", "best gains", "rollouts"],
-                   [[name, r["crossover_fraction"], ", ".join(f"{c:.4f}" for c in r["costs"]), f"{r['median_cost']:.4f}",
-                     ", ".join(f"{k} = {v:.4g}" for k, v in r["best_gains"].items()), r["n_rollouts"]]
-                    for name, r in (("scattered, 0.8 (adopted)", a), ("none", b))]))
+    L.append(
+        'Table 2 lists a crossover fraction of 0.8 beside a row "Crossover Operation: none". pfjax adopts '
+        "MATLAB's default crossover function (scattered) with fraction 0.8 and offers the other reading, no crossover "
+        "(every non-elite child made by mutation), as `GAOptions(crossover_fraction=0)`. The PI tuned on "
+        f"`{ga['scenario']}` ({ga['cost']}) with the same seeds:\n"
+    )
+    L.append(
+        table(
+            ["reading", "crossover fraction", "costs per seed", "median cost", "best gains", "rollouts"],
+            [
+                [
+                    name,
+                    r["crossover_fraction"],
+                    ", ".join(f"{c:.4f}" for c in r["costs"]),
+                    f"{r['median_cost']:.4f}",
+                    ", ".join(f"{k} = {v:.4g}" for k, v in r["best_gains"].items()),
+                    r["n_rollouts"],
+                ]
+                for name, r in (("scattered, 0.8 (adopted)", a), ("none", b))
+            ],
+        )
+    )
     L.append(f"\nBest gains, {ga['gain_change']}.\n")
     L.append("## Differences from the source and their causes\n")
-    L.append("- **K_d differs by %.2f %%** (K_θ by %.2f %%): flat LMI optimum, see above; bounds agree to %.2f %% and %.2f %%." % (
-        100 * rd["K_d"], 100 * rd["K_theta"], 100 * rd["gamma_inf"], 100 * rd["gamma_2"]))
-    L.append("- **Steering limit, horizon, travel direction** are assumed (docs/reproductions/path-following.md §6), not the source's; the controller is evaluated "
-             "continuously as in Simulink.")
-    L.append("- **The steady-state error is not zero** for the static K (d* above), and the equilibrium is not [0, −β_r]; the "
-             "source's appendix-B point is used only to reproduce its eigenvalue figure.")
+    L.append(
+        "- **K_d differs by %.2f %%** (K_θ by %.2f %%): flat LMI optimum, see above; bounds agree to %.2f %% and %.2f %%."
+        % (100 * rd["K_d"], 100 * rd["K_theta"], 100 * rd["gamma_inf"], 100 * rd["gamma_2"])
+    )
+    L.append(
+        "- **Steering limit, horizon, travel direction** are assumed (docs/reproductions/path-following.md §6), not the source's; the controller is evaluated "
+        "continuously as in Simulink."
+    )
+    L.append(
+        "- **The steady-state error is not zero** for the static K (d* above), and the equilibrium is not [0, −β_r]; the "
+        "source's appendix-B point is used only to reproduce its eigenvalue figure."
+    )
     L.append("- **PI gains**: the adopted reading is the evidence-based one above, not a label from the source.")
     (out / "report.md").write_text("\n".join(L) + "\n")
 
@@ -496,7 +736,9 @@ def write_report(out: Path, cfg, syn, rows, pi_df, stab, verdict_rows, figs, sta
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[1])
     ap.add_argument("--config", default=str(ROOT / "studies" / "paper_reproduction.toml"))
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value (dotted keys)")
+    ap.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value (dotted keys)"
+    )
     ap.add_argument("--out", help="output directory (default results/<name>)")
     ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
     args = ap.parse_args(argv)
@@ -514,13 +756,19 @@ def check(cfg: dict) -> None:
         if abs(cfg["model"][key]) >= 90:
             raise ConfigError(f"model.{key}: magnitude must be < 90 deg, got {cfg['model'][key]:g}")
     if cfg["sim"]["dt"] <= 0 or cfg["sim"]["horizon"] < cfg["sim"]["dt"]:
-        raise ConfigError(f"sim.dt/sim.horizon: need 0 < dt <= horizon, got {cfg['sim']['dt']:g}, {cfg['sim']['horizon']:g}")
+        raise ConfigError(
+            f"sim.dt/sim.horizon: need 0 < dt <= horizon, got {cfg['sim']['dt']:g}, {cfg['sim']['horizon']:g}"
+        )
     if cfg["sim"]["horizon"] <= 5.0:  # sine_error_analysis looks at t >= 5 s
-        raise ConfigError(f"sim.horizon: must be > 5 s (the sine-error analysis uses t >= 5 s), got {cfg['sim']['horizon']:g}")
+        raise ConfigError(
+            f"sim.horizon: must be > 5 s (the sine-error analysis uses t >= 5 s), got {cfg['sim']['horizon']:g}"
+        )
     if cfg["sim"]["control_every"] < 0:
         raise ConfigError(f"sim.control_every: must be >= 0 (0: continuous), got {cfg['sim']['control_every']}")
     if cfg["stability"]["horizon"] < cfg["sim"]["dt"]:
-        raise ConfigError(f"stability.horizon: must be >= sim.dt ({cfg['sim']['dt']:g} s), got {cfg['stability']['horizon']:g}")
+        raise ConfigError(
+            f"stability.horizon: must be >= sim.dt ({cfg['sim']['dt']:g} s), got {cfg['stability']['horizon']:g}"
+        )
     if not 0 < cfg["sim"]["steady_window"] <= cfg["sim"]["horizon"]:
         raise ConfigError(f"sim.steady_window: must be in (0, sim.horizon], got {cfg['sim']['steady_window']:g}")
     if cfg["sim"]["settle_band"] <= 0:
@@ -532,8 +780,12 @@ def check(cfg: dict) -> None:
             n_steps = check_steps(cfg[section]["horizon"], cfg["sim"]["dt"])
         except InputError as e:
             raise ConfigError(f"{section}.horizon: {str(e).removeprefix('dt: ')}") from None
-    check_memory("stability.n", 2 * cfg["stability"]["n"] ** 2 * run_bytes(n_steps),
-                 f"a stability grid of {cfg['stability']['n'] ** 2:.3g} runs", "lower stability.n")
+    check_memory(
+        "stability.n",
+        2 * cfg["stability"]["n"] ** 2 * run_bytes(n_steps),
+        f"a stability grid of {cfg['stability']['n'] ** 2:.3g} runs",
+        "lower stability.n",
+    )
 
 
 def run(args) -> int:
@@ -544,8 +796,13 @@ def run(args) -> int:
     t0 = time.time()
     # Assembled beside the target and moved into place at the end: nothing half-written, nothing
     # that pfjax did not write replaced (pfjax.outputs).
-    with OutputDir(out, command="paper-reproduction", config_sha256=config_hash(cfg), overwrite=args.overwrite,
-                   extra={"seed": cfg["seed"]}) as output:
+    with OutputDir(
+        out,
+        command="paper-reproduction",
+        config_sha256=config_hash(cfg),
+        overwrite=args.overwrite,
+        extra={"seed": cfg["seed"]},
+    ) as output:
         tmp = output.staging
         with tqdm(total=3 * (6 if cfg["trackers"] else 3) + 3 + 3, desc="paper reproduction", disable=None) as pbar:
             syn = part_synthesis(cfg)
@@ -568,17 +825,40 @@ def run(args) -> int:
                     uu = jnp.linspace(-2.6, 4.0, 2000)
                 px, py = p.point(uu)
                 shown = {k: v for k, v in trajs[test].items() if k in ("mixed", "paper-k", "pi")}
-                figs[test] = figures.save(figures.tracking_figure(
-                    f"{test} test (equivalent of the source's Figs. 6-17 for this path)",
-                    np.stack([np.asarray(px), np.asarray(py)], 1), shown, math.radians(cfg["model"]["delta_max_deg"])), figdir, f"tracking_{test}")
+                figs[test] = figures.save(
+                    figures.tracking_figure(
+                        f"{test} test (equivalent of the source's Figs. 6-17 for this path)",
+                        np.stack([np.asarray(px), np.asarray(py)], 1),
+                        shown,
+                        math.radians(cfg["model"]["delta_max_deg"]),
+                    ),
+                    figdir,
+                    f"tracking_{test}",
+                )
             grid, shape = stab.pop("grid")
-            figs["stability"] = figures.save(figures.stability_figure(
-                grid, stab_df.source_max_re.to_numpy().reshape(shape), stab_df.eq_max_re.to_numpy().reshape(shape),
-                stab_df.eq_exists.to_numpy().reshape(shape), stab_df.sim_converged.to_numpy().reshape(shape),
-                cfg["model"]["delta_max_deg"]), figdir, "stability_maps")
+            figs["stability"] = figures.save(
+                figures.stability_figure(
+                    grid,
+                    stab_df.source_max_re.to_numpy().reshape(shape),
+                    stab_df.eq_max_re.to_numpy().reshape(shape),
+                    stab_df.eq_exists.to_numpy().reshape(shape),
+                    stab_df.sim_converged.to_numpy().reshape(shape),
+                    cfg["model"]["delta_max_deg"],
+                ),
+                figdir,
+                "stability_maps",
+            )
             ok = dict(zip(pi_df.reading, pi_df.consistent))
-            figs["pi"] = figures.save(figures.pi_assignment_figure(list(pi_df.reading), line_traces, ok), figdir, "pi_readings")
-            figs["sine_error"] = figures.save(figures.sine_error_figure(sine["x"], sine["abs_d"], sine["kappa_x"], sine["kappa"], sine["dkappa_ds"], "mixed"), figdir, "sine_error")
+            figs["pi"] = figures.save(
+                figures.pi_assignment_figure(list(pi_df.reading), line_traces, ok), figdir, "pi_readings"
+            )
+            figs["sine_error"] = figures.save(
+                figures.sine_error_figure(
+                    sine["x"], sine["abs_d"], sine["kappa_x"], sine["kappa"], sine["dkappa_ds"], "mixed"
+                ),
+                figdir,
+                "sine_error",
+            )
             pbar.update(1)
         stamp = {**provenance_stamp(cfg, cfg["seed"]), "wall_s": time.time() - t0}
         runs = pd.DataFrame(rows)
@@ -589,11 +869,20 @@ def run(args) -> int:
         pi_df.to_csv(tmp / "pi_readings.csv", index=False)
         write_parquet(stab_df, tmp / "stability.parquet", meta)
         sine_out = {k: v for k, v in sine.items() if not isinstance(v, np.ndarray)}
-        summary = {"study": cfg["name"], **stamp, "config": cfg, "synthesis": syn,
-                   "runs": rows, "pi_consistent_readings": list(pi_df[pi_df.consistent].reading),
-                   "pi_filters": pi_df.attrs["filters"], "stability": stab, "sine_error": sine_out,
-                   "pi_long_horizon": long_pi, "ga_crossover_readings": ga,
-                   "verdicts": [v._asdict() for v in verdict_rows]}
+        summary = {
+            "study": cfg["name"],
+            **stamp,
+            "config": cfg,
+            "synthesis": syn,
+            "runs": rows,
+            "pi_consistent_readings": list(pi_df[pi_df.consistent].reading),
+            "pi_filters": pi_df.attrs["filters"],
+            "stability": stab,
+            "sine_error": sine_out,
+            "pi_long_horizon": long_pi,
+            "ga_crossover_readings": ga,
+            "verdicts": [v._asdict() for v in verdict_rows],
+        }
         (tmp / "summary.json").write_text(dumps(summary) + "\n")
         write_report(tmp, cfg, syn, rows, pi_df, stab, verdict_rows, figs, stamp, long_pi, ga)
         output.commit()

@@ -18,10 +18,11 @@ import sys
 import time
 from pathlib import Path
 
-import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
-import pfjax.cache
 import jax
 import matplotlib
+
+import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
+import pfjax.cache
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -31,22 +32,33 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from pfjax.config import ConfigError, load, parse_override, read_toml  # noqa: E402
-from pfjax.provenance import config_hash  # noqa: E402
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.jsonio import dumps  # noqa: E402
-from pfjax.outputs import OutputDir, check_name  # noqa: E402
 from pfjax.metrics.robustness import metric_quantiles, success_summary  # noqa: E402
+from pfjax.outputs import OutputDir, check_name  # noqa: E402
+from pfjax.provenance import (  # noqa: E402
+    config_hash,
+    machine,
+    parquet_metadata,
+)
+from pfjax.tables import write_parquet  # noqa: E402
 from pfjax.tracking import batches as B  # noqa: E402
 from pfjax.tracking import report as R  # noqa: E402
 from pfjax.tracking.lemma import four_way, sample_geometry  # noqa: E402
 from pfjax.tracking.simulate import TrackConfig  # noqa: E402
-from pfjax.provenance import machine, parquet_metadata  # noqa: E402
-from pfjax.tables import write_parquet  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_TOML = ROOT / "studies" / "vehicle_tracking.toml"
-QUICK = ["lemma.p=[-1.0, 1.0, 4.5]", "lemma.l_abs=[1.0]", "lemma.gamma_max_deg=[30.0]",
-         "lemma.offsets=[[-1.0, 1.0]]", "lemma.n_geometry=200", "mc.n_runs=24", "sim.horizon=15.0", "sim.dt=0.02"]
+QUICK = [
+    "lemma.p=[-1.0, 1.0, 4.5]",
+    "lemma.l_abs=[1.0]",
+    "lemma.gamma_max_deg=[30.0]",
+    "lemma.offsets=[[-1.0, 1.0]]",
+    "lemma.n_geometry=200",
+    "mc.n_runs=24",
+    "sim.horizon=15.0",
+    "sim.dt=0.02",
+]
 GRID_AXES = ("p", "l_abs", "gamma_max_deg", "offsets")
 METRICS = ["final_error_norm", "iae", "max_abs_gamma_deg", "window_max_z", "limit_fraction"]
 
@@ -80,7 +92,9 @@ def load_config(args) -> dict:
             raise ConfigError(f"lemma.{k}: expected a non-empty list of numbers, got {v!r}")
         cfg["lemma"][k] = [float(x) for x in v]
     offs = cfg["lemma"]["offsets"]
-    if not offs or not all(isinstance(o, list) and len(o) == 2 and all(isinstance(x, (int, float)) for x in o) for o in offs):
+    if not offs or not all(
+        isinstance(o, list) and len(o) == 2 and all(isinstance(x, (int, float)) for x in o) for o in offs
+    ):
         raise ConfigError(f"lemma.offsets: expected a non-empty list of [along, left] pairs, got {offs!r}")
     cfg["lemma"]["offsets"] = [[float(x) for x in o] for o in offs]
     for key, vals in (("lemma.p", cfg["lemma"]["p"]), ("lemma.l_abs", cfg["lemma"]["l_abs"])):
@@ -100,16 +114,22 @@ def run(args) -> int:
     cfg = load_config(args)
     check_name("name", cfg["name"])
     out = Path(args.out) if args.out else ROOT / "results" / cfg["name"]
-    with OutputDir(out, command="vehicle-tracking", config_sha256=config_hash(cfg), overwrite=args.overwrite,
-                   extra={"seed": cfg["seed"]}) as output:
+    with OutputDir(
+        out,
+        command="vehicle-tracking",
+        config_sha256=config_hash(cfg),
+        overwrite=args.overwrite,
+        extra={"seed": cfg["seed"]},
+    ) as output:
         return study(cfg, args, output)
 
 
 def study(cfg: dict, args, output) -> int:
     t0 = time.time()
     s = cfg["sim"]
-    tcfg = TrackConfig(dt=s["dt"], horizon=s["horizon"], window=s["window"], tol_z=s["tol_z"], tol_phi=s["tol_phi"],
-                       band=s["band"])
+    tcfg = TrackConfig(
+        dt=s["dt"], horizon=s["horizon"], window=s["window"], tol_z=s["tol_z"], tol_phi=s["tol_phi"], band=s["band"]
+    )
     key = jax.random.PRNGKey(cfg["seed"])
     chunk = 512 if not args.quick else 36
 
@@ -130,9 +150,15 @@ def study(cfg: dict, args, output) -> int:
         "n_states_z_err_0": int(len(on)),
         "max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2": float(on[inside].phi_minus_pgamma.abs().max()),
         "n_counterexamples_abs_pgamma_gt_pi_2": int((~inside).sum()),
-        "counterexample_abs_phi_minus_pgamma_range": [float(on[~inside].phi_minus_pgamma.abs().min()),
-                                                      float(on[~inside].phi_minus_pgamma.abs().max())] if (~inside).any() else None,
-        "counterexamples_only_outside_bound": bool((on[~inside].p.abs() * np.radians(on[~inside].gamma_max_deg) > math.pi / 2).all()),
+        "counterexample_abs_phi_minus_pgamma_range": [
+            float(on[~inside].phi_minus_pgamma.abs().min()),
+            float(on[~inside].phi_minus_pgamma.abs().max()),
+        ]
+        if (~inside).any()
+        else None,
+        "counterexamples_only_outside_bound": bool(
+            (on[~inside].p.abs() * np.radians(on[~inside].gamma_max_deg) > math.pi / 2).all()
+        ),
         "wrong_distance_min_z_err": float(geo[geo.kind == "wrong_distance"].z_err.min()),
     }
 
@@ -142,23 +168,31 @@ def study(cfg: dict, args, output) -> int:
         df = B.frame(rows, B.run_chunks(scs, tcfg, chunk, f"Monte Carlo ({'forward' if f > 0 else 'backward'})"))
         mode = "forward" if f > 0 else "backward"
         ok = df[df.status == "ok"]
-        mc_summary[mode] = {**success_summary(df["success"].astype(bool).to_numpy()),
-                            "status_counts": df["status"].value_counts().to_dict(),
-                            "quantiles": metric_quantiles(ok, METRICS),
-                            "by_leader": {k: success_summary(v["success"].astype(bool).to_numpy())
-                                          for k, v in df.groupby("leader")}}
+        mc_summary[mode] = {
+            **success_summary(df["success"].astype(bool).to_numpy()),
+            "status_counts": df["status"].value_counts().to_dict(),
+            "quantiles": metric_quantiles(ok, METRICS),
+            "by_leader": {k: success_summary(v["success"].astype(bool).to_numpy()) for k, v in df.groupby("leader")},
+        }
         mc.append(df)
     mc = pd.concat(mc, ignore_index=True)
 
     summary = {
-        "study": cfg["name"], "seed": cfg["seed"], "config": cfg, "config_sha256": config_hash(cfg),
-        "pfjax_version": pfjax.__version__, "machine": machine(),
-        "quick": args.quick, "definitions": {
+        "study": cfg["name"],
+        "seed": cfg["seed"],
+        "config": cfg,
+        "config_sha256": config_hash(cfg),
+        "pfjax_version": pfjax.__version__,
+        "machine": machine(),
+        "quick": args.quick,
+        "definitions": {
             "z_to_0": f"max |z~| over the last {s['window']} s <= {s['tol_z']} m",
             "phi_minus_pgamma_to_0": f"max |phi - p gamma| over the last {s['window']} s <= {s['tol_phi']} rad",
-            "success": f"status ok and max |z~| over the last {s['window']} s <= {s['band']} m"},
+            "success": f"status ok and max |z~| over the last {s['window']} s <= {s['band']} m",
+        },
         "lemma_grid": {"n_runs": int(len(lemma_df)), "table": table.to_dict(orient="records")},
-        "geometry": geometry, "monte_carlo": mc_summary,
+        "geometry": geometry,
+        "monte_carlo": mc_summary,
     }
     tmp = output.staging
     meta = parquet_metadata(cfg, cfg["seed"])
@@ -170,9 +204,20 @@ def study(cfg: dict, args, output) -> int:
     (tmp / "summary.json").write_text(dumps(summary))
     R.write_report(tmp, summary, table, lemma_df)
     out = output.commit()
-    print(dumps({"out": str(out), "wall_s": summary["wall_s"], "lemma_table": summary["lemma_grid"]["table"],
-                 "geometry": geometry, "monte_carlo": {k: {kk: v[kk] for kk in ("n", "success_rate", "success_ci95", "status_counts")}
-                                                      for k, v in mc_summary.items()}}))
+    print(
+        dumps(
+            {
+                "out": str(out),
+                "wall_s": summary["wall_s"],
+                "lemma_table": summary["lemma_grid"]["table"],
+                "geometry": geometry,
+                "monte_carlo": {
+                    k: {kk: v[kk] for kk in ("n", "success_rate", "success_ci95", "status_counts")}
+                    for k, v in mc_summary.items()
+                },
+            }
+        )
+    )
     return 0
 
 

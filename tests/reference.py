@@ -26,8 +26,12 @@ def closest_x(name: str, qx: float, qy: float, window: float = 4.0, n: int = 400
     xs = np.linspace(qx - window, qx + window, n)
     i = int(np.argmin((xs - qx) ** 2 + (f(xs) - qy) ** 2))
     h = xs[1] - xs[0]
-    res = minimize_scalar(lambda x: (x - qx) ** 2 + (f(x) - qy) ** 2, bounds=(xs[i] - h, xs[i] + h),
-                          method="bounded", options={"xatol": 1e-14})
+    res = minimize_scalar(
+        lambda x: (x - qx) ** 2 + (f(x) - qy) ** 2,
+        bounds=(xs[i] - h, xs[i] + h),
+        method="bounded",
+        options={"xatol": 1e-14},
+    )
     return float(res.x)
 
 
@@ -42,8 +46,22 @@ def errors(name: str, x: float, y: float, theta: float):
     return d, te, kappa
 
 
-def closed_loop(name, pose0, beta_r, beta_f, *, K=None, pi=None, v=1.0, L=0.2, delta_max=math.radians(30),
-                T=20.0, t_eval=None, rtol=1e-11, atol=1e-12):
+def closed_loop(
+    name,
+    pose0,
+    beta_r,
+    beta_f,
+    *,
+    K=None,
+    pi=None,
+    v=1.0,
+    L=0.2,
+    delta_max=math.radians(30),
+    T=20.0,
+    t_eval=None,
+    rtol=1e-11,
+    atol=1e-12,
+):
     """Reference closed loop: ``K`` = (k_d, k_theta) state feedback, or ``pi`` = (kp_d, ki_d, kp_th, ki_th)."""
 
     def rhs(t, z):

@@ -32,14 +32,28 @@ def test_all_names_resolve():
 def test_scenarios_numbers_arrays_distributions():
     n = 40
     br = np.linspace(-6, 6, n)
-    a = pfjax.scenarios("sine", n, beta_r_deg=br, beta_f_deg=pfjax.uniform(-3, 3), lateral_offset=0.1,
-                        heading_error_deg=pfjax.normal(0, 2), key=7)
+    a = pfjax.scenarios(
+        "sine",
+        n,
+        beta_r_deg=br,
+        beta_f_deg=pfjax.uniform(-3, 3),
+        lateral_offset=0.1,
+        heading_error_deg=pfjax.normal(0, 2),
+        key=7,
+    )
     t = a.table
     assert a.n == n and np.allclose(t.beta_r_deg, br) and (t.lateral_offset == 0.1).all()
     assert t.beta_f_deg.between(-3, 3).all() and t.beta_f_deg.std() > 0.5
     # the first runs of a larger batch are the same runs; another key draws others
-    b = pfjax.scenarios("sine", 2 * n, beta_r_deg=np.concatenate([br, br]), beta_f_deg=pfjax.uniform(-3, 3),
-                        lateral_offset=0.1, heading_error_deg=pfjax.normal(0, 2), key=7)
+    b = pfjax.scenarios(
+        "sine",
+        2 * n,
+        beta_r_deg=np.concatenate([br, br]),
+        beta_f_deg=pfjax.uniform(-3, 3),
+        lateral_offset=0.1,
+        heading_error_deg=pfjax.normal(0, 2),
+        key=7,
+    )
     np.testing.assert_array_equal(b.table.beta_f_deg[:n], t.beta_f_deg)
     c = pfjax.scenarios("sine", n, beta_f_deg=pfjax.uniform(-3, 3), key=8)
     assert not np.allclose(c.table.beta_f_deg, t.beta_f_deg)
@@ -52,20 +66,38 @@ def test_scenario_matches_one_built_by_hand():
     """Run i of pfjax.scenarios equals make_scenario with the start pose computed independently:
     offset along the path normal at the nominal start, heading = tangent + error."""
     from pfjax.paths import entry
-    from pfjax.sim.scenario import make_scenario
     from pfjax.sim import simulate_batch, stack, unstack
+    from pfjax.sim.scenario import make_scenario
     from pfjax.sim.slip_profiles import constant_slip
 
-    a = pfjax.scenarios("sine", 3, beta_r_deg=[2.0, -4.0, 6.0], beta_f_deg=1.0, lateral_offset=[0.0, 0.1, -0.2],
-                        heading_error_deg=[0.0, 5.0, -10.0], speed=[1.0, 0.8, 1.2])
+    a = pfjax.scenarios(
+        "sine",
+        3,
+        beta_r_deg=[2.0, -4.0, 6.0],
+        beta_f_deg=1.0,
+        lateral_offset=[0.0, 0.1, -0.2],
+        heading_error_deg=[0.0, 5.0, -10.0],
+        speed=[1.0, 0.8, 1.2],
+    )
     sim = pfjax.simulate(a, "pi", config=SHORT)
     path = entry("sine").build()
     for i, row in a.table.iterrows():
         th = math.atan(1.0)  # y = sin x at x = 0: slope cos 0 = 1
-        pose = (-row.lateral_offset * math.sin(th), row.lateral_offset * math.cos(th), th + math.radians(row.heading_error_deg))
-        sc = make_scenario(path, pose, pfjax.controllers.entry("pi").make_params(), v=row.speed,
-                           slip=constant_slip(math.radians(row.beta_r_deg), math.radians(row.beta_f_deg)))
-        ref = unstack(simulate_batch(stack([sc]), controller=pfjax.controllers.pi, config=SimConfig(**SHORT, record=False)), 0)
+        pose = (
+            -row.lateral_offset * math.sin(th),
+            row.lateral_offset * math.cos(th),
+            th + math.radians(row.heading_error_deg),
+        )
+        sc = make_scenario(
+            path,
+            pose,
+            pfjax.controllers.entry("pi").make_params(),
+            v=row.speed,
+            slip=constant_slip(math.radians(row.beta_r_deg), math.radians(row.beta_f_deg)),
+        )
+        ref = unstack(
+            simulate_batch(stack([sc]), controller=pfjax.controllers.pi, config=SimConfig(**SHORT, record=False)), 0
+        )
         assert sim.table.iae[i] == pytest.approx(float(ref.metrics.iae), rel=1e-9), i
 
 
@@ -92,25 +124,38 @@ def test_success_rate_interval_is_clopper_pearson():
     assert "74.0 % of 50 runs" in str(r)
 
 
-@pytest.mark.parametrize("call, key", [
-    (lambda: pfjax.scenarios("sine", 4, beta_r_deg=95.0), "beta_r_deg"),
-    (lambda: pfjax.scenarios("sine", 4, beta_r_deg=[1.0, 2.0]), "beta_r_deg"),
-    (lambda: pfjax.scenarios("sine", 4, speed=np.array([1.0, -1.0, 1.0, 1.0])), "speed"),
-    (lambda: pfjax.scenarios("sine", 4, lateral_offset=float("nan")), "lateral_offset"),
-    (lambda: pfjax.scenarios("nope", 4), "path"),
-    (lambda: pfjax.scenarios("sine", 0), "n"),
-    (lambda: pfjax.scenarios("sine", 4, key=-1), "key"),
-    (lambda: pfjax.uniform(2, 1), "uniform"),
-    (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "nope"), "controller"),
-    (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", gains={"kp": 1.0}), "gains"),
-    (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", config={"horizont": 3}), "config"),
-    (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", config={"dt": -1}), "dt"),
-    (lambda: pfjax.success_rate([]), "success"),
-    (lambda: pfjax.design_mixed(v=0.0), "v"),
-    (lambda: pfjax.load_study("/nonexistent"), "out"),
-    (lambda: pfjax.run_study({"name": "x", "n_runs": 0, "seed": 0, "paths": [{"kind": "line"}],
-                              "controllers": [{"name": "a", "type": "pi"}]}), "n_runs"),
-])
+@pytest.mark.parametrize(
+    "call, key",
+    [
+        (lambda: pfjax.scenarios("sine", 4, beta_r_deg=95.0), "beta_r_deg"),
+        (lambda: pfjax.scenarios("sine", 4, beta_r_deg=[1.0, 2.0]), "beta_r_deg"),
+        (lambda: pfjax.scenarios("sine", 4, speed=np.array([1.0, -1.0, 1.0, 1.0])), "speed"),
+        (lambda: pfjax.scenarios("sine", 4, lateral_offset=float("nan")), "lateral_offset"),
+        (lambda: pfjax.scenarios("nope", 4), "path"),
+        (lambda: pfjax.scenarios("sine", 0), "n"),
+        (lambda: pfjax.scenarios("sine", 4, key=-1), "key"),
+        (lambda: pfjax.uniform(2, 1), "uniform"),
+        (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "nope"), "controller"),
+        (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", gains={"kp": 1.0}), "gains"),
+        (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", config={"horizont": 3}), "config"),
+        (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", config={"dt": -1}), "dt"),
+        (lambda: pfjax.success_rate([]), "success"),
+        (lambda: pfjax.design_mixed(v=0.0), "v"),
+        (lambda: pfjax.load_study("/nonexistent"), "out"),
+        (
+            lambda: pfjax.run_study(
+                {
+                    "name": "x",
+                    "n_runs": 0,
+                    "seed": 0,
+                    "paths": [{"kind": "line"}],
+                    "controllers": [{"name": "a", "type": "pi"}],
+                }
+            ),
+            "n_runs",
+        ),
+    ],
+)
 def test_bad_arguments_are_one_line_errors_naming_them(call, key):
     with pytest.raises(pfjax.InputError) as e:
         call()
@@ -120,15 +165,29 @@ def test_bad_arguments_are_one_line_errors_naming_them(call, key):
 
 def test_run_load_and_replay_a_study(tmp_path):
     config = ROOT / "studies" / "robustness_default.toml"
-    res = pfjax.run_study(config, tmp_path / "out", n_runs=24, chunk_size=24, f64_check_runs=0, margin__enabled=False,
-                          sim__horizon=6.0, success__from_s=2.0, progress=False, report=False)
+    res = pfjax.run_study(
+        config,
+        tmp_path / "out",
+        n_runs=24,
+        chunk_size=24,
+        f64_check_runs=0,
+        margin__enabled=False,
+        sim__horizon=6.0,
+        success__from_s=2.0,
+        progress=False,
+        report=False,
+    )
     assert len(res.runs) == 24 * len(res.summary["config"]["paths"]) * len(res.summary["config"]["controllers"])
     # every column of the run table says its unit and meaning; angles in degrees say so in their names
     from pfjax.tables import units
 
     u = units(tmp_path / "out" / "runs.parquet")
     assert set(u) == set(res.runs.columns)
-    assert (u["start_along_m"]["unit"], u["steady_abs_theta_e_rad"]["unit"], u["beta_r_deg"]["unit"]) == ("m", "rad", "deg")
+    assert (u["start_along_m"]["unit"], u["steady_abs_theta_e_rad"]["unit"], u["beta_r_deg"]["unit"]) == (
+        "m",
+        "rad",
+        "deg",
+    )
     assert all(v["description"] for v in u.values())
     again = pfjax.load_study(tmp_path / "out")
     assert again.summary == res.summary and list(again.headline.columns) == list(res.headline.columns)
@@ -152,8 +211,14 @@ def test_readme_script_runs():
     text = (ROOT / "README.md").read_text()
     script = re.search(r"<!-- api-example -->\s*```python\n(.*?)```", text, re.S).group(1)
     assert len(script.strip().splitlines()) <= 20
-    assert all(line.startswith(("import pfjax", "#", " ")) or "pfjax." in line or "=" in line or line.startswith("print")
-               or not line.strip() for line in script.splitlines())
+    assert all(
+        line.startswith(("import pfjax", "#", " "))
+        or "pfjax." in line
+        or "=" in line
+        or line.startswith("print")
+        or not line.strip()
+        for line in script.splitlines()
+    )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     assert re.search(r"% of 1000 runs succeed \(95 % interval", out.stdout), out.stdout
@@ -166,8 +231,10 @@ def _python(code: str, **env) -> subprocess.CompletedProcess:
 
 
 def test_import_is_cheap_and_sets_the_host_up():
-    out = _python("import sys, os, pfjax; print('jax' in sys.modules, 'cvxpy' in sys.modules); "
-                  "print(os.environ.get('XLA_FLAGS', ''))")
+    out = _python(
+        "import sys, os, pfjax; print('jax' in sys.modules, 'cvxpy' in sys.modules); "
+        "print(os.environ.get('XLA_FLAGS', ''))"
+    )
     lines = out.stdout.splitlines()
     assert out.returncode == 0 and lines[0] == "False False", out.stderr
     cores = len(os.sched_getaffinity(0))
@@ -176,8 +243,10 @@ def test_import_is_cheap_and_sets_the_host_up():
 
 
 def test_warns_once_when_jax_started_first():
-    code = ("import warnings; warnings.simplefilter('always'); import jax; jax.numpy.zeros(1).block_until_ready(); "
-            "import pfjax; pfjax.setup(); print(jax.local_device_count())")
+    code = (
+        "import warnings; warnings.simplefilter('always'); import jax; jax.numpy.zeros(1).block_until_ready(); "
+        "import pfjax; pfjax.setup(); print(jax.local_device_count())"
+    )
     out = _python(code)
     assert out.returncode == 0, out.stderr
     if len(os.sched_getaffinity(0)) > 1:

@@ -103,8 +103,11 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def test_nothing_in_the_library_imports_the_command_line():
     graph = _edges()
-    offenders = sorted(m for m, ts in graph.items() if not m.startswith("pfjax.cli")
-                       and any(t == "pfjax.cli" or t.startswith("pfjax.cli.") for t in ts))
+    offenders = sorted(
+        m
+        for m, ts in graph.items()
+        if not m.startswith("pfjax.cli") and any(t == "pfjax.cli" or t.startswith("pfjax.cli.") for t in ts)
+    )
     assert not offenders, offenders
 
 

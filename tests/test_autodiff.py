@@ -25,7 +25,8 @@ def test_value_and_grad_modes_agree_with_jax_grad(mode):
     for k in p:  # the same derivative, summed in another order: rounding only
         np.testing.assert_allclose(np.asarray(g[k]), np.asarray(g_ref[k]), rtol=1e-14, atol=1e-15)
     v2, g2 = jax.vmap(autodiff.value_and_grad(lambda q: _loss(q, w)[0], mode=mode))(
-        jax.tree_util.tree_map(lambda a: jnp.stack([a, 2 * a]), p))
+        jax.tree_util.tree_map(lambda a: jnp.stack([a, 2 * a]), p)
+    )
     assert v2.shape == (2,) and g2["a"].shape == (2, 3)
     np.testing.assert_allclose(np.asarray(g2["b"][0]), np.asarray(g_ref["b"]), rtol=1e-14)
 
@@ -57,9 +58,11 @@ def test_projection_derivative_is_the_implicit_derivative():
         grad = jax.grad(u_of, argnums=(0, 1, 2, 3))(qx, qy, A, guess)
         conv = lambda *a: float(u_of(*a, guess, 30))
         h = 1e-6
-        fd = [(conv(qx + h, qy, A) - conv(qx - h, qy, A)) / (2 * h),
-              (conv(qx, qy + h, A) - conv(qx, qy - h, A)) / (2 * h),
-              (conv(qx, qy, A + h) - conv(qx, qy, A - h)) / (2 * h)]
+        fd = [
+            (conv(qx + h, qy, A) - conv(qx - h, qy, A)) / (2 * h),
+            (conv(qx, qy + h, A) - conv(qx, qy - h, A)) / (2 * h),
+            (conv(qx, qy, A + h) - conv(qx, qy, A - h)) / (2 * h),
+        ]
         np.testing.assert_allclose(np.asarray(grad[:3], float), fd, rtol=1e-7, atol=1e-8)
         assert float(grad[3]) == 0.0
 
@@ -76,12 +79,16 @@ def test_reverse_mode_carries_small_scenario_leaves_run_by_run():
 
     from pfjax import controllers as C
     from pfjax.paths import sine
-    from pfjax.sim.scenario import make_scenario
     from pfjax.sim import SimConfig, constant_slip, simulate_batch, stack
+    from pfjax.sim.scenario import make_scenario
 
     n = 5  # runs: a size no other axis of the program has
-    rows = [make_scenario(sine(), (0.0, 0.1 * i, 0.0), C.state_feedback_params(K=C.PAPER_K),
-                          slip=constant_slip(0.02 * i, -0.01 * i)) for i in range(n)]
+    rows = [
+        make_scenario(
+            sine(), (0.0, 0.1 * i, 0.0), C.state_feedback_params(K=C.PAPER_K), slip=constant_slip(0.02 * i, -0.01 * i)
+        )
+        for i in range(n)
+    ]
     batch = stack(rows)
     cfg = SimConfig(dt=0.01, horizon=0.5, record=False)
 
@@ -107,8 +114,14 @@ def test_reverse_mode_carries_small_scenario_leaves_run_by_run():
 def test_as_scalars_round_trips_and_keeps_large_leaves_whole():
     from pfjax.numerics.layout import SCALAR_LEAF_MAX, as_scalars
 
-    tree = {"K": jnp.array([[1.0, 2.0]]), "key": jnp.array([3, 4], jnp.uint32), "v": 0.5, "none": None,
-            "seq": jnp.zeros((SCALAR_LEAF_MAX + 1,)), "empty": jnp.zeros((0,))}
+    tree = {
+        "K": jnp.array([[1.0, 2.0]]),
+        "key": jnp.array([3, 4], jnp.uint32),
+        "v": 0.5,
+        "none": None,
+        "seq": jnp.zeros((SCALAR_LEAF_MAX + 1,)),
+        "empty": jnp.zeros((0,)),
+    }
     parts, join = as_scalars(tree)
     flat = jax.tree_util.tree_leaves(tree)
     kinds = [type(p) for p in parts]
@@ -137,9 +150,15 @@ def test_first_true_and_all_true_equal_select_and_all_without_a_short_axis_reduc
     np.testing.assert_array_equal(np.asarray(all_true(conds)), combos.all(axis=0))
 
     f = jax.jit(jax.vmap(lambda fin, a, o, e: classify(fin, a, o, e, 10.0)))
-    args = (jnp.asarray(combos[0]), jnp.asarray(np.where(combos[1], 11.0, 1.0)), jnp.asarray(np.where(combos[2], 0.0, 1.0)),
-            jnp.asarray(combos[3]))
-    np.testing.assert_array_equal(np.asarray(f(*args)), np.asarray(jnp.select([~args[0], args[1] > 10.0, args[2] <= 1e-6, args[3]],
-                                                                               [1, 2, 3, 4], 0)))
+    args = (
+        jnp.asarray(combos[0]),
+        jnp.asarray(np.where(combos[1], 11.0, 1.0)),
+        jnp.asarray(np.where(combos[2], 0.0, 1.0)),
+        jnp.asarray(combos[3]),
+    )
+    np.testing.assert_array_equal(
+        np.asarray(f(*args)),
+        np.asarray(jnp.select([~args[0], args[1] > 10.0, args[2] <= 1e-6, args[3]], [1, 2, 3, 4], 0)),
+    )
     hlo = f.lower(*args).compile().as_text()
     assert " reduce(" not in hlo and "argmax" not in hlo

@@ -21,14 +21,26 @@ import pandas as pd
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-KEYS = ("msteps_per_s_f32", "msteps_per_s_f64", "numba_msteps_per_s_f32", "ratio_vs_numba_f32", "grad_over_forward",
-        "peak_rss_mib")
+KEYS = (
+    "msteps_per_s_f32",
+    "msteps_per_s_f64",
+    "numba_msteps_per_s_f32",
+    "ratio_vs_numba_f32",
+    "grad_over_forward",
+    "peak_rss_mib",
+)
 
 
 def _bench(*args):
     env = {**os.environ, "PFJAX_CACHE_DIR": str(ROOT / ".pytest_cache" / "xla")}
-    return subprocess.run([sys.executable, "-m", "pfjax.cli", "bench", *args], cwd=ROOT, capture_output=True, text=True,
-                          env=env, timeout=900)
+    return subprocess.run(
+        [sys.executable, "-m", "pfjax.cli", "bench", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=900,
+    )
 
 
 @pytest.mark.slow
@@ -58,8 +70,9 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     assert (out / "figures" / "throughput.png").stat().st_size > 5000 and (out / "report.md").is_file()
 
 
-@pytest.mark.parametrize("args, flag", [(["--sizes", "10,x"], "--sizes"), (["--sizes", "0"], "--sizes"),
-                                        (["--seed", "-1"], "--seed")])
+@pytest.mark.parametrize(
+    "args, flag", [(["--sizes", "10,x"], "--sizes"), (["--sizes", "0"], "--sizes"), (["--seed", "-1"], "--seed")]
+)
 def test_bench_bad_input_one_line_exit_2(tmp_path, args, flag, capsys):
     from pfjax.cli import main
 
@@ -90,10 +103,18 @@ def test_numba_reference_reports_a_missing_numba(monkeypatch):
 def test_quick_bench_without_numba_skips_its_reference_with_a_note(tmp_path):
     out = tmp_path / "bench"
     env = {**os.environ, "PFJAX_CACHE_DIR": str(ROOT / ".pytest_cache" / "xla")}
-    no_numba = ("import sys; sys.modules['numba'] = None; from pfjax.cli import main; "
-                "rc = main(sys.argv[1:]); assert sys.modules['numba'] is None; sys.exit(rc)")
-    r = subprocess.run([sys.executable, "-c", no_numba, "bench", "--quick", "--sizes", "64", "--out", str(out), "--json"],
-                       cwd=ROOT, capture_output=True, text=True, env=env, timeout=900)
+    no_numba = (
+        "import sys; sys.modules['numba'] = None; from pfjax.cli import main; "
+        "rc = main(sys.argv[1:]); assert sys.modules['numba'] is None; sys.exit(rc)"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", no_numba, "bench", "--quick", "--sizes", "64", "--out", str(out), "--json"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=900,
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     assert NUMBA_MISSING in r.stderr and "Traceback" not in r.stderr
     s = json.loads(r.stdout)

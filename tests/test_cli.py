@@ -106,8 +106,9 @@ def test_synth_mixed_json_reproduces_source():
     (docs/reproductions/path-following.md §4: the source's values are toolbox bounds from a different solver; pfjax reaches
     K_d 1.6 %, K_theta 0.2 %, bounds < 0.1 % - the objective is flat along K_d). True norms and
     poles against SciPy on docs/reproductions/path-following.md §3 matrices: rel 1e-6 (norms), 1e-9 (poles)."""
-    r = cli("synth", "--method", "mixed", "--speed", "1", "--wheelbase", "0.2", "--alpha", "10", "--beta", "1",
-            "--json")
+    r = cli(
+        "synth", "--method", "mixed", "--speed", "1", "--wheelbase", "0.2", "--alpha", "10", "--beta", "1", "--json"
+    )
     assert r.returncode == 0, r.stderr
     out = strict_json(r.stdout)
     for key in ("K", "gamma_inf", "gamma_2", "hinf_norm", "h2_norm", "closed_loop_poles"):
@@ -159,8 +160,24 @@ def test_simulate_line_paper_k_json_matches_closed_form_equilibrium():
     its initial size; RK4 at 5 ms is accurate to ~1e-8 here. delta to 1e-3 rad (the brief's
     tolerance; the actual error is < 1e-9), d to 1e-5 m, theta_e to 1e-6 rad.
     """
-    r = cli("simulate", "--path", "line", "--x0", "1", "0", "90", "--beta-r-deg", "5",
-            "--beta-f-deg", "5", "--controller", "paper-k", "--horizon", "20", "--json")
+    r = cli(
+        "simulate",
+        "--path",
+        "line",
+        "--x0",
+        "1",
+        "0",
+        "90",
+        "--beta-r-deg",
+        "5",
+        "--beta-f-deg",
+        "5",
+        "--controller",
+        "paper-k",
+        "--horizon",
+        "20",
+        "--json",
+    )
     assert r.returncode == 0, r.stderr
     out = strict_json(r.stdout)
     for key in ("d", "theta_e", "delta"):
@@ -303,8 +320,10 @@ def test_help(args):
 def test_help_and_the_simulator_do_not_import_scipy_stats():
     """``scipy.stats`` takes about 2 s to import (half of ``pfjax --help`` before it was deferred):
     building the parser and importing the simulator must not load it."""
-    code = ("import sys; from pfjax.cli import build_parser; import pfjax.sim; build_parser(); "
-            "print('scipy.stats' in sys.modules)")
+    code = (
+        "import sys; from pfjax.cli import build_parser; import pfjax.sim; build_parser(); "
+        "print('scipy.stats' in sys.modules)"
+    )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=os.environ.copy())
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "False"
@@ -316,8 +335,13 @@ def test_no_command_is_a_usage_error():
 
 
 def test_module_entry_point_matches_console_script():
-    r = subprocess.run([sys.executable, "-m", "pfjax.cli", "synth", "--speed", "0"], capture_output=True, text=True,
-                       timeout=60, env=os.environ.copy())
+    r = subprocess.run(
+        [sys.executable, "-m", "pfjax.cli", "synth", "--speed", "0"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=os.environ.copy(),
+    )
     assert r.returncode == 2 and r.stdout == ""
     lines = r.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("pfjax synth: error: --speed")
@@ -330,21 +354,25 @@ def test_module_entry_point_matches_console_script():
 _SIM_FAST = ("simulate", "--path", "line", "--controller", "stanley", "--dt", "0.05", "--json")
 _TRACK_FAST = ("track", "--dt", "0.05", "--json")
 RENAMED = {
-    "synth": [(("synth", "--json"), "--v", "--speed", "1.2"),
-              (("synth", "--json"), "--L", "--wheelbase", "0.25")],
-    "simulate": [(_SIM_FAST, "--T", "--horizon", "2"),
-                 ((*_SIM_FAST, "--horizon", "2"), "--v", "--speed", "1.5"),
-                 ((*_SIM_FAST, "--horizon", "2"), "--L", "--wheelbase", "0.3")],
-    "track": [(_TRACK_FAST, "--T", "--horizon", "3"),
-              ((*_TRACK_FAST, "--horizon", "3"), "--a", "--wheelbase", "1.5")],
+    "synth": [(("synth", "--json"), "--v", "--speed", "1.2"), (("synth", "--json"), "--L", "--wheelbase", "0.25")],
+    "simulate": [
+        (_SIM_FAST, "--T", "--horizon", "2"),
+        ((*_SIM_FAST, "--horizon", "2"), "--v", "--speed", "1.5"),
+        ((*_SIM_FAST, "--horizon", "2"), "--L", "--wheelbase", "0.3"),
+    ],
+    "track": [(_TRACK_FAST, "--T", "--horizon", "3"), ((*_TRACK_FAST, "--horizon", "3"), "--a", "--wheelbase", "1.5")],
     "parking": [(("parking", "--json"), "--t-max", "--horizon", "20")],
     "parking-search": [(("parking-search", "--method", "grid", "--n", "2", "--json"), "--t-max", "--horizon", "20")],
 }
 #: Per subcommand: ``(argv with a bad value through an old spelling, the flag the error names)``.
 RENAMED_BAD = {
     "synth": [(("synth", "--v", "0"), "--speed"), (("synth", "--L", "abc"), "argument --wheelbase/--L")],
-    "simulate": [((*_SIM_FAST, "--T", "-1"), "--horizon"), ((*_SIM_FAST, "--v", "inf"), "--speed"),
-                 ((*_SIM_FAST, "--L", "0"), "--wheelbase"), ((*_SIM_FAST, "--T", "soon"), "argument --horizon/--T")],
+    "simulate": [
+        ((*_SIM_FAST, "--T", "-1"), "--horizon"),
+        ((*_SIM_FAST, "--v", "inf"), "--speed"),
+        ((*_SIM_FAST, "--L", "0"), "--wheelbase"),
+        ((*_SIM_FAST, "--T", "soon"), "argument --horizon/--T"),
+    ],
     "track": [((*_TRACK_FAST, "--T", "-1"), "--horizon"), ((*_TRACK_FAST, "--a", "0"), "--wheelbase")],
     "parking": [(("parking", "--t-max", "0"), "--horizon")],
     "parking-search": [(("parking-search", "--method", "grid", "--t-max", "nan"), "--horizon")],
@@ -374,8 +402,9 @@ print(json.dumps(results))
 
 def _run_each(argvs: list[list[str]]) -> list[tuple[int, str, str]]:
     env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
-    r = subprocess.run([sys.executable, "-c", _DRIVER, json.dumps(argvs)], capture_output=True, text=True,
-                       timeout=600, env=env)
+    r = subprocess.run(
+        [sys.executable, "-c", _DRIVER, json.dumps(argvs)], capture_output=True, text=True, timeout=600, env=env
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     return [tuple(x) for x in json.loads(r.stdout.strip().splitlines()[-1])]
 
@@ -422,7 +451,7 @@ def test_old_spellings_still_work_with_one_deprecation_line(command):
         assert len(lines) == 1 and lines == _deprecation_lines(old_err), (old, old_err)
         assert _names(lines[0], old) and _names(lines[0], new), lines[0]
     olds = {old for _, old, _, _ in cases}
-    for (argv, flag), (code, out, err) in zip(bad, results[len(argvs):]):
+    for (argv, flag), (code, out, err) in zip(bad, results[len(argvs) :]):
         old = next(a for a in argv if a in olds)
         assert code == 2 and out == "" and "Traceback" not in err, (argv, code, err)
         deprecations = _deprecation_lines(err)
@@ -479,11 +508,14 @@ def test_examples_lists_every_packaged_example_with_one_line(capsys):
     assert [ln.split()[0] for ln in lines] == examples.names()
 
 
-@pytest.mark.parametrize("argv, expected", [
-    (["--example", "nope"], "--example: unknown example 'nope'; expected one of default, heldout, "),
-    (["studies/robustness_default.toml", "--example", "default"], "--example: give a study TOML"),
-    ([], "config: expected a study TOML path or --example NAME"),
-])
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["--example", "nope"], "--example: unknown example 'nope'; expected one of default, heldout, "),
+        (["studies/robustness_default.toml", "--example", "default"], "--example: give a study TOML"),
+        ([], "config: expected a study TOML path or --example NAME"),
+    ],
+)
 @pytest.mark.parametrize("command", ["study", "report"])
 def test_study_example_bad_use_is_one_line_exit_2(tmp_path, capsys, command, argv, expected):
     out = tmp_path / "o"
@@ -497,14 +529,31 @@ def test_study_example_bad_use_is_one_line_exit_2(tmp_path, capsys, command, arg
 @pytest.mark.slow
 def test_study_example_runs_the_packaged_config(tmp_path, capsys):
     out = tmp_path / "heldout"
-    head = run_main(capsys, "study", "--example", "heldout", "--set", "n_runs=4", "--set", "chunk_size=4",
-                    "--set", "f64_check_runs=0", "--set", "margin.enabled=false", "--no-report", "--quiet",
-                    "--out", str(out), "--json")
+    head = run_main(
+        capsys,
+        "study",
+        "--example",
+        "heldout",
+        "--set",
+        "n_runs=4",
+        "--set",
+        "chunk_size=4",
+        "--set",
+        "f64_check_runs=0",
+        "--set",
+        "margin.enabled=false",
+        "--no-report",
+        "--quiet",
+        "--out",
+        str(out),
+        "--json",
+    )
     assert head["study"] == "tuning_heldout" and head["out"] == str(out) and head["n_runs_total"] == 4 * 3
     # the same study as from the repository's file, by its config hash
     from pfjax.montecarlo.config import load_study, study_hash
 
-    spec, _ = load_study(ROOT_STUDIES / "tuning_heldout.toml",
-                         ["n_runs=4", "chunk_size=4", "f64_check_runs=0", "margin.enabled=false"])
+    spec, _ = load_study(
+        ROOT_STUDIES / "tuning_heldout.toml", ["n_runs=4", "chunk_size=4", "f64_check_runs=0", "margin.enabled=false"]
+    )
     assert head["config_sha256"] == study_hash(spec)
     assert (out / "runs.parquet").is_file() and (out / "summary.json").is_file()

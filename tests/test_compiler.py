@@ -8,6 +8,7 @@ the run). pfjax's elementary functions are checked under it in tests/test_elemen
 """
 
 import os
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -33,9 +34,16 @@ def test_avx512_is_read_from_the_cpu_flags(tmp_path):
 
 def test_cpu_info_reads_the_first_processor(tmp_path):
     p = tmp_path / "cpuinfo"
-    p.write_text("processor\t: 0\nvendor_id\t: AuthenticAMD\ncpu family\t: 26\nmodel\t\t: 2\nmodel name\t: AMD EPYC\n"
-                 "flags\t\t: fpu avx512f\n\nprocessor\t: 1\ncpu family\t: 25\nmodel name\t: other\n")
-    assert compiler.cpu_info(str(p)) == {"cpu family": "26", "model": "2", "model name": "AMD EPYC", "flags": "fpu avx512f"}
+    p.write_text(
+        "processor\t: 0\nvendor_id\t: AuthenticAMD\ncpu family\t: 26\nmodel\t\t: 2\nmodel name\t: AMD EPYC\n"
+        "flags\t\t: fpu avx512f\n\nprocessor\t: 1\ncpu family\t: 25\nmodel name\t: other\n"
+    )
+    assert compiler.cpu_info(str(p)) == {
+        "cpu family": "26",
+        "model": "2",
+        "model name": "AMD EPYC",
+        "flags": "fpu avx512f",
+    }
     assert compiler.cpu_info(str(tmp_path / "missing")) == {}
     if os.path.exists(compiler.CPUINFO):  # this machine's: the bench records it
         assert compiler.cpu_info()["flags"]
@@ -73,8 +81,13 @@ def test_every_simulator_entry_point_carries_the_options():
 
     # the modules (the packages export functions of the same name)
     slip, tracking, parking = (import_module(f"pfjax.{p}.simulate") for p in ("sim", "tracking", "parking"))
-    for f in (slip._simulate_vmapped, tracking._simulate_vmapped, parking.run_jit, parking.run_recorded_jit,
-              parking.run_batch):
+    for f in (
+        slip._simulate_vmapped,
+        tracking._simulate_vmapped,
+        parking.run_jit,
+        parking.run_recorded_jit,
+        parking.run_batch,
+    ):
         assert _kvs(f) == compiler.OPTIONS
     with pytest.MonkeyPatch.context() as m:
         m.setattr(compiler, "OPTIONS", dict(WIDE))
@@ -111,8 +124,9 @@ def test_a_wide_program_runs_inside_other_transformations():
         inner = np.asarray(jax.jit(lambda s: f(s))(sc))
         const = np.asarray(jax.jit(lambda: f(sc))())
         mapped = np.asarray(jax.vmap(f)(jax.tree_util.tree_map(lambda a: a[None], sc)))[0]
-        g = jax.grad(lambda K: jnp.sum(f(sc._replace(gains=sc.gains._replace(K=jnp.broadcast_to(K, sc.gains.K.shape))))))(
-            jnp.asarray(P.K))
+        g = jax.grad(
+            lambda K: jnp.sum(f(sc._replace(gains=sc.gains._replace(K=jnp.broadcast_to(K, sc.gains.K.shape)))))
+        )(jnp.asarray(P.K))
     for other in (inner, const, mapped):
         np.testing.assert_allclose(other, top, rtol=1e-12)
     assert np.all(np.isfinite(np.asarray(g)))
@@ -129,8 +143,10 @@ def test_other_backends_get_the_plain_program(monkeypatch):
 
 def _both(f, *args):
     """``f(*args)`` compiled with XLA's default vector width and with 512 bits, as float64 NumPy."""
-    out = [jax.tree_util.tree_map(lambda a: np.asarray(a, np.float64), jax.jit(f, compiler_options=o)(*args))
-           for o in (None, WIDE)]
+    out = [
+        jax.tree_util.tree_map(lambda a: np.asarray(a, np.float64), jax.jit(f, compiler_options=o)(*args))
+        for o in (None, WIDE)
+    ]
     return out
 
 
@@ -157,7 +173,9 @@ def test_slip_simulator_agrees_with_and_without_wide_vectors(name, dtype):
     sc = P.scenarios(P.random_batch(64, 3), np.dtype(dtype))
     ctrl, gains = C.REGISTRY[name][0], C.REGISTRY[name][1]()
     if name != "state_feedback":
-        sc = sc._replace(gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(np.asarray(g, dtype), (64,) + np.shape(g)), gains))
+        sc = sc._replace(
+            gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(np.asarray(g, dtype), (64,) + np.shape(g)), gains)
+        )
     cfg = SimConfig(dt=0.01, horizon=2.0, record=False)
     a, b = _both(jax.vmap(lambda s: simulate(ctrl, s, cfg)), sc)
     np.testing.assert_array_equal(b.status, a.status)
@@ -173,8 +191,12 @@ def test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors():
     from pfjax.tracking import leader as L
 
     params = T.FollowerParams(a=1.0, f=1.0, l=1.0, p=1.0)
-    sc = stack([T.scenario(params, L.sine(), init=T.initial_state(L.sine(), params, offset=(dx, 0.3), heading_error=0.2))
-                for dx in np.linspace(-0.5, 0.5, 16)])
+    sc = stack(
+        [
+            T.scenario(params, L.sine(), init=T.initial_state(L.sine(), params, offset=(dx, 0.3), heading_error=0.2))
+            for dx in np.linspace(-0.5, 0.5, 16)
+        ]
+    )
     cfg = T.TrackConfig(dt=0.02, horizon=4.0, window=1.0)
     a, b = _both(jax.vmap(lambda s: T.simulate(s, cfg)), sc)
     np.testing.assert_array_equal(b.status, a.status)
@@ -193,19 +215,24 @@ def test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors():
 AUDITED = {
     "pfjax.sim.simulate._simulate_vmapped": (
         "test_slip_simulator_agrees_with_and_without_wide_vectors",
-        "tests/test_sim_reference.py (solve_ivp of an independent closed loop)"),
+        "tests/test_sim_reference.py (solve_ivp of an independent closed loop)",
+    ),
     "pfjax.tracking.simulate._simulate_vmapped": (
         "test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors",
-        "tests/test_tracking.py::test_simulation_matches_solve_ivp"),
+        "tests/test_tracking.py::test_simulation_matches_solve_ivp",
+    ),
     "pfjax.parking.simulate.run": (
         "test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors",
-        "tests/test_parking_control.py::test_switched_run_against_solve_ivp"),
+        "tests/test_parking_control.py::test_switched_run_against_solve_ivp",
+    ),
     "pfjax.parking.simulate.run_recorded": (
         "test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors",
-        "tests/test_parking_control.py (case A's first leg against its closed form)"),
+        "tests/test_parking_control.py (case A's first leg against its closed form)",
+    ),
     "pfjax.bench.run._grad.<locals>.loss": (
         "test_slip_simulator_agrees_with_and_without_wide_vectors (the program it wraps)",
-        "tests/test_bench.py::test_quick_bench_contract_and_agreement (NumPy, Numba and SciPy references)"),
+        "tests/test_bench.py::test_quick_bench_contract_and_agreement (NumPy, Numba and SciPy references)",
+    ),
 }
 
 

@@ -43,13 +43,22 @@ def test_defaults_unchanged_and_not_aliased():
     before = copy.deepcopy(DEFAULTS)
     cfg["model"]["v"] = 99.0
     cfg["source"]["K"][0] = 0.0
-    assert DEFAULTS == before
+    assert before == DEFAULTS
 
 
 def test_file_then_overrides(tmp_path):
     p = write(tmp_path, 'name = "from-file"\n[model]\nv = 2\nn = 7\n[deep.inner]\nx = 1.5\n[source]\nK = [-1, -2.5]\n')
-    cfg = load(DEFAULTS, p, ["model.v=3.5", "deep.inner.label=b", "source.flags=[false, true]", "trackers=false",
-                             "model.convention = lenain"])
+    cfg = load(
+        DEFAULTS,
+        p,
+        [
+            "model.v=3.5",
+            "deep.inner.label=b",
+            "source.flags=[false, true]",
+            "trackers=false",
+            "model.convention = lenain",
+        ],
+    )
     assert cfg["name"] == "from-file"
     assert cfg["model"] == {"v": 3.5, "L": 0.2, "convention": "lenain", "n": 7}  # --set wins over the file
     assert cfg["deep"]["inner"] == {"x": 1.5, "label": "b"}

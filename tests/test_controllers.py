@@ -21,8 +21,8 @@ from pfjax import controllers as C
 from pfjax.controllers import Observation
 from pfjax.models import Pose
 from pfjax.paths import circle, line, project
-from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SimConfig, simulate_batch, stack
+from pfjax.sim.scenario import paper_scenario
 
 DMAX = math.radians(30.0)
 CFG = SimConfig(dt=0.01, horizon=20.0)  # sampled every step (zero-order hold over 10 ms)
@@ -35,9 +35,18 @@ WINDUP_POSE = (4.0, 0.0, math.pi / 4)
 def obs_at(path, x, y, theta, v=1.0, L=0.2, delta_max=DMAX) -> Observation:
     """The observation a controller gets for a pose (closest point by the cold projection)."""
     p = project(path, jnp.asarray(x), jnp.asarray(y), jnp.asarray(theta))
-    return Observation(d=p.d, theta_e=p.theta_e, kappa=p.kappa, s=p.s, u=p.u,
-                       pose=Pose(jnp.asarray(x), jnp.asarray(y), jnp.asarray(theta)),
-                       v=jnp.asarray(v), L=jnp.asarray(L), delta_max=jnp.asarray(delta_max), path=path)
+    return Observation(
+        d=p.d,
+        theta_e=p.theta_e,
+        kappa=p.kappa,
+        s=p.s,
+        u=p.u,
+        pose=Pose(jnp.asarray(x), jnp.asarray(y), jnp.asarray(theta)),
+        v=jnp.asarray(v),
+        L=jnp.asarray(L),
+        delta_max=jnp.asarray(delta_max),
+        path=path,
+    )
 
 
 def on_circle(path, u):
@@ -122,9 +131,18 @@ def test_state_feedback_output(ff):
 
 def _fixed_obs(d, te):
     path = line()
-    return Observation(d=jnp.asarray(d), theta_e=jnp.asarray(te), kappa=jnp.asarray(0.0), s=jnp.asarray(0.0),
-                       u=jnp.asarray(0.0), pose=Pose(*(jnp.asarray(0.0),) * 3), v=jnp.asarray(1.0),
-                       L=jnp.asarray(0.2), delta_max=jnp.asarray(DMAX), path=path)
+    return Observation(
+        d=jnp.asarray(d),
+        theta_e=jnp.asarray(te),
+        kappa=jnp.asarray(0.0),
+        s=jnp.asarray(0.0),
+        u=jnp.asarray(0.0),
+        pose=Pose(*(jnp.asarray(0.0),) * 3),
+        v=jnp.asarray(1.0),
+        L=jnp.asarray(0.2),
+        delta_max=jnp.asarray(DMAX),
+        path=path,
+    )
 
 
 def test_pi_step_is_forward_euler_of_the_integral_terms():
@@ -177,8 +195,12 @@ def runs():
     for name, (ctrl, make, *_) in C.REGISTRY.items():
         rows = [paper_scenario("line", make(), beta_r_deg=0.0, beta_f_deg=0.0, pose0=p) for p in POSES]
         if name == "pi":
-            rows += [paper_scenario("line", C.pi_params(**WINDUP_GAINS, k_aw=k), beta_r_deg=0.0, beta_f_deg=0.0,
-                                    pose0=WINDUP_POSE) for k in (0.0, 5.0)]
+            rows += [
+                paper_scenario(
+                    "line", C.pi_params(**WINDUP_GAINS, k_aw=k), beta_r_deg=0.0, beta_f_deg=0.0, pose0=WINDUP_POSE
+                )
+                for k in (0.0, 5.0)
+            ]
         out[name] = jax.device_get(simulate_batch(stack(rows), controller=ctrl, config=CFG))
     return out
 
@@ -228,16 +250,24 @@ def test_pi_anti_windup_in_the_simulator(runs):
     np.testing.assert_array_equal(r.status[n:], 0)
 
 
-@pytest.mark.parametrize("gains", [C.state_feedback_params(C.PAPER_K, feedforward=1.0),
-                                   C.pi_params(**WINDUP_GAINS, k_aw=5.0), C.pi_params(**C.PAPER_PI)],
-                         ids=["state_feedback", "pi_anti_windup", "pi_table3"])
+@pytest.mark.parametrize(
+    "gains",
+    [
+        C.state_feedback_params(C.PAPER_K, feedforward=1.0),
+        C.pi_params(**WINDUP_GAINS, k_aw=5.0),
+        C.pi_params(**C.PAPER_PI),
+    ],
+    ids=["state_feedback", "pi_anti_windup", "pi_table3"],
+)
 def test_linear_controller_reproduces_state_feedback_and_pi(gains):
     """``linear`` with :func:`linear_params` is the same controller (a study runs both kinds as it,
     one compiled program for the two): from a start with saturation and slip, in the simulator
     (sampled every step, float64), the same metrics and final state as the original to 1e-12 relative
     (they are one formula up to the order of exact zero terms; the compiler may fuse them differently)."""
     original = C.state_feedback if isinstance(gains, C.StateFeedbackParams) else C.pi
-    rows = [paper_scenario("sine", gains, beta_r_deg=4.0, beta_f_deg=-3.0, pose0=p) for p in (WINDUP_POSE, (0.0, 0.5, 0.3))]
+    rows = [
+        paper_scenario("sine", gains, beta_r_deg=4.0, beta_f_deg=-3.0, pose0=p) for p in (WINDUP_POSE, (0.0, 0.5, 0.3))
+    ]
     a = simulate_batch(stack(rows), controller=original, config=CFG)
     lin = [r._replace(gains=C.linear_params(r.gains)) for r in rows]
     b = simulate_batch(stack(lin), controller=C.linear, config=CFG)

@@ -24,11 +24,18 @@ from pfjax.montecarlo.study import run
 from pfjax.sim.status import STATUS_NAMES
 
 BASE = {
-    "name": "det", "n_runs": 20, "seed": 11, "chunk_size": 20, "f64_check_runs": 0,
-    "sim": {"horizon": 2.0, "steady_window": 1.0}, "success": {"from_s": 1.0, "band": 0.2},
+    "name": "det",
+    "n_runs": 20,
+    "seed": 11,
+    "chunk_size": 20,
+    "f64_check_runs": 0,
+    "sim": {"horizon": 2.0, "steady_window": 1.0},
+    "success": {"from_s": 1.0, "band": 0.2},
     "slip": {"kind": "ou", "beta_r_deg": {"dist": "uniform", "low": -5, "high": 5}, "ou_sigma_deg": 2.0},
-    "initial": {"lateral_offset": {"dist": "uniform", "low": -0.3, "high": 0.3},
-                "heading_error_deg": {"dist": "uniform", "low": -20, "high": 20}},
+    "initial": {
+        "lateral_offset": {"dist": "uniform", "low": -0.3, "high": 0.3},
+        "heading_error_deg": {"dist": "uniform", "low": -20, "high": 20},
+    },
     "margin": {"enabled": False},
     "paths": [{"kind": "sine"}],
     "controllers": [{"name": "pi", "type": "pi"}],
@@ -55,8 +62,9 @@ def test_controllers_share_sampled_chunks_with_the_same_rows(monkeypatch):
     re-sampling per controller (budget 0) gives bit-identical rows: sampling is deterministic."""
     from pfjax.montecarlo import runner
 
-    data = copy.deepcopy(BASE) | {"controllers": [{"name": "pi", "type": "pi"}, {"name": "pi2", "type": "pi"},
-                                                 {"name": "st", "type": "stanley"}]}
+    data = copy.deepcopy(BASE) | {
+        "controllers": [{"name": "pi", "type": "pi"}, {"name": "pi2", "type": "pi"}, {"name": "st", "type": "stanley"}]
+    }
     spec = load_study(data=data, overrides=["chunk_size=8"])[0]  # 20 runs: chunks of 8, 8, 4
     calls, real = [], runner.sample_aligned
     monkeypatch.setattr(runner, "sample_aligned", lambda *a, **k: calls.append(1) or real(*a, **k))
@@ -65,7 +73,9 @@ def test_controllers_share_sampled_chunks_with_the_same_rows(monkeypatch):
         calls.clear()
         with precision(spec):
             ctrls = {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
-            df = pd.concat([df for _, _, df in simulate_runs(spec, 0, np.arange(spec.n_runs), ctrls)], ignore_index=True)
+            df = pd.concat(
+                [df for _, _, df in simulate_runs(spec, 0, np.arange(spec.n_runs), ctrls)], ignore_index=True
+            )
         return df, len(calls)
 
     shared, n_shared = rows()
@@ -77,8 +87,14 @@ def test_controllers_share_sampled_chunks_with_the_same_rows(monkeypatch):
 
 
 FAILING = {
-    "name": "fail", "n_runs": 8, "seed": 2, "chunk_size": 8, "f64_check_runs": 8, "dtype": "float32",
-    "sim": {"horizon": 3.0, "steady_window": 1.0, "d_fail": 0.4}, "success": {"from_s": 1.0, "band": 0.3},
+    "name": "fail",
+    "n_runs": 8,
+    "seed": 2,
+    "chunk_size": 8,
+    "f64_check_runs": 8,
+    "dtype": "float32",
+    "sim": {"horizon": 3.0, "steady_window": 1.0, "d_fail": 0.4},
+    "success": {"from_s": 1.0, "band": 0.3},
     "initial": {"lateral_offset": {"dist": "uniform", "low": -0.2, "high": 0.2}},
     # a quarter of the runs drive at 3e38 m/s (set below, past the schema's magnitude bound): float32 RK4
     # overflows to inf in the first step (status nonfinite)
@@ -87,11 +103,20 @@ FAILING = {
     "paths": [
         {"kind": "line", "name": "blowup"},  # state feedback with gains at the bound
         {"kind": "line", "name": "away"},  # positive feedback drives |d| past d_fail
-        {"kind": "circle", "radius": 0.12},  # tighter than the steering limit: the robot passes the centre (1 - kappa d <= 0)
-        {"kind": "spline", "name": "short", "points": [[0, 0], [0.5, 0.05], [1.0, 0.0], [1.5, 0.05]]},  # ends after 1.6 m
+        {
+            "kind": "circle",
+            "radius": 0.12,
+        },  # tighter than the steering limit: the robot passes the centre (1 - kappa d <= 0)
+        {
+            "kind": "spline",
+            "name": "short",
+            "points": [[0, 0], [0.5, 0.05], [1.0, 0.0], [1.5, 0.05]],
+        },  # ends after 1.6 m
     ],
-    "controllers": [{"name": "bad", "type": "state_feedback", "K": [1e12, -1e12]},
-                    {"name": "unstable", "type": "state_feedback", "K": [2.0, 0.5]}],
+    "controllers": [
+        {"name": "bad", "type": "state_feedback", "K": [1e12, -1e12]},
+        {"name": "unstable", "type": "state_feedback", "K": [2.0, 0.5]},
+    ],
 }
 
 
@@ -121,7 +146,10 @@ def test_every_status_is_reached_kept_and_counted(failing):
         counts = runs[runs.controller == name]["status"].value_counts().to_dict()
         assert c["status_counts"] == counts
         for path, b in c["per_path"].items():
-            assert b["status_counts"] == runs[(runs.controller == name) & (runs.path == path)]["status"].value_counts().to_dict()
+            assert (
+                b["status_counts"]
+                == runs[(runs.controller == name) & (runs.path == path)]["status"].value_counts().to_dict()
+            )
     assert len(on_disk["warnings"]) == 2  # the circle (curvature) and the short spline (length)
     html = (out / "report.html").read_text()
     for s in STATUS_NAMES.values():

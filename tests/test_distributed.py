@@ -57,8 +57,9 @@ def _free_port() -> int:
 
 
 def _cli(args, env):
-    return subprocess.Popen([sys.executable, "-m", "pfjax.cli", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env)
+    return subprocess.Popen(
+        [sys.executable, "-m", "pfjax.cli", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
 
 
 def test_two_processes_give_the_runs_of_two_devices_and_only_process_0_writes(tmp_path):
@@ -68,8 +69,26 @@ def test_two_processes_give_the_runs_of_two_devices_and_only_process_0_writes(tm
     scratch.mkdir()
     env = {**os.environ, "PFJAX_FIGURE_WORKER": "0", "TMPDIR": str(scratch)}
     coord = f"127.0.0.1:{_free_port()}"
-    procs = [_cli(["study", str(cfg), "--out", str(tmp_path / f"p{i}"), "--quiet", "--json", "--coordinator", coord,
-                   "--num-processes", "2", "--process-id", str(i)], {**env, "PFJAX_HOST_DEVICES": "1"}) for i in (0, 1)]
+    procs = [
+        _cli(
+            [
+                "study",
+                str(cfg),
+                "--out",
+                str(tmp_path / f"p{i}"),
+                "--quiet",
+                "--json",
+                "--coordinator",
+                coord,
+                "--num-processes",
+                "2",
+                "--process-id",
+                str(i),
+            ],
+            {**env, "PFJAX_HOST_DEVICES": "1"},
+        )
+        for i in (0, 1)
+    ]
     outs = [p.communicate(timeout=600) for p in procs]
     assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
     lead, other = (json.loads(o[0]) for o in outs)  # stdout is one JSON object each (Gloo's lines went to stderr)
@@ -77,12 +96,15 @@ def test_two_processes_give_the_runs_of_two_devices_and_only_process_0_writes(tm
     assert lead["chunks"] == {"simulated": 5, "resumed": 0}  # 2 chunks of runs, 3 of the margin sweep (one per axis)
     assert lead["process_count"] == 2 and lead["out"] == str(tmp_path / "p0")
     assert not (tmp_path / "p1").exists() and not list(scratch.iterdir())  # process 1 kept nothing
-    one = _cli(["study", str(cfg), "--out", str(tmp_path / "one"), "--quiet", "--json"], {**env, "PFJAX_HOST_DEVICES": "2"})
+    one = _cli(
+        ["study", str(cfg), "--out", str(tmp_path / "one"), "--quiet", "--json"], {**env, "PFJAX_HOST_DEVICES": "2"}
+    )
     out, err = one.communicate(timeout=600)
     assert one.returncode == 0, err[-2000:]
     for f in ("runs.parquet", "margin.parquet"):
-        pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "p0" / f), pd.read_parquet(tmp_path / "one" / f),
-                                      check_exact=True)
+        pd.testing.assert_frame_equal(
+            pd.read_parquet(tmp_path / "p0" / f), pd.read_parquet(tmp_path / "one" / f), check_exact=True
+        )
     strip = lambda s: {k: v for k, v in s.items() if k not in ("wall_s", "timings_s")}
     a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("p0", "one"))
     assert strip(a) == strip(b)  # worst-case search and float64 check included (process 0's own device)
@@ -91,9 +113,28 @@ def test_two_processes_give_the_runs_of_two_devices_and_only_process_0_writes(tm
 
 def _pair(cfg, out, env, *extra):
     coord = f"127.0.0.1:{_free_port()}"
-    procs = [_cli(["study", str(cfg), "--out", str(out), "--quiet", "--json", "--no-report", "--coordinator", coord,
-                   "--num-processes", "2", "--process-id", str(i), *extra], {**env, "PFJAX_HOST_DEVICES": "1"})
-             for i in (0, 1)]
+    procs = [
+        _cli(
+            [
+                "study",
+                str(cfg),
+                "--out",
+                str(out),
+                "--quiet",
+                "--json",
+                "--no-report",
+                "--coordinator",
+                coord,
+                "--num-processes",
+                "2",
+                "--process-id",
+                str(i),
+                *extra,
+            ],
+            {**env, "PFJAX_HOST_DEVICES": "1"},
+        )
+        for i in (0, 1)
+    ]
     return procs, [p.communicate(timeout=600) for p in procs]
 
 
@@ -162,14 +203,17 @@ def test_a_refused_resume_stops_every_process_with_one_line(case, tmp_path):
     assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
 
 
-@pytest.mark.parametrize("flags, flag", [
-    (["--coordinator", "127.0.0.1:1234"], "--num-processes"),
-    (["--coordinator", "127.0.0.1:1234", "--num-processes", "2"], "--process-id"),
-    (["--num-processes", "2", "--process-id", "0"], "--coordinator"),
-    (["--coordinator", "nohostport", "--num-processes", "2", "--process-id", "0"], "--coordinator"),
-    (["--coordinator", "127.0.0.1:1234", "--num-processes", "0", "--process-id", "0"], "--num-processes"),
-    (["--coordinator", "127.0.0.1:1234", "--num-processes", "2", "--process-id", "2"], "--process-id"),
-])
+@pytest.mark.parametrize(
+    "flags, flag",
+    [
+        (["--coordinator", "127.0.0.1:1234"], "--num-processes"),
+        (["--coordinator", "127.0.0.1:1234", "--num-processes", "2"], "--process-id"),
+        (["--num-processes", "2", "--process-id", "0"], "--coordinator"),
+        (["--coordinator", "nohostport", "--num-processes", "2", "--process-id", "0"], "--coordinator"),
+        (["--coordinator", "127.0.0.1:1234", "--num-processes", "0", "--process-id", "0"], "--num-processes"),
+        (["--coordinator", "127.0.0.1:1234", "--num-processes", "2", "--process-id", "2"], "--process-id"),
+    ],
+)
 def test_bad_distributed_flags_are_one_line_naming_the_flag(flags, flag, tmp_path, capsys):
     cfg = tmp_path / "dist.toml"
     cfg.write_text(STUDY)

@@ -12,9 +12,21 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-PAGES = ["index", "getting-started", "concepts", "studies", "design-and-tuning", "reproductions/path-following",
-         "reproductions/parking", "reproductions/vehicle-tracking", "verification", "performance", "extending", "api",
-         "changelog"]
+PAGES = [
+    "index",
+    "getting-started",
+    "concepts",
+    "studies",
+    "design-and-tuning",
+    "reproductions/path-following",
+    "reproductions/parking",
+    "reproductions/vehicle-tracking",
+    "verification",
+    "performance",
+    "extending",
+    "api",
+    "changelog",
+]
 NOTEBOOKS = sorted(p.stem for p in (ROOT / "notebooks").glob("*.ipynb"))
 
 
@@ -23,8 +35,14 @@ def site(tmp_path_factory):
     pytest.importorskip("mkdocs")
     out = tmp_path_factory.mktemp("site")
     env = {**os.environ, "PFJAX_DOCS_EXECUTE": "false", "NO_MKDOCS_2_WARNING": "1"}
-    r = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(out)], cwd=ROOT, env=env,
-                       capture_output=True, text=True, timeout=900)
+    r = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(out)],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-6000:]
     return out
 
@@ -61,17 +79,29 @@ def test_api_reference_documents_the_public_api(site):
 
 
 # Development-process vocabulary, spelled in pieces so this file does not match itself.
-PROCESS = [r"\bstop " + r"\d+", r"\bstops " + r"\d+", r"earlier " + "stops", r"\b(until|since|at) " + r"stop\b",
-           r"this " + "session", r"\bissue " + r"\d+", r"the " + r"issue'?s?\b", r"\.\./" + "shared"]
+PROCESS = [
+    r"\bstop " + r"\d+",
+    r"\bstops " + r"\d+",
+    r"earlier " + "stops",
+    r"\b(until|since|at) " + r"stop\b",
+    r"this " + "session",
+    r"\bissue " + r"\d+",
+    r"the " + r"issue'?s?\b",
+    r"\.\./" + "shared",
+]
 
 
 def _tracked_text_files():
-    out = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=ROOT, capture_output=True, text=True,
-                         check=True).stdout.split()
+    out = subprocess.run(
+        ["git", "ls-files", "-co", "--exclude-standard"], cwd=ROOT, capture_output=True, text=True, check=True
+    ).stdout.split()
     for name in out:
         p = ROOT / name
-        if p.suffix in (".py", ".md", ".toml", ".ipynb", ".cff", ".yml", ".j2", ".txt", ".cfg") and p.is_file() \
-                and name != "tests/test_docs.py":
+        if (
+            p.suffix in (".py", ".md", ".toml", ".ipynb", ".cff", ".yml", ".j2", ".txt", ".cfg")
+            and p.is_file()
+            and name != "tests/test_docs.py"
+        ):
             yield name, p.read_text(errors="replace")
 
 
@@ -80,7 +110,7 @@ def test_nothing_speaks_of_how_pfjax_was_made():
     for name, text in _tracked_text_files():
         for pattern in PROCESS:
             for m in re.finditer(pattern, text, re.I):
-                line = text[:m.start()].count("\n") + 1
+                line = text[: m.start()].count("\n") + 1
                 found.append(f"{name}:{line}: {text.splitlines()[line - 1].strip()[:120]}")
     assert not found, "\n".join(found[:40])
 

@@ -42,8 +42,13 @@ def _trig_inputs(dtype):
     set whatever order the tests run in."""
     rng = np.random.default_rng(8)
     lim = E.REDUCTION_LIMIT[np.dtype(dtype)]
-    x = np.concatenate([rng.uniform(-np.pi, np.pi, 60000), rng.uniform(-lim, lim, 60000),
-                        np.sign(rng.standard_normal(20000)) * np.exp(rng.uniform(np.log(1e-30), np.log(lim), 20000))])
+    x = np.concatenate(
+        [
+            rng.uniform(-np.pi, np.pi, 60000),
+            rng.uniform(-lim, lim, 60000),
+            np.sign(rng.standard_normal(20000)) * np.exp(rng.uniform(np.log(1e-30), np.log(lim), 20000)),
+        ]
+    )
     k = np.unique(np.geomspace(1, 2 * lim / np.pi - 1, 5000).astype(np.int64))
     near = [(k * (np.longdouble(np.pi) / 2)).astype(dtype)]
     for _ in range(3):
@@ -100,8 +105,13 @@ def test_special_values_match_numpy(dtype):
     v = np.array([0.0, -0.0, 1.0, -1.0, np.inf, -np.inf, np.nan, 1e-30, -1e-30], dtype)
     with np.errstate(invalid="ignore"):
         for name, ref in (("sin", np.sin), ("cos", np.cos), ("tan", np.tan), ("atan", np.arctan)):
-            np.testing.assert_allclose(np.asarray(getattr(E, name)(v)), ref(v), rtol=4e-7 if dtype == np.float32 else 1e-15,
-                                       equal_nan=True, err_msg=name)
+            np.testing.assert_allclose(
+                np.asarray(getattr(E, name)(v)),
+                ref(v),
+                rtol=4e-7 if dtype == np.float32 else 1e-15,
+                equal_nan=True,
+                err_msg=name,
+            )
         np.testing.assert_array_equal(np.signbit(np.asarray(E.atan(v))), np.signbit(np.arctan(v)))
         a, b = np.meshgrid(v, v)
         got, ref = np.asarray(E.atan2(a, b)), np.arctan2(a, b)
@@ -187,9 +197,16 @@ def test_rsqrt_accuracy_and_special_values(dtype, width):
     """1/sqrt(x) over the whole normal range (log-uniform 1e-300..1e300 in float64, 1e-37..1e38 in
     float32, and near 1) and at the exponent extremes where the float64 path rescales by 2^+-1000."""
     lo, hi = (-37.5, 38.2) if dtype == np.float32 else (-307.5, 308.2)
-    x = np.concatenate([10.0 ** RNG.uniform(lo, hi, 100000), RNG.uniform(0.5, 2.0, 50000),
-                        [2.0**1000, 2.0**-1000, np.nextafter(2.0**1000, 0), np.nextafter(2.0**-1000, 1)] if dtype == np.float64 else [],
-                        [np.finfo(dtype).max, np.finfo(dtype).tiny]]).astype(dtype)
+    x = np.concatenate(
+        [
+            10.0 ** RNG.uniform(lo, hi, 100000),
+            RNG.uniform(0.5, 2.0, 50000),
+            [2.0**1000, 2.0**-1000, np.nextafter(2.0**1000, 0), np.nextafter(2.0**-1000, 1)]
+            if dtype == np.float64
+            else [],
+            [np.finfo(dtype).max, np.finfo(dtype).tiny],
+        ]
+    ).astype(dtype)
     got = np.asarray(_jit(E.rsqrt, width)(x))
     assert got.dtype == dtype
     ref = 1.0 / np.sqrt(x.astype(np.longdouble))
@@ -240,7 +257,9 @@ def _subjaxprs(params):
 
 
 def test_the_trace_walker_finds_xla_trigonometry():
-    assert _xla_trig(jax.make_jaxpr(lambda x: jax.lax.scan(lambda c, _: (jnp.arctan(c), None), x, None, 3))(0.5)) == {"atan"}
+    assert _xla_trig(jax.make_jaxpr(lambda x: jax.lax.scan(lambda c, _: (jnp.arctan(c), None), x, None, 3))(0.5)) == {
+        "atan"
+    }
     assert _xla_trig(jax.make_jaxpr(lambda x: E.atan2(E.sin(x), E.cos(x)) + E.tan(x) + E.atan(x))(0.5)) == set()
 
 
@@ -251,12 +270,15 @@ def _slip_run(name):
     """``(run, scenario)``: a short path-following run of controller ``name`` on the paper's sine
     scenario (``run(scenario)`` simulates it; the scenario in the tests' default float64)."""
     from pfjax import controllers as C
-    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import SimConfig
+    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim.simulate import simulate
 
-    ctrl, gains = (C.linear, C.linear_params(C.state_feedback_params())) if name == "linear" else \
-        (C.REGISTRY[name][0], C.REGISTRY[name][1]())
+    ctrl, gains = (
+        (C.linear, C.linear_params(C.state_feedback_params()))
+        if name == "linear"
+        else (C.REGISTRY[name][0], C.REGISTRY[name][1]())
+    )
     return (lambda s: simulate(ctrl, s, SimConfig(dt=0.01, horizon=0.1))), paper_scenario("sine", gains)
 
 
@@ -291,7 +313,10 @@ def test_parking_and_tracking_simulators_use_no_xla_trigonometry():
     from pfjax.tracking import leader as L
 
     omap = to_obstacle_map(list(PARALLEL.values()))
-    assert _xla_trig(jax.make_jaxpr(lambda p: run(p, omap, ParkingConfig()))(run_params((-0.4, 0.5, 0.0), 1, (1.0,)))) == set()
+    assert (
+        _xla_trig(jax.make_jaxpr(lambda p: run(p, omap, ParkingConfig()))(run_params((-0.4, 0.5, 0.0), 1, (1.0,))))
+        == set()
+    )
     params = T.FollowerParams(a=1.0, f=1.0, l=1.0, p=1.0)
     sc = T.scenario(params, L.sine(), init=T.initial_state(L.sine(), params))
     cfg = T.TrackConfig(dt=0.02, horizon=0.2, window=0.1)

@@ -25,8 +25,8 @@ from pfjax import controllers as C
 from pfjax.falsification import OBJECTIVES, falsify, random_search, search_space, worst_trajectory
 from pfjax.falsification import search as falsify_search
 from pfjax.paths import line, sine
-from pfjax.sim.scenario import make_scenario
 from pfjax.sim import SimConfig, sampled_slip, simulate_batch
+from pfjax.sim.scenario import make_scenario
 
 DEG = math.pi / 180
 SF = C.state_feedback_params()  # the source's K
@@ -42,8 +42,9 @@ VERTICES = [(1, 1), (1, -1), (-1, 1), (-1, -1)]
 
 # Paper case: the source's sine path and K, 10 deg slip up to 0.5 Hz, 20 cm and 10 deg initial errors.
 PAPER_CFG = SimConfig(dt=0.02, horizon=10.0)
-PAPER = dict(config=PAPER_CFG, slip_bound_deg=10.0, f_max_hz=0.5,
-             ic_bounds={"d": (-0.2, 0.2), "theta_e_deg": (-10.0, 10.0)})
+PAPER = dict(
+    config=PAPER_CFG, slip_bound_deg=10.0, f_max_hz=0.5, ic_bounds={"d": (-0.2, 0.2), "theta_e_deg": (-10.0, 10.0)}
+)
 RESTARTS, STEPS = 8, 25  # 200 rollouts
 
 
@@ -74,8 +75,18 @@ def test_constant_slip_worst_case_is_the_worst_vertex(brute):
     # Reflection symmetry of the loop about the line: opposite vertices are equally bad.
     assert vertices[1] == pytest.approx(vertices[2], rel=1e-9)
     assert np.argmax(vertices) in (1, 2)
-    r = falsify(C.state_feedback, SF, line(), config=LINE_CFG, slip_bound_deg=A_LIN, f_max_hz=0.0,
-                ic_bounds=ON_PATH, n_restarts=8, steps=30, key=jax.random.PRNGKey(0))
+    r = falsify(
+        C.state_feedback,
+        SF,
+        line(),
+        config=LINE_CFG,
+        slip_bound_deg=A_LIN,
+        f_max_hz=0.0,
+        ic_bounds=ON_PATH,
+        n_restarts=8,
+        steps=30,
+        key=jax.random.PRNGKey(0),
+    )
     best = vertices.max()
     assert 0.99 * best <= float(r.objective) <= best * (1 + 1e-3), (float(r.objective), vertices)
     slip = np.asarray(r.slip)
@@ -86,8 +97,20 @@ def test_constant_slip_worst_case_is_the_worst_vertex(brute):
 
 def test_single_frequency_worst_phases_match_brute_force(brute):
     _, grid, phases = brute
-    r = falsify(C.state_feedback, SF, line(), config=LINE_CFG, slip_bound_deg=A_LIN, f_max_hz=F_LIN, n_freq=1,
-                with_constant=False, ic_bounds=ON_PATH, n_restarts=8, steps=30, key=jax.random.PRNGKey(1))
+    r = falsify(
+        C.state_feedback,
+        SF,
+        line(),
+        config=LINE_CFG,
+        slip_bound_deg=A_LIN,
+        f_max_hz=F_LIN,
+        n_freq=1,
+        with_constant=False,
+        ic_bounds=ON_PATH,
+        n_restarts=8,
+        steps=30,
+        key=jax.random.PRNGKey(1),
+    )
     best = grid.max()
     assert 0.99 * best <= float(r.objective) <= 1.01 * best, (float(r.objective), best)
     # The phase difference between the axles: the falsifier's within one grid step of the brute force's.
@@ -161,13 +184,16 @@ def test_every_objective_shares_one_compile(paper):
     assert falsify_search._ascent_step._cache_size() == compiled
 
 
-@pytest.mark.parametrize("kw, match", [
-    (dict(ic_bounds={"y": (0, 1)}), "unknown key 'y'"),
-    (dict(ic_bounds={"d": (0.2, -0.2)}), r"ic_bounds\['d'\]"),
-    (dict(f_max_hz=20.0), "f_max_hz"),
-    (dict(slip_bound_deg=-1.0), "slip_bound_deg"),
-    (dict(f_max_hz=0.0, with_constant=False), "no slip"),
-])
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(ic_bounds={"y": (0, 1)}), "unknown key 'y'"),
+        (dict(ic_bounds={"d": (0.2, -0.2)}), r"ic_bounds\['d'\]"),
+        (dict(f_max_hz=20.0), "f_max_hz"),
+        (dict(slip_bound_deg=-1.0), "slip_bound_deg"),
+        (dict(f_max_hz=0.0, with_constant=False), "no slip"),
+    ],
+)
 def test_search_space_rejects_bad_bounds(kw, match):
     args = dict(horizon=1.0, slip_bound_deg=5.0, f_max_hz=1.0, ic_bounds={}) | kw
     with pytest.raises(ValueError, match=match):
@@ -176,8 +202,9 @@ def test_search_space_rejects_bad_bounds(kw, match):
 
 def test_unknown_objective():
     with pytest.raises(ValueError, match="objective"):
-        falsify(C.state_feedback, SF, line(), **{**PAPER, "config": LINE_CFG}, objective="iea",
-                key=jax.random.PRNGKey(0))
+        falsify(
+            C.state_feedback, SF, line(), **{**PAPER, "config": LINE_CFG}, objective="iea", key=jax.random.PRNGKey(0)
+        )
 
 
 def test_a_search_compiles_few_programs():
@@ -185,7 +212,9 @@ def test_a_search_compiles_few_programs():
     simulator, the replay, the sampling, scenario building), not one per eager operation: 23 here
     (jax 0.10.2), against 81 before its small steps were jitted."""
     events = []
-    listener = lambda name, secs, **kw: events.append(name) if name == "/jax/core/compile/backend_compile_duration" else None
+    listener = lambda name, secs, **kw: (
+        events.append(name) if name == "/jax/core/compile/backend_compile_duration" else None
+    )
     jax.monitoring.register_event_duration_secs_listener(listener)
     try:
         cfg = SimConfig(dt=0.02, horizon=1.26)  # shapes no other test uses

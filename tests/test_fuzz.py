@@ -35,29 +35,108 @@ from pfjax.montecarlo.config import StudySpec, load_study
 from pfjax.parking.maps import parse_map
 
 EXAMPLES = int(os.environ.get("PFJAX_FUZZ_EXAMPLES", "0")) or None
-FUZZ = settings(max_examples=EXAMPLES or 60, deadline=None, derandomize=EXAMPLES is None,
-                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=EXAMPLES or 60,
+    deadline=None,
+    derandomize=EXAMPLES is None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 
-BASE = {"name": "fz", "n_runs": 4, "seed": 1, "chunk_size": 4, "sim": {"horizon": 2.0, "steady_window": 1.0},
-        "success": {"from_s": 1.0}, "margin": {"enabled": False}, "paths": [{"kind": "line"}],
-        "controllers": [{"name": "st", "type": "stanley"}]}
+BASE = {
+    "name": "fz",
+    "n_runs": 4,
+    "seed": 1,
+    "chunk_size": 4,
+    "sim": {"horizon": 2.0, "steady_window": 1.0},
+    "success": {"from_s": 1.0},
+    "margin": {"enabled": False},
+    "paths": [{"kind": "line"}],
+    "controllers": [{"name": "st", "type": "stanley"}],
+}
 
 #: Values no numeric field should take, and some that only some fields reject.
-HOSTILE = [math.nan, math.inf, -math.inf, 1e308, -1e308, 1e-300, -1e-300, 2**63, -(2**63), 10**400, -(10**400),
-           True, False, "1", "", [], {}, [1.0], {"dist": "uniform"}, 0, -1, 0.0, 1e13]
+HOSTILE = [
+    math.nan,
+    math.inf,
+    -math.inf,
+    1e308,
+    -1e308,
+    1e-300,
+    -1e-300,
+    2**63,
+    -(2**63),
+    10**400,
+    -(10**400),
+    True,
+    False,
+    "1",
+    "",
+    [],
+    {},
+    [1.0],
+    {"dist": "uniform"},
+    0,
+    -1,
+    0.0,
+    1e13,
+]
 #: Dotted keys of the schema's scalar fields (and list items), with the sections they live in.
-KEYS = ["name", "n_runs", "seed", "chunk_size", "dtype", "f64_check_runs",
-        "sim.dt", "sim.horizon", "sim.control_every", "sim.d_fail", "sim.steady_window", "sim.settle_band",
-        "success.band", "success.from_s",
-        "vehicle.speed", "vehicle.L", "vehicle.delta_max_deg", "vehicle.delta_rate_max_deg", "vehicle.convention",
-        "slip.kind", "slip.beta_r_deg", "slip.beta_f_deg", "slip.step_time_s", "slip.step_r_deg", "slip.amp_r_deg",
-        "slip.freq_hz", "slip.ou_sigma_deg", "slip.ou_tau_s", "slip.seq_dt",
-        "initial.start_along_m", "initial.lateral_offset", "initial.heading_error_deg",
-        "noise.sigma_d", "noise.sigma_theta_e_deg",
-        "margin.enabled", "margin.amplitudes_deg", "margin.n_per_amplitude", "margin.eps", "margin.axes",
-        "falsifier.enabled", "falsifier.slip_bound_deg", "falsifier.f_max_hz", "falsifier.steps", "falsifier.n_restarts",
-        "paths[0].kind", "paths[0].radius", "paths[0].length", "paths[0].n_waypoints", "paths[0].points",
-        "controllers[0].name", "controllers[0].type", "controllers[0].K", "controllers[0].gains", "controllers[0].alpha"]
+KEYS = [
+    "name",
+    "n_runs",
+    "seed",
+    "chunk_size",
+    "dtype",
+    "f64_check_runs",
+    "sim.dt",
+    "sim.horizon",
+    "sim.control_every",
+    "sim.d_fail",
+    "sim.steady_window",
+    "sim.settle_band",
+    "success.band",
+    "success.from_s",
+    "vehicle.speed",
+    "vehicle.L",
+    "vehicle.delta_max_deg",
+    "vehicle.delta_rate_max_deg",
+    "vehicle.convention",
+    "slip.kind",
+    "slip.beta_r_deg",
+    "slip.beta_f_deg",
+    "slip.step_time_s",
+    "slip.step_r_deg",
+    "slip.amp_r_deg",
+    "slip.freq_hz",
+    "slip.ou_sigma_deg",
+    "slip.ou_tau_s",
+    "slip.seq_dt",
+    "initial.start_along_m",
+    "initial.lateral_offset",
+    "initial.heading_error_deg",
+    "noise.sigma_d",
+    "noise.sigma_theta_e_deg",
+    "margin.enabled",
+    "margin.amplitudes_deg",
+    "margin.n_per_amplitude",
+    "margin.eps",
+    "margin.axes",
+    "falsifier.enabled",
+    "falsifier.slip_bound_deg",
+    "falsifier.f_max_hz",
+    "falsifier.steps",
+    "falsifier.n_restarts",
+    "paths[0].kind",
+    "paths[0].radius",
+    "paths[0].length",
+    "paths[0].n_waypoints",
+    "paths[0].points",
+    "controllers[0].name",
+    "controllers[0].type",
+    "controllers[0].K",
+    "controllers[0].gains",
+    "controllers[0].alpha",
+]
 
 
 def _set(data: dict, key: str, value) -> None:
@@ -98,7 +177,11 @@ def _toml(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):
-        return "nan" if math.isnan(value) else ("inf" if value == math.inf else "-inf" if value == -math.inf else repr(value))
+        return (
+            "nan"
+            if math.isnan(value)
+            else ("inf" if value == math.inf else "-inf" if value == -math.inf else repr(value))
+        )
     if isinstance(value, str):
         return json.dumps(value)
     if isinstance(value, list):
@@ -126,11 +209,29 @@ def test_schema_raises_only_input_errors_and_accepts_only_sane_configs(changes):
     _check_invariants(spec)
 
 
-KEY_TEXT = st.one_of(st.sampled_from(KEYS), st.text(alphabet="abc_[]0.-= \t", min_size=0, max_size=12),
-                     st.sampled_from(["controllers[abc].name", "controllers[].name", "paths[9].kind", ".", "a..b",
-                                      "[0]", "controllers[0]]", "sim.", "n_runs[0]", "controllers[-99].name"]))
-VALUE_TEXT = st.one_of(st.sampled_from([_toml(v) for v in HOSTILE if not (isinstance(v, int) and abs(v) > 2**64)]),
-                       st.text(max_size=12), st.sampled_from(["{", "[1,", "'", "1e999", "0x", "{dist='normal'}"]))
+KEY_TEXT = st.one_of(
+    st.sampled_from(KEYS),
+    st.text(alphabet="abc_[]0.-= \t", min_size=0, max_size=12),
+    st.sampled_from(
+        [
+            "controllers[abc].name",
+            "controllers[].name",
+            "paths[9].kind",
+            ".",
+            "a..b",
+            "[0]",
+            "controllers[0]]",
+            "sim.",
+            "n_runs[0]",
+            "controllers[-99].name",
+        ]
+    ),
+)
+VALUE_TEXT = st.one_of(
+    st.sampled_from([_toml(v) for v in HOSTILE if not (isinstance(v, int) and abs(v) > 2**64)]),
+    st.text(max_size=12),
+    st.sampled_from(["{", "[1,", "'", "1e999", "0x", "{dist='normal'}"]),
+)
 
 
 @FUZZ
@@ -184,10 +285,12 @@ def _refused(argv: list[str], root: Path, flags=None) -> None:
 @pytest.fixture(scope="module")
 def root(tmp_path_factory):
     r = tmp_path_factory.mktemp("fuzz")
-    (r / "s.toml").write_text("\n".join(f"{k} = {_toml(v)}" for k, v in BASE.items() if not isinstance(v, (dict, list)))
-                              + "\n[sim]\nhorizon = 2.0\nsteady_window = 1.0\n[success]\nfrom_s = 1.0\n[margin]\n"
-                              "enabled = false\n[[paths]]\nkind = \"line\"\n[[controllers]]\nname = \"st\"\n"
-                              "type = \"stanley\"\n")
+    (r / "s.toml").write_text(
+        "\n".join(f"{k} = {_toml(v)}" for k, v in BASE.items() if not isinstance(v, (dict, list)))
+        + "\n[sim]\nhorizon = 2.0\nsteady_window = 1.0\n[success]\nfrom_s = 1.0\n[margin]\n"
+        'enabled = false\n[[paths]]\nkind = "line"\n[[controllers]]\nname = "st"\n'
+        'type = "stanley"\n'
+    )
     (r / "keep").mkdir()
     (r / "keep" / "thesis.tex").write_text("data")
     (r / "a_file").write_text("x")
@@ -195,8 +298,10 @@ def root(tmp_path_factory):
 
 
 @FUZZ
-@given(st.lists(st.tuples(st.sampled_from(KEYS), st.sampled_from(HOSTILE)), min_size=1, max_size=2),
-       st.sampled_from([None, "keep", ".", "..", "a_file/sub", "new"]))
+@given(
+    st.lists(st.tuples(st.sampled_from(KEYS), st.sampled_from(HOSTILE)), min_size=1, max_size=2),
+    st.sampled_from([None, "keep", ".", "..", "a_file/sub", "new"]),
+)
 def test_cli_study_refuses_bad_configs_and_outputs(root, changes, out):
     data = json.loads(json.dumps(BASE))
     for key, value in changes:
@@ -215,28 +320,71 @@ def test_cli_study_refuses_bad_configs_and_outputs(root, changes, out):
 #: Per subcommand: the flags and values none of which may be accepted (each example uses one or
 #: more of them, with otherwise valid arguments).
 BAD_FLAGS = {
-    "simulate": {"--speed": ["0", "-1", "nan", "inf", "1e308"], "--wheelbase": ["0", "-0.2", "nan"],
-                 "--beta-r-deg": ["90", "-95", "nan", "1e400"], "--beta-f-deg": ["91", "inf"],
-                 "--delta-max-deg": ["0", "90", "-5"], "--horizon": ["0", "-1", "inf", "1e308"],
-                 "--dt": ["0", "-0.1", "1e-300", "nan"], "--control-every": ["0", "-3"],
-                 "--gains": ["", ",", "1,2", "kp_d=1,kp_d=2", "nan,1,1,1,1", "x=1", "1,kp_d=2", "1e999,0,0,0,0"],
-                 "--x0": [["0", "nan", "0"], ["inf", "0", "0"], ["1e308", "0", "0"],
-                          ["0", "0", "1e13"]]},  # THETA in deg
-    "synth": {"--speed": ["0", "nan"], "--wheelbase": ["-1", "inf"], "--alpha": ["-1", "nan"], "--beta": ["-2"],
-              "--disk": [["0", "-1"], ["nan", "1"]], "--sector-deg": ["0", "95", "nan"], "--max-real": ["inf"]},
-    "tune": {"--population": ["1", "0", "100000000"], "--generations": ["-1"], "--steps": ["0"], "--starts": ["0"],
-             "--lr": ["0", "nan", "-1"], "--level": ["0", "1", "2"], "--effort": ["-1", "inf"], "--n-runs": ["0"],
-             "--seed": ["-1", "9223372036854775808"], "--horizon": ["0", "inf"], "--dt": ["0", "1e-300"],
-             "--cost": ["mse"], "--aggregate": ["max"]},
+    "simulate": {
+        "--speed": ["0", "-1", "nan", "inf", "1e308"],
+        "--wheelbase": ["0", "-0.2", "nan"],
+        "--beta-r-deg": ["90", "-95", "nan", "1e400"],
+        "--beta-f-deg": ["91", "inf"],
+        "--delta-max-deg": ["0", "90", "-5"],
+        "--horizon": ["0", "-1", "inf", "1e308"],
+        "--dt": ["0", "-0.1", "1e-300", "nan"],
+        "--control-every": ["0", "-3"],
+        "--gains": ["", ",", "1,2", "kp_d=1,kp_d=2", "nan,1,1,1,1", "x=1", "1,kp_d=2", "1e999,0,0,0,0"],
+        "--x0": [["0", "nan", "0"], ["inf", "0", "0"], ["1e308", "0", "0"], ["0", "0", "1e13"]],
+    },  # THETA in deg
+    "synth": {
+        "--speed": ["0", "nan"],
+        "--wheelbase": ["-1", "inf"],
+        "--alpha": ["-1", "nan"],
+        "--beta": ["-2"],
+        "--disk": [["0", "-1"], ["nan", "1"]],
+        "--sector-deg": ["0", "95", "nan"],
+        "--max-real": ["inf"],
+    },
+    "tune": {
+        "--population": ["1", "0", "100000000"],
+        "--generations": ["-1"],
+        "--steps": ["0"],
+        "--starts": ["0"],
+        "--lr": ["0", "nan", "-1"],
+        "--level": ["0", "1", "2"],
+        "--effort": ["-1", "inf"],
+        "--n-runs": ["0"],
+        "--seed": ["-1", "9223372036854775808"],
+        "--horizon": ["0", "inf"],
+        "--dt": ["0", "1e-300"],
+        "--cost": ["mse"],
+        "--aggregate": ["max"],
+    },
     "bench": {"--sizes": ["0", "-5", ",", "1e6", "100000000000"], "--seed": ["-1"]},
-    "parking": {"--k1": ["0", "nan"], "--speed": ["-1", "inf"], "--scan-period": ["0", "100"], "--horizon": ["0"],
-                "--front": ["0", "0.6", "nan"], "--x0": [["0", "0", "95"], ["0", "0", "nan"], ["1e308", "0", "0"]],
-                "--alpha-schedule": ["", "a", "nan"]},
-    "track": {"--p": ["0", "nan"], "--l": ["0"], "--gamma-max-deg": ["0", "90"], "--speed": ["0", "-1"],
-              "--k": ["0"], "--dt": ["0", "inf"], "--horizon": ["-1"], "--stop-and-go": ["2", "-1"]},
+    "parking": {
+        "--k1": ["0", "nan"],
+        "--speed": ["-1", "inf"],
+        "--scan-period": ["0", "100"],
+        "--horizon": ["0"],
+        "--front": ["0", "0.6", "nan"],
+        "--x0": [["0", "0", "95"], ["0", "0", "nan"], ["1e308", "0", "0"]],
+        "--alpha-schedule": ["", "a", "nan"],
+    },
+    "track": {
+        "--p": ["0", "nan"],
+        "--l": ["0"],
+        "--gamma-max-deg": ["0", "90"],
+        "--speed": ["0", "-1"],
+        "--k": ["0"],
+        "--dt": ["0", "inf"],
+        "--horizon": ["-1"],
+        "--stop-and-go": ["2", "-1"],
+    },
 }
-REQUIRED = {"simulate": ["--path", "line", "--controller", "pi"], "synth": [], "tune": ["--method", "ga", "--controller", "pi"],
-            "bench": ["--quick", "--out", "b"], "parking": [], "track": []}
+REQUIRED = {
+    "simulate": ["--path", "line", "--controller", "pi"],
+    "synth": [],
+    "tune": ["--method", "ga", "--controller", "pi"],
+    "bench": ["--quick", "--out", "b"],
+    "parking": [],
+    "track": [],
+}
 
 
 @st.composite

@@ -49,8 +49,9 @@ def test_every_declared_dependency_is_pinned_inside_its_range():
     for req in declared():
         name = canonicalize_name(req.name)
         assert name in p, f"{req.name}: declared in pyproject.toml, not pinned in constraints.txt"
-        assert req.specifier.contains(Version(p[name]), prereleases=True), \
+        assert req.specifier.contains(Version(p[name]), prereleases=True), (
             f"{req.name}: pinned {p[name]}, outside the declared {req.specifier}"
+        )
 
 
 def test_jax_and_jaxlib_are_pinned_together():
@@ -76,8 +77,10 @@ def test_numba_is_the_bench_extra_not_a_core_dependency():
     assert [Requirement(r).name for r in project["optional-dependencies"]["bench"]] == ["numba"]
 
 
-@pytest.mark.skipif(Path(sys.prefix).resolve() != (ROOT / ".venv").resolve(),
-                    reason="runs in the project's .venv only (make test); other environments may differ")
+@pytest.mark.skipif(
+    Path(sys.prefix).resolve() != (ROOT / ".venv").resolve(),
+    reason="runs in the project's .venv only (make test); other environments may differ",
+)
 def test_the_project_venv_holds_the_pinned_versions():
     p = pins()
     wrong = {}

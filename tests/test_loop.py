@@ -43,16 +43,20 @@ def integrator(keep_last: bool) -> loop.System:
     def step(p, carry, k):
         x, t = carry.state, k * DT
         proposed = x + DT * (p.a * x + p.b)
-        health = jnp.where(~jnp.isfinite(x), int(Status.NONFINITE), jnp.where(jnp.abs(x) > X_FAIL, int(Status.DIVERGED), 0))
-        return loop.Sample(proposed, health.astype(jnp.int32), t, Out(t, x), aux=proposed,
-                           keep=(k == N - 1) if keep_last else None)
+        health = jnp.where(
+            ~jnp.isfinite(x), int(Status.NONFINITE), jnp.where(jnp.abs(x) > X_FAIL, int(Status.DIVERGED), 0)
+        )
+        return loop.Sample(
+            proposed, health.astype(jnp.int32), t, Out(t, x), aux=proposed, keep=(k == N - 1) if keep_last else None
+        )
 
     def update(p, m, s, live, was_live):
         integral, entered = m
         return integral + jnp.where(live, s.out.x * DT, 0.0), entered + was_live
 
-    return loop.System(init, step, update, record=lambda p, s, state: (s.out.t, state),
-                       finish=lambda p, r: r, no_failure=math.nan)
+    return loop.System(
+        init, step, update, record=lambda p, s, state: (s.out.t, state), finish=lambda p, r: r, no_failure=math.nan
+    )
 
 
 def numpy_loop(p: Params, keep_last: bool):
@@ -76,12 +80,14 @@ def numpy_loop(p: Params, keep_last: bool):
     return status, fail_time, x, aux, integral, entered, np.array(ts), np.array(xs)
 
 
-CASES = [Params(1.0, -1.0, 0.0),  # decays: OK
-         Params(1.0, 1.0, 0.0),  # grows past X_FAIL at sample 8: DIVERGED, frozen
-         Params(0.5, 0.0, 1.0),  # ramp, reaches X_FAIL later
-         Params(1.0, math.inf, 0.0),  # inf after one step: NONFINITE at sample 1
-         Params(math.nan, 0.0, 0.0),  # NaN from the start: NONFINITE at sample 0
-         Params(5.0, 0.0, 0.0)]  # beyond the threshold at sample 0
+CASES = [
+    Params(1.0, -1.0, 0.0),  # decays: OK
+    Params(1.0, 1.0, 0.0),  # grows past X_FAIL at sample 8: DIVERGED, frozen
+    Params(0.5, 0.0, 1.0),  # ramp, reaches X_FAIL later
+    Params(1.0, math.inf, 0.0),  # inf after one step: NONFINITE at sample 1
+    Params(math.nan, 0.0, 0.0),  # NaN from the start: NONFINITE at sample 0
+    Params(5.0, 0.0, 0.0),
+]  # beyond the threshold at sample 0
 
 
 @pytest.mark.parametrize("keep_last", [False, True])
@@ -109,8 +115,14 @@ def test_recording_switch_scalar_inputs_and_checkpointing_change_nothing():
     off = loop.run(integrator(False), p, N, record=False)
     assert off.records is None
     np.testing.assert_array_equal(off.metrics, ref.metrics)
-    opts = loop.run(integrator(False), p, N, record=False, scalar_inputs=True,
-                    checkpoint_policy=jax.checkpoint_policies.nothing_saveable)
+    opts = loop.run(
+        integrator(False),
+        p,
+        N,
+        record=False,
+        scalar_inputs=True,
+        checkpoint_policy=jax.checkpoint_policies.nothing_saveable,
+    )
     np.testing.assert_array_equal(opts.metrics, ref.metrics)
 
     def loss(b, **kw):
@@ -119,7 +131,9 @@ def test_recording_switch_scalar_inputs_and_checkpointing_change_nothing():
     g = jax.grad(loss)(0.1)
     h = 1e-6
     assert float(g) == pytest.approx((float(loss(0.1 + h)) - float(loss(0.1 - h))) / (2 * h), rel=1e-6)
-    g2 = jax.grad(lambda b: loss(b, scalar_inputs=True, checkpoint_policy=jax.checkpoint_policies.nothing_saveable))(0.1)
+    g2 = jax.grad(lambda b: loss(b, scalar_inputs=True, checkpoint_policy=jax.checkpoint_policies.nothing_saveable))(
+        0.1
+    )
     assert float(g2) == pytest.approx(float(g), rel=1e-12)
 
 
@@ -146,7 +160,9 @@ def test_slip_vehicle_and_tracker_run_through_the_loop(monkeypatch):
 
     monkeypatch.setattr(loop, "run", spy)
     cfg = SimConfig(dt=0.01, horizon=0.1, record=False)
-    out = jax.eval_shape(lambda s: slip.simulate(C.state_feedback, s, cfg), paper_scenario("sine", C.state_feedback_params()))
+    out = jax.eval_shape(
+        lambda s: slip.simulate(C.state_feedback, s, cfg), paper_scenario("sine", C.state_feedback_params())
+    )
     assert isinstance(out, slip.SimResult)
     params = T.FollowerParams(a=1.0, f=1.0, l=1.0, p=1.0)
     tcfg = T.TrackConfig(dt=0.02, horizon=0.2, window=0.1)

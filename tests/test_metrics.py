@@ -17,8 +17,8 @@ import pytest
 from pfjax import controllers as C
 from pfjax.metrics import running
 from pfjax.paths import sine
-from pfjax.sim.scenario import make_scenario
 from pfjax.sim import SimConfig, Status, constant_slip, simulate_batch, stack
+from pfjax.sim.scenario import make_scenario
 
 DEG = math.pi / 180
 CFG = SimConfig(dt=0.01, horizon=12.0, steady_window=4.0, settle_band=0.1, d_fail=2.5)
@@ -33,11 +33,22 @@ def _scenarios():
         # far off and heading away: saturates, overshoots
         make_scenario(sine(), (1.0, 2.5, 2.0), sf, slip=constant_slip(2 * DEG, -3 * DEG)),
         # a larger, faster sine with the Lenain convention and a 20 deg steering limit
-        make_scenario(sine(amplitude=1.5, omega=1.3), (0.5, 0.3, 0.0), sf, slip=constant_slip(-4 * DEG, 3 * DEG),
-                      delta_max_deg=20.0, convention="lenain"),
+        make_scenario(
+            sine(amplitude=1.5, omega=1.3),
+            (0.5, 0.3, 0.0),
+            sf,
+            slip=constant_slip(-4 * DEG, 3 * DEG),
+            delta_max_deg=20.0,
+            convention="lenain",
+        ),
         # destabilising gains with a 3 deg limit: DIVERGED (|d| > 2.5 m)
-        make_scenario(sine(), (0.0, -0.2, math.pi / 4), C.state_feedback_params(K=(2.7, 2.0)),
-                      slip=constant_slip(0.0, 0.0), delta_max_deg=3.0),
+        make_scenario(
+            sine(),
+            (0.0, -0.2, math.pi / 4),
+            C.state_feedback_params(K=(2.7, 2.0)),
+            slip=constant_slip(0.0, 0.0),
+            delta_max_deg=3.0,
+        ),
     ]
 
 
@@ -83,8 +94,9 @@ def test_metrics_equal_numpy_recomputation_from_the_trajectory(res, i):
     tr = jax.tree_util.tree_map(lambda a: a[i], res.trajectory)
     assert int(res.status[i]) == Status.OK
     dmax = float(_scenarios()[i].params.delta_max)
-    ref = reference_metrics(tr, dmax, CFG.horizon, CFG.steady_window, CFG.settle_band,
-                            CFG.success_start, CFG.success_band)
+    ref = reference_metrics(
+        tr, dmax, CFG.horizon, CFG.steady_window, CFG.settle_band, CFG.success_start, CFG.success_band
+    )
     got = jax.tree_util.tree_map(lambda a: a[i], res.metrics)._asdict()
     assert set(ref) == set(got) == set(running.METRIC_NAMES)
     for name, value in ref.items():
@@ -135,8 +147,22 @@ def _feed(t, d, te, delta, sat, weight, *, band, steady_from):
 
     def go(t, d, te, delta, sat, weight):
         acc0 = running.init(d[0], delta[0])
-        body = lambda acc, x: (running.update(acc, x[0], dt, x[5], x[1], x[2], x[3], x[4], band=band,
-                                              steady_from=steady_from, success_from=steady_from), None)
+        body = lambda acc, x: (
+            running.update(
+                acc,
+                x[0],
+                dt,
+                x[5],
+                x[1],
+                x[2],
+                x[3],
+                x[4],
+                band=band,
+                steady_from=steady_from,
+                success_from=steady_from,
+            ),
+            None,
+        )
         acc, _ = jax.lax.scan(body, acc0, jnp.stack([t, d, te, delta, sat, weight], axis=1))
         return running.finalize(acc, horizon, weight[-1] == 0, band)
 

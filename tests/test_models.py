@@ -64,8 +64,13 @@ def test_rates_match_the_equations_for_random_inputs():
     delta, br, bf = (rng.uniform(-0.5, 0.5, n) for _ in range(3))
     theta, v, L = rng.uniform(-4, 4, n), rng.uniform(0.2, 3, n), rng.uniform(0.1, 2, n)
     conv = rng.integers(0, 2, n)
-    p = SlipParams(v=jnp.asarray(v), L=jnp.asarray(L), delta_max=jnp.full(n, 0.5), convention=jnp.asarray(conv),
-                   delta_rate_max=jnp.full(n, jnp.inf))  # vmap maps every field: batch them all
+    p = SlipParams(
+        v=jnp.asarray(v),
+        L=jnp.asarray(L),
+        delta_max=jnp.full(n, 0.5),
+        convention=jnp.asarray(conv),
+        delta_rate_max=jnp.full(n, jnp.inf),
+    )  # vmap maps every field: batch them all
     pose = Pose(jnp.asarray(rng.normal(size=n)), jnp.asarray(rng.normal(size=n)), jnp.asarray(theta))
     r = jax.jit(jax.vmap(world_rhs))(pose, jnp.asarray(delta), jnp.asarray(br), jnp.asarray(bf), p)
     speed = v / np.cos(br)
@@ -83,9 +88,12 @@ def test_zero_slip_is_the_kinematic_bicycle(convention):
     p = params(convention, v=1.7, L=0.35)
     for delta, theta in [(0.3, 0.2), (-0.45, 2.5), (0.0, -1.0)]:
         r = world_rhs(Pose(jnp.asarray(0.0), jnp.asarray(0.0), jnp.asarray(theta)), delta, 0.0, 0.0, p)
-        np.testing.assert_allclose([float(r.x), float(r.y), float(r.theta)],
-                                   [1.7 * math.cos(theta), 1.7 * math.sin(theta), 1.7 * math.tan(delta) / 0.35],
-                                   rtol=1e-14, atol=1e-15)
+        np.testing.assert_allclose(
+            [float(r.x), float(r.y), float(r.theta)],
+            [1.7 * math.cos(theta), 1.7 * math.sin(theta), 1.7 * math.tan(delta) / 0.35],
+            rtol=1e-14,
+            atol=1e-15,
+        )
 
 
 def _circumradius(p1, p2, p3):
@@ -96,8 +104,16 @@ def _circumradius(p1, p2, p3):
 
 def _integrate_world(p, delta, br, bf, pose0, T, t_eval=None):
     f = jax.jit(lambda z: jnp.stack(world_rhs(Pose(*z), delta, br, bf, p)))
-    sol = solve_ivp(lambda t, z: np.asarray(f(jnp.asarray(z))), (0, T), pose0, method="DOP853",
-                    rtol=1e-12, atol=1e-13, t_eval=t_eval, dense_output=t_eval is None)
+    sol = solve_ivp(
+        lambda t, z: np.asarray(f(jnp.asarray(z))),
+        (0, T),
+        pose0,
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-13,
+        t_eval=t_eval,
+        dense_output=t_eval is None,
+    )
     assert sol.success
     return sol
 
@@ -149,8 +165,9 @@ def test_frenet_model_agrees_with_world_model_on_a_circle(case):
     kappa = direction / R
     f = jax.jit(lambda z: jnp.stack(frenet_rhs(FrenetState(*z), delta, br, bf, kappa, p)))
     z0 = [d_geo[0], te_geo[0], s_geo[0]]
-    fr = solve_ivp(lambda _, z: np.asarray(f(jnp.asarray(z))), (0, 6.0), z0, method="DOP853", rtol=1e-12,
-                   atol=1e-13, t_eval=t)
+    fr = solve_ivp(
+        lambda _, z: np.asarray(f(jnp.asarray(z))), (0, 6.0), z0, method="DOP853", rtol=1e-12, atol=1e-13, t_eval=t
+    )
     assert fr.success
     np.testing.assert_allclose(fr.y[0], d_geo, atol=1e-8)
     np.testing.assert_allclose(np.angle(np.exp(1j * (fr.y[1] - te_geo))), 0.0, atol=1e-8)
@@ -166,7 +183,10 @@ def test_frenet_rhs_matches_the_equations():
     sdot = 1.4 * (math.cos(te) - math.tan(br) * math.sin(te)) / (1 - kappa * d)
     np.testing.assert_allclose(
         [float(r.d), float(r.theta_e), float(r.s)],
-        [1.4 * (math.sin(te) + math.tan(br) * math.cos(te)),
-         1.4 / 0.3 * (math.tan(delta - bf) - math.tan(br)) - kappa * sdot, sdot],
+        [
+            1.4 * (math.sin(te) + math.tan(br) * math.cos(te)),
+            1.4 / 0.3 * (math.tan(delta - bf) - math.tan(br)) - kappa * sdot,
+            sdot,
+        ],
         rtol=1e-14,
     )

@@ -20,12 +20,21 @@ from pfjax.montecarlo.study import run
 from pfjax.paths import project
 
 BASE = {
-    "name": "t", "n_runs": 24, "seed": 3, "chunk_size": 24,
-    "sim": {"horizon": 3.0, "steady_window": 1.0}, "success": {"from_s": 2.0, "band": 0.2},
-    "slip": {"beta_r_deg": {"dist": "uniform", "low": -5, "high": 5}, "beta_f_deg": {"dist": "truncnormal", "mean": 0, "std": 2, "low": -6, "high": 6}},
-    "initial": {"lateral_offset": {"dist": "uniform", "low": -0.3, "high": 0.3},
-                "heading_error_deg": {"dist": "uniform", "low": -20, "high": 20},
-                "start_along_m": {"dist": "uniform", "low": 0, "high": 1}},
+    "name": "t",
+    "n_runs": 24,
+    "seed": 3,
+    "chunk_size": 24,
+    "sim": {"horizon": 3.0, "steady_window": 1.0},
+    "success": {"from_s": 2.0, "band": 0.2},
+    "slip": {
+        "beta_r_deg": {"dist": "uniform", "low": -5, "high": 5},
+        "beta_f_deg": {"dist": "truncnormal", "mean": 0, "std": 2, "low": -6, "high": 6},
+    },
+    "initial": {
+        "lateral_offset": {"dist": "uniform", "low": -0.3, "high": 0.3},
+        "heading_error_deg": {"dist": "uniform", "low": -20, "high": 20},
+        "start_along_m": {"dist": "uniform", "low": 0, "high": 1},
+    },
     "margin": {"amplitudes_deg": [0.0, 10.0], "n_per_amplitude": 6},
     "paths": [{"kind": "line"}, {"kind": "circle", "radius": {"dist": "uniform", "low": 2, "high": 3}}],
     "controllers": [{"name": "lmi", "type": "lmi"}, {"name": "stanley", "type": "stanley", "gains": {"k": 2.0}}],
@@ -96,8 +105,11 @@ def test_bad_controller_gain_is_named_at_run_time(tmp_path):
 def test_sampled_distributions():
     """2000 runs: uniform within its bounds with the right mean, normal mean/std (5 sigma of the
     estimator), truncnormal within bounds, choice only from its values."""
-    spec = spec_of("initial.lateral_offset={dist='normal', mean=1.0, std=2.0}", "vehicle.L={dist='truncnormal', mean=0.2, std=0.05, low=0.18, high=0.25}",
-                   "initial.start_along_m={dist='choice', values=[0.0, 0.5]}")
+    spec = spec_of(
+        "initial.lateral_offset={dist='normal', mean=1.0, std=2.0}",
+        "vehicle.L={dist='truncnormal', mean=0.2, std=0.05, low=0.18, high=0.25}",
+        "initial.start_along_m={dist='choice', values=[0.0, 0.5]}",
+    )
     s = sample_runs(spec, 0, np.arange(2000))
     c = s.columns
     n = 2000
@@ -145,7 +157,9 @@ def test_runs_are_independent_of_chunk_size_and_shared_by_controllers(tmp_path):
     ra, ra2, rb = (pd.read_parquet(tmp_path / d / "runs.parquet") for d in ("a", "a2", "b"))
     pd.testing.assert_frame_equal(ra, ra2)
     params = ["beta_r_deg", "beta_f_deg", "lateral_offset", "heading_error_deg", "start_along_m", "radius"]
-    pd.testing.assert_frame_equal(ra[params + ["status", "run", "path", "controller"]], rb[params + ["status", "run", "path", "controller"]])
+    pd.testing.assert_frame_equal(
+        ra[params + ["status", "run", "path", "controller"]], rb[params + ["status", "run", "path", "controller"]]
+    )
     np.testing.assert_allclose(ra["iae"], rb["iae"], rtol=1e-5, atol=1e-7)
     g = ra.groupby("controller")
     np.testing.assert_array_equal(g.get_group("lmi")[params].to_numpy(), g.get_group("stanley")[params].to_numpy())
@@ -191,12 +205,21 @@ def test_state_feedback_and_pi_run_as_one_controller():
     from pfjax.montecarlo.runner import controllers_of
 
     data = copy.deepcopy(BASE)
-    data["controllers"] = [{"name": "lmi", "type": "lmi"}, {"name": "pi", "type": "pi"},
-                           {"name": "stanley", "type": "stanley", "gains": {"k": 2.0}}]
+    data["controllers"] = [
+        {"name": "lmi", "type": "lmi"},
+        {"name": "pi", "type": "pi"},
+        {"name": "stanley", "type": "stanley", "gains": {"k": 2.0}},
+    ]
     ctrls = controllers_of(spec_of(data=data))
     assert ctrls["lmi"][0] is C.linear and ctrls["pi"][0] is C.linear and ctrls["stanley"][0] is C.stanley
     assert jax.tree_util.tree_structure(ctrls["lmi"][1]) == jax.tree_util.tree_structure(ctrls["pi"][1])
-    assert set(ctrls["lmi"][2]) == {"k_d", "k_theta"} and set(ctrls["pi"][2]) == {"kp_d", "ki_d", "kp_theta", "ki_theta", "k_aw"}
+    assert set(ctrls["lmi"][2]) == {"k_d", "k_theta"} and set(ctrls["pi"][2]) == {
+        "kp_d",
+        "ki_d",
+        "kp_theta",
+        "ki_theta",
+        "k_aw",
+    }
     assert np.asarray(ctrls["pi"][1].K).tolist() == pytest.approx([-C.PAPER_PI["kp_d"], -C.PAPER_PI["kp_theta"]])
 
 
@@ -212,8 +235,17 @@ def test_sampler_scratch_memory_is_bounded_for_large_chunks():
     spec, n = spec_of(), 65536
     keys = S.run_keys(spec.seed, 0, np.arange(n))
     z = jnp.zeros(n)
-    compiled = S._draw_runs.lower(keys, {}, S._fixed_path(spec.paths[0]), jnp.asarray(0.0), (z, z), False,
-                                  study=S._Static(spec), circle=None, batched_path=False).compile()
+    compiled = S._draw_runs.lower(
+        keys,
+        {},
+        S._fixed_path(spec.paths[0]),
+        jnp.asarray(0.0),
+        (z, z),
+        False,
+        study=S._Static(spec),
+        circle=None,
+        batched_path=False,
+    ).compile()
     assert compiled.memory_analysis().temp_size_in_bytes < 256 * 2**20
 
 
@@ -247,6 +279,7 @@ def test_main_thread_takes_over_side_jobs_not_started():
                 gate.wait(10)
             ran.append((name, threading.current_thread() is threading.main_thread()))
             return name
+
         return _Stealable(pool.submit(fn), fn)
 
     first, second, third = job("first"), job("second"), job("third")
@@ -279,20 +312,32 @@ def test_few_runs_are_sampled_by_the_chunk_program_exactly():
 
 def test_cli_study_and_bad_input(tmp_path):
     cfg = tmp_path / "s.toml"
-    cfg.write_text('name = "cli"\nn_runs = 4\nseed = 1\nchunk_size = 4\n[sim]\nhorizon = 2.0\nsteady_window = 1.0\n'
-                   '[success]\nfrom_s = 1.0\n[margin]\nenabled = false\n[[paths]]\nkind = "line"\n'
-                   '[[controllers]]\nname = "st"\ntype = "stanley"\n')
+    cfg.write_text(
+        'name = "cli"\nn_runs = 4\nseed = 1\nchunk_size = 4\n[sim]\nhorizon = 2.0\nsteady_window = 1.0\n'
+        '[success]\nfrom_s = 1.0\n[margin]\nenabled = false\n[[paths]]\nkind = "line"\n'
+        '[[controllers]]\nname = "st"\ntype = "stanley"\n'
+    )
     exe = [sys.executable, "-m", "pfjax.cli"]
     out = tmp_path / "o"
-    r = subprocess.run(exe + ["study", str(cfg), "--out", str(out), "--no-report", "--quiet", "--json"], capture_output=True, text=True)
+    r = subprocess.run(
+        exe + ["study", str(cfg), "--out", str(out), "--no-report", "--quiet", "--json"], capture_output=True, text=True
+    )
     assert r.returncode == 0, r.stderr
     head = json.loads(r.stdout)
     assert head["n_runs_total"] == 4 and "st" in head["controllers"]
     assert (out / "runs.parquet").is_file() and (out / "summary.json").is_file()
-    for args, flag in ((["--set", "n_runs=0"], "n_runs"), (["--set", "sim.dtt=0.1"], "sim.dtt"), (["--set", "nokey"], "--set")):
+    for args, flag in (
+        (["--set", "n_runs=0"], "n_runs"),
+        (["--set", "sim.dtt=0.1"], "sim.dtt"),
+        (["--set", "nokey"], "--set"),
+    ):
         o2 = tmp_path / "bad"
-        r = subprocess.run(exe + ["study", str(cfg), "--out", str(o2), "--quiet"] + args, capture_output=True, text=True)
-        assert r.returncode == 2 and r.stdout == "" and len(r.stderr.strip().splitlines()) == 1 and flag in r.stderr, r.stderr
+        r = subprocess.run(
+            exe + ["study", str(cfg), "--out", str(o2), "--quiet"] + args, capture_output=True, text=True
+        )
+        assert r.returncode == 2 and r.stdout == "" and len(r.stderr.strip().splitlines()) == 1 and flag in r.stderr, (
+            r.stderr
+        )
         assert not o2.exists()
     r = subprocess.run(exe + ["study", str(tmp_path / "missing.toml")], capture_output=True, text=True)
     assert r.returncode == 2 and "not found" in r.stderr

@@ -20,8 +20,8 @@ from pfjax.models.slip import Pose
 from pfjax.numerics.random import step_normals
 from pfjax.paths import shapes
 from pfjax.paths.geometry import closest_parameter, curvature, global_parameter, measure, wrap_angle
-from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SensorNoise, SimConfig, simulate_batch, stack
+from pfjax.sim.scenario import paper_scenario
 from pfjax.sim.simulate import _noisy
 
 CFG = SimConfig(horizon=4.0, record=False)
@@ -41,14 +41,15 @@ def _noise(sd, st, seed):
     return SensorNoise(jnp.asarray(sd, float), jnp.asarray(st, float), jax.random.PRNGKey(seed))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _runs(name):
     """Metrics of the three sine-path runs without noise, and of the same runs with sigma = 0 noise
     (first three) and with sigma_d = 0.05 m, sigma_theta_e = 5 deg (last three)."""
     controller, g = C.REGISTRY[name][0], _gains(name)
     base = [paper_scenario("sine", g, pose0=p) for p in STARTS]
-    noisy = ([sc._replace(noise=_noise(0.0, 0.0, i)) for i, sc in enumerate(base)]
-             + [sc._replace(noise=_noise(SIGMA_D, SIGMA_THETA, i)) for i, sc in enumerate(base)])
+    noisy = [sc._replace(noise=_noise(0.0, 0.0, i)) for i, sc in enumerate(base)] + [
+        sc._replace(noise=_noise(SIGMA_D, SIGMA_THETA, i)) for i, sc in enumerate(base)
+    ]
     run = lambda scs: jax.device_get(simulate_batch(stack(scs), controller=controller, config=CFG))
     return run(base), run(noisy)
 
@@ -65,7 +66,10 @@ def test_every_controller_sees_the_noise(name):
         a, b = getattr(free.metrics, field), getattr(noisy.metrics, field)[n:]
         assert np.all(np.abs(b - a) > 1e-6 * np.abs(a)), (field, a, b)
     # the steering's total variation: white noise makes the command jitter
-    assert np.all(noisy.metrics.steer_tv[n:] > 1.5 * free.metrics.steer_tv), (free.metrics.steer_tv, noisy.metrics.steer_tv)
+    assert np.all(noisy.metrics.steer_tv[n:] > 1.5 * free.metrics.steer_tv), (
+        free.metrics.steer_tv,
+        noisy.metrics.steer_tv,
+    )
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -86,8 +90,18 @@ def _exact_observation(path, pose, u_guess, v=1.0, L=0.2, delta_max=math.radians
     u = closest_parameter(path, pose.x, pose.y, u_guess, iters=30)
     pr = measure(path, pose.x, pose.y, pose.theta, u)
     f = lambda a: jnp.asarray(a, float)
-    return Observation(d=pr.d, theta_e=pr.theta_e, kappa=pr.kappa, s=pr.s, u=pr.u, pose=pose, v=f(v), L=f(L),
-                       delta_max=f(delta_max), path=path)
+    return Observation(
+        d=pr.d,
+        theta_e=pr.theta_e,
+        kappa=pr.kappa,
+        s=pr.s,
+        u=pr.u,
+        pose=pose,
+        v=f(v),
+        L=f(L),
+        delta_max=f(delta_max),
+        path=path,
+    )
 
 
 @jax.jit
@@ -163,6 +177,7 @@ def test_every_controller_reads_the_measured_pose(name):
             obs = _exact_observation(path, pose, us[i])
             m = _noisy(obs, noise, k)
             remeasured = _exact_observation(path, m.pose, obs.u)
-            np.testing.assert_allclose(float(out(m)), float(out(remeasured)), rtol=0, atol=1e-9,
-                                       err_msg=f"{name}, pose {i}, step {k}")
+            np.testing.assert_allclose(
+                float(out(m)), float(out(remeasured)), rtol=0, atol=1e-9, err_msg=f"{name}, pose {i}, step {k}"
+            )
             assert float(out(m)) != float(out(obs)), (name, i, k)

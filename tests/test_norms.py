@@ -25,9 +25,7 @@ def random_stable(n, m, p, seed, margin=0.2, with_d=False):
 
 def lightly_damped(zeta=2e-3, wn=3.0):
     """Non-square MIMO system with a sharp resonance at ~wn (damping zeta) plus a fast mode."""
-    A = np.array(
-        [[0.0, 1.0, 0.0], [-(wn**2), -2.0 * zeta * wn, 0.5], [0.0, 0.0, -4.0]]
-    )
+    A = np.array([[0.0, 1.0, 0.0], [-(wn**2), -2.0 * zeta * wn, 0.5], [0.0, 0.0, -4.0]])
     B = np.array([[0.0, 1.0], [1.0, 0.0], [0.3, 1.0]])
     C = np.array([[1.0, 0.0, 0.0], [0.0, 0.2, 1.0], [0.5, 0.0, -1.0]])
     return A, B, C, np.zeros((3, 2))
@@ -44,16 +42,11 @@ def h2_time_integral(A, B, C):
         return float(np.sum((C @ sla.expm(A * t) @ B) ** 2))
 
     edges = np.linspace(0.0, T, 41)
-    total = sum(
-        si.quad(f, a, b, epsabs=0.0, epsrel=1e-11, limit=200)[0]
-        for a, b in zip(edges[:-1], edges[1:])
-    )
+    total = sum(si.quad(f, a, b, epsabs=0.0, epsrel=1e-11, limit=200)[0] for a, b in zip(edges[:-1], edges[1:]))
     return np.sqrt(total)
 
 
-@pytest.mark.parametrize(
-    "n,m,p,seed", [(1, 1, 1, 0), (2, 3, 2, 1), (4, 2, 3, 2), (5, 1, 4, 3), (3, 4, 1, 4)]
-)
+@pytest.mark.parametrize("n,m,p,seed", [(1, 1, 1, 0), (2, 3, 2, 1), (4, 2, 3, 2), (5, 1, 4, 3), (3, 4, 1, 4)])
 def test_h2_matches_time_domain_integral(n, m, p, seed):
     A, B, C, _ = random_stable(n, m, p, seed)
     assert h2_norm(A, B, C) == pytest.approx(h2_time_integral(A, B, C), rel=1e-6)
@@ -63,13 +56,12 @@ def test_h2_lightly_damped_matches_frequency_integral():
     # ||G||_2^2 = (1/pi) int_0^inf ||G(jw)||_F^2 dw, with the resonance split out for quad.
     A, B, C, _ = lightly_damped()
     n = A.shape[0]
+
     def f(w):
         return float(np.sum(np.abs(C @ np.linalg.solve(1j * w * np.eye(n) - A, B)) ** 2))
 
     pts = [0.0, 2.9, 2.99, 3.0, 3.01, 3.1, 10.0, np.inf]
-    total = sum(
-        si.quad(f, a, b, epsabs=0.0, epsrel=1e-12, limit=500)[0] for a, b in zip(pts[:-1], pts[1:])
-    )
+    total = sum(si.quad(f, a, b, epsabs=0.0, epsrel=1e-12, limit=500)[0] for a, b in zip(pts[:-1], pts[1:]))
     assert h2_norm(A, B, C) == pytest.approx(np.sqrt(total / np.pi), rel=1e-6)
 
 
@@ -78,9 +70,7 @@ def test_h2_closed_forms():
     assert h2_norm([[-a]], [[1.0]], [[1.0]]) == pytest.approx(1.0 / np.sqrt(2.0 * a), rel=1e-12)
     zeta, wn = 0.3, 2.0  # wn^2 / (s^2 + 2 zeta wn s + wn^2): ||.||_2^2 = wn / (4 zeta)
     A = [[0.0, 1.0], [-(wn**2), -2.0 * zeta * wn]]
-    assert h2_norm(A, [[0.0], [wn**2]], [[1.0, 0.0]]) == pytest.approx(
-        np.sqrt(wn / (4.0 * zeta)), rel=1e-12
-    )
+    assert h2_norm(A, [[0.0], [wn**2]], [[1.0, 0.0]]) == pytest.approx(np.sqrt(wn / (4.0 * zeta)), rel=1e-12)
 
 
 def test_h2_infinite_when_unstable_or_feedthrough():
@@ -113,7 +103,9 @@ def hinf_sweep(A, B, C, D):
         b = grid[min(i + 1, grid.size - 1)]
         if b > a:
             res = so.minimize_scalar(
-                lambda w: -sigma_max(A, B, C, D, w), bounds=(a, b), method="bounded",
+                lambda w: -sigma_max(A, B, C, D, w),
+                bounds=(a, b),
+                method="bounded",
                 options={"xatol": 1e-14 * max(1.0, b)},
             )
             best = max(best, -res.fun)
@@ -122,8 +114,7 @@ def hinf_sweep(A, B, C, D):
 
 @pytest.mark.parametrize(
     "n,m,p,seed,with_d",
-    [(2, 1, 1, 10, False), (3, 2, 4, 11, False), (4, 3, 2, 12, True), (6, 2, 3, 13, False),
-     (5, 4, 1, 14, True)],
+    [(2, 1, 1, 10, False), (3, 2, 4, 11, False), (4, 3, 2, 12, True), (6, 2, 3, 13, False), (5, 4, 1, 14, True)],
 )
 def test_hinf_matches_frequency_sweep(n, m, p, seed, with_d):
     A, B, C, D = random_stable(n, m, p, seed, with_d=with_d)

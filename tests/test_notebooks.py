@@ -50,7 +50,9 @@ def test_notebook_layout(path: Path):
         assert not nb.cells[i].outputs and nb.cells[i].execution_count is None, f"{path.name}: cell {i} has outputs"
     params = nb.cells[code[0]]
     assert "parameters" in params.metadata.get("tags", []), f"{path.name}: the first code cell is not tagged parameters"
-    assert code[0] > 0 and nb.cells[code[0] - 1].cell_type == "markdown", f"{path.name}: no markdown before the parameters"
+    assert code[0] > 0 and nb.cells[code[0] - 1].cell_type == "markdown", (
+        f"{path.name}: no markdown before the parameters"
+    )
     assert not re.search(r"^\s*(import|from) ", params.source, re.M), f"{path.name}: the parameters cell imports"
     setup = [ln for ln in nb.cells[code[1]].source.splitlines() if ln.startswith(("import ", "from "))]
     assert setup and re.match(r"import pfjax\b", setup[0]), f"{path.name}: pfjax is not imported first"

@@ -95,8 +95,11 @@ def test_root_home_and_directories_containing_the_working_directory_are_refused(
     work.mkdir(parents=True)
     monkeypatch.chdir(work)
     _write(tmp_path / "a" / "b" / "out", {"x.txt": "1"})  # even a directory holding pfjax outputs
-    for target, what in ((tmp_path / "a", "contains it"), (work, "current directory"),
-                         (Path("/"), "does not name a new directory|filesystem root")):
+    for target, what in (
+        (tmp_path / "a", "contains it"),
+        (work, "current directory"),
+        (Path("/"), "does not name a new directory|filesystem root"),
+    ):
         with pytest.raises(InputError, match=what):
             check_target(target, command="study", config_sha256="x", overwrite=True)
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
@@ -111,8 +114,11 @@ def test_own_outputs_are_replaced_by_a_rerun_and_others_only_with_overwrite(tmp_
     assert read_marker(out)["files"].keys() == {"summary.json", "figures/a.png"}
     check_target(out, command="study", config_sha256="a" * 64)  # a re-run of the same config
     for command, sha in (("study", "b" * 64), ("bench", "a" * 64)):
-        with pytest.raises(InputError, match=r"^--out: .* holds the output of `pfjax study` \(config aaaaaaaaaaaa\); "
-                                             r"add --overwrite"):
+        with pytest.raises(
+            InputError,
+            match=r"^--out: .* holds the output of `pfjax study` \(config aaaaaaaaaaaa\); "
+            r"add --overwrite",
+        ):
             check_target(out, command=command, config_sha256=sha)
         check_target(out, command=command, config_sha256=sha, overwrite=True)
 
@@ -147,10 +153,9 @@ def test_a_failed_write_leaves_the_previous_output_and_no_staging(tmp_path):
     out = tmp_path / "out"
     _write(out, {"summary.json": "old"})
     before = _tree(out)
-    with pytest.raises(RuntimeError):
-        with OutputDir(out, command="study", config_sha256="a" * 64) as o:
-            (o.staging / "summary.json").write_text("new")
-            raise RuntimeError("boom")
+    with pytest.raises(RuntimeError), OutputDir(out, command="study", config_sha256="a" * 64) as o:
+        (o.staging / "summary.json").write_text("new")
+        raise RuntimeError("boom")
     assert _tree(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no staging, no lock file
 
@@ -170,10 +175,17 @@ def test_stale_staging_of_a_killed_run_is_removed_by_the_next_writer(tmp_path):
 def test_the_lock_refuses_a_second_writer_in_another_process(tmp_path):
     out = tmp_path / "out"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from pfjax.outputs import OutputDir; "
-         f"o = OutputDir({str(out)!r}, command='study', config_sha256='x').open(); print('held', flush=True); "
-         "sys.stdin.readline(); o.close()"],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-c",
+            "import sys; from pfjax.outputs import OutputDir; "
+            f"o = OutputDir({str(out)!r}, command='study', config_sha256='x').open(); print('held', flush=True); "
+            "sys.stdin.readline(); o.close()",
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "held"
         with pytest.raises(OutputBusy, match=rf"^--out: a pfjax study is running into .*out \(pid {holder.pid} on "):
@@ -188,9 +200,16 @@ def test_the_lock_refuses_a_second_writer_in_another_process(tmp_path):
 def test_a_killed_holder_releases_the_lock(tmp_path):
     out = tmp_path / "out"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import time; from pfjax.outputs import OutputDir; "
-         f"o = OutputDir({str(out)!r}, command='study', config_sha256='x').open(); print('held', flush=True); "
-         "time.sleep(600)"], stdout=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-c",
+            "import time; from pfjax.outputs import OutputDir; "
+            f"o = OutputDir({str(out)!r}, command='study', config_sha256='x').open(); print('held', flush=True); "
+            "time.sleep(600)",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     assert holder.stdout.readline().strip() == "held"
     holder.kill()
     holder.wait()
@@ -217,11 +236,14 @@ def _cli(argv, capsys):
     return code, err
 
 
-@pytest.mark.parametrize("command", [
-    ["study", "{toml}", "--no-report"],
-    ["report", "{toml}"],
-    ["bench", "--quick"],
-])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["study", "{toml}", "--no-report"],
+        ["report", "{toml}"],
+        ["bench", "--quick"],
+    ],
+)
 def test_commands_refuse_a_user_directory_and_touch_nothing(command, study_toml, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     keep = tmp_path / "keep"
@@ -263,8 +285,12 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
         (out / name).write_bytes(text)
         before = _tree(out)
         code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)
-        assert code == EXIT_USAGE and len(err) == 1 and err[0].startswith("pfjax report: error: --out: ") \
-            and name in err[0], err
+        assert (
+            code == EXIT_USAGE
+            and len(err) == 1
+            and err[0].startswith("pfjax report: error: --out: ")
+            and name in err[0]
+        ), err
         assert _tree(out) == before
         (out / name).write_bytes(saved)
     (out / "runs.parquet").unlink()
@@ -324,8 +350,13 @@ def test_chunks_of_another_config_are_never_reused(study_toml, tmp_path):
 
 
 def _env(tmp_path):
-    return {**os.environ, "PFJAX_FIGURE_WORKER": "0", "JAX_COMPILATION_CACHE_DIR": str(tmp_path / "jax_cache"),
-            "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0", "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0"}
+    return {
+        **os.environ,
+        "PFJAX_FIGURE_WORKER": "0",
+        "JAX_COMPILATION_CACHE_DIR": str(tmp_path / "jax_cache"),
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+        "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0",
+    }
 
 
 @pytest.mark.slow
@@ -334,14 +365,33 @@ def test_two_concurrent_studies_on_one_out_never_mix(study_toml, tmp_path):
     second with --fresh --overwrite): whichever runs, the result is wholly one configuration's, and
     a refused process says a study is running."""
     out = tmp_path / "out"
-    base = [sys.executable, "-m", "pfjax.cli", "study", str(study_toml), "--out", str(out), "--no-report", "--quiet",
-            "--json", "--set", "n_runs=400", "--set", "chunk_size=40"]
+    base = [
+        sys.executable,
+        "-m",
+        "pfjax.cli",
+        "study",
+        str(study_toml),
+        "--out",
+        str(out),
+        "--no-report",
+        "--quiet",
+        "--json",
+        "--set",
+        "n_runs=400",
+        "--set",
+        "chunk_size=40",
+    ]
     env = _env(tmp_path)
     a = subprocess.Popen(base, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     while not sibling(out, "lock").exists() and a.poll() is None:
         time.sleep(0.01)
-    b = subprocess.Popen(base + ["--set", "seed=99", "--fresh", "--overwrite"], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=env)
+    b = subprocess.Popen(
+        base + ["--set", "seed=99", "--fresh", "--overwrite"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     results = [p.communicate(timeout=600) + (p.returncode,) for p in (a, b)]
     assert any(rc == 0 for *_, rc in results)
     for _, err, rc in results:
@@ -359,8 +409,22 @@ def test_two_concurrent_studies_on_one_out_never_mix(study_toml, tmp_path):
 @pytest.mark.slow
 def test_ctrl_c_is_one_line_exit_130_and_resumable(study_toml, tmp_path):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "pfjax.cli", "study", str(study_toml), "--out", str(out), "--no-report", "--quiet",
-           "--json", "--set", "n_runs=4000", "--set", "chunk_size=40"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pfjax.cli",
+        "study",
+        str(study_toml),
+        "--out",
+        str(out),
+        "--no-report",
+        "--quiet",
+        "--json",
+        "--set",
+        "n_runs=4000",
+        "--set",
+        "chunk_size=40",
+    ]
     env = _env(tmp_path)
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     t0 = time.time()
@@ -389,8 +453,11 @@ def test_figure_worker_directories_of_killed_studies_are_removed(tmp_path, monke
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
-    stale, live, other = (tmp_path / f"pfjax-figures-{dead.pid}-x1", tmp_path / f"pfjax-figures-{os.getppid()}-x2",
-                          tmp_path / "pfjax-figures-notapid")
+    stale, live, other = (
+        tmp_path / f"pfjax-figures-{dead.pid}-x1",
+        tmp_path / f"pfjax-figures-{os.getppid()}-x2",
+        tmp_path / "pfjax-figures-notapid",
+    )
     for d in (stale, live, other):
         d.mkdir()
     figure_worker.remove_stale_dirs()

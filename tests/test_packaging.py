@@ -34,8 +34,9 @@ def test_each_packaged_example_is_its_studies_file_byte_for_byte(name):
     packaged = examples.path(name)
     assert packaged.parent == PACKAGE / "examples" and packaged.is_file()
     source = ROOT / "studies" / examples.FILES[name]
-    assert packaged.read_bytes() == source.read_bytes(), \
+    assert packaged.read_bytes() == source.read_bytes(), (
         f"pfjax/examples/{packaged.name} differs from studies/{source.name}: copy it again"
+    )
 
 
 def test_the_examples_folder_holds_exactly_the_listed_examples():
@@ -86,7 +87,7 @@ def test_license_is_mit_as_declared():
     text = (ROOT / "LICENSE").read_text()
     assert PYPROJECT["project"]["license"] == "MIT"
     assert text.startswith("MIT License\n") and "Copyright (c) 2026 The pfjax authors" in text
-    assert "THE SOFTWARE IS PROVIDED \"AS IS\"" in text
+    assert 'THE SOFTWARE IS PROVIDED "AS IS"' in text
 
 
 def test_citation_cff_describes_this_version_and_its_three_sources():
@@ -168,8 +169,10 @@ def test_the_wheel_installs_into_a_fresh_venv_and_runs_an_example_outside_the_re
     venv = tmp_path / "venv"
     _run([sys.executable, "-m", "venv", "--without-pip", venv], cwd=tmp_path)
     py = venv / "bin" / "python"
-    _run([sys.executable, "-m", "pip", "--python", py, "install", "--quiet", "--no-deps", "--no-index", wheel],
-         cwd=tmp_path)
+    _run(
+        [sys.executable, "-m", "pip", "--python", py, "install", "--quiet", "--no-deps", "--no-index", wheel],
+        cwd=tmp_path,
+    )
     # ... which then come from this environment's site-packages (a plain path line: its .pth files,
     # the editable pfjax's among them, are not run, and the venv's own site-packages comes first)
     site = Path(_run([py, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"], cwd=tmp_path).stdout.strip())
@@ -178,8 +181,9 @@ def test_the_wheel_installs_into_a_fresh_venv_and_runs_an_example_outside_the_re
 
     work = tmp_path / "work"  # outside the repository
     work.mkdir()
-    where = _run([py, "-c", "import pfjax, pfjax.examples as e; print(pfjax.__file__); print(e.path('default'))"],
-                 cwd=work).stdout.split()
+    where = _run(
+        [py, "-c", "import pfjax, pfjax.examples as e; print(pfjax.__file__); print(e.path('default'))"], cwd=work
+    ).stdout.split()
     for p in where:
         assert Path(p).resolve().is_relative_to(site.resolve()), (p, site)
         assert not Path(p).resolve().is_relative_to(ROOT), p
@@ -189,9 +193,28 @@ def test_the_wheel_installs_into_a_fresh_venv_and_runs_an_example_outside_the_re
         assert re.search(rf"^{n}\s+\S", listed, re.M), (n, listed)
 
     out = tmp_path / "out"
-    _run([venv / "bin" / "pfjax", "study", "--example", "default", "--set", "n_runs=100", "--set", "margin.enabled=false",
-          "--set", "falsifier.enabled=false", "--set", "f64_check_runs=0", "--set", "chunk_size=100",
-          "--out", out, "--quiet"], cwd=work)
+    _run(
+        [
+            venv / "bin" / "pfjax",
+            "study",
+            "--example",
+            "default",
+            "--set",
+            "n_runs=100",
+            "--set",
+            "margin.enabled=false",
+            "--set",
+            "falsifier.enabled=false",
+            "--set",
+            "f64_check_runs=0",
+            "--set",
+            "chunk_size=100",
+            "--out",
+            out,
+            "--quiet",
+        ],
+        cwd=work,
+    )
     assert (out / "runs.parquet").is_file() and (out / "report.html").is_file()  # the report: the wheel's templates
     summary = json.loads((out / "summary.json").read_text())
     assert summary["study"] == "robustness_default" and summary["n_runs_total"] == 100 * 3 * 3

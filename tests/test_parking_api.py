@@ -58,42 +58,45 @@ OK = {"map": "parallel", "x0": (0.1, 0.5, 0.0)}
 NAN = math.nan
 
 
-@pytest.mark.parametrize("kw, key", [
-    ({"x0": (0.1, NAN, 0.0)}, "x0"),
-    ({"x0": (0.1, 0.5, 90.0)}, "x0"),
-    ({"x0": (0.1, 0.5)}, "x0"),
-    ({"x0": "0 0.5 0"}, "x0"),
-    ({"x0": (0.0, -0.5, 0.0)}, "x0"),  # axle point inside the kerb
-    ({"x0": (0.0, 0.0, 60.0)}, "x0"),  # body overlapping the kerb
-    ({"x0": (0.0, 0.3, 0.0), "front": 0.53}, "x0"),  # body overlapping car_ahead with a longer reach
-    ({"speed": -0.05}, "speed"),
-    ({"speed": 0}, "speed"),
-    ({"speed": NAN}, "speed"),
-    ({"k1": math.inf}, "k1"),
-    ({"k2": True}, "k2"),
-    ({"t_max": -1.0}, "t_max"),
-    ({"scan_period": 0.001}, "scan_period"),
-    ({"scan_period": 11.0}, "scan_period"),
-    ({"front": 0.54}, "front"),
-    ({"front": 0.6}, "front"),
-    ({"front": NAN}, "front"),
-    ({"front": 0.0}, "front"),
-    ({"map": "nowhere.toml"}, "map"),
-    ({"map": "Parallel"}, "map"),
-    ({"map": 3}, "map"),
-    ({"alpha_schedule": "1,-1"}, "alpha_schedule"),
-    ({"alpha_schedule": "1,a"}, "alpha_schedule"),
-    ({"alpha_schedule": ""}, "alpha_schedule"),
-    ({"alpha_schedule": [1.0, NAN]}, "alpha_schedule"),
-    ({"alpha_schedule": []}, "alpha_schedule"),
-    ({"alpha_schedule": [1.0] * 9}, "alpha_schedule"),
-    ({"alpha_schedule": None}, "alpha_schedule"),
-    ({"xs": NAN}, "xs"),
-    ({"xs": "-0.9"}, "xs"),
-    ({"direction": "reverse"}, "direction"),
-    ({"direction": -1}, "direction"),
-    ({"lag": "yes"}, "lag"),
-])
+@pytest.mark.parametrize(
+    "kw, key",
+    [
+        ({"x0": (0.1, NAN, 0.0)}, "x0"),
+        ({"x0": (0.1, 0.5, 90.0)}, "x0"),
+        ({"x0": (0.1, 0.5)}, "x0"),
+        ({"x0": "0 0.5 0"}, "x0"),
+        ({"x0": (0.0, -0.5, 0.0)}, "x0"),  # axle point inside the kerb
+        ({"x0": (0.0, 0.0, 60.0)}, "x0"),  # body overlapping the kerb
+        ({"x0": (0.0, 0.3, 0.0), "front": 0.53}, "x0"),  # body overlapping car_ahead with a longer reach
+        ({"speed": -0.05}, "speed"),
+        ({"speed": 0}, "speed"),
+        ({"speed": NAN}, "speed"),
+        ({"k1": math.inf}, "k1"),
+        ({"k2": True}, "k2"),
+        ({"t_max": -1.0}, "t_max"),
+        ({"scan_period": 0.001}, "scan_period"),
+        ({"scan_period": 11.0}, "scan_period"),
+        ({"front": 0.54}, "front"),
+        ({"front": 0.6}, "front"),
+        ({"front": NAN}, "front"),
+        ({"front": 0.0}, "front"),
+        ({"map": "nowhere.toml"}, "map"),
+        ({"map": "Parallel"}, "map"),
+        ({"map": 3}, "map"),
+        ({"alpha_schedule": "1,-1"}, "alpha_schedule"),
+        ({"alpha_schedule": "1,a"}, "alpha_schedule"),
+        ({"alpha_schedule": ""}, "alpha_schedule"),
+        ({"alpha_schedule": [1.0, NAN]}, "alpha_schedule"),
+        ({"alpha_schedule": []}, "alpha_schedule"),
+        ({"alpha_schedule": [1.0] * 9}, "alpha_schedule"),
+        ({"alpha_schedule": None}, "alpha_schedule"),
+        ({"xs": NAN}, "xs"),
+        ({"xs": "-0.9"}, "xs"),
+        ({"direction": "reverse"}, "direction"),
+        ({"direction": -1}, "direction"),
+        ({"lag": "yes"}, "lag"),
+    ],
+)
 def test_run_bad_argument_names_it(kw, key):
     with pytest.raises(InputError) as e:
         api.run(**{**OK, **kw})
@@ -101,23 +104,26 @@ def test_run_bad_argument_names_it(kw, key):
     assert str(e.value).startswith(key) and "\n" not in str(e.value)
 
 
-@pytest.mark.parametrize("kw, key", [
-    ({"method": "annealing"}, "method"),
-    ({"n": 1}, "n"),
-    ({"n": 65}, "n"),
-    ({"n": 2.0}, "n"),
-    ({"population": 1}, "population"),
-    ({"generations": 0}, "generations"),
-    ({"seed": -1}, "seed"),
-    ({"seed": 2**64}, "seed"),
-    ({"weight": -1.0}, "weight"),
-    ({"weight": NAN}, "weight"),
-    ({"speed": -1.0}, "speed"),
-    ({"front": 0.54}, "front"),
-    ({"map": "nowhere.json"}, "map"),
-    ({"map": "parallel"}, "x0"),  # no default start there
-    ({"x0": (-0.7, 0.6, 40.0)}, "x0"),  # body overlapping the garage's left wall
-])
+@pytest.mark.parametrize(
+    "kw, key",
+    [
+        ({"method": "annealing"}, "method"),
+        ({"n": 1}, "n"),
+        ({"n": 65}, "n"),
+        ({"n": 2.0}, "n"),
+        ({"population": 1}, "population"),
+        ({"generations": 0}, "generations"),
+        ({"seed": -1}, "seed"),
+        ({"seed": 2**64}, "seed"),
+        ({"weight": -1.0}, "weight"),
+        ({"weight": NAN}, "weight"),
+        ({"speed": -1.0}, "speed"),
+        ({"front": 0.54}, "front"),
+        ({"map": "nowhere.json"}, "map"),
+        ({"map": "parallel"}, "x0"),  # no default start there
+        ({"x0": (-0.7, 0.6, 40.0)}, "x0"),  # body overlapping the garage's left wall
+    ],
+)
 def test_search_bad_argument_names_it(kw, key):
     with pytest.raises(InputError) as e:
         api.search(**{"method": "grid", **kw})
@@ -130,7 +136,9 @@ def test_map_errors_keep_their_message_and_name_the_argument(tmp_path):
     with pytest.raises(MapError) as e:
         api.run(str(bad), (-1.0, 0.0, 0.0))
     assert e.value.key == "map"
-    assert str(e.value) == "obstacles[0].vertices: polygon not closed (the last vertex must repeat the first, [0.0, 0.0])"
+    assert (
+        str(e.value) == "obstacles[0].vertices: polygon not closed (the last vertex must repeat the first, [0.0, 0.0])"
+    )
     with pytest.raises(MapError) as e:
         api.search("ga", map=tmp_path)  # a directory, given as a path object
     assert e.value.key == "map" and str(e.value).startswith(f"map: {tmp_path}: is a directory")
@@ -143,9 +151,15 @@ def test_cli_names_the_flags(capsys):
     """The API's message with the flag's name: the command line's one line."""
     for args, msg in [
         (["parking", "--front", "0.6"], "--front: must be < 0.54 (the rectangle length), got 0.6"),
-        (["parking", "--alpha-schedule", "1,-1"], "--alpha-schedule: every alpha must be a finite number > 0, got [1.0, -1.0]"),
+        (
+            ["parking", "--alpha-schedule", "1,-1"],
+            "--alpha-schedule: every alpha must be a finite number > 0, got [1.0, -1.0]",
+        ),
         (["parking", "--x0", "0", "-0.5", "0"], "--x0: start point (0, -0.5) lies inside obstacle 'kerb'"),
-        (["parking", "--map", "nowhere.toml"], "--map: map: not 'parallel', 'garage' or an existing file: nowhere.toml"),
+        (
+            ["parking", "--map", "nowhere.toml"],
+            "--map: map: not 'parallel', 'garage' or an existing file: nowhere.toml",
+        ),
         (["parking-search", "--method", "grid", "--n", "1"], "--n: must be >= 2, got 1"),
         (["parking", "--horizon", "-1"], "--horizon: must be > 0, got -1"),  # the API's t_max
     ]:

@@ -20,8 +20,8 @@ import pytest
 
 from pfjax.cli import main
 from pfjax.parking.maps import GARAGE, MAX_VERTICES, to_obstacle_map
-from pfjax.parking.switch_search import SEARCH_CONFIG, fitness, lattice
 from pfjax.parking.simulate import ParkingConfig, run_jit, run_params
+from pfjax.parking.switch_search import SEARCH_CONFIG, fitness, lattice
 
 ROOT = Path(__file__).resolve().parents[1]
 GMAP = to_obstacle_map(list(GARAGE.values()))
@@ -43,8 +43,21 @@ def strict(text):
 
 
 def test_parking_json_contract(capsys):
-    rc, out, _ = run_cli(capsys, "parking", "--map", "parallel", "--x0", "0.1", "0.5", "0", "--direction", "backward",
-                         "--alpha-schedule", "1,0.5,8,1", "--json")
+    rc, out, _ = run_cli(
+        capsys,
+        "parking",
+        "--map",
+        "parallel",
+        "--x0",
+        "0.1",
+        "0.5",
+        "0",
+        "--direction",
+        "backward",
+        "--alpha-schedule",
+        "1,0.5,8,1",
+        "--json",
+    )
     assert rc == 0
     o = strict(out)
     assert o["converged"] is True and o["status"] == "converged"
@@ -54,15 +67,20 @@ def test_parking_json_contract(capsys):
     assert set(o["final"]) == {"x", "y", "theta_deg"}
     assert abs(o["final"]["x"]) + math.hypot(o["final"]["y"], math.tan(math.radians(o["final"]["theta_deg"]))) < 0.02
     # the same run through the library
-    r = run_jit(run_params((0.1, 0.5, 0.0), -1, (1, 0.5, 8, 1)), to_obstacle_map(list(__import__("pfjax.parking.maps", fromlist=["x"]).PARALLEL.values())),
-                ParkingConfig())
+    r = run_jit(
+        run_params((0.1, 0.5, 0.0), -1, (1, 0.5, 8, 1)),
+        to_obstacle_map(list(__import__("pfjax.parking.maps", fromlist=["x"]).PARALLEL.values())),
+        ParkingConfig(),
+    )
     assert o["time_s"] == pytest.approx(float(r.time)) and o["switches"] == int(r.n_switches)
     assert [e["t"] for e in o["switch_log"]] == pytest.approx(list(np.asarray(r.log_t)[: int(r.n_switches)]))
 
 
 def test_parking_garage_user_map(capsys, tmp_path):
     m = tmp_path / "garage.json"
-    m.write_text(json.dumps({"obstacles": [{"vertices": [list(v) for v in poly] + [list(poly[0])]} for poly in GARAGE.values()]}))
+    m.write_text(
+        json.dumps({"obstacles": [{"vertices": [list(v) for v in poly] + [list(poly[0])]} for poly in GARAGE.values()]})
+    )
     rc, out, _ = run_cli(capsys, "parking", "--map", str(m), "--x0", "-0.9", "0.6", "-85", "--xs", "-1.2", "--json")
     rc2, out2, _ = run_cli(capsys, "parking", "--map", "garage", "--xs", "-1.2", "--json")
     assert rc == rc2 == 0
@@ -71,20 +89,23 @@ def test_parking_garage_user_map(capsys, tmp_path):
     assert [e["cause"] for e in a["switch_log"]][:2] == ["obstacle", "switch_point"]
 
 
-@pytest.mark.parametrize("args, flag", [
-    (["parking", "--alpha-schedule", "1,-1"], "--alpha-schedule"),
-    (["parking", "--x0", "0", "-0.5", "0"], "--x0"),  # inside the kerb
-    (["parking", "--x0", "0", "0.5", "90"], "--x0"),
-    (["parking", "--map", "nowhere.toml"], "--map"),
-    (["parking", "--speed", "0"], "--speed"),
-    (["parking", "--xs", "nan"], "--xs"),
-    (["parking-search", "--method", "grid", "--n", "1"], "--n"),
-    (["parking-search", "--method", "ga", "--population", "1"], "--population"),
-    (["parking-search", "--method", "grid", "--map", "parallel"], "--x0"),
-    (["parking", "--scan-period", "0.001"], "--scan-period"),
-    (["parking", "--horizon", "0"], "--horizon"),  # the timeout (once --t-max)
-    (["parking-search", "--method", "grid", "--horizon", "nan"], "--horizon"),
-])
+@pytest.mark.parametrize(
+    "args, flag",
+    [
+        (["parking", "--alpha-schedule", "1,-1"], "--alpha-schedule"),
+        (["parking", "--x0", "0", "-0.5", "0"], "--x0"),  # inside the kerb
+        (["parking", "--x0", "0", "0.5", "90"], "--x0"),
+        (["parking", "--map", "nowhere.toml"], "--map"),
+        (["parking", "--speed", "0"], "--speed"),
+        (["parking", "--xs", "nan"], "--xs"),
+        (["parking-search", "--method", "grid", "--n", "1"], "--n"),
+        (["parking-search", "--method", "ga", "--population", "1"], "--population"),
+        (["parking-search", "--method", "grid", "--map", "parallel"], "--x0"),
+        (["parking", "--scan-period", "0.001"], "--scan-period"),
+        (["parking", "--horizon", "0"], "--horizon"),  # the timeout (once --t-max)
+        (["parking-search", "--method", "grid", "--horizon", "nan"], "--horizon"),
+    ],
+)
 def test_bad_values_exit_2_one_line(capsys, args, flag):
     rc, out, err = run_cli(capsys, *args, "--json")
     assert rc == 2 and out == ""
@@ -102,7 +123,11 @@ def test_bad_map_file_names_key(capsys, tmp_path):
     m = tmp_path / "bad.toml"
     m.write_text("[[obstacles]]\nvertices = [[0, 0], [1, 0], [1, 1]]\n")
     rc, out, err = run_cli(capsys, "parking", "--map", str(m), "--x0", "-1", "0", "0")
-    assert rc == 2 and err.strip() == "pfjax parking: error: --map: obstacles[0].vertices: polygon not closed (the last vertex must repeat the first, [0.0, 0.0])"
+    assert (
+        rc == 2
+        and err.strip()
+        == "pfjax parking: error: --map: obstacles[0].vertices: polygon not closed (the last vertex must repeat the first, [0.0, 0.0])"
+    )
 
 
 def _poly_file(path, polygons, names=None):
@@ -121,21 +146,53 @@ def test_bad_maps_and_starts_exit_2_one_line(capsys, tmp_path):
     (tmp_path / "latin1.toml").write_bytes('name = "caf\xe9"\n'.encode("latin-1"))
     (tmp_path / "folder.json").mkdir()
     cases = [
-        (["parking", "--map", _poly_file(tmp_path / "dup.json", [box, far], ["kerb", "kerb"]), "--x0", "0", "0", "0"],
-         "--map: obstacles[1].name: duplicate obstacle name 'kerb' (also obstacles[0])"),
-        (["parking", "--map", _poly_file(tmp_path / "dflt.json", [far, box], ["obstacle_1"]), "--x0", "0", "0", "0"],
-         "--map: obstacles[1].name: missing, and the default name 'obstacle_1' is taken by obstacles[0]"),
-        (["parking", "--map", str(tmp_path / "latin1.toml"), "--x0", "0", "0", "0"],
-         f"--map: map: {tmp_path / 'latin1.toml'}: not UTF-8 text (byte 0xe9 at offset 11"),
-        (["parking", "--map", str(tmp_path / "folder.json"), "--x0", "0", "0", "0"],
-         f"--map: map: {tmp_path / 'folder.json'}: is a directory"),
-        (["parking-search", "--method", "grid", "--map", _poly_file(tmp_path / "ring.json", [ring]), "--x0", "0", "0", "0"],
-         f"--map: obstacles[0].vertices: at most {MAX_VERTICES} vertices per polygon, got 20000"),
+        (
+            [
+                "parking",
+                "--map",
+                _poly_file(tmp_path / "dup.json", [box, far], ["kerb", "kerb"]),
+                "--x0",
+                "0",
+                "0",
+                "0",
+            ],
+            "--map: obstacles[1].name: duplicate obstacle name 'kerb' (also obstacles[0])",
+        ),
+        (
+            ["parking", "--map", _poly_file(tmp_path / "dflt.json", [far, box], ["obstacle_1"]), "--x0", "0", "0", "0"],
+            "--map: obstacles[1].name: missing, and the default name 'obstacle_1' is taken by obstacles[0]",
+        ),
+        (
+            ["parking", "--map", str(tmp_path / "latin1.toml"), "--x0", "0", "0", "0"],
+            f"--map: map: {tmp_path / 'latin1.toml'}: not UTF-8 text (byte 0xe9 at offset 11",
+        ),
+        (
+            ["parking", "--map", str(tmp_path / "folder.json"), "--x0", "0", "0", "0"],
+            f"--map: map: {tmp_path / 'folder.json'}: is a directory",
+        ),
+        (
+            [
+                "parking-search",
+                "--method",
+                "grid",
+                "--map",
+                _poly_file(tmp_path / "ring.json", [ring]),
+                "--x0",
+                "0",
+                "0",
+                "0",
+            ],
+            f"--map: obstacles[0].vertices: at most {MAX_VERTICES} vertices per polygon, got 20000",
+        ),
         (["parking", "--x0", "0", "0", "60"], "--x0: the robot's body at the start pose overlaps obstacle 'kerb'"),
-        (["parking", "--x0", "0", "0.3", "0", "--front", "0.53"],
-         "--x0: the robot's body at the start pose overlaps obstacle 'car_ahead'"),
-        (["parking-search", "--method", "ga", "--x0", "-0.7", "0.6", "40"],
-         "--x0: the robot's body at the start pose overlaps obstacle 'wall_left'"),
+        (
+            ["parking", "--x0", "0", "0.3", "0", "--front", "0.53"],
+            "--x0: the robot's body at the start pose overlaps obstacle 'car_ahead'",
+        ),
+        (
+            ["parking-search", "--method", "ga", "--x0", "-0.7", "0.6", "40"],
+            "--x0: the robot's body at the start pose overlaps obstacle 'wall_left'",
+        ),
     ]
     for args, msg in cases:
         rc, out, err = run_cli(capsys, *args, "--json")
@@ -160,7 +217,9 @@ def _single_fitness(xs, a1, a2):
 
 
 def test_ga_search_counts_and_resimulates(capsys):
-    rc, out, _ = run_cli(capsys, "parking-search", "--method", "ga", "--population", "5", "--generations", "2", "--seed", "3", "--json")
+    rc, out, _ = run_cli(
+        capsys, "parking-search", "--method", "ga", "--population", "5", "--generations", "2", "--seed", "3", "--json"
+    )
     o = strict(out)
     assert rc == 0 and o["n_simulations"] == 5 + 2 * (5 - 1)  # P + G (P - E)
     assert o["fitness"] == pytest.approx(_single_fitness(o["xs"], o["alpha1"], o["alpha2"]), rel=1e-9)
@@ -186,7 +245,18 @@ def test_study_quick(tmp_path):
     for f in ("cases_parallel", "garage_xs", "search", "start_map", "montecarlo", "histories_D"):
         assert (out / "figures" / f"{f}.png").stat().st_size > 1000 and (out / "figures" / f"{f}.svg").exists()
     assert "a_f = " in (out / "report.md").read_text()
-    bad = subprocess.run([sys.executable, str(ROOT / "studies" / "parking.py"), "--set", "sim.scan_perod=0.1", "--out",
-                          str(tmp_path / "bad")], capture_output=True, text=True, timeout=120)
+    bad = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "studies" / "parking.py"),
+            "--set",
+            "sim.scan_perod=0.1",
+            "--out",
+            str(tmp_path / "bad"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "sim.scan_perod" in bad.stderr
     assert not (tmp_path / "bad").exists()

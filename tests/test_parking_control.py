@@ -23,9 +23,17 @@ from pfjax.parking.geometry import half_corners, quad_hits_map, robot_shape
 from pfjax.parking.maps import PARALLEL, to_obstacle_map
 from pfjax.parking.model import control_params, lyapunov, vector_field
 from pfjax.parking.schedules import CASES, alpha_at, decode_bits, pad_schedule, parse_schedule, three_phase
-from pfjax.parking.simulate import (ParkingConfig, Status, n_periods_for, run_batch, run_jit, run_recorded_jit, run_params,
-                                    simulated_first_switch,
-                                    stack_params)
+from pfjax.parking.simulate import (
+    ParkingConfig,
+    Status,
+    n_periods_for,
+    run_batch,
+    run_jit,
+    run_params,
+    run_recorded_jit,
+    simulated_first_switch,
+    stack_params,
+)
 from pfjax.sim.integrators import rk4_step
 
 PMAP = to_obstacle_map(list(PARALLEL.values()))
@@ -62,7 +70,9 @@ def test_lyapunov_rate_matches_theory():
     p = control_params()
     s = jnp.array([0.1, 0.2, 0.4, 0.0])
     for d, a in [(1.0, 1.0), (-1.0, 0.5), (1.0, 8.0)]:
-        rate = jax.jit(lambda s, d, a: jax.grad(lambda z: lyapunov(z[1], z[2], p.k1))(s) @ vector_field(s, d * p.speed, a, p))
+        rate = jax.jit(
+            lambda s, d, a: jax.grad(lambda z: lyapunov(z[1], z[2], p.k1))(s) @ vector_field(s, d * p.speed, a, p)
+        )
         expect = -2 * a * 8.0 * math.tan(0.4) ** 2 * 0.05 * math.cos(0.4)
         assert float(rate(s, d, a)) == pytest.approx(expect, rel=1e-12)
 
@@ -118,13 +128,15 @@ def test_substeps_converge():
     a, b = run_jit(p, PMAP, ParkingConfig(n_sub=2)), run_jit(p, PMAP, ParkingConfig(n_sub=10))
     assert int(a.n_switches) == int(b.n_switches)
     assert abs(float(a.time) - float(b.time)) <= 0.1
-    np.testing.assert_allclose(np.asarray(a.log_pose)[: int(a.n_switches)], np.asarray(b.log_pose)[: int(b.n_switches)], atol=1e-4)
+    np.testing.assert_allclose(
+        np.asarray(a.log_pose)[: int(a.n_switches)], np.asarray(b.log_pose)[: int(b.n_switches)], atol=1e-4
+    )
 
 
 def test_statuses():
     # a corridor around (10, 0) 2 cm longer than the robot (body x_b in [a_f - 0.54, a_f], a_f = 0.1746):
     # it touches one end, reverses, touches the other after about 2 cm, ... reversing in place
-    box = lambda x0, y0, x1, y1: [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]  # noqa: E731
+    box = lambda x0, y0, x1, y1: [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
     front, rear = 10.0 + A_F + 0.01, 10.0 + A_F - 0.54 - 0.01
     omap = to_obstacle_map([box(front, -1.0, 11.0, 1.0), box(9.0, -1.0, rear, 1.0), box(50.0, 50.0, 51.0, 51.0)])
     runs = [
@@ -135,8 +147,13 @@ def test_statuses():
         run_params((10.0, 0.0, 0.0), 1, (1.0,), length=0.6),  # a longer robot starts touching both ends
     ]
     r = run_batch(stack_params(runs), omap, ParkingConfig())
-    assert [Status(int(s)) for s in r.status] == [Status.HEADING_LIMIT, Status.NONFINITE, Status.TIMEOUT,
-                                                  Status.STUCK, Status.START_OVERLAP]
+    assert [Status(int(s)) for s in r.status] == [
+        Status.HEADING_LIMIT,
+        Status.NONFINITE,
+        Status.TIMEOUT,
+        Status.STUCK,
+        Status.START_OVERLAP,
+    ]
     assert float(r.time[2]) == pytest.approx(200.0, abs=1e-6)
     # stuck at the 4th reversal (legs of 1, 2, 2, 2 cm: less than 0.1 m in all), long before any cut-off
     legs = np.diff(np.concatenate([[0.0], np.asarray(r.log_t[3])[: int(r.n_switches[3])]])) * 0.05
@@ -189,7 +206,7 @@ def test_calibration_of_front_reach():
     pose = jnp.array([0.074, y, th])
     hits = jax.jit(lambda f: quad_hits_map(half_corners(pose, robot_shape(f), 1.0), PMAP))
     grid = np.linspace(0.05, 0.4, 3501)
-    first = grid[np.argmax([bool(hits(f)) for f in grid[::50]]) * 50 - 50:][:101]
+    first = grid[np.argmax([bool(hits(f)) for f in grid[::50]]) * 50 - 50 :][:101]
     touch = first[np.argmax([bool(hits(f)) for f in first])]
     assert touch == pytest.approx(A_F, abs=1.01e-4)
     sw = simulated_first_switch(A_F)
@@ -232,7 +249,7 @@ def test_decision_delay_and_detection_zone():
     assert float(b.log_t[0]) == pytest.approx(float(a.log_t[0]) + 0.1, abs=1e-9)
     from pfjax.parking.geometry import obstacle_ahead
 
-    box = lambda x0, y0, x1, y1: [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]  # noqa: E731
+    box = lambda x0, y0, x1, y1: [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
     behind = to_obstacle_map([box(-1.0, -1.0, A_F - 0.54 + 0.01, 1.0)])  # 1 cm into the rear end
     pose = jnp.zeros(3)
     seen = {zone: bool(obstacle_ahead(pose, robot_shape(A_F, zone=zone), 1.0, behind)) for zone in (0.0, 0.54)}
@@ -246,8 +263,14 @@ def test_decision_delay_and_detection_zone():
 def test_case_sweep_counts_the_source_outcomes():
     from pfjax.parking.assumptions import case_sweep, sweep_summary
 
-    grid = {"front": [A_F], "zone": ["middle", "whole"], "scan_period": [0.1], "decision_delay": [False],
-            "lag": [False], "pause": [0.0]}
+    grid = {
+        "front": [A_F],
+        "zone": ["middle", "whole"],
+        "scan_period": [0.1],
+        "decision_delay": [False],
+        "lag": [False],
+        "pause": [0.0],
+    }
     df = case_sweep(PMAP, grid)
     assert len(df) == 2 * 4 and set(df.case) == {"A", "B", "C", "D"}
     mid = df[df.zone == "middle"].set_index("case")

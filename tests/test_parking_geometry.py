@@ -26,7 +26,7 @@ def clip_area(poly, quad):
     out = [tuple(p) for p in poly]
     for i in range(4):
         a, b = quad[i], quad[(i + 1) % 4]
-        inside = lambda p: (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) >= 0  # noqa: E731
+        inside = lambda p: (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) >= 0
         inp, out = out, []
         if not inp:
             break
@@ -88,8 +88,12 @@ def test_rectangle_polygon_against_clipping_and_sampling():
         # sampling: any sampled point of the quad inside the polygon implies a hit
         u, v = np.meshgrid(np.linspace(0, 1, 40), np.linspace(0, 1, 40))
         q = np.asarray(quad)
-        pts = (q[0] * ((1 - u) * (1 - v))[..., None] + q[1] * (u * (1 - v))[..., None]
-               + q[2] * (u * v)[..., None] + q[3] * ((1 - u) * v)[..., None]).reshape(-1, 2)
+        pts = (
+            q[0] * ((1 - u) * (1 - v))[..., None]
+            + q[1] * (u * (1 - v))[..., None]
+            + q[2] * (u * v)[..., None]
+            + q[3] * ((1 - u) * v)[..., None]
+        ).reshape(-1, 2)
         if MplPath(poly).contains_points(pts).any():
             assert hit
         n_checked += 1

@@ -19,12 +19,25 @@ from matplotlib.path import Path as MplPath
 
 from pfjax.parking.calibrate import A_F
 from pfjax.parking.geometry import L1_WIDTH, L2_LENGTH, points_in_polygons, rectangle_corners, robot_shape
-from pfjax.parking.maps import (BUILTIN, GARAGE, MAX_VERTICES, PARALLEL, MapError, body_overlaps, check_start, load_map,
-                                overlap_area, parse_map, points_in_polygon_np, robot_rectangle, self_crossing,
-                                to_obstacle_map, validate_polygon)
+from pfjax.parking.maps import (
+    BUILTIN,
+    GARAGE,
+    MAX_VERTICES,
+    PARALLEL,
+    MapError,
+    body_overlaps,
+    check_start,
+    load_map,
+    overlap_area,
+    parse_map,
+    points_in_polygon_np,
+    robot_rectangle,
+    self_crossing,
+    to_obstacle_map,
+    validate_polygon,
+)
 from pfjax.parking.schedules import CASES, GARAGE_START
 from pfjax.parking.simulate import run_params
-
 
 # ----------------------------------------------------------------------------- references
 
@@ -102,12 +115,15 @@ def test_duplicate_names_rejected():
     # an explicit name equal to an earlier obstacle's default name
     with pytest.raises(MapError) as e:
         parse_map({"obstacles": [_obstacle(), _obstacle("obstacle_0", x=5)]})
-    assert str(e.value) == ("obstacles[1].name: duplicate obstacle name 'obstacle_0' "
-                            "(also obstacles[0], unnamed, which has it by default)")
+    assert str(e.value) == (
+        "obstacles[1].name: duplicate obstacle name 'obstacle_0' (also obstacles[0], unnamed, which has it by default)"
+    )
     # a default name equal to an earlier explicit name
     with pytest.raises(MapError) as e:
         parse_map({"obstacles": [_obstacle("obstacle_1"), _obstacle(x=5)]})
-    assert str(e.value).startswith("obstacles[1].name: missing, and the default name 'obstacle_1' is taken by obstacles[0]")
+    assert str(e.value).startswith(
+        "obstacles[1].name: missing, and the default name 'obstacle_1' is taken by obstacles[0]"
+    )
     # distinct names, explicit and default, keep every polygon in file order
     name, polys = parse_map({"obstacles": [_obstacle(), _obstacle("a", x=5), _obstacle(x=10)]})
     assert list(polys) == ["obstacle_0", "a", "obstacle_2"] and polys["obstacle_2"][0] == (10.0, 0.0)
@@ -115,9 +131,13 @@ def test_duplicate_names_rejected():
 
 def test_duplicate_names_in_a_file(tmp_path):
     f = tmp_path / "dup.toml"
-    f.write_text('[[obstacles]]\nname = "kerb"\nvertices = [[0, 0], [1, 0], [1, 1], [0, 0]]\n'
-                 '[[obstacles]]\nname = "kerb"\nvertices = [[5, 0], [6, 0], [6, 1], [5, 0]]\n')
-    with pytest.raises(MapError, match=r"^obstacles\[1\]\.name: duplicate obstacle name 'kerb' \(also obstacles\[0\]\)$"):
+    f.write_text(
+        '[[obstacles]]\nname = "kerb"\nvertices = [[0, 0], [1, 0], [1, 1], [0, 0]]\n'
+        '[[obstacles]]\nname = "kerb"\nvertices = [[5, 0], [6, 0], [6, 1], [5, 0]]\n'
+    )
+    with pytest.raises(
+        MapError, match=r"^obstacles\[1\]\.name: duplicate obstacle name 'kerb' \(also obstacles\[0\]\)$"
+    ):
         load_map(str(f))
 
 
@@ -297,20 +317,26 @@ def test_robot_rectangle_matches_geometry():
 SHAPE = (0.4, 0.6, 0.2)  # width, length, front (m): body x_b in [-0.4, 0.2], y_b in [-0.2, 0.2]
 
 
-@pytest.mark.parametrize("label, poly, expect", [
-    ("flush below", [(-1, -1), (1, -1), (1, -0.2), (-1, -0.2)], False),
-    ("flush corner to corner", [(0.2, 0.2), (1, 0.2), (1, 1), (0.2, 1)], False),
-    ("vertex touches an edge", [(0.0, -0.2), (0.5, -1), (-0.5, -1)], False),
-    ("1 mm in", [(-1, -1), (1, -1), (1, -0.199), (-1, -0.199)], True),
-    ("corner inside", [(0.1, 0.1), (1, 0.1), (1, 1), (0.1, 1)], True),
-    ("contains the rectangle", [(-5, -5), (5, -5), (5, 5), (-5, 5)], True),
-    ("inside the rectangle", [(-0.1, -0.1), (0.1, -0.1), (0.0, 0.1)], True),
-    ("the rectangle itself", [(-0.4, -0.2), (0.2, -0.2), (0.2, 0.2), (-0.4, 0.2)], True),
-    ("inscribed triangle", [(-0.4, -0.2), (0.2, 0.0), (-0.4, 0.2)], True),
-    ("crossing bar, no vertex inside", [(-0.1, -3), (0.1, -3), (0.1, 3), (-0.1, 3)], True),
-    ("a U around it, no overlap", [(-1, -1), (1, -1), (1, 1), (0.3, 1), (0.3, -0.5), (-0.5, -0.5), (-0.5, 1), (-1, 1)],
-     False),
-])
+@pytest.mark.parametrize(
+    "label, poly, expect",
+    [
+        ("flush below", [(-1, -1), (1, -1), (1, -0.2), (-1, -0.2)], False),
+        ("flush corner to corner", [(0.2, 0.2), (1, 0.2), (1, 1), (0.2, 1)], False),
+        ("vertex touches an edge", [(0.0, -0.2), (0.5, -1), (-0.5, -1)], False),
+        ("1 mm in", [(-1, -1), (1, -1), (1, -0.199), (-1, -0.199)], True),
+        ("corner inside", [(0.1, 0.1), (1, 0.1), (1, 1), (0.1, 1)], True),
+        ("contains the rectangle", [(-5, -5), (5, -5), (5, 5), (-5, 5)], True),
+        ("inside the rectangle", [(-0.1, -0.1), (0.1, -0.1), (0.0, 0.1)], True),
+        ("the rectangle itself", [(-0.4, -0.2), (0.2, -0.2), (0.2, 0.2), (-0.4, 0.2)], True),
+        ("inscribed triangle", [(-0.4, -0.2), (0.2, 0.0), (-0.4, 0.2)], True),
+        ("crossing bar, no vertex inside", [(-0.1, -3), (0.1, -3), (0.1, 3), (-0.1, 3)], True),
+        (
+            "a U around it, no overlap",
+            [(-1, -1), (1, -1), (1, 1), (0.3, 1), (0.3, -0.5), (-0.5, -0.5), (-0.5, 1), (-1, 1)],
+            False,
+        ),
+    ],
+)
 def test_body_overlap_by_hand(label, poly, expect):
     for orientation in (1, -1):  # either vertex order
         p = poly[::orientation]
@@ -358,10 +384,14 @@ def test_check_start_point_and_body():
     with pytest.raises(MapError, match=r"^--x0: start point \(0, -0\.5\) lies inside obstacle 'kerb'$"):
         check_start(PARALLEL, (0.0, -0.5, 0.0), shape)
     # axle point in the slot, rear of the body in the kerb
-    with pytest.raises(MapError, match=r"^--x0: the robot's body at the start pose overlaps obstacle 'kerb' \(intersection area"):
+    with pytest.raises(
+        MapError, match=r"^--x0: the robot's body at the start pose overlaps obstacle 'kerb' \(intersection area"
+    ):
         check_start(PARALLEL, (0.0, 0.0, 60.0), shape)
     # axle point on the road, body into the car ahead; the key is the caller's
-    with pytest.raises(MapError, match=r"^start_map\.x0\[4\]: the robot's body at the start pose overlaps obstacle 'car_ahead'"):
+    with pytest.raises(
+        MapError, match=r"^start_map\.x0\[4\]: the robot's body at the start pose overlaps obstacle 'car_ahead'"
+    ):
         check_start(PARALLEL, (0.5, 0.3, 0.0), shape, key="start_map.x0[4]")
     check_start(PARALLEL, (0.0, 0.3, 0.0), shape)  # in the slot and the road, touching nothing
     check_start(PARALLEL, (1e300, 0.0, 0.0), shape)  # far outside the map: free, and no overflow in the tolerance

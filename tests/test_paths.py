@@ -29,9 +29,7 @@ from scipy.optimize import brentq
 
 from pfjax.paths import arc_length, circle, curvature, line, parabola, project, sine, spline_through, wrap_angle
 
-WAYPOINTS = np.array(
-    [[0.0, 0.0], [1.5, 0.4], [3.0, 1.5], [4.0, 1.2], [5.5, 0.0], [7.0, -0.5], [8.2, 0.5], [9.0, 2.0]]
-)
+WAYPOINTS = np.array([[0.0, 0.0], [1.5, 0.4], [3.0, 1.5], [4.0, 1.2], [5.5, 0.0], [7.0, -0.5], [8.2, 0.5], [9.0, 2.0]])
 N_DENSE = 250_001  # brute-force samples of each curve
 
 
@@ -99,25 +97,38 @@ def ref_line():  # y = b x with b = tan(pi/4), u = x (a graph); the domain is ar
     h = math.pi / 4
     b = math.tan(h)
     return RefCurve(
-        "line", lambda u: (u + 0 * u, b * u + 0 * u),
+        "line",
+        lambda u: (u + 0 * u, b * u + 0 * u),
         lambda u: (1.0 + 0 * u, b + 0 * u),
-        lambda u: u * math.sqrt(1 + b * b), lambda u: 0.0 * u, -20.0 * math.cos(h), 80.0 * math.cos(h),
+        lambda u: u * math.sqrt(1 + b * b),
+        lambda u: 0.0 * u,
+        -20.0 * math.cos(h),
+        80.0 * math.cos(h),
     )
 
 
 def ref_parabola():  # y = x^2, u = x
     return RefCurve(
-        "parabola", lambda u: (u, u**2), lambda u: (1.0 + 0 * u, 2 * u),
+        "parabola",
+        lambda u: (u, u**2),
+        lambda u: (1.0 + 0 * u, 2 * u),
         lambda x: x / 2 * math.sqrt(1 + 4 * x * x) + math.asinh(2 * x) / 4,
-        lambda x: 2.0 / (1 + 4 * x * x) ** 1.5, -10.0, 10.0,
+        lambda x: 2.0 / (1 + 4 * x * x) ** 1.5,
+        -10.0,
+        10.0,
     )
 
 
 def ref_sine(A=1.0):  # y = A sin x, u = x
     d1 = lambda u: (1.0 + 0 * u, A * np.cos(u))
     return RefCurve(
-        "sine", lambda u: (u, A * np.sin(u)), d1, lambda u: _quad_arc(d1, u, points=list(np.arange(-3, 20) * np.pi / 2)),
-        lambda u: -A * np.sin(u) / (1 + (A * np.cos(u)) ** 2) ** 1.5, -10.0, 60.0,
+        "sine",
+        lambda u: (u, A * np.sin(u)),
+        d1,
+        lambda u: _quad_arc(d1, u, points=list(np.arange(-3, 20) * np.pi / 2)),
+        lambda u: -A * np.sin(u) / (1 + (A * np.cos(u)) ** 2) ** 1.5,
+        -10.0,
+        60.0,
     )
 
 
@@ -125,9 +136,14 @@ def ref_circle(R=2.0, cx=0.5, cy=1.0, direction=1.0, phi0=-math.pi / 2):
     # u is arc length; the reference samples one lap and compares s modulo the circumference.
     phi = lambda u: phi0 + direction * u / R
     return RefCurve(
-        "circle", lambda u: (cx + R * np.cos(phi(u)), cy + R * np.sin(phi(u))),
+        "circle",
+        lambda u: (cx + R * np.cos(phi(u)), cy + R * np.sin(phi(u))),
         lambda u: (-direction * np.sin(phi(u)), direction * np.cos(phi(u))),
-        lambda u: u, lambda u: direction / R + 0 * u, 0.0, 2 * math.pi * R, period=2 * math.pi * R,
+        lambda u: u,
+        lambda u: direction / R + 0 * u,
+        0.0,
+        2 * math.pi * R,
+        period=2 * math.pi * R,
     )
 
 
@@ -143,8 +159,13 @@ def ref_spline():
 
     d1 = lambda u: tuple(np.moveaxis(c1(u), -1, 0))
     return RefCurve(
-        "spline", lambda u: tuple(np.moveaxis(cs(u), -1, 0)), d1,
-        lambda u: _quad_arc(d1, u, points=list(knots)), kappa, 0.0, float(knots[-1]),
+        "spline",
+        lambda u: tuple(np.moveaxis(cs(u), -1, 0)),
+        d1,
+        lambda u: _quad_arc(d1, u, points=list(knots)),
+        kappa,
+        0.0,
+        float(knots[-1]),
     )
 
 
@@ -189,9 +210,12 @@ def _all_outputs(path, xs, ys, ths, u_warm):
     ax = jnp.concatenate([xs, (xs[:, None] + shifts[None, :, 0]).ravel()])
     ay = jnp.concatenate([ys, (ys[:, None] + shifts[None, :, 1]).ravel()])
     cold = jax.vmap(lambda x, y, th: project(path, x, y, th))(xs, ys, ths)
-    warm_all = jax.vmap(warm_project)(ax, ay, jnp.concatenate([ths, jnp.repeat(ths, 4)]), jnp.tile(u_warm, 5)[
-        jnp.concatenate([jnp.arange(n), jnp.repeat(jnp.arange(n), 4)])
-    ])
+    warm_all = jax.vmap(warm_project)(
+        ax,
+        ay,
+        jnp.concatenate([ths, jnp.repeat(ths, 4)]),
+        jnp.tile(u_warm, 5)[jnp.concatenate([jnp.arange(n), jnp.repeat(jnp.arange(n), 4)])],
+    )
     warm = jax.tree_util.tree_map(lambda a: a[:n], warm_all)
     d_shift = warm_all.d[n:].reshape(n, 4)
     grad = jax.vmap(jax.grad(lambda x, y, th, u0: warm_project(x, y, th, u0).d, argnums=(0, 1)))(xs, ys, ths, u_warm)
@@ -297,14 +321,18 @@ def test_arc_length_closed_forms_and_quad():
     arc = jax.jit(jax.vmap(arc_length, in_axes=(None, 0)))
     xs = np.array([-9.5, -3.0, -0.7, 0.0, 0.4, 2.0, 7.5, 10.0])
     par = ref_parabola()
-    np.testing.assert_allclose(np.asarray(arc(parabola(), jnp.asarray(xs))), [par.arc(x) for x in xs], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(arc(parabola(), jnp.asarray(xs))), [par.arc(x) for x in xs], rtol=1e-12, atol=1e-12
+    )
     us = np.array([-20.0, -3.3, 0.0, 1.0, 55.5, 80.0])
     xl = us * math.cos(math.pi / 4)  # the line's u is x: these are arc lengths us from the origin
     np.testing.assert_allclose(np.asarray(arc(line(), jnp.asarray(xl))), us, rtol=1e-14, atol=1e-12)
     np.testing.assert_allclose(np.asarray(arc(circle(radius=1.5), jnp.asarray(us[1:4]))), us[1:4], atol=1e-12)
     sx = np.array([-10.0, -2.0, 0.5, 3.0, 17.0, 60.0])
     sref = ref_sine()
-    np.testing.assert_allclose(np.asarray(arc(sine(), jnp.asarray(sx))), [sref.arc(x) for x in sx], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(arc(sine(), jnp.asarray(sx))), [sref.arc(x) for x in sx], rtol=1e-12, atol=1e-12
+    )
     spl, rsp = spline_through(WAYPOINTS), ref_spline()
     su = np.linspace(0.0, float(spl.u_max), 9)
     np.testing.assert_allclose(np.asarray(arc(spl, jnp.asarray(su))), [rsp.arc(u) for u in su], atol=1e-6)
@@ -337,6 +365,7 @@ def test_vmap_over_a_batch_of_paths():
     paths = jax.tree_util.tree_map(lambda *a: jnp.stack(a), *[sine(amplitude=A) for A in amps])
     qs = [(1.3, 0.9, 0.2), (4.0, -1.2, -1.0), (7.9, 2.6, 2.5), (10.2, -0.1, 0.0)]
     xs, ys, ths = (jnp.asarray([q[i] for q in qs]) for i in range(3))
+
     def one(p, x, y, th):
         grad = jax.grad(lambda x, y: project(p, x, y, th).d, argnums=(0, 1))(x, y)
         return project(p, x, y, th), jnp.stack(grad)
@@ -383,7 +412,8 @@ def test_warm_start_tracks_a_moving_query_point():
 def test_wrap_angle_range():
     """(-pi, pi], including the float edge cases next to +-pi and odd multiples of pi."""
     a = np.r_[
-        np.linspace(-50, 50, 2001), [np.pi, -np.pi, 3 * np.pi, -3 * np.pi, 0.0, -0.0],
+        np.linspace(-50, 50, 2001),
+        [np.pi, -np.pi, 3 * np.pi, -3 * np.pi, 0.0, -0.0],
         [np.nextafter(np.pi, 4), np.nextafter(np.pi, 0), np.nextafter(-np.pi, -4), np.nextafter(-np.pi, 0)],
         [np.nextafter(3 * np.pi, 10), np.nextafter(-3 * np.pi, -10)],
     ]
@@ -425,6 +455,7 @@ def test_derivatives_are_finite_with_the_robot_exactly_on_the_path(dtype):
     with jax.enable_x64(dtype == jnp.float64):
         cast = lambda p: jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), p)
         for path in (cast(sine()), cast(parabola()), cast(circle())):
+
             def d_of(q, u):
                 return project(path, q[0], q[1], jnp.asarray(0.1, dtype), u, 3).d
 

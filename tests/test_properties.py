@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from test_parking_geometry import clip_area
 
 from pfjax.metrics import running
 from pfjax.numerics import elementary as E
@@ -20,7 +21,6 @@ from pfjax.parking.geometry import quad_hits_map, rectangle_corners, robot_shape
 from pfjax.parking.maps import to_obstacle_map
 from pfjax.paths import shapes
 from pfjax.paths.geometry import closest_parameter, measure
-from test_parking_geometry import clip_area
 
 finite = dict(allow_nan=False, allow_infinity=False)
 
@@ -36,8 +36,11 @@ def _circle_projection(qx, qy, u_guess):
 
 
 @settings(max_examples=60, deadline=None)
-@given(phi=st.floats(-math.pi / 2 + 0.05, 3 * math.pi / 2 - 0.05, **finite), r=st.floats(0.3, 3.7, **finite),
-       jitter=st.floats(-0.3, 0.3, **finite))
+@given(
+    phi=st.floats(-math.pi / 2 + 0.05, 3 * math.pi / 2 - 0.05, **finite),
+    r=st.floats(0.3, 3.7, **finite),
+    jitter=st.floats(-0.3, 0.3, **finite),
+)
 def test_circle_projection_is_the_radial_point(phi, r, jitter):
     """For any point at radius r from the centre, the closest point is on the same ray (closed form),
     |d| = |r - R| with d > 0 inside (left of the counter-clockwise circle), and Newton warm-started
@@ -64,8 +67,12 @@ point = st.tuples(st.floats(-1.0, 1.0, **finite), st.floats(-1.0, 1.0, **finite)
 
 
 @settings(max_examples=80, deadline=None)
-@given(tri=st.tuples(point, point, point), x=st.floats(-0.8, 0.8, **finite), y=st.floats(-0.8, 0.8, **finite),
-       th=st.floats(-math.pi, math.pi, **finite))
+@given(
+    tri=st.tuples(point, point, point),
+    x=st.floats(-0.8, 0.8, **finite),
+    y=st.floats(-0.8, 0.8, **finite),
+    th=st.floats(-math.pi, math.pi, **finite),
+)
 def test_rectangle_meets_triangle_iff_clipped_area_positive(tri, x, y, th):
     """The robot rectangle at any pose meets any (non-degenerate) triangle exactly when
     Sutherland-Hodgman clipping of the triangle by the rectangle leaves a positive area."""
@@ -82,6 +89,7 @@ def test_rectangle_meets_triangle_iff_clipped_area_positive(tri, x, y, th):
 
 
 # --------------------------------------------------------------------------------------- angles
+
 
 @settings(max_examples=200, deadline=None)
 @given(a=st.floats(-1e4, 1e4, **finite))
@@ -101,8 +109,10 @@ def _feed(d, te, delta, sat, weight):
     dt, horizon = 0.05, (N - 1) * 0.05
     t = jnp.arange(N) * dt
     acc0 = running.init(d[0], delta[0])
-    body = lambda acc, x: (running.update(acc, x[0], dt, x[5], x[1], x[2], x[3], x[4], band=0.1,
-                                          steady_from=1.0, success_from=1.0), None)
+    body = lambda acc, x: (
+        running.update(acc, x[0], dt, x[5], x[1], x[2], x[3], x[4], band=0.1, steady_from=1.0, success_from=1.0),
+        None,
+    )
     acc, _ = jax.lax.scan(body, acc0, jnp.stack([t, d, te, delta, sat, weight], axis=1))
     return running.finalize(acc, horizon, weight[-1] == 0, 0.1)
 
@@ -113,8 +123,13 @@ samples = st.lists(st.floats(-2.0, 2.0, allow_subnormal=False, **finite), min_si
 
 
 @settings(max_examples=60, deadline=None)
-@given(d=samples, te=samples, delta=samples, sat=st.lists(st.booleans(), min_size=N, max_size=N),
-       fail_at=st.one_of(st.none(), st.integers(1, N - 1)))
+@given(
+    d=samples,
+    te=samples,
+    delta=samples,
+    sat=st.lists(st.booleans(), min_size=N, max_size=N),
+    fail_at=st.one_of(st.none(), st.integers(1, N - 1)),
+)
 def test_running_metrics_equal_numpy_trapezoid(d, te, delta, sat, fail_at):
     """For any sample sequence (and any failure sample), the running metrics equal the composite
     trapezoid rule and sample statistics recomputed in NumPy over the samples before the failure."""

@@ -55,8 +55,10 @@ def test_unrolled_threefry_is_jax_fold_in_bit_for_bit():
     data[:4] = [0, 1, 2**31, 2**32 - 1]
     want = np.asarray(jax.vmap(jax.random.fold_in)(keys, data))
     np.testing.assert_array_equal(np.asarray(jax.jit(jax.vmap(fold_in))(keys, data)), want)
-    np.testing.assert_array_equal(np.asarray(fold_in(jax.random.key(11), 5)),
-                                  np.asarray(jax.random.key_data(jax.random.fold_in(jax.random.key(11), 5))))
+    np.testing.assert_array_equal(
+        np.asarray(fold_in(jax.random.key(11), 5)),
+        np.asarray(jax.random.key_data(jax.random.fold_in(jax.random.key(11), 5))),
+    )
     # step k's words are fold_in(key, m k + j): four float32 draws take m = 2 hashes
     key, k = jax.random.PRNGKey(7), 9
     w = [np.asarray(jax.random.fold_in(key, 2 * k + j)) for j in range(2)]

@@ -61,8 +61,13 @@ def test_unknown_names_are_one_line_errors():
         C.resolve("nope")
     with pytest.raises(InputError, match="path: unknown path 'nope'"):
         paths.entry("nope")
-    base = {"name": "x", "n_runs": 1, "seed": 0, "paths": [{"kind": "line"}],
-            "controllers": [{"name": "a", "type": "pi"}]}
+    base = {
+        "name": "x",
+        "n_runs": 1,
+        "seed": 0,
+        "paths": [{"kind": "line"}],
+        "controllers": [{"name": "a", "type": "pi"}],
+    }
     with pytest.raises(InputError, match=r"controllers\[0\]\.type.*unknown controller type 'nope'"):
         load_study(data={**base, "controllers": [{"name": "a", "type": "nope"}]})
     with pytest.raises(InputError, match=r"paths\[0\]\.kind.*unknown path kind 'nope'"):
@@ -72,8 +77,8 @@ def test_unknown_names_are_one_line_errors():
 
 
 def test_dummy_single_run(dummy):
-    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import SimConfig, simulate_batch, stack, unstack
+    from pfjax.sim.scenario import paper_scenario
 
     e = C.entry("dummy_heading")
     assert e.cli_name == "dummy-heading" and e.gains == ("k_d", "k_h")
@@ -88,13 +93,22 @@ def test_dummy_study(dummy, tmp_path):
     from pfjax.montecarlo.config import load_study
     from pfjax.montecarlo.study import run
 
-    data = {"name": "dummy", "n_runs": 16, "seed": 3, "chunk_size": 16, "f64_check_runs": 0,
-            "sim": {"horizon": 6.0, "steady_window": 2.0}, "success": {"from_s": 4.0, "band": 0.2},
-            "margin": {"enabled": False},
-            "initial": {"lateral_offset": {"dist": "uniform", "low": -0.1, "high": 0.1}},
-            "paths": [{"kind": "gentle"}, {"kind": "sine"}],
-            "controllers": [{"name": "dummy", "type": "dummy_heading", "gains": {"k_h": -2.0}},
-                            {"name": "sf", "type": "paper_k"}]}
+    data = {
+        "name": "dummy",
+        "n_runs": 16,
+        "seed": 3,
+        "chunk_size": 16,
+        "f64_check_runs": 0,
+        "sim": {"horizon": 6.0, "steady_window": 2.0},
+        "success": {"from_s": 4.0, "band": 0.2},
+        "margin": {"enabled": False},
+        "initial": {"lateral_offset": {"dist": "uniform", "low": -0.1, "high": 0.1}},
+        "paths": [{"kind": "gentle"}, {"kind": "sine"}],
+        "controllers": [
+            {"name": "dummy", "type": "dummy_heading", "gains": {"k_h": -2.0}},
+            {"name": "sf", "type": "paper_k"},
+        ],
+    }
     spec, _ = load_study(data=data)
     summary = run(spec, tmp_path / "out", progress=False, report=True)
     runs = pd.read_parquet(tmp_path / "out" / "runs.parquet")
@@ -120,19 +134,62 @@ def test_dummy_tune(dummy):
 
 def test_dummy_through_the_command_line(tmp_path):
     """A subprocess: ``PFJAX_PLUGINS`` imports the plugin before the command line reads its registries."""
-    env = {**os.environ, "PFJAX_PLUGINS": "dummy_plugin",
-           "PYTHONPATH": os.pathsep.join([str(PLUGINS), os.environ.get("PYTHONPATH", "")])}
+    env = {
+        **os.environ,
+        "PFJAX_PLUGINS": "dummy_plugin",
+        "PYTHONPATH": os.pathsep.join([str(PLUGINS), os.environ.get("PYTHONPATH", "")]),
+    }
     cli = [sys.executable, "-m", "pfjax.cli"]
-    out = subprocess.run(cli + ["simulate", "--path", "gentle", "--controller", "dummy-heading", "--gains", "k_h=-2",
-                                "--horizon", "5", "--json"], env=env, capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        cli
+        + [
+            "simulate",
+            "--path",
+            "gentle",
+            "--controller",
+            "dummy-heading",
+            "--gains",
+            "k_h=-2",
+            "--horizon",
+            "5",
+            "--json",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
     assert r["gains"] == {"k_d": -1.5, "k_h": -2.0} and r["metrics"]["status"] == "ok"
-    out = subprocess.run(cli + ["tune", "--method", "gradient", "--controller", "dummy-heading", "--scenario", "gentle",
-                                "--steps", "3", "--horizon", "4", "--json"], env=env, capture_output=True, text=True,
-                         timeout=300)
+    out = subprocess.run(
+        cli
+        + [
+            "tune",
+            "--method",
+            "gradient",
+            "--controller",
+            "dummy-heading",
+            "--scenario",
+            "gentle",
+            "--steps",
+            "3",
+            "--horizon",
+            "4",
+            "--json",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stderr
     assert set(json.loads(out.stdout)["gains"]) >= {"k_d", "k_h"}
-    bad = subprocess.run(cli + ["simulate", "--help"], env={**env, "PFJAX_PLUGINS": "no_such_plugin"},
-                         capture_output=True, text=True, timeout=300)
+    bad = subprocess.run(
+        cli + ["simulate", "--help"],
+        env={**env, "PFJAX_PLUGINS": "no_such_plugin"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "PFJAX_PLUGINS" in bad.stderr

@@ -25,8 +25,14 @@ from pfjax.metrics.running import METRIC_NAMES
 from pfjax.montecarlo.config import load_study
 from pfjax.montecarlo.summary import summarize
 from pfjax.report.figure_set import linearised_predictions
-from pfjax.report.study_figures import (PREDICTION_GRID, controller_colors, distribution_figure, headline_figure,
-                                        margin_figure, slip_map_figure)
+from pfjax.report.study_figures import (
+    PREDICTION_GRID,
+    controller_colors,
+    distribution_figure,
+    headline_figure,
+    margin_figure,
+    slip_map_figure,
+)
 
 BASELINES = Path(__file__).resolve().parent / "baselines"
 N = 2000
@@ -34,12 +40,19 @@ K = C.PAPER_K
 BAND = 0.05
 DMAX = 30.0
 
-SPEC = {"name": "fig", "n_runs": N, "seed": 0, "paths": [{"kind": "line"}, {"kind": "sine"}],
-        "success": {"band": BAND, "from_s": 15.0},
-        "slip": {"beta_r_deg": {"dist": "uniform", "low": -20, "high": 20},
-                 "beta_f_deg": {"dist": "uniform", "low": -20, "high": 20}},
-        "margin": {"amplitudes_deg": [0.0, 5.0, 10.0, 15.0], "n_per_amplitude": 40},
-        "controllers": [{"name": "sf", "type": "state_feedback", "K": list(K)}, {"name": "pp", "type": "pure_pursuit"}]}
+SPEC = {
+    "name": "fig",
+    "n_runs": N,
+    "seed": 0,
+    "paths": [{"kind": "line"}, {"kind": "sine"}],
+    "success": {"band": BAND, "from_s": 15.0},
+    "slip": {
+        "beta_r_deg": {"dist": "uniform", "low": -20, "high": 20},
+        "beta_f_deg": {"dist": "uniform", "low": -20, "high": 20},
+    },
+    "margin": {"amplitudes_deg": [0.0, 5.0, 10.0, 15.0], "n_per_amplitude": 40},
+    "controllers": [{"name": "sf", "type": "state_feedback", "K": list(K)}, {"name": "pp", "type": "pure_pursuit"}],
+}
 
 
 def d_star(br, bf):
@@ -63,9 +76,21 @@ def study():
                 ok = (np.abs(rb + fb) <= math.radians(DMAX)) & (np.abs(d_star(rb, fb)) <= BAND)
             else:
                 ok = np.abs(bf) < 12
-            df = pd.DataFrame({"path": p, "controller": name, "run": np.arange(N // 2), "beta_r_deg": br, "beta_f_deg": bf,
-                               "speed": 1.0, "L": 0.2, "delta_max_deg": DMAX, "start_along_m": 0.0, "lateral_offset": 0.0,
-                               "heading_error_deg": 0.0})
+            df = pd.DataFrame(
+                {
+                    "path": p,
+                    "controller": name,
+                    "run": np.arange(N // 2),
+                    "beta_r_deg": br,
+                    "beta_f_deg": bf,
+                    "speed": 1.0,
+                    "L": 0.2,
+                    "delta_max_deg": DMAX,
+                    "start_along_m": 0.0,
+                    "lateral_offset": 0.0,
+                    "heading_error_deg": 0.0,
+                }
+            )
             for m in METRIC_NAMES:
                 df[m] = rng.lognormal(-1.0 if name == "sf" else 0.0, 0.8, N // 2)
             df["success"] = ok
@@ -76,9 +101,18 @@ def study():
             rows.append(df)
     runs = pd.concat(rows, ignore_index=True)
     amps = spec.margin.amplitudes_deg
-    counts = pd.DataFrame([{"controller": c, "axis": x, "amplitude_deg": a, "n": 80, "k": int(80 * max(0.0, 1 - a / s))}
-                           for c, s in (("sf", 12.0), ("pp", 40.0)) for x in ("rear", "front", "joint") for a in amps])
-    gains = {"sf": {"k_d": K[0], "k_theta": K[1]}, "pp": {k: float(v) for k, v in C.pure_pursuit_params()._asdict().items()}}
+    counts = pd.DataFrame(
+        [
+            {"controller": c, "axis": x, "amplitude_deg": a, "n": 80, "k": int(80 * max(0.0, 1 - a / s))}
+            for c, s in (("sf", 12.0), ("pp", 40.0))
+            for x in ("rear", "front", "joint")
+            for a in amps
+        ]
+    )
+    gains = {
+        "sf": {"k_d": K[0], "k_theta": K[1]},
+        "pp": {k: float(v) for k, v in C.pure_pursuit_params()._asdict().items()},
+    }
     summary = summarize(spec, runs, counts, gains=gains, wall_s=1.0)
     colors = controller_colors([{"name": "sf", "type": "state_feedback"}, {"name": "pp", "type": "pure_pursuit"}])
     return spec, runs, counts, summary, colors
@@ -86,8 +120,12 @@ def study():
 
 def _slip_map(study, predicted=None):
     spec, runs, _, summary, _ = study
-    return slip_map_figure(runs, ["sf", "pp"], delta_max_deg=DMAX,
-                           predicted=linearised_predictions(spec, summary) if predicted is None else predicted)
+    return slip_map_figure(
+        runs,
+        ["sf", "pp"],
+        delta_max_deg=DMAX,
+        predicted=linearised_predictions(spec, summary) if predicted is None else predicted,
+    )
 
 
 # ----------------------------------------------------------------------------- data behind the artists
@@ -185,8 +223,11 @@ def _compare(fig, name: str, tmp_path: Path, tol: float = 2.0, baseline: bool = 
 @pytest.mark.parametrize("name", ["slip_map", "margin_curves", "headline"])
 def test_key_figures_match_their_baselines(study, name, tmp_path):
     spec, runs, _, summary, colors = study
-    fig = {"slip_map": lambda: _slip_map(study), "margin_curves": lambda: margin_figure(summary, colors),
-           "headline": lambda: headline_figure(summary, colors)}[name]()
+    fig = {
+        "slip_map": lambda: _slip_map(study),
+        "margin_curves": lambda: margin_figure(summary, colors),
+        "headline": lambda: headline_figure(summary, colors),
+    }[name]()
     assert _compare(fig, name, tmp_path) is None
 
 

@@ -127,10 +127,25 @@ def test_sigkill_mid_run_then_same_command_resumes(spec, reference, tmp_path):
     """A real kill: the subprocess is SIGKILLed once it has finished a chunk; re-running the same
     command reuses every finished chunk and writes the uninterrupted result."""
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "pfjax.cli", "study", str(spec[1]), "--out", str(out), "--quiet", "--no-report", "--json"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pfjax.cli",
+        "study",
+        str(spec[1]),
+        "--out",
+        str(out),
+        "--quiet",
+        "--no-report",
+        "--json",
+    ]
     # the second process reuses the first one's compilations (persistent cache; the first compiles before any chunk)
-    env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": str(tmp_path / "jax_cache"),
-           "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0", "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0"}
+    env = {
+        **os.environ,
+        "JAX_COMPILATION_CACHE_DIR": str(tmp_path / "jax_cache"),
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+        "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0",
+    }
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, env=env)
     t0 = time.time()
     while time.time() - t0 < 120 and proc.poll() is None:

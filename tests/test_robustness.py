@@ -35,7 +35,6 @@ from pfjax.metrics.robustness import (
     zero_failure_n,
 )
 
-
 # scipy finds the exact interval by root finding (brentq, xtol = 2e-12): agreement to 1e-11
 # absolute; the defining tail equations are checked to ~1e-15 separately.
 CP_ABS = 1e-11
@@ -61,6 +60,7 @@ def _check_against_scipy(k, n, conf):
 
 
 # --- Clopper-Pearson ---------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("conf", [0.8, 0.9, 0.95, 0.99])
 @pytest.mark.parametrize("n", [1, 2, 3, 7, 20, 101, 1000, 10_000])
@@ -130,13 +130,20 @@ def test_success_summary():
 
 # --- quantiles ---------------------------------------------------------------------------------
 
+
 def test_metric_quantiles_against_nanquantile():
     rng = np.random.default_rng(0)
     n = 1001
     settle = rng.exponential(2.0, n)
     settle[rng.random(n) < 0.2] = np.nan  # not settled
-    df = pd.DataFrame({"iae": rng.lognormal(0.0, 1.0, n), "settling_time": settle,
-                       "never": np.full(n, np.nan), "success": rng.random(n) < 0.9})
+    df = pd.DataFrame(
+        {
+            "iae": rng.lognormal(0.0, 1.0, n),
+            "settling_time": settle,
+            "never": np.full(n, np.nan),
+            "success": rng.random(n) < 0.9,
+        }
+    )
     df.loc[3, "iae"] = np.inf  # a diverged run: not finite, not counted
     qs = (0.05, 0.25, 0.5, 0.75, 0.95, 0.99)
     out = metric_quantiles(df, ["iae", "settling_time", "never", "success"])
@@ -151,13 +158,13 @@ def test_metric_quantiles_against_nanquantile():
         assert out[col]["n_finite"] == int(np.isfinite(x).sum())
     assert out["iae"]["n_finite"] == n - 1
     assert out["never"]["n_finite"] == 0 and math.isnan(out["never"]["q50"])
-    assert set(metric_quantiles(df, ["iae"], qs=(0.5, 0.975))["iae"]) == {"mean", "std", "q50", "q97.5",
-                                                                          "n_finite"}
+    assert set(metric_quantiles(df, ["iae"], qs=(0.5, 0.975))["iae"]) == {"mean", "std", "q50", "q97.5", "n_finite"}
     with pytest.raises(KeyError, match="nope"):
         metric_quantiles(df, ["nope"])
 
 
 # --- sample-size bounds ------------------------------------------------------------------------
+
 
 def test_sample_sizes_known_values():
     # ln(40) / (2 * 0.01^2) = 18444.4 ; ln(20) / -ln(0.99) = 298.07
@@ -191,6 +198,7 @@ def test_sample_sizes_reject_bad_arguments():
 
 # --- supported statement -----------------------------------------------------------------------
 
+
 def test_supported_statement_zero_failures():
     eps, delta = 0.01, 0.05
     n = zero_failure_n(eps, delta)
@@ -210,8 +218,9 @@ def test_supported_statement_zero_failures():
 def test_supported_statement_with_failures(n, k_fail, delta):
     out = supported_statement(n, k_fail, delta)
     p_hat = (n - k_fail) / n
-    ref = stats.binomtest(n - k_fail, n, alternative="greater").proportion_ci(confidence_level=1 - delta,
-                                                                              method="exact")
+    ref = stats.binomtest(n - k_fail, n, alternative="greater").proportion_ci(
+        confidence_level=1 - delta, method="exact"
+    )
     assert out["cp_lower"] == pytest.approx(ref.low, rel=1e-9, abs=CP_ABS)
     assert out["zero_failure_eps"] is None
     assert out["success_rate"] == pytest.approx(p_hat)
@@ -322,23 +331,32 @@ def test_slip_margin_sorts_and_validates():
     out = slip_margin(a, k, n, eps=0.05)
     assert [r["amplitude"] for r in out["table"]] == [1.0, 2.0, 3.0]
     assert [r["k"] for r in out["table"]] == [100, 99, 10] and out["margin"] == 2.0
-    for bad in [([1.0, 1.0], [1, 1], [1, 1]), ([1.0], [2], [1]), ([1.0], [0], [0]), ([-1.0], [1], [1]),
-                ([1.0, 2.0], [1], [1, 1]), ([], [], [])]:
+    for bad in [
+        ([1.0, 1.0], [1, 1], [1, 1]),
+        ([1.0], [2], [1]),
+        ([1.0], [0], [0]),
+        ([-1.0], [1], [1]),
+        ([1.0, 2.0], [1], [1, 1]),
+        ([], [], []),
+    ]:
         with pytest.raises(ValueError):
             slip_margin(*(np.asarray(v) for v in bad))
 
 
 # --- failure drivers ---------------------------------------------------------------------------
 
+
 def _synthetic_runs(n=4000, seed=3):
     rng = np.random.default_rng(seed)
     beta_r = rng.uniform(-10.0, 10.0, n)
-    df = pd.DataFrame({
-        "beta_r": beta_r,
-        "beta_f": rng.uniform(-10.0, 10.0, n),
-        "speed": rng.uniform(0.5, 2.0, n),
-        "d0": rng.normal(0.0, 0.3, n),
-    })
+    df = pd.DataFrame(
+        {
+            "beta_r": beta_r,
+            "beta_f": rng.uniform(-10.0, 10.0, n),
+            "speed": rng.uniform(0.5, 2.0, n),
+            "d0": rng.normal(0.0, 0.3, n),
+        }
+    )
     p_fail = 1.0 / (1.0 + np.exp(-(np.abs(beta_r) - 7.0) / 0.5))  # depends on |beta_r| only
     df["success"] = rng.random(n) >= p_fail
     df["iae"] = 0.1 + 0.02 * np.abs(beta_r) ** 2 + rng.normal(0.0, 0.05, n)
@@ -348,10 +366,16 @@ def _synthetic_runs(n=4000, seed=3):
 def test_failure_drivers_finds_abs_beta_r():
     df = _synthetic_runs()
     out = failure_drivers(df, ["beta_r", "beta_f", "speed", "d0"])
-    assert list(out.columns) == ["parameter", "rho_failure", "p_failure", "rho_metric", "p_metric",
-                                 "effect_size", "n"]
-    assert set(out["parameter"]) == {"beta_r", "abs_beta_r", "beta_f", "abs_beta_f", "speed", "d0",
-                                     "abs_d0"}  # speed > 0: no abs row
+    assert list(out.columns) == ["parameter", "rho_failure", "p_failure", "rho_metric", "p_metric", "effect_size", "n"]
+    assert set(out["parameter"]) == {
+        "beta_r",
+        "abs_beta_r",
+        "beta_f",
+        "abs_beta_f",
+        "speed",
+        "d0",
+        "abs_d0",
+    }  # speed > 0: no abs row
     top = out.iloc[0]
     assert top["parameter"] == "abs_beta_r"
     assert top["rho_failure"] > 0.4 and top["p_failure"] < 1e-50

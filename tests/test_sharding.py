@@ -66,9 +66,11 @@ def test_default_host_devices_asks_for_one_device_per_core():
     env = {"PFJAX_HOST_DEVICES": "3", "XLA_FLAGS": "--xla_cpu_foo=1"}
     assert pfjax.default_host_devices(env, modules={})
     assert env["XLA_FLAGS"] == "--xla_cpu_foo=1 --xla_force_host_platform_device_count=3"
-    for env, modules in (({"PFJAX_HOST_DEVICES": "1"}, {}),  # opted out
-                         ({"XLA_FLAGS": "--xla_force_host_platform_device_count=4"}, {}),  # the user's own count
-                         ({}, {"jax": object()})):  # too late: JAX is imported
+    for env, modules in (
+        ({"PFJAX_HOST_DEVICES": "1"}, {}),  # opted out
+        ({"XLA_FLAGS": "--xla_force_host_platform_device_count=4"}, {}),  # the user's own count
+        ({}, {"jax": object()}),
+    ):  # too late: JAX is imported
         before = dict(env)
         assert not pfjax.default_host_devices(env, modules=modules)
         assert env == before
@@ -77,13 +79,16 @@ def test_default_host_devices_asks_for_one_device_per_core():
 def test_small_loop_option_sets_the_threshold_unless_the_user_did():
     env = {"XLA_FLAGS": "--xla_cpu_foo=1"}
     assert pfjax.small_loop_option(env, modules={})
-    assert env["XLA_FLAGS"] == ("--xla_cpu_foo=1 --xla_backend_extra_options="
-                                f"xla_cpu_small_while_loop_byte_threshold={pfjax.SMALL_LOOP_BYTES}")
+    assert env["XLA_FLAGS"] == (
+        f"--xla_cpu_foo=1 --xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold={pfjax.SMALL_LOOP_BYTES}"
+    )
     env = {"PFJAX_SMALL_LOOP_BYTES": "1000"}
     assert pfjax.small_loop_option(env, modules={}) and env["XLA_FLAGS"].endswith("threshold=1000")
-    for env, modules in (({"PFJAX_SMALL_LOOP_BYTES": "0"}, {}),  # opted out
-                         ({"XLA_FLAGS": "--xla_backend_extra_options=xla_cpu_foo=2"}, {}),  # the user's own
-                         ({}, {"jax": object()})):  # too late: JAX is imported
+    for env, modules in (
+        ({"PFJAX_SMALL_LOOP_BYTES": "0"}, {}),  # opted out
+        ({"XLA_FLAGS": "--xla_backend_extra_options=xla_cpu_foo=2"}, {}),  # the user's own
+        ({}, {"jax": object()}),
+    ):  # too late: JAX is imported
         before = dict(env)
         assert not pfjax.small_loop_option(env, modules=modules)
         assert env == before
@@ -108,7 +113,9 @@ def test_plan_batch_splits_devices_into_blocks():
     blocks = -(-per_device // 3)
     assert n == 11 and layout.blocks == blocks and (layout.mesh is None) == (k == 1)
     size = placed["a"].shape[0]
-    assert size % (k * blocks) == 0 and size // (k * blocks) <= 3 and size - 11 < k * blocks  # padding < 1 run per block
+    assert (
+        size % (k * blocks) == 0 and size // (k * blocks) <= 3 and size - 11 < k * blocks
+    )  # padding < 1 run per block
     np.testing.assert_array_equal(np.asarray(placed["a"])[11:], 0.0)  # copies of run 0
     placed, _, layout = sharding.plan_batch({"a": np.arange(1001.0)}, devices, block=None)
     per = placed["a"].shape[0] // k
@@ -133,7 +140,9 @@ def test_blocks_and_devices_give_the_same_runs(model):
         from pfjax.sim import SimConfig, simulate_batch
 
         sc = P.scenarios(P.random_batch(11, seed=1), np.float64)
-        go = lambda **kw: simulate_batch(sc, controller=state_feedback, config=SimConfig(horizon=0.5, record=True), **kw)
+        go = lambda **kw: simulate_batch(
+            sc, controller=state_feedback, config=SimConfig(horizon=0.5, record=True), **kw
+        )
     else:
         from pfjax import tracking as T
         from pfjax.tracking import leader as L
@@ -141,7 +150,9 @@ def test_blocks_and_devices_give_the_same_runs(model):
         line = L.line(speed=1.0, heading=0.4)
         prm = [T.FollowerParams(a=1.0, f=f, l=f, p=f * (1.0 + 0.1 * i)) for i, f in enumerate([1.0, -1.0] * 5 + [1.0])]
         rng = np.random.default_rng(0)
-        inits = T.initial_states(T.stack([line] * 11), T.stack(prm), rng.uniform(-0.5, 0.5, (11, 2)), rng.uniform(-0.3, 0.3, 11))
+        inits = T.initial_states(
+            T.stack([line] * 11), T.stack(prm), rng.uniform(-0.5, 0.5, (11, 2)), rng.uniform(-0.3, 0.3, 11)
+        )
         scs = T.stack([T.scenario(p, line, init=T.unstack(inits, i)) for i, p in enumerate(prm)])
         go = lambda **kw: T.simulate_batch(scs, config=T.TrackConfig(dt=0.01, horizon=1.0), **kw)
     ref = jax.device_get(go(devices=jax.devices()[:1], block=None))
@@ -172,8 +183,13 @@ def test_one_and_two_host_devices_give_the_same_runs(tmp_path, dtype):
     for n in (1, 2):
         env = dict(os.environ, PFJAX_HOST_DEVICES=str(n), XLA_FLAGS="", JAX_PLATFORMS="cpu")
         out = tmp_path / f"dev{n}"
-        r = subprocess.run([sys.executable, "-c", CHILD, str(n), str(cfg), str(out)], env=env, capture_output=True,
-                           text=True, timeout=600)
+        r = subprocess.run(
+            [sys.executable, "-c", CHILD, str(n), str(cfg), str(out)],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert r.returncode == 0, r.stderr[-3000:]
         tables[n] = pd.read_parquet(out / "runs.parquet")
     one, two = tables[1], tables[2]

@@ -16,8 +16,8 @@ import pytest
 
 from pfjax import controllers as C
 from pfjax.paths import circle, line, spline_through
-from pfjax.sim.scenario import make_scenario
 from pfjax.sim import SimConfig, Status, simulate_batch, slip_profile, stack, unstack
+from pfjax.sim.scenario import make_scenario
 
 DEG = math.pi / 180
 CFG = SimConfig(dt=0.01, horizon=6.0, d_fail=3.0)
@@ -65,8 +65,12 @@ ROWS = {
     "diverged_unstable_K": make_scenario(line(), LINE_POSE, sf((1.0, -2.0)), slip=slip()),
 }
 NAMES = list(ROWS)
-FAILING = {"diverged_positive_K": Status.DIVERGED, "nonfinite": Status.NONFINITE, "path_end": Status.PATH_END,
-           "diverged_unstable_K": Status.DIVERGED}
+FAILING = {
+    "diverged_positive_K": Status.DIVERGED,
+    "nonfinite": Status.NONFINITE,
+    "path_end": Status.PATH_END,
+    "diverged_unstable_K": Status.DIVERGED,
+}
 
 
 def run(rows, config=CFG):
@@ -153,9 +157,11 @@ def test_line_parabola_and_sine_share_one_program():
     from pfjax.sim.simulate import _simulate_vmapped
 
     cfg = SimConfig(dt=0.01, horizon=3.0, d_fail=CFG.d_fail, record=False)
-    rows = [make_scenario(line(), LINE_POSE, sf(), slip=PAPER_SLIP),
-            make_scenario(parabola(), (-1.0, 1.3, -1.0), sf(), slip=PAPER_SLIP),
-            make_scenario(sine(), (0.0, 0.3, math.pi / 4), sf(), slip=PAPER_SLIP)]
+    rows = [
+        make_scenario(line(), LINE_POSE, sf(), slip=PAPER_SLIP),
+        make_scenario(parabola(), (-1.0, 1.3, -1.0), sf(), slip=PAPER_SLIP),
+        make_scenario(sine(), (0.0, 0.3, math.pi / 4), sf(), slip=PAPER_SLIP),
+    ]
     assert all(isinstance(r.path, Graph) for r in rows)
     before = _simulate_vmapped._cache_size()
     together = run(rows, cfg)
@@ -183,7 +189,9 @@ def test_record_false_gives_the_same_metrics(mixed):
     assert lean.trajectory is None
     np.testing.assert_array_equal(mixed.status, lean.status)
     for part in ("metrics", "fail_time", "final"):
-        for x, y in zip(jax.tree_util.tree_leaves(getattr(mixed, part)), jax.tree_util.tree_leaves(getattr(lean, part))):
+        for x, y in zip(
+            jax.tree_util.tree_leaves(getattr(mixed, part)), jax.tree_util.tree_leaves(getattr(lean, part))
+        ):
             np.testing.assert_allclose(x, y, rtol=1e-14, atol=1e-15, err_msg=part)
 
 
@@ -195,8 +203,9 @@ def test_time_varying_slip_profiles_in_the_trajectory(mixed):
     expect = {
         "healthy": np.full((t.size, 2), 5 * DEG),
         "step_slip": np.where((t >= 2.0)[:, None], [5 * DEG, 3 * DEG], 0.0),
-        "sinusoid_slip": np.asarray(SINE["constant"]) + np.asarray(SINE["sin_amp"]) * np.sin(
-            2 * np.pi * np.outer(t, SINE["sin_freq"]) + np.asarray(SINE["sin_phase"])),
+        "sinusoid_slip": np.asarray(SINE["constant"])
+        + np.asarray(SINE["sin_amp"])
+        * np.sin(2 * np.pi * np.outer(t, SINE["sin_freq"]) + np.asarray(SINE["sin_phase"])),
         "sampled_slip": SEQ[np.minimum((t / SEQ_DT).astype(int), NSEQ - 1)],
     }
     for name, e in expect.items():
@@ -212,9 +221,16 @@ def test_time_varying_slip_profiles_in_the_trajectory(mixed):
 def test_no_recompilation_for_new_values(mixed):
     """New values with the same shapes (gains, poses, speeds, slip, path parameters) reuse the
     compiled simulate_batch: its jit cache does not grow."""
-    rows = [make_scenario(line(x0=0.3, heading=0.7), (0.5, -0.2, 0.1 * i), sf((-1.0 - i, -1.5)),
-                          slip=slip(constant=i * DEG, sin_amp=1 * DEG, sin_freq=0.2, seq=SEQ), v=0.5 + 0.1 * i)
-            for i in range(len(NAMES))]
+    rows = [
+        make_scenario(
+            line(x0=0.3, heading=0.7),
+            (0.5, -0.2, 0.1 * i),
+            sf((-1.0 - i, -1.5)),
+            slip=slip(constant=i * DEG, sin_amp=1 * DEG, sin_freq=0.2, seq=SEQ),
+            v=0.5 + 0.1 * i,
+        )
+        for i in range(len(NAMES))
+    ]
     run(list(ROWS.values()))  # the fixture's compile is in the cache
     before = simulate_batch._cache_size()
     r = run(rows)
@@ -232,7 +248,9 @@ def test_absent_slip_terms_cost_nothing_and_change_nothing():
 
     lean = constant_slip(5 * DEG, -3 * DEG)
     assert all(getattr(lean, f) is None for f in lean._fields if f != "constant")
-    full = slip_profile(constant=(5 * DEG, -3 * DEG), step_size=0.0, sin_amp=0.0, seq=np.zeros((NSEQ, 2)), seq_dt=SEQ_DT)
+    full = slip_profile(
+        constant=(5 * DEG, -3 * DEG), step_size=0.0, sin_amp=0.0, seq=np.zeros((NSEQ, 2)), seq_dt=SEQ_DT
+    )
     for t in (0.0, 1.3, 7.0):
         assert [float(b) for b in slip_at(lean, t)] == [float(b) for b in slip_at(full, t)]
     cfg = SimConfig(dt=CFG.dt, horizon=2.0, record=False)
@@ -312,7 +330,9 @@ def test_stack_builds_numpy_leaves_and_compiles_nothing():
     batch compiles no program (``jnp.stack`` compiled one per leaf shape and item count)."""
     items = [make_scenario(line(), LINE_POSE, sf(), slip=slip(constant=b * DEG)) for b in (1.0, 2.0, 3.0)]
     events = []
-    listener = lambda name, secs, **kw: events.append(name) if name == "/jax/core/compile/backend_compile_duration" else None
+    listener = lambda name, secs, **kw: (
+        events.append(name) if name == "/jax/core/compile/backend_compile_duration" else None
+    )
     jax.monitoring.register_event_duration_secs_listener(listener)
     try:
         batch = stack(items)
@@ -352,8 +372,9 @@ def test_switching_instants_do_not_depend_on_rounding(dtype):
     from pfjax.sim import slip_at
 
     seq = np.arange(8.0)[:, None] * np.array([[1.0, -1.0]])
-    prof = jax.tree_util.tree_map(lambda a: np.asarray(a, dtype),
-                                  slip_profile(seq=seq, seq_dt=0.05, step_size=(10.0, 10.0), step_time=0.15))
+    prof = jax.tree_util.tree_map(
+        lambda a: np.asarray(a, dtype), slip_profile(seq=seq, seq_dt=0.05, step_size=(10.0, 10.0), step_time=0.15)
+    )
     for j in range(1, 8):
         edge = dtype(j) * dtype(0.05)
         for t in (edge, np.nextafter(edge, dtype(0)), np.nextafter(np.nextafter(edge, dtype(0)), dtype(0))):
@@ -372,11 +393,15 @@ def test_metrics_and_final_state_agree_with_the_trajectory(control_every):
     from pfjax.sim import SensorNoise
 
     sc = make_scenario(line(), (1.0, 0.3, math.pi / 2 + 0.4), sf(), slip=PAPER_SLIP)
-    sc = sc._replace(params=sc.params._replace(delta_rate_max=jax.numpy.asarray(0.8)),
-                     noise=SensorNoise(jax.numpy.asarray(0.01), jax.numpy.asarray(0.5 * DEG), jax.random.PRNGKey(3)))
+    sc = sc._replace(
+        params=sc.params._replace(delta_rate_max=jax.numpy.asarray(0.8)),
+        noise=SensorNoise(jax.numpy.asarray(0.01), jax.numpy.asarray(0.5 * DEG), jax.random.PRNGKey(3)),
+    )
     cfg = SimConfig(dt=0.01, horizon=4.0, d_fail=3.0, control_every=control_every)
     res = run([sc, sc], cfg)
-    m, tr, fin = (jax.tree_util.tree_map(lambda a: np.asarray(a)[0], x) for x in (res.metrics, res.trajectory, res.final))
+    m, tr, fin = (
+        jax.tree_util.tree_map(lambda a: np.asarray(a)[0], x) for x in (res.metrics, res.trajectory, res.final)
+    )
     assert int(res.status[0]) == Status.OK and tr.t.shape == (cfg.n_steps + 1,)
     w = np.full(tr.t.shape, cfg.dt)
     w[[0, -1]] *= 0.5
@@ -411,6 +436,7 @@ def test_first_failure_keeps_the_first_failure_and_its_time(dtype):
     def scan(now_row):
         def body(c, x):
             return first_failure(*c, x[0], x[1]), None
+
         return jax.lax.scan(body, (jnp.zeros((), dtype), jnp.asarray(np.nan, dtype)), (now_row, t))[0]
 
     status, fail_time = jax.jit(jax.vmap(scan))(now)

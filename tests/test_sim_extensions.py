@@ -7,8 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from pfjax import controllers as C
-from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SensorNoise, SimConfig, simulate_batch, stack
+from pfjax.sim.scenario import paper_scenario
 
 K = np.array(C.PAPER_K)
 CFG = SimConfig(horizon=20.0)
@@ -29,8 +29,13 @@ def test_noise_enters_the_controller_with_the_stated_statistics():
     g = C.state_feedback_params()
     sd, st = 0.01, math.radians(1.0)
     base = paper_scenario("line", g)
-    scs = [base, base._replace(noise=_noise(0.0, 0.0, 1)), base._replace(noise=_noise(sd, st, 1)),
-           base._replace(noise=_noise(sd, st, 1)), base._replace(noise=_noise(sd, st, 2))]
+    scs = [
+        base,
+        base._replace(noise=_noise(0.0, 0.0, 1)),
+        base._replace(noise=_noise(sd, st, 1)),
+        base._replace(noise=_noise(sd, st, 1)),
+        base._replace(noise=_noise(sd, st, 2)),
+    ]
     # None and a noise pytree are different structures: run them as two batches.
     r0 = _run(scs[:1])
     r = _run(scs[1:])

@@ -4,13 +4,12 @@ import math
 
 import numpy as np
 import pytest
+from reference import closed_loop
 
 from pfjax import controllers as C
 from pfjax import paths
-from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SimConfig, simulate_batch, stack, unstack
-
-from reference import closed_loop
+from pfjax.sim.scenario import paper_scenario
 
 BETA = math.radians(5.0)
 

@@ -39,8 +39,8 @@ from scipy.optimize import brentq
 from pfjax import controllers as C
 from pfjax.analysis import closed_loop_field, equilibrium, source_linearisation, stability_map
 from pfjax.models.slip import FrenetState, SlipParams, frenet_rhs
-from pfjax.sim.scenario import paper_scenario
 from pfjax.sim import SimConfig, simulate_batch, stack, unstack
+from pfjax.sim.scenario import paper_scenario
 
 K = np.array(C.PAPER_K, dtype=float)  # source's K = [-2.7381, -2.0772]
 V, L, DMAX = 1.0, 0.2, math.radians(30.0)
@@ -210,7 +210,9 @@ def test_equilibrium_on_a_circle(br_deg, bf_deg):
     assert abs(float(res.d)) < 1e-10 and abs(float(res.theta_e)) < 1e-10
     assert float(eq.theta_e) == pytest.approx(-br, abs=1e-14)
 
-    g = lambda d: (V / L) * (math.tan(K[0] * d - K[1] * br - bf) - math.tan(br)) - kappa * V / (math.cos(br) * (1 - kappa * d))
+    g = lambda d: (
+        (V / L) * (math.tan(K[0] * d - K[1] * br - bf) - math.tan(br)) - kappa * V / (math.cos(br) * (1 - kappa * d))
+    )
     d_ref = brentq(g, -0.3, 0.3, xtol=1e-14)  # |K_1| 0.3 < pi/2 - |K_2 beta_r + beta_f|: tan stays on one branch
     assert float(eq.d) == pytest.approx(d_ref, abs=1e-10)
     # the curve shifts the rest point: it is not the line's
@@ -222,8 +224,12 @@ def test_equilibrium_on_a_circle(br_deg, bf_deg):
     np.testing.assert_allclose(sorted_eig(eq.eig), sorted_eig(np.linalg.eigvals(J)), rtol=1e-6)
 
     sc = paper_scenario("circle", C.state_feedback_params(C.PAPER_K), beta_r_deg=br_deg, beta_f_deg=bf_deg)
-    r = unstack(simulate_batch(stack([sc]), controller=C.state_feedback,
-                               config=SimConfig(control_every=None, horizon=20.0, record=False)), 0)
+    r = unstack(
+        simulate_batch(
+            stack([sc]), controller=C.state_feedback, config=SimConfig(control_every=None, horizon=20.0, record=False)
+        ),
+        0,
+    )
     assert int(r.status) == 0
     assert float(r.final.d) == pytest.approx(float(eq.d), abs=1e-4)
     assert float(r.final.theta_e) == pytest.approx(-br, abs=1e-4)
@@ -241,8 +247,14 @@ def _numpy_map(grid_deg, params: SlipParams):
             delta = br + bf if params.convention == 0 else br - bf
             x = np.array([(delta + K[1] * br) / K[0], -br])
             h = 1e-6
-            J = np.stack([(field_np(x + e, br, bf, 0.0, params, False) - field_np(x - e, br, bf, 0.0, params, False)) / (2 * h)
-                          for e in np.eye(2) * h], axis=1)
+            J = np.stack(
+                [
+                    (field_np(x + e, br, bf, 0.0, params, False) - field_np(x - e, br, bf, 0.0, params, False))
+                    / (2 * h)
+                    for e in np.eye(2) * h
+                ],
+                axis=1,
+            )
             exists[i, j] = abs(delta) <= params.delta_max
             hurwitz[i, j] = exists[i, j] and np.all(np.linalg.eigvals(J).real < 0)
             margin[i, j] = abs(abs(delta) - params.delta_max)
@@ -259,8 +271,12 @@ def test_stability_map_is_right_in_float32_and_float64(grid_max):
     clear = margin > 1e-4  # rad away from |delta*| = delta_max
     for x64 in (False, True):
         with jax.enable_x64(x64):
-            eq, _ = stability_map(jnp.asarray(K, float), jnp.radians(jnp.asarray(grid, float)),
-                                  jnp.radians(jnp.asarray(grid, float)), SOURCE)
+            eq, _ = stability_map(
+                jnp.asarray(K, float),
+                jnp.radians(jnp.asarray(grid, float)),
+                jnp.radians(jnp.asarray(grid, float)),
+                SOURCE,
+            )
             np.testing.assert_array_equal(np.asarray(eq.exists)[clear], exists[clear])
             np.testing.assert_array_equal(np.asarray(eq.hurwitz)[clear], hurwitz[clear])
     assert clear.mean() > 0.9 and hurwitz[clear].any()

@@ -32,15 +32,30 @@ STUDY = ROOT / "studies" / "paper_reproduction.py"
 TOML = ROOT / "studies" / "paper_reproduction.toml"
 # Small: 6 s horizon (the sine analysis needs > 5 s), 10 ms steps, controller sampled every step
 # (compiles ~30 % faster than the default continuous evaluation), 3 x 3 stability grid, no trackers.
-SETS = ["sim.horizon=6", "sim.dt=0.01", "sim.control_every=1", "sim.steady_window=1.0", "stability.n=3",
-        "stability.horizon=6", "stability.eig_n=11", "trackers=false", "long_horizon=8", "ga.population=6",
-        "ga.generations=2", "ga.seeds=2"]
+SETS = [
+    "sim.horizon=6",
+    "sim.dt=0.01",
+    "sim.control_every=1",
+    "sim.steady_window=1.0",
+    "stability.n=3",
+    "stability.horizon=6",
+    "stability.eig_n=11",
+    "trackers=false",
+    "long_horizon=8",
+    "ga.population=6",
+    "ga.generations=2",
+    "ga.seeds=2",
+]
 SOURCE_K = (-2.7381, -2.0772)
 
 
 def _run(out: Path, cache: Path):
-    env = dict(os.environ, JAX_COMPILATION_CACHE_DIR=str(cache), JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0",
-               JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0")
+    env = dict(
+        os.environ,
+        JAX_COMPILATION_CACHE_DIR=str(cache),
+        JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0",
+        JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0",
+    )
     args = [sys.executable, str(STUDY), *(a for s in SETS for a in ("--set", s)), "--out", str(out)]
     r = subprocess.run(args, capture_output=True, text=True, timeout=600, env=env)
     assert r.returncode == 0, r.stderr[-4000:]
@@ -78,8 +93,14 @@ def test_outputs_exist(runs):
     for name in ("summary.json", "runs.parquet", "runs.csv", "pi_readings.csv", "stability.parquet", "report.md"):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     pngs = sorted((out / "figures").glob("*.png"))
-    assert {p.stem for p in pngs} >= {"tracking_line", "tracking_parabola", "tracking_sine", "stability_maps",
-                                      "pi_readings", "sine_error"}
+    assert {p.stem for p in pngs} >= {
+        "tracking_line",
+        "tracking_parabola",
+        "tracking_sine",
+        "stability_maps",
+        "pi_readings",
+        "sine_error",
+    }
     for p in pngs:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", p
     # every figure the report links to exists; nothing temporary left next to --out
@@ -149,7 +170,11 @@ def test_synthesis_close_to_source(summary):
 def test_tables(runs, summary):
     out = runs[0]
     df = pd.read_parquet(out / "runs.parquet")
-    assert len(df) == 9 and set(df.controller) == {"mixed", "paper-k", "pi"} and set(df.path) == {"line", "parabola", "sine"}
+    assert (
+        len(df) == 9
+        and set(df.controller) == {"mixed", "paper-k", "pi"}
+        and set(df.path) == {"line", "parabola", "sine"}
+    )
     assert (df.config_sha256 == summary["config_sha256"]).all()
     csv = pd.read_csv(out / "runs.csv")
     assert list(csv.columns) == list(df.columns) and len(csv) == len(df)

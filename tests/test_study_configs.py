@@ -18,11 +18,22 @@ from pfjax.montecarlo.study import run
 matplotlib.use("Agg")
 ROOT = Path(__file__).resolve().parents[1]
 # Monte Carlo study configs (those with controllers and paths); the other TOML files configure study scripts
-CONFIGS = sorted(p for p in (ROOT / "studies").glob("*.toml")
-                 if {"controllers", "paths"} <= set(tomllib.loads(p.read_text())))
-SMALL = ["n_runs=6", "chunk_size=6", "sim.horizon=3.0", "sim.steady_window=1.0", "success.from_s=2.0",
-         "margin.amplitudes_deg=[0.0, 10.0]", "margin.n_per_amplitude=3", "falsifier.n_restarts=2", "falsifier.steps=2",
-         "f64_check_runs=0", "falsifier.enabled=false"]  # the float64 check recompiles every simulator in float64: tested in test_determinism.py
+CONFIGS = sorted(
+    p for p in (ROOT / "studies").glob("*.toml") if {"controllers", "paths"} <= set(tomllib.loads(p.read_text()))
+)
+SMALL = [
+    "n_runs=6",
+    "chunk_size=6",
+    "sim.horizon=3.0",
+    "sim.steady_window=1.0",
+    "success.from_s=2.0",
+    "margin.amplitudes_deg=[0.0, 10.0]",
+    "margin.n_per_amplitude=3",
+    "falsifier.n_restarts=2",
+    "falsifier.steps=2",
+    "f64_check_runs=0",
+    "falsifier.enabled=false",
+]  # the float64 check recompiles every simulator in float64: tested in test_determinism.py
 
 
 def test_configs_are_found():
@@ -61,6 +72,8 @@ def test_default_study_falsifier_small_end_to_end(tmp_path):
     wc = json.loads((tmp_path / "out" / "summary.json").read_text())["controllers"]["pi-table3"]["worst_case"]
     assert wc == summary["controllers"]["pi-table3"]["worst_case"]
     assert wc["path"] == "sine" and wc["n_rollouts"] == 2 * 2 and wc["falsifier"] >= 0 and wc["random"] >= 0
-    assert len(wc["history"]) == len(wc["history_rollouts"]) and max(wc["history"]) == pytest.approx(wc["falsifier"], rel=1e-6)
+    assert len(wc["history"]) == len(wc["history_rollouts"]) and max(wc["history"]) == pytest.approx(
+        wc["falsifier"], rel=1e-6
+    )
     html = (tmp_path / "out" / "report.html").read_text()
     assert "Worst cases found" in html and (tmp_path / "out" / "figures" / "worst_cases.png").is_file()

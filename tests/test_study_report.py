@@ -8,30 +8,36 @@ import base64
 import json
 import os
 import warnings
-from pathlib import Path
 from html.parser import HTMLParser
+from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 
-import pandas as pd  # noqa: E402
-import pytest  # noqa: E402
+import pandas as pd
+import pytest
 
-from pfjax.montecarlo.config import load_study  # noqa: E402
-from pfjax.montecarlo.study import RUN_FIGURES, WORKER_SUMMARY_FIGURES, run  # noqa: E402
-from pfjax.report import figure_worker  # noqa: E402
-from pfjax.report.figure_set import report_figures  # noqa: E402
-from pfjax.montecarlo.summary import summarize  # noqa: E402
-from pfjax.report.study_report import fmt_ci, fmt_margin, fmt_pct, write_report  # noqa: E402
+from pfjax.montecarlo.config import load_study
+from pfjax.montecarlo.study import RUN_FIGURES, WORKER_SUMMARY_FIGURES, run
+from pfjax.montecarlo.summary import summarize
+from pfjax.report import figure_worker
+from pfjax.report.figure_set import report_figures
+from pfjax.report.study_report import fmt_ci, fmt_margin, fmt_pct, write_report
 
 # 30 runs in chunks of 30, and the sweep's 3 amplitudes x 10 runs per axis are 30 too: one array shape,
 # so one compilation per controller.
 CONFIG = {
-    "name": "tiny_report", "n_runs": 30, "seed": 7, "chunk_size": 30,
-    "sim": {"horizon": 4.0, "steady_window": 1.0}, "success": {"from_s": 2.0},
-    "slip": {"beta_r_deg": {"dist": "uniform", "low": -10, "high": 10},
-             "beta_f_deg": {"dist": "uniform", "low": -10, "high": 10}},
+    "name": "tiny_report",
+    "n_runs": 30,
+    "seed": 7,
+    "chunk_size": 30,
+    "sim": {"horizon": 4.0, "steady_window": 1.0},
+    "success": {"from_s": 2.0},
+    "slip": {
+        "beta_r_deg": {"dist": "uniform", "low": -10, "high": 10},
+        "beta_f_deg": {"dist": "uniform", "low": -10, "high": 10},
+    },
     "initial": {"lateral_offset": {"dist": "uniform", "low": -0.2, "high": 0.2}},
     "margin": {"n_per_amplitude": 10, "amplitudes_deg": [0, 10, 20]},
     "paths": [{"kind": "line"}],
@@ -125,7 +131,9 @@ def test_figures_from_the_worker_equal_those_drawn_in_process(study, tmp_path):
     here = _in_process(spec, out, summary, tmp_path)
     assert set(here) == set(RUN_FIGURES + WORKER_SUMMARY_FIGURES)
     for name in here:  # same code, same data: the same bytes
-        assert (tmp_path / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes(), name
+        assert (tmp_path / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes(), (
+            name
+        )
 
 
 def test_cli_study_starts_the_worker_before_its_imports_and_draws_the_same_report(study, tmp_path, monkeypatch, capsys):
@@ -137,8 +145,12 @@ def test_cli_study_starts_the_worker_before_its_imports_and_draws_the_same_repor
     cfg.write_text('name = "x"\n')
     monkeypatch.setenv(figure_worker.ENV, "1")
     started = []
-    monkeypatch.setattr(figure_worker.FigureWorker, "__init__",
-                        lambda self, _init=figure_worker.FigureWorker.__init__, **kw: (started.append(1), _init(self, **kw))[1])
+    monkeypatch.setattr(
+        figure_worker.FigureWorker,
+        "__init__",
+        lambda self, _init=figure_worker.FigureWorker.__init__, **kw: (started.append(1), _init(self, **kw))[1],
+    )
+
     def toml(v):  # a TOML inline value
         if isinstance(v, dict):
             return "{" + ", ".join(f"{k} = {toml(x)}" for k, x in v.items()) + "}"
@@ -149,10 +161,17 @@ def test_cli_study_starts_the_worker_before_its_imports_and_draws_the_same_repor
     sets = [f"{k}={toml(v)}" for k, v in CONFIG.items()]
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
-        assert cli.main(["study", str(cfg), "--out", str(tmp_path / "cli"), "--quiet"] + sum((["--set", a] for a in sets), [])) == 0
+        assert (
+            cli.main(
+                ["study", str(cfg), "--out", str(tmp_path / "cli"), "--quiet"] + sum((["--set", a] for a in sets), [])
+            )
+            == 0
+        )
     assert started == [1]  # one worker, started by the CLI
     for name in FIGURES:
-        assert (tmp_path / "cli" / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes(), name
+        assert (tmp_path / "cli" / "figures" / f"{name}.png").read_bytes() == (
+            out / "figures" / f"{name}.png"
+        ).read_bytes(), name
 
 
 def test_worst_case_figure_from_the_worker_equals_the_one_drawn_here(study, tmp_path):
@@ -165,20 +184,43 @@ def test_worst_case_figure_from_the_worker_equals_the_one_drawn_here(study, tmp_
     trajs = {}
     for i, name in enumerate(summary["controllers"]):
         summary["controllers"][name]["worst_case"] = {
-            "path": "line", "objective": "iae", "falsifier": 1.0 + i, "falsifier_status": "ok", "random": 0.5,
-            "ratio": 2.0 + 2 * i, "n_rollouts": 6,
-            "history": [0.2, 0.7, 1.0 + i], "history_rollouts": [2, 4, 6],
-            "history_random": [0.1, 0.4, 0.5], "history_random_rollouts": [2, 4, 6]}
-        trajs[name] = {"t": t, "x": t, "y": 0.1 * np.sin(t), "d": 0.05 * np.sin(2 * t + i), "beta_r": 0.1 * np.sin(t),
-                       "beta_f": -0.1 * np.cos(t), "path_x": t, "path_y": 0 * t}
+            "path": "line",
+            "objective": "iae",
+            "falsifier": 1.0 + i,
+            "falsifier_status": "ok",
+            "random": 0.5,
+            "ratio": 2.0 + 2 * i,
+            "n_rollouts": 6,
+            "history": [0.2, 0.7, 1.0 + i],
+            "history_rollouts": [2, 4, 6],
+            "history_random": [0.1, 0.4, 0.5],
+            "history_random_rollouts": [2, 4, 6],
+        }
+        trajs[name] = {
+            "t": t,
+            "x": t,
+            "y": 0.1 * np.sin(t),
+            "d": 0.05 * np.sin(2 * t + i),
+            "beta_r": 0.1 * np.sin(t),
+            "beta_f": -0.1 * np.cos(t),
+            "path_x": t,
+            "path_y": 0 * t,
+        }
     with figure_worker.FigureWorker() as w, warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)  # no fallback: the worker drew it
-        got = w.submit(tmp_path / "w", spec, summary, tmp_path / "no-runs-needed.parquet", ["worst_cases"],
-                       worst_trajectories=trajs).result()
+        got = w.submit(
+            tmp_path / "w",
+            spec,
+            summary,
+            tmp_path / "no-runs-needed.parquet",
+            ["worst_cases"],
+            worst_trajectories=trajs,
+        ).result()
     here = report_figures(tmp_path / "h", spec, summary, None, trajs, names=["worst_cases"])
     assert list(got) == list(here) == ["worst_cases"]
-    assert (tmp_path / "w" / "figures" / "worst_cases.png").read_bytes() == \
-        (tmp_path / "h" / "figures" / "worst_cases.png").read_bytes()
+    assert (tmp_path / "w" / "figures" / "worst_cases.png").read_bytes() == (
+        tmp_path / "h" / "figures" / "worst_cases.png"
+    ).read_bytes()
 
 
 def test_figure_worker_that_cannot_start_or_dies_falls_back_to_this_process(study, tmp_path):
@@ -270,16 +312,31 @@ def test_report_numbers_are_those_of_summary_json(study):
         if row[1] != "all paths":
             g = g[g.path == row[1]]
         counts = dict(zip(status[0][5:], map(int, row[5:])))
-        n = summary["controllers"][row[0]]["n"] if row[1] == "all paths" else summary["controllers"][row[0]]["per_path"][row[1]]["n"]
+        n = (
+            summary["controllers"][row[0]]["n"]
+            if row[1] == "all paths"
+            else summary["controllers"][row[0]]["per_path"][row[1]]["n"]
+        )
         assert int(row[2]) == len(g) == sum(counts.values()) == n
         assert int(row[3]) == int(g.success.sum())
         assert int(row[4]) == int(((g.status == "ok") & ~g.success).sum())
-        assert counts == {f"status {k}": int((g.status == k).sum()) for k in
-                          [h.removeprefix("status ") for h in status[0][5:]]}
+        assert counts == {
+            f"status {k}": int((g.status == k).sum()) for k in [h.removeprefix("status ") for h in status[0][5:]]
+        }
     assert len(status) - 1 == len(summary["controllers"]) * (n_paths + (n_paths > 1))
     assert [r[0] for r in status[1:] if r[1] == "all paths"] == (list(summary["controllers"]) if n_paths > 1 else [])
-    for heading in ("Verdict", "Set-up", "Headline per controller", "Per path", "Run status", "Distributions",
-                    "Slip margins", "Robustness map (from simulation)", "Failure drivers", "Reproducibility"):
+    for heading in (
+        "Verdict",
+        "Set-up",
+        "Headline per controller",
+        "Per path",
+        "Run status",
+        "Distributions",
+        "Slip margins",
+        "Robustness map (from simulation)",
+        "Failure drivers",
+        "Reproducibility",
+    ):
         assert heading in text
 
 
@@ -303,8 +360,12 @@ def test_summary_from_the_file_equals_summary_from_the_table(study):
     gains = {k: v["gains"] for k, v in summary["controllers"].items()}
     sweep = None
     if (out / "margin.parquet").exists():
-        sweep = pd.read_parquet(out / "margin.parquet").groupby(["controller", "axis", "amplitude_deg"], sort=False)[
-            "success"].agg(k="sum", n="count").reset_index()
+        sweep = (
+            pd.read_parquet(out / "margin.parquet")
+            .groupby(["controller", "axis", "amplitude_deg"], sort=False)["success"]
+            .agg(k="sum", n="count")
+            .reset_index()
+        )
     from_table = summarize(spec, pd.read_parquet(out / "runs.parquet"), sweep, gains=gains, wall_s=1.0)
     from_file = summarize(spec, out / "runs.parquet", sweep, gains=gains, wall_s=1.0)
     from pfjax.jsonio import dumps  # strict JSON (NaN -> null), so NaN quantiles compare equal
@@ -329,14 +390,22 @@ def test_study_without_report_streams_and_gives_the_same_summary(study, tmp_path
 def test_worst_case_figure_asked_of_the_worker_by_the_last_search_equals_the_one_drawn_here(tmp_path, monkeypatch):
     """With a falsifier, the worker draws the worst-case figure (asked for by whichever thread ends
     the search): every figure of the report is the same as a study's without a worker."""
-    data = {**CONFIG, "n_runs": 8, "chunk_size": 8, "sim": {"horizon": 2.0, "steady_window": 1.0},
-            "success": {"from_s": 1.0}, "margin": {"enabled": False},
-            "controllers": [{"name": "lmi", "type": "lmi"}],
-            "falsifier": {"enabled": True, "path": "line", "n_restarts": 2, "steps": 2}}
+    data = {
+        **CONFIG,
+        "n_runs": 8,
+        "chunk_size": 8,
+        "sim": {"horizon": 2.0, "steady_window": 1.0},
+        "success": {"from_s": 1.0},
+        "margin": {"enabled": False},
+        "controllers": [{"name": "lmi", "type": "lmi"}],
+        "falsifier": {"enabled": True, "path": "line", "n_restarts": 2, "steps": 2},
+    }
     spec, _ = load_study(data=data)
     asked = []
     submit = figure_worker.FigureWorker.submit
-    monkeypatch.setattr(figure_worker.FigureWorker, "submit", lambda self, *a, **k: (asked.append(list(a[4])), submit(self, *a, **k))[1])
+    monkeypatch.setattr(
+        figure_worker.FigureWorker, "submit", lambda self, *a, **k: (asked.append(list(a[4])), submit(self, *a, **k))[1]
+    )
     monkeypatch.setenv(figure_worker.ENV, "1")
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)  # no fallback: the worker drew them
@@ -348,7 +417,9 @@ def test_worst_case_figure_asked_of_the_worker_by_the_last_search_equals_the_one
     assert "worst_cases.png" in pngs
     assert pngs == sorted(p.name for p in (tmp_path / "worker" / "figures").glob("*.png"))
     for name in pngs:
-        assert (tmp_path / "worker" / "figures" / name).read_bytes() == (tmp_path / "here" / "figures" / name).read_bytes(), name
+        assert (tmp_path / "worker" / "figures" / name).read_bytes() == (
+            tmp_path / "here" / "figures" / name
+        ).read_bytes(), name
 
 
 def test_worst_figure_is_asked_for_once_when_the_searches_and_the_directory_are_there():
@@ -372,13 +443,17 @@ def test_worst_figure_is_asked_for_once_when_the_searches_and_the_directory_are_
             if step == "dir":
                 w.start(Path("/out"), Path("/out/runs.parquet"))
             else:  # a search ends in another thread
-                t = threading.Thread(target=w.found, args=(step, ({"falsifier": step}, {"t": step})), name=f"search-{step}")
+                t = threading.Thread(
+                    target=w.found, args=(step, ({"falsifier": step}, {"t": step})), name=f"search-{step}"
+                )
                 t.start()
                 t.join()
             assert len(fake.calls) == (step == order[-1])  # asked for only once everything is there
         out, summary, runs_path, names, trajs, thread = fake.calls[0]
         assert (out, runs_path, names, trajs) == (Path("/out"), Path("/out/runs.parquet"), ["worst_cases"], ["a", "b"])
-        assert summary == {"controllers": {"a": {"worst_case": {"falsifier": "a"}}, "b": {"worst_case": {"falsifier": "b"}}}}
+        assert summary == {
+            "controllers": {"a": {"worst_case": {"falsifier": "a"}}, "b": {"worst_case": {"falsifier": "b"}}}
+        }
         assert thread == ("MainThread" if order[-1] == "dir" else f"search-{order[-1]}")
         assert w.result() == {"worst_cases": {"name": "worst_cases"}} and len(fake.calls) == 1
     assert _WorstFigure(None, None, ["a"]).result() is None  # no worker: the study draws it

@@ -47,9 +47,7 @@ def assert_guarantees(d: Design, plant):
     assert d.K.shape == (plant.Bu.shape[1], plant.A.shape[0])
     assert is_hurwitz(Acl)
     assert np.all(d.closed_loop_poles.real < 0)
-    np.testing.assert_allclose(
-        np.sort_complex(d.closed_loop_poles), np.sort_complex(np.linalg.eigvals(Acl)), rtol=1e-9
-    )
+    np.testing.assert_allclose(np.sort_complex(d.closed_loop_poles), np.sort_complex(np.linalg.eigvals(Acl)), rtol=1e-9)
     assert d.hinf_norm == pytest.approx(hinf_norm(Acl, Bw, Cinf), rel=1e-9)
     assert d.h2_norm == pytest.approx(h2_norm(Acl, Bw, C2), rel=1e-9)
     if d.gamma_inf is not None:

@@ -35,8 +35,8 @@ def test_integral_design_removes_constant_slip_offset():
     import jax
 
     from pfjax import controllers as C
-    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import SimConfig, simulate_batch, stack
+    from pfjax.sim.scenario import paper_scenario
 
     with jax.enable_x64(True):
         g = C.integral_params(integral_mixed().K.ravel())

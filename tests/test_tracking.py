@@ -43,20 +43,27 @@ def test_connection_by_hand_and_eq_8_7():
     s = _state(0.0, 0.0, 0.0, 0.1)
     fw = T.FollowerParams(a=1.0, f=1.0, l=1.0, p=1.0)
     c = T.connection(s, jnp.array([1.0 + 2.0, 2.0]), fw)  # P_f = (1, 0): w = (2, 2)
-    assert float(c.phi) == pytest.approx(math.pi / 4, abs=1e-14) and float(c.d) == pytest.approx(2 * math.sqrt(2), abs=1e-14)
+    assert float(c.phi) == pytest.approx(math.pi / 4, abs=1e-14) and float(c.d) == pytest.approx(
+        2 * math.sqrt(2), abs=1e-14
+    )
     c = T.connection(s, jnp.array([1.0 - 2.0, -2.0]), fw)  # w = (-2, -2): same line, behind -> d < 0
-    assert float(c.phi) == pytest.approx(math.pi / 4, abs=1e-14) and float(c.d) == pytest.approx(-2 * math.sqrt(2), abs=1e-14)
+    assert float(c.phi) == pytest.approx(math.pi / 4, abs=1e-14) and float(c.d) == pytest.approx(
+        -2 * math.sqrt(2), abs=1e-14
+    )
     bw = fw._replace(f=-1.0, l=-1.0)
     c = T.connection(s, jnp.array([-3.0, 1.0]), bw)  # behind P_b = (0, 0): d > 0 for backward tracking
-    assert float(c.phi) == pytest.approx(math.atan2(-1.0, 3.0), abs=1e-14) and float(c.d) == pytest.approx(math.sqrt(10), abs=1e-14)
+    assert float(c.phi) == pytest.approx(math.atan2(-1.0, 3.0), abs=1e-14) and float(c.d) == pytest.approx(
+        math.sqrt(10), abs=1e-14
+    )
     rng = np.random.default_rng(0)
     for f in (1.0, -1.0):
         p = T.FollowerParams(a=0.8, f=f, l=1.3 * f, p=1.7)
         for _ in range(20):
             s = _state(*rng.uniform(-3, 3, 2), rng.uniform(-math.pi, math.pi), rng.uniform(-G30, G30))
             zd = jnp.asarray(rng.uniform(-5, 5, 2))
-            np.testing.assert_allclose(tracking_error_from_connection(s, T.connection(s, zd, p), p),
-                                       T.tracking_error(s, zd, p), atol=1e-12)
+            np.testing.assert_allclose(
+                tracking_error_from_connection(s, T.connection(s, zd, p), p), T.tracking_error(s, zd, p), atol=1e-12
+            )
 
 
 @pytest.mark.parametrize("f", [1.0, -1.0])
@@ -89,8 +96,14 @@ def test_invertibility_bounds():
 
 def test_leader_velocity_and_shapes():
     pv, pos = jax.jit(L.position_velocity), jax.jit(L.position)
-    for ld in (L.line(heading=0.3), L.circle(radius=-4.0), L.sine(), L.lane_change(), L.line(depth=1.0),
-               L.random_smooth(jax.random.PRNGKey(3))):
+    for ld in (
+        L.line(heading=0.3),
+        L.circle(radius=-4.0),
+        L.sine(),
+        L.lane_change(),
+        L.line(depth=1.0),
+        L.random_smooth(jax.random.PRNGKey(3)),
+    ):
         for t in (0.3, 4.0, 7.7):
             z, zd = pv(ld, t)
             h = 1e-6
@@ -103,10 +116,16 @@ def test_leader_velocity_and_shapes():
     assert float(jnp.hypot(*v)) < 1e-12  # stop-and-go stops at T/2
 
 
-def _numpy_rhs(s, v, w, a, br, bf):  # docs/reproductions/vehicle-tracking.md §1 with slip (source convention), written independently
+def _numpy_rhs(
+    s, v, w, a, br, bf
+):  # docs/reproductions/vehicle-tracking.md §1 with slip (source convention), written independently
     x, y, th, g = s
-    return [v * (math.cos(th) - math.tan(br) * math.sin(th)), v * (math.sin(th) + math.tan(br) * math.cos(th)),
-            v / a * (math.tan(g - bf) - math.tan(br)), w]
+    return [
+        v * (math.cos(th) - math.tan(br) * math.sin(th)),
+        v * (math.sin(th) + math.tan(br) * math.cos(th)),
+        v / a * (math.tan(g - bf) - math.tan(br)),
+        w,
+    ]
 
 
 def test_simulation_matches_solve_ivp():
@@ -114,8 +133,9 @@ def test_simulation_matches_solve_ivp():
     ld = L.sine(amplitude=1.0, wavenumber=0.4)
     br, bf = math.radians(3), math.radians(-2)
     init = T.initial_state(ld, params, offset=(-0.5, 0.7), heading_error=0.3)
-    batched = T.initial_states(T.stack([ld, ld]), T.stack([params, params]), np.array([[-0.5, 0.7], [0.0, 0.0]]),
-                               np.array([0.3, 0.0]))
+    batched = T.initial_states(
+        T.stack([ld, ld]), T.stack([params, params]), np.array([[-0.5, 0.7], [0.0, 0.0]]), np.array([0.3, 0.0])
+    )
     for k in ("x", "y", "theta", "gamma"):  # the batched placement is the single-run one
         assert float(getattr(batched, k)[0]) == pytest.approx(float(getattr(init, k)), abs=1e-14)
     on = T.unstack(batched, 1)  # no offset, no heading error: the focus point sits on z_d(0)
@@ -151,11 +171,17 @@ def line_batch():
     for f, l, p in ZD_CASES:
         runs.append((T.FollowerParams(f=f, l=0.5 * l if f > 0 else l, p=p), (0.0, 0.05), 0.0))
         names.append(("zd", (f, l, p)))
-    runs.append((T.FollowerParams(f=-1.0, l=-1.0, p=3.0), (-0.2, 0.3), 0.1))  # gamma reaches pi/(2p) = gamma_max: det M = 0
+    runs.append(
+        (T.FollowerParams(f=-1.0, l=-1.0, p=3.0), (-0.2, 0.3), 0.1)
+    )  # gamma reaches pi/(2p) = gamma_max: det M = 0
     runs.append((T.FollowerParams(f=-1.0, l=-1.0, p=-1.0), (0.0, 60.0), 0.0))  # |z~0| > z_fail = 50 m
     names += [("singular", None), ("far", None)]
-    inits = T.initial_states(T.stack([LINE] * len(runs)), T.stack([r[0] for r in runs]),
-                             np.array([r[1] for r in runs]), np.array([r[2] for r in runs]))
+    inits = T.initial_states(
+        T.stack([LINE] * len(runs)),
+        T.stack([r[0] for r in runs]),
+        np.array([r[1] for r in runs]),
+        np.array([r[2] for r in runs]),
+    )
     scs = [T.scenario(r[0], LINE, init=T.unstack(inits, i)) for i, r in enumerate(runs)]
     cfg = T.TrackConfig(dt=0.01, horizon=30.0, record=True)
     return names, scs, cfg, T.simulate_batch(T.stack(scs), config=cfg)

@@ -23,33 +23,60 @@ def test_run_is_exported():
     assert cli_track.LEADERS == api.LEADERS  # the command line's --leader choices are the library's
 
 
-@pytest.mark.parametrize("mode,extra", [
-    ("forward", ["--leader", "circle", "--stop-and-go", "0.3"]),
-    ("backward", ["--p", "-0.5", "--offset", "0.2", "-0.3", "--beta-r-deg", "2"]),
-])
+@pytest.mark.parametrize(
+    "mode,extra",
+    [
+        ("forward", ["--leader", "circle", "--stop-and-go", "0.3"]),
+        ("backward", ["--p", "-0.5", "--offset", "0.2", "-0.3", "--beta-r-deg", "2"]),
+    ],
+)
 def test_run_equals_cli_json(capsys, mode, extra):
     rc = main(["track", "--mode", mode, "--horizon", "3", "--dt", "0.05", *extra, "--json"])
     out, err = capsys.readouterr()
     assert rc == 0 and err == ""
     cli = json.loads(out)
-    kw = {"leader": "circle", "stop_and_go": 0.3} if mode == "forward" else \
-        {"p": -0.5, "offset": (0.2, -0.3), "beta_r_deg": 2.0}
+    kw = (
+        {"leader": "circle", "stop_and_go": 0.3}
+        if mode == "forward"
+        else {"p": -0.5, "offset": (0.2, -0.3), "beta_r_deg": 2.0}
+    )
     d = run(mode, **kw, **FAST)
     assert json.loads(json.dumps(d)) == cli
     assert d["mode"] == mode and d["f"] == (1 if mode == "forward" else -1) and d["T"] == pytest.approx(3.0)
 
 
-@pytest.mark.parametrize("kw,key", [
-    ({"p": 0}, "p"), ({"p": 0.0}, "p"), ({"l": 0}, "l"), ({"gamma_max_deg": 95}, "gamma_max_deg"),
-    ({"gamma_max_deg": 0}, "gamma_max_deg"), ({"speed": math.nan}, "speed"), ({"speed": -1.0}, "speed"),
-    ({"stop_and_go": 1.5}, "stop_and_go"), ({"stop_and_go": math.nan}, "stop_and_go"),
-    ({"stop_and_go": "0.5"}, "stop_and_go"), ({"leader": "spiral"}, "leader"), ({"leader": None}, "leader"),
-    ({"mode": "sideways"}, "mode"), ({"mode": 1}, "mode"), ({"a": 0}, "a"), ({"k": math.inf}, "k"),
-    ({"v_max": True}, "v_max"), ({"omega_max_deg": -90}, "omega_max_deg"), ({"offset": (0.0,)}, "offset"),
-    ({"offset": (0.0, math.nan)}, "offset"), ({"heading_error_deg": "10"}, "heading_error_deg"),
-    ({"beta_r_deg": 90}, "beta_r_deg"), ({"beta_f_deg": -91}, "beta_f_deg"), ({"horizon": 0}, "horizon"),
-    ({"dt": 0}, "dt"), ({"dt": 5.0}, "dt"), ({"horizon": 1e6, "dt": 0.1}, "horizon/dt"),
-])
+@pytest.mark.parametrize(
+    "kw,key",
+    [
+        ({"p": 0}, "p"),
+        ({"p": 0.0}, "p"),
+        ({"l": 0}, "l"),
+        ({"gamma_max_deg": 95}, "gamma_max_deg"),
+        ({"gamma_max_deg": 0}, "gamma_max_deg"),
+        ({"speed": math.nan}, "speed"),
+        ({"speed": -1.0}, "speed"),
+        ({"stop_and_go": 1.5}, "stop_and_go"),
+        ({"stop_and_go": math.nan}, "stop_and_go"),
+        ({"stop_and_go": "0.5"}, "stop_and_go"),
+        ({"leader": "spiral"}, "leader"),
+        ({"leader": None}, "leader"),
+        ({"mode": "sideways"}, "mode"),
+        ({"mode": 1}, "mode"),
+        ({"a": 0}, "a"),
+        ({"k": math.inf}, "k"),
+        ({"v_max": True}, "v_max"),
+        ({"omega_max_deg": -90}, "omega_max_deg"),
+        ({"offset": (0.0,)}, "offset"),
+        ({"offset": (0.0, math.nan)}, "offset"),
+        ({"heading_error_deg": "10"}, "heading_error_deg"),
+        ({"beta_r_deg": 90}, "beta_r_deg"),
+        ({"beta_f_deg": -91}, "beta_f_deg"),
+        ({"horizon": 0}, "horizon"),
+        ({"dt": 0}, "dt"),
+        ({"dt": 5.0}, "dt"),
+        ({"horizon": 1e6, "dt": 0.1}, "horizon/dt"),
+    ],
+)
 def test_bad_argument_raises_input_error_naming_it(monkeypatch, kw, key):
     monkeypatch.setattr(api, "_simulate", lambda c: pytest.fail("simulated despite a bad argument"))
     args = {**FAST, **kw}
@@ -59,14 +86,21 @@ def test_bad_argument_raises_input_error_naming_it(monkeypatch, kw, key):
     assert e.value.key == key and str(e.value).startswith(f"{key}: ") and "\n" not in str(e.value)
 
 
-@pytest.mark.parametrize("kw,argv,line", [
-    ({"p": 0}, ["--p", "0"], "--p: must be nonzero (M is singular at p = 0), got 0"),
-    ({"dt": 5.0}, ["--dt", "5"], "--dt: must be <= --horizon (3 s), got 5"),
-    ({"stop_and_go": 1.5}, ["--stop-and-go", "1.5"], "--stop-and-go: expected a depth in [0, 1], got 1.5"),
-    ({"gamma_max_deg": 95}, ["--gamma-max-deg", "95"], "--gamma-max-deg: magnitude must be < 90 deg, got 95"),
-    ({"offset": (0.0, math.nan)}, ["--offset", "0", "nan"], "--offset: expected a finite number, got nan"),
-    ({"horizon": 1e6, "dt": 0.1}, ["--horizon", "1e6", "--dt", "0.1"], "--horizon/--dt: at most 2e6 steps, got 1e+07"),
-])
+@pytest.mark.parametrize(
+    "kw,argv,line",
+    [
+        ({"p": 0}, ["--p", "0"], "--p: must be nonzero (M is singular at p = 0), got 0"),
+        ({"dt": 5.0}, ["--dt", "5"], "--dt: must be <= --horizon (3 s), got 5"),
+        ({"stop_and_go": 1.5}, ["--stop-and-go", "1.5"], "--stop-and-go: expected a depth in [0, 1], got 1.5"),
+        ({"gamma_max_deg": 95}, ["--gamma-max-deg", "95"], "--gamma-max-deg: magnitude must be < 90 deg, got 95"),
+        ({"offset": (0.0, math.nan)}, ["--offset", "0", "nan"], "--offset: expected a finite number, got nan"),
+        (
+            {"horizon": 1e6, "dt": 0.1},
+            ["--horizon", "1e6", "--dt", "0.1"],
+            "--horizon/--dt: at most 2e6 steps, got 1e+07",
+        ),
+    ],
+)
 def test_cli_names_the_flags_in_the_library_message(capsys, kw, argv, line):
     """The command line's one line is the library's message with the flags named (as before the move)."""
     with pytest.raises(InputError) as e:

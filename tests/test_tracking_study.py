@@ -16,9 +16,9 @@ from pathlib import Path
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
+from scipy.stats import beta
 
 from pfjax.provenance import config_hash
-from scipy.stats import beta
 
 STUDY = Path(__file__).resolve().parents[1] / "studies" / "vehicle_tracking.py"
 TABLES = ("lemma_runs", "lemma_table", "geometry", "mc_runs")
@@ -45,13 +45,19 @@ def test_quick_study_outputs_consistent(out):
     frames = {}
     for name in TABLES:
         meta = pq.read_schema(out / f"{name}.parquet").metadata
-        assert meta[b"pfjax.config_sha256"].decode() == s["config_sha256"] and meta[b"pfjax.seed"].decode() == str(s["seed"])
+        assert meta[b"pfjax.config_sha256"].decode() == s["config_sha256"] and meta[b"pfjax.seed"].decode() == str(
+            s["seed"]
+        )
         frames[name] = pd.read_parquet(out / f"{name}.parquet")
     assert not list(out.parent.glob(".vehicle_tracking.*"))  # the temporary directory was renamed away
 
     runs, table = frames["lemma_runs"], frames["lemma_table"]
     lem = s["config"]["lemma"]
-    assert len(runs) == s["lemma_grid"]["n_runs"] == 2 * 6 * len(lem["p"]) * len(lem["l_abs"]) * len(lem["gamma_max_deg"]) * len(lem["offsets"])
+    assert (
+        len(runs)
+        == s["lemma_grid"]["n_runs"]
+        == 2 * 6 * len(lem["p"]) * len(lem["l_abs"]) * len(lem["gamma_max_deg"]) * len(lem["offsets"])
+    )
     assert table.to_dict(orient="records") == s["lemma_grid"]["table"]
     ok = runs.status == "ok"
     for r in s["lemma_grid"]["table"]:
@@ -60,7 +66,10 @@ def test_quick_study_outputs_consistent(out):
         assert r["n"] == len(g) and r["failed"] == int((~gok).sum())
         assert r["both"] == int((gok & g.converged & g.phi_converged).sum())
         assert r["z_only"] + r["phi_only"] + r["neither"] + r["both"] + r["failed"] == r["n"]
-    assert runs[ok].window_max_z.notna().all() and (runs.inside_bound == (runs.p.abs() < math.pi / 2 / runs.gamma_max_deg.map(math.radians))).all()
+    assert (
+        runs[ok].window_max_z.notna().all()
+        and (runs.inside_bound == (runs.p.abs() < math.pi / 2 / runs.gamma_max_deg.map(math.radians))).all()
+    )
 
     geo = s["geometry"]
     assert geo["max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2"] < 1e-12 and geo["counterexamples_only_outside_bound"]

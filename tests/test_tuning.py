@@ -22,8 +22,8 @@ def _fd(f, th, h):
 
 
 def _sine_batch(controller):
-    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import stack
+    from pfjax.sim.scenario import paper_scenario
 
     ctrl, factory = C.REGISTRY[controller][:2]
     base = factory()
@@ -69,7 +69,9 @@ def test_aggregates_match_numpy():
 def test_failed_runs_are_penalised():
     # a destabilising gain (K > 0) diverges: its cost carries the penalty, a stabilising one does not
     pr = make_problem("state_feedback", "paper-line", config=SHORT, box=(("K",), (-20, -10), (20, 10)))
-    f = jax.jit(batch_cost(pr.controller, pr.tunable, pr.scenarios, dataclasses.replace(pr.config, d_fail=1.0), pr.cost))
+    f = jax.jit(
+        batch_cost(pr.controller, pr.tunable, pr.scenarios, dataclasses.replace(pr.config, d_fail=1.0), pr.cost)
+    )
     assert float(f(jnp.asarray([5.0, 2.0]))) > 100.0
     assert float(f(jnp.asarray([-2.78, -2.08]))) < 5.0
 
@@ -77,15 +79,28 @@ def test_failed_runs_are_penalised():
 def test_gradient_tune_quadratic_in_box():
     # minimum of |theta - c|^2 with c outside the box in one coordinate: projection onto the box
     c = jnp.asarray([0.3, 2.0, -0.7])
-    r = gradient_tune(lambda th: jnp.sum((th - c) ** 2), [-1, -1, -1], [1, 1, 1], key=jax.random.PRNGKey(0),
-                      steps=300, learning_rate=0.02)
+    r = gradient_tune(
+        lambda th: jnp.sum((th - c) ** 2),
+        [-1, -1, -1],
+        [1, 1, 1],
+        key=jax.random.PRNGKey(0),
+        steps=300,
+        learning_rate=0.02,
+    )
     np.testing.assert_allclose(r.theta, [0.3, 1.0, -0.7], atol=2e-3)
     assert r.n_rollouts == 300 and np.all(np.diff(r.history) <= 0)
-    rev = gradient_tune(lambda th: jnp.sum((th - c) ** 2), [-1, -1, -1], [1, 1, 1], key=jax.random.PRNGKey(0),
-                        steps=300, learning_rate=0.02, mode="reverse")  # "auto" took forward mode (3 gains)
+    rev = gradient_tune(
+        lambda th: jnp.sum((th - c) ** 2),
+        [-1, -1, -1],
+        [1, 1, 1],
+        key=jax.random.PRNGKey(0),
+        steps=300,
+        learning_rate=0.02,
+        mode="reverse",
+    )  # "auto" took forward mode (3 gains)
     np.testing.assert_allclose(rev.theta, r.theta, rtol=1e-12, atol=1e-14)
     with pytest.raises(ValueError, match="^mode: "):
-        gradient_tune(lambda th: jnp.sum(th ** 2), [-1], [1], theta0=[0.5], mode="backward")
+        gradient_tune(lambda th: jnp.sum(th**2), [-1], [1], theta0=[0.5], mode="backward")
 
 
 @pytest.mark.slow
@@ -93,8 +108,28 @@ def test_tune_cli_contract(capsys):
     from pfjax.cli import main
 
     for method in ("ga", "gradient"):
-        rc = main(["tune", "--method", method, "--controller", "state-feedback", "--scenario", "paper-line",
-                   "--generations", "2", "--population", "6", "--steps", "3", "--dt", "0.01", "--horizon", "5", "--json"])
+        rc = main(
+            [
+                "tune",
+                "--method",
+                method,
+                "--controller",
+                "state-feedback",
+                "--scenario",
+                "paper-line",
+                "--generations",
+                "2",
+                "--population",
+                "6",
+                "--steps",
+                "3",
+                "--dt",
+                "0.01",
+                "--horizon",
+                "5",
+                "--json",
+            ]
+        )
         assert rc == 0
         out = json.loads(capsys.readouterr().out)
         for k in ("gains", "cost", "n_rollouts_simulated", "wall_s", "history"):
@@ -104,14 +139,17 @@ def test_tune_cli_contract(capsys):
         assert out["history"] == sorted(out["history"], reverse=True) and out["cost"] == out["history"][-1]
 
 
-@pytest.mark.parametrize("argv,flag", [
-    (["--method", "sgd", "--controller", "pi"], "--method"),
-    (["--method", "ga", "--controller", "lqr"], "--controller"),
-    (["--method", "ga", "--controller", "pi", "--cost", "mse"], "--cost"),
-    (["--method", "ga", "--controller", "pi", "--level", "1.5"], "--level"),
-    (["--method", "ga", "--controller", "pi", "--population", "1"], "--population"),
-    (["--method", "ga", "--controller", "pi", "--scenario", "missing.toml"], "--scenario"),
-])
+@pytest.mark.parametrize(
+    "argv,flag",
+    [
+        (["--method", "sgd", "--controller", "pi"], "--method"),
+        (["--method", "ga", "--controller", "lqr"], "--controller"),
+        (["--method", "ga", "--controller", "pi", "--cost", "mse"], "--cost"),
+        (["--method", "ga", "--controller", "pi", "--level", "1.5"], "--level"),
+        (["--method", "ga", "--controller", "pi", "--population", "1"], "--population"),
+        (["--method", "ga", "--controller", "pi", "--scenario", "missing.toml"], "--scenario"),
+    ],
+)
 def test_tune_cli_bad_values(argv, flag, capsys):
     from pfjax.cli import main
 

@@ -28,7 +28,9 @@ STUDY = ROOT / "studies" / "tuning_ga_vs_gradient.py"
 
 def _run(*args, cwd=ROOT):
     env = {**os.environ, "PFJAX_CACHE_DIR": str(ROOT / ".pytest_cache" / "xla")}
-    return subprocess.run([sys.executable, str(STUDY), *args], cwd=cwd, capture_output=True, text=True, env=env, timeout=900)
+    return subprocess.run(
+        [sys.executable, str(STUDY), *args], cwd=cwd, capture_output=True, text=True, env=env, timeout=900
+    )
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +54,11 @@ def test_quick_tuning_study_outputs_consistent(out):
     # GA budget: P + G (P - E) rollouts per seed (MATLAB ga, elite count 1); the gradient's: one per step and start
     P, G = s["config"]["ga"]["population"], s["config"]["ga"]["generations"]
     for r in s["tuning_runs"]:
-        assert r["n_rollouts"] == (P + G * (P - 1) if r["method"] == "ga" else s["config"]["gradient"]["steps"] * s["config"]["gradient"]["starts"])
+        assert r["n_rollouts"] == (
+            P + G * (P - 1)
+            if r["method"] == "ga"
+            else s["config"]["gradient"]["steps"] * s["config"]["gradient"]["starts"]
+        )
     hist = pd.read_parquet(out / "tuning_runs.parquet")
     for r in s["tuning_runs"]:
         h = hist[(hist.method == r["method"]) & (hist.seed == r["seed"])].sort_values("iteration")
@@ -72,18 +78,26 @@ def test_quick_tuning_study_outputs_consistent(out):
         assert row["success_ci95"] == pytest.approx([lo, hi], abs=1e-9)
         assert row["iae_mean"] == pytest.approx(float(g.iae.mean()), rel=1e-9)
         assert f"{100 * row['success_rate']:.1f} %" in report
-    assert {r["controller"] for r in s["heldout"]["table"]} >= {"pi-table3 (source)", "K-paper (source)", "integral (LMI)",
-                                                              "polytopic (LMI)", "K-gradient-robust"}
+    assert {r["controller"] for r in s["heldout"]["table"]} >= {
+        "pi-table3 (source)",
+        "K-paper (source)",
+        "integral (LMI)",
+        "polytopic (LMI)",
+        "K-gradient-robust",
+    }
     # the integral design removes the slip offset (below 0.1 mm even at quick sizes)
     assert s["targets"]["integral_steady_abs_d_m"] < 1e-4
 
 
-@pytest.mark.parametrize("setting, message", [
-    ("seeds=0", "seeds: must be >= 1"),
-    ("ga.population=1", "ga.population: too small"),
-    ("gradient.lr=-1", "gradient.lr: must be > 0"),
-    ("heldout=nope.toml", "heldout: file not found"),
-])
+@pytest.mark.parametrize(
+    "setting, message",
+    [
+        ("seeds=0", "seeds: must be >= 1"),
+        ("ga.population=1", "ga.population: too small"),
+        ("gradient.lr=-1", "gradient.lr: must be > 0"),
+        ("heldout=nope.toml", "heldout: file not found"),
+    ],
+)
 def test_bad_setting_one_line_exit_2_nothing_written(tmp_path, setting, message):
     d = tmp_path / "out"
     r = _run("--quick", "--set", setting, "--out", str(d))

@@ -33,9 +33,17 @@ kind = "line"
 name = "st"
 type = "stanley"
 """
-DATA = {"name": "v", "n_runs": 4, "seed": 1, "chunk_size": 4, "sim": {"horizon": 2.0, "steady_window": 1.0},
-        "success": {"from_s": 1.0}, "margin": {"enabled": False}, "paths": [{"kind": "line"}],
-        "controllers": [{"name": "st", "type": "stanley"}]}
+DATA = {
+    "name": "v",
+    "n_runs": 4,
+    "seed": 1,
+    "chunk_size": 4,
+    "sim": {"horizon": 2.0, "steady_window": 1.0},
+    "success": {"from_s": 1.0},
+    "margin": {"enabled": False},
+    "paths": [{"kind": "line"}],
+    "controllers": [{"name": "st", "type": "stanley"}],
+}
 SPLINE = "paths[0]={kind='spline', points=%s}"
 SIM = ["simulate", "--path", "line", "--controller", "pi"]
 
@@ -73,43 +81,90 @@ CLI_CASES = [
     (["study", "CFG", "--set", "n_runs=1.5"], "n_runs: Input should be a valid integer"),
     (["study", "CFG", "--set", "seed='x'"], "seed: Input should be a valid integer"),
     (["study", "CFG", "--set", "vehicle.L=0"], "vehicle.L: must be > 0 over its whole range, got a lower bound 0"),
-    (["study", "CFG", "--set", "vehicle.speed={dist='uniform', low=-1, high=1}"], "vehicle.speed: must be > 0 over its whole range"),
-    (["study", "CFG", "--set", "vehicle.delta_max_deg=90"], "vehicle.delta_max_deg: must lie in (0, 90) deg, got range [90, 90]"),
+    (
+        ["study", "CFG", "--set", "vehicle.speed={dist='uniform', low=-1, high=1}"],
+        "vehicle.speed: must be > 0 over its whole range",
+    ),
+    (
+        ["study", "CFG", "--set", "vehicle.delta_max_deg=90"],
+        "vehicle.delta_max_deg: must lie in (0, 90) deg, got range [90, 90]",
+    ),
     (["study", "CFG", "--set", "slip.beta_r_deg=-90"], "slip.beta_r_deg: slip magnitudes must stay below 90 deg"),
-    (["study", "CFG", "--set", "slip.beta_r_deg={dist='uniform', low=5, high=1}"], "slip.beta_r_deg: needs low < high, got low=5, high=1"),
-    (["study", "CFG", "--set", "slip.beta_f_deg={dist='uniform', low=nan, high=1}"], "slip.beta_f_deg.low: expected a finite number, got nan"),
-    (["study", "CFG", "--set", "initial.start_along_m={dist='choice', values=[]}"], "initial.start_along_m: 'values' must be a non-empty list"),
+    (
+        ["study", "CFG", "--set", "slip.beta_r_deg={dist='uniform', low=5, high=1}"],
+        "slip.beta_r_deg: needs low < high, got low=5, high=1",
+    ),
+    (
+        ["study", "CFG", "--set", "slip.beta_f_deg={dist='uniform', low=nan, high=1}"],
+        "slip.beta_f_deg.low: expected a finite number, got nan",
+    ),
+    (
+        ["study", "CFG", "--set", "initial.start_along_m={dist='choice', values=[]}"],
+        "initial.start_along_m: 'values' must be a non-empty list",
+    ),
     (["study", "CFG", "--set", "sim.dtt=0.1"], "sim.dtt: unknown key (did you mean 'sim.dt'?)"),
     (["study", "CFG", "--set", "paths[0].radus=3"], "paths[0].radus: unknown key (did you mean 'paths[0].radius'?)"),
-    (["study", "CFG", "--set", SPLINE % "[[0, 0], [1, 0]]"], "paths[0].points: a spline needs at least 4 points [x, y], got 2"),
+    (
+        ["study", "CFG", "--set", SPLINE % "[[0, 0], [1, 0]]"],
+        "paths[0].points: a spline needs at least 4 points [x, y], got 2",
+    ),
     (["study", "CFG", "--set", SPLINE % "[[0, 0], [1, 0], [1, 0], [2, 0]]"], "paths[0].points[2]: repeats point [1]"),
-    (["study", "CFG", "--set", SPLINE % "[[0, 0], [1, nan], [2, 0], [3, 0]]"], "paths[0].points[1][1]: expected a finite number, got nan"),
-    (["study", "CFG", "--set", SPLINE % "[[0, 0], [1, 0], [0.5, 0], [2, 0]]"], "paths[0].points[2]: the path turns back"),
-    (["study", "CFG", "--set", SPLINE % "[[0, 0], [1], [2, 0], [3, 0]]"], "paths[0].points[1]: expected a point [x, y]"),
+    (
+        ["study", "CFG", "--set", SPLINE % "[[0, 0], [1, nan], [2, 0], [3, 0]]"],
+        "paths[0].points[1][1]: expected a finite number, got nan",
+    ),
+    (
+        ["study", "CFG", "--set", SPLINE % "[[0, 0], [1, 0], [0.5, 0], [2, 0]]"],
+        "paths[0].points[2]: the path turns back",
+    ),
+    (
+        ["study", "CFG", "--set", SPLINE % "[[0, 0], [1], [2, 0], [3, 0]]"],
+        "paths[0].points[1]: expected a point [x, y]",
+    ),
     (["study", "CFG", "--set", "paths[0]={kind='spline'}"], "paths[0].points: required for kind 'spline'"),
-    (["study", "CFG", "--set", "paths[0].points=[[0, 0], [1, 0], [2, 0], [3, 0]]"], "paths[0].points: only for kind 'spline'"),
-    (["study", "CFG", "--set", "controllers[0]={name='k', type='state_feedback', K=[1.0]}"], "controllers[0]: state_feedback needs K = [k_d, k_theta]"),
-    (["study", "CFG", "--set", "controllers[0].gains={k=nan}"], "controllers[0].gains.k: expected a finite number, got nan"),
+    (
+        ["study", "CFG", "--set", "paths[0].points=[[0, 0], [1, 0], [2, 0], [3, 0]]"],
+        "paths[0].points: only for kind 'spline'",
+    ),
+    (
+        ["study", "CFG", "--set", "controllers[0]={name='k', type='state_feedback', K=[1.0]}"],
+        "controllers[0]: state_feedback needs K = [k_d, k_theta]",
+    ),
+    (
+        ["study", "CFG", "--set", "controllers[0].gains={k=nan}"],
+        "controllers[0].gains.k: expected a finite number, got nan",
+    ),
     (["study", "CFG", "--set", "controllers[3].K=[1, 2]"], "controllers[3]: no such list element"),
     (["study", "CFG", "--set", "f64_check_runs=-1"], "f64_check_runs: must be >= 0 (got -1)"),
     (["study", "CFG", "--out", "FILE"], "--out: FILE exists and is not a directory"),
     (["study", "CFG", "--out", "FILE/sub"], "a_file is not a directory (cannot create sub in it)"),
     (["report", "CFG", "--out", "EMPTY"], "--out: no finished study in EMPTY"),
     # the total slip over the distributions' support, not each term alone
-    (["study", "CFG", "--set", "slip.kind='sinusoid'", "--set", "slip.beta_r_deg=60", "--set", "slip.amp_r_deg=60"],
-     "slip.amp_r_deg: the total slip must stay below 90 deg over the distributions' support, got max |beta_r_deg| + "
-     "max |amp_r_deg| = 120 deg"),
-    (["study", "CFG", "--set", "slip.kind='step'", "--set", "slip.beta_f_deg=50", "--set", "slip.step_f_deg=45"],
-     "slip.step_f_deg: the total slip must stay below 90 deg"),
-    (["study", "CFG", "--set", "slip.kind='ou'", "--set", "slip.ou_sigma_deg=1e6"],
-     "slip.ou_sigma_deg: the total slip must stay below 90 deg over the distributions' support, got max |beta_r_deg| + 6"),
-    (["study", "CFG", "--set", "initial.lateral_offset={dist='truncnormal', mean=5, std=1, low=-1, high=1}"],
-     "initial.lateral_offset: needs low <= mean <= high"),
+    (
+        ["study", "CFG", "--set", "slip.kind='sinusoid'", "--set", "slip.beta_r_deg=60", "--set", "slip.amp_r_deg=60"],
+        "slip.amp_r_deg: the total slip must stay below 90 deg over the distributions' support, got max |beta_r_deg| + "
+        "max |amp_r_deg| = 120 deg",
+    ),
+    (
+        ["study", "CFG", "--set", "slip.kind='step'", "--set", "slip.beta_f_deg=50", "--set", "slip.step_f_deg=45"],
+        "slip.step_f_deg: the total slip must stay below 90 deg",
+    ),
+    (
+        ["study", "CFG", "--set", "slip.kind='ou'", "--set", "slip.ou_sigma_deg=1e6"],
+        "slip.ou_sigma_deg: the total slip must stay below 90 deg over the distributions' support, got max |beta_r_deg| + 6",
+    ),
+    (
+        ["study", "CFG", "--set", "initial.lateral_offset={dist='truncnormal', mean=5, std=1, low=-1, high=1}"],
+        "initial.lateral_offset: needs low <= mean <= high",
+    ),
     # numbers: booleans, strings, overflow, underflow, huge integers
     (["study", "CFG", "--set", "n_runs=true"], "n_runs: Input should be a valid integer (got True)"),
     (["study", "CFG", "--set", "seed=9223372036854775808"], "seed: must be <= 9223372036854775807"),
     (["study", "CFG", "--set", "seed=" + "9" * 400], "seed: must be <= 9223372036854775807 (got 99999"),
-    (["study", "CFG", "--set", "vehicle.speed=" + "9" * 400], "vehicle.speed: expected a number of magnitude <= 1e+12, got an integer of 400 digits"),
+    (
+        ["study", "CFG", "--set", "vehicle.speed=" + "9" * 400],
+        "vehicle.speed: expected a number of magnitude <= 1e+12, got an integer of 400 digits",
+    ),
     (["study", "CFG", "--set", "sim.dt=1e-300"], "sim.dt: must be >= 1e-12 (got 1e-300)"),
     (["study", "CFG", "--set", "sim.horizon=1e308"], "sim.horizon: expected a magnitude <= 1e+12, got 1e+308"),
     (["study", "CFG", "--set", "sim.horizon=inf"], "sim.horizon: expected a finite number, got inf"),
@@ -129,11 +184,27 @@ CLI_CASES = [
     (SIM + ["--gains", "kp_d=1,kp_d=2"], "--gains: kp_d is given twice"),
     (SIM + ["--gains", "1,2"], "--gains: expected all 5 gains of --controller pi in order"),
     (SIM + ["--controller", "stanley", "--gains", "1,k_soft=2"], "--gains: mixes name=value pairs and bare numbers"),
-    (["tune", "--method", "gradient", "--controller", "pi", "--seed", "9223372036854775808"], "--seed: must be <= 9223372036854775807"),
+    (
+        ["tune", "--method", "gradient", "--controller", "pi", "--seed", "9223372036854775808"],
+        "--seed: must be <= 9223372036854775807",
+    ),
     (["tune", "--method", "ga", "--controller", "pi", "--population", "100000000"], "--population: must be <= 1000000"),
     (["bench", "--sizes", "1,0"], "--sizes: must be >= 1, got 0"),
-    (["study", "CFG", "--coordinator", "127.0.0.1:1", "--num-processes", "2", "--process-id", "1",
-      "--coordinator-timeout", "0.5"], "--coordinator: could not reach 127.0.0.1:1 within 0.5 s"),
+    (
+        [
+            "study",
+            "CFG",
+            "--coordinator",
+            "127.0.0.1:1",
+            "--num-processes",
+            "2",
+            "--process-id",
+            "1",
+            "--coordinator-timeout",
+            "0.5",
+        ],
+        "--coordinator: could not reach 127.0.0.1:1 within 0.5 s",
+    ),
 ]
 
 
@@ -173,14 +244,16 @@ def test_table_has_at_least_30_cases():
     assert len(CLI_CASES) >= 30
 
 
-STUDY_CASES = [(a[3], e) for a, e in CLI_CASES if a[0] == "study" and len(a) == 4 and a[2] == "--set" and not e.startswith("--set")]
+STUDY_CASES = [
+    (a[3], e) for a, e in CLI_CASES if a[0] == "study" and len(a) == 4 and a[2] == "--set" and not e.startswith("--set")
+]
 
 
 @pytest.mark.parametrize("override,expected", STUDY_CASES, ids=[o[:50] for o, _ in STUDY_CASES])
 def test_load_study_rejects_malformed_config(override, expected):
     with pytest.raises(ConfigError) as e:
         load_study(data=copy.deepcopy(DATA), overrides=[override])
-    assert str(e.value) .startswith(expected.split(":")[0] + ":"), str(e.value)
+    assert str(e.value).startswith(expected.split(":")[0] + ":"), str(e.value)
     assert expected in str(e.value) and "\n" not in str(e.value)
 
 
@@ -194,19 +267,26 @@ def test_feasibility_warnings_name_the_path_and_the_numbers():
     """A circle tighter than the steering allows and a spline shorter than the runs travel are
     warnings, not errors; followable paths give none."""
     data = copy.deepcopy(DATA)
-    data["paths"] = [{"kind": "line"}, {"kind": "sine"}, {"kind": "parabola"},
-                     {"kind": "circle", "radius": {"dist": "uniform", "low": 0.3, "high": 2.0}},
-                     {"kind": "spline", "name": "u", "points": [[0, 0], [0.5, 0.1], [1, 0], [1.5, 0.1]]}]
+    data["paths"] = [
+        {"kind": "line"},
+        {"kind": "sine"},
+        {"kind": "parabola"},
+        {"kind": "circle", "radius": {"dist": "uniform", "low": 0.3, "high": 2.0}},
+        {"kind": "spline", "name": "u", "points": [[0, 0], [0.5, 0.1], [1, 0], [1.5, 0.1]]},
+    ]
     spec, _ = load_study(data=data)
     w = study_warnings(spec)
     assert len(w) == 2, w
-    assert w[0].startswith("paths[3] (circle): max curvature 3.333 1/m exceeds tan(delta_max)/L") and "2.887 1/m" in w[0]
+    assert (
+        w[0].startswith("paths[3] (circle): max curvature 3.333 1/m exceeds tan(delta_max)/L") and "2.887 1/m" in w[0]
+    )
     assert w[1].startswith("paths[4] (u): 1.") and "status path_end" in w[1]
     # the parabola's vertex curvature (2 1/m) becomes unfollowable with a 20 deg steering limit: tan(20 deg)/0.2 = 1.82
     spec, _ = load_study(data=copy.deepcopy(DATA), overrides=["paths[0].kind='parabola'", "vehicle.delta_max_deg=20"])
     assert study_warnings(spec) == [
         "paths[0] (parabola): max curvature 2 1/m exceeds tan(delta_max)/L = tan(20 deg)/0.2 m = 1.82 1/m: "
-        "the robot cannot follow it with its steering limit, even without slip"]
+        "the robot cannot follow it with its steering limit, even without slip"
+    ]
 
 
 def test_a_config_that_is_not_utf8_is_one_line(files, tmp_path, capsys):
@@ -219,9 +299,11 @@ def test_a_config_that_is_not_utf8_is_one_line(files, tmp_path, capsys):
 def test_memory_guard_names_the_key(files, tmp_path, capsys, monkeypatch):
     """Sizes whose arrays exceed the memory budget are refused before anything is allocated."""
     monkeypatch.setenv("PFJAX_MEMORY_BUDGET", str(50 << 20))
-    for argv, key in ((["study", "CFG", "--set", "chunk_size=4096", "--set", "n_runs=4096"], "chunk_size"),
-                      (["study", "CFG", "--set", "n_runs=1000000", "--set", "chunk_size=8"], "n_runs"),
-                      (["bench", "--sizes", "100000"], "--sizes")):
+    for argv, key in (
+        (["study", "CFG", "--set", "chunk_size=4096", "--set", "n_runs=4096"], "chunk_size"),
+        (["study", "CFG", "--set", "n_runs=1000000", "--set", "chunk_size=8"], "n_runs"),
+        (["bench", "--sizes", "100000"], "--sizes"),
+    ):
         assert main([_sub(a, files) for a in argv]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and f"error: {key}: " in err[0] and "memory budget of 50 MiB" in err[0], err
@@ -232,8 +314,8 @@ def test_the_python_api_rejects_what_the_cli_rejects():
     """The same checks from Python, with the argument's name where the CLI names its flag."""
     from pfjax import controllers as C
     from pfjax.errors import InputError
-    from pfjax.sim.scenario import paper_scenario
     from pfjax.sim import SimConfig, simulate_batch, stack
+    from pfjax.sim.scenario import paper_scenario
     from pfjax.synthesis import synthesize
 
     pi = C.REGISTRY["pi"][1]()

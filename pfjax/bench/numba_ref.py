@@ -9,8 +9,25 @@ import numba
 import numpy as np
 
 #: order of the constants vector ``c`` passed to :func:`kernel`
-CONSTANTS = ("dt", "half", "sixth", "v", "vl", "k0", "k1", "dmax", "umin", "umax", "pi", "twopi", "one", "zero",
-             "c001", "c025", "four")
+CONSTANTS = (
+    "dt",
+    "half",
+    "sixth",
+    "v",
+    "vl",
+    "k0",
+    "k1",
+    "dmax",
+    "umin",
+    "umax",
+    "pi",
+    "twopi",
+    "one",
+    "zero",
+    "c001",
+    "c025",
+    "four",
+)
 
 
 @numba.njit(inline="always", cache=True)
@@ -26,6 +43,7 @@ def newton(u, x, y, one, c001, c025, umin, umax):
     m = max(np.sqrt(ex * ex + ey * ey), c025) / np.sqrt(speed2)
     step = min(max(step, -m), m)
     return min(max(u + step, umin), umax)
+
 
 @numba.njit(parallel=True, cache=True)
 def kernel(x0, y0, th0, u0, br, bf, c, n_steps):

@@ -61,13 +61,23 @@ def scenarios(batch: Batch, dtype=np.float32):
     from pfjax.sim import Scenario, constant_slip
 
     n = batch.x0.shape[0]
-    f = lambda a: jnp.asarray(np.broadcast_to(np.asarray(a, dtype), (n,) + np.shape(a)[np.ndim(a) and np.shape(a)[0] == n:]))
+    f = lambda a: jnp.asarray(
+        np.broadcast_to(np.asarray(a, dtype), (n,) + np.shape(a)[np.ndim(a) and np.shape(a)[0] == n :])
+    )
     slip = constant_slip(0.0, 0.0)._replace(constant=jnp.asarray(np.stack([batch.beta_r, batch.beta_f], 1), dtype))
     path = shapes.sine(u_min=U_MIN, u_max=U_MAX)
     path = type(path)(*(f(np.asarray(v)) for v in path))
     gains = state_feedback_params(K)
     gains = type(gains)(*(f(np.asarray(g)) for g in gains))
-    params = SlipParams(v=f(V), L=f(L), delta_max=f(DELTA_MAX), convention=jnp.full((n,), SOURCE, jnp.int32),
-                        delta_rate_max=f(np.inf))
-    return Scenario(pose0=Pose(f(batch.x0), f(batch.y0), f(batch.theta0)), slip=slip, params=params,
-                    path=path, gains=gains, noise=None, u0=f(batch.u0))
+    params = SlipParams(
+        v=f(V), L=f(L), delta_max=f(DELTA_MAX), convention=jnp.full((n,), SOURCE, jnp.int32), delta_rate_max=f(np.inf)
+    )
+    return Scenario(
+        pose0=Pose(f(batch.x0), f(batch.y0), f(batch.theta0)),
+        slip=slip,
+        params=params,
+        path=path,
+        gains=gains,
+        noise=None,
+        u0=f(batch.u0),
+    )

@@ -41,9 +41,23 @@ def numba_available() -> bool:
 def _consts(dtype):
     f = np.dtype(dtype).type
     return dict(
-        dt=f(P.DT), half=f(0.5), sixth=f(P.DT / 6.0), v=f(P.V), vl=f(P.V / P.L), k0=f(P.K[0]), k1=f(P.K[1]),
-        dmax=f(P.DELTA_MAX), umin=f(P.U_MIN), umax=f(P.U_MAX), pi=f(np.pi), twopi=f(2 * np.pi), one=f(1.0),
-        zero=f(0.0), c001=f(0.01), c025=f(0.25), four=f(4.0),
+        dt=f(P.DT),
+        half=f(0.5),
+        sixth=f(P.DT / 6.0),
+        v=f(P.V),
+        vl=f(P.V / P.L),
+        k0=f(P.K[0]),
+        k1=f(P.K[1]),
+        dmax=f(P.DELTA_MAX),
+        umin=f(P.U_MIN),
+        umax=f(P.U_MAX),
+        pi=f(np.pi),
+        twopi=f(2 * np.pi),
+        one=f(1.0),
+        zero=f(0.0),
+        c001=f(0.01),
+        c025=f(0.25),
+        four=f(4.0),
     )
 
 

@@ -9,17 +9,21 @@ from __future__ import annotations
 from dataclasses import asdict
 
 import pfjax
-from pfjax.provenance import config_hash
 from pfjax.jsonio import dumps
 from pfjax.outputs import OutputDir
+from pfjax.provenance import config_hash, parquet_metadata
 from pfjax.report.markdown import table
-from pfjax.provenance import parquet_metadata
 from pfjax.tables import write_parquet
 
-_STYLE = {("pfjax", "float32"): ("C0", "-", "o"), ("pfjax", "float64"): ("C0", "--", "s"),
-          ("numba", "float32"): ("C1", "-", "^"), ("numba", "float64"): ("C1", "--", "v"),
-          ("numpy", "float32"): ("C2", "-", "D"), ("numpy", "float64"): ("C2", "--", "d"),
-          ("scipy", "float64"): ("C3", "--", "x")}
+_STYLE = {
+    ("pfjax", "float32"): ("C0", "-", "o"),
+    ("pfjax", "float64"): ("C0", "--", "s"),
+    ("numba", "float32"): ("C1", "-", "^"),
+    ("numba", "float64"): ("C1", "--", "v"),
+    ("numpy", "float32"): ("C2", "-", "D"),
+    ("numpy", "float64"): ("C2", "--", "d"),
+    ("scipy", "float64"): ("C3", "--", "x"),
+}
 
 
 def throughput_figure(rows, machine: dict):
@@ -36,18 +40,29 @@ def throughput_figure(rows, machine: dict):
             ax.axhline(m[0], ls=ls, color=color, lw=1.2, label=f"scipy solve_ivp {dtype} (one run at a time)")
         elif len(b) == 1:  # a reference measured at one batch size: a marker with its value
             ax.plot(b, m, ls="none", marker=marker, ms=8, color=color, label=f"{impl} {dtype}")
-            ax.annotate(f"{m[0]:.3g}", (b[0], m[0]), textcoords="offset points", fontsize=7, color=color,
-                        xytext=(8 if impl == "numpy" else -30, 3 if dtype == "float32" else -9))
+            ax.annotate(
+                f"{m[0]:.3g}",
+                (b[0], m[0]),
+                textcoords="offset points",
+                fontsize=7,
+                color=color,
+                xytext=(8 if impl == "numpy" else -30, 3 if dtype == "float32" else -9),
+            )
         else:
             ax.plot(b, m, ls=ls, marker=marker, color=color, label=f"{impl} {dtype}")
-            ax.annotate(f"{m[-1]:.3g}", (b[-1], m[-1]), textcoords="offset points", xytext=(6, 4), fontsize=7, color=color)
+            ax.annotate(
+                f"{m[-1]:.3g}", (b[-1], m[-1]), textcoords="offset points", xytext=(6, 4), fontsize=7, color=color
+            )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.margins(x=0.12)
     ax.set_xlabel("batch size (runs)")
     ax.set_ylabel("million rollout-steps / s")
-    ax.set_title(f"slip model, sine path, RK4 5 ms, metrics on — {machine['cpus']} CPUs, "
-                 f"{len(machine['devices'])} JAX device(s)", fontsize=9)
+    ax.set_title(
+        f"slip model, sine path, RK4 5 ms, metrics on — {machine['cpus']} CPUs, "
+        f"{len(machine['devices'])} JAX device(s)",
+        fontsize=9,
+    )
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, ncol=2)
     return fig
@@ -56,22 +71,35 @@ def throughput_figure(rows, machine: dict):
 def markdown(result: dict) -> str:
     s, m = result["summary"], result["machine"]
     lines = [
-        "# pfjax benchmark", "",
+        "# pfjax benchmark",
+        "",
         f"Machine: {m['processor']}, {m.get('cpu_model') or 'CPU model unknown'}"
         f"{' (family ' + m['cpu_family'] + ', model ' + m['cpu_model_number'] + ')' if m.get('cpu_family') else ''}, {m['cpus']} CPUs, JAX {m['jax']} with {len(m['devices'])} device(s); "
         f"1-min load average {m['load_average_1m_start']:.1f} at the start, {m['load_average_1m']:.1f} at the end. "
-        f"AVX-512: {'yes' if m.get('avx512') else 'no'}; simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}.", "",
-        table(["implementation", "dtype", "batch", "M rollout-steps/s", "compile s"],
-              [[r["impl"], r["dtype"], r["batch"], f"{r['msteps_per_s']:.3g}", f"{r['compile_s']:.2f}"] for r in result["rows"]]),
+        f"AVX-512: {'yes' if m.get('avx512') else 'no'}; simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}.",
         "",
-        table(["agreement (max abs IAE difference vs pfjax, m s)", "value", "tolerance", "ok"],
-              [[k, f"{a['max_abs_diff']:.2e}", f"{a['tolerance']:.0e}", a["ok"]] for k, a in s["agreement"].items()]),
+        table(
+            ["implementation", "dtype", "batch", "M rollout-steps/s", "compile s"],
+            [
+                [r["impl"], r["dtype"], r["batch"], f"{r['msteps_per_s']:.3g}", f"{r['compile_s']:.2f}"]
+                for r in result["rows"]
+            ],
+        ),
+        "",
+        table(
+            ["agreement (max abs IAE difference vs pfjax, m s)", "value", "tolerance", "ok"],
+            [[k, f"{a['max_abs_diff']:.2e}", f"{a['tolerance']:.0e}", a["ok"]] for k, a in s["agreement"].items()],
+        ),
     ]
     g = s["gradient"]
-    lines += ["", f"Value and gradient of the batch-mean IAE w.r.t. K over the forward pass: {s['grad_over_forward']:.2f}x "
-              f"({s['grad_mode']} mode, as the tuner takes it); reverse mode {s['grad_over_forward_reverse']:.2f}x "
-              f"(the two gradients differ by {g['modes_max_rel_diff']:.1e} relative). "
-              f"Peak RSS {s['peak_rss_mib']:.0f} MiB.", ""]
+    lines += [
+        "",
+        f"Value and gradient of the batch-mean IAE w.r.t. K over the forward pass: {s['grad_over_forward']:.2f}x "
+        f"({s['grad_mode']} mode, as the tuner takes it); reverse mode {s['grad_over_forward_reverse']:.2f}x "
+        f"(the two gradients differ by {g['modes_max_rel_diff']:.1e} relative). "
+        f"Peak RSS {s['peak_rss_mib']:.0f} MiB.",
+        "",
+    ]
     for note in s.get("notes", []):  # a reference that was skipped (Numba not installed)
         lines += [f"Note: {note} (the Numba reference was skipped; its rates and ratios are null).", ""]
     return "\n".join(lines)
@@ -81,8 +109,9 @@ def output_dir(out, cfg, *, overwrite: bool = False) -> OutputDir:
     """The (unopened) :class:`~pfjax.outputs.OutputDir` of a benchmark of ``cfg`` (a
     :class:`~pfjax.bench.run.BenchConfig`): open it before running the benchmark, so a bad
     ``--out`` is refused before minutes of work."""
-    return OutputDir(out, command="bench", config_sha256=config_hash(asdict(cfg)), overwrite=overwrite,
-                     extra={"seed": cfg.seed})
+    return OutputDir(
+        out, command="bench", config_sha256=config_hash(asdict(cfg)), overwrite=overwrite, extra={"seed": cfg.seed}
+    )
 
 
 def write(result: dict, output: OutputDir):
@@ -90,15 +119,23 @@ def write(result: dict, output: OutputDir):
     import matplotlib.pyplot as plt
     import pandas as pd
 
-    result = dict(result, config_sha256=config_hash(result["config"]), seed=result["config"]["seed"],
-                  pfjax_version=pfjax.__version__)
+    result = dict(
+        result,
+        config_sha256=config_hash(result["config"]),
+        seed=result["config"]["seed"],
+        pfjax_version=pfjax.__version__,
+    )
     tmp = output.staging
     (tmp / "figures").mkdir()
     (tmp / "bench.json").write_text(dumps(result) + "\n")
     df = pd.DataFrame(result["rows"])
     df.attrs = {}
     table = df.assign(config_sha256=result["config_sha256"], pfjax_version=pfjax.__version__)
-    write_parquet(table, tmp / "bench.parquet", parquet_metadata(result["config"], result["seed"], config_sha256=result["config_sha256"]))
+    write_parquet(
+        table,
+        tmp / "bench.parquet",
+        parquet_metadata(result["config"], result["seed"], config_sha256=result["config_sha256"]),
+    )
     fig = throughput_figure(result["rows"], result["machine"])
     for ext in ("png", "svg"):
         fig.savefig(tmp / "figures" / f"throughput.{ext}", dpi=150)

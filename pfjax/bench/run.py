@@ -58,19 +58,39 @@ class BenchConfig:
 
         if not self.sizes:
             raise errors.InputError("sizes: expected at least one batch size")
-        for name, value in (("sizes", max(self.sizes, default=0)), ("sizes", min(self.sizes, default=1)),
-                            ("ref_size", self.ref_size), ("ref_numpy", self.ref_numpy), ("grad_size", self.grad_size),
-                            ("scipy_runs", self.scipy_runs), ("repeats", self.repeats), ("grad_rounds", self.grad_rounds)):
+        for name, value in (
+            ("sizes", max(self.sizes, default=0)),
+            ("sizes", min(self.sizes, default=1)),
+            ("ref_size", self.ref_size),
+            ("ref_numpy", self.ref_numpy),
+            ("grad_size", self.grad_size),
+            ("scipy_runs", self.scipy_runs),
+            ("repeats", self.repeats),
+            ("grad_rounds", self.grad_rounds),
+        ):
             errors.integer(name, value, low=0 if name in ("repeats", "grad_rounds") else 1, high=100_000_000)
         errors.number("horizon", self.horizon, positive=True, unit=" s")
         errors.seed("seed", self.seed)
         n_steps = resources.check_steps(self.horizon, P.DT)
-        resources.check_memory("sizes", 2 * max(self.sizes) * resources.run_bytes(n_steps),
-                               f"a batch of {max(self.sizes)} runs", "give smaller --sizes")
+        resources.check_memory(
+            "sizes",
+            2 * max(self.sizes) * resources.run_bytes(n_steps),
+            f"a batch of {max(self.sizes)} runs",
+            "give smaller --sizes",
+        )
 
 
-QUICK = BenchConfig(sizes=(256, 1024), ref_size=1024, ref_numpy=256, scipy_runs=1, grad_size=256, horizon=2.0,
-                    repeats=1, grad_rounds=1, quick=True)
+QUICK = BenchConfig(
+    sizes=(256, 1024),
+    ref_size=1024,
+    ref_numpy=256,
+    scipy_runs=1,
+    grad_size=256,
+    horizon=2.0,
+    repeats=1,
+    grad_rounds=1,
+    quick=True,
+)
 
 
 def _timed(f, repeats):
@@ -145,10 +165,18 @@ def _grad(batch, dtype, cfg: BenchConfig):
     calls = [lambda f=f: jax.block_until_ready(f(K, sc)) for f in (fwd, auto, rev)]
     (_, (_, g), (_, g_rev)), (_, first, first_rev), (t_fwd, t_grad, t_rev) = _timed_interleaved(calls, cfg.grad_rounds)
     g, g_rev = np.asarray(g, np.float64), np.asarray(g_rev, np.float64)
-    return dict(forward_s=t_fwd, grad_s=t_grad, grad_compile_s=first - t_grad, grad=g.tolist(), mode=mode,
-                reverse_s=t_rev, reverse_compile_s=first_rev - t_rev, grad_reverse=g_rev.tolist(),
-                modes_max_rel_diff=float(np.max(np.abs(g - g_rev)) / np.max(np.abs(g_rev))),
-                grad_finite=bool(np.all(np.isfinite(g)) and np.all(np.isfinite(g_rev))))
+    return dict(
+        forward_s=t_fwd,
+        grad_s=t_grad,
+        grad_compile_s=first - t_grad,
+        grad=g.tolist(),
+        mode=mode,
+        reverse_s=t_rev,
+        reverse_compile_s=first_rev - t_rev,
+        grad_reverse=g_rev.tolist(),
+        modes_max_rel_diff=float(np.max(np.abs(g - g_rev)) / np.max(np.abs(g_rev))),
+        grad_finite=bool(np.all(np.isfinite(g)) and np.all(np.isfinite(g_rev))),
+    )
 
 
 def machine() -> dict:
@@ -158,11 +186,17 @@ def machine() -> dict:
 
     cpu = compiler.cpu_info()
     return dict(
-        cpu_model=cpu.get("model name", ""), cpu_family=cpu.get("cpu family", ""), cpu_model_number=cpu.get("model", ""),
-        platform=platform.platform(), processor=platform.processor() or platform.machine(),
+        cpu_model=cpu.get("model name", ""),
+        cpu_family=cpu.get("cpu family", ""),
+        cpu_model_number=cpu.get("model", ""),
+        platform=platform.platform(),
+        processor=platform.processor() or platform.machine(),
         cpus=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
-        load_average_1m=os.getloadavg()[0], jax=jax.__version__, devices=[str(d) for d in jax.devices()],
-        xla_flags=os.environ.get("XLA_FLAGS", ""), avx512=compiler.has_avx512(),
+        load_average_1m=os.getloadavg()[0],
+        jax=jax.__version__,
+        devices=[str(d) for d in jax.devices()],
+        xla_flags=os.environ.get("XLA_FLAGS", ""),
+        avx512=compiler.has_avx512(),
         compiler_options=dict(compiler.OPTIONS),  # the simulator programs' (512-bit vectors on AVX-512)
     )
 
@@ -187,9 +221,17 @@ def run(cfg: BenchConfig, progress=None) -> dict:
             for b in cfg.sizes:
                 say(f"pfjax {name} B={b}")
                 res, first, best = _pfjax(P.random_batch(b, cfg.seed), dtype, n_steps, cfg)
-                rows.append(dict(impl="pfjax", dtype=name, batch=b, seconds=best, compile_s=first - best,
-                                 msteps_per_s=b * n_steps / best / 1e6,
-                                 failed_runs=int(np.sum(np.asarray(res.status) != 0))))
+                rows.append(
+                    dict(
+                        impl="pfjax",
+                        dtype=name,
+                        batch=b,
+                        seconds=best,
+                        compile_s=first - best,
+                        msteps_per_s=b * n_steps / best / 1e6,
+                        failed_runs=int(np.sum(np.asarray(res.status) != 0)),
+                    )
+                )
                 if b == top:
                     iae[("pfjax", name)] = np.asarray(res.metrics.iae, np.float64)
     batch = P.random_batch(top, cfg.seed)
@@ -201,27 +243,56 @@ def run(cfg: BenchConfig, progress=None) -> dict:
         if have_numba:
             say(f"numba {name} B={nr}")
             out, first, best = _timed(lambda: R.iae_numba(sub(nr), dtype, n_steps), cfg.repeats)
-            rows.append(dict(impl="numba", dtype=name, batch=nr, seconds=best, compile_s=first - best,
-                             msteps_per_s=nr * n_steps / best / 1e6, failed_runs=None))
+            rows.append(
+                dict(
+                    impl="numba",
+                    dtype=name,
+                    batch=nr,
+                    seconds=best,
+                    compile_s=first - best,
+                    msteps_per_s=nr * n_steps / best / 1e6,
+                    failed_runs=None,
+                )
+            )
             agree[f"numba_{name}"] = float(np.max(np.abs(out - ref[:nr])))
         k = min(cfg.ref_numpy, top)
         say(f"numpy {name} B={k}")
         out, _, best = _timed(lambda: R.iae_numpy(sub(k), dtype, n_steps), 0)
-        rows.append(dict(impl="numpy", dtype=name, batch=k, seconds=best, compile_s=0.0,
-                         msteps_per_s=k * n_steps / best / 1e6, failed_runs=None))
+        rows.append(
+            dict(
+                impl="numpy",
+                dtype=name,
+                batch=k,
+                seconds=best,
+                compile_s=0.0,
+                msteps_per_s=k * n_steps / best / 1e6,
+                failed_runs=None,
+            )
+        )
         agree[f"numpy_{name}"] = float(np.max(np.abs(out - ref[:k])))
     say(f"scipy solve_ivp, {cfg.scipy_runs} run(s)")
     t0 = time.perf_counter()
     sc_iae = np.array([R.iae_scipy(batch, i, n_steps) for i in range(cfg.scipy_runs)])
     t_sc = time.perf_counter() - t0
-    rows.append(dict(impl="scipy", dtype="float64", batch=cfg.scipy_runs, seconds=t_sc, compile_s=0.0,
-                     msteps_per_s=cfg.scipy_runs * n_steps / t_sc / 1e6, failed_runs=None))
-    agree["scipy_float64"] = float(np.max(np.abs(sc_iae - iae[("pfjax", "float64")][:cfg.scipy_runs])))
+    rows.append(
+        dict(
+            impl="scipy",
+            dtype="float64",
+            batch=cfg.scipy_runs,
+            seconds=t_sc,
+            compile_s=0.0,
+            msteps_per_s=cfg.scipy_runs * n_steps / t_sc / 1e6,
+            failed_runs=None,
+        )
+    )
+    agree["scipy_float64"] = float(np.max(np.abs(sc_iae - iae[("pfjax", "float64")][: cfg.scipy_runs])))
     say(f"gradient B={cfg.grad_size}")
     with jax.enable_x64(False):
         g = _grad(P.random_batch(cfg.grad_size, cfg.seed), np.float32, cfg)
-    agreement = {k: dict(max_abs_diff=v, tolerance=TOLERANCE["scipy" if k.startswith("scipy") else k.split("_")[1]])
-                 for k, v in agree.items()}
+    agreement = {
+        k: dict(max_abs_diff=v, tolerance=TOLERANCE["scipy" if k.startswith("scipy") else k.split("_")[1]])
+        for k, v in agree.items()
+    }
     for a in agreement.values():
         a["ok"] = a["max_abs_diff"] <= a["tolerance"]
 
@@ -231,23 +302,48 @@ def run(cfg: BenchConfig, progress=None) -> dict:
 
     head32, head64 = rate("pfjax", "float32", top), rate("pfjax", "float64", top)
     summary = dict(
-        msteps_per_s_f32=head32, msteps_per_s_f64=head64, batch=top,
-        numba_msteps_per_s_f32=rate("numba", "float32"), numba_msteps_per_s_f64=rate("numba", "float64"),
-        numpy_msteps_per_s_f32=rate("numpy", "float32"), numpy_msteps_per_s_f64=rate("numpy", "float64"),
+        msteps_per_s_f32=head32,
+        msteps_per_s_f64=head64,
+        batch=top,
+        numba_msteps_per_s_f32=rate("numba", "float32"),
+        numba_msteps_per_s_f64=rate("numba", "float64"),
+        numpy_msteps_per_s_f32=rate("numpy", "float32"),
+        numpy_msteps_per_s_f64=rate("numpy", "float64"),
         scipy_msteps_per_s_f64=rate("scipy", "float64"),
-        ratio_vs_numba_f32=head32 / rate("numba", "float32"), ratio_vs_numba_f64=head64 / rate("numba", "float64"),
-        ratio_vs_numpy_f32=head32 / rate("numpy", "float32"), ratio_vs_numpy_f64=head64 / rate("numpy", "float64"),
+        ratio_vs_numba_f32=head32 / rate("numba", "float32"),
+        ratio_vs_numba_f64=head64 / rate("numba", "float64"),
+        ratio_vs_numpy_f32=head32 / rate("numpy", "float32"),
+        ratio_vs_numpy_f64=head64 / rate("numpy", "float64"),
         ratio_vs_scipy_f64=head64 / rate("scipy", "float64"),
-        compile_s_f32=next(r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float32" and r["batch"] == top),
-        compile_s_f64=next(r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float64" and r["batch"] == top),
-        grad_over_forward=g["grad_s"] / g["forward_s"], grad_mode=g["mode"],
-        grad_over_forward_reverse=g["reverse_s"] / g["forward_s"], gradient=g,
+        compile_s_f32=next(
+            r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float32" and r["batch"] == top
+        ),
+        compile_s_f64=next(
+            r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float64" and r["batch"] == top
+        ),
+        grad_over_forward=g["grad_s"] / g["forward_s"],
+        grad_mode=g["mode"],
+        grad_over_forward_reverse=g["reverse_s"] / g["forward_s"],
+        gradient=g,
         peak_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
-        agreement=agreement, all_agree=all(a["ok"] for a in agreement.values()),
-        failed_runs=sum(r["failed_runs"] or 0 for r in rows), notes=notes,
+        agreement=agreement,
+        all_agree=all(a["ok"] for a in agreement.values()),
+        failed_runs=sum(r["failed_runs"] or 0 for r in rows),
+        notes=notes,
     )
     m = machine()
     m["load_average_1m_start"] = load0
-    return dict(summary=summary, rows=rows, machine=m, config=asdict(cfg), n_steps=n_steps,
-                problem=dict(path="sine y = sin x", controller="state feedback K = %s" % (P.K,), dt=P.DT,
-                             newton_iters=P.NEWTON_ITERS, slip_deg="U(-10, 10) per axle, constant"))
+    return dict(
+        summary=summary,
+        rows=rows,
+        machine=m,
+        config=asdict(cfg),
+        n_steps=n_steps,
+        problem=dict(
+            path="sine y = sin x",
+            controller=f"state feedback K = {P.K}",
+            dt=P.DT,
+            newton_iters=P.NEWTON_ITERS,
+            slip_deg="U(-10, 10) per axle, constant",
+        ),
+    )

@@ -2,26 +2,31 @@
 
 from __future__ import annotations
 
-from pfjax.cli.common import UsageError, as_flags
-
 import sys
 import time
+
+from pfjax.cli.common import UsageError, as_flags
 
 
 def register(sub) -> None:
     p = sub.add_parser(
-        "bench", help="benchmark the simulator against NumPy, Numba and SciPy references",
+        "bench",
+        help="benchmark the simulator against NumPy, Numba and SciPy references",
         description="Simulate one random batch of the slip model (sine path, 3 Newton steps, RK4 5 ms, 20 s, "
-                    "metrics on) with pfjax in float32 and float64 at several batch sizes and with independent "
-                    "NumPy, Numba (prange) and SciPy solve_ivp references; check they agree on the per-run IAE; "
-                    "report million rollout-steps/s, compile time, ratios, gradient cost and peak memory. "
-                    "Writes bench.json, bench.parquet, report.md and figures/throughput.png|svg.")
+        "metrics on) with pfjax in float32 and float64 at several batch sizes and with independent "
+        "NumPy, Numba (prange) and SciPy solve_ivp references; check they agree on the per-run IAE; "
+        "report million rollout-steps/s, compile time, ratios, gradient cost and peak memory. "
+        "Writes bench.json, bench.parquet, report.md and figures/throughput.png|svg.",
+    )
     p.add_argument("--quick", action="store_true", help="small batches and a 2 s horizon (well under a minute)")
     p.add_argument("--sizes", default=None, help="comma-separated pfjax batch sizes (default 1000,10000,100000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random batch")
     p.add_argument("--out", default="results/bench", help="output directory (default results/bench)")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace a pfjax output of another config or command in --out (never anything else)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a pfjax output of another config or command in --out (never anything else)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
     p.set_defaults(func=_cmd)
 
@@ -43,8 +48,12 @@ def _cmd(args) -> dict:
         cfg = QUICK if args.quick else BenchConfig()
         if args.sizes is not None:
             sizes = _sizes(args.sizes)
-            cfg = replace(cfg, sizes=sizes, ref_size=min(cfg.ref_size, max(sizes, default=1)),
-                          ref_numpy=min(cfg.ref_numpy, max(sizes, default=1)))
+            cfg = replace(
+                cfg,
+                sizes=sizes,
+                ref_size=min(cfg.ref_size, max(sizes, default=1)),
+                ref_numpy=min(cfg.ref_numpy, max(sizes, default=1)),
+            )
         cfg = replace(cfg, seed=args.seed)
 
     from pfjax.bench import report, run

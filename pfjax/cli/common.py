@@ -9,8 +9,7 @@ import re
 
 from pfjax.errors import EXIT_USAGE, InputError
 
-__all__ = ["EXIT_USAGE", "UsageError", "Parser", "Aliased", "finite", "as_flags", "print_human",
-           "join_negative_values"]
+__all__ = ["EXIT_USAGE", "Aliased", "Parser", "UsageError", "as_flags", "finite", "join_negative_values", "print_human"]
 
 
 class UsageError(InputError):
@@ -67,11 +66,11 @@ def as_flags(flags: dict[str, str]):
         base = re.split(r"[.\[]", key, maxsplit=1)[0]
         if base not in flags:
             raise
-        body = text[len(key) + 2:] if text.startswith(key + ": ") else text
+        body = text[len(key) + 2 :] if text.startswith(key + ": ") else text
         for name, other in flags.items():  # other settings the message mentions, by their flags too
             if len(name) > 1:
                 body = re.sub(rf"(?<![\w.-]){re.escape(name)}(?![\w.-])", other, body)
-        sub = key[len(base):]
+        sub = key[len(base) :]
         flag = flags[base] + (sub if sub.startswith("[") else "")
         sub = "" if sub.startswith("[") else sub.lstrip(".")
         raise UsageError(f"{flag}: {sub + ': ' if sub else ''}{body}", flags[base]) from None

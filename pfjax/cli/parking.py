@@ -23,31 +23,52 @@ def _common(p):
     p.add_argument("--scan-period", type=float, default=0.1, help="scanner sampling period, s (default 0.1)")
     p.add_argument("--front", type=float, help="a_f: reach of the rectangle ahead of the axle, m (default: calibrated)")
     p.add_argument("--lag", action="store_true", help="yaw-rate PI loop (kP 0.8, kI 16) on")
-    p.add_argument("--horizon", "--t-max", action=Aliased, dest="horizon", type=float, default=200.0,
-                   help="horizon: the run's timeout, s (default 200)")
+    p.add_argument(
+        "--horizon",
+        "--t-max",
+        action=Aliased,
+        dest="horizon",
+        type=float,
+        default=200.0,
+        help="horizon: the run's timeout, s (default 200)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def register(sub) -> None:
-    p = sub.add_parser("parking", help="simulate one parking run (time-state controller with direction/gain switching)",
-                       description="One run of the switching parking controller (docs/reproductions/parking.md); "
-                                   "prints the outcome, parking time and the log of direction switches.")
+    p = sub.add_parser(
+        "parking",
+        help="simulate one parking run (time-state controller with direction/gain switching)",
+        description="One run of the switching parking controller (docs/reproductions/parking.md); "
+        "prints the outcome, parking time and the log of direction switches.",
+    )
     p.add_argument("--map", default="parallel", help="parallel, garage, or a TOML/JSON map file (default parallel)")
-    p.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"),
-                   help="start pose, m m deg (default: case A for parallel, (-0.9, 0.6, -85) for garage)")
+    p.add_argument(
+        "--x0",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "THETA_DEG"),
+        help="start pose, m m deg (default: case A for parallel, (-0.9, 0.6, -85) for garage)",
+    )
     p.add_argument("--direction", choices=("forward", "backward"), default="forward", help="first travel direction")
     p.add_argument("--alpha-schedule", default="1", help="alpha at the start, then after each switch (default 1)")
-    p.add_argument("--xs", type=float, help="garage rule: switch back to forward when backing past x = XS, m (garage default -0.9)")
+    p.add_argument(
+        "--xs", type=float, help="garage rule: switch back to forward when backing past x = XS, m (garage default -0.9)"
+    )
     _common(p)
     p.set_defaults(func=_cmd_parking)
 
-    s = sub.add_parser("parking-search", help="search (X_s, alpha1, alpha2) for the garage by the 24-bit GA or a grid",
-                       description="Search of the garage switching parameters (docs/reproductions/parking.md §5): the source's 24-bit GA "
-                                   "(n = 20, N = 100) or an exhaustive N x N x N grid on the chromosome lattice.")
+    s = sub.add_parser(
+        "parking-search",
+        help="search (X_s, alpha1, alpha2) for the garage by the 24-bit GA or a grid",
+        description="Search of the garage switching parameters (docs/reproductions/parking.md §5): the source's 24-bit GA "
+        "(n = 20, N = 100) or an exhaustive N x N x N grid on the chromosome lattice.",
+    )
     s.add_argument("--method", choices=("ga", "grid"), required=True)
     s.add_argument("--map", default="garage", help="garage (default) or a TOML/JSON map file")
-    s.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"),
-                   help="start pose, m m deg (default -0.9 0.6 -85)")
+    s.add_argument(
+        "--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"), help="start pose, m m deg (default -0.9 0.6 -85)"
+    )
     s.add_argument("--n", type=int, default=32, help="grid levels per parameter (default 32)")
     s.add_argument("--generations", type=int, default=100, help="GA generations N (default 100)")
     s.add_argument("--population", type=int, default=20, help="GA population n (default 20)")
@@ -59,14 +80,36 @@ def register(sub) -> None:
 
 #: ``pfjax parking``'s flags by the argument of :func:`pfjax.parking.run` they set (``map`` aside: see
 #: :func:`_flags`).
-RUN_FLAGS = {"x0": "--x0", "direction": "--direction", "alpha_schedule": "--alpha-schedule", "xs": "--xs",
-             "k1": "--k1", "k2": "--k2", "speed": "--speed", "scan_period": "--scan-period", "front": "--front",
-             "lag": "--lag", "t_max": "--horizon"}
+RUN_FLAGS = {
+    "x0": "--x0",
+    "direction": "--direction",
+    "alpha_schedule": "--alpha-schedule",
+    "xs": "--xs",
+    "k1": "--k1",
+    "k2": "--k2",
+    "speed": "--speed",
+    "scan_period": "--scan-period",
+    "front": "--front",
+    "lag": "--lag",
+    "t_max": "--horizon",
+}
 #: ``pfjax parking-search``'s flags by the argument of :func:`pfjax.parking.switch_search` they set.
-SEARCH_FLAGS = {"method": "--method", "x0": "--x0", "n": "--n", "generations": "--generations",
-                "population": "--population", "seed": "--seed", "weight": "--weight", "k1": "--k1", "k2": "--k2",
-                "speed": "--speed", "scan_period": "--scan-period", "front": "--front", "lag": "--lag",
-                "t_max": "--horizon"}
+SEARCH_FLAGS = {
+    "method": "--method",
+    "x0": "--x0",
+    "n": "--n",
+    "generations": "--generations",
+    "population": "--population",
+    "seed": "--seed",
+    "weight": "--weight",
+    "k1": "--k1",
+    "k2": "--k2",
+    "speed": "--speed",
+    "scan_period": "--scan-period",
+    "front": "--front",
+    "lag": "--lag",
+    "t_max": "--horizon",
+}
 
 
 @contextlib.contextmanager
@@ -87,14 +130,23 @@ def _flags(flags: dict[str, str]):
                 raise
             text = str(e)
             if e.key == "x0" and text.startswith("x0: "):
-                text = text[len("x0: "):]
+                text = text[len("x0: ") :]
             flag = f"--{e.key}"
             raise UsageError(f"{flag}: {text}", flag) from None
 
 
 def _common_args(args) -> dict:
-    return {"map": args.map, "x0": args.x0, "k1": args.k1, "k2": args.k2, "speed": args.speed,
-            "scan_period": args.scan_period, "front": args.front, "lag": bool(args.lag), "t_max": args.horizon}
+    return {
+        "map": args.map,
+        "x0": args.x0,
+        "k1": args.k1,
+        "k2": args.k2,
+        "speed": args.speed,
+        "scan_period": args.scan_period,
+        "front": args.front,
+        "lag": bool(args.lag),
+        "t_max": args.horizon,
+    }
 
 
 def _cmd_parking(args) -> dict:
@@ -108,5 +160,12 @@ def _cmd_search(args) -> dict:
     from pfjax.parking.api import search
 
     with _flags(SEARCH_FLAGS):
-        return search(args.method, n=args.n, generations=args.generations, population=args.population,
-                      seed=args.seed, weight=args.weight, **_common_args(args))
+        return search(
+            args.method,
+            n=args.n,
+            generations=args.generations,
+            population=args.population,
+            seed=args.seed,
+            weight=args.weight,
+            **_common_args(args),
+        )

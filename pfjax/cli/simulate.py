@@ -46,8 +46,10 @@ def _parse_gains(controller: str, text: str | None) -> dict:
         pairs = [tuple(s.strip() for s in p.split("=", 1)) for p in parts]
     else:
         if len(parts) != len(names):
-            raise UsageError(f"--gains: expected all {len(names)} gains of --controller {controller} in order "
-                             f"({','.join(names)}), got {len(parts)}; give some as name=value pairs instead")
+            raise UsageError(
+                f"--gains: expected all {len(names)} gains of --controller {controller} in order "
+                f"({','.join(names)}), got {len(parts)}; give some as name=value pairs instead"
+            )
         pairs = list(zip(names, parts))
     out = {}
     for k, v in pairs:
@@ -79,34 +81,56 @@ def _controller_and_gains(args):
     return e.controller, gains, {k: flat[k] for k in e.gains}
 
 
-SIMULATE_FLAGS = {"v": "--speed", "L": "--wheelbase", "beta_r_deg": "--beta-r-deg", "beta_f_deg": "--beta-f-deg",
-                  "delta_max_deg": "--delta-max-deg", "pose0": "--x0", "horizon": "--horizon", "dt": "--dt",
-                  "control_every": "--control-every", "convention": "--convention", "gains": "--gains"}
+SIMULATE_FLAGS = {
+    "v": "--speed",
+    "L": "--wheelbase",
+    "beta_r_deg": "--beta-r-deg",
+    "beta_f_deg": "--beta-f-deg",
+    "delta_max_deg": "--delta-max-deg",
+    "pose0": "--x0",
+    "horizon": "--horizon",
+    "dt": "--dt",
+    "control_every": "--control-every",
+    "convention": "--convention",
+    "gains": "--gains",
+}
 
 
 def cmd(args) -> dict:
     import numpy as np
 
-    from pfjax.metrics import METRIC_NAMES
     from pfjax import paths
-    from pfjax.sim.scenario import paper_scenario
+    from pfjax.metrics import METRIC_NAMES
     from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack
+    from pfjax.sim.scenario import paper_scenario
 
     if args.continuous and args.control_every is not None:
-        raise UsageError("--control-every: not with --continuous (a continuous controller is evaluated inside every "
-                         "RK4 stage, not sampled)")
+        raise UsageError(
+            "--control-every: not with --continuous (a continuous controller is evaluated inside every "
+            "RK4 stage, not sampled)"
+        )
     pose0 = None
     if args.x0 is not None:  # THETA in degrees, checked as given; the library takes radians
         x, y, theta_deg = (finite(f"--x0[{i}]", v, unit=" deg" if i == 2 else "") for i, v in enumerate(args.x0))
         pose0 = (x, y, math.radians(theta_deg))
     with as_flags(SIMULATE_FLAGS):
-        cfg = SimConfig(dt=args.dt, horizon=args.horizon, record=False,
-                        control_every=None if args.continuous else (1 if args.control_every is None else args.control_every))
+        cfg = SimConfig(
+            dt=args.dt,
+            horizon=args.horizon,
+            record=False,
+            control_every=None if args.continuous else (1 if args.control_every is None else args.control_every),
+        )
         controller, gains, shown = _controller_and_gains(args)
         sc = paper_scenario(
-            args.path, gains, beta_r_deg=args.beta_r_deg, beta_f_deg=args.beta_f_deg,
-            pose0=pose0, v=args.speed, L=args.wheelbase,
-            delta_max_deg=args.delta_max_deg, convention=args.convention,
+            args.path,
+            gains,
+            beta_r_deg=args.beta_r_deg,
+            beta_f_deg=args.beta_f_deg,
+            pose0=pose0,
+            v=args.speed,
+            L=args.wheelbase,
+            delta_max_deg=args.delta_max_deg,
+            convention=args.convention,
         )
     r = unstack(simulate_batch(stack([sc]), controller=controller, config=cfg), 0)
     status = int(r.status)
@@ -134,34 +158,61 @@ def cmd(args) -> dict:
 
 
 def register(sub) -> None:
-    m = sub.add_parser("simulate", help="simulate one run of a paper scenario and print final state and metrics",
-                       description="One closed-loop run of the slip model on a path (SI units; angles in degrees).")
+    m = sub.add_parser(
+        "simulate",
+        help="simulate one run of a paper scenario and print final state and metrics",
+        description="One closed-loop run of the slip model on a path (SI units; angles in degrees).",
+    )
     from pfjax import paths
 
-    m.add_argument("--path", choices=paths.fixed_paths(), required=True,
-                   help="a registered path: the source's line, parabola, sine; pfjax's circle (radius 2 m)")
-    m.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"),
-                   help="initial pose (m, m, deg); default: the source's")
+    m.add_argument(
+        "--path",
+        choices=paths.fixed_paths(),
+        required=True,
+        help="a registered path: the source's line, parabola, sine; pfjax's circle (radius 2 m)",
+    )
+    m.add_argument(
+        "--x0",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "THETA_DEG"),
+        help="initial pose (m, m, deg); default: the source's",
+    )
     m.add_argument("--beta-r-deg", type=float, default=5.0, help="rear slip angle, deg (default 5)")
     m.add_argument("--beta-f-deg", type=float, default=5.0, help="front slip angle, deg (default 5)")
     from pfjax import controllers as C
 
-    m.add_argument("--controller", choices=C.cli_names(), required=True,
-                   help="mixed: the LMI design with the source's weights; paper-k: the source's published K; "
-                        "integral-mixed: the LMI design with integral action; the others: registered controllers")
-    m.add_argument("--gains", help="comma-separated gains (or name=value pairs): " +
-                   "; ".join(f"{c}: {','.join(_gain_names(c))}" for c in C.cli_names()))
-    m.add_argument("--horizon", "--T", action=Aliased, dest="horizon", type=float, default=20.0,
-                   help="horizon, s (default 20)")
+    m.add_argument(
+        "--controller",
+        choices=C.cli_names(),
+        required=True,
+        help="mixed: the LMI design with the source's weights; paper-k: the source's published K; "
+        "integral-mixed: the LMI design with integral action; the others: registered controllers",
+    )
+    m.add_argument(
+        "--gains",
+        help="comma-separated gains (or name=value pairs): "
+        + "; ".join(f"{c}: {','.join(_gain_names(c))}" for c in C.cli_names()),
+    )
+    m.add_argument(
+        "--horizon", "--T", action=Aliased, dest="horizon", type=float, default=20.0, help="horizon, s (default 20)"
+    )
     m.add_argument("--dt", type=float, default=0.005, help="RK4 step, s (default 0.005)")
     m.add_argument("--control-every", type=int, help="controller sampling period in steps (default 1)")
     m.add_argument("--continuous", action="store_true", help="evaluate the controller inside every RK4 stage")
-    m.add_argument("--speed", "--v", action=Aliased, dest="speed", type=float, default=1.0,
-                   help="speed, m/s (default 1)")
-    m.add_argument("--wheelbase", "--L", action=Aliased, dest="wheelbase", type=float, default=0.2,
-                   help="wheelbase, m (default 0.2)")
+    m.add_argument(
+        "--speed", "--v", action=Aliased, dest="speed", type=float, default=1.0, help="speed, m/s (default 1)"
+    )
+    m.add_argument(
+        "--wheelbase",
+        "--L",
+        action=Aliased,
+        dest="wheelbase",
+        type=float,
+        default=0.2,
+        help="wheelbase, m (default 0.2)",
+    )
     m.add_argument("--delta-max-deg", type=float, default=30.0, help="steering limit, deg")
     m.add_argument("--convention", choices=("source", "lenain"), default="source", help="front-slip sign convention")
     m.add_argument("--json", action="store_true", help="print one JSON object")
     m.set_defaults(func=cmd)
-

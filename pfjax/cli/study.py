@@ -44,11 +44,27 @@ def _load_study_or_usage(args):
 
 def _headline(summary: dict, out) -> dict:
     return {
-        "study": summary["study"], "out": str(out), "n_runs_total": summary["n_runs_total"], "seed": summary["seed"],
-        "config_sha256": summary["config_sha256"], "wall_s": summary["wall_s"],
-        "controllers": {k: {f: c[f] for f in ("success_rate", "success_ci95", "iae_mean", "iae_p95", "steady_abs_d_p95",
-                                               "slip_margin_deg", "slip_margin_fails_at_deg")}
-                        for k, c in summary["controllers"].items()},
+        "study": summary["study"],
+        "out": str(out),
+        "n_runs_total": summary["n_runs_total"],
+        "seed": summary["seed"],
+        "config_sha256": summary["config_sha256"],
+        "wall_s": summary["wall_s"],
+        "controllers": {
+            k: {
+                f: c[f]
+                for f in (
+                    "success_rate",
+                    "success_ci95",
+                    "iae_mean",
+                    "iae_p95",
+                    "steady_abs_d_p95",
+                    "slip_margin_deg",
+                    "slip_margin_fails_at_deg",
+                )
+            }
+            for k, c in summary["controllers"].items()
+        },
     }
 
 
@@ -78,8 +94,10 @@ def _distributed(args) -> tuple[int, int]:
         return 0, 1
     if given and len(given) < 3:
         missing = next(k for k, v in flags.items() if v is None)
-        raise UsageError(f"{missing}: required with {given[0]} (give --coordinator, --num-processes and --process-id "
-                         f"together, or --distributed to detect them)")
+        raise UsageError(
+            f"{missing}: required with {given[0]} (give --coordinator, --num-processes and --process-id "
+            f"together, or --distributed to detect them)"
+        )
     if given:
         host, _, port = args.coordinator.rpartition(":")
         if not host or not port.isdigit():
@@ -106,17 +124,18 @@ def _distributed(args) -> tuple[int, int]:
 
 def _cmd_study(args) -> dict:
     # A distributed run's libraries (Gloo) print to stdout: there it carries only the result (--json)
-    distributed = args.distributed or any(v is not None for v in (args.coordinator, args.num_processes, args.process_id))
+    distributed = args.distributed or any(
+        v is not None for v in (args.coordinator, args.num_processes, args.process_id)
+    )
     with _stdout_to_stderr(distributed):
         return _study(args)
 
 
 def _study(args) -> dict:
+    from pfjax.montecarlo.checks import check_resources
     from pfjax.montecarlo.runner import study_output
     from pfjax.outputs import check_target
     from pfjax.report import figure_worker
-
-    from pfjax.montecarlo.checks import check_resources
 
     spec = _load_study_or_usage(args)
     check_resources(spec, report=not args.no_report)  # every process alike, before any joins
@@ -124,8 +143,9 @@ def _study(args) -> dict:
     index, count = _distributed(args)
     lead = index == 0  # the process that writes; the others only lend their devices
     if lead and count == 1:  # refused before anything starts (several processes: process 0 tells the others)
-        check_target(output.target, command=output.command, config_sha256=output.config_sha256,
-                     overwrite=args.overwrite)
+        check_target(
+            output.target, command=output.command, config_sha256=output.config_sha256, overwrite=args.overwrite
+        )
     report = not args.no_report and lead
     # the figure worker imports matplotlib while this process imports JAX (both about 2 s)
     worker = figure_worker.FigureWorker() if report and not args.no_overlap and figure_worker.enabled() else None
@@ -138,8 +158,17 @@ def _study(args) -> dict:
         from pfjax.montecarlo.processes import follow
 
         return {"process_index": index, "process_count": count, "written_by": "process 0", "chunks": follow(spec)}
-    summary = run(spec, output, progress=None if not args.quiet else False, report=report, fresh=args.fresh,
-                  warn=warn, overlap=not args.no_overlap, worker=worker, distributed=count > 1)
+    summary = run(
+        spec,
+        output,
+        progress=None if not args.quiet else False,
+        report=report,
+        fresh=args.fresh,
+        warn=warn,
+        overlap=not args.no_overlap,
+        worker=worker,
+        distributed=count > 1,
+    )
     head = _headline(summary, output.target)
     head.update(warnings=summary.get("warnings", []), chunks=summary.get("chunks"))
     if count > 1:
@@ -158,44 +187,77 @@ def _cmd_report(args) -> dict:
     if marker is None or marker.get("command") != "study":
         raise UsageError(f"--out: no finished study in {out} (run `pfjax study {_source(args)}` first)")
     if marker.get("config_sha256") != study_hash(spec):
-        raise UsageError(f"config: {_source(args)} (with --set) does not match the study in {out} (config hash differs)")
+        raise UsageError(
+            f"config: {_source(args)} (with --set) does not match the study in {out} (config hash differs)"
+        )
     return {"report": str(rewrite_report(out, spec, overwrite=args.overwrite) / "report.html")}
 
 
 def register(sub) -> None:
-    for name, helptext in (("study", "run a Monte Carlo robustness study from a TOML config (runs, margins, summary, report)"),
-                           ("report", "rebuild the HTML report of a finished study without re-simulating")):
+    for name, helptext in (
+        ("study", "run a Monte Carlo robustness study from a TOML config (runs, margins, summary, report)"),
+        ("report", "rebuild the HTML report of a finished study without re-simulating"),
+    ):
         st = sub.add_parser(name, help=helptext, description=helptext)
-        st.add_argument("config", nargs="?", help="study TOML (e.g. studies/robustness_default.toml); "
-                                                  "or give --example NAME instead")
-        st.add_argument("--example", metavar="NAME",
-                        help="a study packaged with pfjax instead of CONFIG (pfjax examples lists them: "
-                             "default, heldout, ...)")
-        st.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a config value; dotted keys, list items as controllers[0].gains.k (repeatable)")
+        st.add_argument(
+            "config",
+            nargs="?",
+            help="study TOML (e.g. studies/robustness_default.toml); or give --example NAME instead",
+        )
+        st.add_argument(
+            "--example",
+            metavar="NAME",
+            help="a study packaged with pfjax instead of CONFIG (pfjax examples lists them: default, heldout, ...)",
+        )
+        st.add_argument(
+            "--set",
+            action="append",
+            default=[],
+            metavar="KEY=VALUE",
+            help="override a config value; dotted keys, list items as controllers[0].gains.k (repeatable)",
+        )
         st.add_argument("--out", help="output directory (default results/<name>)")
-        st.add_argument("--overwrite", action="store_true",
-                        help="replace a pfjax output of another config or command in --out (pfjax never replaces "
-                             "anything it did not write)")
+        st.add_argument(
+            "--overwrite",
+            action="store_true",
+            help="replace a pfjax output of another config or command in --out (pfjax never replaces "
+            "anything it did not write)",
+        )
         if name == "study":
             st.add_argument("--no-report", action="store_true", help="skip report.html")
             st.add_argument("--quiet", action="store_true", help="no progress bar")
-            st.add_argument("--no-overlap", action="store_true",
-                            help="run the worst-case search and the float64 check after the runs instead of "
-                                 "alongside them in a background thread (same results; slower)")
-            st.add_argument("--fresh", action="store_true",
-                            help="discard the finished chunks of an interrupted run into --out and start over "
-                                 "(default: resume them; refused if the config changed)")
+            st.add_argument(
+                "--no-overlap",
+                action="store_true",
+                help="run the worst-case search and the float64 check after the runs instead of "
+                "alongside them in a background thread (same results; slower)",
+            )
+            st.add_argument(
+                "--fresh",
+                action="store_true",
+                help="discard the finished chunks of an interrupted run into --out and start over "
+                "(default: resume them; refused if the config changed)",
+            )
             dist = st.add_argument_group(
-                "several processes or hosts", "every process runs the same command with its own --process-id; "
+                "several processes or hosts",
+                "every process runs the same command with its own --process-id; "
                 "the runs are sharded over the devices of all of them and process 0 writes the results "
-                "(and resumes an interrupted run from its --out; the others follow it)")
+                "(and resumes an interrupted run from its --out; the others follow it)",
+            )
             dist.add_argument("--coordinator", metavar="HOST:PORT", help="address of process 0 (jax.distributed)")
             dist.add_argument("--num-processes", type=int, metavar="N", help="number of processes")
             dist.add_argument("--process-id", type=int, metavar="I", help="this process, 0..N-1 (0 writes)")
-            dist.add_argument("--coordinator-timeout", type=float, default=60.0, metavar="S",
-                              help="seconds to wait for the coordinator and the other processes (default 60)")
-            dist.add_argument("--distributed", action="store_true",
-                              help="join a distributed run whose coordinator, size and rank JAX detects (SLURM, Open MPI)")
+            dist.add_argument(
+                "--coordinator-timeout",
+                type=float,
+                default=60.0,
+                metavar="S",
+                help="seconds to wait for the coordinator and the other processes (default 60)",
+            )
+            dist.add_argument(
+                "--distributed",
+                action="store_true",
+                help="join a distributed run whose coordinator, size and rank JAX detects (SLURM, Open MPI)",
+            )
         st.add_argument("--json", action="store_true", help="print one JSON object")
         st.set_defaults(func=_cmd_study if name == "study" else _cmd_report)

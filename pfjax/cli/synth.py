@@ -12,9 +12,16 @@ import math
 
 from pfjax.cli.common import Aliased, UsageError, as_flags, finite
 
-
-SYNTH_FLAGS = {"method": "--method", "v": "--speed", "L": "--wheelbase", "alpha": "--alpha", "beta": "--beta",
-               "max_real": "--max-real", "disk_center": "--disk", "disk_radius": "--disk"}
+SYNTH_FLAGS = {
+    "method": "--method",
+    "v": "--speed",
+    "L": "--wheelbase",
+    "alpha": "--alpha",
+    "beta": "--beta",
+    "max_real": "--max-real",
+    "disk_center": "--disk",
+    "disk_radius": "--disk",
+}
 
 
 def cmd(args) -> dict:
@@ -32,8 +39,9 @@ def cmd(args) -> dict:
                 sector_angle=None if args.sector_deg is None else math.radians(args.sector_deg),
             )
         try:
-            design = synthesize(args.method, v=args.speed, L=args.wheelbase, alpha=args.alpha, beta=args.beta,
-                                region=region)
+            design = synthesize(
+                args.method, v=args.speed, L=args.wheelbase, alpha=args.alpha, beta=args.beta, region=region
+            )
         except SynthesisError as e:
             flags = "--max-real/--disk/--sector-deg" if region is not None else f"--method {args.method}"
             raise UsageError(f"{flags}: no design exists ({e})") from None
@@ -43,18 +51,32 @@ def cmd(args) -> dict:
 
 
 def register(sub) -> None:
-    s = sub.add_parser("synth", help="design a state feedback by LMIs (docs/reproductions/path-following.md §4) and print K, bounds, true norms",
-                       description="State-feedback H-inf, H2 or mixed H2/H-inf design for the slip model (msfsyn convention).")
+    s = sub.add_parser(
+        "synth",
+        help="design a state feedback by LMIs (docs/reproductions/path-following.md §4) and print K, bounds, true norms",
+        description="State-feedback H-inf, H2 or mixed H2/H-inf design for the slip model (msfsyn convention).",
+    )
     s.add_argument("--method", choices=("mixed", "hinf", "h2"), default="mixed")
-    s.add_argument("--speed", "--v", action=Aliased, dest="speed", type=float, default=1.0,
-                   help="speed, m/s (default 1)")
-    s.add_argument("--wheelbase", "--L", action=Aliased, dest="wheelbase", type=float, default=0.2,
-                   help="wheelbase, m (default 0.2)")
+    s.add_argument(
+        "--speed", "--v", action=Aliased, dest="speed", type=float, default=1.0, help="speed, m/s (default 1)"
+    )
+    s.add_argument(
+        "--wheelbase",
+        "--L",
+        action=Aliased,
+        dest="wheelbase",
+        type=float,
+        default=0.2,
+        help="wheelbase, m (default 0.2)",
+    )
     s.add_argument("--alpha", type=float, default=10.0, help="weight on gamma_inf^2 (mixed; default 10)")
     s.add_argument("--beta", type=float, default=1.0, help="weight on gamma_2^2 (mixed; default 1)")
     s.add_argument("--max-real", type=float, help="pole region: Re(s) < MAX_REAL")
-    s.add_argument("--disk", type=float, nargs=2, metavar=("CENTER", "RADIUS"), help="pole region: |s - CENTER| < RADIUS")
-    s.add_argument("--sector-deg", type=float, help="pole region: conic sector of this half-angle about the negative real axis")
+    s.add_argument(
+        "--disk", type=float, nargs=2, metavar=("CENTER", "RADIUS"), help="pole region: |s - CENTER| < RADIUS"
+    )
+    s.add_argument(
+        "--sector-deg", type=float, help="pole region: conic sector of this half-angle about the negative real axis"
+    )
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=cmd)
-

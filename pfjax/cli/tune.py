@@ -12,10 +12,9 @@ generation / step) and ``history_rollouts``; a progress bar on stderr when it is
 
 from __future__ import annotations
 
-from pfjax.cli.common import UsageError, as_flags
-
 import sys
 
+from pfjax.cli.common import UsageError, as_flags
 
 
 def _controllers() -> dict:
@@ -25,16 +24,21 @@ def _controllers() -> dict:
     return {e.cli_name: n for n, e in C.REGISTRY.items() if e.box is not None}
 
 
-
 def register(sub) -> None:
     p = sub.add_parser(
-        "tune", help="tune controller gains (GA or gradient through the simulator)",
+        "tune",
+        help="tune controller gains (GA or gradient through the simulator)",
         description="Tune a controller's gains on a scenario set by MATLAB-style GA or projected adam on "
-                    "jax.grad of the simulated cost; prints the gains, cost, rollouts and wall time.")
+        "jax.grad of the simulated cost; prints the gains, cost, rollouts and wall time.",
+    )
     p.add_argument("--method", required=True, help="ga | gradient")
     p.add_argument("--controller", required=True, help="a controller with a tuning box: " + " | ".join(_controllers()))
-    p.add_argument("--scenario", default="paper-line", help="paper-line | paper-parabola | paper-sine | paper-all | "
-                   "a registered path's name (one run from its start pose) | a study TOML (CONFIG)")
+    p.add_argument(
+        "--scenario",
+        default="paper-line",
+        help="paper-line | paper-parabola | paper-sine | paper-all | "
+        "a registered path's name (one run from its start pose) | a study TOML (CONFIG)",
+    )
     p.add_argument("--cost", default="iae", help="iae | ise | itae (per run, plus --effort * int delta^2 dt)")
     p.add_argument("--aggregate", default="mean", help="mean | quantile | cvar over the scenario batch")
     p.add_argument("--level", type=float, default=0.9, help="quantile / CVaR level in (0, 1)")
@@ -54,10 +58,23 @@ def register(sub) -> None:
 
 
 #: ``pfjax tune``'s flags by the library argument they set.
-FLAGS = {"method": "--method", "controller": "--controller", "scenario": "--scenario", "metric": "--cost",
-         "aggregate": "--aggregate", "level": "--level", "effort": "--effort", "population_size": "--population",
-         "generations": "--generations", "steps": "--steps", "n_starts": "--starts", "learning_rate": "--lr",
-         "n_runs": "--n-runs", "dt": "--dt", "horizon": "--horizon"}
+FLAGS = {
+    "method": "--method",
+    "controller": "--controller",
+    "scenario": "--scenario",
+    "metric": "--cost",
+    "aggregate": "--aggregate",
+    "level": "--level",
+    "effort": "--effort",
+    "population_size": "--population",
+    "generations": "--generations",
+    "steps": "--steps",
+    "n_starts": "--starts",
+    "learning_rate": "--lr",
+    "n_runs": "--n-runs",
+    "dt": "--dt",
+    "horizon": "--horizon",
+}
 
 
 def _cmd(args) -> dict:
@@ -85,14 +102,37 @@ def _cmd(args) -> dict:
         progress = (not args.json) and sys.stderr.isatty()
         theta0 = problem.tunable.flatten() if args.from_default else None
         options = GAOptions(population_size=args.population, generations=args.generations)
-        r = tune(problem, args.method, key=key, ga_options=options, steps=args.steps, n_starts=args.starts,
-                 learning_rate=args.lr, theta0=theta0, progress=progress)
+        r = tune(
+            problem,
+            args.method,
+            key=key,
+            ga_options=options,
+            steps=args.steps,
+            n_starts=args.starts,
+            learning_rate=args.lr,
+            theta0=theta0,
+            progress=progress,
+        )
     return {
-        "method": args.method, "controller": args.controller, "scenario": args.scenario,
-        "cost_spec": cost._asdict(), "gains": problem.tunable.named(r.theta), "cost": r.cost,
-        "n_rollouts_simulated": r.n_rollouts, "rollouts_per_evaluation": problem.n_per_eval, "wall_s": r.wall_s,
-        "history": r.history.tolist(), "history_rollouts": r.history_rollouts.tolist(),
-        "bounds": {"lower": problem.lower.tolist(), "upper": problem.upper.tolist(), "fields": list(problem.tunable.fields)},
-        "seed": args.seed, "dt": problem.config.dt, "horizon": problem.config.horizon,
-        "n_nonfinite_grad": r.n_nonfinite_grad, "pfjax_version": __version__,
+        "method": args.method,
+        "controller": args.controller,
+        "scenario": args.scenario,
+        "cost_spec": cost._asdict(),
+        "gains": problem.tunable.named(r.theta),
+        "cost": r.cost,
+        "n_rollouts_simulated": r.n_rollouts,
+        "rollouts_per_evaluation": problem.n_per_eval,
+        "wall_s": r.wall_s,
+        "history": r.history.tolist(),
+        "history_rollouts": r.history_rollouts.tolist(),
+        "bounds": {
+            "lower": problem.lower.tolist(),
+            "upper": problem.upper.tolist(),
+            "fields": list(problem.tunable.fields),
+        },
+        "seed": args.seed,
+        "dt": problem.config.dt,
+        "horizon": problem.config.horizon,
+        "n_nonfinite_grad": r.n_nonfinite_grad,
+        "pfjax_version": __version__,
     }

@@ -6,8 +6,9 @@ them and returns the controller's parameter pytree.
 """
 
 from pfjax.controllers.base import Controller, Observation, step
-from pfjax.controllers.registry import (REGISTRY, ControllerEntry, checked_factory, entry, flat_gains, params_from_flat,
-                                        register)
+from pfjax.controllers.designs import DESIGNS, DesignEntry, cli_names, controller_types, resolve, style
+from pfjax.controllers.integral import IntegralParams, integral, integral_params
+
 # Importing a controller's module registers it (pfjax.controllers.registry): one line per kind.
 from pfjax.controllers.linear import (
     PAPER_K,
@@ -24,8 +25,15 @@ from pfjax.controllers.linear import (
     state_feedback_params,
     table3_assignments,
 )
-from pfjax.controllers.integral import IntegralParams, integral, integral_params
-from pfjax.controllers.designs import DESIGNS, DesignEntry, cli_names, controller_types, resolve, style
+from pfjax.controllers.registry import (
+    REGISTRY,
+    ControllerEntry,
+    checked_factory,
+    entry,
+    flat_gains,
+    params_from_flat,
+    register,
+)
 from pfjax.controllers.trackers import (
     PurePursuitParams,
     RearWheelParams,
@@ -39,11 +47,45 @@ from pfjax.controllers.trackers import (
 )
 
 __all__ = [
-    "Controller", "Observation", "step", "PAPER_K", "TABLE3_GAINS", "PAPER_PI", "PIParams",
-    "StateFeedbackParams", "pi", "pi_params", "state_feedback", "state_feedback_params",
-    "table3_assignments", "PurePursuitParams", "RearWheelParams", "StanleyParams", "pure_pursuit",
-    "pure_pursuit_params", "rear_wheel", "rear_wheel_params", "stanley", "stanley_params", "REGISTRY",
-    "ControllerEntry", "register", "entry", "checked_factory", "flat_gains", "params_from_flat", "IntegralParams", "integral", "integral_params",
-    "LinearParams", "linear", "linear_params", "DESIGNS", "DesignEntry", "cli_names", "controller_types", "resolve",
+    "DESIGNS",
+    "PAPER_K",
+    "PAPER_PI",
+    "REGISTRY",
+    "TABLE3_GAINS",
+    "Controller",
+    "ControllerEntry",
+    "DesignEntry",
+    "IntegralParams",
+    "LinearParams",
+    "Observation",
+    "PIParams",
+    "PurePursuitParams",
+    "RearWheelParams",
+    "StanleyParams",
+    "StateFeedbackParams",
+    "checked_factory",
+    "cli_names",
+    "controller_types",
+    "entry",
+    "flat_gains",
+    "integral",
+    "integral_params",
+    "linear",
+    "linear_params",
+    "params_from_flat",
+    "pi",
+    "pi_params",
+    "pure_pursuit",
+    "pure_pursuit_params",
+    "rear_wheel",
+    "rear_wheel_params",
+    "register",
+    "resolve",
+    "stanley",
+    "stanley_params",
+    "state_feedback",
+    "state_feedback_params",
+    "step",
     "style",
+    "table3_assignments",
 ]

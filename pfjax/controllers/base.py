@@ -21,7 +21,8 @@ The simulator uses it two ways, with no code in the controllers for either:
 
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -66,8 +67,9 @@ class Controller(NamedTuple):
         if self.params is not None and not isinstance(params, self.params):
             from pfjax.errors import InputError
 
-            raise InputError(f"gains: controller {self.name!r} takes {self.params.__name__}, got "
-                             f"{type(params).__name__}", "gains")
+            raise InputError(
+                f"gains: controller {self.name!r} takes {self.params.__name__}, got {type(params).__name__}", "gains"
+            )
 
 
 def no_state(params) -> Array:

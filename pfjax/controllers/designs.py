@@ -9,7 +9,8 @@ action), ``paper_k`` the state feedback with the source's published gain (no syn
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 
 class DesignEntry(NamedTuple):
@@ -44,12 +45,23 @@ def _integral(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dic
 
 #: name -> design.
 DESIGNS: dict[str, DesignEntry] = {
-    "lmi": DesignEntry("lmi", "state_feedback", "mixed", _mixed,
-                       {"color": "#1f77b4", "lw": 1.8, "label": "mixed H2/H∞ (pfjax LMI)"}),
-    "paper_k": DesignEntry("paper_k", "state_feedback", "paper-k", _paper_k,
-                           {"color": "#17becf", "lw": 1.2, "ls": "--", "label": "mixed H2/H∞ (source K)"}),
-    "integral_lmi": DesignEntry("integral_lmi", "integral", "integral-mixed", _integral,
-                                {"color": "#ff7f0e", "lw": 1.6, "label": "mixed H2/H∞ with integral action (LMI)"}),
+    "lmi": DesignEntry(
+        "lmi", "state_feedback", "mixed", _mixed, {"color": "#1f77b4", "lw": 1.8, "label": "mixed H2/H∞ (pfjax LMI)"}
+    ),
+    "paper_k": DesignEntry(
+        "paper_k",
+        "state_feedback",
+        "paper-k",
+        _paper_k,
+        {"color": "#17becf", "lw": 1.2, "ls": "--", "label": "mixed H2/H∞ (source K)"},
+    ),
+    "integral_lmi": DesignEntry(
+        "integral_lmi",
+        "integral",
+        "integral-mixed",
+        _integral,
+        {"color": "#ff7f0e", "lw": 1.6, "label": "mixed H2/H∞ with integral action (LMI)"},
+    ),
 }
 
 
@@ -83,8 +95,7 @@ def resolve(name: str, key: str = "controller"):
         return REGISTRY[d.controller], d
     if name in REGISTRY or any(e.cli_name == name for e in REGISTRY.values()):
         return entry(name, key), None
-    raise errors.InputError(f"{key}: unknown controller {name!r}; expected one of "
-                            f"{', '.join(controller_types())}", key)
+    raise errors.InputError(f"{key}: unknown controller {name!r}; expected one of {', '.join(controller_types())}", key)
 
 
 def style(name: str) -> dict:

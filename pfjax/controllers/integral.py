@@ -56,6 +56,11 @@ def _rate(p: IntegralParams, c: Array, obs: Observation, delta_cmd: Array, delta
 
 integral = Controller("integral", _init, _output, _rate, IntegralParams)
 """State feedback with integral of ``d`` (see the module docstring)."""
-register(integral, integral_params, box=(("K",), (-20.0, -10.0, -20.0), (0.0, 0.0, 0.0)),
-         style={"color": "#e377c2", "lw": 1.4, "label": "state feedback with integral action"},
-         labels={"K": ("k_d", "k_theta", "k_i")}, gains=("k_d", "k_theta", "k_i", "k_aw"))
+register(
+    integral,
+    integral_params,
+    box=(("K",), (-20.0, -10.0, -20.0), (0.0, 0.0, 0.0)),
+    style={"color": "#e377c2", "lw": 1.4, "label": "state feedback with integral action"},
+    labels={"K": ("k_d", "k_theta", "k_i")},
+    gains=("k_d", "k_theta", "k_i", "k_aw"),
+)

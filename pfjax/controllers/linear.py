@@ -41,9 +41,14 @@ def _sf_output(p: StateFeedbackParams, c, obs: Observation) -> Array:
 state_feedback = Controller("state_feedback", no_state, _sf_output, no_rate, StateFeedbackParams)
 """Static state feedback ``delta = K x``, ``x = [d, theta_e]`` (source eq. 8; the design is in
 :mod:`pfjax.synthesis`)."""
-register(state_feedback, state_feedback_params, box=(("K",), (-20.0, -10.0), (0.0, 0.0)),
-         style={"color": "#17becf", "lw": 1.2, "ls": "--", "label": "state feedback"},
-         labels={"K": ("k_d", "k_theta")}, gains=("k_d", "k_theta"))
+register(
+    state_feedback,
+    state_feedback_params,
+    box=(("K",), (-20.0, -10.0), (0.0, 0.0)),
+    style={"color": "#17becf", "lw": 1.2, "ls": "--", "label": "state feedback"},
+    labels={"K": ("k_d", "k_theta")},
+    gains=("k_d", "k_theta"),
+)
 
 
 class PIParams(NamedTuple):
@@ -101,9 +106,13 @@ def _pi_init(p) -> Array:
 
 pi = Controller("pi", _pi_init, _pi_output, _pi_rate, PIParams)
 """MISO PI on ``d`` and ``theta_e`` summed into the steering (docs/reproductions/path-following.md §5, eq. 14), optional anti-windup."""
-register(pi, pi_params, defaults=PAPER_PI,
-         box=(("kp_d", "ki_d", "kp_theta", "ki_theta"), (0.0, 0.0, 0.0, 0.0), (60.0, 5.0, 30.0, 1.0)),
-         style={"color": "#d62728", "lw": 1.6, "label": "MISO PI (Table 3)"})
+register(
+    pi,
+    pi_params,
+    defaults=PAPER_PI,
+    box=(("kp_d", "ki_d", "kp_theta", "ki_theta"), (0.0, 0.0, 0.0, 0.0), (60.0, 5.0, 30.0, 1.0)),
+    style={"color": "#d62728", "lw": 1.6, "label": "MISO PI (Table 3)"},
+)
 
 
 class LinearParams(NamedTuple):
@@ -129,8 +138,13 @@ def linear_params(gains: StateFeedbackParams | PIParams) -> LinearParams:
         z = jnp.zeros_like(gains.feedforward)
         return LinearParams(gains.K, gains.feedforward, z, z, z)
     if isinstance(gains, PIParams):
-        return LinearParams(jnp.stack([-gains.kp_d, -gains.kp_theta]), jnp.zeros_like(gains.kp_d), gains.ki_d,
-                            gains.ki_theta, gains.k_aw)
+        return LinearParams(
+            jnp.stack([-gains.kp_d, -gains.kp_theta]),
+            jnp.zeros_like(gains.kp_d),
+            gains.ki_d,
+            gains.ki_theta,
+            gains.k_aw,
+        )
     raise TypeError(f"gains: expected StateFeedbackParams or PIParams, got {type(gains).__name__}")
 
 

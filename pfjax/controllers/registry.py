@@ -9,7 +9,8 @@ An entry unpacks into its first two fields as ``controller, make_params = entry[
 from __future__ import annotations
 
 import inspect
-from typing import Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 from pfjax import errors
 from pfjax.controllers.base import Controller
@@ -54,8 +55,9 @@ def checked_factory(name: str, factory, defaults: dict | None = None):
     def make(**gains):
         for k, v in gains.items():
             if k not in names:
-                raise errors.InputError(f"gains.{k}: unknown gain for controller {name!r}; expected one of "
-                                        f"{', '.join(names)}", "gains")
+                raise errors.InputError(
+                    f"gains.{k}: unknown gain for controller {name!r}; expected one of {', '.join(names)}", "gains"
+                )
             errors.numbers(f"gains.{k}", v)
         return factory(**{**(defaults or {}), **gains})
 
@@ -64,9 +66,18 @@ def checked_factory(name: str, factory, defaults: dict | None = None):
     return make
 
 
-def register(controller: Controller, factory, *, name: str | None = None, defaults: dict | None = None,
-             cli_name: str | None = None, box: tuple | None = None, style: dict | None = None,
-             labels: dict | None = None, gains: tuple | None = None) -> ControllerEntry:
+def register(
+    controller: Controller,
+    factory,
+    *,
+    name: str | None = None,
+    defaults: dict | None = None,
+    cli_name: str | None = None,
+    box: tuple | None = None,
+    style: dict | None = None,
+    labels: dict | None = None,
+    gains: tuple | None = None,
+) -> ControllerEntry:
     """Add a controller kind (replacing one of the same name) and return its entry.
 
     Args:
@@ -84,8 +95,16 @@ def register(controller: Controller, factory, *, name: str | None = None, defaul
     make = checked_factory(name, factory, defaults)
     labels = dict(labels or {})
     flat = tuple(n for f in make.gain_names for n in labels.get(f, (f,)))
-    entry = ControllerEntry(controller, make, name, tuple(gains or flat), cli_name or name.replace("_", "-"), box,
-                            {"color": "#7f7f7f", "lw": 1.0, "label": name, **(style or {})}, labels)
+    entry = ControllerEntry(
+        controller,
+        make,
+        name,
+        tuple(gains or flat),
+        cli_name or name.replace("_", "-"),
+        box,
+        {"color": "#7f7f7f", "lw": 1.0, "label": name, **(style or {})},
+        labels,
+    )
     REGISTRY[name] = entry
     return entry
 
@@ -115,8 +134,9 @@ def params_from_flat(e: ControllerEntry, key: str = "gains", **flat) -> Any:
     default = flat_gains(e)
     for k, v in flat.items():
         if k not in default:
-            raise errors.InputError(f"{key}.{k}: unknown gain for controller {e.name!r}; expected one of "
-                                    f"{', '.join(default)}", key)
+            raise errors.InputError(
+                f"{key}.{k}: unknown gain for controller {e.name!r}; expected one of {', '.join(default)}", key
+            )
         errors.numbers(f"{key}.{k}", v)
     merged = {**default, **flat}
     fields = {}

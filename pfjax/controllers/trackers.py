@@ -14,8 +14,8 @@ from jax import Array
 
 from pfjax.controllers.base import Controller, Observation, no_rate, no_state
 from pfjax.controllers.registry import register
-from pfjax.paths.geometry import closest_parameter, measure
 from pfjax.numerics import elementary as E
+from pfjax.paths.geometry import closest_parameter, measure
 
 
 class StanleyParams(NamedTuple):
@@ -49,8 +49,12 @@ def _stanley_output(p: StanleyParams, c, obs: Observation) -> Array:
 
 
 stanley = Controller("stanley", no_state, _stanley_output, no_rate, StanleyParams)
-register(stanley, stanley_params, box=(("k", "k_soft"), (0.1, 0.01), (20.0, 2.0)),
-         style={"color": "#2ca02c", "lw": 1.0, "label": "Stanley"})
+register(
+    stanley,
+    stanley_params,
+    box=(("k", "k_soft"), (0.1, 0.01), (20.0, 2.0)),
+    style={"color": "#2ca02c", "lw": 1.0, "label": "Stanley"},
+)
 
 
 class PurePursuitParams(NamedTuple):
@@ -92,15 +96,19 @@ def _pure_pursuit_output(p: PurePursuitParams, c, obs: Observation) -> Array:
 
 
 pure_pursuit = Controller("pure_pursuit", no_state, _pure_pursuit_output, no_rate, PurePursuitParams)
-register(pure_pursuit, pure_pursuit_params, box=(("ld_gain", "ld_min"), (0.05, 0.05), (3.0, 2.0)),
-         style={"color": "#9467bd", "lw": 1.0, "label": "pure pursuit"})
+register(
+    pure_pursuit,
+    pure_pursuit_params,
+    box=(("ld_gain", "ld_min"), (0.05, 0.05), (3.0, 2.0)),
+    style={"color": "#9467bd", "lw": 1.0, "label": "pure pursuit"},
+)
 
 
 class RearWheelParams(NamedTuple):
     """Rear-wheel feedback (Paden et al. 2016)::
 
-        omega = v kappa cos(theta_e) / (1 - kappa d) - k_theta |v| theta_e - k_d v sinc(theta_e) d
-        delta = atan(L omega / v)
+    omega = v kappa cos(theta_e) / (1 - kappa d) - k_theta |v| theta_e - k_d v sinc(theta_e) d
+    delta = atan(L omega / v)
     """
 
     k_theta: Array  # 1/m
@@ -116,13 +124,15 @@ def _rear_wheel_output(p: RearWheelParams, c, obs: Observation) -> Array:
     nonzero = jnp.where(te == 0.0, 1.0, te)
     sinc = jnp.where(te == 0.0, 1.0, E.sin(te) / nonzero)  # sin(te)/te, 1 at 0
     omega = (
-        v * obs.kappa * E.cos(te) / (1.0 - obs.kappa * obs.d)
-        - p.k_theta * jnp.abs(v) * te
-        - p.k_d * v * sinc * obs.d
+        v * obs.kappa * E.cos(te) / (1.0 - obs.kappa * obs.d) - p.k_theta * jnp.abs(v) * te - p.k_d * v * sinc * obs.d
     )
     return E.atan(obs.L * omega / v)
 
 
 rear_wheel = Controller("rear_wheel", no_state, _rear_wheel_output, no_rate, RearWheelParams)
-register(rear_wheel, rear_wheel_params, box=(("k_theta", "k_d"), (0.1, 0.1), (20.0, 40.0)),
-         style={"color": "#8c564b", "lw": 1.0, "label": "rear-wheel feedback"})
+register(
+    rear_wheel,
+    rear_wheel_params,
+    box=(("k_theta", "k_d"), (0.1, 0.1), (20.0, 40.0)),
+    style={"color": "#8c564b", "lw": 1.0, "label": "rear-wheel feedback"},
+)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from pfjax.errors import InputError
 
-__all__ = ["FILES", "names", "path", "description", "describe"]
+__all__ = ["FILES", "describe", "description", "names", "path"]
 
 #: Example name -> its file in this package (the same name under ``studies/`` in the repository).
 FILES = {

@@ -9,6 +9,15 @@ from pfjax.falsification.search import OBJECTIVES, FalsifierResult, falsify, ran
 from pfjax.falsification.space import IC_KEYS, RawParams, SearchSpace, frequencies, search_space, slip_from_raw
 
 __all__ = [
-    "OBJECTIVES", "FalsifierResult", "falsify", "random_search", "worst_trajectory", "IC_KEYS", "RawParams",
-    "SearchSpace", "frequencies", "search_space", "slip_from_raw",
+    "IC_KEYS",
+    "OBJECTIVES",
+    "FalsifierResult",
+    "RawParams",
+    "SearchSpace",
+    "falsify",
+    "frequencies",
+    "random_search",
+    "search_space",
+    "slip_from_raw",
+    "worst_trajectory",
 ]

@@ -49,10 +49,6 @@ import optax
 from jax import Array
 
 from pfjax.controllers.base import Controller
-from pfjax.models.slip import Pose, SlipParams
-from pfjax.numerics import autodiff
-from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, unstack
-from pfjax.sim.status import Status
 from pfjax.falsification.space import (
     RawParams,
     SearchSpace,
@@ -63,6 +59,10 @@ from pfjax.falsification.space import (
     search_space,
     slip_from_raw,
 )
+from pfjax.models.slip import Pose, SlipParams
+from pfjax.numerics import autodiff
+from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, unstack
+from pfjax.sim.status import Status
 
 OBJECTIVES = ("iae", "ise", "itae", "max_abs_d", "late_max_abs_d")
 
@@ -100,12 +100,23 @@ def _score(value: Array, status: Array, xp=jnp) -> Array:
 def _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise, space_kw):
     if objective not in OBJECTIVES:
         raise ValueError(f"objective: expected one of {list(OBJECTIVES)}, got {objective!r}")
-    space = search_space(horizon=config.n_steps * config.dt, slip_bound_deg=slip_bound_deg, f_max_hz=f_max_hz,
-                         ic_bounds=ic_bounds, **space_kw)
+    space = search_space(
+        horizon=config.n_steps * config.dt,
+        slip_bound_deg=slip_bound_deg,
+        f_max_hz=f_max_hz,
+        ic_bounds=ic_bounds,
+        **space_kw,
+    )
     arr = lambda tree: jax.tree_util.tree_map(jnp.asarray, tree)
     params = SlipParams() if params is None else params
-    base = Scenario(pose0=Pose(0.0, 0.0, 0.0), slip=None, params=arr(params), path=arr(path), gains=arr(gains),
-                    noise=None if noise is None else arr(noise))
+    base = Scenario(
+        pose0=Pose(0.0, 0.0, 0.0),
+        slip=None,
+        params=arr(params),
+        path=arr(path),
+        gains=arr(gains),
+        noise=None if noise is None else arr(noise),
+    )
     return space, base, config
 
 
@@ -127,10 +138,20 @@ def _repeat(tree, n: int):
 
 def _result(space, base, seq, ic, value, status, history, history_rollouts, n_rollouts, n_gradients, n_nonfinite):
     sc = _build_scenario(space, seq, ic, base)
-    return FalsifierResult(objective=value, status=jnp.asarray(status, jnp.int32), slip=seq, seq_dt=space.seq_dt,
-                           ic=ic, pose0=sc.pose0, scenario=sc, history=jnp.asarray(history),
-                           history_rollouts=jnp.asarray(history_rollouts), n_rollouts=int(n_rollouts),
-                           n_gradients=int(n_gradients), n_nonfinite_grad=int(n_nonfinite))
+    return FalsifierResult(
+        objective=value,
+        status=jnp.asarray(status, jnp.int32),
+        slip=seq,
+        seq_dt=space.seq_dt,
+        ic=ic,
+        pose0=sc.pose0,
+        scenario=sc,
+        history=jnp.asarray(history),
+        history_rollouts=jnp.asarray(history_rollouts),
+        n_rollouts=int(n_rollouts),
+        n_gradients=int(n_gradients),
+        n_nonfinite_grad=int(n_nonfinite),
+    )
 
 
 def _cosine_lr(lr: float, steps: int) -> np.ndarray:
@@ -152,8 +173,18 @@ def _objective(metrics, which: Array) -> Array:
 
 
 @partial(jax.jit, static_argnames=("controller", "config"))
-def _ascent_step(raw: RawParams, opt_state, best: _Best, lr: Array, which: Array, space: SearchSpace,
-                 base: Scenario, *, controller: Controller, config: SimConfig):
+def _ascent_step(
+    raw: RawParams,
+    opt_state,
+    best: _Best,
+    lr: Array,
+    which: Array,
+    space: SearchSpace,
+    base: Scenario,
+    *,
+    controller: Controller,
+    config: SimConfig,
+):
     """One adam step on ``-J`` for every start of the batch; keeps the best run evaluated so far.
 
     Returns ``(raw, opt_state, best, n_nonfinite)``, the last the number of gradient components
@@ -170,8 +201,12 @@ def _ascent_step(raw: RawParams, opt_state, best: _Best, lr: Array, which: Array
     i = jnp.argmax(score)
     better = score[i] > best.score
     pick = lambda new, old: jnp.where(better, new, old)
-    best = _Best(pick(score[i], best.score), pick(value[i], best.value), pick(status[i], best.status),
-                 jax.tree_util.tree_map(lambda a, b: pick(a[i], b), raw, best.raw))
+    best = _Best(
+        pick(score[i], best.score),
+        pick(value[i], best.value),
+        pick(status[i], best.status),
+        jax.tree_util.tree_map(lambda a, b: pick(a[i], b), raw, best.raw),
+    )
     leaves = jax.tree_util.tree_leaves(grad)
     n_nonfinite = sum(jnp.sum(~jnp.isfinite(g)) for g in leaves)
     descent = jax.tree_util.tree_map(lambda g: -jnp.where(jnp.isfinite(g), g, 0.0), grad)  # of -J
@@ -180,10 +215,26 @@ def _ascent_step(raw: RawParams, opt_state, best: _Best, lr: Array, which: Array
     return raw, opt_state, best, n_nonfinite
 
 
-def falsify(controller: Controller, gains, path, *, config: SimConfig, slip_bound_deg: float, f_max_hz: float,
-            ic_bounds: dict, objective: str = "iae", n_restarts: int = 8, steps: int = 50, lr: float = 0.2,
-            key: Array, params: SlipParams | None = None, noise=None, n_freq: int = 8, with_constant: bool = True,
-            seq_dt: float = 0.05) -> FalsifierResult:
+def falsify(
+    controller: Controller,
+    gains,
+    path,
+    *,
+    config: SimConfig,
+    slip_bound_deg: float,
+    f_max_hz: float,
+    ic_bounds: dict,
+    objective: str = "iae",
+    n_restarts: int = 8,
+    steps: int = 50,
+    lr: float = 0.2,
+    key: Array,
+    params: SlipParams | None = None,
+    noise=None,
+    n_freq: int = 8,
+    with_constant: bool = True,
+    seq_dt: float = 0.05,
+) -> FalsifierResult:
     """Gradient ascent on ``J`` over slip profiles and initial conditions (module docstring).
 
     Args:
@@ -209,8 +260,18 @@ def falsify(controller: Controller, gains, path, *, config: SimConfig, slip_boun
     """
     if int(n_restarts) < 1 or int(steps) < 1:
         raise ValueError(f"n_restarts and steps: must be >= 1, got {n_restarts}, {steps}")
-    space, base, config = _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise,
-                                 dict(n_freq=n_freq, with_constant=with_constant, seq_dt=seq_dt))
+    space, base, config = _setup(
+        path,
+        gains,
+        config,
+        slip_bound_deg,
+        f_max_hz,
+        ic_bounds,
+        objective,
+        params,
+        noise,
+        dict(n_freq=n_freq, with_constant=with_constant, seq_dt=seq_dt),
+    )
     config = dataclasses.replace(config, record=False)
     raw = init_raw(space, key, int(n_restarts))
     dtype = space.basis.dtype
@@ -218,13 +279,24 @@ def falsify(controller: Controller, gains, path, *, config: SimConfig, slip_boun
     opt_state, history, nonfinite = _adam_init(raw), [], []
     which = jnp.int32(OBJECTIVES.index(objective))
     for lr_k in _cosine_lr(float(lr), int(steps)):
-        raw, opt_state, best, bad = _ascent_step(raw, opt_state, best, jnp.asarray(lr_k, dtype), which, space, base,
-                                                 controller=controller, config=config)
+        raw, opt_state, best, bad = _ascent_step(
+            raw, opt_state, best, jnp.asarray(lr_k, dtype), which, space, base, controller=controller, config=config
+        )
         history.append(best.value)
         nonfinite.append(bad)
     n = int(n_restarts) * int(steps)
-    return _result(space, base, *_from_raw(space, best.raw), best.value, best.status, np.stack(jax.device_get(history)),
-                   int(n_restarts) * np.arange(1, int(steps) + 1), n, n, int(np.sum(jax.device_get(nonfinite))))
+    return _result(
+        space,
+        base,
+        *_from_raw(space, best.raw),
+        best.value,
+        best.status,
+        np.stack(jax.device_get(history)),
+        int(n_restarts) * np.arange(1, int(steps) + 1),
+        n,
+        n,
+        int(np.sum(jax.device_get(nonfinite))),
+    )
 
 
 @jax.jit
@@ -233,10 +305,26 @@ def _scenarios(space: SearchSpace, seq: Array, ic: Array, idx: Array, base: Scen
     return jax.vmap(build_scenario, in_axes=(None, 0, 0, None))(space, seq[idx], ic[idx], base)
 
 
-def random_search(controller: Controller, gains, path, *, config: SimConfig, slip_bound_deg: float,
-                  f_max_hz: float, ic_bounds: dict, objective: str = "iae", n_samples: int, key: Array,
-                  batch_size: int = 64, params: SlipParams | None = None, noise=None, n_freq: int = 8,
-                  with_constant: bool = True, seq_dt: float = 0.05, devices=None) -> FalsifierResult:
+def random_search(
+    controller: Controller,
+    gains,
+    path,
+    *,
+    config: SimConfig,
+    slip_bound_deg: float,
+    f_max_hz: float,
+    ic_bounds: dict,
+    objective: str = "iae",
+    n_samples: int,
+    key: Array,
+    batch_size: int = 64,
+    params: SlipParams | None = None,
+    noise=None,
+    n_freq: int = 8,
+    with_constant: bool = True,
+    seq_dt: float = 0.05,
+    devices=None,
+) -> FalsifierResult:
     """The baseline: ``n_samples`` random draws of the same set (:func:`pfjax.falsification.space.sample`),
     simulated with :func:`~pfjax.sim.simulate_batch` in chunks of ``batch_size`` (the last one
     padded, so one compile), the worst kept. All draws come from ``key`` at once, so the result
@@ -247,15 +335,26 @@ def random_search(controller: Controller, gains, path, *, config: SimConfig, sli
     ``devices``: as :func:`~pfjax.sim.simulate_batch` (default: all)."""
     if int(n_samples) < 1 or int(batch_size) < 1:
         raise ValueError(f"n_samples and batch_size: must be >= 1, got {n_samples}, {batch_size}")
-    space, base, config = _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise,
-                                 dict(n_freq=n_freq, with_constant=with_constant, seq_dt=seq_dt))
+    space, base, config = _setup(
+        path,
+        gains,
+        config,
+        slip_bound_deg,
+        f_max_hz,
+        ic_bounds,
+        objective,
+        params,
+        noise,
+        dict(n_freq=n_freq, with_constant=with_constant, seq_dt=seq_dt),
+    )
     n, b = int(n_samples), min(int(batch_size), int(n_samples))
     seq, ic = sample(space, key, n)
     values, statuses = [], []
     for start in range(0, n, b):
         idx = np.minimum(np.arange(start, start + b), n - 1)
-        res = simulate_batch(_scenarios(space, seq, ic, idx, base), controller=controller, config=config,
-                             devices=devices)
+        res = simulate_batch(
+            _scenarios(space, seq, ic, idx, base), controller=controller, config=config, devices=devices
+        )
         keep = min(b, n - start)
         values.append(np.asarray(getattr(res.metrics, objective))[:keep])
         statuses.append(np.asarray(res.status)[:keep])
@@ -266,12 +365,23 @@ def random_search(controller: Controller, gains, path, *, config: SimConfig, sli
     for k in range(1, n):
         leader[k] = k if score[k] > score[leader[k - 1]] else leader[k - 1]
     i = leader[-1]
-    return _result(space, base, *unstack((seq, ic), i), jnp.asarray(values[i]), statuses[i], values[leader],
-                   np.arange(1, n + 1), n, 0, 0)
+    return _result(
+        space,
+        base,
+        *unstack((seq, ic), i),
+        jnp.asarray(values[i]),
+        statuses[i],
+        values[leader],
+        np.arange(1, n + 1),
+        n,
+        0,
+        0,
+    )
 
 
-def worst_trajectory(controller: Controller, result: FalsifierResult, config: SimConfig,
-                     batch_size: int = 1, devices=None) -> SimResult:
+def worst_trajectory(
+    controller: Controller, result: FalsifierResult, config: SimConfig, batch_size: int = 1, devices=None
+) -> SimResult:
     """Re-simulate the worst scenario with ``record=True`` (for plotting): one unbatched ``SimResult``.
 
     ``batch_size``: the scenario is repeated to this batch size, so the replay runs a program
@@ -279,6 +389,10 @@ def worst_trajectory(controller: Controller, result: FalsifierResult, config: Si
     instead of compiling one for a single run (seconds). ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
     if int(batch_size) < 1:
         raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
-    res = simulate_batch(_repeat(result.scenario, int(batch_size)), controller=controller,
-                         config=dataclasses.replace(config, record=True), devices=devices)
+    res = simulate_batch(
+        _repeat(result.scenario, int(batch_size)),
+        controller=controller,
+        config=dataclasses.replace(config, record=True),
+        devices=devices,
+    )
     return unstack(res, 0)

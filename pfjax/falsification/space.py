@@ -89,8 +89,16 @@ def _box(key, value) -> tuple[float, float]:
     return lo, hi
 
 
-def search_space(*, horizon: float, slip_bound_deg: float, f_max_hz: float, ic_bounds: dict,
-                 n_freq: int = 8, with_constant: bool = True, seq_dt: float = 0.05) -> SearchSpace:
+def search_space(
+    *,
+    horizon: float,
+    slip_bound_deg: float,
+    f_max_hz: float,
+    ic_bounds: dict,
+    n_freq: int = 8,
+    with_constant: bool = True,
+    seq_dt: float = 0.05,
+) -> SearchSpace:
     """Validate the bounds and build the :class:`SearchSpace` (NumPy at the edge).
 
     Args:
@@ -123,8 +131,13 @@ def search_space(*, horizon: float, slip_bound_deg: float, f_max_hz: float, ic_b
     w = 2 * np.pi * np.outer(t, frequencies(f_max_hz, int(n_freq)))
     cols = ([np.ones((t.size, 1))] if with_constant else []) + [np.cos(w), np.sin(w)]
     f = lambda a: jnp.asarray(a, dtype=float)
-    return SearchSpace(basis=f(np.concatenate(cols, axis=1)), seq_dt=f(seq_dt),
-                       slip_bound=f(math.radians(slip_bound_deg)), ic_lo=f(lo), ic_hi=f(hi))
+    return SearchSpace(
+        basis=f(np.concatenate(cols, axis=1)),
+        seq_dt=f(seq_dt),
+        slip_bound=f(math.radians(slip_bound_deg)),
+        ic_lo=f(lo),
+        ic_hi=f(hi),
+    )
 
 
 def _peak(s: Array) -> Array:

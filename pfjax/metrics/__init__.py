@@ -13,6 +13,14 @@ from pfjax.metrics.robustness import (
 from pfjax.metrics.running import METRIC_NAMES, Metrics
 
 __all__ = [
-    "METRIC_NAMES", "Metrics", "clopper_pearson", "failure_drivers", "hoeffding_n", "metric_quantiles",
-    "slip_margin", "success_summary", "supported_statement", "zero_failure_n",
+    "METRIC_NAMES",
+    "Metrics",
+    "clopper_pearson",
+    "failure_drivers",
+    "hoeffding_n",
+    "metric_quantiles",
+    "slip_margin",
+    "success_summary",
+    "supported_statement",
+    "zero_failure_n",
 ]

@@ -74,7 +74,9 @@ def clopper_pearson(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
     if n == 0:
         return math.nan, math.nan
     alpha = 1.0 - conf
-    from scipy import stats  # imported here: scipy.stats takes about 2 s to import, and the simulator imports this module
+    from scipy import (
+        stats,
+    )  # imported here: scipy.stats takes about 2 s to import, and the simulator imports this module
 
     lo = 0.0 if k == 0 else float(stats.beta.ppf(alpha / 2, k, n - k + 1))
     hi = 1.0 if k == n else float(stats.beta.ppf(1 - alpha / 2, k + 1, n - k))
@@ -106,8 +108,7 @@ def _quantile_key(q: float) -> str:
     return f"q{round(pct):02d}" if abs(pct - round(pct)) < 1e-9 else f"q{pct:g}"
 
 
-def metric_quantiles(df: pd.DataFrame, columns: Sequence[str],
-                     qs: Sequence[float] = DEFAULT_QUANTILES) -> dict:
+def metric_quantiles(df: pd.DataFrame, columns: Sequence[str], qs: Sequence[float] = DEFAULT_QUANTILES) -> dict:
     """NaN-aware mean, standard deviation and quantiles of per-run metrics.
 
     Only finite values count (``settling_time`` is NaN for a run that never settles; a run
@@ -137,8 +138,7 @@ def metric_quantiles(df: pd.DataFrame, columns: Sequence[str],
         x = df[col].to_numpy(dtype=float)
         x = x[np.isfinite(x)]
         m = int(x.size)
-        entry = {"mean": float(x.mean()) if m else math.nan,
-                 "std": float(x.std(ddof=1)) if m > 1 else math.nan}
+        entry = {"mean": float(x.mean()) if m else math.nan, "std": float(x.std(ddof=1)) if m > 1 else math.nan}
         values = np.quantile(x, qs) if m else np.full(len(qs), np.nan)
         entry.update({_quantile_key(q): float(v) for q, v in zip(qs, values)})
         entry["n_finite"] = m
@@ -176,8 +176,7 @@ def hoeffding_n(eps: float, delta: float) -> int:
         The smallest integer ``n`` with ``2 exp(-2 n eps^2) <= delta``.
     """
     eps, delta = _check_open_unit("eps", eps), _check_open_unit("delta", delta)
-    return _smallest_n(lambda n: 2.0 * math.exp(-2.0 * n * eps**2) <= delta,
-                       math.log(2.0 / delta) / (2.0 * eps**2))
+    return _smallest_n(lambda n: 2.0 * math.exp(-2.0 * n * eps**2) <= delta, math.log(2.0 / delta) / (2.0 * eps**2))
 
 
 def zero_failure_n(eps: float, delta: float) -> int:
@@ -234,15 +233,28 @@ def supported_statement(n: int, k_fail: int, delta: float = 0.05) -> dict:
     cp_lower = clopper_pearson(n - k_fail, n, 1.0 - 2.0 * delta)[0]
     conf_pct = f"{100 * (1 - delta):g} %"
     if k_fail == 0:
-        text = (f"No failure in {n} runs: P(failure) <= {eps_0:.3g} with {conf_pct} confidence "
-                f"(Hoeffding alone: P(success) >= {max(0.0, p_hat - eps_h):.4f}).")
+        text = (
+            f"No failure in {n} runs: P(failure) <= {eps_0:.3g} with {conf_pct} confidence "
+            f"(Hoeffding alone: P(success) >= {max(0.0, p_hat - eps_h):.4f})."
+        )
     else:
-        text = (f"{k_fail} failures in {n} runs: P(success) >= {cp_lower:.4f} with {conf_pct} "
-                f"confidence (Clopper-Pearson; Hoeffding: >= {p_hat:.4f} - {eps_h:.4f} "
-                f"= {max(0.0, p_hat - eps_h):.4f}).")
-    return {"n": n, "k_fail": k_fail, "delta": delta, "confidence": 1.0 - delta,
-            "success_rate": p_hat, "hoeffding_eps": eps_h, "hoeffding_lower": max(0.0, p_hat - eps_h),
-            "zero_failure_eps": eps_0, "cp_lower": cp_lower, "text": text}
+        text = (
+            f"{k_fail} failures in {n} runs: P(success) >= {cp_lower:.4f} with {conf_pct} "
+            f"confidence (Clopper-Pearson; Hoeffding: >= {p_hat:.4f} - {eps_h:.4f} "
+            f"= {max(0.0, p_hat - eps_h):.4f})."
+        )
+    return {
+        "n": n,
+        "k_fail": k_fail,
+        "delta": delta,
+        "confidence": 1.0 - delta,
+        "success_rate": p_hat,
+        "hoeffding_eps": eps_h,
+        "hoeffding_lower": max(0.0, p_hat - eps_h),
+        "zero_failure_eps": eps_0,
+        "cp_lower": cp_lower,
+        "text": text,
+    }
 
 
 def _last_safe_index(passes: np.ndarray) -> int:
@@ -251,8 +263,9 @@ def _last_safe_index(passes: np.ndarray) -> int:
     return (passes.size if fails.size == 0 else int(fails[0])) - 1
 
 
-def slip_margin(amplitudes: np.ndarray, successes: np.ndarray, trials: np.ndarray,
-                eps: float = 0.05, conf: float = 0.95) -> dict:
+def slip_margin(
+    amplitudes: np.ndarray, successes: np.ndarray, trials: np.ndarray, eps: float = 0.05, conf: float = 0.95
+) -> dict:
     """Largest slip amplitude at which the success rate stays ``>= 1 - eps``, from a batched sweep.
 
     At amplitudes ``a_1 < ... < a_m`` (deg) the sweep observed ``k_j`` successes in ``n_j`` runs.
@@ -296,8 +309,9 @@ def slip_margin(amplitudes: np.ndarray, successes: np.ndarray, trials: np.ndarra
     k = np.asarray(successes).reshape(-1)
     n = np.asarray(trials).reshape(-1)
     if not a.size == k.size == n.size or a.size == 0:
-        raise ValueError(f"amplitudes, successes and trials need the same non-zero length, "
-                         f"got {a.size}, {k.size}, {n.size}")
+        raise ValueError(
+            f"amplitudes, successes and trials need the same non-zero length, got {a.size}, {k.size}, {n.size}"
+        )
     if not np.all(np.isfinite(a)) or np.any(a < 0):
         raise ValueError(f"amplitudes must be finite and >= 0, got {a}")
     if np.any(n < 1) or np.any(k < 0) or np.any(k > n):
@@ -319,10 +333,26 @@ def slip_margin(amplitudes: np.ndarray, successes: np.ndarray, trials: np.ndarra
         resolution = float(a[-1] - a[-2]) if a.size > 1 else math.nan
     else:
         resolution = float(grid[j + 2] - grid[j + 1])
-    table = [{"amplitude": float(a[i]), "n": int(n[i]), "k": int(k[i]), "rate": float(rate[i]),
-              "lo": float(lo[i]), "hi": float(hi[i])} for i in range(a.size)]
-    return {"margin": margin_of(rate), "margin_lo": margin_of(lo), "margin_hi": margin_of(hi),
-            "resolution": resolution, "censored": bool(censored), "eps": eps, "table": table}
+    table = [
+        {
+            "amplitude": float(a[i]),
+            "n": int(n[i]),
+            "k": int(k[i]),
+            "rate": float(rate[i]),
+            "lo": float(lo[i]),
+            "hi": float(hi[i]),
+        }
+        for i in range(a.size)
+    ]
+    return {
+        "margin": margin_of(rate),
+        "margin_lo": margin_of(lo),
+        "margin_hi": margin_of(hi),
+        "resolution": resolution,
+        "censored": bool(censored),
+        "eps": eps,
+        "table": table,
+    }
 
 
 def _spearman(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -337,8 +367,9 @@ def _spearman(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     return float(res.statistic), float(res.pvalue)
 
 
-def failure_drivers(df: pd.DataFrame, params: list[str], outcome: str = "success",
-                    metric: str | None = "iae") -> pd.DataFrame:
+def failure_drivers(
+    df: pd.DataFrame, params: list[str], outcome: str = "success", metric: str | None = "iae"
+) -> pd.DataFrame:
     """Rank the sampled parameters by how strongly they drive failure.
 
     For each parameter ``x`` (one value per run) and the failure indicator ``F = 1 - success``:
@@ -385,9 +416,19 @@ def failure_drivers(df: pd.DataFrame, params: list[str], outcome: str = "success
             vf, vs = v[ok & (fail > 0.5)], v[ok & (fail < 0.5)]
             sd = np.std(v[ok], ddof=1) if ok.sum() > 1 else 0.0
             effect = (vf.mean() - vs.mean()) / sd if vf.size and vs.size and sd > 0 else math.nan
-            rows.append({"parameter": label, "rho_failure": rho_f, "p_failure": p_f, "rho_metric": rho_m,
-                         "p_metric": p_m, "effect_size": float(effect), "n": int(ok.sum())})
-    out = pd.DataFrame(rows, columns=["parameter", "rho_failure", "p_failure", "rho_metric",
-                                      "p_metric", "effect_size", "n"])
+            rows.append(
+                {
+                    "parameter": label,
+                    "rho_failure": rho_f,
+                    "p_failure": p_f,
+                    "rho_metric": rho_m,
+                    "p_metric": p_m,
+                    "effect_size": float(effect),
+                    "n": int(ok.sum()),
+                }
+            )
+    out = pd.DataFrame(
+        rows, columns=["parameter", "rho_failure", "p_failure", "rho_metric", "p_metric", "effect_size", "n"]
+    )
     order = np.argsort(-np.nan_to_num(np.abs(out["rho_failure"].to_numpy()), nan=-1.0), kind="stable")
     return out.iloc[order].reset_index(drop=True)

@@ -70,14 +70,39 @@ METRIC_NAMES = Metrics._fields
 def init(d0: Array, delta0: Array) -> Accumulator:
     z = jnp.zeros_like(d0)
     return Accumulator(
-        iae=z, ise=z, itae=z, max_abs_d=z, steady_abs_d=z, steady_abs_theta_e_rad=z, steady_weight=z,
-        settle=z, overshoot=z, d0_sign=jnp.sign(d0), steer_energy=z, steer_tv=z, prev_delta=delta0,
-        sat_time=z, time=z, late_max_abs_d=z,
+        iae=z,
+        ise=z,
+        itae=z,
+        max_abs_d=z,
+        steady_abs_d=z,
+        steady_abs_theta_e_rad=z,
+        steady_weight=z,
+        settle=z,
+        overshoot=z,
+        d0_sign=jnp.sign(d0),
+        steer_energy=z,
+        steer_tv=z,
+        prev_delta=delta0,
+        sat_time=z,
+        time=z,
+        late_max_abs_d=z,
     )
 
 
-def update(acc: Accumulator, t, dt, weight, d, theta_e, delta, saturated, *, band: float,
-           steady_from: float, success_from: float) -> Accumulator:
+def update(
+    acc: Accumulator,
+    t,
+    dt,
+    weight,
+    d,
+    theta_e,
+    delta,
+    saturated,
+    *,
+    band: float,
+    steady_from: float,
+    success_from: float,
+) -> Accumulator:
     """Add sample ``k`` (time ``t``) with trapezoid weight ``weight`` (0 after a failure)."""
     w = weight * dt
     live = weight > 0
@@ -105,7 +130,9 @@ def update(acc: Accumulator, t, dt, weight, d, theta_e, delta, saturated, *, ban
         prev_delta=jnp.where(live, delta, acc.prev_delta),
         sat_time=acc.sat_time + w * saturated,
         time=acc.time + w,
-        late_max_abs_d=jnp.where(live & (t >= success_from - 1e-9), jnp.maximum(acc.late_max_abs_d, ad), acc.late_max_abs_d),
+        late_max_abs_d=jnp.where(
+            live & (t >= success_from - 1e-9), jnp.maximum(acc.late_max_abs_d, ad), acc.late_max_abs_d
+        ),
     )
 
 

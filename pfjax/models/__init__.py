@@ -13,4 +13,15 @@ from pfjax.models.slip import (
     yaw_rate,
 )
 
-__all__ = ["CONVENTIONS", "LENAIN", "SOURCE", "FrenetState", "Pose", "SlipParams", "frenet_rhs", "max_curvature", "world_rhs", "yaw_rate"]
+__all__ = [
+    "CONVENTIONS",
+    "LENAIN",
+    "SOURCE",
+    "FrenetState",
+    "Pose",
+    "SlipParams",
+    "frenet_rhs",
+    "max_curvature",
+    "world_rhs",
+    "yaw_rate",
+]

@@ -23,7 +23,6 @@ from pfjax.montecarlo.config import PathSpec, StudySpec
 from pfjax.sim.status import STATUS_NAMES
 
 
-
 def path_max_curvature(p: PathSpec) -> float:
     """Largest |curvature| (1/m) the path can have over the support of its distributions."""
     from pfjax import paths
@@ -67,16 +66,28 @@ def check_resources(spec: StudySpec, *, report: bool = True) -> None:
     # a chunk: sampled scenarios (kept for the next controller), the simulator's batch, its table:
     # 8 runs' worth per run (measured: 10^7 runs in chunks of 65,536 peaked at 1.8 GiB, 18 kB per run
     # of a chunk above the process's 0.6 GiB)
-    check_memory("chunk_size", 8 * chunk * run_bytes(n_steps, seq_len=seq, path_numbers=path_numbers),
-                 f"a chunk of {chunk} runs", "lower chunk_size (the runs stream chunk by chunk)")
+    check_memory(
+        "chunk_size",
+        8 * chunk * run_bytes(n_steps, seq_len=seq, path_numbers=path_numbers),
+        f"a chunk of {chunk} runs",
+        "lower chunk_size (the runs stream chunk by chunk)",
+    )
     if report:
         rows = spec.n_runs * len(spec.paths) * len(spec.controllers)
-        check_memory("n_runs", 8 * 64 * rows, f"the report's run table ({rows:.3g} rows)",
-                     "run without the report (pfjax study --no-report), or lower n_runs")
+        check_memory(
+            "n_runs",
+            8 * 64 * rows,
+            f"the report's run table ({rows:.3g} rows)",
+            "run without the report (pfjax study --no-report), or lower n_runs",
+        )
     if spec.margin.enabled:
         per_axis = spec.margin.n_per_amplitude * len(spec.margin.amplitudes_deg)
-        check_memory("margin.n_per_amplitude", 8 * 6 * per_axis, f"a slip-margin sweep of {per_axis:.3g} runs per axis",
-                     "lower margin.n_per_amplitude")
+        check_memory(
+            "margin.n_per_amplitude",
+            8 * 6 * per_axis,
+            f"a slip-margin sweep of {per_axis:.3g} runs per axis",
+            "lower margin.n_per_amplitude",
+        )
 
 
 def study_warnings(spec: StudySpec) -> list[str]:
@@ -90,19 +101,25 @@ def study_warnings(spec: StudySpec) -> list[str]:
     for i, p in enumerate(spec.paths):
         k = path_max_curvature(p)
         if math.isfinite(k) and k > kappa_follow:
-            out.append(f"paths[{i}] ({p.label}): max curvature {k:.4g} 1/m exceeds tan(delta_max)/L = "
-                       f"tan({dmax_lo:g} deg)/{L_hi:g} m = {kappa_follow:.4g} 1/m: the robot cannot follow it "
-                       f"with its steering limit, even without slip")
+            out.append(
+                f"paths[{i}] ({p.label}): max curvature {k:.4g} 1/m exceeds tan(delta_max)/L = "
+                f"tan({dmax_lo:g} deg)/{L_hi:g} m = {kappa_follow:.4g} 1/m: the robot cannot follow it "
+                f"with its steering limit, even without slip"
+            )
         length = path_length(p)
         if travel > length:
-            out.append(f"paths[{i}] ({p.label}): {length:.4g} m long, but a run may travel {travel:.4g} m "
-                       f"(speed x horizon + start_along_m): runs that reach its end stop with status path_end")
+            out.append(
+                f"paths[{i}] ({p.label}): {length:.4g} m long, but a run may travel {travel:.4g} m "
+                f"(speed x horizon + start_along_m): runs that reach its end stop with status path_end"
+            )
     return out
 
 
 def _cast64(tree):
     return jax.tree_util.tree_map(
-        lambda a: jnp.asarray(np.asarray(a), jnp.float64) if jnp.issubdtype(jnp.asarray(a).dtype, jnp.floating) else a, tree)
+        lambda a: jnp.asarray(np.asarray(a), jnp.float64) if jnp.issubdtype(jnp.asarray(a).dtype, jnp.floating) else a,
+        tree,
+    )
 
 
 def sample_indices(spec: StudySpec, n_sample: int) -> np.ndarray:
@@ -115,7 +132,7 @@ def float64_runs(spec: StudySpec, controllers: dict, n_sample: int, path_index: 
     """The float64 half of :func:`float64_check` for one path: ``{controller name: SimResult}`` (NumPy,
     the :func:`sample_indices` runs only). Independent of the float32 study, so it can run before
     or while the study does. ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
-    from pfjax.montecarlo.runner import with_gains, sample_few, sim_config
+    from pfjax.montecarlo.runner import sample_few, sim_config, with_gains
     from pfjax.sim.simulate import simulate_batch
 
     idx = sample_indices(spec, n_sample)
@@ -126,13 +143,18 @@ def float64_runs(spec: StudySpec, controllers: dict, n_sample: int, path_index: 
     for name, (ctrl, gains, _) in controllers.items():
         with jax.enable_x64(True):
             sc = _cast64(sampled.scenarios)
-            res = jax.device_get(simulate_batch(with_gains(sc, _cast64(gains), m), controller=ctrl, config=sim_config(spec),
-                                                devices=devices))
-            out[name] = jax.tree_util.tree_map(lambda a: np.asarray(a)[:len(idx)], res)
+            res = jax.device_get(
+                simulate_batch(
+                    with_gains(sc, _cast64(gains), m), controller=ctrl, config=sim_config(spec), devices=devices
+                )
+            )
+            out[name] = jax.tree_util.tree_map(lambda a: np.asarray(a)[: len(idx)], res)
     return out
 
 
-def float64_check(spec: StudySpec, controllers: dict, runs: pd.DataFrame, n_sample: int, sims: list | None = None) -> dict:
+def float64_check(
+    spec: StudySpec, controllers: dict, runs: pd.DataFrame, n_sample: int, sims: list | None = None
+) -> dict:
     """Re-simulate ``n_sample`` runs per controller (spread over the paths) in float64 and compare
     with the float32 rows of ``runs``: max |dIAE| (m s), max relative dIAE, max |d late max|, and the
     runs whose status or success differs. The scenarios are sampled in float32 (exactly those the
@@ -140,7 +162,10 @@ def float64_check(spec: StudySpec, controllers: dict, runs: pd.DataFrame, n_samp
     which the simulator draws at the run's precision (a different realisation in float64).
     ``sims``: :func:`float64_runs` per path if already computed."""
     if spec.dtype == "float64" or n_sample <= 0:
-        return {"checked": False, "reason": "the study runs in float64" if spec.dtype == "float64" else "disabled (f64_check_runs = 0)"}
+        return {
+            "checked": False,
+            "reason": "the study runs in float64" if spec.dtype == "float64" else "disabled (f64_check_runs = 0)",
+        }
     idx = sample_indices(spec, n_sample)
     per = {}
     for p, pspec in enumerate(spec.paths):
@@ -148,7 +173,9 @@ def float64_check(spec: StudySpec, controllers: dict, runs: pd.DataFrame, n_samp
         for name in controllers:
             res = sim[name]
             f32 = runs[(runs.path == pspec.label) & (runs.controller == name)].set_index("run").loc[idx]
-            block = per.setdefault(name, {"n": 0, "iae_abs": [], "iae_rel": [], "late": [], "status_mismatch": [], "success_mismatch": 0})
+            block = per.setdefault(
+                name, {"n": 0, "iae_abs": [], "iae_rel": [], "late": [], "status_mismatch": [], "success_mismatch": 0}
+            )
             iae64 = np.asarray(res.metrics.iae, float)
             iae32 = f32["iae"].to_numpy(float)
             st64 = np.asarray(res.status).astype(int)
@@ -158,19 +185,38 @@ def float64_check(spec: StudySpec, controllers: dict, runs: pd.DataFrame, n_samp
             block["n"] += len(idx)
             block["iae_abs"] += list(np.abs(iae64 - iae32)[both])
             block["iae_rel"] += list((np.abs(iae64 - iae32) / np.maximum(np.abs(iae64), 1e-12))[both])
-            block["late"] += list(np.abs(np.asarray(res.metrics.late_max_abs_d, float) - f32["late_max_abs_d"].to_numpy(float))[both])
+            block["late"] += list(
+                np.abs(np.asarray(res.metrics.late_max_abs_d, float) - f32["late_max_abs_d"].to_numpy(float))[both]
+            )
             for r, a, b in zip(idx, f32["status_code"].to_numpy(int), st64):
                 if a != b:
-                    block["status_mismatch"].append({"path": pspec.label, "run": int(r), "float32": STATUS_NAMES[a], "float64": STATUS_NAMES[int(b)]})
-            block["success_mismatch"] += int((np.asarray(res.metrics.success, bool) != f32["success"].to_numpy(bool)).sum())
-    out = {"checked": True, "n_per_controller": int(len(idx) * len(spec.paths)), "run_indices": idx.tolist(),
-           "noise_realisation_differs": bool(spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0), "controllers": {}}
+                    block["status_mismatch"].append(
+                        {
+                            "path": pspec.label,
+                            "run": int(r),
+                            "float32": STATUS_NAMES[a],
+                            "float64": STATUS_NAMES[int(b)],
+                        }
+                    )
+            block["success_mismatch"] += int(
+                (np.asarray(res.metrics.success, bool) != f32["success"].to_numpy(bool)).sum()
+            )
+    out = {
+        "checked": True,
+        "n_per_controller": int(len(idx) * len(spec.paths)),
+        "run_indices": idx.tolist(),
+        "noise_realisation_differs": bool(spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0),
+        "controllers": {},
+    }
     for name, b in per.items():
         mx = lambda xs: float(max(xs)) if xs else None
         out["controllers"][name] = {
-            "n": b["n"], "max_abs_diff_iae": mx(b["iae_abs"]), "max_rel_diff_iae": mx(b["iae_rel"]),
-            "max_abs_diff_late_max_abs_d": mx(b["late"]), "status_agreement": 1 - len(b["status_mismatch"]) / b["n"],
-            "success_agreement": 1 - b["success_mismatch"] / b["n"], "status_mismatches": b["status_mismatch"][:20],
+            "n": b["n"],
+            "max_abs_diff_iae": mx(b["iae_abs"]),
+            "max_rel_diff_iae": mx(b["iae_rel"]),
+            "max_abs_diff_late_max_abs_d": mx(b["late"]),
+            "status_agreement": 1 - len(b["status_mismatch"]) / b["n"],
+            "success_agreement": 1 - b["success_mismatch"] / b["n"],
+            "status_mismatches": b["status_mismatch"][:20],
         }
     return out
-

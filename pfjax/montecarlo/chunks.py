@@ -24,8 +24,8 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Callable, Iterable
 
 import pandas as pd
 import pyarrow as pa
@@ -67,14 +67,20 @@ class ChunkStore:
 
     def __init__(self, out: Path, spec: StudySpec, *, fresh: bool = False):
         self.dir = partial_dir(out)
-        self.manifest = {"study": spec.name, "config_sha256": study_hash(spec), "seed": spec.seed,
-                         "pfjax_version": pfjax.__version__}
+        self.manifest = {
+            "study": spec.name,
+            "config_sha256": study_hash(spec),
+            "seed": spec.seed,
+            "pfjax_version": pfjax.__version__,
+        }
         self.identity = {k: v for k, v in file_metadata(spec).items() if k in IDENTITY}
         self.computed = 0  #: chunks simulated by this process
         self.reused = 0  #: chunks found finished on disk (resumed)
         if self.dir.is_symlink() or (self.dir.exists() and not self.dir.is_dir()):
-            raise ConfigError(f"--out: {self.dir} (where pfjax keeps a study's finished chunks) exists and is not a "
-                              f"directory; move it away")
+            raise ConfigError(
+                f"--out: {self.dir} (where pfjax keeps a study's finished chunks) exists and is not a "
+                f"directory; move it away"
+            )
         if self.dir.exists() and (fresh or not self._chunk_files()):
             self._discard_checked(out)
         if self.dir.exists():
@@ -90,11 +96,16 @@ class ChunkStore:
 
     def _discard_checked(self, out: Path) -> None:
         """Remove the partial directory if it holds only what a study writes there."""
-        foreign = [f.name for f in self.dir.iterdir()
-                   if not (f.name == "manifest.json" or (f.is_file() and ".parquet" in f.name))]
+        foreign = [
+            f.name
+            for f in self.dir.iterdir()
+            if not (f.name == "manifest.json" or (f.is_file() and ".parquet" in f.name))
+        ]
         if foreign:
-            raise ConfigError(f"--out: {self.dir} (where pfjax keeps the finished chunks of {out}) holds "
-                              f"{foreign[0]!r}, which pfjax did not write; move it away")
+            raise ConfigError(
+                f"--out: {self.dir} (where pfjax keeps the finished chunks of {out}) holds "
+                f"{foreign[0]!r}, which pfjax did not write; move it away"
+            )
         shutil.rmtree(self.dir)
 
     def _check_manifest(self, out: Path) -> None:
@@ -107,7 +118,8 @@ class ChunkStore:
                 raise ConfigError(
                     f"--out: {out} has an interrupted study with a different {what} "
                     f"({str(old.get(key))[:12]} there, {self.manifest[key][:12]} now) in {self.dir}; "
-                    f"re-run the original command to resume it, or add --fresh to discard it and start over")
+                    f"re-run the original command to resume it, or add --fresh to discard it and start over"
+                )
 
     def _valid(self, f: Path) -> bool:
         """Whether chunk file ``f`` was computed with this study's config, seed and pfjax version."""

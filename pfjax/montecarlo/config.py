@@ -22,10 +22,9 @@ from typing import Annotated, Any, ClassVar, Literal
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from pfjax.config import ConfigError, _short, nested, parse_override, read_toml
-from pfjax.provenance import config_hash
 from pfjax.errors import MAX_MAGNITUDE, MAX_SEED, MIN_POSITIVE
+from pfjax.provenance import config_hash
 from pfjax.resources import check_steps
-
 
 
 def _real(v: float) -> float:
@@ -77,8 +76,13 @@ class Dist(_Model):
 
     @model_validator(mode="after")
     def _check(self):
-        need = {"constant": ("value",), "uniform": ("low", "high"), "normal": ("mean", "std"),
-                "truncnormal": ("mean", "std", "low", "high"), "choice": ("values",)}[self.dist]
+        need = {
+            "constant": ("value",),
+            "uniform": ("low", "high"),
+            "normal": ("mean", "std"),
+            "truncnormal": ("mean", "std", "low", "high"),
+            "choice": ("values",),
+        }[self.dist]
         for f in need:
             if getattr(self, f) is None:
                 raise ValueError(f"dist '{self.dist}' needs '{f}'")
@@ -94,8 +98,10 @@ class Dist(_Model):
         if self.std is not None and not self.std > 0:
             raise ValueError(f"needs std > 0, got {self.std:g}")
         if self.dist == "truncnormal" and not self.low <= self.mean <= self.high:
-            raise ValueError(f"needs low <= mean <= high (the mean of the normal it truncates), got mean={self.mean:g} "
-                             f"outside [{self.low:g}, {self.high:g}]")
+            raise ValueError(
+                f"needs low <= mean <= high (the mean of the normal it truncates), got mean={self.mean:g} "
+                f"outside [{self.low:g}, {self.high:g}]"
+            )
         if self.values is not None and (not self.values or not all(math.isfinite(v) for v in self.values)):
             raise ValueError("'values' must be a non-empty list of finite numbers")
         return self
@@ -132,7 +138,9 @@ def dist_field(default: float, description: str | None = None):
 class SimSpec(_Model):
     dt: Real = Field(0.005, ge=POSITIVE, description="RK4 integrator step, s")
     horizon: Real = Field(20.0, ge=POSITIVE, description="simulated time per run, s")
-    control_every: int = Field(1, ge=1, le=2_000_000, description="controller sampling period, integrator steps (zero-order hold)")
+    control_every: int = Field(
+        1, ge=1, le=2_000_000, description="controller sampling period, integrator steps (zero-order hold)"
+    )
     d_fail: Real = Field(10.0, ge=POSITIVE, description="|d| above which a run fails with status diverged, m")
     steady_window: Real = Field(5.0, ge=POSITIVE, description="final part of the run for the steady-state errors, s")
     settle_band: Real = Field(0.05, ge=POSITIVE, description="band on |d| for the settling time, m")
@@ -156,13 +164,18 @@ class VehicleSpec(_Model):
     speed: Dist = dist_field(1.0, "rear-axle speed, m/s (a distribution)")
     L: Dist = dist_field(0.2, "wheelbase, m (a distribution)")
     delta_max_deg: Dist = dist_field(30.0, "steering limit, deg (a distribution)")
-    delta_rate_max_deg: Real | None = Field(None, ge=POSITIVE, description="steering rate limit, deg/s (None or inf: none)")
-    convention: Literal["source", "lenain"] = Field("source", description="front-slip sign convention: source or lenain")
+    delta_rate_max_deg: Real | None = Field(
+        None, ge=POSITIVE, description="steering rate limit, deg/s (None or inf: none)"
+    )
+    convention: Literal["source", "lenain"] = Field(
+        "source", description="front-slip sign convention: source or lenain"
+    )
 
     _coerce = field_validator("speed", "L", "delta_max_deg", mode="before")(lambda v: _as_dist(v))
     # "no limit" has one spelling, None, so the validated config is strict JSON (and hashes as such)
     _no_limit = field_validator("delta_rate_max_deg", mode="before")(
-        lambda v: None if isinstance(v, float) and v == math.inf else v)
+        lambda v: None if isinstance(v, float) and v == math.inf else v
+    )
 
     @model_validator(mode="after")
     def _check(self):
@@ -186,7 +199,9 @@ class SlipSpec(_Model):
     ``sinusoid`` (beta_* mean + amp_* sin(2 pi freq_hz t + phase)), ``ou`` (Ornstein-Uhlenbeck around
     beta_* with stationary std ou_sigma_deg and time constant ou_tau_s, sampled every seq_dt)."""
 
-    kind: Literal["constant", "step", "sinusoid", "ou"] = Field("constant", description="slip profile: constant, step, sinusoid or ou (Ornstein-Uhlenbeck)")
+    kind: Literal["constant", "step", "sinusoid", "ou"] = Field(
+        "constant", description="slip profile: constant, step, sinusoid or ou (Ornstein-Uhlenbeck)"
+    )
     beta_r_deg: Dist = dist_field(0.0, "rear slip angle (constant part, or the mean), deg")
     beta_f_deg: Dist = dist_field(0.0, "front slip angle (constant part, or the mean), deg")
     step_time_s: Dist = dist_field(5.0, "step: time of the step, s")
@@ -199,8 +214,19 @@ class SlipSpec(_Model):
     ou_tau_s: Dist = dist_field(1.0, "ou: time constant, s")
     seq_dt: Real = Field(0.05, ge=POSITIVE, description="ou: sampling period of the slip sequence, s")
 
-    _coerce = field_validator("beta_r_deg", "beta_f_deg", "step_time_s", "step_r_deg", "step_f_deg", "amp_r_deg",
-                              "amp_f_deg", "freq_hz", "ou_sigma_deg", "ou_tau_s", mode="before")(lambda v: _as_dist(v))
+    _coerce = field_validator(
+        "beta_r_deg",
+        "beta_f_deg",
+        "step_time_s",
+        "step_r_deg",
+        "step_f_deg",
+        "amp_r_deg",
+        "amp_f_deg",
+        "freq_hz",
+        "ou_sigma_deg",
+        "ou_tau_s",
+        mode="before",
+    )(lambda v: _as_dist(v))
 
     @model_validator(mode="after")
     def _check(self):
@@ -209,8 +235,10 @@ class SlipSpec(_Model):
             lo, hi = getattr(self, f"beta_{axis}_deg").bounds()
             reach = max(abs(lo), abs(hi))
             if reach >= 90:
-                raise ValueError(f"beta_{axis}_deg: slip magnitudes must stay below 90 deg over the distribution's "
-                                 f"support, got range [{lo:g}, {hi:g}]")
+                raise ValueError(
+                    f"beta_{axis}_deg: slip magnitudes must stay below 90 deg over the distribution's "
+                    f"support, got range [{lo:g}, {hi:g}]"
+                )
             if added is None:
                 continue
             name = f"{added}_{axis}_deg" if added != "ou_sigma" else "ou_sigma_deg"
@@ -227,8 +255,10 @@ class SlipSpec(_Model):
                 total = reach + OU_REACH * ahi
                 rule = f"max |beta_{axis}_deg| + {OU_REACH:g} max {name}"
             if not total < 90:
-                raise ValueError(f"{name}: the total slip must stay below 90 deg over the distributions' support, "
-                                 f"got {rule} = {total:g} deg")
+                raise ValueError(
+                    f"{name}: the total slip must stay below 90 deg over the distributions' support, "
+                    f"got {rule} = {total:g} deg"
+                )
         for name in ("ou_tau_s", "freq_hz", "step_time_s"):
             lo, _ = getattr(self, name).bounds()
             if lo < 0 or (name == "ou_tau_s" and lo < POSITIVE):
@@ -244,7 +274,9 @@ class InitialSpec(_Model):
     lateral_offset: Dist = dist_field(0.0, "start offset left of the path, m")
     heading_error_deg: Dist = dist_field(0.0, "start heading error, deg")
 
-    _coerce = field_validator("start_along_m", "lateral_offset", "heading_error_deg", mode="before")(lambda v: _as_dist(v))
+    _coerce = field_validator("start_along_m", "lateral_offset", "heading_error_deg", mode="before")(
+        lambda v: _as_dist(v)
+    )
 
 
 class NoiseSpec(_Model):
@@ -272,7 +304,9 @@ class PathSpec(_Model):
     name: str | None = Field(None, description="label in outputs (default: the kind)")
     radius: Dist = dist_field(2.0, "circle: radius, m")
     length: Real = Field(40.0, ge=POSITIVE, description="random paths: length, m")
-    curvature_margin: Real = Field(0.5, ge=POSITIVE, le=1, description="random paths: fraction of the followable curvature")
+    curvature_margin: Real = Field(
+        0.5, ge=POSITIVE, le=1, description="random paths: fraction of the followable curvature"
+    )
     n_waypoints: int = Field(41, ge=4, le=10_000, description="random paths: spline waypoints")
     points: list[list[Real]] | None = Field(None, description="spline: the points [[x, y], ...] it passes through, m")
 
@@ -301,20 +335,30 @@ class PathSpec(_Model):
                 raise ValueError(f"[{i}]: coordinates must be finite, got {q}")
         for i in range(1, len(v)):
             if math.dist(v[i], v[i - 1]) <= 0:
-                raise ValueError(f"[{i}]: repeats point [{i - 1}] {v[i]}; consecutive points must differ (arc length must increase)")
+                raise ValueError(
+                    f"[{i}]: repeats point [{i - 1}] {v[i]}; consecutive points must differ (arc length must increase)"
+                )
             if i >= 2:
                 a = (v[i - 1][0] - v[i - 2][0], v[i - 1][1] - v[i - 2][1])
                 b = (v[i][0] - v[i - 1][0], v[i][1] - v[i - 1][1])
                 if a[0] * b[0] + a[1] * b[1] <= 0:
-                    raise ValueError(f"[{i}]: the path turns back by 90 deg or more at point [{i - 1}]; points must advance along the path")
+                    raise ValueError(
+                        f"[{i}]: the path turns back by 90 deg or more at point [{i - 1}]; points must advance along the path"
+                    )
         return v
 
     @model_validator(mode="after")
     def _check(self):
         if self.kind == "circle" and not self.radius.bounds()[0] >= POSITIVE:
-            raise ValueError(f"radius: must be > 0 m over its whole range, got a lower bound {self.radius.bounds()[0]:g}")
+            raise ValueError(
+                f"radius: must be > 0 m over its whole range, got a lower bound {self.radius.bounds()[0]:g}"
+            )
         if (self.kind == "spline") != (self.points is not None):
-            raise ValueError("points: required for kind 'spline'" if self.kind == "spline" else f"points: only for kind 'spline', not {self.kind!r}")
+            raise ValueError(
+                "points: required for kind 'spline'"
+                if self.kind == "spline"
+                else f"points: only for kind 'spline', not {self.kind!r}"
+            )
         return self
 
     @property
@@ -329,12 +373,20 @@ class MarginSpec(_Model):
     stays >= 1 - eps."""
 
     enabled: bool = Field(True, description="run the slip-margin sweep")
-    amplitudes_deg: list[Real] = Field(default_factory=lambda: [0.0, 2.5, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0, 25.0, 30.0],
-                                       description="slip amplitudes A swept, deg")
+    amplitudes_deg: list[Real] = Field(
+        default_factory=lambda: [0.0, 2.5, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0, 25.0, 30.0],
+        description="slip amplitudes A swept, deg",
+    )
     n_per_amplitude: int = Field(200, ge=1, le=100_000_000, description="runs per amplitude, path, controller and axis")
-    eps: Real = Field(0.05, ge=POSITIVE, lt=1, description="tolerated failure rate: the margin is the largest A with success >= 1 - eps")
-    axes: list[Literal["rear", "front", "joint"]] = Field(default_factory=lambda: ["rear", "front", "joint"],
-                                                          description="slipping axles: rear, front, joint (both)")
+    eps: Real = Field(
+        0.05,
+        ge=POSITIVE,
+        lt=1,
+        description="tolerated failure rate: the margin is the largest A with success >= 1 - eps",
+    )
+    axes: list[Literal["rear", "front", "joint"]] = Field(
+        default_factory=lambda: ["rear", "front", "joint"], description="slipping axles: rear, front, joint (both)"
+    )
 
     @field_validator("amplitudes_deg")
     @classmethod
@@ -346,8 +398,10 @@ class MarginSpec(_Model):
     @model_validator(mode="after")
     def _check(self):
         if self.n_per_amplitude * len(self.amplitudes_deg) > 100_000_000:
-            raise ValueError(f"n_per_amplitude: at most 1e8 runs per axis and path (n_per_amplitude x "
-                             f"{len(self.amplitudes_deg)} amplitudes), got {self.n_per_amplitude * len(self.amplitudes_deg):.3g}")
+            raise ValueError(
+                f"n_per_amplitude: at most 1e8 runs per axis and path (n_per_amplitude x "
+                f"{len(self.amplitudes_deg)} amplitudes), got {self.n_per_amplitude * len(self.amplitudes_deg):.3g}"
+            )
         return self
 
 
@@ -363,7 +417,9 @@ class FalsifierSpec(_Model):
     f_max_hz: Real = Field(0.5, ge=0, le=10, description="slip bandwidth, Hz (0: constant slip)")
     lateral_offset: Real = Field(0.5, ge=0, description="start offsets searched within +-this, m")
     heading_error_deg: Real = Field(30.0, ge=0, lt=90, description="start heading errors searched within +-this, deg")
-    objective: Literal["iae", "ise", "itae", "max_abs_d", "late_max_abs_d"] = Field("iae", description="what the search maximises")
+    objective: Literal["iae", "ise", "itae", "max_abs_d", "late_max_abs_d"] = Field(
+        "iae", description="what the search maximises"
+    )
     n_restarts: int = Field(8, ge=1, le=256, description="random starts of the gradient ascent")
     steps: int = Field(40, ge=1, le=10_000, description="adam steps per start")
 
@@ -376,9 +432,15 @@ class ControllerSpec(_Model):
     override the defaults or the design; ``K`` is the vector gain of state_feedback and integral."""
 
     name: str = Field(description="label in outputs")
-    type: str = Field(description="a registered controller or design: lmi, paper_k, state_feedback, pi, integral, stanley, ...")
-    K: list[Real] | None = Field(None, description="vector gain of state_feedback [k_d rad/m, k_theta rad/rad] or integral")
-    gains: dict[str, Real] = Field(default_factory=dict, description="scalar gains by name (the others: defaults or the design's)")
+    type: str = Field(
+        description="a registered controller or design: lmi, paper_k, state_feedback, pi, integral, stanley, ..."
+    )
+    K: list[Real] | None = Field(
+        None, description="vector gain of state_feedback [k_d rad/m, k_theta rad/rad] or integral"
+    )
+    gains: dict[str, Real] = Field(
+        default_factory=dict, description="scalar gains by name (the others: defaults or the design's)"
+    )
     alpha: Real = Field(10.0, ge=0, description="designs: weight on gamma_inf^2")
     beta: Real = Field(1.0, ge=0, description="designs: weight on gamma_2^2")
 
@@ -398,8 +460,10 @@ class ControllerSpec(_Model):
         e, d = resolve(self.type)
         if self.K is not None:
             if d is not None or "K" not in e.labels:
-                raise ValueError(f"K is only for types with a vector gain K "
-                                 f"({', '.join(n for n, x in _registry().items() if 'K' in x.labels)}), not {self.type!r}")
+                raise ValueError(
+                    f"K is only for types with a vector gain K "
+                    f"({', '.join(n for n, x in _registry().items() if 'K' in x.labels)}), not {self.type!r}"
+                )
             if len(self.K) != len(e.labels["K"]):
                 raise ValueError(f"{self.type} needs K = [{', '.join(e.labels['K'])}]")
         return self
@@ -414,10 +478,16 @@ def _registry():
 class StudySpec(_Model):
     name: str = Field(description="study name: the default output directory is results/<name>")
     n_runs: int = Field(ge=1, le=100_000_000, description="runs per controller and path")
-    seed: int = Field(ge=0, le=MAX_SEED, description="seed of every random draw (run i of path p draws from fold_in(fold_in(seed, p), i))")
+    seed: int = Field(
+        ge=0,
+        le=MAX_SEED,
+        description="seed of every random draw (run i of path p draws from fold_in(fold_in(seed, p), i))",
+    )
     chunk_size: int = Field(4096, ge=1, le=10_000_000, description="runs simulated (and saved for resuming) at once")
     dtype: Literal["float32", "float64"] = Field("float32", description="floating-point precision of the simulation")
-    f64_check_runs: int = Field(64, ge=0, le=4096, description="float32 studies: runs per controller re-simulated in float64")
+    f64_check_runs: int = Field(
+        64, ge=0, le=4096, description="float32 studies: runs per controller re-simulated in float64"
+    )
     sim: SimSpec = SimSpec()
     success: SuccessSpec = SuccessSpec()
     vehicle: VehicleSpec = VehicleSpec()
@@ -435,17 +505,26 @@ class StudySpec(_Model):
         from pfjax.outputs import NAME_PATTERN
 
         if not NAME_PATTERN.match(v):
-            raise ValueError("expected 1-100 letters, digits, '_', '.' or '-' starting with a letter or digit "
-                             "(it names the output directory results/<name>)")
+            raise ValueError(
+                "expected 1-100 letters, digits, '_', '.' or '-' starting with a letter or digit "
+                "(it names the output directory results/<name>)"
+            )
         return v
 
     @model_validator(mode="after")
     def _check(self):
         if self.success.from_s > self.sim.horizon:
-            raise ValueError(f"success.from_s: must be <= sim.horizon ({self.sim.horizon:g} s), got {self.success.from_s:g}")
+            raise ValueError(
+                f"success.from_s: must be <= sim.horizon ({self.sim.horizon:g} s), got {self.success.from_s:g}"
+            )
         if self.falsifier.path is not None and self.falsifier.path not in [p.label for p in self.paths]:
-            raise ValueError(f"falsifier.path: no path labelled {self.falsifier.path!r}; paths are {[p.label for p in self.paths]}")
-        for what, items in (("controllers", [c.name for c in self.controllers]), ("paths", [p.label for p in self.paths])):
+            raise ValueError(
+                f"falsifier.path: no path labelled {self.falsifier.path!r}; paths are {[p.label for p in self.paths]}"
+            )
+        for what, items in (
+            ("controllers", [c.name for c in self.controllers]),
+            ("paths", [p.label for p in self.paths]),
+        ):
             dup = {x for x in items if items.count(x) > 1}
             if dup:
                 raise ValueError(f"{what}: names must be unique, repeated: {sorted(dup)}")
@@ -486,7 +565,11 @@ def _model_at(loc) -> type[BaseModel] | None:
 
 def _format(err: ValidationError) -> str:
     e = err.errors()[0]
-    loc = [p for p in e["loc"] if not (isinstance(p, str) and ("[" in p or p in ("constant", "uniform", "normal", "truncnormal", "choice")))]
+    loc = [
+        p
+        for p in e["loc"]
+        if not (isinstance(p, str) and ("[" in p or p in ("constant", "uniform", "normal", "truncnormal", "choice")))
+    ]
     key = _loc(loc) or "config"
     if e["type"] == "extra_forbidden":
         parent = _model_at(loc[:-1])
@@ -510,8 +593,12 @@ def _format(err: ValidationError) -> str:
     return f"{key}: {msg} (got {_short(e.get('input'))})" if e["type"] != "value_error" else f"{key}: {msg}"
 
 
-_BOUNDS = {"greater_than": (">", "gt"), "greater_than_equal": (">=", "ge"), "less_than": ("<", "lt"),
-           "less_than_equal": ("<=", "le")}
+_BOUNDS = {
+    "greater_than": (">", "gt"),
+    "greater_than_equal": (">=", "ge"),
+    "less_than": ("<", "lt"),
+    "less_than_equal": ("<=", "le"),
+}
 
 
 def _set_nested(d: dict, update: dict) -> dict:
@@ -521,7 +608,9 @@ def _set_nested(d: dict, update: dict) -> dict:
             i = int(idx.rstrip("]"))
             lst = d.get(name)
             if not isinstance(lst, list) or not -len(lst) <= i < len(lst):
-                raise ConfigError(f"{k}: no such list element" if isinstance(lst, list) else f"{k}: {name} is not a list")
+                raise ConfigError(
+                    f"{k}: no such list element" if isinstance(lst, list) else f"{k}: {name} is not a list"
+                )
             if isinstance(v, dict) and "dist" not in v and isinstance(lst[i], dict):
                 _set_nested(lst[i], v)
             else:
@@ -535,8 +624,9 @@ def _set_nested(d: dict, update: dict) -> dict:
     return d
 
 
-def load_study(path: str | Path | None = None, overrides: list[str] = (), data: dict | None = None,
-               values: dict | None = None) -> tuple[StudySpec, dict]:
+def load_study(
+    path: str | Path | None = None, overrides: list[str] = (), data: dict | None = None, values: dict | None = None
+) -> tuple[StudySpec, dict]:
     """Read, override and validate a study. Returns ``(spec, raw_dict)``; raises ConfigError.
 
     Args:

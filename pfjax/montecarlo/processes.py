@@ -88,9 +88,14 @@ def follow(spec: StudySpec) -> dict:
     if "error" in msg:
         raise (ConfigError if msg["usage"] else RuntimeError)(msg["error"])
     designed = lambda c: C.DESIGNS[c.type].controller  # process 0's design, its gains broadcast
-    spec = spec.model_copy(update={"controllers": [
-        ControllerSpec(name=c.name, type=designed(c), gains=msg["gains"][c.name]) if c.type in C.DESIGNS else c
-        for c in spec.controllers]})
+    spec = spec.model_copy(
+        update={
+            "controllers": [
+                ControllerSpec(name=c.name, type=designed(c), gains=msg["gains"][c.name]) if c.type in C.DESIGNS else c
+                for c in spec.controllers
+            ]
+        }
+    )
     controllers = controllers_of(spec)
     skip = _Skip(msg["finished"])
     with precision(spec):

@@ -29,6 +29,7 @@ from pfjax.sim import sharding
 from pfjax.sim.simulate import SimConfig, simulate_batch
 from pfjax.sim.status import STATUS_NAMES
 
+
 def _nominal(d) -> float:
     """A distribution's nominal value: its value, mean or midpoint."""
     return d.value if d.dist == "constant" else (d.mean if d.mean is not None else 0.5 * (d.low + d.high))
@@ -59,9 +60,17 @@ def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
 
 def sim_config(spec: StudySpec) -> SimConfig:
     s = spec.sim
-    return SimConfig(dt=s.dt, horizon=s.horizon, control_every=s.control_every, record=False, d_fail=s.d_fail,
-                     settle_band=s.settle_band, steady_window=s.steady_window, success_band=spec.success.band,
-                     success_from=spec.success.from_s)
+    return SimConfig(
+        dt=s.dt,
+        horizon=s.horizon,
+        control_every=s.control_every,
+        record=False,
+        d_fail=s.d_fail,
+        settle_band=s.settle_band,
+        steady_window=s.steady_window,
+        success_band=spec.success.band,
+        success_from=spec.success.from_s,
+    )
 
 
 def precision(spec: StudySpec):
@@ -94,7 +103,9 @@ def sample_aligned(spec: StudySpec, path_index: int, idx: np.ndarray, *, slip_ov
     n = len(idx)
     m = max(pad_to or 0, batch_size(n))
     pad = lambda a: np.concatenate([np.asarray(a), np.repeat(np.asarray(a)[:1], m - n)])
-    sampled = sample_runs(spec, path_index, pad(idx), slip_override=None if slip_override is None else tuple(map(pad, slip_override)))
+    sampled = sample_runs(
+        spec, path_index, pad(idx), slip_override=None if slip_override is None else tuple(map(pad, slip_override))
+    )
     return sampled._replace(columns={k: v[:n] for k, v in sampled.columns.items()})
 
 
@@ -113,8 +124,17 @@ def sample_few(spec: StudySpec, path_index: int, idx: np.ndarray):
     return sampled._replace(scenarios=jax.tree_util.tree_map(lambda a: np.asarray(a)[:m], sampled.scenarios))
 
 
-def simulate_chunk(spec: StudySpec, path_index: int, idx: np.ndarray, name: str, controller, *, slip_override=None,
-                   pad_to: int | None = None, sampled=None) -> pd.DataFrame:
+def simulate_chunk(
+    spec: StudySpec,
+    path_index: int,
+    idx: np.ndarray,
+    name: str,
+    controller,
+    *,
+    slip_override=None,
+    pad_to: int | None = None,
+    sampled=None,
+) -> pd.DataFrame:
     """Simulate runs ``idx`` of one path with one controller; one row per run (see module docstring).
 
     The batch is padded to ``pad_to`` runs (default: the study's chunk, or fewer for a smaller
@@ -125,7 +145,9 @@ def simulate_chunk(spec: StudySpec, path_index: int, idx: np.ndarray, name: str,
     if sampled is None:
         sampled = sample_aligned(spec, path_index, idx, slip_override=slip_override, pad_to=pad_to)
     m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
-    res = sharding.gather(simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec)))
+    res = sharding.gather(
+        simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec))
+    )
     df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
     for col in column_names(spec):
         df[col] = np.asarray(sampled.columns[col], dtype=float) if col in sampled.columns else np.nan
@@ -145,8 +167,17 @@ def add_results(df: pd.DataFrame, res, n: int) -> pd.DataFrame:
     return df
 
 
-def simulate_runs(spec: StudySpec, path_index: int, runs: np.ndarray, controllers, *, slip_override=None, chunk=None,
-                  store: ChunkStore | None = None, prefix: str = "runs"):
+def simulate_runs(
+    spec: StudySpec,
+    path_index: int,
+    runs: np.ndarray,
+    controllers,
+    *,
+    slip_override=None,
+    chunk=None,
+    store: ChunkStore | None = None,
+    prefix: str = "runs",
+):
     """Simulate ``runs`` of one path for every controller; yields ``(controller name, chunk key, DataFrame)``.
 
     Rows come in a canonical order (controller, then run) whatever the chunk size. Every controller
@@ -162,8 +193,8 @@ def simulate_runs(spec: StudySpec, path_index: int, runs: np.ndarray, controller
     shared = {} if len(controllers) > 1 else None
     for ci, (name, controller) in enumerate(controllers.items()):
         for a in range(0, len(runs), chunk):
-            idx = runs[a:a + chunk]
-            over = None if slip_override is None else tuple(np.asarray(o)[a:a + chunk] for o in slip_override)
+            idx = runs[a : a + chunk]
+            over = None if slip_override is None else tuple(np.asarray(o)[a : a + chunk] for o in slip_override)
             key = f"{prefix}-p{path_index:03d}-c{ci:03d}-{a:010d}"
 
             def compute(a=a, idx=idx, over=over, name=name, controller=controller, last=ci == len(controllers) - 1):
@@ -176,8 +207,9 @@ def simulate_runs(spec: StudySpec, path_index: int, runs: np.ndarray, controller
                             shared[a] = sampled
                         else:
                             shared = None
-                return simulate_chunk(spec, path_index, idx, name, controller, slip_override=over, pad_to=pad_to,
-                                      sampled=sampled)
+                return simulate_chunk(
+                    spec, path_index, idx, name, controller, slip_override=over, pad_to=pad_to, sampled=sampled
+                )
 
             yield name, key, (compute() if store is None else store.get(key, compute))
 
@@ -197,8 +229,16 @@ def controllers_of(spec: StudySpec) -> dict:
         return {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
 
 
-def run_study(spec: StudySpec, out, *, progress: bool | None = None, extra=None, fresh: bool = False,
-              controllers: dict | None = None, overwrite: bool = False) -> dict:
+def run_study(
+    spec: StudySpec,
+    out,
+    *,
+    progress: bool | None = None,
+    extra=None,
+    fresh: bool = False,
+    controllers: dict | None = None,
+    overwrite: bool = False,
+) -> dict:
     """Run ``spec``, write ``out/runs.parquet`` and return the run table's location and timings.
 
     ``out``: the output directory, or an :class:`~pfjax.outputs.OutputDir` the caller opened (it
@@ -223,8 +263,14 @@ def study_output(spec: StudySpec, out=None, *, overwrite: bool = False, flag: st
     from pfjax.montecarlo.config import study_hash
 
     target = Path("results") / spec.name if out is None else out
-    return OutputDir(target, command="study", config_sha256=study_hash(spec), overwrite=overwrite, flag=flag,
-                     extra={"study": spec.name, "seed": spec.seed})
+    return OutputDir(
+        target,
+        command="study",
+        config_sha256=study_hash(spec),
+        overwrite=overwrite,
+        flag=flag,
+        extra={"study": spec.name, "seed": spec.seed},
+    )
 
 
 def _run_study(spec: StudySpec, output: OutputDir, *, progress, extra, fresh, controllers) -> dict:
@@ -259,8 +305,9 @@ MARGIN_COLUMNS = ["path", "controller", "axis", "amplitude_deg", "success", "sta
 SWEEP_COUNT_KEYS = ["controller", "axis", "amplitude_deg"]
 
 
-def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None, store: ChunkStore | None = None,
-                 dest=None) -> pd.DataFrame:
+def margin_sweep(
+    spec: StudySpec, controllers, *, progress: bool | None = None, store: ChunkStore | None = None, dest=None
+) -> pd.DataFrame:
     """Success counts over the slip-amplitude grid, per controller, axis and amplitude (all paths
     pooled): columns ``controller, axis, amplitude_deg, k`` (successes) and ``n`` (runs).
 
@@ -279,10 +326,21 @@ def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None, 
     counts = []
     total = len(m.axes) * len(amps) * n * len(spec.paths) * len(controllers)
     sink = ParquetAppender(dest, file_metadata(spec)) if dest is not None else contextlib.nullcontext()
-    with sink, tqdm(total=total, desc=f"{spec.name}: slip margin", unit="run",
-                    disable=None if progress is None else not progress) as bar:
+    with (
+        sink,
+        tqdm(
+            total=total,
+            desc=f"{spec.name}: slip margin",
+            unit="run",
+            disable=None if progress is None else not progress,
+        ) as bar,
+    ):
         for xi, axis in enumerate(m.axes):
-            runs = MARGIN_RUN_OFFSET + (xi * len(amps) + np.repeat(np.arange(len(amps)), n)) * n + np.tile(np.arange(n), len(amps))
+            runs = (
+                MARGIN_RUN_OFFSET
+                + (xi * len(amps) + np.repeat(np.arange(len(amps)), n)) * n
+                + np.tile(np.arange(n), len(amps))
+            )
             amp = np.repeat(amps, n)
             for p in range(len(spec.paths)):
                 signs = _signs(spec, p, runs)
@@ -290,8 +348,9 @@ def margin_sweep(spec: StudySpec, controllers, *, progress: bool | None = None, 
                 bf = amp * signs[:, 1] * (axis in ("front", "joint"))
                 rows_of = lambda df, axis=axis, runs=runs, amp=amp: _margin_rows(df, axis, runs, amp)
                 sweep_store = None if store is None else _Project(store, rows_of)
-                for _, _, df in simulate_runs(spec, p, runs, controllers, slip_override=(br, bf), store=sweep_store,
-                                              prefix=f"margin-{axis}"):
+                for _, _, df in simulate_runs(
+                    spec, p, runs, controllers, slip_override=(br, bf), store=sweep_store, prefix=f"margin-{axis}"
+                ):
                     rows = df if store is not None else rows_of(df)
                     if not rows.empty:  # (empty: a chunk another process computes)
                         if dest is not None:

@@ -16,9 +16,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from pfjax import paths
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
 from pfjax.montecarlo.config import Dist, PathSpec, StudySpec
-from pfjax import paths
 from pfjax.paths import shapes
 from pfjax.paths.geometry import arc_length, tangent_angle
 from pfjax.sim.simulate import Scenario, SensorNoise
@@ -26,12 +26,33 @@ from pfjax.sim.slip_profiles import SlipProfile
 
 #: Fixed quantity indices (never reorder: they define the random streams).
 QUANTITIES = (
-    "speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", "step_time_s", "step_r_deg", "step_f_deg",
-    "amp_r_deg", "amp_f_deg", "freq_hz", "phase_r", "phase_f", "ou_sigma_deg", "ou_tau_s", "start_along_m",
-    "lateral_offset", "heading_error_deg", "radius", "path", "noise", "ou_r", "ou_f", "sign_r", "sign_f",
+    "speed",
+    "L",
+    "delta_max_deg",
+    "beta_r_deg",
+    "beta_f_deg",
+    "step_time_s",
+    "step_r_deg",
+    "step_f_deg",
+    "amp_r_deg",
+    "amp_f_deg",
+    "freq_hz",
+    "phase_r",
+    "phase_f",
+    "ou_sigma_deg",
+    "ou_tau_s",
+    "start_along_m",
+    "lateral_offset",
+    "heading_error_deg",
+    "radius",
+    "path",
+    "noise",
+    "ou_r",
+    "ou_f",
+    "sign_r",
+    "sign_f",
 )
 Q = {name: i for i, name in enumerate(QUANTITIES)}
-
 
 
 def run_keys(seed: int, path_index: int, runs: np.ndarray) -> jax.Array:
@@ -81,15 +102,28 @@ class Sampled(NamedTuple):
     scenarios: Scenario  # batched, gains = None (filled per controller)
 
 
-SLIP_COLUMNS = {"constant": (), "step": ("step_time_s", "step_r_deg", "step_f_deg"),
-                "sinusoid": ("amp_r_deg", "amp_f_deg", "freq_hz"), "ou": ("ou_sigma_deg", "ou_tau_s")}
+SLIP_COLUMNS = {
+    "constant": (),
+    "step": ("step_time_s", "step_r_deg", "step_f_deg"),
+    "sinusoid": ("amp_r_deg", "amp_f_deg", "freq_hz"),
+    "ou": ("ou_sigma_deg", "ou_tau_s"),
+}
 
 
 def column_names(spec: StudySpec) -> list[str]:
     """The sampled-parameter columns of a study's run table (fixed for the whole study; NaN where
     a column does not apply to a path)."""
-    cols = ["speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", *SLIP_COLUMNS[spec.slip.kind],
-            "start_along_m", "lateral_offset", "heading_error_deg"]
+    cols = [
+        "speed",
+        "L",
+        "delta_max_deg",
+        "beta_r_deg",
+        "beta_f_deg",
+        *SLIP_COLUMNS[spec.slip.kind],
+        "start_along_m",
+        "lateral_offset",
+        "heading_error_deg",
+    ]
     if any(p.kind == "circle" for p in spec.paths):
         cols.append("radius")
     return cols
@@ -111,14 +145,23 @@ def _slip(spec: StudySpec, key, horizon: float, given=None):
         cols.update(step_time_s=step_time, step_r_deg=sr, step_f_deg=sf)
     elif s.kind == "sinusoid":
         ar, af, fr = d("amp_r_deg"), d("amp_f_deg"), d("freq_hz")
-        ph = jnp.stack([jax.random.uniform(_q(key, "phase_r"), (), maxval=2 * math.pi),
-                        jax.random.uniform(_q(key, "phase_f"), (), maxval=2 * math.pi)])
+        ph = jnp.stack(
+            [
+                jax.random.uniform(_q(key, "phase_r"), (), maxval=2 * math.pi),
+                jax.random.uniform(_q(key, "phase_f"), (), maxval=2 * math.pi),
+            ]
+        )
         terms.update(sin_amp=jnp.stack([ar, af]) * rad, sin_freq=jnp.stack([fr, fr]), sin_phase=ph)
         cols.update(amp_r_deg=ar, amp_f_deg=af, freq_hz=fr)
     elif s.kind == "ou":
         sig, tau = d("ou_sigma_deg"), d("ou_tau_s")
-        seq = jnp.stack([ou_sequence(_q(key, "ou_r"), n_seq, s.seq_dt, sig * rad, tau),
-                         ou_sequence(_q(key, "ou_f"), n_seq, s.seq_dt, sig * rad, tau)], axis=1)
+        seq = jnp.stack(
+            [
+                ou_sequence(_q(key, "ou_r"), n_seq, s.seq_dt, sig * rad, tau),
+                ou_sequence(_q(key, "ou_f"), n_seq, s.seq_dt, sig * rad, tau),
+            ],
+            axis=1,
+        )
         terms.update(seq=seq, seq_dt=jnp.asarray(s.seq_dt, float))
         cols.update(ou_sigma_deg=sig, ou_tau_s=tau)
     profile = SlipProfile(constant=jnp.stack([br, bf]) * rad, **terms)
@@ -178,7 +221,7 @@ SAMPLE_BLOCK = 2048
 class _Static:
     """A pydantic model as a static ``jax.jit`` argument: hashed and compared by its JSON."""
 
-    __slots__ = ("model", "_json")
+    __slots__ = ("_json", "model")
 
     def __init__(self, model):
         self.model, self._json = model, model.model_dump_json()
@@ -191,11 +234,21 @@ class _Static:
 
 
 #: Quantities :func:`sample_runs` can take per run (``given``) instead of drawing them.
-GIVEN = ("speed", "L", "delta_max_deg", "beta_r_deg", "beta_f_deg", "start_along_m", "lateral_offset", "heading_error_deg")
+GIVEN = (
+    "speed",
+    "L",
+    "delta_max_deg",
+    "beta_r_deg",
+    "beta_f_deg",
+    "start_along_m",
+    "lateral_offset",
+    "heading_error_deg",
+)
 
 
-def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_override=None, key=None,
-                given: dict | None = None) -> Sampled:
+def sample_runs(
+    spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_override=None, key=None, given: dict | None = None
+) -> Sampled:
     """Scenarios (without gains) and sampled columns for the given run indices of one path.
 
     ``slip_override``: optional ``(beta_r_deg, beta_f_deg)`` arrays replacing the constant slip
@@ -208,10 +261,15 @@ def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_over
     milliseconds instead of the ~0.2 s of some hundred op-by-op dispatches.
     """
     pspec = spec.paths[path_index]
-    keys = run_keys(spec.seed, path_index, runs) if key is None else _fold_runs(key, jnp.asarray(runs, dtype=jnp.uint32))
+    keys = (
+        run_keys(spec.seed, path_index, runs) if key is None else _fold_runs(key, jnp.asarray(runs, dtype=jnp.uint32))
+    )
     given = {k: jnp.asarray(v, jnp.result_type(float)) for k, v in (given or {}).items()}
     if pspec.kind == "random":
-        drawn = [random_path(jax.random.fold_in(k, Q["path"]), pspec, pspec.curvature_margin * _kappa_follow(spec)) for k in keys]
+        drawn = [
+            random_path(jax.random.fold_in(k, Q["path"]), pspec, pspec.curvature_margin * _kappa_follow(spec))
+            for k in keys
+        ]
         path, circle = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *drawn), None
     else:
         path = _fixed_path(pspec)
@@ -219,8 +277,17 @@ def sample_runs(spec: StudySpec, path_index: int, runs: np.ndarray, *, slip_over
     # the override is always passed (zeros and a false flag when absent): one program for both
     over = (np.zeros(len(runs)),) * 2 if slip_override is None else slip_override
     over = tuple(jnp.asarray(a, float) for a in over)
-    cols, sc = _draw_runs(keys, given, path, jnp.asarray(paths.entry(pspec.kind).start_u, float), over, slip_override is not None,
-                          study=_Static(spec), circle=circle, batched_path=pspec.kind == "random")
+    cols, sc = _draw_runs(
+        keys,
+        given,
+        path,
+        jnp.asarray(paths.entry(pspec.kind).start_u, float),
+        over,
+        slip_override is not None,
+        study=_Static(spec),
+        circle=circle,
+        batched_path=pspec.kind == "random",
+    )
     return Sampled({k: np.asarray(v) for k, v in cols.items()}, sc)
 
 
@@ -231,8 +298,9 @@ def _kappa_follow(spec: StudySpec) -> float:
 
 
 @partial(jax.jit, static_argnames=("study", "circle", "batched_path"))
-def _draw_runs(keys, given, path, u_nom, slip_override, use_override, *, study: _Static, circle: _Static | None,
-               batched_path: bool):
+def _draw_runs(
+    keys, given, path, u_nom, slip_override, use_override, *, study: _Static, circle: _Static | None, batched_path: bool
+):
     """Every run's draws (vmapped over ``keys``; per-run ``given`` values instead where given) and its start pose on ``path`` (batched if
     ``batched_path``; a circle of drawn radius if ``circle`` is its radius distribution); the
     constant slip replaced by ``slip_override`` (deg) where ``use_override``."""
@@ -248,9 +316,21 @@ def _draw_runs(keys, given, path, u_nom, slip_override, use_override, *, study: 
         start_along_m = d(spec.initial.start_along_m, "start_along_m")
         offset = d(spec.initial.lateral_offset, "lateral_offset")
         herr = d(spec.initial.heading_error_deg, "heading_error_deg")
-        cols.update(speed=speed, L=L, delta_max_deg=dmax, start_along_m=start_along_m, lateral_offset=offset, heading_error_deg=herr)
-        params = SlipParams(v=speed, L=L, delta_max=dmax * rad, convention=jnp.asarray(CONVENTIONS[v.convention], jnp.int32),
-                            delta_rate_max=jnp.asarray(math.inf if v.delta_rate_max_deg is None else v.delta_rate_max_deg * rad, float))
+        cols.update(
+            speed=speed,
+            L=L,
+            delta_max_deg=dmax,
+            start_along_m=start_along_m,
+            lateral_offset=offset,
+            heading_error_deg=herr,
+        )
+        params = SlipParams(
+            v=speed,
+            L=L,
+            delta_max=dmax * rad,
+            convention=jnp.asarray(CONVENTIONS[v.convention], jnp.int32),
+            delta_rate_max=jnp.asarray(math.inf if v.delta_rate_max_deg is None else v.delta_rate_max_deg * rad, float),
+        )
         return profile, params, cols, (start_along_m, offset, herr * rad)
 
     profiles, params, cols, starts = jax.vmap(one)(keys, given)
@@ -270,6 +350,9 @@ def _draw_runs(keys, given, path, u_nom, slip_override, use_override, *, study: 
     pose0, u0 = jax.lax.map(lambda a: _start_pose(a[0], u_nom, *a[1:]), (path, *starts), batch_size=SAMPLE_BLOCK)
     noise = None
     if spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0:
-        noise = SensorNoise(jnp.full((n,), spec.noise.sigma_d, float), jnp.full((n,), spec.noise.sigma_theta_e_deg * rad, float),
-                            jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys))
+        noise = SensorNoise(
+            jnp.full((n,), spec.noise.sigma_d, float),
+            jnp.full((n,), spec.noise.sigma_theta_e_deg * rad, float),
+            jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys),
+        )
     return cols, Scenario(pose0=pose0, slip=profiles, params=params, path=path, gains=None, noise=noise, u0=u0)

@@ -57,8 +57,15 @@ class SideJobs:
     work through alone.
     """
 
-    def __init__(self, spec: StudySpec, controllers: dict, *, overlap: bool = True, report: bool = True,
-                 worker: figure_worker.FigureWorker | None = None):
+    def __init__(
+        self,
+        spec: StudySpec,
+        controllers: dict,
+        *,
+        overlap: bool = True,
+        report: bool = True,
+        worker: figure_worker.FigureWorker | None = None,
+    ):
         from concurrent.futures import ThreadPoolExecutor
 
         from pfjax.montecarlo.checks import float64_runs
@@ -82,6 +89,7 @@ class SideJobs:
                         value = fn(*args)
                 self.seconds[phase] = self.seconds.get(phase, 0.0) + time.perf_counter() - t
                 return value
+
             if self._pool is None:
                 return _Deferred(timed)
             job = _Stealable(self._pool.submit(timed), timed)
@@ -94,16 +102,30 @@ class SideJobs:
         if report:
             from pfjax.report.figure_set import warm_predictions
 
-            self.report_warmup = task("report_warmup", warm_predictions, spec, {k: v[2] for k, v in controllers.items()},
-                                      pinned=False)
+            self.report_warmup = task(
+                "report_warmup", warm_predictions, spec, {k: v[2] for k, v in controllers.items()}, pinned=False
+            )
         self.worst_figure = _WorstFigure(worker, spec, list(controllers)) if report and spec.falsifier.enabled else None
         found = (lambda name, value: value) if self.worst_figure is None else self.worst_figure.found
-        self.worst = {name: task("worst_case", lambda *a, name=name, **k: found(name, worst_case(*a, **k)), spec,
-                                 controllers, i)
-                      for i, name in enumerate(controllers)} if spec.falsifier.enabled else {}
+        self.worst = (
+            {
+                name: task(
+                    "worst_case", lambda *a, name=name, **k: found(name, worst_case(*a, **k)), spec, controllers, i
+                )
+                for i, name in enumerate(controllers)
+            }
+            if spec.falsifier.enabled
+            else {}
+        )
         checked = spec.dtype != "float64" and spec.f64_check_runs > 0
-        self.float64 = [task("float64_check", float64_runs, spec, controllers, spec.f64_check_runs, p)
-                        for p in range(len(spec.paths))] if checked else None
+        self.float64 = (
+            [
+                task("float64_check", float64_runs, spec, controllers, spec.f64_check_runs, p)
+                for p in range(len(spec.paths))
+            ]
+            if checked
+            else None
+        )
 
     def take_over(self) -> None:
         """Compute here every task the background thread has not started, the latest first."""
@@ -155,13 +177,19 @@ class _WorstFigure:
 
     def _maybe_submit(self) -> None:
         with self._lock:
-            if self._worker is None or self._out is None or self._request is not None or \
-                    len(self._found) < len(self._names):
+            if (
+                self._worker is None
+                or self._out is None
+                or self._request is not None
+                or len(self._found) < len(self._names)
+            ):
                 return
             # the figure reads only the summary's worst-case blocks, in the controllers' order
             summary = {"controllers": {n: {"worst_case": self._found[n][0]} for n in self._names}}
             trajs = {n: self._found[n][1] for n in self._names}
-            self._request = self._worker.submit(*self._out[:1], self._spec, summary, self._out[1], ["worst_cases"], trajs)
+            self._request = self._worker.submit(
+                *self._out[:1], self._spec, summary, self._out[1], ["worst_cases"], trajs
+            )
 
     def result(self) -> dict | None:
         """The figure's entry (as :func:`~pfjax.report.figure_set.report_figures`), or None if it
@@ -199,9 +227,20 @@ class _Deferred:
         return self._value
 
 
-def run(spec: StudySpec, out=None, *, progress: bool | None = None, report: bool = True,
-        fresh: bool = False, warn=None, overlap: bool = True, worker: figure_worker.FigureWorker | None = None,
-        controllers: dict | None = None, overwrite: bool = False, distributed: bool = False) -> dict:
+def run(
+    spec: StudySpec,
+    out=None,
+    *,
+    progress: bool | None = None,
+    report: bool = True,
+    fresh: bool = False,
+    warn=None,
+    overlap: bool = True,
+    worker: figure_worker.FigureWorker | None = None,
+    controllers: dict | None = None,
+    overwrite: bool = False,
+    distributed: bool = False,
+) -> dict:
     """Run a validated study; returns the summary.
 
     ``out``: the output directory (default ``results/<name>``), or an
@@ -239,8 +278,17 @@ def run(spec: StudySpec, out=None, *, progress: bool | None = None, report: bool
         output.open()
         if worker is None and report and overlap and figure_worker.enabled():
             worker = figure_worker.FigureWorker()  # imports matplotlib now, draws once the runs are written
-        return _run(spec, output, progress=progress, report=report, fresh=fresh, warn=warn, overlap=overlap,
-                    worker=worker, controllers=controllers)
+        return _run(
+            spec,
+            output,
+            progress=progress,
+            report=report,
+            fresh=fresh,
+            warn=warn,
+            overlap=overlap,
+            worker=worker,
+            controllers=controllers,
+        )
     finally:
         if worker is not None:
             worker.close()
@@ -265,8 +313,11 @@ def _run(spec: StudySpec, output, *, progress, report, fresh, warn, overlap, wor
         timings = {"runs": time.time() - t0}  # s per phase (wall clock), in summary.json
         lap = [time.time()]
         # the figures of the runs alone, drawn by the worker process during the margin sweep
-        early = worker.submit(tmp, spec, {"paths": [p.label for p in spec.paths]}, runs_path, RUN_FIGURES) \
-            if worker is not None else None
+        early = (
+            worker.submit(tmp, spec, {"paths": [p.label for p in spec.paths]}, runs_path, RUN_FIGURES)
+            if worker is not None
+            else None
+        )
         if side.worst_figure is not None:
             side.worst_figure.start(tmp, runs_path)  # asked of the worker now if the search is done, else when it is
 
@@ -275,14 +326,22 @@ def _run(spec: StudySpec, output, *, progress, report, fresh, warn, overlap, wor
             timings[phase] = timings.get(phase, 0.0) + now - lap[0]
             lap[0] = now
 
-        sweep = margin_sweep(spec, controllers, progress=progress, store=store, dest=tmp / "margin.parquet") \
-            if spec.margin.enabled else None
+        sweep = (
+            margin_sweep(spec, controllers, progress=progress, store=store, dest=tmp / "margin.parquet")
+            if spec.margin.enabled
+            else None
+        )
         mark("margin")
         # Without a report the run table is never loaded whole: the summary reads one controller at
         # a time and the float64 check only its sampled runs (memory: one controller's rows at most).
         runs = read_runs(runs_path) if report else None
-        summary = summarize(spec, runs if runs is not None else runs_path, sweep,
-                            gains={k: v[2] for k, v in controllers.items()}, wall_s=time.time() - t0)
+        summary = summarize(
+            spec,
+            runs if runs is not None else runs_path,
+            sweep,
+            gains={k: v[2] for k, v in controllers.items()},
+            wall_s=time.time() - t0,
+        )
         summary["warnings"] = warnings
         summary["float64_check"] = None  # below: its float64 runs may still be running in the background
         summary["chunks"] = {"simulated": store.computed, "resumed": store.reused}
@@ -312,9 +371,14 @@ def _run(spec: StudySpec, output, *, progress, report, fresh, warn, overlap, wor
                 worst_figure = report_figures(tmp, spec, summary, runs, worst_traj, names=["worst_cases"])
             figures = ordered_figures(worst_figure, figures, *(part.result() for part in parts))
             mark("report")
-        check_rows = runs if runs is not None or spec.dtype == "float64" or spec.f64_check_runs <= 0 else \
-            read_runs(runs_path, filters=[("run", "in", sample_indices(spec, spec.f64_check_runs).tolist())])
-        summary["float64_check"] = float64_check(spec, controllers, check_rows, spec.f64_check_runs, sims=side.float64_runs())
+        check_rows = (
+            runs
+            if runs is not None or spec.dtype == "float64" or spec.f64_check_runs <= 0
+            else read_runs(runs_path, filters=[("run", "in", sample_indices(spec, spec.f64_check_runs).tolist())])
+        )
+        summary["float64_check"] = float64_check(
+            spec, controllers, check_rows, spec.f64_check_runs, sims=side.float64_runs()
+        )
         mark("float64_check")
         if report:
             write_report(tmp, spec, summary, runs, worst_traj, figures=figures)
@@ -377,8 +441,9 @@ def rewrite_report(out, spec: StudySpec, *, overwrite: bool = False) -> Path:
     with output:
         summary, runs = read_finished(output.target)
         redraw = [n for n in FIGURES if n != "worst_cases"]
-        output.start_from_existing(lambda rel: rel != "report.html" and not (
-            rel.startswith("figures/") and Path(rel).stem in redraw))
+        output.start_from_existing(
+            lambda rel: rel != "report.html" and not (rel.startswith("figures/") and Path(rel).stem in redraw)
+        )
         tmp = output.staging
         figures = report_figures(tmp, spec, summary, runs, names=redraw)
         if (tmp / "figures" / "worst_cases.png").is_file():

@@ -40,7 +40,9 @@ def _block(df: pd.DataFrame) -> dict:
     q = metric_quantiles(df, QUANTILE_METRICS)
     return {
         **s,
-        "iae_mean": q["iae"]["mean"], "iae_p95": q["iae"]["q95"], "steady_abs_d_p95": q["steady_abs_d"]["q95"],
+        "iae_mean": q["iae"]["mean"],
+        "iae_p95": q["iae"]["q95"],
+        "steady_abs_d_p95": q["steady_abs_d"]["q95"],
         "status_counts": {k: int(v) for k, v in df["status"].value_counts().items()},
         "quantiles": q,
     }
@@ -62,7 +64,15 @@ def success_by_param(df: pd.DataFrame, param: str, max_bins: int = 8) -> list[di
     out = []
     for lo, hi, m in groups:
         s = success_summary(success[m])
-        out.append({"lo": float(lo), "hi": float(hi), "n": s["n"], "success_rate": s["success_rate"], "success_ci95": s["success_ci95"]})
+        out.append(
+            {
+                "lo": float(lo),
+                "hi": float(hi),
+                "n": s["n"],
+                "success_rate": s["success_rate"],
+                "success_ci95": s["success_ci95"],
+            }
+        )
     return out
 
 
@@ -118,8 +128,9 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
             params = [c for c in column_names(spec) if df[c].nunique(dropna=True) > 1]
         block = _block(df)
         block["gains"] = gains.get(name, {})
-        block["per_path"] = {p: {k: v for k, v in _block(g).items() if k != "quantiles"}
-                             for p, g in df.groupby("path", sort=False)}
+        block["per_path"] = {
+            p: {k: v for k, v in _block(g).items() if k != "quantiles"} for p, g in df.groupby("path", sort=False)
+        }
         block["statement"] = supported_statement(len(df), int((~df["success"]).sum()))
         mg = margins(sweep, name, spec.margin.eps)
         block["slip_margin"] = mg
@@ -148,9 +159,13 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         "config": spec.model_dump(mode="json"),
         "paths": [p.label for p in spec.paths],
         "controllers": controllers,
-        "sample_size": {"note": "runs needed for P(success) within eps of the estimate (Hoeffding) or for zero failures to bound P(failure) <= eps (worst case), at confidence 1 - delta = 0.95",
-                        **{f"eps={e:g}": {"hoeffding": hoeffding_n(e, 0.05), "zero_failure": zero_failure_n(e, 0.05)}
-                                           for e in (0.05, 0.01, 0.001)}},
+        "sample_size": {
+            "note": "runs needed for P(success) within eps of the estimate (Hoeffding) or for zero failures to bound P(failure) <= eps (worst case), at confidence 1 - delta = 0.95",
+            **{
+                f"eps={e:g}": {"hoeffding": hoeffding_n(e, 0.05), "zero_failure": zero_failure_n(e, 0.05)}
+                for e in (0.05, 0.01, 0.001)
+            },
+        },
     }
 
 
@@ -159,8 +174,19 @@ def headline(summary: dict) -> pd.DataFrame:
     rows = []
     for name, c in summary["controllers"].items():
         lo, hi = c["success_ci95"]
-        rows.append({"controller": name, "runs": c["n"], "success_rate": c["success_rate"], "ci95_lo": lo, "ci95_hi": hi,
-                     "iae_mean": c["iae_mean"], "iae_p95": c["iae_p95"], "steady_abs_d_p95_mm": 1000 * c["steady_abs_d_p95"]
-                     if c["steady_abs_d_p95"] is not None and math.isfinite(c["steady_abs_d_p95"]) else math.nan,
-                     "slip_margin_deg": c["slip_margin_deg"]})
+        rows.append(
+            {
+                "controller": name,
+                "runs": c["n"],
+                "success_rate": c["success_rate"],
+                "ci95_lo": lo,
+                "ci95_hi": hi,
+                "iae_mean": c["iae_mean"],
+                "iae_p95": c["iae_p95"],
+                "steady_abs_d_p95_mm": 1000 * c["steady_abs_d_p95"]
+                if c["steady_abs_d_p95"] is not None and math.isfinite(c["steady_abs_d_p95"])
+                else math.nan,
+                "slip_margin_deg": c["slip_margin_deg"],
+            }
+        )
     return pd.DataFrame(rows)

@@ -20,7 +20,7 @@ up to rounding (tested).
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
@@ -66,8 +66,9 @@ def value_and_grad(fun: Callable, *, mode: str = "auto", has_aux: bool = False) 
         f = lambda v: fun(unravel(v), *args)
         basis = jnp.eye(flat.size, dtype=flat.dtype)
         if has_aux:
-            value, dirs, aux = jax.vmap(lambda t: jax.jvp(f, (flat,), (t,), has_aux=True),
-                                        out_axes=(None, 0, None))(basis)
+            value, dirs, aux = jax.vmap(lambda t: jax.jvp(f, (flat,), (t,), has_aux=True), out_axes=(None, 0, None))(
+                basis
+            )
             return (value, aux), unravel(dirs)
         value, dirs = jax.vmap(lambda t: jax.jvp(f, (flat,), (t,)), out_axes=(None, 0))(basis)
         return value, unravel(dirs)

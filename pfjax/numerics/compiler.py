@@ -74,8 +74,7 @@ def vector_width(environ=None, cpuinfo: str = CPUINFO) -> int | None:
     if want:
         if want.isdigit():
             return int(want) or None
-        warnings.warn(f"{VECTOR_WIDTH_ENV}: value {want!r} ignored, expected a whole number of bits >= 0",
-                      stacklevel=2)
+        warnings.warn(f"{VECTOR_WIDTH_ENV}: value {want!r} ignored, expected a whole number of bits >= 0", stacklevel=2)
     return 512 if has_avx512(cpuinfo) else None
 
 

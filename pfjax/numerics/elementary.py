@@ -38,7 +38,7 @@ ulp for ``|x| <= REDUCTION_LIMIT``
 from __future__ import annotations
 
 from decimal import Decimal, getcontext
-from functools import lru_cache
+from functools import cache
 
 import jax
 import jax.numpy as jnp
@@ -118,7 +118,7 @@ _DEGREES = {
 }
 
 
-@lru_cache(maxsize=None)
+@cache
 def _constants(dtype: np.dtype) -> dict:
     getcontext().prec = 60
     pi = Decimal(_PI_DIGITS)

@@ -113,7 +113,7 @@ def step_normals(key: Array, k, n: int, dtype=jnp.float32) -> Array:
     # Each draw on its own, stacked last: under vmap a (runs, n) array has a short minor axis, which
     # XLA's CPU backend evaluates element by element. The uniforms (so the hash) and the normals are
     # computed once (pfjax.numerics.elementary), else XLA repeats the hash in every kernel reading a draw.
-    u = _once([_uniform_open(words[i * per:(i + 1) * per], dtype) for i in range(n)])
+    u = _once([_uniform_open(words[i * per : (i + 1) * per], dtype) for i in range(n)])
     return jnp.stack(_once([jnp.asarray(math.sqrt(2.0), dtype) * jax.lax.erf_inv(2.0 * ui - 1.0) for ui in u]))
 
 

@@ -78,8 +78,10 @@ def _schedule(alpha_schedule):
     except TypeError:
         values = None
     if values is None:
-        raise InputError(f"alpha_schedule: expected numbers or a comma-separated string, got {alpha_schedule!r:.80}",
-                         "alpha_schedule")
+        raise InputError(
+            f"alpha_schedule: expected numbers or a comma-separated string, got {alpha_schedule!r:.80}",
+            "alpha_schedule",
+        )
     values = [errors.number(f"alpha_schedule[{i}]", v, positive=True) for i, v in enumerate(values)]
     try:
         return pad_schedule(values)
@@ -95,15 +97,20 @@ def _checked(map, x0, *, k1, k2, speed, scan_period, front, lag, t_max, default_
     from pfjax.parking.geometry import L2_LENGTH
     from pfjax.parking.maps import MapError, check_start, load_map, to_obstacle_map
 
-    k1, k2, speed, scan_period, t_max = (errors.number(key, v, positive=True) for key, v in (
-        ("k1", k1), ("k2", k2), ("speed", speed), ("scan_period", scan_period), ("t_max", t_max)))
+    k1, k2, speed, scan_period, t_max = (
+        errors.number(key, v, positive=True)
+        for key, v in (("k1", k1), ("k2", k2), ("speed", speed), ("scan_period", scan_period), ("t_max", t_max))
+    )
     if front is not None:
         front = errors.number("front", front, positive=True)
         if front >= L2_LENGTH:
             raise InputError(f"front: must be < {L2_LENGTH:g} (the rectangle length), got {front:g}", "front")
     if scan_period > MAX_SCAN_PERIOD or t_max / scan_period > MAX_PERIODS:
-        raise InputError(f"scan_period: value {scan_period:g}, expected t_max / scan_period <= {MAX_PERIODS} "
-                         f"and <= {MAX_SCAN_PERIOD:g} s", "scan_period")
+        raise InputError(
+            f"scan_period: value {scan_period:g}, expected t_max / scan_period <= {MAX_PERIODS} "
+            f"and <= {MAX_SCAN_PERIOD:g} s",
+            "scan_period",
+        )
     if not isinstance(lag, (bool, np.bool_)):
         raise InputError(f"lag: expected True or False, got {lag!r:.80}", "lag")
     spec = _map_spec(map)
@@ -120,13 +127,33 @@ def _checked(map, x0, *, k1, k2, speed, scan_period, front, lag, t_max, default_
         check_start(polygons, x0, shape, key="x0")
     except MapError as e:
         raise MapError(str(e), "x0") from None
-    return {"name": name, "spec": spec, "omap": to_obstacle_map(list(polygons.values())), "x0": x0, "front": front,
-            "scan_period": scan_period, "t_max": t_max,
-            "control": control_params(k1=k1, k2=k2, speed=speed, lag=bool(lag))}
+    return {
+        "name": name,
+        "spec": spec,
+        "omap": to_obstacle_map(list(polygons.values())),
+        "x0": x0,
+        "front": front,
+        "scan_period": scan_period,
+        "t_max": t_max,
+        "control": control_params(k1=k1, k2=k2, speed=speed, lag=bool(lag)),
+    }
 
 
-def run(map="parallel", x0=None, *, direction="forward", alpha_schedule=(1.0,), xs=None, k1=32.0, k2=8.0,
-        speed=0.05, scan_period=0.1, front=None, lag=False, t_max=200.0) -> dict:
+def run(
+    map="parallel",
+    x0=None,
+    *,
+    direction="forward",
+    alpha_schedule=(1.0,),
+    xs=None,
+    k1=32.0,
+    k2=8.0,
+    speed=0.05,
+    scan_period=0.1,
+    front=None,
+    lag=False,
+    t_max=200.0,
+) -> dict:
     """One run of the switching parking controller (``pfjax parking``): outcome, parking time and
     the log of direction switches.
 
@@ -170,8 +197,18 @@ def run(map="parallel", x0=None, *, direction="forward", alpha_schedule=(1.0,), 
     schedule = _schedule(alpha_schedule)
     if xs is not None:
         xs = errors.number("xs", xs)
-    c = _checked(map, x0, k1=k1, k2=k2, speed=speed, scan_period=scan_period, front=front, lag=lag, t_max=t_max,
-                 default_start={"parallel": CASES["A"]["x0"], "garage": GARAGE_START})
+    c = _checked(
+        map,
+        x0,
+        k1=k1,
+        k2=k2,
+        speed=speed,
+        scan_period=scan_period,
+        front=front,
+        lag=lag,
+        t_max=t_max,
+        default_start={"parallel": CASES["A"]["x0"], "garage": GARAGE_START},
+    )
     if xs is None and c["spec"] == "garage":  # the garage always has its X_s rule
         xs = GARAGE_XS
 
@@ -179,15 +216,45 @@ def run(map="parallel", x0=None, *, direction="forward", alpha_schedule=(1.0,), 
     from pfjax.parking.summary import run_summary
 
     x0 = c["x0"]
-    p = run_params(x0, DIRECTIONS[direction], list(schedule), xs=xs, front=c["front"], scan_period=c["scan_period"],
-                   control=c["control"])
+    p = run_params(
+        x0,
+        DIRECTIONS[direction],
+        list(schedule),
+        xs=xs,
+        front=c["front"],
+        scan_period=c["scan_period"],
+        control=c["control"],
+    )
     r = run_jit(p, c["omap"], ParkingConfig(t_max=c["t_max"]))
-    return {"map": c["name"], "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]}, "direction": direction,
-            "alpha_schedule": [float(a) for a in schedule], "xs": xs, "a_f": float(p.shape.front), **run_summary(r)}
+    return {
+        "map": c["name"],
+        "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]},
+        "direction": direction,
+        "alpha_schedule": [float(a) for a in schedule],
+        "xs": xs,
+        "a_f": float(p.shape.front),
+        **run_summary(r),
+    }
 
 
-def search(method, *, map="garage", x0=None, n=32, generations=100, population=20, seed=0, weight=100.0, k1=32.0,
-           k2=8.0, speed=0.05, scan_period=0.1, front=None, lag=False, t_max=200.0) -> dict:
+def search(
+    method,
+    *,
+    map="garage",
+    x0=None,
+    n=32,
+    generations=100,
+    population=20,
+    seed=0,
+    weight=100.0,
+    k1=32.0,
+    k2=8.0,
+    speed=0.05,
+    scan_period=0.1,
+    front=None,
+    lag=False,
+    t_max=200.0,
+) -> dict:
     """Search of the garage's switching parameters (X_s, alpha1, alpha2) (``pfjax parking-search``):
     the source's 24-bit GA or an exhaustive ``n x n x n`` grid on the chromosome lattice
     (:mod:`pfjax.parking.switch_search`), maximising ``J = 1 / (t_e + weight * e)``.
@@ -235,23 +302,39 @@ def search(method, *, map="garage", x0=None, n=32, generations=100, population=2
     seed = errors.seed("seed", seed)
     from pfjax.parking.schedules import GARAGE_START
 
-    c = _checked(map, x0, k1=k1, k2=k2, speed=speed, scan_period=scan_period, front=front, lag=lag, t_max=t_max,
-                 default_start={"garage": GARAGE_START, "parallel": None})
+    c = _checked(
+        map,
+        x0,
+        k1=k1,
+        k2=k2,
+        speed=speed,
+        scan_period=scan_period,
+        front=front,
+        lag=lag,
+        t_max=t_max,
+        default_start={"garage": GARAGE_START, "parallel": None},
+    )
 
     import dataclasses
 
     import jax
 
-    from pfjax.parking.switch_search import SEARCH_CONFIG, search_ga, search_grid
     from pfjax.parking.simulate import STATUS_NAMES, run_params
+    from pfjax.parking.switch_search import SEARCH_CONFIG, search_ga, search_grid
 
     base = run_params(c["x0"], 1, (1.0,), xs=-1.0, front=c["front"], scan_period=c["scan_period"], control=c["control"])
     cfg = dataclasses.replace(SEARCH_CONFIG, t_max=c["t_max"])
     if method == "ga":
         from pfjax.tuning.ga import GAOptions
 
-        out = search_ga(c["omap"], key=jax.random.PRNGKey(seed), base=base, weight=weight, cfg=cfg,
-                        options=GAOptions(population_size=population, generations=generations))
+        out = search_ga(
+            c["omap"],
+            key=jax.random.PRNGKey(seed),
+            base=base,
+            weight=weight,
+            cfg=cfg,
+            options=GAOptions(population_size=population, generations=generations),
+        )
         out["seed"] = seed
     else:
         out = search_grid(c["omap"], n=n, base=base, weight=weight, cfg=cfg, chunk=min(1024, n**3))

@@ -33,14 +33,26 @@ from pfjax.parking.simulate import STATUS_NAMES, ParkingConfig, run_many, run_pa
 #: The source's outcome per case (docs/reproductions/parking.md §4): what a combination must give to reproduce it.
 SOURCE_OUTCOME = {"A": "converged", "B": "stuck", "C": "converged", "D": "converged"}
 ZONES = {"middle": {}, "axle": {"split": 0.0}, "whole": {"zone": L2_LENGTH}}
-DEFAULT_GRID = {"front": [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25], "zone": list(ZONES),
-                "scan_period": [0.05, 0.1, 0.2], "decision_delay": [False, True], "lag": [False, True],
-                "pause": [0.0, 1.0]}
+DEFAULT_GRID = {
+    "front": [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25],
+    "zone": list(ZONES),
+    "scan_period": [0.05, 0.1, 0.2],
+    "decision_delay": [False, True],
+    "lag": [False, True],
+    "pause": [0.0, 1.0],
+}
 KEYS = tuple(DEFAULT_GRID)
 
 
-def case_sweep(omap, grid: dict = DEFAULT_GRID, *, control_kw: dict | None = None, cfg: ParkingConfig = ParkingConfig(),
-               chunk: int = 512, progress: bool = False) -> pd.DataFrame:
+def case_sweep(
+    omap,
+    grid: dict = DEFAULT_GRID,
+    *,
+    control_kw: dict | None = None,
+    cfg: ParkingConfig = ParkingConfig(),
+    chunk: int = 512,
+    progress: bool = False,
+) -> pd.DataFrame:
     """Cases A-D under every combination of ``grid`` (keys :data:`KEYS`): one row per run with the
     combination, ``case``, ``status``, ``switches``, ``time_s`` and ``min_leg_m`` (the shortest travel
     between two reversals, m; NaN without a reversal)."""
@@ -49,9 +61,19 @@ def case_sweep(omap, grid: dict = DEFAULT_GRID, *, control_kw: dict | None = Non
     for combo in combos:
         a = dict(zip(KEYS, combo))
         for name, c in CASES.items():
-            items.append(run_params(c["x0"], c["direction"], c["schedule"], front=a["front"], scan_period=a["scan_period"],
-                                    decision_delay=a["decision_delay"], pause=a["pause"],
-                                    control=control_params(lag=a["lag"], **(control_kw or {})), **ZONES[a["zone"]]))
+            items.append(
+                run_params(
+                    c["x0"],
+                    c["direction"],
+                    c["schedule"],
+                    front=a["front"],
+                    scan_period=a["scan_period"],
+                    decision_delay=a["decision_delay"],
+                    pause=a["pause"],
+                    control=control_params(lag=a["lag"], **(control_kw or {})),
+                    **ZONES[a["zone"]],
+                )
+            )
             rows.append({**a, "case": name})
     r = run_many(stack_params(items), omap, cfg, chunk=chunk, progress=progress, desc="assumption sweep")
     df = pd.DataFrame(rows)
@@ -73,11 +95,16 @@ def sweep_summary(df: pd.DataFrame) -> dict:
     stuck; the combinations that reproduce all four source outcomes (A, C, D park, B stuck)."""
     wide = df.pivot_table(index=list(KEYS), columns="case", values="status", aggfunc="first")
     match = np.all([wide[c] == s for c, s in SOURCE_OUTCOME.items()], axis=0)
-    by_zone = {z: {c: df[(df.zone == z) & (df.case == c)].status.value_counts().to_dict() for c in CASES}
-               for z in df.zone.unique()}
-    return {"n_combinations": int(len(wide)),
-            "status_counts": {c: df[df.case == c].status.value_counts().to_dict() for c in CASES},
-            "by_zone": by_zone,
-            "b_min_leg_m": float(df[df.case == "B"].min_leg_m.min()),
-            "all_four_reproduced": [dict(zip(KEYS, (v.item() if hasattr(v, "item") else v for v in idx)))
-                                    for idx in wide.index[match]]}
+    by_zone = {
+        z: {c: df[(df.zone == z) & (df.case == c)].status.value_counts().to_dict() for c in CASES}
+        for z in df.zone.unique()
+    }
+    return {
+        "n_combinations": int(len(wide)),
+        "status_counts": {c: df[df.case == c].status.value_counts().to_dict() for c in CASES},
+        "by_zone": by_zone,
+        "b_min_leg_m": float(df[df.case == "B"].min_leg_m.min()),
+        "all_four_reproduced": [
+            dict(zip(KEYS, (v.item() if hasattr(v, "item") else v for v in idx))) for idx in wide.index[match]
+        ],
+    }

@@ -39,12 +39,21 @@ def calibrate_front(switch_xy=SOURCE_SWITCH, width=0.370, kerb_y=-0.2, car_x=0.5
     x, y_src = switch_xy
     y, th = case_a_pose(x)
     w = width / 2
-    reach = {"kerb": (kerb_y - y + w * math.cos(th)) / math.sin(th),
-             "car_ahead": (car_x - x - w * math.sin(th)) / math.cos(th)}
+    reach = {
+        "kerb": (kerb_y - y + w * math.cos(th)) / math.sin(th),
+        "car_ahead": (car_x - x - w * math.sin(th)) / math.cos(th),
+    }
     valid = {k: v for k, v in reach.items() if v > 0}
     which = min(valid, key=valid.get)
-    return {"a_f": valid[which], "obstacle": which, "reach_per_obstacle": reach, "theta_deg_at_switch": math.degrees(th),
-            "y_closed_form_at_switch_x": y, "y_source": y_src, "switch_x": x}
+    return {
+        "a_f": valid[which],
+        "obstacle": which,
+        "reach_per_obstacle": reach,
+        "theta_deg_at_switch": math.degrees(th),
+        "y_closed_form_at_switch_x": y,
+        "y_source": y_src,
+        "switch_x": x,
+    }
 
 
 #: The calibrated reach (m) used by default everywhere in pfjax.parking.

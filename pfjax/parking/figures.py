@@ -99,7 +99,9 @@ def search_figure(ga: dict, grid_table: dict, n: int):
     axs[0].grid(alpha=0.3)
     F = grid_table["fitness"].reshape(n, n, n).max(axis=2)
     xs, a1 = np.unique(grid_table["xs"]), np.unique(grid_table["alpha1"])
-    im = axs[1].pcolormesh(a1, xs, np.where(F > 0, 1.0 / np.maximum(F, 1e-12), np.nan), shading="nearest", cmap="viridis_r")
+    im = axs[1].pcolormesh(
+        a1, xs, np.where(F > 0, 1.0 / np.maximum(F, 1e-12), np.nan), shading="nearest", cmap="viridis_r"
+    )
     fig.colorbar(im, ax=axs[1], label="best 1/J over α₂ [s]")
     i = int(np.argmax(grid_table["fitness"]))
     axs[1].plot(grid_table["alpha1"][i], grid_table["xs"][i], "wo", mec="k", ms=8, label="grid best")
@@ -120,12 +122,18 @@ def start_map_figure(rows: list[dict]):
     grid = {k: np.full((len(th), len(x0)), np.nan) for k in ("time_s", "xs", "alpha1", "alpha2")}
     for r in rows:
         i, j = int(np.searchsorted(th, r["theta0_deg"])), int(np.searchsorted(x0, r["x0"]))
-        used = {"time_s": r["status"] == 0, "xs": r["switches"] >= 1, "alpha1": r["switches"] >= 1, "alpha2": r["switches"] >= 2}
+        used = {
+            "time_s": r["status"] == 0,
+            "xs": r["switches"] >= 1,
+            "alpha1": r["switches"] >= 1,
+            "alpha2": r["switches"] >= 2,
+        }
         for k in grid:
             grid[k][i, j] = r[k] if used[k] else np.nan  # blank: failed, or too few switches to use the parameter
     fig, axs = plt.subplots(1, 4, figsize=(15, 3.6))
-    for ax, (k, label) in zip(axs, [("time_s", "best parking time [s]"), ("xs", "best X_s [m]"), ("alpha1", "best α₁"),
-                                    ("alpha2", "best α₂")]):
+    for ax, (k, label) in zip(
+        axs, [("time_s", "best parking time [s]"), ("xs", "best X_s [m]"), ("alpha1", "best α₁"), ("alpha2", "best α₂")]
+    ):
         im = ax.pcolormesh(x0, th, grid[k], shading="nearest", cmap="viridis")
         fig.colorbar(im, ax=ax)
         ax.set_title(label + (" (blank: unused)" if k != "time_s" else ""), fontsize=9)

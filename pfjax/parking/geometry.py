@@ -43,7 +43,7 @@ class RobotShape(NamedTuple):
 
 def robot_shape(front, width=L1_WIDTH, length=L2_LENGTH, split=None, zone=0.0) -> RobotShape:
     """The rectangle; ``split`` (m, body frame) defaults to its geometric middle ``front − length/2``."""
-    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
+    f = lambda v: jnp.asarray(v, dtype=float)
     return RobotShape(f(width), f(length), f(front), f(front - 0.5 * length if split is None else split), f(zone))
 
 
@@ -105,8 +105,12 @@ def points_in_polygons(pts, omap: ObstacleMap):
 
 
 def _in_box(p, a, b):
-    return ((p[..., 0] >= jnp.minimum(a[..., 0], b[..., 0]) - 1e-12) & (p[..., 0] <= jnp.maximum(a[..., 0], b[..., 0]) + 1e-12)
-            & (p[..., 1] >= jnp.minimum(a[..., 1], b[..., 1]) - 1e-12) & (p[..., 1] <= jnp.maximum(a[..., 1], b[..., 1]) + 1e-12))
+    return (
+        (p[..., 0] >= jnp.minimum(a[..., 0], b[..., 0]) - 1e-12)
+        & (p[..., 0] <= jnp.maximum(a[..., 0], b[..., 0]) + 1e-12)
+        & (p[..., 1] >= jnp.minimum(a[..., 1], b[..., 1]) - 1e-12)
+        & (p[..., 1] <= jnp.maximum(a[..., 1], b[..., 1]) + 1e-12)
+    )
 
 
 def _points_in_convex(pts, quad):
@@ -122,10 +126,13 @@ def _segments_meet(p1, p2, q1, q2):
     d1, d2 = _cross(q1, q2, p1), _cross(q1, q2, p2)
     d3, d4 = _cross(p1, p2, q1), _cross(p1, p2, q2)
     straddle = (d1 * d2 <= 0) & (d3 * d4 <= 0)
-    boxes = (jnp.maximum(jnp.minimum(p1[..., 0], p2[..., 0]), jnp.minimum(q1[..., 0], q2[..., 0]))
-             <= jnp.minimum(jnp.maximum(p1[..., 0], p2[..., 0]), jnp.maximum(q1[..., 0], q2[..., 0]))) & (
+    boxes = (
+        jnp.maximum(jnp.minimum(p1[..., 0], p2[..., 0]), jnp.minimum(q1[..., 0], q2[..., 0]))
+        <= jnp.minimum(jnp.maximum(p1[..., 0], p2[..., 0]), jnp.maximum(q1[..., 0], q2[..., 0]))
+    ) & (
         jnp.maximum(jnp.minimum(p1[..., 1], p2[..., 1]), jnp.minimum(q1[..., 1], q2[..., 1]))
-        <= jnp.minimum(jnp.maximum(p1[..., 1], p2[..., 1]), jnp.maximum(q1[..., 1], q2[..., 1])))
+        <= jnp.minimum(jnp.maximum(p1[..., 1], p2[..., 1]), jnp.maximum(q1[..., 1], q2[..., 1]))
+    )
     return straddle & boxes
 
 
@@ -146,4 +153,3 @@ def quad_hits_map(quad, omap: ObstacleMap):
 def obstacle_ahead(pose, shape: RobotShape, direction, omap: ObstacleMap):
     """The detection rule (docs/reproductions/parking.md §3, assumed): an obstacle lies in the half toward ``direction`` (±1)."""
     return quad_hits_map(half_corners(pose, shape, direction), omap)
-

@@ -191,7 +191,11 @@ def validate_polygon(key: str, vertices) -> list[tuple[float, float]]:
         raise MapError(f"{key}: at most {MAX_VERTICES} vertices per polygon, got {n_given}")
     pts = []
     for j, v in enumerate(vertices):
-        if not (isinstance(v, list) and len(v) == 2 and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)):
+        if not (
+            isinstance(v, list)
+            and len(v) == 2
+            and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)
+        ):
             raise MapError(f"{key}[{j}]: expected [x, y] numbers, got {v!r:.80}")
         xy = [_coordinate(c) for c in v]
         if None in xy:
@@ -201,7 +205,9 @@ def validate_polygon(key: str, vertices) -> list[tuple[float, float]]:
         raise MapError(f"{key}: polygon not closed (the last vertex must repeat the first, {list(pts[0])})")
     pts = pts[:-1]
     if len(set(pts)) < 3 or len(set(pts)) != len(pts):
-        raise MapError(f"{key}: degenerate polygon (needs >= 3 distinct vertices, none repeated), got {len(set(pts))} distinct")
+        raise MapError(
+            f"{key}: degenerate polygon (needs >= 3 distinct vertices, none repeated), got {len(set(pts))} distinct"
+        )
     v = np.asarray(pts)
     area = 0.5 * float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
     if abs(area) < 1e-9:
@@ -259,8 +265,10 @@ def parse_map(data, source: str = "map") -> tuple[str, dict[str, list]]:
             if explicit:
                 also = f"obstacles[{k}]" if k_explicit else f"obstacles[{k}], unnamed, which has it by default"
                 raise MapError(f"obstacles[{i}].name: duplicate obstacle name {label!r} (also {also})")
-            raise MapError(f"obstacles[{i}].name: missing, and the default name {label!r} is taken by obstacles[{k}]; "
-                           f"name obstacles[{i}] explicitly")
+            raise MapError(
+                f"obstacles[{i}].name: missing, and the default name {label!r} is taken by obstacles[{k}]; "
+                f"name obstacles[{i}] explicitly"
+            )
         owner[label] = (i, explicit)
         out[label] = validate_polygon(f"obstacles[{i}].vertices", o["vertices"])
     return name, out
@@ -301,7 +309,9 @@ def load_map(spec: str) -> tuple[str, dict[str, list]]:
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
-        raise MapError(f"map: {p}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}: {e.reason})") from None
+        raise MapError(
+            f"map: {p}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}: {e.reason})"
+        ) from None
     try:
         data = json.loads(text, object_pairs_hook=_no_duplicate_keys) if kind == "JSON" else tomllib.loads(text)
     except RecursionError:
@@ -449,5 +459,7 @@ def check_start(polygons: dict[str, list], x0, shape, key: str = "--x0") -> None
     if hits:
         name, area = next(iter(hits.items()))
         more = f"; also {len(hits) - 1} other obstacle{'s' if len(hits) > 2 else ''}" if len(hits) > 1 else ""
-        raise MapError(f"{key}: the robot's body at the start pose overlaps obstacle {name!r} "
-                       f"(intersection area {area:.3g} m^2{more})")
+        raise MapError(
+            f"{key}: the robot's body at the start pose overlaps obstacle {name!r} "
+            f"(intersection area {area:.3g} m^2{more})"
+        )

@@ -43,7 +43,7 @@ class ControlParams(NamedTuple):
 
 
 def control_params(k1=32.0, k2=8.0, speed=0.05, kp=0.8, ki=16.0, lag=False) -> ControlParams:
-    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
+    f = lambda v: jnp.asarray(v, dtype=float)
     return ControlParams(f(k1), f(k2), f(speed), f(kp), f(ki), f(1.0 if lag is True else 0.0 if lag is False else lag))
 
 

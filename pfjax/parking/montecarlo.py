@@ -42,7 +42,9 @@ def sample(key, n: int, base: RunParams, s: Scatter) -> RunParams:
         k = jax.random.fold_in(key, i)
         u = [jax.random.uniform(jax.random.fold_in(k, q)) for q in range(len(QUANTITIES))]
         dth = math.radians(s.theta_scatter_deg)
-        pose = base.pose0 + jnp.stack([(2 * u[0] - 1) * s.pos_scatter, (2 * u[1] - 1) * s.pos_scatter, (2 * u[2] - 1) * dth])
+        pose = base.pose0 + jnp.stack(
+            [(2 * u[0] - 1) * s.pos_scatter, (2 * u[1] - 1) * s.pos_scatter, (2 * u[2] - 1) * dth]
+        )
         scan = s.scan_lo + (s.scan_hi - s.scan_lo) * u[3]
         speed = s.speed_lo + (s.speed_hi - s.speed_lo) * u[4]
         lag = (u[5] < s.lag_probability).astype(pose.dtype)
@@ -53,19 +55,31 @@ def sample(key, n: int, base: RunParams, s: Scatter) -> RunParams:
     return p._replace(pose0=pose, scan_period=scan, control=p.control._replace(speed=speed, lag=lag))
 
 
-def monte_carlo(omap, base: RunParams, *, key, n: int, scatter=Scatter(), cfg=ParkingConfig(), chunk=1024,
-                progress=False, label="") -> pd.DataFrame:
+def monte_carlo(
+    omap, base: RunParams, *, key, n: int, scatter=Scatter(), cfg=ParkingConfig(), chunk=1024, progress=False, label=""
+) -> pd.DataFrame:
     """One row per run: sampled quantities, status, parking time, switches."""
     p = sample(key, n, base, scatter)
     r = run_many(p, omap, cfg, chunk=chunk, progress=progress, desc=f"monte carlo {label}".strip())
     pose = np.asarray(p.pose0)
-    return pd.DataFrame({
-        "schedule": label, "run": np.arange(n), "x0": pose[:, 0], "y0": pose[:, 1], "theta0_deg": np.degrees(pose[:, 2]),
-        "scan_period_s": np.asarray(p.scan_period), "speed": np.asarray(p.control.speed), "lag": np.asarray(p.control.lag) > 0.5,
-        "status": [STATUS_NAMES[int(c)] for c in r.status], "status_code": r.status.astype(int),
-        "converged": r.status == int(Status.CONVERGED), "time_s": r.time, "switches": r.n_switches.astype(int),
-        "error": r.error,
-    })
+    return pd.DataFrame(
+        {
+            "schedule": label,
+            "run": np.arange(n),
+            "x0": pose[:, 0],
+            "y0": pose[:, 1],
+            "theta0_deg": np.degrees(pose[:, 2]),
+            "scan_period_s": np.asarray(p.scan_period),
+            "speed": np.asarray(p.control.speed),
+            "lag": np.asarray(p.control.lag) > 0.5,
+            "status": [STATUS_NAMES[int(c)] for c in r.status],
+            "status_code": r.status.astype(int),
+            "converged": r.status == int(Status.CONVERGED),
+            "time_s": r.time,
+            "switches": r.n_switches.astype(int),
+            "error": r.error,
+        }
+    )
 
 
 def summarise(df: pd.DataFrame) -> dict:

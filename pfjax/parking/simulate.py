@@ -165,11 +165,20 @@ def _init(p: RunParams, omap: ObstacleMap, cfg: ParkingConfig) -> Carry:
     dt = p.pose0.dtype
     overlap = obstacle_ahead(p.pose0, p.shape, 1.0, omap) | obstacle_ahead(p.pose0, p.shape, -1.0, omap)
     return Carry(
-        k=jnp.asarray(0), t=jnp.asarray(0.0, dt), state=jnp.concatenate([p.pose0, jnp.zeros(1, dt)]),
-        direction=jnp.asarray(p.direction0, dt), n_switches=jnp.asarray(0), backed=jnp.asarray(False),
-        status=jnp.where(overlap, int(Status.START_OVERLAP), int(Status.RUNNING)), distance=jnp.asarray(0.0, dt),
-        log_t=jnp.full(m, jnp.nan, dt), log_pose=jnp.full((m, 3), jnp.nan, dt), log_cause=jnp.zeros(m, jnp.int32),
-        prev_pose=p.pose0, pause_left=jnp.asarray(0.0, dt), travel_at=jnp.zeros(max(cfg.stuck_switches or 1, 1), dt),
+        k=jnp.asarray(0),
+        t=jnp.asarray(0.0, dt),
+        state=jnp.concatenate([p.pose0, jnp.zeros(1, dt)]),
+        direction=jnp.asarray(p.direction0, dt),
+        n_switches=jnp.asarray(0),
+        backed=jnp.asarray(False),
+        status=jnp.where(overlap, int(Status.START_OVERLAP), int(Status.RUNNING)),
+        distance=jnp.asarray(0.0, dt),
+        log_t=jnp.full(m, jnp.nan, dt),
+        log_pose=jnp.full((m, 3), jnp.nan, dt),
+        log_cause=jnp.zeros(m, jnp.int32),
+        prev_pose=p.pose0,
+        pause_left=jnp.asarray(0.0, dt),
+        travel_at=jnp.zeros(max(cfg.stuck_switches or 1, 1), dt),
     )
 
 
@@ -217,30 +226,60 @@ def _period(c: Carry, p: RunParams, omap: ObstacleMap, cfg: ParkingConfig) -> Ca
         t_new = t + h
         finite = jnp.all(jnp.isfinite(new))
         code = jnp.select(
-            [~finite, jnp.abs(new[2]) >= 0.5 * math.pi, parking_error(new[0], new[1], new[2]) < cfg.tol,
-             t_new >= cfg.t_max - 1e-9],
+            [
+                ~finite,
+                jnp.abs(new[2]) >= 0.5 * math.pi,
+                parking_error(new[0], new[1], new[2]) < cfg.tol,
+                t_new >= cfg.t_max - 1e-9,
+            ],
             [int(Status.NONFINITE), int(Status.HEADING_LIMIT), int(Status.CONVERGED), int(Status.TIMEOUT)],
             int(Status.RUNNING),
         )
         keep = run & finite
-        return (jnp.where(keep, new, state), jnp.where(run, t_new, t), jnp.where(run, code, st),
-                dist + jnp.where(run & moving, p.control.speed * h, 0.0), jnp.maximum(left - h, 0.0))
+        return (
+            jnp.where(keep, new, state),
+            jnp.where(run, t_new, t),
+            jnp.where(run, code, st),
+            dist + jnp.where(run & moving, p.control.speed * h, 0.0),
+            jnp.maximum(left - h, 0.0),
+        )
 
-    state, t, status, dist, pause_left = lax.fori_loop(0, cfg.n_sub, step, (c.state, c.t, status, c.distance, pause_left))
-    return Carry(c.k + 1, t, state, direction, n, c.backed | (switch & (direction < 0)), status, dist, log_t, log_pose,
-                 log_cause, pose, pause_left, travel_at)
+    state, t, status, dist, pause_left = lax.fori_loop(
+        0, cfg.n_sub, step, (c.state, c.t, status, c.distance, pause_left)
+    )
+    return Carry(
+        c.k + 1,
+        t,
+        state,
+        direction,
+        n,
+        c.backed | (switch & (direction < 0)),
+        status,
+        dist,
+        log_t,
+        log_pose,
+        log_cause,
+        pose,
+        pause_left,
+        travel_at,
+    )
 
 
 def _result(c: Carry, cfg: ParkingConfig) -> RunResult:
     status = jnp.where(c.status == Status.RUNNING, int(Status.TIMEOUT), c.status)
     x, y, th = c.state[0], c.state[1], c.state[2]
-    return RunResult(status, c.t, c.state[:3], c.n_switches, c.distance, parking_error(x, y, th), c.log_t, c.log_pose, c.log_cause)
+    return RunResult(
+        status, c.t, c.state[:3], c.n_switches, c.distance, parking_error(x, y, th), c.log_t, c.log_pose, c.log_cause
+    )
 
 
 def run(p: RunParams, omap: ObstacleMap, cfg: ParkingConfig = ParkingConfig()) -> RunResult:
     """Simulate one run until it stops (``lax.while_loop``; vmapped, it runs until every run has stopped)."""
-    final = lax.while_loop(lambda c: (c.status == Status.RUNNING) & (c.k < cfg.max_samples),
-                           lambda c: _period(c, p, omap, cfg), _init(p, omap, cfg))
+    final = lax.while_loop(
+        lambda c: (c.status == Status.RUNNING) & (c.k < cfg.max_samples),
+        lambda c: _period(c, p, omap, cfg),
+        _init(p, omap, cfg),
+    )
     return _result(final, cfg)
 
 
@@ -270,8 +309,15 @@ def _take(tree, sl):
     return jax.tree_util.tree_map(lambda a: a[sl], tree)
 
 
-def run_many(params: RunParams, omap: ObstacleMap, cfg: ParkingConfig = ParkingConfig(), *, chunk: int = 4096,
-             progress: bool = False, desc: str = "parking runs") -> RunResult:
+def run_many(
+    params: RunParams,
+    omap: ObstacleMap,
+    cfg: ParkingConfig = ParkingConfig(),
+    *,
+    chunk: int = 4096,
+    progress: bool = False,
+    desc: str = "parking runs",
+) -> RunResult:
     """Batched runs in jitted chunks of exactly ``chunk`` runs (short chunks padded by repeating the last run,
     so every call with the same ``chunk`` reuses one compilation); NumPy out, in input order."""
     n = int(params.pose0.shape[0])
@@ -289,9 +335,23 @@ def run_many(params: RunParams, omap: ObstacleMap, cfg: ParkingConfig = ParkingC
     return jax.tree_util.tree_map(lambda *a: np.concatenate(a), *outs)
 
 
-def run_params(x0, direction=1, schedule=(1.0,), *, xs=None, front=None, scan_period=0.1, control=None,
-               theta_in_degrees=True, width=None, length=None, split=None, zone=0.0, pause=0.0,
-               decision_delay=False) -> RunParams:
+def run_params(
+    x0,
+    direction=1,
+    schedule=(1.0,),
+    *,
+    xs=None,
+    front=None,
+    scan_period=0.1,
+    control=None,
+    theta_in_degrees=True,
+    width=None,
+    length=None,
+    split=None,
+    zone=0.0,
+    pause=0.0,
+    decision_delay=False,
+) -> RunParams:
     """Convenience constructor of one run's parameters (``x0 = (x m, y m, θ deg)`` by default).
 
     ``front``: the rectangle's reach ahead of the axle, m (default the calibrated a_f); ``split``:
@@ -305,14 +365,24 @@ def run_params(x0, direction=1, schedule=(1.0,), *, xs=None, front=None, scan_pe
 
     x, y, th = (float(v) for v in x0)
     th = math.radians(th) if theta_in_degrees else th
-    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
+    f = lambda v: jnp.asarray(v, dtype=float)
     return RunParams(
-        pose0=f([x, y, th]), direction0=f(1.0 if direction > 0 else -1.0), schedule=f(pad_schedule(schedule)),
-        xs=f(0.0 if xs is None else xs), use_xs=f(0.0 if xs is None else 1.0), scan_period=f(scan_period),
+        pose0=f([x, y, th]),
+        direction0=f(1.0 if direction > 0 else -1.0),
+        schedule=f(pad_schedule(schedule)),
+        xs=f(0.0 if xs is None else xs),
+        use_xs=f(0.0 if xs is None else 1.0),
+        scan_period=f(scan_period),
         control=control if control is not None else control_params(),
-        shape=robot_shape(A_F if front is None else front, L1_WIDTH if width is None else width,
-                          L2_LENGTH if length is None else length, split, zone),
-        pause=f(pause), decision_delay=f(1.0 if decision_delay else 0.0),
+        shape=robot_shape(
+            A_F if front is None else front,
+            L1_WIDTH if width is None else width,
+            L2_LENGTH if length is None else length,
+            split,
+            zone,
+        ),
+        pause=f(pause),
+        decision_delay=f(1.0 if decision_delay else 0.0),
     )
 
 
@@ -326,7 +396,8 @@ def simulated_first_switch(front: float) -> dict:
     (:mod:`pfjax.parking.calibrate`) against the source's point."""
     from pfjax.parking.maps import PARALLEL, to_obstacle_map
 
-    r = run_jit(run_params((-0.4, 0.5, 0.0), 1, (1.0,), front=front), to_obstacle_map(list(PARALLEL.values())),
-                ParkingConfig())
+    r = run_jit(
+        run_params((-0.4, 0.5, 0.0), 1, (1.0,), front=front), to_obstacle_map(list(PARALLEL.values())), ParkingConfig()
+    )
     x, y, th = (float(v) for v in r.log_pose[0])
     return {"t": float(r.log_t[0]), "x": x, "y": y, "theta_deg": math.degrees(th)}

@@ -21,11 +21,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from pfjax.parking.simulate import SEARCH_MAX_SWITCHES, ParkingConfig, RunParams, Status, run_many, run_params
 from pfjax.parking.schedules import ALPHA_MAX, GARAGE_START, XS_MAX, XS_MIN, decode_bits, three_phase
+from pfjax.parking.simulate import SEARCH_MAX_SWITCHES, ParkingConfig, RunParams, Status, run_many, run_params
 
-FAILED = (int(Status.TOO_MANY_SWITCHES), int(Status.HEADING_LIMIT), int(Status.NONFINITE), int(Status.STUCK),
-          int(Status.START_OVERLAP))
+FAILED = (
+    int(Status.TOO_MANY_SWITCHES),
+    int(Status.HEADING_LIMIT),
+    int(Status.NONFINITE),
+    int(Status.STUCK),
+    int(Status.START_OVERLAP),
+)
 #: The search's simulation settings: the source's cut-off at 10 switches decides what a repeatedly
 #: switching candidate is, so the progress test (``stuck``) is off.
 SEARCH_CONFIG = ParkingConfig(max_switches=SEARCH_MAX_SWITCHES, stuck_switches=None)
@@ -52,8 +57,17 @@ def garage_base(start=GARAGE_START, **kw) -> RunParams:
     return run_params(start, 1, (1.0,), xs=-1.0, **kw)
 
 
-def search_ga(omap, *, key, start=GARAGE_START, options=None, weight=100.0, cfg=SEARCH_CONFIG,
-              progress=False, base: RunParams | None = None) -> dict:
+def search_ga(
+    omap,
+    *,
+    key,
+    start=GARAGE_START,
+    options=None,
+    weight=100.0,
+    cfg=SEARCH_CONFIG,
+    progress=False,
+    base: RunParams | None = None,
+) -> dict:
     """The source's GA: 24 bits, n = 20, N = 100 by default; returns the best decoded parameters."""
     from pfjax.tuning.ga import GAOptions, ga_bits
 
@@ -68,19 +82,45 @@ def search_ga(omap, *, key, start=GARAGE_START, options=None, weight=100.0, cfg=
     res = ga_bits(cost_batch, 24, key=key, options=options, progress=progress)
     xs, a1, a2 = (float(v[0]) for v in decode_bits(jnp.asarray(res.x)[None]))
     best = evaluate(omap, base, [xs], [a1], [a2], cfg=cfg, weight=weight, chunk=options.population_size)
-    return {"method": "ga", "xs": xs, "alpha1": a1, "alpha2": a2, "bits": [int(b) for b in res.x],
-            "fitness": -float(res.f), **{k: v[0].item() for k, v in best.items() if k not in ("xs", "alpha1", "alpha2")},
-            "n_simulations": int(res.n_evaluations), "history_best_fitness": (-np.asarray(res.history_best)).tolist(),
-            "history_mean_fitness": (-np.asarray(res.history_mean)).tolist()}
+    return {
+        "method": "ga",
+        "xs": xs,
+        "alpha1": a1,
+        "alpha2": a2,
+        "bits": [int(b) for b in res.x],
+        "fitness": -float(res.f),
+        **{k: v[0].item() for k, v in best.items() if k not in ("xs", "alpha1", "alpha2")},
+        "n_simulations": int(res.n_evaluations),
+        "history_best_fitness": (-np.asarray(res.history_best)).tolist(),
+        "history_mean_fitness": (-np.asarray(res.history_mean)).tolist(),
+    }
 
 
-def evaluate(omap, base: RunParams, xs, alpha1, alpha2, *, cfg=SEARCH_CONFIG, weight=100.0, pose0=None,
-             chunk=1024, progress=False) -> dict:
+def evaluate(
+    omap,
+    base: RunParams,
+    xs,
+    alpha1,
+    alpha2,
+    *,
+    cfg=SEARCH_CONFIG,
+    weight=100.0,
+    pose0=None,
+    chunk=1024,
+    progress=False,
+) -> dict:
     """Batched runs at the given parameters -> NumPy columns (status, time_s, switches, fitness, ...)."""
     r = run_many(batch_params(base, xs, alpha1, alpha2, pose0), omap, cfg, chunk=chunk, progress=progress, desc="grid")
-    return {"xs": np.asarray(xs, float), "alpha1": np.asarray(alpha1, float), "alpha2": np.asarray(alpha2, float),
-            "status": r.status.astype(int), "time_s": r.time, "switches": r.n_switches.astype(int), "error": r.error,
-            "fitness": fitness(r.status, r.time, r.error, weight)}
+    return {
+        "xs": np.asarray(xs, float),
+        "alpha1": np.asarray(alpha1, float),
+        "alpha2": np.asarray(alpha2, float),
+        "status": r.status.astype(int),
+        "time_s": r.time,
+        "switches": r.n_switches.astype(int),
+        "error": r.error,
+        "fitness": fitness(r.status, r.time, r.error, weight),
+    }
 
 
 def lattice(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -89,22 +129,42 @@ def lattice(n: int) -> tuple[np.ndarray, np.ndarray]:
     return XS_MIN + (XS_MAX - XS_MIN) * xi / 255.0, ALPHA_MAX * (xi + 1) / 256.0
 
 
-def search_grid(omap, *, n=32, start=GARAGE_START, weight=100.0, cfg=SEARCH_CONFIG, chunk=1024, progress=False,
-                base: RunParams | None = None) -> dict:
+def search_grid(
+    omap,
+    *,
+    n=32,
+    start=GARAGE_START,
+    weight=100.0,
+    cfg=SEARCH_CONFIG,
+    chunk=1024,
+    progress=False,
+    base: RunParams | None = None,
+) -> dict:
     """Exhaustive n × n × n grid over (X_s, α₁, α₂); returns the best and every evaluation."""
     base = base if base is not None else garage_base(start)
     xl, al = lattice(n)
     X, A1, A2 = (g.ravel() for g in np.meshgrid(xl, al, al, indexing="ij"))
     table = evaluate(omap, base, X, A1, A2, cfg=cfg, weight=weight, chunk=chunk, progress=progress)
     i = int(np.argmax(table["fitness"]))
-    return {"method": "grid", "n": n, "xs": float(X[i]), "alpha1": float(A1[i]), "alpha2": float(A2[i]),
-            "fitness": float(table["fitness"][i]), "time_s": float(table["time_s"][i]), "status": int(table["status"][i]),
-            "switches": int(table["switches"][i]), "error": float(table["error"][i]), "n_simulations": int(X.size),
-            "table": table}
+    return {
+        "method": "grid",
+        "n": n,
+        "xs": float(X[i]),
+        "alpha1": float(A1[i]),
+        "alpha2": float(A2[i]),
+        "fitness": float(table["fitness"][i]),
+        "time_s": float(table["time_s"][i]),
+        "status": int(table["status"][i]),
+        "switches": int(table["switches"][i]),
+        "error": float(table["error"][i]),
+        "n_simulations": int(X.size),
+        "table": table,
+    }
 
 
-def start_map(omap, x0s, theta0s_deg, *, y0=GARAGE_START[1], n=12, weight=100.0, cfg=SEARCH_CONFIG, chunk=1024,
-              progress=False) -> list[dict]:
+def start_map(
+    omap, x0s, theta0s_deg, *, y0=GARAGE_START[1], n=12, weight=100.0, cfg=SEARCH_CONFIG, chunk=1024, progress=False
+) -> list[dict]:
     """For each start (x₀, θ₀): the best (X_s, α₁, α₂) on an n³ grid, its parking time, and α = 1 / X_s = −0.9 for reference."""
     base = garage_base()
     xl, al = lattice(n)
@@ -112,15 +172,37 @@ def start_map(omap, x0s, theta0s_deg, *, y0=GARAGE_START[1], n=12, weight=100.0,
     starts = [(x0, th) for x0 in x0s for th in theta0s_deg]
     m = X.size
     poses = np.concatenate([np.tile([[x0, y0, math.radians(th)]], (m, 1)) for x0, th in starts])
-    table = evaluate(omap, base, np.tile(X, len(starts)), np.tile(A1, len(starts)), np.tile(A2, len(starts)),
-                     cfg=cfg, weight=weight, pose0=poses, chunk=chunk, progress=progress)
+    table = evaluate(
+        omap,
+        base,
+        np.tile(X, len(starts)),
+        np.tile(A1, len(starts)),
+        np.tile(A2, len(starts)),
+        cfg=cfg,
+        weight=weight,
+        pose0=poses,
+        chunk=chunk,
+        progress=progress,
+    )
     rows = []
     for k, (x0, th) in enumerate(starts):
         sl = slice(k * m, (k + 1) * m)
         f = table["fitness"][sl]
         i = int(np.argmax(f))
         ok = table["status"][sl] == int(Status.CONVERGED)
-        rows.append({"x0": x0, "theta0_deg": th, "y0": y0, "xs": float(X[i]), "alpha1": float(A1[i]), "alpha2": float(A2[i]),
-                     "fitness": float(f[i]), "time_s": float(table["time_s"][sl][i]), "status": int(table["status"][sl][i]),
-                     "switches": int(table["switches"][sl][i]), "converged_fraction": float(ok.mean())})
+        rows.append(
+            {
+                "x0": x0,
+                "theta0_deg": th,
+                "y0": y0,
+                "xs": float(X[i]),
+                "alpha1": float(A1[i]),
+                "alpha2": float(A2[i]),
+                "fitness": float(f[i]),
+                "time_s": float(table["time_s"][sl][i]),
+                "status": int(table["status"][sl][i]),
+                "switches": int(table["switches"][sl][i]),
+                "converged_fraction": float(ok.mean()),
+            }
+        )
     return rows

@@ -11,6 +11,7 @@ from pfjax.paths.geometry import (
     tangent_angle,
     wrap_angle,
 )
+from pfjax.paths.registry import PATHS, PathEntry, entry, fixed_paths, register, source_tests
 from pfjax.paths.shapes import (
     Circle,
     Graph,
@@ -21,11 +22,29 @@ from pfjax.paths.shapes import (
     sine,
     spline_through,
 )
-from pfjax.paths.registry import PATHS, PathEntry, entry, fixed_paths, register, source_tests
 
 __all__ = [
-    "Projection", "arc_length", "closest_parameter", "curvature", "global_parameter", "measure",
-    "project", "tangent_angle", "wrap_angle", "Circle", "Graph",
-    "Spline", "circle", "line", "parabola", "sine", "spline_through",
-    "PATHS", "PathEntry", "entry", "fixed_paths", "register", "source_tests",
+    "PATHS",
+    "Circle",
+    "Graph",
+    "PathEntry",
+    "Projection",
+    "Spline",
+    "arc_length",
+    "circle",
+    "closest_parameter",
+    "curvature",
+    "entry",
+    "fixed_paths",
+    "global_parameter",
+    "line",
+    "measure",
+    "parabola",
+    "project",
+    "register",
+    "sine",
+    "source_tests",
+    "spline_through",
+    "tangent_angle",
+    "wrap_angle",
 ]

@@ -18,7 +18,8 @@ Two sorts of entry:
 from __future__ import annotations
 
 import math
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 from pfjax import errors
 
@@ -53,9 +54,17 @@ class PathEntry(NamedTuple):
 PATHS: dict[str, PathEntry] = {}
 
 
-def register(name: str, build: Callable | None = None, *, start_pose=None, start_u: float = 0.0,
-             max_curvature: float | None = None, source: bool = False, parametric: bool = False,
-             description: str = "") -> PathEntry:
+def register(
+    name: str,
+    build: Callable | None = None,
+    *,
+    start_pose=None,
+    start_u: float = 0.0,
+    max_curvature: float | None = None,
+    source: bool = False,
+    parametric: bool = False,
+    description: str = "",
+) -> PathEntry:
     """Add a path kind (replacing one of the same name) and return its entry (see :class:`PathEntry`).
 
     Raises:
@@ -65,8 +74,16 @@ def register(name: str, build: Callable | None = None, *, start_pose=None, start
         raise ValueError(f"name: a path kind is a lower-case identifier, got {name!r}")
     if build is not None and start_pose is None:
         raise ValueError(f"start_pose: a fixed path ({name!r}) needs a single-run start pose (x, y, theta)")
-    e = PathEntry(name, build, None if start_pose is None else tuple(float(v) for v in start_pose), float(start_u),
-                  None if max_curvature is None else float(max_curvature), source, parametric, description or name)
+    e = PathEntry(
+        name,
+        build,
+        None if start_pose is None else tuple(float(v) for v in start_pose),
+        float(start_u),
+        None if max_curvature is None else float(max_curvature),
+        source,
+        parametric,
+        description or name,
+    )
     PATHS[name] = e
     return e
 
@@ -91,16 +108,40 @@ def source_tests() -> tuple[str, ...]:
 def _register_builtins() -> None:
     from pfjax.paths import shapes
 
-    register("line", shapes.line, start_pose=(1.0, 0.0, math.pi / 2), max_curvature=0.0, source=True,
-             description="the source's line y = x")
+    register(
+        "line",
+        shapes.line,
+        start_pose=(1.0, 0.0, math.pi / 2),
+        max_curvature=0.0,
+        source=True,
+        description="the source's line y = x",
+    )
     # y = x^2 peaks at curvature 2a = 2 at the vertex; runs start 2 m before it (x = -2)
-    register("parabola", shapes.parabola, start_pose=(-2.0, 3.0, -math.pi / 2), start_u=-2.0, max_curvature=2.0,
-             source=True, description="the source's parabola y = x^2")
+    register(
+        "parabola",
+        shapes.parabola,
+        start_pose=(-2.0, 3.0, -math.pi / 2),
+        start_u=-2.0,
+        max_curvature=2.0,
+        source=True,
+        description="the source's parabola y = x^2",
+    )
     # y = sin x: curvature at most A w^2 = 1
-    register("sine", shapes.sine, start_pose=(0.0, -0.2, math.pi / 4), max_curvature=1.0, source=True,
-             description="the source's sine y = sin x")
-    register("circle", lambda: shapes.circle(radius=2.0, cy=2.0), start_pose=(0.0, -0.3, 0.0), parametric=True,
-             description="circle about (0, R) from the origin, counter-clockwise (pfjax's; single runs: R = 2 m)")
+    register(
+        "sine",
+        shapes.sine,
+        start_pose=(0.0, -0.2, math.pi / 4),
+        max_curvature=1.0,
+        source=True,
+        description="the source's sine y = sin x",
+    )
+    register(
+        "circle",
+        lambda: shapes.circle(radius=2.0, cy=2.0),
+        start_pose=(0.0, -0.3, 0.0),
+        parametric=True,
+        description="circle about (0, R) from the origin, counter-clockwise (pfjax's; single runs: R = 2 m)",
+    )
     # random: 2 m of path behind the start
     register("random", start_u=2.0, parametric=True, description="random smooth spline, one per run")
     register("spline", parametric=True, description="natural cubic spline through the config's points")

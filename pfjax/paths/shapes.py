@@ -55,7 +55,9 @@ class Graph(NamedTuple):
         return u, self.y0 + self.slope * u + self.a * (u * u) + self.amplitude * E.sin(self.omega * u + self.phase)
 
     def d1(self, u):
-        return jnp.ones_like(u), self.slope + 2.0 * self.a * u + self.amplitude * self.omega * E.cos(self.omega * u + self.phase)
+        return jnp.ones_like(u), self.slope + 2.0 * self.a * u + self.amplitude * self.omega * E.cos(
+            self.omega * u + self.phase
+        )
 
     def d2(self, u):
         return jnp.zeros_like(u), 2.0 * self.a - self.amplitude * self.omega**2 * E.sin(self.omega * u + self.phase)
@@ -181,4 +183,3 @@ def spline_through(waypoints) -> Spline:
         u_min=_f(knots[0]),
         u_max=_f(knots[-1]),
     )
-

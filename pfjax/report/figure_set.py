@@ -30,7 +30,15 @@ from pfjax.report.study_figures import (
 from pfjax.report.worst_case_figures import worst_case_figure
 
 #: The report's figures, in the report's order.
-FIGURES = ("worst_cases", "headline", "margin_curves", "dist_iae", "dist_late_max_abs_d", "slip_map", "success_by_param")
+FIGURES = (
+    "worst_cases",
+    "headline",
+    "margin_curves",
+    "dist_iae",
+    "dist_late_max_abs_d",
+    "slip_map",
+    "success_by_param",
+)
 #: The figures drawn from the run table (the others need only the summary and the worst cases).
 NEEDS_RUNS = {"dist_iae", "dist_late_max_abs_d", "slip_map"}
 
@@ -75,12 +83,20 @@ def figure_entries(out_dir: Path, spec: StudySpec, names) -> dict[str, dict]:
     """``{name: {"name", "caption", "b64"}}`` for figures already written to ``out_dir/figures``
     (the PNG base64-encoded for the page)."""
     text = captions(spec)
-    return {n: {"name": n, "caption": text[n], "b64": _png_base64(Path(out_dir) / "figures" / f"{n}.png")}
-            for n in names}
+    return {
+        n: {"name": n, "caption": text[n], "b64": _png_base64(Path(out_dir) / "figures" / f"{n}.png")} for n in names
+    }
 
 
-def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, colors: dict,
-             worst_trajectories: dict | None = None, names=None) -> dict[str, dict]:
+def _figures(
+    out_dir: Path,
+    spec: StudySpec,
+    summary: dict,
+    runs: pd.DataFrame,
+    colors: dict,
+    worst_trajectories: dict | None = None,
+    names=None,
+) -> dict[str, dict]:
     fig_dir = out_dir / "figures"
     paths = list(summary.get("paths") or ([] if runs is None else runs["path"].unique()))
     band_mm = 1000 * spec.success.band
@@ -90,14 +106,24 @@ def _figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame, 
         "headline": lambda: headline_figure(summary, colors),
         "margin_curves": lambda: margin_figure(summary, colors),
         "dist_iae": lambda: distribution_figure(runs, "iae", colors, paths, unit="m·s", label="IAE ∫|d| dt"),
-        "dist_late_max_abs_d": lambda: distribution_figure(runs, "late_max_abs_d", colors, paths, scale=1000.0,
-                                                           unit="mm", label=f"max |d| from t = {from_s:g} s",
-                                                           band=band_mm),
-        "slip_map": lambda: slip_map_figure(runs, list(summary["controllers"]),
-                                            delta_max_deg=_nominal(spec.vehicle.delta_max_deg),
-                                            convention=spec.vehicle.convention,
-                                            note="" if spec.slip.kind == "constant" else " (constant part)",
-                                            predicted=linearised_predictions(spec, summary)),
+        "dist_late_max_abs_d": lambda: distribution_figure(
+            runs,
+            "late_max_abs_d",
+            colors,
+            paths,
+            scale=1000.0,
+            unit="mm",
+            label=f"max |d| from t = {from_s:g} s",
+            band=band_mm,
+        ),
+        "slip_map": lambda: slip_map_figure(
+            runs,
+            list(summary["controllers"]),
+            delta_max_deg=_nominal(spec.vehicle.delta_max_deg),
+            convention=spec.vehicle.convention,
+            note="" if spec.slip.kind == "constant" else " (constant part)",
+            predicted=linearised_predictions(spec, summary),
+        ),
         "success_by_param": lambda: success_by_param_figure(summary, colors),
     }
     done = []
@@ -134,7 +160,9 @@ def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
     from pfjax.models.slip import CONVENTIONS, SlipParams
 
     v = spec.vehicle
-    params = SlipParams(_nominal(v.speed), _nominal(v.L), math.radians(_nominal(v.delta_max_deg)), CONVENTIONS[v.convention])
+    params = SlipParams(
+        _nominal(v.speed), _nominal(v.L), math.radians(_nominal(v.delta_max_deg)), CONVENTIONS[v.convention]
+    )
     out = {}
     types = {c.name: c.type for c in spec.controllers}
     for name, c in summary["controllers"].items():
@@ -150,15 +178,23 @@ def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
     return out
 
 
-def report_figures(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame,
-                   worst_trajectories: dict | None = None, names=None) -> dict[str, dict]:
+def report_figures(
+    out_dir: Path,
+    spec: StudySpec,
+    summary: dict,
+    runs: pd.DataFrame,
+    worst_trajectories: dict | None = None,
+    names=None,
+) -> dict[str, dict]:
     """Render the report's figures into ``out_dir/figures`` (the slow part of :func:`write_report`;
     it needs the summary's statistics but not its float64 check). Pass the result to
     :func:`write_report` as ``figures``. ``names``: render only these (of :data:`FIGURES`; default
     all), so a study can draw the others before its worst-case search has finished; merge the parts
     with :func:`ordered_figures`. ``runs`` may be None when ``names`` has none of :data:`NEEDS_RUNS`."""
     cfg = summary.get("config") or spec.model_dump(mode="json")
-    return _figures(Path(out_dir), spec, summary, runs, controller_colors(cfg["controllers"]), worst_trajectories, names)
+    return _figures(
+        Path(out_dir), spec, summary, runs, controller_colors(cfg["controllers"]), worst_trajectories, names
+    )
 
 
 def ordered_figures(*parts: dict) -> dict[str, dict]:

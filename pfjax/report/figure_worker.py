@@ -51,7 +51,7 @@ def remove_stale_dirs() -> None:
     import shutil
 
     for d in Path(tempfile.gettempdir()).glob(f"{TMP_PREFIX}*-*"):
-        pid = d.name[len(TMP_PREFIX):].split("-", 1)[0]
+        pid = d.name[len(TMP_PREFIX) :].split("-", 1)[0]
         if not pid.isdigit() or int(pid) == os.getpid():
             continue
         try:
@@ -70,7 +70,7 @@ def enabled(environ=None) -> bool:
 class FigureRequest:
     """Figures asked of a :class:`FigureWorker`; :meth:`result` waits for them."""
 
-    def __init__(self, worker: "FigureWorker", args: tuple, sent: bool):
+    def __init__(self, worker: FigureWorker, args: tuple, sent: bool):
         self._worker, self._args, self._sent, self._value = worker, args, sent, None
         self._answer = None  # the child's JSON answer, once read
 
@@ -96,17 +96,23 @@ class FigureWorker:
         self._count = 0
         self._warned = False
         env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
-        self._stderr = open(self._tmp / "stderr.txt", "w+")
+        self._stderr = open(self._tmp / "stderr.txt", "w+")  # noqa: SIM115  (held for the child's life, closed in close())
         try:
-            self._proc = subprocess.Popen([python, "-m", "pfjax.report.figure_worker"],
-                                          stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
-                                          text=True, env=env)
+            self._proc = subprocess.Popen(
+                [python, "-m", "pfjax.report.figure_worker"],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=self._stderr,
+                text=True,
+                env=env,
+            )
         except OSError as e:
             self._proc = None
             self._warn(f"could not start ({e})")
 
-    def submit(self, out_dir: Path, spec, summary: dict, runs_path: Path, names,
-               worst_trajectories: dict | None = None) -> FigureRequest:
+    def submit(
+        self, out_dir: Path, spec, summary: dict, runs_path: Path, names, worst_trajectories: dict | None = None
+    ) -> FigureRequest:
         """Ask for figures ``names`` (of :data:`~pfjax.report.figure_set.FIGURES`); returns at once.
         Arguments as :func:`~pfjax.report.figure_set.report_figures`, with the run table's file."""
         args = (Path(out_dir).resolve(), spec, summary, Path(runs_path).resolve(), list(names), worst_trajectories)
@@ -166,8 +172,9 @@ class FigureWorker:
 
     def _warn(self, why: str) -> None:
         if not self._warned:
-            warnings.warn(f"pfjax figure worker {why}; drawing the figures in this process", RuntimeWarning,
-                          stacklevel=3)
+            warnings.warn(
+                f"pfjax figure worker {why}; drawing the figures in this process", RuntimeWarning, stacklevel=3
+            )
             self._warned = True
 
     def close(self) -> None:
@@ -197,7 +204,9 @@ class FigureWorker:
         self.close()
 
 
-def _render_here(out_dir: Path, spec, summary: dict, runs_path: Path, names, worst_trajectories=None) -> dict[str, dict]:
+def _render_here(
+    out_dir: Path, spec, summary: dict, runs_path: Path, names, worst_trajectories=None
+) -> dict[str, dict]:
     import pandas as pd
 
     from pfjax.report.figure_set import NEEDS_RUNS, report_figures

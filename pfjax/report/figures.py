@@ -12,6 +12,7 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
+
 def _style(name: str) -> dict:
     """Plot style of a controller (:func:`pfjax.controllers.style`: registry or design name)."""
     from pfjax.controllers import style
@@ -78,8 +79,14 @@ def tracking_figure(title: str, path_xy: np.ndarray, trajs: dict, delta_max: flo
     return fig
 
 
-def stability_figure(beta_deg: np.ndarray, source_max_re: np.ndarray, true_max_re: np.ndarray,
-                     exists: np.ndarray, sim_converged: np.ndarray, delta_max_deg: float):
+def stability_figure(
+    beta_deg: np.ndarray,
+    source_max_re: np.ndarray,
+    true_max_re: np.ndarray,
+    exists: np.ndarray,
+    sim_converged: np.ndarray,
+    delta_max_deg: float,
+):
     """Three maps over (beta_r, beta_f): the source's linearisation, the true equilibrium, simulation."""
     fig, ax = plt.subplots(1, 3, figsize=(15, 4.6), sharey=True)
     ext = [beta_deg[0], beta_deg[-1], beta_deg[0], beta_deg[-1]]
@@ -114,7 +121,12 @@ def pi_assignment_figure(labels: list[str], line_traces: dict, ok: dict):
         else:
             ax.plot(tr["t"], 100 * tr["d"], color="0.75", lw=0.7)
     ax.plot([], [], color="0.75", lw=0.7, label="other readings")
-    ax.set(xlabel="t [s]", ylabel="d [cm]", title="Line test, all 24 readings of Table 3 (β_r = β_f = 5°)", ylim=(-100, 100))
+    ax.set(
+        xlabel="t [s]",
+        ylabel="d [cm]",
+        title="Line test, all 24 readings of Table 3 (β_r = β_f = 5°)",
+        ylim=(-100, 100),
+    )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()

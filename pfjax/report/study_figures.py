@@ -14,11 +14,32 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogLocator, NullLocator
 
-_SPARE = ["#ff7f0e", "#e377c2", "#bcbd22", "#7f7f7f", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173",
-          "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94", "#f7b6d2", "#dbdb8d", "#9edae5"]
+_SPARE = [
+    "#ff7f0e",
+    "#e377c2",
+    "#bcbd22",
+    "#7f7f7f",
+    "#393b79",
+    "#637939",
+    "#8c6d31",
+    "#843c39",
+    "#7b4173",
+    "#aec7e8",
+    "#ffbb78",
+    "#98df8a",
+    "#ff9896",
+    "#c5b0d5",
+    "#c49c94",
+    "#f7b6d2",
+    "#dbdb8d",
+    "#9edae5",
+]
 
-AXIS_TITLE = {"rear": "rear axle only (β_r = ±A)", "front": "front axle only (β_f = ±A)",
-              "joint": "both axles (β_r = ±A, β_f = ±A)"}
+AXIS_TITLE = {
+    "rear": "rear axle only (β_r = ±A)",
+    "front": "front axle only (β_f = ±A)",
+    "joint": "both axles (β_r = ±A, β_f = ±A)",
+}
 
 
 def fmt_margin(m: dict | None) -> str:
@@ -73,7 +94,9 @@ def _log_axis(ax, axis="x"):
 
 
 def _fmt_pct_axis(ax, axis="x"):
-    (ax.xaxis if axis == "x" else ax.yaxis).set_major_formatter(lambda v, _: f"{100 * v:.10g}" if -1e-9 <= v <= 1 + 1e-9 else "")
+    (ax.xaxis if axis == "x" else ax.yaxis).set_major_formatter(
+        lambda v, _: f"{100 * v:.10g}" if -1e-9 <= v <= 1 + 1e-9 else ""
+    )
 
 
 # ------------------------------------------------------------------------------- headline
@@ -105,12 +128,28 @@ def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
                 yy = yi - 0.12 - 0.24 * j / max(1, len(paths) - 1)
                 plo, phi = pp["success_ci95"]
                 lows.append(plo)
-                a.errorbar([pp["success_rate"]], [yy], xerr=[[pp["success_rate"] - plo], [phi - pp["success_rate"]]],
-                           fmt="s", ms=3.5, color=colors[n], alpha=0.55, lw=0.8, capsize=0)
+                a.errorbar(
+                    [pp["success_rate"]],
+                    [yy],
+                    xerr=[[pp["success_rate"] - plo], [phi - pp["success_rate"]]],
+                    fmt="s",
+                    ms=3.5,
+                    color=colors[n],
+                    alpha=0.55,
+                    lw=0.8,
+                    capsize=0,
+                )
                 right = pp["success_rate"] > 0.85  # near 100 %: label on the left, inside the panel
-                a.annotate(p, (plo if right else pp["success_rate"], yy), xytext=(-4 if right else 4, 0),
-                           textcoords="offset points", fontsize=6, va="center", ha="right" if right else "left",
-                           color="0.35")
+                a.annotate(
+                    p,
+                    (plo if right else pp["success_rate"], yy),
+                    xytext=(-4 if right else 4, 0),
+                    textcoords="offset points",
+                    fontsize=6,
+                    va="center",
+                    ha="right" if right else "left",
+                    color="0.35",
+                )
         a.annotate(f"{100 * r:.2f} %", (r, yi), xytext=(0, 7), textcoords="offset points", ha="center", fontsize=8.5)
     left = max(0.0, min(lows) - 0.05 * max(1e-3, 1 - min(lows)) - 0.01) if lows else 0.0
     a.set_xlim(left, 1.0 + (0.1 if len(paths) > 1 else 0.03) * (1.0 - left))
@@ -131,16 +170,32 @@ def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
                     continue
                 eps = m["eps"]
                 yy = yi + 0.28 - 0.56 * (j + 0.5) / len(axes)
-                a.errorbar([m["margin"]], [yy], xerr=[[m["margin"] - m["margin_lo"]], [m["margin_hi"] - m["margin"]]],
-                           fmt=markers[x], ms=6, color=colors[n], capsize=3, lw=1.5, mfc="white" if m["censored"] else colors[n])
-                label = (f"{x}: fails at {m['table'][0]['amplitude']:g}°" if m.get("fails_at_smallest") else
-                         f"{x} {'≥ ' if m['censored'] else ''}{m['margin']:g}°")
-                a.annotate(label, (m["margin_hi"], yy), xytext=(6, 0), textcoords="offset points", fontsize=7, va="center")
+                a.errorbar(
+                    [m["margin"]],
+                    [yy],
+                    xerr=[[m["margin"] - m["margin_lo"]], [m["margin_hi"] - m["margin"]]],
+                    fmt=markers[x],
+                    ms=6,
+                    color=colors[n],
+                    capsize=3,
+                    lw=1.5,
+                    mfc="white" if m["censored"] else colors[n],
+                )
+                label = (
+                    f"{x}: fails at {m['table'][0]['amplitude']:g}°"
+                    if m.get("fails_at_smallest")
+                    else f"{x} {'≥ ' if m['censored'] else ''}{m['margin']:g}°"
+                )
+                a.annotate(
+                    label, (m["margin_hi"], yy), xytext=(6, 0), textcoords="offset points", fontsize=7, va="center"
+                )
                 top = max(top, m["margin_hi"])
         a.set_xlim(-0.03 * top - 0.3, 1.3 * top + 1)
         a.set_title("slip margin [lo, hi]" + (f", success ≥ {100 * (1 - eps):g} %" if eps else ""))
     else:
-        a.text(0.5, 0.5, "no slip-margin sweep in this study", ha="center", va="center", transform=a.transAxes, color="0.4")
+        a.text(
+            0.5, 0.5, "no slip-margin sweep in this study", ha="center", va="center", transform=a.transAxes, color="0.4"
+        )
         a.set_title("slip margin")
     a.set(xlabel="largest safe slip amplitude A [deg]")
     a.grid(alpha=0.3, axis="x")
@@ -162,8 +217,10 @@ def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
         _log_axis(a)
     a.set(xlabel="IAE = ∫|d| dt [m·s]" + (", log scale" if log else ""), title="IAE: p05–p95, p25–p75, median, ◆ mean")
     a.grid(alpha=0.3, axis="x")
-    fig.suptitle(f"Study '{summary['study']}': {summary.get('n_runs_per_controller_and_path', '?')} runs per "
-                 f"controller and path ({len(paths)} path{'s' if len(paths) != 1 else ''})")
+    fig.suptitle(
+        f"Study '{summary['study']}': {summary.get('n_runs_per_controller_and_path', '?')} runs per "
+        f"controller and path ({len(paths)} path{'s' if len(paths) != 1 else ''})"
+    )
     return fig
 
 
@@ -190,9 +247,18 @@ def _wants_log(values: np.ndarray) -> bool:
     return q99 > 30 * q01
 
 
-def distribution_figure(runs: pd.DataFrame, metric: str, colors: dict[str, str], paths: list[str], *,
-                        scale: float = 1.0, unit: str = "", label: str | None = None,
-                        band: float | None = None, bins: int | None = None) -> Figure:
+def distribution_figure(
+    runs: pd.DataFrame,
+    metric: str,
+    colors: dict[str, str],
+    paths: list[str],
+    *,
+    scale: float = 1.0,
+    unit: str = "",
+    label: str | None = None,
+    band: float | None = None,
+    bins: int | None = None,
+) -> Figure:
     """Histogram (top) and ECDF (bottom) of one metric, controllers overlaid, one column per path.
 
     Only runs that ran to the end (status ok) enter the histograms and the ECDF's steps: a failed
@@ -232,7 +298,13 @@ def distribution_figure(runs: pd.DataFrame, metric: str, colors: dict[str, str],
                 counts, _ = np.histogram(np.clip(fin, edges[0], edges[-1]), edges)
                 h.stairs(counts / v.size, edges, color=colors[name], lw=1.6, label=lab)
                 h.stairs(counts / v.size, edges, color=colors[name], alpha=0.12, fill=True)
-                e.plot(grid, np.searchsorted(np.sort(fin), grid, side="right") / v.size, color=colors[name], lw=1.8, label=lab)
+                e.plot(
+                    grid,
+                    np.searchsorted(np.sort(fin), grid, side="right") / v.size,
+                    color=colors[name],
+                    lw=1.8,
+                    label=lab,
+                )
             else:
                 e.plot([], [], color=colors[name], lw=1.8, label=lab + " (no run reached the end)")
         for a in (h, e):
@@ -242,8 +314,11 @@ def distribution_figure(runs: pd.DataFrame, metric: str, colors: dict[str, str],
                 a.axvline(band, color="k", ls="--", lw=1, label=f"success band: {band:g} {unit}" if a is e else None)
             a.grid(alpha=0.3)
         h.set(title=f"path '{p}'", ylabel="fraction of runs per bin" if j == 0 else None)
-        e.set(xlabel=f"{label} [{unit}]" + (", log scale" if log else ""), ylabel="ECDF: P(X ≤ x)" if j == 0 else None,
-              ylim=(0, 1.02))
+        e.set(
+            xlabel=f"{label} [{unit}]" + (", log scale" if log else ""),
+            ylabel="ECDF: P(X ≤ x)" if j == 0 else None,
+            ylim=(0, 1.02),
+        )
         e.legend(fontsize=7, loc="upper left")
     fig.suptitle(f"Distribution of {label} per controller (top: histogram, bottom: empirical CDF)")
     return fig
@@ -276,20 +351,27 @@ def margin_figure(summary: dict, colors: dict[str, str]) -> Figure | None:
             span = max(float(t["amplitude"].max() - t["amplitude"].min()), 1.0)
             t["amplitude"] += (list(ctrl).index(name) - (len(ctrl) - 1) / 2) * 0.006 * span  # dodge overlapping curves
             a.fill_between(t["amplitude"], t["lo"], t["hi"], color=col, alpha=0.15, lw=0)
-            a.plot(t["amplitude"], t["rate"], "o-", color=col, lw=1.8, ms=4,
-                   label=f"{name}: margin {fmt_margin(m)}")
+            a.plot(t["amplitude"], t["rate"], "o-", color=col, lw=1.8, ms=4, label=f"{name}: margin {fmt_margin(m)}")
             a.plot([m["margin"]], [1 - m["eps"]], "v", color=col, ms=9, mec="k", mew=0.6, zorder=5)
         if eps is not None:
             a.axhline(1 - eps, color="k", ls="--", lw=1)
-            a.annotate(f"1 − ε = {100 * (1 - eps):g} %", (0, 1 - eps), xycoords=("axes fraction", "data"),
-                       xytext=(4, -11), textcoords="offset points", fontsize=7)
+            a.annotate(
+                f"1 − ε = {100 * (1 - eps):g} %",
+                (0, 1 - eps),
+                xycoords=("axes fraction", "data"),
+                xytext=(4, -11),
+                textcoords="offset points",
+                fontsize=7,
+            )
         a.set(title=AXIS_TITLE[x], xlabel="slip amplitude A [deg]", ylim=(-0.02, 1.04))
         _fmt_pct_axis(a, "y")
         a.grid(alpha=0.3)
         a.legend(fontsize=7, loc="best")
     ax[0].set_ylabel("success rate [%]")
-    fig.suptitle(f"Slip margin: success rate vs constant slip amplitude ({n_per} runs per amplitude, all paths pooled; "
-                 "band: 95 % Clopper-Pearson; ▼ margin)")
+    fig.suptitle(
+        f"Slip margin: success rate vs constant slip amplitude ({n_per} runs per amplitude, all paths pooled; "
+        "band: 95 % Clopper-Pearson; ▼ margin)"
+    )
     return fig
 
 
@@ -300,8 +382,15 @@ def margin_figure(summary: dict, colors: dict[str, str]) -> Figure | None:
 PREDICTION_GRID = 121
 
 
-def slip_map_figure(runs: pd.DataFrame, controllers: list[str], *, delta_max_deg: float | None = None,
-                    convention: str = "source", note: str = "", predicted=None) -> Figure | None:
+def slip_map_figure(
+    runs: pd.DataFrame,
+    controllers: list[str],
+    *,
+    delta_max_deg: float | None = None,
+    convention: str = "source",
+    note: str = "",
+    predicted=None,
+) -> Figure | None:
     """Success rate binned over the sampled ``(beta_r_deg, beta_f_deg)``, one panel per controller
     (all paths pooled): ``rate = successes / runs`` per cell of an ``n_b x n_b`` grid,
     ``n_b = clip(sqrt(n / 25), 4, 24)`` with ``n`` the runs per controller (about 25 runs per
@@ -347,26 +436,53 @@ def slip_map_figure(runs: pd.DataFrame, controllers: list[str], *, delta_max_deg
             grid = np.asarray(predicted[name](xs, ys), dtype=float)
             if 0 < grid.mean() < 1:
                 a.contour(xs, ys, grid.T, levels=[0.5], colors="k", linewidths=1.4)
-            a.text(0.02, 0.02, "— linearised: success predicted inside" if 0 < grid.mean() < 1 else
-                   f"linearised: success predicted {'everywhere' if grid.mean() == 1 else 'nowhere'}",
-                   transform=a.transAxes, fontsize=7, va="bottom", bbox=dict(fc="white", alpha=0.7, lw=0))
-        a.set(xlim=(ex[0], ex[-1]), ylim=(ey[0], ey[-1]), xlabel=f"β_r{note} [deg]",
-              title=f"{name}: {100 * s.mean():.1f} % overall" if s.size else name)
+            a.text(
+                0.02,
+                0.02,
+                "— linearised: success predicted inside"
+                if 0 < grid.mean() < 1
+                else f"linearised: success predicted {'everywhere' if grid.mean() == 1 else 'nowhere'}",
+                transform=a.transAxes,
+                fontsize=7,
+                va="bottom",
+                bbox=dict(fc="white", alpha=0.7, lw=0),
+            )
+        a.set(
+            xlim=(ex[0], ex[-1]),
+            ylim=(ey[0], ey[-1]),
+            xlabel=f"β_r{note} [deg]",
+            title=f"{name}: {100 * s.mean():.1f} % overall" if s.size else name,
+        )
     ax[0].set_ylabel(f"β_f{note} [deg]")
     fig.colorbar(mesh, ax=list(ax), label="success rate (from simulation)", shrink=0.9)
-    fig.suptitle(f"Robustness map from simulation: success rate over sampled slip ({nb}×{nb} bins, "
-                 f"~{n_per / nb**2:.0f} runs per bin, all paths pooled)")
+    fig.suptitle(
+        f"Robustness map from simulation: success rate over sampled slip ({nb}×{nb} bins, "
+        f"~{n_per / nb**2:.0f} runs per bin, all paths pooled)"
+    )
     return fig
 
 
 # ------------------------------------------------------------------------------- success per parameter
 
-PARAM_LABEL = {"speed": "speed v [m/s]", "L": "wheelbase L [m]", "delta_max_deg": "δ_max [deg]", "beta_r_deg": "β_r [deg]",
-               "beta_f_deg": "β_f [deg]", "step_time_s": "step time [s]", "step_r_deg": "rear step [deg]",
-               "step_f_deg": "front step [deg]", "amp_r_deg": "rear amplitude [deg]", "amp_f_deg": "front amplitude [deg]",
-               "freq_hz": "slip frequency [Hz]", "ou_sigma_deg": "OU std [deg]", "ou_tau_s": "OU time constant [s]",
-               "start_along_m": "start along the path [m]", "lateral_offset": "initial lateral offset [m]",
-               "heading_error_deg": "initial heading error [deg]", "radius": "circle radius [m]"}
+PARAM_LABEL = {
+    "speed": "speed v [m/s]",
+    "L": "wheelbase L [m]",
+    "delta_max_deg": "δ_max [deg]",
+    "beta_r_deg": "β_r [deg]",
+    "beta_f_deg": "β_f [deg]",
+    "step_time_s": "step time [s]",
+    "step_r_deg": "rear step [deg]",
+    "step_f_deg": "front step [deg]",
+    "amp_r_deg": "rear amplitude [deg]",
+    "amp_f_deg": "front amplitude [deg]",
+    "freq_hz": "slip frequency [Hz]",
+    "ou_sigma_deg": "OU std [deg]",
+    "ou_tau_s": "OU time constant [s]",
+    "start_along_m": "start along the path [m]",
+    "lateral_offset": "initial lateral offset [m]",
+    "heading_error_deg": "initial heading error [deg]",
+    "radius": "circle radius [m]",
+}
 
 
 def success_by_param_figure(summary: dict, colors: dict[str, str], ncols: int = 4) -> Figure | None:
@@ -397,7 +513,7 @@ def success_by_param_figure(summary: dict, colors: dict[str, str], ncols: int = 
         a.set(xlabel=PARAM_LABEL.get(p, p), ylim=(-0.03, 1.03))
         _fmt_pct_axis(a, "y")
         a.grid(alpha=0.3)
-    for a in ax[len(params):]:
+    for a in ax[len(params) :]:
         a.set_visible(False)
     for r in range(nrows):
         ax[r * ncols].set_ylabel("success rate [%]")

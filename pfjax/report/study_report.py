@@ -28,11 +28,11 @@ import pandas as pd
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 from scipy import stats
 
+from pfjax.controllers import style
 from pfjax.montecarlo.config import StudySpec
 from pfjax.montecarlo.sampling import SLIP_COLUMNS, column_names
 from pfjax.report.figure_set import _figures
 from pfjax.report.study_figures import controller_colors, fmt_margin
-from pfjax.controllers import style
 from pfjax.sim.status import STATUS_NAMES
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
@@ -100,54 +100,97 @@ def _setup(cfg: dict, summary: dict) -> dict:
     """The study set-up: what was varied and how, what was held fixed, and the success criterion."""
     veh, slip, ini, noise, sim = cfg["vehicle"], cfg["slip"], cfg["initial"], cfg["noise"], cfg["sim"]
     rate = veh["delta_rate_max_deg"]
-    rows = [("speed v [m/s]", veh["speed"]), ("wheelbase L [m]", veh["L"]), ("steering limit δ_max [deg]", veh["delta_max_deg"]),
-            ("steering rate limit [deg/s]", "none" if rate is None or _bad(rate) or rate == "inf" else rate),
-            ("slip model", f"{slip['kind']} (convention: {veh['convention']})"),
-            ("rear slip β_r [deg]", slip["beta_r_deg"]), ("front slip β_f [deg]", slip["beta_f_deg"])]
-    units = {"step_time_s": "step time [s]", "step_r_deg": "rear step [deg]", "step_f_deg": "front step [deg]",
-             "amp_r_deg": "rear sinusoid amplitude [deg]", "amp_f_deg": "front sinusoid amplitude [deg]",
-             "freq_hz": "sinusoid frequency [Hz]", "ou_sigma_deg": "OU stationary std [deg]", "ou_tau_s": "OU time constant [s]"}
+    rows = [
+        ("speed v [m/s]", veh["speed"]),
+        ("wheelbase L [m]", veh["L"]),
+        ("steering limit δ_max [deg]", veh["delta_max_deg"]),
+        ("steering rate limit [deg/s]", "none" if rate is None or _bad(rate) or rate == "inf" else rate),
+        ("slip model", f"{slip['kind']} (convention: {veh['convention']})"),
+        ("rear slip β_r [deg]", slip["beta_r_deg"]),
+        ("front slip β_f [deg]", slip["beta_f_deg"]),
+    ]
+    units = {
+        "step_time_s": "step time [s]",
+        "step_r_deg": "rear step [deg]",
+        "step_f_deg": "front step [deg]",
+        "amp_r_deg": "rear sinusoid amplitude [deg]",
+        "amp_f_deg": "front sinusoid amplitude [deg]",
+        "freq_hz": "sinusoid frequency [Hz]",
+        "ou_sigma_deg": "OU stationary std [deg]",
+        "ou_tau_s": "OU time constant [s]",
+    }
     rows += [(units[k], slip[k]) for k in SLIP_COLUMNS[slip["kind"]]]
     if slip["kind"] == "sinusoid":
         rows.append(("sinusoid phase", "uniform on [0, 2π), per axle"))
     if slip["kind"] == "ou":
         rows.append(("OU sampling period [s]", slip["seq_dt"]))
-    rows += [("start along the path [m]", ini["start_along_m"]), ("initial lateral offset [m]", ini["lateral_offset"]),
-             ("initial heading error [deg]", ini["heading_error_deg"]),
-             ("measurement noise on d [m]", f"normal, std {noise['sigma_d']:g}" if noise["sigma_d"] else "none"),
-             ("measurement noise on θ_e [deg]",
-              f"normal, std {noise['sigma_theta_e_deg']:g}" if noise["sigma_theta_e_deg"] else "none")]
-    uncertain = [{"name": n, "dist": fmt_dist(d), "varies": isinstance(d, dict) and d.get("dist") not in (None, "constant")}
-                 for n, d in rows]
+    rows += [
+        ("start along the path [m]", ini["start_along_m"]),
+        ("initial lateral offset [m]", ini["lateral_offset"]),
+        ("initial heading error [deg]", ini["heading_error_deg"]),
+        ("measurement noise on d [m]", f"normal, std {noise['sigma_d']:g}" if noise["sigma_d"] else "none"),
+        (
+            "measurement noise on θ_e [deg]",
+            f"normal, std {noise['sigma_theta_e_deg']:g}" if noise["sigma_theta_e_deg"] else "none",
+        ),
+    ]
+    uncertain = [
+        {"name": n, "dist": fmt_dist(d), "varies": isinstance(d, dict) and d.get("dist") not in (None, "constant")}
+        for n, d in rows
+    ]
     paths = []
     for p in cfg["paths"]:
-        extra = {"circle": f"radius {fmt_dist(p['radius'])} m",
-                 "random": f"random smooth spline, length {p['length']:g} m, |κ| ≤ {p['curvature_margin']:g} · tan(δ_max)/L, "
-                           f"{p['n_waypoints']} waypoints, one per run",
-                 "spline": f"user-defined: natural cubic spline through {len(p.get('points') or [])} points, "
-                           f"from ({(p.get('points') or [[0, 0]])[0][0]:g}, {(p.get('points') or [[0, 0]])[0][1]:g}) m"}
-        paths.append({"name": p.get("name") or p["kind"], "kind": p["kind"],
-                      "detail": extra.get(p["kind"]) or _path_description(p["kind"])})
+        extra = {
+            "circle": f"radius {fmt_dist(p['radius'])} m",
+            "random": f"random smooth spline, length {p['length']:g} m, |κ| ≤ {p['curvature_margin']:g} · tan(δ_max)/L, "
+            f"{p['n_waypoints']} waypoints, one per run",
+            "spline": f"user-defined: natural cubic spline through {len(p.get('points') or [])} points, "
+            f"from ({(p.get('points') or [[0, 0]])[0][0]:g}, {(p.get('points') or [[0, 0]])[0][1]:g}) m",
+        }
+        paths.append(
+            {
+                "name": p.get("name") or p["kind"],
+                "kind": p["kind"],
+                "detail": extra.get(p["kind"]) or _path_description(p["kind"]),
+            }
+        )
     ctrls = []
     for c in cfg["controllers"]:
         gains = summary["controllers"].get(c["name"], {}).get("gains", {})
-        how = {"lmi": f"mixed H2/H∞ LMI design (α = {c['alpha']:g}, β = {c['beta']:g}) at the nominal speed and wheelbase",
-               "state_feedback": "state feedback δ = K [d, θ_e]"}.get(c["type"]) or style(c["type"])["label"]
-        ctrls.append({"name": c["name"], "type": c["type"], "how": how,
-                      "gains": ", ".join(f"{k} = {v:.4g}" for k, v in gains.items()) or "defaults"})
+        how = {
+            "lmi": f"mixed H2/H∞ LMI design (α = {c['alpha']:g}, β = {c['beta']:g}) at the nominal speed and wheelbase",
+            "state_feedback": "state feedback δ = K [d, θ_e]",
+        }.get(c["type"]) or style(c["type"])["label"]
+        ctrls.append(
+            {
+                "name": c["name"],
+                "type": c["type"],
+                "how": how,
+                "gains": ", ".join(f"{k} = {v:.4g}" for k, v in gains.items()) or "defaults",
+            }
+        )
     m = cfg["margin"]
     return {
-        "uncertain": uncertain, "paths": paths, "controllers": ctrls,
-        "n_runs": cfg["n_runs"], "seed": cfg["seed"], "dtype": cfg["dtype"], "chunk_size": cfg["chunk_size"],
+        "uncertain": uncertain,
+        "paths": paths,
+        "controllers": ctrls,
+        "n_runs": cfg["n_runs"],
+        "seed": cfg["seed"],
+        "dtype": cfg["dtype"],
+        "chunk_size": cfg["chunk_size"],
         "sim": f"horizon {sim['horizon']:g} s, RK4 step {1000 * sim['dt']:g} ms, controller every {sim['control_every']} step(s); "
-               f"failure when |d| > {sim['d_fail']:g} m; steady state = last {sim['steady_window']:g} s; "
-               f"settled within ±{100 * sim['settle_band']:g} cm",
+        f"failure when |d| > {sim['d_fail']:g} m; steady state = last {sim['steady_window']:g} s; "
+        f"settled within ±{100 * sim['settle_band']:g} cm",
         "success": f"|d| ≤ {100 * cfg['success']['band']:g} cm at every sample from t = {cfg['success']['from_s']:g} s "
-                   f"to the end of the horizon, and no failure flag (status 'ok')",
-        "margin": (f"{m['n_per_amplitude']} runs per amplitude, per path and per controller at constant slip of magnitude A "
-                   f"(random sign) on {', '.join(m['axes'])}, A ∈ {{{', '.join(f'{a:g}' for a in m['amplitudes_deg'])}}} deg, "
-                   f"everything else sampled as above; margin = largest A with success ≥ 1 − ε = {100 * (1 - m['eps']):g} % "
-                   f"there and at every smaller A") if m["enabled"] else "not run",
+        f"to the end of the horizon, and no failure flag (status 'ok')",
+        "margin": (
+            f"{m['n_per_amplitude']} runs per amplitude, per path and per controller at constant slip of magnitude A "
+            f"(random sign) on {', '.join(m['axes'])}, A ∈ {{{', '.join(f'{a:g}' for a in m['amplitudes_deg'])}}} deg, "
+            f"everything else sampled as above; margin = largest A with success ≥ 1 − ε = {100 * (1 - m['eps']):g} % "
+            f"there and at every smaller A"
+        )
+        if m["enabled"]
+        else "not run",
     }
 
 
@@ -160,7 +203,9 @@ def _paired(runs: pd.DataFrame, a: str, b: str) -> dict:
     n, only_a, only_b = len(m), int((x & ~y).sum()), int((~x & y).sum())
     p = float(stats.binomtest(only_a, only_a + only_b, 0.5).pvalue) if only_a + only_b else 1.0
     diff = (only_a - only_b) / n if n else math.nan
-    half = stats.norm.ppf(0.975) * math.sqrt(max(only_a + only_b - (only_a - only_b) ** 2 / n, 0.0)) / n if n else math.nan
+    half = (
+        stats.norm.ppf(0.975) * math.sqrt(max(only_a + only_b - (only_a - only_b) ** 2 / n, 0.0)) / n if n else math.nan
+    )
     return {"n": n, "only_a": only_a, "only_b": only_b, "diff": diff, "ci": (diff - half, diff + half), "p": p}
 
 
@@ -188,14 +233,23 @@ def _verdict(summary: dict, runs: pd.DataFrame) -> tuple[str, list[str], list[li
     cb = ctrl[best]
     lines, rows = [], []
     if len(ranked) == 1:
-        return best, [f"Only one controller, {best}: success {fmt_pct(cb['success_rate'])} {fmt_ci(cb['success_ci95'])}."], rows
+        return (
+            best,
+            [f"Only one controller, {best}: success {fmt_pct(cb['success_rate'])} {fmt_ci(cb['success_ci95'])}."],
+            rows,
+        )
     for other in ranked[1:]:
         co = ctrl[other]
         pr = _paired(runs, best, other)
         sig = pr["p"] < 0.05
         f_best, f_other = 1 - cb["success_rate"], 1 - co["success_rate"]
-        ratio = (f"{other} fails {fmt_times(f_other / f_best)} as often" if f_best > 0 else
-                 (f"{best} never failed, {other} did in {fmt_pct(f_other)} of runs" if f_other > 0 else "neither failed"))
+        ratio = (
+            f"{other} fails {fmt_times(f_other / f_best)} as often"
+            if f_best > 0
+            else (
+                f"{best} never failed, {other} did in {fmt_pct(f_other)} of runs" if f_other > 0 else "neither failed"
+            )
+        )
         mb, mo = cb.get("slip_margin", {}).get("joint"), co.get("slip_margin", {}).get("joint")
         margin = f" Joint slip margin: {best} {fmt_margin(mb)}, {other} {fmt_margin(mo)}." if mb and mo else ""
         lines.append(
@@ -204,21 +258,40 @@ def _verdict(summary: dict, runs: pd.DataFrame) -> tuple[str, list[str], list[li
             f"{'more' if sig else 'apart, not a significant difference'} (paired 95 % CI [{100 * pr['ci'][0]:.2f}, "
             f"{100 * pr['ci'][1]:.2f}]; {ratio}). On the same {pr['n']} scenarios, {best} succeeded where {other} failed "
             f"{pr['only_a']} times and the reverse happened {pr['only_b']} times (exact McNemar p {'= ' if pr['p'] >= 1e-16 else ''}"
-            f"{fmt_p(pr['p'])}).{margin}")
-        rows.append([_cell(other), _cell(f"{-100 * pr['diff']:+.2f} pp"),
-                     _cell(f"[{-100 * pr['ci'][1]:+.2f}, {-100 * pr['ci'][0]:+.2f}] pp"), _cell(f"{pr['only_a']} / {pr['only_b']}"),
-                     _cell(fmt_p(pr["p"]), cls="good" if sig else ""),
-                     _cell(DASH if _bad(co["iae_mean"]) or _bad(cb["iae_mean"]) or not cb["iae_mean"]
-                           else fmt_num(co["iae_mean"] / cb["iae_mean"]) + "×")])
+            f"{fmt_p(pr['p'])}).{margin}"
+        )
+        rows.append(
+            [
+                _cell(other),
+                _cell(f"{-100 * pr['diff']:+.2f} pp"),
+                _cell(f"[{-100 * pr['ci'][1]:+.2f}, {-100 * pr['ci'][0]:+.2f}] pp"),
+                _cell(f"{pr['only_a']} / {pr['only_b']}"),
+                _cell(fmt_p(pr["p"]), cls="good" if sig else ""),
+                _cell(
+                    DASH
+                    if _bad(co["iae_mean"]) or _bad(cb["iae_mean"]) or not cb["iae_mean"]
+                    else fmt_num(co["iae_mean"] / cb["iae_mean"]) + "×"
+                ),
+            ]
+        )
     return best, lines, rows
 
 
 def _headline_rows(summary: dict, colors: dict, axes: list[str]) -> list[list]:
     rows = []
     for n, c in summary["controllers"].items():
-        rows.append([_cell(n, swatch=colors[n]), _cell(f"{c['k']} / {c['n']}"), _cell(fmt_pct(c["success_rate"])),
-                     _cell(fmt_ci(c["success_ci95"])), _cell(fmt_num(c["iae_mean"])), _cell(fmt_num(c["iae_p95"])),
-                     _cell(fmt_mm(c["steady_abs_d_p95"]))] + [_cell(fmt_margin(c.get("slip_margin", {}).get(x))) for x in axes])
+        rows.append(
+            [
+                _cell(n, swatch=colors[n]),
+                _cell(f"{c['k']} / {c['n']}"),
+                _cell(fmt_pct(c["success_rate"])),
+                _cell(fmt_ci(c["success_ci95"])),
+                _cell(fmt_num(c["iae_mean"])),
+                _cell(fmt_num(c["iae_p95"])),
+                _cell(fmt_mm(c["steady_abs_d_p95"])),
+            ]
+            + [_cell(fmt_margin(c.get("slip_margin", {}).get(x))) for x in axes]
+        )
     return rows
 
 
@@ -227,9 +300,19 @@ def _per_path_rows(summary: dict, colors: dict) -> list[list]:
     for n, c in summary["controllers"].items():
         for p, b in c["per_path"].items():
             st = ", ".join(f"{k} {v}" for k, v in b["status_counts"].items())
-            rows.append([_cell(n, swatch=colors[n]), _cell(p), _cell(f"{b['k']} / {b['n']}"), _cell(fmt_pct(b["success_rate"])),
-                         _cell(fmt_ci(b["success_ci95"])), _cell(fmt_num(b["iae_mean"])), _cell(fmt_num(b["iae_p95"])),
-                         _cell(fmt_mm(b["steady_abs_d_p95"])), _cell(st, cls="bad" if set(b["status_counts"]) - {"ok"} else "")])
+            rows.append(
+                [
+                    _cell(n, swatch=colors[n]),
+                    _cell(p),
+                    _cell(f"{b['k']} / {b['n']}"),
+                    _cell(fmt_pct(b["success_rate"])),
+                    _cell(fmt_ci(b["success_ci95"])),
+                    _cell(fmt_num(b["iae_mean"])),
+                    _cell(fmt_num(b["iae_p95"])),
+                    _cell(fmt_mm(b["steady_abs_d_p95"])),
+                    _cell(st, cls="bad" if set(b["status_counts"]) - {"ok"} else ""),
+                ]
+            )
     return rows
 
 
@@ -244,9 +327,16 @@ def _status_table(runs: pd.DataFrame, colors: dict) -> tuple[list[str], list[lis
         ok = (g["status"] == "ok").to_numpy()
         succ = g["success"].to_numpy(bool)
         counts = g["status"].value_counts()
-        r = [_cell(n, swatch=colors[n]), _cell(path, cls="total" if total else ""), _cell(str(len(g))),
-             _cell(str(int(succ.sum())), cls="good"), _cell(str(int((ok & ~succ).sum())), cls="warn" if (ok & ~succ).any() else "")]
-        return r + [_cell(str(int(counts.get(s, 0))), cls="bad" if s != "ok" and counts.get(s, 0) else "") for s in names]
+        r = [
+            _cell(n, swatch=colors[n]),
+            _cell(path, cls="total" if total else ""),
+            _cell(str(len(g))),
+            _cell(str(int(succ.sum())), cls="good"),
+            _cell(str(int((ok & ~succ).sum())), cls="warn" if (ok & ~succ).any() else ""),
+        ]
+        return r + [
+            _cell(str(int(counts.get(s, 0))), cls="bad" if s != "ok" and counts.get(s, 0) else "") for s in names
+        ]
 
     for n, g in runs.groupby("controller", sort=False):
         by_path = list(g.groupby("path", sort=False))
@@ -261,11 +351,21 @@ def _precision_rows(summary: dict, colors: dict) -> list[list]:
     chk = summary.get("float64_check") or {}
     rows = []
     for n, c in (chk.get("controllers") or {}).items():
-        mism = ", ".join(f"{m['path']} run {m['run']}: {m['float32']} vs {m['float64']}" for m in c["status_mismatches"][:3])
-        rows.append([_cell(n, swatch=colors.get(n, "#888")), _cell(str(c["n"])), _cell(fmt_num(c["max_abs_diff_iae"], 3)),
-                     _cell(fmt_num(c["max_rel_diff_iae"], 3)), _cell(fmt_num(c["max_abs_diff_late_max_abs_d"], 3)),
-                     _cell(fmt_pct(c["status_agreement"]), cls="" if c["status_agreement"] == 1 else "warn"),
-                     _cell(fmt_pct(c["success_agreement"]), cls="" if c["success_agreement"] == 1 else "warn"), _cell(mism or DASH)])
+        mism = ", ".join(
+            f"{m['path']} run {m['run']}: {m['float32']} vs {m['float64']}" for m in c["status_mismatches"][:3]
+        )
+        rows.append(
+            [
+                _cell(n, swatch=colors.get(n, "#888")),
+                _cell(str(c["n"])),
+                _cell(fmt_num(c["max_abs_diff_iae"], 3)),
+                _cell(fmt_num(c["max_rel_diff_iae"], 3)),
+                _cell(fmt_num(c["max_abs_diff_late_max_abs_d"], 3)),
+                _cell(fmt_pct(c["status_agreement"]), cls="" if c["status_agreement"] == 1 else "warn"),
+                _cell(fmt_pct(c["success_agreement"]), cls="" if c["success_agreement"] == 1 else "warn"),
+                _cell(mism or DASH),
+            ]
+        )
     return rows
 
 
@@ -274,22 +374,40 @@ def _worst_runs(runs: pd.DataFrame, params: list[str], n_show: int = 5) -> dict[
     largest late max |d|."""
     out = {}
     for name, g in runs.groupby("controller", sort=False):
-        g = g.assign(_failed=(g["status"] != "ok"), _ft=g["fail_time"].fillna(np.inf),
-                     _late=g["late_max_abs_d"].fillna(np.inf))
+        g = g.assign(
+            _failed=(g["status"] != "ok"), _ft=g["fail_time"].fillna(np.inf), _late=g["late_max_abs_d"].fillna(np.inf)
+        )
         g = g.sort_values(["_failed", "_ft", "_late"], ascending=[False, True, False], kind="stable").head(n_show)
-        out[name] = [[_cell(r.path), _cell(str(r.run)), _cell(r.status, cls="bad" if r.status != "ok" else ""),
-                      _cell(fmt_num(r.fail_time)), _cell(fmt_mm(r.late_max_abs_d)), _cell(fmt_num(r.iae)),
-                      _cell("yes" if r.success else "no", cls="good" if r.success else "warn")]
-                     + [_cell(fmt_num(getattr(r, p))) for p in params] for r in g.itertuples(index=False)]
+        out[name] = [
+            [
+                _cell(r.path),
+                _cell(str(r.run)),
+                _cell(r.status, cls="bad" if r.status != "ok" else ""),
+                _cell(fmt_num(r.fail_time)),
+                _cell(fmt_mm(r.late_max_abs_d)),
+                _cell(fmt_num(r.iae)),
+                _cell("yes" if r.success else "no", cls="good" if r.success else "warn"),
+            ]
+            + [_cell(fmt_num(getattr(r, p))) for p in params]
+            for r in g.itertuples(index=False)
+        ]
     return out
 
 
 def _drivers(summary: dict) -> dict[str, list[list]]:
     out = {}
     for n, c in summary["controllers"].items():
-        out[n] = [[_cell(d["parameter"]), _cell(fmt_num(d["rho_failure"], 2)), _cell(fmt_p(d["p_failure"])),
-                   _cell(fmt_num(d["rho_metric"], 2)), _cell(fmt_p(d["p_metric"])), _cell(fmt_num(d["effect_size"], 2))]
-                  for d in c.get("failure_drivers", [])]
+        out[n] = [
+            [
+                _cell(d["parameter"]),
+                _cell(fmt_num(d["rho_failure"], 2)),
+                _cell(fmt_p(d["p_failure"])),
+                _cell(fmt_num(d["rho_metric"], 2)),
+                _cell(fmt_p(d["p_metric"])),
+                _cell(fmt_num(d["effect_size"], 2)),
+            ]
+            for d in c.get("failure_drivers", [])
+        ]
     return out
 
 
@@ -298,16 +416,32 @@ def _worst_case_rows(summary: dict, colors: dict) -> list:
     for n, c in summary["controllers"].items():
         wc = c.get("worst_case")
         if wc:
-            rows.append([_cell(n, swatch=colors[n]), _cell(wc["path"]), _cell(wc["objective"]),
-                         _cell(f"{wc['falsifier']:.4g} ({wc['falsifier_status']})"), _cell(f"{wc['random']:.4g} ({wc['random_status']})"),
-                         _cell(f"{wc['ratio']:.2f}×"), _cell(str(wc["n_rollouts"])),
-                         _cell(f"d₀ = {wc['worst_ic']['d0']:+.3f} m, θₑ₀ = {wc['worst_ic']['theta_e0_deg']:+.1f}°, "
-                               f"peak |β_r|, |β_f| = {wc['worst_slip_peak_deg'][0]:.1f}°, {wc['worst_slip_peak_deg'][1]:.1f}°")])
+            rows.append(
+                [
+                    _cell(n, swatch=colors[n]),
+                    _cell(wc["path"]),
+                    _cell(wc["objective"]),
+                    _cell(f"{wc['falsifier']:.4g} ({wc['falsifier_status']})"),
+                    _cell(f"{wc['random']:.4g} ({wc['random_status']})"),
+                    _cell(f"{wc['ratio']:.2f}×"),
+                    _cell(str(wc["n_rollouts"])),
+                    _cell(
+                        f"d₀ = {wc['worst_ic']['d0']:+.3f} m, θₑ₀ = {wc['worst_ic']['theta_e0_deg']:+.1f}°, "
+                        f"peak |β_r|, |β_f| = {wc['worst_slip_peak_deg'][0]:.1f}°, {wc['worst_slip_peak_deg'][1]:.1f}°"
+                    ),
+                ]
+            )
     return rows
 
 
-def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFrame,
-                 worst_trajectories: dict | None = None, figures: dict | None = None) -> None:
+def write_report(
+    out_dir: Path,
+    spec: StudySpec,
+    summary: dict,
+    runs: pd.DataFrame,
+    worst_trajectories: dict | None = None,
+    figures: dict | None = None,
+) -> None:
     """Write ``out_dir/report.html`` (self-contained) and ``out_dir/figures/<name>.png|svg``.
 
     Args:
@@ -329,27 +463,50 @@ def write_report(out_dir: Path, spec: StudySpec, summary: dict, runs: pd.DataFra
     best, verdict, verdict_rows = _verdict(summary, runs)
     status_head, status_rows = _status_table(runs, colors)
     eps = cfg["margin"]["eps"]
-    margin_rows = [[_cell(n, swatch=colors[n]), _cell(x), _cell(fmt_margin(m)), _cell(fmt_num(m["resolution"]))]
-                   for n, c in ctrl.items() for x, m in c.get("slip_margin", {}).items()]
+    margin_rows = [
+        [_cell(n, swatch=colors[n]), _cell(x), _cell(fmt_margin(m)), _cell(fmt_num(m["resolution"]))]
+        for n, c in ctrl.items()
+        for x, m in c.get("slip_margin", {}).items()
+    ]
     ctx = {
-        "s": summary, "setup": _setup(cfg, summary), "colors": colors, "axes": axes, "eps": eps,
-        "best": best, "verdict": verdict, "verdict_rows": verdict_rows,
+        "s": summary,
+        "setup": _setup(cfg, summary),
+        "colors": colors,
+        "axes": axes,
+        "eps": eps,
+        "best": best,
+        "verdict": verdict,
+        "verdict_rows": verdict_rows,
         "headline_rows": _headline_rows(summary, colors, axes),
-        "margin_heads": [f"slip margin, {x} [lo, hi]" for x in axes], "per_path_rows": _per_path_rows(summary, colors),
+        "margin_heads": [f"slip margin, {x} [lo, hi]" for x in axes],
+        "per_path_rows": _per_path_rows(summary, colors),
         "statements": {n: c["statement"]["text"] for n, c in ctrl.items()},
-        "status_head": status_head, "status_rows": status_rows, "margin_rows": margin_rows,
-        "drivers": _drivers(summary), "worst": _worst_runs(runs, params), "worst_params": params,
+        "status_head": status_head,
+        "status_rows": status_rows,
+        "margin_rows": margin_rows,
+        "drivers": _drivers(summary),
+        "worst": _worst_runs(runs, params),
+        "worst_params": params,
         "sample_size": {k: v for k, v in summary.get("sample_size", {}).items() if k != "note"},
         "sample_note": summary.get("sample_size", {}).get("note", ""),
         "n_sweep": summary.get("n_margin_runs", 0),
-        "figures": figures if figures is not None else _figures(out_dir, spec, summary, runs, colors, worst_trajectories),
+        "figures": figures
+        if figures is not None
+        else _figures(out_dir, spec, summary, runs, colors, worst_trajectories),
         "worst_case_rows": _worst_case_rows(summary, colors),
-        "warnings": summary.get("warnings") or [], "precision_rows": _precision_rows(summary, colors),
-        "precision": summary.get("float64_check") or {}, "chunks": summary.get("chunks") or {},
+        "warnings": summary.get("warnings") or [],
+        "precision_rows": _precision_rows(summary, colors),
+        "precision": summary.get("float64_check") or {},
+        "chunks": summary.get("chunks") or {},
         "wall": fmt_num(summary.get("wall_s"), 4),
-        "written": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "written": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
     }
-    env = Environment(loader=FileSystemLoader(TEMPLATES), autoescape=True, undefined=StrictUndefined,
-                      trim_blocks=True, lstrip_blocks=True)
+    env = Environment(
+        loader=FileSystemLoader(TEMPLATES),
+        autoescape=True,
+        undefined=StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
     html = env.get_template("study.html.j2").render(**ctx)
     (out_dir / "report.html").write_text(html, encoding="utf-8")

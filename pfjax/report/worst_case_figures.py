@@ -22,10 +22,18 @@ def worst_case_figure(trajs: dict, summary: dict, colors: dict[str, str]) -> Fig
         a.plot(np.where(inside, tr["path_x"], np.nan), tr["path_y"], color="0.6", lw=3, alpha=0.5, label="path")
         a.plot(tr["x"], tr["y"], color=c, lw=1.5, label="worst run")
         a.plot(tr["x"][0], tr["y"][0], "ko", ms=4)
-        near = (tr["path_x"] > tr["x"].min() - 1) & (tr["path_x"] < tr["x"].max() + 1) & \
-               (tr["path_y"] > tr["y"].min() - 1) & (tr["path_y"] < tr["y"].max() + 1)
+        near = (
+            (tr["path_x"] > tr["x"].min() - 1)
+            & (tr["path_x"] < tr["x"].max() + 1)
+            & (tr["path_y"] > tr["y"].min() - 1)
+            & (tr["path_y"] < tr["y"].max() + 1)
+        )
         a.plot(tr["path_x"][near], tr["path_y"][near], color="none")  # autoscale to the run, not the whole path
-        a.set(xlabel="x [m]", ylabel="y [m]", title=f"{name}: worst {wc['objective']} = {wc['falsifier']:.3g} ({wc['falsifier_status']})")
+        a.set(
+            xlabel="x [m]",
+            ylabel="y [m]",
+            title=f"{name}: worst {wc['objective']} = {wc['falsifier']:.3g} ({wc['falsifier_status']})",
+        )
         a.set_aspect("equal", adjustable="datalim")
         a.autoscale(enable=True, tight=False)
         a.legend(fontsize=7)
@@ -43,7 +51,11 @@ def worst_case_figure(trajs: dict, summary: dict, colors: dict[str, str]) -> Fig
         a = row[3]
         a.plot(wc["history_rollouts"], wc["history"], color=c, lw=2, label="falsifier (gradient ascent)")
         a.plot(wc["history_random_rollouts"], wc["history_random"], color="0.4", ls="--", label="random search")
-        a.set(xlabel="rollouts simulated", ylabel=f"worst {wc['objective']} found", title=f"search: ratio {wc['ratio']:.2f}×")
+        a.set(
+            xlabel="rollouts simulated",
+            ylabel=f"worst {wc['objective']} found",
+            title=f"search: ratio {wc['ratio']:.2f}×",
+        )
         a.legend(fontsize=7)
         a.grid(alpha=0.3)
     return fig

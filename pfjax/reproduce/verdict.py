@@ -17,8 +17,13 @@ VERDICTS = ("holds", "does not hold", "reproduced", "not reproduced", "no verdic
 #: source's number set one of pfjax's parameters (named in the criterion), so matching it is by
 #: construction. ``assumed``: the criterion rests on a parameter the source does not give (named in
 #: the criterion).
-BASES = ("independent", "used to choose the convention", "chosen by filters from the source",
-         "used to calibrate a parameter", "assumed")
+BASES = (
+    "independent",
+    "used to choose the convention",
+    "chosen by filters from the source",
+    "used to calibrate a parameter",
+    "assumed",
+)
 
 
 class Verdict(NamedTuple):
@@ -36,7 +41,7 @@ class Verdict(NamedTuple):
     verdict: str
     basis: str = "independent"
 
-    def check(self) -> "Verdict":
+    def check(self) -> Verdict:
         if self.verdict not in VERDICTS:
             raise ValueError(f"verdict: {self.verdict!r} is not one of {VERDICTS}")
         if self.basis not in BASES:
@@ -47,5 +52,19 @@ class Verdict(NamedTuple):
 def verdict_table(rows: list[Verdict]) -> str:
     """The verdict table in Markdown (cells escaped: evidence such as ``|d|`` stays in its cell)."""
     head = ["claim", "path", "subject", "criterion", "pfjax", "source", "verdict", "basis"]
-    return table(head, [[r.claim, r.path, r.subject, r.criterion, r.pfjax, r.source, f"**{r.verdict}**",
-                         "" if r.basis == "independent" else r.basis] for r in rows])
+    return table(
+        head,
+        [
+            [
+                r.claim,
+                r.path,
+                r.subject,
+                r.criterion,
+                r.pfjax,
+                r.source,
+                f"**{r.verdict}**",
+                "" if r.basis == "independent" else r.basis,
+            ]
+            for r in rows
+        ],
+    )

@@ -14,7 +14,23 @@ from pfjax.sim.slip_profiles import (
 from pfjax.sim.status import STATUS_NAMES, Status
 
 __all__ = [
-    "Final", "Scenario", "SensorNoise", "SimConfig", "SimResult", "Trajectory", "simulate", "simulate_batch", "stack",
-    "unstack", "SlipProfile", "constant_slip", "sampled_slip", "sinusoid_slip", "slip_at", "slip_profile",
-    "step_slip", "STATUS_NAMES", "Status",
+    "STATUS_NAMES",
+    "Final",
+    "Scenario",
+    "SensorNoise",
+    "SimConfig",
+    "SimResult",
+    "SlipProfile",
+    "Status",
+    "Trajectory",
+    "constant_slip",
+    "sampled_slip",
+    "simulate",
+    "simulate_batch",
+    "sinusoid_slip",
+    "slip_at",
+    "slip_profile",
+    "stack",
+    "step_slip",
+    "unstack",
 ]

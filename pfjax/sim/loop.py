@@ -142,8 +142,7 @@ def _sample(system: System, inputs, carry: LoopCarry, k, record: bool):
     return LoopCarry(state, s.aux, metrics, status, fail_time), rec
 
 
-def run(system: System, inputs, n_samples: int, *, record: bool, scalar_inputs: bool = False,
-        checkpoint_policy=None):
+def run(system: System, inputs, n_samples: int, *, record: bool, scalar_inputs: bool = False, checkpoint_policy=None):
     """Run one system over samples ``k = 0..n_samples-1`` (pure, unbatched; vmap it).
 
     Args:
@@ -170,8 +169,18 @@ def run(system: System, inputs, n_samples: int, *, record: bool, scalar_inputs: 
     if checkpoint_policy is not None:
         body = jax.checkpoint(body, prevent_cse=False, policy=checkpoint_policy)
     final, records = jax.lax.scan(body, carry, jnp.arange(n_samples))
-    return system.finish(inputs, Run(final.state, final.aux, final.metrics, final.status.astype(jnp.int32),
-                                     final.status != Status.OK, final.fail_time, records))
+    return system.finish(
+        inputs,
+        Run(
+            final.state,
+            final.aux,
+            final.metrics,
+            final.status.astype(jnp.int32),
+            final.status != Status.OK,
+            final.fail_time,
+            records,
+        ),
+    )
 
 
 # ----------------------------------------------------------------------------- batches of runs
@@ -185,8 +194,10 @@ def stack(items):
     first = jax.tree_util.tree_structure(items[0])
     for i, item in enumerate(items[1:], 1):
         if jax.tree_util.tree_structure(item) != first:
-            raise ValueError(f"stack: item {i} has a different structure from item 0 (e.g. a slip profile with other "
-                             f"terms present: give every run the same terms, zeros where unused)")
+            raise ValueError(
+                f"stack: item {i} has a different structure from item 0 (e.g. a slip profile with other "
+                f"terms present: give every run the same terms, zeros where unused)"
+            )
     return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *items)
 
 

@@ -18,10 +18,9 @@ import math
 import jax
 import jax.numpy as jnp
 
-from pfjax import errors
+from pfjax import errors, paths
 from pfjax.errors import InputError
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
-from pfjax import paths
 from pfjax.sim.simulate import Scenario
 from pfjax.sim.slip_profiles import SlipProfile, constant_slip
 
@@ -39,8 +38,9 @@ def check_gains(gains, key: str = "gains") -> None:
             errors.numbers(f"{key}.{name}" if name else key, leaf)
 
 
-def make_scenario(path, pose0, gains, *, slip: SlipProfile | None = None, v=1.0, L=0.2,
-                  delta_max_deg=30.0, convention="source") -> Scenario:
+def make_scenario(
+    path, pose0, gains, *, slip: SlipProfile | None = None, v=1.0, L=0.2, delta_max_deg=30.0, convention="source"
+) -> Scenario:
     """One scenario from plain values, checked (:class:`~pfjax.errors.InputError` naming the
     argument: ``v`` and ``L`` > 0, ``0 < delta_max_deg < 90``, ``pose0`` three finite numbers, slip
     angles below 90 deg, gains finite).
@@ -69,15 +69,20 @@ def make_scenario(path, pose0, gains, *, slip: SlipProfile | None = None, v=1.0,
     return Scenario(
         pose0=Pose(*(f(a) for a in pose0)),
         slip=constant_slip(0.0, 0.0) if slip is None else slip,
-        params=SlipParams(v=f(v), L=f(L), delta_max=f(math.radians(delta_max_deg)),
-                          convention=jnp.asarray(CONVENTIONS[convention], jnp.int32)),
+        params=SlipParams(
+            v=f(v),
+            L=f(L),
+            delta_max=f(math.radians(delta_max_deg)),
+            convention=jnp.asarray(CONVENTIONS[convention], jnp.int32),
+        ),
         path=path,
         gains=gains,
     )
 
 
-def paper_scenario(test: str, gains, *, beta_r_deg=PAPER_SLIP_DEG, beta_f_deg=PAPER_SLIP_DEG, pose0=None,
-                   **kwargs) -> Scenario:
+def paper_scenario(
+    test: str, gains, *, beta_r_deg=PAPER_SLIP_DEG, beta_f_deg=PAPER_SLIP_DEG, pose0=None, **kwargs
+) -> Scenario:
     """The registered fixed path ``test`` (:data:`pfjax.paths.PATHS`: the source's "line",
     "parabola", "sine", pfjax's "circle", any registered path) from its start pose (or ``pose0``)
     with constant slip ``beta_r_deg``, ``beta_f_deg`` (deg, magnitude below 90); ``kwargs`` as

@@ -37,9 +37,9 @@ up to a few tens of ulp in float32 metrics, float64 bit-identical; tests/test_sh
 from __future__ import annotations
 
 import math
-
+from collections.abc import Callable
 from functools import partial
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -121,13 +121,16 @@ def default_block(tree, devices=None) -> int | None:
     devices = jax.devices() if devices is None else list(devices)
     if devices[0].platform != "cpu":
         return None
-    floats = [a.dtype for a in jax.tree_util.tree_leaves(tree)
-              if hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating)]
+    floats = [
+        a.dtype
+        for a in jax.tree_util.tree_leaves(tree)
+        if hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating)
+    ]
     itemsize = max((np.dtype(d).itemsize for d in floats), default=4)
     return max(1, CPU_BLOCK_BYTES // itemsize)
 
 
-def plan_batch(tree, devices=None, block: int | None | str = "auto", align: int = ALIGN):
+def plan_batch(tree, devices=None, block: int | str | None = "auto", align: int = ALIGN):
     """Pad and place a batch for :func:`map_runs`: ``(placed_tree, n, layout)``.
 
     ``n`` is the original batch size. The batch is split over the devices (as :func:`shard_batch`)
@@ -216,13 +219,19 @@ def reach_coordinator(coordinator: str, process_id: int, timeout_s: float) -> No
                 return
         except OSError as e:
             if time.monotonic() >= deadline:
-                raise InputError(f"coordinator: could not reach {coordinator} within {timeout_s:g} s "
-                                 f"({e.strerror or type(e).__name__}); is process 0 running?") from None
+                raise InputError(
+                    f"coordinator: could not reach {coordinator} within {timeout_s:g} s "
+                    f"({e.strerror or type(e).__name__}); is process 0 running?"
+                ) from None
             time.sleep(0.2)
 
 
-def initialize_distributed(coordinator: str | None = None, num_processes: int | None = None,
-                           process_id: int | None = None, timeout_s: float = COORDINATOR_TIMEOUT_S) -> None:
+def initialize_distributed(
+    coordinator: str | None = None,
+    num_processes: int | None = None,
+    process_id: int | None = None,
+    timeout_s: float = COORDINATOR_TIMEOUT_S,
+) -> None:
     """Join a multi-process JAX run (several hosts, or several processes on one host).
 
     ``jax.distributed.initialize`` with the given coordinator (``host:port`` of process 0), number
@@ -235,8 +244,12 @@ def initialize_distributed(coordinator: str | None = None, num_processes: int | 
     if coordinator is not None and process_id is not None:
         reach_coordinator(coordinator, process_id, timeout_s)
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
-    jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes, process_id=process_id,
-                               initialization_timeout=max(1, int(math.ceil(timeout_s))))
+    jax.distributed.initialize(
+        coordinator_address=coordinator,
+        num_processes=num_processes,
+        process_id=process_id,
+        initialization_timeout=max(1, int(math.ceil(timeout_s))),
+    )
 
 
 def gather(tree):

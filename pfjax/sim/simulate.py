@@ -34,13 +34,20 @@ from pfjax.models.slip import Pose, SlipParams, world_rhs
 from pfjax.numerics import compiler
 from pfjax.numerics import elementary as E
 from pfjax.numerics.random import step_normals
-from pfjax.paths.geometry import NEWTON_START, Projection, closest_parameter, global_parameter, measure, polish_parameter, wrap_angle
+from pfjax.paths.geometry import (
+    NEWTON_START,
+    Projection,
+    closest_parameter,
+    global_parameter,
+    measure,
+    polish_parameter,
+    wrap_angle,
+)
 from pfjax.sim import loop, sharding
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.loop import stack, unstack  # noqa: F401  (re-exported: a batch of runs, run i of a batch)
 from pfjax.sim.slip_profiles import SlipProfile, slip_at
 from pfjax.sim.status import classify
-
 
 #: Newton steps that polish a scenario's given start parameter ``u0`` before sample 0.
 U0_ITERS = 8
@@ -192,8 +199,15 @@ class SimResult(NamedTuple):
 def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
     p = sc.params
     return Observation(
-        d=proj.d, theta_e=proj.theta_e, kappa=proj.kappa, s=proj.s, u=proj.u, pose=pose,
-        v=jnp.asarray(p.v, float), L=jnp.asarray(p.L, float), delta_max=jnp.asarray(p.delta_max, float),
+        d=proj.d,
+        theta_e=proj.theta_e,
+        kappa=proj.kappa,
+        s=proj.s,
+        u=proj.u,
+        pose=pose,
+        v=jnp.asarray(p.v, float),
+        L=jnp.asarray(p.L, float),
+        delta_max=jnp.asarray(p.delta_max, float),
         path=sc.path,
     )
 
@@ -268,8 +282,9 @@ def _start(controller: Controller, sc: Scenario) -> loop.Start:
     else:  # polish the given start parameter (a rolled loop: one Newton step in the program, not eight)
         u0 = polish_parameter(sc.path, pose0.x, pose0.y, jnp.asarray(sc.u0, pose0.x.dtype), U0_ITERS)
     zero = jnp.zeros((), pose0.x.dtype)
-    return loop.Start(_State(pose0, controller.init(sc.gains), u0), running.init(zero, zero), zero,
-                      _Held(u0, zero, zero))
+    return loop.Start(
+        _State(pose0, controller.init(sc.gains), u0), running.init(zero, zero), zero, _Held(u0, zero, zero)
+    )
 
 
 def _closed_loop_rhs(controller: Controller, sc: Scenario, u_guess, k, iters):
@@ -295,8 +310,9 @@ def _sampled_command(controller: Controller, config: SimConfig, sc: Scenario, c,
     if every == 1:  # every step: no conditional (it would split XLA's fused loop body)
         new_cmd, c_next = step(controller, sc.gains, c, obs, dt)
     else:
-        new_cmd, c_next = jax.lax.cond(k % every == 0, lambda: step(controller, sc.gains, c, obs, every * dt),
-                                       lambda: (held.cmd, c))
+        new_cmd, c_next = jax.lax.cond(
+            k % every == 0, lambda: step(controller, sc.gains, c, obs, every * dt), lambda: (held.cmd, c)
+        )
     cmd = jnp.where(last, held.cmd, E.computed_once(new_cmd))
     dmax = jnp.asarray(sc.params.delta_max, float)
     rate = jnp.asarray(sc.params.delta_rate_max, float)
@@ -336,12 +352,21 @@ def _step(controller: Controller, config: SimConfig, sc: Scenario, carry: loop.L
 def _update(config: SimConfig, sc: Scenario, acc: running.Accumulator, s: loop.Sample, live, was_live):
     """Accumulate sample ``k``'s metrics (trapezoid weight 1/2 at both ends, 0 after a failure)."""
     o = s.out
-    acc = acc._replace(d0_sign=jnp.where(o.first, jnp.sign(o.proj.d), acc.d0_sign),
-                       prev_delta=jnp.where(o.first, o.delta, acc.prev_delta))
+    acc = acc._replace(
+        d0_sign=jnp.where(o.first, jnp.sign(o.proj.d), acc.d0_sign),
+        prev_delta=jnp.where(o.first, o.delta, acc.prev_delta),
+    )
     return running.update(
-        acc, o.t, config.dt, jnp.where(live, jnp.where(o.first | o.last, 0.5, 1.0), 0.0), jnp.where(live, o.proj.d, 0.0),
-        jnp.where(live, o.proj.theta_e, 0.0), o.delta, o.saturated,
-        band=config.settle_band, steady_from=config.n_steps * config.dt - config.steady_window,
+        acc,
+        o.t,
+        config.dt,
+        jnp.where(live, jnp.where(o.first | o.last, 0.5, 1.0), 0.0),
+        jnp.where(live, o.proj.d, 0.0),
+        jnp.where(live, o.proj.theta_e, 0.0),
+        o.delta,
+        o.saturated,
+        band=config.settle_band,
+        steady_from=config.n_steps * config.dt - config.steady_window,
         success_from=config.success_start,
     )
 
@@ -349,8 +374,9 @@ def _update(config: SimConfig, sc: Scenario, acc: running.Accumulator, s: loop.S
 def _record(sc: Scenario, s: loop.Sample, state: _State) -> Trajectory:
     o = s.out
     br, bf = slip_at(sc.slip, o.t)
-    return Trajectory(o.t, o.pose.x, o.pose.y, o.pose.theta, o.proj.d, o.proj.theta_e, o.proj.kappa, o.proj.s,
-                      o.cmd, o.delta, br, bf)
+    return Trajectory(
+        o.t, o.pose.x, o.pose.y, o.pose.theta, o.proj.d, o.proj.theta_e, o.proj.kappa, o.proj.s, o.cmd, o.delta, br, bf
+    )
 
 
 def _finish(config: SimConfig, sc: Scenario, r: loop.Run) -> SimResult:
@@ -363,9 +389,14 @@ def _finish(config: SimConfig, sc: Scenario, r: loop.Run) -> SimResult:
 
 def system(controller: Controller, config: SimConfig) -> loop.System:
     """The slip vehicle as a :class:`pfjax.sim.loop.System` (inputs: a :class:`Scenario`)."""
-    return loop.System(init=partial(_start, controller), step=partial(_step, controller, config),
-                       update=partial(_update, config), record=_record, finish=partial(_finish, config),
-                       no_failure=math.nan)
+    return loop.System(
+        init=partial(_start, controller),
+        step=partial(_step, controller, config),
+        update=partial(_update, config),
+        record=_record,
+        finish=partial(_finish, config),
+        no_failure=math.nan,
+    )
 
 
 def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResult:
@@ -383,18 +414,30 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
         ``SimResult``: metrics, status, failure time, final state, trajectory (if ``config.record``).
     """
     controller.check_params(sc.gains)  # at trace time: a PI given state-feedback gains is bad input
-    return loop.run(system(controller, config), sc, config.n_steps + 1, record=config.record,
-                    scalar_inputs=True, checkpoint_policy=_SAVED)
+    return loop.run(
+        system(controller, config),
+        sc,
+        config.n_steps + 1,
+        record=config.record,
+        scalar_inputs=True,
+        checkpoint_policy=_SAVED,
+    )
 
 
 @compiler.jit(static_argnames=("controller", "config", "layout"))
-def _simulate_vmapped(scenarios: Scenario, *, controller: Controller, config: SimConfig,
-                      layout: sharding.Layout = sharding.Layout(None, 1)) -> SimResult:
+def _simulate_vmapped(
+    scenarios: Scenario,
+    *,
+    controller: Controller,
+    config: SimConfig,
+    layout: sharding.Layout = sharding.Layout(None, 1),
+) -> SimResult:
     return sharding.map_runs(lambda sc: simulate(controller, sc, config), scenarios, layout)
 
 
-def simulate_batch(scenarios: Scenario, *, controller: Controller, config: SimConfig, devices=None,
-                   block: int | None | str = "auto") -> SimResult:
+def simulate_batch(
+    scenarios: Scenario, *, controller: Controller, config: SimConfig, devices=None, block: int | str | None = "auto"
+) -> SimResult:
     """Jitted, vmapped :func:`simulate` over a batch of scenarios (leading axis of every leaf),
     sharded over ``devices`` (default: every device JAX sees) and, on CPU, evaluated in cache-sized
     blocks of runs (``block``: runs per block, ``"auto"`` or ``None`` for one block;
@@ -408,12 +451,14 @@ def simulate_batch(scenarios: Scenario, *, controller: Controller, config: SimCo
     controller.check_params(scenarios.gains)  # here, not at trace time: JAX would add to the message
     if config.record and not errors.is_traced(scenarios):
         n_runs = int(np.shape(jax.tree_util.tree_leaves(scenarios)[0])[0])
-        resources.check_memory("record", n_runs * resources.run_bytes(config.n_steps, record=True),
-                               f"recording {n_runs} runs of {config.n_steps + 1} samples",
-                               "simulate with record=False (the metrics need no trajectory), or fewer runs")
+        resources.check_memory(
+            "record",
+            n_runs * resources.run_bytes(config.n_steps, record=True),
+            f"recording {n_runs} runs of {config.n_steps + 1} samples",
+            "simulate with record=False (the metrics need no trajectory), or fewer runs",
+        )
     placed, n, layout = sharding.plan_batch(scenarios, devices, block)
     return sharding.unpad(_simulate_vmapped(placed, controller=controller, config=config, layout=layout), n)
 
 
 simulate_batch._cache_size = _simulate_vmapped._cache_size  # the jitted core's compilation count
-

@@ -48,8 +48,9 @@ def _pair(a) -> Array:
     return jnp.broadcast_to(jnp.asarray(a, dtype=float), (2,))
 
 
-def slip_profile(constant=0.0, step_time=0.0, step_size=None, sin_amp=None, sin_freq=0.0, sin_phase=0.0,
-                 seq=None, seq_dt=1.0) -> SlipProfile:
+def slip_profile(
+    constant=0.0, step_time=0.0, step_size=None, sin_amp=None, sin_freq=0.0, sin_phase=0.0, seq=None, seq_dt=1.0
+) -> SlipProfile:
     """General constructor; scalars apply to both axles, pairs are ``(rear, front)``.
 
     The step term is present when ``step_size`` is given, the sinusoid when ``sin_amp`` is given,

@@ -128,9 +128,7 @@ class Design:
             "gamma_2": num(self.gamma_2),
             "hinf_norm": num(self.hinf_norm),
             "h2_norm": num(self.h2_norm),
-            "closed_loop_poles": [
-                [float(p.real), float(p.imag)] for p in np.asarray(self.closed_loop_poles)
-            ],
+            "closed_loop_poles": [[float(p.real), float(p.imag)] for p in np.asarray(self.closed_loop_poles)],
             "solver": self.solver,
             "solver_status": self.solver_status,
             "alpha": num(self.alpha),
@@ -155,9 +153,7 @@ def _solve_or_raise(prob: cp.Problem, what: str) -> str:
         prob.solve(solver=_SOLVER)
     except cp.error.SolverError as exc:
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise SynthesisError(
-            f"{what} failed: solver {_SOLVER} status 'solver_error' ({msg})", "solver_error"
-        ) from exc
+        raise SynthesisError(f"{what} failed: solver {_SOLVER} status 'solver_error' ({msg})", "solver_error") from exc
     status = str(prob.status)
     if status not in _ACCEPTED or any(v.value is None for v in prob.variables()):
         raise SynthesisError(f"{what} failed: solver {_SOLVER} status '{status}'", status)
@@ -169,7 +165,9 @@ def gain_from(X, Y, what: str) -> tuple[np.ndarray, float]:
     Xv = 0.5 * (X + X.T)
     cond = float(np.linalg.cond(Xv))
     if not np.isfinite(cond) or cond > _COND_MAX:
-        raise SynthesisError(f"{what} failed: Lyapunov matrix ill-conditioned (cond(X) = {cond:.3g})", "ill_conditioned")
+        raise SynthesisError(
+            f"{what} failed: Lyapunov matrix ill-conditioned (cond(X) = {cond:.3g})", "ill_conditioned"
+        )
     return np.linalg.solve(Xv.T, np.asarray(Y).T).T, cond
 
 
@@ -276,9 +274,7 @@ def _solve(
     )
 
 
-def hinf_state_feedback(
-    plant: Plant, region: PoleRegion | None = None, eps: float = 1e-7
-) -> Design:
+def hinf_state_feedback(plant: Plant, region: PoleRegion | None = None, eps: float = 1e-7) -> Design:
     """H-infinity-optimal state feedback (bounded-real lemma, source eq. 8-11).
 
     Minimises ``gamma_inf^2`` subject to the bounded-real-lemma LMI of :func:`_hinf_lmi`,
@@ -296,14 +292,20 @@ def hinf_state_feedback(
         SynthesisError: the LMIs are infeasible or the solver fails.
     """
     return _solve(
-        "hinf", plant, use_hinf=True, use_h2=False, alpha=None, beta=None, region=region,
-        gamma_inf_max=None, gamma_2_max=None, eps=eps,
+        "hinf",
+        plant,
+        use_hinf=True,
+        use_h2=False,
+        alpha=None,
+        beta=None,
+        region=region,
+        gamma_inf_max=None,
+        gamma_2_max=None,
+        eps=eps,
     )
 
 
-def h2_state_feedback(
-    plant: Plant, region: PoleRegion | None = None, eps: float = 1e-7
-) -> Design:
+def h2_state_feedback(plant: Plant, region: PoleRegion | None = None, eps: float = 1e-7) -> Design:
     """H2-optimal state feedback (Lyapunov/trace conditions, source eq. 8-11).
 
     Minimises ``gamma_2^2 = trace W`` subject to the H2 LMIs of :func:`_h2_lmis`, ``X > 0`` and
@@ -314,8 +316,16 @@ def h2_state_feedback(
         SynthesisError: the LMIs are infeasible or the solver fails.
     """
     return _solve(
-        "h2", plant, use_hinf=False, use_h2=True, alpha=None, beta=None, region=region,
-        gamma_inf_max=None, gamma_2_max=None, eps=eps,
+        "h2",
+        plant,
+        use_hinf=False,
+        use_h2=True,
+        alpha=None,
+        beta=None,
+        region=region,
+        gamma_inf_max=None,
+        gamma_2_max=None,
+        eps=eps,
     )
 
 
@@ -363,8 +373,16 @@ def mixed_h2_hinf(
     if alpha < 0 or beta < 0 or (alpha == 0 and beta == 0):
         raise ValueError(f"mixed_h2_hinf needs alpha, beta >= 0, not both 0; got {alpha}, {beta}")
     return _solve(
-        "mixed", plant, use_hinf=True, use_h2=True, alpha=alpha, beta=beta, region=region,
-        gamma_inf_max=gamma_inf_max, gamma_2_max=gamma_2_max, eps=eps,
+        "mixed",
+        plant,
+        use_hinf=True,
+        use_h2=True,
+        alpha=alpha,
+        beta=beta,
+        region=region,
+        gamma_inf_max=gamma_inf_max,
+        gamma_2_max=gamma_2_max,
+        eps=eps,
     )
 
 
@@ -402,9 +420,7 @@ def mixed_bounds_for_gain(
     cons += _hinf_lmi(plant, X, Y, g_sq, eps) + _h2_lmis(plant, X, Y, W, eps)
     objective = cp.Minimize(float(alpha) * g_sq + float(beta) * cp.trace(W))
     _solve_or_raise(cp.Problem(objective, cons), "mixed bounds for gain")
-    return float(np.sqrt(max(float(g_sq.value), 0.0))), float(
-        np.sqrt(max(float(np.trace(W.value)), 0.0))
-    )
+    return float(np.sqrt(max(float(g_sq.value), 0.0))), float(np.sqrt(max(float(np.trace(W.value)), 0.0)))
 
 
 _METHODS = ("hinf", "h2", "mixed")

@@ -55,9 +55,8 @@ def region_contains(region: PoleRegion, poles, tol: float = 0.0) -> bool:
     for s in np.atleast_1d(np.asarray(poles, dtype=complex)):
         if region.max_real is not None and not s.real < region.max_real + tol:
             return False
-        if region.disk_radius is not None:
-            if not abs(s - region.disk_center) < region.disk_radius + tol:
-                return False
+        if region.disk_radius is not None and not abs(s - region.disk_center) < region.disk_radius + tol:
+            return False
         if region.sector_angle is not None:
             th = region.sector_angle
             # sin(th) Re(s) < 0 and |cos(th) Im(s)| < -sin(th) Re(s)

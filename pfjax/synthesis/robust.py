@@ -80,10 +80,16 @@ class RobustDesign:
 
     def to_dict(self) -> dict:
         return {
-            "method": self.method, "K": np.asarray(self.K).tolist(), "gamma_inf": self.gamma_inf,
-            "gamma_2": self.gamma_2, "hinf_norm": self.hinf_norm, "h2_norm": self.h2_norm,
+            "method": self.method,
+            "K": np.asarray(self.K).tolist(),
+            "gamma_inf": self.gamma_inf,
+            "gamma_2": self.gamma_2,
+            "hinf_norm": self.hinf_norm,
+            "h2_norm": self.h2_norm,
             "max_vertex_pole_real": float(np.max(np.real(self.vertex_poles))),
-            "steer_bound": self.steer_bound, "solver_status": self.solver_status, "warnings": list(self.warnings),
+            "steer_bound": self.steer_bound,
+            "solver_status": self.solver_status,
+            "warnings": list(self.warnings),
         }
 
 
@@ -95,8 +101,15 @@ def integral_plant(v: float = 1.0, L: float = 0.2) -> Plant:
     A[2, 0] = 1.0
     Bu = np.vstack([p.Bu, [[0.0]]])
     Bw = np.vstack([p.Bw, np.zeros((1, 3))])
-    return Plant(A=A, Bw=Bw, Bu=Bu, Cinf=np.eye(3), Dinf_u=np.zeros((3, 1)),
-                 C2=np.vstack([np.eye(3), np.zeros((1, 3))]), D2u=np.array([[0.0], [0.0], [0.0], [1.0]]))
+    return Plant(
+        A=A,
+        Bw=Bw,
+        Bu=Bu,
+        Cinf=np.eye(3),
+        Dinf_u=np.zeros((3, 1)),
+        C2=np.vstack([np.eye(3), np.zeros((1, 3))]),
+        D2u=np.array([[0.0], [0.0], [0.0], [1.0]]),
+    )
 
 
 def operating_point_plant(v: float, L: float, beta_r: float, integral: bool = False) -> Plant:
@@ -112,7 +125,9 @@ def polytope_vertices(v_range, beta_r_max: float, L: float = 0.2, integral: bool
     """The 8 vertex plants of the box over ``(v sec beta_r, (v/L) sec^2 beta_r, v)`` (module docstring)."""
     v_lo, v_hi = (float(x) for x in v_range)
     if not 0 < v_lo <= v_hi or not 0 <= beta_r_max < math.pi / 2:
-        raise ValueError(f"v_range/beta_r_max: need 0 < v_lo <= v_hi and 0 <= beta_r_max < pi/2, got {v_range}, {beta_r_max}")
+        raise ValueError(
+            f"v_range/beta_r_max: need 0 < v_lo <= v_hi and 0 <= beta_r_max < pi/2, got {v_range}, {beta_r_max}"
+        )
     sec = 1.0 / math.cos(beta_r_max)
     a_range, b_range = (v_lo, v_hi * sec), (v_lo / L, v_hi * sec**2 / L)
     out = []
@@ -124,8 +139,17 @@ def polytope_vertices(v_range, beta_r_max: float, L: float = 0.2, integral: bool
     return out
 
 
-def robust_mixed(plants, *, alpha=10.0, beta=1.0, x0s=None, delta_max=None, region: PoleRegion | None = None,
-                 method="mixed", eps=1e-7) -> RobustDesign:
+def robust_mixed(
+    plants,
+    *,
+    alpha=10.0,
+    beta=1.0,
+    x0s=None,
+    delta_max=None,
+    region: PoleRegion | None = None,
+    method="mixed",
+    eps=1e-7,
+) -> RobustDesign:
     """Mixed H2/H-inf with one ``X``, ``Y`` over all ``plants`` (vertices), optional steering bound.
 
     Args:
@@ -187,8 +211,9 @@ def integral_mixed(v=1.0, L=0.2, *, alpha=10.0, beta=1.0, **kw) -> RobustDesign:
     return robust_mixed([integral_plant(v, L)], alpha=alpha, beta=beta, method="integral", **kw)
 
 
-def polytopic_mixed(v_range=(0.7, 1.3), beta_r_max_deg=10.0, L=0.2, *, integral=False, alpha=10.0, beta=1.0,
-                    **kw) -> RobustDesign:
+def polytopic_mixed(
+    v_range=(0.7, 1.3), beta_r_max_deg=10.0, L=0.2, *, integral=False, alpha=10.0, beta=1.0, **kw
+) -> RobustDesign:
     """Mixed design with one Lyapunov matrix over the speed x slip polytope (module docstring)."""
     plants = polytope_vertices(v_range, math.radians(beta_r_max_deg), L, integral)
     return robust_mixed(plants, alpha=alpha, beta=beta, method="polytopic" + ("-integral" if integral else ""), **kw)

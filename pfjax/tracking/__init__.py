@@ -11,15 +11,60 @@ from plain arguments, the library behind ``pfjax track``).
 from pfjax.tracking import leader
 from pfjax.tracking.api import run
 from pfjax.tracking.controller import FocusGains, focus_control
-from pfjax.tracking.geometry import (connection, focus_point, input_det, input_matrix, invertibility_factor,
-                                     lemma_bound, p_bound, reference_point, tracking_error)
+from pfjax.tracking.geometry import (
+    connection,
+    focus_point,
+    input_det,
+    input_matrix,
+    invertibility_factor,
+    lemma_bound,
+    p_bound,
+    reference_point,
+    tracking_error,
+)
 from pfjax.tracking.model import Follower, FollowerParams, follower_rhs
-from pfjax.tracking.simulate import (TRACK_STATUS_NAMES, SensorNoise, TrackConfig, TrackScenario, TrackStatus,
-                                     initial_state, initial_states, scenario, simulate, simulate_batch, stack, unstack)
+from pfjax.tracking.simulate import (
+    TRACK_STATUS_NAMES,
+    SensorNoise,
+    TrackConfig,
+    TrackScenario,
+    TrackStatus,
+    initial_state,
+    initial_states,
+    scenario,
+    simulate,
+    simulate_batch,
+    stack,
+    unstack,
+)
 
 __all__ = [
-    "FocusGains", "Follower", "FollowerParams", "SensorNoise", "TRACK_STATUS_NAMES", "TrackConfig", "TrackScenario",
-    "TrackStatus", "connection", "focus_control", "focus_point", "follower_rhs", "initial_state", "initial_states", "input_det",
-    "input_matrix", "invertibility_factor", "leader", "lemma_bound", "p_bound", "reference_point", "run",
-    "scenario", "simulate", "simulate_batch", "stack", "tracking_error", "unstack",
+    "TRACK_STATUS_NAMES",
+    "FocusGains",
+    "Follower",
+    "FollowerParams",
+    "SensorNoise",
+    "TrackConfig",
+    "TrackScenario",
+    "TrackStatus",
+    "connection",
+    "focus_control",
+    "focus_point",
+    "follower_rhs",
+    "initial_state",
+    "initial_states",
+    "input_det",
+    "input_matrix",
+    "invertibility_factor",
+    "leader",
+    "lemma_bound",
+    "p_bound",
+    "reference_point",
+    "run",
+    "scenario",
+    "simulate",
+    "simulate_batch",
+    "stack",
+    "tracking_error",
+    "unstack",
 ]

@@ -53,8 +53,25 @@ def _pair(key: str, value) -> tuple[float, float]:
     return a, b
 
 
-def _check(mode, p, l, gamma_max_deg, leader, speed, stop_and_go, a, k, v_max, omega_max_deg, offset,
-           heading_error_deg, beta_r_deg, beta_f_deg, horizon, dt) -> dict:
+def _check(
+    mode,
+    p,
+    l,
+    gamma_max_deg,
+    leader,
+    speed,
+    stop_and_go,
+    a,
+    k,
+    v_max,
+    omega_max_deg,
+    offset,
+    heading_error_deg,
+    beta_r_deg,
+    beta_f_deg,
+    horizon,
+    dt,
+) -> dict:
     """Every argument checked and converted to float, in the order the command line checks its flags."""
     mode = _choice("mode", mode, MODES)
     leader = _choice("leader", leader, LEADERS)
@@ -65,10 +82,22 @@ def _check(mode, p, l, gamma_max_deg, leader, speed, stop_and_go, a, k, v_max, o
         raise InputError("p: must be nonzero (M is singular at p = 0), got 0", "p")
     if l == 0:
         raise InputError("l: must be nonzero (M is singular at l = 0), got 0", "l")
-    out = {"mode": mode, "leader": leader, "p": p, "l": l,
-           "gamma_max_deg": errors.number("gamma_max_deg", gamma_max_deg, positive=True, below=90, unit=" deg")}
-    for key, v in (("speed", speed), ("a", a), ("k", k), ("v_max", v_max), ("omega_max_deg", omega_max_deg),
-                   ("horizon", horizon), ("dt", dt)):
+    out = {
+        "mode": mode,
+        "leader": leader,
+        "p": p,
+        "l": l,
+        "gamma_max_deg": errors.number("gamma_max_deg", gamma_max_deg, positive=True, below=90, unit=" deg"),
+    }
+    for key, v in (
+        ("speed", speed),
+        ("a", a),
+        ("k", k),
+        ("v_max", v_max),
+        ("omega_max_deg", omega_max_deg),
+        ("horizon", horizon),
+        ("dt", dt),
+    ):
         out[key] = errors.number(key, v, positive=True)
     out["stop_and_go"] = _depth(stop_and_go)
     out["offset"] = _pair("offset", offset)
@@ -83,9 +112,26 @@ def _check(mode, p, l, gamma_max_deg, leader, speed, stop_and_go, a, k, v_max, o
     return out
 
 
-def run(mode="forward", *, p=None, l=None, gamma_max_deg=30.0, leader="line", speed=1.0,
-        stop_and_go=0.0, a=1.0, k=1.0, v_max=3.0, omega_max_deg=90.0, offset=(-0.5, 0.5), heading_error_deg=10.0,
-        beta_r_deg=0.0, beta_f_deg=0.0, horizon=30.0, dt=0.01) -> dict:
+def run(
+    mode="forward",
+    *,
+    p=None,
+    l=None,
+    gamma_max_deg=30.0,
+    leader="line",
+    speed=1.0,
+    stop_and_go=0.0,
+    a=1.0,
+    k=1.0,
+    v_max=3.0,
+    omega_max_deg=90.0,
+    offset=(-0.5, 0.5),
+    heading_error_deg=10.0,
+    beta_r_deg=0.0,
+    beta_f_deg=0.0,
+    horizon=30.0,
+    dt=0.01,
+) -> dict:
     """One run of a car-like follower tracking a leader through its focus point.
 
     The follower steers its reference point towards the focus point
@@ -131,8 +177,25 @@ def run(mode="forward", *, p=None, l=None, gamma_max_deg=30.0, leader="line", sp
         InputError: a bad argument; the message starts with its name (``"p: must be nonzero ..."``),
             or ``horizon/dt`` when the run would take more than 2e6 steps.
     """
-    c = _check(mode, p, l, gamma_max_deg, leader, speed, stop_and_go, a, k, v_max, omega_max_deg, offset,
-               heading_error_deg, beta_r_deg, beta_f_deg, horizon, dt)
+    c = _check(
+        mode,
+        p,
+        l,
+        gamma_max_deg,
+        leader,
+        speed,
+        stop_and_go,
+        a,
+        k,
+        v_max,
+        omega_max_deg,
+        offset,
+        heading_error_deg,
+        beta_r_deg,
+        beta_f_deg,
+        horizon,
+        dt,
+    )
     import jax
 
     with jax.enable_x64(True):
@@ -149,18 +212,35 @@ def _simulate(c: dict) -> dict:
     from pfjax.tracking.leader import by_name
     from pfjax.tracking.lemma import zero_dynamics_stable
     from pfjax.tracking.model import FollowerParams
-    from pfjax.tracking.simulate import (TRACK_STATUS_NAMES, TrackConfig, initial_states, scenario, simulate_batch,
-                                         stack, unstack)
+    from pfjax.tracking.simulate import (
+        TRACK_STATUS_NAMES,
+        TrackConfig,
+        initial_states,
+        scenario,
+        simulate_batch,
+        stack,
+        unstack,
+    )
 
     f = 1 if c["mode"] == "forward" else -1
     pp, ll = c["p"], c["l"]
     gmax = math.radians(c["gamma_max_deg"])
-    params = FollowerParams(a=c["a"], f=float(f), l=ll, p=pp, gamma_max=gmax, v_max=c["v_max"],
-                            omega_max=math.radians(c["omega_max_deg"]))
+    params = FollowerParams(
+        a=c["a"], f=float(f), l=ll, p=pp, gamma_max=gmax, v_max=c["v_max"], omega_max=math.radians(c["omega_max_deg"])
+    )
     ld = by_name(c["leader"], speed=c["speed"], depth=c["stop_and_go"])
-    host = lambda tree: jax.tree_util.tree_map(np.asarray, tree)  # noqa: E731  (index in NumPy, not op by op)
-    init = unstack(host(initial_states(stack([ld]), stack([params]), np.asarray([c["offset"]], dtype=float),
-                                       np.asarray([math.radians(c["heading_error_deg"])]))), 0)
+    host = lambda tree: jax.tree_util.tree_map(np.asarray, tree)
+    init = unstack(
+        host(
+            initial_states(
+                stack([ld]),
+                stack([params]),
+                np.asarray([c["offset"]], dtype=float),
+                np.asarray([math.radians(c["heading_error_deg"])]),
+            )
+        ),
+        0,
+    )
     slip = constant_slip(math.radians(c["beta_r_deg"]), math.radians(c["beta_f_deg"]))
     sc = scenario(params, ld, gains=FocusGains(k=c["k"]), init=init, slip=slip)
     cfg = TrackConfig(dt=c["dt"], horizon=c["horizon"], window=min(5.0, c["horizon"] / 3))
@@ -169,18 +249,32 @@ def _simulate(c: dict) -> dict:
     lo, hi = p_bound(gmax, f)
     status = int(r.status)
     return {
-        "mode": c["mode"], "f": f, "p": pp, "l": ll, "gamma_max_deg": c["gamma_max_deg"], "leader": c["leader"],
-        "converged": bool(m.converged), "phi_converged": bool(m.phi_converged),
-        "final_error_norm": float(m.final_error_norm), "final_phi_minus_pgamma": float(m.final_phi_minus_pgamma),
+        "mode": c["mode"],
+        "f": f,
+        "p": pp,
+        "l": ll,
+        "gamma_max_deg": c["gamma_max_deg"],
+        "leader": c["leader"],
+        "converged": bool(m.converged),
+        "phi_converged": bool(m.phi_converged),
+        "final_error_norm": float(m.final_error_norm),
+        "final_phi_minus_pgamma": float(m.final_phi_minus_pgamma),
         "max_abs_gamma_deg": math.degrees(float(m.max_abs_gamma)),
-        "window_max_error": float(m.window_max_z), "window_max_abs_phi_minus_pgamma": float(m.window_max_phi_err),
-        "iae": float(m.iae), "final_d": float(m.final_d), "limit_fraction": float(m.limit_fraction),
-        "min_abs_det_factor": float(m.min_abs_factor), "status": TRACK_STATUS_NAMES[status], "status_code": status,
+        "window_max_error": float(m.window_max_z),
+        "window_max_abs_phi_minus_pgamma": float(m.window_max_phi_err),
+        "iae": float(m.iae),
+        "final_d": float(m.final_d),
+        "limit_fraction": float(m.limit_fraction),
+        "min_abs_det_factor": float(m.min_abs_factor),
+        "status": TRACK_STATUS_NAMES[status],
+        "status_code": status,
         "fail_time": float(r.fail_time) if math.isfinite(float(r.fail_time)) else None,
-        "lemma_p_bound": lemma_bound(gmax), "inside_lemma_bound": abs(pp) < lemma_bound(gmax),
+        "lemma_p_bound": lemma_bound(gmax),
+        "inside_lemma_bound": abs(pp) < lemma_bound(gmax),
         "input_matrix_invertible_for_all_gamma": bool(lo < pp < hi),
         "zero_dynamics_stable_straight": zero_dynamics_stable(c["speed"], float(f), params),
         "tolerances": {"window_s": cfg.window, "tol_z_m": cfg.tol_z, "tol_phi_rad": cfg.tol_phi},
         "final": {key: float(v) for key, v in r.final._asdict().items()},
-        "T": cfg.n_steps * cfg.dt, "dt": cfg.dt,
+        "T": cfg.n_steps * cfg.dt,
+        "dt": cfg.dt,
     }

@@ -38,8 +38,9 @@ class Command(NamedTuple):
     singular: Array  # bool
 
 
-def focus_control(s: Follower, zd: Array, zd_dot: Array, params: FollowerParams, gains: FocusGains,
-                  sing_tol: float = 1e-3) -> Command:
+def focus_control(
+    s: Follower, zd: Array, zd_dot: Array, params: FollowerParams, gains: FocusGains, sing_tol: float = 1e-3
+) -> Command:
     """One evaluation of the law on a (measured) state ``s`` and the leader's ``z_d, z_d'`` (m, m/s)."""
     M = input_matrix(s.theta, s.gamma, params)
     b = zd_dot - gains.k * tracking_error(s, zd, params)

@@ -38,7 +38,6 @@ import jax.numpy as jnp
 from jax import Array
 
 from pfjax.numerics import elementary as E
-
 from pfjax.tracking.model import Follower, FollowerParams
 
 

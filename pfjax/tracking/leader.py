@@ -53,8 +53,23 @@ class Leader(NamedTuple):
     lane_length: Array  # m, L_c
 
 
-def _leader(kind, *, x0=0.0, y0=0.0, heading=0.0, speed=1.0, depth=0.0, period=10.0, amps=None, omegas=None,
-            phases=None, radius=5.0, lane_width=3.5, lane_center=10.0, lane_length=3.0) -> Leader:
+def _leader(
+    kind,
+    *,
+    x0=0.0,
+    y0=0.0,
+    heading=0.0,
+    speed=1.0,
+    depth=0.0,
+    period=10.0,
+    amps=None,
+    omegas=None,
+    phases=None,
+    radius=5.0,
+    lane_width=3.5,
+    lane_center=10.0,
+    lane_length=3.0,
+) -> Leader:
     def vec(v, fill):
         out = np.full(N_TERMS, fill, dtype=float)
         if v is not None:
@@ -62,11 +77,23 @@ def _leader(kind, *, x0=0.0, y0=0.0, heading=0.0, speed=1.0, depth=0.0, period=1
             out[: v.size] = v
         return out
 
-    f = lambda v: np.asarray(v, dtype=float)  # noqa: E731  (NumPy leaves: no device op per leader)
-    return Leader(kind=np.asarray(kind, dtype=np.int32), x0=f(x0), y0=f(y0), heading=f(heading), speed=f(speed),
-                  depth=f(depth), period=f(period), amps=vec(amps, 0.0), omegas=vec(omegas, 1.0),
-                  phases=vec(phases, 0.0), radius=f(radius), lane_width=f(lane_width), lane_center=f(lane_center),
-                  lane_length=f(lane_length))
+    f = lambda v: np.asarray(v, dtype=float)
+    return Leader(
+        kind=np.asarray(kind, dtype=np.int32),
+        x0=f(x0),
+        y0=f(y0),
+        heading=f(heading),
+        speed=f(speed),
+        depth=f(depth),
+        period=f(period),
+        amps=vec(amps, 0.0),
+        omegas=vec(omegas, 1.0),
+        phases=vec(phases, 0.0),
+        radius=f(radius),
+        lane_width=f(lane_width),
+        lane_center=f(lane_center),
+        lane_length=f(lane_length),
+    )
 
 
 def line(speed=1.0, heading=0.0, **kw) -> Leader:

@@ -63,9 +63,12 @@ def _geometry_samples(key, n: int, params: FollowerParams):
     """``gamma`` and, per kind, ``(phi, |z~|)`` of ``n`` random states (one compilation per ``n``)."""
     k1, k2, k3, k4, k5 = jax.random.split(key, 5)
     gm, l = params.gamma_max, params.l
-    s = Follower(x=jax.random.uniform(k1, (n,), minval=-10, maxval=10), y=jax.random.uniform(k2, (n,), minval=-10, maxval=10),
-                 theta=jax.random.uniform(k3, (n,), minval=-math.pi, maxval=math.pi),
-                 gamma=jax.random.uniform(k4, (n,), minval=-gm, maxval=gm))
+    s = Follower(
+        x=jax.random.uniform(k1, (n,), minval=-10, maxval=10),
+        y=jax.random.uniform(k2, (n,), minval=-10, maxval=10),
+        theta=jax.random.uniform(k3, (n,), minval=-math.pi, maxval=math.pi),
+        gamma=jax.random.uniform(k4, (n,), minval=-gm, maxval=gm),
+    )
     r = jax.random.uniform(k5, (n,), minval=0.2, maxval=1.0)
 
     def one(si, ri):
@@ -81,7 +84,9 @@ def _geometry_samples(key, n: int, params: FollowerParams):
     return s.gamma, jax.vmap(one)(s, r)
 
 
-def sample_geometry(key, n: int, gamma_max: float, p: float, l: float = 1.0, f: int = 1, a: float = 1.0) -> pd.DataFrame:
+def sample_geometry(
+    key, n: int, gamma_max: float, p: float, l: float = 1.0, f: int = 1, a: float = 1.0
+) -> pd.DataFrame:
     """Random states with ``z~ = 0`` and with ``phi = p gamma`` at a wrong distance (see module doc).
 
     Returns a frame of ``n`` rows per ``kind``: ``"on_focus"`` (``z_d`` = the focus point) and
@@ -93,8 +98,18 @@ def sample_geometry(key, n: int, gamma_max: float, p: float, l: float = 1.0, f: 
     g = np.asarray(g)
     rows = []
     for kind, (phi, zerr) in res.items():
-        rows.append(pd.DataFrame({"kind": kind, "gamma": g, "p_gamma": p * g, "phi": np.asarray(phi),
-                                  "phi_minus_pgamma": np.asarray(phi) - p * g, "z_err": np.asarray(zerr)}))
+        rows.append(
+            pd.DataFrame(
+                {
+                    "kind": kind,
+                    "gamma": g,
+                    "p_gamma": p * g,
+                    "phi": np.asarray(phi),
+                    "phi_minus_pgamma": np.asarray(phi) - p * g,
+                    "z_err": np.asarray(zerr),
+                }
+            )
+        )
     return pd.concat(rows, ignore_index=True)
 
 
@@ -105,8 +120,13 @@ def outcomes(df: pd.DataFrame) -> dict[str, pd.Series]:
     that finished). Keys: ``both``, ``z_only``, ``phi_only``, ``neither``, ``failed``.
     """
     ok, z, phi = df["status"] == "ok", df["converged"].astype(bool), df["phi_converged"].astype(bool)
-    return {"both": ok & z & phi, "z_only": ok & z & ~phi, "phi_only": ok & ~z & phi, "neither": ok & ~z & ~phi,
-            "failed": ~ok}
+    return {
+        "both": ok & z & phi,
+        "z_only": ok & z & ~phi,
+        "phi_only": ok & ~z & phi,
+        "neither": ok & ~z & ~phi,
+        "failed": ~ok,
+    }
 
 
 def four_way(df: pd.DataFrame, by: list[str]) -> pd.DataFrame:

@@ -59,12 +59,14 @@ class FollowerParams(NamedTuple):
 
 def as_arrays(params: FollowerParams) -> FollowerParams:
     """``params`` with float64 NumPy leaves and an int32 ``convention`` (what one batch row holds)."""
-    return FollowerParams(*(np.asarray(v, np.int32 if k == "convention" else np.float64)
-                            for k, v in params._asdict().items()))
+    return FollowerParams(
+        *(np.asarray(v, np.int32 if k == "convention" else np.float64) for k, v in params._asdict().items())
+    )
 
 
-def follower_rhs(state: Follower, v: Array, omega: Array, beta_r: Array, beta_f: Array,
-                 params: FollowerParams) -> Follower:
+def follower_rhs(
+    state: Follower, v: Array, omega: Array, beta_r: Array, beta_f: Array, params: FollowerParams
+) -> Follower:
     """Time derivative of the follower state (docs/reproductions/vehicle-tracking.md §1; slip as in :func:`world_rhs`).
 
     Args:

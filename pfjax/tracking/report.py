@@ -18,8 +18,13 @@ from pfjax.report.figures import save
 from pfjax.tracking.lemma import four_way, outcomes
 
 OUTCOMES = ("both", "z_only", "phi_only", "neither", "failed")
-LABELS = {"both": "z~→0 and φ−pγ→0", "z_only": "z~→0 only", "phi_only": "φ−pγ→0 only", "neither": "neither",
-          "failed": "failed (status)"}
+LABELS = {
+    "both": "z~→0 and φ−pγ→0",
+    "z_only": "z~→0 only",
+    "phi_only": "φ−pγ→0 only",
+    "neither": "neither",
+    "failed": "failed (status)",
+}
 
 
 def write_figures(fig_dir: Path, cfg: dict, lemma_df: pd.DataFrame, geo: pd.DataFrame, mc: pd.DataFrame) -> list[str]:
@@ -126,15 +131,28 @@ a leader on the focus direction at the wrong distance has φ = pγ and |z~| ≥ 
 
 
 def write_report(out_dir: Path, summary: dict, table: pd.DataFrame, lemma_df: pd.DataFrame) -> Path:
-    figs = {n: base64.b64encode((out_dir / "figures" / f"{n}.png").read_bytes()).decode()
-            for n in ("lemma_outcomes", "lemma_geometry", "mc_final_error")}
+    figs = {
+        n: base64.b64encode((out_dir / "figures" / f"{n}.png").read_bytes()).decode()
+        for n in ("lemma_outcomes", "lemma_geometry", "mc_final_error")
+    }
     outside = lemma_df[~lemma_df.inside_bound & (lemma_df.status == "ok")]
-    out_tab = four_way(outside, ["mode", "gamma_max_deg", "p"])[["mode", "gamma_max_deg", "p", "n", "z_only", "phi_only"]]
+    out_tab = four_way(outside, ["mode", "gamma_max_deg", "p"])[
+        ["mode", "gamma_max_deg", "p", "n", "z_only", "phi_only"]
+    ]
     out_tab = out_tab.rename(columns={"n": "n_ok"})[(out_tab.z_only + out_tab.phi_only) > 0]
     s = json.loads(json.dumps(summary, default=lambda o: None))
-    html = Environment(undefined=StrictUndefined, autoescape=True).from_string(TEMPLATE).render(
-        s=_ns(s), cols=list(table.columns), rows=table.to_dict(orient="records"), figs=figs,
-        out_cols=list(out_tab.columns), out_rows=out_tab.to_dict(orient="records"))
+    html = (
+        Environment(undefined=StrictUndefined, autoescape=True)
+        .from_string(TEMPLATE)
+        .render(
+            s=_ns(s),
+            cols=list(table.columns),
+            rows=table.to_dict(orient="records"),
+            figs=figs,
+            out_cols=list(out_tab.columns),
+            out_rows=out_tab.to_dict(orient="records"),
+        )
+    )
     path = out_dir / "report.html"
     path.write_text(html)
     return path

@@ -128,8 +128,7 @@ class TrackResult(NamedTuple):
     trajectory: TrackTrajectory | None
 
 
-def initial_state(leader: Leader, params: FollowerParams, offset=(0.0, 0.0), heading_error=0.0,
-                  gamma0=0.0) -> Follower:
+def initial_state(leader: Leader, params: FollowerParams, offset=(0.0, 0.0), heading_error=0.0, gamma0=0.0) -> Follower:
     """A follower whose focus point sits on ``z_d(0)`` at ``gamma = gamma0``, then displaced.
 
     Heading: the leader's direction of travel (forward) or its opposite (backward, the follower
@@ -154,19 +153,31 @@ def initial_states(leaders: Leader, params: FollowerParams, offsets: Array, head
     One compilation per batch size; far cheaper than evaluating :func:`initial_state` op by op.
     """
     return jax.vmap(lambda ld, pr, o, h: initial_state(ld, pr, offset=(o[0], o[1]), heading_error=h))(
-        leaders, params, offsets, heading_errors)
+        leaders, params, offsets, heading_errors
+    )
 
 
-def scenario(params: FollowerParams, leader: Leader, *, gains: FocusGains = FocusGains(), init: Follower | None = None,
-             slip: SlipProfile | None = None, noise: SensorNoise = SensorNoise(), key=None) -> TrackScenario:
+def scenario(
+    params: FollowerParams,
+    leader: Leader,
+    *,
+    gains: FocusGains = FocusGains(),
+    init: Follower | None = None,
+    slip: SlipProfile | None = None,
+    noise: SensorNoise = SensorNoise(),
+    key=None,
+) -> TrackScenario:
     """A scenario with defaults: no slip, no noise, follower placed on the leader (zero error)."""
-    f = lambda v: jnp.asarray(v, dtype=float)  # noqa: E731
+    f = lambda v: jnp.asarray(v, dtype=float)
     params = as_arrays(params)
     return TrackScenario(
-        params=params, gains=FocusGains(*map(f, gains)), leader=leader,
+        params=params,
+        gains=FocusGains(*map(f, gains)),
+        leader=leader,
         init=Follower(*map(f, init if init is not None else initial_state(leader, params))),
         slip=slip if slip is not None else constant_slip(0.0, 0.0),
-        noise=SensorNoise(*map(f, noise)), key=jax.random.PRNGKey(0) if key is None else key,
+        noise=SensorNoise(*map(f, noise)),
+        key=jax.random.PRNGKey(0) if key is None else key,
     )
 
 
@@ -204,8 +215,17 @@ def _start(sc: TrackScenario) -> loop.Start:
     zd0, _ = position_velocity(sc.leader, 0.0 * fz)
     e0 = tracking_error(z0, zd0, p)
     conn0 = connection(z0, zd0, p)
-    m0 = _Running(iae=fz, max_g=jnp.abs(z0.gamma), win_z=fz, win_phi=fz, min_fac=fz + jnp.inf, n_lim=fz,
-                  z_err=jnp.hypot(e0[0], e0[1]), phi_err=conn0.phi - p.p * z0.gamma, d=conn0.d)
+    m0 = _Running(
+        iae=fz,
+        max_g=jnp.abs(z0.gamma),
+        win_z=fz,
+        win_phi=fz,
+        min_fac=fz + jnp.inf,
+        n_lim=fz,
+        z_err=jnp.hypot(e0[0], e0[1]),
+        phi_err=conn0.phi - p.p * z0.gamma,
+        d=conn0.d,
+    )
     return loop.Start(state=z0, metrics=m0, zero=fz)
 
 
@@ -214,8 +234,12 @@ def _step(config: TrackConfig, sc: TrackScenario, carry: loop.LoopCarry, k) -> l
     dt, p, s, ns = config.dt, sc.params, carry.state, sc.noise
     t = k * dt
     eps = step_normals(sc.key, k, 4, carry.status.dtype)  # the run's float type (the status's)
-    meas = Follower(s.x + ns.sigma_pos * eps[0], s.y + ns.sigma_pos * eps[1],
-                    s.theta + ns.sigma_theta * eps[2], s.gamma + ns.sigma_gamma * eps[3])
+    meas = Follower(
+        s.x + ns.sigma_pos * eps[0],
+        s.y + ns.sigma_pos * eps[1],
+        s.theta + ns.sigma_theta * eps[2],
+        s.gamma + ns.sigma_gamma * eps[3],
+    )
     zd, zd_dot = position_velocity(sc.leader, t)
     cmd = focus_control(meas, zd, zd_dot, p, sc.gains, config.sing_tol)
     w = steering_stop(cmd.omega, s.gamma, p.gamma_max, dt)
@@ -234,8 +258,11 @@ def _step(config: TrackConfig, sc: TrackScenario, carry: loop.LoopCarry, k) -> l
     # elementwise over the state's fields and a where chain, not a reduction over a stacked short
     # axis (no vectorisation over the runs on CPU; see pfjax.numerics.layout)
     finite = all_true(jnp.isfinite(v) for v in s1)
-    now = first_true([~finite, enorm > config.z_fail, cmd.singular],
-                     [TrackStatus.NONFINITE, TrackStatus.DIVERGED, TrackStatus.SINGULAR], jnp.int32(TrackStatus.OK))
+    now = first_true(
+        [~finite, enorm > config.z_fail, cmd.singular],
+        [TrackStatus.NONFINITE, TrackStatus.DIVERGED, TrackStatus.SINGULAR],
+        jnp.int32(TrackStatus.OK),
+    )
     return loop.Sample(s1, now, t1, _Out(t1, zd1, err, enorm, conn, conn.phi - p.p * s1.gamma, cmd, w))
 
 
@@ -252,7 +279,9 @@ def _update(config: TrackConfig, sc: TrackScenario, m: _Running, s: loop.Sample,
         win_phi=upd(jnp.where(in_win, jnp.maximum(m.win_phi, jnp.abs(o.phi_err)), m.win_phi), m.win_phi),
         min_fac=jnp.where(was_live, jnp.minimum(m.min_fac, jnp.abs(o.cmd.factor)), m.min_fac),
         n_lim=upd(m.n_lim + limited, m.n_lim),
-        z_err=upd(o.enorm, m.z_err), phi_err=upd(o.phi_err, m.phi_err), d=upd(o.conn.d, m.d),
+        z_err=upd(o.enorm, m.z_err),
+        phi_err=upd(o.phi_err, m.phi_err),
+        d=upd(o.conn.d, m.d),
     )
 
 
@@ -265,10 +294,17 @@ def _finish(config: TrackConfig, sc: TrackScenario, r: loop.Run) -> TrackResult:
     m, failed = r.metrics, r.failed
     nanf = lambda x: jnp.where(failed, jnp.nan, x)
     metrics = TrackMetrics(
-        iae=jnp.where(failed, jnp.inf, m.iae), max_abs_gamma=m.max_g, window_max_z=nanf(m.win_z),
-        window_max_phi_err=nanf(m.win_phi), final_error_norm=m.z_err, final_phi_minus_pgamma=m.phi_err,
-        final_d=m.d, min_abs_factor=m.min_fac, limit_fraction=m.n_lim / config.n_steps,
-        converged=~failed & (m.win_z <= config.tol_z), phi_converged=~failed & (m.win_phi <= config.tol_phi),
+        iae=jnp.where(failed, jnp.inf, m.iae),
+        max_abs_gamma=m.max_g,
+        window_max_z=nanf(m.win_z),
+        window_max_phi_err=nanf(m.win_phi),
+        final_error_norm=m.z_err,
+        final_phi_minus_pgamma=m.phi_err,
+        final_d=m.d,
+        min_abs_factor=m.min_fac,
+        limit_fraction=m.n_lim / config.n_steps,
+        converged=~failed & (m.win_z <= config.tol_z),
+        phi_converged=~failed & (m.win_phi <= config.tol_phi),
         success=~failed & (m.win_z <= config.band),
     )
     return TrackResult(final=r.state, metrics=metrics, status=r.status, fail_time=r.fail_time, trajectory=r.records)
@@ -276,8 +312,14 @@ def _finish(config: TrackConfig, sc: TrackScenario, r: loop.Run) -> TrackResult:
 
 def system(config: TrackConfig) -> loop.System:
     """The focus-point tracker as a :class:`pfjax.sim.loop.System` (inputs: a :class:`TrackScenario`)."""
-    return loop.System(init=_start, step=partial(_step, config), update=partial(_update, config), record=_record,
-                       finish=partial(_finish, config), no_failure=float("inf"))
+    return loop.System(
+        init=_start,
+        step=partial(_step, config),
+        update=partial(_update, config),
+        record=_record,
+        finish=partial(_finish, config),
+        no_failure=float("inf"),
+    )
 
 
 def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
@@ -287,13 +329,15 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
 
 
 @compiler.jit(static_argnames=("config", "layout"))
-def _simulate_vmapped(scenarios: TrackScenario, *, config: TrackConfig,
-                      layout: sharding.Layout = sharding.Layout(None, 1)) -> TrackResult:
+def _simulate_vmapped(
+    scenarios: TrackScenario, *, config: TrackConfig, layout: sharding.Layout = sharding.Layout(None, 1)
+) -> TrackResult:
     return sharding.map_runs(lambda sc: simulate(sc, config), scenarios, layout)
 
 
-def simulate_batch(scenarios: TrackScenario, *, config: TrackConfig, devices=None,
-                   block: int | None | str = "auto") -> TrackResult:
+def simulate_batch(
+    scenarios: TrackScenario, *, config: TrackConfig, devices=None, block: int | str | None = "auto"
+) -> TrackResult:
     """``jit(vmap(simulate))`` over the leading axis of every scenario leaf, sharded over ``devices``
     (default: all) and blocked on CPU (``block``: runs per block; see
     :func:`pfjax.sim.simulate.simulate_batch`). The same results, run for run, for any layout (to an ulp or two)."""

@@ -39,6 +39,7 @@ from pfjax.sim.status import Status
 METRICS = ("iae", "ise", "itae")
 AGGREGATES = ("mean", "quantile", "cvar")
 
+
 class CostSpec(NamedTuple):
     """What is minimised (see the module docstring)."""
 
@@ -48,7 +49,7 @@ class CostSpec(NamedTuple):
     level: float = 0.9  # quantile / CVaR level
     fail_penalty: float = 100.0  # added to a failed run's cost (metric units)
 
-    def check(self) -> "CostSpec":
+    def check(self) -> CostSpec:
         """``self`` if every field is valid; :class:`~pfjax.errors.InputError` naming the field."""
         from pfjax import errors
 

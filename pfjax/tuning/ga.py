@@ -63,7 +63,8 @@ Where this departs from MATLAB, and why:
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import numpy as np

@@ -41,7 +41,8 @@ from __future__ import annotations
 
 import functools
 import time
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -49,7 +50,6 @@ import numpy as np
 import optax
 
 from pfjax import errors
-
 from pfjax.numerics import autodiff
 
 
@@ -141,8 +141,16 @@ def gradient_tune(
     if bar is not None:
         bar.close()
     theta = lo + span * best_z
-    return TuneResult(theta, float(best_J), np.asarray(hist), np.asarray(hist_r, dtype=np.int64), np.asarray(hist_t),
-                      steps * n_per_eval * n_starts, time.perf_counter() - t0, n_bad)
+    return TuneResult(
+        theta,
+        float(best_J),
+        np.asarray(hist),
+        np.asarray(hist_r, dtype=np.int64),
+        np.asarray(hist_t),
+        steps * n_per_eval * n_starts,
+        time.perf_counter() - t0,
+        n_bad,
+    )
 
 
 @functools.lru_cache(maxsize=32)
@@ -178,5 +186,13 @@ def ga_tune(cost_batch, lower, upper, *, key, options=None, n_per_eval: int = 1,
     r = ga(timed, lower, upper, key=key, options=options, progress=progress)
     P, E = options.population_size, options.elite_count
     evals = P + np.arange(options.generations + 1) * (P - E)
-    return TuneResult(np.asarray(r.x), float(r.f), r.history_best, evals * n_per_eval, np.asarray(times),
-                      r.n_evaluations * n_per_eval, time.perf_counter() - t0, 0)
+    return TuneResult(
+        np.asarray(r.x),
+        float(r.f),
+        r.history_best,
+        evals * n_per_eval,
+        np.asarray(times),
+        r.n_evaluations * n_per_eval,
+        time.perf_counter() - t0,
+        0,
+    )

@@ -27,6 +27,7 @@ from pfjax.tuning.cost import CostSpec, Tunable, batch_cost, n_scenarios, popula
 from pfjax.tuning.ga import GAOptions
 from pfjax.tuning.gradient import TuneResult, ga_tune, gradient_tune
 
+
 def scenario_sets() -> dict[str, tuple[str, ...]]:
     """Named scenario sets (one run per path, from its start pose with the source's 5 deg slip):
     ``paper-<test>`` and ``paper-all`` for the source's tests, and every fixed path
@@ -51,8 +52,17 @@ class Problem(NamedTuple):
         return n_scenarios(self.scenarios)
 
 
-def make_problem(controller: str, scenario: str, *, cost: CostSpec = CostSpec(), config: SimConfig | None = None,
-                 n_runs: int = 16, run_offset: int = 0, base_gains=None, box=None) -> Problem:
+def make_problem(
+    controller: str,
+    scenario: str,
+    *,
+    cost: CostSpec = CostSpec(),
+    config: SimConfig | None = None,
+    n_runs: int = 16,
+    run_offset: int = 0,
+    base_gains=None,
+    box=None,
+) -> Problem:
     """Build a problem (``controller``: a :data:`pfjax.controllers.REGISTRY` name).
 
     Args:
@@ -73,8 +83,9 @@ def make_problem(controller: str, scenario: str, *, cost: CostSpec = CostSpec(),
         raise errors.InputError(f"controller: value {controller!r}, expected one of {', '.join(tunable)}")
     sets = scenario_sets()
     if scenario not in sets and not (Path(scenario).suffix == ".toml" and Path(scenario).is_file()):
-        raise errors.InputError(f"scenario: value {scenario!r}, expected one of {', '.join(sets)} or an "
-                                f"existing study .toml")
+        raise errors.InputError(
+            f"scenario: value {scenario!r}, expected one of {', '.join(sets)} or an existing study .toml"
+        )
     errors.integer("n_runs", n_runs, low=1, high=1_000_000)
     errors.integer("run_offset", run_offset, low=0, high=errors.MAX_SEED - n_runs)
     ctrl, factory = C.REGISTRY[controller][:2]
@@ -99,7 +110,9 @@ def make_problem(controller: str, scenario: str, *, cost: CostSpec = CostSpec(),
         batches = []
         for i in range(len(spec.paths)):
             sc = sample_runs(spec, i, runs).scenarios
-            batches.append(sc._replace(gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(g, (n_runs,) + np.shape(g)), base)))
+            batches.append(
+                sc._replace(gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(g, (n_runs,) + np.shape(g)), base))
+            )
         cfg = config or sim_config(spec)
     import dataclasses
 
@@ -130,8 +143,18 @@ def cost_functions(problem: Problem):
     return entry[1], entry[2]
 
 
-def tune(problem: Problem, method: str, *, key, ga_options: GAOptions = GAOptions(), steps: int = 100,
-         n_starts: int = 1, learning_rate: float = 0.05, theta0=None, progress: bool = False) -> TuneResult:
+def tune(
+    problem: Problem,
+    method: str,
+    *,
+    key,
+    ga_options: GAOptions = GAOptions(),
+    steps: int = 100,
+    n_starts: int = 1,
+    learning_rate: float = 0.05,
+    theta0=None,
+    progress: bool = False,
+) -> TuneResult:
     """Run ``method`` (``"ga"`` or ``"gradient"``) on ``problem``; the gradient starts at ``theta0``
     or uniformly in the box from ``key``. Refused before any work (:class:`~pfjax.errors.InputError`
     naming the argument) for an unknown method or settings, or batches beyond the memory budget
@@ -149,18 +172,41 @@ def tune(problem: Problem, method: str, *, key, ga_options: GAOptions = GAOption
     per_run = resources.run_bytes(problem.config.n_steps)
     if method == "ga":
         population = _validate(ga_options)[0]
-        resources.check_memory("population_size", 2 * population * problem.n_per_eval * per_run,
-                               f"a GA population of {population} x {problem.n_per_eval} runs")
+        resources.check_memory(
+            "population_size",
+            2 * population * problem.n_per_eval * per_run,
+            f"a GA population of {population} x {problem.n_per_eval} runs",
+        )
     else:
         n = errors.integer("n_starts", n_starts, low=1, high=1_000_000)
-        resources.check_memory("n_starts", 2 * n * problem.n_per_eval * per_run * (1 + problem.lower.size),
-                               f"{n} starts x {problem.n_per_eval} runs with {problem.lower.size} tangents")
+        resources.check_memory(
+            "n_starts",
+            2 * n * problem.n_per_eval * per_run * (1 + problem.lower.size),
+            f"{n} starts x {problem.n_per_eval} runs with {problem.lower.size} tangents",
+        )
     f_scalar, f_pop = cost_functions(problem)
     if method == "ga":
         f = f_pop
-        return ga_tune(f, problem.lower, problem.upper, key=key, options=ga_options, n_per_eval=problem.n_per_eval,
-                       progress=progress)
+        return ga_tune(
+            f,
+            problem.lower,
+            problem.upper,
+            key=key,
+            options=ga_options,
+            n_per_eval=problem.n_per_eval,
+            progress=progress,
+        )
     if method == "gradient":
-        return gradient_tune(f_scalar, problem.lower, problem.upper, theta0=theta0, key=key, steps=steps,
-                             n_starts=n_starts, n_per_eval=problem.n_per_eval, learning_rate=learning_rate, progress=progress)
+        return gradient_tune(
+            f_scalar,
+            problem.lower,
+            problem.upper,
+            theta0=theta0,
+            key=key,
+            steps=steps,
+            n_starts=n_starts,
+            n_per_eval=problem.n_per_eval,
+            learning_rate=learning_rate,
+            progress=progress,
+        )
     raise AssertionError(method)

@@ -21,9 +21,9 @@ import sys
 import time
 from pathlib import Path
 
-from pfjax.provenance import config_hash
 from pfjax.errors import InputError, command_main
 from pfjax.outputs import OutputDir
+from pfjax.provenance import config_hash
 
 
 def rss_mib(pid: int) -> float:
@@ -51,7 +51,9 @@ def run(args) -> int:
     if args.runs < 9 or args.horizon <= 0 or args.chunk < 1:
         raise InputError("--runs/--horizon/--chunk: --runs >= 9, --horizon > 0 and --chunk >= 1 required")
     cfg = {"runs": args.runs, "horizon": args.horizon, "chunk": args.chunk}
-    with OutputDir(args.out, command="bench-memory", config_sha256=config_hash(cfg), overwrite=args.overwrite) as output:
+    with OutputDir(
+        args.out, command="bench-memory", config_sha256=config_hash(cfg), overwrite=args.overwrite
+    ) as output:
         code = measure(args, output.staging)
         if code == 0:
             print(f"wrote {output.commit()}", file=sys.stderr)
@@ -63,10 +65,28 @@ def measure(args, out: Path) -> int:
     n_runs = args.runs // 9
     study_out = out / "study"
     h = args.horizon
-    sets = [f"n_runs={n_runs}", f"chunk_size={args.chunk}", f"sim.horizon={h}", f"sim.steady_window={h / 2}",
-            f"success.from_s={h / 2}", "margin.enabled=false", "falsifier.enabled=false", "f64_check_runs=0"]
-    cmd = [sys.executable, "-m", "pfjax.cli", "study", "studies/robustness_default.toml", "--no-report", "--fresh",
-           "--out", str(study_out), "--json"] + [a for s in sets for a in ("--set", s)]
+    sets = [
+        f"n_runs={n_runs}",
+        f"chunk_size={args.chunk}",
+        f"sim.horizon={h}",
+        f"sim.steady_window={h / 2}",
+        f"success.from_s={h / 2}",
+        "margin.enabled=false",
+        "falsifier.enabled=false",
+        "f64_check_runs=0",
+    ]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pfjax.cli",
+        "study",
+        "studies/robustness_default.toml",
+        "--no-report",
+        "--fresh",
+        "--out",
+        str(study_out),
+        "--json",
+    ] + [a for s in sets for a in ("--set", s)]
     t0 = time.time()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     trace = []
@@ -82,11 +102,18 @@ def measure(args, out: Path) -> int:
     json.loads(stdout)  # the CLI's one JSON object (checked); the full summary is on disk
     summary = json.loads((study_out / "summary.json").read_text())
     result = {
-        "runs": summary["n_runs_total"], "horizon_s": h, "chunk_size": args.chunk, "wall_s": wall,
-        "runs_per_s": summary["n_runs_total"] / wall, "peak_rss_mib": peak,
+        "runs": summary["n_runs_total"],
+        "horizon_s": h,
+        "chunk_size": args.chunk,
+        "wall_s": wall,
+        "runs_per_s": summary["n_runs_total"] / wall,
+        "peak_rss_mib": peak,
         "runs_parquet_mib": (study_out / "runs.parquet").stat().st_size / 2**20,
-        "config_sha256": summary["config_sha256"], "pfjax_version": summary["pfjax_version"],
-        "cpus": os.cpu_count(), "command": cmd, "rss_trace_mib": trace,
+        "config_sha256": summary["config_sha256"],
+        "pfjax_version": summary["pfjax_version"],
+        "cpus": os.cpu_count(),
+        "command": cmd,
+        "rss_trace_mib": trace,
     }
     (out / "memory.json").write_text(json.dumps(result) + "\n")
     print(json.dumps({k: v for k, v in result.items() if k not in ("rss_trace_mib", "command")}, indent=1))

@@ -26,9 +26,18 @@ def _output(p: HeadingParams, c, obs):
 
 
 heading = Controller("dummy_heading", no_state, _output, no_rate, HeadingParams)
-C.register(heading, heading_params, box=(("k_d", "k_h"), (-6.0, -6.0), (0.0, 0.0)),
-           style={"color": "#bcbd22", "label": "dummy heading"})
+C.register(
+    heading,
+    heading_params,
+    box=(("k_d", "k_h"), (-6.0, -6.0), (0.0, 0.0)),
+    style={"color": "#bcbd22", "label": "dummy heading"},
+)
 
 # y = 0.5 sin(0.5 x): curvature at most A w^2 = 0.125 1/m; start on the path, tangent to it
-paths.register("gentle", lambda: paths.sine(amplitude=0.5, omega=0.5), start_pose=(0.0, -0.1, math.atan(0.25)),
-               max_curvature=0.125, description="a gentle sine (test plugin)")
+paths.register(
+    "gentle",
+    lambda: paths.sine(amplitude=0.5, omega=0.5),
+    start_pose=(0.0, -0.1, math.atan(0.25)),
+    max_curvature=0.125,
+    description="a gentle sine (test plugin)",
+)
