@@ -43,6 +43,7 @@ LINT_TARGETS := pfjax studies tests docs/hooks.py
 lint: $(STAMP)
 	$(VENV)/bin/ruff check $(LINT_TARGETS)
 	$(VENV)/bin/ruff format --check $(LINT_TARGETS)
+	$(VENV)/bin/mypy
 
 # The newest versions pip resolves for pyproject.toml's ranges, written to constraints.txt (its
 # comment lines kept; --all: setuptools is a test dependency, pip freeze leaves it out otherwise);

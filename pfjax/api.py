@@ -257,7 +257,7 @@ def _gains_of(e, d, gains, v: float, L: float) -> tuple[Any, dict]:
             f"gains: expected a dict of {', '.join(e.gains)}, a {kind} or a design with K, got {type(gains).__name__}",
             "gains",
         )
-    return C.params_from_flat(e, **flat), {k: float(v) for k, v in flat.items()}
+    return C.params_from_flat(e, flat), {k: float(v) for k, v in flat.items()}
 
 
 def simulate(
@@ -608,7 +608,9 @@ def falsify(
     steps = errors.integer("steps", steps, low=1, high=100_000)
     params, _ = _gains_of(e, d, gains, speed, L)
     sp = SlipParams(
-        *(np.asarray(x, float) for x in (speed, L, math.radians(delta_max_deg))),
+        v=np.asarray(speed, float),
+        L=np.asarray(L, float),
+        delta_max=np.asarray(math.radians(delta_max_deg), float),
         convention=np.asarray(CONVENTIONS["source"], np.int32),
     )
     k = jax.random.PRNGKey(errors.seed("key", key)) if isinstance(key, (int, np.integer)) else key

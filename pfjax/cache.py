@@ -53,8 +53,9 @@ def enable(path: str | Path | None = None, *, min_compile_s: float = 0.5) -> Pat
     """
     import jax
 
-    if jax.config.jax_compilation_cache_dir:
-        return Path(jax.config.jax_compilation_cache_dir)
+    configured = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]  # a flag, not in the stubs
+    if configured:
+        return Path(configured)
     target = usable(Path(path) if path is not None else default_dir())
     if target is None:
         return None

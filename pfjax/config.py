@@ -13,6 +13,7 @@ import copy
 import difflib
 import re
 import tomllib
+from collections.abc import Sequence
 from pathlib import Path
 
 from pfjax import errors
@@ -145,7 +146,7 @@ def read_toml(path: str | Path, key: str = "config") -> dict:
         raise ConfigError(f"{key}: {path}: invalid TOML ({e})") from None
 
 
-def load(defaults: dict, path: str | Path | None = None, overrides: list[str] = ()) -> dict:
+def load(defaults: dict, path: str | Path | None = None, overrides: Sequence[str] = ()) -> dict:
     """Defaults <- TOML file <- ``--set`` overrides, each checked against the defaults."""
     cfg = copy.deepcopy(defaults)
     if path is not None:

@@ -119,7 +119,7 @@ class ParquetAppender:
 
     def __init__(self, dest: Path, metadata: dict[bytes, bytes]):
         self.dest, self.metadata, self.rows = Path(dest), metadata, 0
-        self._writer = None
+        self._writer: pq.ParquetWriter | None = None
 
     def write(self, table: pa.Table | pd.DataFrame) -> None:
         if isinstance(table, pd.DataFrame):

@@ -36,3 +36,8 @@ def test_ruff_lint_is_clean():
 def test_ruff_format_is_clean():
     r = _run(_tool("ruff"), "format", "--check", "--no-cache", *TARGETS)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_mypy_is_clean():
+    r = _run(_tool("mypy"), "--no-incremental")
+    assert r.returncode == 0, r.stdout + r.stderr

@@ -49,7 +49,7 @@ def test_registries_drive_names():
     for name, e in C.REGISTRY.items():
         flat = C.flat_gains(e)
         assert set(e.gains) <= set(flat), name
-        again = C.flat_gains(e, C.params_from_flat(e, **flat))
+        again = C.flat_gains(e, C.params_from_flat(e, flat))
         assert again.keys() == flat.keys() and np.allclose(list(again.values()), list(flat.values()), rtol=1e-6), name
 
 

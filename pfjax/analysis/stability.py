@@ -48,7 +48,7 @@ def closed_loop_field(x: Array, K: Array, beta_r, beta_f, kappa, params: SlipPar
     delta = K[0] * x[0] + K[1] * x[1]
     if saturate:
         delta = jnp.clip(delta, -params.delta_max, params.delta_max)
-    dx = frenet_rhs(FrenetState(x[0], x[1], 0.0), delta, beta_r, beta_f, kappa, params)
+    dx = frenet_rhs(FrenetState(x[0], x[1], jnp.zeros_like(x[0])), delta, beta_r, beta_f, kappa, params)
     return jnp.stack([dx.d, dx.theta_e])
 
 

@@ -77,7 +77,7 @@ def _controller_and_gains(args):
             with as_flags(SYNTH_FLAGS):
                 flat.update(d.make(args.speed, args.wheelbase))
         flat.update(given)
-        gains = C.params_from_flat(e, **flat)
+        gains = C.params_from_flat(e, flat)
     return e.controller, gains, {k: flat[k] for k in e.gains}
 
 
@@ -134,10 +134,13 @@ def cmd(args) -> dict:
         )
     r = unstack(simulate_batch(stack([sc]), controller=controller, config=cfg), 0)
     status = int(r.status)
-    metrics = {k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES}
+    metrics: dict[str, bool | float | str] = {
+        k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES
+    }
     metrics["status"] = STATUS_NAMES[status]
     if args.x0 is None:
         start = paths.entry(args.path).start_pose
+        assert start is not None  # --path takes fixed paths, which have a start pose
         x0 = (start[0], start[1], math.degrees(start[2]))
     else:
         x0 = args.x0

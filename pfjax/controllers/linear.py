@@ -34,7 +34,7 @@ def state_feedback_params(K=PAPER_K, feedforward=0.0) -> StateFeedbackParams:
     return StateFeedbackParams(jnp.asarray(np.ravel(K), dtype=float), jnp.asarray(feedforward, dtype=float))
 
 
-def _sf_output(p: StateFeedbackParams, c, obs: Observation) -> Array:
+def _sf_output(p: StateFeedbackParams | LinearParams, c, obs: Observation) -> Array:
     return p.K[0] * obs.d + p.K[1] * obs.theta_e + p.feedforward * E.atan(obs.L * obs.kappa)
 
 

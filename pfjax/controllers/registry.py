@@ -9,7 +9,7 @@ An entry unpacks into its first two fields as ``controller, make_params = entry[
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
 
 from pfjax import errors
@@ -33,7 +33,7 @@ class ControllerEntry(NamedTuple):
     """
 
     controller: Controller
-    make_params: Callable[..., Any]
+    make_params: CheckedFactory
     name: str
     gains: tuple[str, ...]
     cli_name: str
@@ -46,24 +46,32 @@ class ControllerEntry(NamedTuple):
 REGISTRY: dict[str, ControllerEntry] = {}
 
 
-def checked_factory(name: str, factory, defaults: dict | None = None):
-    """``factory`` (keyword gains -> parameter pytree) with its arguments checked: an unknown gain
-    name or a gain that is not a finite number raises :class:`~pfjax.errors.InputError` naming
-    ``gains.<name>``. ``defaults`` are used for the gains not given."""
-    names = list(inspect.signature(factory).parameters)
+class CheckedFactory:
+    """A parameter factory (keyword gains -> parameter pytree) with its arguments checked: an unknown
+    gain name or a gain that is not a finite number raises :class:`~pfjax.errors.InputError` naming
+    ``gains.<name>``. ``defaults`` are used for the gains not given; ``gain_names`` are the factory's
+    keyword names, in order."""
 
-    def make(**gains):
+    def __init__(self, name: str, factory: Callable[..., Any], defaults: dict | None = None):
+        self.name, self.factory, self.defaults = name, factory, dict(defaults or {})
+        self.gain_names: tuple[str, ...] = tuple(inspect.signature(factory).parameters)
+        self.__doc__ = factory.__doc__
+
+    def __call__(self, **gains) -> Any:
         for k, v in gains.items():
-            if k not in names:
+            if k not in self.gain_names:
                 raise errors.InputError(
-                    f"gains.{k}: unknown gain for controller {name!r}; expected one of {', '.join(names)}", "gains"
+                    f"gains.{k}: unknown gain for controller {self.name!r}; expected one of "
+                    f"{', '.join(self.gain_names)}",
+                    "gains",
                 )
             errors.numbers(f"gains.{k}", v)
-        return factory(**{**(defaults or {}), **gains})
+        return self.factory(**{**self.defaults, **gains})
 
-    make.gain_names = tuple(names)
-    make.__doc__ = factory.__doc__
-    return make
+
+def checked_factory(name: str, factory: Callable[..., Any], defaults: dict | None = None) -> CheckedFactory:
+    """``factory`` with its arguments checked (:class:`CheckedFactory`)."""
+    return CheckedFactory(name, factory, defaults)
 
 
 def register(
@@ -128,9 +136,9 @@ def flat_gains(e: ControllerEntry, params=None) -> dict[str, float]:
     return out
 
 
-def params_from_flat(e: ControllerEntry, key: str = "gains", **flat) -> Any:
-    """The parameter pytree from scalar gains (the others at their defaults); an unknown name raises
-    :class:`~pfjax.errors.InputError` naming ``<key>.<name>``."""
+def params_from_flat(e: ControllerEntry, flat: Mapping[str, Any], key: str = "gains") -> Any:
+    """The parameter pytree from scalar gains ``{name: value}`` (the others at their defaults); an
+    unknown name raises :class:`~pfjax.errors.InputError` naming ``<key>.<name>``."""
     default = flat_gains(e)
     for k, v in flat.items():
         if k not in default:

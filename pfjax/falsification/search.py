@@ -48,6 +48,7 @@ import numpy as np
 import optax
 from jax import Array
 
+from pfjax.arrays import Leaf
 from pfjax.controllers.base import Controller
 from pfjax.falsification.space import (
     RawParams,
@@ -91,7 +92,7 @@ class _Best(NamedTuple):
     raw: RawParams
 
 
-def _score(value: Array, status: Array, xp=jnp) -> Array:
+def _score(value: Leaf, status: Leaf, xp=jnp) -> Leaf:
     """The ranking key (module docstring); ``xp``: ``jnp``, or ``np`` for host arrays."""
     score = xp.where(status != Status.OK, xp.inf, value)
     return xp.where(xp.isnan(score), -xp.inf, score)
@@ -285,10 +286,12 @@ def falsify(
         history.append(best.value)
         nonfinite.append(bad)
     n = int(n_restarts) * int(steps)
+    seq, ic = _from_raw(space, best.raw)
     return _result(
         space,
         base,
-        *_from_raw(space, best.raw),
+        seq,
+        ic,
         best.value,
         best.status,
         np.stack(jax.device_get(history)),
@@ -358,20 +361,22 @@ def random_search(
         keep = min(b, n - start)
         values.append(np.asarray(getattr(res.metrics, objective))[:keep])
         statuses.append(np.asarray(res.status)[:keep])
-    values, statuses = np.concatenate(values), np.concatenate(statuses)
-    score = _score(values, statuses, np)
+    all_values, all_statuses = np.concatenate(values), np.concatenate(statuses)
+    score = _score(all_values, all_statuses, np)
     # Running best: index of the first maximum of score[:k+1] for every k.
     leader = np.zeros(n, dtype=int)
     for k in range(1, n):
         leader[k] = k if score[k] > score[leader[k - 1]] else leader[k - 1]
     i = leader[-1]
+    seq_i, ic_i = unstack((seq, ic), i)
     return _result(
         space,
         base,
-        *unstack((seq, ic), i),
-        jnp.asarray(values[i]),
-        statuses[i],
-        values[leader],
+        seq_i,
+        ic_i,
+        jnp.asarray(all_values[i]),
+        all_statuses[i],
+        all_values[leader],
         np.arange(1, n + 1),
         n,
         0,

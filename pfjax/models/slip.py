@@ -27,6 +27,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
+from pfjax.arrays import FloatLeaf, IntLeaf
 from pfjax.numerics import elementary as E
 
 SOURCE = 0
@@ -46,11 +47,11 @@ class SlipParams(NamedTuple):
             sampled controllers; a continuous controller is not rate limited.
     """
 
-    v: Array | float = 1.0  # m/s
-    L: Array | float = 0.2  # m
-    delta_max: Array | float = 0.5235987755982988  # rad (30 deg)
-    convention: Array | int = SOURCE  # 0 source, 1 Lenain
-    delta_rate_max: Array | float = float("inf")  # rad/s
+    v: FloatLeaf = 1.0  # m/s
+    L: FloatLeaf = 0.2  # m
+    delta_max: FloatLeaf = 0.5235987755982988  # rad (30 deg)
+    convention: IntLeaf = SOURCE  # 0 source, 1 Lenain
+    delta_rate_max: FloatLeaf = float("inf")  # rad/s
 
 
 class Pose(NamedTuple):
@@ -99,7 +100,7 @@ def world_rhs(pose: Pose, delta: Array, beta_r: Array, beta_f: Array, params: Sl
     Returns:
         The time derivative as a ``Pose`` (m/s, m/s, rad/s).
     """
-    v = params.v
+    v = jnp.asarray(params.v)
     s, c = E.sincos(pose.theta)
     tbr = E.tan(beta_r)
     return Pose(
@@ -128,7 +129,7 @@ def frenet_rhs(
         kappa: path curvature at ``s``, 1/m (left turn positive).
         params: physical parameters.
     """
-    v = params.v
+    v = jnp.asarray(params.v)
     s, c = E.sincos(state.theta_e)
     tbr = E.tan(beta_r)
     s_dot = v * (c - tbr * s) / (1.0 - kappa * state.d)

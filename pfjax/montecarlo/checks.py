@@ -13,6 +13,7 @@ sampled scenarios and gains, cast up) and reports how far the metrics and status
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -167,7 +168,7 @@ def float64_check(
             "reason": "the study runs in float64" if spec.dtype == "float64" else "disabled (f64_check_runs = 0)",
         }
     idx = sample_indices(spec, n_sample)
-    per = {}
+    per: dict[str, Any] = {}
     for p, pspec in enumerate(spec.paths):
         sim = sims[p] if sims is not None else float64_runs(spec, controllers, n_sample, p)
         for name in controllers:

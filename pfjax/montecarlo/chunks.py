@@ -26,6 +26,7 @@ import shutil
 import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any, Protocol
 
 import pandas as pd
 import pyarrow as pa
@@ -53,6 +54,14 @@ def partial_dir(out: Path) -> Path:
     return sibling(Path(out).absolute(), "partial")
 
 
+class ChunkSource(Protocol):
+    """Where a study's chunks come from: :class:`ChunkStore`, or a view of one."""
+
+    def get(self, key: str, compute: Callable[[], pd.DataFrame]) -> pd.DataFrame:
+        """The chunk ``key``: stored, or ``compute()``d."""
+        ...
+
+
 class ChunkStore:
     """The finished chunks of one study (see module docstring).
 
@@ -67,7 +76,7 @@ class ChunkStore:
 
     def __init__(self, out: Path, spec: StudySpec, *, fresh: bool = False):
         self.dir = partial_dir(out)
-        self.manifest = {
+        self.manifest: dict[str, Any] = {
             "study": spec.name,
             "config_sha256": study_hash(spec),
             "seed": spec.seed,

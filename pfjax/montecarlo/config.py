@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import difflib
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal, get_args
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -63,6 +64,10 @@ class _Model(BaseModel):
         return data
 
 
+Axis = Literal["rear", "front", "joint"]
+"""A slipping axle in the slip-margin sweep: rear, front, or joint (both)."""
+
+
 class Dist(_Model):
     """A distribution of one scalar (see module docstring)."""
 
@@ -106,15 +111,24 @@ class Dist(_Model):
             raise ValueError("'values' must be a non-empty list of finite numbers")
         return self
 
+    def number(self, name: str) -> float:
+        """The parameter ``name`` (``value``, ``low``, ``high``, ``mean`` or ``std``) of a distribution that
+        uses it (the validator guarantees it is set)."""
+        v = getattr(self, name)
+        if v is None:
+            raise ValueError(f"dist '{self.dist}' has no '{name}'")
+        return float(v)
+
     def bounds(self) -> tuple[float, float]:
         """Support of the distribution (inf for the normal)."""
         if self.dist == "constant":
-            return self.value, self.value
+            return self.number("value"), self.number("value")
         if self.dist == "choice":
-            return min(self.values), max(self.values)
+            values = self.values or []
+            return min(values), max(values)
         if self.dist == "normal":
             return -math.inf, math.inf
-        return self.low, self.high
+        return self.number("low"), self.number("high")
 
 
 def _as_dist(v: Any):
@@ -384,8 +398,8 @@ class MarginSpec(_Model):
         lt=1,
         description="tolerated failure rate: the margin is the largest A with success >= 1 - eps",
     )
-    axes: list[Literal["rear", "front", "joint"]] = Field(
-        default_factory=lambda: ["rear", "front", "joint"], description="slipping axles: rear, front, joint (both)"
+    axes: list[Axis] = Field(
+        default_factory=lambda: list(get_args(Axis)), description="slipping axles: rear, front, joint (both)"
     )
 
     @field_validator("amplitudes_deg")
@@ -625,7 +639,7 @@ def _set_nested(d: dict, update: dict) -> dict:
 
 
 def load_study(
-    path: str | Path | None = None, overrides: list[str] = (), data: dict | None = None, values: dict | None = None
+    path: str | Path | None = None, overrides: Sequence[str] = (), data: dict | None = None, values: dict | None = None
 ) -> tuple[StudySpec, dict]:
     """Read, override and validate a study. Returns ``(spec, raw_dict)``; raises ConfigError.
 

@@ -21,7 +21,7 @@ from pfjax import controllers as C
 from pfjax.config import ConfigError
 from pfjax.errors import InputError
 from pfjax.metrics.running import METRIC_NAMES
-from pfjax.montecarlo.chunks import ChunkStore, file_metadata
+from pfjax.montecarlo.chunks import ChunkSource, ChunkStore, file_metadata
 from pfjax.montecarlo.config import ControllerSpec, StudySpec
 from pfjax.montecarlo.sampling import column_names, sample_runs
 from pfjax.outputs import OutputDir
@@ -49,7 +49,7 @@ def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
         flat.update(zip(e.labels["K"], c.K))
     flat.update(c.gains)
     try:
-        gains = C.params_from_flat(e, **flat)
+        gains = C.params_from_flat(e, flat)
     except InputError as err:  # names gains.<gain>: the study's key is controllers[i].gains.<gain>
         raise ConfigError(f"controllers[{index}].{err}") from None
     flat = {k: float(v) for k, v in flat.items() if k in e.gains or k in c.gains}
@@ -175,7 +175,7 @@ def simulate_runs(
     *,
     slip_override=None,
     chunk=None,
-    store: ChunkStore | None = None,
+    store: ChunkSource | None = None,
     prefix: str = "runs",
 ):
     """Simulate ``runs`` of one path for every controller; yields ``(controller name, chunk key, DataFrame)``.
@@ -190,7 +190,7 @@ def simulate_runs(
     # each chunk is sampled once and kept for the next controller (sampling is dispatched op by op:
     # ~0.4 s per chunk of the default study); beyond, every controller re-samples, so memory stays
     # O(chunk) (a sampled slip sequence alone is kilobytes per run).
-    shared = {} if len(controllers) > 1 else None
+    shared: dict | None = {} if len(controllers) > 1 else None
     for ci, (name, controller) in enumerate(controllers.items()):
         for a in range(0, len(runs), chunk):
             idx = runs[a : a + chunk]
@@ -306,7 +306,7 @@ SWEEP_COUNT_KEYS = ["controller", "axis", "amplitude_deg"]
 
 
 def margin_sweep(
-    spec: StudySpec, controllers, *, progress: bool | None = None, store: ChunkStore | None = None, dest=None
+    spec: StudySpec, controllers, *, progress: bool | None = None, store: ChunkSource | None = None, dest=None
 ) -> pd.DataFrame:
     """Success counts over the slip-amplitude grid, per controller, axis and amplitude (all paths
     pooled): columns ``controller, axis, amplitude_deg, k`` (successes) and ``n`` (runs).
@@ -325,9 +325,9 @@ def margin_sweep(
     n, amps = m.n_per_amplitude, np.asarray(m.amplitudes_deg)
     counts = []
     total = len(m.axes) * len(amps) * n * len(spec.paths) * len(controllers)
-    sink = ParquetAppender(dest, file_metadata(spec)) if dest is not None else contextlib.nullcontext()
+    sink = ParquetAppender(dest, file_metadata(spec)) if dest is not None else None
     with (
-        sink,
+        sink if sink is not None else contextlib.nullcontext(),
         tqdm(
             total=total,
             desc=f"{spec.name}: slip margin",
@@ -353,7 +353,7 @@ def margin_sweep(
                 ):
                     rows = df if store is not None else rows_of(df)
                     if not rows.empty:  # (empty: a chunk another process computes)
-                        if dest is not None:
+                        if sink is not None:
                             sink.write(rows)
                         counts.append(rows.groupby(SWEEP_COUNT_KEYS, sort=False)["success"].agg(k="sum", n="count"))
                     bar.update(len(df))
@@ -370,7 +370,7 @@ def _margin_rows(df: pd.DataFrame, axis: str, runs: np.ndarray, amp: np.ndarray)
 class _Project:
     """A view of a ChunkStore that stores ``project(chunk)`` instead of the whole chunk (the sweep keeps 6 columns)."""
 
-    def __init__(self, store: ChunkStore, project):
+    def __init__(self, store: ChunkSource, project):
         self.store, self.project = store, project
 
     def get(self, key, compute):

@@ -71,12 +71,13 @@ def draw(dist: Dist, key) -> jax.Array:
     if dist.dist == "constant":
         return jnp.asarray(dist.value, f)
     if dist.dist == "uniform":
-        return jax.random.uniform(key, (), f, dist.low, dist.high)
+        return jax.random.uniform(key, (), f, dist.number("low"), dist.number("high"))
     if dist.dist == "normal":
-        return dist.mean + dist.std * jax.random.normal(key, (), f)
+        return dist.number("mean") + dist.number("std") * jax.random.normal(key, (), f)
     if dist.dist == "truncnormal":
-        lo, hi = (dist.low - dist.mean) / dist.std, (dist.high - dist.mean) / dist.std
-        return dist.mean + dist.std * jax.random.truncated_normal(key, lo, hi, (), f)
+        mean, std = dist.number("mean"), dist.number("std")
+        lo, hi = (dist.number("low") - mean) / std, (dist.number("high") - mean) / std
+        return mean + std * jax.random.truncated_normal(key, lo, hi, (), f)
     return jax.random.choice(key, jnp.asarray(dist.values, f))
 
 
@@ -137,7 +138,7 @@ def _slip(spec: StudySpec, key, horizon: float, given=None):
     br, bf = d("beta_r_deg"), d("beta_f_deg")
     cols = {"beta_r_deg": br, "beta_f_deg": bf}
     n_seq = int(math.ceil(horizon / s.seq_dt)) + 2
-    terms = {}  # only the kind's own terms: an absent term is not computed in the simulator
+    terms: dict[str, jax.Array] = {}  # only the kind's own terms: an absent term is not computed in the simulator
     if s.kind == "step":
         step_time = d("step_time_s")
         sr, sf = d("step_r_deg"), d("step_f_deg")
@@ -204,7 +205,7 @@ def random_path(key, spec: PathSpec, kappa_max: float) -> shapes.Spline:
 def _fixed_path(spec: PathSpec):
     """The path every run of a non-random kind shares (``None`` for ``circle``: its radius is drawn per run)."""
     e = paths.entry(spec.kind)
-    if not e.parametric:
+    if not e.parametric and e.build is not None:
         return e.build()
     if spec.kind == "spline":  # the same user-defined path for every run
         return shapes.spline_through(np.asarray(spec.points, float))

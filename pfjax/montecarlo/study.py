@@ -73,7 +73,7 @@ class SideJobs:
         from pfjax.montecarlo.worst_case import worst_case
 
         self.seconds = {"worst_case": 0.0, "float64_check": 0.0}
-        self._queued = []  # tasks the main thread may take over, in submission order
+        self._queued: list = []  # tasks the main thread may take over, in submission order
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="pfjax-study") if overlap else None
 
         device = jax.local_devices()[-1]
@@ -160,7 +160,8 @@ class _WorstFigure:
         self._worker, self._spec, self._names = worker, spec, names
         self._lock = threading.Lock()
         self._found: dict = {}
-        self._out = self._request = None
+        self._out: tuple[Path, Path] | None = None
+        self._request = None
 
     def found(self, name: str, value):
         """Record one controller's ``(summary block, trajectory)``; returns ``value``."""

@@ -138,7 +138,7 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         # a controller that fails at the smallest amplitude has no margin: say so, not a bare 0
         fails = joint is not None and joint["fails_at_smallest"]
         block["slip_margin_deg"] = None if joint is None or fails else joint["margin"]
-        block["slip_margin_fails_at_deg"] = joint["table"][0]["amplitude"] if fails else None
+        block["slip_margin_fails_at_deg"] = joint["table"][0]["amplitude"] if fails and joint is not None else None
         block["slip_margin_censored"] = None if joint is None else joint["censored"]
         drivers = failure_drivers(df, params, metric="iae") if params else pd.DataFrame()
         block["failure_drivers"] = drivers.head(6).replace({np.nan: None}).to_dict("records")

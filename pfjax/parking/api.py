@@ -50,7 +50,8 @@ def _start(x0, spec: str, default_start: dict) -> tuple[float, float, float]:
         start = default_start.get(spec)
         if start is None:
             raise InputError(f"x0: required (no default start for map {spec!r})", "x0")
-        return tuple(float(v) for v in start)
+        x, y, theta = (float(v) for v in start)
+        return x, y, theta
     try:
         values = None if isinstance(x0, (str, bytes)) else list(x0)
     except TypeError:

@@ -44,7 +44,7 @@ def calibrate_front(switch_xy=SOURCE_SWITCH, width=0.370, kerb_y=-0.2, car_x=0.5
         "car_ahead": (car_x - x - w * math.sin(th)) / math.cos(th),
     }
     valid = {k: v for k, v in reach.items() if v > 0}
-    which = min(valid, key=valid.get)
+    which = min(valid, key=lambda k: valid[k])
     return {
         "a_f": valid[which],
         "obstacle": which,

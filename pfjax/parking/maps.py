@@ -197,10 +197,10 @@ def validate_polygon(key: str, vertices) -> list[tuple[float, float]]:
             and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)
         ):
             raise MapError(f"{key}[{j}]: expected [x, y] numbers, got {v!r:.80}")
-        xy = [_coordinate(c) for c in v]
-        if None in xy:
+        x, y = (_coordinate(c) for c in v)
+        if x is None or y is None:
             raise MapError(f"{key}[{j}]: expected finite numbers within ±{MAX_COORD:g} m, got {v!r:.80}")
-        pts.append((xy[0], xy[1]))
+        pts.append((x, y))
     if len(pts) < 2 or pts[0] != pts[-1]:
         raise MapError(f"{key}: polygon not closed (the last vertex must repeat the first, {list(pts[0])})")
     pts = pts[:-1]

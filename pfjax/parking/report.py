@@ -54,7 +54,7 @@ def _b_verdict(a: dict, b_outcome: str) -> str:
         z: sum(c["zone"] == z for c in a["all_four_reproduced"]) / max(1, sum(v["B"].values()))
         for z, v in a["by_zone"].items()
     }
-    best = max(per_zone, key=per_zone.get) if per_zone else None
+    best = max(per_zone, key=lambda z: per_zone[z]) if per_zone else None
     share = (
         f"; the most in one detection zone: {100 * per_zone[best]:.0f} % of the {best} zone's combinations" if k else ""
     )

@@ -74,10 +74,14 @@ def register(
         raise ValueError(f"name: a path kind is a lower-case identifier, got {name!r}")
     if build is not None and start_pose is None:
         raise ValueError(f"start_pose: a fixed path ({name!r}) needs a single-run start pose (x, y, theta)")
+    pose = None
+    if start_pose is not None:
+        x, y, theta = (float(v) for v in start_pose)
+        pose = (x, y, theta)
     e = PathEntry(
         name,
         build,
-        None if start_pose is None else tuple(float(v) for v in start_pose),
+        pose,
         float(start_u),
         None if max_curvature is None else float(max_curvature),
         source,

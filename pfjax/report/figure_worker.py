@@ -38,6 +38,7 @@ import tempfile
 import threading
 import warnings
 from pathlib import Path
+from typing import IO
 
 #: Environment variable: ``0`` draws every figure in the study's process.
 ENV = "PFJAX_FIGURE_WORKER"
@@ -67,12 +68,20 @@ def enabled(environ=None) -> bool:
     return (os.environ if environ is None else environ).get(ENV, "1").strip() != "0"
 
 
+def _pipe(stream: IO[str] | None) -> IO[str]:
+    """A pipe of the child (opened with ``subprocess.PIPE``, so never None)."""
+    if stream is None:
+        raise RuntimeError("figure worker: pipe not open")
+    return stream
+
+
 class FigureRequest:
     """Figures asked of a :class:`FigureWorker`; :meth:`result` waits for them."""
 
     def __init__(self, worker: FigureWorker, args: tuple, sent: bool):
-        self._worker, self._args, self._sent, self._value = worker, args, sent, None
-        self._answer = None  # the child's JSON answer, once read
+        self._worker, self._args, self._sent = worker, args, sent
+        self._value: dict[str, dict] | None = None
+        self._answer: dict | None = None  # the child's JSON answer, once read
 
     def result(self) -> dict[str, dict]:
         """``{name: {"name", "caption", "b64"}}`` as :func:`~pfjax.report.figure_set.report_figures`."""
@@ -97,6 +106,7 @@ class FigureWorker:
         self._warned = False
         env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
         self._stderr = open(self._tmp / "stderr.txt", "w+")  # noqa: SIM115  (held for the child's life, closed in close())
+        self._proc: subprocess.Popen[str] | None
         try:
             self._proc = subprocess.Popen(
                 [python, "-m", "pfjax.report.figure_worker"],
@@ -125,8 +135,9 @@ class FigureWorker:
                 req = self._tmp / f"request-{self._count}.pkl"
                 req.write_bytes(pickle.dumps(args))
                 try:
-                    self._proc.stdin.write(f"{req}\n")
-                    self._proc.stdin.flush()
+                    stdin = _pipe(self._proc.stdin)
+                    stdin.write(f"{req}\n")
+                    stdin.flush()
                     sent = True
                 except OSError:  # the pipe broke: the child has exited
                     self._died()
@@ -143,13 +154,14 @@ class FigureWorker:
                 head = self._pending.pop(0)
                 if self._proc is None:
                     return None
-                line = self._proc.stdout.readline()
+                line = _pipe(self._proc.stdout).readline()
                 if not line:
                     self._died()
                     return None
-                head._answer = json.loads(line)
-                if not head._answer.get("ok"):
-                    self._warn(f"failed: {head._answer.get('error')}")
+                answer_of_head: dict = json.loads(line)
+                head._answer = answer_of_head
+                if not answer_of_head.get("ok"):
+                    self._warn(f"failed: {answer_of_head.get('error')}")
         answer = request._answer
         if answer is None or not answer.get("ok"):
             return None
@@ -159,12 +171,14 @@ class FigureWorker:
 
     def _died(self) -> None:
         """The child has exited: warn with its exit code and last line of stderr; forget its requests."""
+        if self._proc is None:
+            return
         self._stderr.seek(0)
         err = self._stderr.read().strip().splitlines()
         self._warn(f"exited with code {self._proc.wait()}" + (f": {err[-1]}" if err else ""))
         for pipe in (self._proc.stdin, self._proc.stdout):
             try:
-                pipe.close()
+                _pipe(pipe).close()
             except OSError:
                 pass
         self._proc = None
@@ -182,7 +196,7 @@ class FigureWorker:
         with self._lock:
             if self._proc is not None:
                 try:
-                    self._proc.stdin.close()
+                    _pipe(self._proc.stdin).close()
                 except OSError:
                     pass
                 try:
@@ -190,7 +204,7 @@ class FigureWorker:
                 except subprocess.TimeoutExpired:
                     self._proc.kill()
                     self._proc.wait()
-                self._proc.stdout.close()
+                _pipe(self._proc.stdout).close()
                 self._proc = None
             self._stderr.close()
             for f in self._tmp.glob("*"):

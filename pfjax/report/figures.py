@@ -6,7 +6,9 @@ backend is left to the caller (scripts select Agg; notebooks keep their inline b
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 import matplotlib.pyplot as plt
@@ -48,7 +50,7 @@ def tracking_figure(title: str, path_xy: np.ndarray, trajs: dict, delta_max: flo
     a.set(xlabel="x [m]", ylabel="y [m]", title="path and robot (rear axle)")
     a.set_aspect("equal", adjustable="datalim")
     a.legend(fontsize=7, loc="best")
-    panels = [
+    panels: list[tuple[Any, str, Callable[[np.ndarray], np.ndarray], str]] = [
         (ax[0, 1], "delta", np.degrees, "steering δ [deg]"),
         (ax[1, 0], "d", lambda v: 100 * v, "lateral error d [cm]"),
         (ax[1, 1], "theta_e", np.degrees, "heading error θₑ [deg]"),
@@ -142,7 +144,7 @@ def sine_error_figure(x: np.ndarray, d: np.ndarray, xk: np.ndarray, kappa: np.nd
     ax2.plot(xk, np.abs(kappa), color="#1f77b4", ls="--", label="|κ| [1/m]")
     ax2.plot(xk, np.abs(dkappa), color="#ff7f0e", ls=":", label="|dκ/ds| [1/m²]")
     lines = ax.get_lines() + ax2.get_lines()
-    ax.legend(lines, [l.get_label() for l in lines], fontsize=8, loc="upper right")
+    ax.legend(lines, [str(l.get_label()) for l in lines], fontsize=8, loc="upper right")
     ax.set_title("Sine path after the transient: error against curvature and its rate of change")
     fig.tight_layout()
     return fig

@@ -454,7 +454,8 @@ def slip_map_figure(
             title=f"{name}: {100 * s.mean():.1f} % overall" if s.size else name,
         )
     ax[0].set_ylabel(f"β_f{note} [deg]")
-    fig.colorbar(mesh, ax=list(ax), label="success rate (from simulation)", shrink=0.9)
+    if mesh is not None:
+        fig.colorbar(mesh, ax=list(ax), label="success rate (from simulation)", shrink=0.9)
     fig.suptitle(
         f"Robustness map from simulation: success rate over sampled slip ({nb}×{nb} bins, "
         f"~{n_per / nb**2:.0f} runs per bin, all paths pooled)"

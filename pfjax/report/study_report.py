@@ -231,7 +231,8 @@ def _verdict(summary: dict, runs: pd.DataFrame) -> tuple[str, list[str], list[li
     ranked = sorted(ctrl, key=lambda n: tuple(math.inf if _bad(v) else v for v in key(n)))
     best = ranked[0]
     cb = ctrl[best]
-    lines, rows = [], []
+    lines: list[str] = []
+    rows: list[list[dict]] = []
     if len(ranked) == 1:
         return (
             best,

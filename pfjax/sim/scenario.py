@@ -92,5 +92,6 @@ def paper_scenario(
     errors.numbers("beta_r_deg", beta_r_deg, below=90, unit=" deg")
     errors.numbers("beta_f_deg", beta_f_deg, below=90, unit=" deg")
     e = paths.entry(test)
+    assert e.build is not None  # a fixed path (checked above)
     slip = constant_slip(math.radians(beta_r_deg), math.radians(beta_f_deg))
     return make_scenario(e.build(), e.start_pose if pose0 is None else pose0, gains, slip=slip, **kwargs)

@@ -306,7 +306,7 @@ def _sampled_command(controller: Controller, config: SimConfig, sc: Scenario, c,
     """Sampled controller: ``(cmd, c_next, delta)`` at sample ``k``: a new command every
     ``control_every`` steps, held in between (zero-order hold) and at sample ``N``; saturated at
     ``+-delta_max`` and rate limited, ``|delta_k - delta_{k-1}| <= delta_rate_max dt``."""
-    dt, every = config.dt, int(config.control_every)
+    dt, every = config.dt, int(config.control_every or 1)
     if every == 1:  # every step: no conditional (it would split XLA's fused loop body)
         new_cmd, c_next = step(controller, sc.gains, c, obs, dt)
     else:
@@ -459,6 +459,3 @@ def simulate_batch(
         )
     placed, n, layout = sharding.plan_batch(scenarios, devices, block)
     return sharding.unpad(_simulate_vmapped(placed, controller=controller, config=config, layout=layout), n)
-
-
-simulate_batch._cache_size = _simulate_vmapped._cache_size  # the jitted core's compilation count

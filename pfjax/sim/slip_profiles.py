@@ -117,8 +117,10 @@ def slip_at(profile: SlipProfile, t: Array) -> tuple[Array, Array]:
     if profile.step_size is not None:
         beta = beta + profile.step_size * (t * _boundary_scale(t) >= profile.step_time)
     if profile.sin_amp is not None:
+        assert profile.sin_freq is not None and profile.sin_phase is not None  # set with sin_amp (sinusoid)
         beta = beta + profile.sin_amp * E.sin(2.0 * jnp.pi * profile.sin_freq * t + profile.sin_phase)
     if profile.seq is not None:
+        assert profile.seq_dt is not None  # set with seq (sequence)
         n = profile.seq.shape[0]
         if n == 1:  # a single value: no gather (a gather splits XLA's fused loop body)
             beta = beta + profile.seq[0]

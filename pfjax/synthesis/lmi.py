@@ -160,6 +160,13 @@ def _solve_or_raise(prob: cp.Problem, what: str) -> str:
     return status
 
 
+def solved(v) -> np.ndarray:
+    """The value of a cvxpy variable or expression after a successful solve, as an array."""
+    if v is None or v.value is None:
+        raise RuntimeError("solved: no value (the problem was not solved)")
+    return np.asarray(v.value, dtype=float)
+
+
 def gain_from(X, Y, what: str) -> tuple[np.ndarray, float]:
     """``K = Y X^-1`` and ``cond(X)``; raises ``SynthesisError("ill_conditioned")`` beyond ``_COND_MAX``."""
     Xv = 0.5 * (X + X.T)
@@ -255,8 +262,8 @@ def _solve(
 
     K, cond = gain_from(X.value, Y.value, f"{method} synthesis")  # K = Y X^-1
     Acl, Bw, Cinf_cl, C2_cl = closed_loop(plant, K)
-    gamma_inf = float(np.sqrt(max(float(g_sq.value), 0.0))) if use_hinf else None
-    gamma_2 = float(np.sqrt(max(float(np.trace(W.value)), 0.0))) if use_h2 else None
+    gamma_inf = float(np.sqrt(max(float(solved(g_sq)), 0.0))) if use_hinf else None
+    gamma_2 = float(np.sqrt(max(float(np.trace(solved(W))), 0.0))) if use_h2 else None
     hn, h2n = hinf_norm(Acl, Bw, Cinf_cl), h2_norm(Acl, Bw, C2_cl)
     return Design(
         method=method,
@@ -420,7 +427,7 @@ def mixed_bounds_for_gain(
     cons += _hinf_lmi(plant, X, Y, g_sq, eps) + _h2_lmis(plant, X, Y, W, eps)
     objective = cp.Minimize(float(alpha) * g_sq + float(beta) * cp.trace(W))
     _solve_or_raise(cp.Problem(objective, cons), "mixed bounds for gain")
-    return float(np.sqrt(max(float(g_sq.value), 0.0))), float(np.sqrt(max(float(np.trace(W.value)), 0.0)))
+    return float(np.sqrt(max(float(solved(g_sq)), 0.0))), float(np.sqrt(max(float(np.trace(solved(W))), 0.0)))
 
 
 _METHODS = ("hinf", "h2", "mixed")

@@ -85,7 +85,7 @@ def region_constraints(region: PoleRegion, AclX, X, eps: float) -> list:
         out.append(0.5 * (F + F.T) << -eps * np.eye(n))
     if region.disk_radius is not None:
         r = float(region.disk_radius)
-        c = float(region.disk_center)
+        c = float(region.disk_center or 0.0)
         F = cp.bmat([[-r * X, M - c * X], [(M - c * X).T, -r * X]])
         out.append(0.5 * (F + F.T) << -eps * np.eye(2 * n))
     if region.sector_angle is not None:

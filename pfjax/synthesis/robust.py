@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from pfjax.synthesis.lmi import _hinf_lmi, _solve_or_raise, _sym, bound_warnings, gain_from
+from pfjax.synthesis.lmi import _hinf_lmi, _solve_or_raise, _sym, bound_warnings, gain_from, solved
 from pfjax.synthesis.norms import closed_loop, h2_norm, hinf_norm
 from pfjax.synthesis.plant import Plant, slip_design_plant
 from pfjax.synthesis.regions import PoleRegion, region_constraints
@@ -191,7 +191,7 @@ def robust_mixed(
     prob = cp.Problem(cp.Minimize(float(alpha) * g_sq + float(beta) * cp.trace(W)), cons)
     status = _solve_or_raise(prob, f"{method} synthesis")
     K, cond = gain_from(X.value, Y.value, f"{method} synthesis")
-    gi, g2 = float(np.sqrt(max(g_sq.value, 0.0))), float(np.sqrt(max(np.trace(W.value), 0.0)))
+    gi, g2 = float(np.sqrt(max(float(solved(g_sq)), 0.0))), float(np.sqrt(max(float(np.trace(solved(W))), 0.0)))
     hn, h2n, poles = [], [], []
     for p in plants:
         Acl, Bw, Ci, C2 = closed_loop(p, K)
@@ -200,7 +200,7 @@ def robust_mixed(
         poles.append(np.linalg.eigvals(Acl))
     steer = None
     if delta_max is not None:  # max over the ellipsoid of |K x| = sqrt(K X K')
-        Xv = 0.5 * (X.value + X.value.T)
+        Xv = 0.5 * (solved(X) + solved(X).T)
         steer = float(np.sqrt(np.squeeze(K @ Xv @ K.T)))
     warns = bound_warnings(gi, g2, max(hn), max(h2n), cond)
     return RobustDesign(method, K, gi, g2, float(max(hn)), float(max(h2n)), np.asarray(poles), steer, status, warns)

@@ -150,7 +150,7 @@ def result_columns(r) -> dict:
 def run_chunks(scs: TrackScenario, cfg: TrackConfig, chunk: int, desc: str = "tracking runs") -> dict:
     """:func:`simulate_batch` over ``chunk``-sized slices (the last one padded: one compilation), as NumPy columns."""
     scs = jax.tree_util.tree_map(np.asarray, scs)  # slice on the host, not op by op on the device
-    n = int(scs.params.p.shape[0])
+    n = int(np.shape(scs.params.p)[0])
     outs = []
     for i in tqdm(range(0, n, chunk), desc=desc, leave=False, disable=None):
         part = jax.tree_util.tree_map(lambda x: x[i : i + chunk], scs)

@@ -21,12 +21,13 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
+from pfjax.arrays import FloatLeaf
 from pfjax.tracking.geometry import input_matrix, invertibility_factor, tracking_error
 from pfjax.tracking.model import Follower, FollowerParams
 
 
 class FocusGains(NamedTuple):
-    k: Array | float = 1.0  # 1/s, error decay rate (Lambda = k I)
+    k: FloatLeaf = 1.0  # 1/s, error decay rate (Lambda = k I)
 
 
 class Command(NamedTuple):
@@ -55,6 +56,6 @@ def focus_control(
     return Command(v=v, omega=w, v_cmd=v_cmd, omega_cmd=w_cmd, factor=factor, singular=singular)
 
 
-def steering_stop(omega: Array, gamma: Array, gamma_max: Array, dt: float) -> Array:
+def steering_stop(omega: Array, gamma: Array, gamma_max: FloatLeaf, dt: float) -> Array:
     """Steering rate that keeps ``|gamma + omega dt| <= gamma_max`` over one held step, rad/s."""
     return jnp.clip(omega, (-gamma_max - gamma) / dt, (gamma_max - gamma) / dt)

@@ -114,7 +114,7 @@ def input_matrix(theta: Array, gamma: Array, params: FollowerParams) -> Array:
 def input_det(gamma: Array, params: FollowerParams) -> Array:
     """Closed form ``det M = l p (cos(p gamma) + c_f tan(gamma) sin(p gamma))`` (independent of ``theta``)."""
     pg = params.p * gamma
-    return params.l * params.p * (E.cos(pg) + _cf(params) * E.tan(gamma) * E.sin(pg))
+    return jnp.asarray(params.l) * params.p * (E.cos(pg) + _cf(params) * E.tan(gamma) * E.sin(pg))
 
 
 def invertibility_factor(gamma: Array, params: FollowerParams) -> Array:

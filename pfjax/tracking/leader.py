@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.arrays import Leaf
 from pfjax.numerics import elementary as E
 
 GRAPH, CIRCLE, LANE_CHANGE = 0, 1, 2
@@ -37,20 +38,20 @@ KINDS = ("line", "circle", "sine", "lane-change", "random")
 
 
 class Leader(NamedTuple):
-    kind: Array  # int: GRAPH, CIRCLE, LANE_CHANGE
-    x0: Array  # m, start point
-    y0: Array  # m
-    heading: Array  # rad, rotation of the curve (initial direction of travel for line / circle)
-    speed: Array  # m/s, V0 (rate of u)
-    depth: Array  # -, stop-and-go depth in [0, 1]
-    period: Array  # s, stop-and-go period T
-    amps: Array  # (N_TERMS,) m, graph amplitudes
-    omegas: Array  # (N_TERMS,) rad/m, graph wavenumbers
-    phases: Array  # (N_TERMS,) rad
-    radius: Array  # m, circle radius (signed, left positive)
-    lane_width: Array  # m, W
-    lane_center: Array  # m, u_c
-    lane_length: Array  # m, L_c
+    kind: Leaf  # int: GRAPH, CIRCLE, LANE_CHANGE
+    x0: Leaf  # m, start point
+    y0: Leaf  # m
+    heading: Leaf  # rad, rotation of the curve (initial direction of travel for line / circle)
+    speed: Leaf  # m/s, V0 (rate of u)
+    depth: Leaf  # -, stop-and-go depth in [0, 1]
+    period: Leaf  # s, stop-and-go period T
+    amps: Leaf  # (N_TERMS,) m, graph amplitudes
+    omegas: Leaf  # (N_TERMS,) rad/m, graph wavenumbers
+    phases: Leaf  # (N_TERMS,) rad
+    radius: Leaf  # m, circle radius (signed, left positive)
+    lane_width: Leaf  # m, W
+    lane_center: Leaf  # m, u_c
+    lane_length: Leaf  # m, L_c
 
 
 def _leader(
@@ -138,7 +139,7 @@ def by_name(name: str, **kw) -> Leader:
 def progress(ld: Leader, t: Array) -> Array:
     """``s(t)`` (see module doc), m."""
     T = ld.period
-    return ld.speed * (t - ld.depth * (0.5 * t - T / (4.0 * jnp.pi) * E.sin(2.0 * jnp.pi * t / T)))
+    return jnp.asarray(ld.speed) * (t - ld.depth * (0.5 * t - T / (4.0 * jnp.pi) * E.sin(2.0 * jnp.pi * t / T)))
 
 
 def _curve(ld: Leader, u: Array) -> tuple[Array, Array]:

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.arrays import FloatLeaf, IntLeaf
 from pfjax.models.slip import SOURCE, Pose, SlipParams, world_rhs
 
 
@@ -47,14 +48,14 @@ class FollowerParams(NamedTuple):
         convention: front-slip sign convention of the slip model (0 source, 1 Lenain).
     """
 
-    a: Array | float = 1.0  # m
-    f: Array | float = 1.0  # +1 forward, -1 backward
-    l: Array | float = 1.0  # m
-    p: Array | float = 1.0  # -
-    gamma_max: Array | float = 0.5235987755982988  # rad (30 deg)
-    v_max: Array | float = 3.0  # m/s
-    omega_max: Array | float = 1.5707963267948966  # rad/s (90 deg/s)
-    convention: Array | int = SOURCE
+    a: FloatLeaf = 1.0  # m
+    f: FloatLeaf = 1.0  # +1 forward, -1 backward
+    l: FloatLeaf = 1.0  # m
+    p: FloatLeaf = 1.0  # -
+    gamma_max: FloatLeaf = 0.5235987755982988  # rad (30 deg)
+    v_max: FloatLeaf = 3.0  # m/s
+    omega_max: FloatLeaf = 1.5707963267948966  # rad/s (90 deg/s)
+    convention: IntLeaf = SOURCE
 
 
 def as_arrays(params: FollowerParams) -> FollowerParams:

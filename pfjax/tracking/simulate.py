@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from pfjax.arrays import FloatLeaf
 from pfjax.numerics import compiler
 from pfjax.numerics import elementary as E
 from pfjax.numerics.layout import all_true, first_true
@@ -79,9 +80,9 @@ class SensorNoise(NamedTuple):
     """White Gaussian noise on the follower's measured pose and steering angle: one draw per integrator
     step ``k`` and quantity from ``(key, k)`` (:func:`pfjax.numerics.random.step_normals`)."""
 
-    sigma_pos: Array | float = 0.0  # m, on x and y
-    sigma_theta: Array | float = 0.0  # rad
-    sigma_gamma: Array | float = 0.0  # rad
+    sigma_pos: FloatLeaf = 0.0  # m, on x and y
+    sigma_theta: FloatLeaf = 0.0  # rad
+    sigma_gamma: FloatLeaf = 0.0  # rad
 
 
 class TrackScenario(NamedTuple):
@@ -343,6 +344,3 @@ def simulate_batch(
     :func:`pfjax.sim.simulate.simulate_batch`). The same results, run for run, for any layout (to an ulp or two)."""
     placed, n, layout = sharding.plan_batch(scenarios, devices, block)
     return sharding.unpad(_simulate_vmapped(placed, config=config, layout=layout), n)
-
-
-simulate_batch._cache_size = _simulate_vmapped._cache_size  # the jitted core's compilation count

@@ -129,7 +129,9 @@ def batch_cost(controller: Controller, tunable: Tunable, scenarios, config: SimC
     return cost
 
 
-def population_cost(controller: Controller, tunable: Tunable, scenarios: Scenario, config: SimConfig, spec: CostSpec):
+def population_cost(
+    controller: Controller, tunable: Tunable, scenarios: Scenario | list[Scenario], config: SimConfig, spec: CostSpec
+):
     """Jitted ``(P, D) -> (P,)`` costs for the GA (``P x n`` rollouts per call)."""
     cost = batch_cost(controller, tunable, scenarios, config, spec)
     f = jax.jit(jax.vmap(cost))

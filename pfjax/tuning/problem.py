@@ -89,7 +89,12 @@ def make_problem(
     errors.integer("n_runs", n_runs, low=1, high=1_000_000)
     errors.integer("run_offset", run_offset, low=0, high=errors.MAX_SEED - n_runs)
     ctrl, factory = C.REGISTRY[controller][:2]
-    fields, lo, hi = box or C.REGISTRY[controller].box
+    box = box or C.REGISTRY[controller].box
+    if box is None:
+        raise errors.InputError(
+            f"controller: {controller!r} has no tuning box; give box=(fields, lower, upper)", "controller"
+        )
+    fields, lo, hi = box
     base = factory() if base_gains is None else base_gains
     tun = Tunable(base, tuple(fields))
     if scenario in sets:
