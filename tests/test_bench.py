@@ -52,7 +52,20 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     for k in KEYS:
         assert math.isfinite(s[k]) and s[k] > 0, k
     assert s["all_agree"], s["agreement"]
-    assert set(s["agreement"]) == {"numba_float32", "numba_float64", "numpy_float32", "numpy_float64", "scipy_float64"}
+    assert set(s["agreement"]) == {
+        "jax_minimal_float32",
+        "jax_minimal_float64",
+        "numba_float32",
+        "numba_float64",
+        "numpy_float32",
+        "numpy_float64",
+        "scipy_float64",
+    }
+    # pfjax's throughput as a fraction of the minimal JAX implementation's, recomputed from the rates
+    for p in ("f32", "f64"):
+        assert s[f"fraction_of_minimal_{p}"] == pytest.approx(
+            s[f"msteps_per_s_{p}"] / s[f"minimal_msteps_per_s_{p}"], rel=1e-12
+        )
     assert s["gradient"]["grad_finite"] and s["failed_runs"] == 0
     # forward mode (2 gains) and reverse mode: one derivative, float32 rounding apart
     assert s["grad_mode"] == "forward" and s["gradient"]["modes_max_rel_diff"] < 1e-3
@@ -62,7 +75,7 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     assert full["summary"] == {k: v for k, v in s.items() if k not in ("out", "machine")}
     assert full["config"]["sizes"] == [64, 128] and full["config_sha256"] and full["machine"]["cpus"] >= 1
     rows = pd.read_parquet(out / "bench.parquet")
-    assert set(rows.impl) == {"pfjax", "numba", "numpy", "scipy"}
+    assert set(rows.impl) == {"pfjax", "jax_minimal", "numba", "numpy", "scipy"}
     assert sorted(rows[(rows.impl == "pfjax") & (rows.dtype == "float32")].batch) == [64, 128]
     # rollout-steps / s recomputed from the rows' seconds
     n_steps = full["n_steps"]
@@ -120,11 +133,40 @@ def test_quick_bench_without_numba_skips_its_reference_with_a_note(tmp_path):
     s = json.loads(r.stdout)
     assert s["notes"] == [NUMBA_MISSING]
     # the other references still run and agree; Numba's rates and ratios are null (strict JSON)
-    assert set(s["agreement"]) == {"numpy_float32", "numpy_float64", "scipy_float64"} and s["all_agree"]
+    assert (
+        set(s["agreement"])
+        == {
+            "jax_minimal_float32",
+            "jax_minimal_float64",
+            "numpy_float32",
+            "numpy_float64",
+            "scipy_float64",
+        }
+        and s["all_agree"]
+    )
     for k in ("numba_msteps_per_s_f32", "numba_msteps_per_s_f64", "ratio_vs_numba_f32", "ratio_vs_numba_f64"):
         assert s[k] is None, k
     assert math.isfinite(s["msteps_per_s_f32"]) and math.isfinite(s["ratio_vs_numpy_f64"])
-    assert set(pd.read_parquet(out / "bench.parquet").impl) == {"pfjax", "numpy", "scipy"}
+    assert set(pd.read_parquet(out / "bench.parquet").impl) == {"pfjax", "jax_minimal", "numpy", "scipy"}
     assert json.loads((out / "bench.json").read_text())["summary"]["notes"] == [NUMBA_MISSING]
     assert f"Note: {NUMBA_MISSING}" in (out / "report.md").read_text()
     assert (out / "figures" / "throughput.png").is_file()
+
+
+@pytest.mark.parametrize("dtype, x64, tol", [(np.float32, False, 1e-5), (np.float64, True, 1e-12)])
+def test_minimal_jax_reference_agrees_with_numpy(dtype, x64, tol):
+    """The minimal JAX implementation (the benchmark's limit) solves the same runs as the NumPy
+    reference: per-run IAE over 1 s of 24 runs, float64 to rounding (measured ~4e-16 m s), float32
+    to 1e-5 m s (rounding over 200 steps, measured ~1e-7)."""
+    import jax
+
+    from pfjax.bench import minimal as M
+    from pfjax.bench import problem as P
+    from pfjax.bench import references as R
+
+    batch = P.random_batch(24, 3)
+    n = P.n_steps(1.0)
+    with jax.enable_x64(x64):
+        got, want = M.iae(batch, dtype, n), R.iae_numpy(batch, dtype, n)
+    assert got.shape == (24,) and np.all(want > 0)
+    np.testing.assert_allclose(got, want, rtol=0, atol=tol)

@@ -16,6 +16,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pfjax.arrays import Leaf
+
 K = (-2.7381, -2.0772)  # the source's published gain (pfjax.controllers.PAPER_K)
 V, L, DELTA_MAX = 1.0, 0.2, math.radians(30.0)
 U_MIN, U_MAX = -10.0, 60.0
@@ -23,14 +25,15 @@ DT, HORIZON, NEWTON_ITERS = 0.005, 20.0, 3
 
 
 class Batch(NamedTuple):
-    """Initial poses and slips of ``B`` runs (NumPy, float64), shape ``(B,)`` each."""
+    """Initial poses and slips of ``B`` runs, shape ``(B,)`` each (NumPy float64 as drawn; JAX arrays
+    in :mod:`pfjax.bench.minimal`)."""
 
-    x0: np.ndarray  # m
-    y0: np.ndarray  # m
-    theta0: np.ndarray  # rad
-    u0: np.ndarray  # path parameter (x) of the nominal start
-    beta_r: np.ndarray  # rad
-    beta_f: np.ndarray  # rad
+    x0: Leaf  # m
+    y0: Leaf  # m
+    theta0: Leaf  # rad
+    u0: Leaf  # path parameter (x) of the nominal start
+    beta_r: Leaf  # rad
+    beta_f: Leaf  # rad
 
 
 def n_steps(horizon: float = HORIZON, dt: float = DT) -> int:

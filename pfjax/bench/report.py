@@ -23,6 +23,8 @@ _STYLE = {
     ("numpy", "float32"): ("C2", "-", "D"),
     ("numpy", "float64"): ("C2", "--", "d"),
     ("scipy", "float64"): ("C3", "--", "x"),
+    ("jax_minimal", "float32"): ("C4", "-", "*"),
+    ("jax_minimal", "float64"): ("C4", "--", "P"),
 }
 
 
@@ -46,7 +48,7 @@ def throughput_figure(rows, machine: dict):
                 textcoords="offset points",
                 fontsize=7,
                 color=color,
-                xytext=(8 if impl == "numpy" else -30, 3 if dtype == "float32" else -9),
+                xytext=(8 if impl in ("numpy", "jax_minimal") else -30, 3 if dtype == "float32" else -9),
             )
         else:
             ax.plot(b, m, ls=ls, marker=marker, color=color, label=f"{impl} {dtype}")
@@ -73,10 +75,17 @@ def markdown(result: dict) -> str:
     lines = [
         "# pfjax benchmark",
         "",
-        f"Machine: {m['processor']}, {m.get('cpu_model') or 'CPU model unknown'}"
+        f"Machine: {m['processor']}, {m.get('cpu_vendor') or 'vendor unknown'} {m.get('cpu_model') or 'CPU model unknown'}"
         f"{' (family ' + m['cpu_family'] + ', model ' + m['cpu_model_number'] + ')' if m.get('cpu_family') else ''}, {m['cpus']} CPUs, JAX {m['jax']} with {len(m['devices'])} device(s); "
         f"1-min load average {m['load_average_1m_start']:.1f} at the start, {m['load_average_1m']:.1f} at the end. "
-        f"AVX-512: {'yes' if m.get('avx512') else 'no'}; simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}.",
+        f"AVX-512: {'yes' if m.get('avx512') else 'no'} (flags: {', '.join(m.get('cpu_flags') or []) or 'unknown'}); "
+        f"simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}.",
+        "",
+        f"pfjax at B = {s['batch']} runs at {100 * s['fraction_of_minimal_f32']:.0f} % (float32) and "
+        f"{100 * s['fraction_of_minimal_f64']:.0f} % (float64) of the throughput of a minimal JAX implementation "
+        "of the same problem (`jax_minimal`: IAE only, the same elementary functions, devices, blocks and compiler "
+        "options, no metrics, statuses or general interfaces), measured in the same process; "
+        f"{s['ratio_vs_numba_f32']:.3g}x / {s['ratio_vs_numba_f64']:.3g}x Numba.",
         "",
         table(
             ["implementation", "dtype", "batch", "M rollout-steps/s", "compile s"],

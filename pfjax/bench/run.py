@@ -185,10 +185,13 @@ def machine() -> dict:
     from pfjax.numerics import compiler
 
     cpu = compiler.cpu_info()
+    flags = set(cpu.get("flags", "").split())
     return dict(
         cpu_model=cpu.get("model name", ""),
+        cpu_vendor=cpu.get("vendor_id", ""),
         cpu_family=cpu.get("cpu family", ""),
         cpu_model_number=cpu.get("model", ""),
+        cpu_flags=sorted(flags & {"avx", "avx2", "fma", "avx512f", "avx512dq", "avx512vl", "avx512bw", "sse4_2"}),
         platform=platform.platform(),
         processor=platform.processor() or platform.machine(),
         cpus=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
@@ -205,6 +208,7 @@ def run(cfg: BenchConfig, progress=None) -> dict:
     """Run the benchmark; returns the result dict (``bench.json``'s content)."""
     import jax
 
+    from pfjax.bench import minimal as M
     from pfjax.bench import references as R
 
     say = progress or (lambda msg: None)
@@ -213,7 +217,7 @@ def run(cfg: BenchConfig, progress=None) -> dict:
     if not have_numba:
         say(f"{R.NUMBA_MISSING} (the Numba reference is skipped)")
     n_steps = P.n_steps(cfg.horizon)
-    rows, iae = [], {}
+    rows, iae, agree = [], {}, {}
     load0 = os.getloadavg()[0]
     top = max(cfg.sizes)
     for name, dtype, x64 in (("float32", np.float32, False), ("float64", np.float64, True)):
@@ -234,10 +238,24 @@ def run(cfg: BenchConfig, progress=None) -> dict:
                 )
                 if b == top:
                     iae[("pfjax", name)] = np.asarray(res.metrics.iae, np.float64)
+            say(f"minimal JAX {name} B={top}")
+            runs = M.runs(P.random_batch(top, cfg.seed), dtype)
+            out, first, best = _timed(lambda: jax.block_until_ready(M.simulate(runs, n_steps)), cfg.repeats)
+            rows.append(
+                dict(
+                    impl="jax_minimal",
+                    dtype=name,
+                    batch=top,
+                    seconds=best,
+                    compile_s=first - best,
+                    msteps_per_s=top * n_steps / best / 1e6,
+                    failed_runs=None,
+                )
+            )
+            agree[f"jax_minimal_{name}"] = float(np.max(np.abs(np.asarray(out, np.float64) - iae[("pfjax", name)])))
     batch = P.random_batch(top, cfg.seed)
     nr = min(cfg.ref_size, top)
     sub = lambda k: P.Batch(*(a[:k] for a in batch))
-    agree = {}
     for name, dtype in (("float32", np.float32), ("float64", np.float64)):
         ref = iae[("pfjax", name)]
         if have_numba:
@@ -290,7 +308,7 @@ def run(cfg: BenchConfig, progress=None) -> dict:
     with jax.enable_x64(False):
         g = _grad(P.random_batch(cfg.grad_size, cfg.seed), np.float32, cfg)
     agreement = {
-        k: dict(max_abs_diff=v, tolerance=TOLERANCE["scipy" if k.startswith("scipy") else k.split("_")[1]])
+        k: dict(max_abs_diff=v, tolerance=TOLERANCE["scipy" if k.startswith("scipy") else k.rsplit("_", 1)[1]])
         for k, v in agree.items()
     }
     for a in agreement.values():
@@ -315,6 +333,10 @@ def run(cfg: BenchConfig, progress=None) -> dict:
         ratio_vs_numpy_f32=head32 / rate("numpy", "float32"),
         ratio_vs_numpy_f64=head64 / rate("numpy", "float64"),
         ratio_vs_scipy_f64=head64 / rate("scipy", "float64"),
+        minimal_msteps_per_s_f32=rate("jax_minimal", "float32"),
+        minimal_msteps_per_s_f64=rate("jax_minimal", "float64"),
+        fraction_of_minimal_f32=head32 / rate("jax_minimal", "float32"),
+        fraction_of_minimal_f64=head64 / rate("jax_minimal", "float64"),
         compile_s_f32=next(
             r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float32" and r["batch"] == top
         ),

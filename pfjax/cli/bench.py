@@ -11,11 +11,13 @@ from pfjax.cli.common import UsageError, as_flags
 def register(sub) -> None:
     p = sub.add_parser(
         "bench",
-        help="benchmark the simulator against NumPy, Numba and SciPy references",
+        help="benchmark the simulator against a minimal JAX implementation and NumPy, Numba and SciPy references",
         description="Simulate one random batch of the slip model (sine path, 3 Newton steps, RK4 5 ms, 20 s, "
-        "metrics on) with pfjax in float32 and float64 at several batch sizes and with independent "
-        "NumPy, Numba (prange) and SciPy solve_ivp references; check they agree on the per-run IAE; "
-        "report million rollout-steps/s, compile time, ratios, gradient cost and peak memory. "
+        "metrics on) with pfjax in float32 and float64 at several batch sizes, with a minimal JAX implementation "
+        "of the same problem written for speed (the limit: IAE only, the same elementary functions, devices and "
+        "blocks), and with independent NumPy, Numba (prange) and SciPy solve_ivp references; check they agree on "
+        "the per-run IAE; report million rollout-steps/s, compile time, pfjax's fraction of the minimal "
+        "implementation's throughput, ratios, gradient cost, peak memory and the CPU (vendor, family, model, flags). "
         "Writes bench.json, bench.parquet, report.md and figures/throughput.png|svg.",
     )
     p.add_argument("--quick", action="store_true", help="small batches and a 2 s horizon (well under a minute)")

@@ -39,7 +39,7 @@ CPUINFO = "/proc/cpuinfo"
 
 
 def cpu_info(cpuinfo: str = CPUINFO) -> dict:
-    """The first CPU's ``model name``, ``cpu family``, ``model`` and ``flags`` from ``/proc/cpuinfo``
+    """The first CPU's ``vendor_id``, ``model name``, ``cpu family``, ``model`` and ``flags`` from ``/proc/cpuinfo``
     (``{}`` where that file does not exist, e.g. macOS, or cannot be read). The family tells CPU
     generations apart where the model name does not (a VM's "AMD EPYC": 25 is Zen 3/4, 26 Zen 5)."""
     out = {}
@@ -50,7 +50,7 @@ def cpu_info(cpuinfo: str = CPUINFO) -> dict:
                     break  # the first processor's block ends here
                 key, _, value = line.partition(":")
                 key = key.strip()
-                if key in ("model name", "cpu family", "model", "flags"):
+                if key in ("vendor_id", "model name", "cpu family", "model", "flags"):
                     out[key] = value.strip()
     except OSError:
         pass
