@@ -170,3 +170,54 @@ def test_minimal_jax_reference_agrees_with_numpy(dtype, x64, tol):
         got, want = M.iae(batch, dtype, n), R.iae_numpy(batch, dtype, n)
     assert got.shape == (24,) and np.all(want > 0)
     np.testing.assert_allclose(got, want, rtol=0, atol=tol)
+
+
+# ----------------------------------------------------------- studies/bench/compare.py (two revisions)
+
+
+def _compare_module():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_compare", ROOT / "studies" / "bench" / "compare.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_compare_ratios_median_and_spread():
+    cmp = _compare_module()
+    rounds = [
+        {"base": {"msteps_per_s_f32": 100.0, "msteps_per_s_f64": 40.0, "grad_over_forward": 2.0},
+         "new": {"msteps_per_s_f32": 110.0, "msteps_per_s_f64": 40.0, "grad_over_forward": 1.0}},
+        {"base": {"msteps_per_s_f32": 100.0, "msteps_per_s_f64": 50.0, "grad_over_forward": 2.0},
+         "new": {"msteps_per_s_f32": 90.0, "msteps_per_s_f64": 60.0, "grad_over_forward": 3.0}},
+        {"base": {"msteps_per_s_f32": 50.0, "msteps_per_s_f64": 50.0, "grad_over_forward": 2.0},
+         "new": {"msteps_per_s_f32": 60.0, "msteps_per_s_f64": 50.0, "grad_over_forward": 2.0}},
+    ]  # fmt: skip
+    c = cmp.compare(rounds)
+    assert c["msteps_per_s_f32"]["ratio_new_over_base"] == pytest.approx([1.1, 0.9, 1.2])
+    assert c["msteps_per_s_f32"]["ratio"] == pytest.approx({"median": 1.1, "min": 0.9, "max": 1.2})
+    assert c["msteps_per_s_f64"]["ratio"] == pytest.approx({"median": 1.0, "min": 1.0, "max": 1.2})
+    assert c["grad_over_forward"]["ratio"] == pytest.approx({"median": 1.0, "min": 0.5, "max": 1.5})
+    assert "| msteps_per_s_f32 | 100 / 100 / 50 | 110 / 90 / 60 | 1.100 | 0.900-1.200 |" in cmp.markdown(
+        {"comparison": c, "base": {"rev": "a", "commit": "0" * 40}, "new": {"rev": ".", "commit": "working tree"},
+         "rounds": 3, "bench_args": ["--quick"], "machine": {"cpu_model": "cpu", "cpus": 2}}
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "args, flag",
+    [(["no-such-revision"], "base"), (["HEAD", "no-such-revision"], "new"), (["--rounds", "0"], "--rounds")],
+)
+def test_compare_bad_input_one_line_exit_2(tmp_path, args, flag):
+    out = tmp_path / "cmp"
+    r = subprocess.run(
+        [sys.executable, str(ROOT / "studies" / "bench" / "compare.py"), *args, "--out", str(out)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.startswith(f"bench-compare: error: {flag}") and r.stderr.count("\n") == 1
+    assert not out.exists()

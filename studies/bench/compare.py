@@ -1,0 +1,184 @@
+"""Compare the benchmark of two revisions: ``python studies/bench/compare.py [BASE] [NEW] [--rounds 5]``.
+
+Each revision (a git commit, branch or tag, or ``.`` for the working tree) is checked out into a
+temporary git worktree and ``pfjax bench --json`` is run in it, the two alternately (``BASE``,
+``NEW``, ``BASE``, ``NEW``, ...) in one sitting, so that a slow period of the machine slows both
+alike. The summary gives, per precision, every round's million rollout-steps per second of both,
+the ratio NEW / BASE of each round, its median and its spread (min-max), and the same for the
+gradient's cost over the forward pass; a change to the simulator states its effect with it.
+
+Writes ``results/bench_compare/`` (``compare.json``: every round's bench summary and the ratios,
+with the machine and both commits; ``report.md``) through the one output writer. Bad input (an
+unknown revision, a bad count) stops with one line and exit code 2 before anything runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pfjax  # noqa: F401  (before JAX: one CPU device per core)
+from pfjax import errors
+from pfjax.bench.run import machine
+from pfjax.errors import InputError, command_main
+from pfjax.jsonio import dumps
+from pfjax.outputs import OutputDir
+from pfjax.provenance import config_hash
+from pfjax.report.markdown import table
+
+ROOT = Path(__file__).resolve().parents[2]
+#: The bench summary's keys compared (higher is better for the rates, lower for the gradient cost).
+RATES = ("msteps_per_s_f32", "msteps_per_s_f64")
+COSTS = ("grad_over_forward",)
+
+
+def _git(*args: str, cwd: Path = ROOT) -> str:
+    return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, check=True).stdout.strip()
+
+
+def _commit(rev: str, key: str) -> str:
+    """The commit ``rev`` names, or ``"."`` (the working tree); InputError naming ``key`` otherwise."""
+    if rev == ".":
+        return "."
+    try:
+        return _git("rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}")
+    except subprocess.CalledProcessError:
+        raise InputError(f"{key}: {rev!r} is not a commit of this repository", key) from None
+
+
+class _Tree:
+    """A checkout of one revision (a temporary worktree; the repository itself for ``"."``)."""
+
+    def __init__(self, commit: str, parent: Path):
+        self.commit = commit
+        if commit == ".":
+            self.path, self._temporary = ROOT, False
+        else:
+            self.path, self._temporary = parent / commit[:12], True
+            _git("worktree", "add", "--detach", "--quiet", str(self.path), commit)
+
+    def bench(self, args: list[str], out: Path) -> dict:
+        """One ``pfjax bench --json`` of this checkout (its own code: ``PYTHONPATH``); its summary."""
+        env = {**os.environ, "PYTHONPATH": str(self.path)}
+        cmd = [sys.executable, "-m", "pfjax.cli", "bench", *args, "--out", str(out), "--json"]
+        r = subprocess.run(cmd, cwd=self.path, env=env, capture_output=True, text=True)
+        if r.returncode != 0:
+            tail = (r.stderr.strip().splitlines() or ["(no output)"])[-1]
+            raise RuntimeError(f"pfjax bench failed in {self.commit[:12]} (exit {r.returncode}): {tail}")
+        return json.loads(r.stdout)
+
+    def remove(self) -> None:
+        if self._temporary:
+            _git("worktree", "remove", "--force", str(self.path))
+
+
+def _spread(values: list[float]) -> dict:
+    return {"median": statistics.median(values), "min": min(values), "max": max(values)}
+
+
+def compare(rounds: list[dict]) -> dict:
+    """Per key: NEW / BASE of every round, their median and spread (``rounds``: ``{"base", "new"}``
+    bench summaries)."""
+    out = {}
+    for key in RATES + COSTS:
+        pairs = [(r["base"].get(key), r["new"].get(key)) for r in rounds]
+        ratios = [n / b for b, n in pairs if b and n]
+        out[key] = {
+            "base": [b for b, _ in pairs],
+            "new": [n for _, n in pairs],
+            "ratio_new_over_base": ratios,
+            **({"ratio": _spread(ratios)} if ratios else {}),
+        }
+    return out
+
+
+def markdown(result: dict) -> str:
+    rows = []
+    for key, c in result["comparison"].items():
+        if "ratio" not in c:
+            continue
+        s = c["ratio"]
+        rows.append(
+            [
+                key,
+                " / ".join(f"{v:.3g}" for v in c["base"]),
+                " / ".join(f"{v:.3g}" for v in c["new"]),
+                f"{s['median']:.3f}",
+                f"{s['min']:.3f}-{s['max']:.3f}",
+            ]
+        )
+    m = result["machine"]
+    return "\n".join(
+        [
+            "# Benchmark comparison",
+            "",
+            f"BASE `{result['base']['rev']}` ({result['base']['commit'][:12]}) against NEW `{result['new']['rev']}` "
+            f"({result['new']['commit'][:12]}), {result['rounds']} alternating rounds of `pfjax bench "
+            f"{' '.join(result['bench_args'])}` on {m.get('cpu_model') or m.get('processor')}, {m.get('cpus')} CPUs.",
+            "",
+            table(["quantity", "BASE per round", "NEW per round", "NEW / BASE median", "spread"], rows),
+            "",
+            "Rates are million rollout-steps per second (higher is better); `grad_over_forward` is the "
+            "gradient's cost in forward passes (lower is better).",
+            "",
+        ]
+    )
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("base", nargs="?", default="HEAD", help="the revision compared against (default HEAD)")
+    ap.add_argument("new", nargs="?", default=".", help="the revision compared (default . : the working tree)")
+    ap.add_argument("--rounds", type=int, default=5, help="alternating rounds (default 5)")
+    ap.add_argument("--sizes", default="10000,100000", help="pfjax batch sizes, as pfjax bench (default 10000,100000)")
+    ap.add_argument("--quick", action="store_true", help="pfjax bench --quick (small batches, 2 s horizon)")
+    ap.add_argument("--out", default="results/bench_compare", help="output directory (default results/bench_compare)")
+    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
+    args = ap.parse_args(argv)
+    return command_main("bench-compare", lambda: main_checked(args))
+
+
+def main_checked(args) -> int:
+    errors.integer("--rounds", args.rounds, low=1, high=100)
+    base, new = _commit(args.base, "base"), _commit(args.new, "new")
+    bench_args = ["--sizes", args.sizes] + (["--quick"] if args.quick else [])
+    cfg = {"base": base, "new": new, "rounds": args.rounds, "bench_args": bench_args}
+    with OutputDir(args.out, command="bench-compare", config_sha256=config_hash(cfg), overwrite=args.overwrite) as out:
+        rounds = []
+        with tempfile.TemporaryDirectory(prefix="pfjax-compare-") as tmp:
+            trees = {"base": _Tree(base, Path(tmp)), "new": _Tree(new, Path(tmp))}
+            try:
+                for i in range(args.rounds):
+                    rounds.append(
+                        {name: tree.bench(bench_args, Path(tmp) / f"bench-{name}-{i}") for name, tree in trees.items()}
+                    )
+                    print(f"round {i + 1}/{args.rounds} done", file=sys.stderr, flush=True)
+            finally:
+                for tree in trees.values():
+                    tree.remove()
+        result = {
+            "base": {"rev": args.base, "commit": base if base != "." else "working tree"},
+            "new": {"rev": args.new, "commit": new if new != "." else "working tree"},
+            "rounds": args.rounds,
+            "bench_args": bench_args,
+            "comparison": compare(rounds),
+            "bench_summaries": rounds,
+            "machine": machine(),
+            "config_sha256": config_hash(cfg),
+        }
+        (out.staging / "compare.json").write_text(dumps(result) + "\n")
+        (out.staging / "report.md").write_text(markdown(result))
+        path = out.commit()
+    ratios = {k: c.get("ratio") for k, c in result["comparison"].items()}
+    print(dumps({"out": str(path), "ratios": ratios}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
