@@ -95,6 +95,12 @@ def test_params_from_commonroad_reads_every_field():
     assert st.params_from_commonroad(cr, mu=0.3).mu == 0.3
 
 
+@pytest.mark.parametrize("i", [1, 2, 3])
+def test_stored_commonroad_vehicles_are_the_packages(i):
+    f = (parameters_vehicle1, parameters_vehicle2, parameters_vehicle3)[i - 1]
+    assert st.parameter_set(f"vehicle{i}") == st.params_from_commonroad(f())
+
+
 def test_robot_params_scale_the_f1tenth_car_to_the_source_robot():
     p = st.robot_params()
     assert p.wheelbase == pytest.approx(0.2, rel=1e-12)

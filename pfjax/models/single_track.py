@@ -159,6 +159,83 @@ def robot_params() -> STParams:
     )
 
 
+#: CommonRoad's vehicles 1-3 (1: Ford Escort, 2: BMW 320i, 3: VW Vanagon) as :func:`params_from_commonroad`
+#: reads them from ``commonroad-vehicle-models`` 3.0.2 (stored here so that studies need not install
+#: it; the tests check them against it).
+COMMONROAD_VEHICLES = {
+    "vehicle1": STParams(
+        l_f=0.88392,
+        l_r=1.50876,
+        h=0.59436,
+        m=1225.8878467253344,
+        I_z=1538.8533713561394,
+        mu=1.0489,
+        C_Sf=20.898083706740398,
+        C_Sr=20.898083706740398,
+        delta_min=-0.91,
+        delta_max=0.91,
+        v_delta_min=-0.4,
+        v_delta_max=0.4,
+        v_min=-13.9,
+        v_max=45.8,
+        v_switch=4.755,
+        a_max=11.5,
+    ),
+    "vehicle2": STParams(
+        l_f=1.1561957064,
+        l_r=1.4227170936,
+        h=0.61373004,
+        m=1093.2952334674046,
+        I_z=1791.5995300122856,
+        mu=1.0489,
+        C_Sf=20.898083706740398,
+        C_Sr=20.898083706740398,
+        delta_min=-1.066,
+        delta_max=1.066,
+        v_delta_min=-0.4,
+        v_delta_max=0.4,
+        v_min=-13.9,
+        v_max=50.8,
+        v_switch=7.319,
+        a_max=11.5,
+    ),
+    "vehicle3": STParams(
+        l_f=1.1507916024,
+        l_r=1.3211363976000001,
+        h=0.804490644,
+        m=1478.8979637767998,
+        I_z=2473.1176915564442,
+        mu=1.0489,
+        C_Sf=20.898083706740398,
+        C_Sr=20.898083706740398,
+        delta_min=-1.023,
+        delta_max=1.023,
+        v_delta_min=-0.4,
+        v_delta_max=0.4,
+        v_min=-11.2,
+        v_max=41.7,
+        v_switch=7.824,
+        a_max=11.5,
+    ),
+}
+
+
+def parameter_set(name: str) -> STParams:
+    """A named parameter set: ``"robot"`` (:func:`robot_params`) or ``"vehicle1"``-``"vehicle3"``
+    (:data:`COMMONROAD_VEHICLES`)."""
+    if name == "robot":
+        return robot_params()
+    if name not in COMMONROAD_VEHICLES:
+        from pfjax.errors import InputError
+
+        raise InputError(f"params: expected one of {', '.join(PARAMETER_SETS)}, got {name!r}", "params")
+    return COMMONROAD_VEHICLES[name]
+
+
+#: The names :func:`parameter_set` takes.
+PARAMETER_SETS = ("robot", *COMMONROAD_VEHICLES)
+
+
 def steering_rate(delta: Array, v_delta: Array, p: STParams) -> Array:
     """CommonRoad's ``steering_constraints``: the steering rate (rad/s) held at 0 at an angle limit
     when it pushes further, else clipped to ``[v_delta_min, v_delta_max]``."""
