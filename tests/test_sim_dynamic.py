@@ -91,7 +91,7 @@ def test_at_high_friction_it_follows_the_kinematic_model_without_slip():
 def test_the_speed_loop_holds_the_reference_speed():
     ctrl, sc = _scenario("sine", "pure-pursuit", v_ref=1.5)
     x0 = dyn.start_state(sc.pose0, 1.5, sc.vehicle)
-    assert float(x0[3]) == 1.5
+    assert float(x0.v) == 1.5
     r = dyn.simulate_batch(stack([sc]), controller=ctrl, config=SimConfig(horizon=3.0, record=True))
     v = np.asarray(r.trajectory.v[0])
     assert np.max(np.abs(v - 1.5)) < 0.02 and abs(v[-1] - 1.5) < 2e-3

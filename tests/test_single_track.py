@@ -146,9 +146,9 @@ def test_axle_slip_is_the_kinematic_models_slip():
     from pfjax.models.slip import SlipParams, yaw_rate
 
     p = st.robot_params()
-    x = jnp.array([0.0, 0.0, 0.2, 1.2, 0.4, 1.5, 0.05])
+    x = st.STState(*jnp.array([0.0, 0.0, 0.2, 1.2, 0.4, 1.5, 0.05]))
     br, bf, b = st.axle_slip(x, p)
-    vx = x[3] * jnp.cos(x[6])
-    r = yaw_rate(x[2], br, bf, SlipParams(v=vx, L=p.wheelbase))
-    assert float(r) == pytest.approx(float(x[5]), rel=1e-12)
-    assert float(b) == float(x[6])
+    vx = x.v * jnp.cos(x.beta)
+    r = yaw_rate(x.delta, br, bf, SlipParams(v=vx, L=p.wheelbase))
+    assert float(r) == pytest.approx(float(x.psi_dot), rel=1e-12)
+    assert float(b) == float(x.beta)

@@ -49,6 +49,8 @@ from typing import Any, NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
+from pfjax.numerics import elementary as E
+
 #: Names of the state vector's entries, in CommonRoad's order.
 STATE_NAMES = ("sx", "sy", "delta", "v", "psi", "psi_dot", "beta")
 #: Names of the input vector's entries.
@@ -257,8 +259,76 @@ def acceleration(v: Array, a: Array, p: STParams) -> Array:
     return jnp.where(at_limit, jnp.zeros_like(a), clipped)
 
 
+class STState(NamedTuple):
+    """The ST model's state as named scalars (CommonRoad's vector ``x`` in this order)."""
+
+    sx: Array  # m, centre of mass
+    sy: Array  # m
+    delta: Array  # rad, front steering angle
+    v: Array  # m/s, speed of the centre of mass
+    psi: Array  # rad, yaw angle
+    psi_dot: Array  # rad/s, yaw rate
+    beta: Array  # rad, slip angle at the centre of mass
+
+
+def vector_field(x: STState, v_delta: Array, a_long: Array, params: STParams) -> STState:
+    """The ST model's vector field on named scalars (module docstring's equations): what the
+    simulator integrates (a batch of runs keeps each field a contiguous vector). :func:`rhs` is the
+    same on CommonRoad's vectors.
+
+    Args:
+        x: the state (m, m, rad, m/s, rad, rad/s, rad).
+        v_delta: steering rate input, rad/s; a_long: longitudinal acceleration input, m/s^2 (both
+            before the constraints).
+        params: :class:`STParams`.
+
+    Returns:
+        ``x'`` as an :class:`STState` (each field's unit per second).
+    """
+    p = params
+    delta, v, psi_dot, beta = x.delta, x.v, x.psi_dot, x.beta
+    v_delta = steering_rate(delta, v_delta, p)
+    a = acceleration(v, a_long, p)
+    lf, lr, h, g, mu = p.l_f, p.l_r, p.h, p.g, p.mu
+    l = lf + lr  # m, the wheelbase
+    slow = jnp.abs(v) < p.v_kinematic
+    # dynamic branch (CommonRoad's terms), with v replaced by 1 where it is not taken; the divisions
+    # by v, l, I_z and cos(delta) as multiplications by their reciprocals (one division each)
+    inv_v = 1 / jnp.where(slow, jnp.ones_like(v), v)
+    inv_l = 1 / l
+    ff = g * lr - a * h  # front load per unit mass, m^2/s^2 (times m / l: N)
+    fr = g * lf + a * h  # rear
+    cf, cr = p.C_Sf * ff, p.C_Sr * fr
+    k = mu * p.m / p.I_z * inv_l
+    dd_psi_dyn = -k * inv_v * (lf**2 * cf + lr**2 * cr) * psi_dot + k * (lr * cr - lf * cf) * beta + k * lf * cf * delta
+    mu_vl = mu * inv_v * inv_l
+    d_beta_dyn = (mu_vl * inv_v * (cr * lr - cf * lf) - 1) * psi_dot - mu_vl * (cr + cf) * beta + mu_vl * cf * delta
+    # kinematic branch at the centre of mass: beta_ks = atan(t), cos beta_ks = 1/sqrt(1 + t^2)
+    sin_d, cos_d = E.sincos(delta)
+    sec2_d = 1 / (cos_d * cos_d)  # 1 / cos^2(delta)
+    tan_d = sin_d * cos_d * sec2_d
+    sin_b, cos_b = E.sincos(beta)
+    t = tan_d * lr * inv_l
+    cos_ks = E.rsqrt(1 + t * t)
+    d_beta_ks = lr * v_delta * inv_l * sec2_d / (1 + (tan_d * t) ** 2)
+    dd_psi_ks = inv_l * (a * cos_b * tan_d - v * sin_b * d_beta_ks * tan_d + v * cos_b * v_delta * sec2_d)
+    # the velocity's direction psi + (beta_ks or beta), by the angle-sum formulas
+    sin_p, cos_p = E.sincos(x.psi)
+    cb, sb = jnp.where(slow, cos_ks, cos_b), jnp.where(slow, t * cos_ks, sin_b)
+    return STState(
+        sx=v * (cos_p * cb - sin_p * sb),
+        sy=v * (sin_p * cb + cos_p * sb),
+        delta=v_delta,
+        v=a,
+        psi=jnp.where(slow, v * cos_ks * tan_d * inv_l, psi_dot),
+        psi_dot=jnp.where(slow, dd_psi_ks, dd_psi_dyn),
+        beta=jnp.where(slow, d_beta_ks, d_beta_dyn),
+    )
+
+
 def rhs(x: Array, u: Array, params: STParams) -> Array:
-    """The ST model's vector field ``x' = f(x, u, params)`` (module docstring's equations).
+    """The ST model's vector field ``x' = f(x, u, params)`` on CommonRoad's vectors (module
+    docstring's equations; :func:`vector_field` on named scalars).
 
     Args:
         x: state ``(sx, sy, delta, v, psi, psi_dot, beta)``, shape ``(7,)`` (m, m, rad, m/s, rad, rad/s, rad).
@@ -268,53 +338,10 @@ def rhs(x: Array, u: Array, params: STParams) -> Array:
     Returns:
         ``x'``, shape ``(7,)``, in the state's units per second.
     """
-    p = params
-    delta, v, psi, psi_dot, beta = x[2], x[3], x[4], x[5], x[6]
-    v_delta = steering_rate(delta, u[0], p)
-    a = acceleration(v, u[1], p)
-    lf, lr, h, g, mu = p.l_f, p.l_r, p.h, p.g, p.mu
-    l = lf + lr  # m, the wheelbase
-    slow = jnp.abs(v) < p.v_kinematic
-    # dynamic branch (CommonRoad's grouping of the terms), with v replaced by 1 where it is not taken
-    vd = jnp.where(slow, jnp.ones_like(v), v)
-    ff = g * lr - a * h  # front load per unit mass, m^2/s^2 (times m / l: N)
-    fr = g * lf + a * h  # rear
-    cf, cr = p.C_Sf * ff, p.C_Sr * fr
-    k = mu * p.m / (p.I_z * l)
-    dd_psi_dyn = (
-        -mu * p.m / (vd * p.I_z * l) * (lf**2 * cf + lr**2 * cr) * psi_dot
-        + k * (lr * cr - lf * cf) * beta
-        + k * lf * cf * delta
-    )
-    d_beta_dyn = (
-        (mu / (vd**2 * l) * (cr * lr - cf * lf) - 1) * psi_dot
-        - mu / (vd * l) * (cr + cf) * beta
-        + mu / (vd * l) * cf * delta
-    )
-    # kinematic branch at the centre of mass
-    tan_d, cos_d = jnp.tan(delta), jnp.cos(delta)
-    beta_ks = jnp.arctan(tan_d * lr / l)
-    d_beta_ks = (lr * v_delta) / (l * cos_d**2 * (1 + (tan_d**2 * lr / l) ** 2))
-    dd_psi_ks = (
-        1
-        / l
-        * (a * jnp.cos(beta) * tan_d - v * jnp.sin(beta) * d_beta_ks * tan_d + v * jnp.cos(beta) * v_delta / cos_d**2)
-    )
-    heading = psi + jnp.where(slow, beta_ks, beta)
-    return jnp.stack(
-        [
-            v * jnp.cos(heading),
-            v * jnp.sin(heading),
-            v_delta,
-            a,
-            jnp.where(slow, v * jnp.cos(beta_ks) * tan_d / l, psi_dot),
-            jnp.where(slow, dd_psi_ks, dd_psi_dyn),
-            jnp.where(slow, d_beta_ks, d_beta_dyn),
-        ]
-    )
+    return jnp.stack(vector_field(STState(*(x[i] for i in range(7))), u[0], u[1], params))
 
 
-def axle_slip(x: Array, params: STParams) -> tuple[Array, Array, Array]:
+def axle_slip(x: STState, params: STParams) -> tuple[Array, Array, Array]:
     """Slip angles of a state, in pfjax's kinematic slip model's convention (:mod:`pfjax.models.slip`,
     ``SOURCE``), rad: ``(beta_r, beta_f, beta)``::
 
@@ -327,9 +354,8 @@ def axle_slip(x: Array, params: STParams) -> tuple[Array, Array, Array]:
     convention, the front and rear tyre slip angles are ``alpha_f = beta_f``, ``alpha_r = -beta_r``
     (exactly; the ST model's forces use their linearisations). Defined for ``v cos(beta) > 0``.
     """
-    delta, v, psi_dot, beta = x[2], x[3], x[5], x[6]
-    sb, cb = jnp.sin(beta), jnp.cos(beta)
-    vx = v * cb
-    beta_r = jnp.arctan2(v * sb - params.l_r * psi_dot, vx)
-    beta_f = delta - jnp.arctan2(v * sb + params.l_f * psi_dot, vx)
-    return beta_r, beta_f, beta
+    sb, cb = E.sincos(x.beta)
+    vx, vy = x.v * cb, x.v * sb
+    beta_r = E.atan2(vy - params.l_r * x.psi_dot, vx)
+    beta_f = x.delta - E.atan2(vy + params.l_f * x.psi_dot, vx)
+    return beta_r, beta_f, x.beta

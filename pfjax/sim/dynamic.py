@@ -141,7 +141,7 @@ class _Acc(NamedTuple):
 
 
 class _State(NamedTuple):
-    x: Array  # (7,) the ST state
+    x: st.STState  # the ST state
     c: Any  # controller state
     u: Array  # path parameter, warm start of the next projection
 
@@ -161,28 +161,27 @@ class _Out(NamedTuple):
     delta: Array  # rad, the actuator's angle
     saturated: Array  # 1.0 where |cmd| > delta_max
     slip: Array  # (3,) rad: beta_r, beta_f, beta
-    x: Array  # (7,) the ST state
+    x: st.STState  # the ST state
 
 
-def rear_axle_pose(x: Array, p: st.STParams) -> Pose:
+def rear_axle_pose(x: st.STState, p: st.STParams) -> Pose:
     """The rear-axle pose of an ST state: ``(sx - l_r cos psi, sy - l_r sin psi, psi)`` (m, m, rad)."""
-    s, c = E.sincos(x[4])
-    return Pose(x[0] - p.l_r * c, x[1] - p.l_r * s, x[4])
+    s, c = E.sincos(x.psi)
+    return Pose(x.sx - p.l_r * c, x.sy - p.l_r * s, x.psi)
 
 
-def start_state(pose0: Pose, v0, p: st.STParams) -> Array:
+def start_state(pose0: Pose, v0, p: st.STParams) -> st.STState:
     """The ST state of a vehicle whose rear axle is at ``pose0`` (m, m, rad), driving straight at ``v0`` (m/s)."""
     pose0 = Pose(*pose0)
     s, c = E.sincos(pose0.theta)
     zero = jnp.zeros_like(pose0.x)
-    return jnp.stack([pose0.x + p.l_r * c, pose0.y + p.l_r * s, zero, zero + v0, pose0.theta, zero, zero])
+    return st.STState(pose0.x + p.l_r * c, pose0.y + p.l_r * s, zero, zero + v0, pose0.theta, zero, zero)
 
 
-def closed_loop_rhs(x: Array, delta_c, sc: DynamicScenario) -> Array:
+def closed_loop_rhs(x: st.STState, delta_c, sc: DynamicScenario) -> st.STState:
     """The ST vector field with the steering actuator and the speed loop closed (module docstring):
-    ``st.rhs(x, ((delta_c - delta) / tau_delta, k_v (v_ref - v)), vehicle)``."""
-    u = jnp.stack([(delta_c - x[2]) / sc.tau_delta, sc.k_v * (sc.v_ref - x[3])])
-    return st.rhs(x, u, sc.vehicle)
+    ``st.vector_field(x, (delta_c - delta) / tau_delta, k_v (v_ref - v), vehicle)``."""
+    return st.vector_field(x, (delta_c - x.delta) / sc.tau_delta, sc.k_v * (sc.v_ref - x.v), sc.vehicle)
 
 
 def _start(controller: Controller, sc: DynamicScenario) -> loop.Start:
@@ -204,18 +203,21 @@ def _step(controller: Controller, config: SimConfig, sc: DynamicScenario, carry:
     p = sc.vehicle
     dt, n_steps = config.dt, config.n_steps
     first, last = k == 0, k == n_steps
-    t = jnp.where(last, jnp.asarray(n_steps * dt, x.dtype), k * dt)
+    t = jnp.where(last, jnp.asarray(n_steps * dt, x.v.dtype), k * dt)
     pose = rear_axle_pose(x, p)
     proj = measure_pose(sc, pose, u, config.newton_iters)
     slip = jnp.stack(st.axle_slip(x, p))
     dmax = jnp.asarray(p.delta_max, float)
-    obs = noisy_observation(observation(proj, pose, x[3] * jnp.cos(x[6]), p.l_f + p.l_r, dmax, sc.path), sc.noise, k)
+    v_rear = x.v * E.cos(x.beta)  # m/s, the rear axle's longitudinal speed
+    obs = noisy_observation(observation(proj, pose, v_rear, p.l_f + p.l_r, dmax, sc.path), sc.noise, k)
     cmd, c_next = held_command(controller, config, sc.gains, c, obs, carry.aux.cmd, k, last)
     delta_c = jnp.clip(cmd, -dmax, dmax)
     x_next = rk4_step(lambda tt, xx: closed_loop_rhs(xx, delta_c, sc), t, x, dt)
-    finite = jnp.all(jnp.isfinite(x)) & jnp.isfinite(proj.d)
+    finite = jnp.isfinite(proj.d)
+    for value in x:
+        finite = finite & jnp.isfinite(value)
     health = classify(finite, jnp.abs(proj.d), 1.0 - proj.kappa * proj.d, proj.at_end, config.d_fail)
-    out = _Out(t, first, last, pose, proj, cmd, x[2], (jnp.abs(cmd) > dmax).astype(x.dtype), slip, x)
+    out = _Out(t, first, last, pose, proj, cmd, x.delta, (jnp.abs(cmd) > dmax).astype(x.v.dtype), slip, x)
     return loop.Sample(_State(x_next, c_next, proj.u), health, t, out, _Held(proj.u, cmd), keep=last)
 
 
@@ -243,8 +245,8 @@ def _record(sc: DynamicScenario, s: loop.Sample, state: _State) -> DynamicTrajec
         o.slip[0],
         o.slip[1],
         o.slip[2],
-        o.x[3],
-        o.x[5],
+        o.x.v,
+        o.x.psi_dot,
     )
 
 
@@ -255,7 +257,7 @@ def _finish(config: SimConfig, sc: DynamicScenario, r: loop.Run) -> DynamicResul
     slip = SlipMetrics(*(r.metrics.slip_max * deg), *(mean * deg))
     pose = rear_axle_pose(r.state.x, sc.vehicle)
     proj = measure(sc.path, pose.x, pose.y, pose.theta, r.aux.u_last)
-    final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, r.state.x[2], proj.s)
+    final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, r.state.x.delta, proj.s)
     return DynamicResult(metrics, slip, r.status, r.fail_time, final, r.records)
 
 
