@@ -42,6 +42,7 @@ def _spec(vehicle: dict, **top):
         ({"model": "st", "mu": 0.0}, {"margin": {"enabled": False}}, "vehicle.mu: must lie in (0, 10]"),
         ({"model": "st"}, {"margin": {"enabled": False}, "slip": {"beta_r_deg": 2.0}}, "slip.beta_r_deg: not with"),
         ({"model": "st", "params": "truck"}, {"margin": {"enabled": False}}, "vehicle.params: Input should be"),
+        ({"model": "st", "mu": 10.0}, {"margin": {"enabled": False}}, "sim.dt: the ST model at mu = 10 and speed 1"),
         (
             {"model": "st"},
             {"margin": {"enabled": False}, "falsifier": {"enabled": True}},
@@ -144,6 +145,7 @@ def test_cli_simulate_model_st():
         (["--mu", "0.5"], "--mu"),
         (["--model", "st", "--mu", "-1"], "--mu"),
         (["--model", "st", "--tau-delta", "0"], "--tau-delta"),
+        (["--model", "st", "--mu", "10"], "--dt"),
     ]:
         code, _, err = _main("simulate", "--path", "line", "--controller", "stanley", *argv)
         assert code == 2 and err.strip().splitlines()[-1].startswith(f"pfjax simulate: error: {flag}: "), err

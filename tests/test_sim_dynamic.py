@@ -128,3 +128,17 @@ def test_gradient_through_the_dynamic_vehicle_matches_finite_differences():
     fd = np.array([(float(f(z.at[i].add(h))) - float(f(z.at[i].add(-h)))) / (2 * h) for i in range(3)])
     np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-9)
     assert np.all(np.abs(g) > 1e-6)
+
+
+def test_max_stable_step_separates_stable_from_unstable_integration():
+    """At ``mu = 10`` and 1 m/s the tyre modes are fast (about -1100 and -500 1/s): a step below
+    :func:`st.max_stable_step` runs, one 30 % above it blows up (the run fails, as data)."""
+    ctrl, sc = _scenario("line", "stanley")
+    sc = sc._replace(vehicle=sc.vehicle._replace(mu=10.0))
+    dt_max = st.max_stable_step(sc.vehicle, 1.0, sc.tau_delta, sc.k_v)
+    assert 0.002 < dt_max < 0.0025
+    ev = st.lateral_eigenvalues(sc.vehicle, 1.0)
+    assert np.all(ev.real < 0)
+    for dt, ok in ((0.002, True), (1.3 * dt_max, False)):
+        r = dyn.simulate_batch(stack([sc]), controller=ctrl, config=SimConfig(horizon=1.0, dt=dt, record=False))
+        assert (int(r.status[0]) == Status.OK) == ok, dt

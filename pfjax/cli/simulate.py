@@ -229,6 +229,12 @@ def _simulate_st(args, cfg, pose0) -> dict:
         tau_delta=0.05 if args.tau_delta is None else args.tau_delta,
         k_v=5.0 if args.k_v is None else args.k_v,
     )
+    dt_max = st.max_stable_step(sc.vehicle, args.speed, float(sc.tau_delta), float(sc.k_v))
+    if cfg.dt > dt_max:
+        raise UsageError(
+            f"--dt: the ST model at --mu {float(sc.vehicle.mu):g} and --speed {args.speed:g} needs dt <= "
+            f"{dt_max:.3g} s for a stable RK4 step, got {cfg.dt:g}"
+        )
     r = unstack(dyn.simulate_batch(stack([sc]), controller=controller, config=cfg), 0)
     status = int(r.status)
     metrics = {k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES}

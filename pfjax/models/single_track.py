@@ -44,9 +44,11 @@ the tests check agreement with it to 1e-9 relative. Gravity ``g = 9.81`` m/s^2 a
 
 from __future__ import annotations
 
+import math
 from typing import Any, NamedTuple
 
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from pfjax.numerics import elementary as E
@@ -236,6 +238,43 @@ def parameter_set(name: str) -> STParams:
 
 #: The names :func:`parameter_set` takes.
 PARAMETER_SETS = ("robot", *COMMONROAD_VEHICLES)
+
+
+#: ``|lambda| dt`` up to which a fixed RK4 step is taken as stable for the model's modes (RK4's
+#: stability region reaches 2.785 on the negative real axis and about 2.8 along the imaginary one).
+RK4_REACH = 2.5
+
+
+def lateral_eigenvalues(params: STParams, v: float) -> np.ndarray:
+    """Eigenvalues (1/s) of the dynamic branch's lateral-yaw dynamics in ``(psi_dot, beta)`` at speed
+    ``v`` (m/s) without longitudinal acceleration (``a = 0``; host code, NumPy)::
+
+        A = [[-k (l_f^2 C_Sf F_f + l_r^2 C_Sr F_r) / v,            k (l_r C_Sr F_r - l_f C_Sf F_f)],
+             [mu (l_r C_Sr F_r - l_f C_Sf F_f) / (v^2 l) - 1,      -mu (C_Sf F_f + C_Sr F_r) / (v l)]]
+
+    with ``F_f = g l_r``, ``F_r = g l_f``, ``k = mu m / (I_z l)``. Their magnitude grows as ``mu / v``:
+    the tyres' time constants are short at high friction and low speed.
+    """
+    p = STParams(*(float(np.asarray(a)) for a in params))
+    l = p.l_f + p.l_r
+    cf, cr = p.C_Sf * p.g * p.l_r, p.C_Sr * p.g * p.l_f
+    k = p.mu * p.m / (p.I_z * l)
+    a = np.array(
+        [
+            [-k * (p.l_f**2 * cf + p.l_r**2 * cr) / v, k * (p.l_r * cr - p.l_f * cf)],
+            [p.mu * (cr * p.l_r - cf * p.l_f) / (v**2 * l) - 1, -p.mu * (cr + cf) / (v * l)],
+        ]
+    )
+    return np.linalg.eigvals(a)
+
+
+def max_stable_step(params: STParams, v: float, tau_delta: float = math.inf, k_v: float = 0.0) -> float:
+    """The largest RK4 step (s) for which ``|lambda| dt <= RK4_REACH`` for the lateral-yaw modes at
+    speed ``v`` (:func:`lateral_eigenvalues`), a first-order steering actuator (``lambda = -1 /
+    tau_delta``) and a proportional speed loop (``lambda = -k_v``). A step beyond it lets the
+    integration blow up (a run then fails as ``diverged`` or ``nonfinite``)."""
+    fastest = max(float(np.max(np.abs(lateral_eigenvalues(params, v)))), 1 / tau_delta, k_v)
+    return RK4_REACH / fastest
 
 
 def steering_rate(delta: Array, v_delta: Array, p: STParams) -> Array:

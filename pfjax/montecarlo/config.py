@@ -590,6 +590,17 @@ class StudySpec(_Model):
                 raise ValueError(
                     f'slip.{key}: not with vehicle.model = "st" (its slip comes from the tyre forces); remove it'
                 )
+            from pfjax.models.single_track import max_stable_step
+
+            veh = self.vehicle
+            mu_hi = veh.st_params().mu if veh.mu is None else veh.mu.bounds()[1]
+            v_lo = veh.speed.bounds()[0]
+            dt_max = max_stable_step(veh.st_params()._replace(mu=mu_hi), v_lo, veh.tau_delta_s, veh.k_v)
+            if self.sim.dt > dt_max:
+                raise ValueError(
+                    f"sim.dt: the ST model at mu = {mu_hi:g} and speed {v_lo:g} m/s (the ranges' worst case) needs "
+                    f"dt <= {dt_max:.3g} s for a stable RK4 step, got {self.sim.dt:g}"
+                )
             for key, section, what in (
                 ("margin.enabled", self.margin, "slip-margin sweep"),
                 ("falsifier.enabled", self.falsifier, "worst-case search"),
