@@ -8,7 +8,8 @@ whose slip comes from tyre forces (CommonRoad's single-track model, :mod:`pfjax.
 Arms, all on the same runs (run ``i`` of a path starts from the same pose in every arm: common random
 numbers, so differences between arms are paired): the dynamic arm (robot parameter set, friction
 ``mu`` uniform on ``[mu_low, mu_high]``) and kinematic arms with constant slip uniform on ``+-A`` per
-axle for each ``A`` of ``slip_ranges_deg``. Writes to ``results/kinematic_vs_dynamic/`` (or
+axle for each ``A`` of ``slip_ranges_deg``, and the dynamic vehicle on a high-friction surface
+(``mu_grip``: the same model with little slip). Writes to ``results/kinematic_vs_dynamic/`` (or
 ``--out``): ``runs.parquet`` (one row per arm, path, controller and run), ``summary.json`` and
 ``report.md``:
 
@@ -84,6 +85,8 @@ def load_config(args) -> dict:
     ranges = cfg["slip_ranges_deg"]
     if not ranges or not all(isinstance(a, (int, float)) and 0 <= a < 90 for a in ranges):
         raise ConfigError(f"slip_ranges_deg: expected a non-empty list of angles in [0, 90) deg, got {ranges!r}")
+    if not 0 < cfg["mu_grip"] <= 10:
+        raise ConfigError(f"mu_grip: expected a friction coefficient in (0, 10], got {cfg['mu_grip']!r}")
     for k in ("bench_runs", "bench_repeats"):
         if not (isinstance(cfg[k], int) and cfg[k] >= 1):
             raise ConfigError(f"{k}: expected an integer >= 1, got {cfg[k]!r}")
@@ -98,6 +101,9 @@ def arms(cfg: dict) -> dict[str, dict]:
     dyn["vehicle"] = {**dyn.get("vehicle", {}), "model": "st"}
     dyn["vehicle"]["mu"] = {"dist": "uniform", "low": cfg["mu_low"], "high": cfg["mu_high"]}
     out["dynamic"] = dyn
+    grip = copy.deepcopy(dyn)  # the same vehicle on a high-friction surface: little slip
+    grip["vehicle"]["mu"] = cfg["mu_grip"]
+    out[f"dynamic_mu{cfg['mu_grip']:g}"] = grip
     for a in cfg["slip_ranges_deg"]:
         kin = copy.deepcopy(base)
         slip = {"dist": "uniform", "low": -a, "high": a} if a > 0 else 0.0
@@ -193,10 +199,22 @@ def summarise(cfg: dict, runs: pd.DataFrame) -> dict:
         d = dyn[dyn.controller == name].set_index(key).sort_index()
         k = runs[(runs.arm == ref) & (runs.controller == name)].set_index(key).sort_index()
         paired = _paired(d.success.to_numpy(), k.success.to_numpy())
-        kin_arms = {a: r for a, r in rates.items() if a != "dynamic"}
+        kin_arms = {a: r for a, r in rates.items() if a.startswith("kinematic")}
         equivalent = min(kin_arms, key=lambda a: abs(kin_arms[a]["rate"] - rates["dynamic"]["rate"]))
+        by_path = {
+            arm: {p: _rate(part.success.to_numpy()) for p, part in mine[mine.arm == arm].groupby("path")}
+            for arm in ("dynamic", ref)
+        }
+        dm = d.reset_index()
+        edges = np.linspace(cfg["mu_low"], cfg["mu_high"], 4)
+        by_mu = [
+            {"mu": [float(lo), float(hi)], **_rate(dm[(dm.mu >= lo) & (dm.mu <= hi)].success.to_numpy())}
+            for lo, hi in itertools.pairwise(edges)
+        ]
         controllers[name] = {
             "success": rates,
+            "success_by_path": by_path,
+            "success_by_mu_dynamic": by_mu,
             "paired_dynamic_minus_kinematic": paired,
             "verdict_kinematic": _side(rates[ref]),
             "verdict_dynamic": _side(rates["dynamic"]),
@@ -294,7 +312,30 @@ def report(s: dict) -> str:
             f"{c['verdict_kinematic']} -> {c['verdict_dynamic']} | {'yes' if c['verdict_survives'] else 'no'} | "
             f"{c['equivalent_kinematic_arm']} (gap {100 * c['equivalent_gap']:.1f} pp) |"
         )
-    arms_ = [a for a in next(iter(s["controllers"].values()))["success"] if a != "dynamic"]
+    grip = f"dynamic_mu{cfg['mu_grip']:g}"
+    lines += [
+        "",
+        f"On a high-friction surface (mu = {cfg['mu_grip']:g}, arm {grip}: the same vehicle with little slip):",
+        "",
+        "| controller | " + grip + " |",
+        "|---|---|",
+    ]
+    for name, c in s["controllers"].items():
+        lines.append(f"| {name} | {_pct(c['success'][grip])} |")
+    paths_ = list(next(iter(s["controllers"].values()))["success_by_path"]["dynamic"])
+    lines += ["", "Success by path (dynamic / " + ref + "):", "", "| controller | " + " | ".join(paths_) + " |"]
+    lines.append("|---|" + "---|" * len(paths_))
+    for name, c in s["controllers"].items():
+        bp = c["success_by_path"]
+        cells = [f"{100 * bp['dynamic'][p]['rate']:.1f} / {100 * bp[ref][p]['rate']:.1f} %" for p in paths_]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    mus = next(iter(s["controllers"].values()))["success_by_mu_dynamic"]
+    lines += ["", "Success in the dynamic arm by friction:", ""]
+    lines.append("| controller | " + " | ".join(f"mu {b['mu'][0]:.2f}-{b['mu'][1]:.2f}" for b in mus) + " |")
+    lines.append("|---|" + "---|" * len(mus))
+    for name, c in s["controllers"].items():
+        lines.append(f"| {name} | " + " | ".join(_pct(b) for b in c["success_by_mu_dynamic"]) + " |")
+    arms_ = [a for a in next(iter(s["controllers"].values()))["success"] if a.startswith("kinematic")]
     lines += ["", "Success by kinematic slip range:", "", "| controller | " + " | ".join(arms_) + " |"]
     lines.append("|---|" + "---|" * len(arms_))
     for name, c in s["controllers"].items():
