@@ -23,6 +23,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from pfjax import errors
+from pfjax.resources import MAX_STEPS
 
 # ----------------------------------------------------------------------------- distributions
 
@@ -235,6 +236,8 @@ def scenarios(
     }
     if model == "st":
         data["margin"] = {"enabled": False}
+        # the step is simulate()'s, which checks it against the tyre modes; here the finest allowed
+        data["sim"]["dt"] = horizon / MAX_STEPS
     try:
         spec, _ = load_study(data=data)
     except errors.InputError as e:
@@ -347,6 +350,18 @@ def simulate(
         raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
     config = dataclasses.replace(config, record=bool(trajectories))
     t = scenarios.table
+    if scenarios.spec.vehicle.model == "st":
+        from pfjax.models.single_track import max_stable_step
+
+        veh = scenarios.spec.vehicle
+        worst = veh.st_params()._replace(mu=float(t["mu"].max()))
+        dt_max = max_stable_step(worst, float(t["speed"].min()), veh.tau_delta_s, veh.k_v)
+        if config.dt > dt_max:
+            raise errors.InputError(
+                f"config.dt: the ST model at mu = {worst.mu:g} and speed {float(t['speed'].min()):g} m/s (the runs' "
+                f"worst case) needs dt <= {dt_max:.3g} s for a stable RK4 step, got {config.dt:g}",
+                "config",
+            )
     params, flat = _gains_of(e, d, gains, float(t["speed"].mean()), float(t["L"].mean()))
     n = scenarios.n
     m = batch_size(n)  # padded like a study's chunks: every run takes the same vector code

@@ -149,3 +149,9 @@ def test_cli_simulate_model_st():
     ]:
         code, _, err = _main("simulate", "--path", "line", "--controller", "stanley", *argv)
         assert code == 2 and err.strip().splitlines()[-1].startswith(f"pfjax simulate: error: {flag}: "), err
+
+
+def test_api_checks_the_simulation_step_against_the_tyre_modes():
+    runs = pfjax.scenarios("line", n=2, model="st", mu=10.0)  # the step is simulate's
+    with pytest.raises(InputError, match=r"^config\.dt: the ST model at mu = 10 "):
+        pfjax.simulate(runs, "stanley", config={"horizon": 1.0})
