@@ -284,8 +284,9 @@ def simulate(controller: Controller, sc: DynamicScenario, config: SimConfig) -> 
     ``k = 0..N`` of :func:`system` through :func:`pfjax.sim.loop.run`.
 
     Args:
-        controller, sc, config: the controller (static), the run's scenario, static settings
-            (``config.control_every`` must be an integer).
+        controller: the controller (static).
+        sc: the run's scenario.
+        config: static settings (``config.control_every`` must be an integer).
 
     Returns:
         :class:`DynamicResult`: metrics, slip metrics, status, failure time, final state, trajectory.
