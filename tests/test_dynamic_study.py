@@ -155,3 +155,10 @@ def test_api_checks_the_simulation_step_against_the_tyre_modes():
     runs = pfjax.scenarios("line", n=2, model="st", mu=10.0)  # the step is simulate's
     with pytest.raises(InputError, match=r"^config\.dt: the ST model at mu = 10 "):
         pfjax.simulate(runs, "stanley", config={"horizon": 1.0})
+
+
+def test_a_dumped_config_loads_again_under_either_model():
+    """A study's summary holds its whole config, every key at its value or default: it loads again."""
+    for vehicle, top in (({}, {}), ({"model": "st", "mu": 0.5}, {"margin": {"enabled": False}})):
+        spec = _spec(vehicle, **top)
+        assert load_study(data=spec.model_dump(mode="json"))[0] == spec

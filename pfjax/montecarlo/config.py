@@ -214,8 +214,8 @@ class VehicleSpec(_Model):
             if not (lo > 0 and hi <= 10):
                 raise ValueError(f"mu: must lie in (0, 10] over its whole range, got range [{lo:g}, {hi:g}]")
         other, theirs = (ST_ONLY, "st") if self.model == "kinematic" else (KINEMATIC_ONLY, "kinematic")
-        for name in other:
-            if name in self.model_fields_set:
+        for name in other:  # a value other than the default (a dumped config holds every key, at its default)
+            if getattr(self, name) != type(self).model_fields[name].get_default(call_default_factory=True):
                 why = (
                     "the ST model's wheelbase and steering limit are its parameter set's (vehicle.params)"
                     if theirs == "kinematic"
@@ -585,8 +585,9 @@ class StudySpec(_Model):
                 f"falsifier.path: no path labelled {self.falsifier.path!r}; paths are {[p.label for p in self.paths]}"
             )
         if self.vehicle.model == "st":
-            if self.slip.model_fields_set:
-                key = sorted(self.slip.model_fields_set)[0]
+            changed = [k for k, v in self.slip if v != SlipSpec.model_fields[k].get_default(call_default_factory=True)]
+            if changed:
+                key = changed[0]
                 raise ValueError(
                     f'slip.{key}: not with vehicle.model = "st" (its slip comes from the tyre forces); remove it'
                 )

@@ -136,8 +136,8 @@ class DynamicResult(NamedTuple):
 
 class _Acc(NamedTuple):
     path: running.Accumulator
-    slip_max: Array  # (3,) rad: max |beta_r|, |beta_f|, |beta|
-    slip_sum: Array  # (3,) rad s: weighted sums of the same
+    slip_max: tuple  # rad: max |beta_r|, |beta_f|, |beta| (scalars: a batch keeps each a contiguous vector)
+    slip_sum: tuple  # rad s: weighted sums of the same
 
 
 class _State(NamedTuple):
@@ -160,7 +160,7 @@ class _Out(NamedTuple):
     cmd: Array  # rad
     delta: Array  # rad, the actuator's angle
     saturated: Array  # 1.0 where |cmd| > delta_max
-    slip: Array  # (3,) rad: beta_r, beta_f, beta
+    slip: tuple  # rad: beta_r, beta_f, beta
     x: st.STState  # the ST state
 
 
@@ -191,7 +191,7 @@ def _start(controller: Controller, sc: DynamicScenario) -> loop.Start:
     else:
         u0 = polish_parameter(sc.path, pose0.x, pose0.y, jnp.asarray(sc.u0, pose0.x.dtype), U0_ITERS)
     zero = jnp.zeros((), pose0.x.dtype)
-    acc = _Acc(running.init(zero, zero), jnp.zeros(3, zero.dtype), jnp.zeros(3, zero.dtype))
+    acc = _Acc(running.init(zero, zero), (zero, zero, zero), (zero, zero, zero))
     x0 = start_state(pose0, jnp.asarray(sc.v_ref, zero.dtype), sc.vehicle)
     return loop.Start(_State(x0, controller.init(sc.gains), u0), acc, zero, _Held(u0, zero))
 
@@ -206,9 +206,9 @@ def _step(controller: Controller, config: SimConfig, sc: DynamicScenario, carry:
     t = jnp.where(last, jnp.asarray(n_steps * dt, x.v.dtype), k * dt)
     pose = rear_axle_pose(x, p)
     proj = measure_pose(sc, pose, u, config.newton_iters)
-    slip = jnp.stack(st.axle_slip(x, p))
+    slip = st.axle_slip(x, p)
     dmax = jnp.asarray(p.delta_max, float)
-    v_rear = x.v * E.cos(x.beta)  # m/s, the rear axle's longitudinal speed
+    v_rear = x.v * E.sincos(x.beta)[1]  # m/s, the rear axle's longitudinal speed
     obs = noisy_observation(observation(proj, pose, v_rear, p.l_f + p.l_r, dmax, sc.path), sc.noise, k)
     cmd, c_next = held_command(controller, config, sc.gains, c, obs, carry.aux.cmd, k, last)
     delta_c = jnp.clip(cmd, -dmax, dmax)
@@ -225,8 +225,12 @@ def _update(config: SimConfig, sc: DynamicScenario, acc: _Acc, s: loop.Sample, l
     o = s.out
     path = update_metrics(config, sc, acc.path, s, live, was_live)
     w = jnp.where(live, jnp.where(o.first | o.last, 0.5, 1.0), 0.0) * config.dt
-    mag = jnp.where(live, jnp.abs(o.slip), 0.0)
-    return _Acc(path, jnp.maximum(acc.slip_max, mag), acc.slip_sum + w * mag)
+    mag = [jnp.where(live, jnp.abs(b), 0.0) for b in o.slip]
+    return _Acc(
+        path,
+        tuple(jnp.maximum(m, b) for m, b in zip(acc.slip_max, mag)),
+        tuple(total + w * b for total, b in zip(acc.slip_sum, mag)),
+    )
 
 
 def _record(sc: DynamicScenario, s: loop.Sample, state: _State) -> DynamicTrajectory:
@@ -253,8 +257,8 @@ def _record(sc: DynamicScenario, s: loop.Sample, state: _State) -> DynamicTrajec
 def _finish(config: SimConfig, sc: DynamicScenario, r: loop.Run) -> DynamicResult:
     metrics = running.finalize(r.metrics.path, config.n_steps * config.dt, r.failed, config.success_band)
     deg = 180.0 / math.pi
-    mean = r.metrics.slip_sum / jnp.maximum(r.metrics.path.time, config.dt)
-    slip = SlipMetrics(*(r.metrics.slip_max * deg), *(mean * deg))
+    time = jnp.maximum(r.metrics.path.time, config.dt)
+    slip = SlipMetrics(*(m * deg for m in r.metrics.slip_max), *(total / time * deg for total in r.metrics.slip_sum))
     pose = rear_axle_pose(r.state.x, sc.vehicle)
     proj = measure(sc.path, pose.x, pose.y, pose.theta, r.aux.u_last)
     final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, r.state.x.delta, proj.s)
