@@ -65,9 +65,13 @@ def test_steady_cornering_on_a_circle_matches_the_geometry():
     tr = jax.tree_util.tree_map(lambda a: np.asarray(a[0]), r.trajectory)
     assert int(r.status[0]) == Status.OK
     assert abs(tr.d[-1] - tr.d[-200]) < 1e-6  # steady
-    assert tr.beta_r[-1] == pytest.approx(-tr.theta_e[-1], abs=1e-6)
-    v_rear = tr.v[-1] * math.cos(tr.beta[-1]) / math.cos(tr.beta_r[-1])
-    assert tr.psi_dot[-1] == pytest.approx(v_rear / (2.0 - tr.d[-1]), rel=1e-6)
+    v, beta, r_ = tr.v[-1], tr.beta[-1], tr.psi_dot[-1]
+    exact_r = math.atan2(v * math.sin(beta) - sc.vehicle.l_r * r_, v * math.cos(beta))  # the rear axle's velocity angle
+    assert exact_r == pytest.approx(-tr.theta_e[-1], abs=1e-6)
+    v_rear = v * math.cos(beta) / math.cos(exact_r)
+    assert r_ == pytest.approx(v_rear / (2.0 - tr.d[-1]), rel=1e-6)
+    # the measured (linearised tyre) slip: third-order terms in beta and l_r psi_dot / v (0.05 rad) away
+    assert tr.beta_r[-1] == pytest.approx(exact_r, abs=1e-4)
     # the lateral acceleration v^2 / R = 0.5 m/s^2 needs slip at both axles, the front more (understeer: C_Sf < C_Sr)
     assert 0 < -tr.beta_r[-1] < tr.beta_f[-1] < math.radians(5)
 

@@ -140,15 +140,29 @@ def test_held_input_trajectories_match_solve_ivp_of_the_reference(name, cr):
     assert err < 1e-6, err
 
 
-def test_axle_slip_is_the_kinematic_models_slip():
-    """The kinematic slip model (SOURCE convention) with the axle slip of a dynamic state and the rear
-    axle's longitudinal speed has the dynamic state's yaw rate."""
+def test_tyre_slip_is_the_kinematic_models_slip_to_third_order():
+    """The exact slip angles (the rear axle's and the front wheel's velocity angles) give the
+    kinematic slip model (SOURCE convention, speed ``v cos(beta)``) the dynamic state's yaw rate;
+    :func:`st.tyre_slip`, the model's linearised tyre slip angles, differ from them by less than
+    ``|angle|^3``."""
     from pfjax.models.slip import SlipParams, yaw_rate
 
     p = st.robot_params()
-    x = st.STState(*jnp.array([0.0, 0.0, 0.2, 1.2, 0.4, 1.5, 0.05]))
-    br, bf, b = st.axle_slip(x, p)
-    vx = x.v * jnp.cos(x.beta)
-    r = yaw_rate(x.delta, br, bf, SlipParams(v=vx, L=p.wheelbase))
-    assert float(r) == pytest.approx(float(x.psi_dot), rel=1e-12)
-    assert float(b) == float(x.beta)
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        x = st.STState(
+            *jnp.asarray(
+                [0.0, 0.0, *rng.uniform(-0.3, 0.3, 1), rng.uniform(0.5, 2), 0.4, *rng.uniform(-1, 1, 2) * [2, 0.1]]
+            )
+        )
+        vx, vy = x.v * jnp.cos(x.beta), x.v * jnp.sin(x.beta)
+        exact_r = jnp.arctan2(vy - p.l_r * x.psi_dot, vx)
+        exact_f = x.delta - jnp.arctan2(vy + p.l_f * x.psi_dot, vx)
+        r = yaw_rate(x.delta, exact_r, exact_f, SlipParams(v=vx, L=p.wheelbase))
+        assert float(r) == pytest.approx(float(x.psi_dot), rel=1e-12, abs=1e-14)
+        br, bf, b = st.tyre_slip(x, p)
+        assert abs(float(br - exact_r)) <= abs(float(exact_r)) ** 3 + abs(float(x.beta)) ** 3 + 1e-15
+        assert abs(float(bf - exact_f)) <= abs(float(x.delta - exact_f)) ** 3 + abs(float(x.beta)) ** 3 + 1e-15
+        assert float(b) == float(x.beta)
+    slow = st.STState(*jnp.asarray([0.0, 0.0, 0.2, 0.05, 0.4, 0.3, 0.02]))
+    assert [float(a) for a in st.tyre_slip(slow, p)[:2]] == [0.0, 0.0]  # the kinematic branch: no tyre slip

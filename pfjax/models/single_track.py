@@ -380,21 +380,24 @@ def rhs(x: Array, u: Array, params: STParams) -> Array:
     return jnp.stack(vector_field(STState(*(x[i] for i in range(7))), u[0], u[1], params))
 
 
-def axle_slip(x: STState, params: STParams) -> tuple[Array, Array, Array]:
-    """Slip angles of a state, in pfjax's kinematic slip model's convention (:mod:`pfjax.models.slip`,
-    ``SOURCE``), rad: ``(beta_r, beta_f, beta)``::
+def tyre_slip(x: STState, params: STParams) -> tuple[Array, Array, Array]:
+    """The slip angles of a state as the model's tyre forces see them, in pfjax's kinematic slip
+    model's convention (:mod:`pfjax.models.slip`, ``SOURCE``), rad: ``(beta_r, beta_f, beta)``::
 
-        beta_r = atan2(v sin(beta) - l_r psi_dot, v cos(beta))              rear axle's velocity angle to the body
-        beta_f = delta - atan2(v sin(beta) + l_f psi_dot, v cos(beta))      front wheel's angle to its velocity
+        beta_r = beta - l_r psi_dot / v              = -alpha_r   (rear axle's velocity angle to the body)
+        beta_f = delta - beta - l_f psi_dot / v      =  alpha_f   (front wheel's angle to its velocity)
         beta   = the state's slip angle at the centre of mass
 
-    so that the kinematic model driven by these ``beta_r``, ``beta_f`` (and the rear axle's
-    longitudinal speed ``v cos(beta)``) has the same yaw rate and rear-axle velocity. In the tyre
-    convention, the front and rear tyre slip angles are ``alpha_f = beta_f``, ``alpha_r = -beta_r``
-    (exactly; the ST model's forces use their linearisations). Defined for ``v cos(beta) > 0``.
+    ``alpha_f``, ``alpha_r`` are the ST model's (linearised) tyre slip angles. They are the
+    small-angle forms of the exact angles ``atan2(v sin(beta) - l_r psi_dot, v cos(beta))`` and
+    ``delta - atan2(v sin(beta) + l_f psi_dot, v cos(beta))``, with which the kinematic slip model
+    (speed ``v cos(beta)``) has the dynamic state's yaw rate and rear-axle velocity; the two differ
+    by third-order terms (measured in the tests: below ``|angle|^3``). In the kinematic branch
+    (``|v| < v_kinematic``) the tyres do not slip: ``beta_r = beta_f = 0``.
     """
-    sb, cb = E.sincos(x.beta)
-    vx, vy = x.v * cb, x.v * sb
-    beta_r = E.atan2(vy - params.l_r * x.psi_dot, vx)
-    beta_f = x.delta - E.atan2(vy + params.l_f * x.psi_dot, vx)
+    slow = jnp.abs(x.v) < params.v_kinematic
+    inv_v = 1 / jnp.where(slow, jnp.ones_like(x.v), x.v)
+    zero = jnp.zeros_like(x.v)
+    beta_r = jnp.where(slow, zero, x.beta - params.l_r * x.psi_dot * inv_v)
+    beta_f = jnp.where(slow, zero, x.delta - x.beta - params.l_f * x.psi_dot * inv_v)
     return beta_r, beta_f, x.beta

@@ -26,9 +26,10 @@ friction ``mu``. Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_s
    The ST model has no rolling or air resistance, so the proportional speed loop has no
    steady-state error.
 
-The slip angles are measured at every sample (:func:`pfjax.models.single_track.axle_slip`, in the
-kinematic slip model's ``SOURCE`` convention, so that they compare directly with the slip the
-kinematic studies declare): rear ``beta_r``, front ``beta_f`` and at the centre of mass ``beta``;
+The slip angles are measured at every sample (:func:`pfjax.models.single_track.tyre_slip`: the
+tyre slip angles the model's forces use, in the kinematic slip model's ``SOURCE`` convention, so
+that they compare directly with the slip the kinematic studies declare): rear ``beta_r``, front
+``beta_f`` and at the centre of mass ``beta``;
 :class:`SlipMetrics` holds their largest and time-mean magnitudes (degrees). The path-following
 metrics are the kinematic vehicle's (:func:`~pfjax.sim.simulate.update_metrics`; the applied steering
 is the actuator's angle ``delta``). Only sampled controllers (``SimConfig.control_every >= 1``).
@@ -206,7 +207,7 @@ def _step(controller: Controller, config: SimConfig, sc: DynamicScenario, carry:
     t = jnp.where(last, jnp.asarray(n_steps * dt, x.v.dtype), k * dt)
     pose = rear_axle_pose(x, p)
     proj = measure_pose(sc, pose, u, config.newton_iters)
-    slip = st.axle_slip(x, p)
+    slip = st.tyre_slip(x, p)
     dmax = jnp.asarray(p.delta_max, float)
     v_rear = x.v * E.sincos(x.beta)[1]  # m/s, the rear axle's longitudinal speed
     obs = noisy_observation(observation(proj, pose, v_rear, p.l_f + p.l_r, dmax, sc.path), sc.noise, k)
