@@ -23,6 +23,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from pfjax import errors
+from pfjax.resources import MAX_STEPS
 
 # ----------------------------------------------------------------------------- distributions
 
@@ -98,13 +99,18 @@ _SCENARIO_KEYS = {
     "start_along_m": "initial.start_along_m",
     "lateral_offset": "initial.lateral_offset",
     "heading_error_deg": "initial.heading_error_deg",
+    "mu": "vehicle.mu",
+    "vehicle_params": "vehicle.params",
+    "tau_delta_s": "vehicle.tau_delta_s",
+    "k_v": "vehicle.k_v",
+    "model": "vehicle.model",
 }
 
 
 class Scenarios(NamedTuple):
     """A batch of runs of one path (:func:`scenarios`)."""
 
-    batch: Any  # pfjax.sim.Scenario with a leading run axis (gains None: set by simulate)
+    batch: Any  # pfjax.sim.Scenario (model st: pfjax.sim.dynamic.DynamicScenario) with a leading run axis (gains None)
     table: Any  # pandas DataFrame: one row per run, the sampled values (config units)
     spec: Any  # the study config that describes them (pfjax.montecarlo.config.StudySpec)
 
@@ -117,17 +123,22 @@ def scenarios(
     path: str = "sine",
     n: int = 1,
     *,
-    beta_r_deg=5.0,
-    beta_f_deg=5.0,
+    beta_r_deg=None,
+    beta_f_deg=None,
     lateral_offset=0.0,
     heading_error_deg=0.0,
     start_along_m=0.0,
     speed=1.0,
-    L=0.2,
-    delta_max_deg=30.0,
-    convention: str = "source",
+    L=None,
+    delta_max_deg=None,
+    convention: str | None = None,
     horizon: float = 20.0,
     key=0,
+    model: str = "kinematic",
+    vehicle_params: str | None = None,
+    mu=None,
+    tau_delta_s: float | None = None,
+    k_v: float | None = None,
 ) -> Scenarios:
     """``n`` runs on a registered path (:data:`pfjax.paths.PATHS`), vectorised: each quantity is a
     number (every run), an array of ``n`` numbers (run by run), or a distribution
@@ -137,18 +148,27 @@ def scenarios(
     Args:
         path: a registered path kind (``line``, ``parabola``, ``sine``, ``circle``, ...).
         n: number of runs.
-        beta_r_deg: constant rear slip angle, deg.
-        beta_f_deg: constant front slip angle, deg.
+        beta_r_deg: constant rear slip angle, deg (kinematic model; default 5).
+        beta_f_deg: constant front slip angle, deg (kinematic model; default 5).
         lateral_offset: start offset left of the path, m.
         heading_error_deg: start heading error, deg.
         start_along_m: start, m along the path from its nominal start.
         speed: rear-axle speed, m/s.
-        L: wheelbase, m.
-        delta_max_deg: steering limit, deg.
-        convention: front-slip sign convention (``source`` or ``lenain``).
+        L: wheelbase, m (kinematic model; default 0.2).
+        delta_max_deg: steering limit, deg (kinematic model; default 30).
+        convention: front-slip sign convention (``source`` or ``lenain``; kinematic model).
         horizon: s, only to size slip sequences (the simulation's horizon is :func:`simulate`'s).
         key: an int seed or a JAX PRNG key; run ``i`` draws from ``fold_in(key, i)``, so the first
             runs of a larger ``n`` are the same runs.
+        model: ``"kinematic"`` (slip declared by ``beta_r_deg``, ``beta_f_deg``) or ``"st"``
+            (CommonRoad's single-track model, :mod:`pfjax.sim.dynamic`: the slip comes from the tyre
+            forces, so the slip, ``L``, ``delta_max_deg`` and ``convention`` are refused with it).
+        vehicle_params: st: parameter set, ``robot`` (default) or ``vehicle1``-``vehicle3``.
+        mu: st: friction coefficient (default the set's). tau_delta_s: st: steering actuator time
+            constant, s (default 0.05). k_v: st: speed loop gain, 1/s (default 5).
+
+    The arguments are checked as a study config's ``[vehicle]``, ``[slip]`` and ``[initial]`` keys
+    are (the same validation, the message naming the argument).
     """
     import pandas as pd
 
@@ -156,6 +176,9 @@ def scenarios(
     from pfjax.montecarlo.sampling import sample_runs
 
     n = errors.integer("n", n, low=1, high=100_000_000)
+    if model == "kinematic":  # the kinematic defaults (None: not given, so the ST model can refuse a given one)
+        beta_r_deg = 5.0 if beta_r_deg is None else beta_r_deg
+        beta_f_deg = 5.0 if beta_f_deg is None else beta_f_deg
     values = dict(
         speed=speed,
         L=L,
@@ -165,9 +188,12 @@ def scenarios(
         start_along_m=start_along_m,
         lateral_offset=lateral_offset,
         heading_error_deg=heading_error_deg,
+        mu=mu,
     )
     dists, given = {}, {}
     for name, v in values.items():
+        if v is None:
+            continue
         if isinstance(v, (Dist, dict)):
             dists[name] = v.model_dump() if isinstance(v, Dist) else v
             continue
@@ -184,7 +210,7 @@ def scenarios(
             given[name] = a
     seed = key if isinstance(key, (int, np.integer)) and not isinstance(key, bool) else 0
     errors.seed("key", seed)
-    data = {
+    data: dict[str, Any] = {
         "name": "scenarios",
         "n_runs": n,
         "seed": int(seed),
@@ -192,14 +218,26 @@ def scenarios(
         "controllers": [{"name": "none", "type": "state_feedback"}],
         "sim": {"horizon": horizon},
         "vehicle": {
-            "speed": dists["speed"],
-            "L": dists["L"],
-            "delta_max_deg": dists["delta_max_deg"],
-            "convention": convention,
+            "model": model,
+            **{k: dists[k] for k in ("speed", "L", "delta_max_deg", "mu") if k in dists},
+            **{
+                k: v
+                for k, v in (
+                    ("convention", convention),
+                    ("params", vehicle_params),
+                    ("tau_delta_s", tau_delta_s),
+                    ("k_v", k_v),
+                )
+                if v is not None
+            },
         },
-        "slip": {"beta_r_deg": dists["beta_r_deg"], "beta_f_deg": dists["beta_f_deg"]},
+        "slip": {k: dists[k] for k in ("beta_r_deg", "beta_f_deg") if k in dists},
         "initial": {k: dists[k] for k in ("start_along_m", "lateral_offset", "heading_error_deg")},
     }
+    if model == "st":
+        data["margin"] = {"enabled": False}
+        # the step is simulate()'s, which checks it against the tyre modes; here the finest allowed
+        data["sim"]["dt"] = horizon / MAX_STEPS
     try:
         spec, _ = load_study(data=data)
     except errors.InputError as e:
@@ -285,8 +323,8 @@ def simulate(
     import jax
 
     from pfjax import controllers as C
-    from pfjax.montecarlo.runner import add_results, batch_size
-    from pfjax.sim import SimConfig, simulate_batch
+    from pfjax.montecarlo.runner import add_results, batch_size, simulate_scenarios
+    from pfjax.sim import SimConfig
 
     if not isinstance(scenarios, Scenarios):
         raise errors.InputError(
@@ -312,6 +350,18 @@ def simulate(
         raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
     config = dataclasses.replace(config, record=bool(trajectories))
     t = scenarios.table
+    if scenarios.spec.vehicle.model == "st":
+        from pfjax.models.single_track import max_stable_step
+
+        veh = scenarios.spec.vehicle
+        worst = veh.st_params()._replace(mu=float(t["mu"].max()))
+        dt_max = max_stable_step(worst, float(t["speed"].min()), veh.tau_delta_s, veh.k_v)
+        if config.dt > dt_max:
+            raise errors.InputError(
+                f"config.dt: the ST model at mu = {worst.mu:g} and speed {float(t['speed'].min()):g} m/s (the runs' "
+                f"worst case) needs dt <= {dt_max:.3g} s for a stable RK4 step, got {config.dt:g}",
+                "config",
+            )
     params, flat = _gains_of(e, d, gains, float(t["speed"].mean()), float(t["L"].mean()))
     n = scenarios.n
     m = batch_size(n)  # padded like a study's chunks: every run takes the same vector code
@@ -321,7 +371,7 @@ def simulate(
         gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(np.asarray(g), (m,) + np.shape(g)), params)
     )
     res = jax.tree_util.tree_map(
-        lambda a: np.asarray(a)[:n], simulate_batch(batch, controller=e.controller, config=config)
+        lambda a: np.asarray(a)[:n], simulate_scenarios(batch, controller=e.controller, config=config)
     )
     return Simulation(add_results(t.copy(), res, n), res, e.name, {k: flat[k] for k in e.gains})
 
@@ -343,8 +393,15 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
 
     from pfjax.montecarlo.config import StudySpec
     from pfjax.montecarlo.config import load_study as load_config
-    from pfjax.montecarlo.runner import add_results, controller_of, precision, sample_few, sim_config, with_gains
-    from pfjax.sim import simulate_batch
+    from pfjax.montecarlo.runner import (
+        add_results,
+        controller_of,
+        precision,
+        sample_few,
+        sim_config,
+        simulate_scenarios,
+        with_gains,
+    )
 
     if isinstance(study, (str, Path)):
         study = load_study(study)
@@ -370,7 +427,7 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
         ctrl, gains, flat = controller_of(spec.controllers[c], spec, c)
         m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
         cfg = dataclasses.replace(sim_config(spec), record=bool(trajectories))
-        res = simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
+        res = simulate_scenarios(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
     n = len(idx)
     res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:n], res)
     table = pd.DataFrame(

@@ -42,6 +42,7 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "lateral_offset": ("m", "start offset left of the path"),
     "heading_error_deg": ("deg", "start heading error"),
     "radius": ("m", "circle radius"),
+    "mu": ("1", "tyre-road friction coefficient (vehicle.model = st)"),
     # metrics (pfjax.metrics.running)
     "iae": ("m s", "integral of |d| over the run"),
     "ise": ("m^2 s", "integral of d^2 over the run"),
@@ -59,6 +60,13 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "status_code": ("", "run status code (pfjax.sim.status)"),
     "status": ("", "run status name: ok, nonfinite, diverged, singular, path_end"),
     "fail_time": ("s", "time of the first failure (NaN: none)"),
+    # slip the ST model produced (pfjax.sim.dynamic.SlipMetrics; vehicle.model = st)
+    "max_abs_beta_r_deg": ("deg", "st: largest |rear-axle slip| (kinematic model's convention)"),
+    "max_abs_beta_f_deg": ("deg", "st: largest |front-wheel slip| (kinematic model's convention)"),
+    "max_abs_beta_deg": ("deg", "st: largest |slip angle at the centre of mass|"),
+    "mean_abs_beta_r_deg": ("deg", "st: time-mean |rear-axle slip|"),
+    "mean_abs_beta_f_deg": ("deg", "st: time-mean |front-wheel slip|"),
+    "mean_abs_beta_deg": ("deg", "st: time-mean |slip angle at the centre of mass|"),
     # the margin sweep
     "amplitude_deg": ("deg", "slip amplitude A of the sweep"),
     "axis": ("", "slipping axle(s): rear, front or joint"),

@@ -22,7 +22,7 @@ from pfjax.paths import shapes
 from pfjax.paths.geometry import closest_parameter, curvature, global_parameter, measure, wrap_angle
 from pfjax.sim import SensorNoise, SimConfig, simulate_batch, stack
 from pfjax.sim.scenario import paper_scenario
-from pfjax.sim.simulate import _noisy
+from pfjax.sim.simulate import noisy_observation
 
 CFG = SimConfig(horizon=4.0, record=False)
 SIGMA_D, SIGMA_THETA = 0.05, math.radians(5.0)
@@ -124,7 +124,7 @@ def _poses(path):
 
 @pytest.mark.parametrize("sigma_d", [1e-4, 0.05])
 def test_measured_pose_is_consistent_with_the_measured_errors(sigma_d):
-    """``_noisy`` against an independent computation with :mod:`pfjax.paths.geometry`: the measured
+    """``noisy_observation`` against an independent computation with :mod:`pfjax.paths.geometry`: the measured
     d and theta_e are the true ones plus exactly e_d and e_theta; the measured pose is the true one
     moved by e_d along the left unit normal at the closest point (from the path's derivative) and
     turned by e_theta; projecting it onto the path again gives the same closest point, d + e_d and
@@ -139,7 +139,7 @@ def test_measured_pose_is_consistent_with_the_measured_errors(sigma_d):
         for i in range(len(us)):
             pose = Pose(*(a[i] for a in poses))
             obs = _exact_observation(path, pose, us[i])
-            m = _noisy(obs, noise, k)
+            m = noisy_observation(obs, noise, k)
             # the errors, exactly as the controllers on (d, theta_e) see them
             assert float(m.d) == float(obs.d + e_d)
             assert float(m.theta_e) == float(wrap_angle(obs.theta_e + e_th))
@@ -175,7 +175,7 @@ def test_every_controller_reads_the_measured_pose(name):
         for i in range(len(us)):
             pose = Pose(*(a[i] for a in poses))
             obs = _exact_observation(path, pose, us[i])
-            m = _noisy(obs, noise, k)
+            m = noisy_observation(obs, noise, k)
             remeasured = _exact_observation(path, m.pose, obs.u)
             np.testing.assert_allclose(
                 float(out(m)), float(out(remeasured)), rtol=0, atol=1e-9, err_msg=f"{name}, pose {i}, step {k}"

@@ -3,6 +3,13 @@
     pfjax simulate --path {line,parabola,sine,circle} --controller NAME [--gains G,...]
                    [--x0 X Y THETA_DEG] [--beta-r-deg 5] [--beta-f-deg 5] [--horizon 20] [--dt 0.005]
                    [--speed 1] [--wheelbase 0.2] [--delta-max-deg 30] [--json]
+    pfjax simulate --model st [--vehicle robot|vehicle1|vehicle2|vehicle3] [--mu MU]
+                   [--tau-delta 0.05] [--k-v 5] --path ... --controller NAME [...]
+
+``--model st`` simulates CommonRoad's single-track model (:mod:`pfjax.sim.dynamic`): the slip
+comes from the tyre forces, so the slip flags, ``--wheelbase``, ``--delta-max-deg``,
+``--convention`` and ``--continuous`` are refused with it (the set's wheelbase and steering limit),
+and the output adds the slip the run produced.
 
 ``--T``, ``--v`` and ``--L`` are deprecated spellings of ``--horizon``, ``--speed`` and
 ``--wheelbase`` (read for one release). ``--x0``'s THETA is in degrees, as in ``pfjax parking``.
@@ -81,6 +88,37 @@ def _controller_and_gains(args):
     return e.controller, gains, {k: flat[k] for k in e.gains}
 
 
+#: Flags of one model only: given with the other model they are a usage error naming the flag.
+KINEMATIC_FLAGS = {
+    "beta_r_deg": "--beta-r-deg",
+    "beta_f_deg": "--beta-f-deg",
+    "wheelbase": "--wheelbase",
+    "delta_max_deg": "--delta-max-deg",
+    "convention": "--convention",
+}
+ST_FLAGS = {"vehicle": "--vehicle", "mu": "--mu", "tau_delta": "--tau-delta", "k_v": "--k-v"}
+#: The kinematic flags' defaults (``None`` in the parser, so that a given one can be told apart).
+KINEMATIC_DEFAULTS = {
+    "beta_r_deg": 5.0,
+    "beta_f_deg": 5.0,
+    "wheelbase": 0.2,
+    "delta_max_deg": 30.0,
+    "convention": "source",
+}
+
+
+def _check_model_flags(args) -> None:
+    """:class:`UsageError` naming the first flag given that the chosen ``--model`` does not take;
+    the kinematic flags' defaults filled in."""
+    other = ST_FLAGS if args.model == "kinematic" else {**KINEMATIC_FLAGS, "continuous": "--continuous"}
+    for dest, flag in other.items():
+        if getattr(args, dest) not in (None, False):
+            raise UsageError(f"{flag}: not with --model {args.model}")
+    for dest, value in KINEMATIC_DEFAULTS.items():
+        if getattr(args, dest) is None:
+            setattr(args, dest, value)
+
+
 SIMULATE_FLAGS = {
     "v": "--speed",
     "L": "--wheelbase",
@@ -93,6 +131,10 @@ SIMULATE_FLAGS = {
     "control_every": "--control-every",
     "convention": "--convention",
     "gains": "--gains",
+    "params": "--vehicle",
+    "mu": "--mu",
+    "tau_delta": "--tau-delta",
+    "k_v": "--k-v",
 }
 
 
@@ -104,6 +146,7 @@ def cmd(args) -> dict:
     from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack, unstack
     from pfjax.sim.scenario import paper_scenario
 
+    _check_model_flags(args)
     if args.continuous and args.control_every is not None:
         raise UsageError(
             "--control-every: not with --continuous (a continuous controller is evaluated inside every "
@@ -120,6 +163,8 @@ def cmd(args) -> dict:
             record=False,
             control_every=None if args.continuous else (1 if args.control_every is None else args.control_every),
         )
+        if args.model == "st":
+            return _simulate_st(args, cfg, pose0)
         controller, gains, shown = _controller_and_gains(args)
         sc = paper_scenario(
             args.path,
@@ -160,6 +205,65 @@ def cmd(args) -> dict:
     }
 
 
+def _simulate_st(args, cfg, pose0) -> dict:
+    """One run of the ST model (``--model st``): the output of the kinematic model's run plus the
+    model, its parameter set and the slip the run produced (``slip``, degrees)."""
+    import numpy as np
+
+    from pfjax import paths
+    from pfjax.metrics import METRIC_NAMES
+    from pfjax.models import single_track as st
+    from pfjax.sim import STATUS_NAMES, stack, unstack
+    from pfjax.sim import dynamic as dyn
+    from pfjax.sim.scenario import make_dynamic_scenario
+
+    name = args.vehicle or "robot"
+    vehicle = st.parameter_set(name)
+    args.wheelbase = vehicle.l_f + vehicle.l_r  # the designs are made at the set's wheelbase
+    controller, gains, shown = _controller_and_gains(args)
+    e = paths.entry(args.path)
+    assert e.build is not None and e.start_pose is not None  # --path takes fixed paths
+    sc = make_dynamic_scenario(
+        e.build(),
+        e.start_pose if pose0 is None else pose0,
+        gains,
+        params=name,
+        mu=args.mu,
+        v=args.speed,
+        tau_delta=0.05 if args.tau_delta is None else args.tau_delta,
+        k_v=5.0 if args.k_v is None else args.k_v,
+    )
+    dt_max = st.max_stable_step(sc.vehicle, args.speed, float(sc.tau_delta), float(sc.k_v))
+    if cfg.dt > dt_max:
+        raise UsageError(
+            f"--dt: the ST model at --mu {float(sc.vehicle.mu):g} and --speed {args.speed:g} needs dt <= "
+            f"{dt_max:.3g} s for a stable RK4 step, got {cfg.dt:g}"
+        )
+    r = unstack(dyn.simulate_batch(stack([sc]), controller=controller, config=cfg), 0)
+    status = int(r.status)
+    metrics: dict[str, bool | float | str] = {
+        k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES
+    }
+    metrics["status"] = STATUS_NAMES[status]
+    x0 = args.x0 if args.x0 is not None else (*e.start_pose[:2], math.degrees(e.start_pose[2]))
+    return {
+        "model": "st",
+        "vehicle": name,
+        "mu": float(sc.vehicle.mu),
+        "path": args.path,
+        "controller": args.controller,
+        "gains": shown,
+        "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]},
+        "T": cfg.n_steps * cfg.dt,
+        "dt": cfg.dt,
+        "final": {k: float(v) for k, v in r.final._asdict().items()},
+        "metrics": metrics,
+        "slip": {k: float(v) for k, v in r.slip._asdict().items()},
+        "status_code": status,
+        "fail_time": float(r.fail_time) if np.isfinite(r.fail_time) else None,
+    }
+
+
 def register(sub) -> None:
     m = sub.add_parser(
         "simulate",
@@ -181,8 +285,8 @@ def register(sub) -> None:
         metavar=("X", "Y", "THETA_DEG"),
         help="initial pose (m, m, deg); default: the source's",
     )
-    m.add_argument("--beta-r-deg", type=float, default=5.0, help="rear slip angle, deg (default 5)")
-    m.add_argument("--beta-f-deg", type=float, default=5.0, help="front slip angle, deg (default 5)")
+    m.add_argument("--beta-r-deg", type=float, help="rear slip angle, deg (default 5; kinematic model)")
+    m.add_argument("--beta-f-deg", type=float, help="front slip angle, deg (default 5; kinematic model)")
     from pfjax import controllers as C
 
     m.add_argument(
@@ -212,10 +316,25 @@ def register(sub) -> None:
         action=Aliased,
         dest="wheelbase",
         type=float,
-        default=0.2,
-        help="wheelbase, m (default 0.2)",
+        help="wheelbase, m (default 0.2; kinematic model)",
     )
-    m.add_argument("--delta-max-deg", type=float, default=30.0, help="steering limit, deg")
-    m.add_argument("--convention", choices=("source", "lenain"), default="source", help="front-slip sign convention")
+    m.add_argument("--delta-max-deg", type=float, help="steering limit, deg (default 30; kinematic model)")
+    m.add_argument(
+        "--convention",
+        choices=("source", "lenain"),
+        help="front-slip sign convention (default source; kinematic model)",
+    )
+    from pfjax.models.single_track import PARAMETER_SETS
+
+    m.add_argument(
+        "--model",
+        choices=("kinematic", "st"),
+        default="kinematic",
+        help="vehicle model: kinematic (declared slip) or st (CommonRoad's single-track model, slip from tyre forces)",
+    )
+    m.add_argument("--vehicle", choices=PARAMETER_SETS, help="st: parameter set (default robot)")
+    m.add_argument("--mu", type=float, help="st: friction coefficient (default the set's, 1.0489)")
+    m.add_argument("--tau-delta", type=float, help="st: steering actuator time constant, s (default 0.05)")
+    m.add_argument("--k-v", type=float, help="st: speed loop gain, 1/s (default 5)")
     m.add_argument("--json", action="store_true", help="print one JSON object")
     m.set_defaults(func=cmd)

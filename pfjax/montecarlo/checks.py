@@ -133,8 +133,7 @@ def float64_runs(spec: StudySpec, controllers: dict, n_sample: int, path_index: 
     """The float64 half of :func:`float64_check` for one path: ``{controller name: SimResult}`` (NumPy,
     the :func:`sample_indices` runs only). Independent of the float32 study, so it can run before
     or while the study does. ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
-    from pfjax.montecarlo.runner import sample_few, sim_config, with_gains
-    from pfjax.sim.simulate import simulate_batch
+    from pfjax.montecarlo.runner import sample_few, sim_config, simulate_scenarios, with_gains
 
     idx = sample_indices(spec, n_sample)
     with jax.enable_x64(False):
@@ -145,7 +144,7 @@ def float64_runs(spec: StudySpec, controllers: dict, n_sample: int, path_index: 
         with jax.enable_x64(True):
             sc = _cast64(sampled.scenarios)
             res = jax.device_get(
-                simulate_batch(
+                simulate_scenarios(
                     with_gains(sc, _cast64(gains), m), controller=ctrl, config=sim_config(spec), devices=devices
                 )
             )

@@ -174,8 +174,29 @@ class SuccessSpec(_Model):
     from_s: Real = Field(15.0, ge=0, description="start of the success window, s")
 
 
+#: Keys of ``[vehicle]`` that only the kinematic model reads, and those only the ST model reads.
+KINEMATIC_ONLY = ("L", "delta_max_deg", "delta_rate_max_deg", "convention")
+ST_ONLY = ("params", "mu", "tau_delta_s", "k_v")
+
+
 class VehicleSpec(_Model):
-    speed: Dist = dist_field(1.0, "rear-axle speed, m/s (a distribution)")
+    """The vehicle: ``model = "kinematic"`` (the slip model, slip declared by ``[slip]``;
+    :mod:`pfjax.sim.simulate`) or ``"st"`` (CommonRoad's single-track model, slip from linear tyre
+    forces; :mod:`pfjax.sim.dynamic`) with its parameter set ``params``, friction ``mu``, steering
+    actuator ``tau_delta_s`` and speed loop ``k_v``; its wheelbase and steering limit are the set's."""
+
+    model: Literal["kinematic", "st"] = Field(
+        "kinematic", description="vehicle model: kinematic (declared slip) or st (single-track, tyre forces)"
+    )
+    params: Literal["robot", "vehicle1", "vehicle2", "vehicle3"] = Field(
+        "robot", description="st: parameter set: robot (the 0.2 m robot) or CommonRoad's vehicle1-3"
+    )
+    mu: Dist | None = Field(
+        None, description="st: tyre-road friction coefficient (a distribution; default the parameter set's 1.0489)"
+    )
+    tau_delta_s: Real = Field(0.05, ge=POSITIVE, description="st: steering actuator time constant, s")
+    k_v: Real = Field(5.0, ge=POSITIVE, description="st: speed loop gain, 1/s")
+    speed: Dist = dist_field(1.0, "rear-axle speed, m/s (a distribution; st: the speed loop's reference)")
     L: Dist = dist_field(0.2, "wheelbase, m (a distribution)")
     delta_max_deg: Dist = dist_field(30.0, "steering limit, deg (a distribution)")
     delta_rate_max_deg: Real | None = Field(
@@ -185,7 +206,9 @@ class VehicleSpec(_Model):
         "source", description="front-slip sign convention: source or lenain"
     )
 
-    _coerce = field_validator("speed", "L", "delta_max_deg", mode="before")(lambda v: _as_dist(v))
+    _coerce = field_validator("speed", "L", "delta_max_deg", "mu", mode="before")(
+        lambda v: v if v is None else _as_dist(v)
+    )
     # "no limit" has one spelling, None, so the validated config is strict JSON (and hashes as such)
     _no_limit = field_validator("delta_rate_max_deg", mode="before")(
         lambda v: None if isinstance(v, float) and v == math.inf else v
@@ -200,7 +223,51 @@ class VehicleSpec(_Model):
         lo, hi = self.delta_max_deg.bounds()
         if not (lo > 0 and hi < 90):
             raise ValueError(f"delta_max_deg: must lie in (0, 90) deg, got range [{lo:g}, {hi:g}]")
+        if self.mu is not None:
+            lo, hi = self.mu.bounds()
+            if not (lo > 0 and hi <= 10):
+                raise ValueError(f"mu: must lie in (0, 10] over its whole range, got range [{lo:g}, {hi:g}]")
+        other, theirs = (ST_ONLY, "st") if self.model == "kinematic" else (KINEMATIC_ONLY, "kinematic")
+        for name in other:  # a value other than the default (a dumped config holds every key, at its default)
+            if getattr(self, name) != type(self).model_fields[name].get_default(call_default_factory=True):
+                why = (
+                    "the ST model's wheelbase and steering limit are its parameter set's (vehicle.params)"
+                    if theirs == "kinematic"
+                    else 'it is a setting of model = "st"'
+                )
+                raise ValueError(f'{name}: not with model = "{self.model}" ({why}); remove it')
         return self
+
+    def st_params(self):
+        """The ST model's parameters (:class:`pfjax.models.single_track.STParams`, Python floats) of
+        ``params``, with ``mu`` at its nominal value (the distribution's value, mean or midpoint)."""
+        from pfjax.models.single_track import parameter_set
+
+        p = parameter_set(self.params)
+        return p if self.mu is None else p._replace(mu=nominal(self.mu))
+
+    def wheelbase_bounds(self) -> tuple[float, float]:
+        """The wheelbase's range, m (the kinematic model's ``L``, the ST set's ``l_f + l_r``)."""
+        if self.model == "kinematic":
+            return self.L.bounds()
+        p = self.st_params()
+        return p.l_f + p.l_r, p.l_f + p.l_r
+
+    def delta_max_deg_bounds(self) -> tuple[float, float]:
+        """The steering limit's range, deg."""
+        if self.model == "kinematic":
+            return self.delta_max_deg.bounds()
+        d = math.degrees(self.st_params().delta_max)
+        return d, d
+
+
+def nominal(d: Dist) -> float:
+    """A distribution's nominal value: its value, mean or midpoint."""
+    if d.dist == "constant":
+        return d.number("value")
+    if d.mean is not None:
+        return float(d.mean)
+    return 0.5 * (d.number("low") + d.number("high"))
 
 
 #: How far the Ornstein-Uhlenbeck slip term is taken to reach when the total slip is checked: its
@@ -535,6 +602,30 @@ class StudySpec(_Model):
             raise ValueError(
                 f"falsifier.path: no path labelled {self.falsifier.path!r}; paths are {[p.label for p in self.paths]}"
             )
+        if self.vehicle.model == "st":
+            changed = [k for k, v in self.slip if v != SlipSpec.model_fields[k].get_default(call_default_factory=True)]
+            if changed:
+                key = changed[0]
+                raise ValueError(
+                    f'slip.{key}: not with vehicle.model = "st" (its slip comes from the tyre forces); remove it'
+                )
+            from pfjax.models.single_track import max_stable_step
+
+            veh = self.vehicle
+            mu_hi = veh.st_params().mu if veh.mu is None else veh.mu.bounds()[1]
+            v_lo = veh.speed.bounds()[0]
+            dt_max = max_stable_step(veh.st_params()._replace(mu=mu_hi), v_lo, veh.tau_delta_s, veh.k_v)
+            if self.sim.dt > dt_max:
+                raise ValueError(
+                    f"sim.dt: the ST model at mu = {mu_hi:g} and speed {v_lo:g} m/s (the ranges' worst case) needs "
+                    f"dt <= {dt_max:.3g} s for a stable RK4 step, got {self.sim.dt:g}"
+                )
+            for key, section, what in (
+                ("margin.enabled", self.margin, "slip-margin sweep"),
+                ("falsifier.enabled", self.falsifier, "worst-case search"),
+            ):
+                if section.enabled:
+                    raise ValueError(f'{key}: the {what} declares slip, not with vehicle.model = "st"; set it to false')
         for what, items in (
             ("controllers", [c.name for c in self.controllers]),
             ("paths", [p.label for p in self.paths]),

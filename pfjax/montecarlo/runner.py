@@ -22,17 +22,12 @@ from pfjax.config import ConfigError
 from pfjax.errors import InputError
 from pfjax.metrics.running import METRIC_NAMES
 from pfjax.montecarlo.chunks import ChunkSource, ChunkStore, file_metadata
-from pfjax.montecarlo.config import ControllerSpec, StudySpec
+from pfjax.montecarlo.config import ControllerSpec, StudySpec, nominal
 from pfjax.montecarlo.sampling import column_names, sample_runs
 from pfjax.outputs import OutputDir
-from pfjax.sim import sharding
+from pfjax.sim import dynamic, sharding
 from pfjax.sim.simulate import SimConfig, simulate_batch
 from pfjax.sim.status import STATUS_NAMES
-
-
-def _nominal(d) -> float:
-    """A distribution's nominal value: its value, mean or midpoint."""
-    return d.value if d.dist == "constant" else (d.mean if d.mean is not None else 0.5 * (d.low + d.high))
 
 
 def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
@@ -44,7 +39,7 @@ def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
     e, d = C.resolve(c.type, f"controllers[{index}].type")
     flat = C.flat_gains(e)
     if d is not None:
-        flat.update(d.make(_nominal(spec.vehicle.speed), _nominal(spec.vehicle.L), alpha=c.alpha, beta=c.beta))
+        flat.update(d.make(nominal(spec.vehicle.speed), nominal_wheelbase(spec), alpha=c.alpha, beta=c.beta))
     if c.K is not None:
         flat.update(zip(e.labels["K"], c.K))
     flat.update(c.gains)
@@ -56,6 +51,11 @@ def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
     if e.name in ("state_feedback", "pi"):
         return C.linear, C.linear_params(gains), flat
     return e.controller, gains, flat
+
+
+def nominal_wheelbase(spec: StudySpec) -> float:
+    """The wheelbase the designs are made at, m: the kinematic ``L``'s nominal value, the ST set's ``l_f + l_r``."""
+    return nominal(spec.vehicle.L) if spec.vehicle.model == "kinematic" else spec.vehicle.wheelbase_bounds()[0]
 
 
 def sim_config(spec: StudySpec) -> SimConfig:
@@ -89,6 +89,14 @@ BATCH_ALIGN = 32
 def batch_size(n: int) -> int:
     """``n`` rounded up to a multiple of :data:`BATCH_ALIGN`."""
     return -(-n // BATCH_ALIGN) * BATCH_ALIGN
+
+
+def simulate_scenarios(scenarios, *, controller, config: SimConfig, devices=None):
+    """A batch of sampled runs through its vehicle model's simulator: :func:`pfjax.sim.simulate_batch`
+    for the kinematic model's :class:`~pfjax.sim.Scenario`, :func:`pfjax.sim.dynamic.simulate_batch`
+    for the ST model's :class:`~pfjax.sim.dynamic.DynamicScenario`."""
+    batch = dynamic.simulate_batch if isinstance(scenarios, dynamic.DynamicScenario) else simulate_batch
+    return batch(scenarios, controller=controller, config=config, devices=devices)
 
 
 def with_gains(sc, gains, n):
@@ -146,7 +154,7 @@ def simulate_chunk(
         sampled = sample_aligned(spec, path_index, idx, slip_override=slip_override, pad_to=pad_to)
     m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
     res = sharding.gather(
-        simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec))
+        simulate_scenarios(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec))
     )
     df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
     for col in column_names(spec):
@@ -164,6 +172,8 @@ def add_results(df: pd.DataFrame, res, n: int) -> pd.DataFrame:
     df["status"] = [STATUS_NAMES[int(s)] for s in df["status_code"]]
     df["fail_time"] = np.asarray(res.fail_time, dtype=float)[:n]
     df["success"] = df["success"].astype(bool)
+    for m in dynamic.SLIP_METRIC_NAMES if isinstance(res, dynamic.DynamicResult) else ():
+        df[m] = np.asarray(getattr(res.slip, m), dtype=float)[:n]
     return df
 
 

@@ -21,6 +21,7 @@ from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
 from pfjax.montecarlo.config import Dist, PathSpec, StudySpec
 from pfjax.paths import shapes
 from pfjax.paths.geometry import arc_length, tangent_angle
+from pfjax.sim.dynamic import DynamicScenario
 from pfjax.sim.simulate import Scenario, SensorNoise
 from pfjax.sim.slip_profiles import SlipProfile
 
@@ -51,6 +52,7 @@ QUANTITIES = (
     "ou_f",
     "sign_r",
     "sign_f",
+    "mu",
 )
 Q = {name: i for i, name in enumerate(QUANTITIES)}
 
@@ -100,7 +102,7 @@ class Sampled(NamedTuple):
     """Per-run sampled values in config units (the columns of runs.parquet)."""
 
     columns: dict  # name -> np.ndarray (n,)
-    scenarios: Scenario  # batched, gains = None (filled per controller)
+    scenarios: Scenario | DynamicScenario  # batched (by vehicle.model), gains = None (filled per controller)
 
 
 SLIP_COLUMNS = {
@@ -127,6 +129,8 @@ def column_names(spec: StudySpec) -> list[str]:
     ]
     if any(p.kind == "circle" for p in spec.paths):
         cols.append("radius")
+    if spec.vehicle.model == "st":
+        cols.append("mu")
     return cols
 
 
@@ -244,6 +248,7 @@ GIVEN = (
     "start_along_m",
     "lateral_offset",
     "heading_error_deg",
+    "mu",
 )
 
 
@@ -295,7 +300,7 @@ def sample_runs(
 def _kappa_follow(spec: StudySpec) -> float:
     """The followable curvature for the most restrictive vehicle in the distribution (random paths)."""
     veh = spec.vehicle
-    return math.tan(math.radians(veh.delta_max_deg.bounds()[0])) / veh.L.bounds()[1]
+    return math.tan(math.radians(veh.delta_max_deg_bounds()[0])) / veh.wheelbase_bounds()[1]
 
 
 @partial(jax.jit, static_argnames=("study", "circle", "batched_path"))
@@ -313,6 +318,12 @@ def _draw_runs(
     def one(key, given):
         d = lambda dist, name: given[name] if name in given else draw(dist, _q(key, name))
         speed, L, dmax = d(v.speed, "speed"), d(v.L, "L"), d(v.delta_max_deg, "delta_max_deg")
+        extra = {}
+        if v.model == "st":  # the set's wheelbase and steering limit; the friction drawn
+            st_nominal = v.st_params()
+            L = jnp.asarray(st_nominal.l_f + st_nominal.l_r, float)
+            dmax = jnp.asarray(math.degrees(st_nominal.delta_max), float)
+            extra["mu"] = jnp.asarray(st_nominal.mu, float) if v.mu is None else d(v.mu, "mu")
         profile, cols = _slip(spec, key, horizon, given)
         start_along_m = d(spec.initial.start_along_m, "start_along_m")
         offset = d(spec.initial.lateral_offset, "lateral_offset")
@@ -324,6 +335,7 @@ def _draw_runs(
             start_along_m=start_along_m,
             lateral_offset=offset,
             heading_error_deg=herr,
+            **extra,
         )
         params = SlipParams(
             v=speed,
@@ -355,5 +367,19 @@ def _draw_runs(
             jnp.full((n,), spec.noise.sigma_d, float),
             jnp.full((n,), spec.noise.sigma_theta_e_deg * rad, float),
             jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys),
+        )
+    if v.model == "st":
+        per_run = lambda a: jnp.full((n,), a, params.v.dtype)
+        vehicle = jax.tree_util.tree_map(per_run, v.st_params())._replace(mu=cols["mu"])
+        return cols, DynamicScenario(
+            pose0=pose0,
+            vehicle=vehicle,
+            v_ref=params.v,
+            path=path,
+            gains=None,
+            tau_delta=per_run(v.tau_delta_s),
+            k_v=per_run(v.k_v),
+            noise=noise,
+            u0=u0,
         )
     return cols, Scenario(pose0=pose0, slip=profiles, params=params, path=path, gains=None, noise=noise, u0=u0)

@@ -31,13 +31,14 @@ from pfjax.metrics.running import METRIC_NAMES
 from pfjax.montecarlo.config import StudySpec, study_hash
 from pfjax.montecarlo.sampling import column_names
 from pfjax.provenance import machine
+from pfjax.sim.dynamic import SLIP_METRIC_NAMES
 
 QUANTILE_METRICS = [m for m in METRIC_NAMES if m != "success"]
 
 
 def _block(df: pd.DataFrame) -> dict:
     s = success_summary(df["success"].to_numpy())
-    q = metric_quantiles(df, QUANTILE_METRICS)
+    q = metric_quantiles(df, QUANTILE_METRICS + [m for m in SLIP_METRIC_NAMES if m in df])
     return {
         **s,
         "iae_mean": q["iae"]["mean"],

@@ -47,7 +47,9 @@ the focus-point tracker's)::
     3     singular   1 - kappa d <= 0 (Frenet model invalid)     |det M / (l p)| < sing_tol (no inverse)
     4     path_end   closest point at the path domain's end      -
 
-The slip vehicle checks the sample's current state (check, then step; its last sample ``k = N``
+The dynamic vehicle (:mod:`pfjax.sim.dynamic`, CommonRoad's single-track model) uses the slip
+vehicle's :class:`~pfjax.sim.status.Status` with the same checks on its rear axle's measurement (and
+every entry of its state finite), in the same order (check, then step). The slip vehicle checks the sample's current state (check, then step; its last sample ``k = N``
 only measures, ``keep``); the tracker checks the state after its step (step, then check, at
 ``t_{k+1}``). Its failure time is NaN for a run that never fails, the tracker's ``inf``.
 

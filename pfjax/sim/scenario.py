@@ -1,4 +1,5 @@
-"""Single scenarios: the source's tests from their start poses (docs/reproductions/path-following.md §6) and a checked builder.
+"""Single scenarios: the source's tests from their start poses (docs/reproductions/path-following.md §6) and checked
+builders (:func:`make_scenario` for the kinematic slip vehicle, :func:`make_dynamic_scenario` for the ST model).
 
 | test     | path        | initial (x, y) | initial theta |
 |----------|-------------|----------------|---------------|
@@ -20,7 +21,9 @@ import jax.numpy as jnp
 
 from pfjax import errors, paths
 from pfjax.errors import InputError
+from pfjax.models import single_track as st
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
+from pfjax.sim.dynamic import DynamicScenario
 from pfjax.sim.simulate import Scenario
 from pfjax.sim.slip_profiles import SlipProfile, constant_slip
 
@@ -95,3 +98,49 @@ def paper_scenario(
     assert e.build is not None  # a fixed path (checked above)
     slip = constant_slip(math.radians(beta_r_deg), math.radians(beta_f_deg))
     return make_scenario(e.build(), e.start_pose if pose0 is None else pose0, gains, slip=slip, **kwargs)
+
+
+def make_dynamic_scenario(
+    path, pose0, gains, *, params="robot", mu=None, v=1.0, tau_delta=0.05, k_v=5.0
+) -> DynamicScenario:
+    """One run of the dynamic vehicle (:mod:`pfjax.sim.dynamic`) from plain values, checked
+    (:class:`~pfjax.errors.InputError` naming the argument).
+
+    Args:
+        path: a path shape (:mod:`pfjax.paths.shapes`).
+        pose0: rear-axle start pose ``(x, y, theta)``, m, m, rad.
+        gains: the controller's parameter pytree.
+        params: the ST parameter set's name (:data:`pfjax.models.single_track.PARAMETER_SETS`: ``robot``,
+            ``vehicle1``-``vehicle3``) or an :class:`~pfjax.models.single_track.STParams`.
+        mu: friction coefficient in ``(0, 10]`` (default: the set's).
+        v: reference speed, m/s. tau_delta: steering actuator time constant, s. k_v: speed loop gain, 1/s.
+    """
+    if isinstance(params, str):
+        if params not in st.PARAMETER_SETS:
+            raise InputError(f"params: expected one of {', '.join(st.PARAMETER_SETS)}, got {params!r}", "params")
+        params = st.parameter_set(params)
+    elif not isinstance(params, st.STParams):
+        raise InputError(
+            f"params: expected a parameter set's name or an STParams, got {type(params).__name__}", "params"
+        )
+    if mu is not None:
+        errors.numbers("mu", mu, positive=True, high=10)
+        params = params._replace(mu=mu)
+    errors.numbers("v", v, positive=True, unit=" m/s")
+    errors.numbers("tau_delta", tau_delta, positive=True, unit=" s")
+    errors.numbers("k_v", k_v, positive=True, unit=" 1/s")
+    if not errors.is_traced(pose0) and (not hasattr(pose0, "__len__") or len(pose0) != 3):
+        raise InputError(f"pose0: expected (x, y, theta), got {pose0!r}")
+    for name, value in zip(("pose0[0]", "pose0[1]", "pose0[2]"), pose0):
+        errors.numbers(name, value)
+    check_gains(gains)
+    f = lambda a: jnp.asarray(a, dtype=float)
+    return DynamicScenario(
+        pose0=Pose(*(f(a) for a in pose0)),
+        vehicle=jax.tree_util.tree_map(f, params),
+        v_ref=f(v),
+        path=path,
+        gains=gains,
+        tau_delta=f(tau_delta),
+        k_v=f(k_v),
+    )

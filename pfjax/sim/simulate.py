@@ -3,12 +3,12 @@
 Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_step`:
 
 1. measure the pose against the path (closest point, warm-started Newton, docs/reproductions/path-following.md §2) and, with
-   :class:`SensorNoise`, give the controller the noisy measurement (:func:`_noisy`);
+   :class:`SensorNoise`, give the controller the noisy measurement (:func:`noisy_observation`);
 2. sampled controllers: every ``control_every`` steps compute a new command and hold it
    (zero-order hold); continuous controllers: evaluated inside every RK4 stage instead;
 3. saturate the steering at ``+-delta_max``; check the run's health (:mod:`pfjax.sim.status`);
 4. propose one RK4 step of the pose (and a continuous controller's state), slip evaluated at the
-   stage times; the loop accumulates the metrics (:func:`_update`) and freezes a failed run.
+   stage times; the loop accumulates the metrics (:func:`update_metrics`) and freezes a failed run.
 
 :func:`simulate` is one run (write single-run code); :func:`simulate_batch` is the jitted,
 vmapped entry point. ``SimConfig`` fixes the shapes and is a static argument.
@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import partial
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -131,7 +131,7 @@ class SensorNoise(NamedTuple):
     the path's radius of curvature there), at signed distance ``d + e_d``, with heading error
     ``theta_e + e_theta``. Controllers on ``(d, theta_e)`` see noise of std
     ``sigma_d`` and ``sigma_theta_e`` on them; the geometric trackers (Stanley, pure pursuit) compute
-    their commands from the measured pose, consistent with those errors (see :func:`_noisy`).
+    their commands from the measured pose, consistent with those errors (see :func:`noisy_observation`).
     The noise is white: independent between steps and between ``d`` and ``theta_e``. The metrics
     and the health checks use the true errors.
 
@@ -196,8 +196,10 @@ class SimResult(NamedTuple):
     trajectory: Trajectory | None
 
 
-def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
-    p = sc.params
+def observation(proj: Projection, pose: Pose, v, L, delta_max, path) -> Observation:
+    """What the controllers see of a measured pose: its closest point ``proj``, the rear-axle
+    ``pose`` (m, m, rad), the speed ``v`` (m/s), wheelbase ``L`` (m) and steering limit ``delta_max``
+    (rad) they may use, and the ``path`` (for trackers that look ahead)."""
     return Observation(
         d=proj.d,
         theta_e=proj.theta_e,
@@ -205,14 +207,19 @@ def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
         s=proj.s,
         u=proj.u,
         pose=pose,
-        v=jnp.asarray(p.v, float),
-        L=jnp.asarray(p.L, float),
-        delta_max=jnp.asarray(p.delta_max, float),
-        path=sc.path,
+        v=jnp.asarray(v, float),
+        L=jnp.asarray(L, float),
+        delta_max=jnp.asarray(delta_max, float),
+        path=path,
     )
 
 
-def _noisy(obs: Observation, noise: SensorNoise | None, k) -> Observation:
+def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
+    p = sc.params
+    return observation(proj, pose, p.v, p.L, p.delta_max, sc.path)
+
+
+def noisy_observation(obs: Observation, noise: SensorNoise | None, k) -> Observation:
     """The observation the controllers see at step ``k``: the exact one (``noise is None``), or the
     one measured from the noisy pose (:class:`SensorNoise`'s equations), with
     ``(n0, n1) = step_normals(noise.key, k, 2)``: ``d_m = d + e_d``, ``theta_e,m = wrap(theta_e + e_theta)``
@@ -233,7 +240,10 @@ def _noisy(obs: Observation, noise: SensorNoise | None, k) -> Observation:
     return obs._replace(d=obs.d + e_d, theta_e=wrap_angle(obs.theta_e + e_theta), pose=measured)
 
 
-def _measure(sc: Scenario, pose: Pose, u_guess, iters) -> Projection:
+def measure_pose(sc: WithPath, pose: Pose, u_guess, iters) -> Projection:
+    """The rear-axle ``pose``'s closest point on ``sc.path`` (any scenario with a ``path``): ``iters``
+    warm-started Newton steps from ``u_guess``, then the errors ``d``, ``theta_e`` and the path's
+    ``kappa``, ``s`` there (:func:`pfjax.paths.geometry.measure`)."""
     # the closest point and (below) the command and the applied steering are read by many of the
     # step's kernels, and their cotangents by many of the backward step's: each is computed once
     # (E.computed_once; measured: reverse mode about 30 % cheaper, forward mode about 13 % dearer,
@@ -242,6 +252,13 @@ def _measure(sc: Scenario, pose: Pose, u_guess, iters) -> Projection:
     u = E.computed_once(closest_parameter(sc.path, pose.x, pose.y, u_guess, iters))
     proj = measure(sc.path, pose.x, pose.y, pose.theta, u)
     return proj._replace(theta_e=E.computed_once(proj.theta_e))
+
+
+class WithPath(Protocol):
+    """Any scenario with a ``path`` (the slip vehicle's :class:`Scenario`, the dynamic vehicle's)."""
+
+    @property
+    def path(self) -> Any: ...
 
 
 class _State(NamedTuple):
@@ -293,7 +310,7 @@ def _closed_loop_rhs(controller: Controller, sc: Scenario, u_guess, k, iters):
 
     def f(t, y):
         pose, c = y
-        obs = _noisy(_observation(_measure(sc, pose, u_guess, iters), pose, sc), sc.noise, k)
+        obs = noisy_observation(_observation(measure_pose(sc, pose, u_guess, iters), pose, sc), sc.noise, k)
         cmd = E.computed_once(controller.output(sc.gains, c, obs))
         delta = jnp.clip(cmd, -dmax, dmax)
         br, bf = slip_at(sc.slip, t)
@@ -302,18 +319,25 @@ def _closed_loop_rhs(controller: Controller, sc: Scenario, u_guess, k, iters):
     return f
 
 
-def _sampled_command(controller: Controller, config: SimConfig, sc: Scenario, c, obs, held: _Held, k, last):
-    """Sampled controller: ``(cmd, c_next, delta)`` at sample ``k``: a new command every
-    ``control_every`` steps, held in between (zero-order hold) and at sample ``N``; saturated at
-    ``+-delta_max`` and rate limited, ``|delta_k - delta_{k-1}| <= delta_rate_max dt``."""
+def held_command(controller: Controller, config: SimConfig, gains, c, obs, held_cmd, k, last):
+    """A sampled controller's ``(cmd, c_next)`` at sample ``k``: a new command every ``control_every``
+    steps (the state advanced by :func:`pfjax.controllers.base.step` over the sampling period), held
+    in between (zero-order hold) and at sample ``N`` (``last``)."""
     dt, every = config.dt, int(config.control_every or 1)
     if every == 1:  # every step: no conditional (it would split XLA's fused loop body)
-        new_cmd, c_next = step(controller, sc.gains, c, obs, dt)
+        new_cmd, c_next = step(controller, gains, c, obs, dt)
     else:
         new_cmd, c_next = jax.lax.cond(
-            k % every == 0, lambda: step(controller, sc.gains, c, obs, every * dt), lambda: (held.cmd, c)
+            k % every == 0, lambda: step(controller, gains, c, obs, every * dt), lambda: (held_cmd, c)
         )
-    cmd = jnp.where(last, held.cmd, E.computed_once(new_cmd))
+    return jnp.where(last, held_cmd, E.computed_once(new_cmd)), c_next
+
+
+def _sampled_command(controller: Controller, config: SimConfig, sc: Scenario, c, obs, held: _Held, k, last):
+    """Sampled controller: ``(cmd, c_next, delta)`` at sample ``k`` (:func:`held_command`);
+    saturated at ``+-delta_max`` and rate limited, ``|delta_k - delta_{k-1}| <= delta_rate_max dt``."""
+    dt = config.dt
+    cmd, c_next = held_command(controller, config, sc.gains, c, obs, held.cmd, k, last)
     dmax = jnp.asarray(sc.params.delta_max, float)
     rate = jnp.asarray(sc.params.delta_rate_max, float)
     delta, prev = jnp.clip(cmd, -dmax, dmax), held.delta
@@ -332,8 +356,8 @@ def _step(controller: Controller, config: SimConfig, sc: Scenario, carry: loop.L
     dmax = jnp.asarray(sc.params.delta_max, float)
     first, last = k == 0, k == n_steps
     t = jnp.where(last, jnp.asarray(n_steps * dt, pose.x.dtype), k * dt)
-    proj = _measure(sc, pose, u, iters)
-    obs = _noisy(_observation(proj, pose, sc), sc.noise, k)
+    proj = measure_pose(sc, pose, u, iters)
+    obs = noisy_observation(_observation(proj, pose, sc), sc.noise, k)
     if config.control_every is None:
         cmd = E.computed_once(controller.output(sc.gains, c, obs))
         delta = jnp.clip(cmd, -dmax, dmax)
@@ -349,8 +373,11 @@ def _step(controller: Controller, config: SimConfig, sc: Scenario, carry: loop.L
     return loop.Sample(_State(new_pose, c_next, proj.u), health, t, out, _Held(proj.u, cmd, delta), keep=last)
 
 
-def _update(config: SimConfig, sc: Scenario, acc: running.Accumulator, s: loop.Sample, live, was_live):
-    """Accumulate sample ``k``'s metrics (trapezoid weight 1/2 at both ends, 0 after a failure)."""
+def update_metrics(config: SimConfig, sc: WithPath, acc: running.Accumulator, s: loop.Sample, live, was_live):
+    """Accumulate sample ``k``'s metrics (trapezoid weight 1/2 at both ends, 0 after a failure):
+    :func:`pfjax.metrics.running.update` on the sample's ``out`` fields ``t``, ``first``, ``last``,
+    ``proj`` (its ``d``, ``theta_e``), ``delta`` (applied steering) and ``saturated`` (any system on
+    the loop whose sample has them: the slip vehicle, the dynamic vehicle)."""
     o = s.out
     acc = acc._replace(
         d0_sign=jnp.where(o.first, jnp.sign(o.proj.d), acc.d0_sign),
@@ -392,7 +419,7 @@ def system(controller: Controller, config: SimConfig) -> loop.System:
     return loop.System(
         init=partial(_start, controller),
         step=partial(_step, controller, config),
-        update=partial(_update, config),
+        update=partial(update_metrics, config),
         record=_record,
         finish=partial(_finish, config),
         no_failure=math.nan,
@@ -408,7 +435,9 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     loop as scalars (:mod:`pfjax.numerics.layout`).
 
     Args:
-        controller, sc, config: the controller (static), the run's scenario, static settings.
+        controller: the controller (static).
+        sc: the run's scenario.
+        config: static settings.
 
     Returns:
         ``SimResult``: metrics, status, failure time, final state, trajectory (if ``config.record``).

@@ -1,0 +1,343 @@
+"""The dynamic vehicle: CommonRoad's ST single-track model (:mod:`pfjax.models.single_track`) on the
+simulation loop (:mod:`pfjax.sim.loop`), path following with any registered controller.
+
+The slip is not declared: it emerges from the tyre forces, the speed, the path's curvature and the
+friction ``mu``. Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_step`:
+
+1. measure the *rear-axle* pose ``(x_r, y_r, theta) = (sx - l_r cos psi, sy - l_r sin psi, psi)``
+   against the path, exactly as the kinematic slip vehicle does (:func:`pfjax.sim.simulate.measure_pose`,
+   sensor noise :func:`~pfjax.sim.simulate.noisy_observation`); the controller sees ``d``,
+   ``theta_e``, ``kappa``, the pose, the wheelbase ``l = l_f + l_r``, the steering limit
+   ``delta_max`` and the rear axle's longitudinal speed ``v cos(beta)`` (m/s): every registered
+   controller runs unchanged;
+2. the controller's command (sampled, zero-order hold: :func:`~pfjax.sim.simulate.held_command`),
+   saturated at ``+-delta_max``, is ``delta_c``;
+3. check the run's health (:mod:`pfjax.sim.status`: non-finite state, ``|d| > d_fail``, the Frenet
+   singularity, the path's end);
+4. propose one RK4 step of the ST state with the two low-level loops inside the vector field:
+
+       v_delta = (delta_c - delta) / tau_delta     steering actuator, first order (tau_delta, s), then
+                                                   rate limited to [v_delta_min, v_delta_max] and held
+                                                   at the angle limits (the model's steering constraints)
+       a_long  = k_v (v_ref - v)                   speed loop (k_v, 1/s) holding the reference speed
+                                                   v_ref (m/s), limited by the model's acceleration
+                                                   constraints (+-a_max, constant power above v_switch)
+
+   The ST model has no rolling or air resistance, so the proportional speed loop has no
+   steady-state error.
+
+The slip angles are measured at every sample (:func:`pfjax.models.single_track.tyre_slip`: the
+tyre slip angles the model's forces use, in the kinematic slip model's ``SOURCE`` convention, so
+that they compare directly with the slip the kinematic studies declare): rear ``beta_r``, front
+``beta_f`` and at the centre of mass ``beta``;
+:class:`SlipMetrics` holds their largest and time-mean magnitudes (degrees). The path-following
+metrics are the kinematic vehicle's (:func:`~pfjax.sim.simulate.update_metrics`; the applied steering
+is the actuator's angle ``delta``). Only sampled controllers (``SimConfig.control_every >= 1``).
+
+The run starts on the given rear-axle pose at the reference speed, straight (``delta = psi_dot =
+beta = 0``). :func:`simulate_batch` is the jitted, vmapped entry point.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import partial
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from pfjax import errors, resources
+from pfjax.controllers.base import Controller
+from pfjax.errors import InputError
+from pfjax.metrics import running
+from pfjax.models import single_track as st
+from pfjax.models.slip import Pose
+from pfjax.numerics import compiler
+from pfjax.numerics import elementary as E
+from pfjax.paths.geometry import NEWTON_START, global_parameter, measure, polish_parameter
+from pfjax.sim import loop, sharding
+from pfjax.sim.integrators import rk4_step
+from pfjax.sim.simulate import (
+    U0_ITERS,
+    Final,
+    SensorNoise,
+    SimConfig,
+    held_command,
+    measure_pose,
+    noisy_observation,
+    observation,
+    update_metrics,
+)
+from pfjax.sim.status import classify
+
+#: Reverse mode saves the carry and the projection's last-but-one Newton iterate per step and
+#: recomputes the step (as the slip vehicle, :func:`pfjax.sim.simulate.simulate`).
+_SAVED = jax.checkpoint_policies.save_only_these_names(NEWTON_START)
+
+
+class DynamicScenario(NamedTuple):
+    """Everything that varies between runs of the dynamic vehicle (a pytree; batch it along a leading axis)."""
+
+    pose0: Pose  # initial rear-axle pose (m, m, rad)
+    vehicle: st.STParams  # the ST model's parameters (mu among them)
+    v_ref: Array | float  # m/s, reference speed of the speed loop (the start speed)
+    path: Any  # a path shape from pfjax.paths
+    gains: Any  # the controller's parameter pytree
+    tau_delta: Array | float = 0.05  # s, steering actuator time constant
+    k_v: Array | float = 5.0  # 1/s, speed loop gain
+    noise: SensorNoise | None = None  # measurement noise seen by the controller (None: exact)
+    u0: Any = None  # path parameter near the start's closest point (None: global search)
+
+
+class SlipMetrics(NamedTuple):
+    """Slip angles the run produced (up to its failure), degrees, in the kinematic model's convention."""
+
+    max_abs_beta_r_deg: Array  # deg, largest |rear-axle slip|
+    max_abs_beta_f_deg: Array  # deg, largest |front-wheel slip|
+    max_abs_beta_deg: Array  # deg, largest |slip at the centre of mass|
+    mean_abs_beta_r_deg: Array  # deg, time-mean |rear-axle slip| (trapezoid rule)
+    mean_abs_beta_f_deg: Array  # deg
+    mean_abs_beta_deg: Array  # deg
+
+
+SLIP_METRIC_NAMES = SlipMetrics._fields
+
+
+class DynamicTrajectory(NamedTuple):
+    """Samples at ``t_k = k dt``, ``k = 0..N`` (shape ``(N+1,)`` per run)."""
+
+    t: Array  # s
+    x: Array  # m, rear axle
+    y: Array  # m, rear axle
+    theta: Array  # rad, yaw angle psi
+    d: Array  # m
+    theta_e: Array  # rad
+    kappa: Array  # 1/m
+    s: Array  # m
+    delta_cmd: Array  # rad, controller command (before saturation)
+    delta: Array  # rad, the actuator's steering angle
+    beta_r: Array  # rad, measured rear-axle slip
+    beta_f: Array  # rad, measured front-wheel slip
+    beta: Array  # rad, slip angle at the centre of mass
+    v: Array  # m/s, speed of the centre of mass
+    psi_dot: Array  # rad/s, yaw rate
+
+
+class DynamicResult(NamedTuple):
+    metrics: running.Metrics  # the path-following metrics (as the kinematic vehicle's)
+    slip: SlipMetrics  # the slip angles the run produced
+    status: Array  # int32, a pfjax.sim.status.Status
+    fail_time: Array  # s, time of the first failure (NaN if none)
+    final: Final  # rear-axle pose and errors at the end (or at the failure)
+    trajectory: DynamicTrajectory | None
+
+
+class _Acc(NamedTuple):
+    path: running.Accumulator
+    slip_max: tuple  # rad: max |beta_r|, |beta_f|, |beta| (scalars: a batch keeps each a contiguous vector)
+    slip_sum: tuple  # rad s: weighted sums of the same
+
+
+class _State(NamedTuple):
+    x: st.STState  # the ST state
+    c: Any  # controller state
+    u: Array  # path parameter, warm start of the next projection
+
+
+class _Held(NamedTuple):
+    u_last: Array  # path parameter of the last sample's closest point
+    cmd: Array  # rad, the (held) command
+
+
+class _Out(NamedTuple):
+    t: Array  # s
+    first: Array  # bool
+    last: Array  # bool
+    pose: Pose  # rear axle
+    proj: Any  # Projection of the rear axle
+    cmd: Array  # rad
+    delta: Array  # rad, the actuator's angle
+    saturated: Array  # 1.0 where |cmd| > delta_max
+    slip: tuple  # rad: beta_r, beta_f, beta
+    x: st.STState  # the ST state
+
+
+def rear_axle_pose(x: st.STState, p: st.STParams) -> Pose:
+    """The rear-axle pose of an ST state: ``(sx - l_r cos psi, sy - l_r sin psi, psi)`` (m, m, rad)."""
+    s, c = E.sincos(x.psi)
+    return Pose(x.sx - p.l_r * c, x.sy - p.l_r * s, x.psi)
+
+
+def start_state(pose0: Pose, v0, p: st.STParams) -> st.STState:
+    """The ST state of a vehicle whose rear axle is at ``pose0`` (m, m, rad), driving straight at ``v0`` (m/s)."""
+    pose0 = Pose(*pose0)
+    s, c = E.sincos(pose0.theta)
+    zero = jnp.zeros_like(pose0.x)
+    return st.STState(pose0.x + p.l_r * c, pose0.y + p.l_r * s, zero, zero + v0, pose0.theta, zero, zero)
+
+
+def closed_loop_rhs(x: st.STState, delta_c, sc: DynamicScenario) -> st.STState:
+    """The ST vector field with the steering actuator and the speed loop closed (module docstring):
+    ``st.vector_field(x, (delta_c - delta) / tau_delta, k_v (v_ref - v), vehicle)``."""
+    return st.vector_field(x, (delta_c - x.delta) / sc.tau_delta, sc.k_v * (sc.v_ref - x.v), sc.vehicle)
+
+
+def _start(controller: Controller, sc: DynamicScenario) -> loop.Start:
+    pose0 = Pose(*(jnp.asarray(a, float) for a in sc.pose0))
+    if sc.u0 is None:
+        u0 = global_parameter(sc.path, pose0.x, pose0.y)
+    else:
+        u0 = polish_parameter(sc.path, pose0.x, pose0.y, jnp.asarray(sc.u0, pose0.x.dtype), U0_ITERS)
+    zero = jnp.zeros((), pose0.x.dtype)
+    acc = _Acc(running.init(zero, zero), (zero, zero, zero), (zero, zero, zero))
+    x0 = start_state(pose0, jnp.asarray(sc.v_ref, zero.dtype), sc.vehicle)
+    return loop.Start(_State(x0, controller.init(sc.gains), u0), acc, zero, _Held(u0, zero))
+
+
+def _step(controller: Controller, config: SimConfig, sc: DynamicScenario, carry: loop.LoopCarry, k) -> loop.Sample:
+    """Sample ``k``: measure the rear axle, command, health; the proposed RK4 step of the ST state.
+    Sample ``N`` only measures (``keep``), the command held from step ``N - 1``."""
+    x, c, u = carry.state
+    p = sc.vehicle
+    dt, n_steps = config.dt, config.n_steps
+    first, last = k == 0, k == n_steps
+    t = jnp.where(last, jnp.asarray(n_steps * dt, x.v.dtype), k * dt)
+    pose = rear_axle_pose(x, p)
+    proj = measure_pose(sc, pose, u, config.newton_iters)
+    slip = st.tyre_slip(x, p)
+    dmax = jnp.asarray(p.delta_max, float)
+    v_rear = x.v * E.sincos(x.beta)[1]  # m/s, the rear axle's longitudinal speed
+    obs = noisy_observation(observation(proj, pose, v_rear, p.l_f + p.l_r, dmax, sc.path), sc.noise, k)
+    cmd, c_next = held_command(controller, config, sc.gains, c, obs, carry.aux.cmd, k, last)
+    delta_c = jnp.clip(cmd, -dmax, dmax)
+    x_next = rk4_step(lambda tt, xx: closed_loop_rhs(xx, delta_c, sc), t, x, dt)
+    finite = jnp.isfinite(proj.d)
+    for value in x:
+        finite = finite & jnp.isfinite(value)
+    health = classify(finite, jnp.abs(proj.d), 1.0 - proj.kappa * proj.d, proj.at_end, config.d_fail)
+    out = _Out(t, first, last, pose, proj, cmd, x.delta, (jnp.abs(cmd) > dmax).astype(x.v.dtype), slip, x)
+    return loop.Sample(_State(x_next, c_next, proj.u), health, t, out, _Held(proj.u, cmd), keep=last)
+
+
+def _update(config: SimConfig, sc: DynamicScenario, acc: _Acc, s: loop.Sample, live, was_live) -> _Acc:
+    o = s.out
+    path = update_metrics(config, sc, acc.path, s, live, was_live)
+    w = jnp.where(live, jnp.where(o.first | o.last, 0.5, 1.0), 0.0) * config.dt
+    mag = [jnp.where(live, jnp.abs(b), 0.0) for b in o.slip]
+    return _Acc(
+        path,
+        tuple(jnp.maximum(m, b) for m, b in zip(acc.slip_max, mag)),
+        tuple(total + w * b for total, b in zip(acc.slip_sum, mag)),
+    )
+
+
+def _record(sc: DynamicScenario, s: loop.Sample, state: _State) -> DynamicTrajectory:
+    o = s.out
+    return DynamicTrajectory(
+        o.t,
+        o.pose.x,
+        o.pose.y,
+        o.pose.theta,
+        o.proj.d,
+        o.proj.theta_e,
+        o.proj.kappa,
+        o.proj.s,
+        o.cmd,
+        o.delta,
+        o.slip[0],
+        o.slip[1],
+        o.slip[2],
+        o.x.v,
+        o.x.psi_dot,
+    )
+
+
+def _finish(config: SimConfig, sc: DynamicScenario, r: loop.Run) -> DynamicResult:
+    metrics = running.finalize(r.metrics.path, config.n_steps * config.dt, r.failed, config.success_band)
+    deg = 180.0 / math.pi
+    time = jnp.maximum(r.metrics.path.time, config.dt)
+    slip = SlipMetrics(*(m * deg for m in r.metrics.slip_max), *(total / time * deg for total in r.metrics.slip_sum))
+    pose = rear_axle_pose(r.state.x, sc.vehicle)
+    proj = measure(sc.path, pose.x, pose.y, pose.theta, r.aux.u_last)
+    final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, r.state.x.delta, proj.s)
+    return DynamicResult(metrics, slip, r.status, r.fail_time, final, r.records)
+
+
+def system(controller: Controller, config: SimConfig) -> loop.System:
+    """The dynamic vehicle as a :class:`pfjax.sim.loop.System` (inputs: a :class:`DynamicScenario`)."""
+    if config.control_every is None:
+        raise InputError(
+            "control_every: the dynamic vehicle takes a sampled controller (>= 1 steps); a continuous one "
+            "is not supported",
+            "control_every",
+        )
+    return loop.System(
+        init=partial(_start, controller),
+        step=partial(_step, controller, config),
+        update=partial(_update, config),
+        record=_record,
+        finish=partial(_finish, config),
+        no_failure=math.nan,
+    )
+
+
+def simulate(controller: Controller, sc: DynamicScenario, config: SimConfig) -> DynamicResult:
+    """Simulate one run (pure, unbatched; :func:`simulate_batch` is the entry point): samples
+    ``k = 0..N`` of :func:`system` through :func:`pfjax.sim.loop.run`.
+
+    Args:
+        controller: the controller (static).
+        sc: the run's scenario.
+        config: static settings (``config.control_every`` must be an integer).
+
+    Returns:
+        :class:`DynamicResult`: metrics, slip metrics, status, failure time, final state, trajectory.
+    """
+    controller.check_params(sc.gains)
+    return loop.run(
+        system(controller, config),
+        sc,
+        config.n_steps + 1,
+        record=config.record,
+        scalar_inputs=True,
+        checkpoint_policy=_SAVED,
+    )
+
+
+@compiler.jit(static_argnames=("controller", "config", "layout"))
+def _simulate_vmapped(
+    scenarios: DynamicScenario,
+    *,
+    controller: Controller,
+    config: SimConfig,
+    layout: sharding.Layout = sharding.Layout(None, 1),
+) -> DynamicResult:
+    return sharding.map_runs(lambda sc: simulate(controller, sc, config), scenarios, layout)
+
+
+def simulate_batch(
+    scenarios: DynamicScenario,
+    *,
+    controller: Controller,
+    config: SimConfig,
+    devices=None,
+    block: int | str | None = "auto",
+) -> DynamicResult:
+    """Jitted, vmapped :func:`simulate` over a batch of scenarios (leading axis of every leaf),
+    sharded and blocked as :func:`pfjax.sim.simulate_batch` (compiled once per controller,
+    ``config``, batch shape, device set and block count)."""
+    controller.check_params(scenarios.gains)
+    system(controller, config)  # checks the settings before tracing
+    if config.record and not errors.is_traced(scenarios):
+        n_runs = int(np.shape(jax.tree_util.tree_leaves(scenarios)[0])[0])
+        resources.check_memory(
+            "record",
+            n_runs * 2 * resources.run_bytes(config.n_steps, record=True),
+            f"recording {n_runs} runs of {config.n_steps + 1} samples",
+            "simulate with record=False (the metrics need no trajectory), or fewer runs",
+        )
+    placed, n, layout = sharding.plan_batch(scenarios, devices, block)
+    return sharding.unpad(_simulate_vmapped(placed, controller=controller, config=config, layout=layout), n)

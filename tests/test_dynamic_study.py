@@ -1,0 +1,164 @@
+"""The ST model in studies, on the command line and in the Python API: ``[vehicle] model = "st"`` with
+its parameter set and friction distribution; the kinematic-only and ST-only keys refused with the
+other model, one line naming the key (the flag on the command line, exit 2; the argument in the API);
+a small study's run table with the friction and the slip the runs produced."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+
+import numpy as np
+import pytest
+
+import pfjax
+from pfjax.cli import main
+from pfjax.config import ConfigError
+from pfjax.errors import InputError
+from pfjax.montecarlo.config import load_study
+
+BASE = {
+    "name": "st",
+    "n_runs": 8,
+    "seed": 3,
+    "paths": [{"kind": "sine"}],
+    "controllers": [{"name": "stanley", "type": "stanley"}],
+}
+
+
+def _spec(vehicle: dict, **top):
+    return load_study(data={**BASE, "vehicle": vehicle, **top})[0]
+
+
+@pytest.mark.parametrize(
+    "vehicle, top, message",
+    [
+        ({"model": "st"}, {}, "margin.enabled: the slip-margin sweep declares slip"),
+        ({"model": "st", "L": 0.3}, {"margin": {"enabled": False}}, 'vehicle.L: not with model = "st"'),
+        ({"model": "st", "convention": "lenain"}, {"margin": {"enabled": False}}, "vehicle.convention: not with"),
+        ({"mu": 0.5}, {}, 'vehicle.mu: not with model = "kinematic"'),
+        ({"params": "vehicle2"}, {}, 'vehicle.params: not with model = "kinematic"'),
+        ({"model": "st", "mu": 0.0}, {"margin": {"enabled": False}}, "vehicle.mu: must lie in (0, 10]"),
+        ({"model": "st"}, {"margin": {"enabled": False}, "slip": {"beta_r_deg": 2.0}}, "slip.beta_r_deg: not with"),
+        ({"model": "st", "params": "truck"}, {"margin": {"enabled": False}}, "vehicle.params: Input should be"),
+        ({"model": "st", "mu": 10.0}, {"margin": {"enabled": False}}, "sim.dt: the ST model at mu = 10 and speed 1"),
+        (
+            {"model": "st"},
+            {"margin": {"enabled": False}, "falsifier": {"enabled": True}},
+            "falsifier.enabled: the worst-case search",
+        ),
+    ],
+)
+def test_config_refuses_keys_of_the_other_model_naming_them(vehicle, top, message):
+    with pytest.raises(ConfigError) as e:
+        _spec(vehicle, **top)
+    assert str(e.value).startswith(message) and "\n" not in str(e.value)
+
+
+def test_config_st_reads_the_parameter_set_and_friction():
+    spec = _spec(
+        {"model": "st", "params": "vehicle2", "mu": {"dist": "uniform", "low": 0.3, "high": 1.0}, "speed": 10.0},
+        margin={"enabled": False},
+    )
+    p = spec.vehicle.st_params()
+    assert p.mu == pytest.approx(0.65) and p.l_f == 1.1561957064
+    assert spec.vehicle.wheelbase_bounds() == (p.l_f + p.l_r,) * 2
+
+
+def test_api_validates_as_the_config_naming_the_argument():
+    for kw, message in [
+        ({"model": "st", "beta_r_deg": 3.0}, 'beta_r_deg: not with model = "st"'),
+        ({"model": "st", "L": 0.3}, 'L: not with model = "st"'),
+        ({"mu": 0.5}, 'mu: not with model = "kinematic"'),
+        ({"model": "st", "mu": -1.0}, "mu: must lie in (0, 10]"),
+        ({"model": "st", "vehicle_params": "truck"}, "vehicle_params: Input should be"),
+    ]:
+        with pytest.raises(InputError) as e:
+            pfjax.scenarios("sine", n=2, **kw)
+        assert str(e.value).startswith(message), (kw, str(e.value))
+
+
+def test_api_and_study_simulate_the_st_model_with_its_slip():
+    runs = pfjax.scenarios("sine", n=3, model="st", mu=[0.3, 0.6, 1.0], key=1)
+    sim = pfjax.simulate(runs, "stanley", config={"horizon": 2.0})
+    t = sim.table
+    assert list(t["mu"]) == [0.3, 0.6, 1.0]
+    slip = t["max_abs_beta_f_deg"].to_numpy()
+    assert np.all(slip > 0) and slip[0] > slip[1] > slip[2]  # less friction, more slip
+    assert (t["L"] == 0.2).all()  # the robot set's wheelbase
+
+
+def test_small_st_study_writes_friction_and_slip_columns(tmp_path):
+    res = pfjax.run_study(
+        {
+            **BASE,
+            "vehicle": {"model": "st", "mu": {"dist": "uniform", "low": 0.3, "high": 1.0}},
+            "margin": {"enabled": False},
+            "sim": {"horizon": 2.0, "steady_window": 1.0},
+            "success": {"from_s": 1.0},
+            "f64_check_runs": 0,
+        },
+        tmp_path / "out",
+        report=False,
+    )
+    runs = res.runs
+    assert {"mu", "max_abs_beta_r_deg", "max_abs_beta_f_deg", "mean_abs_beta_deg"} <= set(runs.columns)
+    assert runs["mu"].between(0.3, 1.0).all() and (runs["status"] == "ok").all()
+    q = res.summary["controllers"]["stanley"]["quantiles"]
+    assert q["max_abs_beta_f_deg"]["mean"] == pytest.approx(runs["max_abs_beta_f_deg"].mean())
+
+
+def _main(*argv):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(list(argv))
+        except SystemExit as e:
+            code = e.code
+    return code, out.getvalue(), err.getvalue()
+
+
+def test_cli_simulate_model_st():
+    code, out, _ = _main("simulate", "--model", "st", "--path", "line", "--controller", "stanley", "--horizon", "2")
+    assert code in (0, None)
+    code, out, _ = _main(
+        "simulate",
+        "--model",
+        "st",
+        "--mu",
+        "0.4",
+        "--path",
+        "line",
+        "--controller",
+        "stanley",
+        "--horizon",
+        "2",
+        "--json",
+    )
+    r = json.loads(out)
+    assert r["model"] == "st" and r["mu"] == 0.4 and r["metrics"]["status"] == "ok"
+    assert r["slip"]["max_abs_beta_f_deg"] > 0
+    for argv, flag in [
+        (["--model", "st", "--beta-r-deg", "3"], "--beta-r-deg"),
+        (["--model", "st", "--wheelbase", "0.3"], "--wheelbase"),
+        (["--mu", "0.5"], "--mu"),
+        (["--model", "st", "--mu", "-1"], "--mu"),
+        (["--model", "st", "--tau-delta", "0"], "--tau-delta"),
+        (["--model", "st", "--mu", "10"], "--dt"),
+    ]:
+        code, _, err = _main("simulate", "--path", "line", "--controller", "stanley", *argv)
+        assert code == 2 and err.strip().splitlines()[-1].startswith(f"pfjax simulate: error: {flag}: "), err
+
+
+def test_api_checks_the_simulation_step_against_the_tyre_modes():
+    runs = pfjax.scenarios("line", n=2, model="st", mu=10.0)  # the step is simulate's
+    with pytest.raises(InputError, match=r"^config\.dt: the ST model at mu = 10 "):
+        pfjax.simulate(runs, "stanley", config={"horizon": 1.0})
+
+
+def test_a_dumped_config_loads_again_under_either_model():
+    """A study's summary holds its whole config, every key at its value or default: it loads again."""
+    for vehicle, top in (({}, {}), ({"model": "st", "mu": 0.5}, {"margin": {"enabled": False}})):
+        spec = _spec(vehicle, **top)
+        assert load_study(data=spec.model_dump(mode="json"))[0] == spec
