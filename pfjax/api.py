@@ -534,8 +534,7 @@ def rare_event(
     names = [c.name for c in spec.controllers]
     if controller is not None and controller not in names:
         raise errors.InputError(
-            f"controller: {controller!r} is not a controller of study {spec.name!r}; expected one of "
-            f"{', '.join(names)}",
+            f"controller: {controller!r} is not one of study {spec.name!r}'s controllers: {', '.join(names)}",
             "controller",
         )
     from pfjax.rare.transform import study_inputs
