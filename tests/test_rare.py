@@ -6,7 +6,9 @@ References: ``Φ(-β)`` for the linear limit state ``g(u) = β - u_1``; the unio
 importance-sampling algorithm on the same Python function; for state feedback on a straight line
 under constant Gaussian slip from zero initial error, the Gaussian measure of the slips whose
 closed-loop equilibrium offset (:func:`pfjax.analysis.equilibrium`) leaves the band, integrated by
-``scipy.integrate.quad`` with the band's edges found by ``brentq``. Every estimate must hold the
+``scipy.integrate.quad`` with the band's edges found by ``brentq``
+(:func:`pfjax.rare.reference.line_offset_failure_probability`), checked here against the closed
+form of the line equilibrium, ``d* = (β_f + (1 + K_2) β_r) / K_1``. Every estimate must hold the
 exact value in its 95 % interval (the seeds are fixed, so a test fails the same way each time).
 """
 
@@ -16,12 +18,13 @@ import math
 
 import numpy as np
 import pytest
-from scipy import integrate, optimize, stats
+from scipy import stats
 from scipy.special import ndtr
 
 import pfjax
 from pfjax.errors import InputError
 from pfjax.rare import cross_entropy_is, monte_carlo, subset_simulation
+from pfjax.rare.reference import line_offset_failure_probability
 from pfjax.rare.transform import study_inputs, to_physical, to_standard
 
 
@@ -201,32 +204,16 @@ def line_study(std_deg, **rare):
     }
 
 
-def equilibrium_reference(std_deg: float, band: float = 0.05) -> float:
-    """``P(|d*(β_r, β_f)| > band)`` for independent ``β ~ N(0, std²)``: for each ``β_r`` the offset
-    is monotone in ``β_f``, so the band's edges are two roots (brentq) and the inner integral is
-    two normal tails; the outer one is ``quad`` over ``β_r``."""
-    import jax
-
-    from pfjax.analysis import equilibrium
-    from pfjax.models.slip import SlipParams
-
-    with jax.enable_x64(True):
-        params = SlipParams(v=1.0, L=0.2, delta_max=math.radians(30.0), convention=np.int32(0))
-        d = jax.jit(lambda br, bf: equilibrium(K, br, bf, params).d)
-        s = math.radians(std_deg)
-
-        def inner(br):
-            f = lambda bf, c: float(d(br, bf)) - c
-            hi, lo = optimize.brentq(f, -0.5, 0.5, args=(band,)), optimize.brentq(f, -0.5, 0.5, args=(-band,))
-            lo, hi = sorted((lo, hi))  # |d*| <= band between them
-            return stats.norm.pdf(br, 0, s) * (ndtr(lo / s) + ndtr(-hi / s))
-
-        return integrate.quad(inner, -12 * s, 12 * s, epsabs=0, epsrel=1e-8, limit=200)[0]
+def test_equilibrium_reference_is_the_closed_form():
+    """``d*`` is linear in the slips (rad), so ``p = 2 Φ(-band / (s |(1 + K_2, 1)| / |K_1|))``."""
+    s = math.radians(1.091)
+    exact = 2 * ndtr(-0.05 * abs(K[0]) / (s * math.hypot(1 + K[1], 1.0)))
+    assert line_offset_failure_probability(K, 1.091) == pytest.approx(exact, rel=1e-6)
 
 
 def test_state_feedback_on_a_line_matches_the_equilibrium_integral():
     std = 1.091  # deg: p close to 1e-6
-    p = equilibrium_reference(std)
+    p = line_offset_failure_probability(K, std)
     assert 5e-7 < p < 2e-6
     out = pfjax.rare_event(line_study(std), method="is", max_rollouts=20_000)
     r = out["controllers"]["sf"]

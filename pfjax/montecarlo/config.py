@@ -447,6 +447,7 @@ class RareEventSpec(_Model):
     n_per_level: int = Field(
         2000, ge=100, le=10_000_000, description="is / subset: rollouts per cross-entropy or subset level"
     )
+    n_components: int = Field(4, ge=1, le=64, description="is: Gaussians in the proposal mixture")
     batch: int = Field(2000, ge=32, le=1_000_000, description="runs simulated at once (one compiled shape)")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="seed of the estimator's draws")
 

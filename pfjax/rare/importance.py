@@ -137,6 +137,20 @@ def _initial(rng, u, w, k, mix: Mixture) -> Mixture:
     return Mixture(np.full(len(seeds), 1 / len(seeds)), seeds, np.repeat(cov[None], len(seeds), axis=0))
 
 
+def explore(g: Callable, dim: int, *, n: int = 1000, spread: float = 3.0, seed: int = 0, batch: int = 4096):
+    """Failure points found by sampling a widened input law ``N(0, spread² I)``: ``(points (m, dim),
+    rollouts)``. With ``spread = 3`` a failure region at distance ``β`` from the origin is hit with
+    probability about ``Φ(-β / 3)`` per draw (2.5 % at ``β = 6``, ``p`` about 1e-9), wherever it
+    lies, so every part of a failure region of a few dimensions gets points to start
+    :func:`cross_entropy_is` from (a falsifier's job, done by sampling: the estimate stays unbiased
+    whatever the starts)."""
+    dim, seed, batch = check_common(dim, seed, batch)
+    n = errors.integer("n", n, low=1, high=100_000_000)
+    spread = errors.number("spread", spread, positive=True)
+    u = spread * np.random.default_rng(seed).standard_normal((n, dim))
+    return u[evaluate(g, u, batch) <= 0], n
+
+
 def cross_entropy_is(
     g: Callable,
     dim: int,
@@ -199,6 +213,8 @@ def cross_entropy_is(
             raise errors.InputError(f"starts: expected points of dimension {dim}, got shape {starts.shape}", "starts")
     k = n_components if n_components is not None else (len(starts) if starts is not None else 2)
     k = errors.integer("n_components", min(k, 8) if n_components is None else k, low=1, high=64)
+    if starts is not None and len(starts) < 1:
+        raise errors.InputError("starts: expected at least one point", "starts")
     rng = np.random.default_rng(seed)
     if starts is None:
         mix = Mixture(np.ones(1), np.zeros((1, dim)), np.eye(dim)[None])

@@ -25,7 +25,7 @@ import numpy as np
 
 from pfjax.montecarlo.config import StudySpec
 from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
-from pfjax.rare.importance import cross_entropy_is
+from pfjax.rare.importance import cross_entropy_is, explore
 from pfjax.rare.subset import subset_simulation
 from pfjax.rare.transform import Input, Stratum, study_inputs, to_physical
 
@@ -70,16 +70,23 @@ def _estimate(g, dim, method, rare, budget, seed, target):
         return subset_simulation(
             g, dim, n_per_level=n, target_rel_error=target, max_rollouts=max(budget, n), seed=seed, batch=rare.batch
         )
-    return cross_entropy_is(
+    # explore first: a margin that is flat far from failure (a loop with integral action converges
+    # wherever it does not fail) gives the cross-entropy levels nothing to follow, and they can
+    # end in one part of the failure region only; failure points of a widened law start the fit
+    starts, used = explore(g, dim, n=rare.n_per_level, seed=seed + 7919, batch=rare.batch)
+    est = cross_entropy_is(
         g,
         dim,
+        starts=starts if len(starts) else None,
+        n_components=rare.n_components,
         n_per_level=rare.n_per_level,
         n_batch=rare.n_per_level,
         target_rel_error=target,
-        max_rollouts=budget,
+        max_rollouts=max(budget - used, rare.n_per_level),
         seed=seed,
         batch=rare.batch,
     )
+    return est._replace(n_rollouts=est.n_rollouts + used)
 
 
 def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None) -> dict:

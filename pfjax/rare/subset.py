@@ -66,7 +66,7 @@ def _gamma(ind: np.ndarray, p: float) -> float:
 
 
 def _one_run(g, dim, n, p0, rng, batch, max_levels):
-    """One subset simulation: ``(p, δ², rollouts, level records)``."""
+    """One subset simulation: ``(p, δ², rollouts, level records, failure points)``."""
     nc = int(round(p0 * n))
     ns = n // nc
     u = rng.standard_normal((n, dim))
@@ -85,6 +85,7 @@ def _one_run(g, dim, n, p0, rng, batch, max_levels):
         p *= pj
         levels.append({"threshold": float(b), "p": pj, "gamma": gamma})
         if final or pj == 0:
+            failures = u[fails] if b <= 0 else u[:0]
             break
         seeds, seed_m = u[order[:nc]], m[order[:nc]]
         s_hat = np.maximum(seeds.std(axis=0), 1e-3)
@@ -109,7 +110,7 @@ def _one_run(g, dim, n, p0, rng, batch, max_levels):
         ind_chains = np.stack(chains_m, axis=1)
         m = ind_chains.reshape(-1)
         n = nc * ns
-    return p, d2, rollouts, levels
+    return p, d2, rollouts, levels, failures
 
 
 def subset_simulation(
@@ -140,7 +141,9 @@ def subset_simulation(
 
     Returns:
         a :class:`~pfjax.rare.estimate.RareEstimate` with ``method="subset"``; ``detail`` holds
-        each run's levels (threshold, conditional probability, γ, acceptance).
+        each run's levels (threshold, conditional probability, γ, acceptance) and the last run's
+        failure points (``(m, dim)``, distributed as ``φ`` restricted to the failure region: the
+        starts :func:`pfjax.rare.cross_entropy_is` takes).
     """
     dim, seed, batch = check_common(dim, seed, batch)
     n = errors.integer("n_per_level", n_per_level, low=10, high=100_000_000)
@@ -154,7 +157,7 @@ def subset_simulation(
     rng = np.random.default_rng(seed)
     runs, total = [], 0
     while True:
-        p, d2, used, levels = _one_run(g, dim, n, p0, rng, batch, max_levels)
+        p, d2, used, levels, failures = _one_run(g, dim, n, p0, rng, batch, max_levels)
         runs.append((p, d2, levels))
         total += used
         ps = np.array([r[0] for r in runs])
@@ -170,5 +173,5 @@ def subset_simulation(
         rel,
         int(total),
         "subset",
-        {"runs": len(runs), "levels": [r[2] for r in runs], "n_per_level": n, "p0": p0},
+        {"runs": len(runs), "levels": [r[2] for r in runs], "n_per_level": n, "p0": p0, "failure_points": failures},
     )
