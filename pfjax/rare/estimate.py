@@ -4,10 +4,10 @@ A *limit-state function* ``g`` maps a batch of points of the standard-normal spa
 ``g(u)`` with ``u`` of shape ``(n, dim)`` (float64) returns ``(n,)`` margins, and a point fails
 where ``g(u) <= 0``. The failure probability is
 
-.. math::
-
-    p = P[g(U) \\le 0] = \\int_{g(u) \\le 0} \\varphi_{dim}(u)\\, du,
-    \\qquad U \\sim N(0, I_{dim}).
+$$
+p = P[g(U) \\le 0] = \\int_{g(u) \\le 0} \\varphi_{dim}(u)\\, du,
+\\qquad U \\sim N(0, I_{dim}).
+$$
 
 Every estimator calls ``g`` on batches of at most ``batch`` points (the simulator compiles one
 program per batch shape; :mod:`pfjax.rare.study` pads to a fixed batch) and counts each point it

@@ -3,10 +3,10 @@
 
 **Estimator.** With the proposal ``q`` and ``N`` draws ``u_k ~ q``,
 
-.. math::
-
-    \\hat p = \\frac1N \\sum_k w_k\\, 1[g(u_k) \\le 0], \\qquad w_k = \\frac{φ(u_k)}{q(u_k)},
-    \\qquad δ = \\frac{\\operatorname{std}_k(w_k 1[g(u_k) \\le 0])}{\\sqrt N\\, \\hat p},
+$$
+\\hat p = \\frac1N \\sum_k w_k\\, 1[g(u_k) \\le 0], \\qquad w_k = \\frac{φ(u_k)}{q(u_k)},
+\\qquad δ = \\frac{\\operatorname{std}_k(w_k 1[g(u_k) \\le 0])}{\\sqrt N\\, \\hat p},
+$$
 
 unbiased for any ``q`` that covers the failure region; the 95 % interval is
 ``p̂ (1 ± 1.96 δ)`` (central limit theorem; cut at 0). Draws are added in batches until

@@ -6,9 +6,9 @@ On a line the loop ``δ = K x`` rests at ``θ_e* = -β_r``, ``δ* = β_r + β_f`
 settles there, so a run fails (``|d| > band`` late in the run) exactly where ``|d*| > band``.
 With ``β_r, β_f ~ N(0, s²)`` independent,
 
-.. math::
-
-    p = \\int φ_s(β_r)\\, \\bigl[Φ(β_f^-(β_r)/s) + Φ(-β_f^+(β_r)/s)\\bigr]\\, dβ_r,
+$$
+p = \\int φ_s(β_r)\\, \\bigl[Φ(β_f^-(β_r)/s) + Φ(-β_f^+(β_r)/s)\\bigr]\\, dβ_r,
+$$
 
 with ``β_f^∓(β_r)`` the slips at which ``d* = ∓band`` (``d*`` is monotone in ``β_f``), found by
 ``scipy.optimize.brentq`` on the equilibrium and integrated by ``scipy.integrate.quad`` over

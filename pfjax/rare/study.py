@@ -6,9 +6,9 @@ standard-normal points ``u``, the runs are the study's runs with the continuous 
 ``T(u)`` (:func:`pfjax.montecarlo.sampling.sample_runs` with ``given``), simulated as the study
 simulates them (same settings, precision and gains), and the margin is
 
-.. math::
-
-    g(u) = \\text{threshold} - \\text{metric}(u) \\quad (\\text{metric's unit}),
+$$
+g(u) = \\text{threshold} - \\text{metric}(u) \\quad (\\text{metric's unit}),
+$$
 
 forced to at most ``-10⁻⁹`` where the run's status is a failure (diverged, non-finite, ...). The
 strata combine as ``p = Σ_s w_s p_s`` with ``Var p = Σ_s w_s² Var p_s``; one stratum keeps its

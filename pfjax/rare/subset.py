@@ -5,18 +5,18 @@ The failure event ``F = {g(u) <= 0}`` is reached through nested events
 ``F_j = {g(u) <= b_j}``, ``b_1 > b_2 > ... > b_m = 0``, each threshold the ``p0``-quantile of the
 margins at the previous level, so
 
-.. math::
-
-    p = P(F_1) \\prod_{j=2}^{m} P(F_j \\mid F_{j-1}) \\approx p_0^{m-1}\\, \\hat P_m .
+$$
+p = P(F_1) \\prod_{j=2}^{m} P(F_j \\mid F_{j-1}) \\approx p_0^{m-1}\\, \\hat P_m .
+$$
 
 Level 0 draws ``N`` points from ``N(0, I)``. At each further level the ``N_c = p_0 N`` points with
 the smallest margins seed ``N_c`` Markov chains of length ``N_s = 1 / p_0`` (seed included) whose
 stationary law is ``φ`` restricted to ``F_j``. The move is conditional sampling: per coordinate
 ``i`` with spread ``σ_i`` and ``ρ_i = sqrt(1 - σ_i²)``,
 
-.. math::
-
-    u'_i = ρ_i u_i + \\sqrt{1 - ρ_i^2}\\, ξ_i, \\qquad ξ \\sim N(0, I),
+$$
+u'_i = ρ_i u_i + \\sqrt{1 - ρ_i^2}\\, ξ_i, \\qquad ξ \\sim N(0, I),
+$$
 
 which leaves ``N(0, I)`` invariant, so the candidate is accepted exactly when ``g(u') <= b_j``.
 ``σ_i = min(1, λ ŝ_i)`` with ``ŝ_i`` the seeds' standard deviation, and ``λ`` adapted after every
@@ -24,10 +24,10 @@ batch of steps towards a 44 % acceptance (``log λ += (â - 0.44) / sqrt(t)``).
 
 **Error.** The level-``j`` estimate has squared coefficient of variation (Au and Beck, eq. 29)
 
-.. math::
-
-    δ_j^2 = \\frac{1 - p_j}{N p_j}(1 + γ_j), \\qquad
-    γ_j = 2 \\sum_{k=1}^{N_s - 1} \\Bigl(1 - \\frac{k}{N_s}\\Bigr) \\frac{R_j(k)}{R_j(0)},
+$$
+δ_j^2 = \\frac{1 - p_j}{N p_j}(1 + γ_j), \\qquad
+γ_j = 2 \\sum_{k=1}^{N_s - 1} \\Bigl(1 - \\frac{k}{N_s}\\Bigr) \\frac{R_j(k)}{R_j(0)},
+$$
 
 with ``R_j(k)`` the lag-``k`` autocovariance of the failure indicators along the chains
 (``γ_0 = 0``: level 0 is independent sampling). Levels are taken as uncorrelated,
