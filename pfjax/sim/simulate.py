@@ -408,7 +408,9 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     loop as scalars (:mod:`pfjax.numerics.layout`).
 
     Args:
-        controller, sc, config: the controller (static), the run's scenario, static settings.
+        controller: the controller (static).
+        sc: the run's scenario.
+        config: static settings.
 
     Returns:
         ``SimResult``: metrics, status, failure time, final state, trajectory (if ``config.record``).
