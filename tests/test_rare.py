@@ -323,3 +323,17 @@ def test_study_summary_gains_the_estimates(tmp_path):
     assert c["method"] == "mc" and c["n_rollouts"] == 1000 and c["p_fail"] == 0.0
     assert c["p_fail_ci95"][0] == 0.0 and 0 < c["p_fail_ci95"][1] < 0.01 and c["rel_error"] is None
     assert "rare_event" in res.summary["timings_s"]
+
+
+def test_choices_are_strata():
+    """A start drawn from two places on the line: two strata of weight 1/2, each the same known case."""
+    data = line_study(1.372)  # p close to 1e-4
+    data["initial"] = {"start_along_m": {"dist": "choice", "values": [0.0, 1.0]}}
+    r = pfjax.rare_event(data, max_rollouts=40_000, progress=False)["controllers"]["sf"]
+    assert [(s["values"], s["weight"]) for s in r["strata"]] == [
+        ({"initial.start_along_m": 0.0}, 0.5),
+        ({"initial.start_along_m": 1.0}, 0.5),
+    ]
+    p = line_offset_failure_probability(K, 1.372)
+    assert r["ci95"][0] <= p <= r["ci95"][1], (r["p_fail"], r["ci95"], p)
+    assert r["n_rollouts"] == sum(s["n_rollouts"] for s in r["strata"]) <= 40_000

@@ -27,7 +27,7 @@ from pfjax.montecarlo.config import StudySpec
 from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
 from pfjax.rare.importance import cross_entropy_is, explore
 from pfjax.rare.subset import subset_simulation
-from pfjax.rare.transform import Input, Stratum, study_inputs, to_physical
+from pfjax.rare.transform import Input, Stratum, config_keys, study_inputs, to_physical
 
 
 def limit_state(spec: StudySpec, stratum: Stratum, inputs: list[Input], controller, *, counter=None):
@@ -113,14 +113,15 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     ci = parts[0][1].ci95 if len(parts) == 1 else lognormal_interval(p, rel)
     if p == 0:  # no failure seen: the interval's top is the strata's tops, weighted
         ci = (0.0, min(1.0, sum(s.weight * r.ci95[1] for s, r in parts)))
-    points = []
+    points, keys = [], config_keys(spec)
     for s, r in parts:
         modes = r.detail.get("modes")
         if modes and inputs and r.p_fail > 0:
             x = to_physical(inputs, np.asarray(modes["means"]))
             for j, w in enumerate(modes["weights"]):
                 point = {inp.key: float(x[inp.name][j]) for inp in inputs}
-                points.append({"path": spec.paths[s.path_index].label, **s.values, **point, "weight": s.weight * w})
+                chosen = {keys[k]: v for k, v in s.values.items()}
+                points.append({"path": spec.paths[s.path_index].label, **chosen, **point, "weight": s.weight * w})
     return {
         "p_fail": float(p),
         "ci95": [float(ci[0]), float(ci[1])],
@@ -131,7 +132,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
         "strata": [
             {
                 "path": spec.paths[s.path_index].label,
-                "values": s.values,
+                "values": {keys[k]: v for k, v in s.values.items()},
                 "weight": s.weight,
                 **{k: v for k, v in r._asdict().items() if k != "detail"},
             }

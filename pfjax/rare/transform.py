@@ -66,6 +66,11 @@ def _quantities(spec: StudySpec) -> list[tuple[str, str, Dist]]:
     return out
 
 
+def config_keys(spec: StudySpec) -> dict[str, str]:
+    """Study quantity -> its config key (``beta_r_deg`` -> ``slip.beta_r_deg``)."""
+    return {n: k for n, k, _ in _quantities(spec)}
+
+
 def check_supported(spec: StudySpec) -> None:
     """Raise a one-line :class:`~pfjax.config.ConfigError` naming the first key whose randomness
     the transform cannot map."""
