@@ -20,7 +20,8 @@ plus a defensive share ``α`` of the input law itself, which bounds every weight
 (Hesterberg, 1995). The mixture is fitted by cross-entropy: draw ``n_per_level`` points from the
 current proposal, set the level ``γ_t = max(0, ρ-quantile of g)``, and refit the mixture to the
 points with ``g <= γ_t`` weighted by ``φ / q`` (weighted EM, 20 iterations, covariances
-regularised by ``10⁻⁶ I``; components below 0.5 % weight dropped) until ``γ_t = 0``, then
+regularised by ``10⁻⁶ I``; every component kept with at least 1 % weight, so a part of the
+failure region that one level under-weighs is not lost) until ``γ_t = 0``, then
 ``refine`` more fits at ``γ = 0`` (the fit at a fixed level is a fixed-point iteration towards
 the optimal proposal; its first step rests on few effective samples and comes out too narrow). The first
 proposal is ``N(0, I)``, or, given ``starts`` (failure points found by a falsifier, in the
@@ -40,8 +41,10 @@ from scipy.special import logsumexp
 from pfjax import errors
 from pfjax.rare.estimate import Z95, RareEstimate, check_common, evaluate
 
-#: Mixture components lighter than this are dropped after a fit.
-MIN_WEIGHT = 0.005
+#: Least weight of a mixture component after a fit: a part of the failure region that one level's
+#: draws under-weigh keeps a component, whose draws restore its weight at the next fit (dropped,
+#: the part would be lost for good and the estimate short by its probability).
+MIN_WEIGHT = 0.01
 
 
 class Mixture(NamedTuple):
@@ -105,8 +108,8 @@ def _kmeanspp(rng, u: np.ndarray, w: np.ndarray, k: int) -> np.ndarray:
 def fit_mixture(
     u: np.ndarray, w: np.ndarray, init: Mixture, iters: int = 20, reg: float = 1e-6, full: bool = False
 ) -> Mixture:
-    """Weighted EM for a Gaussian mixture, from ``init``; components that lose all weight are
-    dropped. ``full``: fit the covariances too (else they stay ``I``)."""
+    """Weighted EM for a Gaussian mixture, from ``init``; every component keeps at least
+    :data:`MIN_WEIGHT`. ``full``: fit the covariances too (else they stay ``I``)."""
     dim = u.shape[1]
     w = w / w.sum()
     mix = init
@@ -114,16 +117,15 @@ def fit_mixture(
         lp = _component_logpdf(u, mix)
         r = np.exp(lp - logsumexp(lp, axis=1, keepdims=True)) * w[:, None]
         nk = r.sum(axis=0)
-        keep = nk > 1e-10
-        r, nk = r[:, keep], nk[keep]
-        means = (r.T @ u) / nk[:, None]
-        covs = np.empty((len(nk), dim, dim))
-        for c in range(len(nk)):
+        alive = nk > 1e-12  # a component no point belongs to keeps its place
+        means, covs = mix.means.copy(), mix.covs.copy()
+        for c in np.flatnonzero(alive):
+            means[c] = r[:, c] @ u / nk[c]
             x = u - means[c]
             covs[c] = (r[:, c, None] * x).T @ x / nk[c] + reg * np.eye(dim) if full else np.eye(dim)
-        mix = Mixture(nk / nk.sum(), means, covs)
-    keep = mix.weights >= MIN_WEIGHT
-    return Mixture(mix.weights[keep] / mix.weights[keep].sum(), mix.means[keep], mix.covs[keep])
+        weights = np.maximum(nk / nk.sum(), MIN_WEIGHT)
+        mix = Mixture(weights / weights.sum(), means, covs)
+    return mix
 
 
 def _initial(rng, u, w, k, mix: Mixture) -> Mixture:
