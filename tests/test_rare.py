@@ -318,11 +318,13 @@ def test_command_line_help(capsys):
 def test_study_summary_gains_the_estimates(tmp_path):
     data = line_study(1.091, method="mc", max_rollouts=1000)
     data["n_runs"] = 32
-    res = pfjax.run_study(data, tmp_path / "out", report=False)
+    res = pfjax.run_study(data, tmp_path / "out")
     c = res.summary["controllers"]["sf"]
     assert c["method"] == "mc" and c["n_rollouts"] == 1000 and c["p_fail"] == 0.0
     assert c["p_fail_ci95"][0] == 0.0 and 0 < c["p_fail_ci95"][1] < 0.01 and c["rel_error"] is None
     assert "rare_event" in res.summary["timings_s"]
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert 'id="rare"' in html and "rollouts (method)" in html
 
 
 def test_choices_are_strata():
