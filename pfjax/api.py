@@ -516,6 +516,7 @@ def rare_event(
     from pfjax.montecarlo.runner import controllers_of
     from pfjax.rare import METHODS
     from pfjax.rare.study import estimate_study
+    from pfjax.rare.transform import study_inputs
 
     values = {k.replace("__", "."): v for k, v in overrides.items()}
     if method is not None:
@@ -523,9 +524,9 @@ def rare_event(
             raise errors.InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}", "method")
         values["rare_event.method"] = method
     if target_rel_error is not None:
-        values["rare_event.target_rel_error"] = errors.number(
-            "target_rel_error", target_rel_error, positive=True, below=10.000001
-        )
+        values["rare_event.target_rel_error"] = errors.number("target_rel_error", target_rel_error, positive=True)
+        if target_rel_error > 10:
+            raise errors.InputError(f"target_rel_error: must be <= 10, got {target_rel_error:g}", "target_rel_error")
     if max_rollouts is not None:
         values["rare_event.max_rollouts"] = errors.integer("max_rollouts", max_rollouts, low=100, high=100_000_000)
     if seed is not None:
@@ -537,8 +538,6 @@ def rare_event(
             f"controller: {controller!r} is not one of study {spec.name!r}'s controllers: {', '.join(names)}",
             "controller",
         )
-    from pfjax.rare.transform import study_inputs
-
     study_inputs(spec)  # an unsupported study fails here, before anything is simulated
     controllers = controllers_of(spec)
     chosen = names if controller is None else [controller]
