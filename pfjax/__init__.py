@@ -8,6 +8,7 @@ The public API (:data:`__all__`; :mod:`pfjax.api`)::
     pfjax.simulate(scenarios, controller, gains)       # per-run metrics and statuses
     pfjax.success_rate(simulation)                     # with its Clopper-Pearson interval
     pfjax.run_study(config, out) / pfjax.load_study(out)
+    pfjax.rare_event(config, method="is")             # failure probabilities to 1e-6 and below
     pfjax.tune(...), pfjax.falsify(...), pfjax.parking.run(...), pfjax.tracking.run(...)
 
 Importing pfjax sets the host up (:func:`setup`, :mod:`pfjax.host`): one CPU device per core, the
@@ -46,6 +47,7 @@ _LAZY = {
             "replay",
             "tune",
             "falsify",
+            "rare_event",
             "uniform",
             "normal",
             "truncnormal",
@@ -72,6 +74,7 @@ _SUBPACKAGES = (
     "montecarlo",
     "parking",
     "paths",
+    "rare",
     "reproduce",
     "sim",
     "synthesis",

@@ -6,6 +6,7 @@ imported by nothing in it.
                    [--horizon 20] [--json]
     pfjax study CONFIG.toml [--set key=value ...] [--out DIR] [--json]
     pfjax report CONFIG.toml [--out DIR]
+    pfjax rare-event CONFIG.toml [--method {is,subset,mc}] [--target-rel-error 0.1] [--json]
     pfjax tune | parking | parking-search | track | bench ...   (pfjax SUBCOMMAND --help)
 
 One module per subcommand (or pair of subcommands), each with ``register(sub)``. Bad arguments
@@ -34,7 +35,7 @@ from pfjax.jsonio import dumps
 __all__ = ["EXIT_USAGE", "UsageError", "as_flags", "build_parser", "main"]
 
 #: The subcommand modules, in the order of ``pfjax --help``.
-SUBCOMMANDS = ("synth", "simulate", "study", "examples", "tune", "parking", "track", "bench")
+SUBCOMMANDS = ("synth", "simulate", "study", "rare-event", "examples", "tune", "parking", "track", "bench")
 
 
 def build_parser():
@@ -44,7 +45,7 @@ def build_parser():
     p.add_argument("--version", action="version", version=f"pfjax {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     for name in SUBCOMMANDS:
-        importlib.import_module(f"pfjax.cli.{name}").register(sub)
+        importlib.import_module(f"pfjax.cli.{name.replace('-', '_')}").register(sub)
     return p
 
 

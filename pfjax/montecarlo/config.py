@@ -505,6 +505,40 @@ class FalsifierSpec(_Model):
     steps: int = Field(40, ge=1, le=10_000, description="adam steps per start")
 
 
+class RareEventSpec(_Model):
+    """Small failure probabilities per controller (:mod:`pfjax.rare`): a run fails where its status is
+    a failure or ``metric > threshold``; the estimator works on the margin ``threshold - metric``
+    over the study's uncertain inputs mapped to the standard-normal space (choices and paths as
+    strata, :mod:`pfjax.rare.transform`)."""
+
+    enabled: bool = Field(False, description="estimate each controller's failure probability")
+    method: Literal["is", "subset", "mc"] = Field(
+        "is", description="is (cross-entropy importance sampling), subset (subset simulation) or mc (plain)"
+    )
+    metric: Literal["late_max_abs_d", "max_abs_d", "steady_abs_d", "iae", "ise", "overshoot"] = Field(
+        "late_max_abs_d", description="per-run metric whose excess over threshold is a failure"
+    )
+    threshold: Real | None = Field(
+        None, ge=0, description="failure where metric > threshold (metric's unit; default success.band, m)"
+    )
+    target_rel_error: Real = Field(
+        0.1, gt=0, le=10, description="stop once the estimate's relative error (c.o.v.) is at most this"
+    )
+    max_rollouts: int = Field(100_000, ge=100, le=100_000_000, description="rollouts per controller at most")
+    n_per_level: int = Field(
+        2000, ge=100, le=10_000_000, description="is / subset: rollouts per cross-entropy or subset level"
+    )
+    n_components: int = Field(4, ge=1, le=64, description="is: Gaussians in the proposal mixture")
+    batch: int = Field(2000, ge=32, le=1_000_000, description="runs simulated at once (one compiled shape)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="seed of the estimator's draws")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.method == "subset" and self.n_per_level % 10:
+            raise ValueError(f"n_per_level: subset simulation needs a multiple of 10, got {self.n_per_level}")
+        return self
+
+
 class ControllerSpec(_Model):
     """A controller to compare. ``type``: a registered controller (state_feedback, pi, integral,
     stanley, pure_pursuit, rear_wheel, ...; :data:`pfjax.controllers.REGISTRY`) or a design
@@ -577,6 +611,7 @@ class StudySpec(_Model):
     noise: NoiseSpec = NoiseSpec()
     margin: MarginSpec = MarginSpec()
     falsifier: FalsifierSpec = FalsifierSpec()
+    rare_event: RareEventSpec = RareEventSpec()
     paths: list[PathSpec] = Field(min_length=1)
     controllers: list[ControllerSpec] = Field(min_length=1)
 

@@ -150,12 +150,8 @@ def _slip(spec: StudySpec, key, horizon: float, given=None):
         cols.update(step_time_s=step_time, step_r_deg=sr, step_f_deg=sf)
     elif s.kind == "sinusoid":
         ar, af, fr = d("amp_r_deg"), d("amp_f_deg"), d("freq_hz")
-        ph = jnp.stack(
-            [
-                jax.random.uniform(_q(key, "phase_r"), (), maxval=2 * math.pi),
-                jax.random.uniform(_q(key, "phase_f"), (), maxval=2 * math.pi),
-            ]
-        )
+        phase = lambda name: given[name] if name in given else jax.random.uniform(_q(key, name), (), maxval=2 * math.pi)
+        ph = jnp.stack([phase("phase_r"), phase("phase_f")])
         terms.update(sin_amp=jnp.stack([ar, af]) * rad, sin_freq=jnp.stack([fr, fr]), sin_phase=ph)
         cols.update(amp_r_deg=ar, amp_f_deg=af, freq_hz=fr)
     elif s.kind == "ou":
@@ -238,7 +234,8 @@ class _Static:
         return isinstance(other, _Static) and other._json == self._json
 
 
-#: Quantities :func:`sample_runs` can take per run (``given``) instead of drawing them.
+#: Quantities :func:`sample_runs` can take per run (``given``) instead of drawing them (the
+#: slip profile's terms are used only by their kind; the sinusoid's phases are in rad).
 GIVEN = (
     "speed",
     "L",
@@ -249,6 +246,14 @@ GIVEN = (
     "lateral_offset",
     "heading_error_deg",
     "mu",
+    "step_time_s",
+    "step_r_deg",
+    "step_f_deg",
+    "amp_r_deg",
+    "amp_f_deg",
+    "freq_hz",
+    "phase_r",
+    "phase_f",
 )
 
 

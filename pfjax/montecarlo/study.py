@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[2]
 RUN_FIGURES = ["dist_iae", "dist_late_max_abs_d"]
 WORKER_SUMMARY_FIGURES = ["headline", "margin_curves", "success_by_param"]
 #: The phases of ``timings_s`` in summary.json (main-thread wall clock, s).
-PHASES = ("runs", "margin", "worst_case", "float64_check", "summary", "report")
+PHASES = ("runs", "margin", "worst_case", "rare_event", "float64_check", "summary", "report")
 
 
 class SideJobs:
@@ -304,6 +304,10 @@ def _run(spec: StudySpec, output, *, progress, report, fresh, warn, overlap, wor
 
     t0 = time.time()
     result = {}
+    if spec.rare_event.enabled:  # a study the rare-event transform cannot map fails before any run
+        from pfjax.rare.transform import check_supported
+
+        check_supported(spec)
     warnings = study_warnings(spec)
     for w in warnings:
         (warn or (lambda m: None))(w)
@@ -366,6 +370,19 @@ def _run(spec: StudySpec, output, *, progress, report, fresh, warn, overlap, wor
         for name, block in worst.items():
             summary["controllers"][name]["worst_case"] = block
         mark("worst_case")
+        if spec.rare_event.enabled:
+            from pfjax.rare.study import estimate_study
+
+            for name, est in estimate_study(spec, controllers, progress=progress).items():
+                summary["controllers"][name].update(
+                    p_fail=est["p_fail"],
+                    p_fail_ci95=est["ci95"],
+                    rel_error=est["rel_error"],
+                    n_rollouts=est["n_rollouts"],
+                    method=est["method"],
+                    rare_event=est,
+                )
+            mark("rare_event")
         if report:
             worst_figure = side.worst_figure.result() if side.worst_figure is not None else None
             if worst_figure is None:

@@ -443,6 +443,40 @@ def _worst_case_rows(summary: dict, colors: dict) -> list:
     return rows
 
 
+def _rare_event_rows(summary: dict, colors: dict) -> list:
+    """Per controller: the rare-event estimate beside the plain failure rate of the study's runs, and
+    the most likely failure point the estimate found (``[rare_event]``, :mod:`pfjax.rare`)."""
+    rows = []
+    for n, c in summary["controllers"].items():
+        if "p_fail" not in c:
+            continue
+        lo, hi = c["p_fail_ci95"]
+        plain = 1 - c["success_rate"]
+        plain_ci = (1 - c["success_ci95"][1], 1 - c["success_ci95"][0])
+        points = c["rare_event"].get("failure_points") or []
+        top = (
+            ", ".join(
+                f"{k.split('.')[-1]} = {v:.3g}" if isinstance(v, (int, float)) else f"{k.split('.')[-1]} = {v}"
+                for k, v in points[0].items()
+                if k != "weight"
+            )
+            if points
+            else "—"
+        )
+        rel = "—" if c["rel_error"] is None else f"{100 * c['rel_error']:.1f} %"
+        rows.append(
+            [
+                _cell(n, swatch=colors[n]),
+                _cell(f"{c['p_fail']:.3g} [{lo:.3g}, {hi:.3g}]"),
+                _cell(rel),
+                _cell(f"{c['n_rollouts']} ({c['method']})"),
+                _cell(f"{plain:.3g} [{plain_ci[0]:.3g}, {plain_ci[1]:.3g}]"),
+                _cell(top),
+            ]
+        )
+    return rows
+
+
 def write_report(
     out_dir: Path,
     spec: StudySpec,
@@ -503,6 +537,7 @@ def write_report(
         if figures is not None
         else _figures(out_dir, spec, summary, runs, colors, worst_trajectories),
         "worst_case_rows": _worst_case_rows(summary, colors),
+        "rare_event_rows": _rare_event_rows(summary, colors),
         "warnings": summary.get("warnings") or [],
         "precision_rows": _precision_rows(summary, colors),
         "precision": summary.get("float64_check") or {},

@@ -1,0 +1,67 @@
+"""``pfjax rare-event``: each controller's failure probability under a study's uncertain inputs,
+down to 1e-6 and below, with its 95 % interval (:func:`pfjax.rare_event`).
+
+    pfjax rare-event CONFIG.toml [--set key=value ...] [--controller NAME] [--method {is,subset,mc}]
+                     [--target-rel-error 0.1] [--max-rollouts N] [--seed S] [--json]
+
+Prints ``{"study", "config_sha256", "units", "controllers": {name: {"p_fail", "ci95",
+"rel_error", "n_rollouts", "method", ...}}}``; a progress bar of rollouts on stderr when it is a
+terminal and ``--json`` is not given. Nothing is written to disk.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from pfjax.cli.common import as_flags
+
+#: ``pfjax rare-event``'s flags by the library argument they set.
+FLAGS = {
+    "config": "CONFIG",
+    "controller": "--controller",
+    "method": "--method",
+    "target_rel_error": "--target-rel-error",
+    "max_rollouts": "--max-rollouts",
+    "seed": "--seed",
+}
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "rare-event",
+        help="small failure probabilities (1e-6 and below) with intervals",
+        description="Estimate each controller's probability of failure under a study's uncertain inputs by "
+        "importance sampling (cross-entropy Gaussian mixture), subset simulation or plain Monte Carlo; "
+        "prints the estimate, its 95 %% interval, relative error and rollouts.",
+    )
+    p.add_argument("config", help="study TOML (its [rare_event] table sets the defaults)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value")
+    p.add_argument("--controller", default=None, help="only this controller of the study (default: all)")
+    p.add_argument("--method", default=None, help="is | subset | mc (default: the config's, else is)")
+    p.add_argument("--target-rel-error", type=float, default=None, help="stop at this relative error (0.1)")
+    p.add_argument("--max-rollouts", type=int, default=None, help="rollouts per controller at most (100000)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the estimator's draws (0)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_cmd)
+
+
+def _cmd(args) -> dict:
+    from pathlib import Path
+
+    from pfjax.api import rare_event
+    from pfjax.cli.common import UsageError
+    from pfjax.montecarlo.config import load_study
+
+    if not Path(args.config).is_file():
+        raise UsageError(f"CONFIG: no such file {args.config!r}", "config")
+    spec, _ = load_study(args.config, args.set)
+    with as_flags(FLAGS):
+        return rare_event(
+            spec,
+            controller=args.controller,
+            method=args.method,
+            target_rel_error=args.target_rel_error,
+            max_rollouts=args.max_rollouts,
+            seed=args.seed,
+            progress=(not args.json) and sys.stderr.isatty(),
+        )

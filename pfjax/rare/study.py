@@ -1,0 +1,162 @@
+"""A study controller's failure probability: the study's runs as a limit-state function on the
+standard-normal space, estimated per stratum and combined.
+
+For a stratum ``s`` (a path and one value of every ``choice``, :mod:`pfjax.rare.transform`) and
+standard-normal points ``u``, the runs are the study's runs with the continuous inputs set to
+``T(u)`` (:func:`pfjax.montecarlo.sampling.sample_runs` with ``given``), simulated as the study
+simulates them (same settings, precision and gains), and the margin is
+
+$$
+g(u) = \\text{threshold} - \\text{metric}(u) \\quad (\\text{metric's unit}),
+$$
+
+forced to at most ``-10⁻⁹`` where the run's status is a failure (diverged, non-finite, ...). The
+strata combine as ``p = Σ_s w_s p_s`` with ``Var p = Σ_s w_s² Var p_s``; one stratum keeps its
+estimator's own interval, several get the lognormal one of
+:func:`pfjax.rare.estimate.lognormal_interval`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from pfjax.montecarlo.config import StudySpec
+from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
+from pfjax.rare.importance import cross_entropy_is, explore
+from pfjax.rare.subset import subset_simulation
+from pfjax.rare.transform import Input, Stratum, config_keys, study_inputs, to_physical
+
+
+def limit_state(spec: StudySpec, stratum: Stratum, inputs: list[Input], controller, *, counter=None):
+    """``g(u)`` of one stratum for one controller (``(ctrl, gains, flat)`` of
+    :func:`pfjax.montecarlo.runner.controller_of`); ``counter(n)`` is told of every ``n`` rollouts.
+
+    A batch of ``n`` points is padded to a multiple of 32 runs (one compiled program per padded
+    size), with ``u``'s extra coordinate ignored when the study has no continuous input."""
+    from pfjax.montecarlo.runner import batch_size, sim_config, with_gains
+    from pfjax.montecarlo.sampling import sample_runs
+    from pfjax.sim.simulate import simulate_batch
+
+    ctrl, gains, _ = controller
+    rare = spec.rare_event
+    threshold = spec.success.band if rare.threshold is None else rare.threshold
+    cfg = sim_config(spec)
+
+    def g(u: np.ndarray) -> np.ndarray:
+        n = len(u)
+        m = batch_size(n)
+        x = to_physical(inputs, u) if inputs else {}
+        x.update({k: np.full(n, v) for k, v in stratum.values.items()})
+        given = {k: np.concatenate([v, np.repeat(v[:1], m - n)]) for k, v in x.items()}
+        sampled = sample_runs(spec, stratum.path_index, np.arange(m), given=given)
+        res = simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
+        metric = np.asarray(getattr(res.metrics, rare.metric), dtype=float)[:n]
+        margin = threshold - metric
+        if counter is not None:
+            counter(n)
+        return np.where(np.asarray(res.status)[:n] != 0, np.minimum(margin, -1e-9), margin)
+
+    return g
+
+
+def _estimate(g, dim, method, rare, budget, seed, target):
+    if method == "mc":
+        return monte_carlo(g, dim, n=budget, seed=seed, batch=rare.batch)
+    if method == "subset":
+        n = rare.n_per_level
+        return subset_simulation(
+            g, dim, n_per_level=n, target_rel_error=target, max_rollouts=max(budget, n), seed=seed, batch=rare.batch
+        )
+    # explore first: a margin that is flat far from failure (a loop with integral action converges
+    # wherever it does not fail) gives the cross-entropy levels nothing to follow, and they can
+    # end in one part of the failure region only; failure points of a widened law start the fit
+    starts, used = explore(g, dim, n=rare.n_per_level, seed=seed + 7919, batch=rare.batch)
+    est = cross_entropy_is(
+        g,
+        dim,
+        starts=starts if len(starts) else None,
+        n_components=rare.n_components,
+        n_per_level=rare.n_per_level,
+        n_batch=rare.n_per_level,
+        target_rel_error=target,
+        max_rollouts=max(budget - used, rare.n_per_level),
+        seed=seed,
+        batch=rare.batch,
+    )
+    return est._replace(n_rollouts=est.n_rollouts + used)
+
+
+def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None) -> dict:
+    """One controller's failure probability under ``spec.rare_event`` (module docstring).
+
+    Returns:
+        ``{"p_fail", "ci95", "rel_error", "n_rollouts", "method", "wall_s", "strata",
+        "failure_points"}``: ``ci95`` ``[lo, hi]``, ``wall_s`` s; ``failure_points`` the
+        importance-sampling proposal's modes in the inputs' config units (its weight beside each),
+        the most likely failure points it found (``[]`` for the other methods).
+    """
+    rare = spec.rare_event
+    inputs, strata = study_inputs(spec)
+    dim = max(1, len(inputs))
+    budget = rare.max_rollouts // len(strata)
+    t0 = time.time()
+    parts: list[tuple[Stratum, RareEstimate]] = []
+    for k, s in enumerate(strata):
+        g = limit_state(spec, s, inputs, controller, counter=progress)
+        parts.append((s, _estimate(g, dim, rare.method, rare, budget, rare.seed + k, rare.target_rel_error)))
+    p = sum(s.weight * r.p_fail for s, r in parts)
+    var = sum((s.weight * r.p_fail * r.rel_error) ** 2 for s, r in parts if r.p_fail > 0)
+    rel = math.sqrt(var) / p if p > 0 else math.inf
+    ci = parts[0][1].ci95 if len(parts) == 1 else lognormal_interval(p, rel)
+    if p == 0:  # no failure seen: the interval's top is the strata's tops, weighted
+        ci = (0.0, min(1.0, sum(s.weight * r.ci95[1] for s, r in parts)))
+    points, keys = [], config_keys(spec)
+    for s, r in parts:
+        modes = r.detail.get("modes")
+        if modes and inputs and r.p_fail > 0:
+            x = to_physical(inputs, np.asarray(modes["means"]))
+            for j, w in enumerate(modes["weights"]):
+                point = {inp.key: float(x[inp.name][j]) for inp in inputs}
+                chosen = {keys[k]: v for k, v in s.values.items()}
+                points.append({"path": spec.paths[s.path_index].label, **chosen, **point, "weight": s.weight * w})
+    return {
+        "p_fail": float(p),
+        "ci95": [float(ci[0]), float(ci[1])],
+        "rel_error": float(rel),
+        "n_rollouts": int(sum(r.n_rollouts for _, r in parts)),
+        "method": rare.method,
+        "wall_s": time.time() - t0,
+        "strata": [
+            {
+                "path": spec.paths[s.path_index].label,
+                "values": {keys[k]: v for k, v in s.values.items()},
+                "weight": s.weight,
+                **{k: v for k, v in r._asdict().items() if k != "detail"},
+            }
+            for s, r in parts
+        ],
+        "failure_points": sorted(points, key=lambda q: -q["weight"]),
+    }
+
+
+def estimate_study(spec: StudySpec, controllers: dict, *, names=None, progress: bool | None = None) -> dict:
+    """:func:`estimate_controller` for every controller of ``controllers`` (``{name: (ctrl, gains,
+    flat)}``, :func:`pfjax.montecarlo.runner.controllers_of`) named in ``names`` (default all), in
+    the study's precision, with one progress bar of rollouts on stderr (``progress``: default when
+    stderr is a terminal)."""
+    from tqdm import tqdm
+
+    from pfjax.montecarlo.runner import precision
+
+    names = list(controllers) if names is None else list(names)
+    out = {}
+    total = spec.rare_event.max_rollouts * len(names)
+    disable = None if progress is None else not progress
+    with precision(spec), tqdm(total=total, desc=f"{spec.name}: rare events", unit="run", disable=disable) as bar:
+        for name in names:
+            bar.set_postfix_str(name)
+            out[name] = estimate_controller(spec, name, controllers[name], progress=bar.update)
+    return out

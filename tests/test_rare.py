@@ -1,0 +1,341 @@
+"""pfjax.rare: small failure probabilities against closed forms, OpenTURNS and a physical case
+whose probability is known independently.
+
+References: ``Φ(-β)`` for the linear limit state ``g(u) = β - u_1``; the union of two half-planes
+``P(u_1 >= a or u_2 <= -b) = Φ(-a) + Φ(-b) - Φ(-a)Φ(-b)``; OpenTURNS' subset sampling and its
+importance-sampling algorithm on the same Python function; for state feedback on a straight line
+under constant Gaussian slip from zero initial error, the Gaussian measure of the slips whose
+closed-loop equilibrium offset (:func:`pfjax.analysis.equilibrium`) leaves the band, integrated by
+``scipy.integrate.quad`` with the band's edges found by ``brentq``
+(:func:`pfjax.rare.reference.line_offset_failure_probability`), checked here against the closed
+form of the line equilibrium, ``d* = (β_f + (1 + K_2) β_r) / K_1``. Every estimate must hold the
+exact value in its 95 % interval (the seeds are fixed, so a test fails the same way each time).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+from scipy.special import ndtr
+
+import pfjax
+from pfjax.errors import InputError
+from pfjax.rare import cross_entropy_is, monte_carlo, subset_simulation
+from pfjax.rare.reference import line_offset_failure_probability
+from pfjax.rare.transform import study_inputs, to_physical, to_standard
+
+
+def linear(beta):
+    return lambda u: beta - u[:, 0]
+
+
+def two_regions(u):
+    return np.minimum(4.5 - u[:, 0], 4.0 + u[:, 1])
+
+
+P_TWO = ndtr(-4.5) + ndtr(-4.0) - ndtr(-4.5) * ndtr(-4.0)
+
+
+def inside(r, p):
+    return r.ci95[0] <= p <= r.ci95[1]
+
+
+@pytest.mark.parametrize("beta", [3.719, 4.753, 5.612])  # p = 1e-4, 1e-6, 1e-8
+@pytest.mark.parametrize("method", ["is", "subset"])
+def test_linear_limit_state_holds_phi_minus_beta(beta, method):
+    p = ndtr(-beta)
+    if method == "is":
+        r = cross_entropy_is(linear(beta), 4, seed=1, target_rel_error=0.1)
+        assert r.n_rollouts <= 20_000
+    else:
+        r = subset_simulation(linear(beta), 4, seed=1, target_rel_error=0.1, max_rollouts=400_000)
+    assert r.method == method and r.rel_error <= 0.1
+    assert inside(r, p), (r, p)
+
+
+@pytest.mark.parametrize("method", ["is", "subset"])
+def test_two_failure_regions_are_both_found(method):
+    """Ten seeds: each finds both regions (a proposal that missed one would be biased by 10 % at
+    a 3 % relative error, outside its interval every time); at least 8 of the 10 intervals hold p
+    (a true 95 % interval fails that with probability 1.2 %; seeds 2 and 3 of the importance
+    sampler lie 2.9 and 2.4 of their standard errors off)."""
+    hits = []
+    for seed in range(10):
+        if method == "is":
+            r = cross_entropy_is(two_regions, 2, seed=seed)
+            means = np.asarray(r.detail["modes"]["means"])
+            # one mode near each region's most likely point, (4.5, 0) and (0, -4)
+            assert min(np.linalg.norm(means - [4.5, 0.0], axis=1)) < 0.6
+            assert min(np.linalg.norm(means - [0.0, -4.0], axis=1)) < 0.6
+        else:
+            r = subset_simulation(two_regions, 2, seed=seed, target_rel_error=0.1)
+        hits.append(inside(r, P_TWO))
+    assert sum(hits) >= 8, hits
+
+
+def test_monte_carlo_is_the_exact_binomial():
+    r = monte_carlo(linear(2.0), 3, n=20_000, seed=0)
+    k = r.detail["failures"]
+    assert r.p_fail == k / 20_000 and r.n_rollouts == 20_000
+    assert r.ci95[0] == pytest.approx(stats.beta.ppf(0.025, k, 20_000 - k + 1))
+    assert r.ci95[1] == pytest.approx(stats.beta.ppf(0.975, k + 1, 20_000 - k))
+    assert inside(r, ndtr(-2.0))
+
+
+def test_starts_from_failure_points_are_used():
+    """Started at the two design points, the first level is already at the failure boundary."""
+    r = cross_entropy_is(two_regions, 2, starts=[[4.5, 0.0], [0.0, -4.0]], seed=4)
+    assert r.detail["levels"][0]["threshold"] == 0.0
+    assert inside(r, P_TWO)
+
+
+def test_coverage_of_the_intervals_at_1e_4():
+    """50 independent repeats per method at p = 1e-4: the 95 % intervals hold p in 86-100 % of them
+    (binomial 95 % range of 50 repeats at a true 95 %: 43-50)."""
+    p = ndtr(-3.719)
+    for method in ("is", "subset"):
+        hits = []
+        for s in range(50):
+            if method == "is":
+                r = cross_entropy_is(linear(3.719), 2, seed=100 + s, n_per_level=500, n_batch=1000)
+            else:
+                r = subset_simulation(linear(3.719), 2, seed=100 + s, n_per_level=500)
+            hits.append(inside(r, p))
+        assert np.mean(hits) >= 0.86, (method, np.mean(hits))
+
+
+def test_against_openturns():
+    ot = pytest.importorskip("openturns")
+    ot.RandomGenerator.SetSeed(7)
+    f = ot.PythonFunction(2, 1, func_sample=lambda x: two_regions(np.asarray(x))[:, None])
+    event = ot.ThresholdEvent(ot.CompositeRandomVector(f, ot.RandomVector(ot.Normal(2))), ot.LessOrEqual(), 0.0)
+    ss = ot.SubsetSampling(event)
+    ss.setMaximumOuterSampling(4000)
+    ss.setConditionalProbability(0.1)
+    ss.run()
+    p_ot, cov_ot = ss.getResult().getProbabilityEstimate(), ss.getResult().getCoefficientOfVariation()
+    ours = subset_simulation(two_regions, 2, seed=5, n_per_level=4000)
+    both = math.hypot(p_ot * cov_ot, ours.p_fail * ours.rel_error)
+    assert abs(ours.p_fail - p_ot) <= 2.5 * both, (ours, p_ot, cov_ot)
+    # OpenTURNS' importance sampling with our fitted proposal (its weights computed by OpenTURNS)
+    r = cross_entropy_is(two_regions, 2, seed=6, defensive=0.0)
+    modes = r.detail["modes"]
+    q = ot.Mixture([ot.Normal(m, [1.0, 1.0], ot.CorrelationMatrix(2)) for m in modes["means"]], modes["weights"])
+    algo = ot.ProbabilitySimulationAlgorithm(ot.StandardEvent(event), ot.ImportanceSamplingExperiment(q))
+    algo.setMaximumOuterSampling(5000)
+    algo.setMaximumCoefficientOfVariation(0.0)
+    algo.run()
+    res = algo.getResult()
+    p_is, cov_is = res.getProbabilityEstimate(), res.getCoefficientOfVariation()
+    assert abs(p_is - P_TWO) <= 1.96 * p_is * cov_is and inside(r, P_TWO), (p_is, cov_is, r)
+
+
+# ------------------------------------------------------------------------- the transform
+
+
+def _spec(initial=None, **slip):
+    from pfjax.montecarlo.config import load_study
+
+    return load_study(
+        data={
+            "name": "t",
+            "n_runs": 1,
+            "seed": 0,
+            "slip": slip,
+            "initial": {"start_along_m": {"dist": "choice", "values": [0.0, 1.0]}, **(initial or {})},
+            "vehicle": {"speed": {"dist": "uniform", "low": 0.5, "high": 1.5}},
+            "paths": [{"kind": "line"}, {"kind": "sine"}],
+            "controllers": [{"name": "sf", "type": "state_feedback"}],
+        }
+    )[0]
+
+
+def test_transform_maps_each_distribution_to_its_law():
+    spec = _spec(
+        initial={"lateral_offset": {"dist": "normal", "mean": 0.5, "std": 0.1}},
+        beta_r_deg={"dist": "truncnormal", "mean": 1.0, "std": 2.0, "low": -2.0, "high": 3.0},
+    )
+    inputs, strata = study_inputs(spec)
+    assert [i.name for i in inputs] == ["speed", "beta_r_deg", "lateral_offset"]
+    assert len(strata) == 4 and sum(s.weight for s in strata) == pytest.approx(1.0)
+    u = np.random.default_rng(0).standard_normal((20_000, 3))
+    x = to_physical(inputs, u)
+    laws = {
+        "speed": stats.uniform(0.5, 1.0),
+        "beta_r_deg": stats.truncnorm(-1.5, 1.0, loc=1.0, scale=2.0),
+        "lateral_offset": stats.norm(0.5, 0.1),
+    }
+    for name, law in laws.items():
+        assert stats.kstest(x[name], law.cdf).pvalue > 0.01, name
+    np.testing.assert_allclose(to_standard(inputs, x), u, atol=1e-6)
+    far = to_physical(inputs, np.full((1, 3), 7.0))  # 7 sigma: still inside the truncation
+    assert -2.0 <= far["beta_r_deg"][0] <= 3.0 and far["beta_r_deg"][0] > 2.99
+
+
+def test_transform_names_what_it_cannot_map():
+    with pytest.raises(InputError, match=r"^slip\.kind: "):
+        study_inputs(_spec(kind="ou", ou_sigma_deg=1.0))
+
+
+# ------------------------------------------------------------------------- the physical case
+
+K = np.array([-2.7381, -2.0772])  # the default state feedback's gains (rad/m, rad/rad)
+
+
+def line_study(std_deg, **rare):
+    return {
+        "name": "rare-line",
+        "n_runs": 1,
+        "seed": 0,
+        "dtype": "float64",
+        "sim": {"horizon": 8.0, "dt": 0.01, "steady_window": 2.0},
+        "success": {"band": 0.05, "from_s": 6.0},
+        "slip": {
+            k: {"dist": "truncnormal", "mean": 0.0, "std": std_deg, "low": -30.0, "high": 30.0}
+            for k in ("beta_r_deg", "beta_f_deg")
+        },
+        "margin": {"enabled": False},
+        "paths": [{"kind": "line"}],
+        "controllers": [{"name": "sf", "type": "state_feedback", "K": K.tolist()}],
+        "rare_event": {"enabled": True, "n_per_level": 1000, "batch": 1000, **rare},
+    }
+
+
+def test_equilibrium_reference_is_the_closed_form():
+    """``d*`` is linear in the slips (rad), so ``p = 2 Φ(-band / (s |(1 + K_2, 1)| / |K_1|))``."""
+    s = math.radians(1.091)
+    exact = 2 * ndtr(-0.05 * abs(K[0]) / (s * math.hypot(1 + K[1], 1.0)))
+    assert line_offset_failure_probability(K, 1.091) == pytest.approx(exact, rel=1e-6)
+
+
+def test_state_feedback_on_a_line_matches_the_equilibrium_integral():
+    std = 1.091  # deg: p close to 1e-6
+    p = line_offset_failure_probability(K, std)
+    assert 5e-7 < p < 2e-6
+    out = pfjax.rare_event(line_study(std), method="is", max_rollouts=20_000)
+    r = out["controllers"]["sf"]
+    assert r["ci95"][0] <= p <= r["ci95"][1] and r["rel_error"] <= 0.1, (r, p)
+    assert r["n_rollouts"] <= 20_000 and r["method"] == "is"
+    # the two most likely failure points: opposite slips (d* grows with beta_f - 1.08 beta_r)
+    signs = {np.sign(q["slip.beta_f_deg"]) for q in r["failure_points"][:2]}
+    assert signs == {-1.0, 1.0}
+
+
+def test_rare_event_validates_like_the_command_line():
+    with pytest.raises(InputError, match=r"^method: "):
+        pfjax.rare_event(line_study(1.0), method="bogus")
+    with pytest.raises(InputError, match=r"^target_rel_error: "):
+        pfjax.rare_event(line_study(1.0), target_rel_error=0)
+    with pytest.raises(InputError, match=r"^controller: "):
+        pfjax.rare_event(line_study(1.0), controller="nope")
+    with pytest.raises(InputError, match=r"^rare_event\.n_per_level: "):
+        pfjax.rare_event(line_study(1.0, method="subset", n_per_level=1001))
+
+
+# ------------------------------------------------------------------------- command line and studies
+
+
+def _write(tmp_path, std_deg: float) -> str:
+    """:func:`line_study` as a TOML file."""
+    path = tmp_path / "rare.toml"
+    slip = f'{{ dist = "truncnormal", mean = 0.0, std = {std_deg}, low = -30.0, high = 30.0 }}'
+    path.write_text(
+        f"""name = "rare-line"
+n_runs = 1
+seed = 0
+dtype = "float64"
+sim = {{ horizon = 8.0, dt = 0.01, steady_window = 2.0 }}
+success = {{ band = 0.05, from_s = 6.0 }}
+margin = {{ enabled = false }}
+rare_event = {{ enabled = true, n_per_level = 1000, batch = 1000 }}
+[slip]
+beta_r_deg = {slip}
+beta_f_deg = {slip}
+[[paths]]
+kind = "line"
+[[controllers]]
+name = "sf"
+type = "state_feedback"
+K = [{K[0]}, {K[1]}]
+"""
+    )
+    return str(path)
+
+
+def test_command_line_prints_one_json_object(tmp_path, capsys):
+    import json
+
+    from pfjax.cli import main
+
+    cfg = _write(tmp_path, 1.091)
+    rc = main(["rare-event", cfg, "--method", "mc", "--max-rollouts", "1000", "--seed", "3", "--json"])
+    out = capsys.readouterr().out
+    assert rc == 0 and out.count("\n") == 1
+    obj = json.loads(out)
+    r = obj["controllers"]["sf"]
+    assert set(r) >= {"p_fail", "ci95", "rel_error", "n_rollouts", "method"}
+    assert r["method"] == "mc" and r["n_rollouts"] == 1000 and r["p_fail"] == 0.0
+    assert r["ci95"][0] == 0.0 and r["ci95"][1] == pytest.approx(1 - 0.025 ** (1 / 1000))
+    assert len(obj["config_sha256"]) == 64 and list(tmp_path.iterdir()) == [tmp_path / "rare.toml"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [
+        (["--method", "bogus"], "--method"),
+        (["--target-rel-error", "-1"], "--target-rel-error"),
+        (["--max-rollouts", "5"], "--max-rollouts"),
+        (["--seed", "-2"], "--seed"),
+        (["--controller", "nope"], "--controller"),
+        (["--set", "rare_event.method=xx"], "rare_event.method"),
+    ],
+)
+def test_command_line_bad_input_is_one_line_exit_2(tmp_path, capsys, argv, flag):
+    from pfjax.cli import main
+
+    cfg = _write(tmp_path, 1.0)
+    assert main(["rare-event", cfg, *argv]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and err.startswith(f"pfjax rare-event: error: {flag}: "), err
+    assert main(["rare-event", str(tmp_path / "missing.toml")]) == 2
+    assert "CONFIG: no such file" in capsys.readouterr().err
+
+
+def test_command_line_help(capsys):
+    from pfjax.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["rare-event", "--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    for flag in ("--controller", "--method", "--target-rel-error", "--max-rollouts", "--seed", "--json", "--set"):
+        assert flag in out
+
+
+def test_study_summary_gains_the_estimates(tmp_path):
+    data = line_study(1.091, method="mc", max_rollouts=1000)
+    data["n_runs"] = 32
+    res = pfjax.run_study(data, tmp_path / "out")
+    c = res.summary["controllers"]["sf"]
+    assert c["method"] == "mc" and c["n_rollouts"] == 1000 and c["p_fail"] == 0.0
+    assert c["p_fail_ci95"][0] == 0.0 and 0 < c["p_fail_ci95"][1] < 0.01 and c["rel_error"] is None
+    assert "rare_event" in res.summary["timings_s"]
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert 'id="rare"' in html and "rollouts (method)" in html
+
+
+def test_choices_are_strata():
+    """A start drawn from two places on the line: two strata of weight 1/2, each the same known case."""
+    data = line_study(1.372)  # p close to 1e-4
+    data["initial"] = {"start_along_m": {"dist": "choice", "values": [0.0, 1.0]}}
+    r = pfjax.rare_event(data, max_rollouts=40_000, progress=False)["controllers"]["sf"]
+    assert [(s["values"], s["weight"]) for s in r["strata"]] == [
+        ({"initial.start_along_m": 0.0}, 0.5),
+        ({"initial.start_along_m": 1.0}, 0.5),
+    ]
+    p = line_offset_failure_probability(K, 1.372)
+    assert r["ci95"][0] <= p <= r["ci95"][1], (r["p_fail"], r["ci95"], p)
+    assert r["n_rollouts"] == sum(s["n_rollouts"] for s in r["strata"]) <= 40_000
