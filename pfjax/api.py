@@ -525,7 +525,10 @@ def tune(
         key: int seed (or JAX key) of the GA population / the gradient's starts.
         cost: a :class:`pfjax.tuning.CostSpec` (metric, effort weight, aggregate); default mean IAE.
         config: a :class:`pfjax.sim.SimConfig` (default 20 s at 5 ms, or the study's).
-        steps, n_starts, learning_rate: gradient settings (``None``: the method's default).
+        steps: gradient steps (``None``: the method's default; multi-start: evaluations of a
+            surviving chain).
+        n_starts: starts descended together (``None``: the method's default).
+        learning_rate: multi-start: first BFGS trust radius; adam: step (box units; ``None``: default).
         multistart: a :class:`pfjax.tuning.MultistartOptions` for ``gradient``.
         check: gains to check instead of tuning (``{field: value}``, its JSON text or numbers in
             field order, inside the tuning box): gradient, projected gradient, active bounds,
