@@ -635,38 +635,62 @@ def tune(
     cost=None,
     config=None,
     n_runs: int = 16,
-    steps: int = 100,
-    n_starts: int = 1,
-    learning_rate: float = 0.05,
+    steps: int | None = None,
+    n_starts: int | None = None,
+    learning_rate: float | None = None,
     generations: int = 100,
     population: int = 50,
+    multistart=None,
+    check=None,
     progress: bool = False,
 ) -> dict:
-    """Tune a controller's gains by the GA or by gradient descent through the simulator, as
-    ``pfjax tune`` does.
+    """Tune a controller's gains, or check given gains, as ``pfjax tune`` does.
 
     Args:
         controller: a registered controller with a tuning box (``pi``, ``state_feedback``, ...).
         scenario: ``paper-line`` | ``paper-parabola`` | ``paper-sine`` | ``paper-all`` | a
             registered path's name | a study TOML (``n_runs`` sampled runs per path).
-        method: ``gradient`` (projected adam on ``jax.grad``) or ``ga``.
+        method: ``gradient`` (the multi-start tuner: Sobol screening with the controller's
+            default gains, successive halving of projected BFGS chains, restarts;
+            :mod:`pfjax.tuning.multistart`), ``gradient-plain`` (projected adam from ``n_starts``
+            uniform starts), ``ga`` (MATLAB-style GA) or ``ga+gradient`` (the GA, then ``steps``
+            adam steps from its best).
         key: int seed (or JAX key) of the GA population / the gradient's starts.
         cost: a :class:`pfjax.tuning.CostSpec` (metric, effort weight, aggregate); default mean IAE.
         config: a :class:`pfjax.sim.SimConfig` (default 20 s at 5 ms, or the study's).
+        steps: gradient steps (``None``: the method's default; multi-start: evaluations of a
+            surviving chain).
+        n_starts: starts descended together (``None``: the method's default).
+        learning_rate: multi-start: first BFGS trust radius; adam: step (box units; ``None``: default).
+        multistart: a :class:`pfjax.tuning.MultistartOptions` for ``gradient``.
+        check: gains to check instead of tuning (``{field: value}``, its JSON text or numbers in
+            field order, inside the tuning box): gradient, projected gradient, active bounds,
+            Hessian eigenvalues on the free coordinates, verdict (:mod:`pfjax.tuning.check`).
 
     Returns:
-        ``{"gains", "cost", "n_rollouts", "wall_s", "history", "history_rollouts", "result"}``.
+        ``{"gains", "cost", "n_rollouts", "n_forward_passes", "wall_s", "compile_s", "history",
+        "history_rollouts", "result"}``; with ``check``: ``{"gains", "cost", "check", "result"}``.
     """
     import jax
 
     from pfjax import controllers as C
+    from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
+    from pfjax.tuning.problem import check as run_check
     from pfjax.tuning.problem import make_problem
     from pfjax.tuning.problem import tune as run_tune
 
     name = C.resolve(controller)[0].name if isinstance(controller, str) else controller
     problem = make_problem(name, scenario, cost=cost or CostSpec(), config=config, n_runs=n_runs)
+    if check is not None:
+        r = run_check(problem, check)
+        return {
+            "gains": C.flat_gains(C.entry(name), problem.tunable.gains(r.theta)),
+            "cost": r.cost,
+            "check": as_dict(r, problem.tunable.fields, problem.tunable.sizes),
+            "result": r,
+        }
     k = jax.random.PRNGKey(errors.seed("key", key)) if isinstance(key, (int, np.integer)) else key
     res = run_tune(
         problem,
@@ -676,6 +700,7 @@ def tune(
         steps=steps,
         n_starts=n_starts,
         learning_rate=learning_rate,
+        multistart=multistart,
         progress=progress,
     )
     gains = C.flat_gains(C.entry(name), problem.tunable.gains(res.theta))
@@ -683,7 +708,9 @@ def tune(
         "gains": gains,
         "cost": float(res.cost),
         "n_rollouts": int(res.n_rollouts),
+        "n_forward_passes": int(res.n_forward_passes),
         "wall_s": float(res.wall_s),
+        "compile_s": float(res.compile_s),
         "history": np.asarray(res.history),
         "history_rollouts": np.asarray(res.history_rollouts),
         "result": res,

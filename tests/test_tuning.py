@@ -107,7 +107,7 @@ def test_gradient_tune_quadratic_in_box():
 def test_tune_cli_contract(capsys):
     from pfjax.cli import main
 
-    for method in ("ga", "gradient"):
+    for method in ("ga", "gradient-plain"):
         rc = main(
             [
                 "tune",

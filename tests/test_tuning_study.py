@@ -4,7 +4,9 @@ float64 for its whole process) and of its bad-input contract.
 References: the config hash is recomputed with :func:`pfjax.provenance.config_hash` from the stored config;
 every held-out success rate and Clopper-Pearson interval is recounted from ``heldout.parquet`` with
 scipy's beta quantiles (1e-9); the GA's rollout count is the MATLAB formula P + G (P - E) with E = 1;
-the cost history of every run is non-increasing and ends at the run's reported cost.
+the multi-start tuner's count is recomputed from its options (screened points plus the default gains, the
+halving chains, the restart chains); the cost history of every run is non-increasing and ends at the run's
+reported cost.
 """
 
 from __future__ import annotations
@@ -51,17 +53,34 @@ def test_quick_tuning_study_outputs_consistent(out):
     report = (out / "report.md").read_text()
     assert s["config_sha256"][:16] in report
 
-    # GA budget: P + G (P - E) rollouts per seed (MATLAB ga, elite count 1); the gradient's: one per step and start
+    # GA budget: P + G (P - E) rollouts per seed (MATLAB ga, elite count 1); plain adam's: one per step and start;
+    # the multi-start tuner's: screened points + the default gains, then 1 rollout per chain and step
     P, G = s["config"]["ga"]["population"], s["config"]["ga"]["generations"]
+    ms = s["config"]["multistart"]
+    chains, per_round = [], [ms["steps"] // ms["rounds"]] * ms["rounds"]
+    for i in range(ms["steps"] % ms["rounds"]):
+        per_round[i] += 1
+    n = ms["n_starts"]
+    for _ in range(ms["rounds"]):
+        chains.append(n)
+        n = max(1, n // 2)
+    multistart = ms["n_screen"] + 1 + sum(c * k for c, k in zip(chains, per_round))
+    multistart += (ms["n_restarts"] + 1) * ms["restart_steps"]
+    expected = {
+        "ga": P + G * (P - 1),
+        "gradient-plain": s["config"]["gradient"]["steps"] * s["config"]["gradient"]["starts"],
+        "gradient": multistart,
+        "ga+gradient": P + G * (P - 1) + 30,
+    }
+    runs = pd.DataFrame(s["tuning_runs"])
+    assert set(runs.method) == set(expected)
     for r in s["tuning_runs"]:
-        assert r["n_rollouts"] == (
-            P + G * (P - 1)
-            if r["method"] == "ga"
-            else s["config"]["gradient"]["steps"] * s["config"]["gradient"]["starts"]
-        )
+        assert r["n_rollouts"] == expected[r["method"]], r
+        assert r["n_forward_passes"] >= r["n_rollouts"]
     hist = pd.read_parquet(out / "tuning_runs.parquet")
     for r in s["tuning_runs"]:
-        h = hist[(hist.method == r["method"]) & (hist.seed == r["seed"])].sort_values("iteration")
+        h = hist[(hist.problem == r["problem"]) & (hist.method == r["method"]) & (hist.seed == r["seed"])]
+        h = h.sort_values("iteration")
         assert (h.best_cost.diff().dropna() <= 1e-12).all()
         assert h.best_cost.iloc[-1] == pytest.approx(r["cost"], rel=1e-9)
 
@@ -95,6 +114,8 @@ def test_quick_tuning_study_outputs_consistent(out):
         ("seeds=0", "seeds: must be >= 1"),
         ("ga.population=1", "ga.population: too small"),
         ("gradient.lr=-1", "gradient.lr: must be > 0"),
+        ("multistart.sampler=halton", "multistart: sampler: value 'halton'"),
+        ("compare.problems='pi:paper-all'", "compare.problems: must list pi:paper-line"),
         ("heldout=nope.toml", "heldout: file not found"),
     ],
 )

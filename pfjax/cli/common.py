@@ -87,11 +87,16 @@ def print_human(out: dict) -> None:
 
 
 def join_negative_values(argv: list[str]) -> list[str]:
-    """``--gains -4,-1.5`` -> ``--gains=-4,-1.5`` (argparse would read ``-4,...`` as an option)."""
+    """``--gains -4,-1.5`` -> ``--gains=-4,-1.5`` (and ``--check``; argparse would read ``-4,...`` as an option)."""
     out, i = [], 0
     while i < len(argv):
-        if argv[i] == "--gains" and i + 1 < len(argv) and argv[i + 1].startswith("-") and argv[i + 1][1:2].isdigit():
-            out.append(f"--gains={argv[i + 1]}")
+        if (
+            argv[i] in ("--gains", "--check")
+            and i + 1 < len(argv)
+            and argv[i + 1].startswith("-")
+            and argv[i + 1][1:2].isdigit()
+        ):
+            out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
         else:
             out.append(argv[i])

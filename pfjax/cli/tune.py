@@ -1,13 +1,19 @@
-"""``pfjax tune``: tune a controller's gains by the GA or by gradient descent through the simulator.
+"""``pfjax tune``: tune a controller's gains by the GA or by gradient descent through the simulator,
+or check given gains.
 
-    pfjax tune --method {ga,gradient} --controller {pi,state-feedback,integral,stanley,pure-pursuit,rear-wheel}
+    pfjax tune --method {gradient,gradient-plain,ga,ga+gradient} | --check GAINS
+               --controller {pi,state-feedback,integral,stanley,pure-pursuit,rear-wheel}
                --scenario {paper-line,paper-parabola,paper-sine,paper-all,CONFIG.toml}
                [--cost iae] [--aggregate mean] [--effort 0] [--seed 0] [--generations 100] [--population 50]
-               [--steps 100] [--lr 0.05] [--n-runs 16] [--dt 0.005] [--horizon 20] [--json]
+               [--steps N] [--starts N] [--lr X] [--screen 64] [--sampler sobol] [--rounds 3] [--restarts 3]
+               [--smoothing 0] [--n-runs 16] [--dt 0.005] [--horizon 20] [--json]
 
-Prints ``gains``, ``cost``, ``n_rollouts_simulated``, ``wall_s``, ``history`` (best cost so far per
-generation / step) and ``history_rollouts``; a progress bar on stderr when it is a terminal and
-``--json`` is not given.
+Prints ``gains``, ``cost``, ``n_rollouts_simulated`` (every rollout, value-only or with a gradient),
+``n_forward_passes`` (a rollout with its gradient counted as ``1 + D`` forward passes in forward
+mode), ``wall_s`` (compilation excluded; ``compile_s``), ``history`` (best cost so far per
+generation / step) and ``history_rollouts``; with ``--check``: the gains' cost and
+:mod:`pfjax.tuning.check`'s report. A progress bar on stderr when it is a terminal and ``--json``
+is not given.
 """
 
 from __future__ import annotations
@@ -27,11 +33,25 @@ def _controllers() -> dict:
 def register(sub) -> None:
     p = sub.add_parser(
         "tune",
-        help="tune controller gains (GA or gradient through the simulator)",
-        description="Tune a controller's gains on a scenario set by MATLAB-style GA or projected adam on "
-        "jax.grad of the simulated cost; prints the gains, cost, rollouts and wall time.",
+        help="tune controller gains (GA or gradient through the simulator), or check given gains",
+        description="Tune a controller's gains on a scenario set by a multi-start gradient tuner through the "
+        "simulator or MATLAB-style GA; prints the gains, cost, rollouts and wall time. With --check GAINS: "
+        "the gradient and a second-order check of the given gains (is it a local minimum in the box?).",
     )
-    p.add_argument("--method", required=True, help="ga | gradient")
+    p.add_argument(
+        "--method",
+        default=None,
+        help="gradient (multi-start: screening, successive halving of BFGS chains, restarts) | "
+        "gradient-plain (projected adam from --starts uniform starts) | ga | ga+gradient (GA, then --steps "
+        "adam steps from its best); required unless --check",
+    )
+    p.add_argument(
+        "--check",
+        default=None,
+        metavar="GAINS",
+        help="check these gains instead of tuning: numbers in the box's field order ('10,0,2,0') or a JSON "
+        "object ('{\"kp_d\": 10, ...}'); prints the gradient, active bounds, Hessian eigenvalues and a verdict",
+    )
     p.add_argument("--controller", required=True, help="a controller with a tuning box: " + " | ".join(_controllers()))
     p.add_argument(
         "--scenario",
@@ -46,10 +66,34 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="PRNG seed (GA population / gradient start)")
     p.add_argument("--generations", type=int, default=100, help="GA generations (source: 100)")
     p.add_argument("--population", type=int, default=50, help="GA population (source: 50)")
-    p.add_argument("--steps", type=int, default=100, help="gradient steps")
-    p.add_argument("--starts", type=int, default=1, help="gradient: starts descended together (vmapped)")
-    p.add_argument("--lr", type=float, default=0.05, help="adam step in normalised box units")
-    p.add_argument("--from-default", action="store_true", help="gradient: start from the controller's default gains")
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="gradient: evaluations of a surviving chain (default 60); gradient-plain: steps (100); "
+        "ga+gradient: polishing steps (30)",
+    )
+    p.add_argument(
+        "--starts", type=int, default=None, help="starts descended together (vmapped; gradient 8, gradient-plain 1)"
+    )
+    p.add_argument(
+        "--lr",
+        type=float,
+        default=None,
+        help="gradient: first BFGS trust radius (0.1); adam step (gradient-plain 0.05, ga+gradient 0.01); box units",
+    )
+    p.add_argument("--screen", type=int, default=None, help="gradient: space-filling points screened (64)")
+    p.add_argument("--sampler", default=None, help="gradient: sobol | lhs | uniform (sobol)")
+    p.add_argument("--rounds", type=int, default=None, help="gradient: successive-halving rounds (3; 1: none)")
+    p.add_argument("--restarts", type=int, default=None, help="gradient: perturbed restarts of the incumbent (3)")
+    p.add_argument(
+        "--smoothing", type=float, default=None, help="gradient: randomised-smoothing radius, first round (0: off)"
+    )
+    p.add_argument(
+        "--from-default",
+        action="store_true",
+        help="gradient-plain, ga+gradient: start from the controller's default gains (gradient always screens them)",
+    )
     p.add_argument("--n-runs", type=int, default=16, help="runs per path sampled from a CONFIG study")
     p.add_argument("--dt", type=float, default=None, help="integrator step, s (default: 0.005 or the study's)")
     p.add_argument("--horizon", type=float, default=None, help="simulated time, s (default: 20 or the study's)")
@@ -71,6 +115,12 @@ FLAGS = {
     "steps": "--steps",
     "n_starts": "--starts",
     "learning_rate": "--lr",
+    "n_screen": "--screen",
+    "sampler": "--sampler",
+    "rounds": "--rounds",
+    "n_restarts": "--restarts",
+    "smoothing": "--smoothing",
+    "check": "--check",
     "n_runs": "--n-runs",
     "dt": "--dt",
     "horizon": "--horizon",
@@ -83,22 +133,62 @@ def _cmd(args) -> dict:
     import jax
 
     from pfjax import __version__, errors
+    from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import make_problem, tune
+    from pfjax.tuning.multistart import MultistartOptions
+    from pfjax.tuning.problem import METHODS, check, make_problem, tune
 
     controllers = _controllers()
     if args.controller not in controllers:
         raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}")
-    if args.method not in ("ga", "gradient"):
-        raise UsageError(f"--method: value {args.method!r}, expected ga or gradient")
+    if args.check is None and args.method is None:
+        raise UsageError(f"--method: required unless --check is given; one of {', '.join(METHODS)}")
+    if args.check is not None and args.method is not None:
+        raise UsageError("--check: checks given gains; give --method or --check, not both")
+    if args.method is not None and args.method not in METHODS:
+        raise UsageError(f"--method: value {args.method!r}, expected one of {', '.join(METHODS)}")
     key = jax.random.PRNGKey(errors.seed("--seed", args.seed))
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
+        ms = {
+            k: v
+            for k, v in (
+                ("n_screen", args.screen),
+                ("sampler", args.sampler),
+                ("rounds", args.rounds),
+                ("n_restarts", args.restarts),
+                ("smoothing", args.smoothing),
+            )
+            if v is not None
+        }
+        multistart = MultistartOptions(**ms).check()
         problem = make_problem(controllers[args.controller], args.scenario, cost=cost, n_runs=args.n_runs)
         changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
         if changes:
             problem = problem._replace(config=dataclasses.replace(problem.config, **changes))
+        common = {
+            "controller": args.controller,
+            "scenario": args.scenario,
+            "cost_spec": cost._asdict(),
+            "bounds": {
+                "lower": problem.lower.tolist(),
+                "upper": problem.upper.tolist(),
+                "fields": list(problem.tunable.fields),
+            },
+            "rollouts_per_evaluation": problem.n_per_eval,
+            "dt": problem.config.dt,
+            "horizon": problem.config.horizon,
+            "pfjax_version": __version__,
+        }
+        if args.check is not None:
+            c = check(problem, args.check)
+            return {
+                "gains": problem.tunable.named(c.theta),
+                "cost": c.cost,
+                "check": as_dict(c, problem.tunable.fields, problem.tunable.sizes),
+                **common,
+            }
         progress = (not args.json) and sys.stderr.isatty()
         theta0 = problem.tunable.flatten() if args.from_default else None
         options = GAOptions(population_size=args.population, generations=args.generations)
@@ -111,28 +201,20 @@ def _cmd(args) -> dict:
             n_starts=args.starts,
             learning_rate=args.lr,
             theta0=theta0,
+            multistart=multistart,
             progress=progress,
         )
     return {
         "method": args.method,
-        "controller": args.controller,
-        "scenario": args.scenario,
-        "cost_spec": cost._asdict(),
         "gains": problem.tunable.named(r.theta),
         "cost": r.cost,
         "n_rollouts_simulated": r.n_rollouts,
-        "rollouts_per_evaluation": problem.n_per_eval,
+        "n_forward_passes": r.n_forward_passes,
         "wall_s": r.wall_s,
+        "compile_s": r.compile_s,
         "history": r.history.tolist(),
         "history_rollouts": r.history_rollouts.tolist(),
-        "bounds": {
-            "lower": problem.lower.tolist(),
-            "upper": problem.upper.tolist(),
-            "fields": list(problem.tunable.fields),
-        },
         "seed": args.seed,
-        "dt": problem.config.dt,
-        "horizon": problem.config.horizon,
         "n_nonfinite_grad": r.n_nonfinite_grad,
-        "pfjax_version": __version__,
+        **common,
     }

@@ -133,10 +133,28 @@ def population_cost(
     controller: Controller, tunable: Tunable, scenarios: Scenario | list[Scenario], config: SimConfig, spec: CostSpec
 ):
     """Jitted ``(P, D) -> (P,)`` costs for the GA (``P x n`` rollouts per call)."""
-    cost = batch_cost(controller, tunable, scenarios, config, spec)
-    f = jax.jit(jax.vmap(cost))
-    dtype = jnp.result_type(float)
-    return lambda X: np.asarray(f(jnp.asarray(X, dtype)), dtype=np.float64)
+    return PopulationCost(batch_cost(controller, tunable, scenarios, config, spec))
+
+
+class PopulationCost:
+    """``X (P, D) -> (P,)`` float64 costs of a scalar cost, vmapped and jitted; :meth:`compile`
+    compiles a batch size ahead of time (so a tuner can keep compilation out of its wall time)."""
+
+    def __init__(self, cost):
+        self._f = jax.jit(jax.vmap(cost))
+        self._compiled: dict = {}
+        self._dtype = jnp.result_type(float)
+
+    def compile(self, n: int, dim: int) -> None:
+        """Compile the program for ``(n, dim)`` batches (once per shape)."""
+        shape = (int(n), int(dim))
+        if shape not in self._compiled:
+            self._compiled[shape] = self._f.lower(jnp.zeros(shape, self._dtype)).compile()
+
+    def __call__(self, X) -> np.ndarray:
+        X = jnp.asarray(X, self._dtype)
+        f = self._compiled.get(tuple(X.shape), self._f)
+        return np.asarray(f(X), dtype=np.float64)
 
 
 def _sim(controller, batch, gains, config):

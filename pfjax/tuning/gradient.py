@@ -9,7 +9,11 @@ learning rate suits gains of different magnitudes. One step::
 
 The result is the best ``theta`` evaluated (the iterate with the lowest ``J``), not the last.
 ``n_starts`` starts are descended together (vmapped, one batched call per step). Budget: each
-step simulates ``n`` rollouts per start (the batch), so ``n_rollouts = steps * n * n_starts``. With
+step simulates ``n`` rollouts per start (the batch), so ``n_rollouts = steps * n * n_starts``;
+``n_forward_passes`` charges each ``1 + D`` in forward mode, 4 in reverse mode
+(:func:`pfjax.tuning.multistart.forward_passes_per_gradient`). The step is compiled ahead of time;
+``wall_s`` excludes it (``compile_s``). :mod:`pfjax.tuning.multistart` builds a reliable tuner from
+this step (screening, successive halving, restarts, smoothing). With
 a few gains (``mode="auto"``: at most 4) the gradient is taken in forward mode, one tangent per
 gain alongside the forward pass (2 gains: 2.0-2.2 forward passes for value and gradient, O(1) memory
 in the horizon); with more, in reverse mode (3.2-3.4 forward passes, O(horizon) memory per run for
@@ -60,10 +64,12 @@ class TuneResult(NamedTuple):
     cost: float  # its cost
     history: np.ndarray  # best cost so far after each iteration (GA: generation; gradient: step)
     history_rollouts: np.ndarray  # rollouts simulated when each history entry was reached
-    history_wall_s: np.ndarray  # wall time (s) at each history entry, compilation included
-    n_rollouts: int  # simulated scenarios in all
-    wall_s: float  # wall time of the whole run, s
+    history_wall_s: np.ndarray  # wall time (s) at each history entry, compilation excluded
+    n_rollouts: int  # simulated rollouts in all, value-only or with a gradient
+    wall_s: float  # wall time of the whole run, s, compilation excluded
     n_nonfinite_grad: int  # gradient components replaced by 0 (gradient tuning only)
+    n_forward_passes: int = 0  # forward-pass equivalents: a rollout with its gradient counts 1 + D (forward mode) or 4
+    compile_s: float = 0.0  # ahead-of-time compilation, s (not in wall_s)
 
 
 def gradient_tune(
@@ -99,7 +105,6 @@ def gradient_tune(
         mode: differentiation mode, ``"auto"`` (forward mode for at most 4 parameters, reverse
             above), ``"forward"`` or ``"reverse"`` (:func:`pfjax.numerics.autodiff.value_and_grad`).
     """
-    t0 = time.perf_counter()
     lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
     span = hi - lo
     n_starts = errors.integer("n_starts", n_starts, low=1, high=1_000_000)
@@ -115,8 +120,12 @@ def gradient_tune(
     z = jnp.asarray(np.clip((np.stack(starts) - lo) / span, 0.0, 1.0))  # (n_starts, D)
     opt = optimizer or _adam(float(learning_rate), int(steps))
     lo_j, span_j = jnp.asarray(lo), jnp.asarray(span)
-    step = lambda z, state: _step(z, state, lo_j, span_j, cost=cost, opt=opt, mode=mode)
     state = opt.init(z)
+    t_c = time.perf_counter()
+    compiled = _step.lower(z, state, lo_j, span_j, cost=cost, opt=opt, mode=mode).compile()
+    compile_s = time.perf_counter() - t_c
+    step = lambda z, state: compiled(z, state, lo_j, span_j)
+    t0 = time.perf_counter()
     best_J, best_z = np.inf, np.asarray(z)
     hist, hist_r, hist_t, n_bad = [], [], [], 0
     bar = None
@@ -141,15 +150,20 @@ def gradient_tune(
     if bar is not None:
         bar.close()
     theta = lo + span * best_z
+    from pfjax.tuning.multistart import forward_passes_per_gradient
+
+    n_roll = steps * n_per_eval * n_starts
     return TuneResult(
         theta,
         float(best_J),
         np.asarray(hist),
         np.asarray(hist_r, dtype=np.int64),
         np.asarray(hist_t),
-        steps * n_per_eval * n_starts,
+        n_roll,
         time.perf_counter() - t0,
         n_bad,
+        n_roll * forward_passes_per_gradient(lo.size, mode),
+        compile_s,
     )
 
 
@@ -175,6 +189,12 @@ def ga_tune(cost_batch, lower, upper, *, key, options=None, n_per_eval: int = 1,
     from pfjax.tuning.ga import GAOptions, ga
 
     options = options or GAOptions()
+    P, E = options.population_size, options.elite_count
+    t_c = time.perf_counter()
+    if hasattr(cost_batch, "compile"):  # a pfjax.tuning.cost.PopulationCost: compile its two batch shapes
+        for n in {P, P - E} - {0}:
+            cost_batch.compile(n, np.size(lower))
+    compile_s = time.perf_counter() - t_c
     t0 = time.perf_counter()
     times = []
 
@@ -184,7 +204,6 @@ def ga_tune(cost_batch, lower, upper, *, key, options=None, n_per_eval: int = 1,
         return f
 
     r = ga(timed, lower, upper, key=key, options=options, progress=progress)
-    P, E = options.population_size, options.elite_count
     evals = P + np.arange(options.generations + 1) * (P - E)
     return TuneResult(
         np.asarray(r.x),
@@ -195,4 +214,6 @@ def ga_tune(cost_batch, lower, upper, *, key, options=None, n_per_eval: int = 1,
         r.n_evaluations * n_per_eval,
         time.perf_counter() - t0,
         0,
+        r.n_evaluations * n_per_eval,
+        compile_s,
     )

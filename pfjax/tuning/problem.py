@@ -26,6 +26,7 @@ from pfjax.sim.simulate import SimConfig
 from pfjax.tuning.cost import CostSpec, Tunable, batch_cost, n_scenarios, population_cost
 from pfjax.tuning.ga import GAOptions
 from pfjax.tuning.gradient import TuneResult, ga_tune, gradient_tune
+from pfjax.tuning.multistart import MultistartOptions, multistart_tune
 
 
 def scenario_sets() -> dict[str, tuple[str, ...]]:
@@ -148,70 +149,153 @@ def cost_functions(problem: Problem):
     return entry[1], entry[2]
 
 
+#: Tuning methods of :func:`tune`.
+METHODS = ("ga", "gradient", "gradient-plain", "ga+gradient")
+
+
 def tune(
     problem: Problem,
     method: str,
     *,
     key,
     ga_options: GAOptions = GAOptions(),
-    steps: int = 100,
-    n_starts: int = 1,
-    learning_rate: float = 0.05,
+    steps: int | None = None,
+    n_starts: int | None = None,
+    learning_rate: float | None = None,
     theta0=None,
+    multistart: MultistartOptions | None = None,
     progress: bool = False,
 ) -> TuneResult:
-    """Run ``method`` (``"ga"`` or ``"gradient"``) on ``problem``; the gradient starts at ``theta0``
-    or uniformly in the box from ``key``. Refused before any work (:class:`~pfjax.errors.InputError`
-    naming the argument) for an unknown method or settings, or batches beyond the memory budget
-    (:mod:`pfjax.resources`: the GA simulates a whole population at once, the gradient every start
-    with one tangent per tuned gain)."""
+    """Run ``method`` on ``problem``.
+
+    Methods:
+
+    * ``"ga"``: MATLAB-style GA (:mod:`pfjax.tuning.ga`, ``ga_options``);
+    * ``"gradient"``: the multi-start gradient tuner (:mod:`pfjax.tuning.multistart`: Sobol
+      screening with the controller's default gains (the source's gains or LMI design) and
+      ``theta0`` as candidates, successive halving, smoothing, restarts); ``steps``, ``n_starts``
+      and ``learning_rate`` override the fields of ``multistart``;
+    * ``"gradient-plain"``: projected adam from ``n_starts`` (default 1) starts, ``theta0`` or
+      uniform in the box from ``key`` (:func:`pfjax.tuning.gradient.gradient_tune`; ``steps``
+      default 100, ``learning_rate`` 0.05);
+    * ``"ga+gradient"``: the GA, then ``steps`` (default 30) projected adam steps from its best
+      at ``learning_rate`` (default 0.01): a gradient polish of the GA's answer.
+
+    Refused before any work (:class:`~pfjax.errors.InputError` naming the argument) for an unknown
+    method or settings, or batches beyond the memory budget (:mod:`pfjax.resources`: the GA
+    simulates a whole population at once, the gradient every start with one tangent per tuned
+    gain)."""
     from pfjax import errors, resources
     from pfjax.tuning.ga import _validate
 
-    if method not in ("ga", "gradient"):
-        raise errors.InputError(f"method: value {method!r}, expected ga or gradient")
+    if method not in METHODS:
+        raise errors.InputError(f"method: value {method!r}, expected one of {', '.join(METHODS)}")
     _validate(ga_options)  # every setting is checked, whichever method uses it
-    errors.integer("steps", steps, low=1, high=1_000_000)
-    errors.integer("n_starts", n_starts, low=1, high=1_000_000)
-    errors.number("learning_rate", learning_rate, positive=True)
+    for name, v in (("steps", steps), ("n_starts", n_starts)):
+        if v is not None:
+            errors.integer(name, v, low=1, high=1_000_000)
+    if learning_rate is not None:
+        errors.number("learning_rate", learning_rate, positive=True)
+    ms = multistart or MultistartOptions()
+    ms = ms._replace(
+        **{
+            k: v
+            for k, v in (("steps", steps), ("n_starts", n_starts), ("learning_rate", learning_rate))
+            if v is not None
+        }
+    )
+    if method == "gradient":
+        ms = ms._replace(rounds=min(ms.rounds, ms.steps)).check()
+    D = problem.lower.size
     per_run = resources.run_bytes(problem.config.n_steps)
-    if method == "ga":
+    if method in ("ga", "ga+gradient"):
         population = _validate(ga_options)[0]
         resources.check_memory(
             "population_size",
             2 * population * problem.n_per_eval * per_run,
             f"a GA population of {population} x {problem.n_per_eval} runs",
         )
-    else:
-        n = errors.integer("n_starts", n_starts, low=1, high=1_000_000)
+    n_chains = {"gradient": max(ms.n_starts, ms.n_restarts + 1), "gradient-plain": n_starts or 1}.get(method, 1)
+    resources.check_memory(
+        "n_starts",
+        2 * n_chains * problem.n_per_eval * per_run * (1 + D),
+        f"{n_chains} starts x {problem.n_per_eval} runs with {D} tangents",
+    )
+    if method == "gradient":
         resources.check_memory(
-            "n_starts",
-            2 * n * problem.n_per_eval * per_run * (1 + problem.lower.size),
-            f"{n} starts x {problem.n_per_eval} runs with {problem.lower.size} tangents",
+            "n_screen",
+            2 * (ms.n_screen + 2) * problem.n_per_eval * per_run,
+            f"{ms.n_screen} screened points x {problem.n_per_eval} runs",
         )
     f_scalar, f_pop = cost_functions(problem)
-    if method == "ga":
-        f = f_pop
-        return ga_tune(
-            f,
+    if method == "gradient":
+        cand = [problem.tunable.flatten()] + ([] if theta0 is None else [np.asarray(theta0, np.float64)])
+        return multistart_tune(
+            f_scalar,
             problem.lower,
             problem.upper,
             key=key,
-            options=ga_options,
+            options=ms,
+            candidates=np.stack(cand),
             n_per_eval=problem.n_per_eval,
             progress=progress,
         )
-    if method == "gradient":
+    if method == "gradient-plain":
         return gradient_tune(
             f_scalar,
             problem.lower,
             problem.upper,
             theta0=theta0,
             key=key,
-            steps=steps,
-            n_starts=n_starts,
+            steps=steps or 100,
+            n_starts=n_starts or 1,
             n_per_eval=problem.n_per_eval,
-            learning_rate=learning_rate,
+            learning_rate=learning_rate or 0.05,
             progress=progress,
         )
-    raise AssertionError(method)
+    r = ga_tune(
+        f_pop,
+        problem.lower,
+        problem.upper,
+        key=key,
+        options=ga_options,
+        n_per_eval=problem.n_per_eval,
+        progress=progress,
+    )
+    if method == "ga":
+        return r
+    p = gradient_tune(
+        f_scalar,
+        problem.lower,
+        problem.upper,
+        theta0=r.theta,
+        key=key,
+        steps=steps or 30,
+        n_per_eval=problem.n_per_eval,
+        learning_rate=learning_rate or 0.01,
+        progress=progress,
+    )
+    best = p if p.cost < r.cost else r
+    return TuneResult(
+        best.theta,
+        best.cost,
+        np.concatenate([r.history, np.minimum(p.history, r.cost)]),
+        np.concatenate([r.history_rollouts, r.n_rollouts + p.history_rollouts]),
+        np.concatenate([r.history_wall_s, r.wall_s + p.history_wall_s]),
+        r.n_rollouts + p.n_rollouts,
+        r.wall_s + p.wall_s,
+        p.n_nonfinite_grad,
+        r.n_forward_passes + p.n_forward_passes,
+        r.compile_s + p.compile_s,
+    )
+
+
+def check(problem: Problem, gains, *, h: float = 1e-4, rtol: float = 1e-4):
+    """First- and second-order check of ``gains`` on ``problem`` (:func:`pfjax.tuning.check.check_point`):
+    ``gains`` as :func:`pfjax.tuning.check.parse_gains` reads them (a ``{field: value}`` mapping, its
+    JSON text or numbers in field order), inside the problem's box."""
+    from pfjax.tuning.check import check_point, parse_gains
+
+    th = parse_gains(gains, problem.tunable.fields, problem.tunable.sizes, problem.lower, problem.upper)
+    f_scalar, _ = cost_functions(problem)
+    return check_point(f_scalar, th, problem.lower, problem.upper, h=h, rtol=rtol, n_per_eval=problem.n_per_eval)

@@ -1,0 +1,180 @@
+"""Multi-start gradient tuning, the local-minimum check and ``pfjax tune --check`` / ``--method ga+gradient``.
+
+References: analytic costs with known minima (a narrow deep well beside a broad shallow basin, a
+convex quadratic, a saddle, a kink); the rollout count is recounted independently by a host
+callback inside the cost (one call per evaluated point, whatever the batching and differentiation).
+"""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import pfjax
+from pfjax.sim import SimConfig
+from pfjax.tuning.check import check_point, parse_gains, probe_directions
+from pfjax.tuning.gradient import gradient_tune
+from pfjax.tuning.multistart import MultistartOptions, multistart_tune, space_filling
+
+SHORT = SimConfig(dt=0.01, horizon=4.0, record=False)
+WELL, BOWL = jnp.asarray([0.15, 0.1]), jnp.asarray([0.75, 0.7])
+
+
+def _two_basins(th):
+    """A broad shallow basin (minimum ~ -0.3 at BOWL) and a narrow deep well (minimum ~ -1 at WELL)."""
+    return (
+        0.3 * jnp.sum((th - BOWL) ** 2)
+        - 0.3 * jnp.exp(-jnp.sum((th - BOWL) ** 2) / (2 * 0.4**2))
+        - 1.0 * jnp.exp(-jnp.sum((th - WELL) ** 2) / (2 * 0.08**2))
+    )
+
+
+def test_multistart_reaches_the_narrow_basin_where_single_starts_fail():
+    o = MultistartOptions(n_screen=32, n_starts=4, separation=0.25, steps=24, rounds=2, n_restarts=2, restart_steps=4)
+    single, multi, crowded = [], [], []
+    hit = lambda th: bool(np.linalg.norm(th - np.asarray(WELL)) < 0.02)
+    for seed in range(8):
+        key = jax.random.PRNGKey(seed)
+        r = multistart_tune(_two_basins, [0, 0], [1, 1], key=key, options=o)
+        multi.append(hit(r.theta))
+        p = gradient_tune(_two_basins, [0, 0], [1, 1], key=key, steps=r.n_rollouts, learning_rate=0.05)
+        single.append(hit(p.theta))
+        assert r.n_rollouts == p.n_rollouts  # the same budget
+        crowded.append(
+            hit(multistart_tune(_two_basins, [0, 0], [1, 1], key=key, options=o._replace(separation=0.0)).theta)
+        )
+    assert all(multi), multi
+    assert sum(single) <= 4, single  # the well covers ~6 % of the box; plain descent mostly lands in the bowl
+    # the screening ranks points on the bowl's broad floor first: without separated starts some seeds miss the well
+    assert not all(crowded), crowded
+
+
+def test_rollouts_are_counted_exactly():
+    calls = [0]
+
+    def cost(th):
+        jax.debug.callback(lambda _: calls.__setitem__(0, calls[0] + 1), th[0])
+        return jnp.sum((th - 0.3) ** 2)
+
+    o = MultistartOptions(n_screen=16, n_starts=4, steps=7, rounds=3, n_restarts=2, restart_steps=3)
+    r = multistart_tune(cost, [0, 0, 0], [1, 1, 1], key=jax.random.PRNGKey(0), options=o, candidates=[[0.5] * 3])
+    # 17 screened, chains 4, 2, 1 for 3, 2, 2 steps, 3 restart chains for 3 steps
+    expected = 17 + 4 * 3 + 2 * 2 + 1 * 2 + 3 * 3
+    assert calls[0] == expected == r.n_rollouts == r.history_rollouts[-1]
+    n_grad = expected - 17
+    assert r.n_forward_passes == 17 + 4 * n_grad  # forward mode, 3 gains: 1 + 3 passes per gradient rollout
+    assert np.all(np.diff(r.history) <= 0) and r.cost == r.history[-1] == pytest.approx(0.0, abs=1e-12)
+    assert r.compile_s > 0 and r.wall_s > 0
+
+
+def test_space_filling_samplers_are_seeded_and_stratified():
+    for s in ("sobol", "lhs", "uniform"):
+        a = space_filling(16, 3, s, jax.random.PRNGKey(1))
+        assert a.shape == (16, 3) and np.all((a >= 0) & (a < 1))
+        np.testing.assert_array_equal(a, space_filling(16, 3, s, jax.random.PRNGKey(1)))
+    lhs = space_filling(16, 3, "lhs", jax.random.PRNGKey(2))
+    for d in range(3):  # one point per stratum in every coordinate
+        assert sorted(np.floor(lhs[:, d] * 16).astype(int)) == list(range(16))
+    with pytest.raises(ValueError, match="^sampler: "):
+        MultistartOptions(sampler="halton").check()
+
+
+def test_check_known_minimum_saddle_and_kink():
+    lo, hi = [-1.0, -1.0], [1.0, 1.0]
+    bowl = lambda th: (th[0] - 0.2) ** 2 + 3.0 * (th[1] + 0.1) ** 2 + th[0] * th[1]
+    xs = np.linalg.solve([[2.0, 1.0], [1.0, 6.0]], [0.4, -0.6])  # the stationary point
+    r = check_point(bowl, xs, lo, hi)
+    assert r.verdict == "local minimum" and r.quadratic_model == "positive definite"
+    # Hessian in box units: span^2 * [[2, 1], [1, 6]]
+    np.testing.assert_allclose(r.eigenvalues, 4.0 * np.linalg.eigvalsh([[2.0, 1.0], [1.0, 6.0]]), rtol=1e-6)
+    assert r.newton_decrease < 1e-12 and np.linalg.norm(r.projected_gradient) < 1e-9
+    assert r.n_rollouts == 1 + 4 + len(probe_directions(2)) * 2
+    off = check_point(bowl, xs + [0.05, 0.0], lo, hi)
+    assert off.verdict == "not a local minimum" and off.probe_decrease > 0
+    saddle = check_point(lambda th: th[0] ** 2 - th[1] ** 2, [0.0, 0.0], lo, hi)
+    assert saddle.verdict == "not a local minimum" and saddle.quadratic_model == "indefinite"
+    # minimum on the bound x = 1 (gradient pushes outward): active, still a minimum
+    edge = check_point(lambda th: -th[0] + (th[1] - 0.3) ** 2, [1.0, 0.3], lo, hi)
+    assert edge.verdict == "local minimum" and edge.active.tolist() == [1, 0]
+    # a kink: the gradient is not small on either side, the point is still a minimum
+    kink = check_point(lambda th: jnp.abs(th[0] - 0.3) + (th[1] - 0.6) ** 2, [0.3, 0.6], lo, hi)
+    assert kink.verdict == "local minimum" and abs(kink.gradient[0]) == pytest.approx(1.0)
+
+
+def test_parse_gains_forms_and_errors():
+    f, n, lo, hi = ("a", "K"), (1, 2), [0, -5, -5], [10, 0, 0]
+    want = [1.0, -2.0, -3.0]
+    for g in ("1,-2,-3", [1, -2, -3], {"a": 1, "K": [-2, -3]}, '{"a": 1, "K": [-2, -3]}'):
+        np.testing.assert_array_equal(parse_gains(g, f, n, lo, hi), want)
+    for g, msg in (
+        ("1,2", "2 values, expected 3"),
+        ("1,-2,3", "outside the tuning box"),
+        ("1,x,3", "expected numbers"),
+        ({"a": 1, "b": 2}, "missing"),
+        ('{"a": 1, "K": [1]}', "K has 1 values"),
+        ('{"a": ', "not valid JSON"),
+        ("nan,-1,-1", "finite"),
+    ):
+        with pytest.raises(ValueError, match=f"^check: .*{msg}"):
+            parse_gains(g, f, n, lo, hi)
+
+
+def test_tune_api_methods_and_check_on_the_simulator():
+    small = MultistartOptions(n_screen=8, n_starts=2, steps=4, rounds=2, n_restarts=1, restart_steps=2)
+    out = pfjax.tune("state_feedback", "paper-line", "gradient", config=SHORT, key=0, multistart=small)
+    # 8 screened + the default (source) K; chains 2, 1 for 2 steps; 2 restart chains for 2 steps
+    assert out["n_rollouts"] == 9 + 2 * 2 + 1 * 2 + 2 * 2 and out["n_forward_passes"] == 9 + 3 * 10
+    both = pfjax.tune("state_feedback", "paper-line", "ga+gradient", config=SHORT, generations=2, population=6, steps=3)
+    ga = pfjax.tune("state_feedback", "paper-line", "ga", config=SHORT, generations=2, population=6)
+    assert both["cost"] <= ga["cost"] and both["n_rollouts"] == ga["n_rollouts"] + 3
+    c = pfjax.tune("state_feedback", "paper-line", config=SHORT, check=out["result"].theta.tolist())
+    assert c["check"]["verdict"] in ("local minimum", "not a local minimum") and np.isfinite(c["cost"])
+    with pytest.raises(ValueError, match="^check: 1 values, expected 2"):
+        pfjax.tune("state_feedback", "paper-line", config=SHORT, check="-3")
+    with pytest.raises(ValueError, match="^method: "):
+        pfjax.tune("state_feedback", "paper-line", "newton", config=SHORT)
+
+
+def test_tune_help_lists_methods_and_check(capsys):
+    from pfjax.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["tune", "--help"])
+    assert e.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for word in ("--check GAINS", "ga+gradient", "gradient-plain", "--screen", "--sampler", "--rounds", "--restarts"):
+        assert word in text, word
+
+
+@pytest.mark.parametrize(
+    "argv,flag",
+    [
+        (["--controller", "pi"], "--method"),
+        (["--method", "gradient", "--check", "1,0,1,0", "--controller", "pi"], "--check"),
+        (["--check", "1,0,1", "--controller", "pi"], "--check"),
+        (["--check", "100,0,1,0", "--controller", "pi"], "--check"),
+        (["--method", "gradient", "--controller", "pi", "--sampler", "halton"], "--sampler"),
+        (["--method", "gradient", "--controller", "pi", "--screen", "-1"], "--screen"),
+        (["--method", "gradient", "--controller", "pi", "--smoothing", "-0.1"], "--smoothing"),
+        (["--method", "gradient", "--controller", "pi", "--steps", "0"], "--steps"),
+    ],
+)
+def test_tune_cli_bad_values_exit_2(argv, flag, capsys):
+    from pfjax.cli import main
+
+    assert main(["tune", *argv, "--json"]) == 2
+    err = capsys.readouterr()
+    assert err.out == "" and err.err.startswith(f"pfjax tune: error: {flag}") and err.err.count("\n") == 1
+
+
+def test_tune_cli_check_json(capsys):
+    from pfjax.cli import main
+
+    argv = ["tune", "--check", "-2.7381,-2.0772", "--controller", "state-feedback", "--horizon", "4", "--dt", "0.01"]
+    assert main([*argv, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    c = out["check"]
+    assert set(c["gradient"]) == {"K[0]", "K[1]"} and c["n_rollouts"] == 1 + 4 + 16
+    assert c["verdict"] == "not a local minimum"  # the source's K is far from the IAE optimum
