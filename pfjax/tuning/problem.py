@@ -197,13 +197,10 @@ def tune(
     if learning_rate is not None:
         errors.number("learning_rate", learning_rate, positive=True)
     ms = multistart or MultistartOptions()
-    ms = ms._replace(
-        **{
-            k: v
-            for k, v in (("steps", steps), ("n_starts", n_starts), ("learning_rate", learning_rate))
-            if v is not None
-        }
-    )
+    given: dict[str, Any] = {
+        k: v for k, v in (("steps", steps), ("n_starts", n_starts), ("learning_rate", learning_rate)) if v is not None
+    }
+    ms = ms._replace(**given)
     if method == "gradient":
         ms = ms._replace(rounds=min(ms.rounds, ms.steps)).check()
     D = problem.lower.size
