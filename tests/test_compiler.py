@@ -39,6 +39,7 @@ def test_cpu_info_reads_the_first_processor(tmp_path):
         "flags\t\t: fpu avx512f\n\nprocessor\t: 1\ncpu family\t: 25\nmodel name\t: other\n"
     )
     assert compiler.cpu_info(str(p)) == {
+        "vendor_id": "AuthenticAMD",
         "cpu family": "26",
         "model": "2",
         "model name": "AMD EPYC",
@@ -229,6 +230,14 @@ AUDITED = {
         "test_tracking_and_parking_simulators_agree_with_and_without_wide_vectors",
         "tests/test_parking_control.py (case A's first leg against its closed form)",
     ),
+    "pfjax.sim.dynamic._simulate_vmapped": (
+        "test_dynamic_vehicle_and_minimal_benchmark_agree_with_and_without_wide_vectors",
+        "tests/test_sim_dynamic.py (steady cornering against geometry; the kinematic limit at high friction)",
+    ),
+    "pfjax.bench.minimal._batch": (
+        "test_dynamic_vehicle_and_minimal_benchmark_agree_with_and_without_wide_vectors",
+        "tests/test_bench.py::test_minimal_jax_reference_agrees_with_numpy",
+    ),
     "pfjax.bench.run._grad.<locals>.loss": (
         "test_slip_simulator_agrees_with_and_without_wide_vectors (the program it wraps)",
         "tests/test_bench.py::test_quick_bench_contract_and_agreement (NumPy, Numba and SciPy references)",
@@ -236,10 +245,53 @@ AUDITED = {
 }
 
 
+def test_dynamic_vehicle_and_minimal_benchmark_agree_with_and_without_wide_vectors():
+    from functools import partial
+
+    from pfjax import controllers as C
+    from pfjax import paths
+    from pfjax.bench import minimal as M
+    from pfjax.bench import problem as P
+    from pfjax.models import single_track as st
+    from pfjax.sim import SimConfig, stack
+    from pfjax.sim import dynamic as dyn
+
+    with jax.enable_x64(True):
+        e = paths.entry("sine")
+        ctrl, gains = C.REGISTRY["stanley"][0], C.REGISTRY["stanley"][1]()
+        sc = stack(
+            [
+                dyn.DynamicScenario(
+                    pose0=e.start_pose,
+                    vehicle=st.robot_params()._replace(mu=mu),
+                    v_ref=1.0,
+                    path=e.build(),
+                    gains=gains,
+                )
+                for mu in (0.3, 0.6, 1.0)
+            ]
+        )
+        cfg = SimConfig(dt=0.01, horizon=1.0, record=False)
+        a, b = _both(jax.vmap(lambda s: dyn.simulate(ctrl, s, cfg)), sc)
+        np.testing.assert_array_equal(b.status, a.status)
+        _assert_close(a.metrics, b.metrics, *TOL["float64"])
+
+        runs = M.runs(P.random_batch(16, 2), np.float64)
+        a, b = _both(jax.vmap(partial(M._run, n_steps=100)), runs)
+        _assert_close(a, b, *TOL["float64"])
+
+
 def test_every_wide_program_is_audited():
     from importlib import import_module
 
-    for m in ("pfjax.sim.simulate", "pfjax.tracking.simulate", "pfjax.parking.simulate", "pfjax.bench.run"):
+    for m in (
+        "pfjax.sim.simulate",
+        "pfjax.sim.dynamic",
+        "pfjax.tracking.simulate",
+        "pfjax.parking.simulate",
+        "pfjax.bench.run",
+        "pfjax.bench.minimal",
+    ):
         import_module(m)
     wide = {p for p in compiler.PROGRAMS if not p.startswith(("tests.", "test_"))}
     names = {p.replace("value_and_grad.<locals>.", "") for p in wide}

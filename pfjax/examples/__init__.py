@@ -5,7 +5,7 @@
     import pfjax
     from pfjax import examples
 
-    examples.names()                      # ['default', 'heldout', 'random_paths', 'slip_frequency']
+    examples.names()                      # ['default', 'heldout', 'random_paths', 'slip_frequency', 'rare_events']
     result = pfjax.run_study(examples.path("default"), "results/default", n_runs=1000)
 """
 
@@ -24,6 +24,7 @@ FILES = {
     "heldout": "tuning_heldout.toml",  # the tuning study's held-out set
     "random_paths": "random_paths.toml",
     "slip_frequency": "slip_frequency.toml",
+    "rare_events": "rare_events.toml",  # rare failure probabilities ([rare_event])
 }
 
 

@@ -44,6 +44,13 @@ def resolve_mode(mode: str, n_params: int) -> str:
     return mode
 
 
+def forward_passes_per_gradient(n_params: int, mode: str = "auto") -> int:
+    """Forward-pass equivalents of one rollout with its gradient: ``1 + n_params`` in forward mode
+    (the value and one tangent per parameter), 4 in reverse mode (the forward loop, then the
+    recomputed step and its transpose)."""
+    return 1 + n_params if resolve_mode(mode, n_params) == "forward" else 4
+
+
 def value_and_grad(fun: Callable, *, mode: str = "auto", has_aux: bool = False) -> Callable:
     """Like ``jax.value_and_grad(fun, has_aux=has_aux)`` (first argument only), by ``mode``.
 

@@ -98,7 +98,8 @@ def check_point(
         n_per_eval: rollouts per ``cost`` call, for the budget count.
         mode: differentiation mode.
     """
-    from pfjax.tuning.multistart import _value, forward_passes_per_gradient
+    from pfjax.numerics.autodiff import forward_passes_per_gradient
+    from pfjax.tuning.multistart import _value
 
     lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
     span, D = hi - lo, lo.size

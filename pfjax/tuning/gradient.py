@@ -11,7 +11,7 @@ The result is the best ``theta`` evaluated (the iterate with the lowest ``J``), 
 ``n_starts`` starts are descended together (vmapped, one batched call per step). Budget: each
 step simulates ``n`` rollouts per start (the batch), so ``n_rollouts = steps * n * n_starts``;
 ``n_forward_passes`` charges each ``1 + D`` in forward mode, 4 in reverse mode
-(:func:`pfjax.tuning.multistart.forward_passes_per_gradient`). The step is compiled ahead of time;
+(:func:`pfjax.numerics.autodiff.forward_passes_per_gradient`). The step is compiled ahead of time;
 ``wall_s`` excludes it (``compile_s``). :mod:`pfjax.tuning.multistart` builds a reliable tuner from
 this step (screening, successive halving, restarts, smoothing). With
 a few gains (``mode="auto"``: at most 4) the gradient is taken in forward mode, one tangent per
@@ -150,8 +150,6 @@ def gradient_tune(
     if bar is not None:
         bar.close()
     theta = lo + span * best_z
-    from pfjax.tuning.multistart import forward_passes_per_gradient
-
     n_roll = steps * n_per_eval * n_starts
     return TuneResult(
         theta,
@@ -162,7 +160,7 @@ def gradient_tune(
         n_roll,
         time.perf_counter() - t0,
         n_bad,
-        n_roll * forward_passes_per_gradient(lo.size, mode),
+        n_roll * autodiff.forward_passes_per_gradient(lo.size, mode),
         compile_s,
     )
 

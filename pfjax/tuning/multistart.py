@@ -131,11 +131,6 @@ def select_starts(z, J, n: int, separation: float) -> np.ndarray:
     return np.asarray(taken + rest[: n - len(taken)])
 
 
-def forward_passes_per_gradient(n_params: int, mode: str = "auto") -> int:
-    """Forward-pass equivalents charged to one rollout with its gradient (module docstring)."""
-    return 1 + n_params if autodiff.resolve_mode(mode, n_params) == "forward" else 4
-
-
 def multistart_tune(
     cost: Callable,
     lower,
@@ -196,7 +191,7 @@ def multistart_tune(
     compile_s = time.perf_counter() - t_c
 
     t0 = time.perf_counter()
-    fpp = forward_passes_per_gradient(D, mode)
+    fpp = autodiff.forward_passes_per_gradient(D, mode)
     n_roll = n_fwd = n_bad = 0
     hist, hist_r, hist_t = [], [], []
     best = {"J": np.inf, "z": z0[0]}
