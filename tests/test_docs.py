@@ -84,7 +84,7 @@ PROCESS = [
     r"\bstops " + r"\d+",
     r"earlier " + "stops",
     r"\b(until|since|at) " + r"stop\b",
-    r"this " + "session",
+    r"this " + "sess" + "ion",
     r"\bissue " + r"\d+",
     r"the " + r"issue'?s?\b",
     r"\.\./" + "shared",
