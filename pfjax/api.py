@@ -62,9 +62,9 @@ def _dist(cls, **kw):
     try:
         return cls.model_validate(kw)
     except ValidationError as e:
-        from pfjax.montecarlo.config import _format
+        from pfjax.config import format_error
 
-        raise errors.InputError(f"{kw['dist']}: {_format(e)}", kw["dist"]) from None
+        raise errors.InputError(f"{kw['dist']}: {format_error(e, cls)}", kw["dist"]) from None
 
 
 # ----------------------------------------------------------------------------- design

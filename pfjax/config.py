@@ -1,23 +1,32 @@
-"""Study configuration: TOML merged onto typed defaults, ``--set key=value`` overrides, hashing.
+"""The configuration schema family: every config pfjax reads is a pydantic model validated the same way.
 
-A study declares its defaults as a nested dict; the user's TOML and overrides may only use
-keys that exist there, with values of the same type (ints are accepted where floats are
-expected). Errors are :class:`ConfigError` with one line naming the dotted key, the value
-and what was expected (and a "did you mean" for near-miss keys). The merged config's
-canonical JSON is hashed (SHA-256) and stamped on every output.
+A config is a TOML file (or a dict) validated by a :class:`ConfigModel` subclass (unknown keys,
+wrong types and out-of-range values refused), with ``--set key=value`` overrides (the value parsed as
+TOML; list items written ``name[index]``). :func:`load_model` reads, overrides and validates; its errors
+are :class:`ConfigError` with one line naming the dotted key, the value and what was expected (and a
+"did you mean" for near-miss keys). The validated config's canonical JSON is hashed (SHA-256,
+:func:`pfjax.provenance.config_hash`) and stamped on every output.
+
+The Monte Carlo study (:class:`pfjax.montecarlo.config.StudySpec`) and the study scripts' configs
+(paper reproduction, tuning, parking, vehicle tracking, kinematic versus dynamic) are members of the
+family: the same loader, the same override syntax, the same errors.
 """
 
 from __future__ import annotations
 
 import copy
 import difflib
+import math
 import re
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Annotated, Any, ClassVar, TypeVar
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, ValidationError, model_validator
 
 from pfjax import errors
-from pfjax.errors import InputError
+from pfjax.errors import MAX_MAGNITUDE, MIN_POSITIVE, InputError
 
 
 class ConfigError(InputError):
@@ -154,3 +163,173 @@ def load(defaults: dict, path: str | Path | None = None, overrides: Sequence[str
     for text in overrides:
         cfg = _merge(cfg, parse_override(text))
     return cfg
+
+
+# ------------------------------------------------------------------------------ the schema family
+
+
+def _real(v: float) -> float:
+    if not math.isfinite(v):
+        raise ValueError(f"expected a finite number, got {v}")
+    if abs(v) > MAX_MAGNITUDE:
+        raise ValueError(f"expected a magnitude <= {MAX_MAGNITUDE:g}, got {v:g}")
+    return v
+
+
+#: A number as every config key takes it: finite, magnitude at most :data:`pfjax.errors.MAX_MAGNITUDE`
+#: (booleans and strings are not numbers: the schema is strict).
+Real = Annotated[float, AfterValidator(_real)]
+#: A positive step, length or tolerance: at least :data:`pfjax.errors.MIN_POSITIVE`.
+POSITIVE = MIN_POSITIVE
+
+
+class ConfigModel(BaseModel):
+    """Base of every config model: unknown keys refused, values immutable, types strict (an integer
+    is accepted where a number is expected, nothing else converts)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+    #: old key -> new key: an old spelling is read for one release, with a deprecation warning
+    RENAMED: ClassVar[dict[str, str]] = {}
+
+    @model_validator(mode="before")
+    @classmethod
+    def _renamed(cls, data):
+        if cls.RENAMED and isinstance(data, dict) and any(k in data for k in cls.RENAMED):
+            data = dict(data)
+            for old, new in cls.RENAMED.items():
+                if old in data:
+                    if new in data:
+                        raise ValueError(f"{old}: the old name of {new}; give only {new}")
+                    errors.deprecated(old, new)
+                    data[new] = data.pop(old)
+        return data
+
+
+M = TypeVar("M", bound=BaseModel)
+
+#: union members pydantic names in an error's location (a distribution's tag): not part of the key
+_TAGS = ("constant", "uniform", "normal", "truncnormal", "choice", "function-after[_check(), Dist]")
+
+
+def _loc(loc) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part in _TAGS:
+            continue
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def _model_at(root: type[BaseModel], loc) -> type[BaseModel] | None:
+    model: Any = root
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        field = getattr(model, "model_fields", {}).get(part)
+        if field is None:
+            return model
+        ann = field.annotation
+        args = getattr(ann, "__args__", ())
+        nxt = next((a for a in (ann, *args) if isinstance(a, type) and issubclass(a, BaseModel)), None)
+        if nxt is None:
+            return model
+        model = nxt
+    return model
+
+
+_BOUNDS = {
+    "greater_than": (">", "gt"),
+    "greater_than_equal": (">=", "ge"),
+    "less_than": ("<", "lt"),
+    "less_than_equal": ("<=", "le"),
+}
+
+
+def format_error(err: ValidationError, root: type[BaseModel]) -> str:
+    """The first error of a validation of ``root`` as one line: ``dotted.key: what was wrong (got value)``."""
+    e = err.errors()[0]
+    loc = [p for p in e["loc"] if not (isinstance(p, str) and ("[" in p or p in _TAGS))]
+    key = _loc(loc) or "config"
+    if e["type"] == "extra_forbidden":
+        parent = _model_at(root, loc[:-1])
+        names = list(getattr(parent, "model_fields", {}))
+        hint = difflib.get_close_matches(str(loc[-1]), names, n=1)
+        prefix = _loc(loc[:-1])
+        sug = f" (did you mean '{(prefix + '.') if prefix else ''}{hint[0]}'?)" if hint else ""
+        return f"{key}: unknown key{sug}"
+    msg = e["msg"].removeprefix("Value error, ")
+    # model-level checks name their field first ("speed: must be ..."): join it to the key
+    head, sep, rest = msg.partition(": ")
+    if e["type"] == "value_error" and sep and " " not in head and "'" not in head:
+        key = head if key == "config" else f"{key}{'' if head.startswith('[') else '.'}{head}"
+        msg = rest
+    if e["type"] == "missing":
+        return f"{key}: required key is missing"
+    bound = _BOUNDS.get(e["type"])
+    if bound is not None:  # pydantic writes 1e-12 as 0.000000000001
+        limit = e["ctx"][bound[1]]
+        msg = f"must be {bound[0]} {limit:g}" if isinstance(limit, float) else f"must be {bound[0]} {limit}"
+    return f"{key}: {msg} (got {_short(e.get('input'))})" if e["type"] != "value_error" else f"{key}: {msg}"
+
+
+def set_nested(d: dict, update: dict) -> dict:
+    """Apply a nested override to a raw config dict in place (a distribution table replaces the old
+    one whole; ``name[i]`` keys address list items); ConfigError for a missing list element."""
+    for k, v in update.items():
+        if "[" in k:  # controllers[0].gains.k style
+            name, idx = k.split("[", 1)
+            i = int(idx.rstrip("]"))
+            lst = d.get(name)
+            if not isinstance(lst, list) or not -len(lst) <= i < len(lst):
+                raise ConfigError(
+                    f"{k}: no such list element" if isinstance(lst, list) else f"{k}: {name} is not a list"
+                )
+            if isinstance(v, dict) and "dist" not in v and isinstance(lst[i], dict):
+                set_nested(lst[i], v)
+            else:
+                lst[i] = v
+        elif isinstance(v, dict) and "dist" in v:  # a new distribution replaces the old one whole
+            d[k] = v
+        elif isinstance(v, dict) and isinstance(d.get(k), dict):
+            set_nested(d[k], v)
+        else:
+            d[k] = v
+    return d
+
+
+def load_model(
+    model: type[M],
+    path: str | Path | None = None,
+    overrides: Sequence[str] = (),
+    data: dict | None = None,
+    values: dict | None = None,
+    presets: Sequence[dict] = (),
+) -> tuple[M, dict]:
+    """Read, override and validate a config of schema ``model``. Returns ``(config, raw_dict)``;
+    raises :class:`ConfigError` (one line naming the key).
+
+    Args:
+        model: the schema (a :class:`ConfigModel` subclass).
+        path: a TOML file (else ``data``, a dict; else the schema's defaults).
+        overrides: ``--set`` texts ``"key=value"`` (the value parsed as TOML), applied in order.
+        data: the raw config as a dict, when there is no file.
+        values: overrides as Python values by dotted key (``{"sim.horizon": 30}``), applied last.
+        presets: nested dicts applied between the file and the overrides (a study's ``--quick`` sizes).
+    """
+    raw: dict = {} if data is None else copy.deepcopy(dict(data))
+    if path is not None:
+        raw = read_toml(path)
+    for preset in presets:
+        set_nested(raw, copy.deepcopy(preset))
+    for text in overrides:
+        set_nested(raw, parse_override(text))
+    for key, value in (values or {}).items():
+        set_nested(raw, nested(key, value))
+    try:
+        config = model.model_validate(raw)
+    except ValidationError as e:
+        raise ConfigError(format_error(e, model)) from None
+    return config, raw

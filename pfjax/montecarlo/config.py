@@ -14,54 +14,20 @@ expected (with a "did you mean" for unknown keys).
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any, ClassVar, Literal, get_args
+from typing import Any, ClassVar, Literal, get_args
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from pfjax.config import ConfigError, _short, nested, parse_override, read_toml
-from pfjax.errors import MAX_MAGNITUDE, MAX_SEED, MIN_POSITIVE
+from pfjax.config import POSITIVE, ConfigModel, Real, load_model
+from pfjax.errors import MAX_SEED
 from pfjax.provenance import config_hash
 from pfjax.resources import check_steps
 
-
-def _real(v: float) -> float:
-    if not math.isfinite(v):
-        raise ValueError(f"expected a finite number, got {v}")
-    if abs(v) > MAX_MAGNITUDE:
-        raise ValueError(f"expected a magnitude <= {MAX_MAGNITUDE:g}, got {v:g}")
-    return v
-
-
-#: A number as every study key takes it: finite, magnitude at most :data:`pfjax.errors.MAX_MAGNITUDE`
-#: (booleans and strings are not numbers: the schema is strict).
-Real = Annotated[float, AfterValidator(_real)]
-#: A positive step, length or tolerance: at least :data:`pfjax.errors.MIN_POSITIVE`.
-POSITIVE = MIN_POSITIVE
-
-
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-    #: old key -> new key: an old spelling is read for one release, with a deprecation warning
-    RENAMED: ClassVar[dict[str, str]] = {}
-
-    @model_validator(mode="before")
-    @classmethod
-    def _renamed(cls, data):
-        if cls.RENAMED and isinstance(data, dict) and any(k in data for k in cls.RENAMED):
-            from pfjax.errors import deprecated
-
-            data = dict(data)
-            for old, new in cls.RENAMED.items():
-                if old in data:
-                    if new in data:
-                        raise ValueError(f"{old}: the old name of {new}; give only {new}")
-                    deprecated(old, new)
-                    data[new] = data.pop(old)
-        return data
+#: the family's base model (:class:`pfjax.config.ConfigModel`)
+_Model = ConfigModel
 
 
 Axis = Literal["rear", "front", "joint"]
@@ -674,96 +640,6 @@ class StudySpec(_Model):
 # ------------------------------------------------------------------------------- loading
 
 
-def _loc(loc) -> str:
-    out = ""
-    for part in loc:
-        if isinstance(part, int):
-            out += f"[{part}]"
-        elif part in ("constant", "uniform", "normal", "truncnormal", "choice", "function-after[_check(), Dist]"):
-            continue
-        else:
-            out += ("." if out else "") + str(part)
-    return out
-
-
-def _model_at(loc) -> type[BaseModel] | None:
-    model: Any = StudySpec
-    for part in loc:
-        if isinstance(part, int):
-            continue
-        field = getattr(model, "model_fields", {}).get(part)
-        if field is None:
-            return model
-        ann = field.annotation
-        args = getattr(ann, "__args__", ())
-        nxt = next((a for a in (ann, *args) if isinstance(a, type) and issubclass(a, BaseModel)), None)
-        if nxt is None:
-            return model
-        model = nxt
-    return model
-
-
-def _format(err: ValidationError) -> str:
-    e = err.errors()[0]
-    loc = [
-        p
-        for p in e["loc"]
-        if not (isinstance(p, str) and ("[" in p or p in ("constant", "uniform", "normal", "truncnormal", "choice")))
-    ]
-    key = _loc(loc) or "config"
-    if e["type"] == "extra_forbidden":
-        parent = _model_at(loc[:-1])
-        names = list(getattr(parent, "model_fields", {}))
-        hint = difflib.get_close_matches(str(loc[-1]), names, n=1)
-        prefix = _loc(loc[:-1])
-        sug = f" (did you mean '{(prefix + '.') if prefix else ''}{hint[0]}'?)" if hint else ""
-        return f"{key}: unknown key{sug}"
-    msg = e["msg"].removeprefix("Value error, ")
-    # model-level checks name their field first ("speed: must be ..."): join it to the key
-    head, sep, rest = msg.partition(": ")
-    if e["type"] == "value_error" and sep and " " not in head and "'" not in head:
-        key = head if key == "config" else f"{key}{'' if head.startswith('[') else '.'}{head}"
-        msg = rest
-    if e["type"] == "missing":
-        return f"{key}: required key is missing"
-    bound = _BOUNDS.get(e["type"])
-    if bound is not None:  # pydantic writes 1e-12 as 0.000000000001
-        limit = e["ctx"][bound[1]]
-        msg = f"must be {bound[0]} {limit:g}" if isinstance(limit, float) else f"must be {bound[0]} {limit}"
-    return f"{key}: {msg} (got {_short(e.get('input'))})" if e["type"] != "value_error" else f"{key}: {msg}"
-
-
-_BOUNDS = {
-    "greater_than": (">", "gt"),
-    "greater_than_equal": (">=", "ge"),
-    "less_than": ("<", "lt"),
-    "less_than_equal": ("<=", "le"),
-}
-
-
-def _set_nested(d: dict, update: dict) -> dict:
-    for k, v in update.items():
-        if "[" in k:  # controllers[0].gains.k style
-            name, idx = k.split("[", 1)
-            i = int(idx.rstrip("]"))
-            lst = d.get(name)
-            if not isinstance(lst, list) or not -len(lst) <= i < len(lst):
-                raise ConfigError(
-                    f"{k}: no such list element" if isinstance(lst, list) else f"{k}: {name} is not a list"
-                )
-            if isinstance(v, dict) and "dist" not in v and isinstance(lst[i], dict):
-                _set_nested(lst[i], v)
-            else:
-                lst[i] = v
-        elif isinstance(v, dict) and "dist" in v:  # a new distribution replaces the old one whole
-            d[k] = v
-        elif isinstance(v, dict) and isinstance(d.get(k), dict):
-            _set_nested(d[k], v)
-        else:
-            d[k] = v
-    return d
-
-
 def load_study(
     path: str | Path | None = None, overrides: Sequence[str] = (), data: dict | None = None, values: dict | None = None
 ) -> tuple[StudySpec, dict]:
@@ -774,20 +650,7 @@ def load_study(
         overrides: ``--set`` texts ``"key=value"`` (the value parsed as TOML).
         values: overrides as Python values by dotted key (``{"sim.horizon": 30, "paths": [...]}``).
     """
-    import copy
-
-    raw: dict = {} if data is None else copy.deepcopy(dict(data))
-    if path is not None:
-        raw = read_toml(path)
-    for text in overrides:
-        _set_nested(raw, parse_override(text))
-    for key, value in (values or {}).items():
-        _set_nested(raw, nested(key, value))
-    try:
-        spec = StudySpec.model_validate(raw)
-    except ValidationError as e:
-        raise ConfigError(_format(e)) from None
-    return spec, raw
+    return load_model(StudySpec, path, overrides, data=data, values=values)
 
 
 def study_hash(spec: StudySpec) -> str:
