@@ -26,15 +26,11 @@ from pfjax.errors import MAX_SEED
 from pfjax.provenance import config_hash
 from pfjax.resources import check_steps
 
-#: the family's base model (:class:`pfjax.config.ConfigModel`)
-_Model = ConfigModel
-
-
 Axis = Literal["rear", "front", "joint"]
 """A slipping axle in the slip-margin sweep: rear, front, or joint (both)."""
 
 
-class Dist(_Model):
+class Dist(ConfigModel):
     """A distribution of one scalar (see module docstring)."""
 
     dist: Literal["constant", "uniform", "normal", "truncnormal", "choice"]
@@ -115,7 +111,7 @@ def dist_field(default: float, description: str | None = None):
     return Field(default_factory=lambda: Dist(dist="constant", value=default), description=description)
 
 
-class SimSpec(_Model):
+class SimSpec(ConfigModel):
     dt: Real = Field(0.005, ge=POSITIVE, description="RK4 integrator step, s")
     horizon: Real = Field(20.0, ge=POSITIVE, description="simulated time per run, s")
     control_every: int = Field(
@@ -135,7 +131,7 @@ class SimSpec(_Model):
         return self
 
 
-class SuccessSpec(_Model):
+class SuccessSpec(ConfigModel):
     band: Real = Field(0.05, ge=POSITIVE, description="a run succeeds if |d| stays within this band from from_s on, m")
     from_s: Real = Field(15.0, ge=0, description="start of the success window, s")
 
@@ -145,7 +141,7 @@ KINEMATIC_ONLY = ("L", "delta_max_deg", "delta_rate_max_deg", "convention")
 ST_ONLY = ("params", "mu", "tau_delta_s", "k_v")
 
 
-class VehicleSpec(_Model):
+class VehicleSpec(ConfigModel):
     """The vehicle: ``model = "kinematic"`` (the slip model, slip declared by ``[slip]``;
     :mod:`pfjax.sim.simulate`) or ``"st"`` (CommonRoad's single-track model, slip from linear tyre
     forces; :mod:`pfjax.sim.dynamic`) with its parameter set ``params``, friction ``mu``, steering
@@ -241,7 +237,7 @@ def nominal(d: Dist) -> float:
 OU_REACH = 6.0
 
 
-class SlipSpec(_Model):
+class SlipSpec(ConfigModel):
     """Slip per run: ``constant`` (beta_*), ``step`` (beta_* before, + step_* at step_time_s),
     ``sinusoid`` (beta_* mean + amp_* sin(2 pi freq_hz t + phase)), ``ou`` (Ornstein-Uhlenbeck around
     beta_* with stationary std ou_sigma_deg and time constant ou_tau_s, sampled every seq_dt)."""
@@ -313,7 +309,7 @@ class SlipSpec(_Model):
         return self
 
 
-class InitialSpec(_Model):
+class InitialSpec(ConfigModel):
     """Start pose relative to the path's nominal start: along-path offset, lateral offset, heading error."""
 
     RENAMED: ClassVar[dict[str, str]] = {"start_s": "start_along_m"}
@@ -326,7 +322,7 @@ class InitialSpec(_Model):
     )
 
 
-class NoiseSpec(_Model):
+class NoiseSpec(ConfigModel):
     """White Gaussian sensor noise on the measured rear-axle pose, drawn afresh at every integrator
     step (:class:`pfjax.sim.simulate.SensorNoise`): the measured pose is the true one displaced by
     ``e_d ~ N(0, sigma_d^2)`` (m) along the path's left normal at the closest point and rotated by
@@ -340,7 +336,7 @@ class NoiseSpec(_Model):
     sigma_theta_e_deg: Real = Field(0.0, ge=0, le=180, description="standard deviation of the measured heading, deg")
 
 
-class PathSpec(_Model):
+class PathSpec(ConfigModel):
     """A registered path kind (:data:`pfjax.paths.PATHS`): ``line``, ``parabola``, ``sine`` (the
     source's), ``circle`` (radius), ``random`` (smooth random spline paths with |kappa| <=
     curvature_margin * tan(delta_max) / L), ``spline`` (a natural cubic spline through the user's
@@ -413,7 +409,7 @@ class PathSpec(_Model):
         return self.name or self.kind
 
 
-class MarginSpec(_Model):
+class MarginSpec(ConfigModel):
     """Slip-margin sweep: at each amplitude A, ``n_per_amplitude`` runs per path with constant slip of
     magnitude A (random sign) on the rear axle, the front axle, or both (``axes``); everything else
     sampled as in the study. The margin is the largest A whose success rate (and every smaller A's)
@@ -452,7 +448,7 @@ class MarginSpec(_Model):
         return self
 
 
-class FalsifierSpec(_Model):
+class FalsifierSpec(ConfigModel):
     """Worst-case search per controller (pfjax.falsification): gradient ascent over slip profiles bounded by
     ``slip_bound_deg`` with frequencies up to ``f_max_hz`` and initial errors in the boxes
     +-``lateral_offset`` m, +-``heading_error_deg``, on one path (its run 0's shape and vehicle),
@@ -471,7 +467,7 @@ class FalsifierSpec(_Model):
     steps: int = Field(40, ge=1, le=10_000, description="adam steps per start")
 
 
-class RareEventSpec(_Model):
+class RareEventSpec(ConfigModel):
     """Small failure probabilities per controller (:mod:`pfjax.rare`): a run fails where its status is
     a failure or ``metric > threshold``; the estimator works on the margin ``threshold - metric``
     over the study's uncertain inputs mapped to the standard-normal space (choices and paths as
@@ -505,7 +501,7 @@ class RareEventSpec(_Model):
         return self
 
 
-class ControllerSpec(_Model):
+class ControllerSpec(ConfigModel):
     """A controller to compare. ``type``: a registered controller (state_feedback, pi, integral,
     stanley, pure_pursuit, rear_wheel, ...; :data:`pfjax.controllers.REGISTRY`) or a design
     (lmi: mixed H2/H-inf with ``alpha``, ``beta`` at the nominal speed and wheelbase; integral_lmi;
@@ -556,7 +552,7 @@ def _registry():
     return REGISTRY
 
 
-class StudySpec(_Model):
+class StudySpec(ConfigModel):
     name: str = Field(description="study name: the default output directory is results/<name>")
     n_runs: int = Field(ge=1, le=100_000_000, description="runs per controller and path")
     seed: int = Field(
