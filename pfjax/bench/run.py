@@ -204,145 +204,104 @@ def machine() -> dict:
     )
 
 
-def run(cfg: BenchConfig, progress=None) -> dict:
-    """Run the benchmark; returns the result dict (``bench.json``'s content)."""
+def _row(impl: str, dtype: str, batch: int, seconds: float, compile_s: float, n_steps: int, failed=None) -> dict:
+    """One row of ``bench.json``'s ``rows``: an implementation's best time and its rate."""
+    return dict(
+        impl=impl,
+        dtype=dtype,
+        batch=batch,
+        seconds=seconds,
+        compile_s=compile_s,
+        msteps_per_s=batch * n_steps / seconds / 1e6,
+        failed_runs=failed,
+    )
+
+
+def _max_diff(a, b) -> float:
+    return float(np.max(np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))))
+
+
+def _jax_rows(cfg: BenchConfig, n_steps: int, say) -> tuple[list[dict], dict, dict]:
+    """pfjax at every batch size and the minimal JAX reference at the largest, in both precisions:
+    ``(rows, iae by dtype at the largest batch, agreement of the minimal reference)``."""
     import jax
 
     from pfjax.bench import minimal as M
-    from pfjax.bench import references as R
 
-    say = progress or (lambda msg: None)
-    have_numba = R.numba_available()
-    notes = [] if have_numba else [R.NUMBA_MISSING]
-    if not have_numba:
-        say(f"{R.NUMBA_MISSING} (the Numba reference is skipped)")
-    n_steps = P.n_steps(cfg.horizon)
     rows, iae, agree = [], {}, {}
-    load0 = os.getloadavg()[0]
     top = max(cfg.sizes)
     for name, dtype, x64 in (("float32", np.float32, False), ("float64", np.float64, True)):
         with jax.enable_x64(x64):
             for b in cfg.sizes:
                 say(f"pfjax {name} B={b}")
                 res, first, best = _pfjax(P.random_batch(b, cfg.seed), dtype, n_steps, cfg)
-                rows.append(
-                    dict(
-                        impl="pfjax",
-                        dtype=name,
-                        batch=b,
-                        seconds=best,
-                        compile_s=first - best,
-                        msteps_per_s=b * n_steps / best / 1e6,
-                        failed_runs=int(np.sum(np.asarray(res.status) != 0)),
-                    )
-                )
+                failed = int(np.sum(np.asarray(res.status) != 0))
+                rows.append(_row("pfjax", name, b, best, first - best, n_steps, failed))
                 if b == top:
-                    iae[("pfjax", name)] = np.asarray(res.metrics.iae, np.float64)
+                    iae[name] = np.asarray(res.metrics.iae, np.float64)
             say(f"minimal JAX {name} B={top}")
             runs = M.runs(P.random_batch(top, cfg.seed), dtype)
             out, first, best = _timed(lambda: jax.block_until_ready(M.simulate(runs, n_steps)), cfg.repeats)
-            rows.append(
-                dict(
-                    impl="jax_minimal",
-                    dtype=name,
-                    batch=top,
-                    seconds=best,
-                    compile_s=first - best,
-                    msteps_per_s=top * n_steps / best / 1e6,
-                    failed_runs=None,
-                )
-            )
-            agree[f"jax_minimal_{name}"] = float(np.max(np.abs(np.asarray(out, np.float64) - iae[("pfjax", name)])))
+            rows.append(_row("jax_minimal", name, top, best, first - best, n_steps))
+            agree[f"jax_minimal_{name}"] = _max_diff(out, iae[name])
+    return rows, iae, agree
+
+
+def _reference_rows(cfg: BenchConfig, n_steps: int, iae: dict, have_numba: bool, say) -> tuple[list[dict], dict]:
+    """Numba (if installed) and NumPy in both precisions and SciPy in float64, on the largest batch's
+    first runs: ``(rows, agreement with pfjax's per-run IAE)``."""
+    from pfjax.bench import references as R
+
+    rows, agree = [], {}
+    top = max(cfg.sizes)
     batch = P.random_batch(top, cfg.seed)
-    nr = min(cfg.ref_size, top)
-    sub = lambda k: P.Batch(*(a[:k] for a in batch))
+    nr, k = min(cfg.ref_size, top), min(cfg.ref_numpy, top)
+    sub = lambda n: P.Batch(*(a[:n] for a in batch))
     for name, dtype in (("float32", np.float32), ("float64", np.float64)):
-        ref = iae[("pfjax", name)]
         if have_numba:
             say(f"numba {name} B={nr}")
             out, first, best = _timed(lambda: R.iae_numba(sub(nr), dtype, n_steps), cfg.repeats)
-            rows.append(
-                dict(
-                    impl="numba",
-                    dtype=name,
-                    batch=nr,
-                    seconds=best,
-                    compile_s=first - best,
-                    msteps_per_s=nr * n_steps / best / 1e6,
-                    failed_runs=None,
-                )
-            )
-            agree[f"numba_{name}"] = float(np.max(np.abs(out - ref[:nr])))
-        k = min(cfg.ref_numpy, top)
+            rows.append(_row("numba", name, nr, best, first - best, n_steps))
+            agree[f"numba_{name}"] = _max_diff(out, iae[name][:nr])
         say(f"numpy {name} B={k}")
         out, _, best = _timed(lambda: R.iae_numpy(sub(k), dtype, n_steps), 0)
-        rows.append(
-            dict(
-                impl="numpy",
-                dtype=name,
-                batch=k,
-                seconds=best,
-                compile_s=0.0,
-                msteps_per_s=k * n_steps / best / 1e6,
-                failed_runs=None,
-            )
-        )
-        agree[f"numpy_{name}"] = float(np.max(np.abs(out - ref[:k])))
+        rows.append(_row("numpy", name, k, best, 0.0, n_steps))
+        agree[f"numpy_{name}"] = _max_diff(out, iae[name][:k])
     say(f"scipy solve_ivp, {cfg.scipy_runs} run(s)")
     t0 = time.perf_counter()
     sc_iae = np.array([R.iae_scipy(batch, i, n_steps) for i in range(cfg.scipy_runs)])
-    t_sc = time.perf_counter() - t0
-    rows.append(
-        dict(
-            impl="scipy",
-            dtype="float64",
-            batch=cfg.scipy_runs,
-            seconds=t_sc,
-            compile_s=0.0,
-            msteps_per_s=cfg.scipy_runs * n_steps / t_sc / 1e6,
-            failed_runs=None,
-        )
-    )
-    agree["scipy_float64"] = float(np.max(np.abs(sc_iae - iae[("pfjax", "float64")][: cfg.scipy_runs])))
-    say(f"gradient B={cfg.grad_size}")
-    with jax.enable_x64(False):
-        g = _grad(P.random_batch(cfg.grad_size, cfg.seed), np.float32, cfg)
-    agreement = {
-        k: dict(max_abs_diff=v, tolerance=TOLERANCE["scipy" if k.startswith("scipy") else k.rsplit("_", 1)[1]])
-        for k, v in agree.items()
-    }
-    for a in agreement.values():
-        a["ok"] = a["max_abs_diff"] <= a["tolerance"]
+    rows.append(_row("scipy", "float64", cfg.scipy_runs, time.perf_counter() - t0, 0.0, n_steps))
+    agree["scipy_float64"] = _max_diff(sc_iae, iae["float64"][: cfg.scipy_runs])
+    return rows, agree
+
+
+def _summary(rows: list[dict], top: int, g: dict, agreement: dict, notes: list[str]) -> dict:
+    """The headline rates and ratios (pfjax at the largest batch over each reference)."""
 
     def rate(impl, dtype, batch=None):
         c = [r for r in rows if r["impl"] == impl and r["dtype"] == dtype and (batch is None or r["batch"] == batch)]
         return max(c, key=lambda r: r["batch"])["msteps_per_s"] if c else float("nan")
 
-    head32, head64 = rate("pfjax", "float32", top), rate("pfjax", "float64", top)
-    summary = dict(
-        msteps_per_s_f32=head32,
-        msteps_per_s_f64=head64,
-        batch=top,
-        numba_msteps_per_s_f32=rate("numba", "float32"),
-        numba_msteps_per_s_f64=rate("numba", "float64"),
-        numpy_msteps_per_s_f32=rate("numpy", "float32"),
-        numpy_msteps_per_s_f64=rate("numpy", "float64"),
-        scipy_msteps_per_s_f64=rate("scipy", "float64"),
-        ratio_vs_numba_f32=head32 / rate("numba", "float32"),
-        ratio_vs_numba_f64=head64 / rate("numba", "float64"),
-        ratio_vs_numpy_f32=head32 / rate("numpy", "float32"),
-        ratio_vs_numpy_f64=head64 / rate("numpy", "float64"),
-        ratio_vs_scipy_f64=head64 / rate("scipy", "float64"),
-        minimal_msteps_per_s_f32=rate("jax_minimal", "float32"),
-        minimal_msteps_per_s_f64=rate("jax_minimal", "float64"),
-        fraction_of_minimal_f32=head32 / rate("jax_minimal", "float32"),
-        fraction_of_minimal_f64=head64 / rate("jax_minimal", "float64"),
-        compile_s_f32=next(
-            r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float32" and r["batch"] == top
-        ),
-        compile_s_f64=next(
-            r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == "float64" and r["batch"] == top
-        ),
+    def compile_s(dtype):
+        return next(r["compile_s"] for r in rows if r["impl"] == "pfjax" and r["dtype"] == dtype and r["batch"] == top)
+
+    head = {"f32": rate("pfjax", "float32", top), "f64": rate("pfjax", "float64", top)}
+    out: dict = dict(msteps_per_s_f32=head["f32"], msteps_per_s_f64=head["f64"], batch=top)
+    for impl in ("numba", "numpy"):
+        for p, dtype in (("f32", "float32"), ("f64", "float64")):
+            out[f"{impl}_msteps_per_s_{p}"] = rate(impl, dtype)
+    out["scipy_msteps_per_s_f64"] = rate("scipy", "float64")
+    for impl in ("numba", "numpy"):
+        for p, dtype in (("f32", "float32"), ("f64", "float64")):
+            out[f"ratio_vs_{impl}_{p}"] = head[p] / rate(impl, dtype)
+    out["ratio_vs_scipy_f64"] = head["f64"] / rate("scipy", "float64")
+    for p, dtype in (("f32", "float32"), ("f64", "float64")):
+        out[f"minimal_msteps_per_s_{p}"] = rate("jax_minimal", dtype)
+    for p, dtype in (("f32", "float32"), ("f64", "float64")):
+        out[f"fraction_of_minimal_{p}"] = head[p] / rate("jax_minimal", dtype)
+    out.update(
+        compile_s_f32=compile_s("float32"),
+        compile_s_f64=compile_s("float64"),
         grad_over_forward=g["grad_s"] / g["forward_s"],
         grad_mode=g["mode"],
         grad_over_forward_reverse=g["reverse_s"] / g["forward_s"],
@@ -353,11 +312,38 @@ def run(cfg: BenchConfig, progress=None) -> dict:
         failed_runs=sum(r["failed_runs"] or 0 for r in rows),
         notes=notes,
     )
+    return out
+
+
+def run(cfg: BenchConfig, progress=None) -> dict:
+    """Run the benchmark; returns the result dict (``bench.json``'s content)."""
+    import jax
+
+    from pfjax.bench import references as R
+
+    say = progress or (lambda msg: None)
+    have_numba = R.numba_available()
+    notes = [] if have_numba else [R.NUMBA_MISSING]
+    if not have_numba:
+        say(f"{R.NUMBA_MISSING} (the Numba reference is skipped)")
+    n_steps = P.n_steps(cfg.horizon)
+    load0 = os.getloadavg()[0]
+    rows, iae, agree = _jax_rows(cfg, n_steps, say)
+    ref_rows, ref_agree = _reference_rows(cfg, n_steps, iae, have_numba, say)
+    say(f"gradient B={cfg.grad_size}")
+    with jax.enable_x64(False):
+        g = _grad(P.random_batch(cfg.grad_size, cfg.seed), np.float32, cfg)
+    agreement = {
+        k: dict(max_abs_diff=v, tolerance=TOLERANCE["scipy" if k.startswith("scipy") else k.rsplit("_", 1)[1]])
+        for k, v in {**agree, **ref_agree}.items()
+    }
+    for a in agreement.values():
+        a["ok"] = a["max_abs_diff"] <= a["tolerance"]
     m = machine()
     m["load_average_1m_start"] = load0
     return dict(
-        summary=summary,
-        rows=rows,
+        summary=_summary(rows + ref_rows, max(cfg.sizes), g, agreement, notes),
+        rows=rows + ref_rows,
         machine=m,
         config=asdict(cfg),
         n_steps=n_steps,
