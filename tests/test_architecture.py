@@ -120,3 +120,24 @@ def test_the_library_has_no_import_circles():
 def test_the_analysis_finds_a_circle_when_there_is_one():
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert _cycles(graph) == [["a", "b", "c"]]
+
+
+def test_a_simulation_does_not_import_the_host_side_statistics_stack():
+    """``pfjax simulate`` starts fast: the simulator, the controllers, the paths and the command line's
+    simulate command import neither pandas nor SciPy nor cvxpy nor matplotlib (0.6 s and more of
+    every command's start-up); the robustness statistics load them on first use."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, pfjax.sim, pfjax.sim.simulate, pfjax.sim.scenario, pfjax.controllers, pfjax.paths, "
+        "pfjax.metrics, pfjax.cli.simulate; "
+        "print(','.join(m for m in ('pandas', 'scipy', 'cvxpy', 'matplotlib') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "", f"imported at start-up: {out}"
+    # and the lazily re-exported statistics are still there
+    import pfjax.metrics as metrics
+    from pfjax.metrics import robustness
+
+    assert metrics.slip_margin is robustness.slip_margin and set(robustness.__all__) <= set(dir(metrics))

@@ -25,16 +25,9 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-__all__ = [
-    "clopper_pearson",
-    "failure_drivers",
-    "hoeffding_n",
-    "metric_quantiles",
-    "slip_margin",
-    "success_summary",
-    "supported_statement",
-    "zero_failure_n",
-]
+from pfjax.metrics import _ROBUSTNESS
+
+__all__ = list(_ROBUSTNESS)  # the names pfjax.metrics re-exports, listed there once
 
 DEFAULT_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95, 0.99)
 
