@@ -1,0 +1,44 @@
+"""Distributions for :func:`pfjax.scenarios`: each a study config's ``{"dist": ...}`` table, validated."""
+
+from __future__ import annotations
+
+from pfjax import errors
+
+
+def uniform(low: float, high: float):
+    """A uniform distribution on ``[low, high]`` (for :func:`scenarios`)."""
+    from pfjax.montecarlo.config import Dist
+
+    return _dist(Dist, dist="uniform", low=low, high=high)
+
+
+def normal(mean: float, std: float):
+    """A normal distribution (for :func:`scenarios`)."""
+    from pfjax.montecarlo.config import Dist
+
+    return _dist(Dist, dist="normal", mean=mean, std=std)
+
+
+def truncnormal(mean: float, std: float, low: float, high: float):
+    """A normal distribution truncated to ``[low, high]`` (for :func:`scenarios`)."""
+    from pfjax.montecarlo.config import Dist
+
+    return _dist(Dist, dist="truncnormal", mean=mean, std=std, low=low, high=high)
+
+
+def choice(values):
+    """A uniform choice among ``values`` (for :func:`scenarios`)."""
+    from pfjax.montecarlo.config import Dist
+
+    return _dist(Dist, dist="choice", values=[float(v) for v in values])
+
+
+def _dist(cls, **kw):
+    from pydantic import ValidationError
+
+    try:
+        return cls.model_validate(kw)
+    except ValidationError as e:
+        from pfjax.config import format_error
+
+        raise errors.InputError(f"{kw['dist']}: {format_error(e, cls)}", kw["dist"]) from None

@@ -1,0 +1,196 @@
+"""Batches of runs, vectorised: numbers, arrays of ``n`` numbers or distributions per quantity."""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from pfjax import errors
+from pfjax.resources import MAX_STEPS
+
+#: :func:`scenarios`'s arguments -> the study config's keys.
+_SCENARIO_KEYS = {
+    "speed": "vehicle.speed",
+    "L": "vehicle.L",
+    "delta_max_deg": "vehicle.delta_max_deg",
+    "beta_r_deg": "slip.beta_r_deg",
+    "beta_f_deg": "slip.beta_f_deg",
+    "start_along_m": "initial.start_along_m",
+    "lateral_offset": "initial.lateral_offset",
+    "heading_error_deg": "initial.heading_error_deg",
+    "mu": "vehicle.mu",
+    "vehicle_params": "vehicle.params",
+    "tau_delta_s": "vehicle.tau_delta_s",
+    "k_v": "vehicle.k_v",
+    "model": "vehicle.model",
+}
+
+
+class Scenarios(NamedTuple):
+    """A batch of runs of one path (:func:`scenarios`)."""
+
+    batch: Any  # pfjax.sim.Scenario (model st: pfjax.sim.dynamic.DynamicScenario) with a leading run axis (gains None)
+    table: Any  # pandas DataFrame: one row per run, the sampled values (config units)
+    spec: Any  # the study config that describes them (pfjax.montecarlo.config.StudySpec)
+
+    @property
+    def n(self) -> int:
+        return len(self.table)
+
+
+def scenarios(
+    path: str = "sine",
+    n: int = 1,
+    *,
+    beta_r_deg=None,
+    beta_f_deg=None,
+    lateral_offset=0.0,
+    heading_error_deg=0.0,
+    start_along_m=0.0,
+    speed=1.0,
+    L=None,
+    delta_max_deg=None,
+    convention: str | None = None,
+    horizon: float = 20.0,
+    key=0,
+    model: str = "kinematic",
+    vehicle_params: str | None = None,
+    mu=None,
+    tau_delta_s: float | None = None,
+    k_v: float | None = None,
+) -> Scenarios:
+    """``n`` runs on a registered path (:data:`pfjax.paths.PATHS`), vectorised: each quantity is a
+    number (every run), an array of ``n`` numbers (run by run), or a distribution
+    (:func:`uniform`, :func:`normal`, :func:`truncnormal`, :func:`choice`, or a study config's
+    ``{"dist": ...}`` dict) drawn per run. One jitted program draws them all; no Python loop.
+
+    Args:
+        path: a registered path kind (``line``, ``parabola``, ``sine``, ``circle``, ...).
+        n: number of runs.
+        beta_r_deg: constant rear slip angle, deg (kinematic model; default 5).
+        beta_f_deg: constant front slip angle, deg (kinematic model; default 5).
+        lateral_offset: start offset left of the path, m.
+        heading_error_deg: start heading error, deg.
+        start_along_m: start, m along the path from its nominal start.
+        speed: rear-axle speed, m/s.
+        L: wheelbase, m (kinematic model; default 0.2).
+        delta_max_deg: steering limit, deg (kinematic model; default 30).
+        convention: front-slip sign convention (``source`` or ``lenain``; kinematic model).
+        horizon: s, only to size slip sequences (the simulation's horizon is :func:`simulate`'s).
+        key: an int seed or a JAX PRNG key; run ``i`` draws from ``fold_in(key, i)``, so the first
+            runs of a larger ``n`` are the same runs.
+        model: ``"kinematic"`` (slip declared by ``beta_r_deg``, ``beta_f_deg``) or ``"st"``
+            (CommonRoad's single-track model, :mod:`pfjax.sim.dynamic`: the slip comes from the tyre
+            forces, so the slip, ``L``, ``delta_max_deg`` and ``convention`` are refused with it).
+        vehicle_params: st: parameter set, ``robot`` (default) or ``vehicle1``-``vehicle3``.
+        mu: st: friction coefficient (default the set's). tau_delta_s: st: steering actuator time
+            constant, s (default 0.05). k_v: st: speed loop gain, 1/s (default 5).
+
+    The arguments are checked as a study config's ``[vehicle]``, ``[slip]`` and ``[initial]`` keys
+    are (the same validation, the message naming the argument).
+    """
+    import pandas as pd
+
+    from pfjax.montecarlo.config import load_study
+    from pfjax.montecarlo.sampling import sample_runs
+
+    n = errors.integer("n", n, low=1, high=100_000_000)
+    if model == "kinematic":  # the kinematic defaults (None: not given, so the ST model can refuse a given one)
+        beta_r_deg = 5.0 if beta_r_deg is None else beta_r_deg
+        beta_f_deg = 5.0 if beta_f_deg is None else beta_f_deg
+    values = dict(
+        speed=speed,
+        L=L,
+        delta_max_deg=delta_max_deg,
+        beta_r_deg=beta_r_deg,
+        beta_f_deg=beta_f_deg,
+        start_along_m=start_along_m,
+        lateral_offset=lateral_offset,
+        heading_error_deg=heading_error_deg,
+        mu=mu,
+    )
+    dists, given = _as_dists(values, n)
+    seed = key if isinstance(key, (int, np.integer)) and not isinstance(key, bool) else 0
+    errors.seed("key", seed)
+    data = _study_data(path, n, int(seed), horizon, model, dists, convention, vehicle_params, tau_delta_s, k_v)
+    try:
+        spec, _ = load_study(data=data)
+    except errors.InputError as e:
+        raise _renamed(e) from None
+    jkey = None if isinstance(key, (int, np.integer)) else key
+    sampled = sample_runs(spec, 0, np.arange(n), key=jkey, given=given)
+    table = pd.DataFrame({"run": np.arange(n), **{k: np.asarray(v, float) for k, v in sampled.columns.items()}})
+    return Scenarios(sampled.scenarios, table, spec)
+
+
+def _as_dists(values: dict, n: int) -> tuple[dict, dict]:
+    """``(distribution tables by argument, per-run arrays given)`` from numbers, arrays of ``n``
+    numbers and distributions (``None``: not given)."""
+    from pfjax.montecarlo.config import Dist
+
+    dists, given = {}, {}
+    for name, v in values.items():
+        if v is None:
+            continue
+        if isinstance(v, (Dist, dict)):
+            dists[name] = v.model_dump() if isinstance(v, Dist) else v
+            continue
+        a = np.asarray(errors.numbers(name, v), dtype=float)
+        if a.ndim == 0:
+            dists[name] = {"dist": "constant", "value": float(a)}
+        elif a.shape != (n,):
+            raise errors.InputError(
+                f"{name}: expected a number or {n} numbers (one per run), got shape {a.shape}", name
+            )
+        else:  # the config sees the values' range (its bounds are checked), the runs get the values
+            lo, hi = float(a.min()), float(a.max())
+            dists[name] = {"dist": "constant", "value": lo} if lo == hi else {"dist": "uniform", "low": lo, "high": hi}
+            given[name] = a
+    return dists, given
+
+
+def _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params, tau_delta_s, k_v) -> dict:
+    """The study config (a dict) that describes the runs :func:`scenarios` draws."""
+    data: dict[str, Any] = {
+        "name": "scenarios",
+        "n_runs": n,
+        "seed": seed,
+        "paths": [{"kind": path}],
+        "controllers": [{"name": "none", "type": "state_feedback"}],
+        "sim": {"horizon": horizon},
+        "vehicle": {
+            "model": model,
+            **{k: dists[k] for k in ("speed", "L", "delta_max_deg", "mu") if k in dists},
+            **{
+                k: v
+                for k, v in (
+                    ("convention", convention),
+                    ("params", vehicle_params),
+                    ("tau_delta_s", tau_delta_s),
+                    ("k_v", k_v),
+                )
+                if v is not None
+            },
+        },
+        "slip": {k: dists[k] for k in ("beta_r_deg", "beta_f_deg") if k in dists},
+        "initial": {k: dists[k] for k in ("start_along_m", "lateral_offset", "heading_error_deg")},
+    }
+    if model == "st":
+        data["margin"] = {"enabled": False}
+        # the step is simulate()'s, which checks it against the tyre modes; here the finest allowed
+        data["sim"]["dt"] = horizon / MAX_STEPS
+    return data
+
+
+def _renamed(e: errors.InputError) -> errors.InputError:
+    """A study-config error named by :func:`scenarios`'s argument (``slip.beta_r_deg`` -> ``beta_r_deg``)."""
+    text = str(e)
+    for arg, key in _SCENARIO_KEYS.items():
+        text = text.replace(key, arg)
+    text = (
+        text.replace("paths[0].kind", "path")
+        .replace("sim.horizon", "horizon")
+        .replace("vehicle.convention", "convention")
+    )
+    return errors.InputError(text, text.split(":", 1)[0].split(".", 1)[0])

@@ -1,0 +1,222 @@
+"""Closed-loop simulation of a batch of runs, replays of a study's runs, success rates."""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from pfjax import errors
+from pfjax.api.runs import Scenarios
+
+
+class Simulation(NamedTuple):
+    """The outcome of :func:`simulate`."""
+
+    table: Any  # pandas DataFrame: one row per run: sampled values, metrics, status, fail_time
+    result: Any  # pfjax.sim.SimResult (NumPy arrays; trajectory only if asked for)
+    controller: str  # the controller's registry name
+    gains: dict  # the scalar gains simulated
+
+
+def resolve_gains(e, d, gains, v: float, L: float) -> tuple[Any, dict]:
+    """``(parameter pytree, flat gains)`` from a design, a flat dict, a parameter pytree or a
+    synthesis result with ``K``."""
+    from pfjax import controllers as C
+
+    flat = C.flat_gains(e)
+    if d is not None:
+        flat.update(d.make(v, L))
+    if gains is None:
+        pass
+    elif isinstance(gains, dict):
+        flat.update(gains)
+    elif hasattr(gains, "_asdict") and (e.controller.params is None or isinstance(gains, e.controller.params)):
+        flat = C.flat_gains(e, gains)
+    elif hasattr(gains, "K") and "K" in e.labels:
+        flat.update(zip(e.labels["K"], np.ravel(np.asarray(gains.K, float)).tolist()))
+    else:
+        kind = e.controller.params.__name__ if e.controller.params is not None else "parameter pytree"
+        raise errors.InputError(
+            f"gains: expected a dict of {', '.join(e.gains)}, a {kind} or a design with K, got {type(gains).__name__}",
+            "gains",
+        )
+    return C.params_from_flat(e, flat), {k: float(v) for k, v in flat.items()}
+
+
+def simulate(
+    scenarios: Scenarios, controller="state_feedback", gains=None, config=None, *, trajectories: bool = False
+) -> Simulation:
+    """Simulate every run of ``scenarios`` in closed loop with ``controller``.
+
+    Args:
+        scenarios: from :func:`scenarios`.
+        controller: a registered controller or design name (``state_feedback``, ``pi``,
+            ``integral``, ``stanley``, ``pure_pursuit``, ``rear_wheel``, ``lmi``, ``paper_k``, ...;
+            :func:`pfjax.controllers.controller_types`).
+        gains: the controller's gains: a dict of scalar gains (the others keep their defaults), its
+            parameter pytree, or a design with ``K`` (:func:`design_mixed`). A design name
+            (``lmi``) is designed at the runs' mean speed and wheelbase.
+        config: a :class:`pfjax.sim.SimConfig` or a dict of its fields (``horizon``, ``dt``,
+            ``success_band``, ...); default 20 s at 5 ms.
+        trajectories: also record every run's trajectory (memory grows with the horizon).
+
+    Returns:
+        a :class:`Simulation` (per-run table with metrics and statuses, the raw result).
+    """
+    import dataclasses
+
+    import jax
+
+    from pfjax import controllers as C
+    from pfjax.montecarlo.runner import add_results, batch_size, simulate_scenarios
+    from pfjax.sim import SimConfig
+
+    if not isinstance(scenarios, Scenarios):
+        raise errors.InputError(
+            f"scenarios: expected the result of pfjax.scenarios(...), got {type(scenarios).__name__}", "scenarios"
+        )
+    e, d = C.resolve(controller) if isinstance(controller, str) else (None, None)
+    if e is None:
+        raise errors.InputError(
+            f"controller: expected a controller name, got {type(controller).__name__}", "controller"
+        )
+    if config is None:
+        config = SimConfig()
+    elif isinstance(config, dict):
+        unknown = set(config) - {f.name for f in dataclasses.fields(SimConfig)}
+        if unknown:
+            raise errors.InputError(
+                f"config.{sorted(unknown)[0]}: unknown setting; expected one of "
+                f"{', '.join(f.name for f in dataclasses.fields(SimConfig))}",
+                "config",
+            )
+        config = SimConfig(**config)
+    elif not isinstance(config, SimConfig):
+        raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
+    config = dataclasses.replace(config, record=bool(trajectories))
+    t = scenarios.table
+    if scenarios.spec.vehicle.model == "st":
+        from pfjax.models.single_track import max_stable_step
+
+        veh = scenarios.spec.vehicle
+        worst = veh.st_params()._replace(mu=float(t["mu"].max()))
+        dt_max = max_stable_step(worst, float(t["speed"].min()), veh.tau_delta_s, veh.k_v)
+        if config.dt > dt_max:
+            raise errors.InputError(
+                f"config.dt: the ST model at mu = {worst.mu:g} and speed {float(t['speed'].min()):g} m/s (the runs' "
+                f"worst case) needs dt <= {dt_max:.3g} s for a stable RK4 step, got {config.dt:g}",
+                "config",
+            )
+    params, flat = resolve_gains(e, d, gains, float(t["speed"].mean()), float(t["L"].mean()))
+    n = scenarios.n
+    m = batch_size(n)  # padded like a study's chunks: every run takes the same vector code
+    pad = lambda a: np.concatenate([np.asarray(a), np.repeat(np.asarray(a)[:1], m - n, axis=0)])
+    batch = jax.tree_util.tree_map(pad, scenarios.batch)
+    batch = batch._replace(
+        gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(np.asarray(g), (m,) + np.shape(g)), params)
+    )
+    res = jax.tree_util.tree_map(
+        lambda a: np.asarray(a)[:n], simulate_scenarios(batch, controller=e.controller, config=config)
+    )
+    return Simulation(add_results(t.copy(), res, n), res, e.name, {k: flat[k] for k in e.gains})
+
+
+def replay(study, path: str, controller: str, runs, *, trajectories: bool = True) -> Simulation:
+    """Simulate runs of a finished study again, with their trajectories: the same scenarios (the
+    study's draws for these run indices), gains, settings and precision as the study.
+
+    Args:
+        study: a :class:`StudyResult`, its output directory, or its config (``StudySpec``).
+        path: the path's label in the study. controller: the controller's name in the study.
+        runs: run indices (an int or a sequence).
+    """
+    import dataclasses
+    from pathlib import Path
+
+    import jax
+    import pandas as pd
+
+    from pfjax.montecarlo.config import StudySpec
+    from pfjax.montecarlo.config import load_study as load_config
+    from pfjax.montecarlo.runner import (
+        add_results,
+        controller_of,
+        precision,
+        sample_few,
+        sim_config,
+        simulate_scenarios,
+        with_gains,
+    )
+
+    if isinstance(study, (str, Path)):
+        from pfjax.api.studies import load_study
+
+        study = load_study(study)
+    spec = study if isinstance(study, StudySpec) else load_config(data=study.summary["config"])[0]
+    labels = [p.label for p in spec.paths]
+    names = [c.name for c in spec.controllers]
+    if path not in labels:
+        raise errors.InputError(
+            f"path: {path!r} is not a path of study {spec.name!r}; expected one of {', '.join(labels)}", "path"
+        )
+    if controller not in names:
+        raise errors.InputError(
+            f"controller: {controller!r} is not a controller of study {spec.name!r}; expected one of "
+            f"{', '.join(names)}",
+            "controller",
+        )
+    idx = np.atleast_1d(np.asarray(runs))
+    for r in idx.tolist():
+        errors.integer("runs", r, low=0, high=spec.n_runs - 1)
+    p, c = labels.index(path), names.index(controller)
+    with precision(spec):
+        sampled = sample_few(spec, p, idx.astype(np.int64))
+        ctrl, gains, flat = controller_of(spec.controllers[c], spec, c)
+        m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
+        cfg = dataclasses.replace(sim_config(spec), record=bool(trajectories))
+        res = simulate_scenarios(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
+    n = len(idx)
+    res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:n], res)
+    table = pd.DataFrame(
+        {
+            "path": path,
+            "controller": controller,
+            "run": idx,
+            **{k: np.asarray(v, float) for k, v in sampled.columns.items()},
+        }
+    )
+    return Simulation(add_results(table, res, n), res, spec.controllers[c].type, flat)
+
+
+class SuccessRate(NamedTuple):
+    """A success rate with its Clopper-Pearson interval."""
+
+    rate: float
+    lo: float
+    hi: float
+    k: int  # successes
+    n: int  # runs
+    conf: float
+
+    def __str__(self) -> str:
+        return (
+            f"{100 * self.rate:.1f} % of {self.n} runs succeed "
+            f"({100 * self.conf:g} % interval {100 * self.lo:.1f}-{100 * self.hi:.1f} %)"
+        )
+
+
+def success_rate(x, conf: float = 0.95) -> SuccessRate:
+    """The success rate of a :class:`Simulation` (or a table with a ``success`` column, or a
+    boolean array) with its exact (Clopper-Pearson) ``conf`` interval."""
+    from pfjax.metrics.robustness import clopper_pearson
+
+    s = x.table["success"] if isinstance(x, Simulation) else (x["success"] if hasattr(x, "columns") else x)
+    s = np.asarray(s, dtype=bool).ravel()
+    if s.size == 0:
+        raise errors.InputError("success: no runs", "success")
+    if not 0.0 < errors.number("conf", conf) < 1.0:
+        raise errors.InputError(f"conf: expected in (0, 1), got {conf:g}", "conf")
+    k, n = int(s.sum()), int(s.size)
+    lo, hi = clopper_pearson(k, n, conf)
+    return SuccessRate(k / n, float(lo), float(hi), k, n, float(conf))

@@ -1,0 +1,156 @@
+"""Monte Carlo studies and rare-event estimates through the public API."""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+from pfjax import errors
+
+
+class StudyResult(NamedTuple):
+    """A study's outputs (:func:`run_study`, :func:`load_study`)."""
+
+    out: Any  # pathlib.Path of the output directory
+    summary: dict  # summary.json
+    runs: Any  # pandas DataFrame: runs.parquet
+    margin: Any  # pandas DataFrame: margin.parquet (None without a margin sweep)
+    headline: Any  # pandas DataFrame: one row per controller (success rate, interval, margin)
+
+
+def load_study(out) -> StudyResult:
+    """Read a finished study's outputs from its directory ``out``."""
+    import json
+    from pathlib import Path
+
+    import pandas as pd
+
+    from pfjax.montecarlo.summary import headline
+
+    out = Path(out)
+    if not (out / "summary.json").is_file() or not (out / "runs.parquet").is_file():
+        raise errors.InputError(f"out: {out} holds no finished study (summary.json and runs.parquet)", "out")
+    summary = json.loads((out / "summary.json").read_text())
+    margin = pd.read_parquet(out / "margin.parquet") if (out / "margin.parquet").is_file() else None
+    return StudyResult(out, summary, pd.read_parquet(out / "runs.parquet"), margin, headline(summary))
+
+
+def run_study(
+    config,
+    out=None,
+    *,
+    overwrite: bool = False,
+    fresh: bool = False,
+    progress: bool | None = None,
+    report: bool = True,
+    **overrides,
+) -> StudyResult:
+    """Run a Monte Carlo study and return its outputs, as ``pfjax study`` does.
+
+    Args:
+        config: a study TOML path, a config dict, or a :class:`pfjax.montecarlo.config.StudySpec`.
+        out: output directory (default ``results/<name>``), written with pfjax's output rules
+            (:mod:`pfjax.outputs`: another pfjax output is replaced only with ``overwrite``).
+        fresh: discard the finished chunks of an interrupted run instead of resuming.
+        progress: progress bars (default: when stderr is a terminal). report: write report.html.
+        overrides: config values by key, nested keys with ``__`` (``n_runs=1000``,
+            ``sim__horizon=30``, ``paths=[{"kind": "line"}]``), as ``--set key=value`` but with
+            Python values.
+    """
+    from pathlib import Path
+
+    from pfjax.montecarlo.study import run
+
+    spec = _study_spec(config, {k.replace("__", "."): v for k, v in overrides.items()})
+    out = Path("results") / spec.name if out is None else Path(out)
+    run(spec, out, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
+    return load_study(out)
+
+
+def rare_event(
+    config,
+    *,
+    controller: str | None = None,
+    method: str | None = None,
+    target_rel_error: float | None = None,
+    max_rollouts: int | None = None,
+    seed: int | None = None,
+    progress: bool | None = None,
+    **overrides,
+) -> dict:
+    """Each controller's probability of failure under a study's uncertain inputs, down to 1e-6 and
+    below, with a 95 % interval (:mod:`pfjax.rare`), as ``pfjax rare-event`` does.
+
+    A run fails where its status is a failure or the study's ``rare_event.metric`` exceeds
+    ``rare_event.threshold`` (default: ``late_max_abs_d`` above ``success.band``, m). The keyword
+    arguments override the config's ``[rare_event]`` table.
+
+    Args:
+        config: a study TOML path, a config dict, or a :class:`pfjax.montecarlo.config.StudySpec`.
+        controller: only this controller of the study (default: all).
+        method: ``is`` (cross-entropy importance sampling), ``subset`` (subset simulation) or
+            ``mc`` (plain Monte Carlo, exact binomial interval).
+        target_rel_error: stop once the relative error (coefficient of variation) is at most this.
+        max_rollouts: rollouts per controller at most.
+        seed: seed of the estimator's draws.
+        progress: a progress bar on stderr (default: when it is a terminal).
+        overrides: config values by key, nested keys with ``__``, as :func:`run_study`.
+
+    Returns:
+        ``{"study", "config_sha256", "units", "controllers": {name: {"p_fail", "ci95",
+        "rel_error", "n_rollouts", "method", "wall_s", "strata", "failure_points"}}}``.
+    """
+    from pfjax.montecarlo.config import study_hash
+    from pfjax.montecarlo.runner import controllers_of
+    from pfjax.rare import METHODS
+    from pfjax.rare.study import estimate_study
+    from pfjax.rare.transform import study_inputs
+
+    values = {k.replace("__", "."): v for k, v in overrides.items()}
+    if method is not None:
+        if method not in METHODS:
+            raise errors.InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}", "method")
+        values["rare_event.method"] = method
+    if target_rel_error is not None:
+        values["rare_event.target_rel_error"] = errors.number("target_rel_error", target_rel_error, positive=True)
+        if target_rel_error > 10:
+            raise errors.InputError(f"target_rel_error: must be <= 10, got {target_rel_error:g}", "target_rel_error")
+    if max_rollouts is not None:
+        values["rare_event.max_rollouts"] = errors.integer("max_rollouts", max_rollouts, low=100, high=100_000_000)
+    if seed is not None:
+        values["rare_event.seed"] = errors.seed("seed", seed)
+    spec = _study_spec(config, values)
+    names = [c.name for c in spec.controllers]
+    if controller is not None and controller not in names:
+        raise errors.InputError(
+            f"controller: {controller!r} is not one of study {spec.name!r}'s controllers: {', '.join(names)}",
+            "controller",
+        )
+    study_inputs(spec)  # an unsupported study fails here, before anything is simulated
+    controllers = controllers_of(spec)
+    chosen = names if controller is None else [controller]
+    return {
+        "study": spec.name,
+        "config_sha256": study_hash(spec),
+        "units": {"p_fail": "probability per run", "ci95": "probability", "rel_error": "1", "wall_s": "s"},
+        "controllers": estimate_study(spec, controllers, names=chosen, progress=progress),
+    }
+
+
+def _study_spec(config, values: dict):
+    """A validated study config from a TOML path, a dict or a StudySpec, with ``values`` overriding."""
+    from pathlib import Path
+
+    from pfjax.montecarlo.config import StudySpec
+    from pfjax.montecarlo.config import load_study as load_config
+
+    if isinstance(config, StudySpec):
+        return load_config(data=config.model_dump(mode="json"), values=values)[0]
+    if isinstance(config, dict):
+        return load_config(data=config, values=values)[0]
+    if isinstance(config, (str, Path)):
+        if not Path(config).is_file():
+            raise errors.InputError(f"config: no such file {str(config)!r}", "config")
+        return load_config(Path(config), values=values)[0]
+    raise errors.InputError(
+        f"config: expected a TOML path, a dict or a StudySpec, got {type(config).__name__}", "config"
+    )

@@ -1,0 +1,183 @@
+"""Gain tuning and worst-case search through the public API."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pfjax import errors
+from pfjax.api.simulation import resolve_gains
+
+
+def tune(
+    controller: str = "pi",
+    scenario: str = "paper-line",
+    method: str = "gradient",
+    *,
+    key=0,
+    cost=None,
+    config=None,
+    n_runs: int = 16,
+    steps: int | None = None,
+    n_starts: int | None = None,
+    learning_rate: float | None = None,
+    generations: int = 100,
+    population: int = 50,
+    multistart=None,
+    check=None,
+    progress: bool = False,
+) -> dict:
+    """Tune a controller's gains, or check given gains, as ``pfjax tune`` does.
+
+    Args:
+        controller: a registered controller with a tuning box (``pi``, ``state_feedback``, ...).
+        scenario: ``paper-line`` | ``paper-parabola`` | ``paper-sine`` | ``paper-all`` | a
+            registered path's name | a study TOML (``n_runs`` sampled runs per path).
+        method: ``gradient`` (the multi-start tuner: Sobol screening with the controller's
+            default gains, successive halving of projected BFGS chains, restarts;
+            :mod:`pfjax.tuning.multistart`), ``gradient-plain`` (projected adam from ``n_starts``
+            uniform starts), ``ga`` (MATLAB-style GA) or ``ga+gradient`` (the GA, then ``steps``
+            adam steps from its best).
+        key: int seed (or JAX key) of the GA population / the gradient's starts.
+        cost: a :class:`pfjax.tuning.CostSpec` (metric, effort weight, aggregate); default mean IAE.
+        config: a :class:`pfjax.sim.SimConfig` (default 20 s at 5 ms, or the study's).
+        steps: gradient steps (``None``: the method's default; multi-start: evaluations of a
+            surviving chain).
+        n_starts: starts descended together (``None``: the method's default).
+        learning_rate: multi-start: first BFGS trust radius; adam: step (box units; ``None``: default).
+        multistart: a :class:`pfjax.tuning.MultistartOptions` for ``gradient``.
+        check: gains to check instead of tuning (``{field: value}``, its JSON text or numbers in
+            field order, inside the tuning box): gradient, projected gradient, active bounds,
+            Hessian eigenvalues on the free coordinates, verdict (:mod:`pfjax.tuning.check`).
+
+    Returns:
+        ``{"gains", "cost", "n_rollouts", "n_forward_passes", "wall_s", "compile_s", "history",
+        "history_rollouts", "result"}``; with ``check``: ``{"gains", "cost", "check", "result"}``.
+    """
+    import jax
+
+    from pfjax import controllers as C
+    from pfjax.tuning.check import as_dict
+    from pfjax.tuning.cost import CostSpec
+    from pfjax.tuning.ga import GAOptions
+    from pfjax.tuning.problem import check as run_check
+    from pfjax.tuning.problem import make_problem
+    from pfjax.tuning.problem import tune as run_tune
+
+    name = C.resolve(controller)[0].name if isinstance(controller, str) else controller
+    problem = make_problem(name, scenario, cost=cost or CostSpec(), config=config, n_runs=n_runs)
+    if check is not None:
+        r = run_check(problem, check)
+        return {
+            "gains": C.flat_gains(C.entry(name), problem.tunable.gains(r.theta)),
+            "cost": r.cost,
+            "check": as_dict(r, problem.tunable.fields, problem.tunable.sizes),
+            "result": r,
+        }
+    k = jax.random.PRNGKey(errors.seed("key", key)) if isinstance(key, (int, np.integer)) else key
+    res = run_tune(
+        problem,
+        method,
+        key=k,
+        ga_options=GAOptions(population_size=population, generations=generations),
+        steps=steps,
+        n_starts=n_starts,
+        learning_rate=learning_rate,
+        multistart=multistart,
+        progress=progress,
+    )
+    return _tuned(C.flat_gains(C.entry(name), problem.tunable.gains(res.theta)), res)
+
+
+def _tuned(gains: dict, res) -> dict:
+    """:func:`tune`'s result dict from the tuner's result."""
+    return {
+        "gains": gains,
+        "cost": float(res.cost),
+        "n_rollouts": int(res.n_rollouts),
+        "n_forward_passes": int(res.n_forward_passes),
+        "wall_s": float(res.wall_s),
+        "compile_s": float(res.compile_s),
+        "history": np.asarray(res.history),
+        "history_rollouts": np.asarray(res.history_rollouts),
+        "result": res,
+    }
+
+
+def falsify(
+    controller: str = "state_feedback",
+    path: str = "sine",
+    *,
+    gains=None,
+    slip_bound_deg: float = 10.0,
+    f_max_hz: float = 0.5,
+    lateral_offset: float = 0.1,
+    heading_error_deg: float = 5.0,
+    objective: str = "iae",
+    restarts: int = 8,
+    steps: int = 50,
+    key=0,
+    config=None,
+    speed: float = 1.0,
+    L: float = 0.2,
+    delta_max_deg: float = 30.0,
+):
+    """Search for a controller's worst case on a registered path: gradient ascent of ``objective``
+    through the simulator over slip profiles bounded by ``slip_bound_deg`` (deg, per axle) with
+    frequencies up to ``f_max_hz`` (Hz; 0: constant slip) and start errors within
+    ``±lateral_offset`` (m) and ``±heading_error_deg`` (deg), from ``restarts`` random starts of
+    ``steps`` adam steps each (:func:`pfjax.falsification.falsify`).
+
+    Returns:
+        a :class:`pfjax.falsification.FalsifierResult` (the worst value, its parameters and status).
+    """
+    import jax
+
+    from pfjax import controllers as C
+    from pfjax import paths
+    from pfjax.falsification import falsify as run_falsify
+    from pfjax.models.slip import CONVENTIONS, SlipParams
+    from pfjax.sim import SimConfig
+
+    e, d = C.resolve(controller)
+    entry = paths.entry(path)
+    if entry.build is None:
+        raise errors.InputError(
+            f"path: {path!r} is built only from a study config; expected one of {', '.join(paths.fixed_paths())}",
+            "path",
+        )
+    errors.number("speed", speed, positive=True, unit=" m/s")
+    errors.number("L", L, positive=True, unit=" m")
+    errors.number("delta_max_deg", delta_max_deg, positive=True, below=90, unit=" deg")
+    errors.number("lateral_offset", lateral_offset, nonnegative=True, unit=" m")
+    errors.number("heading_error_deg", heading_error_deg, nonnegative=True, below=180, unit=" deg")
+    restarts = errors.integer("restarts", restarts, low=1, high=4096)
+    steps = errors.integer("steps", steps, low=1, high=100_000)
+    params, _ = resolve_gains(e, d, gains, speed, L)
+    sp = SlipParams(
+        v=np.asarray(speed, float),
+        L=np.asarray(L, float),
+        delta_max=np.asarray(math.radians(delta_max_deg), float),
+        convention=np.asarray(CONVENTIONS["source"], np.int32),
+    )
+    k = jax.random.PRNGKey(errors.seed("key", key)) if isinstance(key, (int, np.integer)) else key
+    ic = {
+        "d": (-lateral_offset, lateral_offset),
+        "theta_e_deg": (-heading_error_deg, heading_error_deg),
+        "u": entry.start_u,
+    }
+    return run_falsify(
+        e.controller,
+        params,
+        entry.build(),
+        config=config or SimConfig(record=False),
+        slip_bound_deg=slip_bound_deg,
+        f_max_hz=f_max_hz,
+        ic_bounds=ic,
+        objective=objective,
+        n_restarts=restarts,
+        steps=steps,
+        key=k,
+        params=sp,
+    )
