@@ -13,15 +13,22 @@ guaranteed bound on the true closed-loop norm; it moves the optimum by O(eps) on
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
 import cvxpy as cp
 import numpy as np
 
 from pfjax.synthesis.norms import closed_loop, h2_norm, hinf_norm
 from pfjax.synthesis.plant import Plant, slip_design_plant
 from pfjax.synthesis.regions import PoleRegion, region_constraints
+from pfjax.synthesis.solver import (
+    SOLVER,
+    Design,
+    SynthesisError,
+    bound_warnings,
+    gain_from,
+    solve_or_raise,
+    solved,
+    sym,
+)
 
 __all__ = [
     "Design",
@@ -33,152 +40,8 @@ __all__ = [
     "synthesize",
 ]
 
-_SOLVER = "CLARABEL"
-_ACCEPTED = ("optimal", "optimal_inaccurate")
 
-
-class SynthesisError(ValueError):
-    """An LMI synthesis problem was infeasible, unbounded, numerically ill-conditioned or the solver
-    failed. ``status`` carries the solver's status (``"infeasible"``, ``"unbounded"``,
-    ``"infeasible_inaccurate"``, ``"solver_error"``, ...) or ``"ill_conditioned"``."""
-
-    def __init__(self, message: str, status: str | None = None):
-        super().__init__(message)
-        self.status = status
-
-
-#: ``cond(X)`` above which ``K = Y X^-1`` is not trusted (SynthesisError "ill_conditioned");
-#: above ``_COND_WARN`` the design carries a warning.
-_COND_MAX = 1e14
-_COND_WARN = 1e9
-#: relative tolerance of the bound check (true norm <= LMI bound), covering solver accuracy.
-_BOUND_RTOL = 1e-5
-
-
-def bound_warnings(gamma_inf, gamma_2, hinf_true, h2_true, cond_X=None) -> tuple:
-    """Disagreements between LMI bounds and the independently computed true norms.
-
-    A valid design has ``||T_inf||_inf <= gamma_inf`` and ``||T_2||_2 <= gamma_2``; a true norm
-    above its bound by more than ``_BOUND_RTOL`` (relative) means the solver's answer is not a
-    certificate. Returns one message per disagreement (empty when all agree); each is also
-    issued as a ``RuntimeWarning``.
-    """
-    import warnings
-
-    out = []
-    for name, bound, true in (("H-inf", gamma_inf, hinf_true), ("H2", gamma_2, h2_true)):
-        if bound is not None and not (true <= bound * (1 + _BOUND_RTOL) + 1e-9):
-            out.append(f"true {name} norm {true:.6g} exceeds its LMI bound {bound:.6g}")
-    if cond_X is not None and cond_X > _COND_WARN:
-        out.append(f"Lyapunov matrix ill-conditioned: cond(X) = {cond_X:.3g}")
-    for msg in out:
-        warnings.warn(msg, RuntimeWarning, stacklevel=3)
-    return tuple(out)
-
-
-@dataclass(frozen=True)
-class Design:
-    """Result of a state-feedback LMI synthesis.
-
-    Attributes:
-        method: ``"hinf"``, ``"h2"`` or ``"mixed"``.
-        K: (n_u, n_x) gain of ``u = K x`` (for the slip plant (1, 2), rad/m and rad/rad).
-        gamma_inf: LMI bound ``gamma_inf > ||T_{w->z_inf}||_inf`` (None for pure H2).
-        gamma_2: LMI bound ``gamma_2 = sqrt(trace W) > ||T_{w->z2}||_2`` (None for pure H-inf).
-        hinf_norm: true closed-loop ``||T_{w->z_inf}||_inf`` (:func:`norms.hinf_norm`).
-        h2_norm: true closed-loop ``||T_{w->z2}||_2`` (:func:`norms.h2_norm`).
-        closed_loop_poles: (n_x,) complex eigenvalues of ``A + Bu K``, 1/s.
-        solver: the conic solver used.
-        solver_status: cvxpy status (``"optimal"`` or ``"optimal_inaccurate"``).
-        alpha: weight on ``gamma_inf^2`` in the mixed objective (None otherwise).
-        beta: weight on ``gamma_2^2`` in the mixed objective (None otherwise).
-        warnings: disagreements of the true norms with the LMI bounds, conditioning
-            (:func:`bound_warnings`; empty for a clean design).
-    """
-
-    method: str
-    K: np.ndarray
-    gamma_inf: float | None
-    gamma_2: float | None
-    hinf_norm: float
-    h2_norm: float
-    closed_loop_poles: np.ndarray
-    solver: str
-    solver_status: str
-    alpha: float | None
-    beta: float | None
-    warnings: tuple = ()
-
-    def to_dict(self) -> dict:
-        """JSON-serialisable view: lists and floats, poles as ``[[re, im], ...]``.
-
-        Non-finite norms (never produced by a successful synthesis) become ``None``.
-        """
-
-        def num(x):
-            if x is None:
-                return None
-            x = float(x)
-            return x if math.isfinite(x) else None
-
-        return {
-            "method": self.method,
-            "K": np.asarray(self.K, dtype=float).tolist(),
-            "gamma_inf": num(self.gamma_inf),
-            "gamma_2": num(self.gamma_2),
-            "hinf_norm": num(self.hinf_norm),
-            "h2_norm": num(self.h2_norm),
-            "closed_loop_poles": [[float(p.real), float(p.imag)] for p in np.asarray(self.closed_loop_poles)],
-            "solver": self.solver,
-            "solver_status": self.solver_status,
-            "alpha": num(self.alpha),
-            "beta": num(self.beta),
-            "warnings": list(self.warnings),
-        }
-
-
-def _sym(M):
-    """Symmetric part, so that cvxpy accepts the expression in a semidefinite constraint."""
-    return 0.5 * (M + M.T)
-
-
-def _solve_or_raise(prob: cp.Problem, what: str) -> str:
-    """Solve with Clarabel; return the cvxpy status or raise a one-line :class:`SynthesisError`.
-
-    ``optimal`` and ``optimal_inaccurate`` are accepted (the status is recorded in the
-    :class:`Design`); ``infeasible``, ``unbounded``, their ``_inaccurate`` variants and solver
-    errors raise.
-    """
-    try:
-        prob.solve(solver=_SOLVER)
-    except cp.error.SolverError as exc:
-        msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise SynthesisError(f"{what} failed: solver {_SOLVER} status 'solver_error' ({msg})", "solver_error") from exc
-    status = str(prob.status)
-    if status not in _ACCEPTED or any(v.value is None for v in prob.variables()):
-        raise SynthesisError(f"{what} failed: solver {_SOLVER} status '{status}'", status)
-    return status
-
-
-def solved(v) -> np.ndarray:
-    """The value of a cvxpy variable or expression after a successful solve, as an array."""
-    if v is None or v.value is None:
-        raise RuntimeError("solved: no value (the problem was not solved)")
-    return np.asarray(v.value, dtype=float)
-
-
-def gain_from(X, Y, what: str) -> tuple[np.ndarray, float]:
-    """``K = Y X^-1`` and ``cond(X)``; raises ``SynthesisError("ill_conditioned")`` beyond ``_COND_MAX``."""
-    Xv = 0.5 * (X + X.T)
-    cond = float(np.linalg.cond(Xv))
-    if not np.isfinite(cond) or cond > _COND_MAX:
-        raise SynthesisError(
-            f"{what} failed: Lyapunov matrix ill-conditioned (cond(X) = {cond:.3g})", "ill_conditioned"
-        )
-    return np.linalg.solve(Xv.T, np.asarray(Y).T).T, cond
-
-
-def _hinf_lmi(plant: Plant, X, Y, g_sq, eps: float):
+def hinf_lmi(plant: Plant, X, Y, g_sq, eps: float):
     """Bounded-real lemma with the substitution ``Y = K X`` (source Theorems 1-3, eq. 8-11)::
 
         [[A X + X A' + Bu Y + Y' Bu',  Bw,    (Cinf X + Dinf_u Y)'],
@@ -198,7 +61,7 @@ def _hinf_lmi(plant: Plant, X, Y, g_sq, eps: float):
             [Z, np.zeros((n_z, n_w)), -g_sq * np.eye(n_z)],
         ]
     )
-    return [_sym(F) << -eps * np.eye(n_x + n_w + n_z)]
+    return [sym(F) << -eps * np.eye(n_x + n_w + n_z)]
 
 
 def _h2_lmis(plant: Plant, X, Y, W, eps: float):
@@ -216,8 +79,8 @@ def _h2_lmis(plant: Plant, X, Y, W, eps: float):
     lyap = M + M.T + plant.Bw @ plant.Bw.T
     F = cp.bmat([[W, Z], [Z.T, X]])
     return [
-        _sym(lyap) << -eps * np.eye(n_x),
-        _sym(F) >> eps * np.eye(n_z + n_x),
+        sym(lyap) << -eps * np.eye(n_x),
+        sym(F) >> eps * np.eye(n_z + n_x),
     ]
 
 
@@ -227,12 +90,12 @@ def _solve(
     *,
     use_hinf: bool,
     use_h2: bool,
-    alpha: float | None,
-    beta: float | None,
     region: PoleRegion | None,
-    gamma_inf_max: float | None,
-    gamma_2_max: float | None,
     eps: float,
+    alpha: float | None = None,
+    beta: float | None = None,
+    gamma_inf_max: float | None = None,
+    gamma_2_max: float | None = None,
 ) -> Design:
     plant = Plant(*(np.asarray(m, dtype=float) for m in plant))
     n_x = plant.A.shape[0]
@@ -244,7 +107,7 @@ def _solve(
     g_sq = W = None
     if use_hinf:
         g_sq = cp.Variable(nonneg=True)  # gamma_inf^2
-        cons += _hinf_lmi(plant, X, Y, g_sq, eps)
+        cons += hinf_lmi(plant, X, Y, g_sq, eps)
         if gamma_inf_max is not None:
             cons.append(g_sq <= float(gamma_inf_max) ** 2)
         objective = objective + (1.0 if alpha is None else float(alpha)) * g_sq
@@ -258,7 +121,7 @@ def _solve(
     if region is not None:
         cons += region_constraints(region, plant.A @ X + plant.Bu @ Y, X, eps)
 
-    status = _solve_or_raise(cp.Problem(cp.Minimize(objective), cons), f"{method} synthesis")
+    status = solve_or_raise(cp.Problem(cp.Minimize(objective), cons), f"{method} synthesis")
 
     K, cond = gain_from(X.value, Y.value, f"{method} synthesis")  # K = Y X^-1
     Acl, Bw, Cinf_cl, C2_cl = closed_loop(plant, K)
@@ -273,7 +136,7 @@ def _solve(
         hinf_norm=hn,
         h2_norm=h2n,
         closed_loop_poles=np.linalg.eigvals(Acl).astype(complex),
-        solver=_SOLVER,
+        solver=SOLVER,
         solver_status=status,
         alpha=None if alpha is None else float(alpha),
         beta=None if beta is None else float(beta),
@@ -284,7 +147,7 @@ def _solve(
 def hinf_state_feedback(plant: Plant, region: PoleRegion | None = None, eps: float = 1e-7) -> Design:
     """H-infinity-optimal state feedback (bounded-real lemma, source eq. 8-11).
 
-    Minimises ``gamma_inf^2`` subject to the bounded-real-lemma LMI of :func:`_hinf_lmi`,
+    Minimises ``gamma_inf^2`` subject to the bounded-real-lemma LMI of :func:`hinf_lmi`,
     ``X > 0`` and the optional pole-region LMIs; ``K = Y X^-1``.
 
     For the slip plant ``z_inf = x`` carries no control penalty, so the problem is singular and
@@ -298,18 +161,7 @@ def hinf_state_feedback(plant: Plant, region: PoleRegion | None = None, eps: flo
     Raises:
         SynthesisError: the LMIs are infeasible or the solver fails.
     """
-    return _solve(
-        "hinf",
-        plant,
-        use_hinf=True,
-        use_h2=False,
-        alpha=None,
-        beta=None,
-        region=region,
-        gamma_inf_max=None,
-        gamma_2_max=None,
-        eps=eps,
-    )
+    return _solve("hinf", plant, use_hinf=True, use_h2=False, region=region, eps=eps)
 
 
 def h2_state_feedback(plant: Plant, region: PoleRegion | None = None, eps: float = 1e-7) -> Design:
@@ -322,18 +174,7 @@ def h2_state_feedback(plant: Plant, region: PoleRegion | None = None, eps: float
     Raises:
         SynthesisError: the LMIs are infeasible or the solver fails.
     """
-    return _solve(
-        "h2",
-        plant,
-        use_hinf=False,
-        use_h2=True,
-        alpha=None,
-        beta=None,
-        region=region,
-        gamma_inf_max=None,
-        gamma_2_max=None,
-        eps=eps,
-    )
+    return _solve("h2", plant, use_hinf=False, use_h2=True, region=region, eps=eps)
 
 
 def mixed_h2_hinf(
@@ -424,9 +265,9 @@ def mixed_bounds_for_gain(
     W = cp.Variable((plant.C2.shape[0],) * 2, symmetric=True)
     Y = K @ X
     cons = [X >> eps * np.eye(n_x)]
-    cons += _hinf_lmi(plant, X, Y, g_sq, eps) + _h2_lmis(plant, X, Y, W, eps)
+    cons += hinf_lmi(plant, X, Y, g_sq, eps) + _h2_lmis(plant, X, Y, W, eps)
     objective = cp.Minimize(float(alpha) * g_sq + float(beta) * cp.trace(W))
-    _solve_or_raise(cp.Problem(objective, cons), "mixed bounds for gain")
+    solve_or_raise(cp.Problem(objective, cons), "mixed bounds for gain")
     return float(np.sqrt(max(float(solved(g_sq)), 0.0))), float(np.sqrt(max(float(np.trace(solved(W))), 0.0)))
 
 

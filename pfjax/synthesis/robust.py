@@ -46,10 +46,11 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from pfjax.synthesis.lmi import _hinf_lmi, _solve_or_raise, _sym, bound_warnings, gain_from, solved
+from pfjax.synthesis.lmi import hinf_lmi
 from pfjax.synthesis.norms import closed_loop, h2_norm, hinf_norm
 from pfjax.synthesis.plant import Plant, slip_design_plant
 from pfjax.synthesis.regions import PoleRegion, region_constraints
+from pfjax.synthesis.solver import bound_warnings, gain_from, solve_or_raise, solved, sym
 
 
 @dataclass(frozen=True)
@@ -172,12 +173,12 @@ def robust_mixed(
     W = cp.Variable((n_z2, n_z2), symmetric=True)
     cons = [X >> eps * np.eye(n_x)]
     for p in plants:
-        cons += _hinf_lmi(p, X, Y, g_sq, eps)
+        cons += hinf_lmi(p, X, Y, g_sq, eps)
         M = p.A @ X + p.Bu @ Y
         n_w = p.Bw.shape[1]
-        cons.append(_sym(cp.bmat([[M + M.T, p.Bw], [p.Bw.T, -np.eye(n_w)]])) << -eps * np.eye(n_x + n_w))
+        cons.append(sym(cp.bmat([[M + M.T, p.Bw], [p.Bw.T, -np.eye(n_w)]])) << -eps * np.eye(n_x + n_w))
         Z = p.C2 @ X + p.D2u @ Y
-        cons.append(_sym(cp.bmat([[W, Z], [Z.T, X]])) >> eps * np.eye(n_z2 + n_x))
+        cons.append(sym(cp.bmat([[W, Z], [Z.T, X]])) >> eps * np.eye(n_z2 + n_x))
         if region is not None:
             cons += region_constraints(region, M, X, eps)
     if delta_max is not None:
@@ -185,11 +186,11 @@ def robust_mixed(
             raise ValueError("x0s: required with delta_max")
         for x0 in np.atleast_2d(np.asarray(x0s, float)):
             c = x0.reshape(n_x, 1)
-            cons.append(_sym(cp.bmat([[np.ones((1, 1)), c.T], [c, X]])) >> 0)
-        cons.append(_sym(cp.bmat([[np.full((1, 1), float(delta_max) ** 2), Y], [Y.T, X]])) >> 0)
+            cons.append(sym(cp.bmat([[np.ones((1, 1)), c.T], [c, X]])) >> 0)
+        cons.append(sym(cp.bmat([[np.full((1, 1), float(delta_max) ** 2), Y], [Y.T, X]])) >> 0)
         method = method + "+steer"
     prob = cp.Problem(cp.Minimize(float(alpha) * g_sq + float(beta) * cp.trace(W)), cons)
-    status = _solve_or_raise(prob, f"{method} synthesis")
+    status = solve_or_raise(prob, f"{method} synthesis")
     K, cond = gain_from(X.value, Y.value, f"{method} synthesis")
     gi, g2 = float(np.sqrt(max(float(solved(g_sq)), 0.0))), float(np.sqrt(max(float(np.trace(solved(W))), 0.0)))
     hn, h2n, poles = [], [], []
