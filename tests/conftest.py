@@ -11,6 +11,8 @@ os.environ.setdefault("PFJAX_CACHE_DIR", str(Path(__file__).resolve().parents[1]
 # Studies draw their report figures in-process here (each figure worker costs ~2 s of CPU to start);
 # tests/test_study_report.py runs its study with the worker and checks it against in-process figures.
 os.environ.setdefault("PFJAX_FIGURE_WORKER", "0")
+# The suite's numbers must not depend on a calibration the machine's user measured (pfjax calibrate).
+os.environ.setdefault("PFJAX_CALIBRATION", "off")
 # Before JAX: the compiler settings users get (pfjax.small_loop_option), but one CPU device per
 # xdist worker (2 workers on 2 cores); subprocesses (CLI, notebooks) still get one per core.
 _host = os.environ.get("PFJAX_HOST_DEVICES")

@@ -182,16 +182,19 @@ def _grad(batch, dtype, cfg: BenchConfig):
 def machine() -> dict:
     import jax
 
-    from pfjax.numerics import compiler
+    from pfjax.numerics import calibration, compiler
+    from pfjax.numerics.cpu import VECTOR_FLAGS
+    from pfjax.sim.sharding import cpu_block_bytes
 
     cpu = compiler.cpu_info()
     flags = set(cpu.get("flags", "").split())
+    calibrated, _ = calibration.vector_width()
     return dict(
         cpu_model=cpu.get("model name", ""),
         cpu_vendor=cpu.get("vendor_id", ""),
         cpu_family=cpu.get("cpu family", ""),
         cpu_model_number=cpu.get("model", ""),
-        cpu_flags=sorted(flags & {"avx", "avx2", "fma", "avx512f", "avx512dq", "avx512vl", "avx512bw", "sse4_2"}),
+        cpu_flags=sorted(flags & VECTOR_FLAGS),
         platform=platform.platform(),
         processor=platform.processor() or platform.machine(),
         cpus=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
@@ -201,6 +204,8 @@ def machine() -> dict:
         xla_flags=os.environ.get("XLA_FLAGS", ""),
         avx512=compiler.has_avx512(),
         compiler_options=dict(compiler.OPTIONS),  # the simulator programs' (512-bit vectors on AVX-512)
+        block_bytes={"float32": cpu_block_bytes(4), "float64": cpu_block_bytes(8)},
+        settings="calibrated" if calibrated else "rules",  # pfjax calibrate's file, or the stated rules
     )
 
 

@@ -7,7 +7,7 @@ imported by nothing in it.
     pfjax study CONFIG.toml [--set key=value ...] [--out DIR] [--json]
     pfjax report CONFIG.toml [--out DIR]
     pfjax rare-event CONFIG.toml [--method {is,subset,mc}] [--target-rel-error 0.1] [--json]
-    pfjax tune | parking | parking-search | track | bench ...   (pfjax SUBCOMMAND --help)
+    pfjax tune | parking | parking-search | track | bench | calibrate ...   (pfjax SUBCOMMAND --help)
 
 One module per subcommand (or pair of subcommands), each with ``register(sub)``. Bad arguments
 print one line naming the flag, the value and what was expected, and exit with code 2 before
@@ -35,7 +35,7 @@ from pfjax.jsonio import dumps
 __all__ = ["EXIT_USAGE", "UsageError", "as_flags", "build_parser", "main"]
 
 #: The subcommand modules, in the order of ``pfjax --help``.
-SUBCOMMANDS = ("synth", "simulate", "study", "rare-event", "examples", "tune", "parking", "track", "bench")
+SUBCOMMANDS = ("synth", "simulate", "study", "rare-event", "examples", "tune", "parking", "track", "bench", "calibrate")
 
 
 def build_parser():

@@ -33,40 +33,20 @@ from functools import partial
 
 import jax
 
+from pfjax.numerics import calibration
+from pfjax.numerics.cpu import CPUINFO, cpu_info, has_avx512
+
+__all__ = ["OPTIONS", "PROGRAMS", "at_top_level", "cpu_info", "has_avx512", "jit", "options", "vector_width"]
+
 VECTOR_WIDTH_ENV = "PFJAX_VECTOR_WIDTH"
 _OPTION = "xla_cpu_prefer_vector_width"
-CPUINFO = "/proc/cpuinfo"
-
-
-def cpu_info(cpuinfo: str = CPUINFO) -> dict:
-    """The first CPU's ``vendor_id``, ``model name``, ``cpu family``, ``model`` and ``flags`` from ``/proc/cpuinfo``
-    (``{}`` where that file does not exist, e.g. macOS, or cannot be read). The family tells CPU
-    generations apart where the model name does not (a VM's "AMD EPYC": 25 is Zen 3/4, 26 Zen 5)."""
-    out = {}
-    try:
-        with open(cpuinfo) as f:
-            for line in f:
-                if not line.strip():
-                    break  # the first processor's block ends here
-                key, _, value = line.partition(":")
-                key = key.strip()
-                if key in ("vendor_id", "model name", "cpu family", "model", "flags"):
-                    out[key] = value.strip()
-    except OSError:
-        pass
-    return out
-
-
-def has_avx512(cpuinfo: str = CPUINFO) -> bool:
-    """Whether the CPU has AVX-512 Foundation (``avx512f`` among the flags of ``/proc/cpuinfo``;
-    False where that file does not exist or cannot be read)."""
-    return "avx512f" in cpu_info(cpuinfo).get("flags", "").split()
 
 
 def vector_width(environ=None, cpuinfo: str = CPUINFO) -> int | None:
     """The vector width in bits pfjax asks XLA's CPU backend for, or ``None`` for XLA's default.
 
-    ``PFJAX_VECTOR_WIDTH`` when set (``0``: XLA's default; a positive number: that width); else
+    ``PFJAX_VECTOR_WIDTH`` when set (``0``: XLA's default; a positive number: that width); else the
+    width ``pfjax calibrate`` measured best on this CPU (:mod:`pfjax.numerics.calibration`); else
     512 on a CPU with AVX-512 (:func:`has_avx512`), else XLA's default. A value that is not a
     whole number >= 0 is ignored with a warning naming the variable."""
     environ = os.environ if environ is None else environ
@@ -75,6 +55,10 @@ def vector_width(environ=None, cpuinfo: str = CPUINFO) -> int | None:
         if want.isdigit():
             return int(want) or None
         warnings.warn(f"{VECTOR_WIDTH_ENV}: value {want!r} ignored, expected a whole number of bits >= 0", stacklevel=2)
+    if cpuinfo == CPUINFO:  # this machine's CPU: its calibration, where one was measured
+        calibrated, width = calibration.vector_width()
+        if calibrated:
+            return width
     return 512 if has_avx512(cpuinfo) else None
 
 

@@ -46,6 +46,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from pfjax.numerics import calibration
+
 AXIS = "runs"
 #: Bytes per batched array in one CPU block. Measured (2-core AMD EPYC with AVX-512, 512-bit vectors,
 #: 2 devices, the benchmark's slip model at 10^5 runs, M rollout-steps/s): float32 blocks of 312-3,750
@@ -116,7 +118,7 @@ def shard_batch(tree, devices=None):
 
 
 def default_block(tree, devices=None) -> int | None:
-    """Runs per block: :data:`CPU_BLOCK_BYTES` per array of the tree's floating dtype on CPU devices,
+    """Runs per block: :func:`cpu_block_bytes` per array of the tree's floating dtype on CPU devices,
     ``None`` (no blocks) on any other platform."""
     devices = jax.devices() if devices is None else list(devices)
     if devices[0].platform != "cpu":
@@ -127,7 +129,13 @@ def default_block(tree, devices=None) -> int | None:
         if hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating)
     ]
     itemsize = max((np.dtype(d).itemsize for d in floats), default=4)
-    return max(1, CPU_BLOCK_BYTES // itemsize)
+    return max(1, cpu_block_bytes(itemsize) // itemsize)
+
+
+def cpu_block_bytes(itemsize: int) -> int:
+    """Bytes per batched array in one CPU block: this CPU's calibration where ``pfjax calibrate``
+    measured one (:mod:`pfjax.numerics.calibration`), else :data:`CPU_BLOCK_BYTES`."""
+    return calibration.block_bytes(itemsize) or CPU_BLOCK_BYTES
 
 
 def plan_batch(tree, devices=None, block: int | str | None = "auto", align: int = ALIGN):

@@ -1,0 +1,138 @@
+"""Measure this CPU's best block size and vector width (``pfjax calibrate``).
+
+The benchmark problem (:mod:`pfjax.bench.problem`: the slip model on the sine path, state feedback,
+metrics on) is simulated with pfjax's own simulator program, compiled for each candidate vector
+width (XLA's default, and 512 bits where the CPU has AVX-512) and run over each candidate block
+size, in float32 and float64, on every device. The candidates are called in turn ``rounds`` times
+after a compiling call each (best time of each), so a slow period of a shared machine slows them
+alike. The choice:
+
+* per precision, the block (bytes per batched array) with the highest rate at the chosen width;
+* one width for both precisions (XLA's option is per program, pfjax sets one for all): the width
+  whose best rates have the largest product over the two precisions.
+
+:func:`calibrate` returns every measurement and the choice; :func:`pfjax.numerics.calibration.save`
+writes it where every later process on this CPU reads it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from pfjax.bench import problem as P
+
+#: Candidate bytes per batched array in one CPU block (float32 runs = bytes / 4, float64 / 8).
+BLOCK_BYTES = (2_500, 5_000, 10_000, 20_000)
+_OPTION = "xla_cpu_prefer_vector_width"
+
+
+def widths() -> tuple[int | None, ...]:
+    """Candidate vector widths on this CPU (None: XLA's default)."""
+    from pfjax.numerics.cpu import has_avx512
+
+    return (None, 512) if has_avx512() else (None,)
+
+
+def _program(width: int | None):
+    """pfjax's batched slip-model program compiled for ``width`` (a fresh jit each, so nothing of the
+    process's own settings leaks in)."""
+    import importlib
+
+    import jax
+
+    fun = importlib.import_module("pfjax.sim.simulate")._simulate_vmapped.__wrapped__
+    options = None if width is None else {_OPTION: width}
+    return jax.jit(fun, static_argnames=("controller", "config", "layout"), compiler_options=options)
+
+
+def _rates(dtype, batch: int, horizon: float, blocks, width_set, rounds: int, say) -> list[dict]:
+    import jax
+
+    from pfjax.controllers import state_feedback
+    from pfjax.sim import SimConfig, sharding
+
+    sc = P.scenarios(P.random_batch(batch, 0), dtype)
+    sim = SimConfig(dt=P.DT, horizon=horizon, newton_iters=P.NEWTON_ITERS, record=False)
+    n_steps = P.n_steps(horizon)
+    itemsize = np.dtype(dtype).itemsize
+    cands = []
+    for width in width_set:
+        program = _program(width)
+        for bb in blocks:
+            placed, _, layout = sharding.plan_batch(sc, None, max(1, bb // itemsize))
+            call = lambda p=placed, lay=layout, f=program: jax.block_until_ready(
+                f(p, controller=state_feedback, config=sim, layout=lay).metrics.iae
+            )
+            say(f"{np.dtype(dtype).name} width {width or 'default'} block {bb} B: compiling")
+            iae = np.asarray(call(), np.float64)
+            cands.append(dict(width=width, block_bytes=bb, call=call, iae=iae, best=math.inf))
+    for _ in range(rounds):
+        for c in cands:
+            t0 = time.perf_counter()
+            c["call"]()
+            c["best"] = min(c["best"], time.perf_counter() - t0)
+    ref = cands[0]["iae"]
+    return [
+        dict(
+            dtype=np.dtype(dtype).name,
+            vector_width=c["width"],
+            block_bytes=c["block_bytes"],
+            seconds=c["best"],
+            msteps_per_s=batch * n_steps / c["best"] / 1e6,
+            max_abs_iae_diff=float(np.max(np.abs(c["iae"] - ref))),
+        )
+        for c in cands
+    ]
+
+
+def choose(rows: Sequence[dict]) -> dict:
+    """The width and per-precision blocks from measured ``rows`` (see the module docstring)."""
+    best: dict = {}
+    for r in rows:
+        key = (r["vector_width"], r["dtype"])
+        if key not in best or r["msteps_per_s"] > best[key]["msteps_per_s"]:
+            best[key] = r
+    ws = sorted({r["vector_width"] for r in rows}, key=lambda w: w or 0)
+    score = {w: sum(math.log(best[(w, d)]["msteps_per_s"]) for d in ("float32", "float64")) for w in ws}
+    width = max(ws, key=lambda w: score[w])
+    return dict(
+        vector_width=width,
+        block_bytes={d: best[(width, d)]["block_bytes"] for d in ("float32", "float64")},
+        msteps_per_s={d: best[(width, d)]["msteps_per_s"] for d in ("float32", "float64")},
+    )
+
+
+def calibrate(
+    batch: int = 20_000,
+    horizon: float = 5.0,
+    rounds: int = 3,
+    blocks: Sequence[int] = BLOCK_BYTES,
+    width_set: Sequence[int | None] | None = None,
+    progress=None,
+) -> dict:
+    """Measure every candidate on this CPU; returns ``{"cpu_key", "version", "vector_width",
+    "block_bytes", "msteps_per_s", "rows", "machine", "sizes"}`` (the file
+    :func:`pfjax.numerics.calibration.save` writes)."""
+    import jax
+
+    from pfjax.bench.run import machine
+    from pfjax.numerics import calibration
+
+    say = progress or (lambda msg: None)
+    ws = tuple(widths() if width_set is None else width_set)
+    rows = []
+    for dtype, x64 in ((np.float32, False), (np.float64, True)):
+        with jax.enable_x64(x64):
+            rows += _rates(dtype, batch, horizon, blocks, ws, rounds, say)
+    return dict(
+        version=calibration.VERSION,
+        cpu_key=calibration.cpu_key(),
+        **choose(rows),
+        rows=rows,
+        sizes=dict(batch=batch, horizon_s=horizon, rounds=rounds, n_steps=P.n_steps(horizon)),
+        machine=machine(),
+    )

@@ -1,0 +1,36 @@
+"""``pfjax calibrate``: measure this CPU's best block size and vector width, and keep them."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="measure this CPU's best CPU block size and vector width and keep them for later runs",
+        description="Simulate the benchmark problem (pfjax bench's) with pfjax's simulator program for every "
+        "candidate vector width (XLA's default; 512 bits with AVX-512) and block size (2,500-20,000 bytes per "
+        "batched array) in float32 and float64, and keep the fastest in the calibration directory "
+        "(PFJAX_CALIBRATION_DIR, default ~/.cache/pfjax/calibration), where every later pfjax process on a CPU "
+        "of the same identity reads it. PFJAX_CALIBRATION=off ignores it. About two minutes on 2 cores.",
+    )
+    p.add_argument("--quick", action="store_true", help="a small batch and a short horizon (seconds; a rough choice)")
+    p.add_argument("--dry-run", action="store_true", help="measure and print, but keep nothing")
+    p.add_argument("--json", action="store_true", help="print one JSON object (the calibration)")
+    p.set_defaults(func=_cmd)
+
+
+def _cmd(args) -> dict:
+    from pfjax.bench.calibrate import calibrate
+    from pfjax.numerics import calibration
+
+    t0 = time.perf_counter()
+    say = lambda m: print(f"[calibrate {time.perf_counter() - t0:6.1f} s] {m}", file=sys.stderr, flush=True)
+    if args.quick:
+        result = calibrate(batch=1024, horizon=0.5, rounds=1, blocks=(2_500, 5_000), progress=say)
+    else:
+        result = calibrate(progress=say)
+    out = None if args.dry_run else str(calibration.save(result))
+    return dict({k: v for k, v in result.items() if k != "machine"}, file=out)

@@ -1,0 +1,135 @@
+"""CPU-dependent settings chosen by measurement: runs per CPU block and the vector width.
+
+Two settings of pfjax's CPU programs depend on the CPU more than on anything else:
+
+* the **block** of runs a device simulates at once (:mod:`pfjax.sim.sharding`), in bytes per
+  batched array: small enough that a block's loop stays in the core's caches and under XLA's
+  small-loop threshold, large enough to amortise the per-block work;
+* the **vector width** XLA's CPU backend generates code for (:mod:`pfjax.numerics.compiler`).
+
+Without a calibration pfjax uses rules stated with their evidence in those modules (5,000 bytes
+per block; 512-bit vectors where the CPU has AVX-512). ``pfjax calibrate`` measures the
+benchmark problem's throughput over the candidates on this CPU (:mod:`pfjax.bench.calibrate`) and
+writes the best to ``<directory>/<cpu key>.json``; every later process on a CPU of the same
+identity (vendor, family, model, model name, vector flags) and the same JAX version reads it at
+import. ``PFJAX_CALIBRATION=off`` ignores the file; ``PFJAX_VECTOR_WIDTH`` still overrides the
+width. The directory is ``$PFJAX_CALIBRATION_DIR``, else ``calibration/`` beside pfjax's
+compilation cache (``~/.cache/pfjax/calibration``).
+
+Results depend on the block and the width only through rounding (each block shape is compiled
+into its own vector code; :mod:`pfjax.sim.sharding`); a study records the settings it ran with.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import warnings
+from pathlib import Path
+
+from pfjax.numerics.cpu import VECTOR_FLAGS, cpu_info
+
+ENV = "PFJAX_CALIBRATION"
+DIR_ENV = "PFJAX_CALIBRATION_DIR"
+OFF = ("off", "0", "none", "false")
+#: The file format written by :func:`save` (a file of another version is ignored).
+VERSION = 1
+
+
+def cpu_key(cpuinfo: str | None = None, jax_version: str | None = None) -> str:
+    """The identity a calibration holds for: vendor, family and model numbers, and a hash of the
+    model name, the vector flags and the JAX version (``"authenticamd-25-17-1a2b3c4d"``)."""
+    import jax
+
+    info = cpu_info() if cpuinfo is None else cpu_info(cpuinfo)
+    flags = sorted(set(info.get("flags", "").split()) & VECTOR_FLAGS)
+    ident = json.dumps([info.get("model name", ""), flags, jax_version or jax.__version__])
+    head = "-".join(info.get(k, "unknown").lower().replace(" ", "") for k in ("vendor_id", "cpu family", "model"))
+    return f"{head}-{hashlib.sha256(ident.encode()).hexdigest()[:8]}"
+
+
+def directory(environ=None) -> Path | None:
+    """Where calibrations are kept (None: disabled by ``PFJAX_CALIBRATION=off``)."""
+    environ = os.environ if environ is None else environ
+    if environ.get(ENV, "").strip().lower() in OFF:
+        return None
+    given = environ.get(DIR_ENV, "").strip()
+    if given:
+        return Path(given).expanduser()
+    from pfjax.cache import default_dir
+
+    cache = default_dir(environ)
+    base = cache.parent if cache is not None else Path.home() / ".cache" / "pfjax"
+    return base / "calibration"
+
+
+def _valid(data) -> bool:
+    try:
+        width = data["vector_width"]
+        blocks = data["block_bytes"]
+        return (
+            data["version"] == VERSION
+            and (width is None or (isinstance(width, int) and width > 0))
+            and all(isinstance(blocks[d], int) and 64 <= blocks[d] <= 10**9 for d in ("float32", "float64"))
+        )
+    except (KeyError, TypeError):
+        return False
+
+
+@functools.cache
+def load(path: str | None = None) -> dict | None:
+    """This CPU's calibration (``{"vector_width", "block_bytes": {"float32", "float64"}, ...}``) or
+    None (none written, disabled, or unreadable: then with one warning naming the file). Read once
+    per process (``path``: a file to read instead, for tests)."""
+    if path is None:
+        where = directory()
+        if where is None:
+            return None
+        file = where / f"{cpu_key()}.json"
+    else:
+        file = Path(path)
+    if not file.is_file():
+        return None
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        warnings.warn(f"{file}: calibration ignored, unreadable ({e})", stacklevel=2)
+        return None
+    if not _valid(data):
+        warnings.warn(f"{file}: calibration ignored, not a pfjax calibration of version {VERSION}", stacklevel=2)
+        return None
+    return data
+
+
+def block_bytes(itemsize: int) -> int | None:
+    """The calibrated bytes per batched array in one CPU block for floats of ``itemsize`` bytes
+    (None: no calibration)."""
+    cal = load()
+    if cal is None:
+        return None
+    return int(cal["block_bytes"]["float64" if itemsize >= 8 else "float32"])
+
+
+def vector_width() -> tuple[bool, int | None]:
+    """``(calibrated, width)``: whether a calibration decides the width, and the width in bits it
+    chose (None: XLA's default)."""
+    cal = load()
+    return (False, None) if cal is None else (True, cal["vector_width"])
+
+
+def save(result: dict, path: Path | None = None) -> Path:
+    """Write a calibration (``result`` as :func:`pfjax.bench.calibrate.calibrate` returns it) to
+    ``path`` (default: this CPU's file in :func:`directory`), atomically; returns the path."""
+    if path is None:
+        where = directory()
+        if where is None:
+            raise ValueError(f"{ENV}: calibrations are disabled ({ENV}=off); nothing written")
+        path = where / f"{result['cpu_key']}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+    load.cache_clear()
+    return path

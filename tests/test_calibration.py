@@ -1,0 +1,107 @@
+"""pfjax.numerics.calibration and pfjax calibrate: CPU-dependent settings chosen by measurement."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pfjax.bench import calibrate as C
+from pfjax.numerics import calibration, compiler
+from pfjax.sim import sharding
+
+
+def _file(tmp_path, **over):
+    data = dict(
+        version=calibration.VERSION, cpu_key="x", vector_width=None, block_bytes={"float32": 2500, "float64": 10000}
+    )
+    data.update(over)
+    p = tmp_path / "cal.json"
+    p.write_text(json.dumps(data))
+    return str(p)
+
+
+def test_a_calibration_file_is_read_and_checked(tmp_path):
+    calibration.load.cache_clear()
+    cal = calibration.load(_file(tmp_path, vector_width=512))
+    assert cal["vector_width"] == 512 and cal["block_bytes"]["float64"] == 10000
+    for bad in (dict(version=99), dict(vector_width=-1), dict(block_bytes={"float32": 8}), dict(block_bytes=3)):
+        calibration.load.cache_clear()
+        with pytest.warns(UserWarning, match="calibration ignored"):
+            assert calibration.load(_file(tmp_path, **bad)) is None
+    calibration.load.cache_clear()
+    (tmp_path / "cal.json").write_text("{not json")
+    with pytest.warns(UserWarning, match="unreadable"):
+        assert calibration.load(str(tmp_path / "cal.json")) is None
+    calibration.load.cache_clear()
+
+
+def test_the_settings_follow_the_calibration_and_the_environment_wins(tmp_path, monkeypatch):
+    cal = json.loads(Path(_file(tmp_path, vector_width=256)).read_text())
+    monkeypatch.setattr(calibration, "load", lambda path=None: cal)
+    assert calibration.block_bytes(4) == 2500 and calibration.block_bytes(8) == 10000
+    assert sharding.cpu_block_bytes(4) == 2500 and sharding.cpu_block_bytes(8) == 10000
+    assert compiler.vector_width(environ={}) == 256
+    assert compiler.vector_width(environ={"PFJAX_VECTOR_WIDTH": "0"}) is None  # the variable overrides
+    monkeypatch.setattr(calibration, "load", lambda path=None: None)
+    assert sharding.cpu_block_bytes(8) == sharding.CPU_BLOCK_BYTES  # no calibration: the stated rule
+    assert compiler.vector_width(environ={}) == (512 if compiler.has_avx512() else None)
+
+
+def test_the_directory_and_the_cpu_key(tmp_path):
+    assert calibration.directory({"PFJAX_CALIBRATION": "off"}) is None
+    assert calibration.directory({"PFJAX_CALIBRATION_DIR": str(tmp_path)}) == tmp_path
+    assert calibration.directory({"PFJAX_CACHE_DIR": str(tmp_path / "xla")}) == tmp_path / "calibration"
+    info = tmp_path / "cpuinfo"
+    info.write_text(
+        "vendor_id\t: GenuineIntel\ncpu family\t: 6\nmodel\t\t: 207\nmodel name\t: Xeon\nflags\t: avx2 avx512f\n\n"
+    )
+    key = calibration.cpu_key(str(info), jax_version="0.1")
+    assert key.startswith("genuineintel-6-207-") and len(key.rsplit("-", 1)[1]) == 8
+    assert calibration.cpu_key(str(info), jax_version="0.2") != key  # another JAX compiles other code
+
+
+def test_the_choice_takes_each_precisions_best_block_at_the_best_width():
+    rows = [
+        dict(dtype=d, vector_width=w, block_bytes=b, msteps_per_s=r)
+        for d, w, b, r in [
+            ("float32", None, 2500, 100.0),
+            ("float32", None, 5000, 120.0),
+            ("float32", 512, 2500, 200.0),
+            ("float32", 512, 5000, 150.0),
+            ("float64", None, 2500, 60.0),
+            ("float64", None, 5000, 50.0),
+            ("float64", 512, 2500, 40.0),
+            ("float64", 512, 5000, 45.0),
+        ]
+    ]
+    got = C.choose(rows)  # 512: 200 * 45 = 9000 > default: 120 * 60 = 7200
+    assert got == dict(
+        vector_width=512,
+        block_bytes={"float32": 2500, "float64": 5000},
+        msteps_per_s={"float32": 200.0, "float64": 45.0},
+    )
+    rows[6]["msteps_per_s"] = rows[7]["msteps_per_s"] = 30.0  # now 200 * 30 = 6000 < 7200
+    assert C.choose(rows)["vector_width"] is None
+
+
+def test_a_small_calibration_measures_agrees_and_round_trips(tmp_path):
+    result = C.calibrate(batch=64, horizon=0.05, rounds=1, blocks=(256, 2500), width_set=(None,))
+    assert result["cpu_key"] == calibration.cpu_key() and result["vector_width"] is None
+    assert {(r["dtype"], r["block_bytes"]) for r in result["rows"]} == {
+        (d, b) for d in ("float32", "float64") for b in (256, 2500)
+    }
+    for r in result["rows"]:
+        assert math.isfinite(r["msteps_per_s"]) and r["msteps_per_s"] > 0
+        # blocks change the result only by rounding
+        assert r["max_abs_iae_diff"] <= (1e-5 if r["dtype"] == "float32" else 1e-12)
+    path = calibration.save(result, tmp_path / "c.json")
+    calibration.load.cache_clear()
+    try:
+        assert calibration.load(str(path))["block_bytes"] == result["block_bytes"]
+    finally:
+        calibration.load.cache_clear()
+    assert np.all([p.suffix == ".json" for p in tmp_path.iterdir()])  # written atomically, no temporary left
