@@ -30,7 +30,7 @@ from pfjax.metrics.robustness import (
 from pfjax.metrics.running import METRIC_NAMES
 from pfjax.montecarlo.config import StudySpec, study_hash
 from pfjax.montecarlo.sampling import column_names
-from pfjax.provenance import machine
+from pfjax.provenance import cpu_settings, machine
 from pfjax.sim.dynamic import SLIP_METRIC_NAMES
 
 QUANTILE_METRICS = [m for m in METRIC_NAMES if m != "success"]
@@ -156,6 +156,7 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         "pfjax_version": pfjax.__version__,
         "dtype": spec.dtype,
         "machine": machine(),
+        "cpu_settings": cpu_settings(),
         "wall_s": wall_s,
         "config": spec.model_dump(mode="json"),
         "paths": [p.label for p in spec.paths],
