@@ -62,3 +62,62 @@ def enable(path: str | Path | None = None, *, min_compile_s: float = 0.5) -> Pat
     jax.config.update("jax_compilation_cache_dir", str(target))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_s))
     return target
+
+
+# ------------------------------------------------------------------------------ designs
+
+
+def _source_hash(package: str) -> str:
+    """SHA-256 of the ``.py`` files of a pfjax subpackage (a changed synthesis never reads a design
+    computed by the old one)."""
+    import hashlib
+
+    root = Path(__file__).resolve().parent / package
+    h = hashlib.sha256()
+    for f in sorted(root.glob("*.py")):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def design_dir(environ=None) -> Path | None:
+    """Where computed designs are kept: ``designs/`` beside the compilation cache (None: disabled
+    with it, ``PFJAX_CACHE_DIR=off``)."""
+    xla = default_dir(environ)
+    return None if xla is None else xla.parent / "designs"
+
+
+def memoized_design(name: str, args: dict, compute) -> dict:
+    """``compute()`` (a design's scalar gains, a dict of floats), kept on disk by ``name``, ``args``,
+    the synthesis code and the solver versions, so a later process reads it instead of importing
+    cvxpy and solving the LMIs again (seconds). Nothing fails without the cache: a missing,
+    unreadable or unwritable directory just computes."""
+    import hashlib
+    import json
+    from importlib import metadata
+
+    where = usable(design_dir())
+    if where is None:
+        return compute()
+    versions: dict[str, str | None] = {}
+    for dist in ("cvxpy", "clarabel", "numpy", "scipy"):
+        try:
+            versions[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            versions[dist] = None
+    key = json.dumps([name, args, versions, _source_hash("synthesis")], sort_keys=True)
+    file = where / f"{name}-{hashlib.sha256(key.encode()).hexdigest()[:24]}.json"
+    try:
+        stored = json.loads(file.read_text(encoding="utf-8"))
+        if stored.get("key") == key:
+            return {k: float(v) for k, v in stored["gains"].items()}
+    except (OSError, ValueError, AttributeError, TypeError):
+        pass
+    gains = compute()
+    try:
+        tmp = file.with_name(f".{file.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps({"key": key, "gains": gains}), encoding="utf-8")
+        os.replace(tmp, file)
+    except OSError:
+        pass
+    return gains

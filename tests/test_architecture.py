@@ -141,3 +141,29 @@ def test_a_simulation_does_not_import_the_host_side_statistics_stack():
     from pfjax.metrics import robustness
 
     assert metrics.slip_margin is robustness.slip_margin and set(robustness.__all__) <= set(dir(metrics))
+
+
+def test_a_design_once_made_is_read_back_without_cvxpy(tmp_path):
+    """The mixed and integral LMI designs are kept on disk (pfjax.cache.memoized_design): a second
+    process gets the same gains without importing cvxpy (seconds); another argument is a new design."""
+    import json
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, json; from pfjax.controllers.designs import DESIGNS; "
+        "g = [DESIGNS[n].make(1.0, 0.2) for n in ('lmi', 'integral_lmi')]; "
+        "print(json.dumps([g, 'cvxpy' in sys.modules]))"
+    )
+    env = {**__import__("os").environ, "PFJAX_CACHE_DIR": str(tmp_path / "xla")}
+    run = lambda: json.loads(
+        subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    )
+    first, second = run(), run()
+    assert first[1] and not second[1]
+    assert first[0] == second[0]  # exactly: floats round-trip through JSON
+    assert sorted(p.name.split("-")[0] for p in (tmp_path / "designs").iterdir()) == ["integral_lmi", "lmi"]
+    from pfjax.synthesis import mixed_h2_hinf, slip_design_plant
+
+    K = mixed_h2_hinf(slip_design_plant(1.0, 0.2), alpha=10.0, beta=1.0).K.ravel()
+    assert first[0][0] == {"k_d": float(K[0]), "k_theta": float(K[1])}

@@ -4,13 +4,17 @@ A study's ``controllers[i].type`` and ``pfjax simulate --controller`` take these
 registry's (:mod:`pfjax.controllers.registry`): ``lmi`` (``mixed`` on the command line) is the
 mixed H2/H∞ state feedback of the source's design problem at the nominal speed and wheelbase,
 ``integral_lmi`` the same criterion on the plant augmented with the integral of ``d`` (integral
-action), ``paper_k`` the state feedback with the source's published gain (no synthesis). The synthesis is imported only when a design is made (cvxpy takes seconds to import).
+action), ``paper_k`` the state feedback with the source's published gain (no synthesis). The synthesis is imported only when a design is made (cvxpy takes seconds to import), and
+a design once made is read back from disk by later processes (:func:`pfjax.cache.memoized_design`:
+keyed by its arguments, the synthesis code and the solver versions).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from typing import NamedTuple
+
+from pfjax.cache import memoized_design
 
 
 class DesignEntry(NamedTuple):
@@ -24,10 +28,13 @@ class DesignEntry(NamedTuple):
 
 
 def _mixed(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict:
-    from pfjax.synthesis import mixed_h2_hinf, slip_design_plant
+    def compute():
+        from pfjax.synthesis import mixed_h2_hinf, slip_design_plant
 
-    K = mixed_h2_hinf(slip_design_plant(v, L), alpha=alpha, beta=beta).K.ravel()
-    return {"k_d": float(K[0]), "k_theta": float(K[1])}
+        K = mixed_h2_hinf(slip_design_plant(v, L), alpha=alpha, beta=beta).K.ravel()
+        return {"k_d": float(K[0]), "k_theta": float(K[1])}
+
+    return memoized_design("lmi", dict(v=v, L=L, alpha=alpha, beta=beta), compute)
 
 
 def _paper_k(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict:
@@ -37,10 +44,13 @@ def _paper_k(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict
 
 
 def _integral(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict:
-    from pfjax.synthesis import integral_mixed
+    def compute():
+        from pfjax.synthesis import integral_mixed
 
-    K = integral_mixed(v, L, alpha=alpha, beta=beta).K.ravel()
-    return {"k_d": float(K[0]), "k_theta": float(K[1]), "k_i": float(K[2])}
+        K = integral_mixed(v, L, alpha=alpha, beta=beta).K.ravel()
+        return {"k_d": float(K[0]), "k_theta": float(K[1]), "k_i": float(K[2])}
+
+    return memoized_design("integral_lmi", dict(v=v, L=L, alpha=alpha, beta=beta), compute)
 
 
 #: name -> design.
