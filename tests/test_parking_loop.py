@@ -22,7 +22,16 @@ from pfjax.parking import period
 from pfjax.parking.maps import GARAGE, PARALLEL, to_obstacle_map
 from pfjax.parking.montecarlo import Scatter, sample
 from pfjax.parking.schedules import CASES, GARAGE_START, decode_bits
-from pfjax.parking.simulate import ParkingConfig, Status, run, run_jit, run_params, run_recorded, stack_params
+from pfjax.parking.simulate import (
+    ParkingConfig,
+    Status,
+    run,
+    run_batch,
+    run_jit,
+    run_params,
+    run_recorded,
+    stack_params,
+)
 from pfjax.parking.switch_search import SEARCH_CONFIG, batch_params, garage_base
 
 PMAP, GMAP = to_obstacle_map(list(PARALLEL.values())), to_obstacle_map(list(GARAGE.values()))
@@ -100,7 +109,7 @@ def test_stored_reference_results():
     for name, want in ref.items():
         if name.startswith("monte carlo"):
             ps, omap = sample(jax.random.PRNGKey(0), 8, run_params(GARAGE_START, 1, (1.0,), xs=-0.9), Scatter()), GMAP
-            r = jax.vmap(lambda p: run(p, omap, ParkingConfig()))(ps)
+            r = run_batch(ps, omap, ParkingConfig())
         else:
             case, _, variant = name.partition(" ")
             if case == "garage":
