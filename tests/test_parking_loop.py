@@ -127,3 +127,23 @@ def test_stored_reference_results():
             np.testing.assert_allclose(
                 np.asarray(getattr(r, key)), want[key], rtol=1e-12, atol=1e-15, err_msg=f"{name} {key}"
             )
+
+
+def test_a_parking_run_is_the_period_system_on_the_one_loop(monkeypatch):
+    from pfjax.parking import simulate
+    from pfjax.sim import loop
+
+    calls = []
+    real = loop.run
+    monkeypatch.setattr(
+        loop, "run", lambda system, p, n, **kw: calls.append((system, n, kw)) or real(system, p, n, **kw)
+    )
+    p = run_params(*(CASES["A"][k] for k in ("x0", "direction", "schedule")))
+    out = jax.eval_shape(lambda p: simulate.run(p, PMAP, ParkingConfig(max_samples=300)), p)
+    rec = jax.eval_shape(lambda p: simulate.run_recorded(p, PMAP, ParkingConfig(), 40), p)
+    assert out.status.shape == () and rec[1].t.shape == (40,)
+    assert [(n, kw) for _, n, kw in calls] == [
+        (300, {"record": False, "until_done": True}),
+        (40, {"record": True, "until_done": True}),
+    ]
+    assert all(s.live == Status.RUNNING for s, _, _ in calls)

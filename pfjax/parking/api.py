@@ -37,7 +37,7 @@ MAX_SCAN_PERIOD = 10.0
 GARAGE_XS = -0.9
 
 
-class Settings(NamedTuple):
+class _Settings(NamedTuple):
     """The run settings :func:`run` and :func:`search` share, as given (checked by :func:`_checked`)."""
 
     k1: Any  # 1/m², gain on y
@@ -108,7 +108,7 @@ def _schedule(alpha_schedule):
         raise InputError(f"alpha_schedule: {e}", "alpha_schedule") from None
 
 
-def _checked(map, x0, settings: Settings, default_start: dict) -> dict:
+def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     """The arguments :func:`run` and :func:`search` share, checked in the command line's order;
     the map loaded and the start pose checked against it."""
     import numpy as np
@@ -216,7 +216,7 @@ def run(
         raise InputError(f"direction: expected 'forward' or 'backward', got {direction!r:.80}", "direction")
     schedule = _schedule(alpha_schedule)
     xs = None if xs is None else errors.number("xs", xs)
-    settings = Settings(k1, k2, speed, scan_period, front, lag, t_max)
+    settings = _Settings(k1, k2, speed, scan_period, front, lag, t_max)
     c = _checked(map, x0, settings, {"parallel": CASES["A"]["x0"], "garage": GARAGE_START})
     if xs is None and c["spec"] == "garage":  # the garage always has its X_s rule
         xs = GARAGE_XS
@@ -314,7 +314,7 @@ def search(
     seed = errors.seed("seed", seed)
     from pfjax.parking.schedules import GARAGE_START
 
-    settings = Settings(k1, k2, speed, scan_period, front, lag, t_max)
+    settings = _Settings(k1, k2, speed, scan_period, front, lag, t_max)
     c = _checked(map, x0, settings, {"garage": GARAGE_START, "parallel": None})
     out = _search(c, method, n=n, generations=generations, population=population, seed=seed, weight=weight)
     return {"map": c["name"], "x0": _pose(c["x0"]), **out}
