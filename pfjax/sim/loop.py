@@ -1,8 +1,10 @@
-"""The one simulation loop: a ``lax.scan`` over the samples of one run of any fixed-step system.
+"""The one simulation loop: a ``lax.scan`` over the samples of one run of any fixed-step system, or
+a ``lax.while_loop`` over the same samples for a run that ends at an event (``until_done``).
 
 What the loop owns (the same for every system):
 
-* the ``lax.scan`` over samples ``k = 0..n-1`` and its named carry, :class:`LoopCarry`;
+* the ``lax.scan`` over samples ``k = 0..n-1`` (run until done: the ``lax.while_loop``) and its
+  named carry, :class:`LoopCarry`;
 * the run's status: each sample's own health code, the first failure winning
   (:func:`pfjax.sim.status.first_failure`), and the failure time (the failing sample's time);
 * freezing: once the run has failed its state is kept as it was before the failing step;
@@ -65,7 +67,8 @@ robot: converged, stuck, timeout, ...) rather than at a fixed horizon is a ``lax
 the same sample (step, status, metrics, freezing) while the status is ``live`` and ``k < n``
 (``LoopCarry.k`` counts the samples); vmapped, it runs until every run of the batch has stopped, each
 run's carry kept from its own stop on. Recorded, it stays a ``lax.scan`` over all ``n`` samples (the
-records have a static shape), so a system run until done makes its step a no-op once stopped. The
+records have a static shape), so a system run until done leaves what its result reads unchanged
+once stopped (the loop freezes ``state``, not ``aux``). The
 parking robot's sample is one scanner period (a direction-switch decision, logged, then ``n_sub``
 RK4 steps); a period can end in a stop and keeps its last RK4 steps, so its whole carry is ``aux``
 (not frozen by the loop) and it freezes its state step by step itself. Its speed on this loop
