@@ -39,9 +39,9 @@ integer status and its own period counter (the structure of ``own_while_loop`` i
 alternating over 15 rounds, float64, jax 0.10.2, a 2-core AMD EPYC (AVX-512) shared with other
 jobs. CPU time (``time.process_time``), loop / own, least and median round: the garage Monte
 Carlo (1,024 runs, :func:`pfjax.parking.montecarlo.sample`, default settings) 0.996 and 0.987; a
-GA population (20 random chromosomes, the search's settings) 0.951 and 0.959. Wall-clock ratios
-of the least rounds over three sittings scattered 0.94-1.11 with the machine's load (6 on 2
-cores), the medians 0.79-1.19: no cost beyond noise.
+GA population (20 random chromosomes, the search's settings) 0.951 and 0.959. The Monte Carlo's
+wall-clock ratios of the least rounds over three sittings scattered 0.94-1.11 with the machine's
+load (6 on 2 cores), the medians 0.79-1.19: no cost beyond noise.
 """
 
 from __future__ import annotations
