@@ -138,7 +138,7 @@ def test_recording_switch_scalar_inputs_and_checkpointing_change_nothing():
 
 
 def test_the_carry_is_named():
-    assert loop.LoopCarry._fields == ("state", "aux", "metrics", "status", "fail_time")
+    assert loop.LoopCarry._fields == ("state", "aux", "metrics", "status", "fail_time", "k")
 
 
 def test_slip_vehicle_and_tracker_run_through_the_loop(monkeypatch):
@@ -173,14 +173,72 @@ def test_slip_vehicle_and_tracker_run_through_the_loop(monkeypatch):
     assert math.isnan(calls[0][0].no_failure) and calls[1][0].no_failure == math.inf
 
 
-def test_one_status_table_for_both_systems():
-    """The loop's docstring table lists every code of :class:`Status` and ``TrackStatus`` under its
-    name, and the codes the two share mean the same name."""
+def test_one_status_table_for_every_system():
+    """The loop's docstring table lists every code of :class:`Status`, ``TrackStatus`` and the parking
+    robot's ``Status`` under its name, and the codes the slip vehicle and the tracker share mean the
+    same name."""
+    from pfjax.parking.runs import Status as ParkingStatus
     from pfjax.tracking.simulate import TrackStatus
 
-    rows = re.findall(r"^\s{4}(\d+)\s+(\w+)\s+(.+?)\s{2,}(.+)$", loop.__doc__, re.MULTILINE)
-    table = {int(code): name for code, name, _, _ in rows}
-    tracker = {int(code) for code, _, _, track in rows if track.strip() != "-"}
-    assert table == {int(s): s.name.lower() for s in Status}
-    assert tracker == {int(s) for s in TrackStatus}
-    assert all(TrackStatus(c).name == Status(c).name for c in tracker)
+    rows = re.findall(r"^\s{4}(-?\d+)\s+(.+?)\s{2,}(.+?)\s{2,}(.+)$", loop.__doc__, re.MULTILINE)
+    name = lambda cell: None if cell.strip() == "-" else cell.split(":")[0].split()[0]
+    slip, track, park = ({int(r[0]): name(r[i]) for r in rows if name(r[i])} for i in (1, 2, 3))
+    assert slip == {int(s): s.name.lower() for s in Status}
+    assert set(track) == {int(s) for s in TrackStatus}
+    assert all(TrackStatus(c).name == Status(c).name for c in track)
+    assert park == {int(s): s.name.lower() for s in ParkingStatus}
+
+
+# ------------------------------------------------------------------------ event-terminated runs
+RUNNING, DONE, R, THRESHOLD = -1, 0, 0.8, 0.1  # x_{k+1} = R x_k; done once x < THRESHOLD
+
+
+def decay() -> loop.System:
+    """``x_{k+1} = R x_k``, stopping (status DONE) at the first sample whose new state is below
+    ``THRESHOLD``; live code RUNNING; a run that starts below it starts DONE. Metrics: samples run."""
+
+    def init(x0):
+        zero = jnp.zeros((), jnp.result_type(float))
+        status = jnp.where(x0 < THRESHOLD, DONE, RUNNING).astype(zero.dtype)
+        return loop.Start(state=x0 + zero, metrics=zero, zero=zero, status=status)
+
+    def step(x0, carry, k):
+        new = R * carry.state
+        return loop.Sample(new, jnp.where(new < THRESHOLD, DONE, RUNNING), (k + 1) * DT, new)
+
+    return loop.System(
+        init,
+        step,
+        update=lambda x0, m, s, live, was_live: m + was_live,
+        record=lambda x0, s, state: s.out,
+        finish=lambda x0, r: r,
+        no_failure=math.nan,
+        live=RUNNING,
+    )
+
+
+def test_event_terminated_mode_stops_each_run_at_its_closed_form_sample():
+    """A run stops after k* = ceil(log(THRESHOLD / x0) / log R) samples (closed form), its state
+    frozen before the stopping step (x0 R^(k*-1)) and its stop time k* DT (s); a run still above the
+    threshold after n samples stops there, RUNNING; one that starts below it runs no sample. Exact
+    up to rounding of the powers (rtol 1e-14: a handful of multiplications)."""
+    x0 = np.array([1.0, 0.5, 0.2, 0.05, 3.0, 1e6])
+    n = 20
+    r = jax.jit(jax.vmap(lambda x: loop.run(decay(), x, n, record=False, until_done=True)))(x0)
+    k_star = np.where(x0 < THRESHOLD, 0, np.ceil(np.log(THRESHOLD / x0) / np.log(R)))
+    ran = np.minimum(k_star, n)
+    np.testing.assert_array_equal(r.metrics, ran)  # samples entered live
+    stopped = k_star <= n
+    np.testing.assert_array_equal(r.status, np.where(stopped, DONE, RUNNING))
+    np.testing.assert_array_equal(r.failed, stopped)
+    # frozen at the stop: the state before the stopping step, x0 R^(k*-1); the stop time k* DT
+    ok = stopped & (k_star > 0)
+    np.testing.assert_allclose(r.state[ok], (x0 * R ** (k_star - 1))[ok], rtol=1e-14)
+    np.testing.assert_allclose(r.fail_time[ok], (k_star * DT)[ok], rtol=1e-14)
+    assert np.isnan(r.fail_time[~ok]).all()
+    np.testing.assert_allclose(r.state[~stopped], (x0 * R**n)[~stopped], rtol=1e-12)
+    # recorded: a scan over all n samples, the same outcome
+    rec = jax.vmap(lambda x: loop.run(decay(), x, n, record=True, until_done=True))(x0)
+    assert rec.records.shape == (len(x0), n)
+    for a, b in zip(r[:6], rec[:6]):
+        np.testing.assert_array_equal(a, b)

@@ -18,6 +18,7 @@ Only :mod:`pfjax.errors` is imported here at module level: importing :mod:`pfjax
 from __future__ import annotations
 
 import os
+from typing import Any, NamedTuple
 
 from pfjax import errors
 from pfjax.errors import InputError
@@ -34,6 +35,23 @@ MAX_PERIODS = 20000
 MAX_SCAN_PERIOD = 10.0
 #: Garage rule of :func:`run` on the built-in garage: switch back to forward when backing past this x, m.
 GARAGE_XS = -0.9
+
+
+class _Settings(NamedTuple):
+    """The run settings :func:`run` and :func:`search` share, as given (checked by :func:`_checked`)."""
+
+    k1: Any  # 1/m², gain on y
+    k2: Any  # 1/m, gain on tan θ
+    speed: Any  # m/s, |v₁|
+    scan_period: Any  # s
+    front: Any  # m, or None: the calibrated a_f
+    lag: Any  # bool, the yaw-rate PI loop on
+    t_max: Any  # s, timeout
+
+
+def _pose(x0) -> dict:
+    """A start pose (x m, y m, θ deg) as the outputs spell it."""
+    return {"x": x0[0], "y": x0[1], "theta_deg": x0[2]}
 
 
 def _map_spec(map) -> str:
@@ -90,7 +108,7 @@ def _schedule(alpha_schedule):
         raise InputError(f"alpha_schedule: {e}", "alpha_schedule") from None
 
 
-def _checked(map, x0, *, k1, k2, speed, scan_period, front, lag, t_max, default_start: dict) -> dict:
+def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     """The arguments :func:`run` and :func:`search` share, checked in the command line's order;
     the map loaded and the start pose checked against it."""
     import numpy as np
@@ -99,9 +117,10 @@ def _checked(map, x0, *, k1, k2, speed, scan_period, front, lag, t_max, default_
     from pfjax.parking.maps import MapError, check_start, load_map, to_obstacle_map
 
     k1, k2, speed, scan_period, t_max = (
-        errors.number(key, v, positive=True)
-        for key, v in (("k1", k1), ("k2", k2), ("speed", speed), ("scan_period", scan_period), ("t_max", t_max))
+        errors.number(key, getattr(settings, key), positive=True)
+        for key in ("k1", "k2", "speed", "scan_period", "t_max")
     )
+    front, lag = settings.front, settings.lag
     if front is not None:
         front = errors.number("front", front, positive=True)
         if front >= L2_LENGTH:
@@ -196,23 +215,16 @@ def run(
     if not isinstance(direction, str) or direction not in DIRECTIONS:
         raise InputError(f"direction: expected 'forward' or 'backward', got {direction!r:.80}", "direction")
     schedule = _schedule(alpha_schedule)
-    if xs is not None:
-        xs = errors.number("xs", xs)
-    c = _checked(
-        map,
-        x0,
-        k1=k1,
-        k2=k2,
-        speed=speed,
-        scan_period=scan_period,
-        front=front,
-        lag=lag,
-        t_max=t_max,
-        default_start={"parallel": CASES["A"]["x0"], "garage": GARAGE_START},
-    )
+    xs = None if xs is None else errors.number("xs", xs)
+    settings = _Settings(k1, k2, speed, scan_period, front, lag, t_max)
+    c = _checked(map, x0, settings, {"parallel": CASES["A"]["x0"], "garage": GARAGE_START})
     if xs is None and c["spec"] == "garage":  # the garage always has its X_s rule
         xs = GARAGE_XS
+    return _one_run(c, direction, schedule, xs)
 
+
+def _one_run(c: dict, direction: str, schedule, xs) -> dict:
+    """Simulate the checked run :func:`run` describes and summarise it."""
     from pfjax.parking.simulate import ParkingConfig, run_jit, run_params
     from pfjax.parking.summary import run_summary
 
@@ -229,7 +241,7 @@ def run(
     r = run_jit(p, c["omap"], ParkingConfig(t_max=c["t_max"]))
     return {
         "map": c["name"],
-        "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]},
+        "x0": _pose(x0),
         "direction": direction,
         "alpha_schedule": [float(a) for a in schedule],
         "xs": xs,
@@ -290,9 +302,8 @@ def search(
         ``history_mean_fitness`` (per generation) and ``seed``.
 
     Raises:
-        InputError: a bad argument; the message starts with its name. A map file that cannot be
-            read or is invalid, and a start pose in an obstacle, raise its subclass
-            :class:`~pfjax.parking.maps.MapError` with key ``"map"`` or ``"x0"``.
+        InputError: a bad argument, as for :func:`run` (a map or start pose error as its subclass
+            :class:`~pfjax.parking.maps.MapError`).
     """
     if not isinstance(method, str) or method not in METHODS:
         raise InputError(f"method: expected 'ga' or 'grid', got {method!r:.80}", "method")
@@ -303,19 +314,14 @@ def search(
     seed = errors.seed("seed", seed)
     from pfjax.parking.schedules import GARAGE_START
 
-    c = _checked(
-        map,
-        x0,
-        k1=k1,
-        k2=k2,
-        speed=speed,
-        scan_period=scan_period,
-        front=front,
-        lag=lag,
-        t_max=t_max,
-        default_start={"garage": GARAGE_START, "parallel": None},
-    )
+    settings = _Settings(k1, k2, speed, scan_period, front, lag, t_max)
+    c = _checked(map, x0, settings, {"garage": GARAGE_START, "parallel": None})
+    out = _search(c, method, n=n, generations=generations, population=population, seed=seed, weight=weight)
+    return {"map": c["name"], "x0": _pose(c["x0"]), **out}
 
+
+def _search(c: dict, method: str, *, n: int, generations: int, population: int, seed: int, weight: float) -> dict:
+    """Run the checked search :func:`search` describes; the best candidate with its status named."""
     import dataclasses
 
     import jax
@@ -342,5 +348,4 @@ def search(
         out.pop("table")
     out["status"] = STATUS_NAMES[int(out["status"])]
     out["converged"] = out["status"] == "converged"
-    x0 = c["x0"]
-    return {"map": c["name"], "x0": {"x": x0[0], "y": x0[1], "theta_deg": x0[2]}, **out}
+    return out

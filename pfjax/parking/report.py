@@ -66,83 +66,10 @@ def _b_verdict(a: dict, b_outcome: str) -> str:
     )
 
 
-def write_report(out: Path, s: dict, sweep: pd.DataFrame) -> Path:
-    from pfjax.reproduce import Verdict, verdict_table
-
-    verdicts = verdict_table([Verdict(**v) for v in s["verdicts"]])
-    a = s["assumptions"]
-    cal, ga, grid = s["calibration"], s["search"]["ga"], s["search"]["grid"]
-    sw = cal["simulated_first_switch"]
-    cases = _table(
-        [
-            "case",
-            "start (x, y, θ°)",
-            "first direction",
-            "α schedule",
-            "X_s",
-            "outcome",
-            "switches",
-            "time [s]",
-            "switch times [s]",
-        ],
-        [
-            [
-                c["case"],
-                c["start"],
-                c["direction"],
-                c["schedule"],
-                _f(c["xs"], 2),
-                c["status"],
-                c["switches"],
-                _f(c["time_s"]),
-                c["switch_times_s"],
-            ]
-            for c in s["cases"]
-        ],
-    )
-    mc_rows = []
-    for lab, m in s["montecarlo"].items():
-        ci = m["success_ci95"]
-        t = m["time_s"]
-        mc_rows.append(
-            [
-                lab,
-                f"{100 * m['success_rate']:.1f} % [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]",
-                ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in m["status_counts"].items() if v),
-                f"{_f(t['q50'])} / {_f(t['q95'])}",
-                f"{100 * m['by_lag'].get('lag_off', {}).get('success_rate', float('nan')):.1f} % / "
-                f"{100 * m['by_lag'].get('lag_on', {}).get('success_rate', float('nan')):.1f} %",
-            ]
-        )
-    smap = _table(
-        ["x₀ [m]", "θ₀ [°]", "best X_s", "α₁", "α₂", "outcome", "time [s]", "switches", "grid runs converged"],
-        [
-            [
-                r["x0"],
-                r["theta0_deg"],
-                _f(r["xs"], 3) if r["switches"] >= 1 else "(unused)",
-                _f(r["alpha1"], 3) if r["switches"] >= 1 else "(unused)",
-                _f(r["alpha2"], 3) if r["switches"] >= 2 else "(unused)",
-                r["status"],
-                _f(r["time_s"]),
-                r["switches"],
-                f"{100 * r['converged_fraction']:.0f} %",
-            ]
-            for r in s["start_map"]
-        ],
-    )
+def _header(s: dict) -> str:
+    """The title and the settings every section shares."""
     cfg = s["config"]
-    runs = s["search"].get("ga_runs", [ga])
-    by_case = {
-        c["case"]: f"{c['status'].replace('_', ' ')} after {c['switches']} switches ({c['time_s']:.1f} s)"
-        for c in s["cases"]
-    }
-    ga_rows = "\n".join(
-        f"| GA run {r.get('seed_index', 0) + 1} | {r['xs']:.3f} | {r['alpha1']:.3f} | {r['alpha2']:.3f} | {r['status']} | {_f(r['time_s'])} | "
-        f"{r['switches']} | {r['fitness']:.5f} | {r['n_simulations']} |"
-        for r in runs
-    )
-    text = f"""# Parking by switching travel direction and gain — pfjax study
+    return f"""# Parking by switching travel direction and gain — pfjax study
 
 Config SHA-256 `{s["config_sha256"]}`, seed {s["seed"]}, pfjax {s["pfjax_version"]}{" (**quick mode: small sizes**)" if s["quick"] else ""};
 wall time {s["wall_s"]:.0f} s on {s["machine"]}.
@@ -151,27 +78,62 @@ scanner period {cfg["sim"]["scan_period"]:g} s, {cfg["sim"]["n_sub"]} RK4 steps 
 stop when |x| + √(y² + tan²θ) < {cfg["sim"]["tol"]:g}. Runs end converged, stuck (less than {cfg["sim"]["stuck_travel"]:g} m of
 travel over the last {cfg["sim"]["stuck_switches"]} legs between reversals: reversing in place), timed out, at the heading limit,
 non-finite, or not started (the rectangle meets an obstacle at the start pose); only the search fails a candidate
-beyond {cfg["search"]["max_switches"]} switches (the source's search cut-off).
+beyond {cfg["search"]["max_switches"]} switches (the source's search cut-off)."""
 
-## Verdicts on the source's reported outcomes
+
+def _verdicts(s: dict) -> str:
+    from pfjax.reproduce import Verdict, verdict_table
+
+    verdicts = verdict_table([Verdict(**v) for v in s["verdicts"]])
+    return f"""## Verdicts on the source's reported outcomes
 
 One row per outcome and criterion. Times count as reproduced within ±10 %. The source's experiments stood
-{cfg["experiment"]["pause"]:g} s at each reversal; pfjax models that stop as an option and shows both.
+{s["config"]["experiment"]["pause"]:g} s at each reversal; pfjax models that stop as an option and shows both.
 
-{verdicts}
+{verdicts}"""
 
-## Calibration of a_f
+
+def _calibration(s: dict) -> str:
+    cal = s["calibration"]
+    sw = cal["simulated_first_switch"]
+    return f"""## Calibration of a_f
 
 On case A's first leg the loop is linear in the x time scale; the closed form gives y = {cal["y_closed_form_at_switch_x"]:.4f} m
 at x = {cal["switch_x"]} (the source reports y = {cal["y_source"]}), with θ = {cal["theta_deg_at_switch"]:.2f}°. The smallest
 reach a_f for which the rectangle's right front corner touches an obstacle at that pose is **a_f = {cal["a_f"]:.4f} m**
 (the {cal["obstacle"]}; the car ahead would need {cal["reach_per_obstacle"]["car_ahead"]:.3f} m). Simulated with this a_f
 and 0.1 s scanner sampling, the first switch happens at t = {sw["t"]:.1f} s with the robot at
-({sw["x"]:.4f}, {sw["y"]:.4f}), θ = {sw["theta_deg"]:.2f}° — within one scanner period of travel (5 mm) of the source's point.
+({sw["x"]:.4f}, {sw["y"]:.4f}), θ = {sw["theta_deg"]:.2f}° — within one scanner period of travel (5 mm) of the source's point."""
 
-## Every source case
 
-{cases}
+def _cases_table(cases: list[dict]) -> str:
+    header = ["case", "start (x, y, θ°)", "first direction", "α schedule", "X_s", "outcome", "switches", "time [s]"]
+    rows = [
+        [
+            c["case"],
+            c["start"],
+            c["direction"],
+            c["schedule"],
+            _f(c["xs"], 2),
+            c["status"],
+            c["switches"],
+            _f(c["time_s"]),
+            c["switch_times_s"],
+        ]
+        for c in cases
+    ]
+    return _table([*header, "switch times [s]"], rows)
+
+
+def _cases(s: dict, sweep: pd.DataFrame) -> str:
+    a = s["assumptions"]
+    by_case = {
+        c["case"]: f"{c['status'].replace('_', ' ')} after {c['switches']} switches ({c['time_s']:.1f} s)"
+        for c in s["cases"]
+    }
+    return f"""## Every source case
+
+{_cases_table(s["cases"])}
 
 ![parallel parking cases](figures/cases_parallel.png)
 
@@ -194,9 +156,18 @@ period old, the yaw-rate PI loop of the experiments, and a stop at each reversal
 {_zone_sentence(a)}
 {len(a["all_four_reproduced"])} of the {a["n_combinations"]} combinations give all four of the source's outcomes at once
 (A, C and D park, B stuck){": " + "; ".join(", ".join(f"{k}={v}" for k, v in c.items()) for c in a["all_four_reproduced"][:8]) if a["all_four_reproduced"] else ""}.
-{_b_verdict(a, by_case.get("B", "—"))}
+{_b_verdict(a, by_case.get("B", "—"))}"""
 
-## Search of (X_s, α₁, α₂) in the garage
+
+def _search(s: dict) -> str:
+    cfg, ga, grid = s["config"], s["search"]["ga"], s["search"]["grid"]
+    runs = s["search"].get("ga_runs", [ga])
+    ga_rows = "\n".join(
+        f"| GA run {r.get('seed_index', 0) + 1} | {r['xs']:.3f} | {r['alpha1']:.3f} | {r['alpha2']:.3f} | {r['status']} | {_f(r['time_s'])} | "
+        f"{r['switches']} | {r['fitness']:.5f} | {r['n_simulations']} |"
+        for r in runs
+    )
+    return f"""## Search of (X_s, α₁, α₂) in the garage
 
 Fitness J = 1/(t_e + {cfg["search"]["weight"]:g}·e_e) (assumed; 0 for too many switches). GA: population
 {cfg["search"]["population"]}, {cfg["search"]["generations"]} generations, 24 bits, {ga["n_simulations"]} simulations per run in {ga["wall_s"]:.0f} s.
@@ -211,27 +182,68 @@ Over {len(runs)} independent GA run(s) the best reaches {100 * ga["fitness_ratio
 ({100 * ga["grid_fraction_better"]:.2f} % of the grid points are better); per run:
 {", ".join(f"{100 * r['fitness_ratio_to_grid_best']:.1f} %" for r in runs)} of the grid's best.
 
-![search](figures/search.png)
+![search](figures/search.png)"""
 
-## Other starts (y₀ = {s["start_map"][0]["y0"] if s["start_map"] else "—"} m): best parameters on a {cfg["start_map"]["grid_n"]}³ grid per start
+
+def _start_map(s: dict) -> str:
+    unused = lambda r, v, k: _f(v, 3) if r["switches"] >= k else "(unused)"
+    smap = _table(
+        ["x₀ [m]", "θ₀ [°]", "best X_s", "α₁", "α₂", "outcome", "time [s]", "switches", "grid runs converged"],
+        [
+            [
+                r["x0"],
+                r["theta0_deg"],
+                unused(r, r["xs"], 1),
+                unused(r, r["alpha1"], 1),
+                unused(r, r["alpha2"], 2),
+                r["status"],
+                _f(r["time_s"]),
+                r["switches"],
+                f"{100 * r['converged_fraction']:.0f} %",
+            ]
+            for r in s["start_map"]
+        ],
+    )
+    return f"""## Other starts (y₀ = {s["start_map"][0]["y0"] if s["start_map"] else "—"} m): best parameters on a {s["config"]["start_map"]["grid_n"]}³ grid per start
 
 {smap}
 
 A parameter is "(unused)" when the best run switched too few times to reach it (α₁ applies from the 1st switch,
 α₂ from the 2nd, X_s only while backing); every value then ties and the grid's first level is listed.
 
-![start map](figures/start_map.png)
+![start map](figures/start_map.png)"""
 
-## Robustness Monte Carlo (garage, {cfg["montecarlo"]["n_runs"]} runs per schedule, same runs for both)
 
-Start scatter ±{cfg["montecarlo"]["pos_scatter"]:g} m and ±{cfg["montecarlo"]["theta_scatter_deg"]:g}°, scanner period
-U[{cfg["montecarlo"]["scan_lo"]:g}, {cfg["montecarlo"]["scan_hi"]:g}] s, speed U[{cfg["montecarlo"]["speed_lo"]:g},
-{cfg["montecarlo"]["speed_hi"]:g}] m/s, yaw-rate PI loop (k_P 0.8, k_I 16) on with probability {cfg["montecarlo"]["lag_probability"]:g}.
+def _montecarlo(s: dict) -> str:
+    m = s["config"]["montecarlo"]
+    rows = []
+    for lab, r in s["montecarlo"].items():
+        ci, t, lag = r["success_ci95"], r["time_s"], r["by_lag"]
+        rows.append(
+            [
+                lab,
+                f"{100 * r['success_rate']:.1f} % [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]",
+                ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in r["status_counts"].items() if v),
+                f"{_f(t['q50'])} / {_f(t['q95'])}",
+                f"{100 * lag.get('lag_off', {}).get('success_rate', float('nan')):.1f} % / "
+                f"{100 * lag.get('lag_on', {}).get('success_rate', float('nan')):.1f} %",
+            ]
+        )
+    header = ["schedule", "success [95 % CI]", "statuses", "parking time p50 / p95 [s]", "success lag off / on"]
+    return f"""## Robustness Monte Carlo (garage, {m["n_runs"]} runs per schedule, same runs for both)
 
-{_table(["schedule", "success [95 % CI]", "statuses", "parking time p50 / p95 [s]", "success lag off / on"], mc_rows)}
+Start scatter ±{m["pos_scatter"]:g} m and ±{m["theta_scatter_deg"]:g}°, scanner period
+U[{m["scan_lo"]:g}, {m["scan_hi"]:g}] s, speed U[{m["speed_lo"]:g},
+{m["speed_hi"]:g}] m/s, yaw-rate PI loop (k_P 0.8, k_I 16) on with probability {m["lag_probability"]:g}.
 
-![monte carlo](figures/montecarlo.png)
-"""
+{_table(header, rows)}
+
+![monte carlo](figures/montecarlo.png)"""
+
+
+def write_report(out: Path, s: dict, sweep: pd.DataFrame) -> Path:
+    """``out/report.md``: header, verdicts, calibration, cases, search, start map, Monte Carlo."""
+    sections = [_header(s), _verdicts(s), _calibration(s), _cases(s, sweep), _search(s), _start_map(s), _montecarlo(s)]
     p = out / "report.md"
-    p.write_text(text)
+    p.write_text("\n\n".join(sections) + "\n")
     return p

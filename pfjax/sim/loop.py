@@ -1,8 +1,10 @@
-"""The one simulation loop: a ``lax.scan`` over the samples of one run of any fixed-step system.
+"""The one simulation loop: a ``lax.scan`` over the samples of one run of any fixed-step system, or
+a ``lax.while_loop`` over the same samples for a run that ends at an event (``until_done``).
 
 What the loop owns (the same for every system):
 
-* the ``lax.scan`` over samples ``k = 0..n-1`` and its named carry, :class:`LoopCarry`;
+* the ``lax.scan`` over samples ``k = 0..n-1`` (run until done: the ``lax.while_loop``) and its
+  named carry, :class:`LoopCarry`;
 * the run's status: each sample's own health code, the first failure winning
   (:func:`pfjax.sim.status.first_failure`), and the failure time (the failing sample's time);
 * freezing: once the run has failed its state is kept as it was before the failing step;
@@ -36,28 +38,42 @@ state and returns its sample's own health code (0: healthy) and time ``t`` (s). 
 stacked records or ``None``). The status is carried as a float code (see
 :func:`~pfjax.sim.status.first_failure`); ``Run.status`` is its int32 value.
 
-Status codes, one table for every system on this loop (``OK`` and the codes ``0-3`` are shared;
-:class:`pfjax.sim.status.Status` is the slip vehicle's, ``pfjax.tracking.simulate.TrackStatus``
-the focus-point tracker's)::
+Status codes, one table for every system on this loop. A status is an integer code to the outside;
+``live`` is the code of a run still going (:attr:`System.live`): ``0`` for the fixed-horizon systems
+(:class:`pfjax.sim.status.Status`, the slip vehicle's, and ``pfjax.tracking.simulate.TrackStatus``,
+the focus-point tracker's, share the codes ``0-3``), ``-1`` for the parking robot
+(``pfjax.parking.simulate.Status``, whose runs stop at an event)::
 
-    code  name       Status (slip vehicle, pfjax.sim.simulate)   TrackStatus (tracker, pfjax.tracking)
-    0     ok         ran the whole horizon                       ran the whole horizon
-    1     nonfinite  pose or measurement NaN/inf                 follower state NaN/inf
-    2     diverged   |d| > SimConfig.d_fail (m)                  |z~| > TrackConfig.z_fail (m)
-    3     singular   1 - kappa d <= 0 (Frenet model invalid)     |det M / (l p)| < sing_tol (no inverse)
-    4     path_end   closest point at the path domain's end      -
+    code  Status (slip vehicle, pfjax.sim.simulate)   TrackStatus (tracker)          parking Status (pfjax.parking)
+    -1    -                                           -                              running (live; never an output)
+    0     ok: ran the whole horizon (live)            ok: ran the whole horizon      converged: |x| + sqrt(y² + tan²θ) < tol
+    1     nonfinite: pose or measurement NaN/inf      nonfinite: follower NaN/inf    timeout: t ≥ t_max
+    2     diverged: |d| > SimConfig.d_fail (m)        diverged: |z~| > z_fail (m)    too_many_switches: > max_switches
+    3     singular: 1 - kappa d <= 0                  singular: |det M / (l p)|      heading_limit: |θ| ≥ π/2
+                                                      < sing_tol (no inverse)
+    4     path_end: closest point at the domain end   -                              nonfinite: state NaN/inf
+    5     -                                           -                              stuck: reversing in place
+    6     -                                           -                              start_overlap: body on an obstacle
 
 The dynamic vehicle (:mod:`pfjax.sim.dynamic`, CommonRoad's single-track model) uses the slip
 vehicle's :class:`~pfjax.sim.status.Status` with the same checks on its rear axle's measurement (and
-every entry of its state finite), in the same order (check, then step). The slip vehicle checks the sample's current state (check, then step; its last sample ``k = N``
-only measures, ``keep``); the tracker checks the state after its step (step, then check, at
-``t_{k+1}``). Its failure time is NaN for a run that never fails, the tracker's ``inf``.
+every entry of its state finite), in the same order (check, then step). The slip vehicle checks the
+sample's current state (check, then step; its last sample ``k = N`` only measures, ``keep``); the
+tracker checks the state after its step (step, then check, at ``t_{k+1}``). Its failure time is NaN
+for a run that never fails, the tracker's ``inf``.
 
-The parking simulator (:mod:`pfjax.parking.simulate`) does not use this loop: its runs end at an
-event (converged, stuck, timeout, ...) rather than at a fixed horizon, so it is a ``lax.while_loop``
-over scanner periods, each a direction-switch decision (logged) followed by ``n_sub`` RK4 steps,
-and its status starts as ``RUNNING`` with ``CONVERGED`` a successful stop, not a run that is OK
-until it fails.
+**Event-terminated runs** (``run(..., until_done=True)``): a run that ends at an event (the parking
+robot: converged, stuck, timeout, ...) rather than at a fixed horizon is a ``lax.while_loop`` over
+the same sample (step, status, metrics, freezing) while the status is ``live`` and ``k < n``
+(``LoopCarry.k`` counts the samples); vmapped, it runs until every run of the batch has stopped, each
+run's carry kept from its own stop on. Recorded, it stays a ``lax.scan`` over all ``n`` samples (the
+records have a static shape), so a system run until done leaves what its result reads unchanged
+once stopped (the loop freezes ``state``, not ``aux``). The
+parking robot's sample is one scanner period (a direction-switch decision, logged, then ``n_sub``
+RK4 steps); a period can end in a stop and keeps its last RK4 steps, so its whole carry is ``aux``
+(not frozen by the loop) and it freezes its state step by step itself. Its speed on this loop
+against a ``lax.while_loop`` of its own: :mod:`pfjax.parking.simulate`'s docstring (no cost beyond
+noise).
 """
 
 from __future__ import annotations
@@ -81,6 +97,7 @@ class Start(NamedTuple):
     metrics: Any  # the running metrics before sample 0
     zero: Array  # a zero of the run's float type: the status starts at it, the failure time at zero + no_failure
     aux: Any = None  # carried on unfrozen (e.g. a sampled controller's held command)
+    status: Array | None = None  # float code of the status at the start (None: zero, i.e. OK)
 
 
 class Sample(NamedTuple):
@@ -102,6 +119,7 @@ class LoopCarry(NamedTuple):
     metrics: Any  # running metrics
     status: Array  # float code of the status (exact small integers)
     fail_time: Array  # s, time of the first failure (no_failure while none)
+    k: Any = None  # int, samples done (the event-terminated mode only; None in a scan)
 
 
 class Run(NamedTuple):
@@ -125,6 +143,7 @@ class System(NamedTuple):
     record: Callable[[Any, Sample, Any], Any]
     finish: Callable[[Any, Run], Any]
     no_failure: float  # fail_time of a run that never fails (NaN or inf)
+    live: int = Status.OK  # the status code of a run still going (the status table)
 
 
 def freeze(live, new, old):
@@ -135,23 +154,35 @@ def freeze(live, new, old):
 def _sample(system: System, inputs, carry: LoopCarry, k, record: bool):
     """One sample: the system's step, the status, the metrics, freezing and the record."""
     s = system.step(inputs, carry, k)
-    was_live = carry.status == Status.OK
-    status, fail_time = first_failure(carry.status, carry.fail_time, s.health, s.time)  # status: a float code
-    live = status == Status.OK
+    was_live = carry.status == system.live
+    status, fail_time = first_failure(carry.status, carry.fail_time, s.health, s.time, system.live)  # a float code
+    live = status == system.live
     metrics = system.update(inputs, carry.metrics, s, live, was_live)
     state = freeze(live if s.keep is None else live & ~s.keep, s.state, carry.state)
     rec = system.record(inputs, s, state) if record else None
     return LoopCarry(state, s.aux, metrics, status, fail_time), rec
 
 
-def run(system: System, inputs, n_samples: int, *, record: bool, scalar_inputs: bool = False, checkpoint_policy=None):
+def run(
+    system: System,
+    inputs,
+    n_samples: int,
+    *,
+    record: bool,
+    until_done: bool = False,
+    scalar_inputs: bool = False,
+    checkpoint_policy=None,
+):
     """Run one system over samples ``k = 0..n_samples-1`` (pure, unbatched; vmap it).
 
     Args:
         system: the system's functions.
         inputs: the run's inputs (a pytree; handed to every function of ``system``).
-        n_samples: number of samples (static).
+        n_samples: number of samples (static); with ``until_done``, the most samples.
         record: stack every sample's :attr:`System.record` (static).
+        until_done: stop at the first sample whose status is not ``system.live`` (a
+            ``lax.while_loop``; see the module docstring). Recorded, the loop still scans all
+            ``n_samples`` samples.
         scalar_inputs: hand ``step``, ``update`` and ``record`` the inputs rebuilt inside the loop
             from scalars (:func:`pfjax.numerics.layout.as_scalars`), so reverse mode accumulates the
             cotangents of small per-run leaves as ``(runs,)`` arrays.
@@ -162,7 +193,8 @@ def run(system: System, inputs, n_samples: int, *, record: bool, scalar_inputs: 
         ``system.finish(inputs, Run(...))``.
     """
     start = system.init(inputs)
-    carry = LoopCarry(start.state, start.aux, start.metrics, start.zero, start.zero + system.no_failure)
+    status = start.zero if start.status is None else start.status
+    carry = LoopCarry(start.state, start.aux, start.metrics, status, start.zero + system.no_failure)
     if scalar_inputs:
         parts, join = as_scalars(inputs)
         body = lambda c, k: _sample(system, join(parts), c, k, record)
@@ -170,7 +202,15 @@ def run(system: System, inputs, n_samples: int, *, record: bool, scalar_inputs: 
         body = lambda c, k: _sample(system, inputs, c, k, record)
     if checkpoint_policy is not None:
         body = jax.checkpoint(body, prevent_cse=False, policy=checkpoint_policy)
-    final, records = jax.lax.scan(body, carry, jnp.arange(n_samples))
+    if until_done and not record:
+        final = jax.lax.while_loop(
+            lambda c: (c.status == system.live) & (c.k < n_samples),
+            lambda c: body(c, c.k)[0]._replace(k=c.k + 1),
+            carry._replace(k=jnp.asarray(0)),
+        )
+        records = None
+    else:
+        final, records = jax.lax.scan(body, carry, jnp.arange(n_samples))
     return system.finish(
         inputs,
         Run(
@@ -178,7 +218,7 @@ def run(system: System, inputs, n_samples: int, *, record: bool, scalar_inputs: 
             final.aux,
             final.metrics,
             final.status.astype(jnp.int32),
-            final.status != Status.OK,
+            final.status != system.live,
             final.fail_time,
             records,
         ),

@@ -35,10 +35,11 @@ def classify(finite, abs_d, one_minus_kd, at_end, d_fail: float):
     )
 
 
-def first_failure(status, fail_time, now, t):
+def first_failure(status, fail_time, now, t, live=Status.OK):
     """``(status, fail_time)`` after a sample whose own status is ``now`` (time ``t``, s): the first
-    failure wins, and ``fail_time`` keeps its sample time. Any status enumeration whose OK is 0
-    (:class:`Status`, the tracking simulator's ``TrackStatus``).
+    status other than ``live`` wins, and ``fail_time`` keeps its sample time. ``live`` is the code of
+    a run still going: ``OK`` (0) for :class:`Status` and the tracking simulator's ``TrackStatus``,
+    ``RUNNING`` (-1) for the parking robot's ``pfjax.parking.simulate.Status``.
 
     ``status`` is carried as a *float* code (``Status`` values are small integers, exact in any float
     type; convert to int32 for output) so that it can be computed once (:func:`pfjax.numerics.
@@ -48,6 +49,6 @@ def first_failure(status, fail_time, now, t):
     time from the checks again. Measured on the benchmark (README, Performance): float32 about 5 %
     more rollout-steps/s. Values are exact.
     """
-    ok = status == Status.OK
+    ok = status == live
     new = E.computed_once(jnp.where(ok, jnp.asarray(now).astype(status.dtype), status))
-    return new, jnp.where(ok & (new != Status.OK), t, fail_time)
+    return new, jnp.where(ok & (new != live), t, fail_time)
