@@ -357,6 +357,9 @@ def test_report_without_margin_sweep(study, tmp_path):
     assert not (tmp_path / "figures" / "margin_curves.png").exists()
     assert "No slip-margin sweep" in "".join(page.text)
     assert len(page.imgs) == len(FIGURES) - 1
+    md = (tmp_path / "report.md").read_text(encoding="utf-8")  # the same report in Markdown, figures linked
+    assert "No slip-margin sweep" in md and "margin_curves.png" not in md
+    assert md.count("](figures/") == len(FIGURES) - 1
 
 
 def test_summary_from_the_file_equals_summary_from_the_table(study):

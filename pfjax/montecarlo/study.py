@@ -145,14 +145,7 @@ def _finish(tmp: Path, runs_path: Path, controllers, store, *, job: dict) -> dic
     t0, warnings, overlap = job["t0"], job["warnings"], job["overlap"]
     timings = {"runs": time.time() - t0}  # s per phase (wall clock), in summary.json
     lap = [time.time()]
-    # the figures of the runs alone, drawn by the worker process during the margin sweep
-    early = (
-        worker.submit(tmp, spec, {"paths": [p.label for p in spec.paths]}, runs_path, RUN_FIGURES)
-        if worker is not None
-        else None
-    )
-    if side.worst_figure is not None:
-        side.worst_figure.start(tmp, runs_path)  # asked of the worker now if the search is done, else when it is
+    early = _start_figures(job, tmp, runs_path)
 
     def mark(phase):
         now = time.time()
@@ -221,6 +214,20 @@ def _finish(tmp: Path, runs_path: Path, controllers, store, *, job: dict) -> dic
     (tmp / "summary.json").write_text(dumps(summary) + "\n")
     job["result"]["summary"] = summary
     return {}
+
+
+def _start_figures(job: dict, tmp: Path, runs_path: Path):
+    """Ask the figure worker for the figures of the runs alone (drawn during the margin sweep), and
+    for the worst-case figure now if the search is done, else when it is; the run figures' answer."""
+    spec, side, worker = job["spec"], job["side"], job["worker"]
+    early = (
+        worker.submit(tmp, spec, {"paths": [p.label for p in spec.paths]}, runs_path, RUN_FIGURES)
+        if worker is not None
+        else None
+    )
+    if side.worst_figure is not None:
+        side.worst_figure.start(tmp, runs_path)
+    return early
 
 
 def _add_rare_events(spec: StudySpec, controllers, summary: dict, progress) -> None:
