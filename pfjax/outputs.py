@@ -33,16 +33,28 @@ study scripts) writes them through :class:`OutputDir`:
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
 import os
 import re
 import shutil
-import socket
 import tempfile
 from pathlib import Path
 
 from pfjax.errors import InputError
+from pfjax.output_lock import OutputBusy, OutputLock, now_utc, sibling
+
+__all__ = [
+    "MARKER",
+    "NAME_PATTERN",
+    "OutputBusy",
+    "OutputDir",
+    "OutputLock",
+    "check_name",
+    "check_target",
+    "glob_escape",
+    "read_marker",
+    "sibling",
+]
 
 MARKER = ".pfjax-output.json"
 #: Version of the marker's format (its ``format`` field).
@@ -52,10 +64,6 @@ _OLD = "pfjax-old"
 
 #: Names of studies and outputs: a letter or digit, then letters, digits, ``_``, ``.``, ``-``.
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
-
-
-class OutputBusy(InputError):
-    """Another process holds the output's lock (it is writing there now)."""
 
 
 def check_name(key: str, name) -> str:
@@ -69,11 +77,6 @@ def check_name(key: str, name) -> str:
             key,
         )
     return name
-
-
-def sibling(target: Path, kind: str) -> Path:
-    """The hidden entry ``.<name>.<kind>`` beside ``target`` (lock file, partial results, staging)."""
-    return target.parent / f".{target.name}.{kind}"
 
 
 def read_marker(directory: Path) -> dict | None:
@@ -118,6 +121,16 @@ def check_target(
     Touches nothing. Returns the target as an absolute path (symbolic links in its parents
     resolved). Raises :class:`~pfjax.errors.InputError` naming ``flag``.
     """
+    resolved = _check_name(target, flag)
+    if not resolved.exists():
+        return resolved
+    _check_contents(resolved, target, command=command, config_sha256=config_sha256, overwrite=overwrite, flag=flag)
+    return resolved
+
+
+def _check_name(target, flag: str) -> Path:
+    """The target as an absolute path, if it names a directory of its own whose parent pfjax may
+    write into (not a root, the home or current directory, a symbolic link); raises InputError."""
     given = Path(target)
     last = str(target).rstrip("/" + os.sep).rsplit(os.sep, 1)[-1].rsplit("/", 1)[-1]
     if str(target).strip() == "" or last in ("", ".", ".."):
@@ -148,8 +161,12 @@ def check_target(
             break
     if resolved.is_symlink():
         raise InputError(f"{flag}: {target} is a symbolic link; give the directory it points to, or another name", flag)
-    if not resolved.exists():
-        return resolved
+    return resolved
+
+
+def _check_contents(resolved: Path, target, *, command: str, config_sha256: str | None, overwrite: bool, flag: str):
+    """An existing target may be replaced only if empty, or holding only what pfjax wrote there
+    (unchanged, of the same command and config unless ``overwrite``); raises InputError."""
     if not resolved.is_dir():
         raise InputError(f"{flag}: {target} exists and is not a directory", flag)
     try:
@@ -157,7 +174,7 @@ def check_target(
     except OSError as e:
         raise InputError(f"{flag}: {target} cannot be read ({e.strerror})", flag) from None
     if empty:
-        return resolved
+        return
     marker = read_marker(resolved)
     if marker is None:
         raise InputError(
@@ -192,69 +209,6 @@ def check_target(
                 f"{flag}: {target} holds {_describe(marker)}; add --overwrite to replace it, or choose another {flag}",
                 flag,
             )
-    return resolved
-
-
-def _now() -> str:
-    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
-
-
-class OutputLock:
-    """An exclusive lock on an output target, held by this process (``fcntl.flock`` on the lock file
-    ``.<name>.lock`` beside the target, which records the holder's pid, host, command and start
-    time). Released by :meth:`release` or by the end of the process."""
-
-    def __init__(self, target: Path, *, command: str, flag: str = "--out"):
-        self.target, self.command, self.flag = Path(target), command, flag
-        self.path = sibling(self.target, "lock")
-        self._fd: int | None = None
-
-    def acquire(self) -> None:
-        import fcntl
-
-        while self._fd is None:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                holder = self._holder(fd)
-                os.close(fd)
-                raise OutputBusy(
-                    f"{self.flag}: a pfjax {holder.get('command', 'command')} is running into "
-                    f"{self.target} (pid {holder.get('pid', '?')} on {holder.get('host', '?')}, started "
-                    f"{holder.get('started', '?')}); wait for it to finish, or choose another {self.flag}",
-                    self.flag,
-                ) from None
-            try:  # the file may have been removed by its previous holder after we opened it
-                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
-            except FileNotFoundError:
-                same = False
-            if not same:
-                os.close(fd)
-                continue
-            info = {"pid": os.getpid(), "host": socket.gethostname(), "command": self.command, "started": _now()}
-            os.ftruncate(fd, 0)
-            os.write(fd, (json.dumps(info) + "\n").encode())
-            self._fd = fd
-
-    @staticmethod
-    def _holder(fd: int) -> dict:
-        try:
-            os.lseek(fd, 0, os.SEEK_SET)
-            data = json.loads(os.read(fd, 4096).decode() or "{}")
-            return data if isinstance(data, dict) else {}
-        except (OSError, ValueError):
-            return {}
-
-    def release(self) -> None:
-        if self._fd is None:
-            return
-        try:
-            os.unlink(self.path)  # while still held: a waiting process re-checks the inode
-        except FileNotFoundError:
-            pass
-        os.close(self._fd)
-        self._fd = None
 
 
 class OutputDir:
@@ -371,7 +325,7 @@ class OutputDir:
             **self.extra,
             **extra,
             "pfjax_version": _version(),
-            "written": _now(),
+            "written": now_utc(),
             "files": {f: [st.st_size, st.st_mtime_ns] for f, st in sorted(files.items())},
             "dirs": sorted(dirs),
         }

@@ -269,7 +269,7 @@ def test_main_thread_takes_over_side_jobs_not_started():
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
-    from pfjax.montecarlo.study import _Stealable
+    from pfjax.montecarlo.side_jobs import Stealable
 
     pool, gate, ran = ThreadPoolExecutor(1), threading.Event(), []
 
@@ -280,7 +280,7 @@ def test_main_thread_takes_over_side_jobs_not_started():
             ran.append((name, threading.current_thread() is threading.main_thread()))
             return name
 
-        return _Stealable(pool.submit(fn), fn)
+        return Stealable(pool.submit(fn), fn)
 
     first, second, third = job("first"), job("second"), job("third")
     third.take_over()  # the background thread is busy with the first: the main thread computes the third

@@ -1,7 +1,7 @@
 """pfjax as a package a researcher installs and cites: the example studies it carries are the
 repository's ``studies/`` files byte for byte (and every ``pfjax study`` config there is carried);
 the licence, citation and changelog agree with ``pyproject.toml``; and the wheel, installed into a
-fresh environment, holds its type marker, report templates and examples and runs an example study
+fresh environment, holds its type marker and examples and runs an example study
 from outside the repository (``@slow``)."""
 
 from __future__ import annotations
@@ -116,10 +116,11 @@ def test_changelog_has_an_unreleased_and_a_section_for_this_version():
         assert not re.search(rf"\b{word}s?\b", text, re.I), word
 
 
-def test_package_data_names_the_marker_templates_and_examples():
+def test_package_data_names_the_marker_and_examples():
     data = PYPROJECT["tool"]["setuptools"]["package-data"]
     assert "py.typed" in data["pfjax"] and (PACKAGE / "py.typed").read_bytes() == b""
-    assert data["pfjax.report"] == ["templates/*.j2"] and data["pfjax.examples"] == ["*.toml"]
+    assert data["pfjax.examples"] == ["*.toml"]
+    assert not list(PACKAGE.rglob("*.j2"))  # reports are built in code (pfjax.report.document), no template files
 
 
 # ------------------------------------------------------------------------------------- the wheel
@@ -153,8 +154,6 @@ def test_the_wheel_installs_into_a_fresh_venv_and_runs_an_example_outside_the_re
 
     names = set(zipfile.ZipFile(wheel).namelist())
     assert "pfjax/py.typed" in names
-    templates = sorted(p.name for p in (PACKAGE / "report" / "templates").glob("*.j2"))
-    assert templates and all(f"pfjax/report/templates/{t}" in names for t in templates)
     assert all(f"pfjax/examples/{f}" in names for f in examples.FILES.values())
     assert "pfjax/examples/__init__.py" in names and "pfjax/cli/examples.py" in names
     assert not any(n.startswith(("tests/", "studies/")) for n in names)
@@ -215,6 +214,6 @@ def test_the_wheel_installs_into_a_fresh_venv_and_runs_an_example_outside_the_re
         ],
         cwd=work,
     )
-    assert (out / "runs.parquet").is_file() and (out / "report.html").is_file()  # the report: the wheel's templates
+    assert (out / "runs.parquet").is_file() and (out / "report.html").is_file() and (out / "report.md").is_file()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["study"] == "robustness_default" and summary["n_runs_total"] == 100 * 3 * 3

@@ -24,12 +24,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
+from pfjax.metrics.margins import slip_margin
 from pfjax.metrics.robustness import (
     clopper_pearson,
     failure_drivers,
     hoeffding_n,
     metric_quantiles,
-    slip_margin,
     success_summary,
     supported_statement,
     zero_failure_n,

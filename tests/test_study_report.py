@@ -279,9 +279,8 @@ def test_every_figure_is_written_as_png_and_svg(study):
         assert "<svg" in svg.read_text(encoding="utf-8")[:2000], name
 
 
-def test_report_numbers_are_those_of_summary_json(study):
-    spec, out, summary = study
-    text = "".join(_parse((out / "report.html").read_text(encoding="utf-8")).text)
+def _headline_numbers_in(text: str, summary: dict) -> None:
+    """The summary's headline numbers, formatted as the report shows them, are all in ``text``."""
     assert summary["config_sha256"] in text
     assert f"{summary['n_runs_total']} simulated runs" in text
     assert f"seed {summary['seed']}" in text
@@ -301,6 +300,13 @@ def test_report_numbers_are_those_of_summary_json(study):
             assert shown in text
         for k, v in c["gains"].items():
             assert f"{k} = {v:.4g}" in text
+
+
+def test_report_numbers_are_those_of_summary_json(study):
+    spec, out, summary = study
+    text = "".join(_parse((out / "report.html").read_text(encoding="utf-8")).text)
+    _headline_numbers_in(text, summary)
+    _headline_numbers_in((out / "report.md").read_text(encoding="utf-8"), summary)
     # failed runs are counted, never hidden: one status row per controller and path (plus the
     # controller's total over its paths), adding up to its runs
     tables = _parse((out / "report.html").read_text(encoding="utf-8")).tables
@@ -351,6 +357,9 @@ def test_report_without_margin_sweep(study, tmp_path):
     assert not (tmp_path / "figures" / "margin_curves.png").exists()
     assert "No slip-margin sweep" in "".join(page.text)
     assert len(page.imgs) == len(FIGURES) - 1
+    md = (tmp_path / "report.md").read_text(encoding="utf-8")  # the same report in Markdown, figures linked
+    assert "No slip-margin sweep" in md and "margin_curves.png" not in md
+    assert md.count("](figures/") == len(FIGURES) - 1
 
 
 def test_summary_from_the_file_equals_summary_from_the_table(study):
@@ -423,11 +432,11 @@ def test_worst_case_figure_asked_of_the_worker_by_the_last_search_equals_the_one
 
 
 def test_worst_figure_is_asked_for_once_when_the_searches_and_the_directory_are_there():
-    """:class:`~pfjax.montecarlo.study._WorstFigure` submits one request, from the thread that
+    """:class:`~pfjax.montecarlo.study.WorstFigure` submits one request, from the thread that
     completes it (the last search or the directory), with the controllers' blocks in their order."""
     import threading
 
-    from pfjax.montecarlo.study import _WorstFigure
+    from pfjax.montecarlo.side_jobs import WorstFigure
 
     class Fake:
         def __init__(self):
@@ -438,7 +447,7 @@ def test_worst_figure_is_asked_for_once_when_the_searches_and_the_directory_are_
             return type("R", (), {"result": lambda self: {"worst_cases": {"name": "worst_cases"}}})()
 
     for order in (["a", "dir", "b"], ["dir", "b", "a"], ["b", "a", "dir"]):
-        w = _WorstFigure(fake := Fake(), None, ["a", "b"])
+        w = WorstFigure(fake := Fake(), None, ["a", "b"])
         for step in order:
             if step == "dir":
                 w.start(Path("/out"), Path("/out/runs.parquet"))
@@ -456,7 +465,7 @@ def test_worst_figure_is_asked_for_once_when_the_searches_and_the_directory_are_
         }
         assert thread == ("MainThread" if order[-1] == "dir" else f"search-{order[-1]}")
         assert w.result() == {"worst_cases": {"name": "worst_cases"}} and len(fake.calls) == 1
-    assert _WorstFigure(None, None, ["a"]).result() is None  # no worker: the study draws it
+    assert WorstFigure(None, None, ["a"]).result() is None  # no worker: the study draws it
 
 
 def test_figure_worker_answers_can_be_collected_in_any_order(study, tmp_path):

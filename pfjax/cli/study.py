@@ -196,7 +196,7 @@ def _cmd_report(args) -> dict:
 def register(sub) -> None:
     for name, helptext in (
         ("study", "run a Monte Carlo robustness study from a TOML config (runs, margins, summary, report)"),
-        ("report", "rebuild the HTML report of a finished study without re-simulating"),
+        ("report", "rebuild the report (report.md and report.html) of a finished study without re-simulating"),
     ):
         st = sub.add_parser(name, help=helptext, description=helptext)
         st.add_argument(

@@ -1,32 +1,32 @@
 """Per-run metrics (running accumulators) and robustness statistics over many runs.
 
-The robustness statistics (:mod:`pfjax.metrics.robustness`, NumPy/SciPy/pandas on the host) are
-imported on first use, so a simulation, which needs only the running metrics, does not pay for
-importing pandas and SciPy.
+The robustness statistics (:mod:`pfjax.metrics.robustness`, :mod:`pfjax.metrics.margins`;
+NumPy/SciPy/pandas on the host) are imported on first use, so a simulation, which needs only the
+running metrics, does not pay for importing pandas and SciPy.
 """
 
 from importlib import import_module
 
 from pfjax.metrics.running import METRIC_NAMES, Metrics
 
-#: Names this package re-exports from :mod:`pfjax.metrics.robustness` (imported on first access).
-_ROBUSTNESS = (
-    "clopper_pearson",
-    "failure_drivers",
-    "hoeffding_n",
-    "metric_quantiles",
-    "slip_margin",
-    "success_summary",
-    "supported_statement",
-    "zero_failure_n",
-)
+#: Statistics this package re-exports, by the module that defines them (imported on first access).
+_LAZY = {
+    "clopper_pearson": "robustness",
+    "failure_drivers": "robustness",
+    "hoeffding_n": "robustness",
+    "metric_quantiles": "robustness",
+    "success_summary": "robustness",
+    "supported_statement": "robustness",
+    "zero_failure_n": "robustness",
+    "slip_margin": "margins",
+}
 
-__all__ = ["METRIC_NAMES", "Metrics", *_ROBUSTNESS]
+__all__ = ["METRIC_NAMES", "Metrics", *_LAZY]
 
 
 def __getattr__(name: str):
-    if name in _ROBUSTNESS:
-        return getattr(import_module("pfjax.metrics.robustness"), name)
+    if name in _LAZY:
+        return getattr(import_module(f"pfjax.metrics.{_LAZY[name]}"), name)
     raise AttributeError(f"module 'pfjax.metrics' has no attribute {name!r}")
 
 

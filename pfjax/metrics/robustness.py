@@ -12,8 +12,9 @@ With ``k = sum S_i`` successes the success probability ``p = P(S = 1)`` is estim
   runs is below ``(1 - eps)^n``, hence ``N >= ln(1/delta) / ln(1/(1 - eps))`` of
   :func:`zero_failure_n`.
 
-:func:`supported_statement` turns a sample into the statement it supports, :func:`slip_margin`
-reads the largest safe slip amplitude off a batched sweep, :func:`metric_quantiles` summarises
+:func:`supported_statement` turns a sample into the statement it supports,
+:func:`pfjax.metrics.margins.slip_margin` reads the largest safe slip amplitude off a batched
+sweep, :func:`metric_quantiles` summarises
 the per-run metrics and :func:`failure_drivers` ranks the sampled parameters that drive failure.
 """
 
@@ -25,14 +26,21 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from pfjax.metrics import _ROBUSTNESS
-
-__all__ = list(_ROBUSTNESS)  # the names pfjax.metrics re-exports, listed there once
+__all__ = [
+    "check_open_unit",
+    "clopper_pearson",
+    "failure_drivers",
+    "hoeffding_n",
+    "metric_quantiles",
+    "success_summary",
+    "supported_statement",
+    "zero_failure_n",
+]
 
 DEFAULT_QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95, 0.99)
 
 
-def _check_open_unit(name: str, value: float) -> float:
+def check_open_unit(name: str, value: float) -> float:
     value = float(value)
     if not 0.0 < value < 1.0:
         raise ValueError(f"{name} must lie in (0, 1), got {value!r}")
@@ -61,7 +69,7 @@ def clopper_pearson(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
         ``(lo, hi)`` as floats; ``(nan, nan)`` when ``n = 0`` (nothing observed).
     """
     k, n = int(k), int(n)
-    conf = _check_open_unit("conf", conf)
+    conf = check_open_unit("conf", conf)
     if n < 0 or not 0 <= k <= max(n, 0):
         raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
     if n == 0:
@@ -168,7 +176,7 @@ def hoeffding_n(eps: float, delta: float) -> int:
     Returns:
         The smallest integer ``n`` with ``2 exp(-2 n eps^2) <= delta``.
     """
-    eps, delta = _check_open_unit("eps", eps), _check_open_unit("delta", delta)
+    eps, delta = check_open_unit("eps", eps), check_open_unit("delta", delta)
     return _smallest_n(lambda n: 2.0 * math.exp(-2.0 * n * eps**2) <= delta, math.log(2.0 / delta) / (2.0 * eps**2))
 
 
@@ -187,7 +195,7 @@ def zero_failure_n(eps: float, delta: float) -> int:
     Returns:
         The smallest integer ``n`` with ``(1 - eps)^n <= delta``.
     """
-    eps, delta = _check_open_unit("eps", eps), _check_open_unit("delta", delta)
+    eps, delta = check_open_unit("eps", eps), check_open_unit("delta", delta)
     log1m = math.log1p(-eps)
     return _smallest_n(lambda n: n * log1m <= math.log(delta), math.log(delta) / log1m)
 
@@ -217,7 +225,7 @@ def supported_statement(n: int, k_fail: int, delta: float = 0.05) -> dict:
         is one English sentence.
     """
     n, k_fail = int(n), int(k_fail)
-    delta = _check_open_unit("delta", delta)
+    delta = check_open_unit("delta", delta)
     if n < 1 or not 0 <= k_fail <= n:
         raise ValueError(f"need n >= 1 and 0 <= k_fail <= n, got n={n}, k_fail={k_fail}")
     p_hat = (n - k_fail) / n
@@ -247,104 +255,6 @@ def supported_statement(n: int, k_fail: int, delta: float = 0.05) -> dict:
         "zero_failure_eps": eps_0,
         "cp_lower": cp_lower,
         "text": text,
-    }
-
-
-def _last_safe_index(passes: np.ndarray) -> int:
-    """Index of the last amplitude such that it and every smaller one pass; -1 if the first fails."""
-    fails = np.flatnonzero(~passes)
-    return (passes.size if fails.size == 0 else int(fails[0])) - 1
-
-
-def slip_margin(
-    amplitudes: np.ndarray, successes: np.ndarray, trials: np.ndarray, eps: float = 0.05, conf: float = 0.95
-) -> dict:
-    """Largest slip amplitude at which the success rate stays ``>= 1 - eps``, from a batched sweep.
-
-    At amplitudes ``a_1 < ... < a_m`` (deg) the sweep observed ``k_j`` successes in ``n_j`` runs.
-    For a per-amplitude rate ``r_j`` the margin is::
-
-        a* = a_J,   J = max{ j : r_i >= 1 - eps for every i <= j }
-
-    i.e. the first amplitude that fails ends the safe range even if a larger one passes again
-    (noise or a genuinely non-monotone curve: the margin promises safety at every amplitude
-    below it). It is evaluated three times:
-
-    * ``margin`` with ``r_j = p_hat_j = k_j / n_j`` (point estimate);
-    * ``margin_lo`` with the Clopper-Pearson lower bound of ``p_j`` at ``conf`` (conservative);
-    * ``margin_hi`` with its upper bound (optimistic).
-
-    Because ``lo_j <= p_hat_j <= hi_j``, ``margin_lo <= margin <= margin_hi`` always.
-
-    Edge cases: if the smallest amplitude already fails, the margin is ``0`` (no tested amplitude
-    is known to be safe; amplitudes are magnitudes, ``a_1 >= 0``). If every amplitude passes,
-    the margin is the largest amplitude tested and ``censored`` is True: the true margin is at
-    least that (right-censored).
-
-    The grid itself limits the answer: the point-estimate crossing lies between ``margin`` and
-    the next amplitude tested, and ``resolution`` is that gap (``a_{J+1} - a_J``, with
-    ``a_0 = 0``); when censored, the last grid step ``a_m - a_{m-1}`` (NaN for a single
-    amplitude).
-
-    Args:
-        amplitudes: ``(m,)`` distinct slip amplitudes, deg, ``>= 0`` (sorted here if not).
-        successes: ``(m,)`` success counts ``k_j``.
-        trials: ``(m,)`` run counts ``n_j >= 1``.
-        eps: tolerated failure rate in (0, 1).
-        conf: two-sided confidence of the per-amplitude intervals.
-
-    Returns:
-        ``{"margin", "margin_lo", "margin_hi", "resolution", "censored", "eps", "table"}`` with
-        ``table`` one dict ``{"amplitude", "n", "k", "rate", "lo", "hi"}`` per amplitude, ascending.
-    """
-    eps = _check_open_unit("eps", eps)
-    a = np.asarray(amplitudes, dtype=float).reshape(-1)
-    k = np.asarray(successes).reshape(-1)
-    n = np.asarray(trials).reshape(-1)
-    if not a.size == k.size == n.size or a.size == 0:
-        raise ValueError(
-            f"amplitudes, successes and trials need the same non-zero length, got {a.size}, {k.size}, {n.size}"
-        )
-    if not np.all(np.isfinite(a)) or np.any(a < 0):
-        raise ValueError(f"amplitudes must be finite and >= 0, got {a}")
-    if np.any(n < 1) or np.any(k < 0) or np.any(k > n):
-        raise ValueError(f"need 0 <= successes <= trials and trials >= 1, got k={k}, n={n}")
-    order = np.argsort(a, kind="stable")
-    a, k, n = a[order], k[order].astype(int), n[order].astype(int)
-    if np.any(np.diff(a) == 0):
-        raise ValueError(f"amplitudes must be distinct, got {a}")
-    rate = k / n
-    lo, hi = np.array([clopper_pearson(kj, nj, conf) for kj, nj in zip(k, n)]).T
-    grid = np.concatenate([[0.0], a])  # a_0 = 0: the margin when the smallest amplitude fails
-
-    def margin_of(r):
-        return float(grid[_last_safe_index(r >= 1.0 - eps) + 1])
-
-    j = _last_safe_index(rate >= 1.0 - eps)
-    censored = j == a.size - 1
-    if censored:
-        resolution = float(a[-1] - a[-2]) if a.size > 1 else math.nan
-    else:
-        resolution = float(grid[j + 2] - grid[j + 1])
-    table = [
-        {
-            "amplitude": float(a[i]),
-            "n": int(n[i]),
-            "k": int(k[i]),
-            "rate": float(rate[i]),
-            "lo": float(lo[i]),
-            "hi": float(hi[i]),
-        }
-        for i in range(a.size)
-    ]
-    return {
-        "margin": margin_of(rate),
-        "margin_lo": margin_of(lo),
-        "margin_hi": margin_of(hi),
-        "resolution": resolution,
-        "censored": bool(censored),
-        "eps": eps,
-        "table": table,
     }
 
 

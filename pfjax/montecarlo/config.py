@@ -14,491 +14,53 @@ expected (with a "did you mean" for unknown keys).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, ClassVar, Literal, get_args
+from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from pfjax.config import POSITIVE, ConfigModel, Real, load_model
+from pfjax.config import ConfigModel, Real, load_model
 from pfjax.errors import MAX_SEED
+from pfjax.montecarlo.analysis_config import Axis, FalsifierSpec, MarginSpec, RareEventSpec
+from pfjax.montecarlo.dists import Dist, dist_field, nominal
+from pfjax.montecarlo.scenario_config import (
+    KINEMATIC_ONLY,
+    OU_REACH,
+    ST_ONLY,
+    InitialSpec,
+    NoiseSpec,
+    PathSpec,
+    SimSpec,
+    SlipSpec,
+    SuccessSpec,
+    VehicleSpec,
+)
 from pfjax.provenance import config_hash
-from pfjax.resources import check_steps
 
-Axis = Literal["rear", "front", "joint"]
-"""A slipping axle in the slip-margin sweep: rear, front, or joint (both)."""
-
-
-class Dist(ConfigModel):
-    """A distribution of one scalar (see module docstring)."""
-
-    dist: Literal["constant", "uniform", "normal", "truncnormal", "choice"]
-    value: Real | None = None
-    low: Real | None = None
-    high: Real | None = None
-    mean: Real | None = None
-    std: Real | None = None
-    values: list[Real] | None = None
-
-    @model_validator(mode="after")
-    def _check(self):
-        need = {
-            "constant": ("value",),
-            "uniform": ("low", "high"),
-            "normal": ("mean", "std"),
-            "truncnormal": ("mean", "std", "low", "high"),
-            "choice": ("values",),
-        }[self.dist]
-        for f in need:
-            if getattr(self, f) is None:
-                raise ValueError(f"dist '{self.dist}' needs '{f}'")
-        for f in ("value", "low", "high", "mean", "std", "values"):
-            if f not in need and getattr(self, f) is not None:
-                raise ValueError(f"dist '{self.dist}' does not use '{f}' (it takes {', '.join(need)})")
-        for f in ("value", "low", "high", "mean", "std"):
-            v = getattr(self, f)
-            if v is not None and not math.isfinite(v):
-                raise ValueError(f"'{f}' must be finite, got {v}")
-        if self.low is not None and self.high is not None and not self.low < self.high:
-            raise ValueError(f"needs low < high, got low={self.low:g}, high={self.high:g}")
-        if self.std is not None and not self.std > 0:
-            raise ValueError(f"needs std > 0, got {self.std:g}")
-        if self.dist == "truncnormal" and not self.low <= self.mean <= self.high:
-            raise ValueError(
-                f"needs low <= mean <= high (the mean of the normal it truncates), got mean={self.mean:g} "
-                f"outside [{self.low:g}, {self.high:g}]"
-            )
-        if self.values is not None and (not self.values or not all(math.isfinite(v) for v in self.values)):
-            raise ValueError("'values' must be a non-empty list of finite numbers")
-        return self
-
-    def number(self, name: str) -> float:
-        """The parameter ``name`` (``value``, ``low``, ``high``, ``mean`` or ``std``) of a distribution that
-        uses it (the validator guarantees it is set)."""
-        v = getattr(self, name)
-        if v is None:
-            raise ValueError(f"dist '{self.dist}' has no '{name}'")
-        return float(v)
-
-    def bounds(self) -> tuple[float, float]:
-        """Support of the distribution (inf for the normal)."""
-        if self.dist == "constant":
-            return self.number("value"), self.number("value")
-        if self.dist == "choice":
-            values = self.values or []
-            return min(values), max(values)
-        if self.dist == "normal":
-            return -math.inf, math.inf
-        return self.number("low"), self.number("high")
-
-
-def _as_dist(v: Any):
-    if isinstance(v, bool):
-        raise ValueError("expected a number or a distribution table")
-    if isinstance(v, (int, float)):
-        from pfjax.errors import number
-
-        try:
-            number("value", v)
-        except ValueError as e:
-            raise ValueError(str(e).removeprefix("value: ")) from None
-        return Dist(dist="constant", value=float(v))
-    return v
-
-
-def dist_field(default: float, description: str | None = None):
-    return Field(default_factory=lambda: Dist(dist="constant", value=default), description=description)
-
-
-class SimSpec(ConfigModel):
-    dt: Real = Field(0.005, ge=POSITIVE, description="RK4 integrator step, s")
-    horizon: Real = Field(20.0, ge=POSITIVE, description="simulated time per run, s")
-    control_every: int = Field(
-        1, ge=1, le=2_000_000, description="controller sampling period, integrator steps (zero-order hold)"
-    )
-    d_fail: Real = Field(10.0, ge=POSITIVE, description="|d| above which a run fails with status diverged, m")
-    steady_window: Real = Field(5.0, ge=POSITIVE, description="final part of the run for the steady-state errors, s")
-    settle_band: Real = Field(0.05, ge=POSITIVE, description="band on |d| for the settling time, m")
-
-    @model_validator(mode="after")
-    def _check(self):
-        if self.dt > self.horizon:
-            raise ValueError(f"dt: must be <= horizon ({self.horizon:g} s), got {self.dt:g}")
-        if self.steady_window > self.horizon:
-            raise ValueError(f"steady_window: must be <= horizon ({self.horizon:g} s), got {self.steady_window:g}")
-        check_steps(self.horizon, self.dt)
-        return self
-
-
-class SuccessSpec(ConfigModel):
-    band: Real = Field(0.05, ge=POSITIVE, description="a run succeeds if |d| stays within this band from from_s on, m")
-    from_s: Real = Field(15.0, ge=0, description="start of the success window, s")
-
-
-#: Keys of ``[vehicle]`` that only the kinematic model reads, and those only the ST model reads.
-KINEMATIC_ONLY = ("L", "delta_max_deg", "delta_rate_max_deg", "convention")
-ST_ONLY = ("params", "mu", "tau_delta_s", "k_v")
-
-
-class VehicleSpec(ConfigModel):
-    """The vehicle: ``model = "kinematic"`` (the slip model, slip declared by ``[slip]``;
-    :mod:`pfjax.sim.simulate`) or ``"st"`` (CommonRoad's single-track model, slip from linear tyre
-    forces; :mod:`pfjax.sim.dynamic`) with its parameter set ``params``, friction ``mu``, steering
-    actuator ``tau_delta_s`` and speed loop ``k_v``; its wheelbase and steering limit are the set's."""
-
-    model: Literal["kinematic", "st"] = Field(
-        "kinematic", description="vehicle model: kinematic (declared slip) or st (single-track, tyre forces)"
-    )
-    params: Literal["robot", "vehicle1", "vehicle2", "vehicle3"] = Field(
-        "robot", description="st: parameter set: robot (the 0.2 m robot) or CommonRoad's vehicle1-3"
-    )
-    mu: Dist | None = Field(
-        None, description="st: tyre-road friction coefficient (a distribution; default the parameter set's 1.0489)"
-    )
-    tau_delta_s: Real = Field(0.05, ge=POSITIVE, description="st: steering actuator time constant, s")
-    k_v: Real = Field(5.0, ge=POSITIVE, description="st: speed loop gain, 1/s")
-    speed: Dist = dist_field(1.0, "rear-axle speed, m/s (a distribution; st: the speed loop's reference)")
-    L: Dist = dist_field(0.2, "wheelbase, m (a distribution)")
-    delta_max_deg: Dist = dist_field(30.0, "steering limit, deg (a distribution)")
-    delta_rate_max_deg: Real | None = Field(
-        None, ge=POSITIVE, description="steering rate limit, deg/s (None or inf: none)"
-    )
-    convention: Literal["source", "lenain"] = Field(
-        "source", description="front-slip sign convention: source or lenain"
-    )
-
-    _coerce = field_validator("speed", "L", "delta_max_deg", "mu", mode="before")(
-        lambda v: v if v is None else _as_dist(v)
-    )
-    # "no limit" has one spelling, None, so the validated config is strict JSON (and hashes as such)
-    _no_limit = field_validator("delta_rate_max_deg", mode="before")(
-        lambda v: None if isinstance(v, float) and v == math.inf else v
-    )
-
-    @model_validator(mode="after")
-    def _check(self):
-        for name in ("speed", "L"):
-            lo, _ = getattr(self, name).bounds()
-            if not lo > 0:
-                raise ValueError(f"{name}: must be > 0 over its whole range, got a lower bound {lo:g}")
-        lo, hi = self.delta_max_deg.bounds()
-        if not (lo > 0 and hi < 90):
-            raise ValueError(f"delta_max_deg: must lie in (0, 90) deg, got range [{lo:g}, {hi:g}]")
-        if self.mu is not None:
-            lo, hi = self.mu.bounds()
-            if not (lo > 0 and hi <= 10):
-                raise ValueError(f"mu: must lie in (0, 10] over its whole range, got range [{lo:g}, {hi:g}]")
-        other, theirs = (ST_ONLY, "st") if self.model == "kinematic" else (KINEMATIC_ONLY, "kinematic")
-        for name in other:  # a value other than the default (a dumped config holds every key, at its default)
-            if getattr(self, name) != type(self).model_fields[name].get_default(call_default_factory=True):
-                why = (
-                    "the ST model's wheelbase and steering limit are its parameter set's (vehicle.params)"
-                    if theirs == "kinematic"
-                    else 'it is a setting of model = "st"'
-                )
-                raise ValueError(f'{name}: not with model = "{self.model}" ({why}); remove it')
-        return self
-
-    def st_params(self):
-        """The ST model's parameters (:class:`pfjax.models.single_track.STParams`, Python floats) of
-        ``params``, with ``mu`` at its nominal value (the distribution's value, mean or midpoint)."""
-        from pfjax.models.single_track import parameter_set
-
-        p = parameter_set(self.params)
-        return p if self.mu is None else p._replace(mu=nominal(self.mu))
-
-    def wheelbase_bounds(self) -> tuple[float, float]:
-        """The wheelbase's range, m (the kinematic model's ``L``, the ST set's ``l_f + l_r``)."""
-        if self.model == "kinematic":
-            return self.L.bounds()
-        p = self.st_params()
-        return p.l_f + p.l_r, p.l_f + p.l_r
-
-    def delta_max_deg_bounds(self) -> tuple[float, float]:
-        """The steering limit's range, deg."""
-        if self.model == "kinematic":
-            return self.delta_max_deg.bounds()
-        d = math.degrees(self.st_params().delta_max)
-        return d, d
-
-
-def nominal(d: Dist) -> float:
-    """A distribution's nominal value: its value, mean or midpoint."""
-    if d.dist == "constant":
-        return d.number("value")
-    if d.mean is not None:
-        return float(d.mean)
-    return 0.5 * (d.number("low") + d.number("high"))
-
-
-#: How far the Ornstein-Uhlenbeck slip term is taken to reach when the total slip is checked: its
-#: stationary std times this (a 6-sigma excursion has probability about 2e-9 per sample).
-OU_REACH = 6.0
-
-
-class SlipSpec(ConfigModel):
-    """Slip per run: ``constant`` (beta_*), ``step`` (beta_* before, + step_* at step_time_s),
-    ``sinusoid`` (beta_* mean + amp_* sin(2 pi freq_hz t + phase)), ``ou`` (Ornstein-Uhlenbeck around
-    beta_* with stationary std ou_sigma_deg and time constant ou_tau_s, sampled every seq_dt)."""
-
-    kind: Literal["constant", "step", "sinusoid", "ou"] = Field(
-        "constant", description="slip profile: constant, step, sinusoid or ou (Ornstein-Uhlenbeck)"
-    )
-    beta_r_deg: Dist = dist_field(0.0, "rear slip angle (constant part, or the mean), deg")
-    beta_f_deg: Dist = dist_field(0.0, "front slip angle (constant part, or the mean), deg")
-    step_time_s: Dist = dist_field(5.0, "step: time of the step, s")
-    step_r_deg: Dist = dist_field(0.0, "step: rear slip added at the step, deg")
-    step_f_deg: Dist = dist_field(0.0, "step: front slip added at the step, deg")
-    amp_r_deg: Dist = dist_field(0.0, "sinusoid: rear amplitude, deg")
-    amp_f_deg: Dist = dist_field(0.0, "sinusoid: front amplitude, deg")
-    freq_hz: Dist = dist_field(0.1, "sinusoid: frequency, Hz")
-    ou_sigma_deg: Dist = dist_field(0.0, "ou: stationary standard deviation, deg")
-    ou_tau_s: Dist = dist_field(1.0, "ou: time constant, s")
-    seq_dt: Real = Field(0.05, ge=POSITIVE, description="ou: sampling period of the slip sequence, s")
-
-    _coerce = field_validator(
-        "beta_r_deg",
-        "beta_f_deg",
-        "step_time_s",
-        "step_r_deg",
-        "step_f_deg",
-        "amp_r_deg",
-        "amp_f_deg",
-        "freq_hz",
-        "ou_sigma_deg",
-        "ou_tau_s",
-        mode="before",
-    )(lambda v: _as_dist(v))
-
-    @model_validator(mode="after")
-    def _check(self):
-        added = {"constant": None, "step": "step", "sinusoid": "amp", "ou": "ou_sigma"}[self.kind]
-        for axis in ("r", "f"):
-            lo, hi = getattr(self, f"beta_{axis}_deg").bounds()
-            reach = max(abs(lo), abs(hi))
-            if reach >= 90:
-                raise ValueError(
-                    f"beta_{axis}_deg: slip magnitudes must stay below 90 deg over the distribution's "
-                    f"support, got range [{lo:g}, {hi:g}]"
-                )
-            if added is None:
-                continue
-            name = f"{added}_{axis}_deg" if added != "ou_sigma" else "ou_sigma_deg"
-            alo, ahi = getattr(self, name).bounds()
-            if added == "step":  # before the step beta, after it beta + step
-                total = max(reach, abs(lo + alo), abs(hi + ahi))
-                rule = f"max |beta_{axis}_deg + {name}|"
-            elif added == "amp":  # beta + amp sin(.) reaches |beta| + |amp|
-                total = reach + max(abs(alo), abs(ahi))
-                rule = f"max |beta_{axis}_deg| + max |{name}|"
-            else:
-                if alo < 0:
-                    raise ValueError(f"{name}: must be >= 0, got a lower bound {alo:g}")
-                total = reach + OU_REACH * ahi
-                rule = f"max |beta_{axis}_deg| + {OU_REACH:g} max {name}"
-            if not total < 90:
-                raise ValueError(
-                    f"{name}: the total slip must stay below 90 deg over the distributions' support, "
-                    f"got {rule} = {total:g} deg"
-                )
-        for name in ("ou_tau_s", "freq_hz", "step_time_s"):
-            lo, _ = getattr(self, name).bounds()
-            if lo < 0 or (name == "ou_tau_s" and lo < POSITIVE):
-                raise ValueError(f"{name}: must be {'> 0' if name == 'ou_tau_s' else '>= 0'}, got a lower bound {lo:g}")
-        return self
-
-
-class InitialSpec(ConfigModel):
-    """Start pose relative to the path's nominal start: along-path offset, lateral offset, heading error."""
-
-    RENAMED: ClassVar[dict[str, str]] = {"start_s": "start_along_m"}
-    start_along_m: Dist = dist_field(0.0, "start, m along the path from its nominal start")
-    lateral_offset: Dist = dist_field(0.0, "start offset left of the path, m")
-    heading_error_deg: Dist = dist_field(0.0, "start heading error, deg")
-
-    _coerce = field_validator("start_along_m", "lateral_offset", "heading_error_deg", mode="before")(
-        lambda v: _as_dist(v)
-    )
-
-
-class NoiseSpec(ConfigModel):
-    """White Gaussian sensor noise on the measured rear-axle pose, drawn afresh at every integrator
-    step (:class:`pfjax.sim.simulate.SensorNoise`): the measured pose is the true one displaced by
-    ``e_d ~ N(0, sigma_d^2)`` (m) along the path's left normal at the closest point and rotated by
-    ``e_theta ~ N(0, sigma_theta_e_deg^2)`` (deg, converted to rad), so the measured lateral error
-    is ``d + e_d`` and the measured heading error ``theta_e + e_theta``. Every controller sees this
-    one noisy measurement: the state-feedback, PI, integral and rear-wheel controllers through
-    ``(d, theta_e)``, Stanley and pure pursuit through the noisy pose. The metrics use the true
-    errors. Both sigmas 0: no noise."""
-
-    sigma_d: Real = Field(0.0, ge=0, description="standard deviation of the measured lateral position, m")
-    sigma_theta_e_deg: Real = Field(0.0, ge=0, le=180, description="standard deviation of the measured heading, deg")
-
-
-class PathSpec(ConfigModel):
-    """A registered path kind (:data:`pfjax.paths.PATHS`): ``line``, ``parabola``, ``sine`` (the
-    source's), ``circle`` (radius), ``random`` (smooth random spline paths with |kappa| <=
-    curvature_margin * tan(delta_max) / L), ``spline`` (a natural cubic spline through the user's
-    ``points`` [[x, y], ...] in m, travelled from the first point), or any path registered with
-    :func:`pfjax.paths.register`."""
-
-    kind: str = Field(description="a registered path kind: line, parabola, sine, circle, random, spline, ...")
-    name: str | None = Field(None, description="label in outputs (default: the kind)")
-    radius: Dist = dist_field(2.0, "circle: radius, m")
-    length: Real = Field(40.0, ge=POSITIVE, description="random paths: length, m")
-    curvature_margin: Real = Field(
-        0.5, ge=POSITIVE, le=1, description="random paths: fraction of the followable curvature"
-    )
-    n_waypoints: int = Field(41, ge=4, le=10_000, description="random paths: spline waypoints")
-    points: list[list[Real]] | None = Field(None, description="spline: the points [[x, y], ...] it passes through, m")
-
-    _coerce = field_validator("radius", mode="before")(lambda v: _as_dist(v))
-
-    @field_validator("kind")
-    @classmethod
-    def _known_kind(cls, v):
-        from pfjax.paths import PATHS
-
-        if v not in PATHS:
-            raise ValueError(f"unknown path kind {v!r}; expected one of {', '.join(PATHS)}")
-        return v
-
-    @field_validator("points")
-    @classmethod
-    def _points(cls, v):
-        if v is None:
-            return v
-        if len(v) < 4:
-            raise ValueError(f"a spline needs at least 4 points [x, y], got {len(v)}")
-        for i, q in enumerate(v):
-            if len(q) != 2:
-                raise ValueError(f"[{i}]: expected a point [x, y], got {q}")
-            if not all(math.isfinite(c) for c in q):
-                raise ValueError(f"[{i}]: coordinates must be finite, got {q}")
-        for i in range(1, len(v)):
-            if math.dist(v[i], v[i - 1]) <= 0:
-                raise ValueError(
-                    f"[{i}]: repeats point [{i - 1}] {v[i]}; consecutive points must differ (arc length must increase)"
-                )
-            if i >= 2:
-                a = (v[i - 1][0] - v[i - 2][0], v[i - 1][1] - v[i - 2][1])
-                b = (v[i][0] - v[i - 1][0], v[i][1] - v[i - 1][1])
-                if a[0] * b[0] + a[1] * b[1] <= 0:
-                    raise ValueError(
-                        f"[{i}]: the path turns back by 90 deg or more at point [{i - 1}]; points must advance along the path"
-                    )
-        return v
-
-    @model_validator(mode="after")
-    def _check(self):
-        if self.kind == "circle" and not self.radius.bounds()[0] >= POSITIVE:
-            raise ValueError(
-                f"radius: must be > 0 m over its whole range, got a lower bound {self.radius.bounds()[0]:g}"
-            )
-        if (self.kind == "spline") != (self.points is not None):
-            raise ValueError(
-                "points: required for kind 'spline'"
-                if self.kind == "spline"
-                else f"points: only for kind 'spline', not {self.kind!r}"
-            )
-        return self
-
-    @property
-    def label(self) -> str:
-        return self.name or self.kind
-
-
-class MarginSpec(ConfigModel):
-    """Slip-margin sweep: at each amplitude A, ``n_per_amplitude`` runs per path with constant slip of
-    magnitude A (random sign) on the rear axle, the front axle, or both (``axes``); everything else
-    sampled as in the study. The margin is the largest A whose success rate (and every smaller A's)
-    stays >= 1 - eps."""
-
-    enabled: bool = Field(True, description="run the slip-margin sweep")
-    amplitudes_deg: list[Real] = Field(
-        default_factory=lambda: [0.0, 2.5, 5.0, 7.5, 10.0, 12.5, 15.0, 17.5, 20.0, 25.0, 30.0],
-        description="slip amplitudes A swept, deg",
-    )
-    n_per_amplitude: int = Field(200, ge=1, le=100_000_000, description="runs per amplitude, path, controller and axis")
-    eps: Real = Field(
-        0.05,
-        ge=POSITIVE,
-        lt=1,
-        description="tolerated failure rate: the margin is the largest A with success >= 1 - eps",
-    )
-    axes: list[Axis] = Field(
-        default_factory=lambda: list(get_args(Axis)), description="slipping axles: rear, front, joint (both)"
-    )
-
-    @field_validator("amplitudes_deg")
-    @classmethod
-    def _amps(cls, v):
-        if not v or any(not (0 <= a < 90) for a in v) or len(set(v)) != len(v):
-            raise ValueError(f"must be distinct amplitudes in [0, 90) deg, got {v}")
-        return sorted(v)
-
-    @model_validator(mode="after")
-    def _check(self):
-        if self.n_per_amplitude * len(self.amplitudes_deg) > 100_000_000:
-            raise ValueError(
-                f"n_per_amplitude: at most 1e8 runs per axis and path (n_per_amplitude x "
-                f"{len(self.amplitudes_deg)} amplitudes), got {self.n_per_amplitude * len(self.amplitudes_deg):.3g}"
-            )
-        return self
-
-
-class FalsifierSpec(ConfigModel):
-    """Worst-case search per controller (pfjax.falsification): gradient ascent over slip profiles bounded by
-    ``slip_bound_deg`` with frequencies up to ``f_max_hz`` and initial errors in the boxes
-    +-``lateral_offset`` m, +-``heading_error_deg``, on one path (its run 0's shape and vehicle),
-    against random search with the same number of rollouts."""
-
-    enabled: bool = Field(False, description="run the worst-case search")
-    path: str | None = Field(None, description="label of the path searched (default: the first path)")
-    slip_bound_deg: Real = Field(10.0, ge=POSITIVE, lt=90, description="bound on each axle's slip, deg")
-    f_max_hz: Real = Field(0.5, ge=0, le=10, description="slip bandwidth, Hz (0: constant slip)")
-    lateral_offset: Real = Field(0.5, ge=0, description="start offsets searched within +-this, m")
-    heading_error_deg: Real = Field(30.0, ge=0, lt=90, description="start heading errors searched within +-this, deg")
-    objective: Literal["iae", "ise", "itae", "max_abs_d", "late_max_abs_d"] = Field(
-        "iae", description="what the search maximises"
-    )
-    n_restarts: int = Field(8, ge=1, le=256, description="random starts of the gradient ascent")
-    steps: int = Field(40, ge=1, le=10_000, description="adam steps per start")
-
-
-class RareEventSpec(ConfigModel):
-    """Small failure probabilities per controller (:mod:`pfjax.rare`): a run fails where its status is
-    a failure or ``metric > threshold``; the estimator works on the margin ``threshold - metric``
-    over the study's uncertain inputs mapped to the standard-normal space (choices and paths as
-    strata, :mod:`pfjax.rare.transform`)."""
-
-    enabled: bool = Field(False, description="estimate each controller's failure probability")
-    method: Literal["is", "subset", "mc"] = Field(
-        "is", description="is (cross-entropy importance sampling), subset (subset simulation) or mc (plain)"
-    )
-    metric: Literal["late_max_abs_d", "max_abs_d", "steady_abs_d", "iae", "ise", "overshoot"] = Field(
-        "late_max_abs_d", description="per-run metric whose excess over threshold is a failure"
-    )
-    threshold: Real | None = Field(
-        None, ge=0, description="failure where metric > threshold (metric's unit; default success.band, m)"
-    )
-    target_rel_error: Real = Field(
-        0.1, gt=0, le=10, description="stop once the estimate's relative error (c.o.v.) is at most this"
-    )
-    max_rollouts: int = Field(100_000, ge=100, le=100_000_000, description="rollouts per controller at most")
-    n_per_level: int = Field(
-        2000, ge=100, le=10_000_000, description="is / subset: rollouts per cross-entropy or subset level"
-    )
-    n_components: int = Field(4, ge=1, le=64, description="is: Gaussians in the proposal mixture")
-    batch: int = Field(2000, ge=32, le=1_000_000, description="runs simulated at once (one compiled shape)")
-    seed: int = Field(0, ge=0, le=MAX_SEED, description="seed of the estimator's draws")
-
-    @model_validator(mode="after")
-    def _check(self):
-        if self.method == "subset" and self.n_per_level % 10:
-            raise ValueError(f"n_per_level: subset simulation needs a multiple of 10, got {self.n_per_level}")
-        return self
+__all__ = [
+    "KINEMATIC_ONLY",
+    "OU_REACH",
+    "ST_ONLY",
+    "Axis",
+    "ControllerSpec",
+    "Dist",
+    "FalsifierSpec",
+    "InitialSpec",
+    "MarginSpec",
+    "NoiseSpec",
+    "PathSpec",
+    "RareEventSpec",
+    "SimSpec",
+    "SlipSpec",
+    "StudySpec",
+    "SuccessSpec",
+    "VehicleSpec",
+    "dist_field",
+    "load_study",
+    "nominal",
+    "study_hash",
+]
 
 
 class ControllerSpec(ConfigModel):

@@ -18,11 +18,11 @@ import numpy as np
 import pandas as pd
 
 import pfjax
+from pfjax.metrics.margins import slip_margin
 from pfjax.metrics.robustness import (
     failure_drivers,
     hoeffding_n,
     metric_quantiles,
-    slip_margin,
     success_summary,
     supported_statement,
     zero_failure_n,

@@ -12,219 +12,23 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
-from matplotlib.ticker import LogLocator, NullLocator
 
-_SPARE = [
-    "#ff7f0e",
-    "#e377c2",
-    "#bcbd22",
-    "#7f7f7f",
-    "#393b79",
-    "#637939",
-    "#8c6d31",
-    "#843c39",
-    "#7b4173",
-    "#aec7e8",
-    "#ffbb78",
-    "#98df8a",
-    "#ff9896",
-    "#c5b0d5",
-    "#c49c94",
-    "#f7b6d2",
-    "#dbdb8d",
-    "#9edae5",
+from pfjax.report.figure_style import AXIS_TITLE, controller_colors, freeze_layout, log_axis, pct_axis
+from pfjax.report.headline_figure import headline_figure
+from pfjax.report.study_format import fmt_margin
+
+__all__ = [
+    "AXIS_TITLE",
+    "PREDICTION_GRID",
+    "controller_colors",
+    "distribution_figure",
+    "fmt_margin",
+    "freeze_layout",
+    "headline_figure",
+    "margin_figure",
+    "slip_map_figure",
+    "success_by_param_figure",
 ]
-
-AXIS_TITLE = {
-    "rear": "rear axle only (β_r = ±A)",
-    "front": "front axle only (β_f = ±A)",
-    "joint": "both axles (β_r = ±A, β_f = ±A)",
-}
-
-
-def fmt_margin(m: dict | None) -> str:
-    """A slip margin with its interval: ``"5° [2.5, 7.5]"``, ``"≥ 20° [20, 20]"`` when censored."""
-    if not m:
-        return "—"
-    if m.get("fails_at_smallest"):
-        return f"none: fails at {m['table'][0]['amplitude']:g}°"
-    return f"{'≥ ' if m['censored'] else ''}{m['margin']:g}° [{m['margin_lo']:g}, {m['margin_hi']:g}]"
-
-
-def controller_colors(controllers: list[dict]) -> dict[str, str]:
-    """One colour per controller: its type's colour (:func:`pfjax.controllers.style`), a spare one if
-    already taken.
-
-    Args:
-        controllers: the study config's controller entries (``name``, ``type``).
-    """
-    from pfjax.controllers import style
-
-    used, out = set(), {}
-    spare = list(_SPARE)
-    for i, c in enumerate(controllers):
-        col = style(c.get("type", "")).get("color")
-        if col is None or col in used:
-            col = next((s for s in spare if s not in used), spare[i % len(spare)])
-        used.add(col)
-        out[c["name"]] = col
-    return out
-
-
-def freeze_layout(fig: Figure) -> Figure:
-    """Run the figure's constrained layout once and keep it, so that saving the figure twice (PNG
-    and SVG) does not lay it out twice (about a third of the drawing time)."""
-    engine = fig.get_layout_engine()
-    if engine is not None:
-        engine.execute(fig)
-        fig.set_layout_engine("none")
-    return fig
-
-
-def _log_axis(ax, axis="x"):
-    """Log scale with plain tick labels at 1, 2, 5 x 10^k."""
-    ax.set_xscale("log") if axis == "x" else ax.set_yscale("log")
-    a = ax.xaxis if axis == "x" else ax.yaxis
-    lo, hi = ax.get_xlim() if axis == "x" else ax.get_ylim()
-    decades = np.log10(hi / lo) if lo > 0 and hi > lo else 1.0
-    subs = (1.0, 2.0, 5.0) if decades <= 2.2 else (1.0, 3.0) if decades <= 3.5 else (1.0,)
-    a.set_major_locator(LogLocator(base=10, subs=subs))
-    a.set_major_formatter(lambda v, _: f"{v:g}")
-    a.set_minor_locator(NullLocator())
-
-
-def _fmt_pct_axis(ax, axis="x"):
-    (ax.xaxis if axis == "x" else ax.yaxis).set_major_formatter(
-        lambda v, _: f"{100 * v:.10g}" if -1e-9 <= v <= 1 + 1e-9 else ""
-    )
-
-
-# ------------------------------------------------------------------------------- headline
-
-
-def headline_figure(summary: dict, colors: dict[str, str]) -> Figure:
-    """Three panels sharing one row per controller: success rate with its 95 % Clopper-Pearson
-    interval (pooled, and per path as small markers), slip margin per axis with ``[lo, hi]``
-    (an arrow when censored: the margin is at least the largest amplitude tested), and the IAE
-    quantiles (box p25-p75, whiskers p05-p95, tick the median, diamond the mean)."""
-    ctrl = summary["controllers"]
-    names = list(ctrl)
-    y = np.arange(len(names))[::-1].astype(float)
-    fig = Figure(figsize=(14, 1.5 + 0.8 * len(names)), layout="constrained")
-    ax = fig.subplots(1, 3, sharey=True, gridspec_kw={"width_ratios": [1.15, 1.0, 1.0]})
-
-    a = ax[0]
-    paths = summary.get("paths", [])
-    lows = []
-    for yi, n in zip(y, names):
-        c = ctrl[n]
-        lo, hi = c["success_ci95"]
-        r = c["success_rate"]
-        lows.append(lo)
-        a.errorbar([r], [yi], xerr=[[r - lo], [hi - r]], fmt="o", ms=8, color=colors[n], capsize=4, lw=2)
-        for j, p in enumerate(paths if len(paths) > 1 else []):
-            pp = c["per_path"].get(p)
-            if pp:
-                yy = yi - 0.12 - 0.24 * j / max(1, len(paths) - 1)
-                plo, phi = pp["success_ci95"]
-                lows.append(plo)
-                a.errorbar(
-                    [pp["success_rate"]],
-                    [yy],
-                    xerr=[[pp["success_rate"] - plo], [phi - pp["success_rate"]]],
-                    fmt="s",
-                    ms=3.5,
-                    color=colors[n],
-                    alpha=0.55,
-                    lw=0.8,
-                    capsize=0,
-                )
-                right = pp["success_rate"] > 0.85  # near 100 %: label on the left, inside the panel
-                a.annotate(
-                    p,
-                    (plo if right else pp["success_rate"], yy),
-                    xytext=(-4 if right else 4, 0),
-                    textcoords="offset points",
-                    fontsize=6,
-                    va="center",
-                    ha="right" if right else "left",
-                    color="0.35",
-                )
-        a.annotate(f"{100 * r:.2f} %", (r, yi), xytext=(0, 7), textcoords="offset points", ha="center", fontsize=8.5)
-    left = max(0.0, min(lows) - 0.05 * max(1e-3, 1 - min(lows)) - 0.01) if lows else 0.0
-    a.set_xlim(left, 1.0 + (0.1 if len(paths) > 1 else 0.03) * (1.0 - left))
-    _fmt_pct_axis(a)
-    a.set(xlabel="success rate [%]", title="success rate, 95 % CI" + (" (small: per path)" if len(paths) > 1 else ""))
-    a.set_yticks(y, names)
-    a.grid(alpha=0.3, axis="x")
-
-    a = ax[1]
-    axes = [x for x in ("rear", "front", "joint") if any(x in ctrl[n].get("slip_margin", {}) for n in names)]
-    if axes:
-        markers = {"rear": "o", "front": "s", "joint": "D"}
-        top, eps = 1.0, None
-        for yi, n in zip(y, names):
-            for j, x in enumerate(axes):
-                m = ctrl[n].get("slip_margin", {}).get(x)
-                if m is None:
-                    continue
-                eps = m["eps"]
-                yy = yi + 0.28 - 0.56 * (j + 0.5) / len(axes)
-                a.errorbar(
-                    [m["margin"]],
-                    [yy],
-                    xerr=[[m["margin"] - m["margin_lo"]], [m["margin_hi"] - m["margin"]]],
-                    fmt=markers[x],
-                    ms=6,
-                    color=colors[n],
-                    capsize=3,
-                    lw=1.5,
-                    mfc="white" if m["censored"] else colors[n],
-                )
-                label = (
-                    f"{x}: fails at {m['table'][0]['amplitude']:g}°"
-                    if m.get("fails_at_smallest")
-                    else f"{x} {'≥ ' if m['censored'] else ''}{m['margin']:g}°"
-                )
-                a.annotate(
-                    label, (m["margin_hi"], yy), xytext=(6, 0), textcoords="offset points", fontsize=7, va="center"
-                )
-                top = max(top, m["margin_hi"])
-        a.set_xlim(-0.03 * top - 0.3, 1.3 * top + 1)
-        a.set_title("slip margin [lo, hi]" + (f", success ≥ {100 * (1 - eps):g} %" if eps else ""))
-    else:
-        a.text(
-            0.5, 0.5, "no slip-margin sweep in this study", ha="center", va="center", transform=a.transAxes, color="0.4"
-        )
-        a.set_title("slip margin")
-    a.set(xlabel="largest safe slip amplitude A [deg]")
-    a.grid(alpha=0.3, axis="x")
-
-    a = ax[2]
-    spread = []
-    for yi, n in zip(y, names):
-        q = ctrl[n]["quantiles"]["iae"]
-        if not q.get("n_finite"):
-            continue
-        spread += [q["q05"], q["q95"]]
-        c = colors[n]
-        a.plot([q["q05"], q["q95"]], [yi, yi], color=c, lw=1.2)
-        a.fill_betweenx([yi - 0.18, yi + 0.18], q["q25"], q["q75"], color=c, alpha=0.45, lw=0)
-        a.plot([q["q50"]] * 2, [yi - 0.22, yi + 0.22], color=c, lw=2.2)
-        a.plot([q["mean"]], [yi], "D", color="k", ms=4)
-    log = bool(spread) and min(spread) > 0 and max(spread) > 10 * min(spread)
-    if log:
-        _log_axis(a)
-    a.set(xlabel="IAE = ∫|d| dt [m·s]" + (", log scale" if log else ""), title="IAE: p05–p95, p25–p75, median, ◆ mean")
-    a.grid(alpha=0.3, axis="x")
-    fig.suptitle(
-        f"Study '{summary['study']}': {summary.get('n_runs_per_controller_and_path', '?')} runs per "
-        f"controller and path ({len(paths)} path{'s' if len(paths) != 1 else ''})"
-    )
-    return fig
-
-
-# ------------------------------------------------------------------------------- distributions
 
 
 def _grid(values: np.ndarray, log: bool, n: int):
@@ -309,7 +113,7 @@ def distribution_figure(
                 e.plot([], [], color=colors[name], lw=1.8, label=lab + " (no run reached the end)")
         for a in (h, e):
             if log:
-                _log_axis(a)
+                log_axis(a)
             if band is not None:
                 a.axvline(band, color="k", ls="--", lw=1, label=f"success band: {band:g} {unit}" if a is e else None)
             a.grid(alpha=0.3)
@@ -364,7 +168,7 @@ def margin_figure(summary: dict, colors: dict[str, str]) -> Figure | None:
                 fontsize=7,
             )
         a.set(title=AXIS_TITLE[x], xlabel="slip amplitude A [deg]", ylim=(-0.02, 1.04))
-        _fmt_pct_axis(a, "y")
+        pct_axis(a, "y")
         a.grid(alpha=0.3)
         a.legend(fontsize=7, loc="best")
     ax[0].set_ylabel("success rate [%]")
@@ -512,7 +316,7 @@ def success_by_param_figure(summary: dict, colors: dict[str, str], ncols: int = 
             r = t["success_rate"].to_numpy(float)
             a.errorbar(x, r, yerr=[r - lo, hi - r], fmt="o-", ms=3.5, lw=1.2, capsize=2, color=colors[name], label=name)
         a.set(xlabel=PARAM_LABEL.get(p, p), ylim=(-0.03, 1.03))
-        _fmt_pct_axis(a, "y")
+        pct_axis(a, "y")
         a.grid(alpha=0.3)
     for a in ax[len(params) :]:
         a.set_visible(False)

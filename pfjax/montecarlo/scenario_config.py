@@ -1,0 +1,300 @@
+"""The scenario sections of a Monte Carlo study's config: simulation and success criterion,
+vehicle, slip, initial condition, measurement noise and paths (:mod:`pfjax.montecarlo.config`)."""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar, Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from pfjax.config import POSITIVE, ConfigModel, Real
+from pfjax.montecarlo.dists import Dist, as_dist, dist_field, nominal
+from pfjax.resources import check_steps
+
+
+class SimSpec(ConfigModel):
+    dt: Real = Field(0.005, ge=POSITIVE, description="RK4 integrator step, s")
+    horizon: Real = Field(20.0, ge=POSITIVE, description="simulated time per run, s")
+    control_every: int = Field(
+        1, ge=1, le=2_000_000, description="controller sampling period, integrator steps (zero-order hold)"
+    )
+    d_fail: Real = Field(10.0, ge=POSITIVE, description="|d| above which a run fails with status diverged, m")
+    steady_window: Real = Field(5.0, ge=POSITIVE, description="final part of the run for the steady-state errors, s")
+    settle_band: Real = Field(0.05, ge=POSITIVE, description="band on |d| for the settling time, m")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.dt > self.horizon:
+            raise ValueError(f"dt: must be <= horizon ({self.horizon:g} s), got {self.dt:g}")
+        if self.steady_window > self.horizon:
+            raise ValueError(f"steady_window: must be <= horizon ({self.horizon:g} s), got {self.steady_window:g}")
+        check_steps(self.horizon, self.dt)
+        return self
+
+
+class SuccessSpec(ConfigModel):
+    band: Real = Field(0.05, ge=POSITIVE, description="a run succeeds if |d| stays within this band from from_s on, m")
+    from_s: Real = Field(15.0, ge=0, description="start of the success window, s")
+
+
+#: Keys of ``[vehicle]`` that only the kinematic model reads, and those only the ST model reads.
+KINEMATIC_ONLY = ("L", "delta_max_deg", "delta_rate_max_deg", "convention")
+ST_ONLY = ("params", "mu", "tau_delta_s", "k_v")
+
+
+class VehicleSpec(ConfigModel):
+    """The vehicle: ``model = "kinematic"`` (the slip model, slip declared by ``[slip]``;
+    :mod:`pfjax.sim.simulate`) or ``"st"`` (CommonRoad's single-track model, slip from linear tyre
+    forces; :mod:`pfjax.sim.dynamic`) with its parameter set ``params``, friction ``mu``, steering
+    actuator ``tau_delta_s`` and speed loop ``k_v``; its wheelbase and steering limit are the set's."""
+
+    model: Literal["kinematic", "st"] = Field(
+        "kinematic", description="vehicle model: kinematic (declared slip) or st (single-track, tyre forces)"
+    )
+    params: Literal["robot", "vehicle1", "vehicle2", "vehicle3"] = Field(
+        "robot", description="st: parameter set: robot (the 0.2 m robot) or CommonRoad's vehicle1-3"
+    )
+    mu: Dist | None = Field(
+        None, description="st: tyre-road friction coefficient (a distribution; default the parameter set's 1.0489)"
+    )
+    tau_delta_s: Real = Field(0.05, ge=POSITIVE, description="st: steering actuator time constant, s")
+    k_v: Real = Field(5.0, ge=POSITIVE, description="st: speed loop gain, 1/s")
+    speed: Dist = dist_field(1.0, "rear-axle speed, m/s (a distribution; st: the speed loop's reference)")
+    L: Dist = dist_field(0.2, "wheelbase, m (a distribution)")
+    delta_max_deg: Dist = dist_field(30.0, "steering limit, deg (a distribution)")
+    delta_rate_max_deg: Real | None = Field(
+        None, ge=POSITIVE, description="steering rate limit, deg/s (None or inf: none)"
+    )
+    convention: Literal["source", "lenain"] = Field(
+        "source", description="front-slip sign convention: source or lenain"
+    )
+
+    _coerce = field_validator("speed", "L", "delta_max_deg", "mu", mode="before")(
+        lambda v: v if v is None else as_dist(v)
+    )
+    # "no limit" has one spelling, None, so the validated config is strict JSON (and hashes as such)
+    _no_limit = field_validator("delta_rate_max_deg", mode="before")(
+        lambda v: None if isinstance(v, float) and v == math.inf else v
+    )
+
+    @model_validator(mode="after")
+    def _check(self):
+        for name in ("speed", "L"):
+            lo, _ = getattr(self, name).bounds()
+            if not lo > 0:
+                raise ValueError(f"{name}: must be > 0 over its whole range, got a lower bound {lo:g}")
+        lo, hi = self.delta_max_deg.bounds()
+        if not (lo > 0 and hi < 90):
+            raise ValueError(f"delta_max_deg: must lie in (0, 90) deg, got range [{lo:g}, {hi:g}]")
+        if self.mu is not None:
+            lo, hi = self.mu.bounds()
+            if not (lo > 0 and hi <= 10):
+                raise ValueError(f"mu: must lie in (0, 10] over its whole range, got range [{lo:g}, {hi:g}]")
+        other, theirs = (ST_ONLY, "st") if self.model == "kinematic" else (KINEMATIC_ONLY, "kinematic")
+        for name in other:  # a value other than the default (a dumped config holds every key, at its default)
+            if getattr(self, name) != type(self).model_fields[name].get_default(call_default_factory=True):
+                why = (
+                    "the ST model's wheelbase and steering limit are its parameter set's (vehicle.params)"
+                    if theirs == "kinematic"
+                    else 'it is a setting of model = "st"'
+                )
+                raise ValueError(f'{name}: not with model = "{self.model}" ({why}); remove it')
+        return self
+
+    def st_params(self):
+        """The ST model's parameters (:class:`pfjax.models.single_track.STParams`, Python floats) of
+        ``params``, with ``mu`` at its nominal value (the distribution's value, mean or midpoint)."""
+        from pfjax.models.single_track import parameter_set
+
+        p = parameter_set(self.params)
+        return p if self.mu is None else p._replace(mu=nominal(self.mu))
+
+    def wheelbase_bounds(self) -> tuple[float, float]:
+        """The wheelbase's range, m (the kinematic model's ``L``, the ST set's ``l_f + l_r``)."""
+        if self.model == "kinematic":
+            return self.L.bounds()
+        p = self.st_params()
+        return p.l_f + p.l_r, p.l_f + p.l_r
+
+    def delta_max_deg_bounds(self) -> tuple[float, float]:
+        """The steering limit's range, deg."""
+        if self.model == "kinematic":
+            return self.delta_max_deg.bounds()
+        d = math.degrees(self.st_params().delta_max)
+        return d, d
+
+
+OU_REACH = 6.0
+
+
+class SlipSpec(ConfigModel):
+    """Slip per run: ``constant`` (beta_*), ``step`` (beta_* before, + step_* at step_time_s),
+    ``sinusoid`` (beta_* mean + amp_* sin(2 pi freq_hz t + phase)), ``ou`` (Ornstein-Uhlenbeck around
+    beta_* with stationary std ou_sigma_deg and time constant ou_tau_s, sampled every seq_dt)."""
+
+    kind: Literal["constant", "step", "sinusoid", "ou"] = Field(
+        "constant", description="slip profile: constant, step, sinusoid or ou (Ornstein-Uhlenbeck)"
+    )
+    beta_r_deg: Dist = dist_field(0.0, "rear slip angle (constant part, or the mean), deg")
+    beta_f_deg: Dist = dist_field(0.0, "front slip angle (constant part, or the mean), deg")
+    step_time_s: Dist = dist_field(5.0, "step: time of the step, s")
+    step_r_deg: Dist = dist_field(0.0, "step: rear slip added at the step, deg")
+    step_f_deg: Dist = dist_field(0.0, "step: front slip added at the step, deg")
+    amp_r_deg: Dist = dist_field(0.0, "sinusoid: rear amplitude, deg")
+    amp_f_deg: Dist = dist_field(0.0, "sinusoid: front amplitude, deg")
+    freq_hz: Dist = dist_field(0.1, "sinusoid: frequency, Hz")
+    ou_sigma_deg: Dist = dist_field(0.0, "ou: stationary standard deviation, deg")
+    ou_tau_s: Dist = dist_field(1.0, "ou: time constant, s")
+    seq_dt: Real = Field(0.05, ge=POSITIVE, description="ou: sampling period of the slip sequence, s")
+
+    _coerce = field_validator(
+        "beta_r_deg",
+        "beta_f_deg",
+        "step_time_s",
+        "step_r_deg",
+        "step_f_deg",
+        "amp_r_deg",
+        "amp_f_deg",
+        "freq_hz",
+        "ou_sigma_deg",
+        "ou_tau_s",
+        mode="before",
+    )(lambda v: as_dist(v))
+
+    @model_validator(mode="after")
+    def _check(self):
+        added = {"constant": None, "step": "step", "sinusoid": "amp", "ou": "ou_sigma"}[self.kind]
+        for axis in ("r", "f"):
+            lo, hi = getattr(self, f"beta_{axis}_deg").bounds()
+            reach = max(abs(lo), abs(hi))
+            if reach >= 90:
+                raise ValueError(
+                    f"beta_{axis}_deg: slip magnitudes must stay below 90 deg over the distribution's "
+                    f"support, got range [{lo:g}, {hi:g}]"
+                )
+            if added is None:
+                continue
+            name = f"{added}_{axis}_deg" if added != "ou_sigma" else "ou_sigma_deg"
+            alo, ahi = getattr(self, name).bounds()
+            if added == "step":  # before the step beta, after it beta + step
+                total = max(reach, abs(lo + alo), abs(hi + ahi))
+                rule = f"max |beta_{axis}_deg + {name}|"
+            elif added == "amp":  # beta + amp sin(.) reaches |beta| + |amp|
+                total = reach + max(abs(alo), abs(ahi))
+                rule = f"max |beta_{axis}_deg| + max |{name}|"
+            else:
+                if alo < 0:
+                    raise ValueError(f"{name}: must be >= 0, got a lower bound {alo:g}")
+                total = reach + OU_REACH * ahi
+                rule = f"max |beta_{axis}_deg| + {OU_REACH:g} max {name}"
+            if not total < 90:
+                raise ValueError(
+                    f"{name}: the total slip must stay below 90 deg over the distributions' support, "
+                    f"got {rule} = {total:g} deg"
+                )
+        for name in ("ou_tau_s", "freq_hz", "step_time_s"):
+            lo, _ = getattr(self, name).bounds()
+            if lo < 0 or (name == "ou_tau_s" and lo < POSITIVE):
+                raise ValueError(f"{name}: must be {'> 0' if name == 'ou_tau_s' else '>= 0'}, got a lower bound {lo:g}")
+        return self
+
+
+class InitialSpec(ConfigModel):
+    """Start pose relative to the path's nominal start: along-path offset, lateral offset, heading error."""
+
+    RENAMED: ClassVar[dict[str, str]] = {"start_s": "start_along_m"}
+    start_along_m: Dist = dist_field(0.0, "start, m along the path from its nominal start")
+    lateral_offset: Dist = dist_field(0.0, "start offset left of the path, m")
+    heading_error_deg: Dist = dist_field(0.0, "start heading error, deg")
+
+    _coerce = field_validator("start_along_m", "lateral_offset", "heading_error_deg", mode="before")(
+        lambda v: as_dist(v)
+    )
+
+
+class NoiseSpec(ConfigModel):
+    """White Gaussian sensor noise on the measured rear-axle pose, drawn afresh at every integrator
+    step (:class:`pfjax.sim.simulate.SensorNoise`): the measured pose is the true one displaced by
+    ``e_d ~ N(0, sigma_d^2)`` (m) along the path's left normal at the closest point and rotated by
+    ``e_theta ~ N(0, sigma_theta_e_deg^2)`` (deg, converted to rad), so the measured lateral error
+    is ``d + e_d`` and the measured heading error ``theta_e + e_theta``. Every controller sees this
+    one noisy measurement: the state-feedback, PI, integral and rear-wheel controllers through
+    ``(d, theta_e)``, Stanley and pure pursuit through the noisy pose. The metrics use the true
+    errors. Both sigmas 0: no noise."""
+
+    sigma_d: Real = Field(0.0, ge=0, description="standard deviation of the measured lateral position, m")
+    sigma_theta_e_deg: Real = Field(0.0, ge=0, le=180, description="standard deviation of the measured heading, deg")
+
+
+class PathSpec(ConfigModel):
+    """A registered path kind (:data:`pfjax.paths.PATHS`): ``line``, ``parabola``, ``sine`` (the
+    source's), ``circle`` (radius), ``random`` (smooth random spline paths with |kappa| <=
+    curvature_margin * tan(delta_max) / L), ``spline`` (a natural cubic spline through the user's
+    ``points`` [[x, y], ...] in m, travelled from the first point), or any path registered with
+    :func:`pfjax.paths.register`."""
+
+    kind: str = Field(description="a registered path kind: line, parabola, sine, circle, random, spline, ...")
+    name: str | None = Field(None, description="label in outputs (default: the kind)")
+    radius: Dist = dist_field(2.0, "circle: radius, m")
+    length: Real = Field(40.0, ge=POSITIVE, description="random paths: length, m")
+    curvature_margin: Real = Field(
+        0.5, ge=POSITIVE, le=1, description="random paths: fraction of the followable curvature"
+    )
+    n_waypoints: int = Field(41, ge=4, le=10_000, description="random paths: spline waypoints")
+    points: list[list[Real]] | None = Field(None, description="spline: the points [[x, y], ...] it passes through, m")
+
+    _coerce = field_validator("radius", mode="before")(lambda v: as_dist(v))
+
+    @field_validator("kind")
+    @classmethod
+    def _known_kind(cls, v):
+        from pfjax.paths import PATHS
+
+        if v not in PATHS:
+            raise ValueError(f"unknown path kind {v!r}; expected one of {', '.join(PATHS)}")
+        return v
+
+    @field_validator("points")
+    @classmethod
+    def _points(cls, v):
+        if v is None:
+            return v
+        if len(v) < 4:
+            raise ValueError(f"a spline needs at least 4 points [x, y], got {len(v)}")
+        for i, q in enumerate(v):
+            if len(q) != 2:
+                raise ValueError(f"[{i}]: expected a point [x, y], got {q}")
+            if not all(math.isfinite(c) for c in q):
+                raise ValueError(f"[{i}]: coordinates must be finite, got {q}")
+        for i in range(1, len(v)):
+            if math.dist(v[i], v[i - 1]) <= 0:
+                raise ValueError(
+                    f"[{i}]: repeats point [{i - 1}] {v[i]}; consecutive points must differ (arc length must increase)"
+                )
+            if i >= 2:
+                a = (v[i - 1][0] - v[i - 2][0], v[i - 1][1] - v[i - 2][1])
+                b = (v[i][0] - v[i - 1][0], v[i][1] - v[i - 1][1])
+                if a[0] * b[0] + a[1] * b[1] <= 0:
+                    raise ValueError(
+                        f"[{i}]: the path turns back by 90 deg or more at point [{i - 1}]; points must advance along the path"
+                    )
+        return v
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.kind == "circle" and not self.radius.bounds()[0] >= POSITIVE:
+            raise ValueError(
+                f"radius: must be > 0 m over its whole range, got a lower bound {self.radius.bounds()[0]:g}"
+            )
+        if (self.kind == "spline") != (self.points is not None):
+            raise ValueError(
+                "points: required for kind 'spline'"
+                if self.kind == "spline"
+                else f"points: only for kind 'spline', not {self.kind!r}"
+            )
+        return self
+
+    @property
+    def label(self) -> str:
+        return self.name or self.kind
