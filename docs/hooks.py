@@ -2,8 +2,9 @@
 
 - ``<!-- config-reference -->``: every key of a study config (:class:`pfjax.montecarlo.config.StudySpec`)
   with its default and its description (units included), read from the pydantic schema;
-  ``<!-- tracking-config-reference -->`` the same for the vehicle-tracking study
-  (:class:`pfjax.tracking.study_config.TrackingStudy`);
+  ``<!-- paper-config-reference -->`` and ``<!-- tracking-config-reference -->`` the same for the
+  paper-reproduction and vehicle-tracking studies (:class:`pfjax.reproduce.paper_config.PaperStudy`,
+  :class:`pfjax.tracking.study_config.TrackingStudy`);
 - ``<!-- column-reference -->``: every column of the run and margin tables with its unit and meaning
   (:data:`pfjax.tables.COLUMNS`, the same metadata the Parquet files carry);
 - ``<!-- controller-reference -->`` and ``<!-- path-reference -->``: the registries.
@@ -65,6 +66,12 @@ def config_reference() -> str:
     return _key_table(StudySpec)
 
 
+def paper_config_reference() -> str:
+    from pfjax.reproduce.paper_config import PaperStudy
+
+    return _key_table(PaperStudy)
+
+
 def tracking_config_reference() -> str:
     from pfjax.tracking.study_config import TrackingStudy
 
@@ -105,6 +112,7 @@ def path_reference() -> str:
 MARKERS = {
     "<!-- config-reference -->": config_reference,
     "<!-- column-reference -->": column_reference,
+    "<!-- paper-config-reference -->": paper_config_reference,
     "<!-- tracking-config-reference -->": tracking_config_reference,
     "<!-- controller-reference -->": controller_reference,
     "<!-- path-reference -->": path_reference,

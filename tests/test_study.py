@@ -11,7 +11,6 @@ and the source's published design values (docs/reproductions/path-following.md Â
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import os
@@ -24,7 +23,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pfjax.config import load
 from pfjax.provenance import config_hash
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -81,16 +79,24 @@ def summary(runs):
     return json.loads(text, parse_constant=no_constants)
 
 
-def study_defaults():
-    spec = importlib.util.spec_from_file_location("paper_reproduction_for_test", STUDY)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.DEFAULTS
+def study_config():
+    from pfjax.reproduce.paper_config import load
+
+    return load(TOML, SETS).model_dump(mode="json")
 
 
 def test_outputs_exist(runs):
     out, _, r = runs
-    for name in ("summary.json", "runs.parquet", "runs.csv", "pi_readings.csv", "stability.parquet", "report.md"):
+    files = (
+        "summary.json",
+        "runs.parquet",
+        "runs.csv",
+        "pi_readings.csv",
+        "stability.parquet",
+        "report.md",
+        "report.html",
+    )
+    for name in files:
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     pngs = sorted((out / "figures").glob("*.png"))
     assert {p.stem for p in pngs} >= {
@@ -113,7 +119,7 @@ def test_outputs_exist(runs):
 
 def test_summary_stamp_and_config(summary):
     assert summary["study"] == "paper_reproduction"
-    cfg = load(study_defaults(), TOML, SETS)
+    cfg = study_config()
     assert summary["config"] == cfg
     assert summary["config_sha256"] == config_hash(cfg)
     assert summary["config"]["sim"]["horizon"] == 6.0 and summary["config"]["stability"]["n"] == 3
@@ -209,3 +215,19 @@ def test_deterministic(runs):
     for s in (sa, sb):
         s.pop("wall_s")
     assert sa == sb
+
+
+def test_report_md_and_html_carry_the_headline_numbers(runs, summary):
+    """report.md and report.html are one document: both show the design's gain, the verdicts and
+    the stability fractions of summary.json."""
+    out = runs[0]
+    md, html = (out / "report.md").read_text(), (out / "report.html").read_text()
+    K = summary["synthesis"]["ours"]["K"]
+    stab = summary["stability"]
+    numbers = [f"{K[0]:.4f}", f"{K[1]:.4f}", f"{100 * stab['equilibrium_exists_fraction']:.1f} %"]
+    numbers += [summary["config_sha256"][:16], f"{summary['pi_long_horizon']['steady_abs_d_mm']:.2f} mm"]
+    for text in (md, html):
+        for n in numbers:
+            assert n in text, n
+        assert sum(text.count(v) for v in ("does not hold", "not reproduced", "no verdict")) > 0
+    assert html.count("<tr>") >= len(summary["verdicts"]) and "data:image/png;base64," in html
