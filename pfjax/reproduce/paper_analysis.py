@@ -32,14 +32,31 @@ from pfjax.sim import (
 from pfjax.sim.scenario import make_scenario
 
 
-def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
+def source_eigen_maxima(cfg: dict, K, params) -> dict:
+    """The source's Figs. 4-5 over its whole (open) slip square: the maxima of the real parts of the
+    slower (lambda_1) and faster (lambda_2) eigenvalue of its linearisation at [0, -beta_r], 1/s,
+    and where they occur (deg)."""
+    st = cfg["stability"]
+    eg = np.linspace(-st["eig_grid_max_deg"], st["eig_grid_max_deg"], st["eig_n"])
+    _, eig = stability_map(K, jnp.radians(eg), jnp.radians(eg), params)
+    re = np.sort(np.asarray(eig.real), axis=-1)  # ascending: [faster, slower]
+    at = lambda a: [float(eg[i]) for i in np.unravel_index(int(np.argmax(a)), a.shape)]
+    return {
+        "grid_max_deg": float(eg[-1]),
+        "n": int(st["eig_n"]),
+        "hurwitz_fraction": float((re < 0).all(-1).mean()),
+        "max_re_slow": float(re[..., 1].max()),
+        "max_re_slow_at": at(re[..., 1]),
+        "max_re_fast": float(re[..., 0].max()),
+        "max_re_fast_at": at(re[..., 0]),
+        "source_max_re_slow": float(cfg["source"]["eig_max_re"][0]),
+        "source_max_re_fast": float(cfg["source"]["eig_max_re"][1]),
+    }
+
+
+def _grid_runs(cfg: dict, BR, BF):
+    """The line test with the source's K at every (beta_r, beta_f) of the grid (deg), unrecorded."""
     st, m = cfg["stability"], cfg["model"]
-    params = SlipParams(m["v"], m["L"], math.radians(m["delta_max_deg"]), 0 if m["convention"] == "source" else 1)
-    K = jnp.asarray(cfg["source"]["K"])
-    grid = np.linspace(-st["grid_max_deg"], st["grid_max_deg"], st["n"])
-    eq, src_eig = stability_map(K, jnp.radians(grid), jnp.radians(grid), params)
-    pbar.update(1)
-    BR, BF = np.meshgrid(grid, grid, indexing="ij")
     gains = C.state_feedback_params(C.PAPER_K)
     # The robot advances along the line at up to v / cos(beta_r): make the line long enough that
     # no run reaches its end within the horizon (the default line is 80 m).
@@ -60,7 +77,21 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
             for br, bf in zip(BR.ravel(), BF.ravel())
         ]
     )
-    r = simulate_batch(scs, controller=C.state_feedback, config=sim_config(cfg, horizon=st["horizon"], record=False))
+    return simulate_batch(scs, controller=C.state_feedback, config=sim_config(cfg, horizon=st["horizon"], record=False))
+
+
+def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
+    """The (beta_r, beta_f) grid with the source's K: its linearisation, the true equilibrium and its
+    eigenvalues, and the line test simulated to check them (docs/reproductions/path-following.md §7).
+    Returns one row per grid point and the summary (``grid``: the axis and shape, for the figure)."""
+    st, m = cfg["stability"], cfg["model"]
+    params = SlipParams(m["v"], m["L"], math.radians(m["delta_max_deg"]), 0 if m["convention"] == "source" else 1)
+    K = jnp.asarray(cfg["source"]["K"])
+    grid = np.linspace(-st["grid_max_deg"], st["grid_max_deg"], st["n"])
+    eq, src_eig = stability_map(K, jnp.radians(grid), jnp.radians(grid), params)
+    pbar.update(1)
+    BR, BF = np.meshgrid(grid, grid, indexing="ij")
+    r = _grid_runs(cfg, BR, BF)
     pbar.update(1)
     d_star, th_star = np.asarray(eq.d).ravel(), np.asarray(eq.theta_e).ravel()
     conv = (
@@ -85,23 +116,7 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
         }
     )
     e5 = equilibrium(K, math.radians(m["beta_r_deg"]), math.radians(m["beta_f_deg"]), params)
-    # The source's Figs. 4-5 over its whole (open) slip square: the maxima of the real parts of the
-    # slower (lambda_1) and faster (lambda_2) eigenvalue of its linearisation at [0, -beta_r]
-    eg = np.linspace(-st["eig_grid_max_deg"], st["eig_grid_max_deg"], st["eig_n"])
-    _, eig = stability_map(K, jnp.radians(eg), jnp.radians(eg), params)
-    re = np.sort(np.asarray(eig.real), axis=-1)  # ascending: [faster, slower]
-    at = lambda a: [float(eg[i]) for i in np.unravel_index(int(np.argmax(a)), a.shape)]
-    eigen_maxima = {
-        "grid_max_deg": float(eg[-1]),
-        "n": int(st["eig_n"]),
-        "hurwitz_fraction": float((re < 0).all(-1).mean()),
-        "max_re_slow": float(re[..., 1].max()),
-        "max_re_slow_at": at(re[..., 1]),
-        "max_re_fast": float(re[..., 0].max()),
-        "max_re_fast_at": at(re[..., 0]),
-        "source_max_re_slow": float(cfg["source"]["eig_max_re"][0]),
-        "source_max_re_fast": float(cfg["source"]["eig_max_re"][1]),
-    }
+    eigen_maxima = source_eigen_maxima(cfg, K, params)
     info = {
         "grid_deg": [float(grid[0]), float(grid[-1]), int(st["n"])],
         "source_hurwitz_fraction": float((df.source_max_re < 0).mean()),
