@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Reproduce Fakharian et al. (docs/reproductions/path-following.md) and check every claim it makes.
 
-    python studies/paper_reproduction.py [--config studies/paper_reproduction.toml] [--set key=value ...] [--out DIR]
+    python studies/paper_reproduction.py [--config studies/paper_reproduction.toml] [--set key=value ...] [--out DIR] [--quick]
 
 Writes to ``results/paper_reproduction/`` (or ``--out``): ``summary.json``, ``runs.parquet`` /
 ``runs.csv`` (one row per path x controller), ``pi_readings.csv`` (the 24 readings of Table 3),
@@ -46,13 +46,14 @@ def main(argv=None) -> int:
         "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value (dotted keys)"
     )
     ap.add_argument("--out", help="output directory (default results/<name>)")
+    ap.add_argument("--quick", action="store_true", help="small sizes (tests, a first look)")
     ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
     args = ap.parse_args(argv)
     return command_main("paper_reproduction", lambda: run(args))
 
 
 def run(args) -> int:
-    config = paper_config.load(args.config, args.set)
+    config = paper_config.load(args.config, args.set, quick=args.quick)
     check_name("name", config.name)
     out = Path(args.out) if args.out else ROOT / "results" / config.name
     t0 = time.time()

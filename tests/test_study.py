@@ -28,22 +28,9 @@ from pfjax.provenance import config_hash
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "studies" / "paper_reproduction.py"
 TOML = ROOT / "studies" / "paper_reproduction.toml"
-# Small: 6 s horizon (the sine analysis needs > 5 s), 10 ms steps, controller sampled every step
-# (compiles ~30 % faster than the default continuous evaluation), 3 x 3 stability grid, no trackers.
-SETS = [
-    "sim.horizon=6",
-    "sim.dt=0.01",
-    "sim.control_every=1",
-    "sim.steady_window=1.0",
-    "stability.n=3",
-    "stability.horizon=6",
-    "stability.eig_n=11",
-    "trackers=false",
-    "long_horizon=8",
-    "ga.population=6",
-    "ga.generations=2",
-    "ga.seeds=2",
-]
+# --quick (pfjax.reproduce.paper_config.QUICK): 6 s horizon (the sine analysis needs > 5 s), 10 ms
+# steps, controller sampled every step (compiles ~30 % faster than the default continuous
+# evaluation), 3 x 3 stability grid, no trackers, a tiny GA.
 SOURCE_K = (-2.7381, -2.0772)
 
 
@@ -54,7 +41,7 @@ def _run(out: Path, cache: Path):
         JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0",
         JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0",
     )
-    args = [sys.executable, str(STUDY), *(a for s in SETS for a in ("--set", s)), "--out", str(out)]
+    args = [sys.executable, str(STUDY), "--quick", "--out", str(out)]
     r = subprocess.run(args, capture_output=True, text=True, timeout=600, env=env)
     assert r.returncode == 0, r.stderr[-4000:]
     return r
@@ -82,7 +69,7 @@ def summary(runs):
 def study_config():
     from pfjax.reproduce.paper_config import load
 
-    return load(TOML, SETS).model_dump(mode="json")
+    return load(TOML, quick=True).model_dump(mode="json")
 
 
 def test_outputs_exist(runs):

@@ -20,6 +20,16 @@ from pfjax.config import POSITIVE, ConfigError, ConfigModel, Real, load_model
 from pfjax.errors import MAX_SEED, InputError
 from pfjax.resources import check_memory, check_steps, run_bytes
 
+#: ``--quick``: a 6 s horizon (the sine analysis needs > 5 s), 10 ms steps, the controller sampled
+#: every step, a 3 x 3 stability grid, no trackers and a tiny GA (tests, a first look)
+QUICK = {
+    "sim": {"horizon": 6.0, "dt": 0.01, "control_every": 1, "steady_window": 1.0},
+    "stability": {"n": 3, "horizon": 6.0, "eig_n": 11},
+    "trackers": False,
+    "long_horizon": 8.0,
+    "ga": {"population": 6, "generations": 2, "seeds": 2},
+}
+
 
 class PaperModel(ConfigModel):
     """The vehicle of the source (Table 1, §6); ``delta_max_deg`` is assumed."""
@@ -131,10 +141,10 @@ def check_resources(config: PaperStudy) -> None:
     )
 
 
-def load(path: str | Path | None = None, overrides: Sequence[str] = ()) -> PaperStudy:
-    """The validated study config: defaults <- ``path`` <- ``overrides``; raises
+def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: bool = False) -> PaperStudy:
+    """The validated study config: defaults <- ``path`` <- (``--quick``) <- ``overrides``; raises
     :class:`pfjax.config.ConfigError` naming the key."""
-    config = load_model(PaperStudy, path, overrides)[0]
+    config = load_model(PaperStudy, path, overrides, presets=[QUICK] if quick else [])[0]
     try:
         check_resources(config)
     except ConfigError:
@@ -145,6 +155,7 @@ def load(path: str | Path | None = None, overrides: Sequence[str] = ()) -> Paper
 
 
 __all__ = [
+    "QUICK",
     "PaperGA",
     "PaperModel",
     "PaperSim",
