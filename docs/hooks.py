@@ -2,6 +2,9 @@
 
 - ``<!-- config-reference -->``: every key of a study config (:class:`pfjax.montecarlo.config.StudySpec`)
   with its default and its description (units included), read from the pydantic schema;
+  ``<!-- paper-config-reference -->`` and ``<!-- tracking-config-reference -->`` the same for the
+  paper-reproduction and vehicle-tracking studies (:class:`pfjax.reproduce.paper_config.PaperStudy`,
+  :class:`pfjax.tracking.study_config.TrackingStudy`);
 - ``<!-- column-reference -->``: every column of the run and margin tables with its unit and meaning
   (:data:`pfjax.tables.COLUMNS`, the same metadata the Parquet files carry);
 - ``<!-- controller-reference -->`` and ``<!-- path-reference -->``: the registries.
@@ -51,12 +54,28 @@ def _rows(model, prefix=""):
             yield key, _default(f), (f.description or "") + dist
 
 
+def _key_table(model) -> str:
+    lines = ["| key | default | meaning and unit |", "|---|---|---|"]
+    lines += [f"| `{k}` | {d} | {m.replace('|', '&#124;')} |" for k, d, m in _rows(model)]
+    return "\n".join(lines)
+
+
 def config_reference() -> str:
     from pfjax.montecarlo.config import StudySpec
 
-    lines = ["| key | default | meaning and unit |", "|---|---|---|"]
-    lines += [f"| `{k}` | {d} | {m.replace('|', '&#124;')} |" for k, d, m in _rows(StudySpec)]
-    return "\n".join(lines)
+    return _key_table(StudySpec)
+
+
+def paper_config_reference() -> str:
+    from pfjax.reproduce.paper_config import PaperStudy
+
+    return _key_table(PaperStudy)
+
+
+def tracking_config_reference() -> str:
+    from pfjax.tracking.study_config import TrackingStudy
+
+    return _key_table(TrackingStudy)
 
 
 def column_reference() -> str:
@@ -93,6 +112,8 @@ def path_reference() -> str:
 MARKERS = {
     "<!-- config-reference -->": config_reference,
     "<!-- column-reference -->": column_reference,
+    "<!-- paper-config-reference -->": paper_config_reference,
+    "<!-- tracking-config-reference -->": tracking_config_reference,
     "<!-- controller-reference -->": controller_reference,
     "<!-- path-reference -->": path_reference,
 }

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import importlib.util
 import json
 import math
 import subprocess
@@ -214,11 +213,40 @@ def test_study_rejects_missing_config_file(study_errors):
     assert r.stdout == "" and list(parent.iterdir()) == []
 
 
-def test_study_toml_matches_script_defaults():
-    """studies/paper_reproduction.toml documents the script's defaults: loading it changes nothing."""
-    spec = importlib.util.spec_from_file_location("paper_reproduction_for_config_test", STUDY)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    cfg = load(mod.DEFAULTS, ROOT / "studies" / "paper_reproduction.toml")
-    assert config_hash(cfg) == config_hash(mod.DEFAULTS)
+def test_study_toml_matches_schema_defaults():
+    """studies/paper_reproduction.toml documents the schema's defaults: loading it changes nothing."""
+    from pfjax.reproduce.paper_config import PaperStudy
+    from pfjax.reproduce.paper_config import load as load_paper
+
+    cfg = load_paper(ROOT / "studies" / "paper_reproduction.toml").model_dump(mode="json")
+    assert config_hash(cfg) == config_hash(PaperStudy().model_dump(mode="json"))
     assert math.isclose(cfg["model"]["delta_max_deg"], 30.0)
+
+
+@pytest.mark.parametrize(
+    "setting, key",
+    [
+        ("model.convention='other'", "model.convention"),
+        ("model.beta_r_deg=90", "model.beta_r_deg"),
+        ("stability.horizon=0.001", "stability.horizon"),  # below sim.dt (cross-field)
+        ("sim.steady_window=30.0", "sim.steady_window"),  # longer than sim.horizon
+        ("stability.n=1", "stability.n"),
+        ("stability.n=100000", "stability.n"),  # the grid would not fit in memory
+        ("ga.seeds=true", "ga.seeds"),  # strict: a boolean is not a count
+    ],
+)
+def test_paper_config_errors_name_the_key(setting, key):
+    from pfjax.reproduce.paper_config import load as load_paper
+
+    with pytest.raises(ConfigError) as e:
+        load_paper(None, [setting])
+    msg = str(e.value)
+    assert len(msg.splitlines()) == 1 and msg.startswith(key), msg
+
+
+def test_paper_quick_preset_then_set():
+    from pfjax.reproduce.paper_config import QUICK
+    from pfjax.reproduce.paper_config import load as load_paper
+
+    c = load_paper(None, ["stability.n=4"], quick=True)
+    assert c.stability.n == 4 and c.sim.horizon == QUICK["sim"]["horizon"] and c.trackers is False

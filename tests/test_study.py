@@ -11,7 +11,6 @@ and the source's published design values (docs/reproductions/path-following.md Â
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import os
@@ -24,28 +23,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pfjax.config import load
 from pfjax.provenance import config_hash
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "studies" / "paper_reproduction.py"
 TOML = ROOT / "studies" / "paper_reproduction.toml"
-# Small: 6 s horizon (the sine analysis needs > 5 s), 10 ms steps, controller sampled every step
-# (compiles ~30 % faster than the default continuous evaluation), 3 x 3 stability grid, no trackers.
-SETS = [
-    "sim.horizon=6",
-    "sim.dt=0.01",
-    "sim.control_every=1",
-    "sim.steady_window=1.0",
-    "stability.n=3",
-    "stability.horizon=6",
-    "stability.eig_n=11",
-    "trackers=false",
-    "long_horizon=8",
-    "ga.population=6",
-    "ga.generations=2",
-    "ga.seeds=2",
-]
+# --quick (pfjax.reproduce.paper_config.QUICK): 6 s horizon (the sine analysis needs > 5 s), 10 ms
+# steps, controller sampled every step (compiles ~30 % faster than the default continuous
+# evaluation), 3 x 3 stability grid, no trackers, a tiny GA.
 SOURCE_K = (-2.7381, -2.0772)
 
 
@@ -56,7 +41,7 @@ def _run(out: Path, cache: Path):
         JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0",
         JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0",
     )
-    args = [sys.executable, str(STUDY), *(a for s in SETS for a in ("--set", s)), "--out", str(out)]
+    args = [sys.executable, str(STUDY), "--quick", "--out", str(out)]
     r = subprocess.run(args, capture_output=True, text=True, timeout=600, env=env)
     assert r.returncode == 0, r.stderr[-4000:]
     return r
@@ -81,16 +66,24 @@ def summary(runs):
     return json.loads(text, parse_constant=no_constants)
 
 
-def study_defaults():
-    spec = importlib.util.spec_from_file_location("paper_reproduction_for_test", STUDY)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.DEFAULTS
+def study_config():
+    from pfjax.reproduce.paper_config import load
+
+    return load(TOML, quick=True).model_dump(mode="json")
 
 
 def test_outputs_exist(runs):
     out, _, r = runs
-    for name in ("summary.json", "runs.parquet", "runs.csv", "pi_readings.csv", "stability.parquet", "report.md"):
+    files = (
+        "summary.json",
+        "runs.parquet",
+        "runs.csv",
+        "pi_readings.csv",
+        "stability.parquet",
+        "report.md",
+        "report.html",
+    )
+    for name in files:
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     pngs = sorted((out / "figures").glob("*.png"))
     assert {p.stem for p in pngs} >= {
@@ -113,7 +106,7 @@ def test_outputs_exist(runs):
 
 def test_summary_stamp_and_config(summary):
     assert summary["study"] == "paper_reproduction"
-    cfg = load(study_defaults(), TOML, SETS)
+    cfg = study_config()
     assert summary["config"] == cfg
     assert summary["config_sha256"] == config_hash(cfg)
     assert summary["config"]["sim"]["horizon"] == 6.0 and summary["config"]["stability"]["n"] == 3
@@ -209,3 +202,19 @@ def test_deterministic(runs):
     for s in (sa, sb):
         s.pop("wall_s")
     assert sa == sb
+
+
+def test_report_md_and_html_carry_the_headline_numbers(runs, summary):
+    """report.md and report.html are one document: both show the design's gain, the verdicts and
+    the stability fractions of summary.json."""
+    out = runs[0]
+    md, html = (out / "report.md").read_text(), (out / "report.html").read_text()
+    K = summary["synthesis"]["ours"]["K"]
+    stab = summary["stability"]
+    numbers = [f"{K[0]:.4f}", f"{K[1]:.4f}", f"{100 * stab['equilibrium_exists_fraction']:.1f} %"]
+    numbers += [summary["config_sha256"][:16], f"{summary['pi_long_horizon']['steady_abs_d_mm']:.2f} mm"]
+    for text in (md, html):
+        for n in numbers:
+            assert n in text, n
+        assert sum(text.count(v) for v in ("does not hold", "not reproduced", "no verdict")) > 0
+    assert html.count("<tr>") >= len(summary["verdicts"]) and "data:image/png;base64," in html

@@ -84,3 +84,55 @@ def test_quick_study_outputs_consistent(out):
         ref = [beta.ppf(0.025, k, n - k + 1) if k > 0 else 0.0, beta.ppf(0.975, k + 1, n - k) if k < n else 1.0]
         assert m["success_ci95"] == pytest.approx(ref, abs=1e-9)
         assert sum(m["status_counts"].values()) == len(d)
+
+
+def _load_script():
+    spec = importlib.util.spec_from_file_location("vehicle_tracking_for_errors", STUDY)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize(
+    "setting, key",
+    [
+        ("mc.n_run=3", "mc.n_run"),  # unknown key
+        ("mc.n_runs=0", "mc.n_runs"),  # out of range
+        ("lemma.p=[0.0, 1.0]", "lemma.p"),  # cross-field check
+        ("lemma.offsets=[[1.0]]", "lemma.offsets"),  # not a pair
+        ("sim.dt='x'", "sim.dt"),  # wrong type
+    ],
+)
+def test_bad_config_one_line_exit_2_nothing_written(tmp_path, capsys, setting, key):
+    mod = _load_script()
+    out = tmp_path / "out"
+    assert mod.main(["--quick", "--out", str(out), "--set", setting]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and key in err, err
+    assert not out.exists() and not list(tmp_path.iterdir())
+
+
+def test_schema_defaults_are_the_shipped_toml():
+    """The TOML lists every key with the schema's default (the study's published sizes)."""
+    import tomllib
+
+    from pfjax.tracking.study_config import TrackingStudy
+
+    toml = STUDY.with_suffix(".toml")
+    assert TrackingStudy().model_dump(mode="json") == tomllib.loads(toml.read_text())
+
+
+@pytest.mark.slow
+def test_report_md_and_html_carry_the_headline_numbers(out):
+    s = json.loads((out / "summary.json").read_text())
+    md, html = (out / "report.md").read_text(), (out / "report.html").read_text()
+    for mode, m in s["monte_carlo"].items():
+        rate = f"{100 * m['success_rate']:.2f} %"
+        lo, hi = (f"{100 * x:.2f}" for x in m["success_ci95"])
+        for text in (md, html):
+            assert rate in text and lo in text and hi in text and mode in text
+    n_runs = f"({s['lemma_grid']['n_runs']} runs)"
+    g = f"{s['geometry']['wrong_distance_min_z_err']:.3f} m"
+    for text in (md, html):
+        assert n_runs in text and g in text and s["config_sha256"][:16] in text
+    assert "![" in md and "data:image/png;base64," in html

@@ -19,6 +19,8 @@ The inputs are plain dicts and frames the study computes (``studies/paper_reprod
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 from pfjax.paths import source_tests
 from pfjax.reproduce.verdict import Verdict
@@ -39,17 +41,32 @@ def _s(x: float) -> str:
     return f"{x:.2f} s" if math.isfinite(x) else "never"
 
 
-def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi: dict, ga: dict) -> list[Verdict]:
-    """Every verdict row of the reproduction (module docstring)."""
-    R = {(r["path"], r["controller"]): r for r in rows}
-    paths = source_tests()
-    dmax_deg = cfg["model"]["delta_max_deg"]
-    band = cfg["sim"]["settle_band"]
-    window = cfg["sim"]["steady_window"]
-    src = cfg["source"]
-    out: list[Verdict] = []
-    add = lambda *a, **k: out.append(Verdict(*a, **k).check())
+class Inputs(NamedTuple):
+    """What the claims are checked on (module docstring): the runs by (path, controller), the
+    source tests, the configured limit (deg), settling band (m), steady window (s), horizon (s), the
+    source's published values, and the analyses."""
 
+    R: dict
+    paths: tuple
+    dmax_deg: float
+    band: float
+    window: float
+    horizon: float
+    src: dict
+    stab: dict
+    pi_df: Any
+    sine: dict
+    long_pi: dict
+    ga: dict
+
+
+#: ``add(claim, path, subject, criterion, pfjax, source, verdict, basis=...)``: append one checked row
+Add = Callable[..., None]
+
+
+def _converge(inp: Inputs, add: Add) -> None:
+    """Both controllers bring the robot onto all three paths."""
+    R, paths, band = inp.R, inp.paths, inp.band
     claim = "Both controllers bring the robot onto all three paths"
     for p in paths:
         for c in CONTROLLERS:
@@ -64,6 +81,11 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
                 "—",
                 _holds(ok),
             )
+
+
+def _steering_limit(inp: Inputs, add: Add) -> None:
+    """Both controllers respect the (assumed) steering limit."""
+    R, paths, dmax_deg = inp.R, inp.paths, inp.dmax_deg
     claim = "Both controllers respect the steering limit"
     for p in paths:
         for c in CONTROLLERS:
@@ -80,6 +102,11 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
                 _holds(peak <= dmax_deg + 1e-9),
                 basis="assumed",
             )
+
+
+def _faster(inp: Inputs, add: Add) -> None:
+    """The mixed design converges faster than the PI, per path."""
+    R, paths, band = inp.R, inp.paths, inp.band
     claim = "The mixed design converges faster than the PI"
     for p in paths:
         m, q = R[(p, "mixed")], R[(p, "pi")]
@@ -92,6 +119,11 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
             "—",
             _holds(m["settling_time"] < q["settling_time"]),
         )
+
+
+def _more_accurate(inp: Inputs, add: Add) -> None:
+    """The mixed design converges more accurately than the PI, per path."""
+    R, paths, window = inp.R, inp.paths, inp.window
     claim = "The mixed design converges more accurately than the PI"
     for p in paths:
         m, q = R[(p, "mixed")], R[(p, "pi")]
@@ -104,6 +136,11 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
             "—",
             _holds(m["steady_abs_d"] < q["steady_abs_d"]),
         )
+
+
+def _yaw_error(inp: Inputs, add: Add) -> None:
+    """The mixed design has the smaller yaw error, per path."""
+    R, paths, window = inp.R, inp.paths, inp.window
     claim = "The mixed design has the smaller yaw error"
     for p in paths:
         m, q = R[(p, "mixed")], R[(p, "pi")]
@@ -117,6 +154,11 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
             "—",
             _holds(dm < dq),
         )
+
+
+def _effort(inp: Inputs, add: Add) -> None:
+    """The mixed design needs less steering effort than the PI, per path."""
+    R, paths = inp.R, inp.paths
     claim = "The mixed design needs less steering effort than the PI"
     for p in paths:
         m, q = R[(p, "mixed")], R[(p, "pi")]
@@ -141,6 +183,10 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
                 _holds(mv < qv) if not (mv == qv == 0) else "no verdict",
             )
 
+
+def _line_mixed_error(inp: Inputs, add: Add) -> None:
+    """Line: the mixed design's steady-state position error below the source's bound."""
+    R, window, src, stab = inp.R, inp.window, inp.src, inp.stab
     claim = f"Line: steady-state position error below {src['line_ss_mixed_mm_below']:g} mm (mixed)"
     for c in ("mixed", "paper-k"):
         r = R[("line", c)]
@@ -153,6 +199,11 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
             f"< {src['line_ss_mixed_mm_below']:g} mm",
             _holds(1000 * r["steady_abs_d"] < src["line_ss_mixed_mm_below"]),
         )
+
+
+def _line_pi_error(inp: Inputs, add: Add) -> None:
+    """Line: the PI's steady-state position error near the source's, at the horizon and settled."""
+    R, window, src, long_pi = inp.R, inp.window, inp.src, inp.long_pi
     claim = f"Line: steady-state position error about {src['line_ss_pi_mm']:g} mm (PI)"
     tol = 0.5
     r = R[("line", "pi")]
@@ -161,7 +212,7 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
         claim,
         "line",
         LABEL["pi"],
-        f"steady |d| at the {cfg['sim']['horizon']:g} s horizon (mean over the last "
+        f"steady |d| at the {inp.horizon:g} s horizon (mean over the last "
         f"{window:g} s) within ±{100 * tol:g} % of {src['line_ss_pi_mm']:g} mm",
         _mm(r["steady_abs_d"]),
         f"about {src['line_ss_pi_mm']:g} mm",
@@ -180,6 +231,11 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
         f"about {src['line_ss_pi_mm']:g} mm",
         "reproduced" if abs(ratio - 1) <= tol else "not reproduced",
     )
+
+
+def _line_steering(inp: Inputs, add: Add) -> None:
+    """Line: the steering settles near the source's angle."""
+    R, src = inp.R, inp.src
     claim = f"Line: the steering settles at about {src['line_delta_deg']:g}° to compensate the slip"
     for c in CONTROLLERS:
         fd = math.degrees(R[("line", c)]["final_delta"])
@@ -193,6 +249,11 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
             _holds(abs(fd - src["line_delta_deg"]) < 0.5),
             basis="used to choose the convention",
         )
+
+
+def _line_yaw(inp: Inputs, add: Add) -> None:
+    """Line: the yaw error settles at a non-zero value."""
+    R = inp.R
     claim = "Line: the yaw error settles at a non-zero value"
     for c in CONTROLLERS:
         te = math.degrees(R[("line", c)]["final_theta_e"])
@@ -206,6 +267,10 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
             _holds(abs(te) > 1.0),
         )
 
+
+def _sine_peaks(inp: Inputs, add: Add) -> None:
+    """Sine: where the errors peak against the curvature."""
+    sine = inp.sine
     claim = "Sine: the errors grow where the curvature changes fastest (near the extrema)"
     to_k, to_dk = sine["median_peak_to_kappa_max_m"], sine["median_peak_to_dkappa_max_m"]
     add(
@@ -227,6 +292,10 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
         _holds(to_dk < to_k),
     )
 
+
+def _hurwitz(inp: Inputs, add: Add) -> None:
+    """Theorem 4, Figs. 4-5: the linearised loop over the slip square."""
+    stab = inp.stab
     claim = "Theorem 4, Figs. 4-5: the linearised loop is Hurwitz for every slip in (−90°, 90°)²"
     em = stab["eigen_maxima"]
     add(
@@ -263,6 +332,10 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
         _holds(stab["equilibrium_exists_fraction"] == 1.0 and stab["hurwitz_where_exists_fraction"] == 1.0),
     )
 
+
+def _table3(inp: Inputs, add: Add) -> None:
+    """Table 3: the reading of the PI gains."""
+    pi_df = inp.pi_df
     claim = "Table 3: GA-optimal PI gains 1.6390, 0.0230, 39.5204, 11.6124 (row labels lost)"
     f = pi_df.attrs["filters"]
     counts = "; ".join(f"{k}: {v} of 24" for k, v in f["passing"].items())
@@ -287,6 +360,10 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
         basis="chosen by filters from the source",
     )
 
+
+def _table2(inp: Inputs, add: Add) -> None:
+    """Table 2: the GA's crossover readings."""
+    ga = inp.ga
     claim = "Table 2: MATLAB ga with crossover fraction 0.8 (and a row 'Crossover Operation: none')"
     a, b = ga["crossover"], ga["none"]
     add(
@@ -308,4 +385,48 @@ def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi
         "—",
         "no verdict",
     )
+
+
+#: every claim, in the order of the verdict table
+CLAIMS = (
+    _converge,
+    _steering_limit,
+    _faster,
+    _more_accurate,
+    _yaw_error,
+    _effort,
+    _line_mixed_error,
+    _line_pi_error,
+    _line_steering,
+    _line_yaw,
+    _sine_peaks,
+    _hurwitz,
+    _table3,
+    _table2,
+)
+
+
+def verdicts(cfg: dict, rows: list[dict], stab: dict, pi_df, sine: dict, long_pi: dict, ga: dict) -> list[Verdict]:
+    """Every verdict row of the reproduction (module docstring), claim by claim (:data:`CLAIMS`)."""
+    inp = Inputs(
+        R={(r["path"], r["controller"]): r for r in rows},
+        paths=source_tests(),
+        dmax_deg=cfg["model"]["delta_max_deg"],
+        band=cfg["sim"]["settle_band"],
+        window=cfg["sim"]["steady_window"],
+        horizon=cfg["sim"]["horizon"],
+        src=cfg["source"],
+        stab=stab,
+        pi_df=pi_df,
+        sine=sine,
+        long_pi=long_pi,
+        ga=ga,
+    )
+    out: list[Verdict] = []
+
+    def add(*a, **k) -> None:
+        out.append(Verdict(*a, **k).check())
+
+    for claim in CLAIMS:
+        claim(inp, add)
     return out

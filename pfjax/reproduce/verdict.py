@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+from pfjax.report.document import Table
 from pfjax.report.markdown import table
 
 #: What a verdict says. ``holds`` / ``does not hold``: pfjax's number meets / misses the criterion.
@@ -68,3 +69,15 @@ def verdict_table(rows: list[Verdict]) -> str:
             for r in rows
         ],
     )
+
+
+def verdict_block(rows) -> Table:
+    """The verdict table as a report block (:mod:`pfjax.report.document`); ``rows`` are
+    :class:`Verdict` or their dicts (a summary's ``verdicts``)."""
+    head = ["claim", "path", "subject", "criterion", "pfjax", "source", "verdict", "basis"]
+    out = []
+    for r in rows:
+        v = r if isinstance(r, Verdict) else Verdict(**r)
+        basis = "" if v.basis == "independent" else v.basis
+        out.append([v.claim, v.path, v.subject, v.criterion, v.pfjax, v.source, f"**{v.verdict}**", basis])
+    return Table(head, out)

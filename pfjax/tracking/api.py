@@ -177,25 +177,7 @@ def run(
         InputError: a bad argument; the message starts with its name (``"p: must be nonzero ..."``),
             or ``horizon/dt`` when the run would take more than 2e6 steps.
     """
-    c = _check(
-        mode,
-        p,
-        l,
-        gamma_max_deg,
-        leader,
-        speed,
-        stop_and_go,
-        a,
-        k,
-        v_max,
-        omega_max_deg,
-        offset,
-        heading_error_deg,
-        beta_r_deg,
-        beta_f_deg,
-        horizon,
-        dt,
-    )
+    c = _check(**locals())  # exactly the arguments above, by name
     import jax
 
     with jax.enable_x64(True):

@@ -1,21 +1,19 @@
-"""Tracking study outputs: Parquet with the config stamp, figures (PNG + SVG) and ``report.html``.
+"""Tracking study outputs: Parquet with the config stamp, figures (PNG + SVG) and the report
+(:func:`report`, a :class:`pfjax.report.document.Document` written as ``report.md`` and ``report.html``).
 
-Matplotlib is imported inside the functions (the library never selects a backend); the page is one
-self-contained HTML file (Jinja2, figures embedded as base64 PNG).
+Matplotlib is imported inside the functions (the library never selects a backend).
 """
 
 from __future__ import annotations
 
-import base64
-import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from jinja2 import Environment, StrictUndefined
 
+from pfjax.report.document import Bullets, Document, Figure, Heading, Paragraph, Table
 from pfjax.report.figures import save
-from pfjax.tracking.lemma import four_way, outcomes
+from pfjax.tracking.lemma import outcomes
 
 OUTCOMES = ("both", "z_only", "phi_only", "neither", "failed")
 LABELS = {
@@ -88,87 +86,80 @@ def write_figures(fig_dir: Path, cfg: dict, lemma_df: pd.DataFrame, geo: pd.Data
     return names
 
 
-TEMPLATE = """<!doctype html><html><head><meta charset="utf-8"><title>{{ s.study }}</title>
-<style>body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
-table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
-th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}img{max-width:100%}code{background:#f5f5f5}</style>
-</head><body>
-<h1>Vehicle tracking with a focus point — Lemma 8.1 and robustness</h1>
-<p>pfjax {{ s.pfjax_version }}, config SHA-256 <code>{{ s.config_sha256[:16] }}…</code>, seed {{ s.seed }},
-{{ s.machine }}, {{ '%.0f' % s.wall_s }} s{% if s.quick %} (<b>quick</b> sizes){% endif %}.</p>
-<h2>Definitions</h2><ul>{% for k, v in s.definitions.items() %}<li><b>{{ k }}</b>: {{ v }}</li>{% endfor %}</ul>
-<h2>Lemma 8.1 by batched simulation ({{ s.lemma_grid.n_runs }} runs)</h2>
-<p>Grid: p ∈ {{ s.config.lemma.p }}, |l| ∈ {{ s.config.lemma.l_abs }} m (l = f|l|), γ_max ∈ {{ s.config.lemma.gamma_max_deg }}°,
-six leader motions, offsets {{ s.config.lemma.offsets }} m, forward and backward. The lemma claims only the
-"equivalence" columns z_only = phi_only = 0 inside the bound.</p>
-<table><tr>{% for c in cols %}<th>{{ c }}</th>{% endfor %}</tr>
-{% for r in rows %}<tr>{% for c in cols %}<td>{{ r[c] }}</td>{% endfor %}</tr>{% endfor %}</table>
-<img src="data:image/png;base64,{{ figs['lemma_outcomes'] }}">
-<h3>Outside the bound, by γ_max and p (runs where exactly one limit holds)</h3>
-<table><tr>{% for c in out_cols %}<th>{{ c }}</th>{% endfor %}</tr>
-{% for r in out_rows %}<tr>{% for c in out_cols %}<td>{{ r[c] }}</td>{% endfor %}</tr>{% endfor %}</table>
-<h2>Lemma 8.1 as geometry</h2>
-<p>{{ s.geometry.n_states_z_err_0 }} random states with z~ = 0: max |φ − pγ| where |pγ| &lt; π/2 is
-{{ '%.1e' % s.geometry.max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2 }} rad;
-{{ s.geometry.n_counterexamples_abs_pgamma_gt_pi_2 }} states with |pγ| &gt; π/2 have |φ − pγ| in
-{{ s.geometry.counterexample_abs_phi_minus_pgamma_range }} rad (= π: the same connection line, the other half), all
-outside the bound: {{ s.geometry.counterexamples_only_outside_bound }}. The converse needs the distance:
-a leader on the focus direction at the wrong distance has φ = pγ and |z~| ≥ {{ '%.3f' % s.geometry.wrong_distance_min_z_err }} m.</p>
-<img src="data:image/png;base64,{{ figs['lemma_geometry'] }}">
-<h2>Robustness Monte Carlo</h2>
-<table><tr><th>mode</th><th>runs</th><th>success [95 % CI]</th><th>statuses</th><th>final |z~| p50 / p95 (m)</th><th>IAE p50 / p95 (m·s)</th><th>max |γ| p95 (deg)</th></tr>
-{% for mode, m in s.monte_carlo.items() %}<tr><td>{{ mode }}</td><td>{{ m.n }}</td>
-<td>{{ '%.2f' % (100*m.success_rate) }} % [{{ '%.2f' % (100*m.success_ci95[0]) }}, {{ '%.2f' % (100*m.success_ci95[1]) }}]</td>
-<td>{{ m.status_counts }}</td>
-<td>{{ '%.2e' % m.quantiles.final_error_norm.q50 }} / {{ '%.2e' % m.quantiles.final_error_norm.q95 }}</td>
-<td>{{ '%.3f' % m.quantiles.iae.q50 }} / {{ '%.3f' % m.quantiles.iae.q95 }}</td>
-<td>{{ '%.1f' % m.quantiles.max_abs_gamma_deg.q95 }}</td></tr>{% endfor %}</table>
-<h3>Success by leader motion</h3><table><tr><th>mode</th><th>leader</th><th>runs</th><th>success [95 % CI]</th></tr>
-{% for mode, m in s.monte_carlo.items() %}{% for ld, b in m.by_leader.items() %}<tr><td>{{ mode }}</td><td>{{ ld }}</td><td>{{ b.n }}</td>
-<td>{{ '%.2f' % (100*b.success_rate) }} % [{{ '%.2f' % (100*b.success_ci95[0]) }}, {{ '%.2f' % (100*b.success_ci95[1]) }}]</td></tr>{% endfor %}{% endfor %}</table>
-<img src="data:image/png;base64,{{ figs['mc_final_error'] }}">
-</body></html>"""
+def _pct(b: dict) -> str:
+    lo, hi = b["success_ci95"]
+    return f"{100 * b['success_rate']:.2f} % [{100 * lo:.2f}, {100 * hi:.2f}]"
 
 
-def write_report(out_dir: Path, summary: dict, table: pd.DataFrame, lemma_df: pd.DataFrame) -> Path:
-    figs = {
-        n: base64.b64encode((out_dir / "figures" / f"{n}.png").read_bytes()).decode()
-        for n in ("lemma_outcomes", "lemma_geometry", "mc_final_error")
-    }
-    outside = lemma_df[~lemma_df.inside_bound & (lemma_df.status == "ok")]
-    out_tab = four_way(outside, ["mode", "gamma_max_deg", "p"])[
-        ["mode", "gamma_max_deg", "p", "n", "z_only", "phi_only"]
+def _frame_table(df: pd.DataFrame, caption: str = "") -> Table:
+    return Table(list(df.columns), [list(r) for r in df.itertuples(index=False)], caption)
+
+
+def _lemma_blocks(s: dict, tables: dict) -> list:
+    lem, g = s["config"]["lemma"], s["geometry"]
+    return [
+        Heading(f"Lemma 8.1 by batched simulation ({s['lemma_grid']['n_runs']} runs)"),
+        Paragraph(
+            f"Grid: p ∈ {lem['p']}, |l| ∈ {lem['l_abs']} m (l = f|l|), γ_max ∈ {lem['gamma_max_deg']}°, "
+            f"six leader motions, offsets {lem['offsets']} m, forward and backward. The lemma claims only the "
+            "equivalence columns z_only = phi_only = 0 inside the bound."
+        ),
+        _frame_table(tables["lemma_table"]),
+        Figure("lemma_outcomes", "Outcomes per mode inside and outside |p| < π/(2γ_max)."),
+        Heading("Outside the bound, by γ_max and p (runs where exactly one limit holds)", 3),
+        _frame_table(tables["outside"]),
+        Heading("Lemma 8.1 as geometry"),
+        Paragraph(
+            f"{g['n_states_z_err_0']} random states with z~ = 0: max |φ − pγ| where |pγ| < π/2 is "
+            f"{g['max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2']:.1e} rad; "
+            f"{g['n_counterexamples_abs_pgamma_gt_pi_2']} states with |pγ| > π/2 have |φ − pγ| in "
+            f"{g['counterexample_abs_phi_minus_pgamma_range']} rad (= π: the same connection line, the other half), "
+            f"all outside the bound: {g['counterexamples_only_outside_bound']}. The converse needs the distance: "
+            f"a leader on the focus direction at the wrong distance has φ = pγ and "
+            f"|z~| ≥ {g['wrong_distance_min_z_err']:.3f} m."
+        ),
+        Figure("lemma_geometry", "φ − pγ on random states with z~ = 0."),
     ]
-    out_tab = out_tab.rename(columns={"n": "n_ok"})[(out_tab.z_only + out_tab.phi_only) > 0]
-    s = json.loads(json.dumps(summary, default=lambda o: None))
-    html = (
-        Environment(undefined=StrictUndefined, autoescape=True)
-        .from_string(TEMPLATE)
-        .render(
-            s=_ns(s),
-            cols=list(table.columns),
-            rows=table.to_dict(orient="records"),
-            figs=figs,
-            out_cols=list(out_tab.columns),
-            out_rows=out_tab.to_dict(orient="records"),
+
+
+def _mc_blocks(s: dict) -> list:
+    header = ["mode", "runs", "success [95 % CI]", "statuses", "final |z~| p50 / p95 (m)"]
+    header += ["IAE p50 / p95 (m·s)", "max |γ| p95 (deg)"]
+    rows, lead = [], []
+    for mode, m in s["monte_carlo"].items():
+        q = m["quantiles"]
+        rows.append(
+            [
+                mode,
+                m["n"],
+                _pct(m),
+                str(m["status_counts"]),
+                f"{q['final_error_norm']['q50']:.2e} / {q['final_error_norm']['q95']:.2e}",
+                f"{q['iae']['q50']:.3f} / {q['iae']['q95']:.3f}",
+                f"{q['max_abs_gamma_deg']['q95']:.1f}",
+            ]
         )
+        lead += [[mode, ld, b["n"], _pct(b)] for ld, b in m["by_leader"].items()]
+    return [
+        Heading("Robustness Monte Carlo"),
+        Table(header, rows),
+        Heading("Success by leader motion", 3),
+        Table(["mode", "leader", "runs", "success [95 % CI]"], lead),
+        Figure("mc_final_error", "Max |z~| over the final window, ECDF per leader motion."),
+    ]
+
+
+def report(summary: dict, tables: dict[str, pd.DataFrame]) -> Document:
+    """The study report from its summary and the tables ``lemma_table`` and ``outside`` (the
+    runs outside the bound where exactly one limit holds); no number is computed here."""
+    s = summary
+    subtitle = (
+        f"pfjax {s['pfjax_version']}, config SHA-256 {s['config_sha256'][:16]}…, seed {s['seed']}, "
+        f"{s['machine']}, {s['wall_s']:.0f} s" + (" (quick sizes)" if s["quick"] else "")
     )
-    path = out_dir / "report.html"
-    path.write_text(html)
-    return path
+    blocks: list = [Heading("Definitions"), Bullets([f"**{k}**: {v}" for k, v in s["definitions"].items()])]
+    blocks += _lemma_blocks(s, tables) + _mc_blocks(s)
+    return Document("Vehicle tracking with a focus point — Lemma 8.1 and robustness", subtitle, blocks)
 
 
-class _ns(dict):
-    """dict with attribute access for the template (``s.geometry.x``)."""
-
-    def __init__(self, d):
-        super().__init__({k: _ns(v) if isinstance(v, dict) else v for k, v in d.items()})
-
-    def __getattr__(self, k):
-        try:
-            return self[k]
-        except KeyError:
-            raise AttributeError(k) from None
-
-
-__all__ = ["write_figures", "write_report"]
+__all__ = ["report", "write_figures"]

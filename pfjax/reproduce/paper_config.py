@@ -1,0 +1,168 @@
+"""The paper-reproduction study's configuration schema (``studies/paper_reproduction.toml``).
+
+Sections: ``model`` (the source's Table 1 and its slip angles), ``sim`` (the integration and the
+metrics' windows), ``synthesis`` (the mixed H2/Hinf objective), ``source`` (the source's published
+values, compared against and never used to tune), ``stability`` (the (beta_r, beta_f) grid and
+its simulation cross-check), ``long_horizon`` and ``ga`` (Table 2's GA readings). Every key is
+optional; the defaults are the study's published settings. Loaded by :func:`load` with the same
+``--set key=value`` syntax and one-line :class:`pfjax.config.ConfigError` as the Monte Carlo study.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from pfjax.config import POSITIVE, ConfigError, ConfigModel, Real, load_model
+from pfjax.errors import MAX_SEED, InputError
+from pfjax.resources import check_memory, check_steps, run_bytes
+
+#: ``--quick``: a 6 s horizon (the sine analysis needs > 5 s), 10 ms steps, the controller sampled
+#: every step, a 3 x 3 stability grid, no trackers and a tiny GA (tests, a first look)
+QUICK = {
+    "sim": {"horizon": 6.0, "dt": 0.01, "control_every": 1, "steady_window": 1.0},
+    "stability": {"n": 3, "horizon": 6.0, "eig_n": 11},
+    "trackers": False,
+    "long_horizon": 8.0,
+    "ga": {"population": 6, "generations": 2, "seeds": 2},
+}
+
+
+class PaperModel(ConfigModel):
+    """The vehicle of the source (Table 1, §6); ``delta_max_deg`` is assumed."""
+
+    v: Real = Field(1.0, ge=POSITIVE, description="forward speed [m/s]")
+    L: Real = Field(0.2, ge=POSITIVE, description="wheelbase [m]")
+    delta_max_deg: Real = Field(30.0, gt=-90, lt=90, description="steering limit (assumed) [deg]")
+    convention: Literal["source", "lenain"] = Field(
+        "source", description="front-slip sign: 'source' tan(delta - beta_f) or 'lenain' tan(delta + beta_f) [-]"
+    )
+    beta_r_deg: Real = Field(5.0, gt=-90, lt=90, description="constant rear slip angle [deg]")
+    beta_f_deg: Real = Field(5.0, gt=-90, lt=90, description="constant front slip angle [deg]")
+
+
+class PaperSim(ConfigModel):
+    """The integration of one run and the windows of its metrics."""
+
+    dt: Real = Field(0.005, ge=POSITIVE, description="RK4 step [s]")
+    horizon: Real = Field(20.0, gt=5.0, description="simulated time; > 5 s (the sine-error analysis uses t >= 5 s) [s]")
+    control_every: int = Field(
+        0, ge=0, description="0: controller inside every RK4 stage; n: sampled every n steps [steps]"
+    )
+    settle_band: Real = Field(0.05, ge=POSITIVE, description="|d| band of the settling time [m]")
+    steady_window: Real = Field(5.0, ge=POSITIVE, description="final window of the steady-state errors [s]")
+
+
+class PaperSynthesis(ConfigModel):
+    """The msfsyn objective alpha gamma_inf^2 + beta gamma_2^2 (source eq. 13)."""
+
+    alpha: Real = Field(10.0, ge=0, description="weight of gamma_inf^2 [-]")
+    beta: Real = Field(1.0, ge=0, description="weight of gamma_2^2 [-]")
+
+
+class PaperSource(ConfigModel):
+    """The source's published values (compared against, never used to tune)."""
+
+    K: list[Real] = Field([-2.7381, -2.0772], min_length=2, max_length=2, description="state feedback [1/m, -]")
+    gamma_inf: Real = Field(1.1, description="published Hinf bound [-]")
+    gamma_2: Real = Field(4.07, description="published H2 bound [-]")
+    table3: list[Real] = Field(
+        [1.6390, 0.0230, 39.5204, 11.6124], min_length=4, max_length=4, description="Table 3 PI gains [-]"
+    )
+    line_ss_mixed_mm_below: Real = Field(3.0, description="line test: mixed steady-state error below [mm]")
+    line_ss_pi_mm: Real = Field(8.0, description="line test: PI steady-state error [mm]")
+    line_delta_deg: Real = Field(10.0, description="line test: steering reading [deg]")
+    eig_max_re: list[Real] = Field(
+        [-1.3185, -5.1930], min_length=2, max_length=2, description="largest real parts, slow and fast [1/s]"
+    )
+
+
+class PaperStability(ConfigModel):
+    """The (beta_r, beta_f) stability grid and its simulation cross-check."""
+
+    grid_max_deg: Real = Field(60.0, gt=0, lt=90, description="grid half-width in each slip angle [deg]")
+    n: int = Field(31, ge=2, description="grid points per axis [-]")
+    horizon: Real = Field(40.0, ge=POSITIVE, description="simulated time of the cross-check runs [s]")
+    tol_d: Real = Field(0.001, ge=POSITIVE, description="converged when |d| <= tol_d at the end [m]")
+    tol_theta_deg: Real = Field(0.1, ge=POSITIVE, description="converged when |theta_e| <= tol_theta_deg [deg]")
+    eig_grid_max_deg: Real = Field(89.9, gt=0, lt=90, description="half-width of the eigenvalue scan [deg]")
+    eig_n: int = Field(721, ge=2, description="points of the eigenvalue scan per axis [-]")
+
+
+class PaperGA(ConfigModel):
+    """Table 2's GA readings: the PI tuned with and without crossover on the same seeds."""
+
+    seeds: int = Field(3, ge=1, description="GA runs per reading [-]")
+    scenario: str = Field("paper-line", description="tuning scenario [-]")
+    population: int = Field(50, ge=2, description="population size [-]")
+    generations: int = Field(100, ge=1, description="generations [-]")
+
+
+class PaperStudy(ConfigModel):
+    """The paper-reproduction study (``studies/paper_reproduction.py``)."""
+
+    name: str = Field("paper_reproduction", description="output folder name under results/ [-]")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="recorded in every output; the study is deterministic [-]")
+    model: PaperModel = PaperModel()
+    sim: PaperSim = PaperSim()
+    synthesis: PaperSynthesis = PaperSynthesis()
+    trackers: bool = Field(True, description="also run Stanley, pure pursuit and rear-wheel feedback [-]")
+    source: PaperSource = PaperSource()
+    stability: PaperStability = PaperStability()
+    long_horizon: Real = Field(300.0, ge=POSITIVE, description="the PI's line test run until it settles [s]")
+    ga: PaperGA = PaperGA()
+
+    @model_validator(mode="after")
+    def _check(self):
+        s, st = self.sim, self.stability
+        if s.horizon < s.dt:
+            raise ValueError(f"sim.horizon: need dt <= horizon, got {s.dt:g}, {s.horizon:g}")
+        if st.horizon < s.dt:
+            raise ValueError(f"stability.horizon: must be >= sim.dt ({s.dt:g} s), got {st.horizon:g}")
+        if s.steady_window > s.horizon:
+            raise ValueError(f"sim.steady_window: must be in (0, sim.horizon], got {s.steady_window:g}")
+        for section in ("sim", "stability"):
+            try:
+                check_steps(getattr(self, section).horizon, s.dt)
+            except InputError as e:
+                raise ValueError(f"{section}.horizon: {str(e).removeprefix('dt: ')}") from None
+        return self
+
+
+def check_resources(config: PaperStudy) -> None:
+    """:class:`pfjax.config.ConfigError` naming ``stability.n`` when the grid would not fit in memory."""
+    n_steps = check_steps(config.stability.horizon, config.sim.dt)
+    n = config.stability.n
+    check_memory(
+        "stability.n", 2 * n**2 * run_bytes(n_steps), f"a stability grid of {n**2:.3g} runs", "lower stability.n"
+    )
+
+
+def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: bool = False) -> PaperStudy:
+    """The validated study config: defaults <- ``path`` <- (``--quick``) <- ``overrides``; raises
+    :class:`pfjax.config.ConfigError` naming the key."""
+    config = load_model(PaperStudy, path, overrides, presets=[QUICK] if quick else [])[0]
+    try:
+        check_resources(config)
+    except ConfigError:
+        raise
+    except InputError as e:
+        raise ConfigError(str(e)) from None
+    return config
+
+
+__all__ = [
+    "QUICK",
+    "PaperGA",
+    "PaperModel",
+    "PaperSim",
+    "PaperSource",
+    "PaperStability",
+    "PaperStudy",
+    "PaperSynthesis",
+    "check_resources",
+    "load",
+]

@@ -1,0 +1,148 @@
+"""The vehicle-tracking study (``studies/vehicle_tracking.py``): Lemma 8.1 by a batched grid of
+simulations and by geometry, and a robustness Monte Carlo of the focus-point controller.
+
+:func:`run` takes a validated :class:`~pfjax.tracking.study_config.TrackingStudy` and an
+:class:`pfjax.outputs.OutputDir`; each part is a function of the config and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import jax
+import numpy as np
+import pandas as pd
+
+import pfjax
+from pfjax.jsonio import dumps
+from pfjax.metrics.robustness import metric_quantiles, success_summary
+from pfjax.provenance import config_hash, machine, parquet_metadata
+from pfjax.report import document
+from pfjax.tables import write_parquet
+from pfjax.tracking import batches as B
+from pfjax.tracking import report as R
+from pfjax.tracking.lemma import four_way, sample_geometry
+from pfjax.tracking.simulate import TrackConfig
+from pfjax.tracking.study_config import TrackingStudy
+
+#: per-run metrics summarised by quantiles in the Monte Carlo summary
+METRICS = ["final_error_norm", "iae", "max_abs_gamma_deg", "window_max_z", "limit_fraction"]
+
+
+def track_config(cfg: dict) -> TrackConfig:
+    """The simulation settings of one run from the ``sim`` section."""
+    s = cfg["sim"]
+    return TrackConfig(
+        dt=s["dt"], horizon=s["horizon"], window=s["window"], tol_z=s["tol_z"], tol_phi=s["tol_phi"], band=s["band"]
+    )
+
+
+def lemma_part(cfg: dict, key, chunk: int) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """The Lemma 8.1 grid: per-run rows, the four outcomes per mode and region, and the runs
+    outside the bound where exactly one limit holds (by mode, gamma_max and p)."""
+    scs, rows = B.lemma_grid(cfg, jax.random.fold_in(key, 0))
+    lemma_df = B.frame(rows, B.run_chunks(scs, track_config(cfg), chunk, "lemma grid"))
+    lemma_df["region"] = np.where(lemma_df["inside_bound"], "|p| < pi/(2 gamma_max)", "|p| >= pi/(2 gamma_max)")
+    table = four_way(lemma_df, ["mode", "region"])
+    outside = lemma_df[~lemma_df.inside_bound & (lemma_df.status == "ok")]
+    out_tab = four_way(outside, ["mode", "gamma_max_deg", "p"])[
+        ["mode", "gamma_max_deg", "p", "n", "z_only", "phi_only"]
+    ]
+    out_tab = out_tab.rename(columns={"n": "n_ok"})[(out_tab.z_only + out_tab.phi_only) > 0]
+    return lemma_df, table, out_tab
+
+
+def geometry_part(cfg: dict, key) -> tuple[pd.DataFrame, dict]:
+    """Lemma 8.1 as geometry on random states: per-state rows and their summary."""
+    geo = []
+    for i, p in enumerate(sorted(set(cfg["lemma"]["p"]))):
+        for gdeg in cfg["lemma"]["gamma_max_deg"]:
+            g = sample_geometry(jax.random.fold_in(key, 100 + i), cfg["lemma"]["n_geometry"], math.radians(gdeg), p)
+            geo.append(g.assign(p=p, gamma_max_deg=gdeg))
+    geo_df = pd.concat(geo, ignore_index=True)
+    on = geo_df[geo_df.kind == "on_focus"]
+    inside = on.p_gamma.abs() < math.pi / 2
+    summary = {
+        "n_states_z_err_0": int(len(on)),
+        "max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2": float(on[inside].phi_minus_pgamma.abs().max()),
+        "n_counterexamples_abs_pgamma_gt_pi_2": int((~inside).sum()),
+        "counterexample_abs_phi_minus_pgamma_range": [
+            float(on[~inside].phi_minus_pgamma.abs().min()),
+            float(on[~inside].phi_minus_pgamma.abs().max()),
+        ]
+        if (~inside).any()
+        else None,
+        "counterexamples_only_outside_bound": bool(
+            (on[~inside].p.abs() * np.radians(on[~inside].gamma_max_deg) > math.pi / 2).all()
+        ),
+        "wrong_distance_min_z_err": float(geo_df[geo_df.kind == "wrong_distance"].z_err.min()),
+    }
+    return geo_df, summary
+
+
+def monte_carlo_part(cfg: dict, key, chunk: int) -> tuple[pd.DataFrame, dict]:
+    """The robustness Monte Carlo, forward then backward: per-run rows and per-mode summaries."""
+    mc, summary = [], {}
+    for f in (1, -1):
+        mode = "forward" if f > 0 else "backward"
+        scs, rows = B.mc_sample(cfg, f, jax.random.fold_in(key, 10 + (f > 0)))
+        df = B.frame(rows, B.run_chunks(scs, track_config(cfg), chunk, f"Monte Carlo ({mode})"))
+        ok = df[df.status == "ok"]
+        summary[mode] = {
+            **success_summary(df["success"].astype(bool).to_numpy()),
+            "status_counts": df["status"].value_counts().to_dict(),
+            "quantiles": metric_quantiles(ok, METRICS),
+            "by_leader": {k: success_summary(v["success"].astype(bool).to_numpy()) for k, v in df.groupby("leader")},
+        }
+        mc.append(df)
+    return pd.concat(mc, ignore_index=True), summary
+
+
+def definitions(cfg: dict) -> dict:
+    """The limits and the success criterion in words, with the configured tolerances."""
+    s = cfg["sim"]
+    return {
+        "z_to_0": f"max |z~| over the last {s['window']} s <= {s['tol_z']} m",
+        "phi_minus_pgamma_to_0": f"max |phi - p gamma| over the last {s['window']} s <= {s['tol_phi']} rad",
+        "success": f"status ok and max |z~| over the last {s['window']} s <= {s['band']} m",
+    }
+
+
+def run(config: TrackingStudy, output, quick: bool = False) -> dict:
+    """Run the study into ``output`` (an open :class:`pfjax.outputs.OutputDir`): ``summary.json``,
+    ``lemma_runs``/``lemma_table``/``geometry``/``mc_runs`` Parquet, ``lemma_table.csv``,
+    ``figures/`` and ``report.md`` + ``report.html``. Returns the summary."""
+    t0 = time.time()
+    cfg = config.model_dump(mode="json")
+    key = jax.random.PRNGKey(cfg["seed"])
+    chunk = 512 if not quick else 36
+    lemma_df, table, out_tab = lemma_part(cfg, key, chunk)
+    geo, geometry = geometry_part(cfg, key)
+    mc, mc_summary = monte_carlo_part(cfg, key, chunk)
+    summary = {
+        "study": cfg["name"],
+        "seed": cfg["seed"],
+        "config": cfg,
+        "config_sha256": config_hash(cfg),
+        "pfjax_version": pfjax.__version__,
+        "machine": machine(),
+        "quick": quick,
+        "definitions": definitions(cfg),
+        "lemma_grid": {"n_runs": int(len(lemma_df)), "table": table.to_dict(orient="records")},
+        "geometry": geometry,
+        "monte_carlo": mc_summary,
+    }
+    tmp = output.staging
+    meta = parquet_metadata(cfg, cfg["seed"])
+    for name, df in (("lemma_runs", lemma_df), ("lemma_table", table), ("geometry", geo), ("mc_runs", mc)):
+        write_parquet(df, tmp / f"{name}.parquet", meta)
+    table.to_csv(tmp / "lemma_table.csv", index=False)
+    summary["figures"] = R.write_figures(tmp / "figures", cfg, lemma_df, geo, mc)
+    summary["wall_s"] = time.time() - t0
+    (tmp / "summary.json").write_text(dumps(summary))
+    document.write(R.report(summary, {"lemma_table": table, "outside": out_tab}), tmp)
+    return summary
+
+
+__all__ = ["METRICS", "definitions", "geometry_part", "lemma_part", "monte_carlo_part", "run", "track_config"]
