@@ -111,5 +111,5 @@ def run_study(config: ParkingStudy, out: Path, quick: bool = False, progress: bo
     )
     summary["verdicts"] = [v._asdict() for v in rows]
     (out / "summary.json").write_text(dumps(summary) + "\n")
-    write_report(out, summary, tables["assumptions"])
+    write_report(out, summary, tables)
     return summary

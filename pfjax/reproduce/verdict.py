@@ -49,22 +49,25 @@ class Verdict(NamedTuple):
         return self
 
 
+def verdict_cells(rows: list[Verdict]) -> tuple[list[str], list[list[str]]]:
+    """The verdict table as ``(header, rows)`` of inline-Markdown cells (a report's table block)."""
+    head = ["claim", "path", "subject", "criterion", "pfjax", "source", "verdict", "basis"]
+    cells = [
+        [
+            r.claim,
+            r.path,
+            r.subject,
+            r.criterion,
+            r.pfjax,
+            r.source,
+            f"**{r.verdict}**",
+            "" if r.basis == "independent" else r.basis,
+        ]
+        for r in rows
+    ]
+    return head, cells
+
+
 def verdict_table(rows: list[Verdict]) -> str:
     """The verdict table in Markdown (cells escaped: evidence such as ``|d|`` stays in its cell)."""
-    head = ["claim", "path", "subject", "criterion", "pfjax", "source", "verdict", "basis"]
-    return table(
-        head,
-        [
-            [
-                r.claim,
-                r.path,
-                r.subject,
-                r.criterion,
-                r.pfjax,
-                r.source,
-                f"**{r.verdict}**",
-                "" if r.basis == "independent" else r.basis,
-            ]
-            for r in rows
-        ],
-    )
+    return table(*verdict_cells(rows))
