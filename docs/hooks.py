@@ -2,6 +2,8 @@
 
 - ``<!-- config-reference -->``: every key of a study config (:class:`pfjax.montecarlo.config.StudySpec`)
   with its default and its description (units included), read from the pydantic schema;
+- ``<!-- parking-config-reference -->``: the same for the parking study
+  (:class:`pfjax.parking.study_config.ParkingStudy`);
 - ``<!-- column-reference -->``: every column of the run and margin tables with its unit and meaning
   (:data:`pfjax.tables.COLUMNS`, the same metadata the Parquet files carry);
 - ``<!-- controller-reference -->`` and ``<!-- path-reference -->``: the registries.
@@ -51,12 +53,22 @@ def _rows(model, prefix=""):
             yield key, _default(f), (f.description or "") + dist
 
 
+def _key_table(model) -> str:
+    lines = ["| key | default | meaning and unit |", "|---|---|---|"]
+    lines += [f"| `{k}` | {d} | {m.replace('|', '&#124;')} |" for k, d, m in _rows(model)]
+    return "\n".join(lines)
+
+
 def config_reference() -> str:
     from pfjax.montecarlo.config import StudySpec
 
-    lines = ["| key | default | meaning and unit |", "|---|---|---|"]
-    lines += [f"| `{k}` | {d} | {m.replace('|', '&#124;')} |" for k, d, m in _rows(StudySpec)]
-    return "\n".join(lines)
+    return _key_table(StudySpec)
+
+
+def parking_config_reference() -> str:
+    from pfjax.parking.study_config import ParkingStudy
+
+    return _key_table(ParkingStudy)
 
 
 def column_reference() -> str:
@@ -92,6 +104,7 @@ def path_reference() -> str:
 
 MARKERS = {
     "<!-- config-reference -->": config_reference,
+    "<!-- parking-config-reference -->": parking_config_reference,
     "<!-- column-reference -->": column_reference,
     "<!-- controller-reference -->": controller_reference,
     "<!-- path-reference -->": path_reference,
