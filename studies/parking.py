@@ -30,10 +30,7 @@ pfjax.cache.enable()
 matplotlib.use("Agg")
 
 from pfjax.errors import command_main  # noqa: E402
-from pfjax.outputs import OutputDir, check_name  # noqa: E402
-from pfjax.parking.study import run_study  # noqa: E402
 from pfjax.parking.study_config import load  # noqa: E402
-from pfjax.provenance import config_hash  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -51,17 +48,8 @@ def main(argv=None) -> int:
 
 def run(args) -> int:
     config = load(args.config, args.set, quick=args.quick)
-    check_name("name", config.name)
     out = Path(args.out) if args.out else ROOT / "results" / config.name
-    with OutputDir(
-        out,
-        command="parking-study",
-        config_sha256=config_hash(config.model_dump(mode="json")),
-        overwrite=args.overwrite,
-        extra={"seed": config.seed},
-    ) as output:
-        summary = run_study(config, output.staging, quick=args.quick)
-        out = output.commit()
+    out, summary = pfjax.parking.run_study(config, out, quick=args.quick, overwrite=args.overwrite)
     print(f"wrote {out} in {summary['wall_s']:.1f} s")
     return 0
 

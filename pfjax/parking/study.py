@@ -13,14 +13,15 @@ import pandas as pd
 from tqdm import tqdm
 
 from pfjax.jsonio import dumps
+from pfjax.outputs import OutputDir, check_name
 from pfjax.parking.calibrate import calibrate_front
 from pfjax.parking.maps import GARAGE, PARALLEL, to_obstacle_map
 from pfjax.parking.report import write_report
 from pfjax.parking.simulate import simulated_first_switch
-from pfjax.parking.study_config import ParkingStudy
+from pfjax.parking.study_config import ParkingStudy, load
 from pfjax.parking.study_parts import part_assumptions, part_montecarlo, part_search, part_start_map
 from pfjax.parking.study_runs import part_cases, part_outcomes
-from pfjax.provenance import parquet_metadata
+from pfjax.provenance import config_hash, parquet_metadata
 from pfjax.provenance import stamp as provenance_stamp
 from pfjax.reproduce.parking import verdicts as parking_verdicts
 from pfjax.tables import write_parquet
@@ -113,3 +114,42 @@ def run_study(config: ParkingStudy, out: Path, quick: bool = False, progress: bo
     (out / "summary.json").write_text(dumps(summary) + "\n")
     write_report(out, summary, tables)
     return summary
+
+
+def run(
+    config: ParkingStudy | str | Path | None = None,
+    out: str | Path | None = None,
+    *,
+    overrides: tuple[str, ...] | list[str] = (),
+    quick: bool = False,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> tuple[Path, dict]:
+    """Run the parking study into ``out`` (default ``results/<name>``), assembled in a staging folder
+    and moved into place when complete (:class:`pfjax.outputs.OutputDir`). Returns ``(folder, summary)``.
+
+    Args:
+        config: a validated :class:`ParkingStudy`, a TOML path, or None for the defaults.
+        out: the output folder.
+        overrides: ``--set`` texts ``"key=value"`` (with a path or None only).
+        quick: apply the ``--quick`` sizes (with a path or None only).
+        overwrite: replace a pfjax output of another config in ``out``.
+        progress: show progress bars.
+
+    Raises:
+        pfjax.config.ConfigError: a bad key or value (one line naming the key), before anything is written.
+    """
+    if not isinstance(config, ParkingStudy):
+        config = load(config, overrides, quick=quick)
+    check_name("name", config.name)
+    folder = Path(out) if out is not None else Path("results") / config.name
+    with OutputDir(
+        folder,
+        command="parking-study",
+        config_sha256=config_hash(config.model_dump(mode="json")),
+        overwrite=overwrite,
+        extra={"seed": config.seed},
+    ) as output:
+        summary = run_study(config, output.staging, quick=quick, progress=progress)
+        folder = output.commit()
+    return folder, summary
