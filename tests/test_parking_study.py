@@ -60,6 +60,15 @@ def test_defaults_and_the_shipped_toml_are_the_documented_settings():
     assert load(TOML).model_dump(mode="json") == REFERENCE
 
 
+def test_the_schema_offers_exactly_the_simulated_detection_zones():
+    from typing import get_args
+
+    from pfjax.parking.assumptions import ZONES
+    from pfjax.parking.study_config import Zone
+
+    assert get_args(Zone) == tuple(ZONES)
+
+
 def test_quick_preset_sets_only_sizes_and_set_overrides_it():
     q = load(TOML, quick=True)
     assert q.montecarlo.n_runs == QUICK["montecarlo"]["n_runs"] == 16 and q.search.grid_n == 3
