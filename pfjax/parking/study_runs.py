@@ -58,6 +58,26 @@ def one(cfg, x0, direction, schedule, *, xs=None, omap, front=None, scan=None):
     return p, r, tr
 
 
+#: figure layout per map: (rows, columns or None for one row, figure size per panel, x limits, y limits)
+_LAYOUT = {
+    "cases_parallel": ((2, 2), (5.5, 4.0), (-1.0, 1.0), (-0.45, 1.0)),
+    "garage_xs": (None, (5.0, 4.6), (-2.2, 0.6), (-1.0, 1.0)),
+}
+
+
+def _trajectory_figure(runs, names, shapes, fig_dir, figure, label, switches):
+    """One panel per run ``names`` (trajectory over the map ``shapes``), titled with the outcome."""
+    grid, (w, h), xlim, ylim = _LAYOUT[figure]
+    nr, nc = grid or (1, len(names))
+    fig, axs = plt.subplots(nr, nc, figsize=(w * nc, h * nr), squeeze=False)
+    for ax, name in zip(axs.ravel(), names):
+        p, r, tr = runs[name]
+        title = f"{label.format(name=name)}: {STATUS_NAMES[int(r.status)]}, {int(r.n_switches)} {switches}, "
+        F.trajectory_axes(ax, shapes, tr, r, p.shape, title + f"{float(r.time):.1f} s", xlim=xlim, ylim=ylim)
+    fig.tight_layout()
+    save(fig, fig_dir, figure)
+
+
 def part_cases(cfg, fig_dir, pmap, gmap):
     rows, runs = [], {}
     for name, c in CASES.items():
@@ -88,37 +108,9 @@ def part_cases(cfg, fig_dir, pmap, gmap):
                 **flat_summary(run_summary(r)),
             }
         )
-    fig, axs = plt.subplots(2, 2, figsize=(11, 8))
-    for ax, name in zip(axs.ravel(), "ABCD"):
-        p, r, tr = runs[name]
-        F.trajectory_axes(
-            ax,
-            PARALLEL,
-            tr,
-            r,
-            p.shape,
-            f"case {name}: {STATUS_NAMES[int(r.status)]}, {int(r.n_switches)} switches, {float(r.time):.1f} s",
-            xlim=(-1.0, 1.0),
-            ylim=(-0.45, 1.0),
-        )
-    fig.tight_layout()
-    save(fig, fig_dir, "cases_parallel")
+    _trajectory_figure(runs, list("ABCD"), PARALLEL, fig_dir, "cases_parallel", "case {name}", "switches")
     g = [k for k in runs if k.startswith("garage")]
-    fig, axs = plt.subplots(1, len(g), figsize=(5 * len(g), 4.6), squeeze=False)
-    for ax, name in zip(axs[0], g):
-        p, r, tr = runs[name]
-        F.trajectory_axes(
-            ax,
-            GARAGE,
-            tr,
-            r,
-            p.shape,
-            f"{name}: {STATUS_NAMES[int(r.status)]}, {int(r.n_switches)} sw., {float(r.time):.1f} s",
-            xlim=(-2.2, 0.6),
-            ylim=(-1.0, 1.0),
-        )
-    fig.tight_layout()
-    save(fig, fig_dir, "garage_xs")
+    _trajectory_figure(runs, g, GARAGE, fig_dir, "garage_xs", "{name}", "sw.")
     for name in ("D", g[0]):
         p, r, tr = runs[name]
         save(
