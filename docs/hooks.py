@@ -5,6 +5,8 @@
   ``<!-- paper-config-reference -->`` and ``<!-- tracking-config-reference -->`` the same for the
   paper-reproduction and vehicle-tracking studies (:class:`pfjax.reproduce.paper_config.PaperStudy`,
   :class:`pfjax.tracking.study_config.TrackingStudy`);
+- ``<!-- parking-config-reference -->``: the same for the parking study
+  (:class:`pfjax.parking.study_config.ParkingStudy`);
 - ``<!-- column-reference -->``: every column of the run and margin tables with its unit and meaning
   (:data:`pfjax.tables.COLUMNS`, the same metadata the Parquet files carry);
 - ``<!-- controller-reference -->`` and ``<!-- path-reference -->``: the registries.
@@ -78,6 +80,12 @@ def tracking_config_reference() -> str:
     return _key_table(TrackingStudy)
 
 
+def parking_config_reference() -> str:
+    from pfjax.parking.study_config import ParkingStudy
+
+    return _key_table(ParkingStudy)
+
+
 def column_reference() -> str:
     from pfjax.tables import COLUMNS
 
@@ -111,6 +119,7 @@ def path_reference() -> str:
 
 MARKERS = {
     "<!-- config-reference -->": config_reference,
+    "<!-- parking-config-reference -->": parking_config_reference,
     "<!-- column-reference -->": column_reference,
     "<!-- paper-config-reference -->": paper_config_reference,
     "<!-- tracking-config-reference -->": tracking_config_reference,

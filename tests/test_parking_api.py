@@ -34,7 +34,10 @@ def test_exports_are_the_api_functions():
     import pfjax.parking.switch_search  # noqa: F401
 
     assert parking.run is api.run and parking.search is api.search
-    assert set(parking.__all__) == {"run", "search"}
+    assert set(parking.__all__) == {"run", "run_study", "search"}
+    from pfjax.parking import study
+
+    assert parking.run_study.__doc__ and "pfjax.parking.study.run" in parking.run_study.__doc__ and study.run
 
 
 def test_run_case_a_equals_cli(capsys):

@@ -244,7 +244,12 @@ def test_study_quick(tmp_path):
     assert len(mc) == 3 * s["config"]["montecarlo"]["n_runs"]
     for f in ("cases_parallel", "garage_xs", "search", "start_map", "montecarlo", "histories_D"):
         assert (out / "figures" / f"{f}.png").stat().st_size > 1000 and (out / "figures" / f"{f}.svg").exists()
-    assert "a_f = " in (out / "report.md").read_text()
+    md, html = (out / "report.md").read_text(), (out / "report.html").read_text()
+    headline = [f"a_f = {s['calibration']['a_f']:.4f} m", f"{s['assumptions']['n_combinations']} combinations"]
+    headline += [f"{100 * r['success_rate']:.1f} %" for r in s["montecarlo"].values()]
+    headline += [v["claim"] for v in s["verdicts"]]
+    for text in headline:  # the report's Markdown and HTML carry the summary's numbers
+        assert text in md and text in html, text
     bad = subprocess.run(
         [
             sys.executable,

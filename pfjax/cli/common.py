@@ -46,6 +46,12 @@ class Aliased(argparse._StoreAction):
         super().__call__(parser, namespace, values, option_string)
 
 
+def add_pose(parser: argparse.ArgumentParser, help: str) -> None:
+    """The start pose flag every one-run command shares: ``--x0 X Y THETA_DEG`` (metres, metres,
+    degrees), three floats, default None (the command's own default start)."""
+    parser.add_argument("--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"), help=help)
+
+
 def finite(flag: str, value: float, *, positive=False, below=None, unit="") -> float:
     """A flag's number checked as the library checks numbers (:func:`pfjax.errors.number`)."""
     from pfjax import errors

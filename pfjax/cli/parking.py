@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import contextlib
 
-from pfjax.cli.common import Aliased, UsageError, as_flags
+from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags
 from pfjax.errors import InputError
 
 
@@ -43,13 +43,7 @@ def register(sub) -> None:
         "prints the outcome, parking time and the log of direction switches.",
     )
     p.add_argument("--map", default="parallel", help="parallel, garage, or a TOML/JSON map file (default parallel)")
-    p.add_argument(
-        "--x0",
-        type=float,
-        nargs=3,
-        metavar=("X", "Y", "THETA_DEG"),
-        help="start pose, m m deg (default: case A for parallel, (-0.9, 0.6, -85) for garage)",
-    )
+    add_pose(p, "start pose, m m deg (default: case A for parallel, (-0.9, 0.6, -85) for garage)")
     p.add_argument("--direction", choices=("forward", "backward"), default="forward", help="first travel direction")
     p.add_argument("--alpha-schedule", default="1", help="alpha at the start, then after each switch (default 1)")
     p.add_argument(
@@ -66,9 +60,7 @@ def register(sub) -> None:
     )
     s.add_argument("--method", choices=("ga", "grid"), required=True)
     s.add_argument("--map", default="garage", help="garage (default) or a TOML/JSON map file")
-    s.add_argument(
-        "--x0", type=float, nargs=3, metavar=("X", "Y", "THETA_DEG"), help="start pose, m m deg (default -0.9 0.6 -85)"
-    )
+    add_pose(s, "start pose, m m deg (default -0.9 0.6 -85)")
     s.add_argument("--n", type=int, default=32, help="grid levels per parameter (default 32)")
     s.add_argument("--generations", type=int, default=100, help="GA generations N (default 100)")
     s.add_argument("--population", type=int, default=20, help="GA population n (default 20)")
@@ -78,13 +70,10 @@ def register(sub) -> None:
     s.set_defaults(func=_cmd_search)
 
 
-#: ``pfjax parking``'s flags by the argument of :func:`pfjax.parking.run` they set (``map`` aside: see
-#: :func:`_flags`).
-RUN_FLAGS = {
+#: the flags both commands share, by the argument of :func:`pfjax.parking.run` they set (``map`` aside:
+#: see :func:`_flags`)
+COMMON_FLAGS = {
     "x0": "--x0",
-    "direction": "--direction",
-    "alpha_schedule": "--alpha-schedule",
-    "xs": "--xs",
     "k1": "--k1",
     "k2": "--k2",
     "speed": "--speed",
@@ -93,22 +82,17 @@ RUN_FLAGS = {
     "lag": "--lag",
     "t_max": "--horizon",
 }
+#: ``pfjax parking``'s flags by the argument of :func:`pfjax.parking.run` they set.
+RUN_FLAGS = {"direction": "--direction", "alpha_schedule": "--alpha-schedule", "xs": "--xs", **COMMON_FLAGS}
 #: ``pfjax parking-search``'s flags by the argument of :func:`pfjax.parking.switch_search` they set.
 SEARCH_FLAGS = {
     "method": "--method",
-    "x0": "--x0",
     "n": "--n",
     "generations": "--generations",
     "population": "--population",
     "seed": "--seed",
     "weight": "--weight",
-    "k1": "--k1",
-    "k2": "--k2",
-    "speed": "--speed",
-    "scan_period": "--scan-period",
-    "front": "--front",
-    "lag": "--lag",
-    "t_max": "--horizon",
+    **COMMON_FLAGS,
 }
 
 

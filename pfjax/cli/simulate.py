@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 
-from pfjax.cli.common import Aliased, UsageError, as_flags, finite
+from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags, finite
 from pfjax.cli.synth import SYNTH_FLAGS
 
 
@@ -286,13 +286,7 @@ def register(sub) -> None:
         required=True,
         help="a registered path: the source's line, parabola, sine; pfjax's circle (radius 2 m)",
     )
-    m.add_argument(
-        "--x0",
-        type=float,
-        nargs=3,
-        metavar=("X", "Y", "THETA_DEG"),
-        help="initial pose (m, m, deg); default: the source's",
-    )
+    add_pose(m, "initial pose (m, m, deg); default: the source's")
     m.add_argument("--beta-r-deg", type=float, help="rear slip angle, deg (default 5; kinematic model)")
     m.add_argument("--beta-f-deg", type=float, help="front slip angle, deg (default 5; kinematic model)")
     from pfjax import controllers as C

@@ -1,4 +1,6 @@
-"""The parking study's Markdown report (every number read from the study's summary)."""
+"""The parking study's report: :func:`report` builds one :class:`pfjax.report.document.Document` from
+the study's summary and tables (every number read from them, none recomputed), and :func:`write_report`
+renders it to ``report.md`` and ``report.html``."""
 
 from __future__ import annotations
 
@@ -7,18 +9,15 @@ from pathlib import Path
 
 import pandas as pd
 
+from pfjax.report import document as D
+from pfjax.reproduce.verdict import Verdict, verdict_cells
+
 
 def _f(x, nd=1):
     return "—" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
 
 
-def _table(header: list[str], rows: list[list]) -> str:
-    from pfjax.report.markdown import table
-
-    return table(header, rows)
-
-
-def assumptions_table(sweep: pd.DataFrame) -> str:
+def assumptions_table(sweep: pd.DataFrame) -> D.Table:
     """Per detection zone and reach a_f: how often each case parks, gets stuck or times out over the
     other assumptions (scanner period, decision delay, yaw-rate loop, stop at reversal)."""
     rows = []
@@ -29,7 +28,7 @@ def assumptions_table(sweep: pd.DataFrame) -> str:
             n = int(counts.sum())
             cells.append(", ".join(f"{k.replace('_', ' ')} {v}/{n}" for k, v in counts.items()))
         rows.append([zone, f"{f:.3f}", *cells])
-    return _table(["detection zone", "a_f [m]", "A", "B", "C", "D"], rows)
+    return D.Table(["detection zone", "a_f [m]", "A", "B", "C", "D"], rows)
 
 
 def _zone_sentence(a: dict) -> str:
@@ -66,47 +65,54 @@ def _b_verdict(a: dict, b_outcome: str) -> str:
     )
 
 
-def _header(s: dict) -> str:
-    """The title and the settings every section shares."""
-    cfg = s["config"]
-    return f"""# Parking by switching travel direction and gain — pfjax study
-
-Config SHA-256 `{s["config_sha256"]}`, seed {s["seed"]}, pfjax {s["pfjax_version"]}{" (**quick mode: small sizes**)" if s["quick"] else ""};
-wall time {s["wall_s"]:.0f} s on {s["machine"]}.
-Controller k₁ = {cfg["controller"]["k1"]:g}, k₂ = {cfg["controller"]["k2"]:g}, |v₁| = {cfg["controller"]["speed"]:g} m/s;
-scanner period {cfg["sim"]["scan_period"]:g} s, {cfg["sim"]["n_sub"]} RK4 steps per period; timeout {cfg["sim"]["t_max"]:g} s;
-stop when |x| + √(y² + tan²θ) < {cfg["sim"]["tol"]:g}. Runs end converged, stuck (less than {cfg["sim"]["stuck_travel"]:g} m of
-travel over the last {cfg["sim"]["stuck_switches"]} legs between reversals: reversing in place), timed out, at the heading limit,
-non-finite, or not started (the rectangle meets an obstacle at the start pose); only the search fails a candidate
-beyond {cfg["search"]["max_switches"]} switches (the source's search cut-off)."""
-
-
-def _verdicts(s: dict) -> str:
-    from pfjax.reproduce import Verdict, verdict_table
-
-    verdicts = verdict_table([Verdict(**v) for v in s["verdicts"]])
-    return f"""## Verdicts on the source's reported outcomes
-
-One row per outcome and criterion. Times count as reproduced within ±10 %. The source's experiments stood
-{s["config"]["experiment"]["pause"]:g} s at each reversal; pfjax models that stop as an option and shows both.
-
-{verdicts}"""
+def _header(s: dict) -> list[D.Block]:
+    """The settings every section shares."""
+    c, sim = s["config"]["controller"], s["config"]["sim"]
+    return [
+        D.Paragraph(
+            f"Wall time {s['wall_s']:.0f} s on {s['machine']}. "
+            f"Controller k₁ = {c['k1']:g}, k₂ = {c['k2']:g}, |v₁| = {c['speed']:g} m/s; "
+            f"scanner period {sim['scan_period']:g} s, {sim['n_sub']} RK4 steps per period; timeout {sim['t_max']:g} s; "
+            f"stop when |x| + √(y² + tan²θ) < {sim['tol']:g}. Runs end converged, stuck (less than "
+            f"{sim['stuck_travel']:g} m of travel over the last {sim['stuck_switches']} legs between reversals: "
+            "reversing in place), timed out, at the heading limit, non-finite, or not started (the rectangle meets "
+            "an obstacle at the start pose); only the search fails a candidate beyond "
+            f"{s['config']['search']['max_switches']} switches (the source's search cut-off).",
+            style="note",
+        )
+    ]
 
 
-def _calibration(s: dict) -> str:
+def _verdicts(s: dict) -> list[D.Block]:
+    header, rows = verdict_cells([Verdict(**v) for v in s["verdicts"]])
+    return [
+        D.Heading("Verdicts on the source's reported outcomes"),
+        D.Paragraph(
+            "One row per outcome and criterion. Times count as reproduced within ±10 %. The source's experiments "
+            f"stood {s['config']['experiment']['pause']:g} s at each reversal; pfjax models that stop as an option "
+            "and shows both."
+        ),
+        D.Table(header, rows),
+    ]
+
+
+def _calibration(s: dict) -> list[D.Block]:
     cal = s["calibration"]
     sw = cal["simulated_first_switch"]
-    return f"""## Calibration of a_f
+    text = (
+        "On case A's first leg the loop is linear in the x time scale; the closed form gives "
+        f"y = {cal['y_closed_form_at_switch_x']:.4f} m at x = {cal['switch_x']} (the source reports "
+        f"y = {cal['y_source']}), with θ = {cal['theta_deg_at_switch']:.2f}°. The smallest reach a_f for which the "
+        "rectangle's right front corner touches an obstacle at that pose is "
+        f"**a_f = {cal['a_f']:.4f} m** (the {cal['obstacle']}; the car ahead would need "
+        f"{cal['reach_per_obstacle']['car_ahead']:.3f} m). Simulated with this a_f and 0.1 s scanner sampling, the "
+        f"first switch happens at t = {sw['t']:.1f} s with the robot at ({sw['x']:.4f}, {sw['y']:.4f}), "
+        f"θ = {sw['theta_deg']:.2f}° — within one scanner period of travel (5 mm) of the source's point."
+    )
+    return [D.Heading("Calibration of a_f"), D.Paragraph(text)]
 
-On case A's first leg the loop is linear in the x time scale; the closed form gives y = {cal["y_closed_form_at_switch_x"]:.4f} m
-at x = {cal["switch_x"]} (the source reports y = {cal["y_source"]}), with θ = {cal["theta_deg_at_switch"]:.2f}°. The smallest
-reach a_f for which the rectangle's right front corner touches an obstacle at that pose is **a_f = {cal["a_f"]:.4f} m**
-(the {cal["obstacle"]}; the car ahead would need {cal["reach_per_obstacle"]["car_ahead"]:.3f} m). Simulated with this a_f
-and 0.1 s scanner sampling, the first switch happens at t = {sw["t"]:.1f} s with the robot at
-({sw["x"]:.4f}, {sw["y"]:.4f}), θ = {sw["theta_deg"]:.2f}° — within one scanner period of travel (5 mm) of the source's point."""
 
-
-def _cases_table(cases: list[dict]) -> str:
+def _cases_table(cases: list[dict]) -> D.Table:
     header = ["case", "start (x, y, θ°)", "first direction", "α schedule", "X_s", "outcome", "switches", "time [s]"]
     rows = [
         [
@@ -122,99 +128,102 @@ def _cases_table(cases: list[dict]) -> str:
         ]
         for c in cases
     ]
-    return _table([*header, "switch times [s]"], rows)
+    return D.Table([*header, "switch times [s]"], rows)
 
 
-def _cases(s: dict, sweep: pd.DataFrame) -> str:
+def _cases(s: dict, sweep: pd.DataFrame) -> list[D.Block]:
     a = s["assumptions"]
     by_case = {
         c["case"]: f"{c['status'].replace('_', ' ')} after {c['switches']} switches ({c['time_s']:.1f} s)"
         for c in s["cases"]
     }
-    return f"""## Every source case
+    four = a["all_four_reproduced"]
+    listed = "; ".join(", ".join(f"{k}={v}" for k, v in c.items()) for c in four[:8])
+    return [
+        D.Heading("Every source case"),
+        _cases_table(s["cases"]),
+        D.Figure("cases_parallel", "parallel parking cases"),
+        D.Figure("garage_xs", "garage with the source's X_s"),
+        D.Figure("histories_D", "case D histories"),
+        D.Heading("Case B: what would make it stuck", level=3),
+        D.Paragraph(
+            'The source reports case B stuck, switching repeatedly in place, "because it turns sharply at each '
+            'switch and, not being round, touches again". '
+            f"pfjax's case B parks ({by_case.get('B', '—')}). Which of the assumptions the source leaves open "
+            "(docs/reproductions/parking.md §3) could change that? The study simulates cases A-D under all "
+            f"{a['n_combinations']} combinations of: the rectangle's reach a_f, the detection zone checked toward the "
+            "travel direction (the half beyond the middle, the part beyond the wheel axle, or the whole rectangle), "
+            "the scanner period, a decision taken on the pose one period old, the yaw-rate PI loop of the "
+            "experiments, and a stop at each reversal. Counts per detection zone and a_f (over the other assumptions):"
+        ),
+        assumptions_table(sweep),
+        D.Paragraph(
+            f"{_zone_sentence(a)} {len(four)} of the {a['n_combinations']} combinations give all four of the "
+            f"source's outcomes at once (A, C and D park, B stuck){': ' + listed if four else ''}."
+        ),
+        D.Paragraph(_b_verdict(a, by_case.get("B", "—")), style="verdict"),
+    ]
 
-{_cases_table(s["cases"])}
 
-![parallel parking cases](figures/cases_parallel.png)
-
-![garage with the source's X_s](figures/garage_xs.png)
-
-![case D histories](figures/histories_D.png)
-
-### Case B: what would make it stuck
-
-The source reports case B stuck, switching repeatedly in place, "because it turns sharply at each switch and, not
-being round, touches again". pfjax's case B parks ({by_case.get("B", "—")}). Which of the assumptions the source
-leaves open (docs/reproductions/parking.md §3) could change that? The study simulates cases A-D under all {a["n_combinations"]} combinations of:
-the rectangle's reach a_f, the detection zone checked toward the travel direction (the half beyond the middle,
-the part beyond the wheel axle, or the whole rectangle), the scanner period, a decision taken on the pose one
-period old, the yaw-rate PI loop of the experiments, and a stop at each reversal. Counts per detection zone and a_f
-(over the other assumptions):
-
-{assumptions_table(sweep)}
-
-{_zone_sentence(a)}
-{len(a["all_four_reproduced"])} of the {a["n_combinations"]} combinations give all four of the source's outcomes at once
-(A, C and D park, B stuck){": " + "; ".join(", ".join(f"{k}={v}" for k, v in c.items()) for c in a["all_four_reproduced"][:8]) if a["all_four_reproduced"] else ""}.
-{_b_verdict(a, by_case.get("B", "—"))}"""
-
-
-def _search(s: dict) -> str:
-    cfg, ga, grid = s["config"], s["search"]["ga"], s["search"]["grid"]
+def _search(s: dict) -> list[D.Block]:
+    se, ga, grid = s["config"]["search"], s["search"]["ga"], s["search"]["grid"]
     runs = s["search"].get("ga_runs", [ga])
-    ga_rows = "\n".join(
-        f"| GA run {r.get('seed_index', 0) + 1} | {r['xs']:.3f} | {r['alpha1']:.3f} | {r['alpha2']:.3f} | {r['status']} | {_f(r['time_s'])} | "
-        f"{r['switches']} | {r['fitness']:.5f} | {r['n_simulations']} |"
-        for r in runs
-    )
-    return f"""## Search of (X_s, α₁, α₂) in the garage
 
-Fitness J = 1/(t_e + {cfg["search"]["weight"]:g}·e_e) (assumed; 0 for too many switches). GA: population
-{cfg["search"]["population"]}, {cfg["search"]["generations"]} generations, 24 bits, {ga["n_simulations"]} simulations per run in {ga["wall_s"]:.0f} s.
-Grid: {grid["n"]}³ = {grid["n_simulations"]} simulations on the chromosome lattice in {grid["wall_s"]:.0f} s.
+    def row(label, r):
+        return [label, f"{r['xs']:.3f}", f"{r['alpha1']:.3f}", f"{r['alpha2']:.3f}", r["status"]] + [
+            _f(r["time_s"]),
+            r["switches"],
+            f"{r['fitness']:.5f}",
+            r["n_simulations"],
+        ]
 
-| method | X_s [m] | α₁ | α₂ | outcome | parking time [s] | switches | J [1/s] | simulations |
-|---|---|---|---|---|---|---|---|---|
-{ga_rows}
-| grid | {grid["xs"]:.3f} | {grid["alpha1"]:.3f} | {grid["alpha2"]:.3f} | {grid["status"]} | {_f(grid["time_s"])} | {grid["switches"]} | {grid["fitness"]:.5f} | {grid["n_simulations"]} |
-
-Over {len(runs)} independent GA run(s) the best reaches {100 * ga["fitness_ratio_to_grid_best"]:.1f} % of the grid's best J
-({100 * ga["grid_fraction_better"]:.2f} % of the grid points are better); per run:
-{", ".join(f"{100 * r['fitness_ratio_to_grid_best']:.1f} %" for r in runs)} of the grid's best.
-
-![search](figures/search.png)"""
-
-
-def _start_map(s: dict) -> str:
-    unused = lambda r, v, k: _f(v, 3) if r["switches"] >= k else "(unused)"
-    smap = _table(
-        ["x₀ [m]", "θ₀ [°]", "best X_s", "α₁", "α₂", "outcome", "time [s]", "switches", "grid runs converged"],
-        [
-            [
-                r["x0"],
-                r["theta0_deg"],
-                unused(r, r["xs"], 1),
-                unused(r, r["alpha1"], 1),
-                unused(r, r["alpha2"], 2),
-                r["status"],
-                _f(r["time_s"]),
-                r["switches"],
-                f"{100 * r['converged_fraction']:.0f} %",
-            ]
-            for r in s["start_map"]
-        ],
-    )
-    return f"""## Other starts (y₀ = {s["start_map"][0]["y0"] if s["start_map"] else "—"} m): best parameters on a {s["config"]["start_map"]["grid_n"]}³ grid per start
-
-{smap}
-
-A parameter is "(unused)" when the best run switched too few times to reach it (α₁ applies from the 1st switch,
-α₂ from the 2nd, X_s only while backing); every value then ties and the grid's first level is listed.
-
-![start map](figures/start_map.png)"""
+    header = ["method", "X_s [m]", "α₁", "α₂", "outcome", "parking time [s]", "switches", "J [1/s]", "simulations"]
+    rows = [row(f"GA run {r.get('seed_index', 0) + 1}", r) for r in runs] + [row("grid", grid)]
+    return [
+        D.Heading("Search of (X_s, α₁, α₂) in the garage"),
+        D.Paragraph(
+            f"Fitness J = 1/(t_e + {se['weight']:g}·e_e) (assumed; 0 for too many switches). GA: population "
+            f"{se['population']}, {se['generations']} generations, 24 bits, {ga['n_simulations']} simulations per run "
+            f"in {ga['wall_s']:.0f} s. Grid: {grid['n']}³ = {grid['n_simulations']} simulations on the chromosome "
+            f"lattice in {grid['wall_s']:.0f} s."
+        ),
+        D.Table(header, rows),
+        D.Paragraph(
+            f"Over {len(runs)} independent GA run(s) the best reaches {100 * ga['fitness_ratio_to_grid_best']:.1f} % "
+            f"of the grid's best J ({100 * ga['grid_fraction_better']:.2f} % of the grid points are better); per run: "
+            + ", ".join(f"{100 * r['fitness_ratio_to_grid_best']:.1f} %" for r in runs)
+            + " of the grid's best."
+        ),
+        D.Figure("search", "search"),
+    ]
 
 
-def _montecarlo(s: dict) -> str:
+def _start_map(s: dict) -> list[D.Block]:
+    def unused(r, v, k):
+        return _f(v, 3) if r["switches"] >= k else "(unused)"
+
+    header = ["x₀ [m]", "θ₀ [°]", "best X_s", "α₁", "α₂", "outcome", "time [s]", "switches", "grid runs converged"]
+    rows = [
+        [r["x0"], r["theta0_deg"], unused(r, r["xs"], 1), unused(r, r["alpha1"], 1), unused(r, r["alpha2"], 2)]
+        + [r["status"], _f(r["time_s"]), r["switches"], f"{100 * r['converged_fraction']:.0f} %"]
+        for r in s["start_map"]
+    ]
+    y0 = s["start_map"][0]["y0"] if s["start_map"] else "—"
+    return [
+        D.Heading(
+            f"Other starts (y₀ = {y0} m): best parameters on a {s['config']['start_map']['grid_n']}³ grid per start"
+        ),
+        D.Table(header, rows),
+        D.Paragraph(
+            'A parameter is "(unused)" when the best run switched too few times to reach it (α₁ applies from the '
+            "1st switch, α₂ from the 2nd, X_s only while backing); every value then ties and the grid's first level "
+            "is listed."
+        ),
+        D.Figure("start_map", "start map"),
+    ]
+
+
+def _montecarlo(s: dict) -> list[D.Block]:
     m = s["config"]["montecarlo"]
     rows = []
     for lab, r in s["montecarlo"].items():
@@ -230,20 +239,37 @@ def _montecarlo(s: dict) -> str:
             ]
         )
     header = ["schedule", "success [95 % CI]", "statuses", "parking time p50 / p95 [s]", "success lag off / on"]
-    return f"""## Robustness Monte Carlo (garage, {m["n_runs"]} runs per schedule, same runs for both)
+    return [
+        D.Heading(f"Robustness Monte Carlo (garage, {m['n_runs']} runs per schedule, same runs for both)"),
+        D.Paragraph(
+            f"Start scatter ±{m['pos_scatter']:g} m and ±{m['theta_scatter_deg']:g}°, scanner period "
+            f"U[{m['scan_lo']:g}, {m['scan_hi']:g}] s, speed U[{m['speed_lo']:g}, {m['speed_hi']:g}] m/s, yaw-rate "
+            f"PI loop (k_P 0.8, k_I 16) on with probability {m['lag_probability']:g}."
+        ),
+        D.Table(header, rows),
+        D.Figure("montecarlo", "monte carlo"),
+    ]
 
-Start scatter ±{m["pos_scatter"]:g} m and ±{m["theta_scatter_deg"]:g}°, scanner period
-U[{m["scan_lo"]:g}, {m["scan_hi"]:g}] s, speed U[{m["speed_lo"]:g},
-{m["speed_hi"]:g}] m/s, yaw-rate PI loop (k_P 0.8, k_I 16) on with probability {m["lag_probability"]:g}.
 
-{_table(header, rows)}
+def report(summary: dict, tables: dict[str, pd.DataFrame]) -> D.Document:
+    """The study's report from its ``summary`` (``summary.json``) and ``tables`` (at least
+    ``assumptions``): header, verdicts, calibration, cases, search, start map, Monte Carlo."""
+    s = summary
+    subtitle = f"Config SHA-256 `{s['config_sha256']}`, seed {s['seed']}, pfjax {s['pfjax_version']}" + (
+        " (**quick mode: small sizes**)" if s["quick"] else ""
+    )
+    blocks = [
+        *_header(s),
+        *_verdicts(s),
+        *_calibration(s),
+        *_cases(s, tables["assumptions"]),
+        *_search(s),
+        *_start_map(s),
+        *_montecarlo(s),
+    ]
+    return D.Document("Parking by switching travel direction and gain — pfjax study", subtitle, blocks)
 
-![monte carlo](figures/montecarlo.png)"""
 
-
-def write_report(out: Path, s: dict, sweep: pd.DataFrame) -> Path:
-    """``out/report.md``: header, verdicts, calibration, cases, search, start map, Monte Carlo."""
-    sections = [_header(s), _verdicts(s), _calibration(s), _cases(s, sweep), _search(s), _start_map(s), _montecarlo(s)]
-    p = out / "report.md"
-    p.write_text("\n\n".join(sections) + "\n")
-    return p
+def write_report(out: Path, summary: dict, tables: dict[str, pd.DataFrame]) -> list[Path]:
+    """``out/report.md`` and ``out/report.html`` from one :func:`report` Document."""
+    return D.write(report(summary, tables), out)

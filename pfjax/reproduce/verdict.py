@@ -50,34 +50,23 @@ class Verdict(NamedTuple):
         return self
 
 
-def verdict_table(rows: list[Verdict]) -> str:
-    """The verdict table in Markdown (cells escaped: evidence such as ``|d|`` stays in its cell)."""
-    head = ["claim", "path", "subject", "criterion", "pfjax", "source", "verdict", "basis"]
-    return table(
-        head,
-        [
-            [
-                r.claim,
-                r.path,
-                r.subject,
-                r.criterion,
-                r.pfjax,
-                r.source,
-                f"**{r.verdict}**",
-                "" if r.basis == "independent" else r.basis,
-            ]
-            for r in rows
-        ],
-    )
-
-
-def verdict_block(rows) -> Table:
-    """The verdict table as a report block (:mod:`pfjax.report.document`); ``rows`` are
+def verdict_cells(rows) -> tuple[list[str], list[list[str]]]:
+    """The verdict table as ``(header, rows)`` of inline-Markdown cells; ``rows`` are
     :class:`Verdict` or their dicts (a summary's ``verdicts``)."""
     head = ["claim", "path", "subject", "criterion", "pfjax", "source", "verdict", "basis"]
-    out = []
+    cells = []
     for r in rows:
         v = r if isinstance(r, Verdict) else Verdict(**r)
         basis = "" if v.basis == "independent" else v.basis
-        out.append([v.claim, v.path, v.subject, v.criterion, v.pfjax, v.source, f"**{v.verdict}**", basis])
-    return Table(head, out)
+        cells.append([v.claim, v.path, v.subject, v.criterion, v.pfjax, v.source, f"**{v.verdict}**", basis])
+    return head, cells
+
+
+def verdict_table(rows: list[Verdict]) -> str:
+    """The verdict table in Markdown (cells escaped: evidence such as ``|d|`` stays in its cell)."""
+    return table(*verdict_cells(rows))
+
+
+def verdict_block(rows) -> Table:
+    """The verdict table as a report block (:mod:`pfjax.report.document`)."""
+    return Table(*verdict_cells(rows))

@@ -1,0 +1,172 @@
+"""The parking study's config (``studies/parking.toml``): one pydantic schema of the
+:class:`pfjax.config.ConfigModel` family, read by :func:`load` with ``--set key=value`` overrides and
+the ``--quick`` preset :data:`QUICK`. A bad key or value raises :class:`pfjax.config.ConfigError`,
+one line naming the key."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from pfjax.config import ConfigModel, Real, load_model
+from pfjax.errors import MAX_SEED
+
+#: a part of the robot's rectangle checked toward the travel direction (pfjax.parking.assumptions.ZONES)
+Zone = Literal["middle", "axle", "whole"]
+
+
+class Controller(ConfigModel):
+    """The source's controller: gains k1, k2 (roots -4 ± 4i) and travel speed |v1|."""
+
+    k1: Real = Field(32.0, gt=0, description="gain on the lateral error [1/m²]")
+    k2: Real = Field(8.0, gt=0, description="gain on the heading error [1/m]")
+    speed: Real = Field(0.05, gt=0, description="travel speed |v1| [m/s]")
+
+
+class Sim(ConfigModel):
+    """Single runs: scanner period, timeout, tolerance, integration and the stuck test."""
+
+    scan_period: Real = Field(0.1, gt=0, description="scanner sampling period [s]")
+    t_max: Real = Field(200.0, gt=0, description="timeout of a run [s]")
+    tol: Real = Field(0.02, gt=0, description="stop when |x| + sqrt(y² + tan²θ) < tol [m]")
+    n_sub: int = Field(2, ge=1, description="RK4 steps per scanner period [-]")
+    front: Real = Field(0.0, ge=0, lt=0.54, description="a_f, reach ahead of the axle; 0 = calibrated [m]")
+    chunk: int = Field(1024, ge=1, description="runs per jitted batch [-]")
+    stuck_switches: int = Field(4, ge=1, description="legs over which stuck_travel is measured [-]")
+    stuck_travel: Real = Field(0.1, ge=0, description="stuck: less travel than this over stuck_switches legs [m]")
+
+    @model_validator(mode="after")
+    def _steps(self):
+        if self.t_max / self.scan_period > 20000:
+            raise ValueError(
+                f"scan_period: t_max / scan_period must be <= 20000, got {self.t_max / self.scan_period:g}"
+            )
+        return self
+
+
+class Assumptions(ConfigModel):
+    """The open assumptions of docs/reproductions/parking.md §3, swept over cases A-D (every combination)."""
+
+    fronts: list[Real] = Field(
+        [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25], min_length=1, description="reach ahead of the axle [m]"
+    )
+    zones: list[Zone] = Field(["middle", "axle", "whole"], min_length=1, description="part checked ahead [-]")
+    scan_periods: list[Real] = Field([0.05, 0.1, 0.2], min_length=1, description="scanner periods [s]")
+    decision_delays: list[bool] = Field(
+        [False, True], min_length=1, description="decide on the pose one period old [-]"
+    )
+    lags: list[bool] = Field([False, True], min_length=1, description="the experiments' yaw-rate PI loop [-]")
+    pauses: list[Real] = Field([0.0, 1.0], min_length=1, description="time standing at each reversal [s]")
+
+    @model_validator(mode="after")
+    def _ranges(self):
+        for key, vals, lo, hi in (("fronts", self.fronts, 0, 0.54), ("scan_periods", self.scan_periods, 0, 1)):
+            for i, f in enumerate(vals):
+                if not lo < f <= hi or (key == "fronts" and f >= hi):
+                    raise ValueError(f"{key}[{i}]: must be in ({lo}, {hi}{')' if key == 'fronts' else ']'}, got {f}")
+        for i, p in enumerate(self.pauses):
+            if p < 0:
+                raise ValueError(f"pauses[{i}]: must be >= 0 s, got {p}")
+        return self
+
+
+class Experiment(ConfigModel):
+    """The source's experiments."""
+
+    pause: Real = Field(1.0, ge=0, description="time standing at each reversal in the experiments [s]")
+
+
+class Garage(ConfigModel):
+    """The garage tries."""
+
+    xs_values: list[Real] = Field([-0.9, -1.2, -1.8], min_length=1, description="switch abscissae X_s tried [m]")
+
+
+class Search(ConfigModel):
+    """docs/reproductions/parking.md §5: 24-bit GA and a grid on the chromosome lattice."""
+
+    weight: Real = Field(100.0, ge=0, description="weight of the time term in the fitness [-]")
+    population: int = Field(20, ge=2, description="GA population size [-]")
+    generations: int = Field(100, ge=1, description="GA generations [-]")
+    grid_n: int = Field(32, ge=2, le=64, description="grid points per schedule parameter [-]")
+    ga_seeds: int = Field(3, ge=1, description="independent GA runs [-]")
+    max_switches: int = Field(10, ge=1, description="a candidate switching more often fails [-]")
+
+
+class StartMap(ConfigModel):
+    """Other starts (y0 = 0.6): best (X_s, α1, α2) on a grid_n³ grid per start."""
+
+    x0: list[Real] = Field([-1.5, -1.3, -1.1, -0.9, -0.7], min_length=1, description="start abscissae [m]")
+    theta0_deg: list[Real] = Field(
+        [-80.0, -40.0, 0.0, 40.0, 80.0], min_length=1, description="start headings, magnitude < 90 [deg]"
+    )
+    grid_n: int = Field(10, ge=2, le=64, description="grid points per schedule parameter [-]")
+
+    @model_validator(mode="after")
+    def _headings(self):
+        for i, th in enumerate(self.theta0_deg):
+            if abs(th) >= 90:
+                raise ValueError(f"theta0_deg[{i}]: magnitude must be < 90, got {th}")
+        return self
+
+
+class MonteCarlo(ConfigModel):
+    """Garage robustness: fixed schedule vs the GA's and the grid's best on the same sampled runs."""
+
+    n_runs: int = Field(1000, ge=1, description="sampled runs per schedule [-]")
+    pos_scatter: Real = Field(0.05, ge=0, description="standard deviation of the start position [m]")
+    theta_scatter_deg: Real = Field(5.0, ge=0, description="standard deviation of the start heading [deg]")
+    scan_lo: Real = Field(0.05, gt=0, description="smallest scanner period [s]")
+    scan_hi: Real = Field(0.2, gt=0, description="largest scanner period [s]")
+    speed_lo: Real = Field(0.04, gt=0, description="smallest travel speed [m/s]")
+    speed_hi: Real = Field(0.06, gt=0, description="largest travel speed [m/s]")
+    lag_probability: Real = Field(0.5, ge=0, le=1, description="probability of the yaw-rate lag [-]")
+
+    @model_validator(mode="after")
+    def _ranges(self):
+        if self.scan_lo > self.scan_hi:
+            raise ValueError(f"scan_lo: must be <= scan_hi, got {self.scan_lo} > {self.scan_hi}")
+        if self.speed_lo > self.speed_hi:
+            raise ValueError(f"speed_lo: must be <= speed_hi, got {self.speed_lo} > {self.speed_hi}")
+        return self
+
+
+class ParkingStudy(ConfigModel):
+    """The parking study (docs/reproductions/parking.md): cases, assumptions sweep, garage tries,
+    searches, start map and Monte Carlo."""
+
+    name: str = Field("parking", description="output folder name under results/ [-]")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="PRNG seed of the GA and the Monte Carlo [-]")
+    controller: Controller = Field(default_factory=Controller, description="controller gains and speed")
+    sim: Sim = Field(default_factory=Sim, description="single runs")
+    assumptions: Assumptions = Field(default_factory=Assumptions, description="assumptions sweep")
+    garage: Garage = Field(default_factory=Garage, description="garage tries")
+    experiment: Experiment = Field(default_factory=Experiment, description="the source's experiments")
+    search: Search = Field(default_factory=Search, description="GA and grid searches")
+    start_map: StartMap = Field(default_factory=StartMap, description="start-pose map")
+    montecarlo: MonteCarlo = Field(default_factory=MonteCarlo, description="robustness Monte Carlo")
+
+
+#: the ``--quick`` sizes (tests)
+QUICK: dict = {
+    "sim": {"chunk": 32},
+    "search": {"population": 4, "generations": 2, "grid_n": 3, "ga_seeds": 2},
+    "start_map": {"grid_n": 2, "x0": [-1.3, -0.9], "theta0_deg": [-80.0, 40.0]},
+    "montecarlo": {"n_runs": 16},
+    "assumptions": {
+        "fronts": [0.15, 0.2],
+        "scan_periods": [0.1],
+        "decision_delays": [False],
+        "lags": [False],
+        "pauses": [0.0],
+    },
+}
+
+
+def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: bool = False) -> ParkingStudy:
+    """The validated study config from a TOML ``path`` (else the defaults), ``--set`` ``overrides``
+    and, with ``quick``, the :data:`QUICK` sizes. Raises :class:`pfjax.config.ConfigError`."""
+    return load_model(ParkingStudy, path, overrides, presets=[QUICK] if quick else [])[0]
