@@ -58,15 +58,31 @@ def test_rollouts_are_counted_exactly():
         jax.debug.callback(lambda _: calls.__setitem__(0, calls[0] + 1), th[0])
         return jnp.sum((th - 0.3) ** 2)
 
-    o = MultistartOptions(n_screen=16, n_starts=4, steps=7, rounds=3, n_restarts=2, restart_steps=3)
+    o = MultistartOptions(n_screen=16, n_starts=4, steps=7, rounds=3, n_restarts=2, restart_steps=3, polish_steps=2)
     r = multistart_tune(cost, [0, 0, 0], [1, 1, 1], key=jax.random.PRNGKey(0), options=o, candidates=[[0.5] * 3])
-    # 17 screened, chains 4, 2, 1 for 3, 2, 2 steps, 3 restart chains for 3 steps
-    expected = 17 + 4 * 3 + 2 * 2 + 1 * 2 + 3 * 3
+    # 17 screened, chains 4, 2, 1 for 3, 2, 2 steps, 3 restart chains for 3 steps, 2 compass iterations of 6 points
+    n_grad = 4 * 3 + 2 * 2 + 1 * 2 + 3 * 3
+    expected = 17 + n_grad + 2 * 6
     assert calls[0] == expected == r.n_rollouts == r.history_rollouts[-1]
-    n_grad = expected - 17
-    assert r.n_forward_passes == 17 + 4 * n_grad  # forward mode, 3 gains: 1 + 3 passes per gradient rollout
+    # forward mode, 3 gains: 1 + 3 passes per gradient rollout, 1 per value-only rollout
+    assert r.n_forward_passes == 17 + 4 * n_grad + 2 * 6
     assert np.all(np.diff(r.history) <= 0) and r.cost == r.history[-1] == pytest.approx(0.0, abs=1e-12)
     assert r.compile_s > 0 and r.wall_s > 0
+
+
+def test_compass_polish_walks_along_a_kink_where_bfgs_stalls():
+    """A V-shaped valley along the kink z1 = 0.5 (minimum 0 at (0.8, 0.5), closed form): a gradient
+    step crosses the kink and is rejected, so the BFGS chain creeps along z0; the compass polish
+    (value only) walks along it."""
+    valley = lambda th: 5.0 * jnp.abs(th[1] - 0.5) + 0.5 * (th[0] - 0.8) ** 2
+    o = MultistartOptions(n_screen=0, n_starts=1, steps=12, rounds=1, n_restarts=0, polish_steps=0)
+    kw = dict(key=jax.random.PRNGKey(0), candidates=[[0.1, 0.5]])
+    plain = multistart_tune(valley, [0, 0], [1, 1], options=o, **kw)
+    polished = multistart_tune(valley, [0, 0], [1, 1], options=o._replace(polish_steps=20), **kw)
+    assert plain.cost > 0.05  # 0.245 at the start: the chain creeps
+    assert polished.cost < 1e-3 and abs(polished.theta[0] - 0.8) < 0.03
+    assert polished.n_rollouts == plain.n_rollouts + 20 * 4
+    assert polished.n_forward_passes == plain.n_forward_passes + 20 * 4  # value only: 1 pass each
 
 
 def test_space_filling_samplers_are_seeded_and_stratified():
@@ -122,7 +138,7 @@ def test_parse_gains_forms_and_errors():
 
 
 def test_tune_api_methods_and_check_on_the_simulator():
-    small = MultistartOptions(n_screen=8, n_starts=2, steps=4, rounds=2, n_restarts=1, restart_steps=2)
+    small = MultistartOptions(n_screen=8, n_starts=2, steps=4, rounds=2, n_restarts=1, restart_steps=2, polish_steps=0)
     out = pfjax.tune("state_feedback", "paper-line", "gradient", config=SHORT, key=0, multistart=small)
     # 8 screened + the default (source) K; chains 2, 1 for 2 steps; 2 restart chains for 2 steps
     assert out["n_rollouts"] == 9 + 2 * 2 + 1 * 2 + 2 * 2 and out["n_forward_passes"] == 9 + 3 * 10
@@ -144,7 +160,16 @@ def test_tune_help_lists_methods_and_check(capsys):
         main(["tune", "--help"])
     assert e.value.code == 0
     text = " ".join(capsys.readouterr().out.split())
-    for word in ("--check GAINS", "ga+gradient", "gradient-plain", "--screen", "--sampler", "--rounds", "--restarts"):
+    for word in (
+        "--check GAINS",
+        "ga+gradient",
+        "gradient-plain",
+        "--screen",
+        "--sampler",
+        "--rounds",
+        "--restarts",
+        "--polish",
+    ):
         assert word in text, word
 
 

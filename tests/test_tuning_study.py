@@ -5,7 +5,7 @@ References: the config hash is recomputed with :func:`pfjax.provenance.config_ha
 every held-out success rate and Clopper-Pearson interval is recounted from ``heldout.parquet`` with
 scipy's beta quantiles (1e-9); the GA's rollout count is the MATLAB formula P + G (P - E) with E = 1;
 the multi-start tuner's count is recomputed from its options (screened points plus the default gains, the
-halving chains, the restart chains); the cost history of every run is non-increasing and ends at the run's
+halving chains, the restart chains, the compass polish); the cost history of every run is non-increasing and ends at the run's
 reported cost.
 """
 
@@ -75,7 +75,10 @@ def test_quick_tuning_study_outputs_consistent(out):
     runs = pd.DataFrame(s["tuning_runs"])
     assert set(runs.method) == set(expected)
     for r in s["tuning_runs"]:
-        assert r["n_rollouts"] == expected[r["method"]], r
+        # the compass polish: 2 D value-only points per iteration (D gains)
+        D = sum(len(v) if isinstance(v, list) else 1 for v in r["gains"].values())
+        polish = ms["polish_steps"] * 2 * D if r["method"] == "gradient" else 0
+        assert r["n_rollouts"] == expected[r["method"]] + polish, r
         assert r["n_forward_passes"] >= r["n_rollouts"]
     hist = pd.read_parquet(out / "tuning_runs.parquet")
     for r in s["tuning_runs"]:

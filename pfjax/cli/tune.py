@@ -6,7 +6,7 @@ or check given gains.
                --scenario {paper-line,paper-parabola,paper-sine,paper-all,CONFIG.toml}
                [--cost iae] [--aggregate mean] [--effort 0] [--seed 0] [--generations 100] [--population 50]
                [--steps N] [--starts N] [--lr X] [--screen 64] [--sampler sobol] [--rounds 3] [--restarts 3]
-               [--smoothing 0] [--n-runs 16] [--dt 0.005] [--horizon 20] [--json]
+               [--polish 8] [--smoothing 0] [--n-runs 16] [--dt 0.005] [--horizon 20] [--json]
 
 Prints ``gains``, ``cost``, ``n_rollouts_simulated`` (every rollout, value-only or with a gradient),
 ``n_forward_passes`` (a rollout with its gradient counted as ``1 + D`` forward passes in forward
@@ -41,7 +41,7 @@ def register(sub) -> None:
     p.add_argument(
         "--method",
         default=None,
-        help="gradient (multi-start: screening, successive halving of BFGS chains, restarts) | "
+        help="gradient (multi-start: screening, successive halving of BFGS chains, restarts, compass polish) | "
         "gradient-plain (projected adam from --starts uniform starts) | ga | ga+gradient (GA, then --steps "
         "adam steps from its best); required unless --check",
     )
@@ -87,6 +87,12 @@ def register(sub) -> None:
     p.add_argument("--rounds", type=int, default=None, help="gradient: successive-halving rounds (3; 1: none)")
     p.add_argument("--restarts", type=int, default=None, help="gradient: perturbed restarts of the incumbent (3)")
     p.add_argument(
+        "--polish",
+        type=int,
+        default=None,
+        help="gradient: value-only compass iterations around the incumbent (8; 0: none)",
+    )
+    p.add_argument(
         "--smoothing", type=float, default=None, help="gradient: randomised-smoothing radius, first round (0: off)"
     )
     p.add_argument(
@@ -119,12 +125,28 @@ FLAGS = {
     "sampler": "--sampler",
     "rounds": "--rounds",
     "n_restarts": "--restarts",
+    "polish_steps": "--polish",
     "smoothing": "--smoothing",
     "check": "--check",
     "n_runs": "--n-runs",
     "dt": "--dt",
     "horizon": "--horizon",
 }
+
+
+def _multistart(args):
+    """The multi-start tuner's options set by the flags (the rest at their defaults), checked."""
+    from pfjax.tuning.multistart import MultistartOptions
+
+    flags = (
+        ("n_screen", args.screen),
+        ("sampler", args.sampler),
+        ("rounds", args.rounds),
+        ("n_restarts", args.restarts),
+        ("polish_steps", args.polish),
+        ("smoothing", args.smoothing),
+    )
+    return MultistartOptions(**{k: v for k, v in flags if v is not None}).check()
 
 
 def _cmd(args) -> dict:
@@ -136,7 +158,6 @@ def _cmd(args) -> dict:
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.multistart import MultistartOptions
     from pfjax.tuning.problem import METHODS, check, make_problem, tune
 
     controllers = _controllers()
@@ -151,18 +172,7 @@ def _cmd(args) -> dict:
     key = jax.random.PRNGKey(errors.seed("--seed", args.seed))
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
-        ms = {
-            k: v
-            for k, v in (
-                ("n_screen", args.screen),
-                ("sampler", args.sampler),
-                ("rounds", args.rounds),
-                ("n_restarts", args.restarts),
-                ("smoothing", args.smoothing),
-            )
-            if v is not None
-        }
-        multistart = MultistartOptions(**ms).check()
+        multistart = _multistart(args)
         problem = make_problem(controllers[args.controller], args.scenario, cost=cost, n_runs=args.n_runs)
         changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
         if changes:

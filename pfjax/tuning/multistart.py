@@ -1,5 +1,5 @@
 """Multi-start gradient tuning: space-filling screening, successive halving of projected BFGS chains,
-restarts, optional smoothing.
+restarts, a compass polish, optional smoothing.
 
 One run of :func:`multistart_tune` on a box ``lower <= theta <= upper`` (normalised coordinates
 ``z = (theta - lower) / (upper - lower) in [0, 1]^D``, as in :mod:`pfjax.tuning.gradient`):
@@ -16,18 +16,14 @@ One run of :func:`multistart_tune` on a box ``lower <= theta <= upper`` (normali
 4. **Restarts.** ``n_restarts`` perturbations of the incumbent (``z* + restart_scale * eps``,
    clipped to the box) and the incumbent itself are descended for ``restart_steps`` steps with a
    quarter of the first step.
+5. **Compass polish.** ``polish_steps`` value-only compass iterations around the incumbent, first
+   step ``polish_scale`` (:mod:`pfjax.tuning.local`): ``2 D`` rollouts of one forward pass each per
+   iteration; they walk along the kinks of IAE costs where gradient steps stall.
 
-The local descent (``local``) is a **projected BFGS** by default, one evaluation per chain and
-step, so that every chain advances in lockstep: the trial point is ``z + d``, ``d = -H_F g_F`` on
-the free coordinates (those not on a bound the gradient pushes against), steepest descent when
-that is not a descent direction, scaled to ``|d|_inf <= radius`` and clipped to the box; a trial
-that lowers the cost is accepted (radius doubled, up to 0.5) and its pair ``s = z_t - z``,
-``y = g_t - g`` updates the inverse Hessian ``H`` when ``s.y > 0`` (Nocedal & Wright eq. 6.17,
-``H`` first scaled by eq. 6.20); a rejected trial quarters the radius. Tuning costs have long
-curved valleys (for the PI, the damping ratio ``~ kp_theta / sqrt(kp_d)`` sets the cost and the
-valley runs along it), which a diagonal method such as Adam crosses back and forth; the curvature
-pairs follow the valley. ``local="adam"`` keeps the cosine-decayed Adam of
-:func:`pfjax.tuning.gradient.gradient_tune` (for comparison).
+The local descent (``local``) is a projected BFGS by default, or Adam (:mod:`pfjax.tuning.local`).
+Tuning costs have long curved valleys (for the PI, the damping ratio ``~ kp_theta / sqrt(kp_d)``
+sets the cost and the valley runs along it), which a diagonal method such as Adam crosses back and
+forth; the BFGS curvature pairs follow the valley.
 
 With ``smoothing = s > 0`` the first round evaluates each trial at ``z_t + sigma_k eps_k``
 (``eps_k ~ N(0, I)``, one draw per chain and step, ``sigma_k`` falling linearly from ``s`` to 0
@@ -35,7 +31,7 @@ over the round): a one-sample randomised smoothing of the cost, which can step o
 narrower than ``sigma``; later rounds see the true cost. The perturbed point is the one evaluated
 and kept, so the incumbent is always a real evaluation.
 
-The result is the best point ever evaluated (screening, trial and restart points alike).
+The result is the best point ever evaluated (screening, trial, restart and polish points alike).
 
 Budget (:class:`~pfjax.tuning.gradient.TuneResult`): ``n_rollouts`` counts every simulated
 rollout, ``n`` per cost evaluation (the batch), value-only or with its gradient. Forward-pass
@@ -61,9 +57,11 @@ import optax
 
 from pfjax import errors
 from pfjax.numerics import autodiff
-from pfjax.tuning.gradient import TuneResult
+from pfjax.tuning import local as L
+from pfjax.tuning.gradient import TuneResult, _adam
 
 SAMPLERS = ("sobol", "lhs", "uniform")
+LOCALS = L.LOCALS
 
 
 class MultistartOptions(NamedTuple):
@@ -81,6 +79,8 @@ class MultistartOptions(NamedTuple):
     n_restarts: int = 3  # perturbations of the incumbent descended at the end (0: off)
     restart_steps: int = 20
     restart_scale: float = 0.05  # standard deviation of the perturbations
+    polish_steps: int = 8  # value-only compass iterations around the incumbent (0: off)
+    polish_scale: float = 0.05  # first compass step
 
     def check(self) -> MultistartOptions:
         """``self`` if valid; :class:`~pfjax.errors.InputError` naming the bad field otherwise."""
@@ -98,6 +98,8 @@ class MultistartOptions(NamedTuple):
         errors.integer("n_restarts", self.n_restarts, low=0, high=1_000_000)
         errors.integer("restart_steps", self.restart_steps, low=0, high=1_000_000)
         errors.number("restart_scale", self.restart_scale, nonnegative=True)
+        errors.integer("polish_steps", self.polish_steps, low=0, high=1_000_000)
+        errors.number("polish_scale", self.polish_scale, low=0.0, high=1.0)
         return self
 
 
@@ -143,7 +145,7 @@ def multistart_tune(
     mode: str = "auto",
     progress: bool = False,
 ) -> TuneResult:
-    """Minimise ``cost(theta)`` over the box by screened, halved, restarted projected descent.
+    """Minimise ``cost(theta)`` over the box by screened, halved, restarted, polished projected descent.
 
     Args:
         cost: ``theta (D,) -> scalar``, traceable (e.g. :func:`pfjax.tuning.cost.batch_cost`).
@@ -154,11 +156,11 @@ def multistart_tune(
             the box), e.g. the source's gains or an LMI design.
         n_per_eval: rollouts per ``cost`` call, for the budget count.
         mode: differentiation mode (:func:`pfjax.numerics.autodiff.value_and_grad`).
-        progress: tqdm bar over the gradient steps.
+        progress: tqdm bar over the gradient steps and polish iterations.
 
     Returns:
         :class:`~pfjax.tuning.gradient.TuneResult`; ``history`` has one entry after the screening
-        and one per gradient step (best cost so far).
+        and one per gradient step and polish iteration (best cost so far).
     """
     o = options.check()
     lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
@@ -172,179 +174,146 @@ def multistart_tune(
     if len(z0) < o.n_starts:  # too few screened points: fill the starts uniformly
         z0 = np.concatenate([z0, np.asarray(jax.random.uniform(k_restart, (o.n_starts - len(z0), D)), np.float64)])
     dtype = jnp.result_type(float)
-    lo_j, span_j = jnp.asarray(lo, dtype), jnp.asarray(span, dtype)
-    per_round = [o.steps // o.rounds + (1 if r < o.steps % o.rounds else 0) for r in range(o.rounds)]
-    sizes, n = [], o.n_starts
-    for _ in range(o.rounds):
-        sizes.append(n)
-        n = max(1, n // 2)
-    n_restart_chains = o.n_restarts + 1 if (o.n_restarts and o.restart_steps) else 0
-    local = _local(o.local, float(o.learning_rate), int(o.steps))
-    local_r = _local(o.local, float(o.learning_rate) / 4.0, max(int(o.restart_steps), 1))
-
-    # --- compile every program ahead of time (not in wall_s) ---
+    plan = _Plan.of(o)
     t_c = time.perf_counter()
-    screen = _compiled(_value, (z0.shape, dtype), cost=cost)
-    steps_c = {}
-    for m, lc in [(s, local) for s in sorted(set(sizes))] + ([(n_restart_chains, local_r)] if n_restart_chains else []):
-        steps_c[(m, lc)] = _compiled(_step, ((m, D), dtype), cost=cost, local=lc, mode=mode)
+    progs = plan.compile(cost, len(z0), D, dtype, mode)
     compile_s = time.perf_counter() - t_c
 
-    t0 = time.perf_counter()
-    fpp = autodiff.forward_passes_per_gradient(D, mode)
-    n_roll = n_fwd = n_bad = 0
-    hist, hist_r, hist_t = [], [], []
-    best = {"J": np.inf, "z": z0[0]}
-
-    def record(J, Z, n_runs, passes):
-        nonlocal n_roll, n_fwd
-        J = np.where(np.isfinite(J), J, np.inf)
-        n_roll += n_runs * n_per_eval
-        n_fwd += n_runs * n_per_eval * passes
-        i = int(np.argmin(J))
-        if J[i] < best["J"]:
-            best["J"], best["z"] = float(J[i]), np.asarray(Z[i], np.float64)
-        hist.append(best["J"])
-        hist_r.append(n_roll)
-        hist_t.append(time.perf_counter() - t0)
-        return J
-
-    J0 = record(np.asarray(screen(jnp.asarray(z0, dtype), lo_j, span_j), np.float64), z0, len(z0), 1)
+    bud = _Budget(n_per_eval, autodiff.forward_passes_per_gradient(D, mode), z0[0], progress and plan.n_iter(o))
+    args = (jnp.asarray(lo, dtype), jnp.asarray(span, dtype))
+    J0 = bud.record(progs["screen"](jnp.asarray(z0, dtype), *args), z0, 1, tick=False)
     order = select_starts(z0, J0, o.n_starts, o.separation)
-    state = local.init(jnp.asarray(z0[order], dtype))
-    chain_best = J0[order].copy()
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    _halving(o, plan, progs, bud, z0[order], J0[order], k_smooth, args, dtype)
+    if plan.n_restart_chains:
+        eps = np.asarray(jax.random.normal(k_restart, (o.n_restarts, D)), np.float64)
+        zr = np.concatenate([bud.z[None], np.clip(bud.z + o.restart_scale * eps, 0.0, 1.0)])
+        state = plan.local_r.init(jnp.asarray(zr, dtype))
+        zeros = jnp.zeros((plan.n_restart_chains, D), dtype)
+        for _ in range(o.restart_steps):
+            J, zp, state, nb = progs[plan.n_restart_chains, plan.local_r](state, zeros, *args)
+            bud.record(J, zp, bud.fpp, nb)
+    h = float(o.polish_scale)
+    for _ in range(o.polish_steps if plan.polish else 0):
+        z_c, J_c, Zp = bud.z, bud.J, L.compass_points(bud.z, h)
+        Jp = bud.record(progs["polish"](jnp.asarray(Zp, dtype), *args), Zp, 1)
+        h = L.compass_update(z_c, J_c, h, Zp, Jp)[2]  # the incumbent moves in bud.record
+    return bud.result(lo, span, compile_s)
 
-        bar = tqdm(total=o.steps + (o.restart_steps if n_restart_chains else 0), desc="multistart", leave=False)
+
+class _Plan(NamedTuple):
+    """Chain counts and local descents of one run, and the programs they need."""
+
+    sizes: tuple  # chains per halving round
+    per_round: tuple  # steps per halving round
+    n_restart_chains: int
+    polish: bool  # a compass polish at the end
+    local: L.Local
+    local_r: L.Local
+
+    @classmethod
+    def of(cls, o: MultistartOptions) -> _Plan:
+        per_round = [o.steps // o.rounds + (1 if r < o.steps % o.rounds else 0) for r in range(o.rounds)]
+        sizes, n = [], o.n_starts
+        for _ in range(o.rounds):
+            sizes.append(n)
+            n = max(1, n // 2)
+        n_r = o.n_restarts + 1 if (o.n_restarts and o.restart_steps) else 0
+        lr, lc = float(o.learning_rate), L.local(o.local, float(o.learning_rate), int(o.steps))
+        return cls(
+            tuple(sizes),
+            tuple(per_round),
+            n_r,
+            bool(o.polish_steps and o.polish_scale > 0),
+            lc,
+            L.local(o.local, lr / 4.0, max(int(o.restart_steps), 1)),
+        )
+
+    def n_iter(self, o: MultistartOptions) -> int:
+        return o.steps + (o.restart_steps if self.n_restart_chains else 0) + (o.polish_steps if self.polish else 0)
+
+    def compile(self, cost, n_screen: int, D: int, dtype, mode: str) -> dict:
+        """Every program compiled ahead of time: ``"screen"``, ``"polish"`` (value only) and one
+        step per ``(chains, local)``."""
+        progs: dict = {"screen": _compiled(_value, ((n_screen, D), dtype), cost=cost)}
+        if self.polish:
+            progs["polish"] = _compiled(_value, ((2 * D, D), dtype), cost=cost)
+        pairs = [(m, self.local) for m in sorted(set(self.sizes))]
+        pairs += [(self.n_restart_chains, self.local_r)] if self.n_restart_chains else []
+        for m, lc in pairs:
+            progs[m, lc] = _compiled(_step, ((m, D), dtype), cost=cost, local=lc, mode=mode)
+        return progs
+
+
+def _halving(o, plan: _Plan, progs, bud: _Budget, z_starts, J_starts, k_smooth, args, dtype) -> None:
+    """Successive halving (module docstring, step 3): the chains from ``z_starts`` descended
+    together round by round, the worse half (by the best cost each has seen) dropped between rounds."""
+    state = plan.local.init(jnp.asarray(z_starts, dtype))
+    chain_best = np.asarray(J_starts, np.float64).copy()
     k_iter = 0
-    for r, (m, n_steps) in enumerate(zip(sizes, per_round)):
+    for r, (m, n_steps) in enumerate(zip(plan.sizes, plan.per_round)):
         if len(chain_best) > m:  # successive halving: keep the m chains with the best costs seen
             keep = np.sort(np.argsort(chain_best, kind="stable")[:m])
             chain_best = chain_best[keep]
             state = jax.tree_util.tree_map(lambda x, keep=keep: x[keep] if np.ndim(x) else x, state)
         for k in range(n_steps):
             sigma = o.smoothing * (1.0 - k / n_steps) if r == 0 and o.rounds > 1 else 0.0
-            noise = sigma * jax.random.normal(jax.random.fold_in(k_smooth, k_iter), (m, D), dtype)
-            J, zp, state, nb = steps_c[(m, local)](state, noise, lo_j, span_j)
-            J = record(np.asarray(J, np.float64), np.asarray(zp), m, fpp)
-            chain_best = np.minimum(chain_best, J)
-            n_bad += int(nb)
+            noise = sigma * jax.random.normal(jax.random.fold_in(k_smooth, k_iter), (m, z_starts.shape[1]), dtype)
+            J, zp, state, nb = progs[m, plan.local](state, noise, *args)
+            chain_best = np.minimum(chain_best, bud.record(J, zp, bud.fpp, nb))
             k_iter += 1
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(best=f"{best['J']:.5g}")
-    if n_restart_chains:
-        eps = np.asarray(jax.random.normal(k_restart, (o.n_restarts, D)), np.float64)
-        zr = np.concatenate([best["z"][None], np.clip(best["z"] + o.restart_scale * eps, 0.0, 1.0)])
-        state = local_r.init(jnp.asarray(zr, dtype))
-        zeros = jnp.zeros((n_restart_chains, D), dtype)
-        for _ in range(o.restart_steps):
-            J, zp, state, nb = steps_c[(n_restart_chains, local_r)](state, zeros, lo_j, span_j)
-            record(np.asarray(J, np.float64), np.asarray(zp), n_restart_chains, fpp)
-            n_bad += int(nb)
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(best=f"{best['J']:.5g}")
-    if bar is not None:
-        bar.close()
-    return TuneResult(
-        lo + span * best["z"],
-        best["J"],
-        np.asarray(hist),
-        np.asarray(hist_r, dtype=np.int64),
-        np.asarray(hist_t),
-        int(n_roll),
-        time.perf_counter() - t0,
-        n_bad,
-        int(n_fwd),
-        compile_s,
-    )
 
 
-# --- local descents: one cost-and-gradient evaluation per chain and step ---------------------------
+class _Budget:
+    """Rollouts and forward passes counted, the best point so far and the history (host side)."""
 
-LOCALS = ("bfgs", "adam")
+    def __init__(self, n_per_eval: int, fpp: int, z0, bar_total):
+        self.n_per_eval, self.fpp = n_per_eval, fpp
+        self.n_roll = self.n_fwd = self.n_bad = 0
+        self.J, self.z = np.inf, np.asarray(z0, np.float64)
+        self.hist: list[float] = []
+        self.hist_r: list[int] = []
+        self.hist_t: list[float] = []
+        self.bar = None
+        if bar_total:
+            from tqdm.auto import tqdm
 
+            self.bar = tqdm(total=bar_total, desc="multistart", leave=False)
+        self.t0 = time.perf_counter()
 
-class _Local(NamedTuple):
-    """A batched local descent: ``init(z (m, D)) -> state``; ``trial(state) -> z_t`` (per chain);
-    ``update(state, z_t, J_t, g_t) -> state`` (per chain). Hashable (static under jit)."""
+    def record(self, J, Z, passes: int, n_bad=0, tick: bool = True) -> np.ndarray:
+        """Count ``len(J)`` evaluations of ``passes`` forward passes per rollout at the points ``Z``;
+        returns the costs with non-finite ones as ``inf``."""
+        J = np.asarray(J, np.float64)
+        J = np.where(np.isfinite(J), J, np.inf)
+        self.n_roll += len(J) * self.n_per_eval
+        self.n_fwd += len(J) * self.n_per_eval * passes
+        self.n_bad += int(n_bad)
+        i = int(np.argmin(J))
+        if J[i] < self.J:
+            self.J, self.z = float(J[i]), np.asarray(Z[i], np.float64)
+        self.hist.append(self.J)
+        self.hist_r.append(self.n_roll)
+        self.hist_t.append(time.perf_counter() - self.t0)
+        if self.bar is not None and tick:
+            self.bar.update(1)
+            self.bar.set_postfix(best=f"{self.J:.5g}")
+        return J
 
-    name: str
-    learning_rate: float
-    steps: int
-
-    def init(self, z):
-        m, D = z.shape
-        if self.name == "adam":
-            return (z, _adam(self.learning_rate, self.steps).init(z))
-        eye = jnp.broadcast_to(jnp.eye(D, dtype=z.dtype), (m, D, D))
-        inf = jnp.full((m,), jnp.inf, z.dtype)
-        return BFGSState(z, inf, jnp.zeros_like(z), eye, jnp.full((m,), self.learning_rate, z.dtype), inf < 0)
-
-
-@functools.lru_cache(maxsize=32)
-def _local(name: str, learning_rate: float, steps: int) -> _Local:
-    return _Local(name, learning_rate, steps)
-
-
-class BFGSState(NamedTuple):
-    """Per-chain state of the projected BFGS descent (leading axis: chains)."""
-
-    z: jnp.ndarray  # (D,) accepted point, normalised
-    J: jnp.ndarray  # () its cost (inf before the first evaluation)
-    g: jnp.ndarray  # (D,) its gradient, normalised units
-    H: jnp.ndarray  # (D, D) inverse-Hessian approximation
-    radius: jnp.ndarray  # () step bound, inf-norm, normalised units
-    scaled: jnp.ndarray  # () bool: H has been scaled by the first curvature pair
-
-
-def _bfgs_trial(st: BFGSState):
-    """Projected quasi-Newton trial point: ``d = -H_F g_F`` on the free coordinates ``F`` (not at a
-    bound the gradient pushes against), steepest descent if that is not a descent direction, scaled
-    to ``|d|_inf <= radius``, clipped to the box. Before the first evaluation: the start itself."""
-    at_lo, at_hi = (st.z <= 0.0) & (st.g > 0.0), (st.z >= 1.0) & (st.g < 0.0)
-    free = ~(at_lo | at_hi)
-    gf = jnp.where(free, st.g, 0.0)
-    d = -(st.H * free[:, None] * free[None, :]) @ gf
-    d = jnp.where(jnp.dot(gf, d) < 0.0, d, -gf)
-    d = d * jnp.minimum(1.0, st.radius / jnp.maximum(jnp.max(jnp.abs(d)), 1e-30))
-    return jnp.where(jnp.isfinite(st.J), jnp.clip(st.z + d, 0.0, 1.0), st.z)
-
-
-def _bfgs_update(st: BFGSState, zt, Jt, gt):
-    """Accept the trial if it lowers the cost (then double the radius up to 0.5; else quarter it),
-    and update ``H`` by BFGS with the accepted pair ``s = z_t - z``, ``y = g_t - g`` when
-    ``s.y > 0`` (the first pair scales ``H`` to ``(s.y / y.y) I`` first, Nocedal & Wright eq. 6.20)."""
-    first = ~jnp.isfinite(st.J)
-    accept = jnp.isfinite(Jt) & (Jt < st.J)
-    s, y = zt - st.z, gt - st.g
-    sy = jnp.dot(s, y)
-    curv = accept & ~first & (sy > 1e-12 * jnp.linalg.norm(s) * jnp.linalg.norm(y)) & (sy > 0)
-    D = s.shape[0]
-    eye = jnp.eye(D, dtype=s.dtype)
-    H0 = jnp.where(st.scaled, st.H, eye * sy / jnp.maximum(jnp.dot(y, y), 1e-300))
-    rho = 1.0 / jnp.where(curv, sy, 1.0)
-    V = eye - rho * jnp.outer(s, y)
-    Hn = V @ H0 @ V.T + rho * jnp.outer(s, s)
-    H = jnp.where(curv, Hn, st.H)
-    radius = jnp.where(first, st.radius, jnp.where(accept, jnp.minimum(2.0 * st.radius, 0.5), st.radius / 4.0))
-    return BFGSState(
-        jnp.where(accept, zt, st.z),
-        jnp.where(accept, Jt, st.J),
-        jnp.where(accept, gt, st.g),
-        H,
-        radius,
-        st.scaled | curv,
-    )
-
-
-@functools.lru_cache(maxsize=32)
-def _adam(learning_rate: float, steps: int) -> optax.GradientTransformation:
-    """Adam with the step cosine-decayed from ``learning_rate`` to a tenth of it over ``steps``."""
-    return optax.adam(optax.cosine_decay_schedule(learning_rate, max(steps, 1), alpha=0.1))
+    def result(self, lo, span, compile_s: float) -> TuneResult:
+        if self.bar is not None:
+            self.bar.close()
+        return TuneResult(
+            lo + span * self.z,
+            self.J,
+            np.asarray(self.hist),
+            np.asarray(self.hist_r, dtype=np.int64),
+            np.asarray(self.hist_t),
+            int(self.n_roll),
+            time.perf_counter() - self.t0,
+            self.n_bad,
+            int(self.n_fwd),
+            compile_s,
+        )
 
 
 _COMPILED: dict = {}
@@ -385,8 +354,8 @@ def _step(state, noise, lo, span, *, cost, local, mode="auto"):
         opt = _adam(local.learning_rate, local.steps)
         upd, opt_state = opt.update(g, opt_state, z)
         return J, zp, (jnp.clip(optax.apply_updates(z, upd), 0.0, 1.0), opt_state), jnp.sum(bad)
-    zp = jnp.clip(jax.vmap(_bfgs_trial)(state) + noise, 0.0, 1.0)
+    zp = jnp.clip(jax.vmap(L.bfgs_trial)(state) + noise, 0.0, 1.0)
     J, g = vg(zp)
     bad = ~jnp.isfinite(g)
     g = jnp.where(bad, 0.0, g)
-    return J, zp, jax.vmap(_bfgs_update)(state, zp, J, g), jnp.sum(bad)
+    return J, zp, jax.vmap(L.bfgs_update)(state, zp, J, g), jnp.sum(bad)
