@@ -10,7 +10,11 @@ $$
 g(u) = \\text{threshold} - \\text{metric}(u) \\quad (\\text{metric's unit}),
 $$
 
-forced to at most ``-10⁻⁹`` where the run's status is a failure (diverged, non-finite, ...). The
+forced to at most ``-10⁻⁹`` where the run's status is a failure (diverged, non-finite, ...);
+positive margins are rounded up to multiples of ``margin_resolution`` (its sign, so the failure
+set, unchanged), so runs that converge alike tie, and beside the margin ``g`` returns the
+tie-break ``-tie_break metric`` that orders tied runs in subset simulation (the larger the
+transient error, the nearer failure; :mod:`pfjax.rare.subset`, *Plateaus*). The
 strata combine as ``p = Σ_s w_s p_s`` with ``Var p = Σ_s w_s² Var p_s``; one stratum keeps its
 estimator's own interval, several get the lognormal one of
 :func:`pfjax.rare.estimate.lognormal_interval`.
@@ -18,6 +22,7 @@ estimator's own interval, several get the lognormal one of
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 
@@ -30,12 +35,18 @@ from pfjax.rare.subset import subset_simulation
 from pfjax.rare.transform import Input, Stratum, config_keys, study_inputs, to_physical
 
 
-def limit_state(spec: StudySpec, stratum: Stratum, inputs: list[Input], controller, *, counter=None):
+def limit_state(
+    spec: StudySpec, stratum: Stratum, inputs: list[Input], controller, *, seed: int = 0, stream: int = 0, counter=None
+):
     """``g(u)`` of one stratum for one controller (``(ctrl, gains, flat)`` of
     :func:`pfjax.montecarlo.runner.controller_of`); ``counter(n)`` is told of every ``n`` rollouts.
 
     A batch of ``n`` points is padded to a multiple of 32 runs (one compiled program per padded
-    size), with ``u``'s extra coordinate ignored when the study has no continuous input."""
+    size), with ``u``'s extra coordinate ignored when the study has no continuous input. Call
+    ``c`` of ``g`` draws the randomness that is not in ``u`` (:mod:`pfjax.rare.transform`) from
+    ``fold_in(fold_in(PRNGKey(seed), stream), c)``: fresh at every rollout, the same for the same seed and calls."""
+    import jax
+
     from pfjax.montecarlo.runner import batch_size, sim_config, with_gains
     from pfjax.montecarlo.sampling import sample_runs
     from pfjax.sim.simulate import simulate_batch
@@ -44,20 +55,29 @@ def limit_state(spec: StudySpec, stratum: Stratum, inputs: list[Input], controll
     rare = spec.rare_event
     threshold = spec.success.band if rare.threshold is None else rare.threshold
     cfg = sim_config(spec)
+    calls = itertools.count()
+    base = jax.random.fold_in(jax.random.PRNGKey(seed), stream)
 
     def g(u: np.ndarray) -> np.ndarray:
         n = len(u)
+        key = jax.random.fold_in(base, next(calls))
         m = batch_size(n)
         x = to_physical(inputs, u) if inputs else {}
         x.update({k: np.full(n, v) for k, v in stratum.values.items()})
         given = {k: np.concatenate([v, np.repeat(v[:1], m - n)]) for k, v in x.items()}
-        sampled = sample_runs(spec, stratum.path_index, np.arange(m), given=given)
+        sampled = sample_runs(spec, stratum.path_index, np.arange(m), key=key, given=given)
         res = simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
         metric = np.asarray(getattr(res.metrics, rare.metric), dtype=float)[:n]
         margin = threshold - metric
         if counter is not None:
             counter(n)
-        return np.where(np.asarray(res.status)[:n] != 0, np.minimum(margin, -1e-9), margin)
+        margin = np.where(np.asarray(res.status)[:n] != 0, np.minimum(margin, -1e-9), margin)
+        if rare.margin_resolution > 0:
+            r = rare.margin_resolution
+            margin = np.where(margin > 0, r * np.maximum(np.ceil(margin / r), 1.0), margin)
+        if rare.tie_break is None:
+            return margin
+        return np.stack([margin, -np.asarray(getattr(res.metrics, rare.tie_break), dtype=float)[:n]], axis=1)
 
     return g
 
@@ -105,7 +125,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     t0 = time.time()
     parts: list[tuple[Stratum, RareEstimate]] = []
     for k, s in enumerate(strata):
-        g = limit_state(spec, s, inputs, controller, counter=progress)
+        g = limit_state(spec, s, inputs, controller, seed=rare.seed, stream=k, counter=progress)
         parts.append((s, _estimate(g, dim, rare.method, rare, budget, rare.seed + k, rare.target_rel_error)))
     p = sum(s.weight * r.p_fail for s, r in parts)
     var = sum((s.weight * r.p_fail * r.rel_error) ** 2 for s, r in parts if r.p_fail > 0)
