@@ -25,12 +25,14 @@ from __future__ import annotations
 import itertools
 import math
 import time
+from functools import partial
 
 import numpy as np
 
 from pfjax.montecarlo.config import StudySpec
 from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
 from pfjax.rare.importance import cross_entropy_is, explore
+from pfjax.rare.starts import falsifier_points
 from pfjax.rare.subset import subset_simulation
 from pfjax.rare.transform import Input, Stratum, config_keys, study_inputs, to_physical
 
@@ -82,7 +84,31 @@ def limit_state(
     return g
 
 
-def _estimate(g, dim, method, rare, budget, seed, target):
+def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict]:
+    """The first proposal's centres by ``rare.starts``: ``(points or None, rollouts, detail)``.
+
+    ``explore``: a margin that is flat far from failure (a loop with integral action converges
+    wherever it does not fail) gives the cross-entropy levels nothing to follow, and they can end
+    in one part of the failure region only; failure points of a widened law start the fit.
+    ``falsifier``: the falsifier's worst run pulled in to the failure boundary
+    (:mod:`pfjax.rare.starts`); ``explore`` where the falsifier does not apply or finds no failure."""
+    if rare.starts == "none":
+        return None, 0, {"starts": "none"}
+    if rare.starts == "falsifier":
+        from pfjax.rare.starts import pull_in
+
+        found = falsifier()
+        if found is not None:
+            u_star, used, grads = found
+            starts, ray = pull_in(g, u_star, batch=rare.batch)
+            if len(starts):
+                detail = {"starts": "falsifier", "falsifier_rollouts": used, "falsifier_gradients": grads}
+                return starts, used + ray, {**detail, "u_star": u_star.tolist(), "start_points": starts.tolist()}
+    starts, used = explore(g, dim, n=rare.n_per_level, seed=seed + 7919, batch=rare.batch)
+    return (starts if len(starts) else None), used, {"starts": "explore"}
+
+
+def _estimate(g, dim, method, rare, budget, seed, target, falsifier=lambda: None):
     if method == "mc":
         return monte_carlo(g, dim, n=budget, seed=seed, batch=rare.batch)
     if method == "subset":
@@ -90,14 +116,11 @@ def _estimate(g, dim, method, rare, budget, seed, target):
         return subset_simulation(
             g, dim, n_per_level=n, target_rel_error=target, max_rollouts=max(budget, n), seed=seed, batch=rare.batch
         )
-    # explore first: a margin that is flat far from failure (a loop with integral action converges
-    # wherever it does not fail) gives the cross-entropy levels nothing to follow, and they can
-    # end in one part of the failure region only; failure points of a widened law start the fit
-    starts, used = explore(g, dim, n=rare.n_per_level, seed=seed + 7919, batch=rare.batch)
+    starts, used, how = _starts(g, dim, rare, seed, falsifier)
     est = cross_entropy_is(
         g,
         dim,
-        starts=starts if len(starts) else None,
+        starts=starts,
         n_components=rare.n_components,
         n_per_level=rare.n_per_level,
         n_batch=rare.n_per_level,
@@ -106,7 +129,7 @@ def _estimate(g, dim, method, rare, budget, seed, target):
         seed=seed,
         batch=rare.batch,
     )
-    return est._replace(n_rollouts=est.n_rollouts + used)
+    return est._replace(n_rollouts=est.n_rollouts + used, detail={**est.detail, **how})
 
 
 def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None) -> dict:
@@ -126,7 +149,8 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     parts: list[tuple[Stratum, RareEstimate]] = []
     for k, s in enumerate(strata):
         g = limit_state(spec, s, inputs, controller, seed=rare.seed, stream=k, counter=progress)
-        parts.append((s, _estimate(g, dim, rare.method, rare, budget, rare.seed + k, rare.target_rel_error)))
+        fals = partial(falsifier_points, spec, s, inputs, controller, seed=rare.seed + k)
+        parts.append((s, _estimate(g, dim, rare.method, rare, budget, rare.seed + k, rare.target_rel_error, fals)))
     p = sum(s.weight * r.p_fail for s, r in parts)
     var = sum((s.weight * r.p_fail * r.rel_error) ** 2 for s, r in parts if r.p_fail > 0)
     rel = math.sqrt(var) / p if p > 0 else math.inf
