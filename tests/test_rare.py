@@ -455,3 +455,18 @@ def test_falsifier_points_map_to_u_and_back_and_start_the_proposal():
         out[how] = pfjax.rare_event(c, method="is", progress=False)["controllers"]["sf"]
         assert out[how]["ci95"][0] <= p <= out[how]["ci95"][1], (how, out[how], p)
     assert out["falsifier"]["n_rollouts"] < out["none"]["n_rollouts"], out
+
+
+def test_drivers_name_the_inputs_far_from_their_medians_in_config_units():
+    from pfjax.rare.study import drivers
+
+    spec = _spec(initial={"lateral_offset": {"dist": "normal", "mean": 1.0, "std": 2.0}})
+    inputs, _ = study_inputs(spec)
+    u = np.zeros(len(inputs))
+    names = [i.name for i in inputs]
+    u[names.index("lateral_offset")], u[names.index("speed")] = -3.0, 1.5
+    d = drivers(inputs, u)
+    assert [x["key"] for x in d] == ["initial.lateral_offset", "vehicle.speed"]
+    assert d[0]["value"] == pytest.approx(1.0 - 3.0 * 2.0) and d[0]["median"] == pytest.approx(1.0)
+    assert d[1]["value"] == pytest.approx(0.5 + ndtr(1.5)) and d[1]["u"] == 1.5
+    assert [x["key"] for x in drivers(inputs, 0.1 * u)] == ["initial.lateral_offset"]  # the farthest at any rate

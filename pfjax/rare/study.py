@@ -132,6 +132,45 @@ def _estimate(g, dim, method, rare, budget, seed, target, falsifier=lambda: None
     return est._replace(n_rollouts=est.n_rollouts + used, detail={**est.detail, **how})
 
 
+def drivers(inputs: list[Input], u: np.ndarray, *, least: float = 1.0) -> list[dict]:
+    """What drives a failure point ``u`` (``(dim,)``): the inputs at least ``least`` standard
+    deviations from their median in ``u`` (the largest first; the farthest one at any rate), each
+    ``{"key", "value", "median", "u"}`` (config units; ``u`` in standard deviations of ``u``)."""
+    x = to_physical(inputs, np.stack([u, np.zeros_like(u)]))
+    order = np.argsort(-np.abs(u), kind="stable")
+    keep = [j for j in order if abs(u[j]) >= least] or list(order[:1])
+    return [
+        {
+            "key": inputs[j].key,
+            "value": float(x[inputs[j].name][0]),
+            "median": float(x[inputs[j].name][1]),
+            "u": float(u[j]),
+        }
+        for j in keep
+    ]
+
+
+def _failure_points(spec: StudySpec, s: Stratum, inputs: list[Input], r: RareEstimate) -> list[dict]:
+    """The proposal's modes of one stratum in config units, each with its weight and drivers."""
+    modes = r.detail.get("modes")
+    if not (modes and inputs and r.p_fail > 0):
+        return []
+    keys = config_keys(spec)
+    means = np.asarray(modes["means"])
+    x = to_physical(inputs, means)
+    chosen = {keys[k]: v for k, v in s.values.items()}
+    return [
+        {
+            "path": spec.paths[s.path_index].label,
+            **chosen,
+            **{inp.key: float(x[inp.name][j]) for inp in inputs},
+            "weight": s.weight * w,
+            "drivers": drivers(inputs, means[j]),
+        }
+        for j, w in enumerate(modes["weights"])
+    ]
+
+
 def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None) -> dict:
     """One controller's failure probability under ``spec.rare_event`` (module docstring).
 
@@ -139,7 +178,8 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
         ``{"p_fail", "ci95", "rel_error", "n_rollouts", "method", "wall_s", "strata",
         "failure_points"}``: ``ci95`` ``[lo, hi]``, ``wall_s`` s; ``failure_points`` the
         importance-sampling proposal's modes in the inputs' config units (its weight beside each),
-        the most likely failure points it found (``[]`` for the other methods).
+        the most likely failure points it found, each with its ``drivers`` (:func:`drivers`;
+        ``[]`` for the other methods).
     """
     rare = spec.rare_event
     inputs, strata = study_inputs(spec)
@@ -157,15 +197,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     ci = parts[0][1].ci95 if len(parts) == 1 else lognormal_interval(p, rel)
     if p == 0:  # no failure seen: the interval's top is the strata's tops, weighted
         ci = (0.0, min(1.0, sum(s.weight * r.ci95[1] for s, r in parts)))
-    points, keys = [], config_keys(spec)
-    for s, r in parts:
-        modes = r.detail.get("modes")
-        if modes and inputs and r.p_fail > 0:
-            x = to_physical(inputs, np.asarray(modes["means"]))
-            for j, w in enumerate(modes["weights"]):
-                point = {inp.key: float(x[inp.name][j]) for inp in inputs}
-                chosen = {keys[k]: v for k, v in s.values.items()}
-                points.append({"path": spec.paths[s.path_index].label, **chosen, **point, "weight": s.weight * w})
+    points = [q for s, r in parts for q in _failure_points(spec, s, inputs, r)]
     return {
         "p_fail": float(p),
         "ci95": [float(ci[0]), float(ci[1])],
