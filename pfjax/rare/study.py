@@ -197,7 +197,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     ci = parts[0][1].ci95 if len(parts) == 1 else lognormal_interval(p, rel)
     if p == 0:  # no failure seen: the interval's top is the strata's tops, weighted
         ci = (0.0, min(1.0, sum(s.weight * r.ci95[1] for s, r in parts)))
-    points = [q for s, r in parts for q in _failure_points(spec, s, inputs, r)]
+    points, keys = [q for s, r in parts for q in _failure_points(spec, s, inputs, r)], config_keys(spec)
     return {
         "p_fail": float(p),
         "ci95": [float(ci[0]), float(ci[1])],
