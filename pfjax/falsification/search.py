@@ -291,20 +291,9 @@ def falsify(
         nonfinite.append(bad)
     n = int(n_restarts) * int(steps)
     seq, ic = _from_raw(space, best.raw)
-    return _result(
-        space,
-        base,
-        seq,
-        ic,
-        best.value,
-        best.status,
-        np.stack(jax.device_get(history)),
-        int(n_restarts) * np.arange(1, int(steps) + 1),
-        n,
-        n,
-        int(np.sum(jax.device_get(nonfinite))),
-        jax.vmap(_from_raw, in_axes=(None, 0))(space, raw),
-    )
+    hist, hist_n = np.stack(jax.device_get(history)), int(n_restarts) * np.arange(1, int(steps) + 1)
+    bad, restarts = int(np.sum(jax.device_get(nonfinite))), jax.vmap(_from_raw, in_axes=(None, 0))(space, raw)
+    return _result(space, base, seq, ic, best.value, best.status, hist, hist_n, n, n, bad, restarts)
 
 
 @jax.jit
