@@ -19,6 +19,8 @@ Parts (each entry records estimate, 95 % interval, relative error, rollouts and 
 * ``study``: every controller of ``studies/rare_events.toml`` by importance sampling and subset
   simulation, for its failure (leaving the path, ``path``) and for leaving the 5 cm band
   (``band``), there also by plain Monte Carlo with ``mc_study`` runs, which resolves it.
+* ``sine_check``: ``pi-table3`` leaving the path on the sine alone (``p`` about 1e-5), by plain
+  Monte Carlo with ``mc_sine`` runs, importance sampling and subset simulation.
 
 Writes ``results/rare_events/verification.json`` (or ``--out``).
 """
@@ -47,8 +49,22 @@ ROOT = Path(__file__).resolve().parents[1]
 K = [-2.7381, -2.0772]  # rad/m, rad/rad: the default state feedback
 #: slip standard deviations (deg) putting the known case's p near 1e-4, 1e-6 and 1e-8
 KNOWN_STD = {"1e-4": 1.372, "1e-6": 1.091, "1e-8": 0.931}
-FULL = {"coverage_repeats": 50, "subset_repeats": 50, "mc_known": 1_000_000, "mc_study": 600_000, "start_seeds": 3}
-QUICK = {"coverage_repeats": 4, "subset_repeats": 2, "mc_known": 20_000, "mc_study": 6_000, "start_seeds": 1}
+FULL = {
+    "coverage_repeats": 50,
+    "subset_repeats": 50,
+    "mc_known": 1_000_000,
+    "mc_study": 600_000,
+    "start_seeds": 3,
+    "mc_sine": 1_000_000,
+}
+QUICK = {
+    "coverage_repeats": 4,
+    "subset_repeats": 2,
+    "mc_known": 20_000,
+    "mc_study": 6_000,
+    "start_seeds": 1,
+    "mc_sine": 6_000,
+}
 #: the band (m) of the study's second failure definition, beside its own threshold (leaving the path)
 BAND = 0.05
 
@@ -149,6 +165,11 @@ def run(args) -> int:
             band["mc"] = estimate(study, name, method="mc", max_rollouts=sizes["mc_study"], rare_event__threshold=BAND)
             result["study"][name] = {"path": entry, "band": band}
             print(name, {m: f"{entry[m]['p_fail']:.3g}" for m in entry}, {m: f"{band[m]['p_fail']:.3g}" for m in band})
+        result["sine_check"] = {
+            m: estimate(study, "pi-table3", method=m, paths=[{"kind": "sine"}], **kw)
+            for m, kw in (("mc", {"max_rollouts": sizes["mc_sine"]}), ("is", {}), ("subset", {}))
+        }
+        print("sine check", {m: f"{r['p_fail']:.3g}" for m, r in result["sine_check"].items()})
         (output.staging / "verification.json").write_text(dumps(result, indent=1) + "\n")
         output.commit()
     print(f"wrote {out}")
