@@ -14,8 +14,13 @@ Parts (each entry records estimate, 95 % interval, relative error, rollouts and 
   1e-8, by importance sampling and subset simulation; plain Monte Carlo at 1e-4.
 * ``coverage``: repeated independent estimates at ``p`` about 1e-4 on the known case: the share of
   95 % intervals that hold the reference.
+* ``starts``: importance sampling at ``p`` about 1e-6 on the known case from the falsifier's
+  failure points, from failure points of a widened law and from ``N(0, I)``: rollouts used.
 * ``study``: every controller of ``studies/rare_events.toml`` by importance sampling and subset
-  simulation, and by plain Monte Carlo with ``mc_rollouts`` runs where it resolves ``p``.
+  simulation, for its failure (leaving the path, ``path``) and for leaving the 5 cm band
+  (``band``), there also by plain Monte Carlo with ``mc_study`` runs, which resolves it.
+* ``sine_check``: ``pi-table3`` leaving the path on the sine alone (``p`` about 1e-5), by plain
+  Monte Carlo with ``mc_sine`` runs, importance sampling and subset simulation.
 
 Writes ``results/rare_events/verification.json`` (or ``--out``).
 """
@@ -44,8 +49,24 @@ ROOT = Path(__file__).resolve().parents[1]
 K = [-2.7381, -2.0772]  # rad/m, rad/rad: the default state feedback
 #: slip standard deviations (deg) putting the known case's p near 1e-4, 1e-6 and 1e-8
 KNOWN_STD = {"1e-4": 1.372, "1e-6": 1.091, "1e-8": 0.931}
-FULL = {"coverage_repeats": 50, "subset_repeats": 50, "mc_known": 2_000_000, "mc_study": 1_000_000}
-QUICK = {"coverage_repeats": 4, "subset_repeats": 2, "mc_known": 20_000, "mc_study": 6_000}
+FULL = {
+    "coverage_repeats": 50,
+    "subset_repeats": 50,
+    "mc_known": 1_000_000,
+    "mc_study": 600_000,
+    "start_seeds": 3,
+    "mc_sine": 1_000_000,
+}
+QUICK = {
+    "coverage_repeats": 4,
+    "subset_repeats": 2,
+    "mc_known": 20_000,
+    "mc_study": 6_000,
+    "start_seeds": 1,
+    "mc_sine": 6_000,
+}
+#: the band (m) of the study's second failure definition, beside its own threshold (leaving the path)
+BAND = 0.05
 
 
 def known_case(std_deg: float) -> dict:
@@ -78,6 +99,28 @@ def holds(r: dict, p: float) -> bool:
     return r["ci95"][0] <= p <= r["ci95"][1]
 
 
+def starts_comparison(n_seeds: int) -> dict:
+    """Importance sampling on the known case at 1e-6 started from the falsifier's failure points,
+    from failure points of a widened law, and from ``N(0, I)``: rollouts to 10 % (seeds 0...)."""
+    std = KNOWN_STD["1e-6"]
+    p = line_offset_failure_probability(K, std)
+    out: dict = {"reference": p}
+    for how in ("falsifier", "explore", "none"):
+        rs = [
+            estimate(known_case(std), "state-feedback", method="is", seed=s, rare_event__starts=how)
+            for s in range(n_seeds)
+        ]
+        out[how] = {
+            "n_rollouts": [r["n_rollouts"] for r in rs],
+            "p_fail": [r["p_fail"] for r in rs],
+            "rel_error": [r["rel_error"] for r in rs],
+            "wall_s": [r["wall_s"] for r in rs],
+            "holds_reference": [holds(r, p) for r in rs],
+        }
+        print(f"starts {how}: {out[how]['n_rollouts']}")
+    return out
+
+
 def run(args) -> int:
     sizes = QUICK if args.quick else FULL
     out = Path(args.out) if args.out else ROOT / "results" / "rare_events"
@@ -96,6 +139,7 @@ def run(args) -> int:
                 )
                 r["holds_reference"] = holds(r, p)
             result["known"][label] = entry
+        result["starts"] = starts_comparison(sizes["start_seeds"])
         std = KNOWN_STD["1e-4"]
         p = result["known"]["1e-4"]["reference"]
         for method, n in (("is", sizes["coverage_repeats"]), ("subset", sizes["subset_repeats"])):
@@ -117,9 +161,15 @@ def run(args) -> int:
         names = [c.name for c in pfjax.montecarlo.config.load_study(study)[0].controllers]
         for name in names:
             entry = {m: estimate(study, name, method=m) for m in ("is", "subset")}
-            entry["mc"] = estimate(study, name, method="mc", max_rollouts=sizes["mc_study"])
-            result["study"][name] = entry
-            print(name, {m: f"{entry[m]['p_fail']:.3g}" for m in entry})
+            band = {m: estimate(study, name, method=m, rare_event__threshold=BAND) for m in ("is", "subset")}
+            band["mc"] = estimate(study, name, method="mc", max_rollouts=sizes["mc_study"], rare_event__threshold=BAND)
+            result["study"][name] = {"path": entry, "band": band}
+            print(name, {m: f"{entry[m]['p_fail']:.3g}" for m in entry}, {m: f"{band[m]['p_fail']:.3g}" for m in band})
+        result["sine_check"] = {
+            m: estimate(study, "pi-table3", method=m, paths=[{"kind": "sine"}], **kw)
+            for m, kw in (("mc", {"max_rollouts": sizes["mc_sine"]}), ("is", {}), ("subset", {}))
+        }
+        print("sine check", {m: f"{r['p_fail']:.3g}" for m, r in result["sine_check"].items()})
         (output.staging / "verification.json").write_text(dumps(result, indent=1) + "\n")
         output.commit()
     print(f"wrote {out}")

@@ -83,6 +83,7 @@ class FalsifierResult(NamedTuple):
     n_rollouts: int  # simulated scenarios
     n_gradients: int  # of those, how many also ran the backward pass
     n_nonfinite_grad: int  # gradient components that were not finite (replaced by 0)
+    restarts: tuple[Array, Array] | None = None  # falsify: every start's last (slip (R, n, 2) rad, ic (R, 3))
 
 
 class _Best(NamedTuple):
@@ -137,7 +138,9 @@ def _repeat(tree, n: int):
     return jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (n,) + jnp.shape(a)), tree)
 
 
-def _result(space, base, seq, ic, value, status, history, history_rollouts, n_rollouts, n_gradients, n_nonfinite):
+def _result(
+    space, base, seq, ic, value, status, history, history_rollouts, n_rollouts, n_gradients, n_nonfinite, restarts=None
+):
     sc = _build_scenario(space, seq, ic, base)
     return FalsifierResult(
         objective=value,
@@ -152,6 +155,7 @@ def _result(space, base, seq, ic, value, status, history, history_rollouts, n_ro
         n_rollouts=int(n_rollouts),
         n_gradients=int(n_gradients),
         n_nonfinite_grad=int(n_nonfinite),
+        restarts=restarts,
     )
 
 
@@ -287,19 +291,9 @@ def falsify(
         nonfinite.append(bad)
     n = int(n_restarts) * int(steps)
     seq, ic = _from_raw(space, best.raw)
-    return _result(
-        space,
-        base,
-        seq,
-        ic,
-        best.value,
-        best.status,
-        np.stack(jax.device_get(history)),
-        int(n_restarts) * np.arange(1, int(steps) + 1),
-        n,
-        n,
-        int(np.sum(jax.device_get(nonfinite))),
-    )
+    hist, hist_n = np.stack(jax.device_get(history)), int(n_restarts) * np.arange(1, int(steps) + 1)
+    bad, restarts = int(np.sum(jax.device_get(nonfinite))), jax.vmap(_from_raw, in_axes=(None, 0))(space, raw)
+    return _result(space, base, seq, ic, best.value, best.status, hist, hist_n, n, n, bad, restarts)
 
 
 @jax.jit

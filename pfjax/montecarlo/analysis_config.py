@@ -96,6 +96,17 @@ class RareEventSpec(ConfigModel):
         2000, ge=100, le=10_000_000, description="is / subset: rollouts per cross-entropy or subset level"
     )
     n_components: int = Field(4, ge=1, le=64, description="is: Gaussians in the proposal mixture")
+    starts: Literal["explore", "falsifier", "none"] = Field(
+        "explore",
+        description="is: the first proposal's centres: failure points of a widened input law (explore), "
+        "of the gradient falsifier mapped to the inputs (falsifier), or none (N(0, I))",
+    )
+    tie_break: Literal["iae", "ise", "itae", "max_abs_d", "steer_energy", "sat_fraction"] | None = Field(
+        "iae", description="subset: metric that orders runs of equal margin (larger: nearer failure)"
+    )
+    margin_resolution: Real = Field(
+        0.0, ge=0, description="subset: positive margins rounded up to multiples of this (metric's unit; ties)"
+    )
     batch: int = Field(2000, ge=32, le=1_000_000, description="runs simulated at once (one compiled shape)")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="seed of the estimator's draws")
 

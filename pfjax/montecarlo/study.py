@@ -108,10 +108,6 @@ def _run(spec: StudySpec, output, *, progress, report, fresh, warn, overlap, wor
 
     t0 = time.time()
     result: dict = {}
-    if spec.rare_event.enabled:  # a study the rare-event transform cannot map fails before any run
-        from pfjax.rare.transform import check_supported
-
-        check_supported(spec)
     warnings = study_warnings(spec)
     for w in warnings:
         (warn or (lambda m: None))(w)

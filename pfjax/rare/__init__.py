@@ -7,7 +7,8 @@ limit-state function on the standard-normal space (failure where ``g(u) <= 0``).
 
 Each returns a :class:`RareEstimate` (``p_fail``, ``ci95``, ``rel_error``, ``n_rollouts``,
 ``method``). :mod:`pfjax.rare.transform` maps a study's uncertain inputs to the standard-normal
-space and :mod:`pfjax.rare.study` builds a study controller's limit-state function from them.
+space, :mod:`pfjax.rare.study` builds a study controller's limit-state function from them, and
+:mod:`pfjax.rare.starts` maps the gradient falsifier's failure points there to start the proposal.
 """
 
 from pfjax.rare.estimate import METHODS, RareEstimate, lognormal_interval, monte_carlo

@@ -66,14 +66,26 @@ def check_common(dim, seed, batch) -> tuple[int, int, int]:
     return dim, seed, batch
 
 
-def evaluate(g: Callable, u: np.ndarray, batch: int) -> np.ndarray:
-    """``g`` on ``u`` in blocks of at most ``batch`` points; non-finite margins count as failures
-    (a run whose margin is NaN has left the model's domain)."""
-    out = [np.asarray(g(u[a : a + batch]), dtype=float).reshape(-1) for a in range(0, len(u), batch)]
-    m = np.concatenate(out) if out else np.zeros(0)
-    if m.shape != (len(u),):
+def evaluate_ranked(g: Callable, u: np.ndarray, batch: int) -> tuple[np.ndarray, np.ndarray]:
+    """``g`` on ``u`` in blocks of at most ``batch`` points: ``(margins, tie-breaks)``, each ``(n,)``.
+
+    ``g`` returns ``(n,)`` margins, or ``(n, 2)``: the margin and a tie-break, a continuous
+    quantity that orders points whose margins are equal (smaller: nearer failure; zeros when ``g``
+    gives none). Only :func:`pfjax.rare.subset_simulation` uses the tie-break; failure is
+    ``margin <= 0`` whatever it is. Non-finite margins count as failures (a run whose margin is NaN
+    has left the model's domain), non-finite tie-breaks as ``-inf``."""
+    out = [np.asarray(g(u[a : a + batch]), dtype=float) for a in range(0, len(u), batch)]
+    out = [x.reshape(len(x), -1) if x.ndim == 2 else x.reshape(-1, 1) for x in out]
+    m = np.concatenate(out) if out else np.zeros((0, 1))
+    if m.shape not in ((len(u), 1), (len(u), 2)):
         raise errors.InputError(f"g: expected {len(u)} margins for {len(u)} points, got shape {m.shape}", "g")
-    return np.where(np.isfinite(m), m, -np.inf)
+    t = m[:, 1] if m.shape[1] == 2 else np.zeros(len(u))
+    return np.where(np.isfinite(m[:, 0]), m[:, 0], -np.inf), np.where(np.isfinite(t), t, -np.inf)
+
+
+def evaluate(g: Callable, u: np.ndarray, batch: int) -> np.ndarray:
+    """The margins of :func:`evaluate_ranked` alone, shape ``(n,)``."""
+    return evaluate_ranked(g, u, batch)[0]
 
 
 def monte_carlo(g: Callable, dim: int, *, n: int = 100_000, seed: int = 0, batch: int = 4096) -> RareEstimate:

@@ -10,7 +10,11 @@ $$
 g(u) = \\text{threshold} - \\text{metric}(u) \\quad (\\text{metric's unit}),
 $$
 
-forced to at most ``-10⁻⁹`` where the run's status is a failure (diverged, non-finite, ...). The
+forced to at most ``-10⁻⁹`` where the run's status is a failure (diverged, non-finite, ...);
+positive margins are rounded up to multiples of ``margin_resolution`` (its sign, so the failure
+set, unchanged), so runs that converge alike tie, and beside the margin ``g`` returns the
+tie-break ``-tie_break metric`` that orders tied runs in subset simulation (the larger the
+transient error, the nearer failure; :mod:`pfjax.rare.subset`, *Plateaus*). The
 strata combine as ``p = Σ_s w_s p_s`` with ``Var p = Σ_s w_s² Var p_s``; one stratum keeps its
 estimator's own interval, several get the lognormal one of
 :func:`pfjax.rare.estimate.lognormal_interval`.
@@ -18,24 +22,33 @@ estimator's own interval, several get the lognormal one of
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
+from functools import partial
 
 import numpy as np
 
 from pfjax.montecarlo.config import StudySpec
 from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
 from pfjax.rare.importance import cross_entropy_is, explore
+from pfjax.rare.starts import falsifier_points
 from pfjax.rare.subset import subset_simulation
 from pfjax.rare.transform import Input, Stratum, config_keys, study_inputs, to_physical
 
 
-def limit_state(spec: StudySpec, stratum: Stratum, inputs: list[Input], controller, *, counter=None):
+def limit_state(
+    spec: StudySpec, stratum: Stratum, inputs: list[Input], controller, *, seed: int = 0, stream: int = 0, counter=None
+):
     """``g(u)`` of one stratum for one controller (``(ctrl, gains, flat)`` of
     :func:`pfjax.montecarlo.runner.controller_of`); ``counter(n)`` is told of every ``n`` rollouts.
 
     A batch of ``n`` points is padded to a multiple of 32 runs (one compiled program per padded
-    size), with ``u``'s extra coordinate ignored when the study has no continuous input."""
+    size), with ``u``'s extra coordinate ignored when the study has no continuous input. Call
+    ``c`` of ``g`` draws the randomness that is not in ``u`` (:mod:`pfjax.rare.transform`) from
+    ``fold_in(fold_in(PRNGKey(seed), stream), c)``: fresh at every rollout, the same for the same seed and calls."""
+    import jax
+
     from pfjax.montecarlo.runner import batch_size, sim_config, with_gains
     from pfjax.montecarlo.sampling import sample_runs
     from pfjax.sim.simulate import simulate_batch
@@ -44,25 +57,58 @@ def limit_state(spec: StudySpec, stratum: Stratum, inputs: list[Input], controll
     rare = spec.rare_event
     threshold = spec.success.band if rare.threshold is None else rare.threshold
     cfg = sim_config(spec)
+    calls = itertools.count()
+    base = jax.random.fold_in(jax.random.PRNGKey(seed), stream)
 
     def g(u: np.ndarray) -> np.ndarray:
         n = len(u)
+        key = jax.random.fold_in(base, next(calls))
         m = batch_size(n)
         x = to_physical(inputs, u) if inputs else {}
         x.update({k: np.full(n, v) for k, v in stratum.values.items()})
         given = {k: np.concatenate([v, np.repeat(v[:1], m - n)]) for k, v in x.items()}
-        sampled = sample_runs(spec, stratum.path_index, np.arange(m), given=given)
+        sampled = sample_runs(spec, stratum.path_index, np.arange(m), key=key, given=given)
         res = simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
         metric = np.asarray(getattr(res.metrics, rare.metric), dtype=float)[:n]
         margin = threshold - metric
         if counter is not None:
             counter(n)
-        return np.where(np.asarray(res.status)[:n] != 0, np.minimum(margin, -1e-9), margin)
+        margin = np.where(np.asarray(res.status)[:n] != 0, np.minimum(margin, -1e-9), margin)
+        if rare.margin_resolution > 0:
+            r = rare.margin_resolution
+            margin = np.where(margin > 0, r * np.maximum(np.ceil(margin / r), 1.0), margin)
+        if rare.tie_break is None:
+            return margin
+        return np.stack([margin, -np.asarray(getattr(res.metrics, rare.tie_break), dtype=float)[:n]], axis=1)
 
     return g
 
 
-def _estimate(g, dim, method, rare, budget, seed, target):
+def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict]:
+    """The first proposal's centres by ``rare.starts``: ``(points or None, rollouts, detail)``.
+
+    ``explore``: a margin that is flat far from failure (a loop with integral action converges
+    wherever it does not fail) gives the cross-entropy levels nothing to follow, and they can end
+    in one part of the failure region only; failure points of a widened law start the fit.
+    ``falsifier``: the falsifier's worst run pulled in to the failure boundary
+    (:mod:`pfjax.rare.starts`); ``explore`` where the falsifier does not apply or finds no failure."""
+    if rare.starts == "none":
+        return None, 0, {"starts": "none"}
+    if rare.starts == "falsifier":
+        from pfjax.rare.starts import pull_in
+
+        found = falsifier()
+        if found is not None:
+            u_star, used, grads = found
+            starts, ray = pull_in(g, u_star, batch=rare.batch)
+            if len(starts):
+                detail = {"starts": "falsifier", "falsifier_rollouts": used, "falsifier_gradients": grads}
+                return starts, used + ray, {**detail, "u_star": u_star.tolist(), "start_points": starts.tolist()}
+    starts, used = explore(g, dim, n=rare.n_per_level, seed=seed + 7919, batch=rare.batch)
+    return (starts if len(starts) else None), used, {"starts": "explore"}
+
+
+def _estimate(g, dim, method, rare, budget, seed, target, falsifier=lambda: None):
     if method == "mc":
         return monte_carlo(g, dim, n=budget, seed=seed, batch=rare.batch)
     if method == "subset":
@@ -70,14 +116,11 @@ def _estimate(g, dim, method, rare, budget, seed, target):
         return subset_simulation(
             g, dim, n_per_level=n, target_rel_error=target, max_rollouts=max(budget, n), seed=seed, batch=rare.batch
         )
-    # explore first: a margin that is flat far from failure (a loop with integral action converges
-    # wherever it does not fail) gives the cross-entropy levels nothing to follow, and they can
-    # end in one part of the failure region only; failure points of a widened law start the fit
-    starts, used = explore(g, dim, n=rare.n_per_level, seed=seed + 7919, batch=rare.batch)
+    starts, used, how = _starts(g, dim, rare, seed, falsifier)
     est = cross_entropy_is(
         g,
         dim,
-        starts=starts if len(starts) else None,
+        starts=starts,
         n_components=rare.n_components,
         n_per_level=rare.n_per_level,
         n_batch=rare.n_per_level,
@@ -86,7 +129,46 @@ def _estimate(g, dim, method, rare, budget, seed, target):
         seed=seed,
         batch=rare.batch,
     )
-    return est._replace(n_rollouts=est.n_rollouts + used)
+    return est._replace(n_rollouts=est.n_rollouts + used, detail={**est.detail, **how})
+
+
+def drivers(inputs: list[Input], u: np.ndarray, *, least: float = 1.0) -> list[dict]:
+    """What drives a failure point ``u`` (``(dim,)``): the inputs at least ``least`` standard
+    deviations from their median in ``u`` (the largest first; the farthest one at any rate), each
+    ``{"key", "value", "median", "u"}`` (config units; ``u`` in standard deviations of ``u``)."""
+    x = to_physical(inputs, np.stack([u, np.zeros_like(u)]))
+    order = np.argsort(-np.abs(u), kind="stable")
+    keep = [j for j in order if abs(u[j]) >= least] or list(order[:1])
+    return [
+        {
+            "key": inputs[j].key,
+            "value": float(x[inputs[j].name][0]),
+            "median": float(x[inputs[j].name][1]),
+            "u": float(u[j]),
+        }
+        for j in keep
+    ]
+
+
+def _failure_points(spec: StudySpec, s: Stratum, inputs: list[Input], r: RareEstimate) -> list[dict]:
+    """The proposal's modes of one stratum in config units, each with its weight and drivers."""
+    modes = r.detail.get("modes")
+    if not (modes and inputs and r.p_fail > 0):
+        return []
+    keys = config_keys(spec)
+    means = np.asarray(modes["means"])
+    x = to_physical(inputs, means)
+    chosen = {keys[k]: v for k, v in s.values.items()}
+    return [
+        {
+            "path": spec.paths[s.path_index].label,
+            **chosen,
+            **{inp.key: float(x[inp.name][j]) for inp in inputs},
+            "weight": s.weight * w,
+            "drivers": drivers(inputs, means[j]),
+        }
+        for j, w in enumerate(modes["weights"])
+    ]
 
 
 def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None) -> dict:
@@ -96,7 +178,8 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
         ``{"p_fail", "ci95", "rel_error", "n_rollouts", "method", "wall_s", "strata",
         "failure_points"}``: ``ci95`` ``[lo, hi]``, ``wall_s`` s; ``failure_points`` the
         importance-sampling proposal's modes in the inputs' config units (its weight beside each),
-        the most likely failure points it found (``[]`` for the other methods).
+        the most likely failure points it found, each with its ``drivers`` (:func:`drivers`;
+        ``[]`` for the other methods).
     """
     rare = spec.rare_event
     inputs, strata = study_inputs(spec)
@@ -105,23 +188,16 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     t0 = time.time()
     parts: list[tuple[Stratum, RareEstimate]] = []
     for k, s in enumerate(strata):
-        g = limit_state(spec, s, inputs, controller, counter=progress)
-        parts.append((s, _estimate(g, dim, rare.method, rare, budget, rare.seed + k, rare.target_rel_error)))
+        g = limit_state(spec, s, inputs, controller, seed=rare.seed, stream=k, counter=progress)
+        fals = partial(falsifier_points, spec, s, inputs, controller, seed=rare.seed + k)
+        parts.append((s, _estimate(g, dim, rare.method, rare, budget, rare.seed + k, rare.target_rel_error, fals)))
     p = sum(s.weight * r.p_fail for s, r in parts)
     var = sum((s.weight * r.p_fail * r.rel_error) ** 2 for s, r in parts if r.p_fail > 0)
     rel = math.sqrt(var) / p if p > 0 else math.inf
     ci = parts[0][1].ci95 if len(parts) == 1 else lognormal_interval(p, rel)
     if p == 0:  # no failure seen: the interval's top is the strata's tops, weighted
         ci = (0.0, min(1.0, sum(s.weight * r.ci95[1] for s, r in parts)))
-    points, keys = [], config_keys(spec)
-    for s, r in parts:
-        modes = r.detail.get("modes")
-        if modes and inputs and r.p_fail > 0:
-            x = to_physical(inputs, np.asarray(modes["means"]))
-            for j, w in enumerate(modes["weights"]):
-                point = {inp.key: float(x[inp.name][j]) for inp in inputs}
-                chosen = {keys[k]: v for k, v in s.values.items()}
-                points.append({"path": spec.paths[s.path_index].label, **chosen, **point, "weight": s.weight * w})
+    points, keys = [q for s, r in parts for q in _failure_points(spec, s, inputs, r)], config_keys(spec)
     return {
         "p_fail": float(p),
         "ci95": [float(ci[0]), float(ci[1])],

@@ -22,6 +22,19 @@ which leaves ``N(0, I)`` invariant, so the candidate is accepted exactly when ``
 ``σ_i = min(1, λ ŝ_i)`` with ``ŝ_i`` the seeds' standard deviation, and ``λ`` adapted after every
 batch of steps towards a 44 % acceptance (``log λ += (â - 0.44) / sqrt(t)``).
 
+**Plateaus.** A margin that is flat over much of the input space (a loop with integral action
+converges wherever it does not saturate) ties many points at one value, and the ``p_0``-quantile
+of tied values is no level: every tied point lies below it, ``P_j`` is 1 and the levels stall.
+Each point is therefore ranked by the pair ``(g, t)`` in the lexicographic order, ``t`` a
+tie-break that ``g`` may return beside the margin (:func:`pfjax.rare.estimate.evaluate_ranked`;
+a continuous quantity that grows towards failure, so ties have none), and the events are
+``F_j = {(g, t) <=_lex b_j}``, still nested, with ``F = {g <= 0}`` the last
+(``b_m = (0, +inf)``). The threshold is the ``N_c``-th smallest key; where it is tied even so,
+it is the largest key strictly below the tie, so ``P_j < p_0`` is the fraction of points strictly
+below and the level lies strictly below the last one; the ``N_j`` seeds then run
+``ceil(N / N_j)`` steps each. A level with every point tied ends the run with ``p = 0`` and an
+infinite relative error (``detail``: ``stalled``): no level below can be placed.
+
 **Error.** The level-``j`` estimate has squared coefficient of variation (Au and Beck, eq. 29)
 
 $$
@@ -46,7 +59,7 @@ from collections.abc import Callable
 import numpy as np
 
 from pfjax import errors
-from pfjax.rare.estimate import RareEstimate, check_common, evaluate, lognormal_interval
+from pfjax.rare.estimate import RareEstimate, check_common, evaluate_ranked, lognormal_interval
 
 #: Acceptance rate the conditional-sampling spread is adapted towards.
 TARGET_ACCEPTANCE = 0.44
@@ -65,51 +78,85 @@ def _gamma(ind: np.ndarray, p: float) -> float:
     return max(gam, 0.0)
 
 
+def below(m: np.ndarray, t: np.ndarray, b: tuple[float, float]) -> np.ndarray:
+    """``(m, t) <= b`` in the lexicographic order: the margin first, the tie-break among equal margins."""
+    return (m < b[0]) | ((m == b[0]) & (t <= b[1]))
+
+
+def level(m: np.ndarray, t: np.ndarray, nc: int) -> tuple[float, float]:
+    """The next threshold ``b_j`` (module docstring, *Plateaus*): the ``nc``-th smallest ``(m, t)``
+    in the lexicographic order, between it and the next; where the tie-break leaves that key tied
+    with others, the largest key strictly below the tie (fewer than ``nc`` points below, every one
+    of them strictly below the last threshold); the tied key itself only where nothing lies below."""
+    order = np.lexsort((t, m))
+    a, c = order[nc - 1], order[nc]
+    if m[a] < m[c]:
+        return 0.5 * (m[a] + m[c]), math.inf
+    if t[a] < t[c]:
+        return float(m[a]), 0.5 * (t[a] + t[c])
+    tied = (m == m[a]) & (t == t[a])
+    lower = ~tied & below(m, t, (float(m[a]), float(t[a])))
+    if lower.any():
+        k = np.flatnonzero(lower)[np.lexsort((t[lower], m[lower]))[-1]]
+        return (float(m[k]), float(t[k])) if m[k] == m[a] else (float(m[k]), math.inf)
+    return float(m[a]), float(t[a])
+
+
+def _chains(g, seeds, seed_m, seed_t, b, n, rng, batch, lam):
+    """``ceil(n / len(seeds))`` conditional-sampling steps of one chain per seed, all kept in
+    ``{(m, t) <= b}`` (module docstring): ``(u, m, t, (N_c, N_s) margins, acceptance, rollouts, λ)``."""
+    nc, dim = seeds.shape
+    ns = -(-n // nc)
+    s_hat = np.maximum(seeds.std(axis=0), 1e-3) if nc > 1 else np.ones(dim)
+    cur_u, cur_m, cur_t = seeds, seed_m, seed_t
+    us, ms, ts, acc_sum, rollouts = [seeds], [seed_m], [seed_t], 0.0, 0
+    for step in range(1, ns):
+        sigma = np.minimum(1.0, lam * s_hat)
+        cand = np.sqrt(1 - sigma**2) * cur_u + sigma * rng.standard_normal(cur_u.shape)
+        cm, ct = evaluate_ranked(g, cand, batch)
+        rollouts += nc
+        ok = below(cm, ct, b)
+        cur_u = np.where(ok[:, None], cand, cur_u)
+        cur_m, cur_t = np.where(ok, cm, cur_m), np.where(ok, ct, cur_t)
+        acc = float(np.mean(ok))
+        acc_sum += acc
+        lam = float(np.clip(lam * math.exp((acc - TARGET_ACCEPTANCE) / math.sqrt(step)), 1e-3, 10.0))
+        us.append(cur_u)
+        ms.append(cur_m)
+        ts.append(cur_t)
+    u = np.stack(us, axis=1).reshape(nc * ns, dim)
+    chain_m = np.stack(ms, axis=1)
+    t = np.stack(ts, axis=1).reshape(-1)
+    return u, chain_m.reshape(-1), t, chain_m, acc_sum / max(ns - 1, 1), rollouts, lam
+
+
 def _one_run(g, dim, n, p0, rng, batch, max_levels):
     """One subset simulation: ``(p, δ², rollouts, level records, failure points)``."""
     nc = int(round(p0 * n))
-    ns = n // nc
     u = rng.standard_normal((n, dim))
-    m = evaluate(g, u, batch)
+    m, t = evaluate_ranked(g, u, batch)
     rollouts, levels, p, d2 = n, [], 1.0, 0.0
-    ind_chains, lam = None, 0.6
-    for level in range(max_levels + 1):
-        order = np.argsort(m, kind="stable")
-        b = 0.5 * (m[order[nc - 1]] + m[order[nc]])
-        final = b <= 0 or level == max_levels
-        b = max(b, 0.0) if not final else 0.0
-        fails = m <= b
+    chain_m, lam = None, 0.6
+    for j in range(max_levels + 1):
+        b = level(m, t, nc)
+        if b[0] <= 0 or j == max_levels:
+            b = (0.0, math.inf)
+        fails = below(m, t, b)
         pj = float(np.mean(fails))
-        gamma = 0.0 if ind_chains is None else _gamma((ind_chains <= b).astype(float), pj)
-        d2 += (1 - pj) / (n * pj) * (1 + gamma) if pj > 0 else math.inf
+        gamma = 0.0 if chain_m is None else _gamma(below(chain_m, t.reshape(chain_m.shape), b).astype(float), pj)
+        d2 += (1 - pj) / (len(m) * pj) * (1 + gamma) if pj > 0 else math.inf
         p *= pj
-        levels.append({"threshold": float(b), "p": pj, "gamma": gamma})
-        if final or pj == 0:
-            failures = u[fails] if b <= 0 else u[:0]
+        levels.append({"threshold": b[0], "tie_break": b[1], "p": pj, "gamma": gamma})
+        if b == (0.0, math.inf) or pj == 0 or pj == 1:
+            levels[-1]["stalled"] = pj == 1 and b[0] > 0
+            failures = u[fails] if b[0] <= 0 else u[:0]
+            if pj == 1 and b[0] > 0:  # every point tied on the plateau: no level below can be placed
+                p, d2 = 0.0, math.inf
             break
-        seeds, seed_m = u[order[:nc]], m[order[:nc]]
-        s_hat = np.maximum(seeds.std(axis=0), 1e-3)
-        chains_u, chains_m = [seeds], [seed_m]
-        cur_u, cur_m, acc_sum = seeds, seed_m, 0.0
-        for t in range(1, ns):
-            sigma = np.minimum(1.0, lam * s_hat)
-            rho = np.sqrt(1 - sigma**2)
-            cand = rho * cur_u + sigma * rng.standard_normal(cur_u.shape)
-            cm = evaluate(g, cand, batch)
-            rollouts += nc
-            ok = cm <= b
-            cur_u = np.where(ok[:, None], cand, cur_u)
-            cur_m = np.where(ok, cm, cur_m)
-            acc = float(np.mean(ok))
-            acc_sum += acc
-            lam = float(np.clip(lam * math.exp((acc - TARGET_ACCEPTANCE) / math.sqrt(t)), 1e-3, 10.0))
-            chains_u.append(cur_u)
-            chains_m.append(cur_m)
-        levels[-1]["acceptance"] = acc_sum / max(ns - 1, 1)
-        u = np.stack(chains_u, axis=1).reshape(nc * ns, dim)
-        ind_chains = np.stack(chains_m, axis=1)
-        m = ind_chains.reshape(-1)
-        n = nc * ns
+        sel = np.flatnonzero(fails)
+        u, m, t, chain_m, acc, used, lam = _chains(g, u[sel], m[sel], t[sel], b, n, rng, batch, lam)
+        rollouts += used
+        levels[-1]["acceptance"] = acc
     return p, d2, rollouts, levels, failures
 
 
@@ -161,11 +208,11 @@ def subset_simulation(
         runs.append((p, d2, levels))
         total += used
         ps = np.array([r[0] for r in runs])
-        var = float(np.sum(ps**2 * np.array([r[1] for r in runs]))) / len(runs) ** 2
+        var = sum(r[0] ** 2 * r[1] if r[0] > 0 else r[1] for r in runs) / len(runs) ** 2
         est = float(ps.mean())
         rel = math.sqrt(var) / est if est > 0 else math.inf
         per_run = total / len(runs)
-        if target_rel_error is None or rel <= target_rel_error or total + per_run > max_rollouts:
+        if target_rel_error is None or rel <= target_rel_error or total + per_run > max_rollouts or math.isinf(d2):
             break
     return RareEstimate(
         est,

@@ -19,8 +19,21 @@ a *stratum* with probability ``Π 1 / n_values``, and a study's paths are strata
 weighs ``1 / n_paths``, as a study pools them), so ``p = Σ_s w_s p_s`` with each ``p_s`` estimated
 on the continuous inputs alone. A sinusoidal slip's phases (uniform on ``[0, 2π)``) are inputs.
 
-Randomness that is not a list of scalars (an Ornstein-Uhlenbeck slip sequence, sensor noise,
-random paths, a circle of random radius) is not mapped: :func:`check_supported` names the key.
+**Randomness that is not a list of scalars** is treated conditionally: an Ornstein-Uhlenbeck slip
+sequence (its driving Gaussian increments; its ``ou_sigma_deg`` and ``ou_tau_s`` are inputs like
+any scalar), sensor noise, a random path's geometry and a circle's random radius are drawn afresh
+from the study's own law at every rollout, independent of ``u`` (:mod:`pfjax.rare.study`). Write
+``ω`` for them; then ``p = E_u[P(fail | u)]`` with ``P(fail | u) = E_ω 1[g(u, ω) <= 0]``, and
+
+* Monte Carlo and importance sampling stay unbiased: ``E[w(u) 1[g(u, ω) <= 0]] = E_q[w(u) P(fail | u)] = p``
+  for any proposal on ``u`` (the weights depend on ``u`` alone); the proposal cannot tilt ``ω``, so a
+  failure driven by ``ω`` alone gains no variance reduction (it is as rare under ``q`` as under
+  ``φ``);
+* subset simulation works on the pair ``(u, ω)``: a fresh ``ω'`` at every candidate is conditional
+  sampling with ``ρ = 0`` on ``ω``'s block (its independent draw from its own law leaves that law
+  invariant), so the chains keep ``φ(u) π(ω)`` restricted to each level.
+
+The vehicle's friction ``mu`` of the single-track model is a scalar input like the others.
 """
 
 from __future__ import annotations
@@ -32,7 +45,6 @@ from typing import NamedTuple
 import numpy as np
 from scipy import special, stats
 
-from pfjax.config import ConfigError
 from pfjax.montecarlo.config import Dist, StudySpec
 from pfjax.montecarlo.sampling import SLIP_COLUMNS
 
@@ -63,6 +75,8 @@ def _quantities(spec: StudySpec) -> list[tuple[str, str, Dist]]:
     if s.kind == "sinusoid":
         out += [("phase_r", "slip.phase_r", PHASE), ("phase_f", "slip.phase_f", PHASE)]
     out += [(n, f"initial.{n}", getattr(i, n)) for n in ("start_along_m", "lateral_offset", "heading_error_deg")]
+    if v.model == "st" and v.mu is not None:
+        out.append(("mu", "vehicle.mu", v.mu))
     return out
 
 
@@ -71,23 +85,21 @@ def config_keys(spec: StudySpec) -> dict[str, str]:
     return {n: k for n, k, _ in _quantities(spec)}
 
 
-def check_supported(spec: StudySpec) -> None:
-    """Raise a one-line :class:`~pfjax.config.ConfigError` naming the first key whose randomness
-    the transform cannot map."""
-    if spec.slip.kind == "ou":
-        raise ConfigError("slip.kind: rare_event supports constant, step and sinusoid slip, not 'ou'")
+def nuisance(spec: StudySpec) -> list[str]:
+    """The study keys whose randomness is drawn afresh at every rollout (module docstring)."""
+    out = ["slip.kind = 'ou' (its increments)"] if spec.slip.kind == "ou" else []
     if spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0:
-        raise ConfigError("noise: rare_event needs a study without sensor noise (sigma_d = sigma_theta_e_deg = 0)")
+        out.append("noise")
     for k, p in enumerate(spec.paths):
         if p.kind == "random":
-            raise ConfigError(f"paths[{k}].kind: rare_event does not support random paths")
+            out.append(f"paths[{k}] (random geometry)")
         if p.kind == "circle" and p.radius.dist != "constant":
-            raise ConfigError(f"paths[{k}].radius: rare_event needs a constant circle radius")
+            out.append(f"paths[{k}].radius")
+    return out
 
 
 def study_inputs(spec: StudySpec) -> tuple[list[Input], list[Stratum]]:
     """The study's continuous inputs (in a fixed order: the coordinates of ``u``) and its strata."""
-    check_supported(spec)
     qs = _quantities(spec)
     inputs = [Input(n, k, d) for n, k, d in qs if d.dist in ("uniform", "normal", "truncnormal")]
     choices = [(n, list(d.values or [])) for n, _, d in qs if d.dist == "choice"]

@@ -155,7 +155,10 @@ def _search_blocks(summary: dict, colors: dict, figures: Mapping) -> list[D.Bloc
     rare = T.rare_event_rows(summary, colors)
     if rare:
         head = ["controller", "P(fail) [95 % interval]", "rel. error", "rollouts (method)"]
-        head += ["plain failure rate of the runs [95 %]", "most likely failure point"]
+        head += [
+            "plain failure rate of the runs [95 %]",
+            "most likely failure points: path, weight, inputs far from their medians (σ of u)",
+        ]
         note = (
             "P(fail) from pfjax.rare over the study's uncertain inputs (importance sampling, subset simulation or "
             "plain Monte Carlo); the plain rate is the share of the study's own runs that fail, with its "

@@ -180,9 +180,22 @@ def worst_case_rows(summary: dict, colors: dict) -> list:
     return rows
 
 
+#: Failure points (the importance-sampling proposal's modes) shown per controller.
+RARE_POINTS = 3
+
+
+def _failure_point_text(q: dict) -> str:
+    """``"sine, 44 %: beta_r_deg = -4 (-3.1σ), beta_f_deg = 4 (+3.2σ)"``: a failure point's path,
+    weight and the inputs that drive it (``drivers``: far from their medians, in config units)."""
+    drv = q.get("drivers") or []
+    what = ", ".join(f"{d['key'].split('.')[-1]} = {d['value']:.3g} ({d['u']:+.1f}σ)" for d in drv) or "near nominal"
+    return f"{q.get('path', '')}, {100 * q['weight']:.0f} %: {what}"
+
+
 def rare_event_rows(summary: dict, colors: dict) -> list:
     """Per controller: the rare-event estimate beside the plain failure rate of the study's runs, and
-    the most likely failure point the estimate found (``[rare_event]``, :mod:`pfjax.rare`)."""
+    the most likely failure points the estimate found, with what drives each (``[rare_event]``,
+    :mod:`pfjax.rare`)."""
     rows = []
     for n, c in summary["controllers"].items():
         if "p_fail" not in c:
@@ -191,15 +204,7 @@ def rare_event_rows(summary: dict, colors: dict) -> list:
         plain = 1 - c["success_rate"]
         plain_ci = (1 - c["success_ci95"][1], 1 - c["success_ci95"][0])
         points = c["rare_event"].get("failure_points") or []
-        top = (
-            ", ".join(
-                f"{k.split('.')[-1]} = {v:.3g}" if isinstance(v, (int, float)) else f"{k.split('.')[-1]} = {v}"
-                for k, v in points[0].items()
-                if k != "weight"
-            )
-            if points
-            else "—"
-        )
+        top = "; ".join(_failure_point_text(q) for q in points[:RARE_POINTS]) if points else "—"
         rel = "—" if c["rel_error"] is None else f"{100 * c['rel_error']:.1f} %"
         rows.append(
             [
