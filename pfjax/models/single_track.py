@@ -93,6 +93,7 @@ __all__ = [
     "drift_parameter_set",
     "drift_params_from_commonroad",
     "lateral_eigenvalues",
+    "lateral_yaw_matrices",
     "max_stable_step",
     "parameter_set",
     "params_from_commonroad",
@@ -116,15 +117,20 @@ INPUT_NAMES = ("v_delta", "a_long")
 RK4_REACH = 2.5
 
 
-def lateral_eigenvalues(params: STParams, v: float) -> np.ndarray:
-    """Eigenvalues (1/s) of the dynamic branch's lateral-yaw dynamics in ``(psi_dot, beta)`` at speed
-    ``v`` (m/s) without longitudinal acceleration (``a = 0``; host code, NumPy)::
+def lateral_yaw_matrices(params: STParams, v: float) -> tuple[np.ndarray, np.ndarray]:
+    """The dynamic branch linearised in ``(psi_dot, beta)`` and ``delta`` at speed ``v`` (m/s), without
+    longitudinal acceleration (``a = 0``; host code, NumPy): ``(psi_dot', beta')' = A (psi_dot, beta)' +
+    B delta`` (the model's equations are linear in these three at fixed ``v`` and ``a``, so this is
+    exact there)::
 
         A = [[-k (l_f^2 C_Sf F_f + l_r^2 C_Sr F_r) / v,            k (l_r C_Sr F_r - l_f C_Sf F_f)],
              [mu (l_r C_Sr F_r - l_f C_Sf F_f) / (v^2 l) - 1,      -mu (C_Sf F_f + C_Sr F_r) / (v l)]]
+        B = [[k l_f C_Sf F_f], [mu C_Sf F_f / (v l)]]
 
-    with ``F_f = g l_r``, ``F_r = g l_f``, ``k = mu m / (I_z l)``. Their magnitude grows as ``mu / v``:
-    the tyres' time constants are short at high friction and low speed.
+    with ``F_f = g l_r``, ``F_r = g l_f``, ``k = mu m / (I_z l)``.
+
+    Returns:
+        ``A`` (2, 2) in 1/s and 1 (``beta'`` per ``psi_dot``), ``B`` (2, 1) in 1/s^2 and 1/s.
     """
     p = STParams(*(float(np.asarray(a)) for a in params))
     l = p.l_f + p.l_r
@@ -136,7 +142,15 @@ def lateral_eigenvalues(params: STParams, v: float) -> np.ndarray:
             [p.mu * (cr * p.l_r - cf * p.l_f) / (v**2 * l) - 1, -p.mu * (cr + cf) / (v * l)],
         ]
     )
-    return np.linalg.eigvals(a)
+    b = np.array([[k * p.l_f * cf], [p.mu * cf / (v * l)]])
+    return a, b
+
+
+def lateral_eigenvalues(params: STParams, v: float) -> np.ndarray:
+    """Eigenvalues (1/s) of the lateral-yaw dynamics :func:`lateral_yaw_matrices` at speed ``v`` (m/s).
+    Their magnitude grows as ``mu / v``: the tyres' time constants are short at high friction and low
+    speed."""
+    return np.linalg.eigvals(lateral_yaw_matrices(params, v)[0])
 
 
 def max_stable_step(params: STParams, v: float, tau_delta: float = math.inf, k_v: float = 0.0) -> float:
