@@ -58,8 +58,10 @@ from pfjax.models.single_track_drift import (
     DRIFT_STATE_NAMES,
     STDParams,
     STDState,
+    drift_modes,
     drift_parameter_set,
     drift_params_from_commonroad,
+    drift_tyre_slip,
     rhs_drift,
     vector_field_drift,
 )
@@ -90,11 +92,15 @@ __all__ = [
     "STParams",
     "STState",
     "acceleration",
+    "body",
+    "drift_modes",
     "drift_parameter_set",
     "drift_params_from_commonroad",
+    "drift_tyre_slip",
     "lateral_eigenvalues",
     "lateral_yaw_matrices",
     "max_stable_step",
+    "model_parameter_set",
     "parameter_set",
     "params_from_commonroad",
     "rhs",
@@ -104,6 +110,7 @@ __all__ = [
     "tyre_slip",
     "vector_field",
     "vector_field_drift",
+    "with_mu",
 ]
 
 #: Names of the state vector's entries, in CommonRoad's order.
@@ -153,13 +160,33 @@ def lateral_eigenvalues(params: STParams, v: float) -> np.ndarray:
     return np.linalg.eigvals(lateral_yaw_matrices(params, v)[0])
 
 
-def max_stable_step(params: STParams, v: float, tau_delta: float = math.inf, k_v: float = 0.0) -> float:
-    """The largest RK4 step (s) for which ``|lambda| dt <= RK4_REACH`` for the lateral-yaw modes at
-    speed ``v`` (:func:`lateral_eigenvalues`), a first-order steering actuator (``lambda = -1 /
-    tau_delta``) and a proportional speed loop (``lambda = -k_v``). A step beyond it lets the
-    integration blow up (a run then fails as ``diverged`` or ``nonfinite``)."""
-    fastest = max(float(np.max(np.abs(lateral_eigenvalues(params, v)))), 1 / tau_delta, k_v)
+def max_stable_step(params: STParams | STDParams, v: float, tau_delta: float = math.inf, k_v: float = 0.0) -> float:
+    """The largest RK4 step (s) for which ``|lambda| dt <= RK4_REACH`` for the model's modes at speed
+    ``v`` (the ST model's lateral-yaw modes, :func:`lateral_eigenvalues`; the drift model's, wheel
+    speeds included, :func:`~pfjax.models.single_track_drift.drift_modes`), a first-order steering
+    actuator (``lambda = -1 / tau_delta``) and a proportional speed loop (``lambda = -k_v``). A step
+    beyond it lets the integration blow up (a run then fails as ``diverged`` or ``nonfinite``)."""
+    modes = drift_modes(params, v) if isinstance(params, STDParams) else lateral_eigenvalues(params, v)
+    fastest = max(float(np.max(np.abs(modes))), 1 / tau_delta, k_v)
     return RK4_REACH / fastest
+
+
+def body(params: STParams | STDParams) -> STParams:
+    """The :class:`STParams` of either model's parameters (the drift model's ``params.body``)."""
+    return params.body if isinstance(params, STDParams) else params
+
+
+def with_mu(params: STParams | STDParams, mu) -> STParams | STDParams:
+    """Either model's parameters with the friction coefficient ``mu`` replaced."""
+    if isinstance(params, STDParams):
+        return params._replace(body=params.body._replace(mu=mu))
+    return params._replace(mu=mu)
+
+
+def model_parameter_set(model: str, name: str) -> STParams | STDParams:
+    """The named parameter set of ``model`` (``"st"``: :func:`parameter_set`; ``"std"``:
+    :func:`~pfjax.models.single_track_drift.drift_parameter_set`)."""
+    return drift_parameter_set(name) if model == "std" else parameter_set(name)
 
 
 class STState(NamedTuple):

@@ -43,7 +43,9 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from pfjax.models import tyres
@@ -223,3 +225,31 @@ def rolling_state(sx, sy, psi, v, params: STDParams) -> STDState:
     zero = jnp.zeros_like(jnp.asarray(v, float))
     om = zero + v / params.R_w
     return STDState(zero + sx, zero + sy, zero, zero + v, zero + psi, zero, zero, om, om)
+
+
+def drift_tyre_slip(x: STDState, params: STDParams) -> tuple[Array, Array, Array]:
+    """The slip angles the drift model's tyres see, in pfjax's kinematic slip model's ``SOURCE``
+    convention (as :func:`pfjax.models.single_track.tyre_slip`), rad: ``(beta_r, beta_f, beta)`` with
+    ``beta_r = alpha_r`` (the rear axle's velocity angle to the body) and ``beta_f = -alpha_f`` (the
+    front wheel's angle to its velocity), the model's exact (arctangent) slip angles; 0 at or below
+    ``V_MIN``."""
+    p = params.body
+    moving = x.v > V_MIN
+    sin_b, cos_b = E.sincos(x.beta)
+    vx = jnp.where(moving, x.v * cos_b, jnp.ones_like(x.v))
+    zero = jnp.zeros_like(x.v)
+    beta_r = jnp.where(moving, E.atan((x.v * sin_b - x.psi_dot * p.l_r) / vx), zero)
+    beta_f = jnp.where(moving, x.delta - E.atan((x.v * sin_b + x.psi_dot * p.l_f) / vx), zero)
+    return beta_r, beta_f, x.beta
+
+
+def drift_modes(params: STDParams, v: float) -> np.ndarray:
+    """Eigenvalues (1/s) of the drift model linearised about straight driving at ``v`` (m/s), wheels
+    rolling, no input (host code: a forward-mode Jacobian of :func:`rhs_drift` in the states ``v``,
+    ``psi_dot``, ``beta``, ``omega_f``, ``omega_r``). The wheel-speed modes, ``~ -R_w^2 p_kx1 F_z /
+    (I_w v)``, are the fastest: hundreds of 1/s for the cars at 10 m/s."""
+    p = jax.tree_util.tree_map(float, params)
+    x0 = jnp.asarray(rolling_state(0.0, 0.0, 0.0, float(v), p), float)
+    jac = np.asarray(jax.jacfwd(lambda x: rhs_drift(x, jnp.zeros(2, x.dtype), p))(x0), float)
+    idx = [3, 5, 6, 7, 8]
+    return np.linalg.eigvals(jac[np.ix_(idx, idx)])

@@ -181,12 +181,16 @@ ST_ONLY = ("params", "mu", "tau_delta_s", "k_v")
 
 class VehicleSpec(_Model):
     """The vehicle: ``model = "kinematic"`` (the slip model, slip declared by ``[slip]``;
-    :mod:`pfjax.sim.simulate`) or ``"st"`` (CommonRoad's single-track model, slip from linear tyre
-    forces; :mod:`pfjax.sim.dynamic`) with its parameter set ``params``, friction ``mu``, steering
-    actuator ``tau_delta_s`` and speed loop ``k_v``; its wheelbase and steering limit are the set's."""
+    :mod:`pfjax.sim.simulate`), ``"st"`` (CommonRoad's single-track model, slip from linear tyre
+    forces; :mod:`pfjax.sim.dynamic`) or ``"std"`` (its single-track drift model: Pacejka tyres and
+    wheel speeds; CommonRoad's vehicles only) with its parameter set ``params``, friction ``mu``,
+    steering actuator ``tau_delta_s`` and speed loop ``k_v``; its wheelbase and steering limit are the
+    set's."""
 
-    model: Literal["kinematic", "st"] = Field(
-        "kinematic", description="vehicle model: kinematic (declared slip) or st (single-track, tyre forces)"
+    model: Literal["kinematic", "st", "std"] = Field(
+        "kinematic",
+        description="vehicle model: kinematic (declared slip), st (single-track, linear tyres) or std "
+        "(single-track drift, Pacejka tyres)",
     )
     params: Literal["robot", "vehicle1", "vehicle2", "vehicle3"] = Field(
         "robot", description="st: parameter set: robot (the 0.2 m robot) or CommonRoad's vehicle1-3"
@@ -236,6 +240,8 @@ class VehicleSpec(_Model):
                     else 'it is a setting of model = "st"'
                 )
                 raise ValueError(f'{name}: not with model = "{self.model}" ({why}); remove it')
+        if self.model == "std" and self.params == "robot":
+            raise ValueError('params: model = "std" has no robot set (no magic-formula tyre); use vehicle1-3')
         return self
 
     def st_params(self):
@@ -245,6 +251,13 @@ class VehicleSpec(_Model):
 
         p = parameter_set(self.params)
         return p if self.mu is None else p._replace(mu=nominal(self.mu))
+
+    def model_params(self):
+        """The parameters the simulator takes: :meth:`st_params` for ``"st"``, the drift model's
+        :class:`pfjax.models.single_track.STDParams` (the same ``mu``) for ``"std"``."""
+        from pfjax.models.single_track import model_parameter_set, with_mu
+
+        return with_mu(model_parameter_set(self.model, self.params), self.st_params().mu)
 
     def wheelbase_bounds(self) -> tuple[float, float]:
         """The wheelbase's range, m (the kinematic model's ``L``, the ST set's ``l_f + l_r``)."""
@@ -637,22 +650,23 @@ class StudySpec(_Model):
             raise ValueError(
                 f"falsifier.path: no path labelled {self.falsifier.path!r}; paths are {[p.label for p in self.paths]}"
             )
-        if self.vehicle.model == "st":
+        if self.vehicle.model in ("st", "std"):
             changed = [k for k, v in self.slip if v != SlipSpec.model_fields[k].get_default(call_default_factory=True)]
             if changed:
                 key = changed[0]
                 raise ValueError(
-                    f'slip.{key}: not with vehicle.model = "st" (its slip comes from the tyre forces); remove it'
+                    f'slip.{key}: not with vehicle.model = "{self.vehicle.model}" (its slip comes from the tyre '
+                    "forces); remove it"
                 )
-            from pfjax.models.single_track import max_stable_step
+            from pfjax.models.single_track import max_stable_step, with_mu
 
             veh = self.vehicle
             mu_hi = veh.st_params().mu if veh.mu is None else veh.mu.bounds()[1]
             v_lo = veh.speed.bounds()[0]
-            dt_max = max_stable_step(veh.st_params()._replace(mu=mu_hi), v_lo, veh.tau_delta_s, veh.k_v)
+            dt_max = max_stable_step(with_mu(veh.model_params(), mu_hi), v_lo, veh.tau_delta_s, veh.k_v)
             if self.sim.dt > dt_max:
                 raise ValueError(
-                    f"sim.dt: the ST model at mu = {mu_hi:g} and speed {v_lo:g} m/s (the ranges' worst case) needs "
+                    f"sim.dt: the {veh.model.upper()} model at mu = {mu_hi:g} and speed {v_lo:g} m/s (the ranges' worst case) needs "
                     f"dt <= {dt_max:.3g} s for a stable RK4 step, got {self.sim.dt:g}"
                 )
             for key, section, what in (
@@ -660,7 +674,9 @@ class StudySpec(_Model):
                 ("falsifier.enabled", self.falsifier, "worst-case search"),
             ):
                 if section.enabled:
-                    raise ValueError(f'{key}: the {what} declares slip, not with vehicle.model = "st"; set it to false')
+                    raise ValueError(
+                        f'{key}: the {what} declares slip, not with vehicle.model = "{self.vehicle.model}"; set it to false'
+                    )
         for what, items in (
             ("controllers", [c.name for c in self.controllers]),
             ("paths", [p.label for p in self.paths]),
