@@ -176,7 +176,7 @@ def _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params
         "slip": {k: dists[k] for k in ("beta_r_deg", "beta_f_deg") if k in dists},
         "initial": {k: dists[k] for k in ("start_along_m", "lateral_offset", "heading_error_deg")},
     }
-    if model == "st":
+    if model in ("st", "std"):
         data["margin"] = {"enabled": False}
         # the step is simulate()'s, which checks it against the tyre modes; here the finest allowed
         data["sim"]["dt"] = horizon / MAX_STEPS

@@ -96,15 +96,15 @@ def simulate(
         raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
     config = dataclasses.replace(config, record=bool(trajectories))
     t = scenarios.table
-    if scenarios.spec.vehicle.model == "st":
-        from pfjax.models.single_track import max_stable_step
+    if scenarios.spec.vehicle.model in ("st", "std"):
+        from pfjax.models.single_track import max_stable_step, with_mu
 
         veh = scenarios.spec.vehicle
-        worst = veh.st_params()._replace(mu=float(t["mu"].max()))
-        dt_max = max_stable_step(worst, float(t["speed"].min()), veh.tau_delta_s, veh.k_v)
+        mu_hi = float(t["mu"].max())
+        dt_max = max_stable_step(with_mu(veh.model_params(), mu_hi), float(t["speed"].min()), veh.tau_delta_s, veh.k_v)
         if config.dt > dt_max:
             raise errors.InputError(
-                f"config.dt: the ST model at mu = {worst.mu:g} and speed {float(t['speed'].min()):g} m/s (the runs' "
+                f"config.dt: the {veh.model.upper()} model at mu = {mu_hi:g} and speed {float(t['speed'].min()):g} m/s (the runs' "
                 f"worst case) needs dt <= {dt_max:.3g} s for a stable RK4 step, got {config.dt:g}",
                 "config",
             )

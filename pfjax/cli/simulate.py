@@ -171,7 +171,7 @@ def cmd(args) -> dict:
             record=False,
             control_every=None if args.continuous else (1 if args.control_every is None else args.control_every),
         )
-        if args.model == "st":
+        if args.model in ("st", "std"):
             return _simulate_st(args, cfg, pose0)
         controller, gains, shown = _controller_and_gains(args)
         sc = paper_scenario(
@@ -214,7 +214,7 @@ def cmd(args) -> dict:
 
 
 def _simulate_st(args, cfg, pose0) -> dict:
-    """One run of the ST model (``--model st``): the output of the kinematic model's run plus the
+    """One run of the ST or STD model (``--model st``, ``std``): the output of the kinematic model's run plus the
     model, its parameter set and the slip the run produced (``slip``, degrees)."""
     import numpy as np
 
@@ -225,7 +225,9 @@ def _simulate_st(args, cfg, pose0) -> dict:
     from pfjax.sim import dynamic as dyn
     from pfjax.sim.scenario import make_dynamic_scenario
 
-    name = args.vehicle or "robot"
+    name = args.vehicle or ("robot" if args.model == "st" else "vehicle2")
+    if args.model == "std" and name not in st.COMMONROAD_DRIFT_VEHICLES:
+        raise UsageError(f"--vehicle: --model std takes {', '.join(st.COMMONROAD_DRIFT_VEHICLES)}, got {name}")
     vehicle = st.parameter_set(name)
     args.wheelbase = vehicle.l_f + vehicle.l_r  # the designs are made at the set's wheelbase
     controller, gains, shown = _controller_and_gains(args)
@@ -240,11 +242,13 @@ def _simulate_st(args, cfg, pose0) -> dict:
         v=args.speed,
         tau_delta=0.05 if args.tau_delta is None else args.tau_delta,
         k_v=5.0 if args.k_v is None else args.k_v,
+        model=args.model,
     )
+    mu = float(st.body(sc.vehicle).mu)
     dt_max = st.max_stable_step(sc.vehicle, args.speed, float(sc.tau_delta), float(sc.k_v))
     if cfg.dt > dt_max:
         raise UsageError(
-            f"--dt: the ST model at --mu {float(sc.vehicle.mu):g} and --speed {args.speed:g} needs dt <= "
+            f"--dt: the {args.model.upper()} model at --mu {mu:g} and --speed {args.speed:g} needs dt <= "
             f"{dt_max:.3g} s for a stable RK4 step, got {cfg.dt:g}"
         )
     r = unstack(dyn.simulate_batch(stack([sc]), controller=controller, config=cfg, devices=one_device()), 0)
@@ -255,9 +259,9 @@ def _simulate_st(args, cfg, pose0) -> dict:
     metrics["status"] = STATUS_NAMES[status]
     x0 = args.x0 if args.x0 is not None else (*e.start_pose[:2], math.degrees(e.start_pose[2]))
     return {
-        "model": "st",
+        "model": args.model,
         "vehicle": name,
-        "mu": float(sc.vehicle.mu),
+        "mu": mu,
         "path": args.path,
         "controller": args.controller,
         "gains": shown,
@@ -330,11 +334,14 @@ def register(sub) -> None:
 
     m.add_argument(
         "--model",
-        choices=("kinematic", "st"),
+        choices=("kinematic", "st", "std"),
         default="kinematic",
-        help="vehicle model: kinematic (declared slip) or st (CommonRoad's single-track model, slip from tyre forces)",
+        help="vehicle model: kinematic (declared slip), st (CommonRoad's single-track model, slip from linear "
+        "tyre forces) or std (its single-track drift model, Pacejka tyres and wheel speeds)",
     )
-    m.add_argument("--vehicle", choices=PARAMETER_SETS, help="st: parameter set (default robot)")
+    m.add_argument(
+        "--vehicle", choices=PARAMETER_SETS, help="st, std: parameter set (default robot for st, vehicle2 for std)"
+    )
     m.add_argument("--mu", type=float, help="st: friction coefficient (default the set's, 1.0489)")
     m.add_argument("--tau-delta", type=float, help="st: steering actuator time constant, s (default 0.05)")
     m.add_argument("--k-v", type=float, help="st: speed loop gain, 1/s (default 5)")

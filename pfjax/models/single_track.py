@@ -10,7 +10,7 @@ IEEE IV 2017, doi:10.1109/IVS.2017.7995802)::
 ``(sx, sy)`` is the centre of mass, ``delta`` the front steering angle, ``v`` the speed of the centre
 of mass, ``psi`` the yaw angle, ``beta`` the slip angle at the centre of mass (the velocity's angle to
 the body axis). The inputs first pass CommonRoad's constraints (:func:`steering_rate` and
-:func:`acceleration`). With ``l = l_f + l_r``, the axle loads per unit mass (load transfer through the
+:func:`acceleration`, in :mod:`pfjax.models.single_track_params` with the parameter sets). With ``l = l_f + l_r``, the axle loads per unit mass (load transfer through the
 centre-of-mass height ``h``) ``F_f = g l_r - a h`` and ``F_r = g l_f + a h`` (m^2/s^2, times ``m / l``
 the vertical forces in N), and linear tyres whose lateral force is ``mu C_S F_z alpha`` (``C_S``:
 cornering stiffness per unit vertical load, 1/rad), the dynamic branch (``|v| >= v_kinematic``) is::
@@ -39,19 +39,79 @@ These are CommonRoad's expressions exactly (``vehicle_dynamics_st``, version 202
 ``commonroad-vehicle-models`` 3.0.2), including the state's ``beta`` (not ``beta_ks``) in ``psi_dot'``;
 the tests check agreement with it to 1e-9 relative. Gravity ``g = 9.81`` m/s^2 as in CommonRoad.
 
-:func:`rhs` is NaN-safe for differentiation: the branch not taken never divides by zero.
+:func:`rhs` is NaN-safe for differentiation: the branch not taken never divides by zero. The
+single-track drift model (CommonRoad's STD: Pacejka tyres and wheel speeds) is :func:`rhs_drift`
+(:mod:`pfjax.models.single_track_drift`), its tyre :mod:`pfjax.models.tyres`.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from pfjax.models.single_track_drift import (
+    COMMONROAD_DRIFT_VEHICLES,
+    DRIFT_STATE_NAMES,
+    STDParams,
+    STDState,
+    drift_modes,
+    drift_parameter_set,
+    drift_params_from_commonroad,
+    drift_tyre_slip,
+    rhs_drift,
+    vector_field_drift,
+)
+from pfjax.models.single_track_params import (
+    COMMONROAD_VEHICLES,
+    PARAMETER_SETS,
+    ROBOT_SCALE,
+    STParams,
+    acceleration,
+    parameter_set,
+    params_from_commonroad,
+    robot_params,
+    steering_rate,
+)
 from pfjax.numerics import elementary as E
+
+__all__ = [
+    "COMMONROAD_DRIFT_VEHICLES",
+    "COMMONROAD_VEHICLES",
+    "DRIFT_STATE_NAMES",
+    "INPUT_NAMES",
+    "PARAMETER_SETS",
+    "RK4_REACH",
+    "ROBOT_SCALE",
+    "STATE_NAMES",
+    "STDParams",
+    "STDState",
+    "STParams",
+    "STState",
+    "acceleration",
+    "body",
+    "drift_modes",
+    "drift_parameter_set",
+    "drift_params_from_commonroad",
+    "drift_tyre_slip",
+    "lateral_eigenvalues",
+    "lateral_yaw_matrices",
+    "max_stable_step",
+    "model_parameter_set",
+    "parameter_set",
+    "params_from_commonroad",
+    "rhs",
+    "rhs_drift",
+    "robot_params",
+    "steering_rate",
+    "tyre_slip",
+    "vector_field",
+    "vector_field_drift",
+    "with_mu",
+]
 
 #: Names of the state vector's entries, in CommonRoad's order.
 STATE_NAMES = ("sx", "sy", "delta", "v", "psi", "psi_dot", "beta")
@@ -59,201 +119,25 @@ STATE_NAMES = ("sx", "sy", "delta", "v", "psi", "psi_dot", "beta")
 INPUT_NAMES = ("v_delta", "a_long")
 
 
-class STParams(NamedTuple):
-    """Parameters of the single-track model (a pytree: sample, vmap, differentiate).
-
-    CommonRoad's names in brackets (:func:`params_from_commonroad`).
-    """
-
-    l_f: Array | float  # m, centre of mass to front axle [a]
-    l_r: Array | float  # m, centre of mass to rear axle [b]
-    h: Array | float  # m, centre-of-mass height [h_s]
-    m: Array | float  # kg, total mass [m]
-    I_z: Array | float  # kg m^2, yaw moment of inertia [I_z]
-    mu: Array | float  # 1, tyre-road friction coefficient [tire.p_dy1]
-    C_Sf: Array | float  # 1/rad, front cornering stiffness per unit vertical load [-tire.p_ky1 / tire.p_dy1]
-    C_Sr: Array | float  # 1/rad, rear cornering stiffness per unit vertical load [-tire.p_ky1 / tire.p_dy1]
-    delta_min: Array | float  # rad, steering angle limits [steering.min, steering.max]
-    delta_max: Array | float  # rad
-    v_delta_min: Array | float  # rad/s, steering rate limits [steering.v_min, steering.v_max]
-    v_delta_max: Array | float  # rad/s
-    v_min: Array | float  # m/s, speed limits [longitudinal.v_min, longitudinal.v_max]
-    v_max: Array | float  # m/s
-    v_switch: Array | float  # m/s, above it the acceleration limit falls as a_max v_switch / v [longitudinal.v_switch]
-    a_max: Array | float  # m/s^2, acceleration and braking limit [longitudinal.a_max]
-    v_kinematic: Array | float = 0.1  # m/s, below it the kinematic model (CommonRoad's fixed 0.1)
-    g: Array | float = 9.81  # m/s^2
-
-    @property
-    def wheelbase(self):
-        """``l = l_f + l_r``, m."""
-        return self.l_f + self.l_r
-
-
-def params_from_commonroad(p: Any, *, mu: float | None = None) -> STParams:
-    """:class:`STParams` from a CommonRoad parameter object (``parameters_vehicle1()`` ...).
-
-    Args:
-        p: a ``vehiclemodels`` ``VehicleParameters`` (anything with its attributes).
-        mu: friction coefficient; default CommonRoad's ``p.tire.p_dy1``.
-
-    Returns:
-        Python floats; both cornering stiffnesses are ``-p.tire.p_ky1 / p.tire.p_dy1`` as in
-        CommonRoad's ``vehicle_dynamics_st`` (``mu`` does not change them).
-    """
-    c_s = -float(p.tire.p_ky1) / float(p.tire.p_dy1)
-    s, lon = p.steering, p.longitudinal
-    return STParams(
-        l_f=float(p.a),
-        l_r=float(p.b),
-        h=float(p.h_s),
-        m=float(p.m),
-        I_z=float(p.I_z),
-        mu=float(p.tire.p_dy1) if mu is None else float(mu),
-        C_Sf=c_s,
-        C_Sr=c_s,
-        delta_min=float(s.min),
-        delta_max=float(s.max),
-        v_delta_min=float(s.v_min),
-        v_delta_max=float(s.v_max),
-        v_min=float(lon.v_min),
-        v_max=float(lon.v_max),
-        v_switch=float(lon.v_switch),
-        a_max=float(lon.a_max),
-    )
-
-
-#: Geometric scale from the F1TENTH car (wheelbase 0.3302 m) to the source robot (wheelbase 0.2 m).
-ROBOT_SCALE = 0.2 / 0.3302
-
-
-def robot_params() -> STParams:
-    """A small-robot parameter set: the source robot's wheelbase (0.2 m) and steering limit (30 deg),
-    the rest scaled from the F1TENTH 1/10 car (the F1TENTH gym's single-track parameters: m = 3.74 kg,
-    I_z = 0.04712 kg m^2, l_f = 0.15875 m, l_r = 0.17145 m, h = 0.074 m, mu = 1.0489,
-    C_Sf = 4.718 /rad, C_Sr = 5.4562 /rad, steering rate +-3.2 rad/s, v_switch = 7.319 m/s,
-    a_max = 9.51 m/s^2, speeds -5..20 m/s).
-
-    Scaling with the geometric factor ``s = 0.2 / 0.3302 = 0.606`` at equal density (Froude scaling):
-    lengths ``x s`` (``l_f = 0.0962``, ``l_r = 0.1038``, ``h = 0.0448`` m), mass ``x s^3`` (0.831 kg),
-    inertia ``x s^5`` (0.00383 kg m^2), speeds ``x sqrt(s)`` (``v_switch = 5.70``, limits -3.89..15.6 m/s),
-    accelerations, angles, ``mu`` and the per-load cornering stiffnesses unchanged; the steering rate
-    ``x 1/sqrt(s)`` (4.11 rad/s). These are assumptions of a plausible small car-like robot, not
-    measurements of the source's robot (which publishes only its wheelbase, speed and slip).
-    """
-    s = ROBOT_SCALE
-    rs = s**0.5
-    return STParams(
-        l_f=0.15875 * s,
-        l_r=0.17145 * s,
-        h=0.074 * s,
-        m=3.74 * s**3,
-        I_z=0.04712 * s**5,
-        mu=1.0489,
-        C_Sf=4.718,
-        C_Sr=5.4562,
-        delta_min=-0.5235987755982988,
-        delta_max=0.5235987755982988,
-        v_delta_min=-3.2 / rs,
-        v_delta_max=3.2 / rs,
-        v_min=-5.0 * rs,
-        v_max=20.0 * rs,
-        v_switch=7.319 * rs,
-        a_max=9.51,
-    )
-
-
-#: CommonRoad's vehicles 1-3 (1: Ford Escort, 2: BMW 320i, 3: VW Vanagon) as :func:`params_from_commonroad`
-#: reads them from ``commonroad-vehicle-models`` 3.0.2 (stored here so that studies need not install
-#: it; the tests check them against it).
-COMMONROAD_VEHICLES = {
-    "vehicle1": STParams(
-        l_f=0.88392,
-        l_r=1.50876,
-        h=0.59436,
-        m=1225.8878467253344,
-        I_z=1538.8533713561394,
-        mu=1.0489,
-        C_Sf=20.898083706740398,
-        C_Sr=20.898083706740398,
-        delta_min=-0.91,
-        delta_max=0.91,
-        v_delta_min=-0.4,
-        v_delta_max=0.4,
-        v_min=-13.9,
-        v_max=45.8,
-        v_switch=4.755,
-        a_max=11.5,
-    ),
-    "vehicle2": STParams(
-        l_f=1.1561957064,
-        l_r=1.4227170936,
-        h=0.61373004,
-        m=1093.2952334674046,
-        I_z=1791.5995300122856,
-        mu=1.0489,
-        C_Sf=20.898083706740398,
-        C_Sr=20.898083706740398,
-        delta_min=-1.066,
-        delta_max=1.066,
-        v_delta_min=-0.4,
-        v_delta_max=0.4,
-        v_min=-13.9,
-        v_max=50.8,
-        v_switch=7.319,
-        a_max=11.5,
-    ),
-    "vehicle3": STParams(
-        l_f=1.1507916024,
-        l_r=1.3211363976000001,
-        h=0.804490644,
-        m=1478.8979637767998,
-        I_z=2473.1176915564442,
-        mu=1.0489,
-        C_Sf=20.898083706740398,
-        C_Sr=20.898083706740398,
-        delta_min=-1.023,
-        delta_max=1.023,
-        v_delta_min=-0.4,
-        v_delta_max=0.4,
-        v_min=-11.2,
-        v_max=41.7,
-        v_switch=7.824,
-        a_max=11.5,
-    ),
-}
-
-
-def parameter_set(name: str) -> STParams:
-    """A named parameter set: ``"robot"`` (:func:`robot_params`) or ``"vehicle1"``-``"vehicle3"``
-    (:data:`COMMONROAD_VEHICLES`)."""
-    if name == "robot":
-        return robot_params()
-    if name not in COMMONROAD_VEHICLES:
-        from pfjax.errors import InputError
-
-        raise InputError(f"params: expected one of {', '.join(PARAMETER_SETS)}, got {name!r}", "params")
-    return COMMONROAD_VEHICLES[name]
-
-
-#: The names :func:`parameter_set` takes.
-PARAMETER_SETS = ("robot", *COMMONROAD_VEHICLES)
-
-
 #: ``|lambda| dt`` up to which a fixed RK4 step is taken as stable for the model's modes (RK4's
 #: stability region reaches 2.785 on the negative real axis and about 2.8 along the imaginary one).
 RK4_REACH = 2.5
 
 
-def lateral_eigenvalues(params: STParams, v: float) -> np.ndarray:
-    """Eigenvalues (1/s) of the dynamic branch's lateral-yaw dynamics in ``(psi_dot, beta)`` at speed
-    ``v`` (m/s) without longitudinal acceleration (``a = 0``; host code, NumPy)::
+def lateral_yaw_matrices(params: STParams, v: float) -> tuple[np.ndarray, np.ndarray]:
+    """The dynamic branch linearised in ``(psi_dot, beta)`` and ``delta`` at speed ``v`` (m/s), without
+    longitudinal acceleration (``a = 0``; host code, NumPy): ``(psi_dot', beta')' = A (psi_dot, beta)' +
+    B delta`` (the model's equations are linear in these three at fixed ``v`` and ``a``, so this is
+    exact there)::
 
         A = [[-k (l_f^2 C_Sf F_f + l_r^2 C_Sr F_r) / v,            k (l_r C_Sr F_r - l_f C_Sf F_f)],
              [mu (l_r C_Sr F_r - l_f C_Sf F_f) / (v^2 l) - 1,      -mu (C_Sf F_f + C_Sr F_r) / (v l)]]
+        B = [[k l_f C_Sf F_f], [mu C_Sf F_f / (v l)]]
 
-    with ``F_f = g l_r``, ``F_r = g l_f``, ``k = mu m / (I_z l)``. Their magnitude grows as ``mu / v``:
-    the tyres' time constants are short at high friction and low speed.
+    with ``F_f = g l_r``, ``F_r = g l_f``, ``k = mu m / (I_z l)``.
+
+    Returns:
+        ``A`` (2, 2) in 1/s and 1 (``beta'`` per ``psi_dot``), ``B`` (2, 1) in 1/s^2 and 1/s.
     """
     p = STParams(*(float(np.asarray(a)) for a in params))
     l = p.l_f + p.l_r
@@ -265,37 +149,44 @@ def lateral_eigenvalues(params: STParams, v: float) -> np.ndarray:
             [p.mu * (cr * p.l_r - cf * p.l_f) / (v**2 * l) - 1, -p.mu * (cr + cf) / (v * l)],
         ]
     )
-    return np.linalg.eigvals(a)
+    b = np.array([[k * p.l_f * cf], [p.mu * cf / (v * l)]])
+    return a, b
 
 
-def max_stable_step(params: STParams, v: float, tau_delta: float = math.inf, k_v: float = 0.0) -> float:
-    """The largest RK4 step (s) for which ``|lambda| dt <= RK4_REACH`` for the lateral-yaw modes at
-    speed ``v`` (:func:`lateral_eigenvalues`), a first-order steering actuator (``lambda = -1 /
-    tau_delta``) and a proportional speed loop (``lambda = -k_v``). A step beyond it lets the
-    integration blow up (a run then fails as ``diverged`` or ``nonfinite``)."""
-    fastest = max(float(np.max(np.abs(lateral_eigenvalues(params, v)))), 1 / tau_delta, k_v)
+def lateral_eigenvalues(params: STParams, v: float) -> np.ndarray:
+    """Eigenvalues (1/s) of the lateral-yaw dynamics :func:`lateral_yaw_matrices` at speed ``v`` (m/s).
+    Their magnitude grows as ``mu / v``: the tyres' time constants are short at high friction and low
+    speed."""
+    return np.linalg.eigvals(lateral_yaw_matrices(params, v)[0])
+
+
+def max_stable_step(params: STParams | STDParams, v: float, tau_delta: float = math.inf, k_v: float = 0.0) -> float:
+    """The largest RK4 step (s) for which ``|lambda| dt <= RK4_REACH`` for the model's modes at speed
+    ``v`` (the ST model's lateral-yaw modes, :func:`lateral_eigenvalues`; the drift model's, wheel
+    speeds included, :func:`~pfjax.models.single_track_drift.drift_modes`), a first-order steering
+    actuator (``lambda = -1 / tau_delta``) and a proportional speed loop (``lambda = -k_v``). A step
+    beyond it lets the integration blow up (a run then fails as ``diverged`` or ``nonfinite``)."""
+    modes = drift_modes(params, v) if isinstance(params, STDParams) else lateral_eigenvalues(params, v)
+    fastest = max(float(np.max(np.abs(modes))), 1 / tau_delta, k_v)
     return RK4_REACH / fastest
 
 
-def steering_rate(delta: Array, v_delta: Array, p: STParams) -> Array:
-    """CommonRoad's ``steering_constraints``: the steering rate (rad/s) held at 0 at an angle limit
-    when it pushes further, else clipped to ``[v_delta_min, v_delta_max]``."""
-    at_limit = ((delta <= p.delta_min) & (v_delta <= 0)) | ((delta >= p.delta_max) & (v_delta >= 0))
-    clipped = jnp.where(
-        v_delta <= p.v_delta_min, p.v_delta_min, jnp.where(v_delta >= p.v_delta_max, p.v_delta_max, v_delta)
-    )
-    return jnp.where(at_limit, jnp.zeros_like(v_delta), clipped)
+def body(params: STParams | STDParams) -> STParams:
+    """The :class:`STParams` of either model's parameters (the drift model's ``params.body``)."""
+    return params.body if isinstance(params, STDParams) else params
 
 
-def acceleration(v: Array, a: Array, p: STParams) -> Array:
-    """CommonRoad's ``acceleration_constraints``: 0 at a speed limit when pushing further, braking
-    limited to ``-a_max``, driving to ``a_max`` up to ``v_switch`` and ``a_max v_switch / v`` above
-    (constant power), m/s^2."""
-    fast = v > p.v_switch
-    pos_limit = jnp.where(fast, p.a_max * p.v_switch / jnp.where(fast, v, 1.0), p.a_max)
-    at_limit = ((v <= p.v_min) & (a <= 0)) | ((v >= p.v_max) & (a >= 0))
-    clipped = jnp.where(a <= -p.a_max, -p.a_max, jnp.where(a >= pos_limit, pos_limit, a))
-    return jnp.where(at_limit, jnp.zeros_like(a), clipped)
+def with_mu(params: STParams | STDParams, mu) -> STParams | STDParams:
+    """Either model's parameters with the friction coefficient ``mu`` replaced."""
+    if isinstance(params, STDParams):
+        return params._replace(body=params.body._replace(mu=mu))
+    return params._replace(mu=mu)
+
+
+def model_parameter_set(model: str, name: str) -> STParams | STDParams:
+    """The named parameter set of ``model`` (``"st"``: :func:`parameter_set`; ``"std"``:
+    :func:`~pfjax.models.single_track_drift.drift_parameter_set`)."""
+    return drift_parameter_set(name) if model == "std" else parameter_set(name)
 
 
 class STState(NamedTuple):

@@ -161,22 +161,23 @@ class StudySpec(ConfigModel):
             raise ValueError(
                 f"falsifier.path: no path labelled {self.falsifier.path!r}; paths are {[p.label for p in self.paths]}"
             )
-        if self.vehicle.model == "st":
+        if self.vehicle.model in ("st", "std"):
             changed = [k for k, v in self.slip if v != SlipSpec.model_fields[k].get_default(call_default_factory=True)]
             if changed:
                 key = changed[0]
                 raise ValueError(
-                    f'slip.{key}: not with vehicle.model = "st" (its slip comes from the tyre forces); remove it'
+                    f'slip.{key}: not with vehicle.model = "{self.vehicle.model}" (its slip comes from the tyre '
+                    "forces); remove it"
                 )
-            from pfjax.models.single_track import max_stable_step
+            from pfjax.models.single_track import max_stable_step, with_mu
 
             veh = self.vehicle
             mu_hi = veh.st_params().mu if veh.mu is None else veh.mu.bounds()[1]
             v_lo = veh.speed.bounds()[0]
-            dt_max = max_stable_step(veh.st_params()._replace(mu=mu_hi), v_lo, veh.tau_delta_s, veh.k_v)
+            dt_max = max_stable_step(with_mu(veh.model_params(), mu_hi), v_lo, veh.tau_delta_s, veh.k_v)
             if self.sim.dt > dt_max:
                 raise ValueError(
-                    f"sim.dt: the ST model at mu = {mu_hi:g} and speed {v_lo:g} m/s (the ranges' worst case) needs "
+                    f"sim.dt: the {veh.model.upper()} model at mu = {mu_hi:g} and speed {v_lo:g} m/s (the ranges' worst case) needs "
                     f"dt <= {dt_max:.3g} s for a stable RK4 step, got {self.sim.dt:g}"
                 )
             for key, section, what in (
@@ -184,7 +185,9 @@ class StudySpec(ConfigModel):
                 ("falsifier.enabled", self.falsifier, "worst-case search"),
             ):
                 if section.enabled:
-                    raise ValueError(f'{key}: the {what} declares slip, not with vehicle.model = "st"; set it to false')
+                    raise ValueError(
+                        f'{key}: the {what} declares slip, not with vehicle.model = "{self.vehicle.model}"; set it to false'
+                    )
         for what, items in (
             ("controllers", [c.name for c in self.controllers]),
             ("paths", [p.label for p in self.paths]),

@@ -129,7 +129,7 @@ def column_names(spec: StudySpec) -> list[str]:
     ]
     if any(p.kind == "circle" for p in spec.paths):
         cols.append("radius")
-    if spec.vehicle.model == "st":
+    if spec.vehicle.model in ("st", "std"):
         cols.append("mu")
     return cols
 
@@ -324,7 +324,7 @@ def _draw_runs(
         d = lambda dist, name: given[name] if name in given else draw(dist, _q(key, name))
         speed, L, dmax = d(v.speed, "speed"), d(v.L, "L"), d(v.delta_max_deg, "delta_max_deg")
         extra = {}
-        if v.model == "st":  # the set's wheelbase and steering limit; the friction drawn
+        if v.model in ("st", "std"):  # the set's wheelbase and steering limit; the friction drawn
             st_nominal = v.st_params()
             L = jnp.asarray(st_nominal.l_f + st_nominal.l_r, float)
             dmax = jnp.asarray(math.degrees(st_nominal.delta_max), float)
@@ -373,9 +373,11 @@ def _draw_runs(
             jnp.full((n,), spec.noise.sigma_theta_e_deg * rad, float),
             jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys),
         )
-    if v.model == "st":
+    if v.model in ("st", "std"):
+        from pfjax.models.single_track import with_mu
+
         per_run = lambda a: jnp.full((n,), a, params.v.dtype)
-        vehicle = jax.tree_util.tree_map(per_run, v.st_params())._replace(mu=cols["mu"])
+        vehicle = with_mu(jax.tree_util.tree_map(per_run, v.model_params()), cols["mu"])
         return cols, DynamicScenario(
             pose0=pose0,
             vehicle=vehicle,

@@ -45,12 +45,16 @@ ST_ONLY = ("params", "mu", "tau_delta_s", "k_v")
 
 class VehicleSpec(ConfigModel):
     """The vehicle: ``model = "kinematic"`` (the slip model, slip declared by ``[slip]``;
-    :mod:`pfjax.sim.simulate`) or ``"st"`` (CommonRoad's single-track model, slip from linear tyre
-    forces; :mod:`pfjax.sim.dynamic`) with its parameter set ``params``, friction ``mu``, steering
-    actuator ``tau_delta_s`` and speed loop ``k_v``; its wheelbase and steering limit are the set's."""
+    :mod:`pfjax.sim.simulate`), ``"st"`` (CommonRoad's single-track model, slip from linear tyre
+    forces; :mod:`pfjax.sim.dynamic`) or ``"std"`` (its single-track drift model: Pacejka tyres and
+    wheel speeds; CommonRoad's vehicles only) with its parameter set ``params``, friction ``mu``,
+    steering actuator ``tau_delta_s`` and speed loop ``k_v``; its wheelbase and steering limit are the
+    set's."""
 
-    model: Literal["kinematic", "st"] = Field(
-        "kinematic", description="vehicle model: kinematic (declared slip) or st (single-track, tyre forces)"
+    model: Literal["kinematic", "st", "std"] = Field(
+        "kinematic",
+        description="vehicle model: kinematic (declared slip), st (single-track, linear tyres) or std "
+        "(single-track drift, Pacejka tyres)",
     )
     params: Literal["robot", "vehicle1", "vehicle2", "vehicle3"] = Field(
         "robot", description="st: parameter set: robot (the 0.2 m robot) or CommonRoad's vehicle1-3"
@@ -100,6 +104,8 @@ class VehicleSpec(ConfigModel):
                     else 'it is a setting of model = "st"'
                 )
                 raise ValueError(f'{name}: not with model = "{self.model}" ({why}); remove it')
+        if self.model == "std" and self.params == "robot":
+            raise ValueError('params: model = "std" has no robot set (no magic-formula tyre); use vehicle1-3')
         return self
 
     def st_params(self):
@@ -109,6 +115,13 @@ class VehicleSpec(ConfigModel):
 
         p = parameter_set(self.params)
         return p if self.mu is None else p._replace(mu=nominal(self.mu))
+
+    def model_params(self):
+        """The parameters the simulator takes: :meth:`st_params` for ``"st"``, the drift model's
+        :class:`pfjax.models.single_track.STDParams` (the same ``mu``) for ``"std"``."""
+        from pfjax.models.single_track import model_parameter_set, with_mu
+
+        return with_mu(model_parameter_set(self.model, self.params), self.st_params().mu)
 
     def wheelbase_bounds(self) -> tuple[float, float]:
         """The wheelbase's range, m (the kinematic model's ``L``, the ST set's ``l_f + l_r``)."""

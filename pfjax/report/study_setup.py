@@ -41,10 +41,10 @@ def uncertain_rows(cfg: dict) -> list[dict]:
         "ou_tau_s": "OU time constant [s]",
     }
     rows += [(units[k], slip[k]) for k in SLIP_COLUMNS[slip["kind"]]]
-    if veh.get("model", "kinematic") == "st":  # slip from the tyre forces: the ST model's settings instead
+    if veh.get("model", "kinematic") in ("st", "std"):  # slip from the tyre forces: the model's settings instead
         rows = [
             ("speed reference v [m/s]", veh["speed"]),
-            ("vehicle model", f"single-track (CommonRoad ST), parameter set {veh['params']}"),
+            ("vehicle model", f"single-track (CommonRoad {veh['model'].upper()}), parameter set {veh['params']}"),
             ("friction μ", "the parameter set's" if veh["mu"] is None else veh["mu"]),
             ("steering actuator time constant [s]", veh["tau_delta_s"]),
             ("speed loop gain [1/s]", veh["k_v"]),

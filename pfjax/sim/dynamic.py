@@ -1,5 +1,8 @@
-"""The dynamic vehicle: CommonRoad's ST single-track model (:mod:`pfjax.models.single_track`) on the
-simulation loop (:mod:`pfjax.sim.loop`), path following with any registered controller.
+"""The dynamic vehicle: CommonRoad's ST single-track model (:mod:`pfjax.models.single_track`) or its
+single-track drift model STD (Pacejka tyres, wheel speeds; :mod:`pfjax.models.single_track_drift`) on
+the simulation loop (:mod:`pfjax.sim.loop`), path following with any registered controller. The
+scenario's parameters pick the model (:class:`~pfjax.models.single_track.STParams`: ST;
+:class:`~pfjax.models.single_track.STDParams`: STD); what follows holds for both.
 
 The slip is not declared: it emerges from the tyre forces, the speed, the path's curvature and the
 friction ``mu``. Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_step`:
@@ -14,7 +17,7 @@ friction ``mu``. Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_s
    saturated at ``+-delta_max``, is ``delta_c``;
 3. check the run's health (:mod:`pfjax.sim.status`: non-finite state, ``|d| > d_fail``, the Frenet
    singularity, the path's end);
-4. propose one RK4 step of the ST state with the two low-level loops inside the vector field:
+4. propose one RK4 step of the model's state with the two low-level loops inside the vector field:
 
        v_delta = (delta_c - delta) / tau_delta     steering actuator, first order (tau_delta, s), then
                                                    rate limited to [v_delta_min, v_delta_max] and held
@@ -26,8 +29,8 @@ friction ``mu``. Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_s
    The ST model has no rolling or air resistance, so the proportional speed loop has no
    steady-state error.
 
-The slip angles are measured at every sample (:func:`pfjax.models.single_track.tyre_slip`: the
-tyre slip angles the model's forces use, in the kinematic slip model's ``SOURCE`` convention, so
+The slip angles are measured at every sample (:func:`pfjax.models.single_track.tyre_slip`,
+:func:`~pfjax.models.single_track.drift_tyre_slip`: the tyre slip angles the model's forces use, in the kinematic slip model's ``SOURCE`` convention, so
 that they compare directly with the slip the kinematic studies declare): rear ``beta_r``, front
 ``beta_f`` and at the centre of mass ``beta``;
 :class:`SlipMetrics` holds their largest and time-mean magnitudes (degrees). The path-following
@@ -35,7 +38,7 @@ metrics are the kinematic vehicle's (:func:`~pfjax.sim.simulate.update_metrics`;
 is the actuator's angle ``delta``). Only sampled controllers (``SimConfig.control_every >= 1``).
 
 The run starts on the given rear-axle pose at the reference speed, straight (``delta = psi_dot =
-beta = 0``). :func:`simulate_batch` is the jitted, vmapped entry point.
+beta = 0``; the drift model's wheels rolling, ``omega = v / R_w``). :func:`simulate_batch` is the jitted, vmapped entry point.
 """
 
 from __future__ import annotations
@@ -82,7 +85,7 @@ class DynamicScenario(NamedTuple):
     """Everything that varies between runs of the dynamic vehicle (a pytree; batch it along a leading axis)."""
 
     pose0: Pose  # initial rear-axle pose (m, m, rad)
-    vehicle: st.STParams  # the ST model's parameters (mu among them)
+    vehicle: st.STParams | st.STDParams  # the model's parameters (mu among them): ST or STD
     v_ref: Array | float  # m/s, reference speed of the speed loop (the start speed)
     path: Any  # a path shape from pfjax.paths
     gains: Any  # the controller's parameter pytree
@@ -142,7 +145,7 @@ class _Acc(NamedTuple):
 
 
 class _State(NamedTuple):
-    x: st.STState  # the ST state
+    x: Any  # the model's state: st.STState or st.STDState
     c: Any  # controller state
     u: Array  # path parameter, warm start of the next projection
 
@@ -162,27 +165,41 @@ class _Out(NamedTuple):
     delta: Array  # rad, the actuator's angle
     saturated: Array  # 1.0 where |cmd| > delta_max
     slip: tuple  # rad: beta_r, beta_f, beta
-    x: st.STState  # the ST state
+    x: Any  # the model's state
 
 
-def rear_axle_pose(x: st.STState, p: st.STParams) -> Pose:
-    """The rear-axle pose of an ST state: ``(sx - l_r cos psi, sy - l_r sin psi, psi)`` (m, m, rad)."""
+def rear_axle_pose(x, p) -> Pose:
+    """The rear-axle pose of an ST or STD state: ``(sx - l_r cos psi, sy - l_r sin psi, psi)`` (m, m, rad)."""
+    p = st.body(p)
     s, c = E.sincos(x.psi)
     return Pose(x.sx - p.l_r * c, x.sy - p.l_r * s, x.psi)
 
 
-def start_state(pose0: Pose, v0, p: st.STParams) -> st.STState:
-    """The ST state of a vehicle whose rear axle is at ``pose0`` (m, m, rad), driving straight at ``v0`` (m/s)."""
+def start_state(pose0: Pose, v0, p):
+    """The ST (or STD, for :class:`~pfjax.models.single_track.STDParams`) state of a vehicle whose rear
+    axle is at ``pose0`` (m, m, rad), driving straight at ``v0`` (m/s), its wheels rolling."""
     pose0 = Pose(*pose0)
+    b = st.body(p)
     s, c = E.sincos(pose0.theta)
     zero = jnp.zeros_like(pose0.x)
-    return st.STState(pose0.x + p.l_r * c, pose0.y + p.l_r * s, zero, zero + v0, pose0.theta, zero, zero)
+    x = st.STState(pose0.x + b.l_r * c, pose0.y + b.l_r * s, zero, zero + v0, pose0.theta, zero, zero)
+    if isinstance(p, st.STDParams):
+        return st.STDState(*x, *(2 * (x.v / p.R_w,)))
+    return x
 
 
-def closed_loop_rhs(x: st.STState, delta_c, sc: DynamicScenario) -> st.STState:
-    """The ST vector field with the steering actuator and the speed loop closed (module docstring):
-    ``st.vector_field(x, (delta_c - delta) / tau_delta, k_v (v_ref - v), vehicle)``."""
-    return st.vector_field(x, (delta_c - x.delta) / sc.tau_delta, sc.k_v * (sc.v_ref - x.v), sc.vehicle)
+def closed_loop_rhs(x, delta_c, sc: DynamicScenario):
+    """The model's vector field with the steering actuator and the speed loop closed (module docstring):
+    ``vector_field(x, (delta_c - delta) / tau_delta, k_v (v_ref - v), vehicle)``."""
+    v_delta, a_long = (delta_c - x.delta) / sc.tau_delta, sc.k_v * (sc.v_ref - x.v)
+    if isinstance(sc.vehicle, st.STDParams):
+        return st.vector_field_drift(x, v_delta, a_long, sc.vehicle)
+    return st.vector_field(x, v_delta, a_long, sc.vehicle)
+
+
+def tyre_slip(x, p) -> tuple[Array, Array, Array]:
+    """``(beta_r, beta_f, beta)`` of either model's state (rad, the kinematic model's convention)."""
+    return st.drift_tyre_slip(x, p) if isinstance(p, st.STDParams) else st.tyre_slip(x, p)
 
 
 def _start(controller: Controller, sc: DynamicScenario) -> loop.Start:
@@ -201,13 +218,13 @@ def _step(controller: Controller, config: SimConfig, sc: DynamicScenario, carry:
     """Sample ``k``: measure the rear axle, command, health; the proposed RK4 step of the ST state.
     Sample ``N`` only measures (``keep``), the command held from step ``N - 1``."""
     x, c, u = carry.state
-    p = sc.vehicle
+    p = st.body(sc.vehicle)
     dt, n_steps = config.dt, config.n_steps
     first, last = k == 0, k == n_steps
     t = jnp.where(last, jnp.asarray(n_steps * dt, x.v.dtype), k * dt)
     pose = rear_axle_pose(x, p)
     proj = measure_pose(sc, pose, u, config.newton_iters)
-    slip = st.tyre_slip(x, p)
+    slip = tyre_slip(x, sc.vehicle)
     dmax = jnp.asarray(p.delta_max, float)
     v_rear = x.v * E.sincos(x.beta)[1]  # m/s, the rear axle's longitudinal speed
     obs = noisy_observation(observation(proj, pose, v_rear, p.l_f + p.l_r, dmax, sc.path), sc.noise, k)

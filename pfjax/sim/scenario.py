@@ -101,7 +101,7 @@ def paper_scenario(
 
 
 def make_dynamic_scenario(
-    path, pose0, gains, *, params="robot", mu=None, v=1.0, tau_delta=0.05, k_v=5.0
+    path, pose0, gains, *, params="robot", mu=None, v=1.0, tau_delta=0.05, k_v=5.0, model="st"
 ) -> DynamicScenario:
     """One run of the dynamic vehicle (:mod:`pfjax.sim.dynamic`) from plain values, checked
     (:class:`~pfjax.errors.InputError` naming the argument).
@@ -111,21 +111,26 @@ def make_dynamic_scenario(
         pose0: rear-axle start pose ``(x, y, theta)``, m, m, rad.
         gains: the controller's parameter pytree.
         params: the ST parameter set's name (:data:`pfjax.models.single_track.PARAMETER_SETS`: ``robot``,
-            ``vehicle1``-``vehicle3``) or an :class:`~pfjax.models.single_track.STParams`.
+            ``vehicle1``-``vehicle3``) or an :class:`~pfjax.models.single_track.STParams` (or, for the
+            drift model, :class:`~pfjax.models.single_track.STDParams`).
         mu: friction coefficient in ``(0, 10]`` (default: the set's).
         v: reference speed, m/s. tau_delta: steering actuator time constant, s. k_v: speed loop gain, 1/s.
+        model: ``"st"`` or ``"std"`` (the drift model; a named set then is one of CommonRoad's vehicles).
     """
+    if model not in ("st", "std"):
+        raise InputError(f"model: expected st or std, got {model!r}", "model")
     if isinstance(params, str):
         if params not in st.PARAMETER_SETS:
             raise InputError(f"params: expected one of {', '.join(st.PARAMETER_SETS)}, got {params!r}", "params")
-        params = st.parameter_set(params)
-    elif not isinstance(params, st.STParams):
+        params = st.model_parameter_set(model, params)
+    elif not isinstance(params, (st.STParams, st.STDParams)):
         raise InputError(
-            f"params: expected a parameter set's name or an STParams, got {type(params).__name__}", "params"
+            f"params: expected a parameter set's name, an STParams or an STDParams, got {type(params).__name__}",
+            "params",
         )
     if mu is not None:
         errors.numbers("mu", mu, positive=True, high=10)
-        params = params._replace(mu=mu)
+        params = st.with_mu(params, mu)
     errors.numbers("v", v, positive=True, unit=" m/s")
     errors.numbers("tau_delta", tau_delta, positive=True, unit=" s")
     errors.numbers("k_v", k_v, positive=True, unit=" 1/s")

@@ -4,6 +4,7 @@ Never imported by jitted code: designs are computed once, at the edges, and thei
 to the simulator as plain arrays.
 """
 
+from pfjax.synthesis.dynamic_plant import OutputFeedbackDesign, dynamic_design_plant, dynamic_mixed
 from pfjax.synthesis.lmi import (
     Design,
     SynthesisError,
@@ -28,11 +29,14 @@ from pfjax.synthesis.robust import (
 
 __all__ = [
     "Design",
+    "OutputFeedbackDesign",
     "Plant",
     "PoleRegion",
     "RobustDesign",
     "SynthesisError",
     "closed_loop",
+    "dynamic_design_plant",
+    "dynamic_mixed",
     "h2_norm",
     "h2_state_feedback",
     "hinf_norm",

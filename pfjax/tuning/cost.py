@@ -33,6 +33,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from pfjax.controllers.base import Controller
+from pfjax.sim import dynamic
+from pfjax.sim.dynamic import DynamicScenario
 from pfjax.sim.simulate import Scenario, SimConfig, simulate
 from pfjax.sim.status import Status
 
@@ -114,12 +116,14 @@ def batch_cost(controller: Controller, tunable: Tunable, scenarios, config: SimC
     """``cost(theta) -> scalar`` over ``scenarios`` (their ``gains`` are ignored).
 
     ``scenarios`` is one batched :class:`Scenario` or a list of them (one per path shape: a batch
-    holds one path type); the runs of all are pooled before aggregation. Pure and traceable
+    holds one path type), or the same of the dynamic vehicle's
+    :class:`~pfjax.sim.dynamic.DynamicScenario` (tuning through the ST or STD model); the runs of
+    all are pooled before aggregation. Pure and traceable
     (``jax.grad``/``jax.vmap`` it); one call simulates :func:`n_scenarios` rollouts.
     """
     spec = spec.check()
     config = config if not config.record else _no_record(config)
-    batches = [scenarios] if isinstance(scenarios, Scenario) else list(scenarios)
+    batches = _batches(scenarios)
 
     def cost(theta):
         g = tunable.gains(theta)
@@ -157,14 +161,19 @@ class PopulationCost:
         return np.asarray(f(X), dtype=np.float64)
 
 
+def _batches(scenarios) -> list:
+    return [scenarios] if isinstance(scenarios, (Scenario, DynamicScenario)) else list(scenarios)
+
+
 def _sim(controller, batch, gains, config):
-    res = jax.vmap(lambda sc: simulate(controller, sc._replace(gains=gains), config))(batch)
+    run = dynamic.simulate if isinstance(batch, DynamicScenario) else simulate
+    res = jax.vmap(lambda sc: run(controller, sc._replace(gains=gains), config))(batch)
     return res.metrics, res.status
 
 
 def n_scenarios(scenarios) -> int:
     """Rollouts per cost evaluation (runs in one batch or a list of batches)."""
-    batches = [scenarios] if isinstance(scenarios, Scenario) else list(scenarios)
+    batches = _batches(scenarios)
     return sum(int(jax.tree_util.tree_leaves(b.pose0)[0].shape[0]) for b in batches)
 
 
