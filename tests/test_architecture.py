@@ -168,3 +168,28 @@ def test_a_design_once_made_is_read_back_without_cvxpy(tmp_path):
 
     K = mixed_h2_hinf(slip_design_plant(1.0, 0.2), alpha=10.0, beta=1.0).K.ravel()
     assert first[0][0] == {"k_d": float(K[0]), "k_theta": float(K[1])}
+
+
+def test_no_module_imports_another_modules_private_names():
+    """Each module keeps its ``_private`` names to itself: no ``from pfjax.x import _name`` in the
+    library, the studies or the notebooks (a name another module needs is public in its home)."""
+    import ast
+    import json
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    sources = {p: p.read_text() for d in ("pfjax", "studies") for p in (root / d).rglob("*.py")}
+    for nb in (root / "notebooks").glob("*.ipynb"):
+        cells = json.loads(nb.read_text())["cells"]
+        code = "\n".join("".join(c["source"]) for c in cells if c["cell_type"] == "code")
+        sources[nb] = "\n".join(line for line in code.splitlines() if not line.lstrip().startswith(("%", "!")))
+    bad = []
+    for path, text in sources.items():
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("pfjax"):
+                bad += [
+                    f"{path.relative_to(root)}: {node.module}.{a.name}"
+                    for a in node.names
+                    if a.name.startswith("_") and not a.name.startswith("__")
+                ]
+    assert not bad, bad

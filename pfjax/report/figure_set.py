@@ -88,7 +88,7 @@ def figure_entries(out_dir: Path, spec: StudySpec, names) -> dict[str, dict]:
     }
 
 
-def _figures(
+def draw_figures(
     out_dir: Path,
     spec: StudySpec,
     summary: dict,
@@ -192,7 +192,7 @@ def report_figures(
     all), so a study can draw the others before its worst-case search has finished; merge the parts
     with :func:`ordered_figures`. ``runs`` may be None when ``names`` has none of :data:`NEEDS_RUNS`."""
     cfg = summary.get("config") or spec.model_dump(mode="json")
-    return _figures(
+    return draw_figures(
         Path(out_dir), spec, summary, runs, controller_colors(cfg["controllers"]), worst_trajectories, names
     )
 

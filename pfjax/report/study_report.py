@@ -20,7 +20,7 @@ import pandas as pd
 from pfjax.montecarlo.config import StudySpec
 from pfjax.montecarlo.sampling import column_names
 from pfjax.report import document
-from pfjax.report.figure_set import _figures
+from pfjax.report.figure_set import draw_figures
 from pfjax.report.study_document import study_document
 from pfjax.report.study_figures import controller_colors, fmt_margin
 from pfjax.report.study_format import DASH, fmt_ci, fmt_dist, fmt_mm, fmt_num, fmt_p, fmt_pct, fmt_times
@@ -65,7 +65,7 @@ def write_report(
     colors = controller_colors(cfg["controllers"])
     params = [c for c in column_names(spec) if c in runs.columns and runs[c].nunique(dropna=True) > 1]
     if figures is None:
-        figures = _figures(out_dir, spec, summary, runs, colors, worst_trajectories)
+        figures = draw_figures(out_dir, spec, summary, runs, colors, worst_trajectories)
     written = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     doc = study_document({**summary, "config": cfg}, runs, figures, params, colors, written)
     return document.write(doc, out_dir)

@@ -99,7 +99,7 @@ def check_point(
         mode: differentiation mode.
     """
     from pfjax.numerics.autodiff import forward_passes_per_gradient
-    from pfjax.tuning.multistart import _value
+    from pfjax.tuning.multistart import box_value
 
     lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
     span, D = hi - lo, lo.size
@@ -143,7 +143,7 @@ def check_point(
         model = "singular"
     U = probe_directions(D)
     Zp = np.clip(np.concatenate([z + r * U for r in radii]), 0.0, 1.0)
-    Jp = np.asarray(jax.jit(_value, static_argnames=("cost",))(jnp.asarray(Zp, dtype), lo_j, span_j, cost=cost))
+    Jp = np.asarray(jax.jit(box_value, static_argnames=("cost",))(jnp.asarray(Zp, dtype), lo_j, span_j, cost=cost))
     Jp = np.where(np.isfinite(Jp), Jp, np.inf)
     i = int(np.argmin(Jp))
     probe_dec = (J - float(Jp[i])) / max(abs(J), 1e-300)

@@ -99,7 +99,7 @@ MAX_POPULATION = 1_000_000
 MAX_GENERATIONS = 1_000_000
 
 
-def _validate(options: GAOptions) -> tuple[int, int, int]:
+def validate_options(options: GAOptions) -> tuple[int, int, int]:
     """``(population, elites, generations)``; :class:`~pfjax.errors.InputError` naming a bad option."""
     from pfjax import errors
 
@@ -167,7 +167,7 @@ def _generation(pop, costs, g, G, key, options, cost_batch, mutate):
 
 
 def _run(cost_batch, pop0, mutate, key, options, progress, desc) -> GAResult:
-    P, E, G = _validate(options)
+    P, E, G = validate_options(options)
     costs = _evaluate(cost_batch, pop0)
     pop = pop0
     n_eval = P
@@ -228,7 +228,7 @@ def ga(
         raise ValueError(f"lower/upper: shapes {lo.shape} and {hi.shape}, expected equal (D,)")
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
         raise ValueError("lower/upper: expected finite bounds with lower < upper")
-    P, _, _ = _validate(options)
+    P, _, _ = validate_options(options)
     span = hi - lo
     k0, kr = jax.random.split(key)
     pop0 = lo + span * _uniform(k0, (P, lo.size))
@@ -258,7 +258,7 @@ def ga_bits(
     n_bits = int(n_bits)
     if n_bits < 1:
         raise ValueError(f"n_bits: value {n_bits}, expected >= 1")
-    P, _, _ = _validate(options)
+    P, _, _ = validate_options(options)
     k0, kr = jax.random.split(key)
     pop0 = _uniform(k0, (P, n_bits)) < 0.5
 

@@ -118,7 +118,7 @@ def gradient_tune(
         u = np.asarray(jax.random.uniform(key, (n_starts - len(starts),) + lo.shape), np.float64)
         starts += list(lo + span * u)
     z = jnp.asarray(np.clip((np.stack(starts) - lo) / span, 0.0, 1.0))  # (n_starts, D)
-    opt = optimizer or _adam(float(learning_rate), int(steps))
+    opt = optimizer or adam(float(learning_rate), int(steps))
     lo_j, span_j = jnp.asarray(lo), jnp.asarray(span)
     state = opt.init(z)
     t_c = time.perf_counter()
@@ -166,7 +166,7 @@ def gradient_tune(
 
 
 @functools.lru_cache(maxsize=32)
-def _adam(learning_rate: float, steps: int) -> optax.GradientTransformation:
+def adam(learning_rate: float, steps: int) -> optax.GradientTransformation:
     """Adam with the step cosine-decayed from ``learning_rate`` to a tenth of it over ``steps``."""
     return optax.adam(optax.cosine_decay_schedule(learning_rate, max(steps, 1), alpha=0.1))
 

@@ -31,7 +31,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from pfjax.tuning.gradient import _adam
+from pfjax.tuning.gradient import adam
 
 LOCALS = ("bfgs", "adam")
 
@@ -47,7 +47,7 @@ class Local(NamedTuple):
     def init(self, z):
         m, D = z.shape
         if self.name == "adam":
-            return (z, _adam(self.learning_rate, self.steps).init(z))
+            return (z, adam(self.learning_rate, self.steps).init(z))
         eye = jnp.broadcast_to(jnp.eye(D, dtype=z.dtype), (m, D, D))
         inf = jnp.full((m,), jnp.inf, z.dtype)
         return BFGSState(z, inf, jnp.zeros_like(z), eye, jnp.full((m,), self.learning_rate, z.dtype), inf < 0)

@@ -58,7 +58,7 @@ import optax
 from pfjax import errors
 from pfjax.numerics import autodiff
 from pfjax.tuning import local as L
-from pfjax.tuning.gradient import TuneResult, _adam
+from pfjax.tuning.gradient import TuneResult, adam
 
 SAMPLERS = ("sobol", "lhs", "uniform")
 LOCALS = L.LOCALS
@@ -234,9 +234,9 @@ class _Plan(NamedTuple):
     def compile(self, cost, n_screen: int, D: int, dtype, mode: str) -> dict:
         """Every program compiled ahead of time: ``"screen"``, ``"polish"`` (value only) and one
         step per ``(chains, local)``."""
-        progs: dict = {"screen": _compiled(_value, ((n_screen, D), dtype), cost=cost)}
+        progs: dict = {"screen": _compiled(box_value, ((n_screen, D), dtype), cost=cost)}
         if self.polish:
-            progs["polish"] = _compiled(_value, ((2 * D, D), dtype), cost=cost)
+            progs["polish"] = _compiled(box_value, ((2 * D, D), dtype), cost=cost)
         pairs = [(m, self.local) for m in sorted(set(self.sizes))]
         pairs += [(self.n_restart_chains, self.local_r)] if self.n_restart_chains else []
         for m, lc in pairs:
@@ -327,13 +327,13 @@ def _compiled(fun, shape_dtype, **static):
         if len(_COMPILED) > 64:
             _COMPILED.clear()
         z, v = jnp.zeros((n, D), dtype), jnp.zeros((D,), dtype)
-        args = (z, v, v) if fun is _value else (static["local"].init(z), z, v, v)
+        args = (z, v, v) if fun is box_value else (static["local"].init(z), z, v, v)
         _COMPILED[k] = fun.lower(*args, **static).compile()
     return _COMPILED[k]
 
 
 @functools.partial(jax.jit, static_argnames=("cost",))
-def _value(z, lo, span, *, cost):
+def box_value(z, lo, span, *, cost):
     """Costs of ``(n, D)`` normalised points (value only)."""
     return jax.vmap(lambda zz: cost(lo + span * zz))(z)
 
@@ -351,7 +351,7 @@ def _step(state, noise, lo, span, *, cost, local, mode="auto"):
         J, g = vg(zp)
         bad = ~jnp.isfinite(g)
         g = jnp.where(bad, 0.0, g)
-        opt = _adam(local.learning_rate, local.steps)
+        opt = adam(local.learning_rate, local.steps)
         upd, opt_state = opt.update(g, opt_state, z)
         return J, zp, (jnp.clip(optax.apply_updates(z, upd), 0.0, 1.0), opt_state), jnp.sum(bad)
     zp = jnp.clip(jax.vmap(L.bfgs_trial)(state) + noise, 0.0, 1.0)

@@ -186,11 +186,11 @@ def tune(
     simulates a whole population at once, the gradient every start with one tangent per tuned
     gain)."""
     from pfjax import errors, resources
-    from pfjax.tuning.ga import _validate
+    from pfjax.tuning.ga import validate_options
 
     if method not in METHODS:
         raise errors.InputError(f"method: value {method!r}, expected one of {', '.join(METHODS)}")
-    _validate(ga_options)  # every setting is checked, whichever method uses it
+    validate_options(ga_options)  # every setting is checked, whichever method uses it
     for name, v in (("steps", steps), ("n_starts", n_starts)):
         if v is not None:
             errors.integer(name, v, low=1, high=1_000_000)
@@ -206,7 +206,7 @@ def tune(
     D = problem.lower.size
     per_run = resources.run_bytes(problem.config.n_steps)
     if method in ("ga", "ga+gradient"):
-        population = _validate(ga_options)[0]
+        population = validate_options(ga_options)[0]
         resources.check_memory(
             "population_size",
             2 * population * problem.n_per_eval * per_run,
