@@ -63,10 +63,10 @@ def _rates(dtype, batch: int, horizon: float, blocks, width_set, rounds: int, sa
     for width in width_set:
         program = _program(width)
         for bb in blocks:
-            placed, _, layout = sharding.plan_batch(sc, None, max(1, bb // itemsize))
-            call = lambda p=placed, lay=layout, f=program: jax.block_until_ready(
+            placed, n, layout = sharding.plan_batch(sc, None, max(1, bb // itemsize))
+            call = lambda p=placed, lay=layout, f=program, n=n: jax.block_until_ready(
                 f(p, controller=state_feedback, config=sim, layout=lay).metrics.iae
-            )
+            )[:n]  # the padding cut off
             say(f"{np.dtype(dtype).name} width {width or 'default'} block {bb} B: compiling")
             iae = np.asarray(call(), np.float64)
             cands.append(dict(width=width, block_bytes=bb, call=call, iae=iae, best=math.inf))
