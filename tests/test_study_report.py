@@ -23,7 +23,8 @@ from pfjax.montecarlo.study import RUN_FIGURES, WORKER_SUMMARY_FIGURES, run
 from pfjax.montecarlo.summary import summarize
 from pfjax.report import figure_worker
 from pfjax.report.figure_set import report_figures
-from pfjax.report.study_report import fmt_ci, fmt_margin, fmt_pct, write_report
+from pfjax.report.study_format import fmt_ci, fmt_margin, fmt_pct
+from pfjax.report.study_report import write_report
 
 # 30 runs in chunks of 30, and the sweep's 3 amplitudes x 10 runs per axis are 30 too: one array shape,
 # so one compilation per controller.

@@ -22,21 +22,9 @@ from pfjax.montecarlo.sampling import column_names
 from pfjax.report import document
 from pfjax.report.figure_set import draw_figures
 from pfjax.report.study_document import study_document
-from pfjax.report.study_figures import controller_colors, fmt_margin
-from pfjax.report.study_format import DASH, fmt_ci, fmt_dist, fmt_mm, fmt_num, fmt_p, fmt_pct, fmt_times
+from pfjax.report.study_figures import controller_colors
 
-__all__ = [
-    "DASH",
-    "fmt_ci",
-    "fmt_dist",
-    "fmt_margin",
-    "fmt_mm",
-    "fmt_num",
-    "fmt_p",
-    "fmt_pct",
-    "fmt_times",
-    "write_report",
-]
+__all__ = ["write_report"]
 
 
 def write_report(
