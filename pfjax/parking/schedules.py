@@ -9,6 +9,7 @@ together; after ``n`` switches the gain is ``schedule[min(n, SCHEDULE_LEN − 1)
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -16,7 +17,7 @@ import numpy as np
 SCHEDULE_LEN = 8
 
 #: The source's cases (docs/reproductions/parking.md §4).
-CASES = {
+CASES: dict[str, dict[str, Any]] = {
     "A": {"map": "parallel", "x0": (-0.4, 0.5, 0.0), "direction": 1, "schedule": (1.0,)},
     "B": {"map": "parallel", "x0": (0.1, 0.5, 0.0), "direction": -1, "schedule": (1.0,)},
     "C": {"map": "parallel", "x0": (0.1, 0.5, 0.0), "direction": -1, "schedule": (1.0, 0.5)},

@@ -30,10 +30,10 @@ from pfjax.tables import write_parquet
 TABLES = ("cases", "assumptions", "grid", "start_map", "montecarlo")
 
 
-def _parts(cfg: dict, fig_dir: Path, progress: bool) -> tuple[dict, dict, dict]:
+def _parts(cfg: ParkingStudy, fig_dir: Path, progress: bool) -> tuple[dict, dict, dict]:
     """Run every part; returns ``(results, tables, timings_s)``."""
     pmap, gmap = to_obstacle_map(list(PARALLEL.values())), to_obstacle_map(list(GARAGE.values()))
-    k_ga, k_mc = jax.random.split(jax.random.PRNGKey(cfg["seed"]))
+    k_ga, k_mc = jax.random.split(jax.random.PRNGKey(cfg.seed))
     steps = tqdm(total=6, desc="parking study", unit="part", disable=not progress)
     timings: dict = {}
     t0 = time.perf_counter()
@@ -91,7 +91,7 @@ def run_study(config: ParkingStudy, out: Path, quick: bool = False, progress: bo
     cfg = config.model_dump(mode="json")
     fig_dir = out / "figures"
     fig_dir.mkdir(parents=True)
-    results, tables, timings = _parts(cfg, fig_dir, progress)
+    results, tables, timings = _parts(config, fig_dir, progress)
     meta = parquet_metadata(cfg, cfg["seed"])
     for name in TABLES:
         write_parquet(tables[name], out / f"{name}.parquet", meta)

@@ -1,6 +1,6 @@
 """The parking study's batched parts: the assumptions sweep over cases A-D, the GA and grid searches
 of the garage schedule, the start-pose map and the robustness Monte Carlo. Each part takes the
-validated config as a plain dict (``ParkingStudy.model_dump()``)."""
+validated config, a :class:`pfjax.parking.study_config.ParkingStudy`."""
 
 from __future__ import annotations
 
@@ -15,60 +15,57 @@ from pfjax.parking.assumptions import case_sweep, sweep_summary
 from pfjax.parking.montecarlo import Scatter, monte_carlo, summarise
 from pfjax.parking.schedules import GARAGE_START
 from pfjax.parking.simulate import STATUS_NAMES, run_params
+from pfjax.parking.study_config import ParkingStudy
 from pfjax.parking.study_runs import setup
 from pfjax.parking.switch_search import search_ga, search_grid, start_map
 from pfjax.report.figures import save
 from pfjax.tuning.ga import GAOptions
 
 
-def part_assumptions(cfg, pmap):
+def part_assumptions(cfg: ParkingStudy, pmap):
     """Cases A-D under every combination of the open assumptions (pfjax.parking.assumptions)."""
     control, _, pc, _ = setup(cfg)
-    a = cfg["assumptions"]
+    a = cfg.assumptions
     grid = {
-        "front": a["fronts"],
-        "zone": a["zones"],
-        "scan_period": a["scan_periods"],
-        "decision_delay": a["decision_delays"],
-        "lag": a["lags"],
-        "pause": a["pauses"],
+        "front": a.fronts,
+        "zone": a.zones,
+        "scan_period": a.scan_periods,
+        "decision_delay": a.decision_delays,
+        "lag": a.lags,
+        "pause": a.pauses,
     }
-    c = cfg["controller"]
+    c = cfg.controller
     df = case_sweep(
         pmap,
         grid,
-        control_kw={"k1": c["k1"], "k2": c["k2"], "speed": c["speed"]},
+        control_kw={"k1": c.k1, "k2": c.k2, "speed": c.speed},
         cfg=pc,
-        chunk=cfg["sim"]["chunk"],
+        chunk=cfg.sim.chunk,
         progress=True,
     )
     return df, sweep_summary(df)
 
 
-def part_search(cfg, fig_dir, gmap, key):
+def part_search(cfg: ParkingStudy, fig_dir, gmap, key):
     control, front, _, pc = setup(cfg)
-    se = cfg["search"]
-    base = run_params(
-        GARAGE_START, 1, (1.0,), xs=-1.0, front=front, scan_period=cfg["sim"]["scan_period"], control=control
-    )
+    se = cfg.search
+    base = run_params(GARAGE_START, 1, (1.0,), xs=-1.0, front=front, scan_period=cfg.sim.scan_period, control=control)
     t0 = time.perf_counter()
-    grid = search_grid(
-        gmap, n=se["grid_n"], base=base, weight=se["weight"], cfg=pc, progress=True, chunk=cfg["sim"]["chunk"]
-    )
+    grid = search_grid(gmap, n=se.grid_n, base=base, weight=se.weight, cfg=pc, progress=True, chunk=cfg.sim.chunk)
     grid["wall_s"] = time.perf_counter() - t0
     table = grid.pop("table")
     f = table["fitness"]
     runs = []
-    for i in range(se["ga_seeds"]):  # independent GA runs: the source reports several good solutions
+    for i in range(se.ga_seeds):  # independent GA runs: the source reports several good solutions
         t0 = time.perf_counter()
         r = search_ga(
             gmap,
             key=jax.random.fold_in(key, i),
             base=base,
-            weight=se["weight"],
+            weight=se.weight,
             cfg=pc,
             progress=True,
-            options=GAOptions(population_size=se["population"], generations=se["generations"]),
+            options=GAOptions(population_size=se.population, generations=se.generations),
         )
         r.update(
             seed_index=i,
@@ -78,7 +75,7 @@ def part_search(cfg, fig_dir, gmap, key):
         )
         runs.append(r)
     ga = max(runs, key=lambda r: r["fitness"])
-    save(F.search_figure(ga, table, se["grid_n"]), fig_dir, "search")
+    save(F.search_figure(ga, table, se.grid_n), fig_dir, "search")
     for d in (*runs, grid):
         d["status"] = STATUS_NAMES[int(d["status"])]
     df = pd.DataFrame({k: v for k, v in table.items()})
@@ -87,18 +84,18 @@ def part_search(cfg, fig_dir, gmap, key):
     return ga, runs, grid, df
 
 
-def part_start_map(cfg, fig_dir, gmap):
+def part_start_map(cfg: ParkingStudy, fig_dir, gmap):
     _, _, _, pc = setup(cfg)
-    sm = cfg["start_map"]
+    sm = cfg.start_map
     rows = start_map(
         gmap,
-        sm["x0"],
-        sm["theta0_deg"],
-        n=sm["grid_n"],
-        weight=cfg["search"]["weight"],
+        sm.x0,
+        sm.theta0_deg,
+        n=sm.grid_n,
+        weight=cfg.search.weight,
         cfg=pc,
         progress=True,
-        chunk=cfg["sim"]["chunk"],
+        chunk=cfg.sim.chunk,
     )
     for r in rows:
         r["status"] = STATUS_NAMES[int(r["status"])] if isinstance(r["status"], int) else r["status"]
@@ -110,13 +107,13 @@ def part_start_map(cfg, fig_dir, gmap):
     return rows
 
 
-def part_montecarlo(cfg, fig_dir, gmap, ga, grid, key):
+def part_montecarlo(cfg: ParkingStudy, fig_dir, gmap, ga, grid, key):
     """Fixed schedule vs the GA's best vs the grid's best, on the same sampled runs."""
     control, front, pc, _ = setup(cfg)
-    m = cfg["montecarlo"]
+    m = cfg.montecarlo
     sc = Scatter(
         **{
-            k: m[k]
+            k: getattr(m, k)
             for k in (
                 "pos_scatter",
                 "theta_scatter_deg",
@@ -128,8 +125,8 @@ def part_montecarlo(cfg, fig_dir, gmap, ga, grid, key):
             )
         }
     )
-    scan = cfg["sim"]["scan_period"]
-    schedules = [("fixed: α=1, X_s=-0.9", -0.9, (1.0,))]
+    scan = cfg.sim.scan_period
+    schedules: list[tuple[str, float, tuple[float, ...]]] = [("fixed: α=1, X_s=-0.9", -0.9, (1.0,))]
     for lab, d in (("GA best", ga), ("grid best", grid)):
         schedules.append(
             (
@@ -143,12 +140,12 @@ def part_montecarlo(cfg, fig_dir, gmap, ga, grid, key):
             gmap,
             run_params(GARAGE_START, 1, sched, xs=xs, front=front, scan_period=scan, control=control),
             key=key,
-            n=m["n_runs"],
+            n=m.n_runs,
             scatter=sc,
             cfg=pc,
             progress=True,
             label=lab,
-            chunk=cfg["sim"]["chunk"],
+            chunk=cfg.sim.chunk,
         )
         for lab, xs, sched in schedules
     ]

@@ -1,7 +1,7 @@
 """The parking study's single runs: the set-up shared by every part, the source's cases A-D and
 the garage tries with their figures, and every scenario whose outcome the source reports
-(docs/reproductions/parking.md §4). Each part takes the validated config as a plain dict
-(``ParkingStudy.model_dump()``)."""
+(docs/reproductions/parking.md §4). Each part takes the validated config, a
+:class:`pfjax.parking.study_config.ParkingStudy`."""
 
 from __future__ import annotations
 
@@ -21,38 +21,39 @@ from pfjax.parking.simulate import (
     run_params,
     run_recorded_jit,
 )
+from pfjax.parking.study_config import ParkingStudy
 from pfjax.parking.summary import run_summary
 from pfjax.report.figures import save
 from pfjax.reproduce.parking import GA_SOLUTIONS
 
 
-def setup(cfg):
+def setup(cfg: ParkingStudy):
     """``(control, front, config of single runs, config of the search)``: single runs, cases, maps
     and the Monte Carlo run until they converge, get stuck or time out; the search also fails a
     candidate at its (max_switches + 1)-th switch (the source's search cut-off)."""
-    c, s = cfg["controller"], cfg["sim"]
-    control = control_params(k1=c["k1"], k2=c["k2"], speed=c["speed"])
-    front = s["front"] if s["front"] > 0 else None
+    c, s = cfg.controller, cfg.sim
+    control = control_params(k1=c.k1, k2=c.k2, speed=c.speed)
+    front = s.front if s.front > 0 else None
     pc = ParkingConfig(
-        t_max=s["t_max"],
-        tol=s["tol"],
-        n_sub=s["n_sub"],
-        stuck_switches=s["stuck_switches"],
-        stuck_travel=s["stuck_travel"],
+        t_max=s.t_max,
+        tol=s.tol,
+        n_sub=s.n_sub,
+        stuck_switches=s.stuck_switches,
+        stuck_travel=s.stuck_travel,
     )
     search = ParkingConfig(
-        t_max=s["t_max"],
-        tol=s["tol"],
-        n_sub=s["n_sub"],
-        max_switches=cfg["search"]["max_switches"],
+        t_max=s.t_max,
+        tol=s.tol,
+        n_sub=s.n_sub,
+        max_switches=cfg.search.max_switches,
         stuck_switches=None,
     )
     return control, front, pc, search
 
 
-def one(cfg, x0, direction, schedule, *, xs=None, omap, front=None, scan=None):
+def one(cfg: ParkingStudy, x0, direction, schedule, *, xs=None, omap, front=None, scan=None):
     control, f0, pc, _ = setup(cfg)
-    scan = scan or cfg["sim"]["scan_period"]
+    scan = scan or cfg.sim.scan_period
     p = run_params(x0, direction, schedule, xs=xs, front=front or f0, scan_period=scan, control=control)
     r, tr = run_recorded_jit(p, omap, pc, n_periods_for(pc, scan))
     return p, r, tr
@@ -78,7 +79,7 @@ def _trajectory_figure(runs, names, shapes, fig_dir, figure, label, switches):
     save(fig, fig_dir, figure)
 
 
-def part_cases(cfg, fig_dir, pmap, gmap):
+def part_cases(cfg: ParkingStudy, fig_dir, pmap, gmap):
     rows, runs = [], {}
     for name, c in CASES.items():
         p, r, tr = one(cfg, c["x0"], c["direction"], c["schedule"], omap=pmap)
@@ -94,7 +95,7 @@ def part_cases(cfg, fig_dir, pmap, gmap):
                 **flat_summary(run_summary(r)),
             }
         )
-    for xs in cfg["garage"]["xs_values"]:
+    for xs in cfg.garage.xs_values:
         p, r, tr = one(cfg, GARAGE_START, 1, (1.0,), xs=xs, omap=gmap)
         runs[f"garage X_s={xs:g}"] = (p, r, tr)
         rows.append(
@@ -136,11 +137,11 @@ def flat_summary(s: dict) -> dict:
     }
 
 
-def part_outcomes(cfg, pmap, gmap) -> dict:
+def part_outcomes(cfg: ParkingStudy, pmap, gmap) -> dict:
     """Every scenario whose outcome the source reports (docs/reproductions/parking.md §4), at pfjax's defaults, and the
     experiments' with a stop at each reversal (``experiment.pause``)."""
     control, front, pc, _ = setup(cfg)
-    scan, pause = cfg["sim"]["scan_period"], cfg["experiment"]["pause"]
+    scan, pause = cfg.sim.scan_period, cfg.experiment.pause
     runs = {}
     for name, c in CASES.items():
         runs[name] = (
