@@ -10,7 +10,8 @@ changed pfjax never loads a stale program).
 The directory is ``$PFJAX_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/pfjax/xla`` (default
 ``~/.cache/pfjax/xla``); ``PFJAX_CACHE_DIR=off`` disables it, and a cache the user configured
 through JAX (``JAX_COMPILATION_CACHE_DIR``) is left as it is. Only compilations longer than
-``min_compile_s`` are stored.
+``min_compile_s`` are stored: 0.5 s by default, 0 for ``pfjax``'s commands, whose small host-side
+programs (a scenario's arrays) would otherwise compile again in every process.
 """
 
 from __future__ import annotations

@@ -148,7 +148,7 @@ def one_device():
 
 def only_run(result):
     """The one run of a batch of one, on the host: copied as it is and indexed in NumPy, where
-    :func:`pfjax.sim.unstack` of device arrays would compile a gather (0.1-0.2 s of the command's
+    :func:`pfjax.sim.unstack` of device arrays would compile a gather (about 0.1 s of the command's
     start-up, in every process)."""
     import jax
 
