@@ -10,7 +10,8 @@ changed pfjax never loads a stale program).
 The directory is ``$PFJAX_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/pfjax/xla`` (default
 ``~/.cache/pfjax/xla``); ``PFJAX_CACHE_DIR=off`` disables it, and a cache the user configured
 through JAX (``JAX_COMPILATION_CACHE_DIR``) is left as it is. Only compilations longer than
-``min_compile_s`` are stored.
+``min_compile_s`` are stored: 0.5 s by default, 0 for ``pfjax``'s commands, whose small host-side
+programs (a scenario's arrays) would otherwise compile again in every process.
 """
 
 from __future__ import annotations
@@ -45,8 +46,14 @@ def usable(target: Path | None) -> Path | None:
     return target if os.access(target, os.W_OK) else None
 
 
-def enable(path: str | Path | None = None, *, min_compile_s: float = 0.5) -> Path | None:
+def enable(path: str | Path | None = None, *, min_compile_s: float | None = None) -> Path | None:
     """Turn on JAX's persistent compilation cache in ``path`` (default :func:`default_dir`).
+
+    Args:
+        path: the cache directory (default :func:`default_dir`).
+        min_compile_s: the shortest compilation stored, s. ``None``: 0.5 s for a cache this call
+            turns on, unchanged for pfjax's own cache already on (``import pfjax`` turns it on with
+            0.5 s); a cache configured through JAX by the user is left as it is either way.
 
     Returns the directory in use, or None when disabled, already configured through JAX, or not
     writable (the cache is an optimisation: nothing fails without it).
@@ -55,12 +62,14 @@ def enable(path: str | Path | None = None, *, min_compile_s: float = 0.5) -> Pat
 
     configured = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]  # a flag, not in the stubs
     if configured:
+        if min_compile_s is not None and Path(configured) == default_dir():
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_s))
         return Path(configured)
     target = usable(Path(path) if path is not None else default_dir())
     if target is None:
         return None
     jax.config.update("jax_compilation_cache_dir", str(target))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_s))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5 if min_compile_s is None else min_compile_s)
     return target
 
 

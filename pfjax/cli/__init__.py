@@ -62,7 +62,9 @@ def main(argv=None) -> int:
     from pfjax import cache
 
     jax.config.update("jax_enable_x64", True)
-    cache.enable()
+    # every program cached, the small host-side ones too (a scenario's arrays, built with jax.numpy): each
+    # compiles in 0.03-0.2 s in every process (measured) and loads from the cache in under 0.01 s
+    cache.enable(min_compile_s=0.0)
     resume = "re-run the same command to resume" if args.command == "study" else "nothing was written"
 
     def body() -> int:
