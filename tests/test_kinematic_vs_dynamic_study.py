@@ -13,8 +13,9 @@ import pytest
 
 from pfjax.config import ConfigError
 from pfjax.dynamic_study.config import load
-from pfjax.dynamic_study.report import percent
+from pfjax.dynamic_study.report import percent, report
 from pfjax.provenance import config_hash
+from pfjax.report.document import to_html, to_markdown
 
 STUDY = Path(__file__).resolve().parents[1] / "studies" / "kinematic_vs_dynamic.py"
 
@@ -66,7 +67,7 @@ SMALL = [
     "study.n_runs=4",
     "designs.enabled=false",
     "car.enabled=false",
-    "bench_runs=2",
+    "bench=false",
 ]
 
 
@@ -81,13 +82,24 @@ def test_quick_study_writes_every_output_and_the_report_carries_the_headline(tmp
         "report.html", "report.md", "runs.parquet", "summary.json",
     ]  # fmt: skip
     s = json.loads((out / "summary.json").read_text())
-    assert s["config_sha256"] == config_hash(s["config"])
+    assert s["config_sha256"] == config_hash(s["config"]) and s["throughput"] == {}
     runs = pd.read_parquet(out / "runs.parquet")
     assert set(runs.arm) == {"dynamic", "dynamic_mu3", "kinematic_10deg", "kinematic_0deg"}
     assert len(runs) == 4 * 4
     md, html = (out / "report.md").read_text(), (out / "report.html").read_text()
     x = s["robot"]["controllers"]["stanley"]
     headline = [percent(x["success"]["dynamic"]), percent(x["success"]["kinematic_10deg"])]
-    headline.append(f"{s['throughput']['float64']['ratio_std_over_kinematic']:.2f}")
+    headline.append(f"{100 * x['paired_dynamic_minus_kinematic']['diff']:+.1f} pp")
+    headline.append(f"wall {s['wall_s']['total']:.0f} s")
     for text in headline:
         assert text in md and text in html, text
+    # the throughput section, from a summary that has one (the full study's keys)
+    row = {
+        m: {"wall_s": 1.0, "ns_per_rollout_step": ns} for m, ns in (("kinematic", 40.0), ("st", 103.0), ("std", 532.0))
+    }
+    bench = {"runs": 2, "steps": 200, "controller": "stanley", "path": "sine"}
+    for dtype in ("float32", "float64"):
+        bench[dtype] = {**row, "ratio_st_over_kinematic": 2.5, "ratio_std_over_kinematic": 13.3}
+    doc = report({**s, "throughput": bench})
+    for text in (to_markdown(doc), to_html(doc)):
+        assert all(v in text for v in ("103", "532", "2.50", "13.30")), text[-2000:]

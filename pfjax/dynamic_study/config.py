@@ -99,6 +99,7 @@ class KinematicVsDynamic(ConfigModel):
         min_length=1,
         description="kinematic arms: constant slip uniform on +-A per axle, one arm per A in [0, 90) [deg]",
     )
+    bench: bool = Field(True, description="time the kinematic, ST and STD models in the same loop (throughput) [-]")
     bench_runs: int = Field(256, ge=1, le=1_000_000, description="runs per batch of the throughput comparison [-]")
     bench_repeats: int = Field(7, ge=1, le=1000, description="timed repeats, interleaved (the best is reported) [-]")
     designs: Designs = Designs()

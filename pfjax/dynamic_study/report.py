@@ -177,7 +177,8 @@ def report(s: dict) -> Document:
             f"{study['n_runs']} runs per controller and path on {', '.join(p['kind'] for p in study['paths'])}; "
             f"speed {study['vehicle']['speed']}; dynamic arm: CommonRoad ST, robot parameter set, mu uniform on "
             f"[{cfg['mu_low']:g}, {cfg['mu_high']:g}]; kinematic arms: constant slip uniform on +-A per axle, A in "
-            f"{cfg['slip_ranges_deg']} deg. Machine: {s['machine']}; wall {s['wall_s']['total']:.0f} s."
+            f"{cfg['slip_ranges_deg']} deg. Machine: {s['machine']}; wall {s['wall_s']['total']:.0f} s at a load "
+            f"average of {', '.join(f'{x:.2f}' for x in s['load_average'])} (1, 5, 15 min)."
         ),
         Heading("Slip the dynamic model produces (deg), robot scale"),
         *slip_tables(s["slip"]),
@@ -197,7 +198,7 @@ def report(s: dict) -> Document:
             *slip_tables(s["car_slip"]),
             *comparison(s["car"], 1e-2, "cm"),
         ]
-    blocks += [*_throughput(s), _wall(s)]
+    blocks += [*(_throughput(s) if s["throughput"] else []), _wall(s)]
     subtitle = f"pfjax {s['pfjax_version']} · config {s['config_sha256'][:12]}"
     return Document(f"Kinematic vs dynamic ({cfg['name']})", subtitle, blocks)
 

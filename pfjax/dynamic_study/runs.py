@@ -25,8 +25,10 @@ from pfjax.provenance import config_hash, machine
 from pfjax.report import document
 
 
-def run_arms(config: KinematicVsDynamic, designed: list[dict], log=sys.stderr) -> tuple[pd.DataFrame, dict]:
-    """Every arm's runs (one table, column ``arm``) and each arm's wall time (s)."""
+def run_arms(config: KinematicVsDynamic, designed: list[dict], log=None) -> tuple[pd.DataFrame, dict]:
+    """Every arm's runs (one table, column ``arm``) and each arm's wall time (s); a line per arm to
+    ``log`` (default: standard error)."""
+    log = sys.stderr if log is None else log
     frames, wall = [], {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, spec in arms(config, designed).items():
@@ -38,7 +40,7 @@ def run_arms(config: KinematicVsDynamic, designed: list[dict], log=sys.stderr) -
     return pd.concat(frames, ignore_index=True), wall
 
 
-def run(config: KinematicVsDynamic, out: str | Path, overwrite: bool = False, log=sys.stderr) -> dict:
+def run(config: KinematicVsDynamic, out: str | Path, overwrite: bool = False, log=None) -> dict:
     """Run the study and write its outputs to ``out``; returns the summary."""
     digest = config_hash(config.model_dump(mode="json"))
     with OutputDir(out, command="kinematic-vs-dynamic", config_sha256=digest, overwrite=overwrite) as output:
@@ -47,7 +49,7 @@ def run(config: KinematicVsDynamic, out: str | Path, overwrite: bool = False, lo
         t_designs = time.time() - t0
         runs, wall = run_arms(config, designed, log)
         t = time.time()
-        bench = throughput(config)
+        bench = throughput(config) if config.bench else {}
         t_bench = time.time() - t
         summary = summarise(config, runs)
         summary.update(
