@@ -6,7 +6,8 @@
   paper-reproduction and vehicle-tracking studies (:class:`pfjax.reproduce.paper_config.PaperStudy`,
   :class:`pfjax.tracking.study_config.TrackingStudy`);
 - ``<!-- parking-config-reference -->``: the same for the parking study
-  (:class:`pfjax.parking.study_config.ParkingStudy`);
+  (:class:`pfjax.parking.study_config.ParkingStudy`); ``<!-- dynamic-study-config-reference -->`` for
+  the kinematic-vs-dynamic study (:class:`pfjax.dynamic_study.config.KinematicVsDynamic`);
 - ``<!-- column-reference -->``: every column of the run and margin tables with its unit and meaning
   (:data:`pfjax.tables.COLUMNS`, the same metadata the Parquet files carry);
 - ``<!-- controller-reference -->`` and ``<!-- path-reference -->``: the registries.
@@ -28,7 +29,7 @@ def _default(field) -> str:
     if isinstance(value, list):
         return "`[" + ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value) + "]`" if value else "`[]`"
     if isinstance(value, dict):
-        return "`{}`"
+        return "a table (see meaning)" if value else "`{}`"
     if isinstance(value, float):
         return f"`{value:g}`"
     return "none" if value is None else f"`{value}`"
@@ -86,6 +87,12 @@ def parking_config_reference() -> str:
     return _key_table(ParkingStudy)
 
 
+def dynamic_study_config_reference() -> str:
+    from pfjax.dynamic_study.config import KinematicVsDynamic
+
+    return _key_table(KinematicVsDynamic)
+
+
 def column_reference() -> str:
     from pfjax.tables import COLUMNS
 
@@ -120,6 +127,7 @@ def path_reference() -> str:
 MARKERS = {
     "<!-- config-reference -->": config_reference,
     "<!-- parking-config-reference -->": parking_config_reference,
+    "<!-- dynamic-study-config-reference -->": dynamic_study_config_reference,
     "<!-- column-reference -->": column_reference,
     "<!-- paper-config-reference -->": paper_config_reference,
     "<!-- tracking-config-reference -->": tracking_config_reference,

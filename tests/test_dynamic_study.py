@@ -164,21 +164,12 @@ def test_a_dumped_config_loads_again_under_either_model():
         assert load_study(data=spec.model_dump(mode="json"))[0] == spec
 
 
-def test_kinematic_vs_dynamic_toml_documents_the_script_defaults():
-    """studies/kinematic_vs_dynamic.toml lists the script's DEFAULTS: loading it changes nothing."""
-    import importlib.util
-    import sys
+def test_kinematic_vs_dynamic_toml_documents_the_schema_defaults():
+    """studies/kinematic_vs_dynamic.toml lists the schema's defaults: loading it changes nothing."""
     from pathlib import Path
 
-    from pfjax.config import load
+    from pfjax.dynamic_study.config import load
 
-    root = Path(__file__).resolve().parents[1] / "studies"
-    sys.path.insert(0, str(root))
-    try:
-        spec = importlib.util.spec_from_file_location("kinematic_vs_dynamic", root / "kinematic_vs_dynamic.py")
-        assert spec is not None and spec.loader is not None
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-    finally:
-        sys.path.remove(str(root))
-    assert load(mod.DEFAULTS, root / "kinematic_vs_dynamic.toml") == mod.DEFAULTS
+    toml = Path(__file__).resolve().parents[1] / "studies" / "kinematic_vs_dynamic.toml"
+    assert load(toml) == load()
+    assert load(toml).model_dump() == load().model_dump()

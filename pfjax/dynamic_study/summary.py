@@ -1,4 +1,4 @@
-"""Summary of the kinematic-vs-dynamic study's runs (``studies/kinematic_vs_dynamic.py``): slip
+"""Summary of the kinematic-vs-dynamic study's runs (:mod:`pfjax.dynamic_study.runs`): slip
 distributions of the dynamic arms, success rates with 95 % Clopper-Pearson intervals, paired
 differences, verdicts and equivalent kinematic slip ranges per controller and scale."""
 
@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from pfjax.dynamic_study.config import KinematicVsDynamic
 from pfjax.metrics.robustness import clopper_pearson
 
 #: A verdict's line: a controller is robust in an arm if its success rate is at least this.
@@ -111,11 +112,11 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
     return {"dynamic_arm": dyn_arm, "reference_arm": ref_arm, "controllers": out}
 
 
-def summarise(cfg: dict, runs: pd.DataFrame) -> dict:
+def summarise(config: KinematicVsDynamic, runs: pd.DataFrame) -> dict:
     """The study's summary: one comparison per scale (robot, designs, car) and the slip tables."""
-    a_max = max(cfg["slip_ranges_deg"])
+    a_max = max(config.slip_ranges_deg)
     arms_ = set(runs.arm)
-    grip = f"dynamic_mu{cfg['mu_grip']:g}"
+    grip = f"dynamic_mu{config.mu_grip:g}"
     out = {
         "robust_line": ROBUST,
         "slip": slip_summary(runs[runs.arm == "dynamic"], a_max),

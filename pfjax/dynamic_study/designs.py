@@ -1,0 +1,60 @@
+"""The mixed H2/H-inf, integral and polytopic gains designed on the kinematic model and redesigned on
+the dynamic model's linearised lateral-yaw dynamics (:mod:`pfjax.synthesis.dynamic_plant`) at the
+robot scale: the study's speed range and ``tau_delta``, friction range ``[mu_low, mu_high]``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pfjax.dynamic_study.arms import ROBOT_WHEELBASE
+from pfjax.dynamic_study.config import KinematicVsDynamic
+from pfjax.models import single_track as st
+
+
+def _plants(p, tau: float, mus, speeds, integral: bool = False) -> list:
+    """The design plants of the linearised lateral-yaw dynamics at every (mu, speed) corner."""
+    from pfjax.synthesis import dynamic_design_plant
+
+    out = []
+    for mu in mus:
+        for v in speeds:
+            a, b = st.lateral_yaw_matrices(p._replace(mu=mu), v)
+            out.append(dynamic_design_plant(a, b, v, p.l_r, ROBOT_WHEELBASE, tau, integral=integral))
+    return out
+
+
+def designs(config: KinematicVsDynamic) -> tuple[list[dict], dict]:
+    """The kinematic and the dynamic designs as study controllers (``<design>-kin``,
+    ``<design>-dyn``), and their records (operating point, gains, criteria)."""
+    from pfjax.synthesis import dynamic_mixed, integral_mixed, mixed_h2_hinf, polytopic_mixed, slip_design_plant
+
+    d = config.designs
+    w: dict = {"alpha": d.alpha, "beta": d.beta}
+    speed = config.study["vehicle"]["speed"]
+    v_lo, v_hi = (speed["low"], speed["high"]) if isinstance(speed, dict) else (speed, speed)
+    v0, mu0 = 0.5 * (v_lo + v_hi), 0.5 * (config.mu_low + config.mu_high)
+    p, L = st.robot_params(), ROBOT_WHEELBASE
+    tau = float(config.study["vehicle"].get("tau_delta_s", 0.05))
+    kin = {
+        "mixed": mixed_h2_hinf(slip_design_plant(v0, L), **w).K,
+        "integral": integral_mixed(v0, L, **w).K,
+        "polytopic": polytopic_mixed((v_lo, v_hi), d.polytope_slip_deg, L, **w).K,
+    }
+    corners = ([config.mu_low, config.mu_high], [v_lo, v_hi])
+    dyn = {
+        "mixed": dynamic_mixed(_plants(p, tau, [mu0], [v0]), kin["mixed"], **w),
+        "integral": dynamic_mixed(_plants(p, tau, [mu0], [v0], True), kin["integral"], **w),
+        "polytopic": dynamic_mixed(_plants(p, tau, *corners), kin["mixed"], **w),
+    }
+    controllers, record = [], {}
+    for name in ("mixed", "integral", "polytopic"):
+        typ = "integral" if name == "integral" else "state_feedback"
+        for origin, K in (("kin", kin[name]), ("dyn", dyn[name].K)):
+            label = f"{name}-{origin}"
+            flat = [float(k) for k in np.ravel(K)]
+            controllers.append({"name": label, "type": typ, "K": flat})
+            record[label] = {**(dyn[name].to_dict() if origin == "dyn" else {}), "K": flat}
+    return controllers, {"operating_point": {"v": v0, "mu": mu0, "tau_delta_s": tau}, "gains": record}
+
+
+__all__ = ["designs"]
