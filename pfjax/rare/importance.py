@@ -196,7 +196,9 @@ def cross_entropy_is(
 
     Returns:
         a :class:`~pfjax.rare.estimate.RareEstimate` with ``method="is"``; ``detail`` holds the
-        levels, the final mixture's ``modes`` (means, weights) and the effective sample size.
+        levels, the final mixture's ``modes`` (means, weights), the effective sample size and
+        the largest weight's share of the estimate (``max_weight_share``,
+        :mod:`pfjax.rare.check`).
     """
     dim, seed, batch = check_common(dim, seed, batch)
     n = errors.integer("n_per_level", n_per_level, low=10, high=100_000_000)
@@ -210,7 +212,9 @@ def cross_entropy_is(
     mix = _first_proposal(rng, starts, k, dim)
     ce = _ce_levels(g, rng, mix, k, n, rho, max_levels, refine, covariance == "full", max_rollouts, batch)
     mix, used, levels, reached = ce
-    s1, s2, n_is, used = _sample_estimate(g, rng, mix, defensive, n_batch, target_rel_error, max_rollouts, used, batch)
+    s1, s2, wmax, n_is, used = _sample_estimate(
+        g, rng, mix, defensive, n_batch, target_rel_error, max_rollouts, used, batch
+    )
     p, var, rel = _moments(s1, s2, n_is)
     half = Z95 * math.sqrt(var)
     ess = s1 * s1 / s2 if s2 > 0 else 0.0
@@ -225,6 +229,7 @@ def cross_entropy_is(
             "converged": reached,
             "n_is": n_is,
             "effective_sample_size": ess,
+            "max_weight_share": wmax / s1 if s1 > 0 else 0.0,
             "modes": {"means": mix.means.tolist(), "weights": mix.weights.tolist()},
         },
     )
@@ -299,8 +304,8 @@ def _moments(s1: float, s2: float, n_is: int) -> tuple[float, float, float]:
 
 def _sample_estimate(g, rng, mix, defensive, n_batch, target, max_rollouts, used, batch):
     """Importance sampling from the defensive mixture in batches of ``n_batch`` until ``δ <= target``
-    or the budget is spent: ``(Σ w, Σ w², draws, rollouts in all)``."""
-    s1 = s2 = 0.0
+    or the budget is spent: ``(Σ w, Σ w², max w, draws, rollouts in all)``."""
+    s1 = s2 = wmax = 0.0
     n_is = 0
     while True:
         size = min(n_batch, max_rollouts - used)
@@ -313,6 +318,7 @@ def _sample_estimate(g, rng, mix, defensive, n_batch, target, max_rollouts, used
         wi = np.where(m <= 0, np.exp(_std_logpdf(u) - proposal_logpdf(u, mix, defensive)), 0.0)
         s1 += float(wi.sum())
         s2 += float((wi * wi).sum())
+        wmax = max(wmax, float(wi.max()))
         if _moments(s1, s2, n_is)[2] <= target:
             break
     if n_is == 0:
@@ -320,4 +326,4 @@ def _sample_estimate(g, rng, mix, defensive, n_batch, target, max_rollouts, used
             f"max_rollouts: {max_rollouts} rollouts were spent by the cross-entropy levels; none left to estimate",
             "max_rollouts",
         )
-    return s1, s2, n_is, used
+    return s1, s2, wmax, n_is, used
