@@ -13,7 +13,8 @@ Parts (each entry records estimate, 95 % interval, relative error, rollouts and 
   (:func:`pfjax.rare.reference.line_offset_failure_probability`), at ``p`` about 1e-4, 1e-6 and
   1e-8, by importance sampling and subset simulation; plain Monte Carlo at 1e-4.
 * ``coverage``: repeated independent estimates at ``p`` about 1e-4 on the known case: the share of
-  95 % intervals that hold the reference.
+  95 % intervals that hold the reference (subset simulation: also the runs' observed spread
+  against the levels-uncorrelated and fully-correlated errors of Au and Beck's bounds).
 * ``starts``: importance sampling at ``p`` about 1e-6 on the known case from the falsifier's
   failure points, from failure points of a widened law and from ``N(0, I)``: rollouts used.
 * ``study``: every controller of ``studies/rare_events.toml`` by importance sampling and subset
@@ -21,6 +22,9 @@ Parts (each entry records estimate, 95 % interval, relative error, rollouts and 
   (``band``), there also by plain Monte Carlo with ``mc_study`` runs, which resolves it.
 * ``sine_check``: ``pi-table3`` leaving the path on the sine alone (``p`` about 1e-5), by plain
   Monte Carlo with ``mc_sine`` runs, importance sampling and subset simulation.
+
+The study's importance-sampling estimates carry the reliability check of ``[rare_event] check =
+"subset"`` (:mod:`pfjax.rare.check`: ``status``, ``warning`` and each stratum's ``check``).
 
 Writes ``results/rare_events/verification.json`` (or ``--out``).
 """
@@ -90,13 +94,37 @@ def known_case(std_deg: float) -> dict:
 def estimate(config, name: str, **kw) -> dict:
     t0 = time.time()
     r = pfjax.rare_event(config, controller=name, progress=False, **kw)["controllers"][name]
-    r = {k: r[k] for k in ("p_fail", "ci95", "rel_error", "n_rollouts", "method", "strata", "failure_points")}
+    keep = ("p_fail", "ci95", "rel_error", "n_rollouts", "method", "status", "warning", "strata", "failure_points")
+    r = {k: r[k] for k in keep}
     r["wall_s"] = time.time() - t0
     return r
 
 
 def holds(r: dict, p: float) -> bool:
     return r["ci95"][0] <= p <= r["ci95"][1]
+
+
+def run_spread(rs: list[dict]) -> dict:
+    """Every independent subset-simulation run inside the repeats: the observed coefficient of
+    variation of the runs' estimates beside the root-mean-square of each run's levels-uncorrelated
+    error ``sqrt(Σ δ_j²)`` and of its fully-correlated bound ``Σ δ_j`` (one stratum)."""
+    import numpy as np
+
+    ps: list[float] = []
+    lo: list[float] = []
+    hi: list[float] = []
+    for r in rs:
+        for run in r["strata"][0]["run_estimates"]:
+            ps.append(run["p"])
+            lo.append(run["delta_uncorrelated"])
+            hi.append(run["delta_correlated"])
+    ps_a = np.asarray(ps)
+    return {
+        "n": len(ps),
+        "observed_cov": float(ps_a.std(ddof=1) / ps_a.mean()),
+        "delta_uncorrelated_rms": float(np.sqrt(np.mean(np.square(lo)))),
+        "delta_correlated_rms": float(np.sqrt(np.mean(np.square(hi)))),
+    }
 
 
 def starts_comparison(n_seeds: int) -> dict:
@@ -156,6 +184,8 @@ def run(args) -> int:
                 "mean_rollouts": sum(r["n_rollouts"] for r in rs) / n,
                 "estimates": [r["p_fail"] for r in rs],
             }
+            if method == "subset":
+                result["coverage"][method]["runs"] = run_spread(rs)
             print(f"coverage {method}: {sum(hits)}/{n}")
         study = ROOT / "studies" / "rare_events.toml"
         names = [c.name for c in pfjax.montecarlo.config.load_study(study)[0].controllers]

@@ -193,3 +193,27 @@ def test_dummy_through_the_command_line(tmp_path):
         timeout=300,
     )
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "PFJAX_PLUGINS" in bad.stderr
+
+
+def test_study_names_the_polytopic_integral_design():
+    """A study's controller ``type = "polytopic_integral_lmi"`` (``polytopic-integral`` on the command
+    line) runs the integral controller with the gain of pfjax.synthesis.polytopic_mixed over the
+    polytope v in [0.8, 1.2] m/s, |beta_r| <= 10 deg at L = 0.2 m (the same LMI solve: 1e-9)."""
+    from pfjax.montecarlo.config import load_study
+    from pfjax.montecarlo.runner import controller_of
+    from pfjax.synthesis import polytopic_mixed
+
+    spec, _ = load_study(
+        studies_rare_events(), overrides=["controllers=[{name='poly', type='polytopic_integral_lmi'}]"]
+    )
+    _, _, flat = controller_of(spec.controllers[0], spec, 0)
+    K = polytopic_mixed((0.8, 1.2), 10.0, 0.2, integral=True).K.ravel()
+    assert [flat[k] for k in ("k_d", "k_theta", "k_i")] == pytest.approx(list(K), rel=1e-9)
+    assert C.resolve("polytopic-integral")[1] is C.resolve("polytopic_integral_lmi")[1]
+    assert C.resolve("polytopic-integral")[0].name == "integral"
+    names = [c.type for c in load_study(studies_rare_events())[0].controllers]
+    assert "polytopic_integral_lmi" in names
+
+
+def studies_rare_events() -> Path:
+    return Path(__file__).resolve().parents[1] / "studies" / "rare_events.toml"

@@ -4,7 +4,9 @@ A study's ``controllers[i].type`` and ``pfjax simulate --controller`` take these
 registry's (:mod:`pfjax.controllers.registry`): ``lmi`` (``mixed`` on the command line) is the
 mixed H2/H∞ state feedback of the source's design problem at the nominal speed and wheelbase,
 ``integral_lmi`` the same criterion on the plant augmented with the integral of ``d`` (integral
-action), ``paper_k`` the state feedback with the source's published gain (no synthesis). The synthesis is imported only when a design is made (cvxpy takes seconds to import), and
+action), ``polytopic_integral_lmi`` (``polytopic-integral``) the integral design with one Lyapunov
+matrix over the polytope of operating points ``v ∈ [0.8 v, 1.2 v]`` (the nominal speed ±20 %),
+``|β_r| <= 10°`` (:func:`pfjax.synthesis.polytopic_mixed`), ``paper_k`` the state feedback with the source's published gain (no synthesis). The synthesis is imported only when a design is made (cvxpy takes seconds to import), and
 a design once made is read back from disk by later processes (:func:`pfjax.cache.memoized_design`:
 keyed by its arguments, the synthesis code and the solver versions).
 """
@@ -43,14 +45,35 @@ def _paper_k(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict
     return {"k_d": PAPER_K[0], "k_theta": PAPER_K[1]}
 
 
+def _integral_gains(K) -> dict:
+    """The integral controller's scalar gains from an augmented-plant gain ``K = [k_d, k_θ, k_i]``."""
+    K = K.ravel()
+    return {"k_d": float(K[0]), "k_theta": float(K[1]), "k_i": float(K[2])}
+
+
 def _integral(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict:
     def compute():
         from pfjax.synthesis import integral_mixed
 
-        K = integral_mixed(v, L, alpha=alpha, beta=beta).K.ravel()
-        return {"k_d": float(K[0]), "k_theta": float(K[1]), "k_i": float(K[2])}
+        return _integral_gains(integral_mixed(v, L, alpha=alpha, beta=beta).K)
 
     return memoized_design("integral_lmi", dict(v=v, L=L, alpha=alpha, beta=beta), compute)
+
+
+#: The polytope of :func:`_polytopic_integral`: speeds ``v (1 ± POLYTOPE_SPEED)``, ``|β_r| <= POLYTOPE_SLIP_DEG``.
+POLYTOPE_SPEED = 0.2
+POLYTOPE_SLIP_DEG = 10.0
+
+
+def _polytopic_integral(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict:
+    args = dict(v_range=(v * (1 - POLYTOPE_SPEED), v * (1 + POLYTOPE_SPEED)), beta_r_max_deg=POLYTOPE_SLIP_DEG, L=L)
+
+    def compute():
+        from pfjax.synthesis import polytopic_mixed
+
+        return _integral_gains(polytopic_mixed(**args, integral=True, alpha=alpha, beta=beta).K)
+
+    return memoized_design("polytopic_integral_lmi", dict(args, alpha=alpha, beta=beta), compute)
 
 
 #: name -> design.
@@ -71,6 +94,13 @@ DESIGNS: dict[str, DesignEntry] = {
         "integral-mixed",
         _integral,
         {"color": "#ff7f0e", "lw": 1.6, "label": "mixed H2/H∞ with integral action (LMI)"},
+    ),
+    "polytopic_integral_lmi": DesignEntry(
+        "polytopic_integral_lmi",
+        "integral",
+        "polytopic-integral",
+        _polytopic_integral,
+        {"color": "#8c564b", "lw": 1.6, "label": "polytopic mixed H2/H∞ with integral action (LMI)"},
     ),
 }
 

@@ -101,6 +101,12 @@ class RareEventSpec(ConfigModel):
         description="is: the first proposal's centres: failure points of a widened input law (explore), "
         "of the gradient falsifier mapped to the inputs (falsifier), or none (N(0, I))",
     )
+    check: Literal["none", "subset"] = Field(
+        "none",
+        description="is: a second estimate by subset simulation (same target and budget, its rollouts "
+        "beside the estimate's); a disagreement beyond the two 95 % intervals, or one draw carrying "
+        "over 10 % of the estimate, sets the controller's status and warning",
+    )
     tie_break: Literal["iae", "ise", "itae", "max_abs_d", "steer_energy", "sat_fraction"] | None = Field(
         "iae", description="subset: metric that orders runs of equal margin (larger: nearer failure)"
     )
@@ -112,6 +118,6 @@ class RareEventSpec(ConfigModel):
 
     @model_validator(mode="after")
     def _check(self):
-        if self.method == "subset" and self.n_per_level % 10:
+        if (self.method == "subset" or self.check == "subset") and self.n_per_level % 10:
             raise ValueError(f"n_per_level: subset simulation needs a multiple of 10, got {self.n_per_level}")
         return self

@@ -196,19 +196,57 @@ def cross_entropy_is(
 
     Returns:
         a :class:`~pfjax.rare.estimate.RareEstimate` with ``method="is"``; ``detail`` holds the
-        levels, the final mixture's ``modes`` (means, weights) and the effective sample size.
+        levels, the final mixture's ``modes`` (means, weights), the effective sample size and
+        the largest weight's share of the estimate (``max_weight_share``,
+        :mod:`pfjax.rare.check`).
     """
     dim, seed, batch = check_common(dim, seed, batch)
     n = errors.integer("n_per_level", n_per_level, low=10, high=100_000_000)
+    rho, defensive = _check_proposal_args(covariance, rho, defensive)
+    errors.number("target_rel_error", target_rel_error, positive=True)
+    max_rollouts = errors.integer("max_rollouts", max_rollouts, low=1, high=10**10)
+    n_batch = errors.integer("n_batch", n_batch, low=10, high=100_000_000)
+    max_levels = errors.integer("max_levels", max_levels, low=0, high=1000)
+    starts, k = _check_starts(starts, n_components, dim)
+    rng = np.random.default_rng(seed)
+    mix = _first_proposal(rng, starts, k, dim)
+    ce = _ce_levels(g, rng, mix, k, n, rho, max_levels, refine, covariance == "full", max_rollouts, batch)
+    mix, used, levels, reached = ce
+    s1, s2, wmax, n_is, used = _sample_estimate(
+        g, rng, mix, defensive, n_batch, target_rel_error, max_rollouts, used, batch
+    )
+    p, var, rel = _moments(s1, s2, n_is)
+    half = Z95 * math.sqrt(var)
+    ess = s1 * s1 / s2 if s2 > 0 else 0.0
+    return RareEstimate(
+        p,
+        (max(0.0, p - half), min(1.0, p + half) if p > 0 else 1.0),
+        rel,
+        int(used),
+        "is",
+        {
+            "levels": levels,
+            "converged": reached,
+            "n_is": n_is,
+            "effective_sample_size": ess,
+            "max_weight_share": wmax / s1 if s1 > 0 else 0.0,
+            "modes": {"means": mix.means.tolist(), "weights": mix.weights.tolist()},
+        },
+    )
+
+
+def _check_proposal_args(covariance, rho, defensive) -> tuple[float, float]:
+    """``covariance``, ``rho`` and ``defensive`` of :func:`cross_entropy_is`, checked."""
     if covariance not in ("unit", "full"):
         raise errors.InputError(f"covariance: expected unit or full, got {covariance!r}", "covariance")
     rho = errors.number("rho", rho, positive=True, below=1)
     if not 0 <= errors.number("defensive", defensive) < 1:
         raise errors.InputError(f"defensive: expected in [0, 1), got {defensive:g}", "defensive")
-    errors.number("target_rel_error", target_rel_error, positive=True)
-    max_rollouts = errors.integer("max_rollouts", max_rollouts, low=1, high=10**10)
-    n_batch = errors.integer("n_batch", n_batch, low=10, high=100_000_000)
-    max_levels = errors.integer("max_levels", max_levels, low=0, high=1000)
+    return rho, defensive
+
+
+def _check_starts(starts, n_components, dim) -> tuple[np.ndarray | None, int]:
+    """``starts`` as ``(m, dim)`` points (or None) and the mixture's component count ``K``."""
     if starts is not None:
         starts = np.atleast_2d(np.asarray(errors.numbers("starts", starts), dtype=float))
         if starts.shape[1] != dim:
@@ -217,13 +255,22 @@ def cross_entropy_is(
     k = errors.integer("n_components", min(k, 8) if n_components is None else k, low=1, high=64)
     if starts is not None and len(starts) < 1:
         raise errors.InputError("starts: expected at least one point", "starts")
-    rng = np.random.default_rng(seed)
+    return starts, k
+
+
+def _first_proposal(rng, starts: np.ndarray | None, k: int, dim: int) -> Mixture:
+    """``N(0, I)``, or unit-covariance components centred on ``starts`` (``k`` k-means++ seeds among
+    them where there are more than ``k``)."""
     if starts is None:
-        mix = Mixture(np.ones(1), np.zeros((1, dim)), np.eye(dim)[None])
-    else:
-        sel = starts if len(starts) <= k else _kmeanspp(rng, starts, np.ones(len(starts)), k)
-        mix = Mixture(np.full(len(sel), 1 / len(sel)), sel, np.repeat(np.eye(dim)[None], len(sel), axis=0))
-    # cross-entropy levels (the fit uses no defensive share: it would pull the fit back to 0)
+        return Mixture(np.ones(1), np.zeros((1, dim)), np.eye(dim)[None])
+    sel = starts if len(starts) <= k else _kmeanspp(rng, starts, np.ones(len(starts)), k)
+    return Mixture(np.full(len(sel), 1 / len(sel)), sel, np.repeat(np.eye(dim)[None], len(sel), axis=0))
+
+
+def _ce_levels(g, rng, mix, k, n, rho, max_levels, refine, full, max_rollouts, batch):
+    """The cross-entropy levels (module docstring; the fit uses no defensive share: it would pull
+    the fit back to 0): ``(mixture, rollouts, level records, converged)``."""
+    dim = mix.means.shape[1]
     used, levels, reached, refined = 0, [], False, 0
     for _ in range(max_levels):
         if used + n > max_rollouts:
@@ -238,15 +285,27 @@ def cross_entropy_is(
         if elite.sum() < 2 * dim:
             levels.append({"threshold": gamma, "elite": int(elite.sum())})
             break
-        mix = fit_mixture(u[elite], w, _initial(rng, u[elite], w, k, mix), full=covariance == "full")
+        mix = fit_mixture(u[elite], w, _initial(rng, u[elite], w, k, mix), full=full)
         ess = float(w.sum() ** 2 / np.sum(w * w))
         levels.append({"threshold": gamma, "elite": int(elite.sum()), "ess": ess, "components": len(mix.weights)})
         refined += gamma == 0.0
         if refined > refine:
             reached = True
             break
-    # importance sampling in batches until the target is met or the budget spent
-    s1 = s2 = 0.0
+    return mix, used, levels, reached
+
+
+def _moments(s1: float, s2: float, n_is: int) -> tuple[float, float, float]:
+    """``(p̂, Var p̂, δ)`` from the sums of the weights and of their squares over ``n_is`` draws."""
+    p = s1 / n_is
+    var = max(s2 / n_is - p * p, 0.0) / n_is
+    return p, var, (math.sqrt(var) / p if p > 0 else math.inf)
+
+
+def _sample_estimate(g, rng, mix, defensive, n_batch, target, max_rollouts, used, batch):
+    """Importance sampling from the defensive mixture in batches of ``n_batch`` until ``δ <= target``
+    or the budget is spent: ``(Σ w, Σ w², max w, draws, rollouts in all)``."""
+    s1 = s2 = wmax = 0.0
     n_is = 0
     while True:
         size = min(n_batch, max_rollouts - used)
@@ -259,32 +318,12 @@ def cross_entropy_is(
         wi = np.where(m <= 0, np.exp(_std_logpdf(u) - proposal_logpdf(u, mix, defensive)), 0.0)
         s1 += float(wi.sum())
         s2 += float((wi * wi).sum())
-        p = s1 / n_is
-        var = max(s2 / n_is - p * p, 0.0) / n_is
-        rel = math.sqrt(var) / p if p > 0 else math.inf
-        if rel <= target_rel_error:
+        wmax = max(wmax, float(wi.max()))
+        if _moments(s1, s2, n_is)[2] <= target:
             break
     if n_is == 0:
         raise errors.InputError(
             f"max_rollouts: {max_rollouts} rollouts were spent by the cross-entropy levels; none left to estimate",
             "max_rollouts",
         )
-    p = s1 / n_is
-    var = max(s2 / n_is - p * p, 0.0) / n_is
-    rel = math.sqrt(var) / p if p > 0 else math.inf
-    half = Z95 * math.sqrt(var)
-    ess = s1 * s1 / s2 if s2 > 0 else 0.0
-    return RareEstimate(
-        p,
-        (max(0.0, p - half), min(1.0, p + half) if p > 0 else 1.0),
-        rel,
-        int(used),
-        "is",
-        {
-            "levels": levels,
-            "converged": reached,
-            "n_is": n_is,
-            "effective_sample_size": ess,
-            "modes": {"means": mix.means.tolist(), "weights": mix.weights.tolist()},
-        },
-    )
+    return s1, s2, wmax, n_is, used

@@ -18,6 +18,11 @@ transient error, the nearer failure; :mod:`pfjax.rare.subset`, *Plateaus*). The
 strata combine as ``p = Σ_s w_s p_s`` with ``Var p = Σ_s w_s² Var p_s``; one stratum keeps its
 estimator's own interval, several get the lognormal one of
 :func:`pfjax.rare.estimate.lognormal_interval`.
+
+An importance-sampling estimate is checked per stratum (:mod:`pfjax.rare.check`): always for
+weights concentrated on one draw, and with ``check = "subset"`` against subset simulation on the
+same target and budget; the controller's ``status`` is the first stratum's flag (``ok`` where
+none is raised) and its ``warning`` names each flagged stratum's path.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from functools import partial
 import numpy as np
 
 from pfjax.montecarlo.config import StudySpec
+from pfjax.rare.check import reliability
 from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
 from pfjax.rare.importance import cross_entropy_is, explore
 from pfjax.rare.starts import falsifier_points
@@ -116,6 +122,12 @@ def _estimate(g, dim, method, rare, budget, seed, target, falsifier=lambda: None
         return subset_simulation(
             g, dim, n_per_level=n, target_rel_error=target, max_rollouts=max(budget, n), seed=seed, batch=rare.batch
         )
+    est = _importance(g, dim, rare, budget, seed, target, falsifier)
+    other = _estimate(g, dim, "subset", rare, budget, seed, target) if rare.check == "subset" else None
+    return est._replace(detail={**est.detail, "check": reliability(est, other)})
+
+
+def _importance(g, dim, rare, budget, seed, target, falsifier):
     starts, used, how = _starts(g, dim, rare, seed, falsifier)
     est = cross_entropy_is(
         g,
@@ -175,8 +187,11 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     """One controller's failure probability under ``spec.rare_event`` (module docstring).
 
     Returns:
-        ``{"p_fail", "ci95", "rel_error", "n_rollouts", "method", "wall_s", "strata",
-        "failure_points"}``: ``ci95`` ``[lo, hi]``, ``wall_s`` s; ``failure_points`` the
+        ``{"p_fail", "ci95", "rel_error", "n_rollouts", "method", "wall_s", "status", "warning",
+        "strata", "failure_points"}``: ``ci95`` ``[lo, hi]``, ``wall_s`` s; ``status`` and
+        ``warning`` the checks' verdict (module docstring; each stratum's ``check`` beside it,
+        whose second estimate's rollouts are not in ``n_rollouts``; subset simulation's
+        ``run_estimates`` per stratum); ``failure_points`` the
         importance-sampling proposal's modes in the inputs' config units (its weight beside each),
         the most likely failure points it found, each with its ``drivers`` (:func:`drivers`;
         ``[]`` for the other methods).
@@ -198,6 +213,8 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     if p == 0:  # no failure seen: the interval's top is the strata's tops, weighted
         ci = (0.0, min(1.0, sum(s.weight * r.ci95[1] for s, r in parts)))
     points, keys = [q for s, r in parts for q in _failure_points(spec, s, inputs, r)], config_keys(spec)
+    checks = [(spec.paths[s.path_index].label, r.detail["check"]) for s, r in parts if "check" in r.detail]
+    flagged = [(label, c) for label, c in checks if c["status"] != "ok"]
     return {
         "p_fail": float(p),
         "ci95": [float(ci[0]), float(ci[1])],
@@ -205,12 +222,15 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
         "n_rollouts": int(sum(r.n_rollouts for _, r in parts)),
         "method": rare.method,
         "wall_s": time.time() - t0,
+        "status": flagged[0][1]["status"] if flagged else "ok",
+        "warning": "; ".join(f"{label}: {c['warning']}" for label, c in flagged) or None,
         "strata": [
             {
                 "path": spec.paths[s.path_index].label,
                 "values": {keys[k]: v for k, v in s.values.items()},
                 "weight": s.weight,
                 **{k: v for k, v in r._asdict().items() if k != "detail"},
+                **{k: r.detail[k] for k in ("check", "run_estimates") if k in r.detail},
             }
             for s, r in parts
         ],

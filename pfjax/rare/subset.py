@@ -43,12 +43,24 @@ $$
 $$
 
 with ``R_j(k)`` the lag-``k`` autocovariance of the failure indicators along the chains
-(``γ_0 = 0``: level 0 is independent sampling). Levels are taken as uncorrelated,
-``δ² = Σ_j δ_j²`` (the usual estimate; it neglects the correlation between levels through
-the seeds, so it is slightly optimistic). The 95 % interval is the lognormal one of
-:func:`pfjax.rare.estimate.lognormal_interval`. ``repeat`` independent runs until the pooled
-relative error reaches ``target_rel_error`` average as ``p = mean(p_r)``,
-``Var p = Σ (δ_r p_r)² / R²``.
+(``γ_0 = 0``: level 0 is independent sampling). One run's ``δ_r² = Σ_j δ_j²`` takes the levels as
+uncorrelated and is a lower bound: the levels are correlated through the seeds each passes to the
+next, and Au and Beck's upper bound, the levels fully correlated, is ``(Σ_j δ_j)²`` (both are in
+``detail["levels"]``'s runs as ``delta_uncorrelated`` and ``delta_correlated``; on the known case
+of ``studies/rare_events.py`` at ``p`` about 1e-4 the runs' observed spread lies between the two,
+nearer the lower).
+
+``repeat`` independent runs ``r = 1 ... R`` until the pooled relative error reaches
+``target_rel_error`` average as ``p = mean(p_r)``, with two estimates of its variance: the
+levels-uncorrelated ``V_a = Σ_r (δ_r p_r)² / R²`` and, from ``R >= 2`` runs, the batch estimate
+``V_b = s² / R`` (``s²`` the sample variance of the ``p_r``: independent runs, so it holds every
+correlation, between levels and along the chains, whatever its form). The relative error is
+``sqrt(max(V_a, V_b)) / p``; the 95 % interval is on the log scale,
+``p exp(±h)``, ``h = max(1.96 s_a, t_{0.975, R-1} s_b)``, ``s² = ln(1 + V / p²)`` for each
+(Student's ``t`` with ``R - 1`` degrees of freedom: ``V_b`` rests on ``R`` runs). One run
+(``target_rel_error`` None, or the target met by the first) has ``V_a`` alone, the lognormal
+interval of :func:`pfjax.rare.estimate.lognormal_interval`, and ``detail["error"]`` says so
+(``"levels uncorrelated"``, else ``"runs"``).
 """
 
 from __future__ import annotations
@@ -59,8 +71,10 @@ from collections.abc import Callable
 import numpy as np
 
 from pfjax import errors
-from pfjax.rare.estimate import RareEstimate, check_common, evaluate_ranked, lognormal_interval
+from pfjax.rare.estimate import Z95, RareEstimate, check_common, evaluate_ranked, lognormal_interval
 
+#: Each run's two errors of Au and Beck's bounds (levels uncorrelated, fully correlated).
+DELTAS = ("delta_uncorrelated", "delta_correlated")
 #: Acceptance rate the conditional-sampling spread is adapted towards.
 TARGET_ACCEPTANCE = 0.44
 
@@ -135,7 +149,7 @@ def _one_run(g, dim, n, p0, rng, batch, max_levels):
     nc = int(round(p0 * n))
     u = rng.standard_normal((n, dim))
     m, t = evaluate_ranked(g, u, batch)
-    rollouts, levels, p, d2 = n, [], 1.0, 0.0
+    rollouts, levels, p, d2, dsum = n, [], 1.0, 0.0, 0.0
     chain_m, lam = None, 0.6
     for j in range(max_levels + 1):
         b = level(m, t, nc)
@@ -144,9 +158,10 @@ def _one_run(g, dim, n, p0, rng, batch, max_levels):
         fails = below(m, t, b)
         pj = float(np.mean(fails))
         gamma = 0.0 if chain_m is None else _gamma(below(chain_m, t.reshape(chain_m.shape), b).astype(float), pj)
-        d2 += (1 - pj) / (len(m) * pj) * (1 + gamma) if pj > 0 else math.inf
+        dj2 = (1 - pj) / (len(m) * pj) * (1 + gamma) if pj > 0 else math.inf
+        d2, dsum = d2 + dj2, dsum + math.sqrt(dj2)
         p *= pj
-        levels.append({"threshold": b[0], "tie_break": b[1], "p": pj, "gamma": gamma})
+        levels.append({"threshold": b[0], "tie_break": b[1], "p": pj, "gamma": gamma, "delta": math.sqrt(dj2)})
         if b == (0.0, math.inf) or pj == 0 or pj == 1:
             levels[-1]["stalled"] = pj == 1 and b[0] > 0
             failures = u[fails] if b[0] <= 0 else u[:0]
@@ -157,7 +172,26 @@ def _one_run(g, dim, n, p0, rng, batch, max_levels):
         u, m, t, chain_m, acc, used, lam = _chains(g, u[sel], m[sel], t[sel], b, n, rng, batch, lam)
         rollouts += used
         levels[-1]["acceptance"] = acc
+    levels[-1]["delta_uncorrelated"], levels[-1]["delta_correlated"] = math.sqrt(d2), dsum
     return p, d2, rollouts, levels, failures
+
+
+def pooled(ps: np.ndarray, d2: np.ndarray) -> tuple[float, float, tuple[float, float]]:
+    """``(p, relative error, 95 % interval)`` of ``R`` independent runs with estimates ``ps`` and
+    levels-uncorrelated squared coefficients of variation ``d2`` (module docstring, *Error*)."""
+    from scipy import stats
+
+    r = len(ps)
+    est = float(ps.mean())
+    va = float(sum(p * p * d if p > 0 else d for p, d in zip(ps, d2))) / r**2
+    if not est > 0 or not math.isfinite(va):
+        return est, math.inf, lognormal_interval(est, math.inf)
+    vb = float(ps.var(ddof=1)) / r if r > 1 else 0.0
+    rel = math.sqrt(max(va, vb)) / est
+    if r == 1:
+        return est, rel, lognormal_interval(est, rel)
+    h = max(Z95 * math.sqrt(math.log1p(va / est**2)), stats.t.ppf(0.975, r - 1) * math.sqrt(math.log1p(vb / est**2)))
+    return est, rel, (est * math.exp(-h), min(1.0, est * math.exp(h)))
 
 
 def subset_simulation(
@@ -188,7 +222,8 @@ def subset_simulation(
 
     Returns:
         a :class:`~pfjax.rare.estimate.RareEstimate` with ``method="subset"``; ``detail`` holds
-        each run's levels (threshold, conditional probability, γ, acceptance) and the last run's
+        each run's levels (threshold, conditional probability, γ, δ_j, acceptance), each run's
+        estimate with its two errors (``run_estimates``), the error used (``error``) and the last run's
         failure points (``(m, dim)``, distributed as ``φ`` restricted to the failure region: the
         starts :func:`pfjax.rare.cross_entropy_is` takes).
     """
@@ -207,18 +242,11 @@ def subset_simulation(
         p, d2, used, levels, failures = _one_run(g, dim, n, p0, rng, batch, max_levels)
         runs.append((p, d2, levels))
         total += used
-        ps = np.array([r[0] for r in runs])
-        var = sum(r[0] ** 2 * r[1] if r[0] > 0 else r[1] for r in runs) / len(runs) ** 2
-        est = float(ps.mean())
-        rel = math.sqrt(var) / est if est > 0 else math.inf
+        est, rel, ci = pooled(np.array([r[0] for r in runs]), np.array([r[1] for r in runs]))
         per_run = total / len(runs)
         if target_rel_error is None or rel <= target_rel_error or total + per_run > max_rollouts or math.isinf(d2):
             break
-    return RareEstimate(
-        est,
-        lognormal_interval(est, rel),
-        rel,
-        int(total),
-        "subset",
-        {"runs": len(runs), "levels": [r[2] for r in runs], "n_per_level": n, "p0": p0, "failure_points": failures},
-    )
+    detail: dict = {"runs": len(runs), "error": "runs" if len(runs) > 1 else "levels uncorrelated"}
+    detail.update(levels=[r[2] for r in runs], n_per_level=n, p0=p0, failure_points=failures)
+    detail["run_estimates"] = [{"p": r[0], **{k: r[2][-1][k] for k in DELTAS}} for r in runs]
+    return RareEstimate(est, ci, rel, int(total), "subset", detail)

@@ -206,10 +206,11 @@ def rare_event_rows(summary: dict, colors: dict) -> list:
         points = c["rare_event"].get("failure_points") or []
         top = "; ".join(_failure_point_text(q) for q in points[:RARE_POINTS]) if points else "—"
         rel = "—" if c["rel_error"] is None else f"{100 * c['rel_error']:.1f} %"
+        warn = c["rare_event"].get("warning")
         rows.append(
             [
                 cell(n, swatch=colors[n]),
-                cell(f"{c['p_fail']:.3g} [{lo:.3g}, {hi:.3g}]"),
+                cell(f"{c['p_fail']:.3g} [{lo:.3g}, {hi:.3g}]" + (f" (warning: {warn})" if warn else "")),
                 cell(rel),
                 cell(f"{c['n_rollouts']} ({c['method']})"),
                 cell(f"{plain:.3g} [{plain_ci[0]:.3g}, {plain_ci[1]:.3g}]"),
