@@ -7,6 +7,8 @@
   :class:`pfjax.tracking.study_config.TrackingStudy`);
 - ``<!-- parking-config-reference -->``: the same for the parking study
   (:class:`pfjax.parking.study_config.ParkingStudy`);
+- ``<!-- tuning-config-reference -->``: the same for the tuning study
+  (:class:`pfjax.tuning.study_config.TuningStudy`);
 - ``<!-- column-reference -->``: every column of the run and margin tables with its unit and meaning
   (:data:`pfjax.tables.COLUMNS`, the same metadata the Parquet files carry);
 - ``<!-- controller-reference -->`` and ``<!-- path-reference -->``: the registries.
@@ -86,6 +88,12 @@ def parking_config_reference() -> str:
     return _key_table(ParkingStudy)
 
 
+def tuning_config_reference() -> str:
+    from pfjax.tuning.study_config import TuningStudy
+
+    return _key_table(TuningStudy)
+
+
 def column_reference() -> str:
     from pfjax.tables import COLUMNS
 
@@ -120,6 +128,7 @@ def path_reference() -> str:
 MARKERS = {
     "<!-- config-reference -->": config_reference,
     "<!-- parking-config-reference -->": parking_config_reference,
+    "<!-- tuning-config-reference -->": tuning_config_reference,
     "<!-- column-reference -->": column_reference,
     "<!-- paper-config-reference -->": paper_config_reference,
     "<!-- tracking-config-reference -->": tracking_config_reference,
