@@ -28,6 +28,7 @@ gradient and Hessian are reported beside it as the smooth picture.
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Callable
 from typing import NamedTuple
@@ -106,7 +107,7 @@ def check_point(
     dtype = jnp.result_type(float)
     span = hi - lo
     lo_j, span_j = jnp.asarray(lo, dtype), jnp.asarray(span, dtype)
-    vg = jax.jit(jax.vmap(autodiff.value_and_grad(lambda z: cost(lo_j + span_j * z), mode=mode)))
+    vg = lambda Z: _values_and_gradients(Z, lo_j, span_j, cost=cost, mode=mode)
     z = np.clip((th - lo) / span, 0.0, 1.0)
     J, g, active, H, eig = _gradient_and_hessian(vg, z, h, dtype)
     pg = np.where(active == 0, g, 0.0)
@@ -134,6 +135,13 @@ def check_point(
         (n_grad + len(Zp)) * n_per_eval,
         (n_grad * fpp + len(Zp)) * n_per_eval,
     )
+
+
+@functools.partial(jax.jit, static_argnames=("cost", "mode"))
+def _values_and_gradients(Z, lo, span, *, cost, mode):
+    """``cost(lo + span z)`` and its gradient in ``z`` at each row of ``Z`` (box units); one program
+    per cost function, mode and batch shape, so checks of several points of one problem share it."""
+    return jax.vmap(autodiff.value_and_grad(lambda z: cost(lo + span * z), mode=mode))(Z)
 
 
 def _checked_point(theta, lo: np.ndarray, h: float, rtol: float) -> np.ndarray:

@@ -150,7 +150,7 @@ def _parts(cfg: dict, spec, progress: bool):
     print("part 1b: the command line's defaults", flush=True)
     cli = P.cli_check(cfg, progress)
     local_checks = P.checks(tuning_runs, problems, main)
-    t3 = P.table3(cfg, make_study_problem(cfg, "pi:paper-line"), progress)
+    t3 = P.table3(cfg, problems["pi:paper-line"], progress)
     print("part 2: K, single vs robust gradient tuning; LMI designs", flush=True)
     ks = P.tune_K(cfg, spec, progress)
     des = P.designs(cfg)
