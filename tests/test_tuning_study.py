@@ -73,7 +73,8 @@ def test_quick_tuning_study_outputs_consistent(out):
         chains.append(n)
         n = max(1, n // 2)
     multistart = ms["n_screen"] + 1 + sum(c * k for c, k in zip(chains, per_round))
-    multistart += (ms["n_restarts"] + 1) * ms["restart_steps"]
+    if ms["n_restarts"] and ms["restart_steps"]:  # the restarts: the incumbent and its perturbations
+        multistart += (ms["n_restarts"] + 1) * ms["restart_steps"]
     expected = {
         "ga": P + G * (P - 1),
         "gradient-plain": s["config"]["gradient"]["steps"] * s["config"]["gradient"]["starts"],

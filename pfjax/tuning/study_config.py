@@ -36,13 +36,15 @@ ABLATION: dict[str, dict[str, int | float | str]] = {
 #: Scenario sets a problem of ``compare.problems`` may name after its controller.
 SCENARIOS = ("paper-line", "paper-all", "heldout-cvar")
 
-#: ``--quick``: two seeds of a few-step tuner on one problem, a small held-out set (tests, a first look)
+#: ``--quick``: two seeds of few-step tuners on one problem, a small held-out set (tests, a first look)
 QUICK = {
     "seeds": 2,
     "cli_seeds": 0,
     "sim": {"horizon": 16.0},
     "ga": {"population": 6, "generations": 2},
-    "gradient": {"steps": 3, "starts": 1, "table3_steps": 2},
+    # plain adam, the Table 3 descent and the GA's polish take the same 30 steps of 0.01 from one
+    # start: one compiled step program serves the three
+    "gradient": {"steps": 30, "starts": 1, "lr": 0.01, "table3_steps": 30},
     "multistart": {
         "n_screen": 4,
         "n_starts": 2,
