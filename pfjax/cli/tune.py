@@ -90,6 +90,16 @@ def register(sub) -> None:
         default=None,
         help="gradient: first BFGS trust radius (0.1); adam step (gradient-plain 0.05, ga+gradient 0.01); box units",
     )
+    _multistart_flags(p)
+    p.add_argument("--n-runs", type=int, default=16, help="runs per path sampled from a CONFIG study")
+    p.add_argument("--dt", type=float, default=None, help="integrator step, s (default: 0.005 or the study's)")
+    p.add_argument("--horizon", type=float, default=None, help="simulated time, s (default: 20 or the study's)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_cmd)
+
+
+def _multistart_flags(p) -> None:
+    """The multi-start tuner's flags (``--method gradient``) and ``--from-default``."""
     p.add_argument("--screen", type=int, default=None, help="gradient: space-filling points screened (64)")
     p.add_argument("--sampler", default=None, help="gradient: sobol | lhs | uniform (sobol)")
     p.add_argument("--rounds", type=int, default=None, help="gradient: successive-halving rounds (3; 1: none)")
@@ -108,11 +118,6 @@ def register(sub) -> None:
         action="store_true",
         help="gradient-plain, ga+gradient: start from the controller's default gains (gradient always screens them)",
     )
-    p.add_argument("--n-runs", type=int, default=16, help="runs per path sampled from a CONFIG study")
-    p.add_argument("--dt", type=float, default=None, help="integrator step, s (default: 0.005 or the study's)")
-    p.add_argument("--horizon", type=float, default=None, help="simulated time, s (default: 20 or the study's)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(func=_cmd)
 
 
 #: ``pfjax tune``'s flags by the library argument they set.
@@ -167,19 +172,10 @@ def _cmd(args) -> dict:
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import METHODS, MODELS, check, make_problem, tune
+    from pfjax.tuning.problem import check, make_problem, tune
 
     controllers = _controllers()
-    if args.controller not in controllers:
-        raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}")
-    if args.check is None and args.method is None:
-        raise UsageError(f"--method: required unless --check is given; one of {', '.join(METHODS)}")
-    if args.check is not None and args.method is not None:
-        raise UsageError("--check: checks given gains; give --method or --check, not both")
-    if args.method is not None and args.method not in METHODS:
-        raise UsageError(f"--method: value {args.method!r}, expected one of {', '.join(METHODS)}")
-    if args.model is not None and args.model not in MODELS:
-        raise UsageError(f"--model: value {args.model!r}, expected one of {', '.join(MODELS)}")
+    _check_flags(args, controllers)
     key = jax.random.PRNGKey(errors.seed("--seed", args.seed))
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
@@ -253,3 +249,19 @@ def _model_of(problem) -> str:
     if not isinstance(sc, DynamicScenario):
         return "kinematic"
     return "std" if isinstance(sc.vehicle, STDParams) else "st"
+
+
+def _check_flags(args, controllers: dict) -> None:
+    """:class:`UsageError` naming the first bad flag among ``--controller``, ``--method``, ``--check`` and ``--model``."""
+    from pfjax.tuning.problem import METHODS, MODELS
+
+    if args.controller not in controllers:
+        raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}")
+    if args.check is None and args.method is None:
+        raise UsageError(f"--method: required unless --check is given; one of {', '.join(METHODS)}")
+    if args.check is not None and args.method is not None:
+        raise UsageError("--check: checks given gains; give --method or --check, not both")
+    if args.method is not None and args.method not in METHODS:
+        raise UsageError(f"--method: value {args.method!r}, expected one of {', '.join(METHODS)}")
+    if args.model is not None and args.model not in MODELS:
+        raise UsageError(f"--model: value {args.model!r}, expected one of {', '.join(MODELS)}")
