@@ -8,6 +8,8 @@
 - ``<!-- parking-config-reference -->``: the same for the parking study
   (:class:`pfjax.parking.study_config.ParkingStudy`); ``<!-- dynamic-study-config-reference -->`` for
   the kinematic-vs-dynamic study (:class:`pfjax.dynamic_study.config.KinematicVsDynamic`);
+- ``<!-- tuning-config-reference -->``: the same for the tuning study
+  (:class:`pfjax.tuning.study_config.TuningStudy`);
 - ``<!-- column-reference -->``: every column of the run and margin tables with its unit and meaning
   (:data:`pfjax.tables.COLUMNS`, the same metadata the Parquet files carry);
 - ``<!-- controller-reference -->`` and ``<!-- path-reference -->``: the registries.
@@ -93,6 +95,12 @@ def dynamic_study_config_reference() -> str:
     return _key_table(KinematicVsDynamic)
 
 
+def tuning_config_reference() -> str:
+    from pfjax.tuning.study_config import TuningStudy
+
+    return _key_table(TuningStudy)
+
+
 def column_reference() -> str:
     from pfjax.tables import COLUMNS
 
@@ -128,6 +136,7 @@ MARKERS = {
     "<!-- config-reference -->": config_reference,
     "<!-- parking-config-reference -->": parking_config_reference,
     "<!-- dynamic-study-config-reference -->": dynamic_study_config_reference,
+    "<!-- tuning-config-reference -->": tuning_config_reference,
     "<!-- column-reference -->": column_reference,
     "<!-- paper-config-reference -->": paper_config_reference,
     "<!-- tracking-config-reference -->": tracking_config_reference,

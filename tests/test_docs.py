@@ -66,6 +66,8 @@ def test_generated_tables_come_from_the_code(site):
         assert f"<code>{column}</code>" in studies, column
     for key in ("sim.scan_period", "assumptions.zones", "search.max_switches", "montecarlo.theta_scatter_deg"):
         assert f"<code>{key}</code>" in studies, key  # the parking study's schema
+    for key in ("multistart.n_screen", "compare.ablation", "robust.heldout_runs", "gradient.table3_steps"):
+        assert f"<code>{key}</code>" in studies, key  # the tuning study's schema
     concepts = (site / "concepts" / "index.html").read_text()
     for name in C.REGISTRY:
         assert f"<code>{name}</code>" in concepts, name

@@ -51,7 +51,15 @@ def test_quick_tuning_study_outputs_consistent(out):
         assert pq.read_schema(out / f"{name}.parquet").metadata[b"pfjax.config_sha256"].decode() == s["config_sha256"]
     assert (out / "figures" / "cost_vs_budget.png").stat().st_size > 1000
     report = (out / "report.md").read_text()
-    assert s["config_sha256"][:16] in report
+    html = (out / "report.html").read_text()
+    for text in (report, html):  # the headline numbers of the summary in both renderings
+        assert s["config_sha256"][:16] in text
+        for name, row in s["targets"]["by_problem"].items():
+            for m in ("ga", "gradient", "gradient-plain"):
+                assert f"{row[m]['median']:.5f}" in text, (name, m)
+        assert f"{s['table3']['cost']:.5f}" in text
+        for row in s["heldout"]["table"]:
+            assert f"{100 * row['success_rate']:.1f} %" in text
 
     # GA budget: P + G (P - E) rollouts per seed (MATLAB ga, elite count 1); plain adam's: one per step and start;
     # the multi-start tuner's: screened points + the default gains, then 1 rollout per chain and step
@@ -65,7 +73,8 @@ def test_quick_tuning_study_outputs_consistent(out):
         chains.append(n)
         n = max(1, n // 2)
     multistart = ms["n_screen"] + 1 + sum(c * k for c, k in zip(chains, per_round))
-    multistart += (ms["n_restarts"] + 1) * ms["restart_steps"]
+    if ms["n_restarts"] and ms["restart_steps"]:  # the restarts: the incumbent and its perturbations
+        multistart += (ms["n_restarts"] + 1) * ms["restart_steps"]
     expected = {
         "ga": P + G * (P - 1),
         "gradient-plain": s["config"]["gradient"]["steps"] * s["config"]["gradient"]["starts"],
@@ -115,11 +124,14 @@ def test_quick_tuning_study_outputs_consistent(out):
     "setting, message",
     [
         ("seeds=0", "seeds: must be >= 1"),
-        ("ga.population=1", "ga.population: too small"),
+        ("ga.population=1", "ga.population: must be >= 2"),
         ("gradient.lr=-1", "gradient.lr: must be > 0"),
-        ("multistart.sampler=halton", "multistart: sampler: value 'halton'"),
+        ("multistart.sampler=halton", "multistart.sampler: value 'halton'"),
         ("compare.problems='pi:paper-all'", "compare.problems: must list pi:paper-line"),
         ("heldout=nope.toml", "heldout: file not found"),
+        ("compare.problemz='pi:paper-line'", "compare.problemz: unknown key (did you mean 'compare.problems'?)"),
+        ("robust.heldout_runs=0", "robust.heldout_runs: must be >= 1 (got 0)"),
+        ("compare.ablation.adam.local='x'", "compare.ablation.adam: local: value 'x'"),
     ],
 )
 def test_bad_setting_one_line_exit_2_nothing_written(tmp_path, setting, message):

@@ -27,6 +27,7 @@ def tune(
     multistart=None,
     check=None,
     progress: bool = False,
+    model: str | None = None,
 ) -> dict:
     """Tune a controller's gains, or check given gains, as ``pfjax tune`` does.
 
@@ -42,6 +43,9 @@ def tune(
         key: int seed (or JAX key) of the GA population / the gradient's starts.
         cost: a :class:`pfjax.tuning.CostSpec` (metric, effort weight, aggregate); default mean IAE.
         config: a :class:`pfjax.sim.SimConfig` (default 20 s at 5 ms, or the study's).
+        model: the vehicle model, ``kinematic`` | ``st`` | ``std`` (default: kinematic, or the
+            study's ``[vehicle] model``, which ``model`` replaces); a paper set on ``st`` uses the
+            robot's parameters, on ``std`` CommonRoad's vehicle2 (:func:`pfjax.tuning.problem.make_problem`).
         steps: gradient steps (``None``: the method's default; multi-start: evaluations of a
             surviving chain).
         n_starts: starts descended together (``None``: the method's default).
@@ -66,7 +70,7 @@ def tune(
     from pfjax.tuning.problem import tune as run_tune
 
     name = C.resolve(controller)[0].name if isinstance(controller, str) else controller
-    problem = make_problem(name, scenario, cost=cost or CostSpec(), config=config, n_runs=n_runs)
+    problem = make_problem(name, scenario, cost=cost or CostSpec(), config=config, n_runs=n_runs, model=model)
     if check is not None:
         r = run_check(problem, check)
         return {

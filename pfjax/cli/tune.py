@@ -4,6 +4,7 @@ or check given gains.
     pfjax tune --method {gradient,gradient-plain,ga,ga+gradient} | --check GAINS
                --controller {pi,state-feedback,integral,stanley,pure-pursuit,rear-wheel}
                --scenario {paper-line,paper-parabola,paper-sine,paper-all,CONFIG.toml}
+               [--model {kinematic,st,std}]
                [--cost iae] [--aggregate mean] [--effort 0] [--seed 0] [--generations 100] [--population 50]
                [--steps N] [--starts N] [--lr X] [--screen 64] [--sampler sobol] [--rounds 3] [--restarts 3]
                [--polish 8] [--smoothing 0] [--n-runs 16] [--dt 0.005] [--horizon 20] [--json]
@@ -59,6 +60,13 @@ def register(sub) -> None:
         help="paper-line | paper-parabola | paper-sine | paper-all | "
         "a registered path's name (one run from its start pose) | a study TOML (CONFIG)",
     )
+    p.add_argument(
+        "--model",
+        default=None,
+        help="vehicle model: kinematic (declared slip) | st (single-track, slip from linear tyre forces) | std "
+        "(single-track drift, Pacejka tyres); a paper set runs st on the robot's parameters, std on CommonRoad's "
+        "vehicle2; default: kinematic, or a CONFIG's [vehicle] model (which --model replaces)",
+    )
     p.add_argument("--cost", default="iae", help="iae | ise | itae (per run, plus --effort * int delta^2 dt)")
     p.add_argument("--aggregate", default="mean", help="mean | quantile | cvar over the scenario batch")
     p.add_argument("--level", type=float, default=0.9, help="quantile / CVaR level in (0, 1)")
@@ -82,6 +90,16 @@ def register(sub) -> None:
         default=None,
         help="gradient: first BFGS trust radius (0.1); adam step (gradient-plain 0.05, ga+gradient 0.01); box units",
     )
+    _multistart_flags(p)
+    p.add_argument("--n-runs", type=int, default=16, help="runs per path sampled from a CONFIG study")
+    p.add_argument("--dt", type=float, default=None, help="integrator step, s (default: 0.005 or the study's)")
+    p.add_argument("--horizon", type=float, default=None, help="simulated time, s (default: 20 or the study's)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_cmd)
+
+
+def _multistart_flags(p) -> None:
+    """The multi-start tuner's flags (``--method gradient``) and ``--from-default``."""
     p.add_argument("--screen", type=int, default=None, help="gradient: space-filling points screened (64)")
     p.add_argument("--sampler", default=None, help="gradient: sobol | lhs | uniform (sobol)")
     p.add_argument("--rounds", type=int, default=None, help="gradient: successive-halving rounds (3; 1: none)")
@@ -100,11 +118,6 @@ def register(sub) -> None:
         action="store_true",
         help="gradient-plain, ga+gradient: start from the controller's default gains (gradient always screens them)",
     )
-    p.add_argument("--n-runs", type=int, default=16, help="runs per path sampled from a CONFIG study")
-    p.add_argument("--dt", type=float, default=None, help="integrator step, s (default: 0.005 or the study's)")
-    p.add_argument("--horizon", type=float, default=None, help="simulated time, s (default: 20 or the study's)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(func=_cmd)
 
 
 #: ``pfjax tune``'s flags by the library argument they set.
@@ -112,6 +125,7 @@ FLAGS = {
     "method": "--method",
     "controller": "--controller",
     "scenario": "--scenario",
+    "model": "--model",
     "metric": "--cost",
     "aggregate": "--aggregate",
     "level": "--level",
@@ -158,28 +172,24 @@ def _cmd(args) -> dict:
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import METHODS, check, make_problem, tune
+    from pfjax.tuning.problem import check, make_problem, tune
 
     controllers = _controllers()
-    if args.controller not in controllers:
-        raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}")
-    if args.check is None and args.method is None:
-        raise UsageError(f"--method: required unless --check is given; one of {', '.join(METHODS)}")
-    if args.check is not None and args.method is not None:
-        raise UsageError("--check: checks given gains; give --method or --check, not both")
-    if args.method is not None and args.method not in METHODS:
-        raise UsageError(f"--method: value {args.method!r}, expected one of {', '.join(METHODS)}")
+    _check_flags(args, controllers)
     key = jax.random.PRNGKey(errors.seed("--seed", args.seed))
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
         multistart = _multistart(args)
-        problem = make_problem(controllers[args.controller], args.scenario, cost=cost, n_runs=args.n_runs)
+        problem = make_problem(
+            controllers[args.controller], args.scenario, cost=cost, n_runs=args.n_runs, model=args.model
+        )
         changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
         if changes:
             problem = problem._replace(config=dataclasses.replace(problem.config, **changes))
         common = {
             "controller": args.controller,
             "scenario": args.scenario,
+            "model": _model_of(problem),
             "cost_spec": cost._asdict(),
             "bounds": {
                 "lower": problem.lower.tolist(),
@@ -228,3 +238,30 @@ def _cmd(args) -> dict:
         "n_nonfinite_grad": r.n_nonfinite_grad,
         **common,
     }
+
+
+def _model_of(problem) -> str:
+    """The vehicle model a problem's runs simulate: ``kinematic``, ``st`` or ``std``."""
+    from pfjax.models.single_track import STDParams
+    from pfjax.sim.dynamic import DynamicScenario
+
+    sc = problem.scenarios[0]
+    if not isinstance(sc, DynamicScenario):
+        return "kinematic"
+    return "std" if isinstance(sc.vehicle, STDParams) else "st"
+
+
+def _check_flags(args, controllers: dict) -> None:
+    """:class:`UsageError` naming the first bad flag among ``--controller``, ``--method``, ``--check`` and ``--model``."""
+    from pfjax.tuning.problem import METHODS, MODELS
+
+    if args.controller not in controllers:
+        raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}")
+    if args.check is None and args.method is None:
+        raise UsageError(f"--method: required unless --check is given; one of {', '.join(METHODS)}")
+    if args.check is not None and args.method is not None:
+        raise UsageError("--check: checks given gains; give --method or --check, not both")
+    if args.method is not None and args.method not in METHODS:
+        raise UsageError(f"--method: value {args.method!r}, expected one of {', '.join(METHODS)}")
+    if args.model is not None and args.model not in MODELS:
+        raise UsageError(f"--model: value {args.model!r}, expected one of {', '.join(MODELS)}")

@@ -28,6 +28,7 @@ gradient and Hessian are reported beside it as the smooth picture.
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Callable
 from typing import NamedTuple
@@ -99,56 +100,25 @@ def check_point(
         mode: differentiation mode.
     """
     from pfjax.numerics.autodiff import forward_passes_per_gradient
-    from pfjax.tuning.multistart import box_value
 
     lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
-    span, D = hi - lo, lo.size
-    th = np.asarray(theta, np.float64).reshape(-1)
-    if th.shape != (D,):
-        raise errors.InputError(f"theta: {th.size} values, expected {D}")
-    errors.number("h", h, positive=True, high=0.1)
-    errors.number("rtol", rtol, nonnegative=True)
+    th = _checked_point(theta, lo, h, rtol)
     radii = [errors.number("radii", r, positive=True, high=1.0) for r in np.ravel(radii)]
     dtype = jnp.result_type(float)
+    span = hi - lo
     lo_j, span_j = jnp.asarray(lo, dtype), jnp.asarray(span, dtype)
-    vg = jax.jit(jax.vmap(autodiff.value_and_grad(lambda z: cost(lo_j + span_j * z), mode=mode)))
+    vg = lambda Z: _values_and_gradients(Z, lo_j, span_j, cost=cost, mode=mode)
     z = np.clip((th - lo) / span, 0.0, 1.0)
-    J, g = vg(jnp.asarray(z[None], dtype))
-    J, g = float(J[0]), np.asarray(g[0], np.float64)
-    tiny = 1e-12
-    active = np.where((z <= tiny) & (g > 0), -1, np.where((z >= 1 - tiny) & (g < 0), 1, 0))
-    free = np.flatnonzero(active == 0)
+    J, g, active, H, eig = _gradient_and_hessian(vg, z, h, dtype)
     pg = np.where(active == 0, g, 0.0)
-    n_grad = 1 + 2 * free.size
-    if free.size:
-        E = np.eye(D)[free] * h
-        _, G = vg(jnp.asarray(np.concatenate([z + E, z - E]), dtype))
-        G = np.asarray(G, np.float64)
-        H = (G[: free.size, free] - G[free.size :, free]) / (2 * h)
-        H = 0.5 * (H + H.T)
-        eig = np.linalg.eigvalsh(H)
-    else:
-        H, eig = np.zeros((0, 0)), np.zeros(0)
-    scale = max(float(np.max(np.abs(eig))) if eig.size else 0.0, 1e-300)
-    decrease = float("nan")
-    if free.size == 0:
-        model = "none"
-    elif eig[0] > 1e-8 * scale:
-        model = "positive definite"
-        gf = pg[free]
-        decrease = 0.5 * float(gf @ np.linalg.solve(H, gf)) / max(abs(J), 1e-300)
-    elif eig[0] < -1e-8 * scale:
-        model = "indefinite"
-    else:
-        model = "singular"
-    U = probe_directions(D)
-    Zp = np.clip(np.concatenate([z + r * U for r in radii]), 0.0, 1.0)
-    Jp = np.asarray(jax.jit(box_value, static_argnames=("cost",))(jnp.asarray(Zp, dtype), lo_j, span_j, cost=cost))
-    Jp = np.where(np.isfinite(Jp), Jp, np.inf)
+    free = np.flatnonzero(active == 0)
+    model, decrease = _quadratic_model(J, pg[free], H, eig)
+    Zp, Jp = _probes(cost, z, radii, lo_j, span_j, dtype)
     i = int(np.argmin(Jp))
     probe_dec = (J - float(Jp[i])) / max(abs(J), 1e-300)
     verdict = "not a local minimum" if probe_dec > rtol else "local minimum"
-    fpp = forward_passes_per_gradient(D, mode)
+    fpp = forward_passes_per_gradient(lo.size, mode)
+    n_grad = 1 + 2 * free.size
     return CheckResult(
         th,
         J,
@@ -165,6 +135,67 @@ def check_point(
         (n_grad + len(Zp)) * n_per_eval,
         (n_grad * fpp + len(Zp)) * n_per_eval,
     )
+
+
+@functools.partial(jax.jit, static_argnames=("cost", "mode"))
+def _values_and_gradients(Z, lo, span, *, cost, mode):
+    """``cost(lo + span z)`` and its gradient in ``z`` at each row of ``Z`` (box units); one program
+    per cost function, mode and batch shape, so checks of several points of one problem share it."""
+    return jax.vmap(autodiff.value_and_grad(lambda z: cost(lo + span * z), mode=mode))(Z)
+
+
+def _checked_point(theta, lo: np.ndarray, h: float, rtol: float) -> np.ndarray:
+    """``theta`` as a flat float64 array of the box's size; :class:`~pfjax.errors.InputError` for a
+    wrong size or a bad ``h`` or ``rtol``."""
+    th = np.asarray(theta, np.float64).reshape(-1)
+    if th.shape != (lo.size,):
+        raise errors.InputError(f"theta: {th.size} values, expected {lo.size}")
+    errors.number("h", h, positive=True, high=0.1)
+    errors.number("rtol", rtol, nonnegative=True)
+    return th
+
+
+def _gradient_and_hessian(vg, z: np.ndarray, h: float, dtype):
+    """At ``z`` (box units): cost ``J``, gradient ``g``, active bounds (-1 lower, +1 upper, 0 free),
+    and the Hessian on the free coordinates by central differences of the gradient,
+    ``H_ij = (g_j(z + h e_i) - g_j(z - h e_i)) / 2h`` (symmetrised), with its eigenvalues."""
+    J, g = vg(jnp.asarray(z[None], dtype))
+    J, g = float(J[0]), np.asarray(g[0], np.float64)
+    tiny = 1e-12
+    active = np.where((z <= tiny) & (g > 0), -1, np.where((z >= 1 - tiny) & (g < 0), 1, 0))
+    free = np.flatnonzero(active == 0)
+    if not free.size:
+        return J, g, active, np.zeros((0, 0)), np.zeros(0)
+    E = np.eye(z.size)[free] * h
+    _, G = vg(jnp.asarray(np.concatenate([z + E, z - E]), dtype))
+    G = np.asarray(G, np.float64)
+    H = (G[: free.size, free] - G[free.size :, free]) / (2 * h)
+    H = 0.5 * (H + H.T)
+    return J, g, active, H, np.linalg.eigvalsh(H)
+
+
+def _quadratic_model(J: float, gf: np.ndarray, H: np.ndarray, eig: np.ndarray) -> tuple[str, float]:
+    """The local quadratic model's kind on the free coordinates (``positive definite``, ``indefinite``,
+    ``singular``, ``none``) and, when positive definite, its predicted relative decrease
+    ``g^T H^-1 g / (2 |J|)``."""
+    if not eig.size:
+        return "none", float("nan")
+    scale = max(float(np.max(np.abs(eig))), 1e-300)
+    if eig[0] > 1e-8 * scale:
+        return "positive definite", 0.5 * float(gf @ np.linalg.solve(H, gf)) / max(abs(J), 1e-300)
+    if eig[0] < -1e-8 * scale:
+        return "indefinite", float("nan")
+    return "singular", float("nan")
+
+
+def _probes(cost, z: np.ndarray, radii, lo_j, span_j, dtype) -> tuple[np.ndarray, np.ndarray]:
+    """The probe points at each radius around ``z`` (clipped to the box) and their costs (non-finite: inf)."""
+    from pfjax.tuning.multistart import box_value
+
+    U = probe_directions(z.size)
+    Zp = np.clip(np.concatenate([z + r * U for r in radii]), 0.0, 1.0)
+    Jp = np.asarray(jax.jit(box_value, static_argnames=("cost",))(jnp.asarray(Zp, dtype), lo_j, span_j, cost=cost))
+    return Zp, np.where(np.isfinite(Jp), Jp, np.inf)
 
 
 def parse_gains(gains, fields, sizes, lower, upper, *, key: str = "check") -> np.ndarray:

@@ -111,44 +111,18 @@ def gradient_tune(
     errors.integer("steps", steps, low=1, high=1_000_000)
     errors.number("learning_rate", learning_rate, positive=True)
     autodiff.resolve_mode(mode, lo.size)
-    if key is None and (theta0 is None or n_starts > 1):
-        raise errors.InputError("key: required for random starts")
-    starts = [] if theta0 is None else [np.asarray(theta0, np.float64)]
-    if len(starts) < n_starts:
-        u = np.asarray(jax.random.uniform(key, (n_starts - len(starts),) + lo.shape), np.float64)
-        starts += list(lo + span * u)
-    z = jnp.asarray(np.clip((np.stack(starts) - lo) / span, 0.0, 1.0))  # (n_starts, D)
+    z = _starts(theta0, key, n_starts, lo, span)
     opt = optimizer or adam(float(learning_rate), int(steps))
     lo_j, span_j = jnp.asarray(lo), jnp.asarray(span)
     state = opt.init(z)
     t_c = time.perf_counter()
     compiled = _step.lower(z, state, lo_j, span_j, cost=cost, opt=opt, mode=mode).compile()
     compile_s = time.perf_counter() - t_c
-    step = lambda z, state: compiled(z, state, lo_j, span_j)
     t0 = time.perf_counter()
-    best_J, best_z = np.inf, np.asarray(z)
-    hist, hist_r, hist_t, n_bad = [], [], [], 0
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=steps, desc="gradient", leave=False)
-    for k in range(steps):
-        z_k = z
-        J, z, state, nb = step(z, state)
-        J = np.where(np.isfinite(np.asarray(J)), np.asarray(J), np.inf)
-        n_bad += int(nb)
-        i = int(np.argmin(J))
-        if J[i] < best_J:
-            best_J, best_z = float(J[i]), np.asarray(z_k[i])
-        hist.append(best_J)
-        hist_r.append((k + 1) * n_per_eval * n_starts)
-        hist_t.append(time.perf_counter() - t0)
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(best=f"{best_J:.5g}")
-    if bar is not None:
-        bar.close()
+    best_J, best_z, hist, hist_t, n_bad = _descend(
+        lambda z, state: compiled(z, state, lo_j, span_j), z, state, steps, progress, t0
+    )
+    hist_r = [(k + 1) * n_per_eval * n_starts for k in range(steps)]
     theta = lo + span * best_z
     n_roll = steps * n_per_eval * n_starts
     return TuneResult(
@@ -163,6 +137,45 @@ def gradient_tune(
         n_roll * autodiff.forward_passes_per_gradient(lo.size, mode),
         compile_s,
     )
+
+
+def _starts(theta0, key, n_starts: int, lo: np.ndarray, span: np.ndarray):
+    """``(n_starts, D)`` starts in box units: ``theta0`` first when given, the others uniform from ``key``."""
+    if key is None and (theta0 is None or n_starts > 1):
+        raise errors.InputError("key: required for random starts")
+    starts = [] if theta0 is None else [np.asarray(theta0, np.float64)]
+    if len(starts) < n_starts:
+        u = np.asarray(jax.random.uniform(key, (n_starts - len(starts),) + lo.shape), np.float64)
+        starts += list(lo + span * u)
+    return jnp.asarray(np.clip((np.stack(starts) - lo) / span, 0.0, 1.0))
+
+
+def _descend(step, z, state, steps: int, progress: bool, t0: float):
+    """``steps`` calls of the compiled ``step``; returns the best cost and its point (box units), the
+    best cost so far and the wall time after each step, and the count of non-finite gradients."""
+    best_J, best_z = np.inf, np.asarray(z)
+    hist, hist_t, n_bad = [], [], 0
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=steps, desc="gradient", leave=False)
+    for _ in range(steps):
+        z_k = z
+        J, z, state, nb = step(z, state)
+        J = np.where(np.isfinite(np.asarray(J)), np.asarray(J), np.inf)
+        n_bad += int(nb)
+        i = int(np.argmin(J))
+        if J[i] < best_J:
+            best_J, best_z = float(J[i]), np.asarray(z_k[i])
+        hist.append(best_J)
+        hist_t.append(time.perf_counter() - t0)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(best=f"{best_J:.5g}")
+    if bar is not None:
+        bar.close()
+    return best_J, best_z, hist, hist_t, n_bad
 
 
 @functools.lru_cache(maxsize=32)

@@ -53,6 +53,12 @@ class Problem(NamedTuple):
         return n_scenarios(self.scenarios)
 
 
+#: Vehicle models a problem simulates (:func:`make_problem`'s ``model``).
+MODELS = ("kinematic", "st", "std")
+#: The parameter set of the paper sets and registered paths on the dynamic models (as ``pfjax simulate --model``).
+DYNAMIC_PARAMS = {"st": "robot", "std": "vehicle2"}
+
+
 def make_problem(
     controller: str,
     scenario: str,
@@ -63,6 +69,7 @@ def make_problem(
     run_offset: int = 0,
     base_gains=None,
     box=None,
+    model: str | None = None,
 ) -> Problem:
     """Build a problem (``controller``: a :data:`pfjax.controllers.REGISTRY` name).
 
@@ -75,20 +82,34 @@ def make_problem(
         n_runs: runs per path sampled from a study TOML; ``run_offset``: first run index.
         base_gains: gains pytree for the untuned fields (default: the registry's defaults).
         box: ``(fields, lower, upper)`` overriding the registry entry's ``box``.
+        model: the vehicle model, ``kinematic`` | ``st`` | ``std`` (:data:`MODELS`; ``None``: the
+            kinematic model for a paper set, the study's ``[vehicle] model`` for a TOML, which
+            ``model`` replaces when given). On ``st`` and ``std`` a paper set's runs start from the
+            same poses on the same paths with the parameter set of :data:`DYNAMIC_PARAMS` (the
+            ``robot``; ``vehicle2`` for the drift model, CommonRoad's vehicles only) at 1 m/s, their
+            slip coming from the tyre forces instead of the declared 5°.
     """
+    import dataclasses
+
+    ctrl, lo, hi, tun = _tunable(controller, base_gains, box)
+    _check_inputs(scenario, n_runs, run_offset, model)
+    if scenario in scenario_sets():
+        batches = _paper_batches(scenario, tun.base, model or "kinematic")
+        cfg = config or SimConfig(record=False)
+    else:
+        batches, study_cfg = _study_batches(scenario, tun.base, n_runs, run_offset, model)
+        cfg = config or study_cfg
+    cfg = dataclasses.replace(cfg, record=False)
+    return Problem(ctrl, tun, batches, cfg, cost.check(), np.asarray(lo, float), np.asarray(hi, float))
+
+
+def _tunable(controller: str, base_gains, box):
+    """(controller function, lower, upper, :class:`Tunable`) of a registered controller with a tuning box."""
     from pfjax import errors
-    from pfjax.sim.simulate import stack
 
     tunable = [n for n, e in C.REGISTRY.items() if e.box is not None]
     if controller not in tunable:
         raise errors.InputError(f"controller: value {controller!r}, expected one of {', '.join(tunable)}")
-    sets = scenario_sets()
-    if scenario not in sets and not (Path(scenario).suffix == ".toml" and Path(scenario).is_file()):
-        raise errors.InputError(
-            f"scenario: value {scenario!r}, expected one of {', '.join(sets)} or an existing study .toml"
-        )
-    errors.integer("n_runs", n_runs, low=1, high=1_000_000)
-    errors.integer("run_offset", run_offset, low=0, high=errors.MAX_SEED - n_runs)
     ctrl, factory = C.REGISTRY[controller][:2]
     box = box or C.REGISTRY[controller].box
     if box is None:
@@ -97,33 +118,61 @@ def make_problem(
         )
     fields, lo, hi = box
     base = factory() if base_gains is None else base_gains
-    tun = Tunable(base, tuple(fields))
-    if scenario in sets:
-        from pfjax.sim.scenario import paper_scenario
+    return ctrl, lo, hi, Tunable(base, tuple(fields))
 
-        batches = [stack([paper_scenario(t, base)]) for t in sets[scenario]]
-        cfg = config or SimConfig(record=False)
-    else:
-        from pfjax.montecarlo.config import load_study
-        from pfjax.montecarlo.runner import sim_config
-        from pfjax.montecarlo.sampling import sample_runs
 
-        try:
-            spec, _ = load_study(Path(scenario))
-        except errors.InputError as e:
-            raise errors.InputError(f"scenario: {e}", "scenario") from None
-        runs = np.arange(run_offset, run_offset + n_runs)
-        batches = []
-        for i in range(len(spec.paths)):
-            sc = sample_runs(spec, i, runs).scenarios
-            batches.append(
-                sc._replace(gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(g, (n_runs,) + np.shape(g)), base))
-            )
-        cfg = config or sim_config(spec)
-    import dataclasses
+def _check_inputs(scenario: str, n_runs: int, run_offset: int, model: str | None) -> None:
+    from pfjax import errors
 
-    cfg = dataclasses.replace(cfg, record=False)
-    return Problem(ctrl, tun, batches, cfg, cost.check(), np.asarray(lo, float), np.asarray(hi, float))
+    sets = scenario_sets()
+    if scenario not in sets and not (Path(scenario).suffix == ".toml" and Path(scenario).is_file()):
+        raise errors.InputError(
+            f"scenario: value {scenario!r}, expected one of {', '.join(sets)} or an existing study .toml"
+        )
+    if model is not None and model not in MODELS:
+        raise errors.InputError(f"model: value {model!r}, expected one of {', '.join(MODELS)}", "model")
+    errors.integer("n_runs", n_runs, low=1, high=1_000_000)
+    errors.integer("run_offset", run_offset, low=0, high=errors.MAX_SEED - n_runs)
+
+
+def _paper_batches(scenario: str, base, model: str) -> list:
+    """One batch of one run per path of a paper set: the kinematic model at the source's 5° slip, or
+    the dynamic model (:func:`pfjax.sim.scenario.make_dynamic_scenario`) from the same start."""
+    from pfjax import paths
+    from pfjax.sim.scenario import make_dynamic_scenario, paper_scenario
+    from pfjax.sim.simulate import stack
+
+    if model == "kinematic":
+        return [stack([paper_scenario(t, base)]) for t in scenario_sets()[scenario]]
+    out = []
+    for t in scenario_sets()[scenario]:
+        e = paths.entry(t)
+        assert e.build is not None and e.start_pose is not None  # a paper set's paths are fixed paths
+        out.append(
+            stack([make_dynamic_scenario(e.build(), e.start_pose, base, params=DYNAMIC_PARAMS[model], model=model)])
+        )
+    return out
+
+
+def _study_batches(scenario: str, base, n_runs: int, run_offset: int, model: str | None):
+    """(batches of ``n_runs`` sampled runs per path from ``run_offset``, the study's SimConfig) of a study TOML."""
+    from pfjax import errors
+    from pfjax.montecarlo.config import load_study
+    from pfjax.montecarlo.runner import sim_config
+    from pfjax.montecarlo.sampling import sample_runs
+
+    try:
+        spec, _ = load_study(Path(scenario), [] if model is None else [f'vehicle.model="{model}"'])
+    except errors.InputError as e:
+        raise errors.InputError(f"scenario: {e}", "scenario") from None
+    runs = np.arange(run_offset, run_offset + n_runs)
+    batches = []
+    for i in range(len(spec.paths)):
+        sc = sample_runs(spec, i, runs).scenarios
+        batches.append(
+            sc._replace(gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(g, (n_runs,) + np.shape(g)), base))
+        )
+    return batches, sim_config(spec)
 
 
 def evaluate(problem: Problem, theta) -> float:
@@ -185,7 +234,53 @@ def tune(
     method or settings, or batches beyond the memory budget (:mod:`pfjax.resources`: the GA
     simulates a whole population at once, the gradient every start with one tangent per tuned
     gain)."""
-    from pfjax import errors, resources
+    ms = _checked_options(method, ga_options, steps, n_starts, learning_rate, multistart)
+    _check_memory(problem, method, ga_options, ms, n_starts)
+    f_scalar, f_pop = cost_functions(problem)
+    box = (problem.lower, problem.upper)
+    if method == "gradient":
+        cand = [problem.tunable.flatten()] + ([] if theta0 is None else [np.asarray(theta0, np.float64)])
+        return multistart_tune(
+            f_scalar,
+            *box,
+            key=key,
+            options=ms,
+            candidates=np.stack(cand),
+            n_per_eval=problem.n_per_eval,
+            progress=progress,
+        )
+    if method == "gradient-plain":
+        return gradient_tune(
+            f_scalar,
+            *box,
+            theta0=theta0,
+            key=key,
+            steps=steps or 100,
+            n_starts=n_starts or 1,
+            n_per_eval=problem.n_per_eval,
+            learning_rate=learning_rate or 0.05,
+            progress=progress,
+        )
+    r = ga_tune(f_pop, *box, key=key, options=ga_options, n_per_eval=problem.n_per_eval, progress=progress)
+    if method == "ga":
+        return r
+    p = gradient_tune(
+        f_scalar,
+        *box,
+        theta0=r.theta,
+        key=key,
+        steps=steps or 30,
+        n_per_eval=problem.n_per_eval,
+        learning_rate=learning_rate or 0.01,
+        progress=progress,
+    )
+    return _chained(r, p)
+
+
+def _checked_options(method, ga_options, steps, n_starts, learning_rate, multistart) -> MultistartOptions:
+    """:func:`tune`'s settings checked (:class:`~pfjax.errors.InputError` naming the argument); the
+    multi-start tuner's options with ``steps``, ``n_starts`` and ``learning_rate`` applied."""
+    from pfjax import errors
     from pfjax.tuning.ga import validate_options
 
     if method not in METHODS:
@@ -203,6 +298,15 @@ def tune(
     ms = ms._replace(**given)
     if method == "gradient":
         ms = ms._replace(rounds=min(ms.rounds, ms.steps)).check()
+    return ms
+
+
+def _check_memory(problem: Problem, method: str, ga_options: GAOptions, ms: MultistartOptions, n_starts) -> None:
+    """Refuse batches beyond the memory budget (:mod:`pfjax.resources`): the GA simulates a whole
+    population at once, the gradient every start with one tangent per tuned gain."""
+    from pfjax import resources
+    from pfjax.tuning.ga import validate_options
+
     D = problem.lower.size
     per_run = resources.run_bytes(problem.config.n_steps)
     if method in ("ga", "ga+gradient"):
@@ -224,54 +328,11 @@ def tune(
             2 * (ms.n_screen + 2) * problem.n_per_eval * per_run,
             f"{ms.n_screen} screened points x {problem.n_per_eval} runs",
         )
-    f_scalar, f_pop = cost_functions(problem)
-    if method == "gradient":
-        cand = [problem.tunable.flatten()] + ([] if theta0 is None else [np.asarray(theta0, np.float64)])
-        return multistart_tune(
-            f_scalar,
-            problem.lower,
-            problem.upper,
-            key=key,
-            options=ms,
-            candidates=np.stack(cand),
-            n_per_eval=problem.n_per_eval,
-            progress=progress,
-        )
-    if method == "gradient-plain":
-        return gradient_tune(
-            f_scalar,
-            problem.lower,
-            problem.upper,
-            theta0=theta0,
-            key=key,
-            steps=steps or 100,
-            n_starts=n_starts or 1,
-            n_per_eval=problem.n_per_eval,
-            learning_rate=learning_rate or 0.05,
-            progress=progress,
-        )
-    r = ga_tune(
-        f_pop,
-        problem.lower,
-        problem.upper,
-        key=key,
-        options=ga_options,
-        n_per_eval=problem.n_per_eval,
-        progress=progress,
-    )
-    if method == "ga":
-        return r
-    p = gradient_tune(
-        f_scalar,
-        problem.lower,
-        problem.upper,
-        theta0=r.theta,
-        key=key,
-        steps=steps or 30,
-        n_per_eval=problem.n_per_eval,
-        learning_rate=learning_rate or 0.01,
-        progress=progress,
-    )
+
+
+def _chained(r: TuneResult, p: TuneResult) -> TuneResult:
+    """The GA's result ``r`` followed by the gradient polish ``p`` from its best: the better answer,
+    the histories joined, the budgets added."""
     best = p if p.cost < r.cost else r
     return TuneResult(
         best.theta,

@@ -1,6 +1,7 @@
-"""Parts of the tuning study (``studies/tuning_ga_vs_gradient.py``) beside the GA-vs-gradient comparison:
-the Table 3 check, local checks of the best answers, single vs robust tuning of K, the LMI designs and
-the held-out Monte Carlo evaluation."""
+"""Parts of the tuning study (:mod:`pfjax.tuning.study`) beside the GA-vs-gradient comparison: the
+Table 3 check, local checks of the best answers, single vs robust tuning of K, the LMI designs, the
+held-out Monte Carlo evaluation and the targets by problem. ``cfg`` is the validated
+:class:`pfjax.tuning.study_config.TuningStudy` as a dict (``model_dump``)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from pfjax.tuning.multistart import MultistartOptions
+from pfjax.tuning.study_config import problem_list
 
 
 def table3(cfg, pr, progress):
@@ -67,6 +69,7 @@ def checks(runs, problems, name):
 
 
 def tune_K(cfg, spec, progress):
+    """K of state feedback tuned by the multi-start tuner on the paper line and on the training sample."""
     from pfjax.sim import SimConfig
     from pfjax.tuning.problem import make_problem, tune
 
@@ -232,3 +235,37 @@ def heldout_controllers(tuning_runs, ks, des) -> dict:
         "polytopic-integral (LMI)": integ(des["polytopic-integral"]["K"]),
     }
     return controllers
+
+
+def targets_by_problem(cfg, runs):
+    """Per problem: the multi-start tuner (and plain adam) against the GA's median on the same seeds."""
+    out = {}
+    need = cfg["seeds"] - max(1, cfg["seeds"] // 20)  # 19 of 20
+    for name in problem_list(cfg["compare"]["problems"]):
+        by = lambda m, name=name: [r for r in runs if r["problem"] == name and r["method"] == m]
+        ga = by("ga")
+        med = float(np.median([r["cost"] for r in ga]))
+        row = {"ga_median": med, "ga_best": min(r["cost"] for r in ga), "ga_rollouts": ga[0]["n_rollouts"]}
+        for m in ("ga", "gradient", "gradient-plain"):
+            rs = by(m)
+            c = np.asarray([r["cost"] for r in rs])
+            wins = int(np.sum(c <= med))
+            row[m] = {
+                "median": float(np.median(c)),
+                "min": float(c.min()),
+                "max": float(c.max()),
+                "wins": wins,
+                "n": len(c),
+                "rollouts": rs[0]["n_rollouts"],
+                "forward_passes": rs[0]["n_forward_passes"],
+                "rollout_fraction": rs[0]["n_rollouts"] / ga[0]["n_rollouts"],
+                "forward_pass_fraction": rs[0]["n_forward_passes"] / ga[0]["n_forward_passes"],
+                "wall_s_median": float(np.median([r["wall_s"] for r in rs])),
+                "met": bool(wins >= need and rs[0]["n_rollouts"] * 10 <= ga[0]["n_rollouts"]),
+                "met_forward_passes": bool(
+                    wins >= need and rs[0]["n_forward_passes"] * 10 <= ga[0]["n_forward_passes"]
+                ),
+            }
+        row["ga_wall_s_median"] = float(np.median([r["wall_s"] for r in ga]))
+        out[name] = row
+    return out

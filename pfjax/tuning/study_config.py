@@ -1,0 +1,237 @@
+"""The tuning study's configuration schema (``studies/tuning_ga_vs_gradient.toml``).
+
+Sections: ``sim`` (the paper-* problems' step and horizon), ``ga`` (the source's MATLAB ga),
+``gradient`` (plain projected adam), ``multistart`` (the multi-start tuner,
+:class:`pfjax.tuning.multistart.MultistartOptions`), ``compare`` (problems and the ablation) and
+``robust`` (robust tuning, the held-out set, the polytopic designs). Every key is optional; the
+defaults are the study's published sizes. Loaded by :func:`load` with the same ``--set key=value``
+syntax and one-line :class:`pfjax.config.ConfigError` as the Monte Carlo study.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from pydantic import Field, model_validator
+
+from pfjax.config import POSITIVE, ConfigModel, Real, load_model
+from pfjax.tuning.multistart import MultistartOptions
+
+#: The multi-start tuner with one ingredient changed, at about the same budget (``compare.ablation``).
+ABLATION: dict[str, dict[str, int | float | str]] = {
+    "no_screening": {"n_screen": 0},
+    "uniform_screening": {"sampler": "uniform"},
+    "latin_hypercube": {"sampler": "lhs"},
+    "no_separation": {"separation": 0.0},
+    "no_halving": {"rounds": 1, "steps": 35},
+    "no_restarts": {"n_restarts": 0},
+    "no_polish": {"polish_steps": 0},
+    "fewer_gradient_steps": {"steps": 30, "restart_steps": 10, "polish_steps": 16},
+    "adam": {"local": "adam", "learning_rate": 0.05},
+    "smoothing": {"smoothing": 0.05},
+    "single_start": {"n_starts": 1, "rounds": 1, "steps": 280},
+}
+
+#: Scenario sets a problem of ``compare.problems`` may name after its controller.
+SCENARIOS = ("paper-line", "paper-all", "heldout-cvar")
+
+#: ``--quick``: two seeds of few-step tuners on one problem, a small held-out set (tests, a first look)
+QUICK = {
+    "seeds": 2,
+    "cli_seeds": 0,
+    "sim": {"horizon": 16.0},
+    "ga": {"population": 6, "generations": 2},
+    # plain adam, the Table 3 descent and the GA's polish take the same 30 steps of 0.01 from one
+    # start: one compiled step program serves the three
+    "gradient": {"steps": 30, "starts": 1, "lr": 0.01, "table3_steps": 30},
+    "multistart": {
+        "n_screen": 4,
+        "n_starts": 2,
+        "steps": 2,
+        "rounds": 1,
+        "n_restarts": 0,
+        "restart_steps": 1,
+        "polish_steps": 0,
+    },
+    "compare": {"problems": "pi:paper-line", "ablate": False},
+    "robust": {"train_runs": 1, "heldout_runs": 3, "margin_runs": 2},
+}
+
+
+class TuneSim(ConfigModel):
+    """The paper-* problems: the source's tests at 5 deg slip."""
+
+    dt: Real = Field(0.01, ge=POSITIVE, description="RK4 integration step [s]")
+    horizon: Real = Field(20.0, gt=15.0, description="simulated time, > 15 s (success window from 15 s) [s]")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.dt > self.horizon:
+            raise ValueError(f"dt: must be <= horizon ({self.horizon:g}), got {self.dt:g}")
+        return self
+
+
+class TuneGA(ConfigModel):
+    """The source's MATLAB ga settings (Table 2)."""
+
+    population: int = Field(50, ge=2, description="individuals per generation [-]")
+    generations: int = Field(100, ge=1, description="generations [-]")
+
+
+class TuneGradient(ConfigModel):
+    """Plain projected adam (``--method gradient-plain``) and the descent from the Table 3 gains."""
+
+    steps: int = Field(100, ge=1, description="adam steps per seed [-]")
+    starts: int = Field(4, ge=1, description="starts descended together [-]")
+    lr: Real = Field(0.05, gt=0, description="adam step [normalised box units]")
+    table3_steps: int = Field(60, ge=1, description="adam steps from the Table 3 gains (local-optimum check) [-]")
+
+
+class TuneMultistart(ConfigModel):
+    """The multi-start tuner (``--method gradient``; :class:`pfjax.tuning.multistart.MultistartOptions`)."""
+
+    n_screen: int = Field(64, description="space-filling points screened by value [-]")
+    sampler: str = Field("sobol", description="screening points: sobol | lhs | uniform [-]")
+    n_starts: int = Field(8, description="best screened points descended together [-]")
+    separation: Real = Field(0.1, description="least RMS distance between two starts [normalised box units]")
+    steps: int = Field(60, description="cost-and-gradient evaluations of a chain that survives every round [-]")
+    rounds: int = Field(3, description="successive-halving rounds (1: no halving) [-]")
+    local: str = Field("bfgs", description="local descent: bfgs | adam [-]")
+    learning_rate: Real = Field(0.1, description="bfgs first trust radius / adam step [normalised box units]")
+    smoothing: Real = Field(0.0, description="randomised-smoothing radius of the first round [normalised box units]")
+    n_restarts: int = Field(3, description="perturbations of the incumbent descended at the end [-]")
+    restart_steps: int = Field(20, description="evaluations of a restart chain [-]")
+    restart_scale: Real = Field(0.05, description="standard deviation of the perturbations [normalised box units]")
+    polish_steps: int = Field(8, description="value-only compass iterations around the incumbent [-]")
+    polish_scale: Real = Field(0.05, description="first compass step [normalised box units]")
+
+    @model_validator(mode="after")
+    def _check(self):
+        check_multistart(self.model_dump())
+        return self
+
+
+def check_multistart(options: dict) -> MultistartOptions:
+    """``options`` as :class:`MultistartOptions`, checked; ``ValueError`` naming the bad field."""
+    from pfjax import errors
+
+    try:
+        return MultistartOptions(**options).check()
+    except (TypeError, errors.InputError) as e:
+        raise ValueError(str(e)) from None
+
+
+def problem_list(text: str) -> list[str]:
+    """A comma-separated ``CONTROLLER:SCENARIO`` list as a list."""
+    return [p.strip() for p in text.split(",") if p.strip()]
+
+
+class TuneCompare(ConfigModel):
+    """The problems every tuner runs on, the CVaR problem and the ablation of the multi-start tuner."""
+
+    problems: str = Field(
+        "pi:paper-line, pi:paper-all, pi:heldout-cvar, state_feedback:paper-line, integral:paper-line, "
+        "stanley:paper-line, pure_pursuit:paper-line, rear_wheel:paper-line",
+        description="comma-separated CONTROLLER:SCENARIO, scenario paper-line | paper-all | heldout-cvar; "
+        "must list pi:paper-line [-]",
+    )
+    cvar_level: Real = Field(0.9, gt=0, lt=1, description="heldout-cvar: CVaR level of the IAE [-]")
+    cvar_runs: int = Field(3, ge=1, description="heldout-cvar: training runs per path [-]")
+    ablate: bool = Field(True, description="run the ablation on every problem of ablate_problems [-]")
+    ablate_problems: str = Field(
+        "pi:paper-line, integral:paper-line", description="comma-separated problems of the ablation [-]"
+    )
+    ablation: dict[str, dict[str, int | float | str]] = Field(
+        default_factory=lambda: {k: v.copy() for k, v in ABLATION.items()},
+        description="variant name -> multistart keys changed [-]",
+    )
+
+    @model_validator(mode="after")
+    def _check(self):
+        from pfjax import controllers as C
+
+        problems = problem_list(self.problems)
+        for p in problems:
+            c, _, sc = p.partition(":")
+            if c not in C.REGISTRY or C.REGISTRY[c].box is None or sc not in SCENARIOS:
+                raise ValueError(
+                    f"problems: {p!r}, expected CONTROLLER:SCENARIO with a tunable controller and a scenario "
+                    + " | ".join(SCENARIOS)
+                )
+        if "pi:paper-line" not in problems:
+            raise ValueError("problems: must list pi:paper-line (the held-out part evaluates its answers)")
+        if self.ablate and not set(problem_list(self.ablate_problems)) <= set(problems):
+            raise ValueError("ablate_problems: every problem must be listed in compare.problems")
+        return self
+
+
+class TuneRobust(ConfigModel):
+    """Robust tuning of K on a training sample of the held-out study's distribution, the held-out
+    evaluation and the polytopic designs."""
+
+    train_runs: int = Field(6, ge=1, description="training runs per path (x 3 paths per cost evaluation) [-]")
+    heldout_runs: int = Field(200, ge=1, description="held-out runs per path [-]")
+    margin_runs: int = Field(40, ge=1, description="runs per slip amplitude in the margin sweep [-]")
+    v_lo: Real = Field(0.8, gt=0, description="polytope: lowest speed [m/s]")
+    v_hi: Real = Field(1.2, gt=0, description="polytope: highest speed [m/s]")
+    beta_r_max_deg: Real = Field(10.0, ge=0, lt=90, description="polytope: largest |beta_r| [deg]")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.v_hi < self.v_lo:
+            raise ValueError(f"v_hi: must be >= v_lo ({self.v_lo:g}), got {self.v_hi:g}")
+        return self
+
+
+class TuningStudy(ConfigModel):
+    """The tuning study (``studies/tuning_ga_vs_gradient.py``)."""
+
+    heldout: str = Field(
+        "studies/tuning_heldout.toml", description="a Monte Carlo study TOML: the held-out set and training set [-]"
+    )
+    seeds: int = Field(20, ge=1, description="seeds 0..seeds-1 of every method on every problem [-]")
+    cli_seeds: int = Field(5, ge=0, description="seeds of `pfjax tune --method gradient` at its defaults [-]")
+    sim: TuneSim = TuneSim()
+    ga: TuneGA = TuneGA()
+    gradient: TuneGradient = TuneGradient()
+    multistart: TuneMultistart = TuneMultistart()
+    compare: TuneCompare = TuneCompare()
+    robust: TuneRobust = TuneRobust()
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.cli_seeds > self.seeds:
+            raise ValueError(f"cli_seeds: must be in [0, seeds], got {self.cli_seeds}")
+        base = self.multistart.model_dump()
+        for name, over in self.compare.ablation.items():
+            try:
+                check_multistart({**base, **over})
+            except ValueError as e:
+                raise ValueError(f"compare.ablation.{name}: {e}") from None
+        if not Path(self.heldout).is_file():
+            raise ValueError(f"heldout: file not found: {self.heldout}")
+        return self
+
+
+def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: bool = False) -> TuningStudy:
+    """The validated study config: defaults <- ``path`` <- (``--quick``) <- ``overrides``; raises
+    :class:`pfjax.config.ConfigError` naming the key."""
+    return load_model(TuningStudy, path, overrides, presets=[QUICK] if quick else [])[0]
+
+
+__all__ = [
+    "ABLATION",
+    "QUICK",
+    "SCENARIOS",
+    "TuneCompare",
+    "TuneGA",
+    "TuneGradient",
+    "TuneMultistart",
+    "TuneRobust",
+    "TuneSim",
+    "TuningStudy",
+    "check_multistart",
+    "load",
+    "problem_list",
+]
