@@ -33,65 +33,10 @@ class ConfigError(InputError):
     """A configuration error; the message is one line and names the key."""
 
 
-def _type_name(v) -> str:
-    return {
-        bool: "a boolean",
-        int: "an integer",
-        float: "a number",
-        str: "a string",
-        list: "a list",
-        dict: "a table",
-    }.get(type(v), type(v).__name__)
-
-
 def _short(value, limit: int = 60) -> str:
     """``repr(value)``, cut to ``limit`` characters (a 400-digit number stays one readable line)."""
     text = repr(value)
     return text if len(text) <= limit else f"{text[: limit - 15]}... ({len(text)} characters)"
-
-
-def _check(key: str, value, default):
-    if isinstance(default, bool):
-        ok = isinstance(value, bool)
-    elif isinstance(default, float):
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if ok:
-            try:
-                value = errors.number(key, value)  # finite, within pfjax's magnitude bounds
-            except InputError as e:
-                raise ConfigError(str(e)) from None
-    elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
-        if ok and abs(value) > errors.MAX_SEED:
-            raise ConfigError(
-                f"{key}: expected an integer of magnitude <= 2**63 - 1, got one of {len(str(abs(value)))} digits"
-            )
-    elif isinstance(default, list):
-        ok = isinstance(value, list) and (not default or len(value) == len(default))
-        if ok and default:
-            value = [_check(f"{key}[{i}]", v, d) for i, (v, d) in enumerate(zip(value, default))]
-    else:
-        ok = isinstance(value, type(default))
-    if not ok:
-        extra = f" of length {len(default)}" if isinstance(default, list) and default else ""
-        raise ConfigError(f"{key}: expected {_type_name(default)}{extra}, got {_short(value)}")
-    return value
-
-
-def _merge(base: dict, update: dict, prefix: str = "") -> dict:
-    out = copy.deepcopy(base)
-    for k, v in update.items():
-        key = f"{prefix}{k}"
-        if k not in base:
-            hint = difflib.get_close_matches(k, list(base), n=1)
-            raise ConfigError(f"{key}: unknown key" + (f" (did you mean {prefix + hint[0]!r}?)" if hint else ""))
-        if isinstance(base[k], dict):
-            if not isinstance(v, dict):
-                raise ConfigError(f"{key}: expected a table, got {v!r}")
-            out[k] = _merge(base[k], v, f"{key}.")
-        else:
-            out[k] = _check(key, v, base[k])
-    return out
 
 
 #: One part of a ``--set`` key: a name, optionally a list index (``controllers[0]``).
@@ -153,16 +98,6 @@ def read_toml(path: str | Path, key: str = "config") -> dict:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{key}: {path}: invalid TOML ({e})") from None
-
-
-def load(defaults: dict, path: str | Path | None = None, overrides: Sequence[str] = ()) -> dict:
-    """Defaults <- TOML file <- ``--set`` overrides, each checked against the defaults."""
-    cfg = copy.deepcopy(defaults)
-    if path is not None:
-        cfg = _merge(cfg, read_toml(path))
-    for text in overrides:
-        cfg = _merge(cfg, parse_override(text))
-    return cfg
 
 
 # ------------------------------------------------------------------------------ the schema family

@@ -1,4 +1,4 @@
-"""pfjax.config: defaults <- TOML file <- --set overrides, one-line errors naming the key, hashing;
+"""pfjax.config: a schema of the family read from defaults <- TOML file <- presets <- --set overrides, one-line errors naming the key, hashing;
 and the study script's handling of bad configuration (exit 2, one line, nothing written)."""
 
 from __future__ import annotations
@@ -11,14 +11,49 @@ import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Literal
 
 import pytest
+from pydantic import Field
 
-from pfjax.config import ConfigError, load, parse_override
+from pfjax.config import ConfigError, ConfigModel, Real, load_model, parse_override
 from pfjax.provenance import config_hash
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "studies" / "paper_reproduction.py"
+
+
+class Model(ConfigModel):
+    v: Real = 1.0
+    L: Real = Field(0.2, gt=0)
+    convention: Literal["source", "lenain"] = "source"
+    n: int = 3
+
+
+class Source(ConfigModel):
+    K: list[Real] = Field([-2.7381, -2.0772], min_length=2, max_length=2)
+    flags: list[bool] = Field([True, False], min_length=2, max_length=2)
+
+
+class Inner(ConfigModel):
+    x: Real = 0.5
+    label: str = "a"
+
+
+class Deep(ConfigModel):
+    inner: Inner = Inner()
+
+
+class Demo(ConfigModel):
+    """A small schema of the family: nested tables, lists of fixed length, literals, bounds."""
+
+    name: str = "demo"
+    seed: int = 0
+    trackers: bool = True
+    model: Model = Model()
+    source: Source = Source()
+    deep: Deep = Deep()
+
 
 DEFAULTS = {
     "name": "demo",
@@ -30,25 +65,26 @@ DEFAULTS = {
 }
 
 
+def load(path=None, overrides=(), **kw) -> dict:
+    return load_model(Demo, path, overrides, **kw)[0].model_dump()
+
+
 def write(tmp_path, text, name="cfg.toml"):
     p = tmp_path / name
     p.write_text(text)
     return p
 
 
-def test_defaults_unchanged_and_not_aliased():
-    cfg = load(DEFAULTS)
-    assert cfg == DEFAULTS and cfg is not DEFAULTS
-    before = copy.deepcopy(DEFAULTS)
-    cfg["model"]["v"] = 99.0
-    cfg["source"]["K"][0] = 0.0
-    assert before == DEFAULTS
+def test_defaults_and_no_aliasing_of_the_raw_data():
+    assert load() == DEFAULTS
+    data = copy.deepcopy(DEFAULTS)
+    cfg, raw = load_model(Demo, data=data, overrides=["model.v=3"])
+    assert cfg.model.v == 3.0 and data == DEFAULTS and raw is not data  # the caller's dict is untouched
 
 
-def test_file_then_overrides(tmp_path):
+def test_file_then_presets_then_overrides(tmp_path):
     p = write(tmp_path, 'name = "from-file"\n[model]\nv = 2\nn = 7\n[deep.inner]\nx = 1.5\n[source]\nK = [-1, -2.5]\n')
     cfg = load(
-        DEFAULTS,
         p,
         [
             "model.v=3.5",
@@ -57,15 +93,17 @@ def test_file_then_overrides(tmp_path):
             "trackers=false",
             "model.convention = lenain",
         ],
+        presets=[{"model": {"L": 0.3, "v": 9.0}}],
     )
     assert cfg["name"] == "from-file"
-    assert cfg["model"] == {"v": 3.5, "L": 0.2, "convention": "lenain", "n": 7}  # --set wins over the file
+    # the preset wins over the file, --set over the preset
+    assert cfg["model"] == {"v": 3.5, "L": 0.3, "convention": "lenain", "n": 7}
     assert cfg["deep"]["inner"] == {"x": 1.5, "label": "b"}
     assert cfg["source"] == {"K": [-1.0, -2.5], "flags": [False, True]}
     assert cfg["trackers"] is False
     # ints accepted where floats are expected, and stored as floats
     assert type(cfg["source"]["K"][0]) is float
-    assert type(load(DEFAULTS, None, ["model.v=2"])["model"]["v"]) is float
+    assert type(load(None, ["model.v=2"])["model"]["v"]) is float
     assert type(cfg["model"]["n"]) is int
 
 
@@ -92,26 +130,26 @@ def message(excinfo) -> str:
         ("modle.v=1", "modle", "did you mean 'model'"),
         ("deep.inner.lable=x", "deep.inner.lable", "did you mean 'deep.inner.label'"),
         ("zzz=1", "zzz", "unknown key"),
-        ("model.v=true", "model.v", "expected a number"),  # a bool is not a number
-        ("model.v=fast", "model.v", "expected a number"),
-        ("model.n=2.5", "model.n", "expected an integer"),
-        ("model.convention=3", "model.convention", "expected a string"),
-        ("trackers=1", "trackers", "expected a boolean"),
-        ("source.K=[1.0]", "source.K", "of length 2"),
-        ("source.K=[1.0, 2.0, 3.0]", "source.K", "of length 2"),
-        ("source.K=3.0", "source.K", "expected a list"),
-        ('source.K=[1.0, "a"]', "source.K[1]", "expected a number"),
+        ("model.v=true", "model.v", "valid number"),  # a bool is not a number
+        ("model.v=fast", "model.v", "valid number"),
+        ("model.n=2.5", "model.n", "valid integer"),
+        ("model.convention=3", "model.convention", "'source' or 'lenain'"),
+        ("trackers=1", "trackers", "valid boolean"),
+        ("source.K=[1.0]", "source.K", "at least 2 items"),
+        ("source.K=[1.0, 2.0, 3.0]", "source.K", "at most 2 items"),
+        ("source.K=3.0", "source.K", "valid list"),
+        ('source.K=[1.0, "a"]', "source.K[1]", "valid number"),
         ("model.v=nan", "model.v", "finite"),
-        ("model.L=-inf", "model.L", "finite"),
-        ("model=3", "model", "expected a table"),
-        ("model.v.x=1", "model.v", "expected a number"),
+        ("model.L=-inf", "model.L", "must be > 0"),
+        ("model=3", "model", "valid dictionary"),
+        ("model.v.x=1", "model.v", "valid number"),
         ("novalue", "--set", "key=value"),
         ("=3", "--set", "empty key"),
     ],
 )
 def test_override_errors_name_the_key(override, key, extra):
     with pytest.raises(ConfigError) as e:
-        load(DEFAULTS, None, [override])
+        load(None, [override])
     msg = message(e)
     assert msg.startswith(key + ":") or msg.startswith(key + " "), msg
     assert extra in msg, msg
@@ -121,16 +159,16 @@ def test_override_errors_name_the_key(override, key, extra):
     "text, key, extra",
     [
         ("[model]\nvv = 1.0\n", "model.vv", "did you mean 'model.v'"),
-        ("[model]\nv = 'fast'\n", "model.v", "expected a number"),
+        ("[model]\nv = 'fast'\n", "model.v", "valid number"),
         ("[model]\nv = nan\n", "model.v", "finite"),
-        ("[source]\nK = [1.0]\n", "source.K", "of length 2"),
-        ("[deep]\ninner = 2\n", "deep.inner", "expected a table"),
-        ("seed = 1.5\n", "seed", "expected an integer"),
+        ("[source]\nK = [1.0]\n", "source.K", "at least 2 items"),
+        ("[deep]\ninner = 2\n", "deep.inner", "valid dictionary"),
+        ("seed = 1.5\n", "seed", "valid integer"),
     ],
 )
 def test_file_errors_name_the_key(tmp_path, text, key, extra):
     with pytest.raises(ConfigError) as e:
-        load(DEFAULTS, write(tmp_path, text))
+        load(write(tmp_path, text))
     msg = message(e)
     assert msg.startswith(key + ":"), msg
     assert extra in msg, msg
@@ -138,11 +176,11 @@ def test_file_errors_name_the_key(tmp_path, text, key, extra):
 
 def test_missing_file_and_invalid_toml(tmp_path):
     with pytest.raises(ConfigError) as e:
-        load(DEFAULTS, tmp_path / "nope.toml")
+        load(tmp_path / "nope.toml")
     assert "not found" in message(e) and "nope.toml" in str(e.value)
     bad = write(tmp_path, "[model\nv = 1\n", "bad.toml")
     with pytest.raises(ConfigError) as e:
-        load(DEFAULTS, bad)
+        load(bad)
     assert "invalid TOML" in message(e) and "bad.toml" in str(e.value)
 
 
@@ -151,7 +189,7 @@ def test_config_error_is_a_value_error():
 
 
 def test_config_hash():
-    cfg = load(DEFAULTS)
+    cfg = load()
     h = config_hash(cfg)
     assert len(h) == 64 and int(h, 16) >= 0
     # the documented definition: SHA-256 of the canonical (sorted, compact) JSON
@@ -160,10 +198,10 @@ def test_config_hash():
     rev = lambda d: {k: rev(v) for k, v in reversed(list(d.items()))} if isinstance(d, dict) else d
     assert list(rev(cfg)) != list(cfg) and config_hash(rev(cfg)) == h
     # stable under how a float was written (an int is stored as a float)
-    assert config_hash(load(DEFAULTS, None, ["model.v=1"])) == h
+    assert config_hash(load(None, ["model.v=1"])) == h
     # changes when any value changes, however deep
     for o in ["model.v=1.0000001", "deep.inner.label=b", "source.K=[-2.7381, -2.0773]", "trackers=false", "seed=1"]:
-        assert config_hash(load(DEFAULTS, None, [o])) != h, o
+        assert config_hash(load(None, [o])) != h, o
 
 
 # ------------------------------------------------------------------ the study script's CLI
