@@ -119,6 +119,17 @@ def test_check_known_minimum_saddle_and_kink():
     assert kink.verdict == "local minimum" and abs(kink.gradient[0]) == pytest.approx(1.0)
 
 
+def test_check_of_a_non_finite_cost_or_gradient_is_data():
+    """A failed rollout (nan cost, or a gradient that is not finite) gives a verdict, not an exception."""
+    lo, hi = [-1.0, -1.0], [1.0, 1.0]
+    nan_cost = check_point(lambda th: jnp.where(th[0] > 0.0, jnp.nan, th[0] ** 2 + th[1] ** 2), [0.5, 0.0], lo, hi)
+    assert nan_cost.verdict == "non-finite cost" and nan_cost.quadratic_model == "non-finite"
+    assert np.isnan(nan_cost.probe_decrease)
+    # finite cost, gradient infinite at the point (sqrt at 0): the Hessian is not formed, the probes still decide
+    cusp = check_point(lambda th: jnp.sqrt(jnp.abs(th[0])) + th[1] ** 2, [0.0, 0.0], lo, hi)
+    assert cusp.quadratic_model == "non-finite" and cusp.verdict == "local minimum"
+
+
 def test_parse_gains_forms_and_errors():
     f, n, lo, hi = ("a", "K"), (1, 2), [0, -5, -5], [10, 0, 0]
     want = [1.0, -2.0, -3.0]

@@ -23,7 +23,10 @@ large curvature. So the **verdict** comes from the probes: ``"local minimum"`` w
 lowers the cost by more than ``rtol |J|`` (default 1e-4: a local minimum within the box at the
 probed scales, up to 0.01 % of the cost),
 ``"not a local minimum"`` otherwise (``best_probe`` gives the direction and the decrease). The
-gradient and Hessian are reported beside it as the smooth picture.
+gradient and Hessian are reported beside it as the smooth picture. A cost or gradient that is not
+finite at ``theta`` (a failed rollout in the batch) is data, not an error: the verdict is
+``"non-finite cost"`` where the cost itself is not finite, and the quadratic model is
+``"non-finite"`` where a gradient is not.
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ import numpy as np
 from pfjax import errors
 from pfjax.numerics import autodiff
 
-VERDICTS = ("local minimum", "not a local minimum")
+VERDICTS = ("local minimum", "not a local minimum", "non-finite cost")
 
 
 class CheckResult(NamedTuple):
@@ -53,7 +56,7 @@ class CheckResult(NamedTuple):
     active: np.ndarray  # (D,) int: -1 on the lower bound, +1 on the upper bound (pushed against), 0 free
     hessian: np.ndarray  # (|F|, |F|) d2J/dz2 on the free coordinates (cost units per box width^2)
     eigenvalues: np.ndarray  # (|F|,) of ``hessian``, ascending
-    quadratic_model: str  # positive definite | indefinite | singular | none (no free coordinate)
+    quadratic_model: str  # positive definite | indefinite | singular | none (no free coordinate) | non-finite
     newton_decrease: float  # 0.5 g_F^T H_F^-1 g_F / |J| (nan unless H_F is positive definite)
     probe_decrease: float  # largest relative decrease (J - J_probe) / |J| over the probes (<= 0: none lower)
     best_probe: np.ndarray  # (D,) displacement of that probe, gain units
@@ -117,6 +120,8 @@ def check_point(
     i = int(np.argmin(Jp))
     probe_dec = (J - float(Jp[i])) / max(abs(J), 1e-300)
     verdict = "not a local minimum" if probe_dec > rtol else "local minimum"
+    if not np.isfinite(J):
+        verdict, probe_dec = "non-finite cost", float("nan")
     fpp = forward_passes_per_gradient(lo.size, mode)
     n_grad = 1 + 2 * free.size
     return CheckResult(
@@ -171,7 +176,8 @@ def _gradient_and_hessian(vg, z: np.ndarray, h: float, dtype):
     G = np.asarray(G, np.float64)
     H = (G[: free.size, free] - G[free.size :, free]) / (2 * h)
     H = 0.5 * (H + H.T)
-    return J, g, active, H, np.linalg.eigvalsh(H)
+    eig = np.linalg.eigvalsh(H) if np.all(np.isfinite(H)) else np.full(free.size, np.nan)
+    return J, g, active, H, eig
 
 
 def _quadratic_model(J: float, gf: np.ndarray, H: np.ndarray, eig: np.ndarray) -> tuple[str, float]:
@@ -180,6 +186,8 @@ def _quadratic_model(J: float, gf: np.ndarray, H: np.ndarray, eig: np.ndarray) -
     ``g^T H^-1 g / (2 |J|)``."""
     if not eig.size:
         return "none", float("nan")
+    if not (np.isfinite(J) and np.all(np.isfinite(eig)) and np.all(np.isfinite(gf))):
+        return "non-finite", float("nan")
     scale = max(float(np.max(np.abs(eig))), 1e-300)
     if eig[0] > 1e-8 * scale:
         return "positive definite", 0.5 * float(gf @ np.linalg.solve(H, gf)) / max(abs(J), 1e-300)
