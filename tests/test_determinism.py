@@ -60,7 +60,7 @@ def test_bit_identical_across_chunk_sizes_and_reruns(dtype):
 def test_controllers_share_sampled_chunks_with_the_same_rows(monkeypatch):
     """Each chunk is sampled once for all controllers (kept while it fits the memory budget), and
     re-sampling per controller (budget 0) gives bit-identical rows: sampling is deterministic."""
-    from pfjax.montecarlo import runner
+    from pfjax.montecarlo import chunk_runs as runner  # the chunk loop reads these names from its home
 
     data = copy.deepcopy(BASE) | {
         "controllers": [{"name": "pi", "type": "pi"}, {"name": "pi2", "type": "pi"}, {"name": "st", "type": "stanley"}]

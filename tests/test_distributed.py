@@ -15,7 +15,7 @@ import pandas as pd
 import pytest
 
 from pfjax.cli import EXIT_USAGE, main
-from pfjax.montecarlo import runner
+from pfjax.montecarlo import chunk_runs as runner  # the chunk loop reads simulate_chunk from its home
 from pfjax.montecarlo.chunks import partial_dir
 from pfjax.montecarlo.config import load_study
 from pfjax.montecarlo.study import run

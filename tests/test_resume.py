@@ -14,7 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from pfjax.config import ConfigError
-from pfjax.montecarlo import runner
+from pfjax.montecarlo import chunk_runs as runner  # the chunk loop reads simulate_chunk from its home
 from pfjax.montecarlo.chunks import partial_dir
 from pfjax.montecarlo.config import load_study
 from pfjax.montecarlo.study import run

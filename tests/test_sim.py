@@ -475,3 +475,18 @@ def test_status_checks_are_compiled_once(model):
     fused = [c for c in re.split(r"\n(?=\S)", lowered.compile().as_text()) if c.lstrip("%").startswith("fused")]
     marked = [c.split()[0] for c in fused if re.search(r"constant\(7\.8125\)", c)]
     assert len(marked) == 1, marked
+
+
+def test_batched_programs_are_named_after_their_simulators():
+    """pfjax.sim.batch builds each simulator's batched program: it is registered (for the compiler
+    audit) and compiled under its simulator module's name, not the builder's."""
+    from importlib import import_module
+
+    from pfjax.numerics import compiler
+
+    mods = [import_module(f"pfjax.{m}") for m in ("sim.simulate", "sim.dynamic", "tracking.simulate")]
+    assert {f"{m.__name__}._simulate_vmapped" for m in mods} <= compiler.PROGRAMS
+    assert not any(p.startswith("pfjax.sim.batch.") for p in compiler.PROGRAMS)
+    cfg = SimConfig(dt=0.01, horizon=0.05, record=False)
+    text = mods[0]._simulate_vmapped.lower(stack([healthy()] * 2), controller=C.state_feedback, config=cfg).as_text()
+    assert "jit__simulate_vmapped" in text

@@ -92,7 +92,6 @@ def scenarios(
     """
     import pandas as pd
 
-    from pfjax.montecarlo.config import load_study
     from pfjax.montecarlo.sampling import sample_runs
 
     n = errors.integer("n", n, low=1, high=100_000_000)
@@ -110,6 +109,18 @@ def scenarios(
         heading_error_deg=heading_error_deg,
         mu=mu,
     )
+    spec, given = _checked_spec(path, n, key, horizon, model, values, convention, vehicle_params, tau_delta_s, k_v)
+    jkey = None if isinstance(key, (int, np.integer)) else key
+    sampled = sample_runs(spec, 0, np.arange(n), key=jkey, given=given)
+    table = pd.DataFrame({"run": np.arange(n), **{k: np.asarray(v, float) for k, v in sampled.columns.items()}})
+    return Scenarios(sampled.scenarios, table, spec)
+
+
+def _checked_spec(path, n, key, horizon, model, values, convention, vehicle_params, tau_delta_s, k_v):
+    """The study spec of :func:`scenarios`'s arguments, checked as a study config is (the message naming
+    the argument), and the per-run ``given`` arrays of ``values``."""
+    from pfjax.montecarlo.config import load_study
+
     dists, given = _as_dists(values, n)
     seed = key if isinstance(key, (int, np.integer)) and not isinstance(key, bool) else 0
     errors.seed("key", seed)
@@ -118,10 +129,7 @@ def scenarios(
         spec, _ = load_study(data=data)
     except errors.InputError as e:
         raise _renamed(e) from None
-    jkey = None if isinstance(key, (int, np.integer)) else key
-    sampled = sample_runs(spec, 0, np.arange(n), key=jkey, given=given)
-    table = pd.DataFrame({"run": np.arange(n), **{k: np.asarray(v, float) for k, v in sampled.columns.items()}})
-    return Scenarios(sampled.scenarios, table, spec)
+    return spec, given
 
 
 def _as_dists(values: dict, n: int) -> tuple[dict, dict]:

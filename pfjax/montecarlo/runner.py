@@ -9,228 +9,34 @@ Outputs are written to a temporary directory and moved into place when complete.
 
 from __future__ import annotations
 
-import contextlib
 import time
 
-import jax
-import jax.numpy as jnp
 import numpy as np
-import pandas as pd
 
-from pfjax import controllers as C
-from pfjax.config import ConfigError
-from pfjax.errors import InputError
-from pfjax.metrics.running import METRIC_NAMES
-from pfjax.montecarlo.chunks import ChunkSource, ChunkStore, file_metadata
-from pfjax.montecarlo.config import ControllerSpec, StudySpec, nominal
-from pfjax.montecarlo.sampling import column_names, sample_runs
+from pfjax.montecarlo.chunk_runs import (  # noqa: F401  (re-exported: a study's runs, chunk by chunk)
+    SHARED_SAMPLES_BYTES,
+    add_results,
+    batch_size,
+    controller_of,
+    nominal_wheelbase,
+    precision,
+    sample_aligned,
+    sample_few,
+    sim_config,
+    simulate_chunk,
+    simulate_runs,
+    simulate_scenarios,
+    with_gains,
+)
+from pfjax.montecarlo.chunks import ChunkStore, file_metadata
+from pfjax.montecarlo.config import StudySpec
+from pfjax.montecarlo.margin import (  # noqa: F401  (re-exported: the slip-margin sweep)
+    MARGIN_COLUMNS,
+    MARGIN_RUN_OFFSET,
+    SWEEP_COUNT_KEYS,
+    margin_sweep,
+)
 from pfjax.outputs import OutputDir
-from pfjax.sim import dynamic, sharding
-from pfjax.sim.simulate import SimConfig, simulate_batch
-from pfjax.sim.status import STATUS_NAMES
-
-
-def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
-    """``(controller, gains pytree, gains as a flat dict)`` for a controller spec, from the registry
-    (:mod:`pfjax.controllers.registry`); a design (:data:`pfjax.controllers.DESIGNS`) is made here
-    at the nominal speed and wheelbase (the distributions' values, means or midpoints). The flat
-    dict holds the entry's scalar gains (designed, configured or default) and any other given. State feedback and PI come
-    as :data:`pfjax.controllers.linear`, so a study of both compiles each simulator program once."""
-    e, d = C.resolve(c.type, f"controllers[{index}].type")
-    flat = C.flat_gains(e)
-    if d is not None:
-        flat.update(d.make(nominal(spec.vehicle.speed), nominal_wheelbase(spec), alpha=c.alpha, beta=c.beta))
-    if c.K is not None:
-        flat.update(zip(e.labels["K"], c.K))
-    flat.update(c.gains)
-    try:
-        gains = C.params_from_flat(e, flat)
-    except InputError as err:  # names gains.<gain>: the study's key is controllers[i].gains.<gain>
-        raise ConfigError(f"controllers[{index}].{err}") from None
-    flat = {k: float(v) for k, v in flat.items() if k in e.gains or k in c.gains}
-    if e.name in ("state_feedback", "pi"):
-        return C.linear, C.linear_params(gains), flat
-    return e.controller, gains, flat
-
-
-def nominal_wheelbase(spec: StudySpec) -> float:
-    """The wheelbase the designs are made at, m: the kinematic ``L``'s nominal value, the ST set's ``l_f + l_r``."""
-    return nominal(spec.vehicle.L) if spec.vehicle.model == "kinematic" else spec.vehicle.wheelbase_bounds()[0]
-
-
-def sim_config(spec: StudySpec) -> SimConfig:
-    s = spec.sim
-    return SimConfig(
-        dt=s.dt,
-        horizon=s.horizon,
-        control_every=s.control_every,
-        record=False,
-        d_fail=s.d_fail,
-        settle_band=s.settle_band,
-        steady_window=s.steady_window,
-        success_band=spec.success.band,
-        success_from=spec.success.from_s,
-    )
-
-
-def precision(spec: StudySpec):
-    """Context in which the study runs: float64 enables x64; float32 disables it even if it was on."""
-    return jax.enable_x64(spec.dtype == "float64")
-
-
-#: Batches are padded to a multiple of this many runs. XLA's CPU code runs a vmapped batch through
-#: SIMD vector lanes plus a scalar remainder loop, and the two round differently (a run's metrics
-#: moved by ~1e-6 in float32, ~3e-15 in float64 with the batch size); with every batch a multiple
-#: of the widest vector (16 float32 lanes in AVX-512; 32 for margin), every run takes the vector
-#: path and a run's numbers do not depend on the chunk size (tests/test_determinism.py).
-BATCH_ALIGN = 32
-
-
-def batch_size(n: int) -> int:
-    """``n`` rounded up to a multiple of :data:`BATCH_ALIGN`."""
-    return -(-n // BATCH_ALIGN) * BATCH_ALIGN
-
-
-def simulate_scenarios(scenarios, *, controller, config: SimConfig, devices=None):
-    """A batch of sampled runs through its vehicle model's simulator: :func:`pfjax.sim.simulate_batch`
-    for the kinematic model's :class:`~pfjax.sim.Scenario`, :func:`pfjax.sim.dynamic.simulate_batch`
-    for the ST model's :class:`~pfjax.sim.dynamic.DynamicScenario`."""
-    batch = dynamic.simulate_batch if isinstance(scenarios, dynamic.DynamicScenario) else simulate_batch
-    return batch(scenarios, controller=controller, config=config, devices=devices)
-
-
-def with_gains(sc, gains, n):
-    """Scenarios ``sc`` (a batch of ``n``) with every run's gains set to ``gains``."""
-    return sc._replace(gains=jax.tree_util.tree_map(lambda g: jnp.broadcast_to(g, (n,) + jnp.shape(g)), gains))
-
-
-def sample_aligned(spec: StudySpec, path_index: int, idx: np.ndarray, *, slip_override=None, pad_to: int | None = None):
-    """:func:`sample_runs` on ``idx`` padded (with copies of its first run) to ``max(pad_to, batch_size(len(idx)))``
-    runs: the scenarios keep the padded batch, the columns only the ``len(idx)`` real runs. Sampling is
-    vmapped too, so it is padded like the simulation (see :data:`BATCH_ALIGN`)."""
-    n = len(idx)
-    m = max(pad_to or 0, batch_size(n))
-    pad = lambda a: np.concatenate([np.asarray(a), np.repeat(np.asarray(a)[:1], m - n)])
-    sampled = sample_runs(
-        spec, path_index, pad(idx), slip_override=None if slip_override is None else tuple(map(pad, slip_override))
-    )
-    return sampled._replace(columns={k: v[:n] for k, v in sampled.columns.items()})
-
-
-def sample_few(spec: StudySpec, path_index: int, idx: np.ndarray):
-    """:func:`sample_aligned` for a few runs (the float64 check's, the worst-case search's run 0),
-    drawn by the program that samples the study's chunks: padded to the chunk's batch, with JAX's
-    default device (a program is compiled per default device, and a study's side jobs pin theirs),
-    then cut back to ``batch_size(len(idx))`` runs. The scenarios are exactly those the study's
-    chunks draw for these runs; sampling a padded chunk takes about 30 ms, compiling a sampler for
-    32 runs took 1.1-1.5 s. Random paths are drawn run by run, so they are not padded."""
-    if spec.paths[path_index].kind == "random":
-        return sample_aligned(spec, path_index, idx)
-    with jax.default_device(None):
-        sampled = sample_aligned(spec, path_index, idx, pad_to=batch_size(min(spec.chunk_size, spec.n_runs)))
-    m = batch_size(len(idx))
-    return sampled._replace(scenarios=jax.tree_util.tree_map(lambda a: np.asarray(a)[:m], sampled.scenarios))
-
-
-def simulate_chunk(
-    spec: StudySpec,
-    path_index: int,
-    idx: np.ndarray,
-    name: str,
-    controller,
-    *,
-    slip_override=None,
-    pad_to: int | None = None,
-    sampled=None,
-) -> pd.DataFrame:
-    """Simulate runs ``idx`` of one path with one controller; one row per run (see module docstring).
-
-    The batch is padded to ``pad_to`` runs (default: the study's chunk, or fewer for a smaller
-    study) so every chunk of a study has one shape (one compilation per controller and path).
-    ``sampled``: the chunk's :func:`sample_aligned` result if the caller already has it."""
-    ctrl, gains, _ = controller
-    n = len(idx)
-    if sampled is None:
-        sampled = sample_aligned(spec, path_index, idx, slip_override=slip_override, pad_to=pad_to)
-    m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
-    res = sharding.gather(
-        simulate_scenarios(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=sim_config(spec))
-    )
-    df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
-    for col in column_names(spec):
-        df[col] = np.asarray(sampled.columns[col], dtype=float) if col in sampled.columns else np.nan
-    return add_results(df, res, n)
-
-
-def add_results(df: pd.DataFrame, res, n: int) -> pd.DataFrame:
-    """``df`` (one row per run) with the first ``n`` runs of a :class:`~pfjax.sim.SimResult` added
-    as columns: every metric (:data:`~pfjax.metrics.running.METRIC_NAMES`), ``status_code``,
-    ``status`` (its name) and ``fail_time`` (s, NaN without failure); the run table's layout."""
-    for m in METRIC_NAMES:
-        df[m] = np.asarray(getattr(res.metrics, m))[:n]
-    df["status_code"] = np.asarray(res.status)[:n].astype(np.int8)
-    df["status"] = [STATUS_NAMES[int(s)] for s in df["status_code"]]
-    df["fail_time"] = np.asarray(res.fail_time, dtype=float)[:n]
-    df["success"] = df["success"].astype(bool)
-    for m in dynamic.SLIP_METRIC_NAMES if isinstance(res, dynamic.DynamicResult) else ():
-        df[m] = np.asarray(getattr(res.slip, m), dtype=float)[:n]
-    return df
-
-
-def simulate_runs(
-    spec: StudySpec,
-    path_index: int,
-    runs: np.ndarray,
-    controllers,
-    *,
-    slip_override=None,
-    chunk=None,
-    store: ChunkSource | None = None,
-    prefix: str = "runs",
-):
-    """Simulate ``runs`` of one path for every controller; yields ``(controller name, chunk key, DataFrame)``.
-
-    Rows come in a canonical order (controller, then run) whatever the chunk size. Every controller
-    runs the same sampled chunks (deterministic): kept from the first controller for the others
-    while they fit in :data:`SHARED_SAMPLES_BYTES`, else re-sampled, so memory stays bounded. With a
-    ``store``, chunks finished earlier are read back instead of simulated (resume)."""
-    chunk = chunk or spec.chunk_size
-    pad_to = batch_size(min(chunk, max(spec.n_runs, len(runs))))  # the margin sweep pads up to the study's chunk
-    # The controllers run the same sampled chunks: while all of them fit in SHARED_SAMPLES_BYTES,
-    # each chunk is sampled once and kept for the next controller (sampling is dispatched op by op:
-    # ~0.4 s per chunk of the default study); beyond, every controller re-samples, so memory stays
-    # O(chunk) (a sampled slip sequence alone is kilobytes per run).
-    shared: dict | None = {} if len(controllers) > 1 else None
-    for ci, (name, controller) in enumerate(controllers.items()):
-        for a in range(0, len(runs), chunk):
-            idx = runs[a : a + chunk]
-            over = None if slip_override is None else tuple(np.asarray(o)[a : a + chunk] for o in slip_override)
-            key = f"{prefix}-p{path_index:03d}-c{ci:03d}-{a:010d}"
-
-            def compute(a=a, idx=idx, over=over, name=name, controller=controller, last=ci == len(controllers) - 1):
-                nonlocal shared
-                sampled = None if shared is None else (shared.pop(a, None) if last else shared.get(a))
-                if sampled is None:
-                    sampled = sample_aligned(spec, path_index, idx, slip_override=over, pad_to=pad_to)
-                    if shared is not None and not last:
-                        if _nbytes(sampled) * len(runs) / len(idx) <= SHARED_SAMPLES_BYTES:
-                            shared[a] = sampled
-                        else:
-                            shared = None
-                return simulate_chunk(
-                    spec, path_index, idx, name, controller, slip_override=over, pad_to=pad_to, sampled=sampled
-                )
-
-            yield name, key, (compute() if store is None else store.get(key, compute))
-
-
-#: Most memory :func:`simulate_runs` spends keeping one path's sampled chunks for the next controller.
-SHARED_SAMPLES_BYTES = 64 << 20
-
-
-def _nbytes(sampled) -> int:
-    leaves = jax.tree_util.tree_leaves(sampled.scenarios) + list(sampled.columns.values())
-    return sum(int(x.nbytes) for x in leaves)
 
 
 def controllers_of(spec: StudySpec) -> dict:
@@ -307,97 +113,3 @@ def _run_study(spec: StudySpec, output: OutputDir, *, progress, extra, fresh, co
     store.discard()
     info["wall_s"] = time.time() - t0
     return info
-
-
-MARGIN_RUN_OFFSET = 1 << 30  # margin runs draw from their own index range (disjoint from the study's runs)
-MARGIN_COLUMNS = ["path", "controller", "axis", "amplitude_deg", "success", "status"]
-#: The slip-margin sweep's success counts: per controller, axis and amplitude, paths pooled.
-SWEEP_COUNT_KEYS = ["controller", "axis", "amplitude_deg"]
-
-
-def margin_sweep(
-    spec: StudySpec, controllers, *, progress: bool | None = None, store: ChunkSource | None = None, dest=None
-) -> pd.DataFrame:
-    """Success counts over the slip-amplitude grid, per controller, axis and amplitude (all paths
-    pooled): columns ``controller, axis, amplitude_deg, k`` (successes) and ``n`` (runs).
-
-    Run ``j`` at amplitude index ``a`` on axis ``x`` uses run index ``OFFSET + (x * n_amp + a) * n + j``; its
-    slip is ``A * sign`` with the sign drawn from the run's own key (so the sweep is deterministic).
-    The sweep streams like the study: one chunk of runs in memory at a time; its run rows
-    (:data:`MARGIN_COLUMNS`) go to the Parquet file ``dest`` if given. With a ``store``, finished
-    chunks of the sweep are resumed like the study's.
-    """
-    from tqdm import tqdm
-
-    from pfjax.montecarlo.chunks import ParquetAppender
-
-    m = spec.margin
-    n, amps = m.n_per_amplitude, np.asarray(m.amplitudes_deg)
-    counts = []
-    total = len(m.axes) * len(amps) * n * len(spec.paths) * len(controllers)
-    sink = ParquetAppender(dest, file_metadata(spec)) if dest is not None else None
-    with (
-        sink if sink is not None else contextlib.nullcontext(),
-        tqdm(
-            total=total,
-            desc=f"{spec.name}: slip margin",
-            unit="run",
-            disable=None if progress is None else not progress,
-        ) as bar,
-    ):
-        for xi, axis in enumerate(m.axes):
-            runs = (
-                MARGIN_RUN_OFFSET
-                + (xi * len(amps) + np.repeat(np.arange(len(amps)), n)) * n
-                + np.tile(np.arange(n), len(amps))
-            )
-            amp = np.repeat(amps, n)
-            for p in range(len(spec.paths)):
-                signs = _signs(spec, p, runs)
-                br = amp * signs[:, 0] * (axis in ("rear", "joint"))
-                bf = amp * signs[:, 1] * (axis in ("front", "joint"))
-                rows_of = lambda df, axis=axis, runs=runs, amp=amp: _margin_rows(df, axis, runs, amp)
-                sweep_store = None if store is None else _Project(store, rows_of)
-                for _, _, df in simulate_runs(
-                    spec, p, runs, controllers, slip_override=(br, bf), store=sweep_store, prefix=f"margin-{axis}"
-                ):
-                    rows = df if store is not None else rows_of(df)
-                    if not rows.empty:  # (empty: a chunk another process computes)
-                        if sink is not None:
-                            sink.write(rows)
-                        counts.append(rows.groupby(SWEEP_COUNT_KEYS, sort=False)["success"].agg(k="sum", n="count"))
-                    bar.update(len(df))
-    if not counts:
-        return pd.DataFrame(columns=SWEEP_COUNT_KEYS + ["k", "n"])
-    return pd.concat(counts).groupby(level=SWEEP_COUNT_KEYS, sort=False).sum().reset_index()
-
-
-def _margin_rows(df: pd.DataFrame, axis: str, runs: np.ndarray, amp: np.ndarray) -> pd.DataFrame:
-    df = df.assign(axis=axis, amplitude_deg=np.interp(df["run"].to_numpy(), runs, amp))
-    return df[MARGIN_COLUMNS]
-
-
-class _Project:
-    """A view of a ChunkStore that stores ``project(chunk)`` instead of the whole chunk (the sweep keeps 6 columns)."""
-
-    def __init__(self, store: ChunkSource, project):
-        self.store, self.project = store, project
-
-    def get(self, key, compute):
-        return self.store.get(key, lambda: self.project(compute()))
-
-
-def _signs(spec: StudySpec, path_index: int, runs: np.ndarray) -> np.ndarray:
-    from pfjax.montecarlo.sampling import run_keys
-
-    return np.where(np.asarray(_sign_draws(run_keys(spec.seed, path_index, runs))), 1.0, -1.0)
-
-
-@jax.jit
-def _sign_draws(keys):
-    """Per run (rear, front): a fair coin from the run's key (one program; op by op, each operation
-    would be compiled on its own)."""
-    from pfjax.montecarlo.sampling import Q
-
-    draw = lambda k, q: jax.random.bernoulli(jax.random.fold_in(k, Q[q]))
-    return jax.vmap(lambda k: jnp.stack([draw(k, "sign_r"), draw(k, "sign_f")]))(keys)

@@ -308,6 +308,77 @@ def _kappa_follow(spec: StudySpec) -> float:
     return math.tan(math.radians(veh.delta_max_deg_bounds()[0])) / veh.wheelbase_bounds()[1]
 
 
+def _draw_one(spec: StudySpec, key, given: dict):
+    """One run's draws from its ``key`` (``given[name]`` instead where given): the slip profile, the
+    vehicle's :class:`~pfjax.models.slip.SlipParams` (speed m/s, wheelbase m, steering limit rad), the
+    columns of the run table (degrees where named ``_deg``) and the start's ``(arc length m, lateral
+    offset m, heading error rad)``."""
+    v = spec.vehicle
+    rad = math.pi / 180
+    d = lambda dist, name: given[name] if name in given else draw(dist, _q(key, name))
+    speed, L, dmax = d(v.speed, "speed"), d(v.L, "L"), d(v.delta_max_deg, "delta_max_deg")
+    extra = {}
+    if v.model in ("st", "std"):  # the set's wheelbase and steering limit; the friction drawn
+        st_nominal = v.st_params()
+        L = jnp.asarray(st_nominal.l_f + st_nominal.l_r, float)
+        dmax = jnp.asarray(math.degrees(st_nominal.delta_max), float)
+        extra["mu"] = jnp.asarray(st_nominal.mu, float) if v.mu is None else d(v.mu, "mu")
+    profile, cols = _slip(spec, key, spec.sim.horizon, given)
+    start_along_m = d(spec.initial.start_along_m, "start_along_m")
+    offset = d(spec.initial.lateral_offset, "lateral_offset")
+    herr = d(spec.initial.heading_error_deg, "heading_error_deg")
+    cols.update(
+        speed=speed,
+        L=L,
+        delta_max_deg=dmax,
+        start_along_m=start_along_m,
+        lateral_offset=offset,
+        heading_error_deg=herr,
+        **extra,
+    )
+    params = SlipParams(
+        v=speed,
+        L=L,
+        delta_max=dmax * rad,
+        convention=jnp.asarray(CONVENTIONS[v.convention], jnp.int32),
+        delta_rate_max=jnp.asarray(math.inf if v.delta_rate_max_deg is None else v.delta_rate_max_deg * rad, float),
+    )
+    return profile, params, cols, (start_along_m, offset, herr * rad)
+
+
+def _scenarios(spec: StudySpec, keys, cols: dict, profiles, params, path, pose0, u0):
+    """The batch's scenarios from its draws: the slip vehicle's :class:`Scenario` or, for the ``st``
+    and ``std`` models, the :class:`DynamicScenario` with the drawn friction ``cols["mu"]``; sensor
+    noise (``sigma_d`` m, ``sigma_theta_e_deg`` deg) with one key per run where the study has any."""
+    v = spec.vehicle
+    n = keys.shape[0]
+    rad = math.pi / 180
+    noise = None
+    if spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0:
+        noise = SensorNoise(
+            jnp.full((n,), spec.noise.sigma_d, float),
+            jnp.full((n,), spec.noise.sigma_theta_e_deg * rad, float),
+            jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys),
+        )
+    if v.model in ("st", "std"):
+        from pfjax.models.single_track import with_mu
+
+        per_run = lambda a: jnp.full((n,), a, params.v.dtype)
+        vehicle = with_mu(jax.tree_util.tree_map(per_run, v.model_params()), cols["mu"])
+        return DynamicScenario(
+            pose0=pose0,
+            vehicle=vehicle,
+            v_ref=params.v,
+            path=path,
+            gains=None,
+            tau_delta=per_run(v.tau_delta_s),
+            k_v=per_run(v.k_v),
+            noise=noise,
+            u0=u0,
+        )
+    return Scenario(pose0=pose0, slip=profiles, params=params, path=path, gains=None, noise=noise, u0=u0)
+
+
 @partial(jax.jit, static_argnames=("study", "circle", "batched_path"))
 def _draw_runs(
     keys, given, path, u_nom, slip_override, use_override, *, study: _Static, circle: _Static | None, batched_path: bool
@@ -316,42 +387,8 @@ def _draw_runs(
     ``batched_path``; a circle of drawn radius if ``circle`` is its radius distribution); the
     constant slip replaced by ``slip_override`` (deg) where ``use_override``."""
     spec = study.model
-    v = spec.vehicle
-    horizon = spec.sim.horizon
     rad = math.pi / 180
-
-    def one(key, given):
-        d = lambda dist, name: given[name] if name in given else draw(dist, _q(key, name))
-        speed, L, dmax = d(v.speed, "speed"), d(v.L, "L"), d(v.delta_max_deg, "delta_max_deg")
-        extra = {}
-        if v.model in ("st", "std"):  # the set's wheelbase and steering limit; the friction drawn
-            st_nominal = v.st_params()
-            L = jnp.asarray(st_nominal.l_f + st_nominal.l_r, float)
-            dmax = jnp.asarray(math.degrees(st_nominal.delta_max), float)
-            extra["mu"] = jnp.asarray(st_nominal.mu, float) if v.mu is None else d(v.mu, "mu")
-        profile, cols = _slip(spec, key, horizon, given)
-        start_along_m = d(spec.initial.start_along_m, "start_along_m")
-        offset = d(spec.initial.lateral_offset, "lateral_offset")
-        herr = d(spec.initial.heading_error_deg, "heading_error_deg")
-        cols.update(
-            speed=speed,
-            L=L,
-            delta_max_deg=dmax,
-            start_along_m=start_along_m,
-            lateral_offset=offset,
-            heading_error_deg=herr,
-            **extra,
-        )
-        params = SlipParams(
-            v=speed,
-            L=L,
-            delta_max=dmax * rad,
-            convention=jnp.asarray(CONVENTIONS[v.convention], jnp.int32),
-            delta_rate_max=jnp.asarray(math.inf if v.delta_rate_max_deg is None else v.delta_rate_max_deg * rad, float),
-        )
-        return profile, params, cols, (start_along_m, offset, herr * rad)
-
-    profiles, params, cols, starts = jax.vmap(one)(keys, given)
+    profiles, params, cols, starts = jax.vmap(lambda k, g: _draw_one(spec, k, g))(keys, given)
     n = keys.shape[0]
     br = jnp.where(use_override, slip_override[0], cols["beta_r_deg"])
     bf = jnp.where(use_override, slip_override[1], cols["beta_f_deg"])
@@ -366,27 +403,4 @@ def _draw_runs(
     # in blocks of runs: each start pose integrates arc length on 512 nodes per Newton step, and a
     # 65,536-run chunk at once held about 1.6 GB of such intermediates (measured)
     pose0, u0 = jax.lax.map(lambda a: _start_pose(a[0], u_nom, *a[1:]), (path, *starts), batch_size=SAMPLE_BLOCK)
-    noise = None
-    if spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0:
-        noise = SensorNoise(
-            jnp.full((n,), spec.noise.sigma_d, float),
-            jnp.full((n,), spec.noise.sigma_theta_e_deg * rad, float),
-            jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys),
-        )
-    if v.model in ("st", "std"):
-        from pfjax.models.single_track import with_mu
-
-        per_run = lambda a: jnp.full((n,), a, params.v.dtype)
-        vehicle = with_mu(jax.tree_util.tree_map(per_run, v.model_params()), cols["mu"])
-        return cols, DynamicScenario(
-            pose0=pose0,
-            vehicle=vehicle,
-            v_ref=params.v,
-            path=path,
-            gains=None,
-            tau_delta=per_run(v.tau_delta_s),
-            k_v=per_run(v.k_v),
-            noise=noise,
-            u0=u0,
-        )
-    return cols, Scenario(pose0=pose0, slip=profiles, params=params, path=path, gains=None, noise=noise, u0=u0)
+    return cols, _scenarios(spec, keys, cols, profiles, params, path, pose0, u0)

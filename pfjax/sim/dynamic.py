@@ -49,19 +49,16 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax import Array
 
-from pfjax import errors, resources
 from pfjax.controllers.base import Controller
 from pfjax.errors import InputError
 from pfjax.metrics import running
 from pfjax.models import single_track as st
 from pfjax.models.slip import Pose
-from pfjax.numerics import compiler
 from pfjax.numerics import elementary as E
 from pfjax.paths.geometry import NEWTON_START, global_parameter, measure, polish_parameter
-from pfjax.sim import loop, sharding
+from pfjax.sim import batch, loop
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.simulate import (
     U0_ITERS,
@@ -324,15 +321,13 @@ def simulate(controller: Controller, sc: DynamicScenario, config: SimConfig) -> 
     )
 
 
-@compiler.jit(static_argnames=("controller", "config", "layout"))
-def _simulate_vmapped(
-    scenarios: DynamicScenario,
-    *,
-    controller: Controller,
-    config: SimConfig,
-    layout: sharding.Layout = sharding.Layout(None, 1),
-) -> DynamicResult:
-    return sharding.map_runs(lambda sc: simulate(controller, sc, config), scenarios, layout)
+#: The jitted, vmapped :func:`simulate` (:func:`pfjax.sim.batch.program`).
+_simulate_vmapped = batch.program(
+    lambda sc, *, controller, config: simulate(controller, sc, config),
+    module=__name__,
+    name="_simulate_vmapped",
+    static=("controller", "config"),
+)
 
 
 def simulate_batch(
@@ -348,13 +343,6 @@ def simulate_batch(
     ``config``, batch shape, device set and block count)."""
     controller.check_params(scenarios.gains)
     system(controller, config)  # checks the settings before tracing
-    if config.record and not errors.is_traced(scenarios):
-        n_runs = int(np.shape(jax.tree_util.tree_leaves(scenarios)[0])[0])
-        resources.check_memory(
-            "record",
-            n_runs * 2 * resources.run_bytes(config.n_steps, record=True),
-            f"recording {n_runs} runs of {config.n_steps + 1} samples",
-            "simulate with record=False (the metrics need no trajectory), or fewer runs",
-        )
-    placed, n, layout = sharding.plan_batch(scenarios, devices, block)
-    return sharding.unpad(_simulate_vmapped(placed, controller=controller, config=config, layout=layout), n)
+    if config.record:
+        batch.check_record(scenarios, config.n_steps, copies=2)
+    return batch.call(_simulate_vmapped, scenarios, devices=devices, block=block, controller=controller, config=config)

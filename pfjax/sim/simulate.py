@@ -11,41 +11,42 @@ Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_step`:
    stage times; the loop accumulates the metrics (:func:`update_metrics`) and freezes a failed run.
 
 :func:`simulate` is one run (write single-run code); :func:`simulate_batch` is the jitted,
-vmapped entry point. ``SimConfig`` fixes the shapes and is a static argument.
+vmapped entry point (:mod:`pfjax.sim.batch`). ``SimConfig`` (:mod:`pfjax.sim.settings`) fixes the
+shapes and is a static argument; the measurement and the sensor noise are in :mod:`pfjax.sim.sensing`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from functools import partial
-from typing import Any, NamedTuple, Protocol
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax import Array
 
-from pfjax import errors, resources
 from pfjax.controllers.base import Controller, Observation, step
-from pfjax.errors import InputError
 from pfjax.metrics import running
 from pfjax.models.slip import Pose, SlipParams, world_rhs
-from pfjax.numerics import compiler
 from pfjax.numerics import elementary as E
-from pfjax.numerics.random import step_normals
 from pfjax.paths.geometry import (
     NEWTON_START,
     Projection,
-    closest_parameter,
     global_parameter,
     measure,
     polish_parameter,
-    wrap_angle,
 )
-from pfjax.sim import loop, sharding
+from pfjax.sim import batch, loop
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.loop import stack, unstack  # noqa: F401  (re-exported: a batch of runs, run i of a batch)
+from pfjax.sim.sensing import (
+    SensorNoise,
+    WithPath,
+    measure_pose,
+    noisy_observation,
+    observation,
+)
+from pfjax.sim.settings import SimConfig
 from pfjax.sim.slip_profiles import SlipProfile, slip_at
 from pfjax.sim.status import classify
 
@@ -56,94 +57,6 @@ U0_ITERS = 8
 #: so the backward step recomputes only the differentiated last Newton step (measured: 5 % less CPU
 #: time for the benchmark's gradient); a whole step's residuals would cost far more memory traffic.
 _SAVED = jax.checkpoint_policies.save_only_these_names(NEWTON_START)
-
-
-@dataclass(frozen=True)
-class SimConfig:
-    """Static settings (they fix array shapes; hashable so they can be jit-static).
-
-    Attributes:
-        dt: integrator step, s (default 5 ms).
-        horizon: simulated time, s (docs/reproductions/path-following.md §6: *assumed* 20 s).
-        control_every: controller sampling period in integrator steps (zero-order hold);
-            ``None`` evaluates the controller continuously inside every RK4 stage.
-        newton_iters: Newton steps of the warm-started projection per measurement.
-        record: ``True`` returns full trajectories (memory O(horizon) per run);
-            ``False`` only the running metrics (memory independent of the horizon).
-        d_fail: |d| above which a run is flagged ``DIVERGED``, m.
-        settle_band: band on |d| for the settling time, m.
-        steady_window: final part of the run for the steady-state errors, s.
-        success_band: a run succeeds if it does not fail and |d| <= this from ``success_from`` on, m.
-        success_from: start of the success window, s (``None``: the steady window's start).
-    """
-
-    dt: float = 0.005
-    horizon: float = 20.0
-    control_every: int | None = 1
-    newton_iters: int = 3
-    record: bool = True
-    d_fail: float = 10.0
-    settle_band: float = 0.05
-    steady_window: float = 5.0
-    success_band: float = 0.05
-    success_from: float | None = None
-
-    def __post_init__(self):
-        """Checks every setting (:class:`~pfjax.errors.InputError` naming it)."""
-        errors.number("dt", self.dt, positive=True, unit=" s")
-        errors.number("horizon", self.horizon, positive=True, unit=" s")
-        if not self.horizon >= self.dt:
-            raise InputError(f"horizon: must be >= dt ({self.dt:g} s), got {self.horizon:g}")
-        resources.check_steps(self.horizon, self.dt)
-        if self.control_every is not None:
-            errors.integer("control_every", self.control_every, low=1, high=resources.MAX_STEPS)
-        errors.integer("newton_iters", self.newton_iters, low=1, high=100)
-        for name in ("d_fail", "settle_band", "steady_window", "success_band"):
-            errors.number(name, getattr(self, name), positive=True)
-        if self.success_from is not None:
-            errors.number("success_from", self.success_from, nonnegative=True, unit=" s")
-
-    @property
-    def n_steps(self) -> int:
-        return int(round(self.horizon / self.dt))
-
-    @property
-    def success_start(self) -> float:
-        return self.n_steps * self.dt - self.steady_window if self.success_from is None else self.success_from
-
-
-class SensorNoise(NamedTuple):
-    """White Gaussian noise on the measured rear-axle pose: one pair of standard normals
-    ``(n0, n1)`` per integrator step ``k`` from ``(key, k)``
-    (:func:`pfjax.numerics.random.step_normals`; deterministic, O(1) memory).
-
-    The sensor measures the pose; every controller sees the same noisy measurement. The measured
-    pose is the true one displaced by ``e_d = sigma_d n0`` (m) along the path's left unit normal at
-    the closest point and rotated by ``e_theta = sigma_theta_e n1`` (rad)::
-
-        psi_p   = theta - theta_e                  (rad, path tangent angle at the closest point)
-        x_m     = x - e_d sin(psi_p)               (m)
-        y_m     = y + e_d cos(psi_p)               (m)
-        theta_m = theta + e_theta                  (rad)
-
-    so the measured errors are ``d_m = d + e_d`` (m) and ``theta_e,m = wrap(theta_e + e_theta)``
-    (rad): the measured pose projects onto the same closest point (while ``|d + e_d|`` stays below
-    the path's radius of curvature there), at signed distance ``d + e_d``, with heading error
-    ``theta_e + e_theta``. Controllers on ``(d, theta_e)`` see noise of std
-    ``sigma_d`` and ``sigma_theta_e`` on them; the geometric trackers (Stanley, pure pursuit) compute
-    their commands from the measured pose, consistent with those errors (see :func:`noisy_observation`).
-    The noise is white: independent between steps and between ``d`` and ``theta_e``. The metrics
-    and the health checks use the true errors.
-
-    Attributes:
-        sigma_d: std of the lateral (path-normal) position error ``e_d``, m.
-        sigma_theta_e: std of the heading error ``e_theta``, rad.
-        key: ``uint32[2]``, a ``jax.random.PRNGKey``.
-    """
-
-    sigma_d: Array  # m
-    sigma_theta_e: Array  # rad
-    key: Array  # uint32[2], a jax.random.PRNGKey
 
 
 class Scenario(NamedTuple):
@@ -196,69 +109,9 @@ class SimResult(NamedTuple):
     trajectory: Trajectory | None
 
 
-def observation(proj: Projection, pose: Pose, v, L, delta_max, path) -> Observation:
-    """What the controllers see of a measured pose: its closest point ``proj``, the rear-axle
-    ``pose`` (m, m, rad), the speed ``v`` (m/s), wheelbase ``L`` (m) and steering limit ``delta_max``
-    (rad) they may use, and the ``path`` (for trackers that look ahead)."""
-    return Observation(
-        d=proj.d,
-        theta_e=proj.theta_e,
-        kappa=proj.kappa,
-        s=proj.s,
-        u=proj.u,
-        pose=pose,
-        v=jnp.asarray(v, float),
-        L=jnp.asarray(L, float),
-        delta_max=jnp.asarray(delta_max, float),
-        path=path,
-    )
-
-
 def _observation(proj: Projection, pose: Pose, sc: Scenario) -> Observation:
     p = sc.params
     return observation(proj, pose, p.v, p.L, p.delta_max, sc.path)
-
-
-def noisy_observation(obs: Observation, noise: SensorNoise | None, k) -> Observation:
-    """The observation the controllers see at step ``k``: the exact one (``noise is None``), or the
-    one measured from the noisy pose (:class:`SensorNoise`'s equations), with
-    ``(n0, n1) = step_normals(noise.key, k, 2)``: ``d_m = d + e_d``, ``theta_e,m = wrap(theta_e + e_theta)``
-    and the pose displaced by ``e_d`` (m) along the path's left normal and rotated by ``e_theta``
-    (rad). ``kappa``, ``s`` and ``u`` (the closest point's) are unchanged: the measured pose
-    projects onto the same point (locally); ``u`` is only the trackers' warm start.
-
-    ``k`` is the integrator step (the noise's counter; in continuous mode every RK4 stage of step
-    ``k`` sees the same draw). Returns ``obs`` itself when ``noise is None`` (no operations).
-    """
-    if noise is None:
-        return obs
-    n = step_normals(noise.key, k, 2, obs.d.dtype)
-    e_d, e_theta = noise.sigma_d * n[0], noise.sigma_theta_e * n[1]
-    pose = obs.pose
-    sin_p, cos_p = E.sincos(pose.theta - obs.theta_e)  # the path tangent at the closest point
-    measured = Pose(pose.x - e_d * sin_p, pose.y + e_d * cos_p, pose.theta + e_theta)
-    return obs._replace(d=obs.d + e_d, theta_e=wrap_angle(obs.theta_e + e_theta), pose=measured)
-
-
-def measure_pose(sc: WithPath, pose: Pose, u_guess, iters) -> Projection:
-    """The rear-axle ``pose``'s closest point on ``sc.path`` (any scenario with a ``path``): ``iters``
-    warm-started Newton steps from ``u_guess``, then the errors ``d``, ``theta_e`` and the path's
-    ``kappa``, ``s`` there (:func:`pfjax.paths.geometry.measure`)."""
-    # the closest point and (below) the command and the applied steering are read by many of the
-    # step's kernels, and their cotangents by many of the backward step's: each is computed once
-    # (E.computed_once; measured: reverse mode about 30 % cheaper, forward mode about 13 % dearer,
-    # the forward pass 1-2.5 % slower). So is the heading error (an atan2 read by the controller and
-    # by the steady-state metric: the forward pass about 2 % faster, and both read the same rounding)
-    u = E.computed_once(closest_parameter(sc.path, pose.x, pose.y, u_guess, iters))
-    proj = measure(sc.path, pose.x, pose.y, pose.theta, u)
-    return proj._replace(theta_e=E.computed_once(proj.theta_e))
-
-
-class WithPath(Protocol):
-    """Any scenario with a ``path`` (the slip vehicle's :class:`Scenario`, the dynamic vehicle's)."""
-
-    @property
-    def path(self) -> Any: ...
 
 
 class _State(NamedTuple):
@@ -453,15 +306,13 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     )
 
 
-@compiler.jit(static_argnames=("controller", "config", "layout"))
-def _simulate_vmapped(
-    scenarios: Scenario,
-    *,
-    controller: Controller,
-    config: SimConfig,
-    layout: sharding.Layout = sharding.Layout(None, 1),
-) -> SimResult:
-    return sharding.map_runs(lambda sc: simulate(controller, sc, config), scenarios, layout)
+#: The jitted, vmapped :func:`simulate` (:func:`pfjax.sim.batch.program`).
+_simulate_vmapped = batch.program(
+    lambda sc, *, controller, config: simulate(controller, sc, config),
+    module=__name__,
+    name="_simulate_vmapped",
+    static=("controller", "config"),
+)
 
 
 def simulate_batch(
@@ -478,13 +329,6 @@ def simulate_batch(
     each block shape into its own vector code: at most an ulp or two in a metric, measured).
     """
     controller.check_params(scenarios.gains)  # here, not at trace time: JAX would add to the message
-    if config.record and not errors.is_traced(scenarios):
-        n_runs = int(np.shape(jax.tree_util.tree_leaves(scenarios)[0])[0])
-        resources.check_memory(
-            "record",
-            n_runs * resources.run_bytes(config.n_steps, record=True),
-            f"recording {n_runs} runs of {config.n_steps + 1} samples",
-            "simulate with record=False (the metrics need no trajectory), or fewer runs",
-        )
-    placed, n, layout = sharding.plan_batch(scenarios, devices, block)
-    return sharding.unpad(_simulate_vmapped(placed, controller=controller, config=config, layout=layout), n)
+    if config.record:
+        batch.check_record(scenarios, config.n_steps)
+    return batch.call(_simulate_vmapped, scenarios, devices=devices, block=block, controller=controller, config=config)

@@ -32,11 +32,10 @@ import jax.numpy as jnp
 from jax import Array
 
 from pfjax.arrays import FloatLeaf
-from pfjax.numerics import compiler
 from pfjax.numerics import elementary as E
 from pfjax.numerics.layout import all_true, first_true
 from pfjax.numerics.random import step_normals
-from pfjax.sim import loop, sharding
+from pfjax.sim import batch, loop
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.loop import stack, unstack  # noqa: F401  (re-exported: a batch of runs, run i of a batch)
 from pfjax.sim.slip_profiles import SlipProfile, constant_slip, slip_at
@@ -329,11 +328,8 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
     return loop.run(system(config), sc, config.n_steps, record=config.record)
 
 
-@compiler.jit(static_argnames=("config", "layout"))
-def _simulate_vmapped(
-    scenarios: TrackScenario, *, config: TrackConfig, layout: sharding.Layout = sharding.Layout(None, 1)
-) -> TrackResult:
-    return sharding.map_runs(lambda sc: simulate(sc, config), scenarios, layout)
+#: The jitted, vmapped :func:`simulate` (:func:`pfjax.sim.batch.program`).
+_simulate_vmapped = batch.program(simulate, module=__name__, name="_simulate_vmapped", static=("config",))
 
 
 def simulate_batch(
@@ -342,5 +338,4 @@ def simulate_batch(
     """``jit(vmap(simulate))`` over the leading axis of every scenario leaf, sharded over ``devices``
     (default: all) and blocked on CPU (``block``: runs per block; see
     :func:`pfjax.sim.simulate.simulate_batch`). The same results, run for run, for any layout (to an ulp or two)."""
-    placed, n, layout = sharding.plan_batch(scenarios, devices, block)
-    return sharding.unpad(_simulate_vmapped(placed, config=config, layout=layout), n)
+    return batch.call(_simulate_vmapped, scenarios, devices=devices, block=block, config=config)

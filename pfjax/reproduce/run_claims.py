@@ -1,0 +1,278 @@
+"""The path-following source's claims checked on the runs of its tests (:mod:`pfjax.reproduce.path_following`
+assembles the verdict table): convergence, the steering limit, speed and accuracy of the designs, the yaw
+error, the steering effort, the line test's errors and steering, the sine test's error peaks. Each claim
+is ``claim(inputs, add)``: it reads :class:`Inputs` and appends its rows with ``add`` (:data:`Add`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+CONTROLLERS = ("mixed", "pi")
+LABEL = {"mixed": "mixed H2/H∞ (pfjax's K)", "paper-k": "mixed H2/H∞ (source's K)", "pi": "PI (Table 3)"}
+
+
+def holds(ok: bool) -> str:
+    return "holds" if ok else "does not hold"
+
+
+def mm(x: float) -> str:
+    return f"{1000 * x:.2f} mm"
+
+
+def seconds(x: float) -> str:
+    return f"{x:.2f} s" if math.isfinite(x) else "never"
+
+
+class Inputs(NamedTuple):
+    """What the claims are checked on (:mod:`pfjax.reproduce.path_following` describes each input): the runs by (path, controller), the
+    source tests, the configured limit (deg), settling band (m), steady window (s), horizon (s), the
+    source's published values, and the analyses."""
+
+    R: dict
+    paths: tuple
+    dmax_deg: float
+    band: float
+    window: float
+    horizon: float
+    src: dict
+    stab: dict
+    pi_df: Any
+    sine: dict
+    long_pi: dict
+    ga: dict
+
+
+#: ``add(claim, path, subject, criterion, pfjax, source, verdict, basis=...)``: append one checked row
+Add = Callable[..., None]
+
+
+def converge(inp: Inputs, add: Add) -> None:
+    """Both controllers bring the robot onto all three paths."""
+    R, paths, band = inp.R, inp.paths, inp.band
+    claim = "Both controllers bring the robot onto all three paths"
+    for p in paths:
+        for c in CONTROLLERS:
+            r = R[(p, c)]
+            ok = r["status"] == "ok" and math.isfinite(r["settling_time"])
+            add(
+                claim,
+                p,
+                LABEL[c],
+                f"the run ends ok and |d| stays within {100 * band:g} cm from a finite time on (the settling time)",
+                seconds(r["settling_time"]) + ("" if r["status"] == "ok" else f", status {r['status']}"),
+                "—",
+                holds(ok),
+            )
+
+
+def steering_limit(inp: Inputs, add: Add) -> None:
+    """Both controllers respect the (assumed) steering limit."""
+    R, paths, dmax_deg = inp.R, inp.paths, inp.dmax_deg
+    claim = "Both controllers respect the steering limit"
+    for p in paths:
+        for c in CONTROLLERS:
+            r = R[(p, c)]
+            peak = math.degrees(r["max_abs_delta_cmd"])
+            add(
+                claim,
+                p,
+                LABEL[c],
+                f"the commanded steering (before the ±{dmax_deg:g}° saturation; assumed limit) "
+                f"stays within the limit: max |δ_cmd| ≤ {dmax_deg:g}°",
+                f"max |δ_cmd| = {peak:.1f}°, saturated {100 * r['sat_fraction']:.1f} % of the run",
+                "—",
+                holds(peak <= dmax_deg + 1e-9),
+                basis="assumed",
+            )
+
+
+def faster(inp: Inputs, add: Add) -> None:
+    """The mixed design converges faster than the PI, per path."""
+    R, paths, band = inp.R, inp.paths, inp.band
+    claim = "The mixed design converges faster than the PI"
+    for p in paths:
+        m, q = R[(p, "mixed")], R[(p, "pi")]
+        add(
+            claim,
+            p,
+            "mixed vs PI",
+            f"settling time into the {100 * band:g} cm band: mixed < PI",
+            f"{seconds(m['settling_time'])} vs {seconds(q['settling_time'])}",
+            "—",
+            holds(m["settling_time"] < q["settling_time"]),
+        )
+
+
+def more_accurate(inp: Inputs, add: Add) -> None:
+    """The mixed design converges more accurately than the PI, per path."""
+    R, paths, window = inp.R, inp.paths, inp.window
+    claim = "The mixed design converges more accurately than the PI"
+    for p in paths:
+        m, q = R[(p, "mixed")], R[(p, "pi")]
+        add(
+            claim,
+            p,
+            "mixed vs PI",
+            f"steady |d| (mean over the last {window:g} s): mixed < PI",
+            f"{mm(m['steady_abs_d'])} vs {mm(q['steady_abs_d'])}",
+            "—",
+            holds(m["steady_abs_d"] < q["steady_abs_d"]),
+        )
+
+
+def yaw_error(inp: Inputs, add: Add) -> None:
+    """The mixed design has the smaller yaw error, per path."""
+    R, paths, window = inp.R, inp.paths, inp.window
+    claim = "The mixed design has the smaller yaw error"
+    for p in paths:
+        m, q = R[(p, "mixed")], R[(p, "pi")]
+        dm, dq = math.degrees(m["steady_abs_theta_e_rad"]), math.degrees(q["steady_abs_theta_e_rad"])
+        add(
+            claim,
+            p,
+            "mixed vs PI",
+            f"steady |θₑ| (mean over the last {window:g} s): mixed < PI",
+            f"{dm:.3f}° vs {dq:.3f}°",
+            "—",
+            holds(dm < dq),
+        )
+
+
+def effort(inp: Inputs, add: Add) -> None:
+    """The mixed design needs less steering effort than the PI, per path."""
+    R, paths = inp.R, inp.paths
+    claim = "The mixed design needs less steering effort than the PI"
+    for p in paths:
+        m, q = R[(p, "mixed")], R[(p, "pi")]
+        for what, key, fmt in (
+            (
+                "peak commanded steering max |δ_cmd| (before saturation)",
+                "max_abs_delta_cmd",
+                lambda v: f"{math.degrees(v):.1f}°",
+            ),
+            ("peak applied steering max |δ| (after saturation)", "max_abs_delta", lambda v: f"{math.degrees(v):.1f}°"),
+            ("steering energy ∫δ² dt of the applied steering", "steer_energy", lambda v: f"{v:.4f} rad²·s"),
+            ("time with the command beyond the limit", "sat_fraction", lambda v: f"{100 * v:.1f} % of the run"),
+        ):
+            mv, qv = m[key], q[key]
+            add(
+                claim,
+                p,
+                "mixed vs PI",
+                f"{what}: mixed < PI",
+                f"{fmt(mv)} vs {fmt(qv)}",
+                "—",
+                holds(mv < qv) if not (mv == qv == 0) else "no verdict",
+            )
+
+
+def line_mixed_error(inp: Inputs, add: Add) -> None:
+    """Line: the mixed design's steady-state position error below the source's bound."""
+    R, window, src, stab = inp.R, inp.window, inp.src, inp.stab
+    claim = f"Line: steady-state position error below {src['line_ss_mixed_mm_below']:g} mm (mixed)"
+    for c in ("mixed", "paper-k"):
+        r = R[("line", c)]
+        add(
+            claim,
+            "line",
+            LABEL[c],
+            f"steady |d| (mean over the last {window:g} s) < {src['line_ss_mixed_mm_below']:g} mm",
+            f"{mm(r['steady_abs_d'])} (equilibrium d* = {mm(stab['paper_case']['d_star'])} for the source's K)",
+            f"< {src['line_ss_mixed_mm_below']:g} mm",
+            holds(1000 * r["steady_abs_d"] < src["line_ss_mixed_mm_below"]),
+        )
+
+
+def line_pi_error(inp: Inputs, add: Add) -> None:
+    """Line: the PI's steady-state position error near the source's, at the horizon and settled."""
+    R, window, src, long_pi = inp.R, inp.window, inp.src, inp.long_pi
+    claim = f"Line: steady-state position error about {src['line_ss_pi_mm']:g} mm (PI)"
+    tol = 0.5
+    r = R[("line", "pi")]
+    ratio = 1000 * r["steady_abs_d"] / src["line_ss_pi_mm"]
+    add(
+        claim,
+        "line",
+        LABEL["pi"],
+        f"steady |d| at the {inp.horizon:g} s horizon (mean over the last "
+        f"{window:g} s) within ±{100 * tol:g} % of {src['line_ss_pi_mm']:g} mm",
+        mm(r["steady_abs_d"]),
+        f"about {src['line_ss_pi_mm']:g} mm",
+        "reproduced" if abs(ratio - 1) <= tol else "not reproduced",
+        basis="assumed",
+    )
+    ratio = long_pi["steady_abs_d_mm"] / src["line_ss_pi_mm"]
+    add(
+        claim,
+        "line",
+        LABEL["pi"],
+        f"steady |d| once settled (a {long_pi['horizon_s']:g} s run: mean over its last "
+        f"{window:g} s) within ±{100 * tol:g} % of {src['line_ss_pi_mm']:g} mm; settled = |d| within 5 % of its final "
+        f"value from then on",
+        f"{long_pi['steady_abs_d_mm']:.2f} mm, settled from t = {seconds(long_pi['settle_time_s'])}",
+        f"about {src['line_ss_pi_mm']:g} mm",
+        "reproduced" if abs(ratio - 1) <= tol else "not reproduced",
+    )
+
+
+def line_steering(inp: Inputs, add: Add) -> None:
+    """Line: the steering settles near the source's angle."""
+    R, src = inp.R, inp.src
+    claim = f"Line: the steering settles at about {src['line_delta_deg']:g}° to compensate the slip"
+    for c in CONTROLLERS:
+        fd = math.degrees(R[("line", c)]["final_delta"])
+        add(
+            claim,
+            "line",
+            LABEL[c],
+            f"final applied steering within 0.5° of {src['line_delta_deg']:g}°",
+            f"{fd:.3f}°",
+            f"about {src['line_delta_deg']:g}°",
+            holds(abs(fd - src["line_delta_deg"]) < 0.5),
+            basis="used to choose the convention",
+        )
+
+
+def line_yaw(inp: Inputs, add: Add) -> None:
+    """Line: the yaw error settles at a non-zero value."""
+    R = inp.R
+    claim = "Line: the yaw error settles at a non-zero value"
+    for c in CONTROLLERS:
+        te = math.degrees(R[("line", c)]["final_theta_e"])
+        add(
+            claim,
+            "line",
+            LABEL[c],
+            "final |θₑ| > 1° (the equilibrium needs θₑ* = −β_r)",
+            f"{te:.3f}°",
+            "non-zero",
+            holds(abs(te) > 1.0),
+        )
+
+
+def sine_peaks(inp: Inputs, add: Add) -> None:
+    """Sine: where the errors peak against the curvature."""
+    sine = inp.sine
+    claim = "Sine: the errors grow where the curvature changes fastest (near the extrema)"
+    to_k, to_dk = sine["median_peak_to_kappa_max_m"], sine["median_peak_to_dkappa_max_m"]
+    add(
+        claim,
+        "sine",
+        LABEL["mixed"],
+        "after 5 s, |d| peaks within a quarter period (π/4 m of x) of the sine's extrema (|κ| maxima)",
+        f"median distance {to_k:.2f} m",
+        "near the extrema",
+        holds(to_k < math.pi / 4),
+    )
+    add(
+        claim,
+        "sine",
+        LABEL["mixed"],
+        "the |d| peaks lie closer to the |dκ/ds| maxima (curvature changing fastest) than to the |κ| maxima",
+        f"{to_dk:.2f} m vs {to_k:.2f} m",
+        "where κ changes fastest",
+        holds(to_dk < to_k),
+    )

@@ -1,0 +1,63 @@
+"""The slip vehicle's static settings (:class:`SimConfig`): step, horizon, controller sampling, projection
+iterations, recording and the metrics' bands; hashable, so they are a jitted program's static argument."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pfjax import errors, resources
+from pfjax.errors import InputError
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Static settings (they fix array shapes; hashable so they can be jit-static).
+
+    Attributes:
+        dt: integrator step, s (default 5 ms).
+        horizon: simulated time, s (docs/reproductions/path-following.md §6: *assumed* 20 s).
+        control_every: controller sampling period in integrator steps (zero-order hold);
+            ``None`` evaluates the controller continuously inside every RK4 stage.
+        newton_iters: Newton steps of the warm-started projection per measurement.
+        record: ``True`` returns full trajectories (memory O(horizon) per run);
+            ``False`` only the running metrics (memory independent of the horizon).
+        d_fail: |d| above which a run is flagged ``DIVERGED``, m.
+        settle_band: band on |d| for the settling time, m.
+        steady_window: final part of the run for the steady-state errors, s.
+        success_band: a run succeeds if it does not fail and |d| <= this from ``success_from`` on, m.
+        success_from: start of the success window, s (``None``: the steady window's start).
+    """
+
+    dt: float = 0.005
+    horizon: float = 20.0
+    control_every: int | None = 1
+    newton_iters: int = 3
+    record: bool = True
+    d_fail: float = 10.0
+    settle_band: float = 0.05
+    steady_window: float = 5.0
+    success_band: float = 0.05
+    success_from: float | None = None
+
+    def __post_init__(self):
+        """Checks every setting (:class:`~pfjax.errors.InputError` naming it)."""
+        errors.number("dt", self.dt, positive=True, unit=" s")
+        errors.number("horizon", self.horizon, positive=True, unit=" s")
+        if not self.horizon >= self.dt:
+            raise InputError(f"horizon: must be >= dt ({self.dt:g} s), got {self.horizon:g}")
+        resources.check_steps(self.horizon, self.dt)
+        if self.control_every is not None:
+            errors.integer("control_every", self.control_every, low=1, high=resources.MAX_STEPS)
+        errors.integer("newton_iters", self.newton_iters, low=1, high=100)
+        for name in ("d_fail", "settle_band", "steady_window", "success_band"):
+            errors.number(name, getattr(self, name), positive=True)
+        if self.success_from is not None:
+            errors.number("success_from", self.success_from, nonnegative=True, unit=" s")
+
+    @property
+    def n_steps(self) -> int:
+        return int(round(self.horizon / self.dt))
+
+    @property
+    def success_start(self) -> float:
+        return self.n_steps * self.dt - self.steady_window if self.success_from is None else self.success_from
