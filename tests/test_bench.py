@@ -71,6 +71,13 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     assert s["grad_mode"] == "forward" and s["gradient"]["modes_max_rel_diff"] < 1e-3
     assert s["grad_over_forward_reverse"] > 0
     assert s["ratio_vs_numba_f32"] == pytest.approx(s["msteps_per_s_f32"] / s["numba_msteps_per_s_f32"], rel=1e-12)
+    # the vehicle models in the same loop (--quick: kinematic and ST), the ratio recomputed from the times
+    for p, dtype in (("f32", "float32"), ("f64", "float64")):
+        row = s["models"][dtype]
+        assert s[f"model_cost_ratio_st_{p}"] == pytest.approx(
+            row["st"]["wall_s"] / row["kinematic"]["wall_s"], rel=1e-12
+        )
+        assert s[f"model_cost_ratio_st_{p}"] > 0 and s[f"model_cost_ratio_std_{p}"] is None
     full = json.loads((out / "bench.json").read_text())
     assert full["summary"] == {k: v for k, v in s.items() if k not in ("out", "machine")}
     assert full["config"]["sizes"] == [64, 128] and full["config_sha256"] and full["machine"]["cpus"] >= 1

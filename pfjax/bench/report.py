@@ -70,6 +70,31 @@ def throughput_figure(rows, machine: dict):
     return fig
 
 
+def _models(b: dict) -> list[str]:
+    """The vehicle-model comparison (:mod:`pfjax.bench.models`): ns per rollout-step and the ratio to
+    the kinematic model, per precision."""
+    if not b:
+        return []
+    names = [m for m in b["float32"] if not m.startswith("ratio_")]
+    rows = [
+        [
+            m,
+            *(f"{b[d][m]['ns_per_rollout_step']:.1f}" for d in ("float32", "float64")),
+            *("" if m == "kinematic" else f"{b[d][f'ratio_{m}_over_kinematic']:.2f}x" for d in ("float32", "float64")),
+        ]
+        for m in names
+    ]
+    return [
+        f"Vehicle models in the same loop ({b['runs']} runs of {b['steps']} steps, {b['controller']} on the "
+        f"{b['path']} path, metrics on; STD: vehicle 2 at 10 m/s, 2 ms step):",
+        "",
+        table(
+            ["model", "ns/rollout-step f32", "ns/rollout-step f64", "over kinematic f32", "over kinematic f64"], rows
+        ),
+        "",
+    ]
+
+
 def markdown(result: dict) -> str:
     s, m = result["summary"], result["machine"]
     lines = [
@@ -108,6 +133,7 @@ def markdown(result: dict) -> str:
         f"(the two gradients differ by {g['modes_max_rel_diff']:.1e} relative). "
         f"Peak RSS {s['peak_rss_mib']:.0f} MiB.",
         "",
+        *_models(s.get("models") or {}),
     ]
     for note in s.get("notes", []):  # a reference that was skipped (Numba not installed)
         lines += [f"Note: {note} (the Numba reference was skipped; its rates and ratios are null).", ""]

@@ -16,6 +16,9 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
   :mod:`pfjax.numerics.autodiff`) and in reverse mode (``jax.value_and_grad``): the three called
   in turn ``grad_rounds`` times, best of each, so the ratios survive a shared machine's slow
   periods;
+* the cost per rollout-step of the dynamic vehicle models (ST, STD) against the kinematic model in
+  the same loop (:mod:`pfjax.bench.models`, ``model_runs`` runs of ``model_horizon`` s, best of
+  ``repeats + 1`` interleaved calls; ``model_runs = 0`` skips it);
 * the process's peak resident memory (``getrusage``).
 """
 
@@ -48,6 +51,9 @@ class BenchConfig:
     horizon: float = P.HORIZON  # s
     repeats: int = 2
     grad_rounds: int = 5  # interleaved rounds of forward / gradient / reverse-mode calls (best of each)
+    model_runs: int = 2000  # runs per batch of the vehicle-model comparison (0: skipped)
+    model_horizon: float = 10.0  # s, of the kinematic and ST runs at the benchmark's step (STD: the same steps)
+    models: tuple[str, ...] = ("kinematic", "st", "std")
     seed: int = 0
     quick: bool = False
 
@@ -67,9 +73,16 @@ class BenchConfig:
             ("scipy_runs", self.scipy_runs),
             ("repeats", self.repeats),
             ("grad_rounds", self.grad_rounds),
+            ("model_runs", self.model_runs),
         ):
-            errors.integer(name, value, low=0 if name in ("repeats", "grad_rounds") else 1, high=100_000_000)
+            low = 0 if name in ("repeats", "grad_rounds", "model_runs") else 1
+            errors.integer(name, value, low=low, high=100_000_000)
         errors.number("horizon", self.horizon, positive=True, unit=" s")
+        errors.number("model_horizon", self.model_horizon, positive=True, unit=" s")
+        from pfjax.bench.models import MODELS
+
+        if not self.models or self.models[0] != "kinematic" or not set(self.models) <= set(MODELS):
+            raise errors.InputError(f"models: expected 'kinematic' first, then any of {sorted(MODELS)}")
         errors.seed("seed", self.seed)
         n_steps = resources.check_steps(self.horizon, P.DT)
         resources.check_memory(
@@ -89,6 +102,9 @@ QUICK = BenchConfig(
     horizon=2.0,
     repeats=1,
     grad_rounds=1,
+    model_runs=64,
+    model_horizon=2.0,
+    models=("kinematic", "st"),
     quick=True,
 )
 
@@ -280,7 +296,7 @@ def _reference_rows(cfg: BenchConfig, n_steps: int, iae: dict, have_numba: bool,
     return rows, agree
 
 
-def _summary(rows: list[dict], top: int, g: dict, agreement: dict, notes: list[str]) -> dict:
+def _summary(rows: list[dict], top: int, g: dict, agreement: dict, notes: list[str], models: dict) -> dict:
     """The headline rates and ratios (pfjax at the largest batch over each reference)."""
 
     def rate(impl, dtype, batch=None):
@@ -311,12 +327,24 @@ def _summary(rows: list[dict], top: int, g: dict, agreement: dict, notes: list[s
         grad_mode=g["mode"],
         grad_over_forward_reverse=g["reverse_s"] / g["forward_s"],
         gradient=g,
+        **_model_ratios(models),
+        models=models,
         peak_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         agreement=agreement,
         all_agree=all(a["ok"] for a in agreement.values()),
         failed_runs=sum(r["failed_runs"] or 0 for r in rows),
         notes=notes,
     )
+    return out
+
+
+def _model_ratios(models: dict) -> dict:
+    """``model_cost_ratio_<model>_<f32|f64>``: a dynamic model's cost per rollout-step over the
+    kinematic model's (None where it was not run)."""
+    out = {}
+    for m in ("st", "std"):
+        for p, dtype in (("f32", "float32"), ("f64", "float64")):
+            out[f"model_cost_ratio_{m}_{p}"] = models.get(dtype, {}).get(f"ratio_{m}_over_kinematic")
     return out
 
 
@@ -338,6 +366,12 @@ def run(cfg: BenchConfig, progress=None) -> dict:
     say(f"gradient B={cfg.grad_size}")
     with jax.enable_x64(False):
         g = _grad(P.random_batch(cfg.grad_size, cfg.seed), np.float32, cfg)
+    models: dict = {}
+    if cfg.model_runs:
+        from pfjax.bench.models import model_costs
+
+        steps = P.n_steps(cfg.model_horizon)
+        models = model_costs(cfg.model_runs, steps, P.DT, cfg.repeats + 1, cfg.models, progress=say)
     agreement = {
         k: dict(max_abs_diff=v, tolerance=TOLERANCE["scipy" if k.startswith("scipy") else k.rsplit("_", 1)[1]])
         for k, v in {**agree, **ref_agree}.items()
@@ -347,7 +381,7 @@ def run(cfg: BenchConfig, progress=None) -> dict:
     m = machine()
     m["load_average_1m_start"] = load0
     return dict(
-        summary=_summary(rows + ref_rows, max(cfg.sizes), g, agreement, notes),
+        summary=_summary(rows + ref_rows, max(cfg.sizes), g, agreement, notes, models),
         rows=rows + ref_rows,
         machine=m,
         config=asdict(cfg),

@@ -174,8 +174,9 @@ def _gradient_and_hessian(vg, z: np.ndarray, h: float, dtype):
     E = np.eye(z.size)[free] * h
     _, G = vg(jnp.asarray(np.concatenate([z + E, z - E]), dtype))
     G = np.asarray(G, np.float64)
-    H = (G[: free.size, free] - G[free.size :, free]) / (2 * h)
-    H = 0.5 * (H + H.T)
+    with np.errstate(invalid="ignore"):  # inf - inf where a gradient is not finite: nan, reported as data
+        H = (G[: free.size, free] - G[free.size :, free]) / (2 * h)
+        H = 0.5 * (H + H.T)
     eig = np.linalg.eigvalsh(H) if np.all(np.isfinite(H)) else np.full(free.size, np.nan)
     return J, g, active, H, eig
 
