@@ -89,56 +89,36 @@ def steering_limit(inp: Inputs, add: Add) -> None:
             )
 
 
+def _mixed_below_pi(inp: Inputs, add: Add, claim: str, key: str, criterion: str, show: Callable[[float], str]) -> None:
+    """One row per path: the claim holds where the mixed design's ``key`` is below the PI's."""
+    for p in inp.paths:
+        m, q = inp.R[(p, "mixed")][key], inp.R[(p, "pi")][key]
+        add(claim, p, "mixed vs PI", criterion, f"{show(m)} vs {show(q)}", "—", holds(m < q))
+
+
 def faster(inp: Inputs, add: Add) -> None:
     """The mixed design converges faster than the PI, per path."""
-    R, paths, band = inp.R, inp.paths, inp.band
-    claim = "The mixed design converges faster than the PI"
-    for p in paths:
-        m, q = R[(p, "mixed")], R[(p, "pi")]
-        add(
-            claim,
-            p,
-            "mixed vs PI",
-            f"settling time into the {100 * band:g} cm band: mixed < PI",
-            f"{seconds(m['settling_time'])} vs {seconds(q['settling_time'])}",
-            "—",
-            holds(m["settling_time"] < q["settling_time"]),
-        )
+    criterion = f"settling time into the {100 * inp.band:g} cm band: mixed < PI"
+    _mixed_below_pi(inp, add, "The mixed design converges faster than the PI", "settling_time", criterion, seconds)
 
 
 def more_accurate(inp: Inputs, add: Add) -> None:
     """The mixed design converges more accurately than the PI, per path."""
-    R, paths, window = inp.R, inp.paths, inp.window
-    claim = "The mixed design converges more accurately than the PI"
-    for p in paths:
-        m, q = R[(p, "mixed")], R[(p, "pi")]
-        add(
-            claim,
-            p,
-            "mixed vs PI",
-            f"steady |d| (mean over the last {window:g} s): mixed < PI",
-            f"{mm(m['steady_abs_d'])} vs {mm(q['steady_abs_d'])}",
-            "—",
-            holds(m["steady_abs_d"] < q["steady_abs_d"]),
-        )
+    criterion = f"steady |d| (mean over the last {inp.window:g} s): mixed < PI"
+    _mixed_below_pi(inp, add, "The mixed design converges more accurately than the PI", "steady_abs_d", criterion, mm)
 
 
 def yaw_error(inp: Inputs, add: Add) -> None:
     """The mixed design has the smaller yaw error, per path."""
-    R, paths, window = inp.R, inp.paths, inp.window
-    claim = "The mixed design has the smaller yaw error"
-    for p in paths:
-        m, q = R[(p, "mixed")], R[(p, "pi")]
-        dm, dq = math.degrees(m["steady_abs_theta_e_rad"]), math.degrees(q["steady_abs_theta_e_rad"])
-        add(
-            claim,
-            p,
-            "mixed vs PI",
-            f"steady |θₑ| (mean over the last {window:g} s): mixed < PI",
-            f"{dm:.3f}° vs {dq:.3f}°",
-            "—",
-            holds(dm < dq),
-        )
+    criterion = f"steady |θₑ| (mean over the last {inp.window:g} s): mixed < PI"
+    _mixed_below_pi(
+        inp,
+        add,
+        "The mixed design has the smaller yaw error",
+        "steady_abs_theta_e_rad",
+        criterion,
+        lambda rad: f"{math.degrees(rad):.3f}°",
+    )
 
 
 def effort(inp: Inputs, add: Add) -> None:
