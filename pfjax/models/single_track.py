@@ -245,14 +245,21 @@ def vector_field(x: STState, v_delta: Array, a_long: Array, params: STParams) ->
     # the velocity's direction psi + (beta_ks or beta), by the angle-sum formulas
     sin_p, cos_p = E.sincos(x.psi)
     cb, sb = jnp.where(slow, cos_ks, cos_b), jnp.where(slow, t * cos_ks, sin_b)
+    # the rates that select between the branches, computed in kernels of their own on CPU (values
+    # and derivatives exact): every kernel of the integrator that reads them would otherwise
+    # recompute both branches (docs/dynamic-model.md, Cost)
+    d_psi = E.computed_once(jnp.where(slow, v * cos_ks * tan_d * inv_l, psi_dot))
+    dd_psi, d_beta = E.computed_once_pair(
+        jnp.where(slow, dd_psi_ks, dd_psi_dyn), jnp.where(slow, d_beta_ks, d_beta_dyn), v
+    )
     return STState(
         sx=v * (cos_p * cb - sin_p * sb),
         sy=v * (sin_p * cb + cos_p * sb),
         delta=v_delta,
         v=a,
-        psi=jnp.where(slow, v * cos_ks * tan_d * inv_l, psi_dot),
-        psi_dot=jnp.where(slow, dd_psi_ks, dd_psi_dyn),
-        beta=jnp.where(slow, d_beta_ks, d_beta_dyn),
+        psi=d_psi,
+        psi_dot=dd_psi,
+        beta=d_beta,
     )
 
 

@@ -179,7 +179,8 @@ def _sincos(x):
 def computed_once_pair(a, b, x):
     """``(a, b)`` unchanged, but computed once per fused program (``a`` and ``b`` of one shape and
     float dtype; exact where both are finite or both NaN, since an infinite one makes the other
-    ``inf * 0 = NaN``). Used for the sine-cosine pair and the simulators' random draws.
+    ``inf * 0 = NaN``). Used for the sine-cosine pair, the simulators' random draws and the ST model's
+    branch-selected rates (:func:`pfjax.models.single_track.vector_field`).
 
     XLA's CPU backend never shares work between two fused kernels: every kernel that uses a cheap
     elementwise value (a polynomial sine) recomputes it from the last values held in memory, and a
@@ -204,8 +205,8 @@ def computed_once(x):
     tangent is divided by the same 1, so the transpose of that division puts reverse mode's cotangent
     of ``x`` in a kernel of its own too: the backward step then sums the cotangent's contributions
     once instead of recomputing them in each kernel that needs it. Values and derivatives are exact
-    (the division by 1 is). Used for the slip simulator's closest-point parameter, steering command
-    and applied steering. Measured on the benchmark (README, Performance): the reverse-mode gradient
+    (the division by 1 is). Used for the ST model's yaw rate ``psi'``, and for the slip simulator's
+    closest-point parameter, steering command and applied steering. Measured on the benchmark (README, Performance): the reverse-mode gradient
     about 30 % less CPU time; forward-mode gradients (whose tangents the same division puts in
     kernels of their own) about 13 % more; the forward pass 1-2.5 % slower. Identity off CPU."""
     return jax.lax.platform_dependent(x, cpu=lambda x: x / _one_from(x), default=lambda x: x)
