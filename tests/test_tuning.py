@@ -177,10 +177,11 @@ def _dynamic_iae(gains: dict, model: str, config) -> float:
 def test_tune_cli_on_the_dynamic_model(capsys):
     """``pfjax tune --model st``: the GA tunes through the ST model; the reported cost is the IAE of the
     returned gains simulated on the ST model directly, and differs from the kinematic model's at the
-    same gains (the slip comes from the tyres, not 5°). Tolerance 1e-3 relative: the tuner's program
-    takes the gains as traced arguments, the direct run as constants, and on the ST loop that alone
-    moved the IAE of the paper line by 7.8e-5 relative (0.705379 against 0.705325 at the default
-    gains, dt 0.01 s, float64); the kinematic model's agree to the last digit."""
+    same gains (the slip comes from the tyres, not 5°). Tolerance 1e-3 relative: the tuner's cost
+    and the direct run are different compiled programs, and gains whose run falls into the ST
+    model's saturated limit cycle amplify their rounding differences (a 1e-15 relative change of
+    the gains moves such a run's IAE by about 4e-4; docs/dynamic-model.md); settled runs agree to
+    rounding."""
     from pfjax.cli import main
 
     argv = ["tune", "--method", "ga", "--controller", "pi", "--model", "st", "--generations", "1"]
