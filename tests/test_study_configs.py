@@ -34,6 +34,9 @@ SMALL = [
     "f64_check_runs=0",
     "falsifier.enabled=false",
 ]  # the float64 check recompiles every simulator in float64: tested in test_determinism.py
+#: a config's rare-event estimates (rare_events.toml) on a small budget; the estimators' accuracy is
+#: tested in test_rare.py
+RARE_SMALL = ["rare_event.max_rollouts=15000", "rare_event.n_per_level=500", "rare_event.batch=500"]
 
 
 def test_configs_are_found():
@@ -46,10 +49,14 @@ def test_study_config_runs_small(path, tmp_path):
     spec, _ = load_study(path)  # the file as shipped validates
     if path.stem == "robustness_default":
         assert spec.n_runs >= 10_000 and {p.kind for p in spec.paths} == {"line", "parabola", "sine"}
-    small, _ = load_study(path, SMALL)
+    small, _ = load_study(path, SMALL + (RARE_SMALL if spec.rare_event.enabled else []))
     summary = run(small, tmp_path / "out", progress=False, report=True)
     runs = pd.read_parquet(tmp_path / "out" / "runs.parquet")
     assert len(runs) == summary["n_runs_total"] == 6 * len(small.paths) * len(small.controllers)
+    if spec.rare_event.enabled:  # every controller's estimate within the budget, in the summary
+        for c in summary["controllers"].values():
+            assert {"p_fail", "p_fail_ci95", "rel_error", "n_rollouts", "method"} <= set(c)
+            assert c["method"] == spec.rare_event.method and 0 < c["n_rollouts"] <= 15000
     assert set(summary["controllers"]) == {c.name for c in small.controllers}
     on_disk = json.loads((tmp_path / "out" / "summary.json").read_text())
     for c in on_disk["controllers"].values():
