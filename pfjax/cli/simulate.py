@@ -138,32 +138,15 @@ SIMULATE_FLAGS = {
 }
 
 
-def one_device():
-    """One run needs one device: a mesh of every core would pad it with copies and trace a sharded
-    program (0.1-0.2 s of the command's start-up; the run's numbers are the same)."""
-    import jax
-
-    return jax.devices()[:1]
-
-
-def only_run(result):
-    """The one run of a batch of one, on the host: copied as it is and indexed in NumPy, where
-    :func:`pfjax.sim.unstack` of device arrays would compile a gather (about 0.1 s of the command's
-    start-up, in every process)."""
-    import jax
-
-    from pfjax.sim import unstack
-
-    return unstack(jax.device_get(result), 0)
-
-
 def cmd(args) -> dict:
+    import jax
     import numpy as np
 
     from pfjax import paths
     from pfjax.metrics import METRIC_NAMES
-    from pfjax.sim import STATUS_NAMES, SimConfig, simulate_batch, stack
+    from pfjax.sim import STATUS_NAMES, SimConfig
     from pfjax.sim.scenario import paper_scenario
+    from pfjax.sim.simulate import simulate_one
 
     _check_model_flags(args)
     if args.continuous and args.control_every is not None:
@@ -196,7 +179,7 @@ def cmd(args) -> dict:
             delta_max_deg=args.delta_max_deg,
             convention=args.convention,
         )
-    r = only_run(simulate_batch(stack([sc]), controller=controller, config=cfg, devices=one_device()))
+    r = jax.device_get(simulate_one(sc, controller=controller, config=cfg))
     status = int(r.status)
     metrics: dict[str, bool | float | str] = {
         k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES
@@ -227,12 +210,13 @@ def cmd(args) -> dict:
 def _simulate_st(args, cfg, pose0) -> dict:
     """One run of the ST or STD model (``--model st``, ``std``): the output of the kinematic model's run plus the
     model, its parameter set and the slip the run produced (``slip``, degrees)."""
+    import jax
     import numpy as np
 
     from pfjax import paths
     from pfjax.metrics import METRIC_NAMES
     from pfjax.models import single_track as st
-    from pfjax.sim import STATUS_NAMES, stack
+    from pfjax.sim import STATUS_NAMES
     from pfjax.sim import dynamic as dyn
     from pfjax.sim.scenario import make_dynamic_scenario
 
@@ -262,7 +246,7 @@ def _simulate_st(args, cfg, pose0) -> dict:
             f"--dt: the {args.model.upper()} model at --mu {mu:g} and --speed {args.speed:g} needs dt <= "
             f"{dt_max:.3g} s for a stable RK4 step, got {cfg.dt:g}"
         )
-    r = only_run(dyn.simulate_batch(stack([sc]), controller=controller, config=cfg, devices=one_device()))
+    r = jax.device_get(dyn.simulate_one(sc, controller=controller, config=cfg))
     status = int(r.status)
     metrics: dict[str, bool | float | str] = {
         k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES

@@ -330,6 +330,14 @@ _simulate_vmapped = batch.program(
     static=("controller", "config"),
 )
 
+#: The jitted :func:`simulate` of one run, without a batch axis (:func:`pfjax.sim.batch.one_run`).
+_simulate_one = batch.one_run(
+    lambda sc, *, controller, config: simulate(controller, sc, config),
+    module=__name__,
+    name="_simulate_one",
+    static=("controller", "config"),
+)
+
 
 def simulate_batch(
     scenarios: DynamicScenario,
@@ -347,3 +355,13 @@ def simulate_batch(
     if config.record:
         batch.check_record(scenarios, config.n_steps, copies=2)
     return batch.call(_simulate_vmapped, scenarios, devices=devices, block=block, controller=controller, config=config)
+
+
+def simulate_one(scenario: DynamicScenario, *, controller: Controller, config: SimConfig) -> DynamicResult:
+    """Jitted :func:`simulate` of one run (a scenario without a batch axis), as
+    :func:`pfjax.sim.simulate.simulate_one`: the numbers of that run in :func:`simulate_batch`."""
+    controller.check_params(scenario.gains)
+    system(controller, config)  # checks the settings before tracing
+    if config.record:
+        batch.check_record(loop.stack([scenario]), config.n_steps, copies=2)
+    return _simulate_one(scenario, controller=controller, config=config)

@@ -314,6 +314,14 @@ _simulate_vmapped = batch.program(
     static=("controller", "config"),
 )
 
+#: The jitted :func:`simulate` of one run, without a batch axis (:func:`pfjax.sim.batch.one_run`).
+_simulate_one = batch.one_run(
+    lambda sc, *, controller, config: simulate(controller, sc, config),
+    module=__name__,
+    name="_simulate_one",
+    static=("controller", "config"),
+)
+
 
 def simulate_batch(
     scenarios: Scenario, *, controller: Controller, config: SimConfig, devices=None, block: int | str | None = "auto"
@@ -332,3 +340,14 @@ def simulate_batch(
     if config.record:
         batch.check_record(scenarios, config.n_steps)
     return batch.call(_simulate_vmapped, scenarios, devices=devices, block=block, controller=controller, config=config)
+
+
+def simulate_one(scenario: Scenario, *, controller: Controller, config: SimConfig) -> SimResult:
+    """Jitted :func:`simulate` of one run (a scenario without a batch axis) on JAX's default device:
+    the numbers that run gets in :func:`simulate_batch` (to the last bit of a metric), traced in less
+    than half the time of a batch of one (:func:`pfjax.sim.batch.one_run`). ``pfjax simulate`` calls
+    it."""
+    controller.check_params(scenario.gains)
+    if config.record:
+        batch.check_record(loop.stack([scenario]), config.n_steps)
+    return _simulate_one(scenario, controller=controller, config=config)
