@@ -62,7 +62,7 @@ from pfjax.falsification.space import (
 )
 from pfjax.models.slip import Pose, SlipParams
 from pfjax.numerics import autodiff
-from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, unstack
+from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, simulate_one, unstack
 from pfjax.sim.status import Status
 
 OBJECTIVES = ("iae", "ise", "itae", "max_abs_d", "late_max_abs_d")
@@ -383,15 +383,20 @@ def worst_trajectory(
 ) -> SimResult:
     """Re-simulate the worst scenario with ``record=True`` (for plotting): one unbatched ``SimResult``.
 
-    ``batch_size``: the scenario is repeated to this batch size, so the replay runs a program
-    compiled before (a :func:`random_search` with ``record=True`` and this ``batch_size``)
-    instead of compiling one for a single run (seconds). ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
+    ``batch_size=1`` (default): the one run through :func:`~pfjax.sim.simulate.simulate_one` (the
+    unbatched program, on ``devices[0]`` if given, else JAX's default device). Above 1, the scenario
+    is repeated to this batch size, so the replay runs a batched program compiled before (a
+    :func:`random_search` with ``record=True`` and this ``batch_size``) instead of compiling one.
+    ``devices``: as :func:`~pfjax.sim.simulate_batch`."""
     if int(batch_size) < 1:
         raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
+    config = dataclasses.replace(config, record=True)
+    if int(batch_size) == 1:
+        if devices is None:
+            return simulate_one(result.scenario, controller=controller, config=config)
+        with jax.default_device(next(iter(devices))):
+            return simulate_one(result.scenario, controller=controller, config=config)
     res = simulate_batch(
-        _repeat(result.scenario, int(batch_size)),
-        controller=controller,
-        config=dataclasses.replace(config, record=True),
-        devices=devices,
+        _repeat(result.scenario, int(batch_size)), controller=controller, config=config, devices=devices
     )
     return unstack(res, 0)
