@@ -166,7 +166,7 @@ def test_blocks_and_devices_give_the_same_runs(model):
                 np.testing.assert_array_equal(a, b, err_msg=str(kw))
 
 
-@pytest.mark.parametrize("model", ["slip", "st"])
+@pytest.mark.parametrize("model", ["slip", "st", "tracking"])
 def test_one_run_alone_gives_its_numbers_in_a_batch(model):
     """``simulate_one`` (the unbatched program ``pfjax simulate`` calls) on each of 3 runs against the
     same runs of a batch of 3: identical statuses and integer results, floats to 1e-13 relative. The
@@ -181,6 +181,20 @@ def test_one_run_alone_gives_its_numbers_in_a_batch(model):
 
         batch = P.scenarios(P.random_batch(3, seed=2), np.float64)
         controller = state_feedback
+    elif model == "tracking":
+        from pfjax import tracking as T
+        from pfjax.tracking import leader as L
+
+        line = L.line(speed=1.0, heading=0.4)
+        prm = [T.FollowerParams(a=1.0, f=f, l=f, p=1.2 * f) for f in (1.0, -1.0, 1.0)]
+        rng = np.random.default_rng(3)
+        inits = T.initial_states(
+            T.stack([line] * 3), T.stack(prm), rng.uniform(-0.5, 0.5, (3, 2)), rng.uniform(-0.3, 0.3, 3)
+        )
+        batch = T.stack([T.scenario(p, line, init=T.unstack(inits, i)) for i, p in enumerate(prm)])
+        cfg = T.TrackConfig(dt=0.01, horizon=1.0, record=True)
+        run_batch = lambda b: T.simulate_batch(b, config=cfg)
+        run_one = lambda sc: T.simulate_one(sc, config=cfg)
     else:
         from pfjax import controllers as C
         from pfjax import paths
@@ -193,10 +207,13 @@ def test_one_run_alone_gives_its_numbers_in_a_batch(model):
         assert sine.build is not None and sine.start_pose is not None
         batch = stack([make_dynamic_scenario(sine.build(), sine.start_pose, gains, mu=mu) for mu in (0.3, 0.6, 1.0)])
         controller = e.controller
-    cfg = SimConfig(horizon=0.5, record=True)
-    ref = jax.device_get(simulate_batch(batch, controller=controller, config=cfg))
+    if model != "tracking":
+        cfg = SimConfig(horizon=0.5, record=True)
+        run_batch = lambda b: simulate_batch(b, controller=controller, config=cfg)
+        run_one = lambda sc: simulate_one(sc, controller=controller, config=cfg)
+    ref = jax.device_get(run_batch(batch))
     for i in range(3):
-        got = jax.device_get(simulate_one(unstack(batch, i), controller=controller, config=cfg))
+        got = jax.device_get(run_one(unstack(batch, i)))
         for a, b in zip(jax.tree_util.tree_leaves(unstack(ref, i)), jax.tree_util.tree_leaves(got)):
             assert np.shape(a) == np.shape(b)
             if np.asarray(a).dtype.kind == "f":

@@ -6,8 +6,9 @@ Each simulator module (the slip vehicle :mod:`pfjax.sim.simulate`, the dynamic v
 :mod:`pfjax.sim.dynamic`, formation tracking :mod:`pfjax.tracking.simulate`) builds its compiled
 program with :func:`program` (one program per module, registered under the module's name) and calls it
 with :func:`call`; a recording simulator checks its memory first with :func:`check_record`. A
-command that simulates a single run (``pfjax simulate``) calls the unbatched function compiled on
-its own (:func:`one_run`), which traces in less than half the time of a batch of one.
+command that simulates a single run (``pfjax simulate``, ``pfjax track``) calls the unbatched
+function compiled on its own (:func:`one_run`), which traces in less than half the time of a batch
+of one.
 """
 
 from __future__ import annotations
@@ -51,7 +52,8 @@ def one_run(run_one: Callable[..., Any], *, module: str, name: str, static: tupl
     jax 0.10.2). Tracing and lowering are paid in every process, with the compiled program in the
     persistent cache too: they are most of a warm one-run command's start-up. The per-run code is the
     same; XLA compiles it into other machine code, which may round a step's arithmetic differently
-    in its last bit (measured: at most 1 ulp in a metric; tests/test_sharding.py). Compiled with
+    in its last bit (measured: at most 1 ulp in a metric of ``pfjax simulate``; tests/test_sharding.py
+    compares every simulator's single-run and batched programs). Compiled with
     XLA's default options: a single run has no batch axis to vectorise.
     """
 

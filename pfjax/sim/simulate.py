@@ -344,9 +344,9 @@ def simulate_batch(
 
 def simulate_one(scenario: Scenario, *, controller: Controller, config: SimConfig) -> SimResult:
     """Jitted :func:`simulate` of one run (a scenario without a batch axis) on JAX's default device:
-    the numbers that run gets in :func:`simulate_batch` (to the last bit of a metric), traced in less
-    than half the time of a batch of one (:func:`pfjax.sim.batch.one_run`). ``pfjax simulate`` calls
-    it."""
+    the numbers that run gets in :func:`simulate_batch` up to rounding (tests/test_sharding.py), traced
+    in less than half the time of a batch of one (:func:`pfjax.sim.batch.one_run`). ``pfjax
+    simulate`` calls it."""
     controller.check_params(scenario.gains)
     if config.record:
         batch.check_record(loop.stack([scenario]), config.n_steps)

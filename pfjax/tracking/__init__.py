@@ -34,6 +34,7 @@ from pfjax.tracking.simulate import (
     scenario,
     simulate,
     simulate_batch,
+    simulate_one,
     stack,
     unstack,
 )
@@ -64,6 +65,7 @@ __all__ = [
     "scenario",
     "simulate",
     "simulate_batch",
+    "simulate_one",
     "stack",
     "tracking_error",
     "unstack",

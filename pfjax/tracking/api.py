@@ -199,7 +199,7 @@ def _simulate(c: dict) -> dict:
         TrackConfig,
         initial_states,
         scenario,
-        simulate_batch,
+        simulate_one,
         stack,
         unstack,
     )
@@ -226,7 +226,7 @@ def _simulate(c: dict) -> dict:
     slip = constant_slip(math.radians(c["beta_r_deg"]), math.radians(c["beta_f_deg"]))
     sc = scenario(params, ld, gains=FocusGains(k=c["k"]), init=init, slip=slip)
     cfg = TrackConfig(dt=c["dt"], horizon=c["horizon"], window=min(5.0, c["horizon"] / 3))
-    r = unstack(host(simulate_batch(stack([sc]), config=cfg)), 0)
+    r = host(simulate_one(sc, config=cfg))
     m = r.metrics
     lo, hi = p_bound(gmax, f)
     status = int(r.status)
