@@ -23,12 +23,13 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)
 
 # The last lines run the README's first commands once, so that the persistent compilation cache
-# (~/.cache/pfjax/xla) holds their programs and a user's first pfjax simulate starts warm.
+# (~/.cache/pfjax/xla) holds their programs and a user's first pfjax simulate or pfjax track starts warm.
 study: $(STAMP)
 	$(PY) studies/paper_reproduction.py
 	$(VENV)/bin/pfjax study studies/robustness_default.toml
 	$(VENV)/bin/pfjax simulate --path sine --controller mixed --beta-r-deg 5 --beta-f-deg 5 --horizon 20 --json > /dev/null
 	$(VENV)/bin/pfjax simulate --path sine --controller pi --json > /dev/null
+	$(VENV)/bin/pfjax track --json > /dev/null
 
 # pytest exits 5 when it collects no test: .ci/run fails on it too (a suite that ran nothing).
 # --dist worksteal: an idle worker takes queued tests from the busy one (the slow tests come last).
