@@ -3,12 +3,12 @@ over the leading axis of a batch of scenarios, split over devices and cache-size
 (:mod:`pfjax.sim.sharding`), compiled with :func:`pfjax.numerics.compiler.jit` and called.
 
 Each simulator module (the slip vehicle :mod:`pfjax.sim.simulate`, the dynamic vehicle
-:mod:`pfjax.sim.dynamic`, formation tracking :mod:`pfjax.tracking.simulate`) builds its compiled
-program with :func:`program` (one program per module, registered under the module's name) and calls it
-with :func:`call`; a recording simulator checks its memory first with :func:`check_record`. A
-command that simulates a single run (``pfjax simulate``, ``pfjax track``) calls the unbatched
-function compiled on its own (:func:`one_run`), which traces in less than half the time of a batch
-of one.
+:mod:`pfjax.sim.dynamic`, formation tracking :mod:`pfjax.tracking.simulate`) builds its two compiled
+entry points with :func:`programs`: the batched :func:`program` (registered under the module's
+name), which it calls with :func:`call`, and the single run :func:`one_run`, which a command that
+simulates one run (``pfjax simulate``, ``pfjax track``) calls because it traces in less than half
+the time of a batch of one. A recording simulator checks its memory first with
+:func:`check_record`.
 """
 
 from __future__ import annotations
@@ -63,6 +63,16 @@ def one_run(run_one: Callable[..., Any], *, module: str, name: str, static: tupl
     run.__module__ = module
     run.__name__ = run.__qualname__ = name
     return jax.jit(run, static_argnames=static)
+
+
+def programs(run_one: Callable[..., Any], *, module: str, static: tuple[str, ...]):
+    """A simulator module's two compiled entry points of ``run_one``: ``(batched, single)``, the
+    :func:`program` registered as ``module._simulate_vmapped`` and the :func:`one_run` named
+    ``module._simulate_one``."""
+    return (
+        program(run_one, module=module, name="_simulate_vmapped", static=static),
+        one_run(run_one, module=module, name="_simulate_one", static=static),
+    )
 
 
 def call(jitted, scenarios, *, devices=None, block: int | str | None = "auto", **static):

@@ -306,20 +306,10 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
     )
 
 
-#: The jitted, vmapped :func:`simulate` (:func:`pfjax.sim.batch.program`).
-_simulate_vmapped = batch.program(
-    lambda sc, *, controller, config: simulate(controller, sc, config),
-    module=__name__,
-    name="_simulate_vmapped",
-    static=("controller", "config"),
-)
-
-#: The jitted :func:`simulate` of one run, without a batch axis (:func:`pfjax.sim.batch.one_run`).
-_simulate_one = batch.one_run(
-    lambda sc, *, controller, config: simulate(controller, sc, config),
-    module=__name__,
-    name="_simulate_one",
-    static=("controller", "config"),
+#: The jitted, vmapped :func:`simulate` and the jitted single run without a batch axis
+#: (:func:`pfjax.sim.batch.programs`).
+_simulate_vmapped, _simulate_one = batch.programs(
+    lambda sc, *, controller, config: simulate(controller, sc, config), module=__name__, static=("controller", "config")
 )
 
 

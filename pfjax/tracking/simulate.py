@@ -328,11 +328,9 @@ def simulate(sc: TrackScenario, config: TrackConfig) -> TrackResult:
     return loop.run(system(config), sc, config.n_steps, record=config.record)
 
 
-#: The jitted, vmapped :func:`simulate` (:func:`pfjax.sim.batch.program`).
-_simulate_vmapped = batch.program(simulate, module=__name__, name="_simulate_vmapped", static=("config",))
-
-#: The jitted :func:`simulate` of one run, without a batch axis (:func:`pfjax.sim.batch.one_run`).
-_simulate_one = batch.one_run(simulate, module=__name__, name="_simulate_one", static=("config",))
+#: The jitted, vmapped :func:`simulate` and the jitted single run without a batch axis
+#: (:func:`pfjax.sim.batch.programs`).
+_simulate_vmapped, _simulate_one = batch.programs(simulate, module=__name__, static=("config",))
 
 
 def simulate_batch(
