@@ -127,6 +127,30 @@ def test_plan_batch_splits_devices_into_blocks():
     assert sharding.default_block({"x": np.zeros(3)}, [SimpleNamespace(platform="gpu")]) is None
 
 
+def _tracking_batch(n: int, seed: int):
+    """``n`` followers on a straight leader, alternately forward and backward, displaced at random."""
+    from pfjax import tracking as T
+    from pfjax.tracking import leader as L
+
+    line = L.line(speed=1.0, heading=0.4)
+    prm = [T.FollowerParams(a=1.0, f=f, l=f, p=f * (1.0 + 0.1 * i)) for i, f in enumerate(([1.0, -1.0] * n)[:n])]
+    rng = np.random.default_rng(seed)
+    inits = T.initial_states(
+        T.stack([line] * n), T.stack(prm), rng.uniform(-0.5, 0.5, (n, 2)), rng.uniform(-0.3, 0.3, n)
+    )
+    return T.stack([T.scenario(p, line, init=T.unstack(inits, i)) for i, p in enumerate(prm)])
+
+
+def _assert_same_runs(ref, got, msg: str) -> None:
+    """Leaf by leaf: the same shapes, integers equal, floats to 1e-13 relative (1e-15 absolute)."""
+    for a, b in zip(jax.tree_util.tree_leaves(ref), jax.tree_util.tree_leaves(got)):
+        assert np.shape(a) == np.shape(b), msg
+        if np.asarray(a).dtype.kind == "f":
+            np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-15, err_msg=msg)
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=msg)
+
+
 @pytest.mark.parametrize("model", ["slip", "tracking"])
 def test_blocks_and_devices_give_the_same_runs(model):
     """The same 11 runs in one block on one device, in blocks of 3 and 4 (padded), and over every
@@ -145,25 +169,15 @@ def test_blocks_and_devices_give_the_same_runs(model):
         )
     else:
         from pfjax import tracking as T
-        from pfjax.tracking import leader as L
 
-        line = L.line(speed=1.0, heading=0.4)
-        prm = [T.FollowerParams(a=1.0, f=f, l=f, p=f * (1.0 + 0.1 * i)) for i, f in enumerate([1.0, -1.0] * 5 + [1.0])]
-        rng = np.random.default_rng(0)
-        inits = T.initial_states(
-            T.stack([line] * 11), T.stack(prm), rng.uniform(-0.5, 0.5, (11, 2)), rng.uniform(-0.3, 0.3, 11)
-        )
-        scs = T.stack([T.scenario(p, line, init=T.unstack(inits, i)) for i, p in enumerate(prm)])
+        scs = _tracking_batch(11, seed=0)
         go = lambda **kw: T.simulate_batch(scs, config=T.TrackConfig(dt=0.01, horizon=1.0), **kw)
     ref = jax.device_get(go(devices=jax.devices()[:1], block=None))
     for kw in ({"block": 3}, {"devices": jax.devices()[:1], "block": 4}, {"block": None}, {}):
         got = jax.device_get(go(**kw))
         for a, b in zip(jax.tree_util.tree_leaves(ref), jax.tree_util.tree_leaves(got)):
-            assert a.shape == b.shape and a.dtype == b.dtype == (np.float64 if a.dtype.kind == "f" else a.dtype)
-            if a.dtype.kind == "f":
-                np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-15, err_msg=str(kw))
-            else:
-                np.testing.assert_array_equal(a, b, err_msg=str(kw))
+            assert a.dtype == b.dtype == (np.float64 if a.dtype.kind == "f" else a.dtype)
+        _assert_same_runs(ref, got, str(kw))
 
 
 @pytest.mark.parametrize("model", ["slip", "st", "tracking"])
@@ -183,15 +197,8 @@ def test_one_run_alone_gives_its_numbers_in_a_batch(model):
         controller = state_feedback
     elif model == "tracking":
         from pfjax import tracking as T
-        from pfjax.tracking import leader as L
 
-        line = L.line(speed=1.0, heading=0.4)
-        prm = [T.FollowerParams(a=1.0, f=f, l=f, p=1.2 * f) for f in (1.0, -1.0, 1.0)]
-        rng = np.random.default_rng(3)
-        inits = T.initial_states(
-            T.stack([line] * 3), T.stack(prm), rng.uniform(-0.5, 0.5, (3, 2)), rng.uniform(-0.3, 0.3, 3)
-        )
-        batch = T.stack([T.scenario(p, line, init=T.unstack(inits, i)) for i, p in enumerate(prm)])
+        batch = _tracking_batch(3, seed=3)
         cfg = T.TrackConfig(dt=0.01, horizon=1.0, record=True)
         run_batch = lambda b: T.simulate_batch(b, config=cfg)
         run_one = lambda sc: T.simulate_one(sc, config=cfg)
@@ -213,13 +220,7 @@ def test_one_run_alone_gives_its_numbers_in_a_batch(model):
         run_one = lambda sc: simulate_one(sc, controller=controller, config=cfg)
     ref = jax.device_get(run_batch(batch))
     for i in range(3):
-        got = jax.device_get(run_one(unstack(batch, i)))
-        for a, b in zip(jax.tree_util.tree_leaves(unstack(ref, i)), jax.tree_util.tree_leaves(got)):
-            assert np.shape(a) == np.shape(b)
-            if np.asarray(a).dtype.kind == "f":
-                np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-15, err_msg=f"run {i}")
-            else:
-                np.testing.assert_array_equal(a, b, err_msg=f"run {i}")
+        _assert_same_runs(unstack(ref, i), jax.device_get(run_one(unstack(batch, i))), f"run {i}")
 
 
 @pytest.mark.slow

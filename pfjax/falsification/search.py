@@ -38,6 +38,7 @@ scenario count, not equal compute.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from functools import partial
 from typing import NamedTuple
@@ -392,9 +393,7 @@ def worst_trajectory(
         raise ValueError(f"batch_size: must be >= 1, got {batch_size}")
     config = dataclasses.replace(config, record=True)
     if int(batch_size) == 1:
-        if devices is None:
-            return simulate_one(result.scenario, controller=controller, config=config)
-        with jax.default_device(next(iter(devices))):
+        with contextlib.nullcontext() if devices is None else jax.default_device(next(iter(devices))):
             return simulate_one(result.scenario, controller=controller, config=config)
     res = simulate_batch(
         _repeat(result.scenario, int(batch_size)), controller=controller, config=config, devices=devices

@@ -340,18 +340,21 @@ def simulate_batch(
     """Jitted, vmapped :func:`simulate` over a batch of scenarios (leading axis of every leaf),
     sharded and blocked as :func:`pfjax.sim.simulate_batch` (compiled once per controller,
     ``config``, batch shape, device set and block count)."""
-    controller.check_params(scenarios.gains)
-    system(controller, config)  # checks the settings before tracing
-    if config.record:
-        batch.check_record(scenarios, config.n_steps, copies=2)
+    _check(scenarios, controller, config)
     return batch.call(_simulate_vmapped, scenarios, devices=devices, block=block, controller=controller, config=config)
 
 
 def simulate_one(scenario: DynamicScenario, *, controller: Controller, config: SimConfig) -> DynamicResult:
     """Jitted :func:`simulate` of one run (a scenario without a batch axis), as
     :func:`pfjax.sim.simulate.simulate_one`: the numbers of that run in :func:`simulate_batch`."""
-    controller.check_params(scenario.gains)
-    system(controller, config)  # checks the settings before tracing
-    if config.record:
-        batch.check_record(loop.stack([scenario]), config.n_steps, copies=2)
+    _check(loop.stack([scenario]), controller, config)
     return _simulate_one(scenario, controller=controller, config=config)
+
+
+def _check(scenarios: DynamicScenario, controller: Controller, config: SimConfig) -> None:
+    """The entry points' input checks on a batch (leading axis), before tracing: the controller's
+    gains, the settings (:func:`system`) and the memory of a recorded batch (states and slips)."""
+    controller.check_params(scenarios.gains)
+    system(controller, config)
+    if config.record:
+        batch.check_record(scenarios, config.n_steps, copies=2)

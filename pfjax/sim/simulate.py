@@ -326,9 +326,7 @@ def simulate_batch(
     the same, run for run, whatever the number of devices and blocks, up to rounding (XLA compiles
     each block shape into its own vector code: at most an ulp or two in a metric, measured).
     """
-    controller.check_params(scenarios.gains)  # here, not at trace time: JAX would add to the message
-    if config.record:
-        batch.check_record(scenarios, config.n_steps)
+    _check(scenarios, controller, config)
     return batch.call(_simulate_vmapped, scenarios, devices=devices, block=block, controller=controller, config=config)
 
 
@@ -337,7 +335,13 @@ def simulate_one(scenario: Scenario, *, controller: Controller, config: SimConfi
     the numbers that run gets in :func:`simulate_batch` up to rounding (tests/test_sharding.py), traced
     in less than half the time of a batch of one (:func:`pfjax.sim.batch.one_run`). ``pfjax
     simulate`` calls it."""
-    controller.check_params(scenario.gains)
-    if config.record:
-        batch.check_record(loop.stack([scenario]), config.n_steps)
+    _check(loop.stack([scenario]), controller, config)
     return _simulate_one(scenario, controller=controller, config=config)
+
+
+def _check(scenarios: Scenario, controller: Controller, config: SimConfig) -> None:
+    """The entry points' input checks on a batch (leading axis), before tracing, where JAX would add
+    to the message: the controller's gains, and the memory of a recorded batch."""
+    controller.check_params(scenarios.gains)
+    if config.record:
+        batch.check_record(scenarios, config.n_steps)
