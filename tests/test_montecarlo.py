@@ -121,6 +121,45 @@ def test_sampled_distributions():
     assert set(np.unique(c["start_along_m"])) <= {0.0, 0.5} and len(np.unique(c["start_along_m"])) == 2
 
 
+def test_studies_differing_only_in_their_distributions_numbers_share_one_sampler():
+    """The sampler's program is keyed by the distributions' kinds, not their numbers, nor the rest
+    of the study (name, controllers): a second study with other ranges, normal parameters, choice
+    values and circle radii compiles nothing, and its draws follow its own numbers (the same
+    uniform, normal and index draws per run, mapped to its ranges). A change of kind compiles anew."""
+    from pfjax.montecarlo import sampling as S
+
+    a = spec_of(
+        "initial.lateral_offset={dist='normal', mean=0.0, std=1.0}", "vehicle.L={dist='choice', values=[0.2, 0.3]}"
+    )
+    b = spec_of(
+        "name='other'",
+        "controllers=[{name='pi', type='pi'}]",
+        "slip.beta_r_deg={dist='uniform', low=-1.0, high=3.0}",
+        "slip.beta_f_deg={dist='truncnormal', mean=0.0, std=4.0, low=-12.0, high=12.0}",
+        "initial.lateral_offset={dist='normal', mean=0.5, std=2.0}",
+        "vehicle.L={dist='choice', values=[0.4, 0.6]}",
+        "paths=[{kind='line'}, {kind='circle', radius={dist='uniform', low=4.0, high=5.0}}]",
+    )
+    runs = np.arange(64)
+    for p in range(2):
+        ca = sample_runs(a, p, runs).columns
+        compiled = S._draw_runs._cache_size()
+        cb = sample_runs(b, p, runs).columns
+        assert S._draw_runs._cache_size() == compiled
+        u = lambda c, lo, hi: (c - lo) / (hi - lo)
+        rtol = dict(rtol=0, atol=1e-12)  # float64 rounding of the affine maps
+        np.testing.assert_allclose(u(ca["beta_r_deg"], -5, 5), u(cb["beta_r_deg"], -1, 3), **rtol)
+        np.testing.assert_allclose(ca["beta_f_deg"] / 2, cb["beta_f_deg"] / 4, **rtol)  # same bounds in std units
+        np.testing.assert_allclose(ca["lateral_offset"], (cb["lateral_offset"] - 0.5) / 2, **rtol)
+        np.testing.assert_array_equal(ca["L"] == 0.2, cb["L"] == 0.4)
+        np.testing.assert_array_equal(np.unique(cb["L"]), [0.4, 0.6])
+        if p == 1:
+            np.testing.assert_allclose(u(ca["radius"], 2, 3), u(cb["radius"], 4, 5), **rtol)
+    c = spec_of("slip.beta_r_deg={dist='choice', values=[1.0, -2.0]}")
+    sample_runs(c, 0, runs)
+    assert S._draw_runs._cache_size() == compiled + 1
+
+
 def test_start_pose_has_the_sampled_offset_heading_error_and_arc_position():
     """Projecting the sampled start pose back onto the path returns d = lateral_offset,
     theta_e = heading_error and s = start_along_m (the line's and circle's nominal start has s = 0)."""
@@ -235,6 +274,7 @@ def test_sampler_scratch_memory_is_bounded_for_large_chunks():
     spec, n = spec_of(), 65536
     keys = S.run_keys(spec.seed, 0, np.arange(n))
     z = jnp.zeros(n)
+    design, numbers, _ = S._design(spec, spec.paths[0])
     compiled = S._draw_runs.lower(
         keys,
         {},
@@ -242,7 +282,8 @@ def test_sampler_scratch_memory_is_bounded_for_large_chunks():
         jnp.asarray(0.0),
         (z, z),
         False,
-        study=S._Static(spec),
+        jax.tree_util.tree_map(jnp.asarray, numbers),
+        design=S._Static(design),
         circle=None,
         batched_path=False,
     ).compile()

@@ -15,10 +15,12 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pydantic_core
 
 from pfjax import paths
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
 from pfjax.montecarlo.config import Dist, PathSpec, StudySpec
+from pfjax.montecarlo.scenario_config import InitialSpec, NoiseSpec, SlipSpec, VehicleSpec
 from pfjax.paths import shapes
 from pfjax.paths.geometry import arc_length, tangent_angle
 from pfjax.sim.dynamic import DynamicScenario
@@ -67,20 +69,44 @@ def _fold_runs(base, runs):
     return jax.vmap(lambda i: jax.random.fold_in(base, i))(runs)
 
 
-def draw(dist: Dist, key) -> jax.Array:
-    """One scalar from ``dist`` (float)."""
+def draw(dist: Dist, key, numbers: dict | None = None) -> jax.Array:
+    """One scalar from ``dist`` (float). ``numbers``: its parameters (:func:`dist_numbers`) as arrays,
+    used instead of ``dist``'s own, so that one traced program serves every distribution of a kind."""
     f = jnp.result_type(float)
+    num = dist.number if numbers is None else numbers.__getitem__
     if dist.dist == "constant":
-        return jnp.asarray(dist.value, f)
+        return jnp.asarray(num("value"), f)
     if dist.dist == "uniform":
-        return jax.random.uniform(key, (), f, dist.number("low"), dist.number("high"))
+        return jax.random.uniform(key, (), f, num("low"), num("high"))
     if dist.dist == "normal":
-        return dist.number("mean") + dist.number("std") * jax.random.normal(key, (), f)
+        return num("mean") + num("std") * jax.random.normal(key, (), f)
     if dist.dist == "truncnormal":
-        mean, std = dist.number("mean"), dist.number("std")
-        lo, hi = (dist.number("low") - mean) / std, (dist.number("high") - mean) / std
+        mean, std = num("mean"), num("std")
+        lo, hi = (num("low") - mean) / std, (num("high") - mean) / std
         return mean + std * jax.random.truncated_normal(key, lo, hi, (), f)
-    return jax.random.choice(key, jnp.asarray(dist.values, f))
+    return jax.random.choice(key, jnp.asarray(dist.values if numbers is None else numbers["values"], f))
+
+
+#: A valid distribution of each kind, standing in for a study's own in the sampler's static arguments.
+_PLACEHOLDER: dict[str, dict] = {
+    "constant": {"value": 0.0},
+    "uniform": {"low": 0.0, "high": 1.0},
+    "normal": {"mean": 0.0, "std": 1.0},
+    "truncnormal": {"mean": 0.0, "std": 1.0, "low": -1.0, "high": 1.0},
+}
+
+
+def dist_numbers(dist: Dist) -> dict:
+    """``dist``'s parameters by name (``value``, ``low``, ``high``, ``mean``, ``std``: floats;
+    ``values``: a list), the ones its kind uses."""
+    return {k: v for k, v in dist.model_dump(exclude={"dist"}).items() if v is not None}
+
+
+def placeholder(dist: Dist) -> Dist:
+    """A distribution of ``dist``'s kind (and, for ``choice``, its number of values) with fixed numbers."""
+    if dist.dist == "choice":
+        return Dist(dist="choice", values=[0.0] * len(dist.values or ()))
+    return Dist(dist=dist.dist, **_PLACEHOLDER[dist.dist])
 
 
 def _q(key, name):
@@ -134,10 +160,9 @@ def column_names(spec: StudySpec) -> list[str]:
     return cols
 
 
-def _slip(spec: StudySpec, key, horizon: float, given=None):
-    s = spec.slip
-    given = given or {}
-    d = lambda name: given[name] if name in given else draw(getattr(s, name), _q(key, name))
+def _slip(design: _Design, key, given: dict, numbers: dict):
+    s, horizon = design.slip, design.horizon
+    d = lambda name: given[name] if name in given else draw(getattr(s, name), _q(key, name), numbers[name])
     rad = math.pi / 180
     br, bf = d("beta_r_deg"), d("beta_f_deg")
     cols = {"beta_r_deg": br, "beta_f_deg": bf}
@@ -220,18 +245,50 @@ SAMPLE_BLOCK = 2048
 
 
 class _Static:
-    """A pydantic model as a static ``jax.jit`` argument: hashed and compared by its JSON."""
+    """Pydantic models (or a tuple of them and plain values) as a static ``jax.jit`` argument:
+    hashed and compared by their JSON."""
 
     __slots__ = ("_json", "model")
 
     def __init__(self, model):
-        self.model, self._json = model, model.model_dump_json()
+        self.model, self._json = model, pydantic_core.to_json(model)
 
     def __hash__(self):
         return hash(self._json)
 
     def __eq__(self, other):
         return isinstance(other, _Static) and other._json == self._json
+
+
+class _Design(NamedTuple):
+    """What the sampler reads of a study (static in :func:`_draw_runs`): its vehicle, slip,
+    initial-condition and noise sections and its horizon (s), every distribution in them reduced to
+    its kind by :func:`placeholder`. The distributions' numbers are the program's arguments, so
+    studies, and the arms of one, that differ only in those numbers share one compiled sampler."""
+
+    vehicle: VehicleSpec
+    slip: SlipSpec
+    initial: InitialSpec
+    noise: NoiseSpec
+    horizon: float
+
+
+def _design(spec: StudySpec, pspec: PathSpec) -> tuple[_Design, dict, Dist | None]:
+    """The sampler's static part of ``spec`` for the path ``pspec``, the numbers of their
+    distributions by quantity name (:data:`QUANTITIES`; :func:`dist_numbers`), and for a circle its
+    radius distribution's placeholder (``None`` for other paths)."""
+    numbers: dict = {}
+
+    def masked(section):
+        dists = {name: value for name, value in section if isinstance(value, Dist)}
+        numbers.update({name: dist_numbers(d) for name, d in dists.items()})
+        return section.model_copy(update={name: placeholder(d) for name, d in dists.items()})
+
+    circle = None
+    if pspec.kind == "circle":
+        numbers["radius"], circle = dist_numbers(pspec.radius), placeholder(pspec.radius)
+    design = _Design(masked(spec.vehicle), masked(spec.slip), masked(spec.initial), spec.noise, spec.sim.horizon)
+    return design, numbers, circle
 
 
 #: Quantities :func:`sample_runs` can take per run (``given``) instead of drawing them (the
@@ -267,24 +324,28 @@ def sample_runs(
     seed (run ``i`` draws from ``fold_in(key, i)``). ``given``: per-run values (arrays of
     ``len(runs)``, config units) of some of :data:`GIVEN`, used instead of drawing them.
 
-    The draws are one jitted program (:func:`_draw_runs`) per study, batch shape and precision, shared
-    by the paths of one shape (line, parabola and sine pass their path in): a chunk of 2,500 runs costs
-    milliseconds instead of the ~0.2 s of some hundred op-by-op dispatches.
+    The draws are one jitted program (:func:`_draw_runs`) per batch shape, precision and study design
+    (:class:`_Design`: the distributions' kinds, not their numbers), shared by the paths of one shape
+    (line, parabola and sine pass their path in): a chunk of 2,500 runs costs milliseconds instead of
+    the ~0.2 s of some hundred op-by-op dispatches, and a study that differs from another only in its
+    distributions' numbers reuses its compiled sampler.
     """
     pspec = spec.paths[path_index]
     keys = (
         run_keys(spec.seed, path_index, runs) if key is None else _fold_runs(key, jnp.asarray(runs, dtype=jnp.uint32))
     )
-    given = {k: jnp.asarray(v, jnp.result_type(float)) for k, v in (given or {}).items()}
+    f = jnp.result_type(float)
+    given = {k: jnp.asarray(v, f) for k, v in (given or {}).items()}
+    design, numbers, circle = _design(spec, pspec)
+    numbers = {q: {k: jnp.asarray(v, f) for k, v in d.items()} for q, d in numbers.items()}
     if pspec.kind == "random":
         drawn = [
             random_path(jax.random.fold_in(k, Q["path"]), pspec, pspec.curvature_margin * _kappa_follow(spec))
             for k in keys
         ]
-        path, circle = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *drawn), None
+        path = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *drawn)
     else:
         path = _fixed_path(pspec)
-        circle = _Static(pspec.radius) if path is None else None
     # the override is always passed (zeros and a false flag when absent): one program for both
     over = (np.zeros(len(runs)),) * 2 if slip_override is None else slip_override
     over = tuple(jnp.asarray(a, float) for a in over)
@@ -295,8 +356,9 @@ def sample_runs(
         jnp.asarray(paths.entry(pspec.kind).start_u, float),
         over,
         slip_override is not None,
-        study=_Static(spec),
-        circle=circle,
+        numbers,
+        design=_Static(design),
+        circle=None if circle is None else _Static(circle),
         batched_path=pspec.kind == "random",
     )
     return Sampled({k: np.asarray(v) for k, v in cols.items()}, sc)
@@ -308,14 +370,15 @@ def _kappa_follow(spec: StudySpec) -> float:
     return math.tan(math.radians(veh.delta_max_deg_bounds()[0])) / veh.wheelbase_bounds()[1]
 
 
-def _draw_one(spec: StudySpec, key, given: dict):
-    """One run's draws from its ``key`` (``given[name]`` instead where given): the slip profile, the
+def _draw_one(design: _Design, key, given: dict, numbers: dict):
+    """One run's draws from its ``key`` (``given[name]`` instead where given; the distributions'
+    numbers from ``numbers``, :func:`_design`): the slip profile, the
     vehicle's :class:`~pfjax.models.slip.SlipParams` (speed m/s, wheelbase m, steering limit rad), the
     columns of the run table (degrees where named ``_deg``) and the start's ``(arc length m, lateral
     offset m, heading error rad)``."""
-    v = spec.vehicle
+    v = design.vehicle
     rad = math.pi / 180
-    d = lambda dist, name: given[name] if name in given else draw(dist, _q(key, name))
+    d = lambda dist, name: given[name] if name in given else draw(dist, _q(key, name), numbers[name])
     speed, L, dmax = d(v.speed, "speed"), d(v.L, "L"), d(v.delta_max_deg, "delta_max_deg")
     extra = {}
     if v.model in ("st", "std"):  # the set's wheelbase and steering limit; the friction drawn
@@ -323,10 +386,10 @@ def _draw_one(spec: StudySpec, key, given: dict):
         L = jnp.asarray(st_nominal.l_f + st_nominal.l_r, float)
         dmax = jnp.asarray(math.degrees(st_nominal.delta_max), float)
         extra["mu"] = jnp.asarray(st_nominal.mu, float) if v.mu is None else d(v.mu, "mu")
-    profile, cols = _slip(spec, key, spec.sim.horizon, given)
-    start_along_m = d(spec.initial.start_along_m, "start_along_m")
-    offset = d(spec.initial.lateral_offset, "lateral_offset")
-    herr = d(spec.initial.heading_error_deg, "heading_error_deg")
+    profile, cols = _slip(design, key, given, numbers)
+    start_along_m = d(design.initial.start_along_m, "start_along_m")
+    offset = d(design.initial.lateral_offset, "lateral_offset")
+    herr = d(design.initial.heading_error_deg, "heading_error_deg")
     cols.update(
         speed=speed,
         L=L,
@@ -346,18 +409,18 @@ def _draw_one(spec: StudySpec, key, given: dict):
     return profile, params, cols, (start_along_m, offset, herr * rad)
 
 
-def _scenarios(spec: StudySpec, keys, cols: dict, profiles, params, path, pose0, u0):
+def _scenarios(design: _Design, keys, cols: dict, profiles, params, path, pose0, u0):
     """The batch's scenarios from its draws: the slip vehicle's :class:`Scenario` or, for the ``st``
     and ``std`` models, the :class:`DynamicScenario` with the drawn friction ``cols["mu"]``; sensor
     noise (``sigma_d`` m, ``sigma_theta_e_deg`` deg) with one key per run where the study has any."""
-    v = spec.vehicle
+    v, sensor = design.vehicle, design.noise
     n = keys.shape[0]
     rad = math.pi / 180
     noise = None
-    if spec.noise.sigma_d > 0 or spec.noise.sigma_theta_e_deg > 0:
+    if sensor.sigma_d > 0 or sensor.sigma_theta_e_deg > 0:
         noise = SensorNoise(
-            jnp.full((n,), spec.noise.sigma_d, float),
-            jnp.full((n,), spec.noise.sigma_theta_e_deg * rad, float),
+            jnp.full((n,), sensor.sigma_d, float),
+            jnp.full((n,), sensor.sigma_theta_e_deg * rad, float),
             jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys),
         )
     if v.model in ("st", "std"):
@@ -379,23 +442,34 @@ def _scenarios(spec: StudySpec, keys, cols: dict, profiles, params, path, pose0,
     return Scenario(pose0=pose0, slip=profiles, params=params, path=path, gains=None, noise=noise, u0=u0)
 
 
-@partial(jax.jit, static_argnames=("study", "circle", "batched_path"))
+@partial(jax.jit, static_argnames=("design", "circle", "batched_path"))
 def _draw_runs(
-    keys, given, path, u_nom, slip_override, use_override, *, study: _Static, circle: _Static | None, batched_path: bool
+    keys,
+    given,
+    path,
+    u_nom,
+    slip_override,
+    use_override,
+    numbers,
+    *,
+    design: _Static,
+    circle: _Static | None,
+    batched_path: bool,
 ):
-    """Every run's draws (vmapped over ``keys``; per-run ``given`` values instead where given) and its start pose on ``path`` (batched if
-    ``batched_path``; a circle of drawn radius if ``circle`` is its radius distribution); the
-    constant slip replaced by ``slip_override`` (deg) where ``use_override``."""
-    spec = study.model
+    """Every run's draws (vmapped over ``keys``; per-run ``given`` values instead where given; the
+    distributions of ``design``, a :class:`_Design`, with the parameters ``numbers``) and its start
+    pose on ``path`` (batched if ``batched_path``; a circle of drawn radius if ``circle`` is its
+    radius distribution); the constant slip replaced by ``slip_override`` (deg) where ``use_override``."""
+    spec = design.model
     rad = math.pi / 180
-    profiles, params, cols, starts = jax.vmap(lambda k, g: _draw_one(spec, k, g))(keys, given)
+    profiles, params, cols, starts = jax.vmap(lambda k, g: _draw_one(spec, k, g, numbers))(keys, given)
     n = keys.shape[0]
     br = jnp.where(use_override, slip_override[0], cols["beta_r_deg"])
     bf = jnp.where(use_override, slip_override[1], cols["beta_f_deg"])
     profiles = profiles._replace(constant=jnp.where(use_override, jnp.stack([br, bf], 1) * rad, profiles.constant))
     cols.update(beta_r_deg=br, beta_f_deg=bf)
     if circle is not None:
-        r = jax.vmap(lambda k: draw(circle.model, _q(k, "radius")))(keys)
+        r = jax.vmap(lambda k: draw(circle.model, _q(k, "radius"), numbers["radius"]))(keys)
         path, batched_path = jax.vmap(lambda r: shapes.circle(radius=r, cy=r))(r), True
         cols.update(radius=r)
     if not batched_path:
