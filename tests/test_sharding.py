@@ -229,11 +229,14 @@ def test_one_and_two_host_devices_give_the_same_runs(tmp_path, dtype):
     """45 runs (padded to 64, split 32 + 32 over two devices) of the PI controller with OU slip and
     sensor noise. float64: the run tables are bit-identical. float32: the sampled parameters,
     statuses, success flags and failure times are identical, and every metric agrees to 1e-5
-    relative. XLA compiles the 32-run and the 64-run blocks into different vector code, which may
+    relative, or, for the metrics in metres, to 1e-6 m (4 float32 ulps of the vehicle's coordinates,
+    which stay below 2 m: the lateral error is a difference of coordinates, so its rounding is
+    absolute). XLA compiles the 32-run and the 64-run blocks into different vector code, which may
     round a step's arithmetic differently in its last bit; the closed loop and the 400-step sums
     carry that along. Measured (Zen 4): bit-identical with XLA's default vector width; with the
-    512-bit vectors pfjax asks for on AVX-512 CPUs (pfjax.numerics.compiler) 3-62 ulp, at most
-    4.1e-6 relative (late_max_abs_d), in 6-36 of the 45 runs per metric."""
+    512-bit vectors pfjax asks for on AVX-512 CPUs (pfjax.numerics.compiler) in 1-35 of the 45 runs
+    per metric, at most 3.2e-6 relative, except the late maximum of |d|: 1.2e-7 m on 8 mm (1.5e-5
+    relative, half an ulp of a 2 m coordinate)."""
     cfg = tmp_path / "s.toml"
     cfg.write_text(STUDY.format(dtype=dtype))
     tables = {}
@@ -257,4 +260,7 @@ def test_one_and_two_host_devices_give_the_same_runs(tmp_path, dtype):
     metrics = [m for m in pfjax.metrics.running.METRIC_NAMES if m != "success"]
     exact = [c for c in one.columns if c not in metrics]
     pd.testing.assert_frame_equal(one[exact], two[exact], check_exact=True)
-    pd.testing.assert_frame_equal(one[metrics], two[metrics], check_exact=False, rtol=1e-5, atol=0)
+    metres = ["max_abs_d", "steady_abs_d", "late_max_abs_d"]
+    others = [m for m in metrics if m not in metres]
+    pd.testing.assert_frame_equal(one[others], two[others], check_exact=False, rtol=1e-5, atol=0)
+    pd.testing.assert_frame_equal(one[metres], two[metres], check_exact=False, rtol=1e-5, atol=1e-6)
