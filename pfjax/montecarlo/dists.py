@@ -63,6 +63,11 @@ class Dist(ConfigModel):
             raise ValueError(f"dist '{self.dist}' has no '{name}'")
         return float(v)
 
+    def numbers(self) -> dict:
+        """The parameters its kind uses, by name (``value``, ``low``, ``high``, ``mean``, ``std``:
+        floats; ``values``: a list)."""
+        return {k: v for k, v in self.model_dump(exclude={"dist"}).items() if v is not None}
+
     def bounds(self) -> tuple[float, float]:
         """Support of the distribution (inf for the normal)."""
         if self.dist == "constant":

@@ -70,7 +70,7 @@ def _fold_runs(base, runs):
 
 
 def draw(dist: Dist, key, numbers: dict | None = None) -> jax.Array:
-    """One scalar from ``dist`` (float). ``numbers``: its parameters (:func:`dist_numbers`) as arrays,
+    """One scalar from ``dist`` (float). ``numbers``: its parameters (:meth:`Dist.numbers`) as arrays,
     used instead of ``dist``'s own, so that one traced program serves every distribution of a kind."""
     f = jnp.result_type(float)
     num = dist.number if numbers is None else numbers.__getitem__
@@ -96,13 +96,7 @@ _PLACEHOLDER: dict[str, dict] = {
 }
 
 
-def dist_numbers(dist: Dist) -> dict:
-    """``dist``'s parameters by name (``value``, ``low``, ``high``, ``mean``, ``std``: floats;
-    ``values``: a list), the ones its kind uses."""
-    return {k: v for k, v in dist.model_dump(exclude={"dist"}).items() if v is not None}
-
-
-def placeholder(dist: Dist) -> Dist:
+def _placeholder(dist: Dist) -> Dist:
     """A distribution of ``dist``'s kind (and, for ``choice``, its number of values) with fixed numbers."""
     if dist.dist == "choice":
         return Dist(dist="choice", values=[0.0] * len(dist.values or ()))
@@ -158,6 +152,53 @@ def column_names(spec: StudySpec) -> list[str]:
     if spec.vehicle.model in ("st", "std"):
         cols.append("mu")
     return cols
+
+
+class _Static:
+    """Pydantic models (or a tuple of them and plain values) as a static ``jax.jit`` argument:
+    hashed and compared by their JSON."""
+
+    __slots__ = ("_json", "model")
+
+    def __init__(self, model):
+        self.model, self._json = model, pydantic_core.to_json(model)
+
+    def __hash__(self):
+        return hash(self._json)
+
+    def __eq__(self, other):
+        return isinstance(other, _Static) and other._json == self._json
+
+
+class _Design(NamedTuple):
+    """What the sampler reads of a study (static in :func:`_draw_runs`): its vehicle, slip,
+    initial-condition and noise sections and its horizon (s), every distribution in them reduced to
+    its kind by :func:`_placeholder`. The distributions' numbers are the program's arguments, so
+    studies, and the arms of one, that differ only in those numbers share one compiled sampler."""
+
+    vehicle: VehicleSpec
+    slip: SlipSpec
+    initial: InitialSpec
+    noise: NoiseSpec
+    horizon: float
+
+
+def _design(spec: StudySpec, pspec: PathSpec) -> tuple[_Design, dict, Dist | None]:
+    """The sampler's static part of ``spec`` for the path ``pspec``, the numbers of their
+    distributions by quantity name (:data:`QUANTITIES`; :meth:`Dist.numbers`), and for a circle its
+    radius distribution's placeholder (``None`` for other paths)."""
+    numbers: dict = {}
+
+    def masked(section):
+        dists = {name: value for name, value in section if isinstance(value, Dist)}
+        numbers.update({name: d.numbers() for name, d in dists.items()})
+        return section.model_copy(update={name: _placeholder(d) for name, d in dists.items()})
+
+    circle = None
+    if pspec.kind == "circle":
+        numbers["radius"], circle = pspec.radius.numbers(), _placeholder(pspec.radius)
+    design = _Design(masked(spec.vehicle), masked(spec.slip), masked(spec.initial), spec.noise, spec.sim.horizon)
+    return design, numbers, circle
 
 
 def _slip(design: _Design, key, given: dict, numbers: dict):
@@ -242,53 +283,6 @@ def _fixed_path(spec: PathSpec):
 #: Runs whose start poses the sampler computes at once (bounds its memory: about 4 MB per
 #: arc-length intermediate in float32).
 SAMPLE_BLOCK = 2048
-
-
-class _Static:
-    """Pydantic models (or a tuple of them and plain values) as a static ``jax.jit`` argument:
-    hashed and compared by their JSON."""
-
-    __slots__ = ("_json", "model")
-
-    def __init__(self, model):
-        self.model, self._json = model, pydantic_core.to_json(model)
-
-    def __hash__(self):
-        return hash(self._json)
-
-    def __eq__(self, other):
-        return isinstance(other, _Static) and other._json == self._json
-
-
-class _Design(NamedTuple):
-    """What the sampler reads of a study (static in :func:`_draw_runs`): its vehicle, slip,
-    initial-condition and noise sections and its horizon (s), every distribution in them reduced to
-    its kind by :func:`placeholder`. The distributions' numbers are the program's arguments, so
-    studies, and the arms of one, that differ only in those numbers share one compiled sampler."""
-
-    vehicle: VehicleSpec
-    slip: SlipSpec
-    initial: InitialSpec
-    noise: NoiseSpec
-    horizon: float
-
-
-def _design(spec: StudySpec, pspec: PathSpec) -> tuple[_Design, dict, Dist | None]:
-    """The sampler's static part of ``spec`` for the path ``pspec``, the numbers of their
-    distributions by quantity name (:data:`QUANTITIES`; :func:`dist_numbers`), and for a circle its
-    radius distribution's placeholder (``None`` for other paths)."""
-    numbers: dict = {}
-
-    def masked(section):
-        dists = {name: value for name, value in section if isinstance(value, Dist)}
-        numbers.update({name: dist_numbers(d) for name, d in dists.items()})
-        return section.model_copy(update={name: placeholder(d) for name, d in dists.items()})
-
-    circle = None
-    if pspec.kind == "circle":
-        numbers["radius"], circle = dist_numbers(pspec.radius), placeholder(pspec.radius)
-    design = _Design(masked(spec.vehicle), masked(spec.slip), masked(spec.initial), spec.noise, spec.sim.horizon)
-    return design, numbers, circle
 
 
 #: Quantities :func:`sample_runs` can take per run (``given``) instead of drawing them (the
@@ -460,9 +454,9 @@ def _draw_runs(
     distributions of ``design``, a :class:`_Design`, with the parameters ``numbers``) and its start
     pose on ``path`` (batched if ``batched_path``; a circle of drawn radius if ``circle`` is its
     radius distribution); the constant slip replaced by ``slip_override`` (deg) where ``use_override``."""
-    spec = design.model
+    drawn = design.model
     rad = math.pi / 180
-    profiles, params, cols, starts = jax.vmap(lambda k, g: _draw_one(spec, k, g, numbers))(keys, given)
+    profiles, params, cols, starts = jax.vmap(lambda k, g: _draw_one(drawn, k, g, numbers))(keys, given)
     n = keys.shape[0]
     br = jnp.where(use_override, slip_override[0], cols["beta_r_deg"])
     bf = jnp.where(use_override, slip_override[1], cols["beta_f_deg"])
@@ -477,4 +471,4 @@ def _draw_runs(
     # in blocks of runs: each start pose integrates arc length on 512 nodes per Newton step, and a
     # 65,536-run chunk at once held about 1.6 GB of such intermediates (measured)
     pose0, u0 = jax.lax.map(lambda a: _start_pose(a[0], u_nom, *a[1:]), (path, *starts), batch_size=SAMPLE_BLOCK)
-    return cols, _scenarios(spec, keys, cols, profiles, params, path, pose0, u0)
+    return cols, _scenarios(drawn, keys, cols, profiles, params, path, pose0, u0)
