@@ -69,22 +69,21 @@ def _fold_runs(base, runs):
     return jax.vmap(lambda i: jax.random.fold_in(base, i))(runs)
 
 
-def draw(dist: Dist, key, numbers: dict | None = None) -> jax.Array:
-    """One scalar from ``dist`` (float). ``numbers``: its parameters (:meth:`Dist.numbers`) as arrays,
-    used instead of ``dist``'s own, so that one traced program serves every distribution of a kind."""
+def draw(dist: Dist, key, numbers: dict) -> jax.Array:
+    """One scalar from a distribution of ``dist``'s kind with the parameters ``numbers``
+    (:meth:`Dist.numbers`, as arrays: traced, so one program serves every distribution of a kind)."""
     f = jnp.result_type(float)
-    num = dist.number if numbers is None else numbers.__getitem__
     if dist.dist == "constant":
-        return jnp.asarray(num("value"), f)
+        return jnp.asarray(numbers["value"], f)
     if dist.dist == "uniform":
-        return jax.random.uniform(key, (), f, num("low"), num("high"))
+        return jax.random.uniform(key, (), f, numbers["low"], numbers["high"])
     if dist.dist == "normal":
-        return num("mean") + num("std") * jax.random.normal(key, (), f)
+        return numbers["mean"] + numbers["std"] * jax.random.normal(key, (), f)
     if dist.dist == "truncnormal":
-        mean, std = num("mean"), num("std")
-        lo, hi = (num("low") - mean) / std, (num("high") - mean) / std
+        mean, std = numbers["mean"], numbers["std"]
+        lo, hi = (numbers["low"] - mean) / std, (numbers["high"] - mean) / std
         return mean + std * jax.random.truncated_normal(key, lo, hi, (), f)
-    return jax.random.choice(key, jnp.asarray(dist.values if numbers is None else numbers["values"], f))
+    return jax.random.choice(key, jnp.asarray(numbers["values"], f))
 
 
 #: A valid distribution of each kind, standing in for a study's own in the sampler's static arguments.
