@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import jax
+import pytest
 
 from pfjax import cache
 
@@ -38,20 +39,27 @@ def test_enable_sets_the_minimum_of_pfjax_own_cache_only(tmp_path, monkeypatch):
     assert got == (Path(other), 0.5)
 
 
-def _compiles(env, args):
+#: ``python -m pfjax.cli`` (the interpreter's usual end), and the console script's entry point
+#: (:func:`pfjax.cli.run`, which ends the process without the teardown)
+LAUNCHERS = {"module": ["-m", "pfjax.cli"], "console-script": ["-c", "from pfjax.cli import run; run()"]}
+
+
+def _compiles(env, args, launcher="module"):
     out = subprocess.run(
-        [sys.executable, "-m", "pfjax.cli", *args], env=env, capture_output=True, text=True, timeout=300, check=True
+        [sys.executable, *LAUNCHERS[launcher], *args], env=env, capture_output=True, text=True, timeout=300, check=True
     )
     log = out.stderr
     return len(re.findall(r"Finished XLA compilation", log)), len(re.findall(r"Persistent compilation cache hit", log))
 
 
-def test_warm_simulate_command_loads_every_program_from_the_cache(tmp_path):
+@pytest.mark.parametrize("launcher", LAUNCHERS)
+def test_warm_simulate_command_loads_every_program_from_the_cache(tmp_path, launcher):
     # a fresh cache of pfjax's own (import pfjax set JAX's variables for this process: not inherited)
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_COMPILATION_CACHE", "JAX_PERSISTENT_CACHE"))}
     env.update({cache.ENV: str(tmp_path / "xla"), "JAX_LOG_COMPILES": "1"})
     args = ["simulate", "--path", "sine", "--controller", "pi", "--horizon", "0.2", "--json"]
-    compiled, hits = _compiles(env, args)
+    compiled, hits = _compiles(env, args, launcher)
     assert compiled - hits >= 2  # compiled: the simulator and the scenario's small host-side programs
-    compiled_warm, hits_warm = _compiles(env, args)
+    # each was stored before the process ended
+    compiled_warm, hits_warm = _compiles(env, args, launcher)
     assert compiled_warm == hits_warm == compiled  # each one loaded, none compiled again

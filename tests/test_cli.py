@@ -305,6 +305,32 @@ def test_console_script_bad_input_exits_2():
     assert r.stderr.splitlines() == [r.stderr.strip()] and r.stderr.startswith("pfjax simulate: error: --dt")
 
 
+#: The console script's entry point (:func:`pfjax.cli.run`), with an exit handler that says it ran.
+RUN = [
+    sys.executable,
+    "-c",
+    "import atexit, sys; atexit.register(lambda: sys.stderr.write('exit handlers ran')); "
+    "from pfjax.cli import run; run()",
+]
+
+
+@pytest.mark.parametrize(
+    "args, code",
+    [(("examples", "--json"), 0), (("simulate", "--help"), 0), (("examples", "--nope"), 2), (SIM + ("--dt", "0"), 2)],
+)
+def test_console_script_ends_after_its_output_and_exit_handlers_with_the_commands_code(tmp_path, args, code):
+    # stdout to a file is block-buffered (unless PYTHONUNBUFFERED): an end without a flush would lose it
+    out, env = tmp_path / "out.txt", {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    with out.open("w") as f:
+        r = subprocess.run([*RUN, *args], stdout=f, stderr=subprocess.PIPE, text=True, timeout=60, env=env)
+    assert r.returncode == code, r.stderr
+    assert r.stderr.endswith("exit handlers ran"), r.stderr
+    # the same output and messages as the usual end of a process (python -m pfjax.cli)
+    usual = subprocess.run([sys.executable, "-m", "pfjax.cli", *args], capture_output=True, text=True, timeout=60)
+    assert (usual.returncode, out.read_text(), r.stderr) == (code, usual.stdout, usual.stderr + "exit handlers ran")
+    assert usual.stdout if code == 0 else usual.stderr.count("error:") == 1
+
+
 @pytest.mark.parametrize("args", [("--help",), ("synth", "--help"), ("simulate", "--help"), ("--version",)])
 def test_help(args):
     r = cli(*args, timeout=60)
