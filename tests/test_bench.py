@@ -66,6 +66,15 @@ def test_quick_bench_contract_and_agreement(tmp_path):
         assert s[f"fraction_of_minimal_{p}"] == pytest.approx(
             s[f"msteps_per_s_{p}"] / s[f"minimal_msteps_per_s_{p}"], rel=1e-12
         )
+    # and at every batch size, from the rows of that size
+    rows = pd.read_parquet(out / "bench.parquet")
+    rate = lambda impl, dtype, b: rows[(rows.impl == impl) & (rows.dtype == dtype) & (rows.batch == b)].msteps_per_s
+    assert [f["batch"] for f in s["fraction_of_minimal_by_batch"]] == [64, 128]
+    for f in s["fraction_of_minimal_by_batch"]:
+        for p, dtype in (("f32", "float32"), ("f64", "float64")):
+            want = rate("pfjax", dtype, f["batch"]).item() / rate("jax_minimal", dtype, f["batch"]).item()
+            assert f[p] == pytest.approx(want, rel=1e-12)
+    assert s["fraction_of_minimal_by_batch"][-1]["f32"] == s["fraction_of_minimal_f32"]
     assert s["gradient"]["grad_finite"] and s["failed_runs"] == 0
     # forward mode (2 gains) and reverse mode: one derivative, float32 rounding apart
     assert s["grad_mode"] == "forward" and s["gradient"]["modes_max_rel_diff"] < 1e-3
@@ -81,9 +90,9 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     full = json.loads((out / "bench.json").read_text())
     assert full["summary"] == {k: v for k, v in s.items() if k not in ("out", "machine")}
     assert full["config"]["sizes"] == [64, 128] and full["config_sha256"] and full["machine"]["cpus"] >= 1
-    rows = pd.read_parquet(out / "bench.parquet")
     assert set(rows.impl) == {"pfjax", "jax_minimal", "numba", "numpy", "scipy"}
-    assert sorted(rows[(rows.impl == "pfjax") & (rows.dtype == "float32")].batch) == [64, 128]
+    for impl in ("pfjax", "jax_minimal"):
+        assert sorted(rows[(rows.impl == impl) & (rows.dtype == "float32")].batch) == [64, 128]
     # rollout-steps / s recomputed from the rows' seconds
     n_steps = full["n_steps"]
     np.testing.assert_allclose(rows.msteps_per_s, rows.batch * n_steps / rows.seconds / 1e6, rtol=1e-12)

@@ -109,8 +109,13 @@ def markdown(result: dict) -> str:
         f"pfjax at B = {s['batch']} runs at {100 * s['fraction_of_minimal_f32']:.0f} % (float32) and "
         f"{100 * s['fraction_of_minimal_f64']:.0f} % (float64) of the throughput of a minimal JAX implementation "
         "of the same problem (`jax_minimal`: IAE only, the same elementary functions, devices, blocks and compiler "
-        "options, no metrics, statuses or general interfaces), measured in the same process; "
-        f"{s['ratio_vs_numba_f32']:.3g}x / {s['ratio_vs_numba_f64']:.3g}x Numba.",
+        "options, no metrics, statuses or general interfaces), measured in the same process"
+        + "".join(
+            f"; at B = {f['batch']}: {100 * f['f32']:.0f} % / {100 * f['f64']:.0f} %"
+            for f in s.get("fraction_of_minimal_by_batch", [])
+            if f["batch"] != s["batch"]
+        )
+        + f"; {s['ratio_vs_numba_f32']:.3g}x / {s['ratio_vs_numba_f64']:.3g}x Numba.",
         "",
         table(
             ["implementation", "dtype", "batch", "M rollout-steps/s", "compile s"],
