@@ -254,7 +254,8 @@ def _jax_rows(cfg: BenchConfig, n_steps: int, say) -> tuple[list[dict], dict, di
 
     from pfjax.bench import minimal as M
 
-    rows, iae, diffs = [], {}, {}
+    rows, iae = [], {}
+    diffs: dict[str, list[float]] = {}
     top = max(cfg.sizes)
     for name, dtype, x64 in (("float32", np.float32, False), ("float64", np.float64, True)):
         with jax.enable_x64(x64):
