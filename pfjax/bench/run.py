@@ -272,7 +272,7 @@ def _jax_rows(cfg: BenchConfig, n_steps: int, say) -> tuple[list[dict], dict, di
                 out, first, best = _timed(lambda: jax.block_until_ready(M.simulate(runs, n_steps)), cfg.repeats)
                 rows.append(_row("jax_minimal", name, b, best, first - best, n_steps))
                 diffs.setdefault(f"jax_minimal_{name}", []).append(_max_diff(out, res.metrics.iae))
-    return rows, iae, {k: float(np.max(v)) for k, v in diffs.items()}  # NaN if any is
+    return rows, iae, {k: float(np.max(v)) for k, v in diffs.items()}  # NaN if any difference is NaN
 
 
 def _reference_rows(cfg: BenchConfig, n_steps: int, iae: dict, have_numba: bool, say) -> tuple[list[dict], dict]:

@@ -85,12 +85,12 @@ def run() -> None:
     Once a command has written and closed its outputs, the teardown of a process that imported JAX
     (freeing its modules, compiled programs and runtime) changes nothing, and took 0.22-0.34 s of a
     warm ``pfjax simulate`` or ``pfjax track`` (medians; 2-core AMD EPYC, jax 0.10.2;
-    docs/performance.md). So the script waits for any
-    non-daemon thread, runs the exit handlers (:mod:`atexit`: JAX's, logging's, multiprocessing's),
-    flushes stdout and stderr and ends with :func:`os._exit` and the command's exit code (as
-    :func:`sys.exit` would give it). If a stream cannot be flushed (a closed pipe), or the command
-    raised, it exits the usual way. ``python -m pfjax.cli`` exits the usual way too, for tools that
-    act after the program returns (``python -m cProfile``).
+    docs/performance.md). So the script waits for any non-daemon thread, runs the exit handlers
+    (:mod:`atexit`: JAX's, logging's, multiprocessing's), flushes stdout and stderr and ends with
+    :func:`os._exit` and the command's exit code (as :func:`sys.exit` would give it). If a stream
+    cannot be flushed (a closed pipe), or the command raised, it exits the usual way.
+    ``python -m pfjax.cli`` exits the usual way too, for tools that act after the program returns
+    (``python -m cProfile``).
     """
     import atexit
     import os
