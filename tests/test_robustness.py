@@ -78,6 +78,16 @@ def test_clopper_pearson_matches_scipy_property(n, frac, conf):
     assert 0.0 <= lo <= k / n <= hi <= 1.0
 
 
+@settings(max_examples=200, deadline=None)
+@given(n=st.integers(1, 10**6), frac=st.floats(0, 1), conf=st.sampled_from([0.5, 0.8, 0.9, 0.95, 0.99, 0.999]))
+def test_clopper_pearson_is_the_beta_quantile_of_scipy_stats(n, frac, conf):
+    # the inverse regularised incomplete beta function is scipy.stats.beta.ppf's own: equal, not close
+    k, alpha = round(frac * n), 1 - conf
+    lo, hi = clopper_pearson(k, n, conf)
+    assert lo == (0.0 if k == 0 else float(stats.beta.ppf(alpha / 2, k, n - k + 1)))
+    assert hi == (1.0 if k == n else float(stats.beta.ppf(1 - alpha / 2, k + 1, n - k)))
+
+
 def test_clopper_pearson_edges():
     assert clopper_pearson(0, 10)[0] == 0.0
     assert clopper_pearson(10, 10)[1] == 1.0
@@ -390,6 +400,33 @@ def test_failure_drivers_finds_abs_beta_r():
     ref = stats.spearmanr(x, f.astype(float))
     assert top["rho_failure"] == pytest.approx(ref.statistic, rel=1e-12)
     assert top["n"] == len(df)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(3, 400),
+    ties=st.sampled_from([None, 0, 1]),
+    kind=st.sampled_from(["noise", "binary", "monotone", "reversed"]),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_spearman_is_scipys_statistic_and_p_value(n, ties, kind, seed):
+    from pfjax.metrics.robustness import _spearman
+
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=n)
+    x = x if ties is None else np.round(x, ties)  # ties in x
+    y = {
+        "noise": 0.5 * x + rng.normal(size=n),
+        "binary": (rng.random(n) < 0.3).astype(float),  # a failure indicator: ties in y
+        "monotone": np.exp(x),  # rho = 1 without ties in x
+        "reversed": -(x**3),
+    }[kind]
+    if np.ptp(x) == 0 or np.ptp(y) == 0:
+        assert all(math.isnan(v) for v in _spearman(x, y))
+        return
+    ref = stats.spearmanr(x, y)
+    # the same arithmetic (average ranks, their correlation, Student's t): equal, not close
+    assert _spearman(x, y) == (float(ref.statistic), float(ref.pvalue))
 
 
 def test_failure_drivers_degenerate_cases_are_nan_not_errors():

@@ -481,3 +481,59 @@ def test_figure_worker_answers_can_be_collected_in_any_order(study, tmp_path):
         assert list(first.result()) == ["dist_iae"]
     for d, name in (("e", "dist_iae"), ("f", "headline")):
         assert (tmp_path / d / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes()
+
+
+def test_paired_comparison_is_mcnemars_exact_test_and_the_wald_interval():
+    """:func:`pfjax.report.study_verdict.paired` against ``scipy.stats.binomtest`` (the exact
+    McNemar test: the runs where exactly one controller succeeds, at p = 1/2) and the paired Wald
+    interval written out with ``scipy.stats.norm``."""
+    import math
+
+    import numpy as np
+    from scipy import stats
+
+    from pfjax.report.study_verdict import paired
+
+    rng = np.random.default_rng(5)
+    for n, p_a, p_b in [(2000, 0.6, 0.55), (300, 0.5, 0.5), (40, 0.9, 0.2), (12, 1.0, 1.0), (7, 0.0, 1.0)]:
+        ok_a, ok_b = rng.random(n) < p_a, rng.random(n) < p_b
+        runs = pd.DataFrame(
+            {
+                "controller": ["a"] * n + ["b"] * n,
+                "path": "line",
+                "run": np.r_[np.arange(n), rng.permutation(n)],  # rows of b in another order
+                "success": np.r_[ok_a, np.zeros(n, bool)],
+            }
+        )
+        runs.loc[runs.controller == "b", "success"] = ok_b[runs.loc[runs.controller == "b", "run"].to_numpy()]
+        got = paired(runs, "a", "b")
+        b, c = int((ok_a & ~ok_b).sum()), int((~ok_a & ok_b).sum())
+        assert (got["n"], got["only_a"], got["only_b"]) == (n, b, c)
+        want_p = stats.binomtest(b, b + c, 0.5).pvalue if b + c else 1.0
+        assert got["p"] == pytest.approx(want_p, rel=1e-10)
+        half = stats.norm.ppf(0.975) * math.sqrt(max(b + c - (b - c) ** 2 / n, 0.0)) / n
+        assert got["diff"] == (b - c) / n
+        assert got["ci"] == pytest.approx(((b - c) / n - half, (b - c) / n + half), rel=1e-15, abs=1e-15)
+
+
+def test_a_study_with_its_report_does_not_import_scipy_stats(tmp_path):
+    """The summary's intervals and rank correlations and the report's paired tests come from
+    ``scipy.special``: ``scipy.stats`` would add 0.5-1 s of imports to every study."""
+    import subprocess
+    import sys
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(
+        'name = "imports"\nn_runs = 8\nseed = 1\nchunk_size = 8\n[sim]\nhorizon = 2.0\nsteady_window = 1.0\n'
+        "[success]\nfrom_s = 1.0\n[margin]\namplitudes_deg = [0.0, 10.0]\nn_per_amplitude = 4\n"
+        '[[paths]]\nkind = "line"\n[[controllers]]\nname = "st"\ntype = "stanley"\n'
+        '[[controllers]]\nname = "pp"\ntype = "pure_pursuit"\n'
+    )
+    out = tmp_path / "o"
+    cmd = [sys.executable, "-X", "importtime", "-m", "pfjax.cli", "study", str(cfg), "--out", str(out), "--quiet"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert (out / "report.html").is_file()
+    imported = {line.rsplit("|", 1)[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time:")}
+    # (an import through scipy's lazy attributes lists only scipy.stats' submodules)
+    assert "scipy.special" in imported and not [m for m in imported if m.split(".")[:2] == ["scipy", "stats"]]

@@ -9,7 +9,10 @@ paired (Wald) 95 % interval::
     D +- 1.96 sqrt((b + c) - (b - c)^2 / n) / n
 
 and the exact McNemar test of "equally robust" is the two-sided binomial test of ``b`` successes
-in ``b + c`` trials at ``p = 1/2``.
+in ``b + c`` trials at ``p = 1/2``. That distribution is symmetric, so its p-value is twice the
+smaller tail, ``min(1, 2 P(X <= min(b, c)))`` with ``X ~ Bin(b + c, 1/2)`` (``scipy.stats.binomtest``'s
+to 1e-10 relative, tested; computed with ``scipy.special``, which imports 0.5-1 s faster than
+``scipy.stats``).
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from __future__ import annotations
 import math
 
 import pandas as pd
-from scipy import stats
+from scipy import special
 
 from pfjax.report.document import Cell
 from pfjax.report.study_format import DASH, cell, fmt_ci, fmt_margin, fmt_num, fmt_p, fmt_pct, fmt_times, missing
@@ -32,10 +35,10 @@ def paired(runs: pd.DataFrame, a: str, b: str) -> dict:
     m = sa.merge(sb, on=["path", "run"], suffixes=("_a", "_b"))
     x, y = m["success_a"].to_numpy(bool), m["success_b"].to_numpy(bool)
     n, only_a, only_b = len(m), int((x & ~y).sum()), int((~x & y).sum())
-    p = float(stats.binomtest(only_a, only_a + only_b, 0.5).pvalue) if only_a + only_b else 1.0
+    p = min(1.0, 2.0 * float(special.bdtr(min(only_a, only_b), only_a + only_b, 0.5))) if only_a + only_b else 1.0
     diff = (only_a - only_b) / n if n else math.nan
     half = (
-        stats.norm.ppf(0.975) * math.sqrt(max(only_a + only_b - (only_a - only_b) ** 2 / n, 0.0)) / n if n else math.nan
+        special.ndtri(0.975) * math.sqrt(max(only_a + only_b - (only_a - only_b) ** 2 / n, 0.0)) / n if n else math.nan
     )
     return {"n": n, "only_a": only_a, "only_b": only_b, "diff": diff, "ci": (diff - half, diff + half), "p": p}
 
