@@ -518,7 +518,7 @@ def test_paired_comparison_is_mcnemars_exact_test_and_the_wald_interval():
 
 def test_a_study_with_its_report_does_not_import_scipy_stats(tmp_path):
     """The summary's intervals and rank correlations and the report's paired tests come from
-    ``scipy.special``: ``scipy.stats`` would add 0.5-1 s of imports to every study."""
+    ``scipy.special``: ``scipy.stats`` would add about 0.5 s of imports to every study."""
     import subprocess
     import sys
 

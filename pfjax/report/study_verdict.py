@@ -11,8 +11,8 @@ paired (Wald) 95 % interval::
 and the exact McNemar test of "equally robust" is the two-sided binomial test of ``b`` successes
 in ``b + c`` trials at ``p = 1/2``. That distribution is symmetric, so its p-value is twice the
 smaller tail, ``min(1, 2 P(X <= min(b, c)))`` with ``X ~ Bin(b + c, 1/2)`` (``scipy.stats.binomtest``'s
-to 1e-10 relative, tested; computed with ``scipy.special``, which imports 0.5-1 s faster than
-``scipy.stats``).
+to 1e-10 relative, tested; computed with ``scipy.special``, which imports about 0.5 s faster
+than ``scipy.stats``).
 """
 
 from __future__ import annotations
