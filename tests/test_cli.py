@@ -344,8 +344,8 @@ def test_help(args):
 
 
 def test_help_and_the_simulator_do_not_import_scipy_stats():
-    """``scipy.stats`` takes about 2 s to import (half of ``pfjax --help`` before it was deferred):
-    building the parser and importing the simulator must not load it."""
+    """``scipy.stats`` takes 0.5-2 s to import (as long as the rest of ``pfjax --help``): building
+    the parser and importing the simulator must not load it."""
     code = (
         "import sys; from pfjax.cli import build_parser; import pfjax.sim; build_parser(); "
         "print('scipy.stats' in sys.modules)"
