@@ -453,9 +453,9 @@ def _draw_runs(
     distributions of ``design``, a :class:`_Design`, with the parameters ``numbers``) and its start
     pose on ``path`` (batched if ``batched_path``; a circle of drawn radius if ``circle`` is its
     radius distribution); the constant slip replaced by ``slip_override`` (deg) where ``use_override``."""
-    drawn = design.model
+    study_design = design.model  # the _Design inside its static wrapper
     rad = math.pi / 180
-    profiles, params, cols, starts = jax.vmap(lambda k, g: _draw_one(drawn, k, g, numbers))(keys, given)
+    profiles, params, cols, starts = jax.vmap(lambda k, g: _draw_one(study_design, k, g, numbers))(keys, given)
     n = keys.shape[0]
     br = jnp.where(use_override, slip_override[0], cols["beta_r_deg"])
     bf = jnp.where(use_override, slip_override[1], cols["beta_f_deg"])
@@ -470,4 +470,4 @@ def _draw_runs(
     # in blocks of runs: each start pose integrates arc length on 512 nodes per Newton step, and a
     # 65,536-run chunk at once held about 1.6 GB of such intermediates (measured)
     pose0, u0 = jax.lax.map(lambda a: _start_pose(a[0], u_nom, *a[1:]), (path, *starts), batch_size=SAMPLE_BLOCK)
-    return cols, _scenarios(drawn, keys, cols, profiles, params, path, pose0, u0)
+    return cols, _scenarios(study_design, keys, cols, profiles, params, path, pose0, u0)
