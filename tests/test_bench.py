@@ -97,6 +97,14 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     n_steps = full["n_steps"]
     np.testing.assert_allclose(rows.msteps_per_s, rows.batch * n_steps / rows.seconds / 1e6, rtol=1e-12)
     assert (out / "figures" / "throughput.png").stat().st_size > 5000 and (out / "report.md").is_file()
+    # the goals: every one reported, none measured by a --quick run (2 s horizon, small batches)
+    from pfjax.bench.goals import GOALS
+
+    assert [g["goal"] for g in s["goals"]] == [g.name for g in GOALS]
+    assert all(g["value"] is None and g["met"] is None for g in s["goals"])
+    report = (out / "report.md").read_text()
+    assert "Goals on this machine (docs/performance.md, Scale targets): none measured" in report
+    assert report.count("| not measured | – |") == len(GOALS)
 
 
 @pytest.mark.parametrize(
@@ -237,3 +245,72 @@ def test_compare_bad_input_one_line_exit_2(tmp_path, args, flag):
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.startswith(f"bench-compare: error: {flag}") and r.stderr.count("\n") == 1
     assert not out.exists()
+
+
+def _result(**summary):
+    """A benchmark result with pfjax and minimal-implementation rows at 10^4 and 10^5 runs."""
+    rows = [
+        {"impl": impl, "dtype": f"float{bits}", "batch": b, "msteps_per_s": rate}
+        for impl, bits, b, rate in (
+            ("pfjax", 32, 10_000, 140.0),
+            ("pfjax", 32, 100_000, 150.0),
+            ("pfjax", 64, 10_000, 60.0),
+            ("pfjax", 64, 100_000, 69.9),
+            ("jax_minimal", 32, 100_000, 170.0),
+        )
+    ]
+    base = dict(
+        batch=100_000,
+        fraction_of_minimal_by_batch=[
+            {"batch": 10_000, "f32": 0.9, "f64": 0.849},
+            {"batch": 100_000, "f32": 0.95, "f64": 0.86},
+        ],
+        ratio_vs_numba_f32=12.0,
+        ratio_vs_numba_f64=float("nan"),  # Numba skipped
+        grad_mode="forward",
+        grad_over_forward=2.0,
+        grad_over_forward_reverse=3.01,
+    )
+    return {"rows": rows, "summary": {**base, **summary}, "config": {"horizon": 20.0, "grad_size": 2000}}
+
+
+def test_goals_read_each_number_where_it_is_stated_and_a_target_reached_is_met():
+    from pfjax.bench.goals import check
+
+    got = {g["goal"]: (g["value"], g["met"]) for g in check(_result())}
+    assert got == {
+        "throughput_f32": (150.0, True),  # exactly the target: met
+        "throughput_f64": (69.9, False),
+        "fraction_of_minimal_f32_10000": (0.9, True),
+        "fraction_of_minimal_f32_100000": (0.95, True),
+        "fraction_of_minimal_f64_10000": (0.849, False),
+        "fraction_of_minimal_f64_100000": (0.86, True),
+        "numba_f32": (12.0, True),
+        "numba_f64": (None, None),  # not finite: not measured, neither met nor missed
+        "gradient_forward_mode": (2.0, True),  # at most the target: met
+        "gradient_reverse_mode": (3.01, False),
+    }
+
+
+def test_goals_not_measured_when_the_run_lacks_their_batch_horizon_or_mode():
+    from pfjax.bench.goals import check
+
+    result = _result(
+        batch=1024, fraction_of_minimal_by_batch=[{"batch": 1024, "f32": 0.99, "f64": 0.99}], grad_mode="reverse"
+    )
+    result["rows"] = [r for r in result["rows"] if r["batch"] == 10_000]
+    got = {g["goal"]: (g["value"], g["met"]) for g in check(result)}
+    assert all(got[n] == (None, None) for n in got if n != "gradient_reverse_mode"), got
+    assert got["gradient_reverse_mode"] == (3.01, False)
+    # the gradient at another batch, or any number at another horizon: not the goals' measurement
+    measured = lambda config: {g["goal"] for g in check({**_result(), "config": config}) if g["value"] is not None}
+    assert measured({"horizon": 20.0, "grad_size": 256}) == {
+        "throughput_f32",
+        "throughput_f64",
+        "fraction_of_minimal_f32_10000",
+        "fraction_of_minimal_f32_100000",
+        "fraction_of_minimal_f64_10000",
+        "fraction_of_minimal_f64_100000",
+        "numba_f32",
+    }
+    assert measured({"horizon": 2.0, "grad_size": 2000}) == set()

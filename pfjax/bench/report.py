@@ -95,6 +95,44 @@ def _models(b: dict) -> list[str]:
     ]
 
 
+def _goals(goals: list[dict]) -> list[str]:
+    """The goals table (:mod:`pfjax.bench.goals`): target, measured value, met."""
+    if not goals:
+        return []
+
+    def number(x: float, name: str) -> str:
+        if name.startswith("fraction_"):
+            return f"{100 * x:.1f} %"
+        return f"{x:.3g}" + ("x" if name.startswith(("numba_", "gradient_")) else "")
+
+    rows = []
+    for g in goals:
+        rows.append(
+            [
+                f"{g['text']} (B = {g['batch']:,})",
+                ("≥ " if g["at_least"] else "≤ ") + number(g["target"], g["goal"]),
+                "not measured" if g["value"] is None else number(g["value"], g["goal"]),
+                "–" if g["met"] is None else ("yes" if g["met"] else "no"),
+            ]
+        )
+    met = sum(g["met"] is True for g in goals)
+    measured = sum(g["met"] is not None for g in goals)
+    return [
+        "Goals on this machine (docs/performance.md, Scale targets): "
+        + (f"{met} of the {measured} measured met" if measured else "none measured")
+        + (
+            f"; {len(goals) - measured} not measured in this run (a goal is measured at its batch size "
+            "with the benchmark's 20 s horizon)"
+            if measured < len(goals)
+            else ""
+        )
+        + ".",
+        "",
+        table(["goal", "target", "measured", "met"], rows),
+        "",
+    ]
+
+
 def markdown(result: dict) -> str:
     s, m = result["summary"], result["machine"]
     lines = [
@@ -140,6 +178,7 @@ def markdown(result: dict) -> str:
         "",
         *_models(s.get("models") or {}),
     ]
+    lines += _goals(s.get("goals") or [])
     for note in s.get("notes", []):  # a reference that was skipped (Numba not installed)
         lines += [f"Note: {note} (the Numba reference was skipped; its rates and ratios are null).", ""]
     return "\n".join(lines)

@@ -23,7 +23,8 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
 * the cost per rollout-step of the dynamic vehicle models (ST, STD) against the kinematic model in
   the same loop (:mod:`pfjax.bench.models`, ``model_runs`` runs of ``model_horizon`` s, best of
   ``repeats + 1`` interleaved calls; ``model_runs = 0`` skips it);
-* the process's peak resident memory (``getrusage``).
+* the process's peak resident memory (``getrusage``);
+* pfjax's performance goals against these numbers (:mod:`pfjax.bench.goals`): ``summary["goals"]``.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from pfjax.bench import goals
 from pfjax.bench import problem as P
 
 #: max |IAE_ref - IAE_pfjax| (m s) accepted as agreement, per reference and dtype. float64: the
@@ -398,7 +400,7 @@ def run(cfg: BenchConfig, progress=None) -> dict:
         a["ok"] = a["max_abs_diff"] <= a["tolerance"]
     m = machine()
     m["load_average_1m_start"] = load0
-    return dict(
+    result: dict = dict(
         summary=_summary(rows + ref_rows, max(cfg.sizes), g, agreement, notes, models),
         rows=rows + ref_rows,
         machine=m,
@@ -412,3 +414,5 @@ def run(cfg: BenchConfig, progress=None) -> dict:
             slip_deg="U(-10, 10) per axle, constant",
         ),
     )
+    result["summary"]["goals"] = goals.check(result)  # pfjax's performance goals on this machine
+    return result

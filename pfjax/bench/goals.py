@@ -1,0 +1,139 @@
+"""pfjax's performance goals, checked by every run of ``pfjax bench`` on the machine it runs on.
+
+Each :class:`Goal` is one number of the benchmark's result against a target, at the batch size the
+goal is stated for. :func:`check` evaluates them all: ``summary["goals"]`` in ``bench.json`` and
+the "Goals on this machine" table of ``report.md``. A goal whose number the run did not measure
+(its batch size was not among ``--sizes``, or Numba is not installed) is reported as not measured,
+never as met or missed. The goals and what was measured against them on the machines pfjax was
+tuned on are in docs/performance.md (Scale targets).
+
+Rates are million rollout-steps per second (runs x RK4 steps over wall time); fractions are
+pfjax's throughput over the minimal JAX implementation's (:mod:`pfjax.bench.minimal`) at the same
+batch size, in the same process; ratios over Numba are pfjax at the run's largest batch over the
+Numba reference; the gradient costs are the value and gradient of the batch-mean IAE with respect
+to the gains over the forward pass, at the gradient's batch of 2,000 runs. The goals are stated for
+the benchmark's problem at its full horizon (20 s), so a ``--quick`` run measures none of them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+__all__ = ["GOALS", "Goal", "check"]
+
+
+class Goal(NamedTuple):
+    """One performance goal: ``value(result, batch) >= target`` (``at_least``) or ``<= target``."""
+
+    name: str  # key of the goal in ``summary["goals"]``
+    text: str  # what is measured, in words
+    target: float
+    at_least: bool  # True: the value must reach the target; False: stay at or below it
+    batch: int  # the batch size the goal is stated for (the gradient's batch for gradient costs)
+    value: Callable[[dict, int], float | None]  # from the result (``rows``, ``summary``, ``config``)
+
+
+def _rate(impl: str, dtype: str):
+    def value(result: dict, batch: int) -> float | None:
+        rows = [r for r in result["rows"] if r["impl"] == impl and r["dtype"] == dtype and r["batch"] == batch]
+        return rows[0]["msteps_per_s"] if rows else None
+
+    return value
+
+
+def _fraction(bits: int):
+    def value(result: dict, batch: int) -> float | None:
+        found = [f[f"f{bits}"] for f in result["summary"]["fraction_of_minimal_by_batch"] if f["batch"] == batch]
+        return found[0] if found else None
+
+    return value
+
+
+def _gradient(key: str):
+    """A gradient cost, where the run's gradient batch is the goal's."""
+
+    def value(result: dict, batch: int) -> float | None:
+        return result["summary"].get(key) if result["config"]["grad_size"] == batch else None
+
+    return value
+
+
+def _summary_at_top(key: str):
+    """A summary number measured at the run's largest batch, where that batch is the goal's."""
+
+    def value(result: dict, batch: int) -> float | None:
+        s = result["summary"]
+        return s.get(key) if s["batch"] == batch else None
+
+    return value
+
+
+#: The goals, in the order the report lists them.
+GOALS: tuple[Goal, ...] = (
+    Goal("throughput_f32", "pfjax float32, M rollout-steps/s", 150.0, True, 100_000, _rate("pfjax", "float32")),
+    Goal("throughput_f64", "pfjax float64, M rollout-steps/s", 70.0, True, 100_000, _rate("pfjax", "float64")),
+    *(
+        Goal(
+            f"fraction_of_minimal_f{bits}_{batch}",
+            f"pfjax float{bits} over the minimal JAX implementation",
+            target,
+            True,
+            batch,
+            _fraction(bits),
+        )
+        for bits, target in ((32, 0.90), (64, 0.85))
+        for batch in (10_000, 100_000)
+    ),
+    Goal("numba_f32", "pfjax over Numba, float32", 12.0, True, 100_000, _summary_at_top("ratio_vs_numba_f32")),
+    Goal("numba_f64", "pfjax over Numba, float64", 8.0, True, 100_000, _summary_at_top("ratio_vs_numba_f64")),
+    Goal(
+        "gradient_forward_mode",
+        "value and gradient over the forward pass, forward mode",
+        2.0,
+        False,
+        2_000,
+        _gradient("grad_over_forward"),
+    ),
+    Goal(
+        "gradient_reverse_mode",
+        "value and gradient over the forward pass, reverse mode",
+        3.0,
+        False,
+        2_000,
+        _gradient("grad_over_forward_reverse"),
+    ),
+)
+
+
+def check(result: dict, goals: tuple[Goal, ...] = GOALS) -> list[dict]:
+    """Every goal against ``result`` (:func:`pfjax.bench.run.run`'s, with its ``rows``,
+    ``summary`` and ``config``): ``{"goal", "text", "target", "at_least", "batch", "value", "met"}``
+    per goal, ``value`` and ``met`` None where the run did not measure it: its batch size was not
+    run, the run's horizon is not the benchmark problem's (:data:`pfjax.bench.problem.HORIZON`,
+    e.g. ``--quick``), the number is not finite (Numba skipped), or, for the forward-mode gradient,
+    the tuner's mode was reverse."""
+    from pfjax.bench.problem import HORIZON
+
+    full = result["config"]["horizon"] == HORIZON
+    out = []
+    for g in goals:
+        value = g.value(result, g.batch) if full else None
+        if g.name == "gradient_forward_mode" and result["summary"].get("grad_mode") != "forward":
+            value = None
+        if value is not None and not math.isfinite(value):
+            value = None
+        met = None if value is None else (value >= g.target if g.at_least else value <= g.target)
+        out.append(
+            {
+                "goal": g.name,
+                "text": g.text,
+                "target": g.target,
+                "at_least": g.at_least,
+                "batch": g.batch,
+                "value": value,
+                "met": met,
+            }
+        )
+    return out
