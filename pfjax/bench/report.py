@@ -97,6 +97,8 @@ def _models(b: dict) -> list[str]:
 
 def _goals(goals: list[dict]) -> list[str]:
     """The goals table (:mod:`pfjax.bench.goals`): target, measured value, met."""
+    from pfjax.bench.problem import HORIZON
+
     if not goals:
         return []
 
@@ -122,7 +124,7 @@ def _goals(goals: list[dict]) -> list[str]:
         + (f"{met} of the {measured} measured met" if measured else "none measured")
         + (
             f"; {len(goals) - measured} not measured in this run (a goal is measured at its batch size "
-            "with the benchmark's 20 s horizon)"
+            f"with the benchmark's {HORIZON:g} s horizon)"
             if measured < len(goals)
             else ""
         )
