@@ -21,6 +21,8 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
+from pfjax.bench.problem import HORIZON
+
 __all__ = ["GOALS", "Goal", "check"]
 
 
@@ -51,11 +53,15 @@ def _fraction(bits: int):
     return value
 
 
-def _gradient(key: str):
-    """A gradient cost, where the run's gradient batch is the goal's."""
+def _gradient(key: str, mode: str | None = None):
+    """A gradient cost, where the run's gradient batch is the goal's (and, given ``mode``, where the
+    tuner's gradient was taken in that mode)."""
 
     def value(result: dict, batch: int) -> float | None:
-        return result["summary"].get(key) if result["config"]["grad_size"] == batch else None
+        s = result["summary"]
+        if result["config"]["grad_size"] != batch or (mode is not None and s.get("grad_mode") != mode):
+            return None
+        return s.get(key)
 
     return value
 
@@ -94,7 +100,7 @@ GOALS: tuple[Goal, ...] = (
         2.0,
         False,
         2_000,
-        _gradient("grad_over_forward"),
+        _gradient("grad_over_forward", mode="forward"),
     ),
     Goal(
         "gradient_reverse_mode",
@@ -114,14 +120,10 @@ def check(result: dict, goals: tuple[Goal, ...] = GOALS) -> list[dict]:
     run, the run's horizon is not the benchmark problem's (:data:`pfjax.bench.problem.HORIZON`,
     e.g. ``--quick``), the number is not finite (Numba skipped), or, for the forward-mode gradient,
     the tuner's mode was reverse."""
-    from pfjax.bench.problem import HORIZON
-
     full = result["config"]["horizon"] == HORIZON
     out = []
     for g in goals:
         value = g.value(result, g.batch) if full else None
-        if g.name == "gradient_forward_mode" and result["summary"].get("grad_mode") != "forward":
-            value = None
         if value is not None and not math.isfinite(value):
             value = None
         met = None if value is None else (value >= g.target if g.at_least else value <= g.target)
