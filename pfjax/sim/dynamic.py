@@ -27,7 +27,9 @@ friction ``mu``. Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_s
                                                    constraints (+-a_max, constant power above v_switch)
 
    The ST model has no rolling or air resistance, so the proportional speed loop has no
-   steady-state error.
+   steady-state error. The step's four stages are one loop
+   (:func:`~pfjax.sim.integrators.rk4_step_rolled`): the tyre model is compiled once, not four
+   times, which more than halves the drift model's compile time at the same speed.
 
 The slip angles are measured at every sample (:func:`pfjax.models.single_track.tyre_slip`,
 :func:`~pfjax.models.single_track.drift_tyre_slip`: the tyre slip angles the model's forces use, in the kinematic slip model's ``SOURCE`` convention, so
@@ -59,7 +61,7 @@ from pfjax.models.slip import Pose
 from pfjax.numerics import elementary as E
 from pfjax.paths.geometry import NEWTON_START, global_parameter, measure, polish_parameter
 from pfjax.sim import batch, loop
-from pfjax.sim.integrators import rk4_step
+from pfjax.sim.integrators import rk4_step_rolled
 from pfjax.sim.simulate import (
     U0_ITERS,
     Final,
@@ -228,7 +230,7 @@ def _step(controller: Controller, config: SimConfig, sc: DynamicScenario, carry:
     obs = noisy_observation(observation(proj, pose, v_rear, p.l_f + p.l_r, dmax, sc.path), sc.noise, k)
     cmd, c_next = held_command(controller, config, sc.gains, c, obs, carry.aux.cmd, k, last)
     delta_c = jnp.clip(cmd, -dmax, dmax)
-    x_next = rk4_step(lambda tt, xx: closed_loop_rhs(xx, delta_c, sc), t, x, dt)
+    x_next = rk4_step_rolled(lambda tt, xx: closed_loop_rhs(xx, delta_c, sc), t, x, dt)
     finite = jnp.isfinite(proj.d)
     for value in x:
         finite = finite & jnp.isfinite(value)
