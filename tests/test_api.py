@@ -172,6 +172,7 @@ def test_run_load_and_replay_a_study(tmp_path):
         chunk_size=24,
         f64_check_runs=0,
         margin__enabled=False,
+        falsifier__enabled=False,  # a study's worst-case search: tests/test_study_configs.py
         sim__horizon=6.0,
         success__from_s=2.0,
         progress=False,
