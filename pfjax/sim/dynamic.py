@@ -29,7 +29,7 @@ friction ``mu``. Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_s
    The ST model has no rolling or air resistance, so the proportional speed loop has no
    steady-state error. The step's four stages are one loop
    (:func:`~pfjax.sim.integrators.rk4_step_rolled`): the tyre model is compiled once, not four
-   times, which more than halves the drift model's compile time at the same speed.
+   times, which more than halves the drift model's compile time at the same or a lower run time.
 
 The slip angles are measured at every sample (:func:`pfjax.models.single_track.tyre_slip`,
 :func:`~pfjax.models.single_track.drift_tyre_slip`: the tyre slip angles the model's forces use, in the kinematic slip model's ``SOURCE`` convention, so

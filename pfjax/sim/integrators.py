@@ -46,7 +46,8 @@ def rk4_step_rolled(f, t, y, dt):
 
     For a large ``f`` (a tyre model: :mod:`pfjax.sim.dynamic`) XLA compiles the loop several times
     faster than the written-out stages and runs it as fast; for a small ``f`` the written-out
-    stages are as quick to compile (docs/performance.md, "Compilation").
+    stages are as quick to compile (measured: docs/performance.md, "How the simulator is made
+    fast").
     """
     tm = jax.tree_util.tree_map
 
