@@ -257,6 +257,7 @@ def _result(**summary):
             ("pfjax", 64, 10_000, 60.0),
             ("pfjax", 64, 100_000, 69.9),
             ("jax_minimal", 32, 100_000, 170.0),
+            ("numba", 32, 10_000, 12.5),  # the reference runs once, at its own batch (Numba float64 skipped)
         )
     ]
     base = dict(
@@ -285,11 +286,15 @@ def test_goals_read_each_number_where_it_is_stated_and_a_target_reached_is_met()
         "fraction_of_minimal_f32_100000": (0.95, True),
         "fraction_of_minimal_f64_10000": (0.849, False),
         "fraction_of_minimal_f64_100000": (0.86, True),
-        "numba_f32": (12.0, True),
-        "numba_f64": (None, None),  # not finite: not measured, neither met nor missed
+        "numba_f32": (12.0, True),  # pfjax at 10^5 (150) over Numba (12.5)
+        "numba_f64": (None, None),  # no Numba row: not measured, neither met nor missed
         "gradient_forward_mode": (2.0, True),  # at most the target: met
         "gradient_reverse_mode": (3.01, False),
     }
+    # a larger batch added to the run (as on a GPU) leaves every goal read at its own batch
+    bigger = _result(batch=1_000_000)
+    bigger["rows"].append({"impl": "pfjax", "dtype": "float32", "batch": 1_000_000, "msteps_per_s": 900.0})
+    assert {g["goal"]: (g["value"], g["met"]) for g in check(bigger)} == got
 
 
 def test_goals_not_measured_when_the_run_lacks_their_batch_horizon_or_mode():
