@@ -5,7 +5,8 @@ program; :func:`rk4_step_rolled` computes the same step with the stages as one l
 iterations, so it appears once. They perform the same floating-point operations in the same order
 (results differ at most where XLA contracts a multiply and an add into one fused operation in one
 program and not the other: the last bit). Which to use is a compile-time against run-time choice,
-measured per simulator (:mod:`pfjax.sim.dynamic` uses the rolled step).
+measured per simulator (:mod:`pfjax.sim.dynamic` and the slip vehicle's continuous controllers
+use the rolled step).
 """
 
 from __future__ import annotations

@@ -9,6 +9,9 @@ Per sample ``k`` (time ``t_k = k dt``, ``k = 0..N``), :func:`_step`:
 3. saturate the steering at ``+-delta_max``; check the run's health (:mod:`pfjax.sim.status`);
 4. propose one RK4 step of the pose (and a continuous controller's state), slip evaluated at the
    stage times; the loop accumulates the metrics (:func:`update_metrics`) and freezes a failed run.
+   With a continuous controller (projection and controller in every stage) the stages are one loop
+   (:func:`~pfjax.sim.integrators.rk4_step_rolled`, compiled about a quarter faster at the same run
+   time); a sampled controller's small vector field keeps them written out.
 
 :func:`simulate` is one run (write single-run code); :func:`simulate_batch` is the jitted,
 vmapped entry point (:mod:`pfjax.sim.batch`). ``SimConfig`` (:mod:`pfjax.sim.settings`) fixes the
@@ -37,7 +40,7 @@ from pfjax.paths.geometry import (
     polish_parameter,
 )
 from pfjax.sim import batch, loop
-from pfjax.sim.integrators import rk4_step
+from pfjax.sim.integrators import rk4_step, rk4_step_rolled
 from pfjax.sim.loop import stack, unstack  # noqa: F401  (re-exported: a batch of runs, run i of a batch)
 from pfjax.sim.sensing import (
     SensorNoise,
@@ -214,7 +217,7 @@ def _step(controller: Controller, config: SimConfig, sc: Scenario, carry: loop.L
     if config.control_every is None:
         cmd = E.computed_once(controller.output(sc.gains, c, obs))
         delta = jnp.clip(cmd, -dmax, dmax)
-        new_pose, c_next = rk4_step(_closed_loop_rhs(controller, sc, proj.u, k, iters), t, (pose, c), dt)
+        new_pose, c_next = rk4_step_rolled(_closed_loop_rhs(controller, sc, proj.u, k, iters), t, (pose, c), dt)
     else:
         cmd, c_next, delta = _sampled_command(controller, config, sc, c, obs, carry.aux, k, last)
         rhs = lambda tt, ps: world_rhs(ps, delta, *slip_at(sc.slip, tt), sc.params)
