@@ -57,10 +57,10 @@ def rk4_step_rolled(f, t, y, dt):
         first = i == 0
         h = jnp.where(i == 3, dt, 0.5 * dt)  # a_i dt (stage 0 does not use it)
         w = jnp.where((i == 1) | (i == 2), 2.0, 1.0)
-        y_in = tm(lambda yi, ki: jnp.where(first, yi, yi + h * ki), y, k)
+        y_in = tm(lambda yi, zi: jnp.where(first, yi, zi), y, _axpy(y, h, k))
         k = f(jnp.where(first, t, t + h), y_in)
         return k, tm(lambda s, ki: s + w * ki, acc, k)
 
     zeros = tm(jnp.zeros_like, y)
     _, acc = lax.fori_loop(0, 4, stage, (zeros, zeros))
-    return tm(lambda yi, s: yi + (dt / 6.0) * s, y, acc)
+    return _axpy(y, dt / 6.0, acc)
