@@ -70,6 +70,33 @@ def test_rollouts_are_counted_exactly():
     assert r.compile_s > 0 and r.wall_s > 0
 
 
+def test_restarts_share_the_halving_rounds_step_program(monkeypatch):
+    """BFGS's first radius is state, not a static argument: restarts at a quarter of it reuse the
+    step program of the round with their chain count; Adam's schedule is static, so its restarts
+    compile their own."""
+    from pfjax.tuning import multistart
+
+    compiled = []
+    real = multistart._compiled
+
+    def spy(fun, shape_dtype, **static):
+        if fun is multistart._step:
+            compiled.append((shape_dtype[0][0], static["local"]))
+        return real(fun, shape_dtype, **static)
+
+    monkeypatch.setattr(multistart, "_COMPILED", {})
+    monkeypatch.setattr(multistart, "_compiled", spy)
+    cost = lambda th: jnp.sum((th - 0.3) ** 2)
+    o = MultistartOptions(n_screen=8, n_starts=4, steps=4, rounds=2, n_restarts=1, restart_steps=2, polish_steps=0)
+    r = multistart_tune(cost, [0, 0], [1, 1], key=jax.random.PRNGKey(0), options=o)
+    assert sorted(m for m, _ in compiled) == [2, 4]  # chains 4 then 2; the 2 restart chains reuse the second
+    assert r.n_rollouts == 8 + 4 * 2 + 2 * 2 + 2 * 2  # the restarts ran
+    compiled.clear()
+    multistart_tune(cost, [0, 0], [1, 1], key=jax.random.PRNGKey(0), options=o._replace(local="adam"))
+    assert sorted(m for m, _ in compiled) == [2, 2, 4]
+    assert len({lc for _, lc in compiled}) == 2  # the restarts' Adam schedule differs
+
+
 def test_compass_polish_walks_along_a_kink_where_bfgs_stalls():
     """A V-shaped valley along the kink z1 = 0.5 (minimum 0 at (0.8, 0.5), closed form): a gradient
     step crosses the kink and is rejected, so the BFGS chain creeps along z0; the compass polish

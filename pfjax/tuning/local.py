@@ -52,6 +52,14 @@ class Local(NamedTuple):
         inf = jnp.full((m,), jnp.inf, z.dtype)
         return BFGSState(z, inf, jnp.zeros_like(z), eye, jnp.full((m,), self.learning_rate, z.dtype), inf < 0)
 
+    @property
+    def program(self) -> Local:
+        """The static argument of this descent's compiled step: Adam's schedule depends on its
+        learning rate and step count, while BFGS's first radius is in its state (:meth:`init`),
+        so every BFGS descent (the halving rounds, the restarts' quarter radius) shares one step
+        program per chain count."""
+        return self if self.name == "adam" else local(self.name, 0.0, 0)
+
 
 @functools.lru_cache(maxsize=32)
 def local(name: str, learning_rate: float, steps: int) -> Local:

@@ -190,7 +190,7 @@ def multistart_tune(
         state = plan.local_r.init(jnp.asarray(zr, dtype))
         zeros = jnp.zeros((plan.n_restart_chains, D), dtype)
         for _ in range(o.restart_steps):
-            J, zp, state, nb = progs[plan.n_restart_chains, plan.local_r](state, zeros, *args)
+            J, zp, state, nb = progs[plan.n_restart_chains, plan.local_r.program](state, zeros, *args)
             bud.record(J, zp, bud.fpp, nb)
     h = float(o.polish_scale)
     for _ in range(o.polish_steps if plan.polish else 0):
@@ -233,13 +233,14 @@ class _Plan(NamedTuple):
 
     def compile(self, cost, n_screen: int, D: int, dtype, mode: str) -> dict:
         """Every program compiled ahead of time: ``"screen"``, ``"polish"`` (value only) and one
-        step per ``(chains, local)``."""
+        step per ``(chains, local.program)`` (the restarts reuse a halving round's program when
+        their chain count is one of the rounds')."""
         progs: dict = {"screen": _compiled(box_value, ((n_screen, D), dtype), cost=cost)}
         if self.polish:
             progs["polish"] = _compiled(box_value, ((2 * D, D), dtype), cost=cost)
-        pairs = [(m, self.local) for m in sorted(set(self.sizes))]
-        pairs += [(self.n_restart_chains, self.local_r)] if self.n_restart_chains else []
-        for m, lc in pairs:
+        pairs = {(m, self.local.program) for m in self.sizes}
+        pairs |= {(self.n_restart_chains, self.local_r.program)} if self.n_restart_chains else set()
+        for m, lc in sorted(pairs):
             progs[m, lc] = _compiled(_step, ((m, D), dtype), cost=cost, local=lc, mode=mode)
         return progs
 
@@ -258,7 +259,7 @@ def _halving(o, plan: _Plan, progs, bud: _Budget, z_starts, J_starts, k_smooth, 
         for k in range(n_steps):
             sigma = o.smoothing * (1.0 - k / n_steps) if r == 0 and o.rounds > 1 else 0.0
             noise = sigma * jax.random.normal(jax.random.fold_in(k_smooth, k_iter), (m, z_starts.shape[1]), dtype)
-            J, zp, state, nb = progs[m, plan.local](state, noise, *args)
+            J, zp, state, nb = progs[m, plan.local.program](state, noise, *args)
             chain_best = np.minimum(chain_best, bud.record(J, zp, bud.fpp, nb))
             k_iter += 1
 
