@@ -138,6 +138,7 @@ def test_numba_reference_reports_a_missing_numba(monkeypatch):
 
 @pytest.mark.slow
 def test_quick_bench_without_numba_skips_its_reference_with_a_note(tmp_path):
+    """Also the human output (no --json): the report's tables and where the outputs are."""
     out = tmp_path / "bench"
     env = {**os.environ, "PFJAX_CACHE_DIR": str(ROOT / ".pytest_cache" / "xla")}
     no_numba = (
@@ -145,7 +146,7 @@ def test_quick_bench_without_numba_skips_its_reference_with_a_note(tmp_path):
         "rc = main(sys.argv[1:]); assert sys.modules['numba'] is None; sys.exit(rc)"
     )
     r = subprocess.run(
-        [sys.executable, "-c", no_numba, "bench", "--quick", "--sizes", "64", "--out", str(out), "--json"],
+        [sys.executable, "-c", no_numba, "bench", "--quick", "--sizes", "64", "--out", str(out)],
         cwd=ROOT,
         capture_output=True,
         text=True,
@@ -154,7 +155,13 @@ def test_quick_bench_without_numba_skips_its_reference_with_a_note(tmp_path):
     )
     assert r.returncode == 0, r.stderr[-3000:]
     assert NUMBA_MISSING in r.stderr and "Traceback" not in r.stderr
-    s = json.loads(r.stdout)
+    report = (out / "report.md").read_text()
+    assert (
+        r.stdout
+        == f"{report.rstrip()}\n\nWritten to {out}: bench.json, bench.parquet, report.md, figures/throughput.png|svg\n"
+    )
+    assert "| implementation | dtype | batch | M rollout-steps/s | compile s |" in r.stdout
+    s = json.loads((out / "bench.json").read_text())["summary"]
     assert s["notes"] == [NUMBA_MISSING]
     # the other references still run and agree; Numba's rates and ratios are null (strict JSON)
     assert (
@@ -172,8 +179,7 @@ def test_quick_bench_without_numba_skips_its_reference_with_a_note(tmp_path):
         assert s[k] is None, k
     assert math.isfinite(s["msteps_per_s_f32"]) and math.isfinite(s["ratio_vs_numpy_f64"])
     assert set(pd.read_parquet(out / "bench.parquet").impl) == {"pfjax", "jax_minimal", "numpy", "scipy"}
-    assert json.loads((out / "bench.json").read_text())["summary"]["notes"] == [NUMBA_MISSING]
-    assert f"Note: {NUMBA_MISSING}" in (out / "report.md").read_text()
+    assert f"Note: {NUMBA_MISSING}" in report
     assert (out / "figures" / "throughput.png").is_file()
 
 

@@ -355,6 +355,30 @@ def test_help_and_the_simulator_do_not_import_scipy_stats():
     assert r.stdout.strip() == "False"
 
 
+def test_human_output_indents_nested_dicts_and_lists_of_dicts(capsys):
+    from pfjax.cli.common import print_human
+
+    print_human(
+        {
+            "a": 1.5,
+            "sub": {"b": "x", "deeper": {"c": 2}},
+            "rows": [{"n": 1, "ok": True}, {"n": 2, "ok": False}],
+            "e": [],
+        }
+    )
+    assert capsys.readouterr().out.splitlines() == [
+        f"{'a':22s} 1.5",
+        "sub:",
+        f"  {'b':20s} x",
+        "  deeper:",
+        f"    {'c':18s} 2",
+        "rows:",
+        "  - n 1, ok True",
+        "  - n 2, ok False",
+        f"{'e':22s} []",
+    ]
+
+
 def test_no_command_is_a_usage_error():
     r = cli(timeout=60)
     assert r.returncode == 2 and len(r.stderr.splitlines()) == 1 and r.stdout == ""

@@ -72,7 +72,7 @@ def main(argv=None) -> int:
         if args.json:
             print(dumps(out))
         else:
-            print_human(out)
+            getattr(args, "human", print_human)(out)
         return 0
 
     return command_main(f"pfjax {args.command}", body, interrupted=resume)

@@ -30,7 +30,7 @@ def register(sub) -> None:
         help="replace a pfjax output of another config or command in --out (never anything else)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
-    p.set_defaults(func=_cmd)
+    p.set_defaults(func=_cmd, human=_human)
 
 
 def _sizes(text: str):
@@ -67,3 +67,12 @@ def _cmd(args) -> dict:
         out = report.write(result, output)
     s = result["summary"]
     return dict(s, out=str(out), machine=result["machine"])
+
+
+def _human(out: dict) -> None:
+    """Without ``--json``: the report (``report.md``: tables of throughput, agreement, gradient cost,
+    vehicle models and goals) and where the outputs are."""
+    from pathlib import Path
+
+    print((Path(out["out"]) / "report.md").read_text(encoding="utf-8").rstrip())
+    print(f"\nWritten to {out['out']}: bench.json, bench.parquet, report.md, figures/throughput.png|svg")

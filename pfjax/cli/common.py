@@ -83,13 +83,24 @@ def as_flags(flags: dict[str, str]):
 
 
 def print_human(out: dict) -> None:
-    for k, v in out.items():
-        if isinstance(v, dict):
-            print(f"{k}:")
-            for kk, vv in v.items():
-                print(f"  {kk:20s} {vv}")
+    """A command's result without ``--json``: ``key value`` lines, a nested dict's keys indented
+    under its name, a list of dicts one ``- key value, ...`` line per item (a command with a
+    report of its own prints that instead: its parser's ``human`` default)."""
+    for line in _human_lines(out, 0):
+        print(line)
+
+
+def _human_lines(d: dict, depth: int):
+    pad, width = "  " * depth, max(22 - 2 * depth, 1)
+    for k, v in d.items():
+        if isinstance(v, dict) and v:
+            yield f"{pad}{k}:"
+            yield from _human_lines(v, depth + 1)
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            yield f"{pad}{k}:"
+            yield from (f"{pad}  - " + ", ".join(f"{kk} {vv}" for kk, vv in x.items()) for x in v)
         else:
-            print(f"{k:22s} {v}")
+            yield f"{pad}{k:{width}s} {v}"
 
 
 def join_negative_values(argv: list[str]) -> list[str]:
