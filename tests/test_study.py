@@ -1,8 +1,8 @@
 """studies/paper_reproduction.py end to end, at small sizes, twice (determinism).
 
-The two runs are separate processes sharing a JAX persistent compilation cache in a temporary
-directory (the second run loads the first run's executables instead of recompiling; the results
-must not, and do not, depend on that).
+The two runs are separate processes sharing the suite's persistent compilation cache (conftest.py;
+every program stored, so the second run loads the first run's executables instead of recompiling,
+and a later run of the suite loads both; the results must not, and do not, depend on that).
 
 Numbers are checked against closed forms where one exists: docs/reproductions/path-following.md §7's line equilibrium
 (``theta_e* = -beta_r``, ``d* = (beta_r + beta_f + K_2 beta_r) / K_1``) for the stability grid,
@@ -34,10 +34,9 @@ TOML = ROOT / "studies" / "paper_reproduction.toml"
 SOURCE_K = (-2.7381, -2.0772)
 
 
-def _run(out: Path, cache: Path):
+def _run(out: Path):
     env = dict(
-        os.environ,
-        JAX_COMPILATION_CACHE_DIR=str(cache),
+        os.environ,  # PFJAX_CACHE_DIR: the suite's cache
         JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0",
         JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0",
     )
@@ -50,9 +49,8 @@ def _run(out: Path, cache: Path):
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("study")
-    cache = base / "jax-cache"
-    r1 = _run(base / "run1", cache)
-    _run(base / "run2", cache)  # the second run, for the determinism checks
+    r1 = _run(base / "run1")
+    _run(base / "run2")  # the second run, for the determinism checks
     return base / "run1", base / "run2", r1
 
 
