@@ -34,6 +34,7 @@ import pyarrow.parquet as pq
 
 import pfjax
 from pfjax.config import ConfigError
+from pfjax.errors import stop_if_interrupted
 from pfjax.montecarlo.config import StudySpec, study_hash
 from pfjax.outputs import sibling
 from pfjax.provenance import parquet_metadata
@@ -152,6 +153,7 @@ class ChunkStore:
         if f.is_file() and self._valid(f):
             self.reused += 1
             return pd.read_parquet(f)
+        stop_if_interrupted()  # a Ctrl-C whose exception never arrived: stop before the next chunk
         df = compute()
         tmp = f.with_name(f".{f.name}.tmp{os.getpid()}")
         table = pa.Table.from_pandas(df, preserve_index=False)
