@@ -97,6 +97,57 @@ def test_restarts_share_the_halving_rounds_step_program(monkeypatch):
     assert len({lc for _, lc in compiled}) == 2  # the restarts' Adam schedule differs
 
 
+@jax.custom_jvp
+def _nan_slope(x):
+    return x
+
+
+_nan_slope.defjvp(lambda primals, tangents: (primals[0], jnp.where(tangents[0] == 0, 0.0, jnp.nan)))  # forward mode
+
+
+@pytest.mark.parametrize("local", ["bfgs", "adam"])
+def test_cheap_costs_share_one_step_program_with_the_same_result(monkeypatch, local):
+    """With ``rollout_steps`` small the halving rounds (and BFGS's restarts) run on the first
+    round's program, their chains padded with copies of the first: the same points, costs, counts
+    and non-finite gradient components as one program per chain count."""
+    from pfjax.tuning import multistart
+
+    compiled = []
+    real = multistart._compiled
+
+    def spy(fun, shape_dtype, **static):
+        if fun is multistart._step:
+            compiled.append(shape_dtype[0][0])
+        return real(fun, shape_dtype, **static)
+
+    monkeypatch.setattr(multistart, "_COMPILED", {})
+    monkeypatch.setattr(multistart, "_compiled", spy)
+
+    def cost(th):  # the second gain's derivative is NaN (zeroed and counted)
+        return jnp.sum((th - jnp.asarray([0.3, 0.6, 0.2])) ** 2) + 0.1 * _nan_slope(th[1])
+
+    o = MultistartOptions(n_screen=8, n_starts=4, steps=7, rounds=3, n_restarts=2, restart_steps=3, polish_steps=2)
+    o = o._replace(local=local)
+    args = (cost, [0, 0, 0], [1, 1, 1])
+    own = multistart_tune(*args, key=jax.random.PRNGKey(1), options=o)
+    assert sorted(compiled) == [1, 2, 3, 4]
+    compiled.clear()
+    shared = multistart_tune(*args, key=jax.random.PRNGKey(1), options=o, rollout_steps=1)
+    # adam's restarts keep a program of their own (their schedule is static)
+    assert sorted(compiled) == ([4] if local == "bfgs" else [3, 4])
+    n_grad = 4 * 3 + 2 * 2 + 1 * 2 + 3 * 3  # chains 4, 2, 1 for 3, 2, 2 steps; 3 restart chains for 3 steps
+    for r in (own, shared):
+        assert r.n_rollouts == 8 + n_grad + 2 * 6  # screened, descended, polished
+        assert r.n_nonfinite_grad == n_grad  # one NaN component per real chain's gradient
+    np.testing.assert_array_equal(shared.theta, own.theta)
+    np.testing.assert_array_equal(shared.history, own.history)
+    # too much padded work for the budget: one program per chain count again
+    compiled.clear()
+    multistart._COMPILED.clear()
+    multistart_tune(*args, key=jax.random.PRNGKey(1), options=o, rollout_steps=10**9)
+    assert sorted(compiled) == [1, 2, 3, 4]
+
+
 def test_compass_polish_walks_along_a_kink_where_bfgs_stalls():
     """A V-shaped valley along the kink z1 = 0.5 (minimum 0 at (0.8, 0.5), closed form): a gradient
     step crosses the kink and is rejected, so the BFGS chain creeps along z0; the compass polish
@@ -180,6 +231,21 @@ def test_tune_api_methods_and_check_on_the_simulator():
     out = pfjax.tune("state_feedback", "paper-line", "gradient", config=SHORT, key=0, multistart=small)
     # 8 screened + the default (source) K; chains 2, 1 for 2 steps; 2 restart chains for 2 steps
     assert out["n_rollouts"] == 9 + 2 * 2 + 1 * 2 + 2 * 2 and out["n_forward_passes"] == 9 + 3 * 10
+    # pfjax.tune ran every round on the 2-chain program (a cheap cost); one program per chain count
+    # gives the same simulator-cost result to the bit
+    from pfjax.tuning.multistart import _Plan
+    from pfjax.tuning.problem import make_problem, tune
+
+    assert _Plan.of(small, SHORT.n_steps).programs == (2, 2)  # one run per evaluation
+    own = tune(
+        make_problem("state_feedback", "paper-line", config=SHORT),
+        "gradient",
+        key=jax.random.PRNGKey(0),
+        multistart=small,
+        shared_programs=False,
+    )
+    np.testing.assert_array_equal(own.theta, out["result"].theta)
+    np.testing.assert_array_equal(own.history, out["result"].history)
     both = pfjax.tune("state_feedback", "paper-line", "ga+gradient", config=SHORT, generations=2, population=6, steps=3)
     ga = pfjax.tune("state_feedback", "paper-line", "ga", config=SHORT, generations=2, population=6)
     assert both["cost"] <= ga["cost"] and both["n_rollouts"] == ga["n_rollouts"] + 3

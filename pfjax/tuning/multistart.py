@@ -41,6 +41,15 @@ equivalents ``n_forward_passes`` charge a value-only rollout 1 and a rollout wit
 mode (measured 3.2-3.4). ``wall_s`` excludes compilation (every program is compiled ahead of time,
 timed in ``compile_s``; the compiled programs are cached per cost function and shape, so repeated
 runs on one problem compile once).
+
+Programs: the screening's and the polish's (value only) and one cost-and-gradient step per chain
+count (8, 4 and 2 chains by default; BFGS restarts reuse the one of their count). When the caller
+gives the rollout-steps of one evaluation and they are few (``rollout_steps`` of
+:func:`multistart_tune`), every round and the BFGS restarts run on the first round's program
+instead, the dropped chains' places taken by copies of the first chain whose results are not
+used: two compilations fewer at the defaults, for a few tenths of a second of extra simulation.
+The chains are independent lanes of one vmapped program, so the results do not change (to the
+bit in the tests, on a quadratic and on the simulator's cost).
 """
 
 from __future__ import annotations
@@ -142,6 +151,7 @@ def multistart_tune(
     options: MultistartOptions = MultistartOptions(),
     candidates=None,
     n_per_eval: int = 1,
+    rollout_steps: int | None = None,
     mode: str = "auto",
     progress: bool = False,
 ) -> TuneResult:
@@ -155,6 +165,12 @@ def multistart_tune(
         candidates: ``(K, D)`` extra points screened beside the space-filling ones (clipped to
             the box), e.g. the source's gains or an LMI design.
         n_per_eval: rollouts per ``cost`` call, for the budget count.
+        rollout_steps: the simulated rollout-steps of one ``cost`` call (its runs times their
+            steps), when known. Then the halving rounds and the restarts share the first round's
+            compiled step program (their chains padded with copies of the first, whose results
+            are dropped) if the padding adds at most :data:`PAD_ROLLOUT_STEPS` rollout-steps to
+            the run: a fraction of a second, against seconds to compile each further program.
+            ``None`` (a cost of unknown size): one program per chain count.
         mode: differentiation mode (:func:`pfjax.numerics.autodiff.value_and_grad`).
         progress: tqdm bar over the gradient steps and polish iterations.
 
@@ -174,7 +190,7 @@ def multistart_tune(
     if len(z0) < o.n_starts:  # too few screened points: fill the starts uniformly
         z0 = np.concatenate([z0, np.asarray(jax.random.uniform(k_restart, (o.n_starts - len(z0), D)), np.float64)])
     dtype = jnp.result_type(float)
-    plan = _Plan.of(o)
+    plan = _Plan.of(o, rollout_steps)
     t_c = time.perf_counter()
     progs = plan.compile(cost, len(z0), D, dtype, mode)
     compile_s = time.perf_counter() - t_c
@@ -187,17 +203,25 @@ def multistart_tune(
     if plan.n_restart_chains:
         eps = np.asarray(jax.random.normal(k_restart, (o.n_restarts, D)), np.float64)
         zr = np.concatenate([bud.z[None], np.clip(bud.z + o.restart_scale * eps, 0.0, 1.0)])
-        state = plan.local_r.init(jnp.asarray(zr, dtype))
-        zeros = jnp.zeros((plan.n_restart_chains, D), dtype)
+        m, size = plan.n_restart_chains, plan.restart_program
+        state = _rows(plan.local_r.init(jnp.asarray(zr, dtype)), _padding(np.arange(m), size))
+        zeros = jnp.zeros((size, D), dtype)
         for _ in range(o.restart_steps):
-            J, zp, state, nb = progs[plan.n_restart_chains, plan.local_r.program](state, zeros, *args)
-            bud.record(J, zp, bud.fpp, nb)
+            J, zp, state, nb = progs[size, plan.local_r.program](state, zeros, *args)
+            bud.record(np.asarray(J)[:m], np.asarray(zp)[:m], bud.fpp, np.asarray(nb)[:m])
     h = float(o.polish_scale)
     for _ in range(o.polish_steps if plan.polish else 0):
         z_c, J_c, Zp = bud.z, bud.J, L.compass_points(bud.z, h)
         Jp = bud.record(progs["polish"](jnp.asarray(Zp, dtype), *args), Zp, 1)
         h = L.compass_update(z_c, J_c, h, Zp, Jp)[2]  # the incumbent moves in bud.record
     return bud.result(lo, span, compile_s)
+
+
+#: the most rollout-steps a run's padded chains may add when its halving rounds and restarts share
+#: one compiled step program (:func:`multistart_tune`'s ``rollout_steps``): a few tenths of a
+#: second of simulation with gradients, against seconds to compile each further step program
+#: (docs/design-and-tuning.md, the multi-start tuner)
+PAD_ROLLOUT_STEPS = 2_000_000
 
 
 class _Plan(NamedTuple):
@@ -209,9 +233,11 @@ class _Plan(NamedTuple):
     polish: bool  # a compass polish at the end
     local: L.Local
     local_r: L.Local
+    programs: tuple  # chain count of each halving round's step program (>= its chains: padded)
+    restart_program: int  # chain count of the restarts' step program
 
     @classmethod
-    def of(cls, o: MultistartOptions) -> _Plan:
+    def of(cls, o: MultistartOptions, rollout_steps: int | None = None) -> _Plan:
         per_round = [o.steps // o.rounds + (1 if r < o.steps % o.rounds else 0) for r in range(o.rounds)]
         sizes, n = [], o.n_starts
         for _ in range(o.rounds):
@@ -219,13 +245,22 @@ class _Plan(NamedTuple):
             n = max(1, n // 2)
         n_r = o.n_restarts + 1 if (o.n_restarts and o.restart_steps) else 0
         lr, lc = float(o.learning_rate), L.local(o.local, float(o.learning_rate), int(o.steps))
+        local_r = L.local(o.local, lr / 4.0, max(int(o.restart_steps), 1))
+        # shared: every round on the first round's program, and the restarts too where that program
+        # is theirs (BFGS) and has room, if the padded chains' rollouts are cheap
+        top = sizes[0]
+        pad_r = top if (n_r and local_r.program == lc.program and n_r <= top) else n_r
+        padding = sum((top - m) * k for m, k in zip(sizes, per_round)) + (pad_r - n_r) * o.restart_steps
+        share = rollout_steps is not None and padding * int(rollout_steps) <= PAD_ROLLOUT_STEPS
         return cls(
             tuple(sizes),
             tuple(per_round),
             n_r,
             bool(o.polish_steps and o.polish_scale > 0),
             lc,
-            L.local(o.local, lr / 4.0, max(int(o.restart_steps), 1)),
+            local_r,
+            tuple(top if share else m for m in sizes),
+            pad_r if share else n_r,
         )
 
     def n_iter(self, o: MultistartOptions) -> int:
@@ -234,15 +269,26 @@ class _Plan(NamedTuple):
     def compile(self, cost, n_screen: int, D: int, dtype, mode: str) -> dict:
         """Every program compiled ahead of time: ``"screen"``, ``"polish"`` (value only) and one
         step per ``(chains, local.program)`` (the restarts reuse a halving round's program when
-        their chain count is one of the rounds')."""
+        their chain count, padded or not, is the round's)."""
         progs: dict = {"screen": _compiled(box_value, ((n_screen, D), dtype), cost=cost)}
         if self.polish:
             progs["polish"] = _compiled(box_value, ((2 * D, D), dtype), cost=cost)
-        pairs = {(m, self.local.program) for m in self.sizes}
-        pairs |= {(self.n_restart_chains, self.local_r.program)} if self.n_restart_chains else set()
+        pairs = {(m, self.local.program) for m in self.programs}
+        pairs |= {(self.restart_program, self.local_r.program)} if self.n_restart_chains else set()
         for m, lc in sorted(pairs):
             progs[m, lc] = _compiled(_step, ((m, D), dtype), cost=cost, local=lc, mode=mode)
         return progs
+
+
+def _padding(idx: np.ndarray, size: int) -> np.ndarray:
+    """The chains ``idx`` followed by copies of the first up to ``size`` (a shared program's extra
+    chains, whose results are dropped)."""
+    return np.concatenate([idx, np.full(size - len(idx), idx[0])])
+
+
+def _rows(state, idx: np.ndarray):
+    """The chains ``idx`` of a descent state, gathered on the host (no program to compile)."""
+    return jax.tree_util.tree_map(lambda x: np.asarray(x)[idx] if np.ndim(x) else x, state)
 
 
 def _halving(o, plan: _Plan, progs, bud: _Budget, z_starts, J_starts, k_smooth, args, dtype) -> None:
@@ -251,15 +297,18 @@ def _halving(o, plan: _Plan, progs, bud: _Budget, z_starts, J_starts, k_smooth, 
     state = plan.local.init(jnp.asarray(z_starts, dtype))
     chain_best = np.asarray(J_starts, np.float64).copy()
     k_iter = 0
-    for r, (m, n_steps) in enumerate(zip(plan.sizes, plan.per_round)):
+    for r, (m, size, n_steps) in enumerate(zip(plan.sizes, plan.programs, plan.per_round)):
+        keep = np.arange(m)
         if len(chain_best) > m:  # successive halving: keep the m chains with the best costs seen
             keep = np.sort(np.argsort(chain_best, kind="stable")[:m])
             chain_best = chain_best[keep]
-            state = jax.tree_util.tree_map(lambda x, keep=keep: x[keep] if np.ndim(x) else x, state)
+        state = _rows(state, _padding(keep, size))  # a shared program's extra chains: copies of the first
+        pad = np.zeros((size - m, z_starts.shape[1]), dtype)
         for k in range(n_steps):
             sigma = o.smoothing * (1.0 - k / n_steps) if r == 0 and o.rounds > 1 else 0.0
             noise = sigma * jax.random.normal(jax.random.fold_in(k_smooth, k_iter), (m, z_starts.shape[1]), dtype)
-            J, zp, state, nb = progs[m, plan.local.program](state, noise, *args)
+            J, zp, state, nb = progs[size, plan.local.program](state, np.concatenate([np.asarray(noise), pad]), *args)
+            J, zp, nb = (np.asarray(x)[:m] for x in (J, zp, nb))
             chain_best = np.minimum(chain_best, bud.record(J, zp, bud.fpp, nb))
             k_iter += 1
 
@@ -282,13 +331,14 @@ class _Budget:
         self.t0 = time.perf_counter()
 
     def record(self, J, Z, passes: int, n_bad=0, tick: bool = True) -> np.ndarray:
-        """Count ``len(J)`` evaluations of ``passes`` forward passes per rollout at the points ``Z``;
-        returns the costs with non-finite ones as ``inf``."""
+        """Count ``len(J)`` evaluations of ``passes`` forward passes per rollout at the points ``Z``
+        (``n_bad``: their non-finite gradient components, per point or in all); returns the costs
+        with non-finite ones as ``inf``."""
         J = np.asarray(J, np.float64)
         J = np.where(np.isfinite(J), J, np.inf)
         self.n_roll += len(J) * self.n_per_eval
         self.n_fwd += len(J) * self.n_per_eval * passes
-        self.n_bad += int(n_bad)
+        self.n_bad += int(np.sum(n_bad))
         i = int(np.argmin(J))
         if J[i] < self.J:
             self.J, self.z = float(J[i]), np.asarray(Z[i], np.float64)
@@ -343,8 +393,8 @@ def box_value(z, lo, span, *, cost):
 def _step(state, noise, lo, span, *, cost, local, mode="auto"):
     """One evaluation of every chain: the cost and its gradient at the trial point (plus ``noise``:
     randomised smoothing; 0 for the true cost), then the local update. Returns the costs at the
-    evaluated points, those points, the new state and the number of non-finite gradient components
-    (zeroed)."""
+    evaluated points, those points, the new state and each chain's number of non-finite gradient
+    components (zeroed)."""
     vg = jax.vmap(autodiff.value_and_grad(lambda zz: cost(lo + span * zz), mode=mode))
     if local.name == "adam":
         z, opt_state = state
@@ -354,9 +404,9 @@ def _step(state, noise, lo, span, *, cost, local, mode="auto"):
         g = jnp.where(bad, 0.0, g)
         opt = adam(local.learning_rate, local.steps)
         upd, opt_state = opt.update(g, opt_state, z)
-        return J, zp, (jnp.clip(optax.apply_updates(z, upd), 0.0, 1.0), opt_state), jnp.sum(bad)
+        return J, zp, (jnp.clip(optax.apply_updates(z, upd), 0.0, 1.0), opt_state), jnp.sum(bad, axis=-1)
     zp = jnp.clip(jax.vmap(L.bfgs_trial)(state) + noise, 0.0, 1.0)
     J, g = vg(zp)
     bad = ~jnp.isfinite(g)
     g = jnp.where(bad, 0.0, g)
-    return J, zp, jax.vmap(L.bfgs_update)(state, zp, J, g), jnp.sum(bad)
+    return J, zp, jax.vmap(L.bfgs_update)(state, zp, J, g), jnp.sum(bad, axis=-1)

@@ -213,6 +213,7 @@ def tune(
     learning_rate: float | None = None,
     theta0=None,
     multistart: MultistartOptions | None = None,
+    shared_programs: bool = True,
     progress: bool = False,
 ) -> TuneResult:
     """Run ``method`` on ``problem``.
@@ -229,6 +230,12 @@ def tune(
       default 100, ``learning_rate`` 0.05);
     * ``"ga+gradient"``: the GA, then ``steps`` (default 30) projected adam steps from its best
       at ``learning_rate`` (default 0.01): a gradient polish of the GA's answer.
+
+    ``shared_programs`` (``"gradient"``): the multi-start tuner runs its halving rounds and
+    restarts on the first round's compiled program when the padded chains' rollouts are cheap
+    (:func:`~pfjax.tuning.multistart.multistart_tune`'s ``rollout_steps``), the quickest first
+    answer; ``False``: one program per chain count, for many runs on one problem (a study's seeds)
+    that reuse the compiled programs. The results are the same either way.
 
     Refused before any work (:class:`~pfjax.errors.InputError` naming the argument) for an unknown
     method or settings, or batches beyond the memory budget (:mod:`pfjax.resources`: the GA
@@ -247,6 +254,7 @@ def tune(
             options=ms,
             candidates=np.stack(cand),
             n_per_eval=problem.n_per_eval,
+            rollout_steps=problem.n_per_eval * problem.config.n_steps if shared_programs else None,
             progress=progress,
         )
     if method == "gradient-plain":

@@ -111,7 +111,10 @@ def compare(cfg: dict, progress: bool):
         pr = problems[name] = make_study_problem(cfg, name)
         for label, kw in methods(cfg, name, i == 0).items():
             for seed in range(cfg["seeds"]):
-                r = tune(pr, key=jax.random.PRNGKey(seed), ga_options=opts, progress=progress, **kw)
+                # shared_programs=False: the seeds reuse one program per chain count, compiled once
+                r = tune(
+                    pr, key=jax.random.PRNGKey(seed), ga_options=opts, shared_programs=False, progress=progress, **kw
+                )
                 runs.append(_run_row(name, label, seed, r, pr))
                 rows += _history_rows(name, label, seed, r)
             c = [x["cost"] for x in runs if x["problem"] == name and x["method"] == label]
