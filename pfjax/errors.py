@@ -243,17 +243,25 @@ def _on_sigint(signum, frame):
     """Python's SIGINT handler (raise ``KeyboardInterrupt``), except inside a finalizer, where the
     exception would be dropped: there the signal is sent again shortly (:func:`command_main`)."""
     import os
-    import signal
     import threading
 
     global _interrupted
     _interrupted = True
     if _in_finalizer(frame):
-        again = threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT))
+        again = threading.Timer(0.05, _send_again, (os.getpid(),))
         again.daemon = True
         again.start()
         return
     raise KeyboardInterrupt
+
+
+def _send_again(pid: int) -> None:
+    """SIGINT to ``pid`` if the command that got it still runs (its handler is installed)."""
+    import os
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is _on_sigint:
+        os.kill(pid, signal.SIGINT)
 
 
 def _in_finalizer(frame) -> bool:

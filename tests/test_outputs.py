@@ -475,28 +475,25 @@ def test_a_half_created_partial_directory_is_removed_by_the_next_writer(tmp_path
 
 def test_ctrl_c_during_a_gc_callback_still_interrupts_the_command(monkeypatch, capsys):
     """Python prints and drops an exception raised in a garbage-collector callback (JAX registers
-    one): the command's SIGINT handler raises none there but sends the signal again 50 ms later,
-    and remembers it for the check before each of a study's chunks (the backstop, tested here
-    without the second signal)."""
+    one): the command's SIGINT handler raises none there but sends the signal again 50 ms later
+    (not if the command has ended by then), and remembers it for the check before each of a
+    study's chunks (the backstop, tested without the second signal)."""
     import gc
     import threading
 
     from pfjax import errors
 
-    get = signal.getsignal
-    real = get(signal.SIGINT)
-    monkeypatch.setattr(signal, "getsignal", lambda s: signal.default_int_handler)  # as in a fresh process
     quiet = type("NoTimer", (), {"__init__": lambda self, *a, **k: None, "start": lambda self: None})
 
-    def body(resend: bool):
-        if not resend:
+    def body(mode: str):
+        if mode == "backstop":
             monkeypatch.setattr(threading, "Timer", quiet)
         fired = []
 
         def in_gc(phase, info):
             if phase == "start" and not fired:
                 fired.append(True)
-                if get(signal.SIGINT) is errors._on_sigint:  # only under the command's handler
+                if signal.getsignal(signal.SIGINT) is errors._on_sigint:  # only under the command's handler
                     signal.raise_signal(signal.SIGINT)
 
         gc.callbacks.append(in_gc)
@@ -505,21 +502,30 @@ def test_ctrl_c_during_a_gc_callback_still_interrupts_the_command(monkeypatch, c
         finally:
             gc.callbacks.remove(in_gc)
         assert fired
+        if mode == "ended":
+            return 0
         t0 = time.time()
-        while resend and time.time() - t0 < 5:
+        while mode == "resend" and time.time() - t0 < 5:
             time.sleep(0.01)  # the second signal interrupts here
-        waited.append(resend)  # reached only without the second signal
+        waited.append(mode)  # reached only without the second signal
         errors.stop_if_interrupted()
         return 0
 
-    dropped, waited = [], []
+    dropped, waited, late = [], [], []
     monkeypatch.setattr(sys, "unraisablehook", dropped.append)
+    real = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a fresh process
     try:
-        for resend in (True, False):
-            assert errors.command_main("pfjax study", lambda r=resend: body(r), interrupted="resume") == 130
+        for mode, code in (("resend", 130), ("ended", 0), ("backstop", 130)):
+            assert errors.command_main("pfjax study", lambda m=mode: body(m), interrupted="resume") == code
             err = capsys.readouterr().err
-            assert err.strip().splitlines()[-1] == "pfjax study: interrupted; resume" and "Traceback" not in err, err
+            assert "Traceback" not in err, err
+            if code:
+                assert err.strip().splitlines()[-1] == "pfjax study: interrupted; resume", err
+            else:  # the command ended within 50 ms: no second signal to whatever runs next
+                signal.signal(signal.SIGINT, lambda *a: late.append(a))
+                time.sleep(0.2)
+                signal.signal(signal.SIGINT, signal.default_int_handler)
     finally:
         signal.signal(signal.SIGINT, real)
-    assert waited == [False] and dropped == []  # the second signal, not the backstop; no exception dropped
-    assert not errors._interrupted  # forgotten when the command ends: the Python API never stops on it
+    assert waited == ["backstop"] and dropped == [] and late == []  # no exception dropped, no late signal
+    assert not errors._interrupted  # forgotten when a command ends: the Python API never stops on it
