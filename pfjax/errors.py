@@ -204,25 +204,15 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
     """Run ``body()`` (which returns an exit code) as a command's main function: bad input
     (:class:`InputError`) prints one line ``<prog>: error: <message>`` on stderr and returns
     :data:`EXIT_USAGE`; Ctrl-C prints ``<prog>: interrupted; <interrupted>`` and returns
-    :data:`EXIT_INTERRUPTED`. No traceback either way.
-
-    Python prints and drops an exception raised while a garbage-collector callback or a
-    ``__del__`` runs (JAX registers such a callback), so a Ctrl-C that arrives there would be lost
-    and the command would run on to its end. The handler installed here instead delivers the
-    signal again 50 ms later, and remembers it for :func:`stop_if_interrupted`."""
-    import signal
+    :data:`EXIT_INTERRUPTED`. No traceback either way. Ctrl-C is never lost, even where Python
+    drops its exception (:mod:`pfjax.interrupts`)."""
     import sys
-    import threading
 
-    global _interrupted
-    _interrupted = False
-    own = threading.current_thread() is threading.main_thread() and (
-        signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    )
-    if own:
-        signal.signal(signal.SIGINT, _on_sigint)
+    from pfjax import interrupts
+
     try:
-        return body()
+        with interrupts.guard():
+            return body()
     except InputError as e:
         print(f"{prog}: error: {one_line(e)}", file=sys.stderr)
         return EXIT_USAGE
@@ -230,60 +220,6 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
         sys.stderr.write("\n")  # below a progress bar's partial line
         print(f"{prog}: interrupted; {interrupted}", file=sys.stderr)
         return EXIT_INTERRUPTED
-    finally:
-        _interrupted = False  # the Python API outside a command never sees it
-        if own:
-            signal.signal(signal.SIGINT, signal.default_int_handler)
-
-
-_interrupted = False
-
-
-def _on_sigint(signum, frame):
-    """Python's SIGINT handler (raise ``KeyboardInterrupt``), except inside a finalizer, where the
-    exception would be dropped: there the signal is sent again shortly (:func:`command_main`)."""
-    import os
-    import threading
-
-    global _interrupted
-    _interrupted = True
-    if _in_finalizer(frame):
-        again = threading.Timer(0.05, _send_again, (os.getpid(),))
-        again.daemon = True
-        again.start()
-        return
-    raise KeyboardInterrupt
-
-
-def _send_again(pid: int) -> None:
-    """SIGINT to ``pid`` if the command that got it still runs (its handler is installed)."""
-    import os
-    import signal
-
-    if signal.getsignal(signal.SIGINT) is _on_sigint:
-        os.kill(pid, signal.SIGINT)
-
-
-def _in_finalizer(frame) -> bool:
-    """Whether ``frame`` runs inside a garbage-collector callback or a ``__del__`` method."""
-    import gc
-
-    callbacks = {getattr(cb, "__code__", None) for cb in gc.callbacks}
-    while frame is not None:
-        if frame.f_code in callbacks or frame.f_code.co_name == "__del__":
-            return True
-        frame = frame.f_back
-    return False
-
-
-def stop_if_interrupted() -> None:
-    """Raise ``KeyboardInterrupt`` in the main thread if the command got Ctrl-C
-    (:func:`command_main`): called before each of a study's chunks, a backstop for a signal whose
-    exception never arrived, so the study stops at the next chunk, resumable."""
-    import threading
-
-    if _interrupted and threading.current_thread() is threading.main_thread():
-        raise KeyboardInterrupt
 
 
 class PfjaxDeprecationWarning(FutureWarning):

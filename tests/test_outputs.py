@@ -473,52 +473,68 @@ def test_a_half_created_partial_directory_is_removed_by_the_next_writer(tmp_path
     assert not half.exists()
 
 
-def test_ctrl_c_during_a_gc_callback_still_interrupts_the_command(monkeypatch, capsys):
-    """Python prints and drops an exception raised in a garbage-collector callback (JAX registers
-    one): the command's SIGINT handler raises none there but sends the signal again 50 ms later
-    (not if the command has ended by then), and remembers it for the check before each of a
-    study's chunks (the backstop, tested without the second signal)."""
+def test_ctrl_c_whose_exception_python_drops_still_interrupts_the_command(monkeypatch, capsys):
+    """Python prints and drops a ``KeyboardInterrupt`` raised in a garbage-collector callback (JAX
+    registers one) or a weakref callback: the command takes it from the unraisable hook, prints
+    nothing for it and sends SIGINT again 50 ms later (not if the command has ended by then), and
+    remembers it for the check before each of a study's chunks (the backstop, tested without the
+    second signal)."""
     import gc
     import threading
+    import weakref
 
-    from pfjax import errors
+    from pfjax import errors, interrupts
 
-    quiet = type("NoTimer", (), {"__init__": lambda self, *a, **k: None, "start": lambda self: None})
+    class NoTimer:
+        def __init__(self, *a, **k):
+            pass
 
-    def body(mode: str):
-        if mode == "backstop":
-            monkeypatch.setattr(threading, "Timer", quiet)
+        start = cancel = join = lambda self: None
+        is_alive = lambda self: False
+
+    def interrupt_in(where: str):
+        """SIGINT handled inside a gc callback or a weakref callback (only under the command's handler)."""
+        send = lambda *_: (
+            signal.getsignal(signal.SIGINT) is interrupts._on_sigint and signal.raise_signal(signal.SIGINT)
+        )
+        if where == "weakref":
+            obj = type("Obj", (), {})()
+            ref = weakref.ref(obj, send)  # noqa: F841
+            del obj  # the callback runs here
+            return
         fired = []
 
         def in_gc(phase, info):
             if phase == "start" and not fired:
-                fired.append(True)
-                if signal.getsignal(signal.SIGINT) is errors._on_sigint:  # only under the command's handler
-                    signal.raise_signal(signal.SIGINT)
+                fired.append(send())
 
         gc.callbacks.append(in_gc)
         try:
             gc.collect()
         finally:
             gc.callbacks.remove(in_gc)
-        assert fired
+
+    def body(mode: str):
+        if mode == "backstop":
+            monkeypatch.setattr(threading, "Timer", NoTimer)
+        interrupt_in("weakref" if mode == "weakref" else "gc")
         if mode == "ended":
             return 0
         t0 = time.time()
-        while mode == "resend" and time.time() - t0 < 5:
+        while mode != "backstop" and time.time() - t0 < 5:
             time.sleep(0.01)  # the second signal interrupts here
         waited.append(mode)  # reached only without the second signal
-        errors.stop_if_interrupted()
+        interrupts.stop_if_interrupted()
         return 0
 
     dropped, waited, late = [], [], []
     monkeypatch.setattr(sys, "unraisablehook", dropped.append)
     real = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a fresh process
     try:
-        for mode, code in (("resend", 130), ("ended", 0), ("backstop", 130)):
-            assert errors.command_main("pfjax study", lambda m=mode: body(m), interrupted="resume") == code
+        for mode, code in (("gc", 130), ("weakref", 130), ("ended", 0), ("backstop", 130)):
+            assert errors.command_main("pfjax study", lambda m=mode: body(m), interrupted="resume") == code, mode
             err = capsys.readouterr().err
-            assert "Traceback" not in err, err
+            assert "Traceback" not in err and "Exception ignored" not in err, err
             if code:
                 assert err.strip().splitlines()[-1] == "pfjax study: interrupted; resume", err
             else:  # the command ended within 50 ms: no second signal to whatever runs next
@@ -527,5 +543,6 @@ def test_ctrl_c_during_a_gc_callback_still_interrupts_the_command(monkeypatch, c
                 signal.signal(signal.SIGINT, signal.default_int_handler)
     finally:
         signal.signal(signal.SIGINT, real)
-    assert waited == ["backstop"] and dropped == [] and late == []  # no exception dropped, no late signal
-    assert not errors._interrupted  # forgotten when a command ends: the Python API never stops on it
+    assert waited == ["backstop"] and dropped == [] and late == []  # no exception reached the hook, no late signal
+    assert sys.unraisablehook == dropped.append and interrupts._running is None  # restored, forgotten
+    interrupts.stop_if_interrupted()  # outside a command: nothing to stop

@@ -34,7 +34,7 @@ import pyarrow.parquet as pq
 
 import pfjax
 from pfjax.config import ConfigError
-from pfjax.errors import stop_if_interrupted
+from pfjax.interrupts import stop_if_interrupted
 from pfjax.montecarlo.config import StudySpec, study_hash
 from pfjax.outputs import sibling
 from pfjax.provenance import parquet_metadata

@@ -1,0 +1,105 @@
+"""Ctrl-C in pfjax's commands, never lost.
+
+Python runs a SIGINT handler in the main thread between two bytecodes, and the
+``KeyboardInterrupt`` it raises is printed and dropped (:data:`sys.unraisablehook`) when that
+moment falls inside a garbage-collector callback (JAX registers one), a ``__del__`` method or a
+weakref callback: the command would then run on to its end and exit 0. :func:`guard`, around a
+command's body (:func:`pfjax.errors.command_main`), takes such a dropped ``KeyboardInterrupt``
+from the unraisable hook, prints nothing for it, and sends SIGINT again 50 ms later, from a timer
+thread, so that it arrives in ordinary code; it also remembers every SIGINT for
+:func:`stop_if_interrupted`, which a study calls before each chunk (a backstop: the study stops
+at the next chunk, resumable). Once the command ends, nothing is sent again and nothing is
+remembered, so code after it (the Python API) never sees a late interrupt.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import signal
+import sys
+import threading
+
+#: Delay of the second SIGINT after one was dropped, s.
+RESEND_S = 0.05
+
+
+class _Command:
+    """The running command's interrupt state."""
+
+    def __init__(self):
+        self.interrupted = False  # a SIGINT arrived
+        self.closing = False  # the command is ending: nothing more is sent or raised
+        self.timer: threading.Timer | None = None
+
+
+_running: _Command | None = None
+
+
+@contextlib.contextmanager
+def guard():
+    """Within: SIGINT raises ``KeyboardInterrupt`` as usual, is remembered, and is sent again if
+    Python dropped its exception (module docstring). Takes effect only in the main thread, with
+    Python's default SIGINT handler installed and no command already guarded; elsewhere it changes
+    nothing."""
+    global _running
+    if (
+        _running is not None
+        or threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+    ):
+        yield
+        return
+    cmd = _running = _Command()
+    hook = sys.unraisablehook
+    sys.unraisablehook = functools.partial(_unraisable, cmd, hook)
+    signal.signal(signal.SIGINT, _on_sigint)
+    try:
+        yield
+    finally:
+        cmd.closing = True
+        if cmd.timer is not None:
+            cmd.timer.cancel()
+            cmd.timer.join()
+        # signal.signal runs a pending handler first (ours, which ignores it while closing)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        sys.unraisablehook = hook
+        _running = None
+
+
+def _on_sigint(signum, frame):
+    """Python's SIGINT handler, remembering the signal; ignored while the command ends."""
+    cmd = _running
+    if cmd is None or cmd.closing:
+        return
+    cmd.interrupted = True
+    raise KeyboardInterrupt
+
+
+def _unraisable(cmd: _Command, hook, unraisable) -> None:
+    """The unraisable hook within :func:`guard`: a dropped ``KeyboardInterrupt`` is sent again;
+    anything else goes to the previous hook."""
+    if not (issubclass(unraisable.exc_type, KeyboardInterrupt) and cmd is _running):
+        hook(unraisable)
+        return
+    if not cmd.closing and (cmd.timer is None or not cmd.timer.is_alive()):
+        cmd.timer = threading.Timer(RESEND_S, _send_again, (cmd,))
+        cmd.timer.daemon = True
+        cmd.timer.start()
+
+
+def _send_again(cmd: _Command) -> None:
+    if not cmd.closing:
+        os.kill(os.getpid(), signal.SIGINT)
+
+
+def stop_if_interrupted() -> None:
+    """Raise ``KeyboardInterrupt`` in the main thread if the running command got SIGINT (module
+    docstring: called before each of a study's chunks)."""
+    cmd = _running
+    if cmd is not None and cmd.interrupted and threading.current_thread() is threading.main_thread():
+        raise KeyboardInterrupt
+
+
+__all__ = ["RESEND_S", "guard", "stop_if_interrupted"]
