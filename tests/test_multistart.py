@@ -236,7 +236,7 @@ def test_tune_api_methods_and_check_on_the_simulator():
     from pfjax.tuning.multistart import _Plan
     from pfjax.tuning.problem import make_problem, tune
 
-    assert _Plan.of(small, SHORT.n_steps).programs == (2, 2)  # one run per evaluation
+    assert _Plan.of(small, SHORT.n_steps * 3).programs == (2, 2)  # one run per evaluation, 1 + D passes
     own = tune(
         make_problem("state_feedback", "paper-line", config=SHORT),
         "gradient",

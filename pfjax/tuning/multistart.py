@@ -48,8 +48,10 @@ gives the rollout-steps of one evaluation and they are few (``rollout_steps`` of
 :func:`multistart_tune`), every round and the BFGS restarts run on the first round's program
 instead, the dropped chains' places taken by copies of the first chain whose results are not
 used: two compilations fewer at the defaults, for a few tenths of a second of extra simulation.
-The chains are independent lanes of one vmapped program, so the results do not change (to the
-bit in the tests, on a quadratic and on the simulator's cost).
+The chains are independent lanes of one vmapped program, so the results agree with one program
+per chain count: to the bit in the tests (a quadratic, the simulator's cost), in general up to
+the float rounding of a differently compiled program (which could change a halving's choice
+between two chains of nearly equal cost).
 """
 
 from __future__ import annotations
@@ -168,9 +170,10 @@ def multistart_tune(
         rollout_steps: the simulated rollout-steps of one ``cost`` call (its runs times their
             steps), when known. Then the halving rounds and the restarts share the first round's
             compiled step program (their chains padded with copies of the first, whose results
-            are dropped) if the padding adds at most :data:`PAD_ROLLOUT_STEPS` rollout-steps to
-            the run: a fraction of a second, against seconds to compile each further program.
-            ``None`` (a cost of unknown size): one program per chain count.
+            are dropped) if the padding adds at most :data:`PAD_FORWARD_PASSES` forward-pass
+            rollout-steps to the run (a gradient rollout charged as in ``n_forward_passes``): a
+            fraction of a second, against seconds to compile each further program. ``None`` (a
+            cost of unknown size): one program per chain count.
         mode: differentiation mode (:func:`pfjax.numerics.autodiff.value_and_grad`).
         progress: tqdm bar over the gradient steps and polish iterations.
 
@@ -190,7 +193,8 @@ def multistart_tune(
     if len(z0) < o.n_starts:  # too few screened points: fill the starts uniformly
         z0 = np.concatenate([z0, np.asarray(jax.random.uniform(k_restart, (o.n_starts - len(z0), D)), np.float64)])
     dtype = jnp.result_type(float)
-    plan = _Plan.of(o, rollout_steps)
+    passes = None if rollout_steps is None else int(rollout_steps) * autodiff.forward_passes_per_gradient(D, mode)
+    plan = _Plan.of(o, passes)
     t_c = time.perf_counter()
     progs = plan.compile(cost, len(z0), D, dtype, mode)
     compile_s = time.perf_counter() - t_c
@@ -217,11 +221,12 @@ def multistart_tune(
     return bud.result(lo, span, compile_s)
 
 
-#: the most rollout-steps a run's padded chains may add when its halving rounds and restarts share
-#: one compiled step program (:func:`multistart_tune`'s ``rollout_steps``): a few tenths of a
-#: second of simulation with gradients, against seconds to compile each further step program
-#: (docs/design-and-tuning.md, the multi-start tuner)
-PAD_ROLLOUT_STEPS = 2_000_000
+#: the most forward-pass rollout-steps (a gradient rollout-step charged ``1 + D`` in forward mode, 4
+#: in reverse) a run's padded chains may add when its halving rounds and restarts share one
+#: compiled step program (:func:`multistart_tune`'s ``rollout_steps``): a few tenths of a second
+#: of simulation, against seconds to compile each further step program (docs/design-and-tuning.md,
+#: the multi-start tuner)
+PAD_FORWARD_PASSES = 10_000_000
 
 
 class _Plan(NamedTuple):
@@ -237,7 +242,9 @@ class _Plan(NamedTuple):
     restart_program: int  # chain count of the restarts' step program
 
     @classmethod
-    def of(cls, o: MultistartOptions, rollout_steps: int | None = None) -> _Plan:
+    def of(cls, o: MultistartOptions, passes: int | None = None) -> _Plan:
+        """The plan of ``o``; ``passes``: forward-pass rollout-steps of one gradient evaluation
+        (None: unknown, no shared program)."""
         per_round = [o.steps // o.rounds + (1 if r < o.steps % o.rounds else 0) for r in range(o.rounds)]
         sizes, n = [], o.n_starts
         for _ in range(o.rounds):
@@ -251,7 +258,7 @@ class _Plan(NamedTuple):
         top = sizes[0]
         pad_r = top if (n_r and local_r.program == lc.program and n_r <= top) else n_r
         padding = sum((top - m) * k for m, k in zip(sizes, per_round)) + (pad_r - n_r) * o.restart_steps
-        share = rollout_steps is not None and padding * int(rollout_steps) <= PAD_ROLLOUT_STEPS
+        share = passes is not None and padding * passes <= PAD_FORWARD_PASSES
         return cls(
             tuple(sizes),
             tuple(per_round),

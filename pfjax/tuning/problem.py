@@ -235,7 +235,8 @@ def tune(
     restarts on the first round's compiled program when the padded chains' rollouts are cheap
     (:func:`~pfjax.tuning.multistart.multistart_tune`'s ``rollout_steps``), the quickest first
     answer; ``False``: one program per chain count, for many runs on one problem (a study's seeds)
-    that reuse the compiled programs. The results are the same either way.
+    that reuse the compiled programs. The results agree (to the bit in the tests; in general up
+    to float rounding).
 
     Refused before any work (:class:`~pfjax.errors.InputError` naming the argument) for an unknown
     method or settings, or batches beyond the memory budget (:mod:`pfjax.resources`: the GA
