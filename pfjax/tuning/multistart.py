@@ -211,8 +211,8 @@ def multistart_tune(
         state = _rows(plan.local_r.init(jnp.asarray(zr, dtype)), _padding(np.arange(m), size))
         zeros = jnp.zeros((size, D), dtype)
         for _ in range(o.restart_steps):
-            J, zp, state, nb = progs[size, plan.local_r.program](state, zeros, *args)
-            bud.record(np.asarray(J)[:m], np.asarray(zp)[:m], bud.fpp, np.asarray(nb)[:m])
+            J, zp, nb, state = _chains_step(progs[size, plan.local_r.program], state, zeros, m, args)
+            bud.record(J, zp, bud.fpp, nb)
     h = float(o.polish_scale)
     for _ in range(o.polish_steps if plan.polish else 0):
         z_c, J_c, Zp = bud.z, bud.J, L.compass_points(bud.z, h)
@@ -293,6 +293,13 @@ def _padding(idx: np.ndarray, size: int) -> np.ndarray:
     return np.concatenate([idx, np.full(size - len(idx), idx[0])])
 
 
+def _chains_step(program, state, noise, m: int, args):
+    """One step of a (possibly padded) step program: the costs, points and non-finite counts of
+    the ``m`` real chains, and the new state (every chain)."""
+    J, zp, state, nb = program(state, noise, *args)
+    return (*(np.asarray(x)[:m] for x in (J, zp, nb)), state)
+
+
 def _rows(state, idx: np.ndarray):
     """The chains ``idx`` of a descent state, gathered on the host (no program to compile)."""
     return jax.tree_util.tree_map(lambda x: np.asarray(x)[idx] if np.ndim(x) else x, state)
@@ -314,8 +321,8 @@ def _halving(o, plan: _Plan, progs, bud: _Budget, z_starts, J_starts, k_smooth, 
         for k in range(n_steps):
             sigma = o.smoothing * (1.0 - k / n_steps) if r == 0 and o.rounds > 1 else 0.0
             noise = sigma * jax.random.normal(jax.random.fold_in(k_smooth, k_iter), (m, z_starts.shape[1]), dtype)
-            J, zp, state, nb = progs[size, plan.local.program](state, np.concatenate([np.asarray(noise), pad]), *args)
-            J, zp, nb = (np.asarray(x)[:m] for x in (J, zp, nb))
+            noise = np.concatenate([np.asarray(noise), pad])
+            J, zp, nb, state = _chains_step(progs[size, plan.local.program], state, noise, m, args)
             chain_best = np.minimum(chain_best, bud.record(J, zp, bud.fpp, nb))
             k_iter += 1
 
