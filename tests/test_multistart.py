@@ -70,10 +70,9 @@ def test_rollouts_are_counted_exactly():
     assert r.compile_s > 0 and r.wall_s > 0
 
 
-def test_restarts_share_the_halving_rounds_step_program(monkeypatch):
-    """BFGS's first radius is state, not a static argument: restarts at a quarter of it reuse the
-    step program of the round with their chain count; Adam's schedule is static, so its restarts
-    compile their own."""
+@pytest.fixture
+def step_programs(monkeypatch):
+    """The ``(chains, local)`` of every step program the multi-start tuner compiles (cache emptied)."""
     from pfjax.tuning import multistart
 
     compiled = []
@@ -86,6 +85,14 @@ def test_restarts_share_the_halving_rounds_step_program(monkeypatch):
 
     monkeypatch.setattr(multistart, "_COMPILED", {})
     monkeypatch.setattr(multistart, "_compiled", spy)
+    return compiled
+
+
+def test_restarts_share_the_halving_rounds_step_program(step_programs):
+    """BFGS's first radius is state, not a static argument: restarts at a quarter of it reuse the
+    step program of the round with their chain count; Adam's schedule is static, so its restarts
+    compile their own."""
+    compiled = step_programs
     cost = lambda th: jnp.sum((th - 0.3) ** 2)
     o = MultistartOptions(n_screen=8, n_starts=4, steps=4, rounds=2, n_restarts=1, restart_steps=2, polish_steps=0)
     r = multistart_tune(cost, [0, 0], [1, 1], key=jax.random.PRNGKey(0), options=o)
@@ -106,22 +113,13 @@ _nan_slope.defjvp(lambda primals, tangents: (primals[0], jnp.where(tangents[0] =
 
 
 @pytest.mark.parametrize("local", ["bfgs", "adam"])
-def test_cheap_costs_share_one_step_program_with_the_same_result(monkeypatch, local):
+def test_cheap_costs_share_one_step_program_with_the_same_result(step_programs, local):
     """With ``rollout_steps`` small the halving rounds (and BFGS's restarts) run on the first
     round's program, their chains padded with copies of the first: the same points, costs, counts
     and non-finite gradient components as one program per chain count."""
     from pfjax.tuning import multistart
 
-    compiled = []
-    real = multistart._compiled
-
-    def spy(fun, shape_dtype, **static):
-        if fun is multistart._step:
-            compiled.append(shape_dtype[0][0])
-        return real(fun, shape_dtype, **static)
-
-    monkeypatch.setattr(multistart, "_COMPILED", {})
-    monkeypatch.setattr(multistart, "_compiled", spy)
+    chains = lambda: sorted(m for m, _ in step_programs)  # chain counts of the compiled step programs
 
     def cost(th):  # the second gain's derivative is NaN (zeroed and counted)
         return jnp.sum((th - jnp.asarray([0.3, 0.6, 0.2])) ** 2) + 0.1 * _nan_slope(th[1])
@@ -130,11 +128,11 @@ def test_cheap_costs_share_one_step_program_with_the_same_result(monkeypatch, lo
     o = o._replace(local=local)
     args = (cost, [0, 0, 0], [1, 1, 1])
     own = multistart_tune(*args, key=jax.random.PRNGKey(1), options=o)
-    assert sorted(compiled) == [1, 2, 3, 4]
-    compiled.clear()
+    assert chains() == [1, 2, 3, 4]
+    step_programs.clear()
     shared = multistart_tune(*args, key=jax.random.PRNGKey(1), options=o, rollout_steps=1)
     # adam's restarts keep a program of their own (their schedule is static)
-    assert sorted(compiled) == ([4] if local == "bfgs" else [3, 4])
+    assert chains() == ([4] if local == "bfgs" else [3, 4])
     n_grad = 4 * 3 + 2 * 2 + 1 * 2 + 3 * 3  # chains 4, 2, 1 for 3, 2, 2 steps; 3 restart chains for 3 steps
     for r in (own, shared):
         assert r.n_rollouts == 8 + n_grad + 2 * 6  # screened, descended, polished
@@ -142,10 +140,10 @@ def test_cheap_costs_share_one_step_program_with_the_same_result(monkeypatch, lo
     np.testing.assert_array_equal(shared.theta, own.theta)
     np.testing.assert_array_equal(shared.history, own.history)
     # too much padded work for the budget: one program per chain count again
-    compiled.clear()
+    step_programs.clear()
     multistart._COMPILED.clear()
     multistart_tune(*args, key=jax.random.PRNGKey(1), options=o, rollout_steps=10**9)
-    assert sorted(compiled) == [1, 2, 3, 4]
+    assert chains() == [1, 2, 3, 4]
 
 
 def test_compass_polish_walks_along_a_kink_where_bfgs_stalls():
