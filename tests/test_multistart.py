@@ -72,15 +72,22 @@ def test_rollouts_are_counted_exactly():
 
 @pytest.fixture
 def step_programs(monkeypatch):
-    """The ``(chains, local)`` of every step program the multi-start tuner compiles (cache emptied)."""
+    """The ``(chains, local)`` of every step program the multi-start tuner asks for (cache emptied);
+    its ``values`` attribute: the points of every value-only program asked for."""
     from pfjax.tuning import multistart
 
-    compiled = []
+    class Asked(list):
+        values: list
+
+    compiled = Asked()
+    compiled.values = []
     real = multistart._compiled
 
     def spy(fun, shape_dtype, **static):
         if fun is multistart._step:
             compiled.append((shape_dtype[0][0], static["local"]))
+        else:
+            compiled.values.append(shape_dtype[0][0])
         return real(fun, shape_dtype, **static)
 
     monkeypatch.setattr(multistart, "_COMPILED", {})
@@ -115,8 +122,9 @@ _nan_slope.defjvp(lambda primals, tangents: (primals[0], jnp.where(tangents[0] =
 @pytest.mark.parametrize("local", ["bfgs", "adam"])
 def test_cheap_costs_share_one_step_program_with_the_same_result(step_programs, local):
     """With ``rollout_steps`` small the halving rounds (and BFGS's restarts) run on the first
-    round's program, their chains padded with copies of the first: the same points, costs, counts
-    and non-finite gradient components as one program per chain count."""
+    round's program, their chains padded with copies of the first, and the polish's compass points
+    on the screening's value-only program: the same points, costs, counts and non-finite gradient
+    components as one program per chain count and purpose."""
     from pfjax.tuning import multistart
 
     chains = lambda: sorted(m for m, _ in step_programs)  # chain counts of the compiled step programs
@@ -128,11 +136,12 @@ def test_cheap_costs_share_one_step_program_with_the_same_result(step_programs, 
     o = o._replace(local=local)
     args = (cost, [0, 0, 0], [1, 1, 1])
     own = multistart_tune(*args, key=jax.random.PRNGKey(1), options=o)
-    assert chains() == [1, 2, 3, 4]
+    assert chains() == [1, 2, 3, 4] and step_programs.values == [8, 6]  # screening 8 points, polish 2 D
     step_programs.clear()
+    step_programs.values.clear()
     shared = multistart_tune(*args, key=jax.random.PRNGKey(1), options=o, rollout_steps=1)
     # adam's restarts keep a program of their own (their schedule is static)
-    assert chains() == ([4] if local == "bfgs" else [3, 4])
+    assert chains() == ([4] if local == "bfgs" else [3, 4]) and step_programs.values == [8, 8]
     n_grad = 4 * 3 + 2 * 2 + 1 * 2 + 3 * 3  # chains 4, 2, 1 for 3, 2, 2 steps; 3 restart chains for 3 steps
     for r in (own, shared):
         assert r.n_rollouts == 8 + n_grad + 2 * 6  # screened, descended, polished
@@ -142,8 +151,29 @@ def test_cheap_costs_share_one_step_program_with_the_same_result(step_programs, 
     # too much padded work for the budget: one program per chain count again
     step_programs.clear()
     multistart._COMPILED.clear()
+    step_programs.values.clear()
     multistart_tune(*args, key=jax.random.PRNGKey(1), options=o, rollout_steps=10**9)
-    assert chains() == [1, 2, 3, 4]
+    assert chains() == [1, 2, 3, 4] and step_programs.values == [8, 6]
+
+
+def test_the_padding_budget_counts_gradient_and_value_only_rollouts():
+    """Sharing is decided on the whole run's padded work in forward-pass rollout-steps: the padded
+    chain-steps times the 1 + D passes of a gradient plus the polish's padded points times 1."""
+    from pfjax.tuning.multistart import PAD_FORWARD_PASSES, _Plan
+
+    o = MultistartOptions(n_screen=8, n_starts=4, steps=7, rounds=3, n_restarts=2, restart_steps=3, polish_steps=2)
+    # chains 4, 2, 1 for 3, 2, 2 steps and 3 restart chains for 3 steps on 4-chain programs: 13
+    # padded chain-steps of 1 + D = 4 passes; the polish's 2 D = 6 points padded to the screening's
+    # 8 for 2 iterations: 4 value-only rollouts
+    per_step = 13 * 4 + 4
+    fits = _Plan.of(o, 8, 3, PAD_FORWARD_PASSES // per_step, 4)
+    assert fits.programs == (4, 4, 4) and fits.restart_program == 4 and fits.polish_program == 8
+    over = _Plan.of(o, 8, 3, PAD_FORWARD_PASSES // per_step + 1, 4)  # fits without the polish's padding
+    assert 13 * 4 * (PAD_FORWARD_PASSES // per_step + 1) <= PAD_FORWARD_PASSES
+    assert over.programs == (4, 2, 1) and over.restart_program == 3 and over.polish_program == 6
+    # a polish with more compass points than screened points keeps its own program
+    few = _Plan.of(o._replace(n_screen=4), 4, 3, 1, 4)
+    assert few.programs == (4, 4, 4) and few.polish_program == 6
 
 
 def test_compass_polish_walks_along_a_kink_where_bfgs_stalls():
@@ -234,7 +264,8 @@ def test_tune_api_methods_and_check_on_the_simulator():
     from pfjax.tuning.multistart import _Plan
     from pfjax.tuning.problem import make_problem, tune
 
-    assert _Plan.of(small, SHORT.n_steps * 3).programs == (2, 2)  # one run per evaluation, 1 + D passes
+    # 9 screened points, D = 2; one run per evaluation, a gradient charged 1 + D passes
+    assert _Plan.of(small, 9, 2, SHORT.n_steps, 3).programs == (2, 2)
     own = tune(
         make_problem("state_feedback", "paper-line", config=SHORT),
         "gradient",

@@ -46,12 +46,13 @@ Programs: the screening's and the polish's (value only) and one cost-and-gradien
 count (8, 4 and 2 chains by default; BFGS restarts reuse the one of their count). When the caller
 gives the rollout-steps of one evaluation and they are few (``rollout_steps`` of
 :func:`multistart_tune`), every round and the BFGS restarts run on the first round's program
-instead, the dropped chains' places taken by copies of the first chain whose results are not
-used: two compilations fewer at the defaults, for a few tenths of a second of extra simulation.
-The chains are independent lanes of one vmapped program, so the results agree with one program
-per chain count: to the bit in the tests (a quadratic, the simulator's cost), in general up to
-the float rounding of a differently compiled program (which could change a halving's choice
-between two chains of nearly equal cost).
+instead, and the polish on the screening's, the dropped chains' and missing points' places taken
+by copies of the first whose results are not used: three compilations fewer at the defaults, for
+a few tenths of a second of extra simulation. The chains and points are independent lanes of one
+vmapped program, so the results agree with one program per chain count and purpose: to the bit
+in the tests (a quadratic, the simulator's cost), in general up to the float rounding of a
+differently compiled program (which could change a halving's choice between two chains of nearly
+equal cost).
 """
 
 from __future__ import annotations
@@ -169,11 +170,12 @@ def multistart_tune(
         n_per_eval: rollouts per ``cost`` call, for the budget count.
         rollout_steps: the simulated rollout-steps of one ``cost`` call (its runs times their
             steps), when known. Then the halving rounds and the restarts share the first round's
-            compiled step program (their chains padded with copies of the first, whose results
-            are dropped) if the padding adds at most :data:`PAD_FORWARD_PASSES` forward-pass
-            rollout-steps to the run (a gradient rollout charged as in ``n_forward_passes``): a
-            fraction of a second, against seconds to compile each further program. ``None`` (a
-            cost of unknown size): one program per chain count.
+            compiled step program, and the polish the screening's value-only program (chains and
+            points padded with copies of the first, whose results are dropped), if the padding
+            adds at most :data:`PAD_FORWARD_PASSES` forward-pass rollout-steps to the run (a
+            rollout charged as in ``n_forward_passes``): a fraction of a second, against about a
+            second to compile each further program. ``None`` (a cost of unknown size): one
+            program per chain count and purpose.
         mode: differentiation mode (:func:`pfjax.numerics.autodiff.value_and_grad`).
         progress: tqdm bar over the gradient steps and polish iterations.
 
@@ -193,13 +195,13 @@ def multistart_tune(
     if len(z0) < o.n_starts:  # too few screened points: fill the starts uniformly
         z0 = np.concatenate([z0, np.asarray(jax.random.uniform(k_restart, (o.n_starts - len(z0), D)), np.float64)])
     dtype = jnp.result_type(float)
-    passes = None if rollout_steps is None else int(rollout_steps) * autodiff.forward_passes_per_gradient(D, mode)
-    plan = _Plan.of(o, passes)
+    fpp = autodiff.forward_passes_per_gradient(D, mode)
+    plan = _Plan.of(o, len(z0), D, None if rollout_steps is None else int(rollout_steps), fpp)
     t_c = time.perf_counter()
-    progs = plan.compile(cost, len(z0), D, dtype, mode)
+    progs = plan.compile(cost, D, dtype, mode)
     compile_s = time.perf_counter() - t_c
 
-    bud = _Budget(n_per_eval, autodiff.forward_passes_per_gradient(D, mode), z0[0], progress and plan.n_iter(o))
+    bud = _Budget(n_per_eval, fpp, z0[0], progress and plan.n_iter(o))
     args = (jnp.asarray(lo, dtype), jnp.asarray(span, dtype))
     J0 = bud.record(progs["screen"](jnp.asarray(z0, dtype), *args), z0, 1, tick=False)
     order = select_starts(z0, J0, o.n_starts, o.separation)
@@ -216,16 +218,17 @@ def multistart_tune(
     h = float(o.polish_scale)
     for _ in range(o.polish_steps if plan.polish else 0):
         z_c, J_c, Zp = bud.z, bud.J, L.compass_points(bud.z, h)
-        Jp = bud.record(progs["polish"](jnp.asarray(Zp, dtype), *args), Zp, 1)
+        Zpad = np.concatenate([Zp, np.repeat(Zp[:1], plan.polish_program - len(Zp), axis=0)])
+        Jp = bud.record(np.asarray(progs["polish"](jnp.asarray(Zpad, dtype), *args))[: len(Zp)], Zp, 1)
         h = L.compass_update(z_c, J_c, h, Zp, Jp)[2]  # the incumbent moves in bud.record
     return bud.result(lo, span, compile_s)
 
 
 #: the most forward-pass rollout-steps (a gradient rollout-step charged ``1 + D`` in forward mode, 4
-#: in reverse) a run's padded chains may add when its halving rounds and restarts share one
-#: compiled step program (:func:`multistart_tune`'s ``rollout_steps``): a few tenths of a second
-#: of simulation, against seconds to compile each further step program (docs/design-and-tuning.md,
-#: the multi-start tuner)
+#: in reverse; a value-only one 1) a run's padded points may add when its halving rounds and
+#: restarts share one compiled step program and its polish the screening's value-only program
+#: (:func:`multistart_tune`'s ``rollout_steps``): a few tenths of a second of simulation, against
+#: about a second to compile each further program (docs/design-and-tuning.md, the multi-start tuner)
 PAD_FORWARD_PASSES = 10_000_000
 
 
@@ -240,11 +243,14 @@ class _Plan(NamedTuple):
     local_r: L.Local
     programs: tuple  # chain count of each halving round's step program (>= its chains: padded)
     restart_program: int  # chain count of the restarts' step program
+    screen_program: int  # points of the screening's value-only program
+    polish_program: int  # points of the polish's value-only program (the screening's where shared)
 
     @classmethod
-    def of(cls, o: MultistartOptions, passes: int | None = None) -> _Plan:
-        """The plan of ``o``; ``passes``: forward-pass rollout-steps of one gradient evaluation
-        (None: unknown, no shared program)."""
+    def of(cls, o: MultistartOptions, n_screen: int, D: int, rollout_steps: int | None = None, fpp: int = 1) -> _Plan:
+        """The plan of ``o`` for ``n_screen`` screened points in ``D`` dimensions; ``rollout_steps``:
+        the rollout-steps of one evaluation (None: unknown, no shared program), ``fpp``: the
+        forward passes a gradient is charged."""
         per_round = [o.steps // o.rounds + (1 if r < o.steps % o.rounds else 0) for r in range(o.rounds)]
         sizes, n = [], o.n_starts
         for _ in range(o.rounds):
@@ -258,28 +264,35 @@ class _Plan(NamedTuple):
         top = sizes[0]
         pad_r = top if (n_r and local_r.program == lc.program and n_r <= top) else n_r
         padding = sum((top - m) * k for m, k in zip(sizes, per_round)) + (pad_r - n_r) * o.restart_steps
-        share = passes is not None and padding * passes <= PAD_FORWARD_PASSES
+        polish = bool(o.polish_steps and o.polish_scale > 0)
+        # and the polish's 2 D compass points on the screening's program, if it has room
+        pad_p = n_screen if (polish and n_screen >= 2 * D) else 2 * D
+        value_padding = (pad_p - 2 * D) * o.polish_steps if polish else 0
+        share = rollout_steps is not None and (padding * fpp + value_padding) * rollout_steps <= PAD_FORWARD_PASSES
         return cls(
             tuple(sizes),
             tuple(per_round),
             n_r,
-            bool(o.polish_steps and o.polish_scale > 0),
+            polish,
             lc,
             local_r,
             tuple(top if share else m for m in sizes),
             pad_r if share else n_r,
+            n_screen,
+            pad_p if share else 2 * D,
         )
 
     def n_iter(self, o: MultistartOptions) -> int:
         return o.steps + (o.restart_steps if self.n_restart_chains else 0) + (o.polish_steps if self.polish else 0)
 
-    def compile(self, cost, n_screen: int, D: int, dtype, mode: str) -> dict:
-        """Every program compiled ahead of time: ``"screen"``, ``"polish"`` (value only) and one
-        step per ``(chains, local.program)`` (the restarts reuse a halving round's program when
-        their chain count, padded or not, is the round's)."""
-        progs: dict = {"screen": _compiled(box_value, ((n_screen, D), dtype), cost=cost)}
+    def compile(self, cost, D: int, dtype, mode: str) -> dict:
+        """Every program compiled ahead of time: ``"screen"``, ``"polish"`` (value only; one program
+        where the polish's points are padded to the screening's) and one step per ``(chains,
+        local.program)`` (the restarts reuse a halving round's program when their chain count,
+        padded or not, is the round's)."""
+        progs: dict = {"screen": _compiled(box_value, ((self.screen_program, D), dtype), cost=cost)}
         if self.polish:
-            progs["polish"] = _compiled(box_value, ((2 * D, D), dtype), cost=cost)
+            progs["polish"] = _compiled(box_value, ((self.polish_program, D), dtype), cost=cost)
         pairs = {(m, self.local.program) for m in self.programs}
         pairs |= {(self.restart_program, self.local_r.program)} if self.n_restart_chains else set()
         for m, lc in sorted(pairs):
@@ -320,8 +333,13 @@ def _halving(o, plan: _Plan, progs, bud: _Budget, z_starts, J_starts, k_smooth, 
         pad = np.zeros((size - m, z_starts.shape[1]), dtype)
         for k in range(n_steps):
             sigma = o.smoothing * (1.0 - k / n_steps) if r == 0 and o.rounds > 1 else 0.0
-            noise = sigma * jax.random.normal(jax.random.fold_in(k_smooth, k_iter), (m, z_starts.shape[1]), dtype)
-            noise = np.concatenate([np.asarray(noise), pad])
+            shape = (m, z_starts.shape[1])
+            noise = (  # no draw where it would be scaled by 0
+                np.asarray(sigma * jax.random.normal(jax.random.fold_in(k_smooth, k_iter), shape, dtype))
+                if sigma
+                else np.zeros(shape, dtype)
+            )
+            noise = np.concatenate([noise, pad])
             J, zp, nb, state = _chains_step(progs[size, plan.local.program], state, noise, m, args)
             chain_best = np.minimum(chain_best, bud.record(J, zp, bud.fpp, nb))
             k_iter += 1
