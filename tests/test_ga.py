@@ -146,3 +146,32 @@ def test_bad_options_raise():
         ga(sphere, [0], [1], key=jax.random.PRNGKey(0), options=GAOptions(elite_count=50))
     with pytest.raises(ValueError, match="lower/upper"):
         ga(sphere, [1], [0], key=jax.random.PRNGKey(0))
+
+
+def test_ga_tune_evaluates_the_children_on_the_population_program_when_cheap():
+    """With ``rollout_steps`` small, each generation's ``P - E`` children are padded to the
+    population's ``P`` points (copies of the first child, costs dropped), so one program is
+    compiled instead of two, to the same result; beyond the padding budget, two programs again."""
+    import jax.numpy as jnp
+
+    from pfjax.tuning.cost import PopulationCost
+    from pfjax.tuning.gradient import ga_tune
+    from pfjax.tuning.multistart import PAD_FORWARD_PASSES
+
+    cost = lambda th: jnp.sum((th - 0.3) ** 2) + 0.1 * jnp.sin(5.0 * th[0])
+    o = GAOptions(population_size=12, elite_count=2, generations=5)
+    f_own = PopulationCost(cost)
+    own = ga_tune(f_own, [0.0, 0.0], [1.0, 1.0], key=jax.random.PRNGKey(3), options=o)
+    assert sorted(f_own._compiled) == [(10, 2), (12, 2)]
+    f_shared = PopulationCost(cost)
+    shared = ga_tune(f_shared, [0.0, 0.0], [1.0, 1.0], key=jax.random.PRNGKey(3), options=o, rollout_steps=1)
+    assert sorted(f_shared._compiled) == [(12, 2)] and f_shared._f._cache_size() == 0  # nothing compiled on call
+    np.testing.assert_array_equal(shared.theta, own.theta)
+    np.testing.assert_array_equal(shared.history, own.history)
+    assert shared.n_rollouts == own.n_rollouts == 12 + 5 * 10  # the padded evaluations are not counted
+    # E = 2 padded evaluations per generation, 5 generations: over the budget by one rollout-step
+    f_over = PopulationCost(cost)
+    ga_tune(
+        f_over, [0.0, 0.0], [1.0, 1.0], key=jax.random.PRNGKey(3), options=o, rollout_steps=PAD_FORWARD_PASSES // 10 + 1
+    )
+    assert sorted(f_over._compiled) == [(10, 2), (12, 2)]

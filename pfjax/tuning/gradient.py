@@ -195,22 +195,45 @@ def _step(z, state, lo, span, *, cost, opt, mode="auto"):
     return J, jnp.clip(optax.apply_updates(z, upd), 0.0, 1.0), state, jnp.sum(bad)
 
 
-def ga_tune(cost_batch, lower, upper, *, key, options=None, n_per_eval: int = 1, progress: bool = False) -> TuneResult:
-    """:func:`pfjax.tuning.ga.ga` wrapped into a :class:`TuneResult` (rollouts = evaluations x batch)."""
+def ga_tune(
+    cost_batch,
+    lower,
+    upper,
+    *,
+    key,
+    options=None,
+    n_per_eval: int = 1,
+    rollout_steps: int | None = None,
+    progress: bool = False,
+) -> TuneResult:
+    """:func:`pfjax.tuning.ga.ga` wrapped into a :class:`TuneResult` (rollouts = evaluations x batch).
+
+    A :class:`pfjax.tuning.cost.PopulationCost` is compiled ahead of time for the population's
+    ``P`` points and the ``P - E`` children of each generation. ``rollout_steps``: the rollout-steps
+    of one evaluation, when known; then the children are evaluated on the population's program
+    instead, padded with copies of the first child whose costs are dropped, if the ``E`` padded
+    evaluations per generation add at most
+    :data:`~pfjax.tuning.multistart.PAD_FORWARD_PASSES` rollout-steps to the run: one compilation
+    fewer (the costs are those of independent lanes of one vmapped program)."""
     from pfjax.tuning.ga import GAOptions, ga
+    from pfjax.tuning.multistart import PAD_FORWARD_PASSES
 
     options = options or GAOptions()
     P, E = options.population_size, options.elite_count
+    pad = rollout_steps is not None and E * options.generations * int(rollout_steps) <= PAD_FORWARD_PASSES
     t_c = time.perf_counter()
-    if hasattr(cost_batch, "compile"):  # a pfjax.tuning.cost.PopulationCost: compile its two batch shapes
-        for n in {P, P - E} - {0}:
+    if hasattr(cost_batch, "compile"):  # a pfjax.tuning.cost.PopulationCost: compile its batch shapes
+        for n in ({P} if pad else {P, P - E}) - {0}:
             cost_batch.compile(n, np.size(lower))
     compile_s = time.perf_counter() - t_c
     t0 = time.perf_counter()
     times = []
 
     def timed(X):
-        f = cost_batch(X)
+        m = len(X)
+        if pad and m < P:
+            X = np.concatenate([X, np.repeat(X[:1], P - m, axis=0)])
+        f = np.asarray(cost_batch(X))[:m]
         times.append(time.perf_counter() - t0)
         return f
 

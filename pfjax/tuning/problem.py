@@ -231,12 +231,13 @@ def tune(
     * ``"ga+gradient"``: the GA, then ``steps`` (default 30) projected adam steps from its best
       at ``learning_rate`` (default 0.01): a gradient polish of the GA's answer.
 
-    ``shared_programs`` (``"gradient"``): the multi-start tuner runs its halving rounds and
-    restarts on the first round's compiled program when the padded chains' rollouts are cheap
-    (:func:`~pfjax.tuning.multistart.multistart_tune`'s ``rollout_steps``), the quickest first
-    answer; ``False``: one program per chain count, for many runs on one problem (a study's seeds)
-    that reuse the compiled programs. The results agree (to the bit in the tests; in general up
-    to float rounding).
+    ``shared_programs``: when the padded rollouts are cheap, the multi-start tuner runs its
+    halving rounds and restarts on the first round's compiled program and its polish on the
+    screening's (:func:`~pfjax.tuning.multistart.multistart_tune`'s ``rollout_steps``), and the GA
+    its generations' children on the population's program (:func:`~pfjax.tuning.gradient.ga_tune`'s):
+    the quickest first answer; ``False``: one program per batch shape, for many runs on one
+    problem (a study's seeds) that reuse the compiled programs. The results agree (to the bit in
+    the tests; in general up to float rounding).
 
     Refused before any work (:class:`~pfjax.errors.InputError` naming the argument) for an unknown
     method or settings, or batches beyond the memory budget (:mod:`pfjax.resources`: the GA
@@ -246,6 +247,7 @@ def tune(
     _check_memory(problem, method, ga_options, ms, n_starts)
     f_scalar, f_pop = cost_functions(problem)
     box = (problem.lower, problem.upper)
+    rollout_steps = problem.n_per_eval * problem.config.n_steps if shared_programs else None
     if method == "gradient":
         cand = [problem.tunable.flatten()] + ([] if theta0 is None else [np.asarray(theta0, np.float64)])
         return multistart_tune(
@@ -255,7 +257,7 @@ def tune(
             options=ms,
             candidates=np.stack(cand),
             n_per_eval=problem.n_per_eval,
-            rollout_steps=problem.n_per_eval * problem.config.n_steps if shared_programs else None,
+            rollout_steps=rollout_steps,
             progress=progress,
         )
     if method == "gradient-plain":
@@ -270,7 +272,15 @@ def tune(
             learning_rate=learning_rate or 0.05,
             progress=progress,
         )
-    r = ga_tune(f_pop, *box, key=key, options=ga_options, n_per_eval=problem.n_per_eval, progress=progress)
+    r = ga_tune(
+        f_pop,
+        *box,
+        key=key,
+        options=ga_options,
+        n_per_eval=problem.n_per_eval,
+        rollout_steps=rollout_steps,
+        progress=progress,
+    )
     if method == "ga":
         return r
     p = gradient_tune(
