@@ -155,8 +155,7 @@ def test_ga_tune_evaluates_the_children_on_the_population_program_when_cheap():
     import jax.numpy as jnp
 
     from pfjax.tuning.cost import PopulationCost
-    from pfjax.tuning.gradient import ga_tune
-    from pfjax.tuning.multistart import PAD_FORWARD_PASSES
+    from pfjax.tuning.gradient import PAD_FORWARD_PASSES, ga_tune
 
     cost = lambda th: jnp.sum((th - 0.3) ** 2) + 0.1 * jnp.sin(5.0 * th[0])
     o = GAOptions(population_size=12, elite_count=2, generations=5)

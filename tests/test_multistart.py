@@ -159,7 +159,8 @@ def test_cheap_costs_share_one_step_program_with_the_same_result(step_programs, 
 def test_the_padding_budget_counts_gradient_and_value_only_rollouts():
     """Sharing is decided on the whole run's padded work in forward-pass rollout-steps: the padded
     chain-steps times the 1 + D passes of a gradient plus the polish's padded points times 1."""
-    from pfjax.tuning.multistart import PAD_FORWARD_PASSES, _Plan
+    from pfjax.tuning.gradient import PAD_FORWARD_PASSES
+    from pfjax.tuning.multistart import _Plan
 
     o = MultistartOptions(n_screen=8, n_starts=4, steps=7, rounds=3, n_restarts=2, restart_steps=3, polish_steps=2)
     # chains 4, 2, 1 for 3, 2, 2 steps and 3 restart chains for 3 steps on 4-chain programs: 13

@@ -56,6 +56,14 @@ import optax
 from pfjax import errors
 from pfjax.numerics import autodiff
 
+#: The most forward-pass rollout-steps (a gradient rollout-step charged ``1 + D`` in forward mode, 4
+#: in reverse; a value-only one 1) a tuning run's padded points may add when its evaluations of
+#: several batch shapes share one compiled program: the multi-start tuner's halving rounds and
+#: restarts, and its polish on the screening's program (:func:`pfjax.tuning.multistart.multistart_tune`),
+#: the GA's children on the population's program (:func:`ga_tune`). A few tenths of a second of
+#: simulation, against about a second to compile each further program (docs/design-and-tuning.md).
+PAD_FORWARD_PASSES = 10_000_000
+
 
 class TuneResult(NamedTuple):
     """The outcome of a tuning run (GA or gradient), in one shape for both."""
@@ -213,10 +221,9 @@ def ga_tune(
     of one evaluation, when known; then the children are evaluated on the population's program
     instead, padded with copies of the first child whose costs are dropped, if the ``E`` padded
     evaluations per generation add at most
-    :data:`~pfjax.tuning.multistart.PAD_FORWARD_PASSES` rollout-steps to the run: one compilation
+    :data:`PAD_FORWARD_PASSES` rollout-steps to the run: one compilation
     fewer (the costs are those of independent lanes of one vmapped program)."""
     from pfjax.tuning.ga import GAOptions, ga
-    from pfjax.tuning.multistart import PAD_FORWARD_PASSES
 
     options = options or GAOptions()
     P, E = options.population_size, options.elite_count

@@ -70,7 +70,7 @@ import optax
 from pfjax import errors
 from pfjax.numerics import autodiff
 from pfjax.tuning import local as L
-from pfjax.tuning.gradient import TuneResult, adam
+from pfjax.tuning.gradient import PAD_FORWARD_PASSES, TuneResult, adam
 
 SAMPLERS = ("sobol", "lhs", "uniform")
 LOCALS = L.LOCALS
@@ -172,7 +172,7 @@ def multistart_tune(
             steps), when known. Then the halving rounds and the restarts share the first round's
             compiled step program, and the polish the screening's value-only program (chains and
             points padded with copies of the first, whose results are dropped), if the padding
-            adds at most :data:`PAD_FORWARD_PASSES` forward-pass rollout-steps to the run (a
+            adds at most :data:`~pfjax.tuning.gradient.PAD_FORWARD_PASSES` forward-pass rollout-steps to the run (a
             rollout charged as in ``n_forward_passes``): a fraction of a second, against about a
             second to compile each further program. ``None`` (a cost of unknown size): one
             program per chain count and purpose.
@@ -222,14 +222,6 @@ def multistart_tune(
         Jp = bud.record(np.asarray(progs["polish"](jnp.asarray(Zpad, dtype), *args))[: len(Zp)], Zp, 1)
         h = L.compass_update(z_c, J_c, h, Zp, Jp)[2]  # the incumbent moves in bud.record
     return bud.result(lo, span, compile_s)
-
-
-#: the most forward-pass rollout-steps (a gradient rollout-step charged ``1 + D`` in forward mode, 4
-#: in reverse; a value-only one 1) a run's padded points may add when its halving rounds and
-#: restarts share one compiled step program and its polish the screening's value-only program
-#: (:func:`multistart_tune`'s ``rollout_steps``): a few tenths of a second of simulation, against
-#: about a second to compile each further program (docs/design-and-tuning.md, the multi-start tuner)
-PAD_FORWARD_PASSES = 10_000_000
 
 
 class _Plan(NamedTuple):
