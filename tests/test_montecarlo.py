@@ -290,6 +290,56 @@ def test_sampler_scratch_memory_is_bounded_for_large_chunks():
     assert compiled.memory_analysis().temp_size_in_bytes < 256 * 2**20
 
 
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_a_shared_start_arc_length_is_solved_once_to_the_per_run_start_poses(dtype):
+    """With one fixed path and a constant ``start_along_m`` the sampler solves the start point's
+    arc-length Newton once for all runs; the start poses and parameters are those of the per-run
+    solve (forced here by giving the same constant run by run): to the bit at the nominal start,
+    within 4 ulp 0.7 m along it."""
+    from pfjax.montecarlo.chunk_runs import precision
+    from pfjax.montecarlo.sampling import sample_runs
+
+    for kind in ("line", "parabola", "sine"):
+        for along in (0.0, 0.7):
+            spec = spec_of(f"dtype='{dtype}'", f"initial.start_along_m={along}", f"paths=[{{kind='{kind}'}}]")
+            runs = np.arange(64)
+            with precision(spec):
+                once = sample_runs(spec, 0, runs).scenarios
+                per_run = sample_runs(spec, 0, runs, given={"start_along_m": np.full(64, along)}).scenarios
+            got = [np.asarray(a) for a in (*once.pose0, once.u0)]
+            want = [np.asarray(a) for a in (*per_run.pose0, per_run.u0)]
+            assert got[0].dtype == np.dtype(dtype)
+            for g, w in zip(got, want):
+                if along == 0.0:
+                    np.testing.assert_array_equal(g, w)
+                else:
+                    np.testing.assert_allclose(g, w, rtol=4 * np.finfo(dtype).eps, atol=4 * np.finfo(dtype).eps)
+            assert np.ptp(got[-1]) == 0.0  # one start parameter for every run
+
+
+def test_a_shared_start_arc_length_is_integrated_once_not_per_run():
+    """XLA's cost analysis of the sampler for 256 runs on the sine path: with a constant
+    ``start_along_m`` the arc-length quadrature (512 nodes per Newton step) is not in the runs'
+    work, so the program has far fewer floating-point operations than with the arc length given
+    run by run (measured 0.36 M against 61 M)."""
+    import jax.numpy as jnp
+
+    from pfjax.montecarlo import sampling as S
+
+    spec, n = spec_of("initial.start_along_m=0.5", "paths=[{kind='sine'}]"), 256
+    keys, z = S.run_keys(spec.seed, 0, np.arange(n)), jnp.zeros(n)
+    design, numbers, _ = S._design(spec, spec.paths[0])
+
+    def flops(given):
+        args = (keys, given, S._fixed_path(spec.paths[0]), jnp.asarray(0.0), (z, z), False)
+        static = dict(design=S._Static(design), circle=None, batched_path=False)
+        compiled = S._draw_runs.lower(*args, jax.tree_util.tree_map(jnp.asarray, numbers), **static).compile()
+        analysis = compiled.cost_analysis()
+        return (analysis if isinstance(analysis, dict) else analysis[0])["flops"]
+
+    assert flops({}) * 20 < flops({"start_along_m": jnp.full(n, 0.5)})
+
+
 def test_side_jobs_alongside_the_runs_change_nothing(tmp_path):
     """The worst-case search and the float64 check run in a background thread alongside the runs
     (on one device) or after them in the main thread: the same summary, runs and sweep."""

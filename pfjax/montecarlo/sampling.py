@@ -465,9 +465,18 @@ def _draw_runs(
         r = jax.vmap(lambda k: draw(circle.model, _q(k, "radius"), numbers["radius"]))(keys)
         path, batched_path = jax.vmap(lambda r: shapes.circle(radius=r, cy=r))(r), True
         cols.update(radius=r)
-    if not batched_path:
-        path = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (n,) + jnp.shape(a)), path)
-    # in blocks of runs: each start pose integrates arc length on 512 nodes per Newton step, and a
-    # 65,536-run chunk at once held about 1.6 GB of such intermediates (measured)
-    pose0, u0 = jax.lax.map(lambda a: _start_pose(a[0], u_nom, *a[1:]), (path, *starts), batch_size=SAMPLE_BLOCK)
-    return cols, _scenarios(study_design, keys, cols, profiles, params, path, pose0, u0)
+    runs_path = (
+        path if batched_path else jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (n,) + jnp.shape(a)), path)
+    )
+    if not batched_path and study_design.initial.start_along_m.dist == "constant" and "start_along_m" not in given:
+        # one path and one arc length for every run: the start point's Newton on the arc length
+        # (512 nodes per step) is solved once, only the offset and heading error are per run
+        along, offset, herr = starts
+        pose0, u0 = jax.vmap(lambda o, h: _start_pose(path, u_nom, along[0], o, h))(offset, herr)
+    else:
+        # in blocks of runs: each start pose integrates arc length on 512 nodes per Newton step, and
+        # a 65,536-run chunk at once held about 1.6 GB of such intermediates (measured)
+        pose0, u0 = jax.lax.map(
+            lambda a: _start_pose(a[0], u_nom, *a[1:]), (runs_path, *starts), batch_size=SAMPLE_BLOCK
+        )
+    return cols, _scenarios(study_design, keys, cols, profiles, params, runs_path, pose0, u0)
