@@ -174,3 +174,15 @@ def test_ga_tune_evaluates_the_children_on_the_population_program_when_cheap():
         f_over, [0.0, 0.0], [1.0, 1.0], key=jax.random.PRNGKey(3), options=o, rollout_steps=PAD_FORWARD_PASSES // 10 + 1
     )
     assert sorted(f_over._compiled) == [(10, 2), (12, 2)]
+    # a cost function that is not a PopulationCost compiles nothing ahead: it gets the children as they are
+    sizes = []
+    plain = ga_tune(
+        lambda X: (sizes.append(len(X)), np.asarray(f_own(X)))[1],
+        [0.0, 0.0],
+        [1.0, 1.0],
+        key=jax.random.PRNGKey(3),
+        options=o,
+        rollout_steps=1,
+    )
+    assert sizes == [12] + [10] * 5
+    np.testing.assert_array_equal(plain.theta, own.theta)

@@ -157,8 +157,9 @@ def test_cheap_costs_share_one_step_program_with_the_same_result(step_programs, 
 
 
 def test_the_padding_budget_counts_gradient_and_value_only_rollouts():
-    """Sharing is decided on the whole run's padded work in forward-pass rollout-steps: the padded
-    chain-steps times the 1 + D passes of a gradient plus the polish's padded points times 1."""
+    """The step programs are shared where the padded chain-steps times the 1 + D passes of a
+    gradient fit the budget (forward-pass rollout-steps); the polish's program too where what is
+    left covers its padded points (1 pass each); an unknown evaluation size shares nothing."""
     from pfjax.tuning.gradient import PAD_FORWARD_PASSES
     from pfjax.tuning.multistart import _Plan
 
@@ -166,12 +167,16 @@ def test_the_padding_budget_counts_gradient_and_value_only_rollouts():
     # chains 4, 2, 1 for 3, 2, 2 steps and 3 restart chains for 3 steps on 4-chain programs: 13
     # padded chain-steps of 1 + D = 4 passes; the polish's 2 D = 6 points padded to the screening's
     # 8 for 2 iterations: 4 value-only rollouts
-    per_step = 13 * 4 + 4
-    fits = _Plan.of(o, 8, 3, PAD_FORWARD_PASSES // per_step, 4)
+    steps_only, both = 13 * 4, 13 * 4 + 4
+    fits = _Plan.of(o, 8, 3, PAD_FORWARD_PASSES // both, 4)
     assert fits.programs == (4, 4, 4) and fits.restart_program == 4 and fits.polish_program == 8
-    over = _Plan.of(o, 8, 3, PAD_FORWARD_PASSES // per_step + 1, 4)  # fits without the polish's padding
-    assert 13 * 4 * (PAD_FORWARD_PASSES // per_step + 1) <= PAD_FORWARD_PASSES
+    steps = _Plan.of(o, 8, 3, PAD_FORWARD_PASSES // both + 1, 4)  # the steps' padding alone fits
+    assert steps.programs == (4, 4, 4) and steps.restart_program == 4 and steps.polish_program == 6
+    over = _Plan.of(o, 8, 3, PAD_FORWARD_PASSES // steps_only + 1, 4)
     assert over.programs == (4, 2, 1) and over.restart_program == 3 and over.polish_program == 6
+    unknown = _Plan.of(o, 8, 3, None, 4)
+    assert unknown.programs == (4, 2, 1) and unknown.polish_program == 6
+    assert _Plan.of(o._replace(rounds=1, n_restarts=0), 8, 3, None, 4).polish_program == 6  # no step padding
     # a polish with more compass points than screened points keeps its own program
     few = _Plan.of(o._replace(n_screen=4), 4, 3, 1, 4)
     assert few.programs == (4, 4, 4) and few.polish_program == 6

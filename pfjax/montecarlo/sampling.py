@@ -471,8 +471,8 @@ def _draw_runs(
     if not batched_path and study_design.initial.start_along_m.dist == "constant" and "start_along_m" not in given:
         # one path and one arc length for every run: the start point's Newton on the arc length
         # (512 nodes per step) is solved once, only the offset and heading error are per run
-        along, offset, herr = starts
-        pose0, u0 = jax.vmap(lambda o, h: _start_pose(path, u_nom, along[0], o, h))(offset, herr)
+        along = draw(study_design.initial.start_along_m, None, numbers["start_along_m"])  # the constant
+        pose0, u0 = jax.vmap(lambda o, h: _start_pose(path, u_nom, along, o, h))(*starts[1:])
     else:
         # in blocks of runs: each start pose integrates arc length on 512 nodes per Newton step, and
         # a 65,536-run chunk at once held about 1.6 GB of such intermediates (measured)

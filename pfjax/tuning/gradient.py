@@ -65,6 +65,13 @@ from pfjax.numerics import autodiff
 PAD_FORWARD_PASSES = 10_000_000
 
 
+def pad_rows(a, n: int) -> np.ndarray:
+    """``a`` (rows along its first axis) followed by copies of its first row up to ``n`` rows: the
+    places of a shared compiled program's extra points or chains, whose results are dropped."""
+    a = np.asarray(a)
+    return np.concatenate([a, np.repeat(a[:1], n - len(a), axis=0)])
+
+
 class TuneResult(NamedTuple):
     """The outcome of a tuning run (GA or gradient), in one shape for both."""
 
@@ -216,31 +223,28 @@ def ga_tune(
 ) -> TuneResult:
     """:func:`pfjax.tuning.ga.ga` wrapped into a :class:`TuneResult` (rollouts = evaluations x batch).
 
-    A :class:`pfjax.tuning.cost.PopulationCost` is compiled ahead of time for the population's
-    ``P`` points and the ``P - E`` children of each generation. ``rollout_steps``: the rollout-steps
-    of one evaluation, when known; then the children are evaluated on the population's program
-    instead, padded with copies of the first child whose costs are dropped, if the ``E`` padded
-    evaluations per generation add at most
-    :data:`PAD_FORWARD_PASSES` rollout-steps to the run: one compilation
-    fewer (the costs are those of independent lanes of one vmapped program)."""
+    A :class:`pfjax.tuning.cost.PopulationCost` is compiled ahead of time: for the population's
+    ``P`` points and, unless padded, the ``P - E`` children of each generation. ``rollout_steps``:
+    the rollout-steps of one evaluation, when known; then the children of a ``PopulationCost`` are
+    evaluated on the population's program, padded with copies of the first child whose costs are
+    dropped, if the ``E`` padded evaluations per generation add at most :data:`PAD_FORWARD_PASSES`
+    rollout-steps to the run: one compilation fewer (the costs are those of independent lanes of
+    one vmapped program)."""
     from pfjax.tuning.ga import GAOptions, ga
 
     options = options or GAOptions()
     P, E = options.population_size, options.elite_count
-    pad = rollout_steps is not None and E * options.generations * int(rollout_steps) <= PAD_FORWARD_PASSES
+    compiled = hasattr(cost_batch, "compile")  # a pfjax.tuning.cost.PopulationCost
+    pad = compiled and rollout_steps is not None and E * options.generations * int(rollout_steps) <= PAD_FORWARD_PASSES
     t_c = time.perf_counter()
-    if hasattr(cost_batch, "compile"):  # a pfjax.tuning.cost.PopulationCost: compile its batch shapes
-        for n in ({P} if pad else {P, P - E}) - {0}:
-            cost_batch.compile(n, np.size(lower))
+    for n in ({P} if pad else {P, P - E}) - {0} if compiled else ():
+        cost_batch.compile(n, np.size(lower))
     compile_s = time.perf_counter() - t_c
     t0 = time.perf_counter()
     times = []
 
     def timed(X):
-        m = len(X)
-        if pad and m < P:
-            X = np.concatenate([X, np.repeat(X[:1], P - m, axis=0)])
-        f = np.asarray(cost_batch(X))[:m]
+        f = np.asarray(cost_batch(pad_rows(X, P)))[: len(X)] if pad else cost_batch(X)
         times.append(time.perf_counter() - t0)
         return f
 

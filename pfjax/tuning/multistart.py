@@ -70,7 +70,7 @@ import optax
 from pfjax import errors
 from pfjax.numerics import autodiff
 from pfjax.tuning import local as L
-from pfjax.tuning.gradient import PAD_FORWARD_PASSES, TuneResult, adam
+from pfjax.tuning.gradient import PAD_FORWARD_PASSES, TuneResult, adam, pad_rows
 
 SAMPLERS = ("sobol", "lhs", "uniform")
 LOCALS = L.LOCALS
@@ -170,11 +170,12 @@ def multistart_tune(
         n_per_eval: rollouts per ``cost`` call, for the budget count.
         rollout_steps: the simulated rollout-steps of one ``cost`` call (its runs times their
             steps), when known. Then the halving rounds and the restarts share the first round's
-            compiled step program, and the polish the screening's value-only program (chains and
-            points padded with copies of the first, whose results are dropped), if the padding
-            adds at most :data:`~pfjax.tuning.gradient.PAD_FORWARD_PASSES` forward-pass rollout-steps to the run (a
-            rollout charged as in ``n_forward_passes``): a fraction of a second, against about a
-            second to compile each further program. ``None`` (a cost of unknown size): one
+            compiled step program if their padded chains add at most
+            :data:`~pfjax.tuning.gradient.PAD_FORWARD_PASSES` forward-pass rollout-steps to the
+            run (a rollout charged as in ``n_forward_passes``), and the polish the screening's
+            value-only program if the rest of that budget covers its padded points (padded with
+            copies of the first, whose results are dropped): a fraction of a second, against about
+            a second to compile each further program. ``None`` (a cost of unknown size): one
             program per chain count and purpose.
         mode: differentiation mode (:func:`pfjax.numerics.autodiff.value_and_grad`).
         progress: tqdm bar over the gradient steps and polish iterations.
@@ -210,7 +211,7 @@ def multistart_tune(
         eps = np.asarray(jax.random.normal(k_restart, (o.n_restarts, D)), np.float64)
         zr = np.concatenate([bud.z[None], np.clip(bud.z + o.restart_scale * eps, 0.0, 1.0)])
         m, size = plan.n_restart_chains, plan.restart_program
-        state = _rows(plan.local_r.init(jnp.asarray(zr, dtype)), _padding(np.arange(m), size))
+        state = _rows(plan.local_r.init(jnp.asarray(zr, dtype)), pad_rows(np.arange(m), size))
         zeros = jnp.zeros((size, D), dtype)
         for _ in range(o.restart_steps):
             J, zp, nb, state = _chains_step(progs[size, plan.local_r.program], state, zeros, m, args)
@@ -218,8 +219,8 @@ def multistart_tune(
     h = float(o.polish_scale)
     for _ in range(o.polish_steps if plan.polish else 0):
         z_c, J_c, Zp = bud.z, bud.J, L.compass_points(bud.z, h)
-        Zpad = np.concatenate([Zp, np.repeat(Zp[:1], plan.polish_program - len(Zp), axis=0)])
-        Jp = bud.record(np.asarray(progs["polish"](jnp.asarray(Zpad, dtype), *args))[: len(Zp)], Zp, 1)
+        Jp = np.asarray(progs["polish"](jnp.asarray(pad_rows(Zp, plan.polish_program), dtype), *args))
+        Jp = bud.record(Jp[: len(Zp)], Zp, 1)
         h = L.compass_update(z_c, J_c, h, Zp, Jp)[2]  # the incumbent moves in bud.record
     return bud.result(lo, span, compile_s)
 
@@ -257,10 +258,13 @@ class _Plan(NamedTuple):
         pad_r = top if (n_r and local_r.program == lc.program and n_r <= top) else n_r
         padding = sum((top - m) * k for m, k in zip(sizes, per_round)) + (pad_r - n_r) * o.restart_steps
         polish = bool(o.polish_steps and o.polish_scale > 0)
-        # and the polish's 2 D compass points on the screening's program, if it has room
+        # and the polish's 2 D compass points on the screening's program, if it has room and the
+        # budget left after the steps' padding covers theirs
         pad_p = n_screen if (polish and n_screen >= 2 * D) else 2 * D
         value_padding = (pad_p - 2 * D) * o.polish_steps if polish else 0
-        share = rollout_steps is not None and (padding * fpp + value_padding) * rollout_steps <= PAD_FORWARD_PASSES
+        steps = rollout_steps or 0
+        share = rollout_steps is not None and padding * fpp * steps <= PAD_FORWARD_PASSES  # unknown: none
+        share_p = share and (padding * fpp + value_padding) * steps <= PAD_FORWARD_PASSES
         return cls(
             tuple(sizes),
             tuple(per_round),
@@ -271,7 +275,7 @@ class _Plan(NamedTuple):
             tuple(top if share else m for m in sizes),
             pad_r if share else n_r,
             n_screen,
-            pad_p if share else 2 * D,
+            pad_p if share_p else 2 * D,
         )
 
     def n_iter(self, o: MultistartOptions) -> int:
@@ -290,12 +294,6 @@ class _Plan(NamedTuple):
         for m, lc in sorted(pairs):
             progs[m, lc] = _compiled(_step, ((m, D), dtype), cost=cost, local=lc, mode=mode)
         return progs
-
-
-def _padding(idx: np.ndarray, size: int) -> np.ndarray:
-    """The chains ``idx`` followed by copies of the first up to ``size`` (a shared program's extra
-    chains, whose results are dropped)."""
-    return np.concatenate([idx, np.full(size - len(idx), idx[0])])
 
 
 def _chains_step(program, state, noise, m: int, args):
@@ -321,7 +319,7 @@ def _halving(o, plan: _Plan, progs, bud: _Budget, z_starts, J_starts, k_smooth, 
         if len(chain_best) > m:  # successive halving: keep the m chains with the best costs seen
             keep = np.sort(np.argsort(chain_best, kind="stable")[:m])
             chain_best = chain_best[keep]
-        state = _rows(state, _padding(keep, size))  # a shared program's extra chains: copies of the first
+        state = _rows(state, pad_rows(keep, size))  # a shared program's extra chains: copies of the first
         pad = np.zeros((size - m, z_starts.shape[1]), dtype)
         for k in range(n_steps):
             sigma = o.smoothing * (1.0 - k / n_steps) if r == 0 and o.rounds > 1 else 0.0
