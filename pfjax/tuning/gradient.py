@@ -237,8 +237,9 @@ def ga_tune(
     compiled = hasattr(cost_batch, "compile")  # a pfjax.tuning.cost.PopulationCost
     pad = compiled and rollout_steps is not None and E * options.generations * int(rollout_steps) <= PAD_FORWARD_PASSES
     t_c = time.perf_counter()
-    for n in ({P} if pad else {P, P - E}) - {0} if compiled else ():
-        cost_batch.compile(n, np.size(lower))
+    if compiled:
+        for n in ({P} if pad else {P, P - E}) - {0}:
+            cost_batch.compile(n, np.size(lower))
     compile_s = time.perf_counter() - t_c
     t0 = time.perf_counter()
     times = []
