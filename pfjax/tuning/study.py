@@ -111,7 +111,8 @@ def compare(cfg: dict, progress: bool):
         pr = problems[name] = make_study_problem(cfg, name)
         for label, kw in methods(cfg, name, i == 0).items():
             for seed in range(cfg["seeds"]):
-                # shared_programs=False: the seeds reuse one program per chain count, compiled once
+                # shared_programs=False: the seeds reuse one program per batch shape (chain count, GA
+                # population and children), compiled once
                 r = tune(
                     pr, key=jax.random.PRNGKey(seed), ga_options=opts, shared_programs=False, progress=progress, **kw
                 )
