@@ -66,3 +66,25 @@ def test_std_is_refused_for_the_robot_and_for_a_too_long_step():
         load_study(data={**base, "vehicle": veh, "margin": {"enabled": False}, "sim": {"dt": 0.005}})
     spec, _ = load_study(data={**base, "vehicle": veh, "margin": {"enabled": False}, "sim": {"dt": 0.002}})
     assert spec.vehicle.model == "std"
+
+
+def test_std_without_a_parameter_set_takes_vehicle2_everywhere():
+    """``params`` not given: the study config, :func:`pfjax.scenarios` and the command line (one table,
+    ``DEFAULT_PARAMETER_SET``) take vehicle2 for the drift model and the robot for the ST model; the
+    kinematic model's dumped config keeps the robot (its default), so its hash does not move."""
+    import pfjax
+    from pfjax.montecarlo.config import load_study, study_hash
+    from pfjax.montecarlo.scenario_config import DEFAULT_PARAMETER_SET
+
+    assert DEFAULT_PARAMETER_SET == {"st": "robot", "std": "vehicle2"}
+    base = {"name": "s", "n_runs": 2, "seed": 1, "paths": [{"kind": "line"}], "margin": {"enabled": False}}
+    base["controllers"] = [{"name": "s", "type": "stanley"}]
+    for model, dt, want in (("std", 0.0002, "vehicle2"), ("st", 0.002, "robot"), ("kinematic", 0.005, "robot")):
+        spec, _ = load_study(data={**base, "vehicle": {"model": model}, "sim": {"dt": dt}})
+        assert spec.vehicle.params == want
+        given, _ = load_study(data={**base, "vehicle": {"model": model, "params": want}, "sim": {"dt": dt}})
+        assert study_hash(given) == study_hash(spec)
+    assert pfjax.scenarios("line", 2, model="std").spec.vehicle.params == "vehicle2"
+    assert pfjax.scenarios("line", 2, model="std", vehicle_params="vehicle1").spec.vehicle.params == "vehicle1"
+    with pytest.raises(InputError, match="vehicle_params"):
+        pfjax.scenarios("line", 2, model="std", vehicle_params="robot")

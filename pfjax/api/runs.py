@@ -80,10 +80,13 @@ def scenarios(
         horizon: s, only to size slip sequences (the simulation's horizon is :func:`simulate`'s).
         key: an int seed or a JAX PRNG key; run ``i`` draws from ``fold_in(key, i)``, so the first
             runs of a larger ``n`` are the same runs.
-        model: ``"kinematic"`` (slip declared by ``beta_r_deg``, ``beta_f_deg``) or ``"st"``
+        model: ``"kinematic"`` (slip declared by ``beta_r_deg``, ``beta_f_deg``), ``"st"``
             (CommonRoad's single-track model, :mod:`pfjax.sim.dynamic`: the slip comes from the tyre
-            forces, so the slip, ``L``, ``delta_max_deg`` and ``convention`` are refused with it).
-        vehicle_params: st: parameter set, ``robot`` (default) or ``vehicle1``-``vehicle3``.
+            forces, so a slip, ``L``, ``delta_max_deg`` or ``convention`` other than a study config's
+            default, no slip, 0.2 m, 30 deg and ``source``, is refused with it) or ``"std"`` (its
+            drift model, CommonRoad's vehicles only).
+        vehicle_params: st, std: parameter set, ``robot`` or ``vehicle1``-``vehicle3`` (default
+            ``robot`` for st, ``vehicle2`` for std).
         mu: st: friction coefficient (default the set's). tau_delta_s: st: steering actuator time
             constant, s (default 0.05). k_v: st: speed loop gain, 1/s (default 5).
 

@@ -216,11 +216,12 @@ def _simulate_st(args, cfg, pose0) -> dict:
     from pfjax import paths
     from pfjax.metrics import METRIC_NAMES
     from pfjax.models import single_track as st
+    from pfjax.montecarlo.scenario_config import DEFAULT_PARAMETER_SET
     from pfjax.sim import STATUS_NAMES
     from pfjax.sim import dynamic as dyn
     from pfjax.sim.scenario import make_dynamic_scenario
 
-    name = args.vehicle or ("robot" if args.model == "st" else "vehicle2")
+    name = args.vehicle or DEFAULT_PARAMETER_SET[args.model]
     if args.model == "std" and name not in st.COMMONROAD_DRIFT_VEHICLES:
         raise UsageError(f"--vehicle: --model std takes {', '.join(st.COMMONROAD_DRIFT_VEHICLES)}, got {name}")
     vehicle = st.parameter_set(name)

@@ -41,6 +41,10 @@ class SuccessSpec(ConfigModel):
 #: Keys of ``[vehicle]`` that only the kinematic model reads, and those only the ST model reads.
 KINEMATIC_ONLY = ("L", "delta_max_deg", "delta_rate_max_deg", "convention")
 ST_ONLY = ("params", "mu", "tau_delta_s", "k_v")
+#: The parameter set of each dynamic model when ``params`` is not given: the 0.2 m robot for ``"st"``;
+#: ``"std"`` has no robot set (no magic-formula tyre), so CommonRoad's vehicle2 (the command line's
+#: ``pfjax simulate --model std`` takes the same).
+DEFAULT_PARAMETER_SET = {"st": "robot", "std": "vehicle2"}
 
 
 class VehicleSpec(ConfigModel):
@@ -57,7 +61,9 @@ class VehicleSpec(ConfigModel):
         "(single-track drift, Pacejka tyres)",
     )
     params: Literal["robot", "vehicle1", "vehicle2", "vehicle3"] = Field(
-        "robot", description="st: parameter set: robot (the 0.2 m robot) or CommonRoad's vehicle1-3"
+        "robot",
+        description="st, std: parameter set: robot (the 0.2 m robot) or CommonRoad's vehicle1-3 (default "
+        "robot; vehicle2 for std)",
     )
     mu: Dist | None = Field(
         None, description="st: tyre-road friction coefficient (a distribution; default the parameter set's 1.0489)"
@@ -81,6 +87,14 @@ class VehicleSpec(ConfigModel):
     _no_limit = field_validator("delta_rate_max_deg", mode="before")(
         lambda v: None if isinstance(v, float) and v == math.inf else v
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _model_default_set(cls, data):
+        """``params`` not given: the model's :data:`DEFAULT_PARAMETER_SET`."""
+        if isinstance(data, dict) and data.get("params") is None and data.get("model") in DEFAULT_PARAMETER_SET:
+            return {**data, "params": DEFAULT_PARAMETER_SET[data["model"]]}
+        return data
 
     @model_validator(mode="after")
     def _check(self):
