@@ -51,7 +51,8 @@ def run_study(
         out: output directory (default ``results/<name>``), written with pfjax's output rules
             (:mod:`pfjax.outputs`: another pfjax output is replaced only with ``overwrite``).
         fresh: discard the finished chunks of an interrupted run instead of resuming.
-        progress: progress bars (default: when stderr is a terminal). report: write report.html.
+        progress: progress bars (default: when stderr is a terminal). report: write the report
+            (``report.md``, ``report.html`` and ``figures/``).
         overrides: config values by key, nested keys with ``__`` (``n_runs=1000``,
             ``sim__horizon=30``, ``paths=[{"kind": "line"}]``), as ``--set key=value`` but with
             Python values.

@@ -32,7 +32,7 @@ def register(sub) -> None:
         help="small failure probabilities (1e-6 and below) with intervals",
         description="Estimate each controller's probability of failure under a study's uncertain inputs by "
         "importance sampling (cross-entropy Gaussian mixture), subset simulation or plain Monte Carlo; "
-        "prints the estimate, its 95 %% interval, relative error and rollouts.",
+        "prints the estimate, its 95 % interval, relative error and rollouts.",
     )
     p.add_argument("config", help="study TOML (its [rare_event] table sets the defaults)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value")

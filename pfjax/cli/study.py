@@ -224,7 +224,9 @@ def register(sub) -> None:
             "anything it did not write)",
         )
         if name == "study":
-            st.add_argument("--no-report", action="store_true", help="skip report.html")
+            st.add_argument(
+                "--no-report", action="store_true", help="skip the report (report.md, report.html and figures/)"
+            )
             st.add_argument("--quiet", action="store_true", help="no progress bar")
             st.add_argument(
                 "--no-overlap",
