@@ -1,13 +1,19 @@
 """One writer at a time for an output directory (:mod:`pfjax.outputs`): an exclusive
 ``fcntl.flock`` on the lock file ``.<name>.lock`` beside the target, recording the holder's pid,
-host, command and start time; the operating system releases it when the process ends."""
+host, command and start time; the operating system releases it when the process ends.
+
+Only pfjax's own lock file is used, written and removed: a symbolic link (never followed), a
+directory or a file that does not hold a lock record (empty, or JSON with the holder's ``pid``) at
+that name is refused (:class:`~pfjax.errors.InputError` naming the flag), and left as it is."""
 
 from __future__ import annotations
 
 import datetime as _dt
+import errno
 import json
 import os
 import socket
+import stat
 from pathlib import Path
 
 from pfjax.errors import InputError
@@ -42,7 +48,17 @@ class OutputLock:
         import fcntl
 
         while self._fd is None:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:  # O_NOFOLLOW: a link at the lock's name is refused, not followed
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
+            except OSError as e:
+                if e.errno in (errno.ELOOP, errno.EISDIR):
+                    raise self._foreign() from None
+                raise InputError(
+                    f"{self.flag}: cannot create pfjax's lock file {self.path}: {e.strerror}", self.flag
+                ) from None
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                os.close(fd)
+                raise self._foreign()
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
@@ -61,10 +77,33 @@ class OutputLock:
             if not same:
                 os.close(fd)
                 continue
+            if not self._is_lock_record(fd):
+                os.close(fd)
+                raise self._foreign()
             info = {"pid": os.getpid(), "host": socket.gethostname(), "command": self.command, "started": now_utc()}
             os.ftruncate(fd, 0)
             os.write(fd, (json.dumps(info) + "\n").encode())
             self._fd = fd
+
+    def _foreign(self) -> InputError:
+        return InputError(
+            f"{self.flag}: {self.path} (the name of pfjax's lock file for {self.target}) is taken by "
+            f"something pfjax did not write; move it away",
+            self.flag,
+        )
+
+    @staticmethod
+    def _is_lock_record(fd: int) -> bool:
+        """Whether the file holds what a lock holder writes (or nothing yet)."""
+        os.lseek(fd, 0, os.SEEK_SET)
+        text = os.read(fd, 4097)
+        if not text:
+            return True
+        try:
+            data = json.loads(text.decode())
+        except (UnicodeDecodeError, ValueError):
+            return False
+        return isinstance(data, dict) and "pid" in data and len(text) <= 4096
 
     @staticmethod
     def _holder(fd: int) -> dict:

@@ -28,7 +28,11 @@ study scripts) writes them through :class:`OutputDir`:
    the marker is written last, and :meth:`OutputDir.commit` renames it into place. A run that
    stops early (an error, Ctrl-C, a kill) leaves the previous output as it was; its staging
    directory is removed on the way out, or, after a kill, by the next run that holds the lock
-   (with any half-created partial directory ``.<name>.partial-*`` of a study's chunks).
+   (with any half-created partial directory ``.<name>.partial-*`` of a study's chunks). Each such
+   temporary directory holds the file ``.pfjax-temporary`` from its creation until it is moved
+   into place (:func:`temporary_dir`), and only a directory holding it is removed: an entry of the
+   same name that pfjax did not make is left as it is, and so is a lock file pfjax did not write
+   (a symbolic link, a directory or a file of other content at ``.<name>.lock`` is refused).
 """
 
 from __future__ import annotations
@@ -61,6 +65,8 @@ MARKER = ".pfjax-output.json"
 MARKER_FORMAT = 1
 STAGING = "pfjax-staging"
 _OLD = "pfjax-old"
+#: The file that marks a temporary directory as pfjax's (:func:`temporary_dir`).
+TEMP_MARK = ".pfjax-temporary"
 
 #: Names of studies and outputs: a letter or digit, then letters, digits, ``_``, ``.``, ``-``.
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
@@ -270,7 +276,8 @@ class OutputDir:
             )
             for kind in (STAGING, _OLD, "partial"):  # only this target's, and nobody else holds its lock
                 for stale in self.target.parent.glob(f".{glob_escape(self.target.name)}.{kind}-*"):
-                    shutil.rmtree(stale, ignore_errors=True)
+                    if is_temporary(stale):
+                        shutil.rmtree(stale, ignore_errors=True)
         except BaseException:
             self._lock.release()
             raise
@@ -295,7 +302,7 @@ class OutputDir:
         if not self.is_open:
             raise RuntimeError("OutputDir: open() it (or use it as a context manager) before writing")
         if self._staging is None:
-            self._staging = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.{STAGING}-", dir=self.target.parent))
+            self._staging = temporary_dir(self.target, STAGING)
         return self._staging
 
     def start_from_existing(self, keep) -> None:
@@ -317,6 +324,7 @@ class OutputDir:
         """Write the marker (with ``extra`` fields) and move the staging directory into place,
         replacing the previous output. Returns the target."""
         staging = self.staging
+        unmark(staging)
         files, dirs = _entries(staging)
         marker = {
             "format": MARKER_FORMAT,
@@ -340,13 +348,37 @@ class OutputDir:
                 overwrite=self.overwrite,
                 flag=self.flag,
             )  # nothing foreign arrived meanwhile
-            old = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.{_OLD}-", dir=self.target.parent))
+            old = temporary_dir(self.target, _OLD)
             os.replace(self.target, old / "output")
         os.replace(staging, self.target)
         self.committed = True
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
         return self.target
+
+
+def temporary_dir(target: Path, kind: str) -> Path:
+    """A new temporary directory ``.<name>.<kind>-*`` beside ``target`` (same filesystem), marked as
+    pfjax's by :data:`TEMP_MARK`, so that a later run that finds it left by a kill may remove it
+    (:func:`is_temporary`); :func:`unmark` takes the mark out before the directory is moved into place."""
+    return mark_temporary(Path(tempfile.mkdtemp(prefix=f".{Path(target).name}.{kind}-", dir=Path(target).parent)))
+
+
+def mark_temporary(directory: Path) -> Path:
+    """Put :data:`TEMP_MARK` (this process's pid and the time) in a directory pfjax just made."""
+    (directory / TEMP_MARK).write_text(json.dumps({"pid": os.getpid(), "created": now_utc()}) + "\n", encoding="utf-8")
+    return directory
+
+
+def is_temporary(path: Path) -> bool:
+    """Whether ``path`` is a directory (not a link) that :func:`temporary_dir` made and nobody released."""
+    mark = path / TEMP_MARK
+    return path.is_dir() and not path.is_symlink() and mark.is_file() and not mark.is_symlink()
+
+
+def unmark(directory: Path) -> None:
+    """Take :data:`TEMP_MARK` out of a :func:`temporary_dir` before it is moved into place."""
+    (directory / TEMP_MARK).unlink(missing_ok=True)
 
 
 def glob_escape(name: str) -> str:

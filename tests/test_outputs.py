@@ -18,7 +18,18 @@ from pfjax.errors import EXIT_INTERRUPTED, EXIT_USAGE, InputError
 from pfjax.montecarlo.chunks import partial_dir
 from pfjax.montecarlo.config import load_study
 from pfjax.montecarlo.study import run
-from pfjax.outputs import MARKER, OutputBusy, OutputDir, check_name, check_target, read_marker, sibling
+from pfjax.outputs import (
+    MARKER,
+    TEMP_MARK,
+    OutputBusy,
+    OutputDir,
+    check_name,
+    check_target,
+    mark_temporary,
+    read_marker,
+    sibling,
+    temporary_dir,
+)
 
 STUDY = """name = "outputs"
 n_runs = 24
@@ -162,14 +173,55 @@ def test_a_failed_write_leaves_the_previous_output_and_no_staging(tmp_path):
 
 def test_stale_staging_of_a_killed_run_is_removed_by_the_next_writer(tmp_path):
     out = tmp_path / "out"
-    stale = [sibling(out, "pfjax-staging-abc123"), sibling(out, "pfjax-old-def456")]
+    stale = [temporary_dir(out, "pfjax-staging"), temporary_dir(out, "pfjax-old")]
     for s in stale:
-        s.mkdir()
         (s / "x").write_text("left by a kill")
-    other = tmp_path / ".outer.pfjax-staging-xyz"  # another target's: not this writer's business
-    other.mkdir()
+    other = temporary_dir(tmp_path / "outer", "pfjax-staging")  # another target's: not this writer's business
     _write(out, {"a": "1"})
     assert not any(s.exists() for s in stale) and other.exists()
+
+
+def test_entries_beside_the_target_that_pfjax_did_not_make_are_left_as_they_are(tmp_path):
+    """Directories named like pfjax's temporary ones but without its mark (a user's, or a link to
+    one) survive a writer's clean-up, byte for byte; so does the file a link points to."""
+    out = tmp_path / "out"
+    mine = [sibling(out, "pfjax-staging-mine"), sibling(out, "pfjax-old-mine"), sibling(out, "partial-mine")]
+    for d in mine:
+        d.mkdir()
+        (d / "precious.txt").write_text("the user's")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / TEMP_MARK).write_text("")  # marked, but reached only through a link
+    sibling(out, "partial-link").symlink_to(elsewhere, target_is_directory=True)
+    before = _tree(tmp_path)
+    _write(out, {"a": "1"})
+    after = _tree(tmp_path)
+    assert {k: v for k, v in after.items() if not k.startswith("out")} == before
+
+
+@pytest.mark.parametrize("kind", ["file", "symlink", "directory"])
+def test_a_lock_name_taken_by_something_pfjax_did_not_write_is_refused_and_kept(tmp_path, kind):
+    out, precious = tmp_path / "out", tmp_path / "precious.txt"
+    precious.write_text("the user's")
+    lock = sibling(out, "lock")
+    if kind == "file":
+        lock.write_text("the user's notes")
+    elif kind == "symlink":
+        lock.symlink_to(precious)
+    else:
+        lock.mkdir()
+        (lock / "x").write_text("the user's")
+    before = _tree(tmp_path)
+    with pytest.raises(InputError, match="--out: .*lock file .*pfjax did not write"):
+        _write(out, {"a": "1"})
+    assert _tree(tmp_path) == before and lock.is_symlink() == (kind == "symlink")
+
+
+def test_a_lock_file_left_by_a_killed_writer_is_taken_over(tmp_path):
+    out = tmp_path / "out"
+    sibling(out, "lock").write_text(json.dumps({"pid": 1, "host": "h", "command": "study"}) + "\n")
+    _write(out, {"a": "1"})
+    assert (out / "a").read_text() == "1" and not sibling(out, "lock").exists()
 
 
 def test_the_lock_refuses_a_second_writer_in_another_process(tmp_path):
@@ -453,21 +505,23 @@ def test_figure_worker_directories_of_killed_studies_are_removed(tmp_path, monke
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
-    stale, live, other = (
+    stale, live, other, users = (
         tmp_path / f"pfjax-figures-{dead.pid}-x1",
         tmp_path / f"pfjax-figures-{os.getppid()}-x2",
         tmp_path / "pfjax-figures-notapid",
+        tmp_path / f"pfjax-figures-{dead.pid}-mine",  # a dead pid's name, but not made by pfjax
     )
-    for d in (stale, live, other):
+    for d in (stale, live, other, users):
         d.mkdir()
+        if d is not users:
+            mark_temporary(d)
     figure_worker.remove_stale_dirs()
-    assert not stale.exists() and live.exists() and other.exists()
+    assert not stale.exists() and live.exists() and other.exists() and users.exists()
 
 
 def test_a_half_created_partial_directory_is_removed_by_the_next_writer(tmp_path):
     out = tmp_path / "out"
-    half = sibling(out, "partial-k1ll3d")  # ChunkStore's temporary name before its atomic rename
-    half.mkdir()
+    half = temporary_dir(out, "partial")  # ChunkStore's temporary directory before its atomic rename
     (half / "manifest.json").write_text("{}")
     _write(out, {"a": "1"})
     assert not half.exists()

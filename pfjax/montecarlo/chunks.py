@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, Protocol
@@ -36,7 +35,7 @@ import pfjax
 from pfjax.config import ConfigError
 from pfjax.interrupts import stop_if_interrupted
 from pfjax.montecarlo.config import StudySpec, study_hash
-from pfjax.outputs import sibling
+from pfjax.outputs import sibling, temporary_dir, unmark
 from pfjax.provenance import parquet_metadata
 from pfjax.tables import ParquetAppender
 
@@ -97,8 +96,9 @@ class ChunkStore:
             self._check_manifest(out)
         else:
             self.dir.parent.mkdir(parents=True, exist_ok=True)
-            tmp = Path(tempfile.mkdtemp(prefix=f"{self.dir.name}-", dir=self.dir.parent))
+            tmp = temporary_dir(Path(out).absolute(), "partial")
             (tmp / "manifest.json").write_text(json.dumps(self.manifest, indent=1) + "\n")
+            unmark(tmp)
             os.replace(tmp, self.dir)
 
     def _chunk_files(self) -> list[Path]:
@@ -109,7 +109,7 @@ class ChunkStore:
         foreign = [
             f.name
             for f in self.dir.iterdir()
-            if not (f.name == "manifest.json" or (f.is_file() and ".parquet" in f.name))
+            if not (f.is_file() and (f.name == "manifest.json" or ".parquet" in f.name))
         ]
         if foreign:
             raise ConfigError(

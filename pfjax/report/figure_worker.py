@@ -48,12 +48,15 @@ TMP_PREFIX = "pfjax-figures-"
 
 def remove_stale_dirs() -> None:
     """Remove request directories whose owning process has ended (a study killed before it could
-    remove its own): ``<tmp>/pfjax-figures-<pid>-*`` with no process ``pid``."""
+    remove its own): ``<tmp>/pfjax-figures-<pid>-*`` with no process ``pid``, and only those
+    pfjax marked as its own (:func:`pfjax.outputs.is_temporary`)."""
     import shutil
+
+    from pfjax.outputs import is_temporary
 
     for d in Path(tempfile.gettempdir()).glob(f"{TMP_PREFIX}*-*"):
         pid = d.name[len(TMP_PREFIX) :].split("-", 1)[0]
-        if not pid.isdigit() or int(pid) == os.getpid():
+        if not pid.isdigit() or int(pid) == os.getpid() or not is_temporary(d):
             continue
         try:
             os.kill(int(pid), 0)
@@ -100,8 +103,10 @@ class FigureWorker:
     def __init__(self, *, python: str = sys.executable):
         self._lock = threading.RLock()  # the pipes, the request count and the pending list
         self._pending: list[FigureRequest] = []
+        from pfjax.outputs import mark_temporary
+
         remove_stale_dirs()
-        self._tmp = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}{os.getpid()}-"))
+        self._tmp = mark_temporary(Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}{os.getpid()}-")))
         self._count = 0
         self._warned = False
         env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
