@@ -55,10 +55,14 @@ def parse_override(text: str) -> dict:
     if bad is not None:
         raise ConfigError(f"--set: malformed key {key!r} at {bad!r} (expected dotted names, list items as name[0])")
     try:
-        value = tomllib.loads(f"v = {raw}")["v"]
+        parsed = tomllib.loads(f"v = {raw}")
     except tomllib.TOMLDecodeError:
-        value = raw
-    return nested(key, value)
+        parsed = {"v": raw}
+    except RecursionError:
+        raise ConfigError(f"--set: {key}: the value is nested too deeply") from None
+    if set(parsed) != {"v"}:  # "16\nseed=5" would set a second key unseen
+        raise ConfigError(f"--set: {key}: expected one value, got {raw!r}")
+    return nested(key, parsed["v"])
 
 
 def nested(key: str, value) -> dict:
@@ -98,6 +102,8 @@ def read_toml(path: str | Path, key: str = "config") -> dict:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{key}: {path}: invalid TOML ({e})") from None
+    except RecursionError:
+        raise ConfigError(f"{key}: {path}: invalid TOML (nested too deeply)") from None
 
 
 # ------------------------------------------------------------------------------ the schema family

@@ -263,6 +263,19 @@ def test_malformed_toml_file(tmp_path):
         load_study(tmp_path / "bad.toml")
 
 
+def test_a_value_nested_too_deeply_or_two_values_in_one_set_are_one_line_errors(tmp_path):
+    """TOML's parser recurses per nesting level: thousands of brackets are a one-line error, not a
+    RecursionError; a --set value that smuggles a second key in (a newline) is refused, not dropped."""
+    deep = "[" * 5000 + "]" * 5000
+    (tmp_path / "deep.toml").write_text(f'name = "x"\nn_runs = {deep}\n')
+    with pytest.raises(ConfigError, match=r"^config: .*deep.toml: invalid TOML \(nested too deeply\)$"):
+        load_study(tmp_path / "deep.toml")
+    with pytest.raises(ConfigError, match=r"^--set: n_runs: the value is nested too deeply$"):
+        load_study(data=copy.deepcopy(DATA), overrides=[f"n_runs={deep}"])
+    with pytest.raises(ConfigError, match=r"^--set: n_runs: expected one value"):
+        load_study(data=copy.deepcopy(DATA), overrides=["n_runs=16\nseed=5"])
+
+
 def test_feasibility_warnings_name_the_path_and_the_numbers():
     """A circle tighter than the steering allows and a spline shorter than the runs travel are
     warnings, not errors; followable paths give none."""
