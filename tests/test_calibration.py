@@ -105,3 +105,33 @@ def test_a_small_calibration_measures_agrees_and_round_trips(tmp_path):
     finally:
         calibration.load.cache_clear()
     assert np.all([p.suffix == ".json" for p in tmp_path.iterdir()])  # written atomically, no temporary left
+
+
+def test_pfjax_calibrate_refuses_where_it_could_keep_nothing_before_measuring(tmp_path, monkeypatch, capsys):
+    """Calibrations off, or a calibration directory that is a file (or under one): exit 2 with one line
+    naming the environment variable, before any measuring and with nothing created; --dry-run still runs."""
+    from pfjax.cli import main
+    from pfjax.errors import InputError
+
+    afile = tmp_path / "afile"
+    afile.write_text("the user's")
+    for env, value, name in (
+        ("PFJAX_CALIBRATION", "off", "PFJAX_CALIBRATION"),
+        ("PFJAX_CALIBRATION_DIR", str(afile), "PFJAX_CALIBRATION_DIR"),
+        ("PFJAX_CALIBRATION_DIR", str(afile / "sub"), "PFJAX_CALIBRATION_DIR"),
+    ):
+        environ = {env: value}
+        with pytest.raises(InputError, match=f"^{name}: "):
+            calibration.writable_directory(environ)
+        monkeypatch.setenv(env, value)
+        monkeypatch.setattr(C, "calibrate", lambda **kw: pytest.fail("measured before checking"))
+        assert main(["calibrate", "--quick"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"pfjax calibrate: error: {name}: "), err
+        monkeypatch.delenv(env)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"] and afile.read_text() == "the user's"
+    assert (
+        calibration.writable_directory({"PFJAX_CALIBRATION_DIR": str(tmp_path / "new" / "dir")})
+        == tmp_path / "new" / "dir"
+    )
+    assert not (tmp_path / "new").exists()

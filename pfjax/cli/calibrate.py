@@ -26,6 +26,8 @@ def _cmd(args) -> dict:
     from pfjax.bench.calibrate import calibrate
     from pfjax.numerics import calibration
 
+    if not args.dry_run:
+        calibration.writable_directory()  # before two minutes of measuring: where the result goes
     t0 = time.perf_counter()
     say = lambda m: print(f"[calibrate {time.perf_counter() - t0:6.1f} s] {m}", file=sys.stderr, flush=True)
     if args.quick:

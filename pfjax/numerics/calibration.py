@@ -119,14 +119,37 @@ def vector_width() -> tuple[bool, int | None]:
     return (False, None) if cal is None else (True, cal["vector_width"])
 
 
+def writable_directory(environ=None) -> Path:
+    """:func:`directory`, checked before anything is measured or written: an
+    :class:`~pfjax.errors.InputError` naming the environment variable when calibrations are off or the
+    directory is not one that can be made and written (nothing is created here)."""
+    from pfjax.errors import InputError
+
+    environ = os.environ if environ is None else environ
+    where = directory(environ)
+    if where is None:
+        raise InputError(
+            f"{ENV}: calibrations are off ({ENV}={environ.get(ENV, '').strip()}), so none would be kept; "
+            f"unset it, or measure with --dry-run",
+            ENV,
+        )
+    probe = where
+    while not probe.exists() and probe != probe.parent:  # the nearest existing one must be a writable directory
+        probe = probe.parent
+    if not probe.is_dir() or not os.access(probe, os.W_OK):
+        raise InputError(
+            f"{DIR_ENV}: {where} cannot be made and written ({probe} is not a writable directory); "
+            f"set {DIR_ENV} to one",
+            DIR_ENV,
+        )
+    return where
+
+
 def save(result: dict, path: Path | None = None) -> Path:
     """Write a calibration (``result`` as :func:`pfjax.bench.calibrate.calibrate` returns it) to
-    ``path`` (default: this CPU's file in :func:`directory`), atomically; returns the path."""
+    ``path`` (default: this CPU's file in :func:`writable_directory`), atomically; returns the path."""
     if path is None:
-        where = directory()
-        if where is None:
-            raise ValueError(f"{ENV}: calibrations are disabled ({ENV}=off); nothing written")
-        path = where / f"{result['cpu_key']}.json"
+        path = writable_directory() / f"{result['cpu_key']}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
