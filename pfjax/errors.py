@@ -222,6 +222,18 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
         return EXIT_INTERRUPTED
 
 
+class SynthesisError(ValueError):
+    """An LMI synthesis problem was infeasible, unbounded, numerically ill-conditioned or the solver
+    failed. ``status`` carries the solver's status (``"infeasible"``, ``"unbounded"``,
+    ``"infeasible_inaccurate"``, ``"solver_error"``, ...) or ``"ill_conditioned"``. Raised by
+    :mod:`pfjax.synthesis` (which re-exports it); defined here so that code that only calls a
+    design can catch it without importing the solver."""
+
+    def __init__(self, message: str, status: str | None = None):
+        super().__init__(message)
+        self.status = status
+
+
 class PfjaxDeprecationWarning(FutureWarning):
     """An old spelling of a config key, flag or argument that pfjax still reads (for one release)."""
 

@@ -77,6 +77,19 @@ CLI_CASES = [
     (SIM + ["--speed", "fast"], "argument --speed/--v: invalid float value: 'fast'"),
     (["study", "missing.toml"], "config: file not found: missing.toml"),
     (["study", "CFG", "--set", "n_runz=3"], "n_runz: unknown key (did you mean 'n_runs'?)"),
+    # a design that cannot be made (infeasible LMIs): one line naming the controller, before --out is made
+    (
+        ["study", "CFG", "--set", 'controllers=[{name="m",type="lmi",alpha=1e12,beta=1e-12}]', "--out", "new/sub"],
+        "controllers[0]: mixed synthesis failed: solver CLARABEL status 'infeasible'",
+    ),
+    (
+        ["rare-event", "CFG", "--set", 'controllers=[{name="m",type="lmi",alpha=1e12,beta=1e-12}]'],
+        "controllers[0]: mixed synthesis failed: solver CLARABEL status 'infeasible'",
+    ),
+    (
+        ["simulate", "--path", "line", "--controller", "polytopic-integral", "--speed", "1e6", "--horizon", "1"],
+        "--controller: polytopic-integral synthesis failed",
+    ),
     (["study", "CFG", "--set", "nokey"], "--set: expected key=value, got 'nokey'"),
     (["study", "CFG", "--set", "n_runs=1.5"], "n_runs: Input should be a valid integer"),
     (["study", "CFG", "--set", "seed='x'"], "seed: Input should be a valid integer"),

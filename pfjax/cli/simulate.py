@@ -82,7 +82,7 @@ def _controller_and_gains(args):
         flat = C.flat_gains(e)
         if d is not None and not set(e.gains) <= set(given):
             with as_flags(SYNTH_FLAGS):
-                flat.update(d.make(args.speed, args.wheelbase))
+                flat.update(C.design_gains(d, args.speed, args.wheelbase, "--controller"))
         flat.update(given)
         gains = C.params_from_flat(e, flat)
     return e.controller, gains, {k: flat[k] for k in e.gains}

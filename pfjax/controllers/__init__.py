@@ -6,7 +6,7 @@ them and returns the controller's parameter pytree.
 """
 
 from pfjax.controllers.base import Controller, Observation, step
-from pfjax.controllers.designs import DESIGNS, DesignEntry, cli_names, controller_types, resolve, style
+from pfjax.controllers.designs import DESIGNS, DesignEntry, cli_names, controller_types, design_gains, resolve, style
 from pfjax.controllers.integral import IntegralParams, integral, integral_params
 
 # Importing a controller's module registers it (pfjax.controllers.registry): one line per kind.
@@ -66,6 +66,7 @@ __all__ = [
     "checked_factory",
     "cli_names",
     "controller_types",
+    "design_gains",
     "entry",
     "flat_gains",
     "integral",

@@ -76,6 +76,22 @@ def _polytopic_integral(v: float, L: float, alpha: float = 10.0, beta: float = 1
     return memoized_design("polytopic_integral_lmi", dict(args, alpha=alpha, beta=beta), compute)
 
 
+def design_gains(d: DesignEntry, v: float, L: float, key: str, **kw) -> dict:
+    """``d.make(v, L, **kw)`` for a controller a study, command or API call asks for under ``key``: a
+    synthesis that fails (infeasible, ill-conditioned, a solver error) is an
+    :class:`~pfjax.errors.InputError` naming ``key``, with the solver's status and the operating
+    point, in one line (the controller cannot be built, so nothing is run)."""
+    from pfjax.errors import InputError, SynthesisError
+
+    try:
+        return d.make(v, L, **kw)
+    except SynthesisError as e:
+        given = "".join(f", {k} {val:g}" for k, val in kw.items() if val is not None)
+        raise InputError(
+            f"{key}: {e} (the {d.name} design at speed {v:g} m/s, wheelbase {L:g} m{given})", key
+        ) from None
+
+
 #: name -> design.
 DESIGNS: dict[str, DesignEntry] = {
     "lmi": DesignEntry(

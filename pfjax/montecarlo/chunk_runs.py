@@ -34,7 +34,8 @@ def controller_of(c: ControllerSpec, spec: StudySpec, index: int):
     e, d = C.resolve(c.type, f"controllers[{index}].type")
     flat = C.flat_gains(e)
     if d is not None:
-        flat.update(d.make(nominal(spec.vehicle.speed), nominal_wheelbase(spec), alpha=c.alpha, beta=c.beta))
+        v, L = nominal(spec.vehicle.speed), nominal_wheelbase(spec)
+        flat.update(C.design_gains(d, v, L, f"controllers[{index}]", alpha=c.alpha, beta=c.beta))
     if c.K is not None:
         flat.update(zip(e.labels["K"], c.K))
     flat.update(c.gains)

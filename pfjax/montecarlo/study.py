@@ -66,11 +66,13 @@ def run(
     (:func:`pfjax.montecarlo.processes.lead` tells the others what to simulate).
     """
     from pfjax.montecarlo.checks import check_resources
-    from pfjax.montecarlo.runner import study_output
+    from pfjax.montecarlo.runner import controllers_of, study_output
     from pfjax.outputs import OutputDir
 
     check_resources(spec, report=report)  # before anything is written or allocated
     output = out if isinstance(out, OutputDir) else study_output(spec, out, overwrite=overwrite)
+    if controllers is None and not distributed:  # a design that fails stops here, before --out is made
+        controllers = controllers_of(spec)
     opened_here = not output.is_open
     if worker is not None and not (report and overlap):
         worker.close()

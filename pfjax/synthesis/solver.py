@@ -21,15 +21,7 @@ SOLVER = "CLARABEL"
 _ACCEPTED = ("optimal", "optimal_inaccurate")
 
 
-class SynthesisError(ValueError):
-    """An LMI synthesis problem was infeasible, unbounded, numerically ill-conditioned or the solver
-    failed. ``status`` carries the solver's status (``"infeasible"``, ``"unbounded"``,
-    ``"infeasible_inaccurate"``, ``"solver_error"``, ...) or ``"ill_conditioned"``."""
-
-    def __init__(self, message: str, status: str | None = None):
-        super().__init__(message)
-        self.status = status
-
+from pfjax.errors import SynthesisError  # noqa: E402  (its home: a light module, so callers catch it without cvxpy)
 
 #: ``cond(X)`` above which ``K = Y X^-1`` is not trusted (SynthesisError "ill_conditioned");
 #: above ``_COND_WARN`` the design carries a warning.
