@@ -84,3 +84,19 @@ def test_default_study_falsifier_small_end_to_end(tmp_path):
     )
     html = (tmp_path / "out" / "report.html").read_text()
     assert "Worst cases found" in html and (tmp_path / "out" / "figures" / "worst_cases.png").is_file()
+
+
+def test_random_paths_take_every_allowed_waypoint_count():
+    """``n_waypoints`` up to the schema's 10,000: the waypoints stay distinct samples of the integrated
+    path (the curvature integral takes 4 samples per interval past 1,000 intervals)."""
+    import numpy as np
+
+    from pfjax.montecarlo.config import PathSpec
+    from pfjax.montecarlo.sampling import random_path
+
+    key = np.array([0, 7], np.uint32)
+    for n in (4, 41, 1001, 10_000):
+        path = random_path(key, PathSpec(kind="random", n_waypoints=n), kappa_max=0.5)
+        knots = np.asarray(path.knots)
+        assert knots.shape == (n,) and np.all(np.diff(knots) > 0), n
+        assert np.all(np.isfinite(np.asarray(path.coef_x))) and np.all(np.isfinite(np.asarray(path.coef_y)))

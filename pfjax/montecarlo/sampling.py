@@ -251,9 +251,11 @@ def _start_pose(path, u_nominal, start_along_m, offset, heading_err):
 def random_path(key, spec: PathSpec, kappa_max: float) -> shapes.Spline:
     """A smooth random path: curvature ``kappa(s) = sum_j a_j sin(w_j s + phi_j)`` (3 modes, wavelengths
     6-30 m) scaled so ``max|kappa| = kappa_max``, integrated from the origin heading +x, and a natural
-    cubic spline through ``n_waypoints`` points along it. Built with NumPy (SciPy spline) at the edge."""
+    cubic spline through ``n_waypoints`` points along it. Built with NumPy (SciPy spline) at the edge.
+    The integral is taken on 4001 samples, or 4 per waypoint interval where there are more than
+    1000 intervals (so that the waypoints are distinct samples)."""
     rng = np.random.default_rng(np.asarray(key).astype(np.uint32).tolist())
-    s = np.linspace(0.0, spec.length, 4001)
+    s = np.linspace(0.0, spec.length, max(4001, 4 * (spec.n_waypoints - 1) + 1))
     w = 2 * np.pi / rng.uniform(6.0, 30.0, 3)
     a = rng.normal(size=3)
     phi = rng.uniform(0, 2 * np.pi, 3)
