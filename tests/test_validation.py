@@ -359,3 +359,16 @@ def test_the_python_api_rejects_what_the_cli_rejects():
         synthesize("mixed", v=0.0)
     with pytest.raises(InputError, match=r"^pose0\[2\]: expected a finite number, got nan$"):
         paper_scenario("line", pi, pose0=(0.0, 0.0, float("nan")))
+
+
+def test_negative_numbers_in_exponent_form_are_values_not_options():
+    """argparse's own pattern reads ``-1e-3`` as an option ("expected one argument"); pfjax's parser
+    takes it, in single values and in lists of values, and still refuses a value that is not a number."""
+    from pfjax.cli import build_parser
+
+    p = build_parser()
+    args = p.parse_args(SIM + ["--beta-r-deg", "-1e-3", "--x0", "0", "0", "-1e1"])
+    assert args.beta_r_deg == -1e-3 and [float(v) for v in args.x0] == [0.0, 0.0, -10.0]
+    assert p.parse_args(["track", "--offset", "-5e-1", "0.5"]).offset == [-0.5, 0.5]
+    with pytest.raises(SystemExit):
+        p.parse_args(SIM + ["--beta-r-deg", "-x"])

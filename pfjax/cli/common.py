@@ -16,7 +16,16 @@ class UsageError(InputError):
     """A bad command-line value; the message names the flag."""
 
 
+#: A negative number, also in exponent form (``-1e-3``, ``-5e-1``): argparse's own pattern has no
+#: exponent, so it would read such a value as an option and stop with "expected one argument".
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
 class Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
+
     def error(self, message):  # one line, exit code 2 (argparse's own convention)
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
 
