@@ -216,26 +216,28 @@ def format_error(err: ValidationError, root: type[BaseModel]) -> str:
     return f"{key}: {msg} (got {_short(e.get('input'))})" if e["type"] != "value_error" else f"{key}: {msg}"
 
 
-def set_nested(d: dict, update: dict) -> dict:
+def set_nested(d: dict, update: dict, prefix: str = "") -> dict:
     """Apply a nested override to a raw config dict in place (a distribution table replaces the old
-    one whole; ``name[i]`` keys address list items); ConfigError for a missing list element."""
+    one whole; ``name[i]`` keys address list items); ConfigError for a missing list element, naming
+    the whole dotted key (``prefix``: the keys above ``d``)."""
     for k, v in update.items():
         if "[" in k:  # controllers[0].gains.k style
             name, idx = k.split("[", 1)
             i = int(idx.rstrip("]"))
             lst = d.get(name)
             if not isinstance(lst, list) or not -len(lst) <= i < len(lst):
+                key = f"{prefix}{k}"
                 raise ConfigError(
-                    f"{k}: no such list element" if isinstance(lst, list) else f"{k}: {name} is not a list"
+                    f"{key}: no such list element" if isinstance(lst, list) else f"{key}: {prefix}{name} is not a list"
                 )
             if isinstance(v, dict) and "dist" not in v and isinstance(lst[i], dict):
-                set_nested(lst[i], v)
+                set_nested(lst[i], v, f"{prefix}{k}.")
             else:
                 lst[i] = v
         elif isinstance(v, dict) and "dist" in v:  # a new distribution replaces the old one whole
             d[k] = v
         elif isinstance(v, dict) and isinstance(d.get(k), dict):
-            set_nested(d[k], v)
+            set_nested(d[k], v, f"{prefix}{k}.")
         else:
             d[k] = v
     return d

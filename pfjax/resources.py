@@ -37,7 +37,8 @@ def check_steps(horizon: float, dt: float) -> int:
     n = horizon / dt
     if n > MAX_STEPS:
         raise InputError(
-            f"dt: at most {MAX_STEPS:.0e} integrator steps per run (horizon / dt), got {horizon:g} / {dt:g} = {n:.3g}",
+            f"dt: horizon / dt (a run's integrator step count) may be at most {MAX_STEPS:.0e}, "
+            f"got {horizon:g} / {dt:g} = {n:.3g}",
             "dt",
         )
     return int(round(n))

@@ -181,7 +181,10 @@ CLI_CASES = [
     (["study", "CFG", "--set", "sim.dt=1e-300"], "sim.dt: must be >= 1e-12 (got 1e-300)"),
     (["study", "CFG", "--set", "sim.horizon=1e308"], "sim.horizon: expected a magnitude <= 1e+12, got 1e+308"),
     (["study", "CFG", "--set", "sim.horizon=inf"], "sim.horizon: expected a finite number, got inf"),
-    (["study", "CFG", "--set", "sim.dt=1e-9"], "sim.dt: at most 2e+06 integrator steps per run"),
+    (
+        ["study", "CFG", "--set", "sim.dt=1e-9"],
+        "sim.dt: horizon / dt (a run's integrator step count) may be at most 2e+06",
+    ),
     (["study", "CFG", "--set", "noise.sigma_d=-0.1"], "noise.sigma_d: must be >= 0"),
     (["study", "CFG", "--set", "chunk_size=100000000"], "chunk_size: must be <= 10000000"),
     # names
@@ -192,6 +195,11 @@ CLI_CASES = [
     (["study", "CFG", "--set", "controllers[abc].name=x"], "--set: malformed key 'controllers[abc].name'"),
     (["study", "CFG", "--set", "controllers[].name=x"], "--set: malformed key 'controllers[].name'"),
     (["study", "CFG", "--set", "n_runs[0]={dist='uniform'}"], "n_runs[0]: n_runs is not a list"),
+    (["study", "CFG", "--set", "sim.dt[0]=1", "--quiet"], "sim.dt[0]: sim.dt is not a list"),
+    (
+        ["study", "CFG", "--set", "slip.kind='ou'", "--set", "slip.seq_dt=1e-12"],
+        "slip.seq_dt: sim.horizon / seq_dt (the slip samples per run) may be at most 2e+06",
+    ),
     # flags that conflict, gains given partly or twice
     (SIM + ["--continuous", "--control-every", "2"], "--control-every: not with --continuous"),
     (SIM + ["--gains", "kp_d=1,kp_d=2"], "--gains: kp_d is given twice"),

@@ -37,6 +37,7 @@ from pfjax.montecarlo.scenario_config import (
     VehicleSpec,
 )
 from pfjax.provenance import config_hash
+from pfjax.resources import MAX_STEPS
 
 __all__ = [
     "KINEMATIC_ONLY",
@@ -156,6 +157,11 @@ class StudySpec(ConfigModel):
         if self.success.from_s > self.sim.horizon:
             raise ValueError(
                 f"success.from_s: must be <= sim.horizon ({self.sim.horizon:g} s), got {self.success.from_s:g}"
+            )
+        if self.slip.kind == "ou" and self.sim.horizon / self.slip.seq_dt > MAX_STEPS:
+            raise ValueError(
+                f"slip.seq_dt: sim.horizon / seq_dt (the slip samples per run) may be at most {MAX_STEPS:.0e}, "
+                f"got {self.sim.horizon:g} / {self.slip.seq_dt:g} = {self.sim.horizon / self.slip.seq_dt:.3g}"
             )
         if self.falsifier.path is not None and self.falsifier.path not in [p.label for p in self.paths]:
             raise ValueError(

@@ -44,6 +44,8 @@ from pfjax import errors
 from pfjax.numerics import autodiff
 
 VERDICTS = ("local minimum", "not a local minimum", "non-finite cost")
+#: :func:`check_point`'s probe radii, box units.
+RADII = (1e-3, 1e-2)
 
 
 class CheckResult(NamedTuple):
@@ -85,7 +87,7 @@ def check_point(
     upper,
     *,
     h: float = 1e-4,
-    radii=(1e-3, 1e-2),
+    radii=RADII,
     rtol: float = 1e-4,
     n_per_eval: int = 1,
     mode: str = "auto",
@@ -231,10 +233,11 @@ def parse_gains(gains, fields, sizes, lower, upper, *, key: str = "check") -> np
         unknown = sorted(set(gains) - set(fields))
         missing = [f for f in fields if f not in gains]
         if unknown or missing:
-            raise errors.InputError(
-                f"{key}: fields {', '.join(missing) or '-'} missing, {', '.join(unknown) or '-'} unknown; expected {names}",
-                key,
-            )
+            wrong = [
+                f"{', '.join(missing)} missing" if missing else "",
+                f"{', '.join(unknown)} unknown" if unknown else "",
+            ]
+            raise errors.InputError(f"{key}: {'; '.join(w for w in wrong if w)}; expected {names}", key)
         flat = []
         for f, n in zip(fields, sizes):
             v = np.ravel(np.asarray(gains[f], dtype=object))
