@@ -100,6 +100,7 @@ def test_parking_garage_user_map(capsys, tmp_path):
         (["parking", "--xs", "nan"], "--xs"),
         (["parking-search", "--method", "grid", "--n", "1"], "--n"),
         (["parking-search", "--method", "ga", "--population", "1"], "--population"),
+        (["parking-search", "--method", "ga", "--population", "100000000"], "--population: must be <= 1000000"),
         (["parking-search", "--method", "grid", "--map", "parallel"], "--x0"),
         (["parking", "--scan-period", "0.001"], "--scan-period"),
         (["parking", "--horizon", "0"], "--horizon"),  # the timeout (once --t-max)

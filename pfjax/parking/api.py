@@ -125,10 +125,12 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
         front = errors.number("front", front, positive=True)
         if front >= L2_LENGTH:
             raise InputError(f"front: must be < {L2_LENGTH:g} (the rectangle length), got {front:g}", "front")
-    if scan_period > MAX_SCAN_PERIOD or t_max / scan_period > MAX_PERIODS:
+    if scan_period > MAX_SCAN_PERIOD:
+        raise InputError(f"scan_period: must be <= {MAX_SCAN_PERIOD:g} s, got {scan_period:g}", "scan_period")
+    if t_max / scan_period > MAX_PERIODS:  # the message shows both: either may be the one to change
         raise InputError(
-            f"scan_period: value {scan_period:g}, expected t_max / scan_period <= {MAX_PERIODS} "
-            f"and <= {MAX_SCAN_PERIOD:g} s",
+            f"scan_period: t_max / scan_period may be at most {MAX_PERIODS}, got {t_max:g} / {scan_period:g} = "
+            f"{t_max / scan_period:.3g}",
             "scan_period",
         )
     if not isinstance(lag, (bool, np.bool_)):
@@ -309,8 +311,10 @@ def search(
         raise InputError(f"method: expected 'ga' or 'grid', got {method!r:.80}", "method")
     weight = errors.number("weight", weight, nonnegative=True)
     n = errors.integer("n", n, low=2, high=64)
-    population = errors.integer("population", population, low=2)
-    generations = errors.integer("generations", generations, low=1)
+    from pfjax.tuning.ga import MAX_GENERATIONS, MAX_POPULATION
+
+    population = errors.integer("population", population, low=2, high=MAX_POPULATION)
+    generations = errors.integer("generations", generations, low=1, high=MAX_GENERATIONS)
     seed = errors.seed("seed", seed)
     from pfjax.parking.schedules import GARAGE_START
 

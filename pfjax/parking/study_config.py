@@ -40,9 +40,12 @@ class Sim(ConfigModel):
 
     @model_validator(mode="after")
     def _steps(self):
-        if self.t_max / self.scan_period > 20000:
+        from pfjax.parking.api import MAX_PERIODS
+
+        if self.t_max / self.scan_period > MAX_PERIODS:
             raise ValueError(
-                f"scan_period: t_max / scan_period must be <= 20000, got {self.t_max / self.scan_period:g}"
+                f"scan_period: t_max / scan_period may be at most {MAX_PERIODS}, got {self.t_max:g} / {self.scan_period:g} = "
+                f"{self.t_max / self.scan_period:.3g}"
             )
         return self
 
