@@ -196,6 +196,8 @@ CLI_CASES = [
     (["study", "CFG", "--set", "controllers[].name=x"], "--set: malformed key 'controllers[].name'"),
     (["study", "CFG", "--set", "n_runs[0]={dist='uniform'}"], "n_runs[0]: n_runs is not a list"),
     (["study", "CFG", "--set", "sim.dt[0]=1", "--quiet"], "sim.dt[0]: sim.dt is not a list"),
+    (["study", "CFG", "--coordinator-timeout", "nan"], "--coordinator-timeout: expected a finite number, got nan"),
+    (["study", "CFG", "--coordinator-timeout", "-5", "--quiet"], "--coordinator-timeout: must be > 0 s, got -5"),
     (
         ["study", "CFG", "--set", "slip.kind='ou'", "--set", "slip.seq_dt=1e-12"],
         "slip.seq_dt: sim.horizon / seq_dt (the slip samples per run) may be at most 2e+06",

@@ -90,6 +90,7 @@ def _distributed(args) -> tuple[int, int]:
     """Join a multi-process study if the flags ask for one; ``(process index, process count)``."""
     flags = {"--coordinator": args.coordinator, "--num-processes": args.num_processes, "--process-id": args.process_id}
     given = [k for k, v in flags.items() if v is not None]
+    timeout = finite("--coordinator-timeout", args.coordinator_timeout, positive=True, unit=" s")  # given alone too
     if not given and not args.distributed:
         return 0, 1
     if given and len(given) < 3:
@@ -106,7 +107,6 @@ def _distributed(args) -> tuple[int, int]:
             raise UsageError(f"--num-processes: expected >= 1, got {args.num_processes}")
         if not 0 <= args.process_id < args.num_processes:
             raise UsageError(f"--process-id: expected 0..{args.num_processes - 1}, got {args.process_id}")
-    timeout = finite("--coordinator-timeout", args.coordinator_timeout, positive=True, unit=" s")
     import jax
 
     from pfjax.sim import sharding
