@@ -60,6 +60,17 @@ def backend_started(modules=None) -> bool:
     return True if xb is None or not hasattr(xb, "backends_are_initialized") else bool(xb.backends_are_initialized())
 
 
+def whole_number(environ, name: str, unit: str, default: int) -> int:
+    """The environment variable ``name`` as a whole number >= 0, else ``default``; a value that is set
+    but not such a number is ignored with a warning naming the variable (a typo is not silent)."""
+    want = environ.get(name, "").strip()
+    if want.isdigit():
+        return int(want)
+    if want:
+        warnings.warn(f"{name}: value {want!r} ignored, expected a whole number of {unit} >= 0", stacklevel=3)
+    return default
+
+
 def default_host_devices(environ=None, modules=None) -> bool:
     """Ask XLA for one CPU device per core, if that is still possible and wanted.
 
@@ -73,8 +84,7 @@ def default_host_devices(environ=None, modules=None) -> bool:
     flags = environ.get("XLA_FLAGS", "")
     if backend_started(modules) or _FLAG in flags:
         return False
-    want = environ.get(HOST_DEVICES_ENV, "").strip()
-    n = int(want) if want.isdigit() else _cores()
+    n = whole_number(environ, HOST_DEVICES_ENV, "devices", _cores())
     if n <= 1:
         return False
     environ["XLA_FLAGS"] = f"{flags} {_FLAG}={n}".strip()
@@ -94,8 +104,7 @@ def small_loop_option(environ=None, modules=None) -> bool:
     flags = environ.get("XLA_FLAGS", "")
     if backend_started(modules) or _EXTRA in flags:
         return False
-    want = environ.get(SMALL_LOOP_ENV, "").strip()
-    n = int(want) if want.isdigit() else SMALL_LOOP_BYTES
+    n = whole_number(environ, SMALL_LOOP_ENV, "bytes", SMALL_LOOP_BYTES)
     if n <= 0:
         return False
     environ["XLA_FLAGS"] = f"{flags} {_EXTRA}=xla_cpu_small_while_loop_byte_threshold={n}".strip()

@@ -55,12 +55,11 @@ def physical_memory() -> int:
 def memory_budget(environ=None) -> int:
     """The most memory one allocation plan may take: ``$PFJAX_MEMORY_BUDGET`` bytes if set, else
     half the physical memory (the rest is the operating system's, XLA's code and the user's)."""
+    from pfjax.host import whole_number
+
     environ = os.environ if environ is None else environ
-    text = environ.get(ENV, "").strip()
-    if text.isdigit():
-        return int(text)
     total = physical_memory()
-    return total // 2 if total else 1 << 62
+    return whole_number(environ, ENV, "bytes", total // 2 if total else 1 << 62)
 
 
 def fmt_bytes(n: float) -> str:

@@ -94,6 +94,22 @@ def test_small_loop_option_sets_the_threshold_unless_the_user_did():
         assert env == before
 
 
+def test_a_setting_in_the_environment_that_is_not_a_number_is_ignored_with_a_warning():
+    """PFJAX_HOST_DEVICES, PFJAX_SMALL_LOOP_BYTES and PFJAX_MEMORY_BUDGET set to something that is not
+    a whole number: the default, and a warning naming the variable (not silence)."""
+    from pfjax.resources import memory_budget
+
+    with pytest.warns(UserWarning, match="^PFJAX_HOST_DEVICES: value 'abc' ignored"):
+        env = {"PFJAX_HOST_DEVICES": "abc"}
+        assert pfjax.default_host_devices(env, modules={}) == (len(os.sched_getaffinity(0)) > 1)
+    with pytest.warns(UserWarning, match="^PFJAX_SMALL_LOOP_BYTES: value '1e6' ignored"):
+        env = {"PFJAX_SMALL_LOOP_BYTES": "1e6"}
+        assert pfjax.small_loop_option(env, modules={}) and env["XLA_FLAGS"].endswith(f"={pfjax.SMALL_LOOP_BYTES}")
+    with pytest.warns(UserWarning, match="^PFJAX_MEMORY_BUDGET: value '8GB' ignored"):
+        assert memory_budget({"PFJAX_MEMORY_BUDGET": "8GB"}) == memory_budget({})
+    assert memory_budget({"PFJAX_MEMORY_BUDGET": "123"}) == 123
+
+
 def test_shard_batch_pads_and_unpad_restores():
     tree = {"a": np.arange(5.0), "b": np.arange(10.0).reshape(5, 2)}
     sharded, n = sharding.shard_batch(tree, devices=jax.devices()[:1])
