@@ -14,12 +14,12 @@ described in :mod:`pfjax.dynamic_study.arms`; the config keys in
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
+from pfjax.cli.common import Parser
 
 pfjax.cache.enable()
 
@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = Parser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", help="a TOML file of the study's keys (studies/kinematic_vs_dynamic.toml)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out")

@@ -14,7 +14,6 @@ the config's ``[source]`` table and always labelled as the source's.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -24,6 +23,7 @@ import matplotlib
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
+from pfjax.cli.common import Parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[1])
+    ap = Parser(description=__doc__.split("\n")[1])
     ap.add_argument("--config", default=str(ROOT / "studies" / "paper_reproduction.toml"))
     ap.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value (dotted keys)"

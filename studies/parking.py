@@ -15,7 +15,6 @@ one line, exit 2, nothing written.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -24,6 +23,7 @@ import matplotlib
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
+from pfjax.cli.common import Parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap = Parser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--config", default=str(ROOT / "studies" / "parking.toml"))
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out")

@@ -31,7 +31,6 @@ Writes ``results/rare_events/verification.json`` (or ``--out``).
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -39,6 +38,7 @@ import jax
 
 import pfjax  # before JAX: one CPU device per core
 import pfjax.cache
+from pfjax.cli.common import Parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -207,7 +207,7 @@ def run(args) -> int:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = Parser(description=__doc__.splitlines()[0])
     ap.add_argument("--out")
     ap.add_argument("--quick", action="store_true", help="small sizes (tests)")
     ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")

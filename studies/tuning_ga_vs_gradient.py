@@ -13,7 +13,6 @@ assembled beside the output directory and moved into place at the end
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -22,6 +21,7 @@ import jax
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
+from pfjax.cli.common import Parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -33,7 +33,7 @@ from pfjax.tuning import study, study_config  # noqa: E402
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = Parser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", default="studies/tuning_ga_vs_gradient.toml")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default=None)

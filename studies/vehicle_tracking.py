@@ -14,7 +14,6 @@ exit code 2, nothing written.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -23,6 +22,7 @@ import matplotlib
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
+from pfjax.cli.common import Parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -39,7 +39,7 @@ DEFAULT_TOML = ROOT / "studies" / "vehicle_tracking.toml"
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = Parser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", default=str(DEFAULT_TOML))
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out")

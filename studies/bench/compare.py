@@ -14,7 +14,6 @@ unknown revision, a bad count) stops with one line and exit code 2 before anythi
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import statistics
@@ -26,6 +25,7 @@ from pathlib import Path
 import pfjax  # noqa: F401  (before JAX: one CPU device per core)
 from pfjax import errors
 from pfjax.bench.run import machine
+from pfjax.cli.common import Parser
 from pfjax.errors import InputError, command_main
 from pfjax.jsonio import dumps
 from pfjax.outputs import OutputDir
@@ -132,7 +132,7 @@ def markdown(result: dict) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = Parser(description=__doc__.splitlines()[0])
     ap.add_argument("base", nargs="?", default="HEAD", help="the revision compared against (default HEAD)")
     ap.add_argument("new", nargs="?", default=".", help="the revision compared (default . : the working tree)")
     ap.add_argument("--rounds", type=int, default=5, help="alternating rounds (default 5)")

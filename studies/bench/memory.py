@@ -12,7 +12,6 @@ wall time, peak RSS, the RSS trace, the size of ``runs.parquet``) beside the stu
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import resource
@@ -21,6 +20,7 @@ import sys
 import time
 from pathlib import Path
 
+from pfjax.cli.common import Parser
 from pfjax.errors import InputError, command_main
 from pfjax.outputs import OutputDir
 from pfjax.provenance import config_hash
@@ -37,7 +37,7 @@ def rss_mib(pid: int) -> float:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = Parser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=1_000_000, help="runs in all (default 10^6)")
     ap.add_argument("--horizon", type=float, default=1.0, help="simulated seconds per run (default 1)")
     ap.add_argument("--chunk", type=int, default=65536, help="runs simulated per chunk")
