@@ -122,11 +122,15 @@ def solve_or_raise(prob: cp.Problem, what: str) -> str:
     """Solve with Clarabel; return the cvxpy status or raise a one-line :class:`SynthesisError`.
 
     ``optimal`` and ``optimal_inaccurate`` are accepted (the status is recorded in the
-    :class:`Design`); ``infeasible``, ``unbounded``, their ``_inaccurate`` variants and solver
-    errors raise.
+    :class:`Design`, so cvxpy's own two-line warning for an inaccurate solution is not printed);
+    ``infeasible``, ``unbounded``, their ``_inaccurate`` variants and solver errors raise.
     """
+    import warnings
+
     try:
-        prob.solve(solver=SOLVER)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Solution may be inaccurate", category=UserWarning)
+            prob.solve(solver=SOLVER)
     except cp.error.SolverError as exc:
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise SynthesisError(f"{what} failed: solver {SOLVER} status 'solver_error' ({msg})", "solver_error") from exc
