@@ -383,7 +383,9 @@ def test_command_line_bad_input_is_one_line_exit_2(tmp_path, capsys, argv, flag)
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and err.startswith(f"pfjax rare-event: error: {flag}: "), err
     assert main(["rare-event", str(tmp_path / "missing.toml")]) == 2
-    assert "CONFIG: no such file" in capsys.readouterr().err
+    assert "pfjax rare-event: error: config: file not found: " in capsys.readouterr().err
+    assert main(["rare-event", str(tmp_path)]) == 2  # a directory: as pfjax study says it
+    assert capsys.readouterr().err == f"pfjax rare-event: error: config: {tmp_path} is not a file\n"
 
 
 def test_command_line_help(capsys):

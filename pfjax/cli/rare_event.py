@@ -46,15 +46,11 @@ def register(sub) -> None:
 
 
 def _cmd(args) -> dict:
-    from pathlib import Path
 
     from pfjax.api import rare_event
-    from pfjax.cli.common import UsageError
     from pfjax.montecarlo.config import load_study
 
-    if not Path(args.config).is_file():
-        raise UsageError(f"CONFIG: no such file {args.config!r}", "config")
-    spec, _ = load_study(args.config, args.set)
+    spec, _ = load_study(args.config, args.set)  # a missing file or a directory: as pfjax study says it
     with as_flags(FLAGS):
         return rare_event(
             spec,
