@@ -27,10 +27,16 @@ def truncnormal(mean: float, std: float, low: float, high: float):
 
 
 def choice(values):
-    """A uniform choice among ``values`` (for :func:`scenarios`)."""
+    """A uniform choice among ``values``, a non-empty list (tuple, 1-D array) of numbers (for :func:`scenarios`)."""
+    import numpy as np
+
     from pfjax.montecarlo.config import Dist
 
-    return _dist(Dist, dist="choice", values=[float(v) for v in values])
+    # checked as a study config's list is (numbers only: no strings, no booleans)
+    listed = (
+        values.tolist() if isinstance(values, np.ndarray) else list(values) if isinstance(values, tuple) else values
+    )
+    return _dist(Dist, dist="choice", values=listed)
 
 
 def _dist(cls, **kw):
@@ -41,4 +47,6 @@ def _dist(cls, **kw):
     except ValidationError as e:
         from pfjax.config import format_error
 
-        raise errors.InputError(f"{kw['dist']}: {format_error(e, cls)}", kw["dist"]) from None
+        # a check of the whole table (low < high) names no key of its own: the function names it
+        message = format_error(e, cls).removeprefix("config: ")
+        raise errors.InputError(f"{kw['dist']}: {message}", kw["dist"]) from None

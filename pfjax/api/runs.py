@@ -112,22 +112,55 @@ def scenarios(
         heading_error_deg=heading_error_deg,
         mu=mu,
     )
-    spec, given = _checked_spec(path, n, key, horizon, model, values, convention, vehicle_params, tau_delta_s, k_v)
-    jkey = None if isinstance(key, (int, np.integer)) else key
+    seed, jkey = seed_or_key(key)
+    spec, given = _checked_spec(
+        path, n, 0 if seed is None else seed, horizon, model, values, convention, vehicle_params, tau_delta_s, k_v
+    )
     sampled = sample_runs(spec, 0, np.arange(n), key=jkey, given=given)
     table = pd.DataFrame({"run": np.arange(n), **{k: np.asarray(v, float) for k, v in sampled.columns.items()}})
     return Scenarios(sampled.scenarios, table, spec)
 
 
-def _checked_spec(path, n, key, horizon, model, values, convention, vehicle_params, tau_delta_s, k_v):
+def seed_or_key(key, name: str = "key") -> tuple[int | None, Any]:
+    """``(seed, None)`` for an int seed (``0`` to ``2**63 - 1``), ``(None, key)`` for a JAX PRNG key (a
+    typed key or raw ``uint32`` key data, one key); :class:`~pfjax.errors.InputError` naming ``name``
+    otherwise."""
+    import jax
+    import jax.numpy as jnp
+
+    if isinstance(key, (int, np.integer)):  # a bool is refused here, as an integer (errors.integer)
+        return errors.seed(name, key), None
+    if isinstance(key, (jax.Array, np.ndarray)):
+        if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+            one = key.shape == ()
+        else:  # raw key data: uint32 words of one key (a wider type would be cast silently)
+            try:
+                one = key.dtype == np.uint32 and jax.random.wrap_key_data(jnp.asarray(key)).shape == ()
+            except (TypeError, ValueError):
+                one = False
+        if one:
+            return None, key
+        got = f"an array of {key.dtype}, shape {key.shape}"
+    else:
+        got = repr(key) if len(repr(key)) <= 60 else f"a {type(key).__name__}"
+    raise errors.InputError(f"{name}: must be an int seed or a JAX PRNG key, got {got}", name)
+
+
+def prng_key(key, name: str = "key"):
+    """A JAX PRNG key from an int seed or a JAX PRNG key (:func:`seed_or_key`)."""
+    import jax
+
+    seed, k = seed_or_key(key, name)
+    return k if seed is None else jax.random.PRNGKey(seed)
+
+
+def _checked_spec(path, n, seed, horizon, model, values, convention, vehicle_params, tau_delta_s, k_v):
     """The study spec of :func:`scenarios`'s arguments, checked as a study config is (the message naming
     the argument), and the per-run ``given`` arrays of ``values``."""
     from pfjax.montecarlo.config import load_study
 
     dists, given = _as_dists(values, n)
-    seed = key if isinstance(key, (int, np.integer)) and not isinstance(key, bool) else 0
-    errors.seed("key", seed)
-    data = _study_data(path, n, int(seed), horizon, model, dists, convention, vehicle_params, tau_delta_s, k_v)
+    data = _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params, tau_delta_s, k_v)
     try:
         spec, _ = load_study(data=data)
     except errors.InputError as e:

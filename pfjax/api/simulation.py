@@ -26,7 +26,7 @@ def resolve_gains(e, d, gains, v: float, L: float) -> tuple[Any, dict]:
 
     flat = C.flat_gains(e)
     if d is not None:
-        flat.update(d.make(v, L))
+        flat.update(C.design_gains(d, v, L, "controller"))
     if gains is None:
         pass
     elif isinstance(gains, dict):
@@ -42,6 +42,29 @@ def resolve_gains(e, d, gains, v: float, L: float) -> tuple[Any, dict]:
             "gains",
         )
     return C.params_from_flat(e, flat), {k: float(v) for k, v in flat.items()}
+
+
+def sim_config(config, default=None):
+    """``config`` (a :class:`pfjax.sim.SimConfig`, a dict of its fields, or None for ``default``) as a
+    ``SimConfig``; :class:`~pfjax.errors.InputError` naming ``config`` otherwise (the fields are
+    checked by ``SimConfig``)."""
+    import dataclasses
+
+    from pfjax.sim import SimConfig
+
+    if config is None:
+        return default
+    if isinstance(config, dict):
+        names = [f.name for f in dataclasses.fields(SimConfig)]
+        unknown = [k for k in config if k not in names]
+        if unknown:
+            raise errors.InputError(
+                f"config.{unknown[0]}: unknown setting; expected one of {', '.join(names)}", "config"
+            )
+        return SimConfig(**config)
+    if not isinstance(config, SimConfig):
+        raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
+    return config
 
 
 def simulate(
@@ -81,20 +104,7 @@ def simulate(
         raise errors.InputError(
             f"controller: expected a controller name, got {type(controller).__name__}", "controller"
         )
-    if config is None:
-        config = SimConfig()
-    elif isinstance(config, dict):
-        unknown = set(config) - {f.name for f in dataclasses.fields(SimConfig)}
-        if unknown:
-            raise errors.InputError(
-                f"config.{sorted(unknown)[0]}: unknown setting; expected one of "
-                f"{', '.join(f.name for f in dataclasses.fields(SimConfig))}",
-                "config",
-            )
-        config = SimConfig(**config)
-    elif not isinstance(config, SimConfig):
-        raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
-    config = dataclasses.replace(config, record=bool(trajectories))
+    config = dataclasses.replace(sim_config(config, SimConfig()), record=bool(trajectories))
     t = scenarios.table
     if scenarios.spec.vehicle.model in ("st", "std"):
         from pfjax.models.single_track import max_stable_step, with_mu
@@ -208,15 +218,32 @@ class SuccessRate(NamedTuple):
 
 def success_rate(x, conf: float = 0.95) -> SuccessRate:
     """The success rate of a :class:`Simulation` (or a table with a ``success`` column, or a
-    boolean array) with its exact (Clopper-Pearson) ``conf`` interval."""
+    boolean array) with its exact (Clopper-Pearson) ``conf`` interval.
+
+    Raises:
+        InputError: no runs, or successes that are not booleans (``success: ...``); ``conf`` not in (0, 1).
+    """
     from pfjax.metrics.robustness import clopper_pearson
 
+    if hasattr(x, "columns") and "success" not in x.columns:
+        raise errors.InputError("success: the table has no 'success' column", "success")
     s = x.table["success"] if isinstance(x, Simulation) else (x["success"] if hasattr(x, "columns") else x)
-    s = np.asarray(s, dtype=bool).ravel()
-    if s.size == 0:
+    try:
+        a = np.asarray(s).ravel()
+    except ValueError:  # a ragged nest of lists
+        a = np.asarray(s, dtype=object).ravel()
+    if a.size == 0:
         raise errors.InputError("success: no runs", "success")
+    if a.dtype != bool:  # only a boolean is an outcome (NumPy would read any non-empty string as True)
+        items = np.asarray(s, dtype=object).ravel().tolist()  # the values given, not NumPy's common type
+        i = next((i for i, v in enumerate(items) if not isinstance(v, (bool, np.bool_))), None)
+        if i is not None:
+            raise errors.InputError(
+                f"success[{i}]: expected a boolean (True: the run succeeded), got {items[i]!r}", "success"
+            )
+        a = a.astype(bool)  # booleans of an object array
     if not 0.0 < errors.number("conf", conf) < 1.0:
         raise errors.InputError(f"conf: expected in (0, 1), got {conf:g}", "conf")
-    k, n = int(s.sum()), int(s.size)
+    k, n = int(a.sum()), int(a.size)
     lo, hi = clopper_pearson(k, n, conf)
     return SuccessRate(k / n, float(lo), float(hi), k, n, float(conf))

@@ -18,20 +18,52 @@ class StudyResult(NamedTuple):
 
 
 def load_study(out) -> StudyResult:
-    """Read a finished study's outputs from its directory ``out``."""
-    import json
-    from pathlib import Path
-
+    """Read a finished study's outputs from its directory ``out``, as ``pfjax report`` reads them
+    (:class:`~pfjax.errors.InputError` naming ``out`` for a missing or corrupt file)."""
     import pandas as pd
 
+    from pfjax.montecarlo.study import read_finished
     from pfjax.montecarlo.summary import headline
 
-    out = Path(out)
+    out = _out_dir(out)
     if not (out / "summary.json").is_file() or not (out / "runs.parquet").is_file():
         raise errors.InputError(f"out: {out} holds no finished study (summary.json and runs.parquet)", "out")
-    summary = json.loads((out / "summary.json").read_text())
-    margin = pd.read_parquet(out / "margin.parquet") if (out / "margin.parquet").is_file() else None
-    return StudyResult(out, summary, pd.read_parquet(out / "runs.parquet"), margin, headline(summary))
+    try:
+        summary, runs = read_finished(out)
+        rows = headline(summary)
+    except errors.InputError as e:  # pfjax report's message
+        raise _named_out(e) from None
+    except (KeyError, TypeError, ValueError):  # a summary.json without a controller's numbers
+        raise errors.InputError(
+            f"out: {out / 'summary.json'} is not a study summary; re-run the study", "out"
+        ) from None
+    margin = None
+    if (out / "margin.parquet").is_file():
+        try:
+            margin = pd.read_parquet(out / "margin.parquet")
+        except (OSError, ValueError) as e:  # pyarrow's errors are ValueErrors too
+            raise errors.InputError(
+                f"out: {out / 'margin.parquet'} cannot be read ({errors.one_line(e)}); re-run the study", "out"
+            ) from None
+    return StudyResult(out, summary, runs, margin, rows)
+
+
+def _out_dir(out):
+    """``out`` (a str or path-like) as a Path; :class:`~pfjax.errors.InputError` naming ``out`` otherwise
+    (which directories pfjax writes is :mod:`pfjax.outputs`' rule)."""
+    import os
+    from pathlib import Path
+
+    if not isinstance(out, (str, os.PathLike)):
+        raise errors.InputError(f"out: expected a directory path, got {out!r}", "out")
+    return Path(out)
+
+
+def _named_out(e: errors.InputError) -> errors.InputError:
+    """The command's error about ``--out`` naming the argument ``out`` instead (other errors unchanged)."""
+    if e.key != "--out":
+        return e
+    return errors.InputError("out" + str(e).removeprefix("--out"), "out")
 
 
 def run_study(
@@ -61,9 +93,13 @@ def run_study(
 
     from pfjax.montecarlo.study import run
 
+    out = None if out is None else _out_dir(out)
     spec = _study_spec(config, {k.replace("__", "."): v for k, v in overrides.items()})
-    out = Path("results") / spec.name if out is None else Path(out)
-    run(spec, out, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
+    out = Path("results") / spec.name if out is None else out
+    try:
+        run(spec, out, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
+    except errors.InputError as e:  # the directory refused by pfjax.outputs, as `pfjax study --out` is
+        raise _named_out(e) from None
     return load_study(out)
 
 

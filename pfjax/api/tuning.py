@@ -7,7 +7,8 @@ import math
 import numpy as np
 
 from pfjax import errors
-from pfjax.api.simulation import resolve_gains
+from pfjax.api.runs import prng_key
+from pfjax.api.simulation import resolve_gains, sim_config
 
 
 def tune(
@@ -32,7 +33,8 @@ def tune(
     """Tune a controller's gains, or check given gains, as ``pfjax tune`` does.
 
     Args:
-        controller: a registered controller with a tuning box (``pi``, ``state_feedback``, ...).
+        controller: a registered controller with a tuning box (``pi``, ``state_feedback``, ...; the
+            command line's spellings too); a design (``lmi``) is refused, as by ``pfjax tune``.
         scenario: ``paper-line`` | ``paper-parabola`` | ``paper-sine`` | ``paper-all`` | a
             registered path's name | a study TOML (``n_runs`` sampled runs per path).
         method: ``gradient`` (the multi-start tuner: Sobol screening with the controller's
@@ -42,7 +44,7 @@ def tune(
             adam steps from its best).
         key: int seed (or JAX key) of the GA population / the gradient's starts.
         cost: a :class:`pfjax.tuning.CostSpec` (metric, effort weight, aggregate); default mean IAE.
-        config: a :class:`pfjax.sim.SimConfig` (default 20 s at 5 ms, or the study's).
+        config: a :class:`pfjax.sim.SimConfig` or a dict of its fields (default 20 s at 5 ms, or the study's).
         model: the vehicle model, ``kinematic`` | ``st`` | ``std`` (default: kinematic, or the
             study's ``[vehicle] model``, which ``model`` replaces); a paper set on ``st`` uses the
             robot's parameters, on ``std`` CommonRoad's vehicle2 (:func:`pfjax.tuning.problem.make_problem`).
@@ -59,8 +61,6 @@ def tune(
         ``{"gains", "cost", "n_rollouts", "n_forward_passes", "wall_s", "compile_s", "history",
         "history_rollouts", "result"}``; with ``check``: ``{"gains", "cost", "check", "result"}``.
     """
-    import jax
-
     from pfjax import controllers as C
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
@@ -69,8 +69,17 @@ def tune(
     from pfjax.tuning.problem import make_problem
     from pfjax.tuning.problem import tune as run_tune
 
-    name = C.resolve(controller)[0].name if isinstance(controller, str) else controller
-    problem = make_problem(name, scenario, cost=cost or CostSpec(), config=config, n_runs=n_runs, model=model)
+    # a command-line spelling names its registry entry; anything else (a design such as lmi: its
+    # gains are designed, not tuned) is refused by make_problem, as `pfjax tune --controller` refuses it
+    if not isinstance(controller, str):
+        raise errors.InputError(
+            f"controller: expected a controller name, got {type(controller).__name__}", "controller"
+        )
+    name = next((n for n, e in C.REGISTRY.items() if controller in (n, e.cli_name)), controller)
+    k = prng_key(key)
+    config = sim_config(config)
+    cost = CostSpec() if cost is None else cost
+    problem = make_problem(name, scenario, cost=cost, config=config, n_runs=n_runs, model=model)
     if check is not None:
         r = run_check(problem, check)
         return {
@@ -79,7 +88,6 @@ def tune(
             "check": as_dict(r, problem.tunable.fields, problem.tunable.sizes),
             "result": r,
         }
-    k = jax.random.PRNGKey(errors.seed("key", key)) if isinstance(key, (int, np.integer)) else key
     res = run_tune(
         problem,
         method,
@@ -133,14 +141,17 @@ def falsify(
     ``±lateral_offset`` (m) and ``±heading_error_deg`` (deg), from ``restarts`` random starts of
     ``steps`` adam steps each (:func:`pfjax.falsification.falsify`).
 
+    ``slip_bound_deg``, ``f_max_hz``, ``lateral_offset``, ``heading_error_deg``, ``objective``,
+    ``restarts`` and ``steps`` are checked as a study config's ``[falsifier]`` keys are (``restarts``
+    is its ``n_restarts``); ``config`` is a :class:`pfjax.sim.SimConfig` or a dict of its fields.
+
     Returns:
         a :class:`pfjax.falsification.FalsifierResult` (the worst value, its parameters and status).
     """
-    import jax
-
     from pfjax import controllers as C
     from pfjax import paths
     from pfjax.falsification import falsify as run_falsify
+    from pfjax.falsification.search import check_settings
     from pfjax.models.slip import CONVENTIONS, SlipParams
     from pfjax.sim import SimConfig
 
@@ -154,10 +165,22 @@ def falsify(
     errors.number("speed", speed, positive=True, unit=" m/s")
     errors.number("L", L, positive=True, unit=" m")
     errors.number("delta_max_deg", delta_max_deg, positive=True, below=90, unit=" deg")
-    errors.number("lateral_offset", lateral_offset, nonnegative=True, unit=" m")
-    errors.number("heading_error_deg", heading_error_deg, nonnegative=True, below=180, unit=" deg")
-    restarts = errors.integer("restarts", restarts, low=1, high=4096)
-    steps = errors.integer("steps", steps, low=1, high=100_000)
+    try:
+        check_settings(
+            slip_bound_deg=slip_bound_deg,
+            f_max_hz=f_max_hz,
+            lateral_offset=lateral_offset,
+            heading_error_deg=heading_error_deg,
+            objective=objective,
+            n_restarts=restarts,
+            steps=steps,
+        )
+    except errors.InputError as ex:  # the config's n_restarts is this function's restarts
+        if ex.key != "n_restarts":
+            raise
+        raise errors.InputError("restarts" + str(ex).removeprefix("n_restarts"), "restarts") from None
+    k = prng_key(key)
+    config = sim_config(config, SimConfig(record=False))
     params, _ = resolve_gains(e, d, gains, speed, L)
     sp = SlipParams(
         v=np.asarray(speed, float),
@@ -165,7 +188,6 @@ def falsify(
         delta_max=np.asarray(math.radians(delta_max_deg), float),
         convention=np.asarray(CONVENTIONS["source"], np.int32),
     )
-    k = jax.random.PRNGKey(errors.seed("key", key)) if isinstance(key, (int, np.integer)) else key
     ic = {
         "d": (-lateral_offset, lateral_offset),
         "theta_e_deg": (-heading_error_deg, heading_error_deg),
@@ -175,7 +197,7 @@ def falsify(
         e.controller,
         params,
         entry.build(),
-        config=config or SimConfig(record=False),
+        config=config,
         slip_bound_deg=slip_bound_deg,
         f_max_hz=f_max_hz,
         ic_bounds=ic,

@@ -49,6 +49,7 @@ import numpy as np
 import optax
 from jax import Array
 
+from pfjax import errors
 from pfjax.arrays import Leaf
 from pfjax.controllers.base import Controller
 from pfjax.falsification.space import (
@@ -100,9 +101,20 @@ def _score(value: Leaf, status: Leaf, xp=jnp) -> Leaf:
     return xp.where(xp.isnan(score), -xp.inf, score)
 
 
+def check_settings(**settings) -> None:
+    """:class:`~pfjax.errors.InputError` naming the argument for a value of a search's settings
+    (``slip_bound_deg``, ``f_max_hz``, ``objective``, ``n_restarts``, ``steps``, ``lateral_offset``,
+    ``heading_error_deg``) that a study config's ``[falsifier]`` table refuses: its schema
+    (:class:`pfjax.montecarlo.analysis_config.FalsifierSpec`) holds the limits, so a search is judged
+    alike from a config, a library call and the API."""
+    from pfjax.config import load_model
+    from pfjax.montecarlo.analysis_config import FalsifierSpec
+
+    load_model(FalsifierSpec, data={k: v.item() if isinstance(v, np.generic) else v for k, v in settings.items()})
+
+
 def _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise, space_kw):
-    if objective not in OBJECTIVES:
-        raise ValueError(f"objective: expected one of {list(OBJECTIVES)}, got {objective!r}")
+    check_settings(slip_bound_deg=slip_bound_deg, f_max_hz=f_max_hz, objective=objective)
     space = search_space(
         horizon=config.n_steps * config.dt,
         slip_bound_deg=slip_bound_deg,
@@ -263,9 +275,12 @@ def falsify(
 
     Returns:
         :class:`FalsifierResult`; ``n_rollouts = n_gradients = n_restarts * steps``, history per step.
+
+    Raises:
+        InputError: ``slip_bound_deg``, ``f_max_hz``, ``objective``, ``n_restarts`` or ``steps`` out of
+            a study config's ``[falsifier]`` limits (:func:`check_settings`), named in the message.
     """
-    if int(n_restarts) < 1 or int(steps) < 1:
-        raise ValueError(f"n_restarts and steps: must be >= 1, got {n_restarts}, {steps}")
+    check_settings(n_restarts=n_restarts, steps=steps)
     space, base, config = _setup(
         path,
         gains,
@@ -331,8 +346,8 @@ def random_search(
     ``config.record`` is honoured though the trajectories are discarded: with ``record=True`` and
     the same ``batch_size``, :func:`worst_trajectory` reuses this search's compiled program.
     ``devices``: as :func:`~pfjax.sim.simulate_batch` (default: all)."""
-    if int(n_samples) < 1 or int(batch_size) < 1:
-        raise ValueError(f"n_samples and batch_size: must be >= 1, got {n_samples}, {batch_size}")
+    errors.integer("n_samples", n_samples, low=1)
+    errors.integer("batch_size", batch_size, low=1)
     space, base, config = _setup(
         path,
         gains,

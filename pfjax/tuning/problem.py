@@ -91,7 +91,11 @@ def make_problem(
     """
     import dataclasses
 
+    from pfjax import errors
+
     ctrl, lo, hi, tun = _tunable(controller, base_gains, box)
+    if not isinstance(cost, CostSpec):
+        raise errors.InputError(f"cost: expected a pfjax.tuning.CostSpec, got {type(cost).__name__}", "cost")
     _check_inputs(scenario, n_runs, run_offset, model)
     if scenario in scenario_sets():
         batches = _paper_batches(scenario, tun.base, model or "kinematic")
@@ -310,6 +314,10 @@ def _checked_options(method, ga_options, steps, n_starts, learning_rate, multist
             errors.integer(name, v, low=1, high=1_000_000)
     if learning_rate is not None:
         errors.number("learning_rate", learning_rate, positive=True)
+    if multistart is not None and not isinstance(multistart, MultistartOptions):
+        raise errors.InputError(
+            f"multistart: expected a pfjax.tuning.MultistartOptions, got {type(multistart).__name__}", "multistart"
+        )
     ms = multistart or MultistartOptions()
     given: dict[str, Any] = {
         k: v for k, v in (("steps", steps), ("n_starts", n_starts), ("learning_rate", learning_rate)) if v is not None
@@ -320,14 +328,34 @@ def _checked_options(method, ga_options, steps, n_starts, learning_rate, multist
     return ms
 
 
-def _check_memory(problem: Problem, method: str, ga_options: GAOptions, ms: MultistartOptions, n_starts) -> None:
+def _check_memory(
+    problem: Problem,
+    method: str,
+    ga_options: GAOptions = GAOptions(),
+    ms: MultistartOptions | None = None,
+    n_starts=None,
+) -> None:
     """Refuse batches beyond the memory budget (:mod:`pfjax.resources`): the GA simulates a whole
-    population at once, the gradient every start with one tangent per tuned gain."""
+    population at once, the gradient every start with one tangent per tuned gain, a ``check`` its
+    Hessian's gradients at once and then its probes (value only)."""
     from pfjax import resources
+    from pfjax.tuning.check import RADII, probe_directions
     from pfjax.tuning.ga import validate_options
 
     D = problem.lower.size
     per_run = resources.run_bytes(problem.config.n_steps)
+    if method == "check":  # check_point: 2 D central differences of the gradient, then the probes
+        resources.check_memory(
+            "check",
+            2 * 2 * D * problem.n_per_eval * per_run * (1 + D),
+            f"the Hessian's {2 * D} gradients x {problem.n_per_eval} runs with {D} tangents",
+        )
+        n_probes = len(RADII) * len(probe_directions(D))
+        resources.check_memory(
+            "check", 2 * n_probes * problem.n_per_eval * per_run, f"{n_probes} probes x {problem.n_per_eval} runs"
+        )
+        return
+    ms = ms or MultistartOptions()
     if method in ("ga", "ga+gradient"):
         population = validate_options(ga_options)[0]
         resources.check_memory(
@@ -374,5 +402,6 @@ def check(problem: Problem, gains, *, h: float = 1e-4, rtol: float = 1e-4):
     from pfjax.tuning.check import check_point, parse_gains
 
     th = parse_gains(gains, problem.tunable.fields, problem.tunable.sizes, problem.lower, problem.upper)
+    _check_memory(problem, "check")  # before anything is compiled or simulated
     f_scalar, _ = cost_functions(problem)
     return check_point(f_scalar, th, problem.lower, problem.upper, h=h, rtol=rtol, n_per_eval=problem.n_per_eval)

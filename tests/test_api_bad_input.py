@@ -1,0 +1,264 @@
+"""Bad input to the public API (pfjax.api) is an InputError whose one-line message starts with the
+argument's name, refused before any work, with the limits the command line and study configs use:
+pole regions, PRNG keys, tune's and falsify's arguments, distributions, success rates, output
+directories, a tuning check's memory and a finished study's corrupt files."""
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import pfjax
+from pfjax import controllers as C
+from pfjax.cli import main
+from pfjax.errors import InputError
+from pfjax.falsification import falsify, random_search
+from pfjax.paths import line
+from pfjax.sim import SimConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+SHORT = SimConfig(dt=0.02, horizon=1.0, record=False)
+STUDY = {
+    "name": "x",
+    "n_runs": 1,
+    "seed": 0,
+    "paths": [{"kind": "line"}],
+    "controllers": [{"name": "a", "type": "pi"}],
+}
+
+
+def _refused(call, key: str) -> str:
+    """The message of the InputError ``call()`` raises, checked: one line, starting with ``key``."""
+    with pytest.raises(pfjax.InputError) as e:
+        call()
+    msg = str(e.value)
+    assert "\n" not in msg and re.match(rf"{re.escape(key)}\b", msg), msg
+    return msg
+
+
+@pytest.mark.parametrize(
+    "call, key",
+    [
+        (lambda: pfjax.design_mixed(region="bogus"), "region"),
+        (lambda: pfjax.design_mixed(region={"max_real": float("nan")}), "region"),
+        (lambda: pfjax.design_mixed(region={"maxreal": -1.0}), "region"),
+        (lambda: pfjax.design_mixed(region={"disk_radius": 1.0}), "region"),
+    ],
+)
+def test_design_mixed_region(call, key):
+    _refused(call, key)
+
+
+def test_design_mixed_region_dict_is_a_pole_region():
+    from pfjax.synthesis import PoleRegion
+
+    a = pfjax.design_mixed(region={"max_real": -0.5})
+    b = pfjax.design_mixed(region=PoleRegion(max_real=-0.5))
+    np.testing.assert_allclose(a.K, b.K)
+
+
+@pytest.mark.parametrize(
+    "key",
+    [1.5, "a", True, None, np.array([1, 2, 3], np.uint32), np.array([0.0, 1.0])],
+    ids=["float", "str", "bool", "none", "3-words", "float-array"],
+)
+def test_scenarios_key(key):
+    msg = _refused(lambda: pfjax.scenarios("line", n=2, key=key), "key")
+    assert "Traceback" not in msg
+
+
+def test_scenarios_key_batch_of_keys_refused_one_key_accepted():
+    import jax
+
+    _refused(lambda: pfjax.scenarios("line", n=2, key=jax.random.split(jax.random.key(0), 2)), "key")
+    typed = pfjax.scenarios("line", n=2, key=jax.random.key(3)).table
+    raw = pfjax.scenarios("line", n=2, key=jax.random.PRNGKey(3)).table
+    pd.testing.assert_frame_equal(typed, raw)
+
+
+@pytest.mark.parametrize(
+    "kw, key",
+    [
+        (dict(key=1.5), "key"),
+        (dict(key="a"), "key"),
+        (dict(cost="iae"), "cost"),
+        (dict(config="x"), "config"),
+        (dict(config={"horizont": 3.0}), "config"),
+        (dict(multistart="x"), "multistart"),
+    ],
+)
+def test_tune_arguments(kw, key):
+    _refused(lambda: pfjax.tune("pi", "paper-line", "gradient", **kw), key)
+
+
+def test_tune_refuses_a_design_as_the_command_line_does(capsys):
+    msg = _refused(lambda: pfjax.tune("lmi", "line", "ga"), "controller")
+    assert main(["tune", "--controller", "lmi", "--method", "ga"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("pfjax tune: error: --controller: value 'lmi', expected one of "), err
+    assert msg.startswith("controller: value 'lmi', expected one of "), msg
+    _refused(lambda: pfjax.tune(5), "controller")
+
+
+def test_tune_check_memory_is_refused_before_any_work(monkeypatch, capsys):
+    """A check whose batches exceed the memory budget is refused as tuning is, before the cost is
+    built, compiled or run (here a budget of 1 kB refuses the smallest check)."""
+    from pfjax.tuning import problem
+
+    def no_work(*a, **kw):
+        raise AssertionError("the check's work started")
+
+    monkeypatch.setenv("PFJAX_MEMORY_BUDGET", "1000")
+    monkeypatch.setattr(problem, "cost_functions", no_work)
+    msg = _refused(lambda: pfjax.tune("stanley", "paper-line", check=[1.0, 1.0]), "check")
+    assert "memory budget of 1000 B" in msg, msg
+    assert main(["tune", "--controller", "stanley", "--check", "1,1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("pfjax tune: error: --check: ") and "memory budget of 1000 B" in err, err
+
+
+@pytest.mark.parametrize(
+    "values",
+    [["a"], [True], "12", 5, [], [float("nan")]],
+    ids=["str-item", "bool-item", "str", "int", "empty", "nan"],
+)
+def test_choice_values(values):
+    msg = _refused(lambda: pfjax.choice(values), "choice")
+    assert "values" in msg, msg
+
+
+def test_choice_takes_a_tuple_or_an_array():
+    assert pfjax.choice((1, 2)).values == pfjax.choice(np.array([1.0, 2.0])).values == [1.0, 2.0]
+
+
+@pytest.mark.parametrize(
+    "kw, key",
+    [
+        (dict(slip_bound_deg=float("nan")), "slip_bound_deg"),
+        (dict(slip_bound_deg=95), "slip_bound_deg"),
+        (dict(slip_bound_deg=0.0), "slip_bound_deg"),
+        (dict(f_max_hz=-1), "f_max_hz"),
+        (dict(f_max_hz=11.0), "f_max_hz"),
+        (dict(objective="foo"), "objective"),
+        (dict(heading_error_deg=95.0), "heading_error_deg"),
+        (dict(lateral_offset=-0.1), "lateral_offset"),
+        (dict(restarts=0), "restarts"),
+        (dict(restarts=1000), "restarts"),
+        (dict(steps=20_000), "steps"),
+        (dict(key=1.5), "key"),
+        (dict(config="x"), "config"),
+    ],
+)
+def test_falsify_arguments(kw, key):
+    small = dict(restarts=1, steps=1, config=SHORT)  # a search that is not refused stays short
+    _refused(lambda: pfjax.falsify(**(small | kw)), key)
+
+
+def test_falsify_limits_are_the_study_configs():
+    from pfjax.montecarlo.config import load_study
+
+    for setting, value in (("slip_bound_deg", 95), ("f_max_hz", -1), ("n_restarts", 1000)):
+        with pytest.raises(pfjax.InputError) as config_error:
+            load_study(ROOT / "studies" / "robustness_default.toml", values={f"falsifier.{setting}": value})
+        arg = "restarts" if setting == "n_restarts" else setting
+        with pytest.raises(pfjax.InputError) as api_error:
+            pfjax.falsify(**{arg: value})
+        assert str(config_error.value) == f"falsifier.{setting}{str(api_error.value).removeprefix(arg)}"
+
+
+@pytest.mark.parametrize(
+    "kw, key",
+    [
+        (dict(slip_bound_deg=95.0), "slip_bound_deg"),
+        (dict(slip_bound_deg=float("nan")), "slip_bound_deg"),
+        (dict(f_max_hz=-1.0), "f_max_hz"),
+        (dict(objective="foo"), "objective"),
+    ],
+)
+def test_library_searches_check_their_settings(kw, key):
+    import jax
+
+    args = dict(config=SHORT, slip_bound_deg=5.0, f_max_hz=0.5, ic_bounds={}, key=jax.random.PRNGKey(0)) | kw
+    sf = C.state_feedback_params()
+    _refused(lambda: falsify(C.state_feedback, sf, line(), n_restarts=1, steps=1, **args), key)
+    _refused(lambda: random_search(C.state_feedback, sf, line(), n_samples=1, **args), key)
+
+
+@pytest.mark.parametrize(
+    "kw, key",
+    [(dict(n_restarts=300), "n_restarts"), (dict(steps=0), "steps"), (dict(n_restarts=1.5), "n_restarts")],
+)
+def test_library_falsify_checks_its_budget(kw, key):
+    import jax
+
+    args = dict(config=SHORT, slip_bound_deg=5.0, f_max_hz=0.5, ic_bounds={}, key=jax.random.PRNGKey(0))
+    sf = C.state_feedback_params()
+    _refused(lambda: falsify(C.state_feedback, sf, line(), **(dict(n_restarts=1, steps=1) | kw), **args), key)
+    _refused(lambda: random_search(C.state_feedback, sf, line(), n_samples=0, **args), "n_samples")
+    _refused(lambda: random_search(C.state_feedback, sf, line(), n_samples=1, batch_size=0.5, **args), "batch_size")
+
+
+@pytest.mark.parametrize(
+    "x, index",
+    [("abc", 0), ([True, "x", 5], 1), ([0, 1, 1], 0), ([True, float("nan")], 1), ([[True], [True, False]], 0)],
+    ids=["str", "mixed", "ints", "nan", "ragged"],
+)
+def test_success_rate_takes_only_booleans(x, index):
+    msg = _refused(lambda: pfjax.success_rate(x), "success")
+    assert msg.startswith(f"success[{index}]: expected a boolean"), msg
+
+
+def test_success_rate_tables_and_object_booleans():
+    _refused(lambda: pfjax.success_rate(pd.DataFrame({"ok": [True]})), "success")
+    r = pfjax.success_rate(np.array([True, False, True], dtype=object))
+    assert (r.k, r.n) == (2, 3)
+    assert pfjax.success_rate(pd.DataFrame({"success": [True, False]})).k == 1
+
+
+@pytest.mark.parametrize("out", [123, b"dir", ""], ids=["int", "bytes", "empty"])
+def test_run_and_load_study_out(out, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _refused(lambda: pfjax.run_study(STUDY, out), "out")
+    _refused(lambda: pfjax.load_study(out), "out")
+    assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+@pytest.mark.parametrize(
+    "summary",
+    ["{bad", "[]", json.dumps({"controllers": {"a": {}}}), "\xff"],
+    ids=["not-json", "a-list", "no-numbers", "not-utf8"],
+)
+def test_load_study_corrupt_summary_is_the_report_commands_error(summary, tmp_path, capsys):
+    out = tmp_path / "s"
+    out.mkdir()
+    (out / "summary.json").write_bytes(summary.encode("latin-1"))
+    pd.DataFrame({"run": [0]}).to_parquet(out / "runs.parquet")
+    msg = _refused(lambda: pfjax.load_study(out), "out")
+    assert str(out / "summary.json") in msg and "re-run the study" in msg, msg
+    if summary != json.dumps({"controllers": {"a": {}}}):  # pfjax report reads the file as load_study does
+        from pfjax.montecarlo.study import read_finished
+
+        with pytest.raises(pfjax.InputError) as e:
+            read_finished(out)
+        assert str(e.value) == "--out" + msg.removeprefix("out")
+
+
+def test_load_study_corrupt_runs_or_margin(tmp_path):
+    out = tmp_path / "s"
+    out.mkdir()
+    (out / "summary.json").write_text(json.dumps({"controllers": {}}))
+    (out / "runs.parquet").write_text("not parquet")
+    assert "runs.parquet cannot be read" in _refused(lambda: pfjax.load_study(out), "out")
+    pd.DataFrame({"run": [0]}).to_parquet(out / "runs.parquet")
+    (out / "margin.parquet").write_text("not parquet")
+    assert "margin.parquet cannot be read" in _refused(lambda: pfjax.load_study(out), "out")
+
+
+def test_a_design_that_cannot_be_made_names_the_controller():
+    """As pfjax simulate --controller polytopic-integral --speed 1e6: the synthesis fails, one line."""
+    sc = pfjax.scenarios("line", 2, speed=1e6)
+    with pytest.raises(InputError, match=r"^controller: polytopic-integral synthesis failed: solver CLARABEL"):
+        pfjax.simulate(sc, "polytopic-integral")
