@@ -15,13 +15,12 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
+from pfjax.errors import SynthesisError  # its home: a light module, so callers catch it without cvxpy
+
 __all__ = ["SOLVER", "Design", "SynthesisError", "bound_warnings", "gain_from", "solve_or_raise", "solved", "sym"]
 
 SOLVER = "CLARABEL"
 _ACCEPTED = ("optimal", "optimal_inaccurate")
-
-
-from pfjax.errors import SynthesisError  # noqa: E402  (its home: a light module, so callers catch it without cvxpy)
 
 #: ``cond(X)`` above which ``K = Y X^-1`` is not trusted (SynthesisError "ill_conditioned");
 #: above ``_COND_WARN`` the design carries a warning.
