@@ -120,6 +120,24 @@ def test_tune_check_memory_is_refused_before_any_work(monkeypatch, capsys):
     assert err.startswith("pfjax tune: error: --check: ") and "memory budget of 1000 B" in err, err
 
 
+def test_tune_on_a_study_refuses_runs_beyond_the_budget_before_drawing_them(monkeypatch, capsys):
+    """One evaluation's runs (n_runs per path of the study) beyond the memory budget: refused naming
+    n_runs (--n-runs) before a single run is drawn, whatever the method."""
+    from pfjax.montecarlo import sampling
+
+    def no_draws(*a, **kw):
+        raise AssertionError("runs were drawn")
+
+    monkeypatch.setenv("PFJAX_MEMORY_BUDGET", str(10**9))
+    monkeypatch.setattr(sampling, "sample_runs", no_draws)
+    heldout = str(ROOT / "studies" / "tuning_heldout.toml")
+    msg = _refused(lambda: pfjax.tune("stanley", heldout, check=[1.0, 1.0], n_runs=100_000), "n_runs")
+    assert "one evaluation of 100000 runs x 3 paths" in msg, msg
+    assert main(["tune", "--controller", "stanley", "--scenario", heldout, "--method", "ga", "--n-runs", "100000"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("pfjax tune: error: --n-runs: one evaluation") and err.endswith("lower --n-runs"), err
+
+
 @pytest.mark.parametrize(
     "values",
     [["a"], [True], "12", 5, [], [float("nan")]],

@@ -101,7 +101,7 @@ def make_problem(
         batches = _paper_batches(scenario, tun.base, model or "kinematic")
         cfg = config or SimConfig(record=False)
     else:
-        batches, study_cfg = _study_batches(scenario, tun.base, n_runs, run_offset, model)
+        batches, study_cfg = _study_batches(scenario, tun.base, n_runs, run_offset, model, config)
         cfg = config or study_cfg
     cfg = dataclasses.replace(cfg, record=False)
     return Problem(ctrl, tun, batches, cfg, cost.check(), np.asarray(lo, float), np.asarray(hi, float))
@@ -158,9 +158,11 @@ def _paper_batches(scenario: str, base, model: str) -> list:
     return out
 
 
-def _study_batches(scenario: str, base, n_runs: int, run_offset: int, model: str | None):
-    """(batches of ``n_runs`` sampled runs per path from ``run_offset``, the study's SimConfig) of a study TOML."""
-    from pfjax import errors
+def _study_batches(scenario: str, base, n_runs: int, run_offset: int, model: str | None, config=None):
+    """(batches of ``n_runs`` sampled runs per path from ``run_offset``, the study's SimConfig) of a study TOML.
+    The runs of one evaluation are checked against the memory budget before any is drawn (the
+    methods' own checks, :func:`_check_memory`, follow once the problem is built)."""
+    from pfjax import errors, resources
     from pfjax.montecarlo.config import load_study
     from pfjax.montecarlo.runner import sim_config
     from pfjax.montecarlo.sampling import sample_runs
@@ -169,6 +171,13 @@ def _study_batches(scenario: str, base, n_runs: int, run_offset: int, model: str
         spec, _ = load_study(Path(scenario), [] if model is None else [f'vehicle.model="{model}"'])
     except errors.InputError as e:
         raise errors.InputError(f"scenario: {e}", "scenario") from None
+    n = n_runs * len(spec.paths)
+    resources.check_memory(
+        "n_runs",
+        2 * n * resources.run_bytes((config or sim_config(spec)).n_steps),
+        f"one evaluation of {n_runs} runs x {len(spec.paths)} paths",
+        "lower n_runs",
+    )
     runs = np.arange(run_offset, run_offset + n_runs)
     batches = []
     for i in range(len(spec.paths)):
