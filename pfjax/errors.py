@@ -222,6 +222,14 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
         return EXIT_INTERRUPTED
 
 
+def renamed(e: InputError, old: str, new: str) -> InputError:
+    """``e`` told by another name for its key: the same one-line message with its leading ``old``
+    (a flag, a config key) as ``new`` (the argument a caller gave); ``e`` itself if its key is another."""
+    if e.key != old:
+        return e
+    return type(e)(new + str(e).removeprefix(old), new)
+
+
 class SynthesisError(ValueError):
     """An LMI synthesis problem was infeasible, unbounded, numerically ill-conditioned or the solver
     failed. ``status`` carries the solver's status (``"infeasible"``, ``"unbounded"``,

@@ -32,7 +32,7 @@ def load_study(out) -> StudyResult:
         summary, runs = read_finished(out)
         rows = headline(summary)
     except errors.InputError as e:  # pfjax report's message
-        raise _named_out(e) from None
+        raise errors.renamed(e, "--out", "out") from None
     except (KeyError, TypeError, ValueError):  # a summary.json without a controller's numbers
         raise errors.InputError(
             f"out: {out / 'summary.json'} is not a study summary; re-run the study", "out"
@@ -57,13 +57,6 @@ def _out_dir(out):
     if not isinstance(out, (str, os.PathLike)):
         raise errors.InputError(f"out: expected a directory path, got {out!r}", "out")
     return Path(out)
-
-
-def _named_out(e: errors.InputError) -> errors.InputError:
-    """The command's error about ``--out`` naming the argument ``out`` instead (other errors unchanged)."""
-    if e.key != "--out":
-        return e
-    return errors.InputError("out" + str(e).removeprefix("--out"), "out")
 
 
 def run_study(
@@ -99,7 +92,7 @@ def run_study(
     try:
         run(spec, out, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
     except errors.InputError as e:  # the directory refused by pfjax.outputs, as `pfjax study --out` is
-        raise _named_out(e) from None
+        raise errors.renamed(e, "--out", "out") from None
     return load_study(out)
 
 

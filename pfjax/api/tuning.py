@@ -176,9 +176,7 @@ def falsify(
             steps=steps,
         )
     except errors.InputError as ex:  # the config's n_restarts is this function's restarts
-        if ex.key != "n_restarts":
-            raise
-        raise errors.InputError("restarts" + str(ex).removeprefix("n_restarts"), "restarts") from None
+        raise errors.renamed(ex, "n_restarts", "restarts") from None
     k = prng_key(key)
     config = sim_config(config, SimConfig(record=False))
     params, _ = resolve_gains(e, d, gains, speed, L)
