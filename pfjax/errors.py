@@ -18,6 +18,9 @@ import numbers as _numbers
 EXIT_USAGE = 2
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT).
 EXIT_INTERRUPTED = 130
+#: Exit code of a command whose standard output was closed by its reader (``pfjax ... | head``):
+#: 128 + SIGPIPE, what a shell reports for a program that signal stopped.
+EXIT_BROKEN_PIPE = 141
 
 #: Largest magnitude any physical quantity in pfjax may take: far beyond anything meaningful in
 #: SI units for a wheeled robot, and small enough that squares and products stay finite in float32
@@ -204,15 +207,24 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
     """Run ``body()`` (which returns an exit code) as a command's main function: bad input
     (:class:`InputError`) prints one line ``<prog>: error: <message>`` on stderr and returns
     :data:`EXIT_USAGE`; Ctrl-C prints ``<prog>: interrupted; <interrupted>`` and returns
-    :data:`EXIT_INTERRUPTED`. No traceback either way. Ctrl-C is never lost, even where Python
-    drops its exception (:mod:`pfjax.interrupts`)."""
+    :data:`EXIT_INTERRUPTED`; standard output closed by its reader (``| head``) returns
+    :data:`EXIT_BROKEN_PIPE` quietly, the rest of the output going nowhere. No traceback in any
+    case. Ctrl-C is never lost, even where Python drops its exception (:mod:`pfjax.interrupts`)."""
+    import os
     import sys
 
     from pfjax import interrupts
 
     try:
         with interrupts.guard():
-            return body()
+            code = body()
+            sys.stdout.flush()  # here, so that a closed pipe is met inside this try
+            return code
+    except BrokenPipeError:
+        # what is still buffered, and any later write, goes to /dev/null instead of raising again
+        # (Python's own flush at exit would print "Exception ignored ... BrokenPipeError")
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except InputError as e:
         print(f"{prog}: error: {one_line(e)}", file=sys.stderr)
         return EXIT_USAGE

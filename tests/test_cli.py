@@ -615,3 +615,17 @@ def test_study_example_runs_the_packaged_config(tmp_path, capsys):
     )
     assert head["config_sha256"] == study_hash(spec)
     assert (out / "runs.parquet").is_file() and (out / "summary.json").is_file()
+
+
+@pytest.mark.parametrize("args", [["examples", "--json"], ["examples"]])
+def test_stdout_closed_by_its_reader_ends_quietly_with_exit_code_141(args):
+    """``pfjax ... | head`` where the reader has gone before the command writes: no traceback and no
+    "Exception ignored" message, exit code 128 + SIGPIPE (pfjax.errors.EXIT_BROKEN_PIPE)."""
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        p = subprocess.run([*PFJAX, *args], stdout=w, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(w)
+    assert p.returncode == 141, p.stderr
+    assert p.stderr == ""
