@@ -25,6 +25,9 @@ ENV = "PFJAX_MEMORY_BUDGET"
 #: memory of ``simulate_batch`` on the benchmark problem, metrics only): 2.4 kB per run at 10^5
 #: runs, 1.1 kB at 10^6.
 RUN_BYTES = 2400
+#: Bytes one run of :func:`pfjax.scenarios` takes at the peak of drawing it (its scenario arrays,
+#: its row of the table and the draws' temporaries). Measured: 293-295 B per run at 10^6 runs.
+SCENARIO_BYTES = 300
 #: Bytes per recorded sample of a trajectory (12 float64 fields).
 SAMPLE_BYTES = 8 * 12
 #: Most integrator steps one run may take (``horizon / dt``): a 20 s run at 10 us.

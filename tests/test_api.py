@@ -138,7 +138,7 @@ def test_success_rate_interval_is_clopper_pearson():
         (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "nope"), "controller"),
         (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", gains={"kp": 1.0}), "gains"),
         (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", config={"horizont": 3}), "config"),
-        (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", config={"dt": -1}), "dt"),
+        (lambda: pfjax.simulate(pfjax.scenarios("sine", 2), "pi", config={"dt": -1}), "config.dt"),
         (lambda: pfjax.success_rate([]), "success"),
         (lambda: pfjax.design_mixed(v=0.0), "v"),
         (lambda: pfjax.load_study("/nonexistent"), "out"),

@@ -280,3 +280,47 @@ def test_a_design_that_cannot_be_made_names_the_controller():
     sc = pfjax.scenarios("line", 2, speed=1e6)
     with pytest.raises(InputError, match=r"^controller: polytopic-integral synthesis failed: solver CLARABEL"):
         pfjax.simulate(sc, "polytopic-integral")
+
+
+@pytest.mark.parametrize(
+    "call, key",
+    [
+        (lambda: pfjax.scenarios("line", 2, horizon=1e12), "horizon"),
+        (lambda: pfjax.scenarios("spline", 2), "path"),
+        (lambda: pfjax.simulate(pfjax.scenarios("line", 2), "pi", None, {"dt": float("nan")}), "config.dt"),
+        (lambda: pfjax.simulate(pfjax.scenarios("line", 2), "pi", None, {"horizon": -1.0}), "config.horizon"),
+        (lambda: pfjax.replay(5, "line", "a", 0), "study"),
+    ],
+)
+def test_errors_name_the_argument_the_caller_passed(call, key):
+    """Not the study-config key or simulator field behind it (sim.dt, paths[0].points, dt, record)."""
+    _refused(call, key)
+
+
+def test_recording_beyond_the_memory_budget_names_trajectories(monkeypatch):
+    monkeypatch.setenv("PFJAX_MEMORY_BUDGET", str(10**6))
+    msg = _refused(
+        lambda: pfjax.simulate(pfjax.scenarios("line", 8), "pi", None, {"horizon": 20.0}, trajectories=True),
+        "trajectories",
+    )
+    assert "trajectories=False" in msg and "record=" not in msg
+
+
+def test_scenarios_beyond_the_memory_budget_are_refused_before_drawing(monkeypatch):
+    from pfjax.resources import SCENARIO_BYTES
+
+    monkeypatch.setenv("PFJAX_MEMORY_BUDGET", str(1000 * SCENARIO_BYTES))
+    msg = _refused(lambda: pfjax.scenarios("line", 1001), "n")
+    assert "1001 runs" in msg and "pfjax.run_study" in msg
+    assert pfjax.scenarios("line", 1000).n == 1000
+
+
+def test_replay_of_a_directory_without_a_study_or_of_no_runs_names_its_argument(tmp_path):
+    _refused(lambda: pfjax.replay(tmp_path, "line", "a", 0), "study")
+    _refused(lambda: pfjax.replay(_spec(), "line", "a", []), "runs")
+
+
+def _spec():
+    from pfjax.montecarlo.config import load_study
+
+    return load_study(data=STUDY)[0]

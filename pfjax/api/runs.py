@@ -6,7 +6,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from pfjax import errors
+from pfjax import errors, resources
 from pfjax.resources import MAX_STEPS
 
 #: :func:`scenarios`'s arguments -> the study config's keys.
@@ -67,7 +67,8 @@ def scenarios(
 
     Args:
         path: a registered path kind (``line``, ``parabola``, ``sine``, ``circle``, ...).
-        n: number of runs.
+        n: number of runs, at most 10^8 and what fits the memory budget (about 300 bytes per run,
+            :data:`pfjax.resources.SCENARIO_BYTES`; :func:`pfjax.resources.memory_budget`).
         beta_r_deg: constant rear slip angle, deg (kinematic model; default 5).
         beta_f_deg: constant front slip angle, deg (kinematic model; default 5).
         lateral_offset: start offset left of the path, m.
@@ -98,6 +99,12 @@ def scenarios(
     from pfjax.montecarlo.sampling import sample_runs
 
     n = errors.integer("n", n, low=1, high=100_000_000)
+    resources.check_memory(
+        "n",
+        n * resources.SCENARIO_BYTES,
+        f"drawing {n} runs at once",
+        "draw fewer runs per call, or run a study (pfjax.run_study), which streams any number in chunks",
+    )
     if model == "kinematic":  # the kinematic defaults (None: not given, so the ST model can refuse a given one)
         beta_r_deg = 5.0 if beta_r_deg is None else beta_r_deg
         beta_f_deg = 5.0 if beta_f_deg is None else beta_f_deg
@@ -234,7 +241,9 @@ def _renamed(e: errors.InputError) -> errors.InputError:
         text = text.replace(key, arg)
     text = (
         text.replace("paths[0].kind", "path")
+        .replace("paths[0]", "path")
         .replace("sim.horizon", "horizon")
+        .replace("sim.dt: horizon / dt", "horizon: horizon / dt")
         .replace("vehicle.convention", "convention")
     )
     return errors.InputError(text, text.split(":", 1)[0].split(".", 1)[0])

@@ -61,7 +61,10 @@ def sim_config(config, default=None):
             raise errors.InputError(
                 f"config.{unknown[0]}: unknown setting; expected one of {', '.join(names)}", "config"
             )
-        return SimConfig(**config)
+        try:
+            return SimConfig(**config)
+        except errors.InputError as e:  # named as the caller wrote it: config.dt, not dt
+            raise errors.renamed(e, e.key, f"config.{e.key}") if e.key in names else e from None
     if not isinstance(config, SimConfig):
         raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
     return config
@@ -126,9 +129,14 @@ def simulate(
     batch = batch._replace(
         gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(np.asarray(g), (m,) + np.shape(g)), params)
     )
-    res = jax.tree_util.tree_map(
-        lambda a: np.asarray(a)[:n], simulate_scenarios(batch, controller=e.controller, config=config)
-    )
+    try:
+        res = simulate_scenarios(batch, controller=e.controller, config=config)
+    except errors.InputError as err:  # the recording's memory check, named by this function's argument
+        if err.key != "record":
+            raise
+        text = str(errors.renamed(err, "record", "trajectories")).replace("record=False", "trajectories=False")
+        raise errors.InputError(text, "trajectories") from None
+    res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:n], res)
     return Simulation(add_results(t.copy(), res, n), res, e.name, {k: flat[k] for k in e.gains})
 
 
@@ -147,6 +155,7 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
     import jax
     import pandas as pd
 
+    from pfjax.api.studies import StudyResult, load_study
     from pfjax.montecarlo.config import StudySpec
     from pfjax.montecarlo.config import load_study as load_config
     from pfjax.montecarlo.runner import (
@@ -160,9 +169,15 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
     )
 
     if isinstance(study, (str, Path)):
-        from pfjax.api.studies import load_study
-
-        study = load_study(study)
+        try:
+            study = load_study(study)
+        except errors.InputError as e:
+            raise errors.renamed(e, "out", "study") from None
+    if not isinstance(study, (StudyResult, StudySpec)):
+        raise errors.InputError(
+            f"study: expected a StudyResult, a study's output directory or a StudySpec, got {type(study).__name__}",
+            "study",
+        )
     spec = study if isinstance(study, StudySpec) else load_config(data=study.summary["config"])[0]
     labels = [p.label for p in spec.paths]
     names = [c.name for c in spec.controllers]
@@ -177,6 +192,8 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
             "controller",
         )
     idx = np.atleast_1d(np.asarray(runs))
+    if idx.size == 0 or idx.ndim != 1:
+        raise errors.InputError(f"runs: expected a run index or a non-empty sequence of them, got {runs!r}", "runs")
     for r in idx.tolist():
         errors.integer("runs", r, low=0, high=spec.n_runs - 1)
     p, c = labels.index(path), names.index(controller)
