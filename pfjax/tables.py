@@ -13,10 +13,12 @@ mistaken for degrees, ``_hz``, ``_m``/``_s`` where the quantity could be mistake
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pandas as pd
-import pyarrow as pa
-import pyarrow.parquet as pq
+if TYPE_CHECKING:  # imported where used, so that the unit table (COLUMNS) costs no pandas or Arrow import
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
 
 #: column -> (unit, description). Units: "1" dimensionless, "" text or code.
 COLUMNS: dict[str, tuple[str, str]] = {
@@ -77,6 +79,8 @@ COLUMNS: dict[str, tuple[str, str]] = {
 
 def units(path: str | Path) -> dict[str, dict[str, str]]:
     """``{column: {"unit": ..., "description": ...}}`` of a Parquet file pfjax wrote."""
+    import pyarrow.parquet as pq
+
     out = {}
     for f in pq.read_schema(path):
         md = f.metadata or {}
@@ -88,6 +92,8 @@ def units(path: str | Path) -> dict[str, dict[str, str]]:
 def schema_with_units(schema, extra: dict[str, tuple[str, str]] | None = None, metadata: dict | None = None):
     """``schema`` with each known column's unit and description as field metadata (``extra``
     first, then :data:`COLUMNS`) and ``metadata`` added to the schema's key-value metadata."""
+    import pyarrow as pa
+
     known = {**COLUMNS, **(extra or {})}
     fields = []
     for f in schema:
@@ -107,6 +113,8 @@ def schema_with_units(schema, extra: dict[str, tuple[str, str]] | None = None, m
 
 def to_arrow(df, extra: dict[str, tuple[str, str]] | None = None, metadata: dict | None = None):
     """A pandas DataFrame as an Arrow table with units (:func:`schema_with_units`), no index."""
+    import pyarrow as pa
+
     t = pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False)
     return t.cast(schema_with_units(t.schema, extra, metadata))
 
@@ -116,6 +124,8 @@ def write_parquet(
 ) -> None:
     """Write ``df`` (pandas) to ``path`` with column units and ``metadata``
     (:func:`pfjax.provenance.parquet_metadata`)."""
+    import pyarrow.parquet as pq
+
     pq.write_table(to_arrow(df, units, metadata), path)
 
 
@@ -130,6 +140,10 @@ class ParquetAppender:
         self._writer: pq.ParquetWriter | None = None
 
     def write(self, table: pa.Table | pd.DataFrame) -> None:
+        import pandas as pd
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
         if isinstance(table, pd.DataFrame):
             table = pa.Table.from_pandas(table, preserve_index=False)
         if self._writer is None:
@@ -142,6 +156,9 @@ class ParquetAppender:
         return self
 
     def __exit__(self, *exc) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
         if self._writer is not None:
             self._writer.close()
         elif exc[0] is None:

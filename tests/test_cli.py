@@ -230,7 +230,7 @@ def test_gains_positional_and_named(capsys):
     base = ("simulate", "--path", "line", "--controller", "paper-k", "--json")
     a = run_main(capsys, *base, "--gains=-4,-1.5")
     b = run_main(capsys, *base, "--gains", "k_d=-4, k_theta=-1.5")
-    assert a == b
+    assert a == b  # the arguments recorded as parsed: the same hash
     assert a["gains"] == {"k_d": -4.0, "k_theta": -1.5}
     d_star = (2 * BETA - 1.5 * BETA) / -4.0
     assert a["final"]["d"] == pytest.approx(d_star, abs=1e-5)
@@ -629,3 +629,35 @@ def test_stdout_closed_by_its_reader_ends_quietly_with_exit_code_141(args):
         os.close(w)
     assert p.returncode == 141, p.stderr
     assert p.stderr == ""
+
+
+def test_simulate_json_gives_units_arguments_and_the_provenance_record(capsys):
+    """Every number of ``pfjax simulate --json`` has its unit (the metrics' from the run table's
+    COLUMNS), the arguments it ran with (defaults filled in) and a study summary's provenance record;
+    the same arguments give the same hash, another argument another."""
+    from pfjax.provenance import config_hash
+    from pfjax.tables import COLUMNS
+
+    base = ("simulate", "--path", "line", "--controller", "pi", "--horizon", "1", "--json")
+    a, b, c = run_main(capsys, *base), run_main(capsys, *base), run_main(capsys, *base, "--speed", "0.5")
+    u = a["units"]
+    assert u["final.theta"] == "rad" and u["beta_r"] == "rad" and u["x0.theta_deg"] == "deg" and u["T"] == "s"
+    numbers = [
+        f"{k}.{n}" if isinstance(v, dict) else k
+        for k, v in a.items()
+        if k not in ("units", "arguments", "cpu_settings")
+        for n in (v if isinstance(v, dict) else [None])
+        if isinstance(v[n] if isinstance(v, dict) else v, float)
+        and not isinstance(v[n] if isinstance(v, dict) else v, bool)
+    ]
+    assert set(numbers) <= set(u), set(numbers) - set(u)
+    assert all(u[f"metrics.{m}"] == COLUMNS[m][0] for m in ("iae", "max_abs_d", "settling_time"))
+    assert a["arguments"]["horizon"] == 1.0 and a["arguments"]["speed"] == 1.0 and "func" not in a["arguments"]
+    assert a["config_sha256"] == config_hash(a["arguments"]) == b["config_sha256"] != c["config_sha256"]
+    assert {"pfjax_version", "machine", "cpu_settings", "seed"} <= set(a)
+
+
+def test_examples_json_is_the_listing_alone(capsys):
+    from pfjax import examples
+
+    assert list(run_main(capsys, "examples", "--json")) == examples.names()

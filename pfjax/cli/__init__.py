@@ -70,7 +70,9 @@ def main(argv=None) -> int:
     def body() -> int:
         out = args.func(args)
         if args.json:
-            print(dumps(out))
+            from pfjax.cli.records import stamped
+
+            print(dumps(stamped(out, args)))
         else:
             getattr(args, "human", print_human)(out)
         return 0

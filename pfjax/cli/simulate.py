@@ -21,6 +21,7 @@ import math
 
 from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags, finite
 from pfjax.cli.synth import SYNTH_FLAGS
+from pfjax.tables import COLUMNS
 
 
 def _gain_names(controller: str) -> tuple[str, ...]:
@@ -78,6 +79,7 @@ def _controller_and_gains(args):
 
     e, d = C.resolve(args.controller, "--controller")
     given = _parse_gains(args.controller, args.gains)
+    args.gains = given or None  # recorded as parsed (pfjax.cli.records): "-4,-1.5" and "k_d=-4,k_theta=-1.5" alike
     with as_flags({"gains": "--gains", "K": "--gains"}):
         flat = C.flat_gains(e)
         if d is not None and not set(e.gains) <= set(given):
@@ -135,6 +137,24 @@ SIMULATE_FLAGS = {
     "mu": "--mu",
     "tau_delta": "--tau-delta",
     "k_v": "--k-v",
+}
+
+
+#: The unit of each number ``cmd`` returns (:func:`pfjax.cli.records.units`).
+UNITS = {
+    "x0.x": "m",
+    "x0.y": "m",
+    "x0.theta_deg": "deg",
+    "beta_r": "rad",
+    "beta_f": "rad",
+    "mu": "1",
+    "T": "s",
+    "dt": "s",
+    "final.*": {"x": "m", "y": "m", "theta": "rad", "d": "m", "theta_e": "rad", "delta": "rad", "s": "m"},
+    "metrics.*": {name: unit for name, (unit, _) in COLUMNS.items()},
+    "slip.*": {name: unit for name, (unit, _) in COLUMNS.items()},
+    "fail_time": "s",
+    "gains.*": "the controller's parameter units (pfjax.controllers)",
 }
 
 
@@ -276,7 +296,8 @@ def register(sub) -> None:
     m = sub.add_parser(
         "simulate",
         help="simulate one run of a paper scenario and print final state and metrics",
-        description="One closed-loop run of the slip model on a path (SI units; angles in degrees).",
+        description="One closed-loop run of the slip model on a path (SI units; the flags take angles in degrees, "
+        "and --json gives the unit of every number it prints).",
     )
     from pfjax import paths
 
@@ -342,4 +363,4 @@ def register(sub) -> None:
     m.add_argument("--tau-delta", type=float, help="st: steering actuator time constant, s (default 0.05)")
     m.add_argument("--k-v", type=float, help="st: speed loop gain, 1/s (default 5)")
     m.add_argument("--json", action="store_true", help="print one JSON object")
-    m.set_defaults(func=cmd)
+    m.set_defaults(func=cmd, units=UNITS)

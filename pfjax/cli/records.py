@@ -1,0 +1,77 @@
+"""What a command's JSON output records beside its result (``pfjax <command> --json``).
+
+A command that computes a result without a config of its own (``simulate``, ``synth``, ``tune``,
+``parking``, ``parking-search``, ``track``) declares the unit of each number it prints
+(``set_defaults(units=...)`` on its parser), and prints its result with:
+
+* ``units``: the unit of each number, by its dotted key (``"final.theta": "rad"``), from that
+  table (a key ``"<parent>.*"`` gives the unit of every number under ``<parent>`` by its name, e.g.
+  the metrics by :data:`pfjax.tables.COLUMNS`);
+* ``arguments``: every argument the command ran with, defaults filled in (run it again with them);
+* the provenance record of a study's ``summary.json`` (:func:`pfjax.provenance.stamp`): pfjax's
+  version, ``config_sha256`` (over ``arguments``: the same arguments, the same hash), the seed where
+  the command takes one, the machine and the CPU settings.
+
+Commands with a config of their own (``study``, ``report``, ``rare-event``, ``bench``) carry
+their own ``config_sha256``; listings (``examples``) are printed as they are.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+#: Attributes of the parsed arguments that are the command's machinery, not its input.
+_INTERNAL = {"func", "human", "json", "units", "command"}
+
+
+def _jsonable(v):
+    if isinstance(v, Path):
+        return str(v)
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    return v
+
+
+def arguments(args) -> dict:
+    """The command's arguments (the parsed ``args``, defaults filled in) as a JSON-able dict."""
+    return {k: _jsonable(v) for k, v in sorted(vars(args).items()) if k not in _INTERNAL}
+
+
+def units(out: Mapping, table: Mapping) -> dict[str, str]:
+    """``{dotted key: unit}`` for every value of ``out`` (numbers, lists of numbers) whose key
+    ``table`` gives a unit: ``table[key]``, else ``table["<parent>.*"][name]``. Text and codes
+    (unit ``""``) are left out."""
+    found: dict[str, str] = {}
+
+    def walk(d: Mapping, prefix: str) -> None:
+        by_name = table.get(f"{prefix}*", {})
+        for name, value in d.items():
+            key = f"{prefix}{name}"
+            if isinstance(value, Mapping):
+                walk(value, f"{key}.")
+                continue
+            unit = table.get(key, by_name.get(name) if isinstance(by_name, Mapping) else by_name)
+            if isinstance(unit, str) and unit:
+                found[key] = unit
+
+    walk(out, "")
+    return found
+
+
+def stamped(out, args):
+    """``out`` with its ``units``, ``arguments`` and provenance (module docstring); unchanged if the
+    command declares no units, ``out`` is not a dict or it carries a ``config_sha256`` of its own.
+    Keys of ``out`` win over the record's."""
+    from pfjax import provenance
+
+    table = getattr(args, "units", None)
+    if table is None or not isinstance(out, dict) or "config_sha256" in out:
+        return out
+    given = arguments(args)
+    record = {
+        "units": units(out, table),
+        "arguments": given,
+        **provenance.stamp(given, given.get("seed")),
+    }
+    return {**out, **{k: v for k, v in record.items() if k not in out}}
