@@ -15,6 +15,7 @@ exact value in its 95 % interval (the seeds are fixed, so a test fails the same 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -553,3 +554,41 @@ def test_reliability_check_flags_concentrated_weights():
     assert blind.detail["max_weight_share"] < 0.01 and reliability(blind)["status"] == "ok"
     good = cross_entropy_is(far_and_near, 2, starts=[[3.7, 0.0], [-3.2, 0.0]], seed=3)
     assert good.detail["max_weight_share"] < 0.01 and reliability(good)["status"] == "ok"
+
+
+@pytest.mark.parametrize(
+    ("method", "extra", "need"),
+    [
+        ("is", [], 2 * 1000 + 1),  # starts (explore), one cross-entropy level and a draw
+        ("is", ["--set", "rare_event.starts=none"], 1000 + 1),
+        ("subset", [], 1000),  # a first level
+    ],
+)
+def test_a_budget_below_what_the_method_needs_is_refused_before_anything_is_simulated(
+    tmp_path, capsys, monkeypatch, method, extra, need
+):
+    """``max_rollouts`` split over the strata below what one stratum's estimate needs
+    (:func:`pfjax.rare.study.rollouts_needed`): one line naming the flag and the least budget, exit
+    2, no rollout spent; the least budget itself is accepted (a study with 2 paths: 2 strata)."""
+    from pfjax.cli import main
+    from pfjax.montecarlo.config import load_study
+    from pfjax.rare import study
+
+    cfg = tmp_path / "two.toml"
+    cfg.write_text(
+        Path(_write(tmp_path, 1.0)).read_text().replace('kind = "line"', 'kind = "line"\n[[paths]]\nkind = "sine"')
+    )
+
+    def no_rollouts(*a, **kw):
+        raise AssertionError("a rollout was spent")
+
+    monkeypatch.setattr(study, "limit_state", no_rollouts)
+    argv = ["rare-event", str(cfg), "--method", method, *extra]
+    assert main([*argv, "--max-rollouts", str(2 * need - 1)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("pfjax rare-event: error: --max-rollouts: "), err
+    assert f"at least {need} rollouts per stratum" in err and f"at least {2 * need} in all" in err, err
+    spec = load_study(str(cfg), [f"rare_event.method={method}", f"rare_event.max_rollouts={2 * need}", *extra[1:]])[0]
+    study.check_budget(spec)
+    with pytest.raises(AssertionError, match="a rollout was spent"):  # past the check, the first rollout
+        pfjax.rare_event(spec)

@@ -120,7 +120,8 @@ def rare_event(
         method: ``is`` (cross-entropy importance sampling), ``subset`` (subset simulation) or
             ``mc`` (plain Monte Carlo, exact binomial interval).
         target_rel_error: stop once the relative error (coefficient of variation) is at most this.
-        max_rollouts: rollouts per controller at most.
+        max_rollouts: rollouts per controller, split evenly over the strata (docs/rare-events.md, *The budget*:
+            at least :func:`pfjax.rare.study.rollouts_needed` per stratum, checked before anything is simulated).
         seed: seed of the estimator's draws.
         progress: a progress bar on stderr (default: when it is a terminal).
         overrides: config values by key, nested keys with ``__``, as :func:`run_study`.
@@ -132,8 +133,7 @@ def rare_event(
     from pfjax.montecarlo.config import study_hash
     from pfjax.montecarlo.runner import controllers_of
     from pfjax.rare import METHODS
-    from pfjax.rare.study import estimate_study
-    from pfjax.rare.transform import study_inputs
+    from pfjax.rare.study import check_budget, estimate_study
 
     values = {k.replace("__", "."): v for k, v in overrides.items()}
     if method is not None:
@@ -155,7 +155,7 @@ def rare_event(
             f"controller: {controller!r} is not one of study {spec.name!r}'s controllers: {', '.join(names)}",
             "controller",
         )
-    study_inputs(spec)  # an unsupported study fails here, before anything is simulated
+    check_budget(spec)  # an unsupported study or too small a budget fails here, before anything is simulated
     controllers = controllers_of(spec)
     chosen = names if controller is None else [controller]
     return {

@@ -91,7 +91,13 @@ class RareEventSpec(ConfigModel):
     target_rel_error: Real = Field(
         0.1, gt=0, le=10, description="stop once the estimate's relative error (c.o.v.) is at most this"
     )
-    max_rollouts: int = Field(100_000, ge=100, le=100_000_000, description="rollouts per controller at most")
+    max_rollouts: int = Field(
+        100_000,
+        ge=100,
+        le=100_000_000,
+        description="rollouts per controller, split evenly over the strata (subset simulation completes a run it "
+        "has started, the first one always)",
+    )
     n_per_level: int = Field(
         2000, ge=100, le=10_000_000, description="is / subset: rollouts per cross-entropy or subset level"
     )

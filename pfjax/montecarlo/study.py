@@ -70,6 +70,10 @@ def run(
     from pfjax.outputs import OutputDir
 
     check_resources(spec, report=report)  # before anything is written or allocated
+    if spec.rare_event.enabled:
+        from pfjax.rare.study import check_budget
+
+        check_budget(spec)  # the rare-event estimates' budget, before the runs
     output = out if isinstance(out, OutputDir) else study_output(spec, out, overwrite=overwrite)
     if controllers is None and not distributed:  # a design that fails stops here, before --out is made
         controllers = controllers_of(spec)

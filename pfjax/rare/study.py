@@ -114,6 +114,41 @@ def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict
     return (starts if len(starts) else None), used, {"starts": "explore"}
 
 
+def rollouts_needed(spec: StudySpec) -> tuple[int, str]:
+    """The fewest rollouts per stratum with which ``spec.rare_event.method`` yields an estimate, and
+    what they are for: plain Monte Carlo 1; subset simulation ``n_per_level`` (its first level);
+    importance sampling ``n_per_level`` for its starts (``explore``, and the fallback of
+    ``falsifier``; none for ``none``), ``n_per_level`` for a cross-entropy level and 1 draw to
+    estimate from."""
+    rare = spec.rare_event
+    n = rare.n_per_level
+    if rare.method == "mc":
+        return 1, "one run"
+    if rare.method == "subset":
+        return n, f"a first level of n_per_level = {n}"
+    if rare.starts == "none":
+        return n + 1, f"a cross-entropy level of n_per_level = {n} and a draw"
+    return 2 * n + 1, f"{n} for the starts, a cross-entropy level of {n} (n_per_level) and a draw"
+
+
+def check_budget(spec: StudySpec) -> None:
+    """:class:`~pfjax.errors.InputError` naming ``max_rollouts`` when ``spec.rare_event.max_rollouts``,
+    split evenly over the study's strata (:func:`pfjax.rare.transform.study_inputs`), leaves a
+    stratum fewer rollouts than its method needs (:func:`rollouts_needed`): refused before anything
+    is simulated, not after a stratum has spent them."""
+    from pfjax import errors
+
+    rare = spec.rare_event
+    strata = len(study_inputs(spec)[1])
+    need, what = rollouts_needed(spec)
+    if rare.max_rollouts // strata < need:
+        raise errors.InputError(
+            f"max_rollouts: {rare.method} needs at least {need} rollouts per stratum ({what}); the study has "
+            f"{strata} strata (paths x choice values), so at least {need * strata} in all, got {rare.max_rollouts}",
+            "max_rollouts",
+        )
+
+
 def _estimate(g, dim, method, rare, budget, seed, target, falsifier=lambda: None):
     if method == "mc":
         return monte_carlo(g, dim, n=budget, seed=seed, batch=rare.batch)
@@ -197,6 +232,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
         ``[]`` for the other methods).
     """
     rare = spec.rare_event
+    check_budget(spec)
     inputs, strata = study_inputs(spec)
     dim = max(1, len(inputs))
     budget = rare.max_rollouts // len(strata)
