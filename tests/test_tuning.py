@@ -107,6 +107,7 @@ def test_gradient_tune_quadratic_in_box():
 def test_tune_cli_contract(capsys):
     from pfjax.cli import main
 
+    own = {"ga": ["--generations", "2", "--population", "6"], "gradient-plain": ["--steps", "3"]}
     for method in ("ga", "gradient-plain"):
         rc = main(
             [
@@ -117,12 +118,7 @@ def test_tune_cli_contract(capsys):
                 "state-feedback",
                 "--scenario",
                 "paper-line",
-                "--generations",
-                "2",
-                "--population",
-                "6",
-                "--steps",
-                "3",
+                *own[method],
                 "--dt",
                 "0.01",
                 "--horizon",
@@ -145,7 +141,7 @@ def test_tune_cli_contract(capsys):
         (["--method", "sgd", "--controller", "pi"], "--method"),
         (["--method", "ga", "--controller", "lqr"], "--controller"),
         (["--method", "ga", "--controller", "pi", "--cost", "mse"], "--cost"),
-        (["--method", "ga", "--controller", "pi", "--level", "1.5"], "--level"),
+        (["--method", "ga", "--controller", "pi", "--aggregate", "cvar", "--level", "1.5"], "--level"),
         (["--method", "ga", "--controller", "pi", "--population", "1"], "--population"),
         (["--method", "ga", "--controller", "pi", "--scenario", "missing.toml"], "--scenario"),
         (["--method", "ga", "--controller", "pi", "--model", "dynamic"], "--model"),
@@ -202,14 +198,15 @@ def test_tune_cli_on_the_dynamic_model(capsys):
 def test_tune_api_model_keyword_std():
     """``pfjax.tune(..., model=...)`` and :func:`make_problem`'s ``model``: on ``std`` a paper set's
     runs are the drift model's (CommonRoad's vehicle2 parameters, the paths' start poses), on
-    ``st`` the robot's; a bad value names ``model``."""
+    ``st`` the robot's; a bad value names ``model``. The drift model's wheel-speed modes at 1 m/s
+    need a step of at most 0.27 ms (:func:`pfjax.models.single_track.max_stable_step`)."""
     import pfjax
     from pfjax import paths
     from pfjax.models import single_track as st
     from pfjax.sim.dynamic import DynamicScenario
 
-    for model, cls, name in (("std", st.STDParams, "vehicle2"), ("st", st.STParams, "robot")):
-        pr = make_problem("pi", "paper-all", model=model)
+    for model, cls, name, dt in (("std", st.STDParams, "vehicle2", 2.5e-4), ("st", st.STParams, "robot", 0.005)):
+        pr = make_problem("pi", "paper-all", model=model, config={"dt": dt})
         assert len(pr.scenarios) == 3 and pr.n_per_eval == 3
         for sc, path in zip(pr.scenarios, ("line", "parabola", "sine")):
             assert isinstance(sc, DynamicScenario) and isinstance(sc.vehicle, cls)

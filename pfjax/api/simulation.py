@@ -48,23 +48,13 @@ def sim_config(config, default=None):
     """``config`` (a :class:`pfjax.sim.SimConfig`, a dict of its fields, or None for ``default``) as a
     ``SimConfig``; :class:`~pfjax.errors.InputError` naming ``config`` otherwise (the fields are
     checked by ``SimConfig``)."""
-    import dataclasses
-
     from pfjax.sim import SimConfig
+    from pfjax.sim.settings import changed
 
     if config is None:
         return default
     if isinstance(config, dict):
-        names = [f.name for f in dataclasses.fields(SimConfig)]
-        unknown = [k for k in config if k not in names]
-        if unknown:
-            raise errors.InputError(
-                f"config.{unknown[0]}: unknown setting; expected one of {', '.join(names)}", "config"
-            )
-        try:
-            return SimConfig(**config)
-        except errors.InputError as e:  # named as the caller wrote it: config.dt, not dt
-            raise errors.renamed(e, e.key, f"config.{e.key}") if e.key in names else e from None
+        return changed(SimConfig(), config)
     if not isinstance(config, SimConfig):
         raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
     return config
@@ -110,17 +100,12 @@ def simulate(
     config = dataclasses.replace(sim_config(config, SimConfig()), record=bool(trajectories))
     t = scenarios.table
     if scenarios.spec.vehicle.model in ("st", "std"):
-        from pfjax.models.single_track import max_stable_step, with_mu
+        from pfjax.models.single_track import check_step, with_mu
 
         veh = scenarios.spec.vehicle
-        mu_hi = float(t["mu"].max())
-        dt_max = max_stable_step(with_mu(veh.model_params(), mu_hi), float(t["speed"].min()), veh.tau_delta_s, veh.k_v)
-        if config.dt > dt_max:
-            raise errors.InputError(
-                f"config.dt: the {veh.model.upper()} model at mu = {mu_hi:g} and speed {float(t['speed'].min()):g} m/s (the runs' "
-                f"worst case) needs dt <= {dt_max:.3g} s for a stable RK4 step, got {config.dt:g}",
-                "config",
-            )
+        params = with_mu(veh.model_params(), float(t["mu"].max()))
+        v_lo = float(t["speed"].min())
+        check_step("config.dt", config.dt, params, v_lo, veh.tau_delta_s, veh.k_v, worst_case="the runs' worst case")
     params, flat = resolve_gains(e, d, gains, float(t["speed"].mean()), float(t["L"].mean()))
     n = scenarios.n
     m = batch_size(n)  # padded like a study's chunks: every run takes the same vector code

@@ -44,7 +44,9 @@ def tune(
             adam steps from its best).
         key: int seed (or JAX key) of the GA population / the gradient's starts.
         cost: a :class:`pfjax.tuning.CostSpec` (metric, effort weight, aggregate); default mean IAE.
-        config: a :class:`pfjax.sim.SimConfig` or a dict of its fields (default 20 s at 5 ms, or the study's).
+        config: a :class:`pfjax.sim.SimConfig`, or a dict of its fields that change the default
+            settings (20 s at 5 ms) or the study's; on ``st`` and ``std`` its ``dt`` must be a stable RK4 step for the runs
+            (:func:`pfjax.tuning.problem.make_problem`; errors name ``config.dt``).
         model: the vehicle model, ``kinematic`` | ``st`` | ``std`` (default: kinematic, or the
             study's ``[vehicle] model``, which ``model`` replaces); a paper set on ``st`` uses the
             robot's parameters, on ``std`` CommonRoad's vehicle2 (:func:`pfjax.tuning.problem.make_problem`).
@@ -77,7 +79,8 @@ def tune(
         )
     name = next((n for n, e in C.REGISTRY.items() if controller in (n, e.cli_name)), controller)
     k = prng_key(key)
-    config = sim_config(config)
+    # a dict changes the default or the study's settings (make_problem); a bad field is named config.<field>
+    config = config if isinstance(config, dict) else sim_config(config)
     cost = CostSpec() if cost is None else cost
     problem = make_problem(name, scenario, cost=cost, config=config, n_runs=n_runs, model=model)
     if check is not None:
@@ -88,17 +91,20 @@ def tune(
             "check": as_dict(r, problem.tunable.fields, problem.tunable.sizes),
             "result": r,
         }
-    res = run_tune(
-        problem,
-        method,
-        key=k,
-        ga_options=GAOptions(population_size=population, generations=generations),
-        steps=steps,
-        n_starts=n_starts,
-        learning_rate=learning_rate,
-        multistart=multistart,
-        progress=progress,
-    )
+    try:
+        res = run_tune(
+            problem,
+            method,
+            key=k,
+            ga_options=GAOptions(population_size=population, generations=generations),
+            steps=steps,
+            n_starts=n_starts,
+            learning_rate=learning_rate,
+            multistart=multistart,
+            progress=progress,
+        )
+    except errors.InputError as e:  # the GA's population_size is this function's population
+        raise errors.renamed(e, "population_size", "population") from None
     return _tuned(C.flat_gains(C.entry(name), problem.tunable.gains(res.theta)), res)
 
 

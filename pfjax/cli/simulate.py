@@ -261,12 +261,7 @@ def _simulate_st(args, cfg, pose0) -> dict:
         model=args.model,
     )
     mu = float(st.body(sc.vehicle).mu)
-    dt_max = st.max_stable_step(sc.vehicle, args.speed, float(sc.tau_delta), float(sc.k_v))
-    if cfg.dt > dt_max:
-        raise UsageError(
-            f"--dt: the {args.model.upper()} model at --mu {mu:g} and --speed {args.speed:g} needs dt <= "
-            f"{dt_max:.3g} s for a stable RK4 step, got {cfg.dt:g}"
-        )
+    st.check_step("--dt", cfg.dt, sc.vehicle, args.speed, float(sc.tau_delta), float(sc.k_v))
     r = jax.device_get(dyn.simulate_one(sc, controller=controller, config=cfg))
     status = int(r.status)
     metrics: dict[str, bool | float | str] = {

@@ -7,7 +7,11 @@ or check given gains.
                [--model {kinematic,st,std}]
                [--cost iae] [--aggregate mean] [--effort 0] [--seed 0] [--generations 100] [--population 50]
                [--steps N] [--starts N] [--lr X] [--screen 64] [--sampler sobol] [--rounds 3] [--restarts 3]
-               [--polish 8] [--smoothing 0] [--n-runs 16] [--dt 0.005] [--horizon 20] [--json]
+               [--polish 8] [--smoothing 0] [--from-default] [--n-runs 16] [--dt 0.005] [--horizon 20] [--json]
+
+A flag the chosen method (or ``--check``), scenario or aggregate does not read is refused
+(:data:`METHOD_FLAGS`); ``--dt`` and ``--horizon`` change the default or the study's settings and
+the result is checked by :func:`pfjax.tuning.problem.make_problem` (a stable step on ``st`` and ``std``).
 
 Prints ``gains``, ``cost``, ``n_rollouts_simulated`` (every rollout, value-only or with a gradient),
 ``n_forward_passes`` (a rollout with its gradient counted as ``1 + D`` forward passes in forward
@@ -69,11 +73,11 @@ def register(sub) -> None:
     )
     p.add_argument("--cost", default="iae", help="iae | ise | itae (per run, plus --effort * int delta^2 dt)")
     p.add_argument("--aggregate", default="mean", help="mean | quantile | cvar over the scenario batch")
-    p.add_argument("--level", type=float, default=0.9, help="quantile / CVaR level in (0, 1)")
+    p.add_argument("--level", type=float, default=None, help="quantile / CVaR level in (0, 1) (0.9)")
     p.add_argument("--effort", type=float, default=0.0, help="control-effort weight (>= 0)")
-    p.add_argument("--seed", type=int, default=0, help="PRNG seed (GA population / gradient start)")
-    p.add_argument("--generations", type=int, default=100, help="GA generations (source: 100)")
-    p.add_argument("--population", type=int, default=50, help="GA population (source: 50)")
+    p.add_argument("--seed", type=int, default=None, help="PRNG seed (GA population / gradient start; 0)")
+    p.add_argument("--generations", type=int, default=None, help="ga, ga+gradient: GA generations (source: 100)")
+    p.add_argument("--population", type=int, default=None, help="ga, ga+gradient: GA population (source: 50)")
     p.add_argument(
         "--steps",
         type=int,
@@ -82,7 +86,10 @@ def register(sub) -> None:
         "ga+gradient: polishing steps (30)",
     )
     p.add_argument(
-        "--starts", type=int, default=None, help="starts descended together (vmapped; gradient 8, gradient-plain 1)"
+        "--starts",
+        type=int,
+        default=None,
+        help="gradient, gradient-plain: starts descended together (vmapped; gradient 8, gradient-plain 1)",
     )
     p.add_argument(
         "--lr",
@@ -91,7 +98,7 @@ def register(sub) -> None:
         help="gradient: first BFGS trust radius (0.1); adam step (gradient-plain 0.05, ga+gradient 0.01); box units",
     )
     _multistart_flags(p)
-    p.add_argument("--n-runs", type=int, default=16, help="runs per path sampled from a CONFIG study")
+    p.add_argument("--n-runs", type=int, default=None, help="runs per path sampled from a CONFIG study (16)")
     p.add_argument("--dt", type=float, default=None, help="integrator step, s (default: 0.005 or the study's)")
     p.add_argument("--horizon", type=float, default=None, help="simulated time, s (default: 20 or the study's)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -111,12 +118,16 @@ def _multistart_flags(p) -> None:
         help="gradient: value-only compass iterations around the incumbent (8; 0: none)",
     )
     p.add_argument(
-        "--smoothing", type=float, default=None, help="gradient: randomised-smoothing radius, first round (0: off)"
+        "--smoothing",
+        type=float,
+        default=None,
+        help="gradient: randomised-smoothing radius of the first round, box units in [0, 1] (0: off)",
     )
     p.add_argument(
         "--from-default",
         action="store_true",
-        help="gradient-plain, ga+gradient: start from the controller's default gains (gradient always screens them)",
+        help="gradient-plain: start from the controller's default gains (gradient always screens them; the GA "
+        "starts from a uniform population)",
     )
 
 
@@ -164,8 +175,6 @@ def _multistart(args):
 
 
 def _cmd(args) -> dict:
-    import dataclasses
-
     import jax
 
     from pfjax import __version__, errors
@@ -176,16 +185,25 @@ def _cmd(args) -> dict:
 
     controllers = _controllers()
     _check_flags(args, controllers)
+    for dest, value in DEFAULTS.items():
+        if getattr(args, dest) is None:
+            setattr(args, dest, value)
     key = jax.random.PRNGKey(errors.seed("--seed", args.seed))
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
         multistart = _multistart(args)
-        problem = make_problem(
-            controllers[args.controller], args.scenario, cost=cost, n_runs=args.n_runs, model=args.model
-        )
         changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
-        if changes:
-            problem = problem._replace(config=dataclasses.replace(problem.config, **changes))
+        try:  # the study's or the default settings with --dt and --horizon, checked as a whole
+            problem = make_problem(
+                controllers[args.controller],
+                args.scenario,
+                cost=cost,
+                config=changes or None,
+                n_runs=args.n_runs,
+                model=args.model,
+            )
+        except errors.InputError as e:
+            raise errors.renamed(errors.renamed(e, "config.dt", "--dt"), "config.horizon", "--horizon") from None
         common = {
             "controller": args.controller,
             "scenario": args.scenario,
@@ -251,9 +269,28 @@ def _model_of(problem) -> str:
     return "std" if isinstance(sc.vehicle, STDParams) else "st"
 
 
+#: The defaults of the flags that only some methods or scenarios read (``None`` in the parser, so
+#: that a given one can be told apart).
+DEFAULTS = {"seed": 0, "generations": 100, "population": 50, "n_runs": 16, "level": 0.9}
+
+#: The methods that read each method-specific flag (by its destination); ``--check`` reads none.
+METHOD_FLAGS = {
+    "seed": ("gradient", "gradient-plain", "ga", "ga+gradient"),
+    "generations": ("ga", "ga+gradient"),
+    "population": ("ga", "ga+gradient"),
+    "steps": ("gradient", "gradient-plain", "ga+gradient"),
+    "starts": ("gradient", "gradient-plain"),
+    "lr": ("gradient", "gradient-plain", "ga+gradient"),
+    **{dest: ("gradient",) for dest in ("screen", "sampler", "rounds", "restarts", "polish", "smoothing")},
+    "from_default": ("gradient-plain",),
+}
+
+
 def _check_flags(args, controllers: dict) -> None:
-    """:class:`UsageError` naming the first bad flag among ``--controller``, ``--method``, ``--check`` and ``--model``."""
-    from pfjax.tuning.problem import METHODS, MODELS
+    """:class:`UsageError` naming the first bad flag among ``--controller``, ``--method``, ``--check``
+    and ``--model``, or the first flag given that the chosen method (or ``--check``), scenario or
+    aggregate does not read."""
+    from pfjax.tuning.problem import METHODS, MODELS, scenario_sets
 
     if args.controller not in controllers:
         raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}")
@@ -265,3 +302,12 @@ def _check_flags(args, controllers: dict) -> None:
         raise UsageError(f"--method: value {args.method!r}, expected one of {', '.join(METHODS)}")
     if args.model is not None and args.model not in MODELS:
         raise UsageError(f"--model: value {args.model!r}, expected one of {', '.join(MODELS)}")
+    for dest, methods in METHOD_FLAGS.items():
+        given = getattr(args, dest) is not None and getattr(args, dest) is not False  # 0 is given
+        if given and args.method not in methods:
+            mode = "--check" if args.method is None else f"--method {args.method}"
+            raise UsageError(f"--{dest.replace('_', '-')}: not with {mode} (only with --method {', '.join(methods)})")
+    if args.n_runs is not None and args.scenario in scenario_sets():
+        raise UsageError(f"--n-runs: not with --scenario {args.scenario} (it samples the runs of a study TOML)")
+    if args.level is not None and args.aggregate == "mean":
+        raise UsageError("--level: not with --aggregate mean (only with quantile, cvar)")

@@ -93,6 +93,7 @@ __all__ = [
     "STState",
     "acceleration",
     "body",
+    "check_step",
     "drift_modes",
     "drift_parameter_set",
     "drift_params_from_commonroad",
@@ -169,6 +170,34 @@ def max_stable_step(params: STParams | STDParams, v: float, tau_delta: float = m
     modes = drift_modes(params, v) if isinstance(params, STDParams) else lateral_eigenvalues(params, v)
     fastest = max(float(np.max(np.abs(modes))), 1 / tau_delta, k_v)
     return RK4_REACH / fastest
+
+
+def check_step(
+    key: str,
+    dt: float,
+    params: STParams | STDParams,
+    v: float,
+    tau_delta: float = math.inf,
+    k_v: float = 0.0,
+    *,
+    worst_case: str | None = None,
+) -> None:
+    """:class:`~pfjax.errors.InputError` naming ``key`` when ``dt`` (s) is beyond
+    :func:`max_stable_step` of ``params`` (their friction) at speed ``v`` (m/s) with the steering
+    actuator ``tau_delta`` (s) and speed loop ``k_v`` (1/s): the one check of the step that a study
+    config, :func:`pfjax.simulate`, ``pfjax simulate`` and tuning make. ``worst_case``: where
+    ``params`` and ``v`` come from, said in the message (``"the runs' worst case"``)."""
+    from pfjax.errors import InputError
+
+    dt_max = max_stable_step(params, v, tau_delta, k_v)
+    if dt > dt_max:
+        name = "STD" if isinstance(params, STDParams) else "ST"
+        where = f" ({worst_case})" if worst_case else ""
+        raise InputError(
+            f"{key}: the {name} model at mu = {float(body(params).mu):g} and speed {v:g} m/s{where} needs "
+            f"dt <= {dt_max:.3g} s for a stable RK4 step, got {dt:g}",
+            key,
+        )
 
 
 def body(params: STParams | STDParams) -> STParams:

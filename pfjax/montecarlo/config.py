@@ -175,17 +175,15 @@ class StudySpec(ConfigModel):
                     f'slip.{key}: not with vehicle.model = "{self.vehicle.model}" (its slip comes from the tyre '
                     "forces); remove it"
                 )
-            from pfjax.models.single_track import max_stable_step, with_mu
+            from pfjax.models.single_track import check_step, with_mu
 
             veh = self.vehicle
             mu_hi = veh.st_params().mu if veh.mu is None else veh.mu.bounds()[1]
+            params = with_mu(veh.model_params(), mu_hi)
             v_lo = veh.speed.bounds()[0]
-            dt_max = max_stable_step(with_mu(veh.model_params(), mu_hi), v_lo, veh.tau_delta_s, veh.k_v)
-            if self.sim.dt > dt_max:
-                raise ValueError(
-                    f"sim.dt: the {veh.model.upper()} model at mu = {mu_hi:g} and speed {v_lo:g} m/s (the ranges' worst case) needs "
-                    f"dt <= {dt_max:.3g} s for a stable RK4 step, got {self.sim.dt:g}"
-                )
+            check_step(
+                "sim.dt", self.sim.dt, params, v_lo, veh.tau_delta_s, veh.k_v, worst_case="the ranges' worst case"
+            )
             for key, section, what in (
                 ("margin.enabled", self.margin, "slip-margin sweep"),
                 ("falsifier.enabled", self.falsifier, "worst-case search"),

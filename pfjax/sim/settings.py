@@ -61,3 +61,19 @@ class SimConfig:
     @property
     def success_start(self) -> float:
         return self.n_steps * self.dt - self.steady_window if self.success_from is None else self.success_from
+
+
+def changed(base: SimConfig, changes: dict, key: str = "config") -> SimConfig:
+    """``base`` with the fields in ``changes`` replaced (and checked as :class:`SimConfig` checks
+    them); :class:`~pfjax.errors.InputError` naming ``<key>.<field>`` for an unknown or bad field,
+    as a caller who passed ``changes`` as its argument ``key`` wrote it."""
+    import dataclasses
+
+    names = [f.name for f in dataclasses.fields(SimConfig)]
+    unknown = [k for k in changes if k not in names]
+    if unknown:
+        raise InputError(f"{key}.{unknown[0]}: unknown setting; expected one of {', '.join(names)}", key)
+    try:
+        return dataclasses.replace(base, **changes)
+    except InputError as e:
+        raise (errors.renamed(e, e.key, f"{key}.{e.key}") if e.key in names else e) from None

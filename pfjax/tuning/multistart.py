@@ -25,9 +25,9 @@ Tuning costs have long curved valleys (for the PI, the damping ratio ``~ kp_thet
 sets the cost and the valley runs along it), which a diagonal method such as Adam crosses back and
 forth; the BFGS curvature pairs follow the valley.
 
-With ``smoothing = s > 0`` the first round evaluates each trial at ``z_t + sigma_k eps_k``
-(``eps_k ~ N(0, I)``, one draw per chain and step, ``sigma_k`` falling linearly from ``s`` to 0
-over the round): a one-sample randomised smoothing of the cost, which can step over basins
+With ``smoothing = s > 0`` (at most 1, the box's width) the first round evaluates each trial at
+``z_t + sigma_k eps_k`` (``eps_k ~ N(0, I)``, one draw per chain and step, ``sigma_k`` falling
+linearly from ``s`` to 0 over the round): a one-sample randomised smoothing of the cost, which can step over basins
 narrower than ``sigma``; later rounds see the true cost. The perturbed point is the one evaluated
 and kept, so the incumbent is always a real evaluation.
 
@@ -87,7 +87,7 @@ class MultistartOptions(NamedTuple):
     rounds: int = 3  # successive-halving rounds (1: no halving)
     local: str = "bfgs"  # bfgs | adam: the local descent
     learning_rate: float = 0.1  # bfgs: first trust radius (inf-norm); adam: step, cosine-decayed to a tenth
-    smoothing: float = 0.0  # randomised-smoothing radius of the first round (0: off)
+    smoothing: float = 0.0  # randomised-smoothing radius of the first round, in [0, 1] (0: off)
     n_restarts: int = 3  # perturbations of the incumbent descended at the end (0: off)
     restart_steps: int = 20
     restart_scale: float = 0.05  # standard deviation of the perturbations
@@ -106,7 +106,7 @@ class MultistartOptions(NamedTuple):
         errors.integer("steps", self.steps, low=1, high=1_000_000)
         errors.integer("rounds", self.rounds, low=1, high=max(1, int(self.steps)))
         errors.number("learning_rate", self.learning_rate, positive=True)
-        errors.number("smoothing", self.smoothing, nonnegative=True)
+        errors.number("smoothing", self.smoothing, low=0.0, high=1.0)
         errors.integer("n_restarts", self.n_restarts, low=0, high=1_000_000)
         errors.integer("restart_steps", self.restart_steps, low=0, high=1_000_000)
         errors.number("restart_scale", self.restart_scale, nonnegative=True)

@@ -64,7 +64,7 @@ def make_problem(
     scenario: str,
     *,
     cost: CostSpec = CostSpec(),
-    config: SimConfig | None = None,
+    config: SimConfig | dict | None = None,
     n_runs: int = 16,
     run_offset: int = 0,
     base_gains=None,
@@ -77,8 +77,13 @@ def make_problem(
         controller: registry name with a tuning box (``pi``, ``state_feedback``, ``integral``, ``stanley``, ...).
         scenario: a paper set name or a study TOML path (module docstring).
         cost: what is minimised.
-        config: simulation settings (``record`` is forced off); default ``SimConfig()`` for paper
-            sets, the study's for a TOML.
+        config: simulation settings (``record`` is forced off): a ``SimConfig``, or a dict of its
+            fields that change the default ones (``{"dt": 0.01}``, as ``pfjax tune --dt``); default
+            ``SimConfig()`` for paper sets, the study's for a TOML. On a study a horizon beyond the
+            study's draws its OU slip sequences for the longer horizon. On ``st`` and ``std`` the
+            step must be a stable RK4 step for the runs' worst case (highest friction, lowest speed;
+            :func:`pfjax.models.single_track.max_stable_step`, as ``pfjax simulate`` and a study
+            require); :class:`~pfjax.errors.InputError` naming ``config.dt`` otherwise.
         n_runs: runs per path sampled from a study TOML; ``run_offset``: first run index.
         base_gains: gains pytree for the untuned fields (default: the registry's defaults).
         box: ``(fields, lower, upper)`` overriding the registry entry's ``box``.
@@ -97,14 +102,43 @@ def make_problem(
     if not isinstance(cost, CostSpec):
         raise errors.InputError(f"cost: expected a pfjax.tuning.CostSpec, got {type(cost).__name__}", "cost")
     _check_inputs(scenario, n_runs, run_offset, model)
+    if config is not None and not isinstance(config, (SimConfig, dict)):
+        raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
     if scenario in scenario_sets():
+        cfg = _settings(config, SimConfig(record=False))
         batches = _paper_batches(scenario, tun.base, model or "kinematic")
-        cfg = config or SimConfig(record=False)
     else:
-        batches, study_cfg = _study_batches(scenario, tun.base, n_runs, run_offset, model, config)
-        cfg = config or study_cfg
+        batches, cfg = _study_batches(scenario, tun.base, n_runs, run_offset, model, config)
     cfg = dataclasses.replace(cfg, record=False)
+    _check_step(batches, cfg)
     return Problem(ctrl, tun, batches, cfg, cost.check(), np.asarray(lo, float), np.asarray(hi, float))
+
+
+def _settings(config, base: SimConfig) -> SimConfig:
+    """``config`` (a SimConfig) or ``base`` with the fields of a dict ``config`` changed
+    (:func:`pfjax.sim.settings.changed`: a bad field is named ``config.<field>``)."""
+    from pfjax.sim.settings import changed
+
+    if not isinstance(config, dict):
+        return base if config is None else config
+    return changed(base, config)
+
+
+def _check_step(batches: list, cfg: SimConfig) -> None:
+    """:class:`~pfjax.errors.InputError` naming ``config.dt`` if ``cfg.dt`` is beyond the stable RK4
+    step (:func:`pfjax.models.single_track.max_stable_step`) of a dynamic batch's worst case: its
+    highest friction and lowest speed, shortest steering time constant and stiffest speed loop
+    (the kinematic model has no such bound)."""
+    from pfjax.models.single_track import body, check_step, with_mu
+    from pfjax.sim.dynamic import DynamicScenario
+
+    for b in batches:
+        if not isinstance(b, DynamicScenario):
+            continue
+        first = jax.tree_util.tree_map(lambda a: np.asarray(a).reshape(-1)[0], b.vehicle)
+        params = with_mu(first, float(np.max(body(b.vehicle).mu)))
+        v, tau, k_v = float(np.min(b.v_ref)), float(np.min(b.tau_delta)), float(np.max(b.k_v))
+        check_step("config.dt", cfg.dt, params, v, tau, k_v, worst_case="the runs' worst case")
 
 
 def _tunable(controller: str, base_gains, box):
@@ -159,7 +193,9 @@ def _paper_batches(scenario: str, base, model: str) -> list:
 
 
 def _study_batches(scenario: str, base, n_runs: int, run_offset: int, model: str | None, config=None):
-    """(batches of ``n_runs`` sampled runs per path from ``run_offset``, the study's SimConfig) of a study TOML.
+    """(batches of ``n_runs`` sampled runs per path from ``run_offset``, the final SimConfig: the
+    study's, or ``config`` as :func:`make_problem` reads it) of a study TOML; a horizon beyond the
+    study's draws the runs' OU slip sequences for it.
     The runs of one evaluation are checked against the memory budget before any is drawn (the
     methods' own checks, :func:`_check_memory`, follow once the problem is built)."""
     from pfjax import errors, resources
@@ -171,13 +207,22 @@ def _study_batches(scenario: str, base, n_runs: int, run_offset: int, model: str
         spec, _ = load_study(Path(scenario), [] if model is None else [f'vehicle.model="{model}"'])
     except errors.InputError as e:
         raise errors.InputError(f"scenario: {e}", "scenario") from None
+    cfg = _settings(config, sim_config(spec))
     n = n_runs * len(spec.paths)
     resources.check_memory(
         "n_runs",
-        2 * n * resources.run_bytes((config or sim_config(spec)).n_steps),
+        2 * n * resources.run_bytes(cfg.n_steps),
         f"one evaluation of {n_runs} runs x {len(spec.paths)} paths",
         "lower n_runs",
     )
+    if cfg.horizon > spec.sim.horizon:  # slip sequences for the whole run (shorter runs: the study's, cut)
+        if spec.slip.kind == "ou" and cfg.horizon / spec.slip.seq_dt > resources.MAX_STEPS:
+            raise errors.InputError(
+                f"config.horizon: horizon / slip.seq_dt (the study's OU slip samples per run) may be at most "
+                f"{resources.MAX_STEPS:.0e}, got {cfg.horizon:g} / {spec.slip.seq_dt:g}",
+                "config.horizon",
+            )
+        spec = spec.model_copy(update={"sim": spec.sim.model_copy(update={"horizon": cfg.horizon})})
     runs = np.arange(run_offset, run_offset + n_runs)
     batches = []
     for i in range(len(spec.paths)):
@@ -185,7 +230,7 @@ def _study_batches(scenario: str, base, n_runs: int, run_offset: int, model: str
         batches.append(
             sc._replace(gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(g, (n_runs,) + np.shape(g)), base))
         )
-    return batches, sim_config(spec)
+    return batches, cfg
 
 
 def evaluate(problem: Problem, theta) -> float:

@@ -99,7 +99,9 @@ class TuneMultistart(ConfigModel):
     rounds: int = Field(3, description="successive-halving rounds (1: no halving) [-]")
     local: str = Field("bfgs", description="local descent: bfgs | adam [-]")
     learning_rate: Real = Field(0.1, description="bfgs first trust radius / adam step [normalised box units]")
-    smoothing: Real = Field(0.0, description="randomised-smoothing radius of the first round [normalised box units]")
+    smoothing: Real = Field(
+        0.0, description="randomised-smoothing radius of the first round, at most 1 [normalised box units]"
+    )
     n_restarts: int = Field(3, description="perturbations of the incumbent descended at the end [-]")
     restart_steps: int = Field(20, description="evaluations of a restart chain [-]")
     restart_scale: Real = Field(0.05, description="standard deviation of the perturbations [normalised box units]")

@@ -1,0 +1,170 @@
+"""``pfjax tune``'s and ``pfjax.tune``'s settings checked as a whole: the final step against the
+dynamic model's stable RK4 step, a study's slip drawn for the final horizon, flags the chosen
+method does not read refused, errors named by the caller's argument; ``pfjax synth``'s weights
+checked whatever the method. Every refusal here comes before anything is compiled or simulated."""
+
+import math
+
+import numpy as np
+import pytest
+
+import pfjax
+from pfjax.cli import main
+from pfjax.errors import InputError
+from pfjax.sim import SimConfig
+from pfjax.tuning.problem import make_problem
+
+#: A one-path study of the ST model at a stable 10 ms step (its own sim.dt is accepted).
+ST_STUDY = """
+name = "st_small"
+n_runs = 4
+seed = 1
+[sim]
+dt = 0.01
+horizon = 3.0
+steady_window = 1.0
+[success]
+from_s = 2.0
+[vehicle]
+model = "st"
+speed = 1.0
+[margin]
+enabled = false
+[[paths]]
+kind = "line"
+[[controllers]]
+name = "k"
+type = "state_feedback"
+"""
+#: A one-path kinematic study with OU slip over a 3 s horizon (sequences sampled every 50 ms).
+OU_STUDY = """
+name = "ou_small"
+n_runs = 4
+seed = 1
+[sim]
+dt = 0.01
+horizon = 3.0
+steady_window = 1.0
+[success]
+from_s = 2.0
+[vehicle]
+speed = 1.0
+L = 0.2
+[slip]
+kind = "ou"
+ou_sigma_deg = 3.0
+ou_tau_s = 1.0
+[[paths]]
+kind = "line"
+[[controllers]]
+name = "k"
+type = "state_feedback"
+"""
+
+
+def _refused_cli(argv, flag, capsys) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr()
+    assert err.out == "" and err.err.startswith(f"pfjax {argv[0]}: error: {flag}: "), err.err
+    assert err.err.count("\n") == 1, err.err
+    return err.err
+
+
+def test_tune_refuses_a_step_beyond_the_dynamic_models_stable_step(tmp_path, capsys):
+    """--dt (and the API's config) go through the stable-step check of `pfjax simulate` and the
+    study config: the robot's ST model at mu 1.05 and 1 m/s needs dt <= 0.0222 s, on a paper set
+    and on a study whose own sim.dt is fine, from the CLI and from Python."""
+    study = tmp_path / "st.toml"
+    study.write_text(ST_STUDY)
+    paper = ["tune", "--check", "39.5204,1.639,11.6124,0.023", "--controller", "pi", "--model", "st"]
+    err = _refused_cli([*paper, "--dt", "0.05", "--horizon", "2", "--json"], "--dt", capsys)
+    assert "needs dt <= 0.0222 s for a stable RK4 step, got 0.05" in err, err
+    _refused_cli(["tune", "--check=-5,-2", "--controller", "state-feedback", "--scenario", str(study)]
+                 + ["--n-runs", "2", "--dt", "0.05", "--json"], "--dt", capsys)  # fmt: skip
+    with pytest.raises(InputError, match=r"^config\.dt: the ST model at mu = 1\.0489 .* needs dt <= 0\.0222 s"):
+        pfjax.tune("state_feedback", "paper-line", model="st", check=[-5, -2], config={"dt": 0.05, "horizon": 2.0})
+    with pytest.raises(InputError, match=r"^config\.dt: the ST model") as e:
+        make_problem("state_feedback", str(study), n_runs=2, config=SimConfig(dt=0.05))
+    assert e.value.key == "config.dt"
+    with pytest.raises(InputError, match=r"^config\.dt: the STD model"):
+        make_problem("pi", "paper-line", model="std", config={"dt": 0.05})
+    assert make_problem("state_feedback", str(study), n_runs=2, config={"dt": 0.02}).config.dt == 0.02  # stable
+    assert make_problem("state_feedback", "paper-line", config={"dt": 0.05}).config.dt == 0.05  # kinematic: no bound
+
+
+def test_tune_on_a_study_draws_its_slip_for_the_final_horizon(tmp_path):
+    """A horizon beyond a study's (3 s, OU slip every 50 ms) draws the sequences for the whole run
+    instead of holding the last sample from 3.1 s on; a shorter one keeps the study's draws."""
+    study = tmp_path / "ou.toml"
+    study.write_text(OU_STUDY)
+    own = make_problem("state_feedback", str(study), n_runs=2)
+    for config in ({"horizon": 30.0}, SimConfig(horizon=30.0)):
+        pr = make_problem("state_feedback", str(study), n_runs=2, config=config)
+        slip = pr.scenarios[0].slip
+        assert pr.config.horizon == 30.0
+        assert (slip.seq.shape[1] - 1) * float(np.asarray(slip.seq_dt).reshape(-1)[0]) >= 30.0, slip.seq.shape
+    short = make_problem("state_feedback", str(study), n_runs=2, config={"horizon": 2.0})
+    np.testing.assert_array_equal(short.scenarios[0].slip.seq, own.scenarios[0].slip.seq)
+
+
+@pytest.mark.parametrize(
+    "argv,flag",
+    [
+        (["--method", "ga", "--from-default"], "--from-default"),
+        (["--method", "ga", "--screen", "3", "--smoothing", "0.5"], "--screen"),
+        (["--method", "ga+gradient", "--from-default"], "--from-default"),  # the GA takes no start
+        (["--method", "gradient", "--from-default"], "--from-default"),  # always screened
+        (["--method", "gradient", "--generations", "7"], "--generations"),
+        (["--method", "gradient-plain", "--population", "6"], "--population"),
+        (["--method", "ga", "--steps", "4"], "--steps"),
+        (["--method", "ga+gradient", "--starts", "2"], "--starts"),
+        (["--method", "ga", "--lr", "0.3"], "--lr"),
+        (["--check=-5,-2", "--generations", "7", "--lr", "0.3", "--steps", "4"], "--generations"),
+        (["--check=-5,-2", "--lr", "0.3"], "--lr"),
+        (["--check=-5,-2", "--from-default"], "--from-default"),
+        (["--check=-5,-2", "--seed", "0"], "--seed"),  # a given 0 is given
+        (["--method", "ga", "--smoothing", "0"], "--smoothing"),
+        (["--check=-5,-2", "--n-runs", "5"], "--n-runs"),
+        (["--method", "ga", "--scenario", "paper-all", "--n-runs", "5"], "--n-runs"),
+        (["--method", "ga", "--level", "0.5"], "--level"),  # --aggregate mean reads no level
+        (["--method", "gradient", "--smoothing", "1e6"], "--smoothing"),  # box units: at most 1
+        (["--method", "gradient", "--smoothing", "1.01"], "--smoothing"),
+    ],
+)
+def test_tune_cli_refuses_flags_the_method_does_not_read(argv, flag, capsys):
+    _refused_cli(["tune", "--controller", "state-feedback", *argv, "--json"], flag, capsys)
+
+
+def test_multistart_smoothing_is_at_most_the_box_width():
+    from pfjax.tuning import MultistartOptions
+
+    assert MultistartOptions(smoothing=1.0).check().smoothing == 1.0
+    with pytest.raises(InputError, match=r"^smoothing: must be <= 1, got 1e\+06$"):
+        MultistartOptions(smoothing=1e6).check()
+
+
+def test_tune_api_names_its_own_arguments():
+    """The GA's population_size is pfjax.tune's population; a SimConfig field is config's."""
+    with pytest.raises(InputError, match=r"^population: must be >= 2, got 0$") as e:
+        pfjax.tune("pi", "paper-line", "ga", population=0)
+    assert e.value.key == "population"
+    with pytest.raises(InputError, match=r"^config\.dt: expected a finite number, got nan$") as e:
+        pfjax.tune("pi", "paper-line", "ga", config={"dt": math.nan})
+    assert e.value.key == "config.dt"
+    with pytest.raises(InputError, match=r"^config\.horizon: must be > 0"):
+        pfjax.tune("pi", "paper-line", "ga", config={"horizon": 0.0})
+    with pytest.raises(InputError, match=r"^config\.dt: "):
+        make_problem("pi", "paper-line", config={"dt": -1.0})
+
+
+@pytest.mark.parametrize(
+    "argv,flag",
+    [
+        (["--method", "h2", "--alpha", "nan"], "--alpha"),
+        (["--method", "hinf", "--alpha", "-3", "--json"], "--alpha"),
+        (["--method", "h2", "--beta", "inf"], "--beta"),
+        (["--method", "hinf", "--beta", "-1"], "--beta"),
+    ],
+)
+def test_synth_checks_alpha_and_beta_whatever_the_method(argv, flag, capsys):
+    _refused_cli(["synth", *argv], flag, capsys)
