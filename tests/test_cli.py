@@ -661,3 +661,36 @@ def test_examples_json_is_the_listing_alone(capsys):
     from pfjax import examples
 
     assert list(run_main(capsys, "examples", "--json")) == examples.names()
+
+
+def _numbers(d: dict, prefix: str = "") -> list[str]:
+    """The dotted keys of every number (or list of numbers) in a command's JSON output, its
+    provenance record and arguments aside."""
+    keys = []
+    for k, v in d.items():
+        if not prefix and k in ("units", "arguments", "cpu_settings", "seed"):
+            continue
+        if isinstance(v, dict):
+            keys += _numbers(v, f"{prefix}{k}.")
+        elif isinstance(v, float) or (
+            isinstance(v, list) and v and all(isinstance(x, (float, list)) for x in v) and not isinstance(v[0], str)
+        ):
+            keys.append(f"{prefix}{k}")
+    return keys
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["simulate", "--path", "sine", "--controller", "stanley", "--horizon", "1", "--model", "st"],
+        ["synth"],
+        ["tune", "--check", "39.5204,1.639,11.6124,0.023", "--controller", "pi", "--scenario", "paper-line"],
+    ],
+)
+def test_one_run_commands_give_every_number_its_unit_and_hash_their_arguments(capsys, args):
+    from pfjax.provenance import config_hash
+
+    out = run_main(capsys, *args, "--json")
+    missing = [k for k in _numbers(out) if k not in out["units"]]
+    assert not missing, missing
+    assert out["config_sha256"] == config_hash(out["arguments"]) and out["pfjax_version"]

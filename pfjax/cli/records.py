@@ -21,6 +21,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
+#: The unit of a controller's gains: each gain's own (its parameter pytree's docstring).
+GAINS = "the controller's parameter units (pfjax.controllers)"
+
 #: Attributes of the parsed arguments that are the command's machinery, not its input.
 _INTERNAL = {"func", "human", "json", "units", "command"}
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags, finite
+from pfjax.cli.records import GAINS
 from pfjax.cli.synth import SYNTH_FLAGS
 from pfjax.tables import COLUMNS
 
@@ -154,7 +155,7 @@ UNITS = {
     "metrics.*": {name: unit for name, (unit, _) in COLUMNS.items()},
     "slip.*": {name: unit for name, (unit, _) in COLUMNS.items()},
     "fail_time": "s",
-    "gains.*": "the controller's parameter units (pfjax.controllers)",
+    "gains.*": GAINS,
 }
 
 

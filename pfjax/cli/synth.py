@@ -24,6 +24,23 @@ SYNTH_FLAGS = {
 }
 
 
+#: The unit of each number ``cmd`` returns (:func:`pfjax.cli.records.units`; the norms are of the
+#: source's performance channels, from the slip w (rad) to z = x = [d (m), theta_e (rad)], and to
+#: z_2 = [x; delta (rad)], unweighted).
+UNITS = {
+    "K": "rad/m (d), rad/rad (theta_e)",
+    "gamma_inf": "H-infinity bound, slip (rad) to [d m, theta_e rad]",
+    "hinf_norm": "H-infinity norm, slip (rad) to [d m, theta_e rad]",
+    "gamma_2": "H2 bound, slip (rad) to [d m, theta_e rad, delta rad]",
+    "h2_norm": "H2 norm, slip (rad) to [d m, theta_e rad, delta rad]",
+    "closed_loop_poles": "rad/s (real, imaginary)",
+    "alpha": "1",
+    "beta": "1",
+    "v": "m/s",
+    "L": "m",
+}
+
+
 def cmd(args) -> dict:
     from pfjax import errors
     from pfjax.synthesis import PoleRegion, SynthesisError, synthesize
@@ -82,4 +99,4 @@ def register(sub) -> None:
         "--sector-deg", type=float, help="pole region: conic sector of this half-angle about the negative real axis"
     )
     s.add_argument("--json", action="store_true", help="print one JSON object")
-    s.set_defaults(func=cmd)
+    s.set_defaults(func=cmd, units=UNITS)

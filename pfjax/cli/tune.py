@@ -26,6 +26,7 @@ from __future__ import annotations
 import sys
 
 from pfjax.cli.common import UsageError, as_flags
+from pfjax.cli.records import GAINS
 
 
 def _controllers() -> dict:
@@ -102,7 +103,7 @@ def register(sub) -> None:
     p.add_argument("--dt", type=float, default=None, help="integrator step, s (default: 0.005 or the study's)")
     p.add_argument("--horizon", type=float, default=None, help="simulated time, s (default: 20 or the study's)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(func=_cmd)
+    p.set_defaults(func=_cmd, units=UNITS)
 
 
 def _multistart_flags(p) -> None:
@@ -172,6 +173,31 @@ def _multistart(args):
         ("smoothing", args.smoothing),
     )
     return MultistartOptions(**{k: v for k, v in flags if v is not None}).check()
+
+
+#: The cost's unit: its metric's, aggregated over the runs (pfjax.tuning.cost).
+COST = "the metric's (iae m s, ise m^2 s, itae m s^2; effort: per rad^2 s of steering)"
+#: The unit of each number ``_cmd`` returns (:func:`pfjax.cli.records.units`).
+UNITS = {
+    "gains.*": GAINS,
+    "bounds.lower": GAINS,
+    "bounds.upper": GAINS,
+    "cost": COST,
+    "history": COST,
+    "cost_spec.fail_penalty": COST,
+    "cost_spec.effort": "cost per rad^2 s",
+    "cost_spec.level": "1",
+    "check.gradient.*": "cost per gain unit",
+    "check.projected_gradient_norm": "cost per box width",
+    "check.hessian_eigenvalues": "cost per box width^2",
+    "check.best_probe.*": "box widths",
+    "check.newton_decrease_relative": "1",
+    "check.probe_decrease_relative": "1",
+    "dt": "s",
+    "horizon": "s",
+    "wall_s": "s",
+    "compile_s": "s",
+}
 
 
 def _cmd(args) -> dict:
