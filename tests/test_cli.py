@@ -561,6 +561,7 @@ def test_examples_lists_every_packaged_example_with_one_line(capsys):
     out = run_main(capsys, "examples", "--json")
     assert list(out) == examples.names() and out["default"].startswith("Default Monte Carlo robustness study")
     assert all(isinstance(v, str) and v and "\n" not in v for v in out.values())
+    assert all(v.endswith(".") for v in out.values()), out  # a whole sentence, not a comment's first line
     assert main(["examples"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert [ln.split()[0] for ln in lines] == examples.names()

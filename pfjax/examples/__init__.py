@@ -42,18 +42,21 @@ def path(name: str) -> Path:
 
 
 def description(name: str) -> str:
-    """One line about example ``name``: the first sentence of its first comment line (or its
-    ``name`` key when the file starts with no comment)."""
+    """One line about example ``name``: the first sentence of the comment the file starts with
+    (its first comment lines, joined), or its ``name`` key when the file starts with no comment."""
     text = path(name).read_text(encoding="utf-8")
+    comment = []
     for line in text.splitlines():
         line = line.strip()
-        if not line:
+        if not line.startswith("#"):
+            if line or comment:
+                break
             continue
-        if line.startswith("#"):
-            first = line.lstrip("#").strip()
-            head, sep, _ = first.partition(". ")
-            return head + "." if sep else first
-        break
+        comment.append(line.lstrip("#").strip())
+    if comment:
+        first = " ".join(comment)
+        head, sep, _ = first.partition(". ")
+        return head + "." if sep else first
     import tomllib
 
     return str(tomllib.loads(text).get("name", name))
