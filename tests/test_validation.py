@@ -55,7 +55,7 @@ CLI_CASES = [
     (["synth", "--speed", "nan"], "--speed: expected a finite number, got nan"),
     (["synth", "--alpha", "-1"], "--alpha: must be >= 0, got -1"),
     (["synth", "--disk", "-5", "0"], "--disk: must be > 0 1/s, got 0"),
-    (["synth", "--sector-deg", "90"], "--sector-deg: expected a half-angle in (0, 90), got 90"),
+    (["synth", "--sector-deg", "90.5"], "--sector-deg: expected a half-angle in (0, 90], got 90.5"),
     (["synth", "--method", "lqg"], "argument --method: invalid choice: 'lqg'"),
     (SIM + ["--beta-r-deg", "90"], "--beta-r-deg: magnitude must be < 90 deg, got 90"),
     (SIM + ["--beta-f-deg", "-120"], "--beta-f-deg: magnitude must be < 90 deg, got -120"),

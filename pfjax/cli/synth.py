@@ -49,8 +49,9 @@ def cmd(args) -> dict:
     with as_flags(SYNTH_FLAGS):
         for name in ("alpha", "beta"):  # flags whatever the method (the designs read them for mixed only)
             errors.number(name, getattr(args, name), nonnegative=True)
-        if args.sector_deg is not None and not 0 < finite("--sector-deg", args.sector_deg) < 90:
-            raise UsageError(f"--sector-deg: expected a half-angle in (0, 90), got {args.sector_deg:g}")
+        # PoleRegion's bound on sector_angle, (0, pi/2] rad, in the flag's degrees
+        if args.sector_deg is not None and not 0 < finite("--sector-deg", args.sector_deg) <= 90:
+            raise UsageError(f"--sector-deg: expected a half-angle in (0, 90], got {args.sector_deg:g}")
         if args.max_real is not None or args.disk is not None or args.sector_deg is not None:
             region = PoleRegion(
                 max_real=args.max_real,
