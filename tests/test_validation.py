@@ -382,3 +382,18 @@ def test_negative_numbers_in_exponent_form_are_values_not_options():
     assert p.parse_args(["track", "--offset", "-5e-1", "0.5"]).offset == [-0.5, 0.5]
     with pytest.raises(SystemExit):
         p.parse_args(SIM + ["--beta-r-deg", "-x"])
+
+
+def test_a_sampling_period_longer_than_the_horizon_is_refused():
+    """One command for the whole run (``control_every`` beyond the run's steps) is a mistake: refused
+    naming the flag or key, by SimConfig, so on the command line, in a study config and in the API."""
+    from pfjax.cli import main
+    from pfjax.errors import InputError
+    from pfjax.sim import SimConfig
+
+    with pytest.raises(InputError, match=r"^control_every: .*\(200 steps\)"):
+        SimConfig(horizon=1.0, control_every=201)
+    assert SimConfig(horizon=1.0, control_every=200).control_every == 200
+    assert main(["simulate", "--path", "line", "--controller", "pi", "--horizon", "1", "--control-every", "1000"]) == 2
+    with pytest.raises(InputError, match=r"^sim\.control_every: .*\(1200 steps\)"):
+        load_study(data=copy.deepcopy(DATA), overrides=["sim.control_every=1201", "sim.horizon=6", "success.from_s=1"])

@@ -10,7 +10,6 @@ from pydantic import Field, field_validator, model_validator
 
 from pfjax.config import POSITIVE, ConfigModel, Real
 from pfjax.montecarlo.dists import Dist, as_dist, dist_field, nominal
-from pfjax.resources import check_steps
 
 
 class SimSpec(ConfigModel):
@@ -25,11 +24,14 @@ class SimSpec(ConfigModel):
 
     @model_validator(mode="after")
     def _check(self):
+        from pfjax.sim.settings import SimConfig
+
         if self.dt > self.horizon:
             raise ValueError(f"dt: must be <= horizon ({self.horizon:g} s), got {self.dt:g}")
         if self.steady_window > self.horizon:
             raise ValueError(f"steady_window: must be <= horizon ({self.horizon:g} s), got {self.steady_window:g}")
-        check_steps(self.horizon, self.dt)
+        # the simulator's own checks of these settings (the step count, the sampling period), one home
+        SimConfig(dt=self.dt, horizon=self.horizon, control_every=self.control_every)
         return self
 
 

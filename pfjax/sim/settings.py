@@ -48,6 +48,12 @@ class SimConfig:
         resources.check_steps(self.horizon, self.dt)
         if self.control_every is not None:
             errors.integer("control_every", self.control_every, low=1, high=resources.MAX_STEPS)
+            if self.control_every > self.n_steps:  # one command for the whole run: a mistake, not a controller
+                raise InputError(
+                    f"control_every: the controller's sampling period ({self.control_every} steps of {self.dt:g} s) "
+                    f"is longer than the horizon ({self.n_steps} steps)",
+                    "control_every",
+                )
         errors.integer("newton_iters", self.newton_iters, low=1, high=100)
         for name in ("d_fail", "settle_band", "steady_window", "success_band"):
             errors.number(name, getattr(self, name), positive=True)
