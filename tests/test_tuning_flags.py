@@ -4,6 +4,7 @@ method does not read refused, errors named by the caller's argument; ``pfjax syn
 checked whatever the method. Every refusal here comes before anything is compiled or simulated."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -168,3 +169,22 @@ def test_tune_api_names_its_own_arguments():
 )
 def test_synth_checks_alpha_and_beta_whatever_the_method(argv, flag, capsys):
     _refused_cli(["synth", *argv], flag, capsys)
+
+
+@pytest.mark.parametrize(
+    ("method", "kwargs", "name"),
+    [
+        ("gradient", {"generations": 5}, "generations"),
+        ("ga", {"steps": 4}, "steps"),
+        ("ga", {"learning_rate": 0.1}, "learning_rate"),
+        ("gradient-plain", {"multistart": object()}, "multistart"),
+        ("ga+gradient", {"n_starts": 2}, "n_starts"),
+    ],
+)
+def test_tune_api_refuses_a_setting_its_method_does_not_read(method, kwargs, name):
+    """As ``pfjax tune`` refuses the flag (pfjax.tuning.problem.METHOD_SETTINGS, one table for both),
+    before any problem is built."""
+    with pytest.raises(InputError, match=rf"^{name}: not with method {re.escape(method)} \(only with method "):
+        pfjax.tune("pi", "paper-line", method, **kwargs)
+    with pytest.raises(InputError, match=rf"^{name}: not with a check "):
+        pfjax.tune("pi", "paper-line", check=[39.5204, 1.639, 11.6124, 0.023], **kwargs)

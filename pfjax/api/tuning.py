@@ -23,8 +23,8 @@ def tune(
     steps: int | None = None,
     n_starts: int | None = None,
     learning_rate: float | None = None,
-    generations: int = 100,
-    population: int = 50,
+    generations: int | None = None,
+    population: int | None = None,
     multistart=None,
     check=None,
     progress: bool = False,
@@ -55,9 +55,15 @@ def tune(
         n_starts: starts descended together (``None``: the method's default).
         learning_rate: multi-start: first BFGS trust radius; adam: step (box units; ``None``: default).
         multistart: a :class:`pfjax.tuning.MultistartOptions` for ``gradient``.
+        generations, population: ``ga`` and ``ga+gradient``: the GA's (``None``: the source's 100
+            and 50, :class:`pfjax.tuning.GAOptions`).
         check: gains to check instead of tuning (``{field: value}``, its JSON text or numbers in
             field order, inside the tuning box): gradient, projected gradient, active bounds,
             Hessian eigenvalues on the free coordinates, verdict (:mod:`pfjax.tuning.check`).
+
+    A setting the method does not read (``generations`` with ``gradient``, ``steps`` with ``ga``,
+    any of them with ``check``; :data:`pfjax.tuning.problem.METHOD_SETTINGS`) is refused naming it,
+    as ``pfjax tune`` refuses its flag.
 
     Returns:
         ``{"gains", "cost", "n_rollouts", "n_forward_passes", "wall_s", "compile_s", "history",
@@ -68,7 +74,7 @@ def tune(
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
     from pfjax.tuning.problem import check as run_check
-    from pfjax.tuning.problem import make_problem
+    from pfjax.tuning.problem import check_settings_apply, make_problem
     from pfjax.tuning.problem import tune as run_tune
 
     # a command-line spelling names its registry entry; anything else (a design such as lmi: its
@@ -82,6 +88,10 @@ def tune(
     # a dict changes the default or the study's settings (make_problem); a bad field is named config.<field>
     config = config if isinstance(config, dict) else sim_config(config)
     cost = CostSpec() if cost is None else cost
+    settings = dict(generations=generations, population=population, steps=steps, n_starts=n_starts)
+    settings.update(learning_rate=learning_rate, multistart=multistart)
+    # a setting the method (or a check) does not read is refused, as pfjax tune refuses its flag
+    check_settings_apply(None if check is not None else method, {k for k, v in settings.items() if v is not None})
     problem = make_problem(name, scenario, cost=cost, config=config, n_runs=n_runs, model=model)
     if check is not None:
         r = run_check(problem, check)
@@ -96,7 +106,10 @@ def tune(
             problem,
             method,
             key=k,
-            ga_options=GAOptions(population_size=population, generations=generations),
+            ga_options=GAOptions()._replace(
+                **({} if population is None else {"population_size": population}),
+                **({} if generations is None else {"generations": generations}),
+            ),
             steps=steps,
             n_starts=n_starts,
             learning_rate=learning_rate,

@@ -10,7 +10,7 @@ or check given gains.
                [--polish 8] [--smoothing 0] [--from-default] [--n-runs 16] [--dt 0.005] [--horizon 20] [--json]
 
 A flag the chosen method (or ``--check``), scenario or aggregate does not read is refused
-(:data:`METHOD_FLAGS`); ``--dt`` and ``--horizon`` change the default or the study's settings and
+(:func:`method_flags`); ``--dt`` and ``--horizon`` change the default or the study's settings and
 the result is checked by :func:`pfjax.tuning.problem.make_problem` (a stable step on ``st`` and ``std``).
 
 Prints ``gains``, ``cost``, ``n_rollouts_simulated`` (every rollout, value-only or with a gradient),
@@ -299,17 +299,25 @@ def _model_of(problem) -> str:
 #: that a given one can be told apart).
 DEFAULTS = {"seed": 0, "generations": 100, "population": 50, "n_runs": 16, "level": 0.9}
 
-#: The methods that read each method-specific flag (by its destination); ``--check`` reads none.
-METHOD_FLAGS = {
-    "seed": ("gradient", "gradient-plain", "ga", "ga+gradient"),
-    "generations": ("ga", "ga+gradient"),
-    "population": ("ga", "ga+gradient"),
-    "steps": ("gradient", "gradient-plain", "ga+gradient"),
-    "starts": ("gradient", "gradient-plain"),
-    "lr": ("gradient", "gradient-plain", "ga+gradient"),
-    **{dest: ("gradient",) for dest in ("screen", "sampler", "rounds", "restarts", "polish", "smoothing")},
-    "from_default": ("gradient-plain",),
-}
+
+def method_flags() -> dict[str, tuple[str, ...]]:
+    """The methods that read each method-specific flag (by its destination; ``--check`` reads none):
+    the library's :data:`pfjax.tuning.problem.METHOD_SETTINGS` under the flags' names, and the
+    flags the command line alone has (``--seed``, the multi-start tuner's settings one by one,
+    ``--from-default``)."""
+    from pfjax.tuning.problem import METHOD_SETTINGS, METHODS
+
+    m = METHOD_SETTINGS
+    return {
+        "seed": METHODS,
+        "generations": m["generations"],
+        "population": m["population"],
+        "steps": m["steps"],
+        "starts": m["n_starts"],
+        "lr": m["learning_rate"],
+        **{dest: m["multistart"] for dest in ("screen", "sampler", "rounds", "restarts", "polish", "smoothing")},
+        "from_default": ("gradient-plain",),
+    }
 
 
 def _check_flags(args, controllers: dict) -> None:
@@ -328,7 +336,7 @@ def _check_flags(args, controllers: dict) -> None:
         raise UsageError(f"--method: value {args.method!r}, expected one of {', '.join(METHODS)}")
     if args.model is not None and args.model not in MODELS:
         raise UsageError(f"--model: value {args.model!r}, expected one of {', '.join(MODELS)}")
-    for dest, methods in METHOD_FLAGS.items():
+    for dest, methods in method_flags().items():
         given = getattr(args, dest) is not None and getattr(args, dest) is not False  # 0 is given
         if given and args.method not in methods:
             mode = "--check" if args.method is None else f"--method {args.method}"

@@ -258,6 +258,31 @@ def cost_functions(problem: Problem):
 
 #: Tuning methods of :func:`tune`.
 METHODS = ("ga", "gradient", "gradient-plain", "ga+gradient")
+#: The methods that read each method-specific setting (by :func:`pfjax.tune`'s argument names;
+#: ``pfjax tune``'s flags are these under their own names, :func:`pfjax.cli.tune.method_flags`).
+#: A check (``check=``) reads none of them.
+METHOD_SETTINGS = {
+    "generations": ("ga", "ga+gradient"),
+    "population": ("ga", "ga+gradient"),
+    "steps": ("gradient", "gradient-plain", "ga+gradient"),
+    "n_starts": ("gradient", "gradient-plain"),
+    "learning_rate": ("gradient", "gradient-plain", "ga+gradient"),
+    "multistart": ("gradient",),
+}
+
+
+def check_settings_apply(method: str | None, given, name=lambda setting: setting) -> None:
+    """:class:`~pfjax.errors.InputError` naming the first setting of :data:`METHOD_SETTINGS` in
+    ``given`` (the settings a caller gave) that ``method`` does not read (``None``: a check, which
+    reads none); ``name(setting)`` is the caller's name for it (a flag)."""
+    from pfjax import errors
+
+    for setting, methods in METHOD_SETTINGS.items():
+        if setting in given and method not in methods:
+            mode = "a check" if method is None else f"method {method}"
+            raise errors.InputError(
+                f"{name(setting)}: not with {mode} (only with method {', '.join(methods)})", name(setting)
+            )
 
 
 def tune(
