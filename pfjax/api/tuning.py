@@ -88,8 +88,8 @@ def tune(
     # a dict changes the default or the study's settings (make_problem); a bad field is named config.<field>
     config = config if isinstance(config, dict) else sim_config(config)
     cost = CostSpec() if cost is None else cost
-    settings = dict(generations=generations, population=population, steps=steps, n_starts=n_starts)
-    settings.update(learning_rate=learning_rate, multistart=multistart)
+    settings: dict[str, object] = dict(generations=generations, population=population, steps=steps)
+    settings.update(n_starts=n_starts, learning_rate=learning_rate, multistart=multistart)
     # a setting the method (or a check) does not read is refused, as pfjax tune refuses its flag
     check_settings_apply(None if check is not None else method, {k for k, v in settings.items() if v is not None})
     problem = make_problem(name, scenario, cost=cost, config=config, n_runs=n_runs, model=model)

@@ -45,7 +45,7 @@ def description(name: str) -> str:
     """One line about example ``name``: the first sentence of the comment the file starts with
     (its first comment lines, joined), or its ``name`` key when the file starts with no comment."""
     text = path(name).read_text(encoding="utf-8")
-    comment = []
+    comment: list[str] = []
     for line in text.splitlines():
         line = line.strip()
         if not line.startswith("#"):
