@@ -156,12 +156,12 @@ def test_cli_names_the_flags(capsys):
         (["parking", "--front", "0.6"], "--front: must be < 0.54 (the rectangle length), got 0.6"),
         (
             ["parking", "--alpha-schedule", "1,-1"],
-            "--alpha-schedule: every alpha must be a finite number > 0, got [1.0, -1.0]",
+            "--alpha-schedule[1]: must be > 0, got -1",
         ),
         (["parking", "--x0", "0", "-0.5", "0"], "--x0: start point (0, -0.5) lies inside obstacle 'kerb'"),
         (
             ["parking", "--map", "nowhere.toml"],
-            "--map: map: not 'parallel', 'garage' or an existing file: nowhere.toml",
+            "--map: nowhere.toml: not 'parallel', 'garage' or an existing TOML/JSON map file",
         ),
         (["parking-search", "--method", "grid", "--n", "1"], "--n: must be >= 2, got 1"),
         (["parking", "--horizon", "-1"], "--horizon: must be > 0, got -1"),  # the API's t_max

@@ -165,11 +165,11 @@ def test_bad_maps_and_starts_exit_2_one_line(capsys, tmp_path):
         ),
         (
             ["parking", "--map", str(tmp_path / "latin1.toml"), "--x0", "0", "0", "0"],
-            f"--map: map: {tmp_path / 'latin1.toml'}: not UTF-8 text (byte 0xe9 at offset 11",
+            f"--map: {tmp_path / 'latin1.toml'}: not UTF-8 text (byte 0xe9 at offset 11",
         ),
         (
             ["parking", "--map", str(tmp_path / "folder.json"), "--x0", "0", "0", "0"],
-            f"--map: map: {tmp_path / 'folder.json'}: is a directory",
+            f"--map: {tmp_path / 'folder.json'}: is a directory",
         ),
         (
             [

@@ -59,7 +59,7 @@ def register(sub) -> None:
         "(n = 20, N = 100) or an exhaustive N x N x N grid on the chromosome lattice.",
     )
     s.add_argument("--method", choices=("ga", "grid"), required=True)
-    s.add_argument("--map", default="garage", help="garage (default) or a TOML/JSON map file")
+    s.add_argument("--map", default="garage", help="garage (default), parallel (with --x0), or a TOML/JSON map file")
     add_pose(s, "start pose, m m deg (default -0.9 0.6 -85)")
     s.add_argument("--n", type=int, default=32, help="grid levels per parameter (default 32)")
     s.add_argument("--generations", type=int, default=100, help="GA generations N (default 100)")
@@ -92,6 +92,7 @@ SEARCH_FLAGS = {
     "population": "--population",
     "seed": "--seed",
     "weight": "--weight",
+    "population/generations": "--population/--generations",
     **COMMON_FLAGS,
 }
 
@@ -113,8 +114,8 @@ def _flags(flags: dict[str, str]):
             if not isinstance(e, MapError) or e.key not in ("map", "x0"):
                 raise
             text = str(e)
-            if e.key == "x0" and text.startswith("x0: "):
-                text = text[len("x0: ") :]
+            if text.startswith(f"{e.key}: "):  # the load's own "map: <path>: ...", "x0: ..."
+                text = text[len(e.key) + 2 :]
             flag = f"--{e.key}"
             raise UsageError(f"{flag}: {text}", flag) from None
 

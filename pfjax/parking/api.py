@@ -17,7 +17,9 @@ Only :mod:`pfjax.errors` is imported here at module level: importing :mod:`pfjax
 
 from __future__ import annotations
 
+import math
 import os
+from collections.abc import Mapping
 from typing import Any, NamedTuple
 
 from pfjax import errors
@@ -31,6 +33,13 @@ DIRECTIONS = {"forward": 1, "backward": -1}
 METHODS = ("ga", "grid")
 #: Most scanner periods one run may take (``t_max / scan_period``; the simulator's loop bound).
 MAX_PERIODS = 20000
+#: Most scanner periods one search may simulate: its runs (``n^3`` on the grid, at most
+#: ``population * (generations + 1)`` for the GA) times ``t_max / scan_period`` each. Measured on a
+#: 2-core machine at the defaults (200 s / 0.1 s): the grid's 512 runs take 1.4 s and its 1,728
+#: runs 5.4 s (about 3 ms a run), so the default ``n = 32`` (32,768 runs, 6.6e7 periods) takes
+#: about 2 minutes and this limit about 3; ``n = 64`` at the defaults (5.2e8) and a GA of
+#: 1,000 x 1,000 (2e9) are refused.
+MAX_SEARCH_PERIODS = 10**8
 #: Longest scanner period, s.
 MAX_SCAN_PERIOD = 10.0
 #: Garage rule of :func:`run` on the built-in garage: switch back to forward when backing past this x, m.
@@ -86,14 +95,11 @@ def _schedule(alpha_schedule):
     from pfjax.parking.schedules import pad_schedule, parse_schedule
 
     if isinstance(alpha_schedule, str):
-        try:
-            return parse_schedule(alpha_schedule)
-        except ValueError as e:
-            raise InputError(f"alpha_schedule: {e}", "alpha_schedule") from None
+        return parse_schedule(alpha_schedule, "alpha_schedule")
     if errors.is_number(alpha_schedule):
         alpha_schedule = (alpha_schedule,)
     try:
-        values = None if isinstance(alpha_schedule, bytes) else list(alpha_schedule)
+        values = None if isinstance(alpha_schedule, (bytes, Mapping)) else list(alpha_schedule)
     except TypeError:
         values = None
     if values is None:
@@ -101,11 +107,7 @@ def _schedule(alpha_schedule):
             f"alpha_schedule: expected numbers or a comma-separated string, got {alpha_schedule!r:.80}",
             "alpha_schedule",
         )
-    values = [errors.number(f"alpha_schedule[{i}]", v, positive=True) for i, v in enumerate(values)]
-    try:
-        return pad_schedule(values)
-    except ValueError as e:
-        raise InputError(f"alpha_schedule: {e}", "alpha_schedule") from None
+    return pad_schedule(values, "alpha_schedule")
 
 
 def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
@@ -186,9 +188,10 @@ def run(
             (-0.4 m, 0.5 m, 0 deg) on ``"parallel"``, (-0.9 m, 0.6 m, -85 deg) on ``"garage"``
             (required for a map file). The robot's body must not overlap an obstacle there.
         direction: first travel direction, ``"forward"`` or ``"backward"``.
-        alpha_schedule: the gain factor alpha (dimensionless, each > 0) at the start, then after
-            each direction switch, the last one holding from then on; 1 to 8 numbers, or the
-            command line's comma-separated string (``"1,0.5,8,1"``).
+        alpha_schedule: the gain factor alpha (dimensionless, each in [1e-12, 1e12]) at the start,
+            then after each direction switch, the last one holding from then on; 1 to 8 numbers (a
+            sequence, not a mapping), or the command line's comma-separated string
+            (``"1,0.5,8,1"``), both checked by :func:`pfjax.parking.schedules.pad_schedule`.
         xs: garage rule, m: after the first switch to backward, switch back to forward when
             backing past ``x = xs``; None: no such rule, except on ``"garage"`` (-0.9 m).
         k1: gain on y, 1/m^2 (> 0).
@@ -284,7 +287,7 @@ def search(
             on ``"garage"`` (required for any other map).
         n: grid levels per parameter, 2..64 (grid only; ``n^3`` runs).
         generations: GA generations N, >= 1 (GA only).
-        population: GA population size n, >= 2 (GA only).
+        population: GA population size n, >= 2 (GA only; at most ``population * (generations + 1)`` runs).
         seed: PRNG seed of the GA, 0..2^63 - 1 (GA only).
         weight: end-error weight w in J, s/m (>= 0).
         k1: gain on y, 1/m^2 (> 0).
@@ -303,9 +306,14 @@ def search(
         ``n_simulations``; the grid adds ``n``, the GA ``bits`` (24), ``history_best_fitness``,
         ``history_mean_fitness`` (per generation) and ``seed``.
 
+    The search's size is checked before anything is simulated: its runs times ``t_max /
+    scan_period`` may be at most :data:`MAX_SEARCH_PERIODS` (1e8) scanner periods, so the default
+    grid (``n = 32``, 6.6e7 at 200 s / 0.1 s) passes and ``n = 64`` needs ``t_max <= 38 s``.
+
     Raises:
         InputError: a bad argument, as for :func:`run` (a map or start pose error as its subclass
-            :class:`~pfjax.parking.maps.MapError`).
+            :class:`~pfjax.parking.maps.MapError`); ``n`` or ``population/generations`` for a
+            search above :data:`MAX_SEARCH_PERIODS`.
     """
     if not isinstance(method, str) or method not in METHODS:
         raise InputError(f"method: expected 'ga' or 'grid', got {method!r:.80}", "method")
@@ -320,8 +328,29 @@ def search(
 
     settings = _Settings(k1, k2, speed, scan_period, front, lag, t_max)
     c = _checked(map, x0, settings, {"garage": GARAGE_START, "parallel": None})
+    _check_work(method, n, generations, population, c["t_max"], c["scan_period"])
     out = _search(c, method, n=n, generations=generations, population=population, seed=seed, weight=weight)
     return {"map": c["name"], "x0": _pose(c["x0"]), **out}
+
+
+def _check_work(method: str, n: int, generations: int, population: int, t_max: float, scan_period: float) -> None:
+    """:class:`InputError` when the search would simulate more than :data:`MAX_SEARCH_PERIODS`
+    scanner periods (named ``n`` on the grid, ``population/generations`` for the GA)."""
+    periods = math.ceil(t_max / scan_period)
+    if method == "grid":
+        key, runs, how = "n", n**3, f"n^3 = {n}^3 = {n**3}"
+    else:
+        runs = population * (generations + 1)
+        key, how = (
+            "population/generations",
+            f"population x (generations + 1) = {population} x {generations + 1} = {runs}",
+        )
+    if runs * periods > MAX_SEARCH_PERIODS:
+        raise InputError(
+            f"{key}: the search may simulate at most {MAX_SEARCH_PERIODS:.0e} scanner periods (runs x t_max / "
+            f"scan_period), got {how} runs x {periods} periods = {runs * periods:.3g}",
+            key,
+        )
 
 
 def _search(c: dict, method: str, *, n: int, generations: int, population: int, seed: int, weight: float) -> dict:

@@ -8,11 +8,13 @@ together; after ``n`` switches the gain is ``schedule[min(n, SCHEDULE_LEN − 1)
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
+
+from pfjax import errors
+from pfjax.errors import InputError
 
 SCHEDULE_LEN = 8
 
@@ -29,23 +31,29 @@ GARAGE_START = (-0.9, 0.6, -85.0)  # x m, y m, θ deg
 XS_MIN, XS_MAX, ALPHA_MAX = -1.2, -0.6, 10.0
 
 
-def pad_schedule(values) -> np.ndarray:
-    """Schedule values -> (SCHEDULE_LEN,) array padded with the last value; ValueError if not all finite > 0."""
-    v = [float(a) for a in values]
+def pad_schedule(values, key: str = "alpha_schedule") -> np.ndarray:
+    """Schedule values -> (SCHEDULE_LEN,) array padded with the last value.
+
+    The one check of a schedule, whatever form it came in (:func:`parse_schedule`'s string, a
+    sequence from :func:`pfjax.parking.run` or a study config): 1 to :data:`SCHEDULE_LEN` values,
+    each a number in [:data:`~pfjax.errors.MIN_POSITIVE`, :data:`~pfjax.errors.MAX_MAGNITUDE`]
+    (:func:`pfjax.errors.number` with ``positive``). Raises :class:`~pfjax.errors.InputError` (a
+    ``ValueError``) naming ``key``, or ``key[i]`` for the i-th value.
+    """
+    v = list(values)
     if not v or len(v) > SCHEDULE_LEN:
-        raise ValueError(f"expected 1..{SCHEDULE_LEN} values, got {len(v)}")
-    if not all(math.isfinite(a) and a > 0 for a in v):
-        raise ValueError(f"every alpha must be a finite number > 0, got {v}")
+        raise InputError(f"{key}: expected 1..{SCHEDULE_LEN} values, got {len(v)}", key)
+    v = [errors.number(f"{key}[{i}]", a, positive=True) for i, a in enumerate(v)]
     return np.asarray(v + [v[-1]] * (SCHEDULE_LEN - len(v)))
 
 
-def parse_schedule(text: str) -> np.ndarray:
-    """'1,0.5,8,1' -> padded schedule; ValueError with the reason."""
+def parse_schedule(text: str, key: str = "alpha_schedule") -> np.ndarray:
+    """'1,0.5,8,1' -> padded schedule (:func:`pad_schedule`'s checks); InputError naming ``key``."""
     try:
         vals = [float(s) for s in text.split(",")]
     except ValueError:
-        raise ValueError(f"expected comma-separated numbers, got {text!r}") from None
-    return pad_schedule(vals)
+        raise InputError(f"{key}: expected comma-separated numbers, got {text!r:.80}", key) from None
+    return pad_schedule(vals, key)
 
 
 def alpha_at(schedule, n_switches):

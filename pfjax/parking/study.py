@@ -5,6 +5,7 @@ figures, ``report.md`` and ``report.html``)."""
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -12,6 +13,8 @@ import jax
 import pandas as pd
 from tqdm import tqdm
 
+from pfjax import errors
+from pfjax.errors import InputError
 from pfjax.jsonio import dumps
 from pfjax.outputs import OutputDir, check_name
 from pfjax.parking.calibrate import calibrate_front
@@ -129,18 +132,36 @@ def run(
     and moved into place when complete (:class:`pfjax.outputs.OutputDir`). Returns ``(folder, summary)``.
 
     Args:
-        config: a validated :class:`ParkingStudy`, a TOML path, or None for the defaults.
-        out: the output folder.
-        overrides: ``--set`` texts ``"key=value"`` (with a path or None only).
-        quick: apply the ``--quick`` sizes (with a path or None only).
+        config: a validated :class:`ParkingStudy`, a TOML path (str or path-like), or None for the defaults.
+        out: the output folder (str or path-like).
+        overrides: a list or tuple of ``--set`` texts ``"key=value"`` (with a path or None only).
+        quick: True: apply the ``--quick`` sizes (with a path or None; with a :class:`ParkingStudy`,
+            only recorded in the summary).
         overwrite: replace a pfjax output of another config in ``out``.
         progress: show progress bars.
 
     Raises:
-        pfjax.config.ConfigError: a bad key or value (one line naming the key), before anything is written.
+        pfjax.errors.InputError: a bad argument, named as here (``config``, ``out``, ``overrides``,
+            ``quick``, ``overwrite``, ``progress``), before anything is written; its subclass
+            :class:`pfjax.config.ConfigError` for a bad key or value of the config (one line naming the key).
     """
-    if not isinstance(config, ParkingStudy):
-        config = load(config, overrides, quick=quick)
+    if config is not None and not isinstance(config, (ParkingStudy, str, os.PathLike)):
+        raise InputError(f"config: expected a ParkingStudy, a TOML path or None, got {type(config).__name__}", "config")
+    if out is not None and not isinstance(out, (str, os.PathLike)):
+        raise InputError(f"out: expected a directory path or None, got {type(out).__name__}", "out")
+    if not isinstance(overrides, (list, tuple)) or not all(isinstance(o, str) for o in overrides):
+        raise InputError(f'overrides: expected a list of "key=value" strings, got {overrides!r:.80}', "overrides")
+    for key, value in (("quick", quick), ("overwrite", overwrite), ("progress", progress)):
+        if not isinstance(value, bool):
+            raise InputError(f"{key}: expected True or False, got {value!r:.80}", key)
+    if isinstance(config, ParkingStudy):
+        if overrides:
+            raise InputError("overrides: only with a config path or None (a ParkingStudy is already validated)")
+    else:
+        try:
+            config = load(config, overrides, quick=quick)
+        except InputError as e:  # the config module's flag, by this function's argument
+            raise errors.renamed(e, "--set", "overrides") from None
     check_name("name", config.name)
     folder = Path(out) if out is not None else Path("results") / config.name
     with OutputDir(
@@ -149,6 +170,7 @@ def run(
         config_sha256=config_hash(config.model_dump(mode="json")),
         overwrite=overwrite,
         extra={"seed": config.seed},
+        flag="out",
     ) as output:
         summary = run_study(config, output.staging, quick=quick, progress=progress)
         folder = output.commit()

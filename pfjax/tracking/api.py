@@ -9,6 +9,7 @@ Every argument is checked before anything is compiled or simulated; a bad one ra
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 from pfjax import errors
 from pfjax.errors import InputError
@@ -21,6 +22,9 @@ MODES = ("forward", "backward")
 LEADERS = ("line", "circle", "sine", "lane-change")
 #: Most integrator steps one run may take (``horizon / dt``).
 MAX_STEPS = 2_000_000
+#: Relative tolerance within which ``horizon / dt`` must be a whole number (float round-off of
+#: e.g. ``30 / 0.01 = 2999.9999999999995``).
+STEPS_RTOL = 1e-9
 
 
 def _choice(key: str, value, choices: tuple[str, ...]) -> str:
@@ -47,7 +51,7 @@ def _pair(key: str, value) -> tuple[float, float]:
         n = len(value)
     except TypeError:
         n = None
-    if n != 2 or isinstance(value, str):
+    if n != 2 or isinstance(value, (str, Mapping)):
         raise InputError(f"{key}: expected two numbers (along, left), got {value!r}", key)
     a, b = (errors.number(key, v) for v in value)
     return a, b
@@ -109,6 +113,14 @@ def _check(
         raise InputError(f"dt: must be <= horizon ({T:g} s), got {dt:g}", "dt")
     if T / dt > MAX_STEPS:  # names both: the command line shows it as --T/--dt
         raise InputError(f"horizon/dt: at most 2e6 steps, got {T / dt:.3g}", "horizon/dt")
+    n = T / dt
+    if abs(n - round(n)) > STEPS_RTOL * n:  # the run would be rounded to a whole step: refused, never silent
+        lo, hi = math.floor(n) * dt, math.ceil(n) * dt
+        raise InputError(
+            f"horizon: must be a whole number of steps dt = {dt:g} s, got {T:g} s = {n:.6g} steps "
+            f"(e.g. {lo:g} or {hi:g} s)",
+            "horizon",
+        )
     return out
 
 
@@ -154,11 +166,14 @@ def run(
         k: error decay rate of the linearised loop, 1/s, > 0.
         v_max: the follower's speed limit, m/s, > 0.
         omega_max_deg: steering-rate limit, deg/s, > 0.
-        offset: the follower's initial displacement ``(along, left)`` in the leader's frame, m.
+        offset: the follower's initial displacement ``(along, left)`` in the leader's frame, m
+            (two numbers; a sequence, not a mapping).
         heading_error_deg: initial heading error, deg.
         beta_r_deg: constant rear-wheel slip angle, deg, |beta_r_deg| < 90.
         beta_f_deg: constant front-wheel slip angle, deg, |beta_f_deg| < 90.
-        horizon: simulated time, s, > 0 (the command line's ``--T``).
+        horizon: simulated time, s, > 0 (the command line's ``--horizon``): a whole number of
+            steps ``dt`` (to a relative 1e-9, :data:`STEPS_RTOL`), never rounded; the result's
+            ``T`` is ``round(horizon / dt) * dt``, equal to it up to float round-off.
         dt: integrator step, s, in (0, horizon], at most 2e6 steps in ``horizon``.
 
     Returns:
@@ -175,7 +190,8 @@ def run(
 
     Raises:
         InputError: a bad argument; the message starts with its name (``"p: must be nonzero ..."``),
-            or ``horizon/dt`` when the run would take more than 2e6 steps.
+            or ``horizon/dt`` when the run would take more than 2e6 steps; ``horizon`` when it is
+            not a whole number of steps.
     """
     c = _check(**locals())  # exactly the arguments above, by name
     import jax

@@ -1,0 +1,53 @@
+"""``pfjax.tracking.run`` / ``pfjax track``: a horizon that is not a whole number of steps is
+refused (never rounded one way or the other), and a mapping is not an offset pair.
+
+References: hand-computed step counts (2.5 s / 1 s and 0.015 s / 0.01 s are 2.5 and 1.5 steps; 30 s
+/ 0.01 s is 3000 up to round-off)."""
+
+from __future__ import annotations
+
+import pytest
+
+from pfjax.cli import main
+from pfjax.errors import InputError
+from pfjax.tracking import api
+
+
+def _never(monkeypatch):
+    monkeypatch.setattr(api, "_simulate", lambda c: (_ for _ in ()).throw(AssertionError("simulated")))
+
+
+@pytest.mark.parametrize("horizon,dt,steps", [(2.5, 1.0, "2.5"), (0.015, 0.01, "1.5"), (3.0, 0.7, "4.28571")])
+def test_horizon_must_be_whole_steps(monkeypatch, horizon, dt, steps):
+    _never(monkeypatch)
+    with pytest.raises(InputError) as e:
+        api.run(horizon=horizon, dt=dt)
+    assert e.value.key == "horizon"
+    assert str(e.value).startswith(
+        f"horizon: must be a whole number of steps dt = {dt:g} s, got {horizon:g} s = {steps}"
+    )
+
+
+def test_whole_steps_up_to_round_off_pass(monkeypatch):
+    seen = []
+    monkeypatch.setattr(api, "_simulate", lambda c: seen.append((c["horizon"], c["dt"])))
+    for horizon, dt in ((30.0, 0.01), (0.3, 0.1), (12.0, 0.02), (3.0, 0.05)):
+        api.run(horizon=horizon, dt=dt)
+    assert len(seen) == 4
+
+
+def test_horizon_error_on_the_command_line(capsys):
+    rc = main(["track", "--horizon", "2.5", "--dt", "1", "--json"])
+    out, err = capsys.readouterr()
+    assert (rc, out) == (2, "")
+    assert err == (
+        "pfjax track: error: --horizon: must be a whole number of steps --dt = 1 s, got 2.5 s = 2.5 steps "
+        "(e.g. 2 or 3 s)\n"
+    )
+
+
+def test_offset_mapping_refused(monkeypatch):
+    _never(monkeypatch)
+    with pytest.raises(InputError) as e:
+        api.run(offset={1: 2, 3: 4})
+    assert e.value.key == "offset" and str(e.value).startswith("offset: expected two numbers")
