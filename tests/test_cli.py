@@ -673,6 +673,8 @@ def _numbers(d: dict, prefix: str = "") -> list[str]:
             continue
         if isinstance(v, dict):
             keys += _numbers(v, f"{prefix}{k}.")
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):  # a log of records
+            keys += sorted({n for x in v for n in _numbers(x, f"{prefix}{k}.")})
         elif isinstance(v, float) or (
             isinstance(v, list) and v and all(isinstance(x, (float, list)) for x in v) and not isinstance(v[0], str)
         ):
@@ -686,6 +688,10 @@ def _numbers(d: dict, prefix: str = "") -> list[str]:
         ["simulate", "--path", "sine", "--controller", "stanley", "--horizon", "1", "--model", "st"],
         ["synth"],
         ["tune", "--check", "39.5204,1.639,11.6124,0.023", "--controller", "pi", "--scenario", "paper-line"],
+        ["parking", "--horizon", "60"],
+        ["parking-search", "--method", "grid", "--n", "2", "--horizon", "20"],
+        ["parking-search", "--method", "ga", "--population", "4", "--generations", "1", "--horizon", "20"],
+        ["track", "--horizon", "5"],
     ],
 )
 def test_one_run_commands_give_every_number_its_unit_and_hash_their_arguments(capsys, args):

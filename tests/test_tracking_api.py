@@ -41,7 +41,10 @@ def test_run_equals_cli_json(capsys, mode, extra):
         else {"p": -0.5, "offset": (0.2, -0.3), "beta_r_deg": 2.0}
     )
     d = run(mode, **kw, **FAST)
-    assert json.loads(json.dumps(d)) == cli
+    from pfjax.cli.records import RECORD  # the command adds its units, arguments and provenance
+
+    assert json.loads(json.dumps(d)) == {k: v for k, v in cli.items() if k not in RECORD or k in d}
+    assert set(cli) - set(d) == set(RECORD)
     assert d["mode"] == mode and d["f"] == (1 if mode == "forward" else -1) and d["T"] == pytest.approx(3.0)
 
 

@@ -15,6 +15,34 @@ import contextlib
 from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags
 from pfjax.errors import InputError
 
+_POSE = {"x0.x": "m", "x0.y": "m", "x0.theta_deg": "deg"}
+#: The source's end error ``|x| + sqrt(y^2 + tan^2 theta)`` (m and the tangent's 1, as it defines it).
+_ERROR = "m (|x| + sqrt(y^2 + tan^2 theta), the source's measure)"
+#: The unit of each number ``pfjax parking --json`` prints (:func:`pfjax.cli.records.units`).
+RUN_UNITS = {
+    **_POSE,
+    "alpha_schedule": "1",
+    "xs": "m",
+    "a_f": "m",
+    "time_s": "s",
+    "switch_log.*": {"t": "s", "x": "m", "y": "m", "theta_deg": "deg"},
+    "final.*": {"x": "m", "y": "m", "theta_deg": "deg"},
+    "error": _ERROR,
+    "distance_m": "m",
+}
+#: The unit of each number ``pfjax parking-search --json`` prints.
+SEARCH_UNITS = {
+    **_POSE,
+    "xs": "m",
+    "alpha1": "1",
+    "alpha2": "1",
+    "fitness": "s (J: time plus --weight x error)",
+    "history_best_fitness": "s",
+    "history_mean_fitness": "s",
+    "time_s": "s",
+    "error": _ERROR,
+}
+
 
 def _common(p):
     p.add_argument("--k1", type=float, default=32.0, help="gain on y, 1/m^2 (default 32)")
@@ -50,7 +78,7 @@ def register(sub) -> None:
         "--xs", type=float, help="garage rule: switch back to forward when backing past x = XS, m (garage default -0.9)"
     )
     _common(p)
-    p.set_defaults(func=_cmd_parking)
+    p.set_defaults(func=_cmd_parking, units=RUN_UNITS)
 
     s = sub.add_parser(
         "parking-search",
@@ -67,7 +95,7 @@ def register(sub) -> None:
     s.add_argument("--seed", type=int, default=0, help="PRNG seed of the GA (default 0)")
     s.add_argument("--weight", type=float, default=100.0, help="end-error weight w in J = 1/(t_e + w e) (default 100)")
     _common(s)
-    s.set_defaults(func=_cmd_search)
+    s.set_defaults(func=_cmd_search, units=SEARCH_UNITS)
 
 
 #: the flags both commands share, by the argument of :func:`pfjax.parking.run` they set (``map`` aside:

@@ -24,6 +24,9 @@ from pathlib import Path
 #: The unit of a controller's gains: each gain's own (its parameter pytree's docstring).
 GAINS = "the controller's parameter units (pfjax.controllers)"
 
+#: The keys :func:`stamped` adds to a result (where the result has no key of that name).
+RECORD = ("units", "arguments", "pfjax_version", "config_sha256", "seed", "machine", "cpu_settings")
+
 #: Attributes of the parsed arguments that are the command's machinery, not its input.
 _INTERNAL = {"func", "human", "json", "units", "command"}
 
@@ -42,9 +45,9 @@ def arguments(args) -> dict:
 
 
 def units(out: Mapping, table: Mapping) -> dict[str, str]:
-    """``{dotted key: unit}`` for every value of ``out`` (numbers, lists of numbers) whose key
-    ``table`` gives a unit: ``table[key]``, else ``table["<parent>.*"][name]``. Text and codes
-    (unit ``""``) are left out."""
+    """``{dotted key: unit}`` for every value of ``out`` (numbers, lists of numbers; a list of
+    records by its fields, ``switch_log.t``) whose key ``table`` gives a unit: ``table[key]``, else
+    ``table["<parent>.*"][name]``. Text and codes (unit ``""``) are left out."""
     found: dict[str, str] = {}
 
     def walk(d: Mapping, prefix: str) -> None:
@@ -53,6 +56,10 @@ def units(out: Mapping, table: Mapping) -> dict[str, str]:
             key = f"{prefix}{name}"
             if isinstance(value, Mapping):
                 walk(value, f"{key}.")
+                continue
+            if isinstance(value, list) and value and all(isinstance(v, Mapping) for v in value):
+                for item in value:  # a list of records (a log): one unit per field
+                    walk(item, f"{key}.")
                 continue
             unit = table.get(key, by_name.get(name) if isinstance(by_name, Mapping) else by_name)
             if isinstance(unit, str) and unit:

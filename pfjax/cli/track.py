@@ -11,6 +11,28 @@ from __future__ import annotations
 
 from pfjax.cli.common import Aliased, as_flags
 
+#: The unit of each number ``pfjax track --json`` prints (:func:`pfjax.cli.records.units`).
+UNITS = {
+    "p": "1",
+    "l": "m",
+    "gamma_max_deg": "deg",
+    "final_error_norm": "m",
+    "final_phi_minus_pgamma": "rad",
+    "max_abs_gamma_deg": "deg",
+    "window_max_error": "m",
+    "window_max_abs_phi_minus_pgamma": "rad",
+    "iae": "m s",
+    "final_d": "m",
+    "limit_fraction": "1",
+    "min_abs_det_factor": "1",
+    "lemma_p_bound": "1",
+    "fail_time": "s",
+    "tolerances.*": {"window_s": "s", "tol_z_m": "m", "tol_phi_rad": "rad"},
+    "final.*": {"x": "m", "y": "m", "theta": "rad", "gamma": "rad"},
+    "T": "s",
+    "dt": "s",
+}
+
 #: The ``--leader`` choices: :data:`pfjax.tracking.api.LEADERS`, written out so that building the
 #: parser does not import the simulator (a test checks that the two agree).
 LEADERS = ("line", "circle", "sine", "lane-change")
@@ -64,7 +86,7 @@ def register(sub) -> None:
     )
     p.add_argument("--dt", type=float, default=0.01, help="step, s (default 0.01)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(func=_cmd)
+    p.set_defaults(func=_cmd, units=UNITS)
 
 
 #: ``pfjax track``'s flags by the :func:`pfjax.tracking.run` argument they set (``horizon/dt``: the step count).
