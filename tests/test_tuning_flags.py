@@ -188,3 +188,13 @@ def test_tune_api_refuses_a_setting_its_method_does_not_read(method, kwargs, nam
         pfjax.tune("pi", "paper-line", method, **kwargs)
     with pytest.raises(InputError, match=rf"^{name}: not with a check "):
         pfjax.tune("pi", "paper-line", check=[39.5204, 1.639, 11.6124, 0.023], **kwargs)
+
+
+def test_an_error_in_a_study_file_keeps_the_files_words(tmp_path, capsys):
+    """``--scenario: sim.dt: ...`` is about the study file's keys: its words (model, dt) are not
+    turned into the command's flags (--model, --dt)."""
+    study = tmp_path / "st.toml"
+    study.write_text(ST_STUDY.replace("dt = 0.01", "dt = 0.05"))
+    assert main(["tune", "--check=-5,-2", "--controller", "state-feedback", "--scenario", str(study)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pfjax tune: error: --scenario: sim.dt: the ST model at ") and "needs dt <= " in err, err

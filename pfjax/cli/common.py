@@ -82,9 +82,12 @@ def as_flags(flags: dict[str, str]):
         if base not in flags:
             raise
         body = text[len(key) + 2 :] if text.startswith(key + ": ") else text
-        for name, other in flags.items():  # other settings the message mentions, by their flags too
-            if len(name) > 1:
-                body = re.sub(rf"(?<![\w.-]){re.escape(name)}(?![\w.-])", other, body)
+        # other settings the message mentions, by their flags too; not in an error about a config
+        # file's own key (``--scenario: sim.dt: ...``), whose words are the file's, not the flags'
+        if not re.match(r"[\w\[\]]+(\.[\w\[\]]+)+: ", body):
+            for name, other in flags.items():
+                if len(name) > 1:
+                    body = re.sub(rf"(?<![\w.-]){re.escape(name)}(?![\w.-])", other, body)
         sub = key[len(base) :]
         flag = flags[base] + (sub if sub.startswith("[") else "")
         sub = "" if sub.startswith("[") else sub.lstrip(".")
