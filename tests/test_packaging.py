@@ -67,8 +67,13 @@ def test_each_example_loads_as_a_study_and_has_a_one_line_description(name):
     assert spec.n_runs >= 1 and spec.controllers and spec.paths
     text = examples.description(name)
     assert text and "\n" not in text and not text.startswith("#")
-    first = next(ln for ln in examples.path(name).read_text().splitlines() if ln.strip())
-    assert text.rstrip(".") in first  # the first comment line (its first sentence)
+    lines = examples.path(name).read_text().splitlines()
+    opening = []  # the comment the file opens with, its lines joined
+    for ln in lines[next(i for i, ln in enumerate(lines) if ln.strip()) :]:
+        if not ln.startswith("#"):
+            break
+        opening.append(ln.lstrip("#").strip())
+    assert text.rstrip(".") in " ".join(opening) and text.endswith(".")  # its first sentence, whole
 
 
 def test_an_unknown_example_names_the_key_and_the_choices():
