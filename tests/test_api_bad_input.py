@@ -324,3 +324,14 @@ def _spec():
     from pfjax.montecarlo.config import load_study
 
     return load_study(data=STUDY)[0]
+
+
+def test_run_study_names_out_in_the_whole_refusal(tmp_path):
+    """A user's directory refused as ``pfjax study --out`` refuses it, every mention of the argument
+    its Python name (the advice too: "choose another out"), and the directory untouched."""
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep")
+    msg = _refused(lambda: pfjax.run_study(STUDY, mine), "out")
+    assert "choose another out" in msg and "--out" not in msg, msg
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"] and (mine / "notes.txt").read_text() == "keep"

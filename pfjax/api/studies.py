@@ -84,15 +84,15 @@ def run_study(
     """
     from pathlib import Path
 
+    from pfjax.montecarlo.runner import study_output
     from pfjax.montecarlo.study import run
 
     out = None if out is None else _out_dir(out)
     spec = _study_spec(config, {k.replace("__", "."): v for k, v in overrides.items()})
     out = Path("results") / spec.name if out is None else out
-    try:
-        run(spec, out, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
-    except errors.InputError as e:  # the directory refused by pfjax.outputs, as `pfjax study --out` is
-        raise errors.renamed(e, "--out", "out") from None
+    # the output directory judged by pfjax.outputs as `pfjax study --out` is, its messages naming `out`
+    output = study_output(spec, out, overwrite=overwrite, flag="out")
+    run(spec, output, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
     return load_study(out)
 
 
