@@ -29,8 +29,7 @@ jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
 matplotlib.use("Agg")
 
-from pfjax import errors  # noqa: E402
-from pfjax.errors import InputError, command_main  # noqa: E402
+from pfjax.errors import command_main  # noqa: E402
 from pfjax.parking.study_config import load  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -50,13 +49,7 @@ def main(argv=None) -> int:
 def run(args) -> int:
     config = load(args.config, args.set, quick=args.quick)
     out = Path(args.out) if args.out else ROOT / "results" / config.name
-    try:
-        out, summary = pfjax.parking.run_study(config, out, quick=args.quick, overwrite=args.overwrite)
-    except InputError as e:  # the library names its argument out; here it is the flag
-        if e.key != "out":
-            raise
-        text = str(errors.renamed(e, "out", "--out")).replace("choose another out", "choose another --out")
-        raise InputError(text, "--out") from None
+    out, summary = pfjax.parking.run_study(config, out, quick=args.quick, overwrite=args.overwrite, flag="--out")
     print(f"wrote {out} in {summary['wall_s']:.1f} s")
     return 0
 

@@ -143,3 +143,22 @@ def test_run_study_names_its_python_arguments(tmp_path, monkeypatch):
         assert e.value.key == key and str(e.value).startswith(f"{key}: "), (kwargs, str(e.value))
         assert "--" not in str(e.value).split(":")[0]
     assert sorted(x.name for x in tmp_path.iterdir()) == ["busy.txt"] and busy.read_text() == "mine"
+
+
+def test_the_study_script_names_its_out_flag_in_the_whole_refusal(tmp_path):
+    """``studies/parking.py --out DIR`` on a user's directory: one line naming ``--out`` (the advice
+    too), exit 2, the directory untouched (the library told the flag's name, pfjax.outputs)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep")
+    script = Path(__file__).resolve().parents[1] / "studies" / "parking.py"
+    r = subprocess.run(
+        [sys.executable, str(script), "--quick", "--out", str(mine)], capture_output=True, text=True, timeout=300
+    )
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.startswith("parking: error: --out: ") and "choose another --out" in r.stderr, r.stderr
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"]

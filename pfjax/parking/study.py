@@ -127,6 +127,7 @@ def run(
     quick: bool = False,
     overwrite: bool = False,
     progress: bool = True,
+    flag: str = "out",
 ) -> tuple[Path, dict]:
     """Run the parking study into ``out`` (default ``results/<name>``), assembled in a staging folder
     and moved into place when complete (:class:`pfjax.outputs.OutputDir`). Returns ``(folder, summary)``.
@@ -139,6 +140,8 @@ def run(
             only recorded in the summary).
         overwrite: replace a pfjax output of another config in ``out``.
         progress: show progress bars.
+        flag: the name ``out`` goes by in the output directory's refusals (:class:`pfjax.outputs.OutputDir`;
+            ``studies/parking.py`` passes its ``--out``).
 
     Raises:
         pfjax.errors.InputError: a bad argument, named as here (``config``, ``out``, ``overrides``,
@@ -170,7 +173,7 @@ def run(
         config_sha256=config_hash(config.model_dump(mode="json")),
         overwrite=overwrite,
         extra={"seed": config.seed},
-        flag="out",
+        flag=flag,
     ) as output:
         summary = run_study(config, output.staging, quick=quick, progress=progress)
         folder = output.commit()
