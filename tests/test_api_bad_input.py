@@ -304,6 +304,7 @@ def test_recording_beyond_the_memory_budget_names_trajectories(monkeypatch):
         "trajectories",
     )
     assert "trajectories=False" in msg and "record=" not in msg
+    assert "recording 8 runs (padded to 32)" in msg  # the caller's runs, and the batch that is recorded
 
 
 def test_scenarios_beyond_the_memory_budget_are_refused_before_drawing(monkeypatch):

@@ -85,7 +85,7 @@ def simulate(
     import jax
 
     from pfjax import controllers as C
-    from pfjax.montecarlo.runner import add_results, batch_size, simulate_scenarios
+    from pfjax.montecarlo.runner import add_results, batch_size, check_record, simulate_scenarios
     from pfjax.sim import SimConfig
 
     if not isinstance(scenarios, Scenarios):
@@ -114,13 +114,15 @@ def simulate(
     batch = batch._replace(
         gains=jax.tree_util.tree_map(lambda g: np.broadcast_to(np.asarray(g), (m,) + np.shape(g)), params)
     )
-    try:
-        res = simulate_scenarios(batch, controller=e.controller, config=config)
-    except errors.InputError as err:  # the recording's memory check, named by this function's argument
-        if err.key != "record":
-            raise
-        text = str(errors.renamed(err, "record", "trajectories")).replace("record=False", "trajectories=False")
-        raise errors.InputError(text, "trajectories") from None
+    if config.record:
+        check_record(
+            batch,
+            config,
+            key="trajectories",
+            runs=n,
+            hint="pass trajectories=False (the metrics need none), or fewer runs",
+        )
+    res = simulate_scenarios(batch, controller=e.controller, config=config)
     res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:n], res)
     return Simulation(add_results(t.copy(), res, n), res, e.name, {k: flat[k] for k in e.gains})
 

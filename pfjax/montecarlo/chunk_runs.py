@@ -20,7 +20,7 @@ from pfjax.metrics.running import METRIC_NAMES
 from pfjax.montecarlo.chunks import ChunkSource
 from pfjax.montecarlo.config import ControllerSpec, StudySpec, nominal
 from pfjax.montecarlo.sampling import column_names, sample_runs
-from pfjax.sim import dynamic, sharding
+from pfjax.sim import batch, dynamic, sharding
 from pfjax.sim.simulate import SimConfig, simulate_batch
 from pfjax.sim.status import STATUS_NAMES
 
@@ -91,8 +91,16 @@ def simulate_scenarios(scenarios, *, controller, config: SimConfig, devices=None
     """A batch of sampled runs through its vehicle model's simulator: :func:`pfjax.sim.simulate_batch`
     for the kinematic model's :class:`~pfjax.sim.Scenario`, :func:`pfjax.sim.dynamic.simulate_batch`
     for the ST model's :class:`~pfjax.sim.dynamic.DynamicScenario`."""
-    batch = dynamic.simulate_batch if isinstance(scenarios, dynamic.DynamicScenario) else simulate_batch
-    return batch(scenarios, controller=controller, config=config, devices=devices)
+    run = dynamic.simulate_batch if isinstance(scenarios, dynamic.DynamicScenario) else simulate_batch
+    return run(scenarios, controller=controller, config=config, devices=devices)
+
+
+def check_record(scenarios, config: SimConfig, **named) -> None:
+    """:func:`pfjax.sim.batch.check_record` for a batch of sampled runs, whichever vehicle model
+    simulates it (a recorded ST run holds :data:`pfjax.sim.dynamic.RECORD_COPIES` trajectories);
+    ``named``: its ``key``, ``runs`` and ``hint``, so a caller's refusal names its own argument."""
+    copies = dynamic.RECORD_COPIES if isinstance(scenarios, dynamic.DynamicScenario) else 1
+    batch.check_record(scenarios, config.n_steps, copies=copies, **named)
 
 
 def with_gains(sc, gains, n):

@@ -17,6 +17,7 @@ from pfjax.montecarlo.chunk_runs import (  # noqa: F401  (re-exported: a study's
     SHARED_SAMPLES_BYTES,
     add_results,
     batch_size,
+    check_record,
     controller_of,
     nominal_wheelbase,
     precision,

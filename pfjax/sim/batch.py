@@ -84,16 +84,21 @@ def call(jitted, scenarios, *, devices=None, block: int | str | None = "auto", *
     return sharding.unpad(jitted(placed, layout=layout, **static), n)
 
 
-def check_record(scenarios, n_steps: int, *, copies: int = 1) -> None:
-    """Refuses (:class:`~pfjax.errors.InputError` naming ``record``) to record ``N + 1 = n_steps + 1``
-    samples of every run of a concrete batch when ``copies`` trajectories of that size per run would
-    not fit in memory (:func:`pfjax.resources.check_memory`); traced batches are not checked."""
+def check_record(
+    scenarios, n_steps: int, *, copies: int = 1, key: str = "record", runs: int | None = None, hint: str | None = None
+) -> None:
+    """Refuses (:class:`~pfjax.errors.InputError` naming ``key``, default ``record``) to record
+    ``N + 1 = n_steps + 1`` samples of every run of a concrete batch when ``copies`` trajectories of
+    that size per run would not fit in memory (:func:`pfjax.resources.check_memory`); traced batches
+    are not checked. ``runs``: the caller's own run count, when the batch holds padding runs too
+    (the message says both); ``hint``: what to do instead, in the caller's words."""
     if errors.is_traced(scenarios):
         return
     n_runs = int(np.shape(jax.tree_util.tree_leaves(scenarios)[0])[0])
+    told = n_runs if runs is None else int(runs)
     resources.check_memory(
-        "record",
+        key,
         n_runs * copies * resources.run_bytes(n_steps, record=True),
-        f"recording {n_runs} runs of {n_steps + 1} samples",
-        "simulate with record=False (the metrics need no trajectory), or fewer runs",
+        f"recording {told} runs" + (f" (padded to {n_runs})" if told != n_runs else "") + f" of {n_steps + 1} samples",
+        hint or "simulate with record=False (the metrics need no trajectory), or fewer runs",
     )

@@ -107,6 +107,10 @@ class SlipMetrics(NamedTuple):
 
 SLIP_METRIC_NAMES = SlipMetrics._fields
 
+#: A recorded run holds two trajectories' worth of samples per step (the states and the slips),
+#: against one for the kinematic simulator (:func:`pfjax.sim.batch.check_record`).
+RECORD_COPIES = 2
+
 
 class DynamicTrajectory(NamedTuple):
     """Samples at ``t_k = k dt``, ``k = 0..N`` (shape ``(N+1,)`` per run)."""
@@ -359,4 +363,4 @@ def _check(scenarios: DynamicScenario, controller: Controller, config: SimConfig
     controller.check_params(scenarios.gains)
     system(controller, config)
     if config.record:
-        batch.check_record(scenarios, config.n_steps, copies=2)
+        batch.check_record(scenarios, config.n_steps, copies=RECORD_COPIES)
