@@ -198,3 +198,22 @@ def test_an_error_in_a_study_file_keeps_the_files_words(tmp_path, capsys):
     assert main(["tune", "--check=-5,-2", "--controller", "state-feedback", "--scenario", str(study)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("pfjax tune: error: --scenario: sim.dt: the ST model at ") and "needs dt <= " in err, err
+
+
+def test_tune_api_refuses_a_method_with_a_check_and_defaults_to_gradient(monkeypatch):
+    """As ``pfjax tune`` refuses ``--method`` with ``--check`` (a check runs no method); without
+    either, the API tunes by the multi-start gradient method."""
+    from pfjax.tuning import problem
+
+    with pytest.raises(InputError, match=r"^check: checks given gains; give method or check, not both$"):
+        pfjax.tune("pi", "paper-line", "ga", check=[39.5204, 1.639, 11.6124, 0.023])
+
+    class Reached(Exception):
+        pass
+
+    def record(p, method, **kw):
+        raise Reached(method)
+
+    monkeypatch.setattr(problem, "tune", record)
+    with pytest.raises(Reached, match="^gradient$"):
+        pfjax.tune("pi", "paper-line", config={"horizon": 1.0}, n_runs=1)

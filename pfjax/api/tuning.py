@@ -14,7 +14,7 @@ from pfjax.api.simulation import resolve_gains, sim_config
 def tune(
     controller: str = "pi",
     scenario: str = "paper-line",
-    method: str = "gradient",
+    method: str | None = None,
     *,
     key=0,
     cost=None,
@@ -41,7 +41,9 @@ def tune(
             default gains, successive halving of projected BFGS chains, restarts;
             :mod:`pfjax.tuning.multistart`), ``gradient-plain`` (projected adam from ``n_starts``
             uniform starts), ``ga`` (MATLAB-style GA) or ``ga+gradient`` (the GA, then ``steps``
-            adam steps from its best).
+            adam steps from its best); ``None`` (default): ``gradient``, or a check when ``check`` is
+            given (a method and ``check`` together are refused, as ``pfjax tune`` refuses
+            ``--method`` with ``--check``).
         key: int seed (or JAX key) of the GA population / the gradient's starts.
         cost: a :class:`pfjax.tuning.CostSpec` (metric, effort weight, aggregate); default mean IAE.
         config: a :class:`pfjax.sim.SimConfig`, or a dict of its fields that change the default
@@ -84,6 +86,9 @@ def tune(
             f"controller: expected a controller name, got {type(controller).__name__}", "controller"
         )
     name = next((n for n, e in C.REGISTRY.items() if controller in (n, e.cli_name)), controller)
+    if check is not None and method is not None:
+        raise errors.InputError("check: checks given gains; give method or check, not both", "check")
+    method = "gradient" if method is None and check is None else method
     k = prng_key(key)
     # a dict changes the default or the study's settings (make_problem); a bad field is named config.<field>
     config = config if isinstance(config, dict) else sim_config(config)
@@ -91,7 +96,7 @@ def tune(
     settings: dict[str, object] = dict(generations=generations, population=population, steps=steps)
     settings.update(n_starts=n_starts, learning_rate=learning_rate, multistart=multistart)
     # a setting the method (or a check) does not read is refused, as pfjax tune refuses its flag
-    check_settings_apply(None if check is not None else method, {k for k, v in settings.items() if v is not None})
+    check_settings_apply(method, {k for k, v in settings.items() if v is not None})
     problem = make_problem(name, scenario, cost=cost, config=config, n_runs=n_runs, model=model)
     if check is not None:
         r = run_check(problem, check)
