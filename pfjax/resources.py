@@ -14,6 +14,7 @@ predict the peak to the byte.
 
 from __future__ import annotations
 
+import math
 import os
 
 from pfjax.errors import InputError
@@ -43,6 +44,26 @@ def check_steps(horizon: float, dt: float) -> int:
             f"dt: horizon / dt (a run's integrator step count) may be at most {MAX_STEPS:.0e}, "
             f"got {horizon:g} / {dt:g} = {n:.3g}",
             "dt",
+        )
+    return int(round(n))
+
+
+#: Relative tolerance of a whole number of steps: ``horizon / dt`` within this of an integer (the
+#: rounding of a decimal horizon and step, e.g. 20 / 0.005) is that integer.
+STEPS_RTOL = 1e-9
+
+
+def whole_steps(horizon: float, dt: float, key: str = "horizon") -> int:
+    """The number of integrator steps ``horizon / dt`` when it is a whole number (to a relative
+    :data:`STEPS_RTOL`); :class:`~pfjax.errors.InputError` naming ``key`` otherwise, with the two
+    nearest horizons that are: a run is never silently lengthened or shortened to whole steps."""
+    n = horizon / dt
+    if abs(n - round(n)) > STEPS_RTOL * n:
+        lo, hi = math.floor(n) * dt, math.ceil(n) * dt
+        raise InputError(
+            f"{key}: must be a whole number of steps dt = {dt:g} s, got {horizon:g} s = {n:.6g} steps "
+            f"(e.g. {lo:g} or {hi:g} s)",
+            key,
         )
     return int(round(n))
 

@@ -144,5 +144,7 @@ def test_max_stable_step_separates_stable_from_unstable_integration():
     ev = st.lateral_eigenvalues(sc.vehicle, 1.0)
     assert np.all(ev.real < 0)
     for dt, ok in ((0.002, True), (1.3 * dt_max, False)):
-        r = dyn.simulate_batch(stack([sc]), controller=ctrl, config=SimConfig(horizon=1.0, dt=dt, record=False))
+        r = dyn.simulate_batch(
+            stack([sc]), controller=ctrl, config=SimConfig(horizon=round(1.0 / dt) * dt, dt=dt, record=False)
+        )
         assert (int(r.status[0]) == Status.OK) == ok, dt

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -141,3 +142,21 @@ def test_bad_setting_one_line_exit_2_nothing_written(tmp_path, setting, message)
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], r.stderr
     assert not d.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("override", "key", "text"),
+    [
+        ("sim.horizon=20.005", "sim.horizon", "must be a whole number of steps dt = 0.01 s"),
+        ("sim.dt=0.0064", "sim.dt", "the integral design's 30 s runs: horizon: must be a whole number"),
+    ],
+)
+def test_a_step_that_does_not_divide_a_horizon_is_refused_at_load(override, key, text):
+    """The problems' horizon and the integral design's 30 s steady-state runs are both whole numbers
+    of steps ``sim.dt``, checked when the study is read (before hours of tuning), naming the key."""
+    from pfjax.config import ConfigError
+    from pfjax.tuning.study_config import load
+
+    with pytest.raises(ConfigError, match=rf"^{re.escape(key)}: .*{re.escape(text)}"):
+        load(overrides=[override])
+    assert load(overrides=["sim.dt=0.008"], quick=True).sim.dt == 0.008

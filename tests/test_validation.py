@@ -397,3 +397,25 @@ def test_a_sampling_period_longer_than_the_horizon_is_refused():
     assert main(["simulate", "--path", "line", "--controller", "pi", "--horizon", "1", "--control-every", "1000"]) == 2
     with pytest.raises(InputError, match=r"^sim\.control_every: .*\(1200 steps\)"):
         load_study(data=copy.deepcopy(DATA), overrides=["sim.control_every=1201", "sim.horizon=6", "success.from_s=1"])
+
+
+def test_a_horizon_of_a_fraction_of_a_step_is_refused_everywhere(tmp_path, capsys):
+    """``horizon / dt`` must be a whole number (to a relative 1e-9): never rounded to whole steps
+    (0.015 s at 10 ms would run 2 steps, 0.02 s), refused naming the horizon in each front end."""
+    from pfjax.errors import InputError
+    from pfjax.sim import SimConfig
+
+    with pytest.raises(InputError, match=r"^horizon: must be a whole number of steps dt = 0.01 s, got 0.015 s = 1.5 "):
+        SimConfig(dt=0.01, horizon=0.015)
+    assert SimConfig(dt=0.01, horizon=30.0).n_steps == 3000  # 30 / 0.01 = 2999.9999999999995
+    assert SimConfig(dt=0.003, horizon=19.998).n_steps == 6666
+    assert main(["simulate", "--path", "line", "--controller", "pi", "--horizon", "20", "--dt", "0.003", "--json"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("pfjax simulate: error: --horizon: must be a whole number of steps")
+        and "19.998 or 20.001 s" in err
+    )
+    out = tmp_path / "never"
+    code = main(["study", "--example", "default", "--set", "sim.horizon=20.001", "--out", str(out)])
+    assert code == 2 and not out.exists()
+    assert "sim.horizon: must be a whole number of steps" in capsys.readouterr().err

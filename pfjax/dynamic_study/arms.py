@@ -74,8 +74,8 @@ def _scale(d, f: float):
 
 
 def car_study(config: KinematicVsDynamic) -> dict:
-    """The robot study scaled to the car (module docstring): lengths x S, speeds and times x sqrt(S),
-    the paths as splines through the scaled source paths, the controllers' gains Froude-scaled."""
+    """The robot study scaled to the car (module docstring): lengths x S, speeds and times x sqrt(S)
+    (the horizon rounded to whole steps of the car's ``dt``), the paths as splines through the scaled source paths, the controllers' gains Froude-scaled."""
     p = st.parameter_set(config.car.params)
     s = float(p.l_f + p.l_r) / ROBOT_WHEELBASE
     rs = math.sqrt(s)
@@ -83,7 +83,9 @@ def car_study(config: KinematicVsDynamic) -> dict:
     spec["name"] = config.name
     spec["n_runs"] = spec["chunk_size"] = config.car.n_runs
     sim = spec["sim"]
-    sim.update(dt=config.car.dt, horizon=sim["horizon"] * rs, steady_window=sim["steady_window"] * rs)
+    # the scaled horizon to whole car steps (the simulator refuses a fraction of a step)
+    horizon = round(sim["horizon"] * rs / config.car.dt) * config.car.dt
+    sim.update(dt=config.car.dt, horizon=horizon, steady_window=sim["steady_window"] * rs)
     spec["success"] = {"band": spec["success"]["band"] * s, "from_s": spec["success"]["from_s"] * rs}
     ini = spec["initial"]
     ini["start_along_m"], ini["lateral_offset"] = _scale(ini["start_along_m"], s), _scale(ini["lateral_offset"], s)

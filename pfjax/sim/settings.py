@@ -15,7 +15,8 @@ class SimConfig:
 
     Attributes:
         dt: integrator step, s (default 5 ms).
-        horizon: simulated time, s (docs/reproductions/path-following.md §6: *assumed* 20 s).
+        horizon: simulated time, s (docs/reproductions/path-following.md §6: *assumed* 20 s), a whole
+            number of steps ``dt`` (to a relative 1e-9, :func:`pfjax.resources.whole_steps`).
         control_every: controller sampling period in integrator steps (zero-order hold);
             ``None`` evaluates the controller continuously inside every RK4 stage.
         newton_iters: Newton steps of the warm-started projection per measurement.
@@ -46,6 +47,7 @@ class SimConfig:
         if not self.horizon >= self.dt:
             raise InputError(f"horizon: must be >= dt ({self.dt:g} s), got {self.horizon:g}")
         resources.check_steps(self.horizon, self.dt)
+        resources.whole_steps(self.horizon, self.dt)  # never rounded to whole steps
         if self.control_every is not None:
             errors.integer("control_every", self.control_every, low=1, high=resources.MAX_STEPS)
             if self.control_every > self.n_steps:  # one command for the whole run: a mistake, not a controller
@@ -62,6 +64,7 @@ class SimConfig:
 
     @property
     def n_steps(self) -> int:
+        """``horizon / dt``, a whole number (checked on construction)."""
         return int(round(self.horizon / self.dt))
 
     @property

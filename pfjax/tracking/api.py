@@ -13,6 +13,7 @@ from collections.abc import Mapping
 
 from pfjax import errors
 from pfjax.errors import InputError
+from pfjax.resources import whole_steps
 
 __all__ = ["LEADERS", "MODES", "run"]
 
@@ -22,9 +23,6 @@ MODES = ("forward", "backward")
 LEADERS = ("line", "circle", "sine", "lane-change")
 #: Most integrator steps one run may take (``horizon / dt``).
 MAX_STEPS = 2_000_000
-#: Relative tolerance within which ``horizon / dt`` must be a whole number (float round-off of
-#: e.g. ``30 / 0.01 = 2999.9999999999995``).
-STEPS_RTOL = 1e-9
 
 
 def _choice(key: str, value, choices: tuple[str, ...]) -> str:
@@ -113,14 +111,7 @@ def _check(
         raise InputError(f"dt: must be <= horizon ({T:g} s), got {dt:g}", "dt")
     if T / dt > MAX_STEPS:  # names both: the command line shows it as --T/--dt
         raise InputError(f"horizon/dt: at most 2e6 steps, got {T / dt:.3g}", "horizon/dt")
-    n = T / dt
-    if abs(n - round(n)) > STEPS_RTOL * n:  # the run would be rounded to a whole step: refused, never silent
-        lo, hi = math.floor(n) * dt, math.ceil(n) * dt
-        raise InputError(
-            f"horizon: must be a whole number of steps dt = {dt:g} s, got {T:g} s = {n:.6g} steps "
-            f"(e.g. {lo:g} or {hi:g} s)",
-            "horizon",
-        )
+    whole_steps(T, dt)  # a run is never rounded to whole steps
     return out
 
 
@@ -172,7 +163,7 @@ def run(
         beta_r_deg: constant rear-wheel slip angle, deg, |beta_r_deg| < 90.
         beta_f_deg: constant front-wheel slip angle, deg, |beta_f_deg| < 90.
         horizon: simulated time, s, > 0 (the command line's ``--horizon``): a whole number of
-            steps ``dt`` (to a relative 1e-9, :data:`STEPS_RTOL`), never rounded; the result's
+            steps ``dt`` (to a relative 1e-9, :data:`pfjax.resources.STEPS_RTOL`), never rounded; the result's
             ``T`` is ``round(horizon / dt) * dt``, equal to it up to float round-off.
         dt: integrator step, s, in (0, horizon], at most 2e6 steps in ``horizon``.
 

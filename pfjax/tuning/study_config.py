@@ -59,6 +59,10 @@ QUICK = {
 }
 
 
+#: Simulated time of the integral design's steady-state check (:func:`pfjax.tuning.study_parts.integral_steady`), s.
+INTEGRAL_STEADY_HORIZON = 30.0
+
+
 class TuneSim(ConfigModel):
     """The paper-* problems: the source's tests at 5 deg slip."""
 
@@ -67,8 +71,17 @@ class TuneSim(ConfigModel):
 
     @model_validator(mode="after")
     def _check(self):
+        from pfjax.sim.settings import SimConfig
+
         if self.dt > self.horizon:
             raise ValueError(f"dt: must be <= horizon ({self.horizon:g}), got {self.dt:g}")
+        # the simulator's own checks (the step count, whole steps), for the problems' horizon and the
+        # integral design's steady-state runs (INTEGRAL_STEADY_HORIZON)
+        SimConfig(dt=self.dt, horizon=self.horizon)
+        try:
+            SimConfig(dt=self.dt, horizon=INTEGRAL_STEADY_HORIZON)
+        except ValueError as e:
+            raise ValueError(f"dt: the integral design's {INTEGRAL_STEADY_HORIZON:g} s runs: {e}") from None
         return self
 
 

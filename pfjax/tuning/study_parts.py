@@ -152,10 +152,12 @@ def integral_steady(cfg) -> float:
     from pfjax.sim import SimConfig, simulate_batch, stack
     from pfjax.sim.scenario import paper_scenario
     from pfjax.synthesis import integral_mixed
+    from pfjax.tuning.study_config import INTEGRAL_STEADY_HORIZON
 
     g = C.integral_params(integral_mixed().K.ravel())
     sc = stack([paper_scenario("line", g, beta_r_deg=br, beta_f_deg=bf) for br, bf in ((5, 5), (-8, 4), (10, -10))])
-    r = simulate_batch(sc, controller=C.integral, config=SimConfig(dt=cfg["sim"]["dt"], horizon=30.0, record=False))
+    config = SimConfig(dt=cfg["sim"]["dt"], horizon=INTEGRAL_STEADY_HORIZON, record=False)
+    r = simulate_batch(sc, controller=C.integral, config=config)
     return float(np.max(np.asarray(r.metrics.steady_abs_d)))
 
 
