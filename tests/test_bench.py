@@ -120,6 +120,16 @@ def test_bench_bad_input_one_line_exit_2(tmp_path, args, flag, capsys):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("key", ["horizon", "model_horizon"])
+def test_bench_config_refuses_a_horizon_of_a_fraction_of_a_step(key):
+    """The benchmark's 5 ms step must divide its horizons (never rounded), naming the field."""
+    from pfjax.bench.run import BenchConfig
+    from pfjax.errors import InputError
+
+    with pytest.raises(InputError, match=rf"^{key}: must be a whole number of steps dt = 0.005 s"):
+        BenchConfig(**{key: 2.0021})
+
+
 # ------------------------------------------------------------------------- without Numba (optional)
 
 NUMBA_MISSING = "numba not installed: pip install 'pfjax[bench]'"

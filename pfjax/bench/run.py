@@ -91,6 +91,8 @@ class BenchConfig:
             raise errors.InputError(f"models: expected 'kinematic' first, then any of {sorted(MODELS)}")
         errors.seed("seed", self.seed)
         n_steps = resources.check_steps(self.horizon, P.DT)
+        resources.whole_steps(self.horizon, P.DT)  # the benchmark's step divides both horizons
+        resources.whole_steps(self.model_horizon, P.DT, "model_horizon")
         resources.check_memory(
             "sizes",
             2 * max(self.sizes) * resources.run_bytes(n_steps),
