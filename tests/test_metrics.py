@@ -250,6 +250,28 @@ def test_hand_computed_failure_stops_accumulating():
     assert np.isnan(m.steady_abs_d) and np.isnan(m.settling_time)
 
 
+def test_a_run_failed_at_its_first_sample_has_no_maxima():
+    """Weight 0 from sample 0 on (the run starts beyond d_fail): the integrals over no time are 0, the
+    maxima and the saturated fraction over no samples NaN (not 0: a 3 m start is not a 0 m error)."""
+    h, N = 0.01, 100
+    t = np.arange(N + 1) * h
+    d = np.full(N + 1, 3.0)
+    z = np.zeros_like(t)
+    m = _feed(t, d, z, z + 0.1, z, np.zeros(N + 1), band=0.05, steady_from=0.5)
+    for name in ("iae", "ise", "itae", "steer_energy", "steer_tv"):
+        assert getattr(m, name) == 0.0, name
+    for name in ("max_abs_d", "late_max_abs_d", "overshoot", "sat_fraction", "steady_abs_d", "settling_time"):
+        assert np.isnan(getattr(m, name)), name
+    assert not bool(m.success)
+    # end to end: a start 3 m off the line with d_fail = 1 m fails at t = 0
+    import pfjax
+
+    sc = pfjax.scenarios("line", 2, lateral_offset=[0.5, 3.0], beta_r_deg=0, beta_f_deg=0)
+    tab = pfjax.simulate(sc, "pi", config={"horizon": 1.0, "dt": 0.01, "d_fail": 1.0}).table
+    assert list(tab.status) == ["ok", "diverged"] and tab.fail_time[1] == 0.0
+    assert np.isnan(tab.max_abs_d[1]) and tab.iae[1] == 0.0 and 0.45 < tab.max_abs_d[0] <= 0.5
+
+
 def test_success_window_hand_computed():
     """late_max_abs_d is the max |d| from success_from on (exp(-6) for a decreasing exp(-t));
     success needs it within the band and no failure."""

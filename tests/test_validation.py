@@ -419,3 +419,18 @@ def test_a_horizon_of_a_fraction_of_a_step_is_refused_everywhere(tmp_path, capsy
     code = main(["study", "--example", "default", "--set", "sim.horizon=20.001", "--out", str(out)])
     assert code == 2 and not out.exists()
     assert "sim.horizon: must be a whole number of steps" in capsys.readouterr().err
+
+
+def test_a_success_window_past_the_horizon_is_refused():
+    """``success_from`` beyond the run would leave the success window empty, and every run that did
+    not fail would pass: refused, as a study refuses ``success.from_s`` past ``sim.horizon``."""
+    import pfjax
+    from pfjax.errors import InputError
+    from pfjax.sim import SimConfig
+
+    with pytest.raises(InputError, match=r"^success_from: must be <= horizon \(1 s\), got 100$"):
+        SimConfig(horizon=1.0, dt=0.01, success_from=100.0)
+    assert SimConfig(horizon=1.0, dt=0.01, success_from=1.0).success_start == 1.0
+    sc = pfjax.scenarios("line", 2)
+    with pytest.raises(InputError, match=r"^config.success_from: must be <= horizon"):
+        pfjax.simulate(sc, "pi", config={"horizon": 1.0, "dt": 0.01, "success_from": 100.0})

@@ -19,6 +19,11 @@ and the remaining metrics are sample statistics:
 * ``sat_fraction``: fraction of the run's time with the command beyond the steering limit;
 * ``late_max_abs_d``: max |d| from ``success_from`` on (m);
 * ``success``: the run did not fail and ``late_max_abs_d <= success_band``.
+
+A failed run's metrics describe it up to its failure (the failing sample excluded). A run that
+fails at its first sample (``t = 0``: it starts beyond ``d_fail``, or not finite) has no samples:
+its integrals and ``steer_tv`` are 0, its maxima (``max_abs_d``, ``late_max_abs_d``,
+``overshoot``) and ``sat_fraction`` NaN.
 """
 
 from __future__ import annotations
@@ -141,18 +146,21 @@ def finalize(acc: Accumulator, horizon: float, failed: Array, success_band: floa
     nan = jnp.nan
     settled = (acc.settle <= horizon) & ~failed
     sw = jnp.where(acc.steady_weight > 0, acc.steady_weight, 1.0)
+    # a run that failed at its first sample has no samples: its integrals are 0 (over no time), its
+    # maxima and its saturated fraction are undefined (NaN), not 0
+    empty = acc.time <= 0
     return Metrics(
         iae=acc.iae,
         ise=acc.ise,
         itae=acc.itae,
-        max_abs_d=acc.max_abs_d,
+        max_abs_d=jnp.where(empty, nan, acc.max_abs_d),
         steady_abs_d=jnp.where(failed, nan, acc.steady_abs_d / sw),
         steady_abs_theta_e_rad=jnp.where(failed, nan, acc.steady_abs_theta_e_rad / sw),
         settling_time=jnp.where(settled, acc.settle, nan),
-        overshoot=jnp.maximum(acc.overshoot, 0.0),
+        overshoot=jnp.where(empty, nan, jnp.maximum(acc.overshoot, 0.0)),
         steer_energy=acc.steer_energy,
         steer_tv=acc.steer_tv,
-        sat_fraction=acc.sat_time / jnp.where(acc.time > 0, acc.time, 1.0),
-        late_max_abs_d=acc.late_max_abs_d,
+        sat_fraction=jnp.where(empty, nan, acc.sat_time / jnp.where(empty, 1.0, acc.time)),
+        late_max_abs_d=jnp.where(empty, nan, acc.late_max_abs_d),
         success=~failed & (acc.late_max_abs_d <= success_band),
     )

@@ -79,7 +79,8 @@ def limit_state(
         margin = threshold - metric
         if counter is not None:
             counter(n)
-        margin = np.where(np.asarray(res.status)[:n] != 0, np.minimum(margin, -1e-9), margin)
+        # a failed run fails the limit state whatever its metric (NaN for a run failed at t = 0: fmin)
+        margin = np.where(np.asarray(res.status)[:n] != 0, np.fmin(margin, -1e-9), margin)
         if rare.margin_resolution > 0:
             r = rare.margin_resolution
             margin = np.where(margin > 0, r * np.maximum(np.ceil(margin / r), 1.0), margin)

@@ -24,9 +24,11 @@ class SimConfig:
             ``False`` only the running metrics (memory independent of the horizon).
         d_fail: |d| above which a run is flagged ``DIVERGED``, m.
         settle_band: band on |d| for the settling time, m.
-        steady_window: final part of the run for the steady-state errors, s.
+        steady_window: final part of the run for the steady-state errors, s (the whole run when
+            longer than ``horizon``; a study's ``[sim]`` refuses that).
         success_band: a run succeeds if it does not fail and |d| <= this from ``success_from`` on, m.
-        success_from: start of the success window, s (``None``: the steady window's start).
+        success_from: start of the success window, s, at most ``horizon`` (``None``: the steady
+            window's start).
     """
 
     dt: float = 0.005
@@ -61,6 +63,10 @@ class SimConfig:
             errors.number(name, getattr(self, name), positive=True)
         if self.success_from is not None:
             errors.number("success_from", self.success_from, nonnegative=True, unit=" s")
+            if self.success_from > self.horizon:  # an empty success window would pass every run
+                raise InputError(
+                    f"success_from: must be <= horizon ({self.horizon:g} s), got {self.success_from:g}", "success_from"
+                )
 
     @property
     def n_steps(self) -> int:
