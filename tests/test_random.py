@@ -2,6 +2,8 @@
 scipy.stats.norm), independent between components, steps and keys, deterministic, in float32 and
 float64. The draws are a fixed function of the key, so the p-values are fixed numbers, not flaky."""
 
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -65,3 +67,33 @@ def test_unrolled_threefry_is_jax_fold_in_bit_for_bit():
     u = np.asarray([_uniform_open([jnp.uint32(x)], np.float32) for x in (w[0][0], w[0][1], w[1][0], w[1][1])])
     z = np.sqrt(2.0) * scipy.special.erfinv(2.0 * u.astype(np.float64) - 1.0)
     np.testing.assert_allclose(np.asarray(step_normals(key, k, 4)), z, rtol=1e-5, atol=1e-5)  # float32 erf_inv
+
+
+def test_seed_key_is_the_64_bit_prng_key_in_any_precision():
+    """``seed_key(s)`` is ``PRNGKey(s)`` as built with 64-bit integers, whatever ``jax_enable_x64``:
+    below 2**32 the keys of both modes; above, distinct keys for ``s`` and ``s + 2**32`` (a
+    float32 study's seeds 1 and 2**32 + 1 drew the same runs)."""
+    from pfjax.numerics.random import seed_key
+
+    seeds = [0, 1, 2**31, 2**32 - 1, 2**32 + 1, 12345678901234, 2**63 - 1]
+    with jax.enable_x64(False):
+        for s in seeds[:4]:
+            assert np.asarray(seed_key(s)).tolist() == np.asarray(jax.random.PRNGKey(s)).tolist()
+        assert np.asarray(seed_key(1)).tolist() != np.asarray(seed_key(2**32 + 1)).tolist()
+        low = [np.asarray(seed_key(s)).tolist() for s in seeds]
+    with jax.enable_x64(True):
+        for s, k in zip(seeds, low):
+            assert k == np.asarray(jax.random.PRNGKey(s)).tolist(), s
+
+
+def test_a_float32_study_draws_other_runs_for_a_seed_2_to_the_32_apart():
+    from pfjax.montecarlo.chunk_runs import precision, sample_aligned
+    from pfjax.montecarlo.config import load_study
+
+    drawn = []
+    for seed in (1, 2**32 + 1):
+        study = Path(__file__).resolve().parents[1] / "studies" / "robustness_default.toml"
+        spec, _ = load_study(study, [f"seed={seed}", "n_runs=8"])
+        with precision(spec):
+            drawn.append(np.asarray(sample_aligned(spec, 0, np.arange(8)).columns["beta_r_deg"]))
+    assert not np.array_equal(*drawn)

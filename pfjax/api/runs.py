@@ -154,11 +154,12 @@ def seed_or_key(key, name: str = "key") -> tuple[int | None, Any]:
 
 
 def prng_key(key, name: str = "key"):
-    """A JAX PRNG key from an int seed or a JAX PRNG key (:func:`seed_or_key`)."""
-    import jax
+    """A JAX PRNG key from an int seed (:func:`pfjax.numerics.random.seed_key`: all 63 bits, in any
+    precision) or a JAX PRNG key (:func:`seed_or_key`)."""
+    from pfjax.numerics.random import seed_key
 
     seed, k = seed_or_key(key, name)
-    return k if seed is None else jax.random.PRNGKey(seed)
+    return k if seed is None else seed_key(seed)
 
 
 def _checked_spec(path, n, seed, horizon, model, values, convention, vehicle_params, tau_delta_s, k_v):

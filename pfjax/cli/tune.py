@@ -201,9 +201,9 @@ UNITS = {
 
 
 def _cmd(args) -> dict:
-    import jax
 
     from pfjax import __version__, errors
+    from pfjax.numerics.random import seed_key
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
@@ -214,7 +214,7 @@ def _cmd(args) -> dict:
     for dest, value in DEFAULTS.items():
         if getattr(args, dest) is None:
             setattr(args, dest, value)
-    key = jax.random.PRNGKey(errors.seed("--seed", args.seed))
+    key = seed_key(errors.seed("--seed", args.seed))
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
         multistart = _multistart(args)

@@ -29,6 +29,7 @@ from pfjax.controllers.base import Controller
 from pfjax.models import single_track as st
 from pfjax.models.slip import Pose
 from pfjax.numerics import elementary as E
+from pfjax.numerics.random import seed_key
 from pfjax.sim import dynamic
 from pfjax.sim.dynamic import DynamicScenario
 from pfjax.sim.simulate import SimConfig
@@ -102,7 +103,7 @@ def falsify_dynamic(
     import dataclasses
 
     config = dataclasses.replace(config, record=False)
-    key = jax.random.PRNGKey(key) if isinstance(key, int) else key
+    key = seed_key(key) if isinstance(key, int) else key
     dtype = jnp.asarray(base.v_ref, float).dtype
     u = jax.random.uniform(key, (n_starts, 3), dtype, 0.02, 0.98)
     r = jnp.log(u) - jnp.log1p(-u)  # logit: uniform draws in the box

@@ -1,7 +1,7 @@
 """Sampling a study's runs: distributions -> per-run parameters -> a batch of Scenarios.
 
 Determinism: run ``i`` of path ``p`` draws every quantity from
-``fold_in(fold_in(fold_in(PRNGKey(seed), p), i), q)`` with ``q`` the quantity's fixed index, so a
+``fold_in(fold_in(fold_in(seed_key(seed), p), i), q)`` (:func:`pfjax.numerics.random.seed_key`) with ``q`` the quantity's fixed index, so a
 run's parameters do not depend on the chunk it falls in, and every controller sees the same runs
 (common random numbers: controller differences are not sampling noise).
 """
@@ -21,6 +21,7 @@ from pfjax import paths
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
 from pfjax.montecarlo.config import Dist, PathSpec, StudySpec
 from pfjax.montecarlo.scenario_config import InitialSpec, NoiseSpec, SlipSpec, VehicleSpec
+from pfjax.numerics.random import seed_key
 from pfjax.paths import shapes
 from pfjax.paths.geometry import arc_length, tangent_angle
 from pfjax.sim.dynamic import DynamicScenario
@@ -60,7 +61,7 @@ Q = {name: i for i, name in enumerate(QUANTITIES)}
 
 
 def run_keys(seed: int, path_index: int, runs: np.ndarray) -> jax.Array:
-    base = jax.random.fold_in(jax.random.PRNGKey(seed), path_index)
+    base = jax.random.fold_in(seed_key(seed), path_index)
     return _fold_runs(base, jnp.asarray(runs, dtype=jnp.uint32))
 
 

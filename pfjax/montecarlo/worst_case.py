@@ -11,6 +11,7 @@ from pfjax import paths
 from pfjax.falsification import falsify, random_search, worst_trajectory
 from pfjax.montecarlo.config import StudySpec
 from pfjax.montecarlo.runner import sample_few, sim_config
+from pfjax.numerics.random import seed_key
 from pfjax.sim.simulate import unstack
 from pfjax.sim.status import STATUS_NAMES
 
@@ -51,7 +52,7 @@ def worst_case(spec: StudySpec, controllers, i: int, devices=None) -> tuple[dict
         },
         params=run0.params,
     )
-    key = jax.random.fold_in(jax.random.PRNGKey(spec.seed), 0xFA15)
+    key = jax.random.fold_in(seed_key(spec.seed), 0xFA15)
     name, (controller, gains, _) = list(controllers.items())[i]
     k1, k2 = jax.random.split(jax.random.fold_in(key, i))
     fr = falsify(controller, gains, run0.path, n_restarts=f.n_restarts, steps=f.steps, key=k1, config=cfg, **bounds)

@@ -1,4 +1,4 @@
-"""Per-step Gaussian draws inside a simulator loop, cheap under ``vmap``.
+"""Seeds as PRNG keys (:func:`seed_key`), and per-step Gaussian draws inside a simulator loop, cheap under ``vmap``.
 
 A simulator with sensor noise needs a few standard normal numbers per run and integrator step,
 reproducible from the run's PRNG key and the step index alone (no key in the carry, O(1) memory).
@@ -26,6 +26,16 @@ import numpy as np
 from jax import Array
 
 from pfjax.numerics import elementary as E
+
+
+def seed_key(seed: int) -> Array:
+    """The PRNG key of an integer seed in ``[0, 2**63)``: ``jax.random.PRNGKey(seed)`` as JAX builds it
+    with 64-bit integers enabled (the two 32-bit halves ``[seed >> 32, seed mod 2**32]``), whatever
+    ``jax_enable_x64`` says. ``PRNGKey`` itself keeps only the low 32 bits with 64-bit integers off,
+    so seeds ``s`` and ``s + 2**32`` would draw the same numbers in a float32 study and different
+    ones in float64; below ``2**32`` the two keys are equal."""
+    s = int(seed)
+    return jnp.array([(s >> 32) & 0xFFFFFFFF, s & 0xFFFFFFFF], dtype=jnp.uint32)
 
 
 def _key_data(key: Array) -> Array:

@@ -357,8 +357,7 @@ def _search(c: dict, method: str, *, n: int, generations: int, population: int, 
     """Run the checked search :func:`search` describes; the best candidate with its status named."""
     import dataclasses
 
-    import jax
-
+    from pfjax.numerics.random import seed_key
     from pfjax.parking.simulate import STATUS_NAMES, run_params
     from pfjax.parking.switch_search import SEARCH_CONFIG, search_ga, search_grid
 
@@ -369,7 +368,7 @@ def _search(c: dict, method: str, *, n: int, generations: int, population: int, 
 
         out = search_ga(
             c["omap"],
-            key=jax.random.PRNGKey(seed),
+            key=seed_key(seed),
             base=base,
             weight=weight,
             cfg=cfg,

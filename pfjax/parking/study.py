@@ -16,6 +16,7 @@ from tqdm import tqdm
 from pfjax import errors
 from pfjax.errors import InputError
 from pfjax.jsonio import dumps
+from pfjax.numerics.random import seed_key
 from pfjax.outputs import OutputDir, check_name
 from pfjax.parking.calibrate import calibrate_front
 from pfjax.parking.maps import GARAGE, PARALLEL, to_obstacle_map
@@ -36,7 +37,7 @@ TABLES = ("cases", "assumptions", "grid", "start_map", "montecarlo")
 def _parts(cfg: ParkingStudy, fig_dir: Path, progress: bool) -> tuple[dict, dict, dict]:
     """Run every part; returns ``(results, tables, timings_s)``."""
     pmap, gmap = to_obstacle_map(list(PARALLEL.values())), to_obstacle_map(list(GARAGE.values()))
-    k_ga, k_mc = jax.random.split(jax.random.PRNGKey(cfg.seed))
+    k_ga, k_mc = jax.random.split(seed_key(cfg.seed))
     steps = tqdm(total=6, desc="parking study", unit="part", disable=not progress)
     timings: dict = {}
     t0 = time.perf_counter()

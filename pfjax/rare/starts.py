@@ -52,12 +52,12 @@ def falsifier_points(spec: StudySpec, stratum: Stratum, inputs: list[Input], con
     gradient rollouts)``, or ``None`` where the study's
     slip is not constant or the stratum's inputs have no slip (the falsifier searches constant
     slips and start errors)."""
-    import jax
 
     from pfjax import paths
     from pfjax.falsification import falsify
     from pfjax.montecarlo.runner import sim_config
     from pfjax.montecarlo.sampling import sample_runs
+    from pfjax.numerics.random import seed_key
     from pfjax.sim.simulate import unstack
 
     slips = [b for b in (_box(inputs, "beta_r_deg"), _box(inputs, "beta_f_deg")) if b is not None]
@@ -85,7 +85,7 @@ def falsifier_points(spec: StudySpec, stratum: Stratum, inputs: list[Input], con
         objective=rare.metric if rare.metric in _OBJECTIVES else "late_max_abs_d",
         n_restarts=f.n_restarts,
         steps=f.steps,
-        key=jax.random.PRNGKey(seed),
+        key=seed_key(seed),
         params=run0.params,
     )
     assert fr.restarts is not None  # falsify records every start's last run

@@ -35,6 +35,7 @@ from functools import partial
 import numpy as np
 
 from pfjax.montecarlo.config import StudySpec
+from pfjax.numerics.random import seed_key
 from pfjax.rare.check import reliability
 from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
 from pfjax.rare.importance import cross_entropy_is, explore
@@ -52,7 +53,7 @@ def limit_state(
     A batch of ``n`` points is padded to a multiple of 32 runs (one compiled program per padded
     size), with ``u``'s extra coordinate ignored when the study has no continuous input. Call
     ``c`` of ``g`` draws the randomness that is not in ``u`` (:mod:`pfjax.rare.transform`) from
-    ``fold_in(fold_in(PRNGKey(seed), stream), c)``: fresh at every rollout, the same for the same seed and calls."""
+    ``fold_in(fold_in(seed_key(seed), stream), c)``: fresh at every rollout, the same for the same seed and calls."""
     import jax
 
     from pfjax.montecarlo.runner import batch_size, sim_config, with_gains
@@ -64,7 +65,7 @@ def limit_state(
     threshold = spec.success.band if rare.threshold is None else rare.threshold
     cfg = sim_config(spec)
     calls = itertools.count()
-    base = jax.random.fold_in(jax.random.PRNGKey(seed), stream)
+    base = jax.random.fold_in(seed_key(seed), stream)
 
     def g(u: np.ndarray) -> np.ndarray:
         n = len(u)

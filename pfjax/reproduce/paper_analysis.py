@@ -16,6 +16,7 @@ from pfjax import controllers as C
 from pfjax import paths
 from pfjax.analysis import equilibrium, stability_map
 from pfjax.models import SlipParams
+from pfjax.numerics.random import seed_key
 from pfjax.paths import (
     curvature,
     global_parameter,
@@ -177,7 +178,7 @@ def part_ga_readings(cfg) -> dict:
     out = {"scenario": g["scenario"], "cost": "mean IAE ∫|d| dt, m·s"}
     for name, fraction in (("crossover", 0.8), ("none", 0.0)):
         opts = GAOptions(population_size=g["population"], generations=g["generations"], crossover_fraction=fraction)
-        runs = [tune(problem, "ga", key=jax.random.PRNGKey(seed), ga_options=opts) for seed in range(g["seeds"])]
+        runs = [tune(problem, "ga", key=seed_key(seed), ga_options=opts) for seed in range(g["seeds"])]
         costs = [float(r.cost) for r in runs]
         best = runs[int(np.argmin(costs))]
         out[name] = {

@@ -17,6 +17,7 @@ import pandas as pd
 import pfjax
 from pfjax.jsonio import dumps
 from pfjax.metrics.robustness import metric_quantiles, success_summary
+from pfjax.numerics.random import seed_key
 from pfjax.provenance import config_hash, machine, parquet_metadata
 from pfjax.report import document
 from pfjax.tables import write_parquet
@@ -115,7 +116,7 @@ def run(config: TrackingStudy, output, quick: bool = False) -> dict:
     ``figures/`` and ``report.md`` + ``report.html``. Returns the summary."""
     t0 = time.time()
     cfg = config.model_dump(mode="json")
-    key = jax.random.PRNGKey(cfg["seed"])
+    key = seed_key(cfg["seed"])
     chunk = 512 if not quick else 36
     lemma_df, table, out_tab = lemma_part(cfg, key, chunk)
     geo, geometry = geometry_part(cfg, key)

@@ -27,6 +27,7 @@ import jax
 import numpy as np
 import pandas as pd
 
+from pfjax.numerics.random import seed_key
 from pfjax.tuning.study_config import TuningStudy, problem_list
 
 
@@ -113,9 +114,7 @@ def compare(cfg: dict, progress: bool):
             for seed in range(cfg["seeds"]):
                 # shared_programs=False: the seeds reuse one program per batch shape (chain count, GA
                 # population and children), compiled once
-                r = tune(
-                    pr, key=jax.random.PRNGKey(seed), ga_options=opts, shared_programs=False, progress=progress, **kw
-                )
+                r = tune(pr, key=seed_key(seed), ga_options=opts, shared_programs=False, progress=progress, **kw)
                 runs.append(_run_row(name, label, seed, r, pr))
                 rows += _history_rows(name, label, seed, r)
             c = [x["cost"] for x in runs if x["problem"] == name and x["method"] == label]

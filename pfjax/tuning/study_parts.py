@@ -9,6 +9,7 @@ import jax
 import numpy as np
 import pandas as pd
 
+from pfjax.numerics.random import seed_key
 from pfjax.tuning.multistart import MultistartOptions
 from pfjax.tuning.study_config import problem_list
 
@@ -171,8 +172,8 @@ def cli_check(cfg, progress):
     seeds = range(cfg["cli_seeds"])
     opts = GAOptions(population_size=cfg["ga"]["population"], generations=cfg["ga"]["generations"])
     ms = MultistartOptions(**cfg["multistart"])
-    ga = [tune(pr, "ga", key=jax.random.PRNGKey(s), ga_options=opts, progress=progress).cost for s in seeds]
-    gr = [tune(pr, "gradient", key=jax.random.PRNGKey(s), multistart=ms, progress=progress).cost for s in seeds]
+    ga = [tune(pr, "ga", key=seed_key(s), ga_options=opts, progress=progress).cost for s in seeds]
+    gr = [tune(pr, "gradient", key=seed_key(s), multistart=ms, progress=progress).cost for s in seeds]
     best = min(ga) if ga else float("nan")
     return {
         "dt": pr.config.dt,
