@@ -63,25 +63,6 @@ _LAZY = {
     "register_controller": ("pfjax.controllers.registry", "register"),
     "register_path": ("pfjax.paths.registry", "register"),
 }
-#: subpackages reachable as attributes (``pfjax.parking.run``)
-_SUBPACKAGES = (
-    "analysis",
-    "cache",
-    "controllers",
-    "falsification",
-    "metrics",
-    "models",
-    "montecarlo",
-    "parking",
-    "paths",
-    "rare",
-    "reproduce",
-    "sim",
-    "synthesis",
-    "tracking",
-    "tuning",
-)
-
 __all__ = [
     *_LAZY,
     "parking",
@@ -99,6 +80,14 @@ __all__ = [
 ]
 
 
+def _submodules() -> set[str]:
+    """Names of pfjax's public subpackages and modules (``parking``, ``api``, ``errors``, ``plugins``, ...),
+    each reachable as an attribute and imported on first use (``pfjax.parking.run``)."""
+    import pkgutil
+
+    return {m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_")}
+
+
 def __getattr__(name):
     if name in _LAZY:
         where = _LAZY[name]
@@ -106,10 +95,10 @@ def __getattr__(name):
         value = getattr(importlib.import_module(module), attr)
         globals()[name] = value
         return value
-    if name in _SUBPACKAGES:
+    if name in _submodules():
         return importlib.import_module(f"pfjax.{name}")
     raise AttributeError(f"module 'pfjax' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(__all__) | set(_SUBPACKAGES))
+    return sorted(set(globals()) | set(__all__) | _submodules())

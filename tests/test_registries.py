@@ -217,3 +217,114 @@ def test_study_names_the_polytopic_integral_design():
 
 def studies_rare_events() -> Path:
     return Path(__file__).resolve().parents[1] / "studies" / "rare_events.toml"
+
+
+def _sf_register(factory=None, **kw):
+    """Register state feedback again under a test name, with ``kw`` changed, always removing it."""
+    e = C.entry("state_feedback")
+    try:
+        return C.register(
+            e.controller,
+            factory or e.make_params.factory,
+            **{"name": "sf_copy", "labels": e.labels, "box": e.box, **kw},
+        )
+    finally:
+        C.REGISTRY.pop("sf_copy", None)
+
+
+@pytest.mark.parametrize(
+    "kw, key",
+    [
+        ({"box": (("k_x",), (0.0,), (1.0,))}, "box.fields"),  # not a gain field
+        ({"box": (("K",), (0.0, -1.0), (-1.0, 0.0))}, "box.lower[0]"),  # lower > upper
+        ({"box": (("K",), (-1.0, -1.0), (-1.0, 0.0))}, "box.lower[0]"),  # lower == upper
+        ({"box": (("K",), (-1.0,), (0.0,))}, "box.lower"),  # K has two elements
+        ({"box": (("K",), (-1.0, -1.0), (0.0, 0.0, 0.0))}, "box.upper"),
+        ({"box": (("K",), (-1.0, float("nan")), (0.0, 0.0))}, "box.lower[1]"),
+        ({"box": (("K", "K"), (-1.0,) * 4, (0.0,) * 4)}, "box.fields"),
+        ({"box": ("K", -1.0, 0.0, 1.0)}, "box"),
+        ({"name": ""}, "name"),
+        ({"name": 5}, "name"),
+        ({"factory": 5}, "factory"),
+        ({"defaults": {"k_x": 1.0}}, "defaults"),
+        ({"labels": {"K": "k_d"}}, "labels.K"),
+        ({"gains": ("k_x",)}, "gains"),
+    ],
+)
+def test_controller_register_checks_its_arguments(kw, key):
+    """A bad argument of ``register`` is refused when it is given, naming it, not inside a later tune."""
+    from pfjax.errors import InputError
+
+    with pytest.raises(InputError) as err:
+        _sf_register(**kw)
+    assert err.value.key == key and str(err.value).startswith(key) and "\n" not in str(err.value)
+    assert "sf_copy" not in C.REGISTRY
+
+
+def test_controller_register_keeps_a_good_box():
+    e = _sf_register(box=[("K",), np.array([-20, -10]), [0, 0]])
+    assert e.box == (("K",), (-20.0, -10.0), (0.0, 0.0))
+
+
+@pytest.mark.parametrize(
+    "kw, key",
+    [
+        ({"name": 5}, "name"),
+        ({"name": "Bad-Name"}, "name"),
+        ({"build": 5}, "build"),
+        ({"build": None}, "build"),  # a fixed path needs its builder
+        ({"start_pose": (0.0, 0.0)}, "start_pose"),
+        ({"start_pose": (float("nan"), 0.0, 0.0)}, "start_pose[0]"),
+        ({"start_pose": None}, "start_pose"),
+        ({"start_u": "0"}, "start_u"),
+        ({"start_u": float("inf")}, "start_u"),
+        ({"max_curvature": -1.0}, "max_curvature"),
+        ({"parametric": True}, "parametric"),  # only pfjax's own kinds are built from a path config
+        ({"source": "yes"}, "source"),
+        ({"description": 5}, "description"),
+    ],
+)
+def test_path_register_checks_its_arguments(kw, key):
+    from pfjax.errors import InputError
+
+    args = {"start_pose": (0.0, 0.0, 0.0), "max_curvature": 0.0, **kw}
+    try:
+        with pytest.raises(InputError) as err:
+            paths.register(args.pop("name", "test_path"), args.pop("build", paths.line), **args)
+    finally:
+        paths.PATHS.pop("test_path", None)
+    assert err.value.key == key and str(err.value).startswith(key) and "\n" not in str(err.value)
+
+
+def test_path_register_keeps_good_arguments():
+    try:
+        e = paths.register("test_path", paths.line, start_pose=np.array([1, 0, 0.5]), start_u=np.float32(2.0))
+    finally:
+        paths.PATHS.pop("test_path", None)
+    assert e.start_pose == (1.0, 0.0, 0.5) and e.start_u == 2.0 and e.max_curvature is None
+
+
+def test_per_run_gain_is_named_by_its_flat_name():
+    """A per-run array for one scalar gain is refused by the gain's own name (``k_d``), not the
+    vector field it belongs to (``K``); NumPy and JAX scalars and 0-d arrays are gains."""
+    import jax.numpy as jnp
+
+    from pfjax.errors import InputError
+
+    e = C.entry("state_feedback")
+    with pytest.raises(
+        InputError, match=r"^gains\.k_d: expected a number \(one gain for all runs\), got an array of shape \(2,\)$"
+    ):
+        C.params_from_flat(e, {"k_d": np.array([-1.0, -2.0])})
+    with pytest.raises(InputError, match=r"^gains\.k_theta: expected a number"):
+        C.params_from_flat(e, {"k_theta": "x"})
+    p = C.params_from_flat(e, {"k_d": np.float32(-1.0), "k_theta": np.asarray(-2.0), "feedforward": jnp.asarray(0.0)})
+    assert np.allclose(p.K, [-1.0, -2.0])
+
+
+def test_import_exposes_the_public_modules():
+    """``pfjax.api``, ``pfjax.errors`` and ``pfjax.plugins`` are attributes right after ``import pfjax``."""
+    code = "import pfjax; print(pfjax.api.__name__, pfjax.errors.__name__, pfjax.plugins.__name__)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["pfjax.api", "pfjax.errors", "pfjax.plugins"]

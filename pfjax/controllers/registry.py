@@ -28,7 +28,8 @@ class ControllerEntry(NamedTuple):
             ``pfjax tune --controller`` after ``-`` → ``_``.
         gains: the scalar gains ``--gains`` takes in order (names of :func:`flat_gains`).
         cli_name: the command-line name (kebab-case).
-        box: tuning box ``(fields, lower, upper)`` (flat, in field order) or None (not tunable).
+        box: tuning box ``(fields, lower, upper)`` (bounds flat, in field order, in the gains' units;
+            checked by :func:`check_box`) or None (not tunable).
         style: plot style (matplotlib keywords ``color``, ``lw``, ``ls`` and a ``label``).
     """
 
@@ -89,32 +90,105 @@ def register(
     """Add a controller kind (replacing one of the same name) and return its entry.
 
     Args:
-        controller: the controller.
-        factory: keyword gains -> parameter pytree (its parameters name the fields, in order).
-        name: registry name (default ``controller.name``).
-        defaults: default gains the factory does not have itself.
+        controller: the controller (a :class:`~pfjax.controllers.base.Controller`).
+        factory: keyword gains -> parameter pytree (its parameters name the gain fields, in order).
+        name: registry name, a non-empty string (default ``controller.name``).
+        defaults: default gains the factory does not have itself (keys: its parameters).
         cli_name: command-line name (default the name with ``_`` → ``-``).
-        box: tuning box ``(fields, lower, upper)``.
+        box: tuning box ``(fields, lower, upper)``, or None (not tunable): distinct gain fields
+            and their flat bounds, in the gains' own units (:func:`check_box`).
         style: plot style (default grey, the name as label).
-        labels: names of a vector field's elements (``{"K": ("k_d", "k_theta")}``).
+        labels: names of a vector field's elements (``{"K": ("k_d", "k_theta")}``); a field
+            without labels is a scalar.
         gains: the scalar gains ``--gains`` takes in order (default all of them).
+
+    Raises:
+        InputError: an argument that is not as described, naming it (``box.lower[1]: ...``).
     """
-    name = name or controller.name
+    if not isinstance(controller, Controller):
+        raise errors.InputError(f"controller: expected a pfjax Controller, got {type(controller).__name__}")
+    if not callable(factory):
+        raise errors.InputError(f"factory: expected a callable (keyword gains -> parameters), got {factory!r}")
+    name = _text("name", controller.name if name is None else name)
     make = checked_factory(name, factory, defaults)
+    for k in defaults or {}:
+        _field("defaults", k, make)
     labels = dict(labels or {})
+    for k, names in labels.items():
+        _field("labels", k, make)
+        if not isinstance(names, (tuple, list)) or not names or not all(isinstance(n, str) for n in names):
+            raise errors.InputError(f"labels.{k}: expected a non-empty tuple of gain names, got {names!r}")
     flat = tuple(n for f in make.gain_names for n in labels.get(f, (f,)))
+    for k in gains or ():
+        if k not in flat:
+            raise errors.InputError(f"gains: unknown gain {k!r} of {name!r}; expected one of {', '.join(flat)}")
     entry = ControllerEntry(
         controller,
         make,
         name,
         tuple(gains or flat),
-        cli_name or name.replace("_", "-"),
-        box,
+        _text("cli_name", cli_name or name.replace("_", "-")),
+        None if box is None else check_box(box, make, labels),
         {"color": "#7f7f7f", "lw": 1.0, "label": name, **(style or {})},
         labels,
     )
     REGISTRY[name] = entry
     return entry
+
+
+def check_box(box, make: CheckedFactory, labels: Mapping[str, tuple], key: str = "box") -> tuple:
+    """``box = (fields, lower, upper)`` as tuples, checked against a controller's gain fields.
+
+    ``fields`` are distinct gain fields of ``make`` (the factory's parameters); ``lower`` and
+    ``upper`` are flat bounds of ``D`` finite numbers each, ``D`` the fields' total size (a field
+    with ``labels`` has one element per label, any other is a scalar), with ``lower < upper``
+    elementwise: the box ``lower <= theta <= upper`` that tuning searches
+    (:class:`pfjax.tuning.cost.Tunable` writes ``theta`` into the fields). An
+    :class:`~pfjax.errors.InputError` naming ``key`` (``box.fields``, ``box.lower[i]``, ...) otherwise.
+    """
+    import numpy as np
+
+    if not isinstance(box, (tuple, list)) or len(box) != 3:
+        raise errors.InputError(f"{key}: expected (fields, lower, upper), got {box!r}", key)
+    fields, lower, upper = box
+    if isinstance(fields, str) or not isinstance(fields, (tuple, list)) or not fields:
+        raise errors.InputError(f"{key}.fields: expected a non-empty tuple of gain fields, got {fields!r}")
+    for f in fields:
+        _field(f"{key}.fields", f, make)
+    errors.unique(f"{key}.fields", fields)
+    size = sum(len(labels.get(f, (f,))) for f in fields)
+    lo, hi = (_bounds(f"{key}.{side}", b, size, fields) for side, b in (("lower", lower), ("upper", upper)))
+    if not np.all(lo < hi):
+        i = int(np.argmin(lo < hi))
+        raise errors.InputError(f"{key}.lower[{i}]: must be < {key}.upper[{i}] = {hi[i]:g}, got {lo[i]:g}")
+    return tuple(fields), tuple(lo.tolist()), tuple(hi.tolist())
+
+
+def _bounds(key: str, value, size: int, fields) -> Any:
+    """``value`` as a float array of shape ``(size,)`` of finite numbers; InputError naming ``key``."""
+    import numpy as np
+
+    a = None if value is None else np.asarray(errors.numbers(key, value), dtype=float)
+    if a is None or a.shape != (size,):
+        raise errors.InputError(
+            f"{key}: expected {size} numbers (the flat elements of {', '.join(fields)}), got {value!r}", key
+        )
+    return a
+
+
+def _field(key: str, name, make: CheckedFactory) -> None:
+    """InputError naming ``key`` unless ``name`` is one of the gain fields of ``make``."""
+    if name not in make.gain_names:
+        raise errors.InputError(
+            f"{key}: unknown gain field {name!r} of {make.name!r}; expected one of {', '.join(make.gain_names)}", key
+        )
+
+
+def _text(key: str, value) -> str:
+    """``value`` if it is a non-empty string; InputError naming ``key`` otherwise."""
+    if not isinstance(value, str) or not value.strip():
+        raise errors.InputError(f"{key}: expected a non-empty string, got {value!r}", key)
+    return value
 
 
 def flat_gains(e: ControllerEntry, params=None) -> dict[str, float]:
@@ -138,20 +212,35 @@ def flat_gains(e: ControllerEntry, params=None) -> dict[str, float]:
 
 def params_from_flat(e: ControllerEntry, flat: Mapping[str, Any], key: str = "gains") -> Any:
     """The parameter pytree from scalar gains ``{name: value}`` (the others at their defaults); an
-    unknown name raises :class:`~pfjax.errors.InputError` naming ``<key>.<name>``."""
+    unknown name, or a value that is not one finite number, raises
+    :class:`~pfjax.errors.InputError` naming ``<key>.<name>``."""
     default = flat_gains(e)
     for k, v in flat.items():
         if k not in default:
             raise errors.InputError(
                 f"{key}.{k}: unknown gain for controller {e.name!r}; expected one of {', '.join(default)}", key
             )
-        errors.numbers(f"{key}.{k}", v)
+        _scalar(f"{key}.{k}", v)
     merged = {**default, **flat}
     fields = {}
     for field in e.make_params.gain_names:
         names = e.labels.get(field)
         fields[field] = [merged[n] for n in names] if names else merged[field]
     return e.make_params(**fields)
+
+
+def _scalar(key: str, value) -> None:
+    """InputError naming ``key`` unless ``value`` is one finite real number (a Python or NumPy
+    scalar, a 0-d NumPy or JAX array): the gains are the same for every run, not one per run."""
+    shape = (len(value),) if isinstance(value, (list, tuple)) else getattr(value, "shape", ())
+    if shape:
+        raise errors.InputError(
+            f"{key}: expected a number (one gain for all runs), got an array of shape {tuple(shape)}", key
+        )
+    if hasattr(value, "shape"):  # a NumPy or JAX scalar, traced or not
+        errors.numbers(key, value)
+    else:
+        errors.number(key, value)
 
 
 def entry(name: str, key: str = "controller") -> ControllerEntry:

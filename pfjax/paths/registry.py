@@ -53,6 +53,9 @@ class PathEntry(NamedTuple):
 #: name -> entry, in registration order.
 PATHS: dict[str, PathEntry] = {}
 
+#: The parametric kinds: :mod:`pfjax.montecarlo.sampling` builds them from a study's path config.
+PARAMETRIC = ("circle", "random", "spline")
+
 
 def register(
     name: str,
@@ -67,29 +70,69 @@ def register(
 ) -> PathEntry:
     """Add a path kind (replacing one of the same name) and return its entry (see :class:`PathEntry`).
 
+    Args:
+        name: the kind's config and command-line name, a lower-case identifier (``paths[i].kind``,
+            ``--path``).
+        build: ``() -> path``, a :mod:`pfjax.paths.shapes` pytree (a curve ``p(u)`` in m); None
+            only for the parametric kinds (:data:`PARAMETRIC`), built from a study's path config.
+        start_pose: single runs' start ``(x, y, theta)`` (m, m, rad), three finite numbers; needed
+            with ``build``.
+        start_u: path parameter ``u`` (m: ``x`` on a graph ``y = f(x)``, arc length on a circle,
+            chord length on a spline) from which a study's ``start_along_m`` is measured.
+        max_curvature: largest |curvature| over the path (1/m, >= 0), or None where it depends on
+            the study's path config (:func:`pfjax.montecarlo.checks.path_max_curvature`).
+        source: one of the source's three test paths (:func:`source_tests`).
+        parametric: built per study from the path config's fields, only for :data:`PARAMETRIC`
+            (``build``, if given, is the single runs' path).
+        description: one line for reports (default the name).
+
     Raises:
-        ValueError: a name that is not a lower-case identifier, a fixed path without a start pose.
+        InputError: an argument that is not as described, naming it.
     """
-    if not name.replace("_", "").isalnum() or not name.islower():
-        raise ValueError(f"name: a path kind is a lower-case identifier, got {name!r}")
+    if not isinstance(name, str) or not name.replace("_", "").isalnum() or not name.islower():
+        raise errors.InputError(f"name: a path kind is a lower-case identifier, got {name!r}", "name")
+    if build is not None and not callable(build):
+        raise errors.InputError(f"build: expected a function () -> path, got {build!r}", "build")
+    for key, flag in (("source", source), ("parametric", parametric)):
+        if not isinstance(flag, bool):
+            raise errors.InputError(f"{key}: expected True or False, got {flag!r}", key)
+    if parametric and name not in PARAMETRIC:
+        raise errors.InputError(
+            f"parametric: only {', '.join(PARAMETRIC)} are built from a study's path config; {name!r} needs build",
+            "parametric",
+        )
+    if build is None and not parametric:
+        raise errors.InputError(f"build: path {name!r} needs a function () -> path", "build")
     if build is not None and start_pose is None:
-        raise ValueError(f"start_pose: a fixed path ({name!r}) needs a single-run start pose (x, y, theta)")
-    pose = None
-    if start_pose is not None:
-        x, y, theta = (float(v) for v in start_pose)
-        pose = (x, y, theta)
+        raise errors.InputError(
+            f"start_pose: a fixed path ({name!r}) needs a single-run start pose (x, y, theta)", "start_pose"
+        )
+    if not isinstance(description, str):
+        raise errors.InputError(f"description: expected a string, got {description!r}", "description")
     e = PathEntry(
         name,
         build,
-        pose,
-        float(start_u),
-        None if max_curvature is None else float(max_curvature),
+        None if start_pose is None else _pose("start_pose", start_pose),
+        errors.number("start_u", start_u, unit=" m"),
+        None if max_curvature is None else errors.number("max_curvature", max_curvature, nonnegative=True, unit=" 1/m"),
         source,
         parametric,
-        description or name,
+        " ".join(description.split()) or name,
     )
     PATHS[name] = e
     return e
+
+
+def _pose(key: str, value) -> tuple[float, float, float]:
+    """``value`` as ``(x, y, theta)`` floats (m, m, rad); InputError naming ``key`` unless it is three
+    finite numbers."""
+    import numpy as np
+
+    a = np.asarray(errors.numbers(key, value), dtype=float)
+    if a.shape != (3,):
+        raise errors.InputError(f"{key}: expected three numbers (x, y, theta) in m, m, rad, got {value!r}", key)
+    x, y, theta = a.tolist()
+    return x, y, theta
 
 
 def entry(name: str, key: str = "path") -> PathEntry:
