@@ -217,3 +217,16 @@ def test_tune_api_refuses_a_method_with_a_check_and_defaults_to_gradient(monkeyp
     monkeypatch.setattr(problem, "tune", record)
     with pytest.raises(Reached, match="^gradient$"):
         pfjax.tune("pi", "paper-line", config={"horizon": 1.0}, n_runs=1)
+
+
+@pytest.mark.parametrize(
+    ("box", "key"),
+    [((("k_x",), (0.0,), (1.0,)), "box.fields"), ((("kp_d",), (2.0,), (1.0,)), "box.lower[0]")],
+)
+def test_make_problem_checks_a_given_box_as_register_does(box, key):
+    """A box given to make_problem is checked like a registered one (controllers.check_box), before
+    tuning would fail inside JAX or the GA."""
+    from pfjax.tuning.problem import make_problem
+
+    with pytest.raises(InputError, match=rf"^{re.escape(key)}: "):
+        make_problem("pi", "paper-line", box=box)

@@ -28,6 +28,7 @@ from pfjax.controllers.linear import (
 from pfjax.controllers.registry import (
     REGISTRY,
     ControllerEntry,
+    check_box,
     checked_factory,
     entry,
     flat_gains,
@@ -63,6 +64,7 @@ __all__ = [
     "RearWheelParams",
     "StanleyParams",
     "StateFeedbackParams",
+    "check_box",
     "checked_factory",
     "cli_names",
     "controller_types",

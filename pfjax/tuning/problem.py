@@ -149,6 +149,8 @@ def _tunable(controller: str, base_gains, box):
     if controller not in tunable:
         raise errors.InputError(f"controller: value {controller!r}, expected one of {', '.join(tunable)}")
     ctrl, factory = C.REGISTRY[controller][:2]
+    if box is not None:  # the caller's own box, checked as a registered one is
+        box = C.check_box(box, factory, C.REGISTRY[controller].labels)
     box = box or C.REGISTRY[controller].box
     if box is None:
         raise errors.InputError(
