@@ -443,3 +443,24 @@ def test_failure_drivers_degenerate_cases_are_nan_not_errors():
     assert out["rho_metric"].notna().all()
     with pytest.raises(KeyError, match="nope"):
         failure_drivers(df, ["nope"])
+
+
+def test_a_studys_metric_statistics_leave_failed_runs_out():
+    """A run that diverges at once has an IAE of 0 (its metrics stop at the failure): the summary's
+    IAE statistics are over the runs that ran the whole horizon, the success rate over every run."""
+    import pandas as pd
+
+    from pfjax.metrics.running import METRIC_NAMES
+    from pfjax.montecarlo.summary import _block
+
+    n = 6
+    df = pd.DataFrame({m: np.ones(n) for m in METRIC_NAMES if m != "success"})
+    df["iae"] = [2.0, 4.0, 6.0, 0.0, 0.0, 0.0]
+    df["success"] = [True, True, False, False, False, False]
+    df["status"] = ["ok", "ok", "ok", "diverged", "diverged", "nonfinite"]
+    b = _block(df)
+    assert b["n"] == 6 and b["k"] == 2
+    assert b["iae_mean"] == 4.0 and b["quantiles"]["iae"]["n_finite"] == 3
+    assert b["status_counts"] == {"ok": 3, "diverged": 2, "nonfinite": 1}
+    every_run_failed = _block(df.assign(status="diverged", success=False))
+    assert np.isnan(every_run_failed["iae_mean"]) and every_run_failed["success_rate"] == 0.0

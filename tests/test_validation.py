@@ -137,7 +137,7 @@ CLI_CASES = [
     (["study", "CFG", "--set", "paths[0]={kind='spline'}"], "paths[0].points: required for kind 'spline'"),
     (
         ["study", "CFG", "--set", "paths[0].points=[[0, 0], [1, 0], [2, 0], [3, 0]]"],
-        "paths[0].points: only for kind 'spline'",
+        "paths[0].points: not a key of a line path; its keys are kind, name (points is a key of kind 'spline')",
     ),
     (
         ["study", "CFG", "--set", "controllers[0]={name='k', type='state_feedback', K=[1.0]}"],
@@ -434,3 +434,10 @@ def test_a_success_window_past_the_horizon_is_refused():
     sc = pfjax.scenarios("line", 2)
     with pytest.raises(InputError, match=r"^config.success_from: must be <= horizon"):
         pfjax.simulate(sc, "pi", config={"horizon": 1.0, "dt": 0.01, "success_from": 100.0})
+
+
+@pytest.mark.parametrize("axes", ['["rear","rear"]', "[]"])
+def test_margin_axes_must_be_distinct_and_present(axes):
+    """A repeated axis would run and count its sweep twice; an empty list would run none."""
+    with pytest.raises(ConfigError, match=r"^margin.axes: must be distinct axes of rear, front, joint"):
+        load_study(data=copy.deepcopy(DATA), overrides=[f"margin.axes={axes}"])

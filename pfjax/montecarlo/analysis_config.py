@@ -43,6 +43,13 @@ class MarginSpec(ConfigModel):
             raise ValueError(f"must be distinct amplitudes in [0, 90) deg, got {v}")
         return sorted(v)
 
+    @field_validator("axes")
+    @classmethod
+    def _axes(cls, v):
+        if not v or len(set(v)) != len(v):  # a repeated axis would count its runs twice
+            raise ValueError(f"must be distinct axes of {', '.join(get_args(Axis))}, at least one, got {v}")
+        return v
+
     @model_validator(mode="after")
     def _check(self):
         if self.n_per_amplitude * len(self.amplitudes_deg) > 100_000_000:

@@ -7,7 +7,7 @@ failure. The top-level keys: ``study``, ``n_runs_total``, ``seed``, ``config_sha
 ``controllers`` (each with ``success_rate``, ``success_ci95``, ``iae_mean``, ``iae_p95``,
 ``steady_abs_d_p95``, ``slip_margin_deg`` and ``slip_margin_fails_at_deg``: the joint-axis margin,
 or null with the smallest amplitude tested in ``slip_margin_fails_at_deg`` when the controller
-already fails there).
+already fails there; both null when the sweep has no joint axis, whose margins are in ``slip_margin``).
 """
 
 from __future__ import annotations
@@ -37,8 +37,12 @@ QUANTILE_METRICS = [m for m in METRIC_NAMES if m != "success"]
 
 
 def _block(df: pd.DataFrame) -> dict:
+    """Success over every run; the metrics' statistics (``iae_mean``, ``iae_p95``, ``quantiles``) over
+    the runs that ran the whole horizon (status ``ok``): a failed run's metrics describe it only up
+    to its failure (a run that diverges at once has an IAE of about 0), so the failures are counted
+    by ``status_counts`` and the success rate, not averaged into the metrics."""
     s = success_summary(df["success"].to_numpy())
-    q = metric_quantiles(df, QUANTILE_METRICS + [m for m in SLIP_METRIC_NAMES if m in df])
+    q = metric_quantiles(df[df["status"] == "ok"], QUANTILE_METRICS + [m for m in SLIP_METRIC_NAMES if m in df])
     return {
         **s,
         "iae_mean": q["iae"]["mean"],
@@ -135,7 +139,7 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         block["statement"] = supported_statement(len(df), int((~df["success"]).sum()))
         mg = margins(sweep, name, spec.margin.eps)
         block["slip_margin"] = mg
-        joint = mg.get("joint") or next(iter(mg.values()), None)
+        joint = mg.get("joint")  # the headline margin is the joint axis's (null if not swept)
         # a controller that fails at the smallest amplitude has no margin: say so, not a bare 0
         fails = joint is not None and joint["fails_at_smallest"]
         block["slip_margin_deg"] = None if joint is None or fails else joint["margin"]
