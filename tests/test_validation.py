@@ -441,3 +441,11 @@ def test_margin_axes_must_be_distinct_and_present(axes):
     """A repeated axis would run and count its sweep twice; an empty list would run none."""
     with pytest.raises(ConfigError, match=r"^margin.axes: must be distinct axes of rear, front, joint"):
         load_study(data=copy.deepcopy(DATA), overrides=[f"margin.axes={axes}"])
+
+
+def test_a_design_with_both_weights_zero_is_refused_at_load():
+    """alpha = beta = 0 leaves the mixed objective empty: the synthesis's own check
+    (pfjax.synthesis.lmi.check_weights) refuses it when the study is read, not in a traceback."""
+    overrides = ['controllers[0].type="lmi"', "controllers[0].alpha=0", "controllers[0].beta=0"]
+    with pytest.raises(ConfigError, match=r"^controllers\[0\].alpha: must not be 0 together with beta"):
+        load_study(data=copy.deepcopy(DATA), overrides=overrides)

@@ -106,6 +106,10 @@ class ControllerSpec(ConfigModel):
                 )
             if len(self.K) != len(e.labels["K"]):
                 raise ValueError(f"{self.type} needs K = [{', '.join(e.labels['K'])}]")
+        if d is not None and self.alpha + self.beta == 0:  # the synthesis's own check and message
+            from pfjax.synthesis.lmi import check_weights
+
+            check_weights(self.alpha, self.beta)
         return self
 
 

@@ -177,6 +177,17 @@ def h2_state_feedback(plant: Plant, region: PoleRegion | None = None, eps: float
     return _solve("h2", plant, use_hinf=False, use_h2=True, region=region, eps=eps)
 
 
+def check_weights(alpha, beta) -> None:
+    """The mixed objective's weights ``alpha gamma_inf^2 + beta gamma_2^2``: finite, at least 0, not
+    both 0 (the objective would be empty); :class:`~pfjax.errors.InputError` naming ``alpha`` or ``beta``."""
+    from pfjax import errors
+
+    errors.number("alpha", alpha, nonnegative=True)
+    errors.number("beta", beta, nonnegative=True)
+    if alpha + beta == 0:
+        raise errors.InputError("alpha: must not be 0 together with beta (the mixed objective would be empty)", "alpha")
+
+
 def mixed_h2_hinf(
     plant: Plant,
     alpha: float = 10.0,
@@ -218,8 +229,7 @@ def mixed_h2_hinf(
         SynthesisError: the LMIs are infeasible (e.g. ``gamma_inf_max`` too small) or the solver
             fails.
     """
-    if alpha < 0 or beta < 0 or (alpha == 0 and beta == 0):
-        raise ValueError(f"mixed_h2_hinf needs alpha, beta >= 0, not both 0; got {alpha}, {beta}")
+    check_weights(alpha, beta)
     return _solve(
         "mixed",
         plant,
@@ -303,10 +313,7 @@ def synthesize(
     errors.number("v", v, positive=True, unit=" m/s")
     errors.number("L", L, positive=True, unit=" m")
     if method == "mixed":
-        errors.number("alpha", alpha, nonnegative=True)
-        errors.number("beta", beta, nonnegative=True)
-        if alpha + beta == 0:
-            raise errors.InputError("alpha: must not be 0 together with beta (the mixed objective would be empty)")
+        check_weights(alpha, beta)
     plant = slip_design_plant(v=v, L=L)
     if method == "hinf":
         return hinf_state_feedback(plant, region=region)
