@@ -243,6 +243,32 @@ def set_nested(d: dict, update: dict, prefix: str = "") -> dict:
     return d
 
 
+def plain(value):
+    """``value`` with NumPy and JAX values as Python's, through dicts, lists and tuples: a NumPy
+    scalar or a 0-d NumPy or JAX array as its Python ``int``, ``float``, ``bool`` (or ``complex``,
+    ``str``, ``bytes``), a 1-D array as a list of them. Anything else is returned as it is. The
+    schema judges the result as it judges Python values (a boolean stays a boolean, refused where
+    a number is expected; a 2-D array is not a list)."""
+    import sys
+
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [plain(v) for v in value]
+    if isinstance(value, tuple):
+        return tuple(plain(v) for v in value)
+    jax = sys.modules.get("jax")  # a JAX array exists only once JAX is imported
+    if jax is not None and isinstance(value, jax.Array):
+        if isinstance(value, jax.core.Tracer):  # no numbers yet (inside jit, grad or vmap)
+            return value
+        value = np.asarray(value)
+    if isinstance(value, (np.ndarray, np.generic)) and value.ndim <= 1 and value.dtype.kind in "biufcSU":
+        return value.tolist()
+    return value
+
+
 def load_model(
     model: type[M],
     path: str | Path | None = None,
@@ -260,9 +286,11 @@ def load_model(
         overrides: ``--set`` texts ``"key=value"`` (the value parsed as TOML), applied in order.
         data: the raw config as a dict, when there is no file.
         values: overrides as Python values by dotted key (``{"sim.horizon": 30}``), applied last.
+            In ``data`` and ``values``, NumPy and JAX numbers and 1-D arrays are read as Python's
+            (:func:`plain`).
         presets: nested dicts applied between the file and the overrides (a study's ``--quick`` sizes).
     """
-    raw: dict = {} if data is None else copy.deepcopy(dict(data))
+    raw: dict = {} if data is None else copy.deepcopy(plain(dict(data)))
     if path is not None:
         raw = read_toml(path)
     for preset in presets:
@@ -270,7 +298,7 @@ def load_model(
     for text in overrides:
         set_nested(raw, parse_override(text))
     for key, value in (values or {}).items():
-        set_nested(raw, nested(key, value))
+        set_nested(raw, nested(key, plain(value)))
     try:
         config = model.model_validate(raw)
     except ValidationError as e:

@@ -188,6 +188,17 @@ def seed(key: str, value) -> int:
     return integer(key, value, low=0, high=MAX_SEED)
 
 
+def boolean(key: str, value, *, or_none: bool = False) -> bool | None:
+    """``value`` as a bool (a NumPy boolean too; None where ``or_none``); :class:`InputError` naming
+    ``key`` for anything else (``"no"``, ``0``), which Python's truth would read as a choice."""
+    if value is None and or_none:
+        return None
+    if not (isinstance(value, bool) or type(value).__name__ == "bool_"):  # NumPy's, without importing it
+        expected = "True, False or None" if or_none else "True or False"
+        raise InputError(f"{key}: expected {expected}, got {value!r:.80}", key)
+    return bool(value)
+
+
 def unique(key: str, names) -> None:
     """:class:`InputError` naming the first repeated name in ``names`` (controllers, paths, obstacles)."""
     seen: dict = {}

@@ -17,7 +17,8 @@ study scripts) writes them through :class:`OutputDir`:
      path ending in ``.`` or ``..``.
 
    A refusal is an :class:`~pfjax.errors.InputError` naming the flag (``--out``), and nothing is
-   touched.
+   touched. A Python function passes its own spellings (``flag="out"``, ``overwrite_flag="overwrite"``),
+   so its refusals name its arguments and advise ``pass overwrite=True``, not ``add --overwrite``.
 2. **One writer at a time.** The target's lock file ``.<name>.lock`` beside it is held with
    ``fcntl.flock`` for the whole command, so a second process writing to the same target is
    refused (:class:`OutputBusy`, naming the running process's pid and start time). The operating
@@ -56,6 +57,7 @@ __all__ = [
     "check_name",
     "check_target",
     "glob_escape",
+    "overwrite_advice",
     "read_marker",
     "sibling",
 ]
@@ -120,18 +122,47 @@ def _describe(marker: dict) -> str:
 
 
 def check_target(
-    target, *, command: str, config_sha256: str | None, overwrite: bool = False, flag: str = "--out"
+    target,
+    *,
+    command: str,
+    config_sha256: str | None,
+    overwrite: bool = False,
+    flag: str = "--out",
+    overwrite_flag: str | None = None,
 ) -> Path:
     """Check that ``target`` may receive a new output of ``command`` (see the module docstring).
 
     Touches nothing. Returns the target as an absolute path (symbolic links in its parents
-    resolved). Raises :class:`~pfjax.errors.InputError` naming ``flag``.
+    resolved). Raises :class:`~pfjax.errors.InputError` naming ``flag``, whose advice to replace
+    the target names ``overwrite_flag`` (:func:`overwrite_advice`).
     """
     resolved = _check_name(target, flag)
     if not resolved.exists():
         return resolved
-    _check_contents(resolved, target, command=command, config_sha256=config_sha256, overwrite=overwrite, flag=flag)
+    _check_contents(
+        resolved,
+        target,
+        command=command,
+        config_sha256=config_sha256,
+        overwrite=overwrite,
+        flag=flag,
+        overwrite_flag=overwrite_flag,
+    )
     return resolved
+
+
+def overwrite_advice(flag: str, overwrite_flag: str | None = None) -> str:
+    """How a refusal tells its caller to replace an output, in the caller's spelling: ``"add
+    --overwrite"`` for a command-line flag, ``"pass overwrite=True"`` for a Python argument.
+
+    Args:
+        flag: the name the output directory goes by (``--out``, ``out``).
+        overwrite_flag: the name the overwrite option goes by (``--overwrite``, ``overwrite``);
+            default: ``--overwrite`` where ``flag`` is a command-line flag (starts with ``-``),
+            else ``overwrite``.
+    """
+    name = overwrite_flag or ("--overwrite" if flag.startswith("-") else "overwrite")
+    return f"add {name}" if name.startswith("-") else f"pass {name}=True"
 
 
 def _check_name(target, flag: str) -> Path:
@@ -170,7 +201,16 @@ def _check_name(target, flag: str) -> Path:
     return resolved
 
 
-def _check_contents(resolved: Path, target, *, command: str, config_sha256: str | None, overwrite: bool, flag: str):
+def _check_contents(
+    resolved: Path,
+    target,
+    *,
+    command: str,
+    config_sha256: str | None,
+    overwrite: bool,
+    flag: str,
+    overwrite_flag: str | None,
+):
     """An existing target may be replaced only if empty, or holding only what pfjax wrote there
     (unchanged, of the same command and config unless ``overwrite``); raises InputError."""
     if not resolved.is_dir():
@@ -204,15 +244,16 @@ def _check_contents(resolved: Path, target, *, command: str, config_sha256: str 
         if not (isinstance(listed.get(f), list) and listed[f] == [st.st_size, st.st_mtime_ns])
     ]
     if not overwrite:
+        advice = overwrite_advice(flag, overwrite_flag)
         if changed:
             raise InputError(
-                f"{flag}: {target}/{changed[0]} changed after pfjax wrote it; add --overwrite to replace "
+                f"{flag}: {target}/{changed[0]} changed after pfjax wrote it; {advice} to replace "
                 f"{target}, or choose another {flag}",
                 flag,
             )
         if marker.get("command") != command or marker.get("config_sha256") != config_sha256:
             raise InputError(
-                f"{flag}: {target} holds {_describe(marker)}; add --overwrite to replace it, or choose another {flag}",
+                f"{flag}: {target} holds {_describe(marker)}; {advice} to replace it, or choose another {flag}",
                 flag,
             )
 
@@ -233,6 +274,9 @@ class OutputDir:
         config_sha256: the hash of the config the output comes from (recorded in the marker).
         overwrite: replace a pfjax output of another command or config, or one whose files changed.
         flag: the flag or key named in error messages.
+        overwrite_flag: the flag or argument the refusals advise to replace the target
+            (:func:`overwrite_advice`; default: ``--overwrite`` with a ``flag`` such as ``--out``,
+            ``overwrite`` with a Python argument's name such as ``out``).
         extra: more fields for the marker (e.g. the study name, the seed).
     """
 
@@ -244,10 +288,19 @@ class OutputDir:
         config_sha256: str | None,
         overwrite: bool = False,
         flag: str = "--out",
+        overwrite_flag: str | None = None,
         extra: dict | None = None,
     ):
         self.command, self.config_sha256, self.overwrite, self.flag = command, config_sha256, overwrite, flag
-        self.target = check_target(target, command=command, config_sha256=config_sha256, overwrite=overwrite, flag=flag)
+        self.overwrite_flag = overwrite_flag
+        self.target = check_target(
+            target,
+            command=command,
+            config_sha256=config_sha256,
+            overwrite=overwrite,
+            flag=flag,
+            overwrite_flag=overwrite_flag,
+        )
         self.extra = dict(extra or {})
         self._lock = OutputLock(self.target, command=command, flag=flag)
         self._staging: Path | None = None
@@ -273,11 +326,10 @@ class OutputDir:
                 config_sha256=self.config_sha256,
                 overwrite=self.overwrite,
                 flag=self.flag,
+                overwrite_flag=self.overwrite_flag,
             )
-            for kind in (STAGING, _OLD, "partial"):  # only this target's, and nobody else holds its lock
-                for stale in self.target.parent.glob(f".{glob_escape(self.target.name)}.{kind}-*"):
-                    if is_temporary(stale):
-                        shutil.rmtree(stale, ignore_errors=True)
+            for stale in own_temporary_dirs(self.target):  # nobody else holds this target's lock
+                shutil.rmtree(stale, ignore_errors=True)
         except BaseException:
             self._lock.release()
             raise
@@ -347,6 +399,7 @@ class OutputDir:
                 config_sha256=self.config_sha256,
                 overwrite=self.overwrite,
                 flag=self.flag,
+                overwrite_flag=self.overwrite_flag,
             )  # nothing foreign arrived meanwhile
             old = temporary_dir(self.target, _OLD)
             os.replace(self.target, old / "output")
@@ -362,6 +415,17 @@ def temporary_dir(target: Path, kind: str) -> Path:
     pfjax's by :data:`TEMP_MARK`, so that a later run that finds it left by a kill may remove it
     (:func:`is_temporary`); :func:`unmark` takes the mark out before the directory is moved into place."""
     return mark_temporary(Path(tempfile.mkdtemp(prefix=f".{Path(target).name}.{kind}-", dir=Path(target).parent)))
+
+
+def own_temporary_dirs(target: Path) -> list[Path]:
+    """The :func:`temporary_dir` directories of ``target`` itself, left by a run that was killed:
+    ``.<name>.<kind>-`` and mkdtemp's 8 characters, nothing more, and still marked. A glob such as
+    ``.exp.partial-*`` would also match the live ``.exp.partial-v2.pfjax-staging-*`` of another
+    target, ``exp.partial-v2``, whose lock this run does not hold."""
+    own = re.compile(rf"\.{re.escape(target.name)}\.(?:{STAGING}|{_OLD}|partial)-[a-z0-9_]{{8}}")
+    return [
+        p for p in target.parent.glob(f".{glob_escape(target.name)}.*") if own.fullmatch(p.name) and is_temporary(p)
+    ]
 
 
 def mark_temporary(directory: Path) -> Path:

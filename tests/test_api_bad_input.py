@@ -336,3 +336,96 @@ def test_run_study_names_out_in_the_whole_refusal(tmp_path):
     msg = _refused(lambda: pfjax.run_study(STUDY, mine), "out")
     assert "choose another out" in msg and "--out" not in msg, msg
     assert [p.name for p in mine.iterdir()] == ["notes.txt"] and (mine / "notes.txt").read_text() == "keep"
+
+
+#: A study that runs in seconds (the refusals below come before any of it runs).
+TINY = {
+    "name": "tiny",
+    "n_runs": 4,
+    "seed": 0,
+    "paths": [{"kind": "line"}],
+    "controllers": [{"name": "a", "type": "pi"}],
+    "sim": {"horizon": 2.0, "dt": 0.01, "steady_window": 1.0},
+    "success": {"from_s": 1.0},
+    "falsifier": {"enabled": False},
+    "margin": {"enabled": False},
+}
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """A finished tiny study's directory."""
+    out = tmp_path_factory.mktemp("finished") / "study"
+    pfjax.run_study(TINY, out, report=False, progress=False)
+    return out
+
+
+def _snapshot(folder: Path) -> list:
+    """Every entry beside and under ``folder`` with its size and modification time."""
+    return sorted(
+        (str(p.relative_to(folder.parent)), p.stat().st_size, p.stat().st_mtime_ns) for p in folder.parent.rglob("*")
+    )
+
+
+@pytest.mark.parametrize(
+    "kw, key",
+    [
+        (dict(overwrite="no"), "overwrite"),
+        (dict(overwrite=1, n_runs=8), "overwrite"),
+        (dict(fresh="no"), "fresh"),
+        (dict(progress="x"), "progress"),
+        (dict(report=None), "report"),
+    ],
+    ids=["overwrite-str", "overwrite-int", "fresh-str", "progress-str", "report-none"],
+)
+def test_run_study_flags_take_only_booleans(finished, kw, key):
+    """bool("no") is True: a string would replace a finished study. Refused, nothing touched."""
+    before = _snapshot(finished)
+    msg = _refused(lambda: pfjax.run_study(TINY, finished, **{"report": False, "progress": False, **kw}), key)
+    assert re.search(r"expected True(,| or) False", msg), msg
+    assert _snapshot(finished) == before
+
+
+def test_rare_event_and_tune_progress_take_only_booleans():
+    _refused(lambda: pfjax.rare_event(TINY, method="mc", max_rollouts=100, progress="x"), "progress")
+    _refused(lambda: pfjax.tune("pi", "paper-line", progress="no"), "progress")
+    _refused(lambda: pfjax.tune("pi", "paper-line", progress=None), "progress")
+
+
+def test_run_study_overwrite_advice_is_the_argument(finished):
+    """Another config's output is refused with the caller's words: overwrite=True, not --overwrite."""
+    before = _snapshot(finished)
+    msg = _refused(lambda: pfjax.run_study(TINY, finished, report=False, progress=False, n_runs=8), "out")
+    assert "pass overwrite=True to replace it" in msg and "--overwrite" not in msg, msg
+    assert _snapshot(finished) == before
+
+
+def test_study_configs_take_numpy_and_jax_numbers():
+    import jax.numpy as jnp
+
+    from pfjax.montecarlo.config import load_study
+
+    spec = load_study(data={**STUDY, "n_runs": np.int64(3)}, values={"seed": jnp.int32(2), "sim.dt": np.float32(0.5)})[
+        0
+    ]
+    assert (spec.n_runs, spec.seed, spec.sim.dt) == (3, 2, 0.5)
+    for bad in (np.bool_(True), jnp.array(True), np.float64(3.0), np.str_("3")):  # still refused as before
+        with pytest.raises(pfjax.InputError, match=r"^n_runs: "):
+            load_study(data=STUDY, values={"n_runs": bad})
+
+
+def test_run_study_takes_numpy_integers(finished, tmp_path):
+    """In the config and as an override, as pfjax.scenarios takes them: the same study as with ints."""
+    a = pfjax.run_study({**TINY, "n_runs": np.int64(4)}, tmp_path / "a", report=False, progress=False)
+    b = pfjax.run_study(TINY, tmp_path / "b", report=False, progress=False, n_runs=np.int32(4), seed=np.uint8(0))
+    assert a.summary["config"] == b.summary["config"] == pfjax.load_study(finished).summary["config"]
+    _refused(lambda: pfjax.run_study(TINY, tmp_path / "c", report=False, n_runs=np.bool_(True)), "n_runs")
+    assert not (tmp_path / "c").exists()
+
+
+def test_choice_takes_a_jax_array():
+    import jax.numpy as jnp
+
+    assert pfjax.choice(jnp.array([1.0, 2.0])).values == [1.0, 2.0]
+    _refused(lambda: pfjax.choice(jnp.array([True, False])), "choice")
+    _refused(lambda: pfjax.choice(np.zeros((2, 2))), "choice")

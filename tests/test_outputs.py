@@ -181,6 +181,21 @@ def test_stale_staging_of_a_killed_run_is_removed_by_the_next_writer(tmp_path):
     assert not any(s.exists() for s in stale) and other.exists()
 
 
+def test_a_writer_leaves_the_temporary_directories_of_a_target_named_like_its_own(tmp_path):
+    """Target ``exp`` and a study running into ``exp.partial-v2``: the other's live staging
+    ``.exp.partial-v2.pfjax-staging-*`` (marked, its lock held elsewhere) matches a glob of
+    ``.exp.partial-*`` but is not ``exp``'s: it survives ``exp``'s clean-up; ``exp``'s own stale
+    directories do not."""
+    out = tmp_path / "exp"
+    live = [temporary_dir(tmp_path / "exp.partial-v2", kind) for kind in ("pfjax-staging", "partial")]
+    live.append(temporary_dir(tmp_path / "exp.pfjax-old-x", "pfjax-staging"))
+    for d in live:
+        (d / "summary.json").write_text("{}")
+    stale = [temporary_dir(out, kind) for kind in ("pfjax-staging", "pfjax-old", "partial")]
+    _write(out, {"a": "1"})
+    assert all((d / "summary.json").is_file() for d in live) and not any(d.exists() for d in stale)
+
+
 def test_entries_beside_the_target_that_pfjax_did_not_make_are_left_as_they_are(tmp_path):
     """Directories named like pfjax's temporary ones but without its mark (a user's, or a link to
     one) survive a writer's clean-up, byte for byte; so does the file a link points to."""

@@ -27,23 +27,23 @@ def truncnormal(mean: float, std: float, low: float, high: float):
 
 
 def choice(values):
-    """A uniform choice among ``values``, a non-empty list (tuple, 1-D array) of numbers (for :func:`scenarios`)."""
-    import numpy as np
-
+    """A uniform choice among ``values``, a non-empty list (tuple, 1-D NumPy or JAX array) of numbers
+    (for :func:`scenarios`)."""
     from pfjax.montecarlo.config import Dist
 
     # checked as a study config's list is (numbers only: no strings, no booleans)
-    listed = (
-        values.tolist() if isinstance(values, np.ndarray) else list(values) if isinstance(values, tuple) else values
-    )
-    return _dist(Dist, dist="choice", values=listed)
+    return _dist(Dist, dist="choice", values=list(values) if isinstance(values, tuple) else values)
 
 
 def _dist(cls, **kw):
+    """``kw`` validated as a study config's distribution table is (NumPy and JAX numbers read as
+    Python's, :func:`pfjax.config.plain`); InputError naming the distribution otherwise."""
     from pydantic import ValidationError
 
+    from pfjax.config import plain
+
     try:
-        return cls.model_validate(kw)
+        return cls.model_validate(plain(kw))
     except ValidationError as e:
         from pfjax.config import format_error
 

@@ -18,8 +18,19 @@ class StudyResult(NamedTuple):
 
 
 def load_study(out) -> StudyResult:
-    """Read a finished study's outputs from its directory ``out``, as ``pfjax report`` reads them
-    (:class:`~pfjax.errors.InputError` naming ``out`` for a missing or corrupt file)."""
+    """Read a finished study's outputs from its directory ``out``, as ``pfjax report`` reads them.
+
+    Args:
+        out: the study's output directory (a str or path-like).
+
+    Returns:
+        a :class:`StudyResult`: the directory, ``summary.json``, the run table, the margin table
+        (None without a margin sweep) and the headline table.
+
+    Raises:
+        pfjax.errors.InputError: naming ``out``: not a str or path-like, no finished study there
+            (``summary.json`` and ``runs.parquet``), or one of its files corrupt or unreadable.
+    """
     import pandas as pd
 
     from pfjax.montecarlo.study import read_finished
@@ -71,27 +82,53 @@ def run_study(
 ) -> StudyResult:
     """Run a Monte Carlo study and return its outputs, as ``pfjax study`` does.
 
+    The study computes in its config's ``dtype`` (default float32), whatever JAX is configured
+    for (``float64`` enables ``jax_enable_x64`` for the study, ``float32`` turns it off for the
+    study), so its numbers are ``pfjax study``'s.
+
     Args:
         config: a study TOML path, a config dict, or a :class:`pfjax.montecarlo.config.StudySpec`.
         out: output directory (default ``results/<name>``), written with pfjax's output rules
             (:mod:`pfjax.outputs`: another pfjax output is replaced only with ``overwrite``).
-        fresh: discard the finished chunks of an interrupted run instead of resuming.
-        progress: progress bars (default: when stderr is a terminal). report: write the report
-            (``report.md``, ``report.html`` and ``figures/``).
+        overwrite: True: replace a pfjax output of another config or command in ``out`` (never
+            files pfjax did not write there).
+        fresh: True: discard the finished chunks of an interrupted run instead of resuming.
+        progress: progress bars (None, the default: when stderr is a terminal).
+        report: True: write the report (``report.md``, ``report.html`` and ``figures/``).
         overrides: config values by key, nested keys with ``__`` (``n_runs=1000``,
             ``sim__horizon=30``, ``paths=[{"kind": "line"}]``), as ``--set key=value`` but with
-            Python values.
+            Python values (NumPy and JAX numbers and 1-D arrays too).
+
+    Returns:
+        the study's outputs, as :func:`load_study` reads them from ``out``.
+
+    Raises:
+        pfjax.errors.InputError: before anything is written: a bad argument, named as here
+            (``config``: no such file or not a path, dict or StudySpec; ``overwrite``, ``fresh``,
+            ``report``: not True or False; ``progress``: not True, False or None); ``out`` when it
+            is not a path or pfjax may not write there (:mod:`pfjax.outputs`: files pfjax did not
+            write, another output without ``overwrite``; :class:`pfjax.outputs.OutputBusy` while
+            another process writes there); a key of the config (``chunk_size``, ``max_rollouts``,
+            ``controllers[i]``) for a study beyond the memory budget, a rare-event budget too small
+            or a design that cannot be made. Its subclass :class:`pfjax.config.ConfigError` names
+            the config key (an override by its dotted key) of a bad key or value.
+        OSError: the file system refuses a write (what ``out`` held stays as it was).
     """
     from pathlib import Path
 
     from pfjax.montecarlo.runner import study_output
     from pfjax.montecarlo.study import run
 
+    overwrite = errors.boolean("overwrite", overwrite)
+    fresh = errors.boolean("fresh", fresh)
+    progress = errors.boolean("progress", progress, or_none=True)
+    report = errors.boolean("report", report)
     out = None if out is None else _out_dir(out)
     spec = _study_spec(config, {k.replace("__", "."): v for k, v in overrides.items()})
     out = Path("results") / spec.name if out is None else out
-    # the output directory judged by pfjax.outputs as `pfjax study --out` is, its messages naming `out`
-    output = study_output(spec, out, overwrite=overwrite, flag="out")
+    # the output directory judged by pfjax.outputs as `pfjax study --out` is, its messages naming
+    # this function's arguments (out, overwrite=True)
+    output = study_output(spec, out, overwrite=overwrite, flag="out", overwrite_flag="overwrite")
     run(spec, output, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
     return load_study(out)
 
@@ -112,7 +149,8 @@ def rare_event(
 
     A run fails where its status is a failure or the study's ``rare_event.metric`` exceeds
     ``rare_event.threshold`` (default: ``late_max_abs_d`` above ``success.band``, m). The keyword
-    arguments override the config's ``[rare_event]`` table.
+    arguments override the config's ``[rare_event]`` table. The runs are computed in the study's
+    ``dtype``, whatever JAX is configured for, as :func:`run_study`'s.
 
     Args:
         config: a study TOML path, a config dict, or a :class:`pfjax.montecarlo.config.StudySpec`.
@@ -123,18 +161,36 @@ def rare_event(
         max_rollouts: rollouts per controller, split evenly over the strata (docs/rare-events.md, *The budget*:
             at least :func:`pfjax.rare.study.rollouts_needed` per stratum, checked before anything is simulated).
         seed: seed of the estimator's draws.
-        progress: a progress bar on stderr (default: when it is a terminal).
+        progress: a progress bar on stderr (None, the default: when it is a terminal).
         overrides: config values by key, nested keys with ``__``, as :func:`run_study`.
 
     Returns:
         ``{"study", "config_sha256", "units", "controllers": {name: {"p_fail", "ci95",
-        "rel_error", "n_rollouts", "method", "wall_s", "strata", "failure_points"}}}``.
+        "rel_error", "n_rollouts", "method", "wall_s", "status", "warning", "strata",
+        "failure_points"}}}`` (:func:`pfjax.rare.study.estimate_controller`): ``ci95`` ``[lo, hi]``,
+        ``wall_s`` s; ``status`` the verdict of the importance-sampling checks
+        (:mod:`pfjax.rare.check`): ``"ok"``, or the first flagged stratum's ``"disagree"``
+        (``rare_event.check = "subset"`` and subset simulation's estimate beyond the 95 %
+        intervals) or ``"concentrated"`` (one draw carries more than
+        :data:`pfjax.rare.check.MAX_WEIGHT_SHARE` of the estimate); always ``"ok"`` with
+        ``subset`` and ``mc``; ``warning`` None, or each flagged stratum's path and what was found,
+        joined by ``"; "``.
+
+    Raises:
+        pfjax.errors.InputError: before anything is simulated: a bad argument, named as here
+            (``method``, ``target_rel_error``, ``max_rollouts``, ``seed``, ``controller``: not one
+            of the study's; ``progress``: not True, False or None; ``config``: no such file or not
+            a path, dict or StudySpec); ``max_rollouts`` also when the budget leaves a stratum fewer
+            rollouts than its method needs (:func:`pfjax.rare.study.check_budget`); ``controllers[i]``
+            for a design that cannot be made. Its subclass :class:`pfjax.config.ConfigError` names
+            the config key (an override by its dotted key) of a bad key or value.
     """
     from pfjax.montecarlo.config import study_hash
     from pfjax.montecarlo.runner import controllers_of
     from pfjax.rare import METHODS
     from pfjax.rare.study import check_budget, estimate_study
 
+    progress = errors.boolean("progress", progress, or_none=True)
     values = {k.replace("__", "."): v for k, v in overrides.items()}
     if method is not None:
         if method not in METHODS:

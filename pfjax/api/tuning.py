@@ -32,6 +32,9 @@ def tune(
 ) -> dict:
     """Tune a controller's gains, or check given gains, as ``pfjax tune`` does.
 
+    Computed in the precision JAX is configured for (float32 unless ``jax_enable_x64``); the
+    command line enables float64, and a caller that does the same gets its numbers.
+
     Args:
         controller: a registered controller with a tuning box (``pi``, ``state_feedback``, ...; the
             command line's spellings too); a design (``lmi``) is refused, as by ``pfjax tune``.
@@ -62,6 +65,7 @@ def tune(
         check: gains to check instead of tuning (``{field: value}``, its JSON text or numbers in
             field order, inside the tuning box): gradient, projected gradient, active bounds,
             Hessian eigenvalues on the free coordinates, verdict (:mod:`pfjax.tuning.check`).
+        progress: True: a progress bar on stderr over the tuner's steps or generations.
 
     A setting the method does not read (``generations`` with ``gradient``, ``steps`` with ``ga``,
     any of them with ``check``; :data:`pfjax.tuning.problem.METHOD_SETTINGS`) is refused naming it,
@@ -70,6 +74,12 @@ def tune(
     Returns:
         ``{"gains", "cost", "n_rollouts", "n_forward_passes", "wall_s", "compile_s", "history",
         "history_rollouts", "result"}``; with ``check``: ``{"gains", "cost", "check", "result"}``.
+
+    Raises:
+        pfjax.errors.InputError: a bad argument, named as here, before any run is simulated
+            (``controller``, ``scenario``, ``method``, ``key``, ``model``, a setting the method does
+            not read, ``check`` with ``method``, ``config.<field>`` for a bad field of ``config``;
+            ``progress``: not True or False).
     """
     from pfjax import controllers as C
     from pfjax.tuning.check import as_dict
@@ -79,6 +89,7 @@ def tune(
     from pfjax.tuning.problem import check_settings_apply, make_problem
     from pfjax.tuning.problem import tune as run_tune
 
+    progress = errors.boolean("progress", progress)
     # a command-line spelling names its registry entry; anything else (a design such as lmi: its
     # gains are designed, not tuned) is refused by make_problem, as `pfjax tune --controller` refuses it
     if not isinstance(controller, str):
@@ -169,8 +180,27 @@ def falsify(
     ``restarts`` and ``steps`` are checked as a study config's ``[falsifier]`` keys are (``restarts``
     is its ``n_restarts``); ``config`` is a :class:`pfjax.sim.SimConfig` or a dict of its fields.
 
+    Computed in the precision JAX is configured for (float32 unless ``jax_enable_x64``); the
+    command line enables float64, and a caller that does the same gets its numbers.
+
+    Args:
+        controller: a registered controller or design (the command line's spellings too).
+        path: a registered path built without a study config (``sine``, ``line``, ...).
+        gains: the controller's gains: None (its defaults; a design is made at ``speed`` and
+            ``L``), a dict of some of its gains by name, its parameter pytree, or a synthesis
+            result with ``K``.
+        key: int seed (or JAX key) of the random starts.
+        speed: the rear axle's longitudinal speed, m/s (> 0).
+        L: wheelbase, m (> 0).
+        delta_max_deg: steering limit, deg (in (0, 90)).
+
     Returns:
         a :class:`pfjax.falsification.FalsifierResult` (the worst value, its parameters and status).
+
+    Raises:
+        pfjax.errors.InputError: a bad argument, named as here, before any run is simulated
+            (``controller``, ``path``, ``gains``, ``speed``, ``L``, ``delta_max_deg``, ``key``,
+            ``config``, ``restarts`` and the other ``[falsifier]`` keys' arguments).
     """
     from pfjax import controllers as C
     from pfjax import paths

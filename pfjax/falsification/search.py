@@ -110,7 +110,7 @@ def check_settings(**settings) -> None:
     from pfjax.config import load_model
     from pfjax.montecarlo.analysis_config import FalsifierSpec
 
-    load_model(FalsifierSpec, data={k: v.item() if isinstance(v, np.generic) else v for k, v in settings.items()})
+    load_model(FalsifierSpec, data=settings)
 
 
 def _setup(path, gains, config, slip_bound_deg, f_max_hz, ic_bounds, objective, params, noise, space_kw):

@@ -73,8 +73,18 @@ def run_study(
         return _run_study(spec, output, progress=progress, extra=extra, fresh=fresh, controllers=controllers)
 
 
-def study_output(spec: StudySpec, out=None, *, overwrite: bool = False, flag: str = "--out") -> OutputDir:
-    """The (unopened) :class:`~pfjax.outputs.OutputDir` of a study: ``out`` or ``results/<name>``."""
+def study_output(
+    spec: StudySpec,
+    out=None,
+    *,
+    overwrite: bool = False,
+    flag: str = "--out",
+    overwrite_flag: str | None = None,
+) -> OutputDir:
+    """The (unopened) :class:`~pfjax.outputs.OutputDir` of a study: ``out`` or ``results/<name>``.
+    Its refusals name ``out`` as ``flag`` and advise ``overwrite`` as ``overwrite_flag`` (the
+    caller's spellings: ``--out`` and ``--overwrite`` for ``pfjax study``, ``out`` and
+    ``overwrite`` for :func:`pfjax.run_study`; :func:`pfjax.outputs.overwrite_advice`)."""
     from pathlib import Path
 
     from pfjax.montecarlo.config import study_hash
@@ -86,6 +96,7 @@ def study_output(spec: StudySpec, out=None, *, overwrite: bool = False, flag: st
         config_sha256=study_hash(spec),
         overwrite=overwrite,
         flag=flag,
+        overwrite_flag=overwrite_flag,
         extra={"study": spec.name, "seed": spec.seed},
     )
 

@@ -113,7 +113,6 @@ def _schedule(alpha_schedule):
 def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     """The arguments :func:`run` and :func:`search` share, checked in the command line's order;
     the map loaded and the start pose checked against it."""
-    import numpy as np
 
     from pfjax.parking.geometry import L2_LENGTH
     from pfjax.parking.maps import MapError, check_start, load_map, to_obstacle_map
@@ -135,8 +134,7 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
             f"{t_max / scan_period:.3g}",
             "scan_period",
         )
-    if not isinstance(lag, (bool, np.bool_)):
-        raise InputError(f"lag: expected True or False, got {lag!r:.80}", "lag")
+    errors.boolean("lag", lag)
     spec = _map_spec(map)
     try:
         name, polygons = load_map(spec)

@@ -156,8 +156,7 @@ def run(
     if not isinstance(overrides, (list, tuple)) or not all(isinstance(o, str) for o in overrides):
         raise InputError(f'overrides: expected a list of "key=value" strings, got {overrides!r:.80}', "overrides")
     for key, value in (("quick", quick), ("overwrite", overwrite), ("progress", progress)):
-        if not isinstance(value, bool):
-            raise InputError(f"{key}: expected True or False, got {value!r:.80}", key)
+        errors.boolean(key, value)
     if isinstance(config, ParkingStudy):
         if overrides:
             raise InputError("overrides: only with a config path or None (a ParkingStudy is already validated)")
