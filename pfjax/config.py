@@ -210,6 +210,9 @@ def format_error(err: ValidationError, root: type[BaseModel]) -> str:
     if e["type"] == "missing":
         return f"{key}: required key is missing"
     bound = _BOUNDS.get(e["type"])
+    value = e.get("input")
+    if bound is not None and isinstance(value, float) and math.isnan(value):  # NaN fails every bound
+        return f"{key}: expected a finite number, got nan"
     if bound is not None:  # pydantic writes 1e-12 as 0.000000000001
         limit = e["ctx"][bound[1]]
         msg = f"must be {bound[0]} {limit:g}" if isinstance(limit, float) else f"must be {bound[0]} {limit}"

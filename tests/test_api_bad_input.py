@@ -429,3 +429,26 @@ def test_choice_takes_a_jax_array():
     assert pfjax.choice(jnp.array([1.0, 2.0])).values == [1.0, 2.0]
     _refused(lambda: pfjax.choice(jnp.array([True, False])), "choice")
     _refused(lambda: pfjax.choice(np.zeros((2, 2))), "choice")
+
+
+def test_simulate_and_replay_trajectories_take_only_booleans_and_config_has_no_record():
+    """``trajectories="no"`` would record (Python's truth); ``config={"record": True}`` was silently
+    replaced by ``trajectories``: one way to ask, refused otherwise, naming the argument."""
+    sc = pfjax.scenarios("line", 2)
+    _refused(lambda: pfjax.simulate(sc, "pi", trajectories="no"), "trajectories")
+    _refused(lambda: pfjax.simulate(sc, "pi", config={"horizon": 1.0, "record": True}), "config.record")
+    _refused(lambda: pfjax.replay("/nonexistent", "line", "pi", 0, trajectories=1), "trajectories")
+
+
+@pytest.mark.parametrize("horizon", [10.0, 4.0, 0.3, 20.0013])
+def test_scenarios_take_any_positive_horizon(horizon):
+    """The horizon only sizes the slip sequences: the study config behind it keeps its windows
+    inside it (a horizon under 15 s was refused naming success.from_s, a key nobody passed)."""
+    assert pfjax.scenarios("sine", 2, horizon=horizon).n == 2
+
+
+def test_nan_is_not_a_finite_number_rather_than_too_small():
+    msg = _refused(lambda: pfjax.scenarios("line", 2, horizon=float("nan")), "horizon")
+    assert msg == "horizon: expected a finite number, got nan"
+    msg = _refused(lambda: pfjax.scenarios("line", 2, model="st", tau_delta_s=float("nan")), "tau_delta_s")
+    assert "expected a finite number, got nan" in msg

@@ -167,6 +167,7 @@ def _checked_spec(path, n, seed, horizon, model, values, convention, vehicle_par
     the argument), and the per-run ``given`` arrays of ``values``."""
     from pfjax.montecarlo.config import load_study
 
+    horizon = errors.number("horizon", horizon, positive=True, unit=" s")  # before it becomes the step too
     dists, given = _as_dists(values, n)
     data = _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params, tau_delta_s, k_v)
     try:
@@ -210,7 +211,10 @@ def _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params
         "seed": seed,
         "paths": [{"kind": path}],
         "controllers": [{"name": "none", "type": "state_feedback"}],
-        "sim": {"horizon": horizon},
+        # the horizon only sizes the slip sequences: the rest of the run's timing is simulate()'s, so
+        # the windows are kept inside any horizon and the step is the whole horizon (the ST model's below)
+        "sim": {"horizon": horizon, "dt": horizon, "steady_window": min(horizon, 5.0)},
+        "success": {"from_s": min(horizon, 15.0)},
         "vehicle": {
             "model": model,
             **{k: dists[k] for k in ("speed", "L", "delta_max_deg", "mu") if k in dists},

@@ -74,11 +74,19 @@ def simulate(
             parameter pytree, or a design with ``K`` (:func:`design_mixed`). A design name
             (``lmi``) is designed at the runs' mean speed and wheelbase.
         config: a :class:`pfjax.sim.SimConfig` or a dict of its fields (``horizon``, ``dt``,
-            ``success_band``, ...); default 20 s at 5 ms.
-        trajectories: also record every run's trajectory (memory grows with the horizon).
+            ``success_band``, ...; not ``record``: that is ``trajectories``); default 20 s at 5 ms.
+        trajectories: ``True`` also records every run's trajectory (memory grows with the horizon).
+
+    Computed in the precision JAX is configured for (float32 unless ``jax_enable_x64``); the command
+    line enables float64, and a caller that does the same gets its numbers.
 
     Returns:
         a :class:`Simulation` (per-run table with metrics and statuses, the raw result).
+
+    Raises:
+        InputError: a bad argument, named (``controller``, ``gains.k_d``, ``config.dt``,
+            ``trajectories``: also when recording would exceed the memory budget). A run that fails
+            numerically is not an error: its ``status`` says how it failed.
     """
     import dataclasses
 
@@ -97,7 +105,10 @@ def simulate(
         raise errors.InputError(
             f"controller: expected a controller name, got {type(controller).__name__}", "controller"
         )
-    config = dataclasses.replace(sim_config(config, SimConfig()), record=bool(trajectories))
+    trajectories = errors.boolean("trajectories", trajectories)
+    if isinstance(config, dict) and "record" in config:  # one way to ask for trajectories, not two
+        raise errors.InputError("config.record: pass trajectories=True to record the runs", "config.record")
+    config = dataclasses.replace(sim_config(config, SimConfig()), record=trajectories)
     t = scenarios.table
     if scenarios.spec.vehicle.model in ("st", "std"):
         from pfjax.models.single_track import check_step, with_mu
@@ -135,6 +146,15 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
         study: a :class:`StudyResult`, its output directory, or its config (``StudySpec``).
         path: the path's label in the study. controller: the controller's name in the study.
         runs: run indices (an int or a sequence).
+        trajectories: ``True`` (default) also records the runs' trajectories.
+
+    Returns:
+        a :class:`Simulation` of these runs: their rows as the study's ``runs.parquet`` holds them
+        (the same numbers), and with ``trajectories`` the recorded runs in ``result.trajectory``.
+
+    Raises:
+        InputError: ``study`` is not a study (or a directory without one), ``path`` or
+            ``controller`` is not one of the study's, or ``runs`` is empty or out of range.
     """
     import dataclasses
     from pathlib import Path
@@ -155,6 +175,7 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
         with_gains,
     )
 
+    trajectories = errors.boolean("trajectories", trajectories)
     if isinstance(study, (str, Path)):
         try:
             study = load_study(study)
@@ -188,7 +209,7 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
         sampled = sample_few(spec, p, idx.astype(np.int64))
         ctrl, gains, flat = controller_of(spec.controllers[c], spec, c)
         m = jax.tree_util.tree_leaves(sampled.scenarios)[0].shape[0]
-        cfg = dataclasses.replace(sim_config(spec), record=bool(trajectories))
+        cfg = dataclasses.replace(sim_config(spec), record=trajectories)
         res = simulate_scenarios(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
     n = len(idx)
     res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:n], res)
