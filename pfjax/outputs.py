@@ -60,6 +60,7 @@ __all__ = [
     "overwrite_advice",
     "read_marker",
     "sibling",
+    "switch_advice",
 ]
 
 MARKER = ".pfjax-output.json"
@@ -161,8 +162,16 @@ def overwrite_advice(flag: str, overwrite_flag: str | None = None) -> str:
             default: ``--overwrite`` where ``flag`` is a command-line flag (starts with ``-``),
             else ``overwrite``.
     """
-    name = overwrite_flag or ("--overwrite" if flag.startswith("-") else "overwrite")
-    return f"add {name}" if name.startswith("-") else f"pass {name}=True"
+    if overwrite_flag is None:
+        return switch_advice(flag, "overwrite")
+    return f"add {overwrite_flag}" if overwrite_flag.startswith("-") else f"pass {overwrite_flag}=True"
+
+
+def switch_advice(flag: str, option: str) -> str:
+    """How to turn on the switch ``option`` (``overwrite``, ``fresh``) in the words of a caller whose
+    output directory goes by ``flag``: ``"add --fresh"`` beside a command line's ``--out``, ``"pass
+    fresh=True"`` beside a Python argument ``out``."""
+    return f"add --{option}" if flag.startswith("-") else f"pass {option}=True"
 
 
 def _check_name(target, flag: str) -> Path:

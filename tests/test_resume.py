@@ -102,6 +102,13 @@ def test_interrupted_study_resumes_without_recomputing(spec, reference, tmp_path
     other = spec[0].model_copy(update={"seed": 8})
     with pytest.raises(ConfigError, match=r"^--out: .* interrupted study with a different config .* add --fresh"):
         run(other, out, progress=False, report=False)
+    import pfjax  # the Python API names its own arguments: out, and fresh=True
+
+    with pytest.raises(
+        ConfigError, match=r"^out: .* interrupted study with a different config .* pass fresh=True"
+    ) as e:
+        pfjax.run_study(other, out, progress=False, report=False)
+    assert e.value.key == "out"
 
     summary = run(spec[0], out, progress=False, report=False)
     assert summary["chunks"] == {"simulated": N_CHUNKS - 6, "resumed": 6}

@@ -35,7 +35,7 @@ import pfjax
 from pfjax.config import ConfigError
 from pfjax.interrupts import stop_if_interrupted
 from pfjax.montecarlo.config import StudySpec, study_hash
-from pfjax.outputs import sibling, temporary_dir, unmark
+from pfjax.outputs import sibling, switch_advice, temporary_dir, unmark
 from pfjax.provenance import parquet_metadata
 from pfjax.tables import ParquetAppender
 
@@ -69,13 +69,16 @@ class ChunkStore:
         out: the study's output directory (the chunks live next to it, never inside).
         spec: the validated study; its hash identifies the chunks.
         fresh: discard any unfinished chunks first (``pfjax study --fresh``) instead of resuming.
+        flag: the name the output directory goes by in the caller's refusals (``--out``, or
+            ``out`` for :func:`pfjax.run_study`, whose advice is then ``pass fresh=True``).
 
     Raises:
         ConfigError: the partial directory holds chunks of a different config or pfjax version.
     """
 
-    def __init__(self, out: Path, spec: StudySpec, *, fresh: bool = False):
+    def __init__(self, out: Path, spec: StudySpec, *, fresh: bool = False, flag: str = "--out"):
         self.dir = partial_dir(out)
+        self.flag = flag
         self.manifest: dict[str, Any] = {
             "study": spec.name,
             "config_sha256": study_hash(spec),
@@ -87,8 +90,9 @@ class ChunkStore:
         self.reused = 0  #: chunks found finished on disk (resumed)
         if self.dir.is_symlink() or (self.dir.exists() and not self.dir.is_dir()):
             raise ConfigError(
-                f"--out: {self.dir} (where pfjax keeps a study's finished chunks) exists and is not a "
-                f"directory; move it away"
+                f"{flag}: {self.dir} (where pfjax keeps a study's finished chunks) exists and is not a "
+                f"directory; move it away",
+                flag,
             )
         if self.dir.exists() and (fresh or not self._chunk_files()):
             self._discard_checked(out)
@@ -113,8 +117,9 @@ class ChunkStore:
         ]
         if foreign:
             raise ConfigError(
-                f"--out: {self.dir} (where pfjax keeps the finished chunks of {out}) holds "
-                f"{foreign[0]!r}, which pfjax did not write; move it away"
+                f"{self.flag}: {self.dir} (where pfjax keeps the finished chunks of {out}) holds "
+                f"{foreign[0]!r}, which pfjax did not write; move it away",
+                self.flag,
             )
         shutil.rmtree(self.dir)
 
@@ -126,9 +131,11 @@ class ChunkStore:
         for key, what in (("config_sha256", "config"), ("pfjax_version", "pfjax version")):
             if old.get(key) != self.manifest[key]:
                 raise ConfigError(
-                    f"--out: {out} has an interrupted study with a different {what} "
+                    f"{self.flag}: {out} has an interrupted study with a different {what} "
                     f"({str(old.get(key))[:12]} there, {self.manifest[key][:12]} now) in {self.dir}; "
-                    f"re-run the original command to resume it, or add --fresh to discard it and start over"
+                    f"re-run the original command to resume it, or {switch_advice(self.flag, 'fresh')} "
+                    "to discard it and start over",
+                    self.flag,
                 )
 
     def _valid(self, f: Path) -> bool:

@@ -62,7 +62,7 @@ def lead(spec: StudySpec, output, *, fresh: bool = False) -> dict:
 
     try:
         output.open()
-        store = ChunkStore(output.target, spec, fresh=fresh)
+        store = ChunkStore(output.target, spec, fresh=fresh, flag=output.flag)
         controllers = controllers_of(spec)
     except Exception as e:
         sharding.broadcast_json({"error": str(e), "usage": isinstance(e, InputError)})

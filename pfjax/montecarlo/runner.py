@@ -106,7 +106,7 @@ def _run_study(spec: StudySpec, output: OutputDir, *, progress, extra, fresh, co
 
     t0 = time.time()
     controllers = controllers_of(spec) if controllers is None else controllers
-    store = ChunkStore(output.target, spec, fresh=fresh)
+    store = ChunkStore(output.target, spec, fresh=fresh, flag=output.flag)
     tmp = output.staging
     with precision(spec):
         total = spec.n_runs * len(spec.paths) * len(controllers)
