@@ -292,8 +292,9 @@ def register(sub) -> None:
     m = sub.add_parser(
         "simulate",
         help="simulate one run of a paper scenario and print final state and metrics",
-        description="One closed-loop run of the slip model on a path (SI units; the flags take angles in degrees, "
-        "and --json gives the unit of every number it prints).",
+        description="One closed-loop run of a vehicle model on a path: the kinematic model with declared slip, "
+        "or CommonRoad's single-track models with tyre slip (--model); SI units, the flags take angles in degrees, "
+        "and --json gives the unit of every number it prints.",
     )
     from pfjax import paths
 
@@ -323,7 +324,13 @@ def register(sub) -> None:
     m.add_argument(
         "--horizon", "--T", action=Aliased, dest="horizon", type=float, default=20.0, help="horizon, s (default 20)"
     )
-    m.add_argument("--dt", type=float, default=0.005, help="RK4 step, s (default 0.005)")
+    m.add_argument(
+        "--dt",
+        type=float,
+        default=0.005,
+        help="RK4 step, s (default 0.005); on st and std it must be a stable step for the tyre modes, checked "
+        "(--model std at 1 m/s needs about 0.00025)",
+    )
     m.add_argument("--control-every", type=int, help="controller sampling period in steps (default 1)")
     m.add_argument("--continuous", action="store_true", help="evaluate the controller inside every RK4 stage")
     m.add_argument(
@@ -355,8 +362,8 @@ def register(sub) -> None:
     m.add_argument(
         "--vehicle", choices=PARAMETER_SETS, help="st, std: parameter set (default robot for st, vehicle2 for std)"
     )
-    m.add_argument("--mu", type=float, help="st: friction coefficient (default the set's, 1.0489)")
-    m.add_argument("--tau-delta", type=float, help="st: steering actuator time constant, s (default 0.05)")
-    m.add_argument("--k-v", type=float, help="st: speed loop gain, 1/s (default 5)")
+    m.add_argument("--mu", type=float, help="st, std: friction coefficient (default the set's)")
+    m.add_argument("--tau-delta", type=float, help="st, std: steering actuator time constant, s (default 0.05)")
+    m.add_argument("--k-v", type=float, help="st, std: speed loop gain, 1/s (default 5)")
     m.add_argument("--json", action="store_true", help="print one JSON object")
     m.set_defaults(func=cmd, units=UNITS)
