@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
-from pfjax.cli.common import Parser
+from pfjax.cli.study import NAMED_OUT, default_out, script_parser
 
 pfjax.cache.enable()
 
@@ -29,21 +29,19 @@ from pfjax.dynamic_study.runs import run  # noqa: E402
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.report.document import to_markdown  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 def main(argv=None) -> int:
-    ap = Parser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", help="a TOML file of the study's keys (studies/kinematic_vs_dynamic.toml)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out")
-    ap.add_argument("--quick", action="store_true", help="a small sample and short runs (for tests)")
-    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
+    ap = script_parser(
+        __doc__,
+        config=Path(__file__).resolve().with_suffix(".toml"),
+        out_default=NAMED_OUT,
+        quick="a small sample and short runs (for tests)",
+    )
     args = ap.parse_args(argv)
 
     def go() -> int:
         config = study_config.load(args.config, args.set, quick=args.quick)
-        out = Path(args.out) if args.out else ROOT / "results" / config.name
+        out = default_out(args.out, config.name)
         print(to_markdown(report(run(config, out, overwrite=args.overwrite))))
         return 0
 

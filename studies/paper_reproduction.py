@@ -23,7 +23,7 @@ import matplotlib
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
-from pfjax.cli.common import Parser
+from pfjax.cli.study import NAMED_OUT, default_out, script_parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -36,18 +36,14 @@ from pfjax.outputs import OutputDir, check_name  # noqa: E402
 from pfjax.provenance import config_hash  # noqa: E402
 from pfjax.reproduce import paper_config, paper_study  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 def main(argv=None) -> int:
-    ap = Parser(description=__doc__.split("\n")[1])
-    ap.add_argument("--config", default=str(ROOT / "studies" / "paper_reproduction.toml"))
-    ap.add_argument(
-        "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value (dotted keys)"
+    ap = script_parser(
+        __doc__,
+        config=Path(__file__).resolve().with_suffix(".toml"),
+        out_default=NAMED_OUT,
+        quick="small sizes (tests, a first look)",
     )
-    ap.add_argument("--out", help="output directory (default results/<name>)")
-    ap.add_argument("--quick", action="store_true", help="small sizes (tests, a first look)")
-    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
     args = ap.parse_args(argv)
     return command_main("paper_reproduction", lambda: run(args))
 
@@ -55,7 +51,7 @@ def main(argv=None) -> int:
 def run(args) -> int:
     config = paper_config.load(args.config, args.set, quick=args.quick)
     check_name("name", config.name)
-    out = Path(args.out) if args.out else ROOT / "results" / config.name
+    out = default_out(args.out, config.name)
     t0 = time.time()
     # Assembled beside the target and moved into place at the end: nothing half-written, nothing
     # that pfjax did not write replaced (pfjax.outputs).

@@ -23,7 +23,7 @@ import matplotlib
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
-from pfjax.cli.common import Parser
+from pfjax.cli.study import NAMED_OUT, default_out, script_parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -32,23 +32,21 @@ matplotlib.use("Agg")
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.parking.study_config import load  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 def main(argv=None) -> int:
-    ap = Parser(description=(__doc__ or "").splitlines()[0])
-    ap.add_argument("--config", default=str(ROOT / "studies" / "parking.toml"))
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out")
-    ap.add_argument("--quick", action="store_true", help="small sizes (tests)")
-    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
+    ap = script_parser(
+        __doc__,
+        config=Path(__file__).resolve().with_suffix(".toml"),
+        out_default=NAMED_OUT,
+        quick="small sizes (tests)",
+    )
     args = ap.parse_args(argv)
     return command_main("parking", lambda: run(args))
 
 
 def run(args) -> int:
     config = load(args.config, args.set, quick=args.quick)
-    out = Path(args.out) if args.out else ROOT / "results" / config.name
+    out = default_out(args.out, config.name)
     out, summary = pfjax.parking.run_study(config, out, quick=args.quick, overwrite=args.overwrite, flag="--out")
     print(f"wrote {out} in {summary['wall_s']:.1f} s")
     return 0

@@ -38,7 +38,7 @@ import jax
 
 import pfjax  # before JAX: one CPU device per core
 import pfjax.cache
-from pfjax.cli.common import Parser
+from pfjax.cli.study import default_out, script_parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -151,7 +151,7 @@ def starts_comparison(n_seeds: int) -> dict:
 
 def run(args) -> int:
     sizes = QUICK if args.quick else FULL
-    out = Path(args.out) if args.out else ROOT / "results" / "rare_events"
+    out = default_out(args.out, "rare_events")
     result = {"machine": machine(), "sizes": sizes, "known": {}, "coverage": {}, "study": {}}
     with OutputDir(out, command="rare-events", config_sha256=config_hash(sizes), overwrite=args.overwrite) as output:
         for label, std in KNOWN_STD.items():
@@ -207,10 +207,7 @@ def run(args) -> int:
 
 
 def main(argv=None) -> int:
-    ap = Parser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out")
-    ap.add_argument("--quick", action="store_true", help="small sizes (tests)")
-    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
+    ap = script_parser(__doc__, config=None, out_default="results/rare_events", quick="small sizes (tests)")
     args = ap.parse_args(argv)
     return command_main("rare-events", lambda: run(args))
 

@@ -21,7 +21,7 @@ import jax
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
-from pfjax.cli.common import Parser
+from pfjax.cli.study import default_out, script_parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -33,19 +33,19 @@ from pfjax.tuning import study, study_config  # noqa: E402
 
 
 def main(argv=None) -> int:
-    ap = Parser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", default="studies/tuning_ga_vs_gradient.toml")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out", default=None)
-    ap.add_argument("--quick", action="store_true", help="tiny sizes (seconds of simulation; used by the tests)")
-    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
+    ap = script_parser(
+        __doc__,
+        config=Path(__file__).resolve().with_suffix(".toml"),
+        out_default="results/tuning, or results/tuning_quick with --quick",
+        quick="tiny sizes (seconds of simulation; used by the tests)",
+    )
     args = ap.parse_args(argv)
     return command_main("tuning_ga_vs_gradient", lambda: main_checked(args))
 
 
 def main_checked(args) -> int:
     config = study_config.load(args.config, args.set, quick=args.quick)
-    out = Path(args.out or ("results/tuning_quick" if args.quick else "results/tuning"))
+    out = default_out(args.out, "tuning_quick" if args.quick else "tuning")
     with OutputDir(
         out,
         command="tuning-study",

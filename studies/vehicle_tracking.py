@@ -22,7 +22,7 @@ import matplotlib
 
 import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
 import pfjax.cache
-from pfjax.cli.common import Parser
+from pfjax.cli.study import NAMED_OUT, default_out, script_parser
 
 jax.config.update("jax_enable_x64", True)
 pfjax.cache.enable()
@@ -34,17 +34,14 @@ from pfjax.outputs import OutputDir, check_name  # noqa: E402
 from pfjax.provenance import config_hash  # noqa: E402
 from pfjax.tracking import study, study_config  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_TOML = ROOT / "studies" / "vehicle_tracking.toml"
-
 
 def main(argv=None) -> int:
-    ap = Parser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", default=str(DEFAULT_TOML))
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--out")
-    ap.add_argument("--quick", action="store_true", help="small grid and sample (for tests)")
-    ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
+    ap = script_parser(
+        __doc__,
+        config=Path(__file__).resolve().with_suffix(".toml"),
+        out_default=NAMED_OUT,
+        quick="small grid and sample (for tests)",
+    )
     args = ap.parse_args(argv)
     return command_main("vehicle_tracking", lambda: run(args))
 
@@ -52,7 +49,7 @@ def main(argv=None) -> int:
 def run(args) -> int:
     config = study_config.load(args.config, args.set, quick=args.quick)
     check_name("name", config.name)
-    out = Path(args.out) if args.out else ROOT / "results" / config.name
+    out = default_out(args.out, config.name)
     cfg = config.model_dump(mode="json")
     with OutputDir(
         out,

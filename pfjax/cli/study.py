@@ -7,11 +7,80 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import os
+import re
 import sys
 from pathlib import Path
 
-from pfjax.cli.common import UsageError, as_flags, finite
+from pfjax.cli.common import Parser, UsageError, as_flags, finite
 from pfjax.errors import InputError, one_line
+
+#: ``--overwrite`` of a command that writes a new output (``pfjax study``, the study scripts)
+OVERWRITE_HELP = (
+    "replace a pfjax output of another config or command in --out, or one whose files changed since "
+    "pfjax wrote them (pfjax never replaces anything it did not write)"
+)
+#: ``--overwrite`` of ``pfjax report``: the study in --out must be this config's (checked first), so
+#: what it allows is only replacing files changed since pfjax wrote them (:func:`_cmd_report`)
+REPORT_OVERWRITE_HELP = (
+    "rebuild the report even if files in --out changed since pfjax wrote them (an edited report.md, "
+    "report.html or redrawn figure is replaced, other files are kept as they are); the study in --out "
+    "must still be of this config"
+)
+
+
+#: the default ``--out`` of a command whose config has a ``name``, in its help (:func:`default_out`)
+NAMED_OUT = "results/<name> (<name>: the config's name)"
+
+
+def default_out(out, name: str) -> Path:
+    """The output directory a command writes: ``out`` (``--out``), else ``results/<name>`` under the
+    current directory (``pfjax study``, ``pfjax report`` and the study scripts alike)."""
+    return Path(out) if out else Path("results") / name
+
+
+def add_output_flags(parser, *, set_help: str | None, out_default: str, overwrite_help: str = OVERWRITE_HELP) -> None:
+    """``--set`` (unless ``set_help`` is None), ``--out`` and ``--overwrite``, with their help texts:
+    the flags ``pfjax study``, ``pfjax report`` and the study scripts share."""
+    if set_help is not None:
+        parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=set_help)
+    parser.add_argument(
+        "--out", metavar="DIR", help=f"output directory (default: {out_default}, under the current directory)"
+    )
+    parser.add_argument("--overwrite", action="store_true", help=overwrite_help)
+
+
+def first_paragraph(doc: str | None) -> str:
+    """A docstring's first paragraph on one line, its reST markup (``:mod:`x```, ````x````) as
+    plain text: a parser's description."""
+    text = re.split(r"\n\s*\n", (doc or "").strip(), maxsplit=1)[0]
+    text = re.sub(r":\w+:`~?([^`]*)`", r"\1", text).replace("``", "")
+    return " ".join(text.split())
+
+
+def script_parser(doc: str | None, *, config: Path | None, out_default: str, quick: str) -> Parser:
+    """The parser of a study script (``studies/*.py``): its docstring's first paragraph as the
+    description; ``--config`` (default ``config``, the TOML beside the script) and ``--set`` (both
+    left out where ``config`` is None: a script without a config), ``--out`` (default
+    ``out_default`` under the current directory, as ``pfjax study``; :func:`default_out`),
+    ``--quick`` (``quick``: what it shrinks) and ``--overwrite``."""
+    ap = Parser(description=first_paragraph(doc))
+    if config is not None:
+        ap.add_argument(
+            "--config",
+            metavar="TOML",
+            default=str(config),
+            help=f"the study's config, a TOML file (default {config.name} beside this script)",
+        )
+    add_output_flags(
+        ap,
+        set_help=None
+        if config is None
+        else "override a config value, applied after --config and --quick: a dotted key (table.key) or "
+        "list item (key[0].name) and a TOML value (repeatable)",
+        out_default=out_default,
+    )
+    ap.add_argument("--quick", action="store_true", help=quick)
+    return ap
 
 
 def _config(args):
@@ -103,6 +172,8 @@ def _distributed(args) -> tuple[int, int]:
         host, _, port = args.coordinator.rpartition(":")
         if not host or not port.isdigit():
             raise UsageError(f"--coordinator: expected HOST:PORT, got {args.coordinator!r}")
+        if not 1 <= int(port) <= 65535:
+            raise UsageError(f"--coordinator: expected a port in 1..65535, got {port} in {args.coordinator!r}")
         if args.num_processes < 1:
             raise UsageError(f"--num-processes: expected >= 1, got {args.num_processes}")
         if not 0 <= args.process_id < args.num_processes:
@@ -182,7 +253,7 @@ def _cmd_report(args) -> dict:
     from pfjax.outputs import read_marker
 
     spec = _load_study_or_usage(args)
-    out = Path(args.out) if args.out else Path("results") / spec.name
+    out = default_out(args.out, spec.name)
     marker = read_marker(out) if out.is_dir() else None
     if marker is None or marker.get("command") != "study":
         raise UsageError(f"--out: no finished study in {out} (run `pfjax study {_source(args)}` first)")
@@ -209,19 +280,11 @@ def register(sub) -> None:
             metavar="NAME",
             help="a study packaged with pfjax instead of CONFIG (pfjax examples lists them: default, heldout, ...)",
         )
-        st.add_argument(
-            "--set",
-            action="append",
-            default=[],
-            metavar="KEY=VALUE",
-            help="override a config value; dotted keys, list items as controllers[0].gains.k (repeatable)",
-        )
-        st.add_argument("--out", help="output directory (default results/<name>)")
-        st.add_argument(
-            "--overwrite",
-            action="store_true",
-            help="replace a pfjax output of another config or command in --out (pfjax never replaces "
-            "anything it did not write)",
+        add_output_flags(
+            st,
+            set_help="override a config value; dotted keys, list items as controllers[0].gains.k (repeatable)",
+            out_default=NAMED_OUT,
+            overwrite_help=OVERWRITE_HELP if name == "study" else REPORT_OVERWRITE_HELP,
         )
         if name == "study":
             st.add_argument(

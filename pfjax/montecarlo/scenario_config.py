@@ -263,6 +263,16 @@ class PathSpec(ConfigModel):
     ``points`` [[x, y], ...] in m, travelled from the first point), or any path registered with
     :func:`pfjax.paths.register`."""
 
+    #: The keys only some kinds read, and those kinds (the parametric ones, built from these keys by
+    #: :mod:`pfjax.montecarlo.sampling`); every other kind reads only ``kind`` and ``name``.
+    KIND_KEYS: ClassVar[dict[str, tuple[str, ...]]] = {
+        "radius": ("circle",),
+        "length": ("random",),
+        "curvature_margin": ("random",),
+        "n_waypoints": ("random",),
+        "points": ("spline",),
+    }
+
     kind: str = Field(description="a registered path kind: line, parabola, sine, circle, random, spline, ...")
     name: str | None = Field(None, description="label in outputs (default: the kind)")
     radius: Dist = dist_field(2.0, "circle: radius, m")
@@ -310,18 +320,27 @@ class PathSpec(ConfigModel):
                     )
         return v
 
+    @classmethod
+    def keys_of(cls, kind: str) -> list[str]:
+        """The keys a path of ``kind`` reads (:data:`KIND_KEYS`), in the schema's order."""
+        return [k for k in cls.model_fields if kind in cls.KIND_KEYS.get(k, (kind,))]
+
     @model_validator(mode="after")
     def _check(self):
+        fields = type(self).model_fields
+        for name, kinds in self.KIND_KEYS.items():
+            # a value other than the default (a dumped config holds every key, at its default)
+            if self.kind not in kinds and getattr(self, name) != fields[name].get_default(call_default_factory=True):
+                raise ValueError(
+                    f"{name}: not a key of a {self.kind} path; its keys are {', '.join(self.keys_of(self.kind))} "
+                    f"({name} is a key of kind {' or '.join(map(repr, kinds))})"
+                )
         if self.kind == "circle" and not self.radius.bounds()[0] >= POSITIVE:
             raise ValueError(
                 f"radius: must be > 0 m over its whole range, got a lower bound {self.radius.bounds()[0]:g}"
             )
-        if (self.kind == "spline") != (self.points is not None):
-            raise ValueError(
-                "points: required for kind 'spline'"
-                if self.kind == "spline"
-                else f"points: only for kind 'spline', not {self.kind!r}"
-            )
+        if self.kind == "spline" and self.points is None:
+            raise ValueError("points: required for kind 'spline'")
         return self
 
     @property
