@@ -81,13 +81,13 @@ def nested(key: str, value) -> dict:
 
 
 def read_text(path: str | Path, key: str = "config") -> str:
-    """A UTF-8 text file's contents; ConfigError (one line naming ``key``) if it is missing, not a
-    file, unreadable or not UTF-8."""
+    """A UTF-8 text file's contents (a leading byte-order mark, which some editors write, dropped);
+    ConfigError (one line naming ``key``) if it is missing, not a file, unreadable or not UTF-8."""
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"{key}: file not found: {p}" if not p.exists() else f"{key}: {p} is not a file")
     try:
-        return p.read_text(encoding="utf-8")
+        return p.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as e:
         raise ConfigError(f"{key}: {p} is not UTF-8 text (byte {e.start}: {e.reason})") from None
     except OSError as e:

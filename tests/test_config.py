@@ -288,3 +288,16 @@ def test_paper_quick_preset_then_set():
 
     c = load_paper(None, ["stability.n=4"], quick=True)
     assert c.stability.n == 4 and c.sim.horizon == QUICK["sim"]["horizon"] and c.trackers is False
+
+
+def test_a_study_file_with_a_byte_order_mark_loads(tmp_path):
+    """Some editors start a UTF-8 file with a byte-order mark, which TOML parsers refuse
+    ("Invalid statement" at line 1): it is dropped, and the file is read as without it."""
+    from pfjax.montecarlo.config import load_study
+
+    src = (Path(__file__).resolve().parents[1] / "studies" / "robustness_default.toml").read_bytes()
+    bom = tmp_path / "bom.toml"
+    bom.write_bytes(b"\xef\xbb\xbf" + src)
+    assert (
+        load_study(bom)[0] == load_study(Path(__file__).resolve().parents[1] / "studies" / "robustness_default.toml")[0]
+    )
