@@ -301,3 +301,19 @@ def test_a_study_file_with_a_byte_order_mark_loads(tmp_path):
     assert (
         load_study(bom)[0] == load_study(Path(__file__).resolve().parents[1] / "studies" / "robustness_default.toml")[0]
     )
+
+
+def test_the_nominal_value_of_every_distribution_kind():
+    """A design controller is made at the nominal speed and wheelbase: a choice's is the mean of
+    its values (it had none, and a study with an LMI controller and a choice of speeds crashed)."""
+    from pfjax.montecarlo.dists import Dist, nominal
+
+    cases = [
+        ({"dist": "constant", "value": 1.5}, 1.5),
+        ({"dist": "uniform", "low": 0.8, "high": 1.4}, 1.1),
+        ({"dist": "normal", "mean": 0.3, "std": 0.1}, 0.3),
+        ({"dist": "truncnormal", "mean": 1.0, "std": 0.2, "low": 0.7, "high": 1.4}, 1.0),
+        ({"dist": "choice", "values": [0.8, 1.2, 1.6]}, 1.2),
+    ]
+    for table, want in cases:
+        assert nominal(Dist.model_validate(table)) == pytest.approx(want), table

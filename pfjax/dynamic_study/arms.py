@@ -21,6 +21,8 @@ from pfjax import controllers as C
 from pfjax import paths
 from pfjax.dynamic_study.config import KinematicVsDynamic
 from pfjax.models import single_track as st
+from pfjax.montecarlo.dists import Dist
+from pfjax.montecarlo.scenario_config import NoiseSpec, SimSpec
 
 ROBOT_WHEELBASE = 0.2  # m, the source robot's (the kinematic studies' L)
 #: Froude scaling exponents of the controllers' gains (the gain's unit in m and s -> S^exponent).
@@ -67,15 +69,20 @@ def arms(config: KinematicVsDynamic, designed: list[dict] | None = None) -> dict
 
 
 def _scale(d, f: float):
-    """A distribution table or a number, its lengths (``low``, ``high``, ``value``) times ``f``."""
-    if isinstance(d, dict):
-        return {k: (v * f if k in ("low", "high", "value") else v) for k, v in d.items()}
-    return d * f
+    """A length, speed or time (a number or a distribution table, :mod:`pfjax.montecarlo.dists`) in
+    units ``f`` times larger (``f > 0``): a number, and every location and scale parameter of a
+    table (``value``, ``low``, ``high``, ``mean``, ``std``, each of ``values``), times ``f``."""
+    if not isinstance(d, dict):
+        return d * f
+    dist = Dist.model_validate(d)
+    scaled = {k: [x * f for x in v] if k == "values" else v * f for k, v in dist.numbers().items()}
+    return {"dist": dist.dist, **scaled}
 
 
 def car_study(config: KinematicVsDynamic) -> dict:
     """The robot study scaled to the car (module docstring): lengths x S, speeds and times x sqrt(S)
-    (the horizon rounded to whole steps of the car's ``dt``), the paths as splines through the scaled source paths, the controllers' gains Froude-scaled."""
+    (the horizon rounded to whole steps of the car's ``dt``; the failure, settling and success bands
+    and the lateral noise are lengths too), the paths as splines through the scaled source paths, the controllers' gains Froude-scaled."""
     p = st.parameter_set(config.car.params)
     s = float(p.l_f + p.l_r) / ROBOT_WHEELBASE
     rs = math.sqrt(s)
@@ -85,7 +92,12 @@ def car_study(config: KinematicVsDynamic) -> dict:
     sim = spec["sim"]
     # the scaled horizon to whole car steps (the simulator refuses a fraction of a step)
     horizon = round(sim["horizon"] * rs / config.car.dt) * config.car.dt
-    sim.update(dt=config.car.dt, horizon=horizon, steady_window=sim["steady_window"] * rs)
+    given = lambda section, table, key: table.get(key, section.model_fields[key].default)  # or the schema's default
+    sim.update(dt=config.car.dt, horizon=horizon, steady_window=given(SimSpec, sim, "steady_window") * rs)
+    for key in ("d_fail", "settle_band"):  # lengths: the failure and settling bands
+        sim[key] = given(SimSpec, sim, key) * s
+    if "noise" in spec:  # the measured lateral position's noise is a length; the heading's an angle
+        spec["noise"] = {**spec["noise"], "sigma_d": given(NoiseSpec, spec["noise"], "sigma_d") * s}
     spec["success"] = {"band": spec["success"]["band"] * s, "from_s": spec["success"]["from_s"] * rs}
     ini = spec["initial"]
     ini["start_along_m"], ini["lateral_offset"] = _scale(ini["start_along_m"], s), _scale(ini["lateral_offset"], s)
@@ -104,6 +116,60 @@ def car_study(config: KinematicVsDynamic) -> dict:
     return spec
 
 
+def _config_key(arm: str, key: str, grip: str) -> str:
+    """The study config's key behind the key ``key`` of arm ``arm``'s study config (``grip``: the
+    high-friction arm's name)."""
+    if arm.startswith("car_"):
+        if key in ("sim.dt", "sim.horizon"):  # the car's step, and its horizon in whole steps of it
+            return "car.dt"
+        if key in ("n_runs", "chunk_size"):
+            return "car.n_runs"
+        if key == "vehicle.params":
+            return "car.params"
+    if key == "vehicle.mu":
+        return "mu_grip" if arm == grip else "mu_high"
+    if key.startswith("slip."):
+        return "slip_ranges_deg"
+    return f"study.{key}"
+
+
+def check(config: KinematicVsDynamic) -> None:
+    """Every arm's study config (:func:`arms`, the designs' arms as their source arms) checked as
+    :func:`pfjax.run_study` checks it before it simulates (the study schema, the simulation step,
+    the memory of a chunk);
+    :class:`pfjax.config.ConfigError` with one line naming the key of ``config`` (``study.sim.dt``,
+    ``car.dt``, ...) and the arm. :func:`pfjax.dynamic_study.runs.run` calls it before anything else."""
+    from pydantic import ValidationError
+
+    from pfjax.config import ConfigError, format_error
+    from pfjax.errors import InputError
+    from pfjax.montecarlo.checks import check_resources
+    from pfjax.montecarlo.config import StudySpec
+
+    grip = f"dynamic_mu{config.mu_grip:g}"
+    if config.car.enabled:
+        for i, q in enumerate(config.study["paths"]):
+            e = paths.PATHS.get(q.get("kind"))
+            if e is None or e.build is None or e.parametric or set(q) - {"kind", "name"}:
+                raise ConfigError(
+                    f"study.paths[{i}].kind: the car arms scale fixed paths "
+                    f"({', '.join(k for k in paths.fixed_paths() if not paths.PATHS[k].parametric)}) given by their "
+                    f"kind alone, got {q!r}; set car.enabled = false to run a study of other paths"
+                )
+    for arm, spec in arms(config).items():
+        try:
+            validated = StudySpec.model_validate(spec)
+            check_resources(validated, report=False)
+        except ValidationError as e:
+            message = format_error(e, StudySpec)
+        except InputError as e:
+            message = str(e)
+        else:
+            continue
+        key, _, what = message.partition(": ")
+        raise ConfigError(f"{_config_key(arm, key, grip)}: {what} (arm {arm})")
+
+
 def scaled_path(kind: str, s: float, length: float = 45.0, n: int = 301) -> list[list[float]]:
     """Points of a source path (``kind``) from its study start (``start_u``) over ``length`` m of arc,
     scaled by ``s`` (m); equally spaced in arc length (``n`` points: a cubic spline through them
@@ -119,4 +185,4 @@ def scaled_path(kind: str, s: float, length: float = 45.0, n: int = 301) -> list
     return [[float(s * x[i]), float(s * y[i])] for i in keep]
 
 
-__all__ = ["GAIN_SCALING", "ROBOT_WHEELBASE", "arms", "car_study", "scaled_path"]
+__all__ = ["GAIN_SCALING", "ROBOT_WHEELBASE", "arms", "car_study", "check", "scaled_path"]

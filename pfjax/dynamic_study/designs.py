@@ -1,6 +1,7 @@
 """The mixed H2/H-inf, integral and polytopic gains designed on the kinematic model and redesigned on
 the dynamic model's linearised lateral-yaw dynamics (:mod:`pfjax.synthesis.dynamic_plant`) at the
-robot scale: the study's speed range and ``tau_delta``, friction range ``[mu_low, mu_high]``."""
+robot scale: the study's speed range (the support of its distribution; the operating point at its
+midpoint) and ``tau_delta``, friction range ``[mu_low, mu_high]``."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 from pfjax.dynamic_study.arms import ROBOT_WHEELBASE
 from pfjax.dynamic_study.config import KinematicVsDynamic
 from pfjax.models import single_track as st
+from pfjax.montecarlo.config import VehicleSpec
 
 
 def _plants(p, tau: float, mus, speeds, integral: bool = False) -> list:
@@ -30,8 +32,7 @@ def designs(config: KinematicVsDynamic) -> tuple[list[dict], dict]:
 
     d = config.designs
     w: dict = {"alpha": d.alpha, "beta": d.beta}
-    speed = config.study["vehicle"]["speed"]
-    v_lo, v_hi = (speed["low"], speed["high"]) if isinstance(speed, dict) else (speed, speed)
+    v_lo, v_hi = VehicleSpec.model_validate(config.study["vehicle"]).speed.bounds()  # any kind of distribution
     v0, mu0 = 0.5 * (v_lo + v_hi), 0.5 * (config.mu_low + config.mu_high)
     p, L = st.robot_params(), ROBOT_WHEELBASE
     tau = float(config.study["vehicle"].get("tau_delta_s", 0.05))

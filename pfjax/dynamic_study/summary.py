@@ -4,7 +4,6 @@ differences, verdicts and equivalent kinematic slip ranges per controller and sc
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -16,6 +15,31 @@ from pfjax.metrics.robustness import clopper_pearson
 #: A verdict's line: a controller is robust in an arm if its success rate is at least this.
 ROBUST = 0.95
 SLIP_COLS = ["max_abs_beta_r_deg", "max_abs_beta_f_deg", "mean_abs_beta_r_deg", "mean_abs_beta_f_deg"]
+#: ``summary.json``'s units, by field name (a field has one meaning wherever it occurs).
+UNITS = {
+    "mu": "1 (friction coefficient; a bin's [lo, hi])",
+    "speed": "m/s (a bin's [lo, hi])",
+    **{c: "deg (q50, q95, max: quantiles over runs)" for c in SLIP_COLS},
+    "declared_range_deg": "deg",
+    "fraction_max_beyond_declared": "1",
+    "max_curvature_robot": "1/m (the robot-scale path)",
+    "robust_line": "1 (success rate)",
+    "rate": "1 (success rate)",
+    "ci95": "1 (95 % interval of a rate or a paired difference of success rates)",
+    "diff": "1 (difference of success rates)",
+    "equivalent_gap": "1 (difference of success rates)",
+    "k": "runs",
+    "n": "runs",
+    "failure_status_dynamic": "runs",
+    "late_max_abs_d_q95": "m",
+    "worst_late_max_abs_d": "m",
+    "operating_point": "v m/s, mu 1, tau_delta_s s",
+    **dict.fromkeys(("K", "K0"), "rad/m, rad/rad (state feedback); rad/m, rad/rad, rad/(m s) (integral)"),
+    "max_pole_real": "1/s",
+    "ns_per_rollout_step": "ns",
+    "wall_s": "s",
+    "load_average": "processes (1, 5, 15 min)",
+}
 #: The source paths' largest curvature, 1/m (pfjax.paths registry), for the slip-by-curvature table.
 PATH_CURVATURE = {"line": 0.0, "sine": 1.0, "parabola": 2.0}
 
@@ -44,25 +68,42 @@ def _q(s: pd.Series) -> dict:
     return {"q50": float(s.quantile(0.5)), "q95": float(s.quantile(0.95)), "max": float(s.max())}
 
 
-def _binned(dyn: pd.DataFrame, col: str, edges) -> list[dict]:
+def bins(values: pd.Series, n: int) -> list[tuple[float, float, pd.Series]]:
+    """``n`` equal bins over the range of ``values``, each ``(lo, hi, mask of its rows)``: half-open
+    ``[lo, hi)``, the last closed, so that every finite value lies in exactly one bin; a range of zero
+    width is one bin ``[lo, lo]``; empty bins are left out."""
+    ok = values.notna()
+    if not ok.any():
+        return []
+    lo, hi = float(values[ok].min()), float(values[ok].max())
+    if not lo < hi:
+        return [(lo, hi, ok)]
+    edges = np.linspace(lo, hi, n + 1)
+    index = np.clip(np.searchsorted(edges, values.to_numpy(), side="right") - 1, 0, n - 1)
     out = []
-    for lo, hi in itertools.pairwise(edges):
-        part = dyn[(dyn[col] >= lo) & (dyn[col] <= hi)]
-        if len(part):
-            out.append({col: [float(lo), float(hi)], "n": len(part), **{c: _q(part[c]) for c in SLIP_COLS}})
+    for i in range(n):
+        mask = ok & (index == i)
+        if mask.any():
+            out.append((float(edges[i]), float(edges[i + 1]), mask))
     return out
+
+
+def _binned(dyn: pd.DataFrame, col: str, n: int) -> list[dict]:
+    return [
+        {col: [lo, hi], "n": int(mask.sum()), **{c: _q(dyn[mask][c]) for c in SLIP_COLS}}
+        for lo, hi, mask in bins(dyn[col], n)
+    ]
 
 
 def slip_summary(dyn: pd.DataFrame, declared: float, speed_scale: float = 1.0) -> dict:
     """The slip the dynamic arm ``dyn`` produced: by friction, speed and path (curvature)."""
-    v_lo, v_hi = float(dyn.speed.min()), float(dyn.speed.max())
     by_path = [
         {"path": p, "max_curvature_robot": PATH_CURVATURE.get(p), "n": len(part), **{c: _q(part[c]) for c in SLIP_COLS}}
         for p, part in dyn.groupby("path")
     ]
     return {
-        "by_mu": _binned(dyn, "mu", np.linspace(float(dyn.mu.min()), float(dyn.mu.max()), 8)),
-        "by_speed": _binned(dyn, "speed", np.linspace(v_lo, v_hi, 4)),
+        "by_mu": _binned(dyn, "mu", 7),
+        "by_speed": _binned(dyn, "speed", 3),
         "by_path": by_path,
         "all": {c: _q(dyn[c]) for c in SLIP_COLS},
         "declared_range_deg": declared,
@@ -88,7 +129,6 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
         kin_arms = {a: r for a, r in rates.items() if a.startswith(kin_prefix)}
         equivalent = min(kin_arms, key=lambda a: abs(kin_arms[a]["rate"] - rates[dyn_arm]["rate"]))
         dm = d.reset_index()
-        edges = np.linspace(float(dm.mu.min()), float(dm.mu.max()), 4)
         out[name] = {
             "success": rates,
             "success_by_path": {
@@ -96,8 +136,7 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
                 for arm in (dyn_arm, ref_arm)
             },
             "success_by_mu_dynamic": [
-                {"mu": [float(lo), float(hi)], **_rate(dm[(dm.mu >= lo) & (dm.mu <= hi)].success.to_numpy())}
-                for lo, hi in itertools.pairwise(edges)
+                {"mu": [lo, hi], **_rate(dm[mask].success.to_numpy())} for lo, hi, mask in bins(dm.mu, 3)
             ],
             "paired_dynamic_minus_kinematic": _paired(d.success.to_numpy(), k.success.to_numpy()),
             "verdict_kinematic": _side(rates[ref_arm]),

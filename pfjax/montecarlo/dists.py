@@ -99,11 +99,13 @@ def dist_field(default: float, description: str | None = None):
 
 
 def nominal(d: Dist) -> float:
-    """A distribution's nominal value: its value, mean or midpoint."""
+    """A distribution's nominal value: its value, mean, midpoint or the mean of its choices."""
     if d.dist == "constant":
         return d.number("value")
     if d.mean is not None:
         return float(d.mean)
+    if d.dist == "choice":
+        return float(sum(d.values) / len(d.values))
     return 0.5 * (d.number("low") + d.number("high"))
 
 

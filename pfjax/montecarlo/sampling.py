@@ -383,6 +383,8 @@ def _draw_one(design: _Design, key, given: dict, numbers: dict):
         dmax = jnp.asarray(math.degrees(st_nominal.delta_max), float)
         extra["mu"] = jnp.asarray(st_nominal.mu, float) if v.mu is None else d(v.mu, "mu")
     profile, cols = _slip(design, key, given, numbers)
+    if v.model in ("st", "std"):  # nothing declared: the tyres make the slip (max_abs_beta_* record it)
+        cols = {k: jnp.full_like(c, jnp.nan) for k, c in cols.items()}
     start_along_m = d(design.initial.start_along_m, "start_along_m")
     offset = d(design.initial.lateral_offset, "lateral_offset")
     herr = d(design.initial.heading_error_deg, "heading_error_deg")

@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from pfjax.montecarlo.config import StudySpec
+from pfjax.montecarlo.dists import nominal
 from pfjax.report.figures import save
 from pfjax.report.study_figures import (
     controller_colors,
@@ -45,13 +46,6 @@ NEEDS_RUNS = {"dist_iae", "dist_late_max_abs_d", "slip_map"}
 
 def _png_base64(path: Path) -> str:
     return base64.b64encode(path.read_bytes()).decode("ascii")
-
-
-def _nominal(d) -> float:
-    """The nominal value of a distribution: its value, mean, mid-range or the mean of its choices."""
-    if d.value is not None or d.mean is not None:
-        return d.value if d.value is not None else d.mean
-    return 0.5 * (d.low + d.high) if d.low is not None else float(np.mean(d.values))
 
 
 def captions(spec: StudySpec) -> dict[str, str]:
@@ -119,7 +113,7 @@ def draw_figures(
         "slip_map": lambda: slip_map_figure(
             runs,
             list(summary["controllers"]),
-            delta_max_deg=_nominal(spec.vehicle.delta_max_deg),
+            delta_max_deg=nominal(spec.vehicle.delta_max_deg),
             convention=spec.vehicle.convention,
             note="" if spec.slip.kind == "constant" else " (constant part)",
             predicted=linearised_predictions(spec, summary),
@@ -161,7 +155,7 @@ def linearised_predictions(spec: StudySpec, summary: dict) -> dict:
 
     v = spec.vehicle
     params = SlipParams(
-        _nominal(v.speed), _nominal(v.L), math.radians(_nominal(v.delta_max_deg)), CONVENTIONS[v.convention]
+        nominal(v.speed), nominal(v.L), math.radians(nominal(v.delta_max_deg)), CONVENTIONS[v.convention]
     )
     out = {}
     types = {c.name: c.type for c in spec.controllers}
