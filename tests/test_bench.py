@@ -88,7 +88,9 @@ def test_quick_bench_contract_and_agreement(tmp_path):
         )
         assert s[f"model_cost_ratio_st_{p}"] > 0 and s[f"model_cost_ratio_std_{p}"] is None
     full = json.loads((out / "bench.json").read_text())
-    assert full["summary"] == {k: v for k, v in s.items() if k not in ("out", "machine")}
+    printed = ("out", "machine", "config_sha256", "seed", "pfjax_version", "units")
+    assert full["summary"] == {k: v for k, v in s.items() if k not in printed}
+    assert s["config_sha256"] == full["config_sha256"] and s["units"]["msteps_per_s_f32"] == "1e6 rollout-steps/s"
     assert full["config"]["sizes"] == [64, 128] and full["config_sha256"] and full["machine"]["cpus"] >= 1
     assert set(rows.impl) == {"pfjax", "jax_minimal", "numba", "numpy", "scipy"}
     for impl in ("pfjax", "jax_minimal"):
@@ -118,6 +120,83 @@ def test_bench_bad_input_one_line_exit_2(tmp_path, args, flag, capsys):
     err = capsys.readouterr()
     assert err.out == "" and err.err.startswith(f"pfjax bench: error: {flag}") and err.err.count("\n") == 1
     assert not out.exists()
+
+
+def test_bench_outputs_carry_units_and_the_config_hash(tmp_path, monkeypatch, capsys):
+    """bench.parquet: each column's unit, ``failed_runs`` a whole count (null where not counted);
+    bench.json: a ``units`` map; ``--json``: the summary with its units, config hash and seed. The
+    benchmark itself is stubbed (its rows as it makes them)."""
+    from dataclasses import asdict
+
+    from matplotlib.figure import Figure
+
+    from pfjax.bench import report, run
+    from pfjax.cli import main
+    from pfjax.tables import units
+
+    def fake_run(cfg, progress=None):
+        row = dict(impl="pfjax", dtype="float32", batch=256, seconds=0.1, compile_s=1.0, msteps_per_s=1.0)
+        rows = [dict(row, failed_runs=0), dict(row, impl="numpy", failed_runs=None)]
+        summary = dict(
+            msteps_per_s_f32=1.0,
+            ratio_vs_numpy_f32=2.0,
+            peak_rss_mib=100.0,
+            failed_runs=0,
+            gradient={"forward_s": 0.1, "grad_s": 0.2, "mode": "forward"},
+            agreement={"numpy_float32": {"max_abs_diff": 1e-7, "tolerance": 1e-4, "ok": True}},
+            models={
+                "float32": {"kinematic": {"wall_s": 0.1, "ns_per_rollout_step": 5.0}, "ratio_st_over_kinematic": 2.0}
+            },
+        )
+        return dict(summary=summary, rows=rows, machine={"cpus": 2}, config=asdict(cfg), problem={"dt": 0.005})
+
+    monkeypatch.setattr(run, "run", fake_run)
+    monkeypatch.setattr(report, "markdown", lambda result: "# stub\n")
+    monkeypatch.setattr(report, "throughput_figure", lambda rows, machine: Figure())
+    out = tmp_path / "bench"
+    assert main(["bench", "--quick", "--out", str(out), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    full = json.loads((out / "bench.json").read_text())
+    assert printed["config_sha256"] == full["config_sha256"] and len(full["config_sha256"]) == 64
+    assert printed["seed"] == full["seed"] == 0 and printed["pfjax_version"] == full["pfjax_version"]
+    assert printed["units"] == {
+        "msteps_per_s_f32": "1e6 rollout-steps/s",
+        "ratio_vs_numpy_f32": "1",
+        "peak_rss_mib": "MiB",
+        "gradient.forward_s": "s",
+        "gradient.grad_s": "s",
+        "agreement.numpy_float32.max_abs_diff": "m s",
+        "agreement.numpy_float32.tolerance": "m s",
+        "models.float32.kinematic.wall_s": "s",
+        "models.float32.kinematic.ns_per_rollout_step": "ns",
+        "models.float32.ratio_st_over_kinematic": "1",
+    }
+    assert {k: v for k, v in full["units"].items() if not k.startswith("summary.")} == {
+        "rows.seconds": "s",
+        "rows.compile_s": "s",
+        "rows.msteps_per_s": "1e6 rollout-steps/s",
+        "config.horizon": "s",
+        "config.model_horizon": "s",
+        "problem.dt": "s",
+    }
+    assert full["units"]["summary.agreement.numpy_float32.max_abs_diff"] == "m s"
+    got = units(out / "bench.parquet")
+    assert got["seconds"]["unit"] == "s" and got["msteps_per_s"]["unit"] == "1e6 rollout-steps/s"
+    assert set(got) == set(report.COLUMNS)
+    table = pd.read_parquet(out / "bench.parquet")
+    assert str(table.failed_runs.dtype) == "Int64" and table.failed_runs.tolist()[0] == 0
+    assert table.failed_runs.isna().tolist() == [False, True]
+    assert set(table.config_sha256) == {full["config_sha256"]}
+
+
+def test_bench_sizes_help_states_what_it_governs(capsys):
+    from pfjax.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["bench", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "default 1000,10000,100000; --quick: 256,1024" in text
+    assert "the gradient's batch (2,000; --quick: 256) and the vehicle-model comparison" in text
 
 
 @pytest.mark.parametrize("key", ["horizon", "model_horizon"])
@@ -261,6 +340,145 @@ def test_compare_bad_input_one_line_exit_2(tmp_path, args, flag):
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.startswith(f"bench-compare: error: {flag}") and r.stderr.count("\n") == 1
     assert not out.exists()
+
+
+def _no_worktree(self, commit, parent):
+    pytest.fail("work started before the input was checked")
+
+
+@pytest.mark.parametrize(
+    "sizes, message",
+    [("x", "--sizes: value 'x'"), ("0", "--sizes: must be >= 1"), ("5000000", "--sizes: a batch of 5000000 runs")],
+)
+def test_compare_refuses_bad_sizes_as_pfjax_bench_does_before_any_work(tmp_path, monkeypatch, capsys, sizes, message):
+    cmp = _compare_module()
+    monkeypatch.setattr(cmp._Tree, "__init__", _no_worktree)
+    monkeypatch.setenv("PFJAX_MEMORY_BUDGET", str(2**30))  # 5,000,000 runs need far more, on any machine
+    out = tmp_path / "cmp"
+    assert cmp.main(["HEAD", ".", "--sizes", sizes, "--out", str(out)]) == 2
+    err = capsys.readouterr()
+    assert err.out == "" and err.err.startswith(f"bench-compare: error: {message}") and err.err.count("\n") == 1
+    assert not out.exists()
+
+
+def _summary(rate: float) -> dict:
+    return {"msteps_per_s_f32": rate, "msteps_per_s_f64": rate / 2, "grad_over_forward": 2.0}
+
+
+def test_compare_passes_sizes_only_where_given_and_keeps_the_rounds_before_a_failure(tmp_path, monkeypatch, capsys):
+    """--quick alone: pfjax bench --quick's own sizes; a bench refusing its arguments: one line, exit 2;
+    a bench failing in round 2: one line, exit 1, round 1 written and marked incomplete."""
+    cmp = _compare_module()
+    calls, real = [], subprocess.run
+
+    def child(returncode, stderr="", stdout=""):
+        def fake(cmd, **kw):  # pfjax bench's runs answered here, anything else (uname) run
+            if "pfjax.cli" not in cmd:
+                return real(cmd, **kw)
+            calls.append(cmd)
+            return subprocess.CompletedProcess(
+                cmd, returncode() if callable(returncode) else returncode, stdout, stderr
+            )
+
+        return fake
+
+    ok = json.dumps(_summary(100.0))
+    monkeypatch.setattr(cmp.subprocess, "run", child(0, stdout=ok))
+    assert cmp.main([".", ".", "--quick", "--rounds", "1", "--out", str(tmp_path / "a")]) == 0
+    assert calls and all("--sizes" not in c and "--quick" in c for c in calls)
+    calls.clear()
+    assert cmp.main([".", ".", "--rounds", "1", "--out", str(tmp_path / "b")]) == 0
+    assert all(c[c.index("--sizes") + 1] == cmp.SIZES for c in calls)
+    capsys.readouterr()
+
+    monkeypatch.setattr(cmp.subprocess, "run", child(2, stderr="pfjax bench: error: --quick: unknown flag\n"))
+    assert cmp.main([".", ".", "--quick", "--rounds", "1", "--out", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert err == "bench-compare: error: --quick: unknown flag (pfjax bench of the working tree)\n"
+    assert not (tmp_path / "c").exists()
+
+    codes = iter([0, 0, 1])
+    monkeypatch.setattr(cmp.subprocess, "run", child(lambda: next(codes), "Traceback ...\nMemoryError\n", ok))
+    out = tmp_path / "d"
+    assert cmp.main([".", ".", "--quick", "--rounds", "3", "--out", str(out)]) == 1
+    got = capsys.readouterr()
+    (line,) = [x for x in got.err.splitlines() if x.startswith("bench-compare: error:")]
+    assert "round 2/3" in line and "MemoryError" in line and "1 complete round(s) are written" in line
+    written = json.loads((out / "compare.json").read_text())
+    assert written["rounds"] == 1 and written["rounds_requested"] == 3 and "round 2/3" in written["incomplete"]
+    assert written["comparison"]["msteps_per_s_f32"]["ratio"]["median"] == 1.0
+    assert "**Incomplete**: 1 of 3 rounds" in (out / "report.md").read_text()
+
+
+# ------------------------------------------------------------------ studies/bench/memory.py (peak memory)
+
+
+def _memory_module():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_memory", ROOT / "studies" / "bench" / "memory.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--horizon", "nan"], "--horizon: expected a finite number"),
+        (["--horizon", "0.0123"], "--horizon: must be a whole number of steps dt = 0.005 s"),
+        (["--horizon", "1e9"], "--horizon: horizon / dt"),
+        (["--runs", "5"], "--runs: must be >= 9"),
+        (["--runs", "100000000000"], "--runs: 100000000000 runs give n_runs = 11111111111"),
+        (["--chunk", "0"], "--chunk: must be >= 1"),
+    ],
+)
+def test_memory_refuses_each_bad_flag_by_name_before_the_study(tmp_path, monkeypatch, capsys, args, message):
+    mem = _memory_module()
+    monkeypatch.setattr(mem.subprocess, "Popen", lambda *a, **kw: pytest.fail("the study started"))
+    monkeypatch.chdir(tmp_path)  # the study is found from any directory
+    out = tmp_path / "mem"
+    assert mem.main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr()
+    assert err.out == "" and err.err.startswith(f"memory.py: error: {message}") and err.err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_memory_ctrl_c_stops_the_study_and_waits_for_it(tmp_path, monkeypatch, capsys):
+    """Ctrl-C: one SIGINT to the study, which is waited for (its clean-up done) before the output is
+    removed; its offer to resume is not passed on (this script starts afresh)."""
+    import time
+
+    mem = _memory_module()
+    ready, done = tmp_path / "ready", tmp_path / "done"
+    child = (
+        "import pathlib, signal, sys, time\n"
+        "def stop(*_):\n"
+        "    sys.stderr.write('\\npfjax study: interrupted; re-run the same command to resume\\n')\n"
+        "    sys.stderr.flush(); time.sleep(0.3)\n"
+        f"    pathlib.Path({str(done)!r}).write_text('cleaned up'); sys.exit(130)\n"
+        "signal.signal(signal.SIGINT, stop)\n"
+        "sys.stderr.write('study running\\n'); sys.stderr.flush()\n"
+        f"pathlib.Path({str(ready)!r}).touch()\n"
+        "time.sleep(60)\n"
+    )
+    monkeypatch.setattr(mem, "study_command", lambda sets, study_out: [sys.executable, "-c", child])
+
+    def ctrl_c(pid):
+        for _ in range(200):
+            if ready.exists():
+                raise KeyboardInterrupt
+            time.sleep(0.05)
+        pytest.fail("the child did not start")
+
+    monkeypatch.setattr(mem, "rss_mib", ctrl_c)
+    out = tmp_path / "mem"
+    assert mem.main(["--runs", "9", "--horizon", "0.05", "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert done.read_text() == "cleaned up"  # waited for
+    assert "study running" in err and "resume" not in err and "memory.py: interrupted; nothing was written" in err
+    assert not out.exists() or not any(out.iterdir())
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no staging left
 
 
 def _result(**summary):

@@ -54,7 +54,16 @@ def test_the_settings_follow_the_calibration_and_the_environment_wins(tmp_path, 
 def test_the_directory_and_the_cpu_key(tmp_path):
     assert calibration.directory({"PFJAX_CALIBRATION": "off"}) is None
     assert calibration.directory({"PFJAX_CALIBRATION_DIR": str(tmp_path)}) == tmp_path
-    assert calibration.directory({"PFJAX_CACHE_DIR": str(tmp_path / "xla")}) == tmp_path / "calibration"
+    # one rule, whatever the compilation cache's PFJAX_CACHE_DIR says (never a sibling of that directory)
+    assert calibration.directory({"PFJAX_CACHE_DIR": str(tmp_path / "xla")}) == (
+        Path.home() / ".cache" / "pfjax" / "calibration"
+    )
+    assert calibration.directory({"XDG_CACHE_HOME": str(tmp_path), "PFJAX_CACHE_DIR": "/tmp/xla"}) == (
+        tmp_path / "pfjax" / "calibration"
+    )
+    assert calibration.directory({"PFJAX_CALIBRATION_DIR": str(tmp_path / "c"), "XDG_CACHE_HOME": "/x"}) == (
+        tmp_path / "c"
+    )
     info = tmp_path / "cpuinfo"
     info.write_text(
         "vendor_id\t: GenuineIntel\ncpu family\t: 6\nmodel\t\t: 207\nmodel name\t: Xeon\nflags\t: avx2 avx512f\n\n"
@@ -135,3 +144,51 @@ def test_pfjax_calibrate_refuses_where_it_could_keep_nothing_before_measuring(tm
         == tmp_path / "new" / "dir"
     )
     assert not (tmp_path / "new").exists()
+
+
+def test_only_the_supported_vector_widths_are_read_and_a_bad_file_warns_in_one_line(tmp_path):
+    """A width XLA cannot take (7), a boolean or a float is not a calibration; the warning is one line
+    attributed to pfjax, not a line of pfjax's source."""
+    import warnings
+
+    for width in (None, *calibration.WIDTHS):
+        calibration.load.cache_clear()
+        assert calibration.load(_file(tmp_path, vector_width=width))["vector_width"] == width
+    for bad in (dict(vector_width=7), dict(vector_width=True), dict(vector_width=512.0), dict(vector_width=0)):
+        calibration.load.cache_clear()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            assert calibration.load(_file(tmp_path, **bad)) is None, bad
+        (w,) = caught
+        text = warnings.formatwarning(w.message, w.category, w.filename, w.lineno, w.line)
+        assert text.count("\n") == 1 and text.startswith("pfjax:0: UserWarning: "), text
+        assert "calibration ignored" in text and "calibration.py" not in text
+    calibration.load.cache_clear()
+    assert not calibration._valid(dict(version=1, vector_width=None, block_bytes={"float32": True, "float64": 5000}))
+
+
+def test_a_calibration_file_that_is_a_directory_is_refused_before_measuring(tmp_path, monkeypatch, capsys):
+    """``<dir>/<cpu key>.json`` a directory: one line naming PFJAX_CALIBRATION_DIR, exit 2, before any
+    measuring, nothing created; and :func:`save` leaves no temporary file when its write fails."""
+    from pfjax.cli import main
+    from pfjax.errors import InputError
+
+    key = calibration.cpu_key()
+    (tmp_path / f"{key}.json").mkdir()
+    with pytest.raises(InputError) as e:
+        calibration.writable_directory({"PFJAX_CALIBRATION_DIR": str(tmp_path)})
+    assert str(e.value).startswith("PFJAX_CALIBRATION_DIR: ") and f"{key}.json" in str(e.value)
+    assert calibration.writable_directory({"PFJAX_CALIBRATION_DIR": str(tmp_path)}, key="other") == tmp_path
+    monkeypatch.delenv("PFJAX_CALIBRATION", raising=False)  # the tests' "off" (conftest)
+    monkeypatch.setenv("PFJAX_CALIBRATION_DIR", str(tmp_path))
+    monkeypatch.setattr(C, "calibrate", lambda **kw: pytest.fail("measured before checking"))
+    assert main(["calibrate", "--quick"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("pfjax calibrate: error: PFJAX_CALIBRATION_DIR: "), err
+    result = dict(
+        version=calibration.VERSION, cpu_key=key, vector_width=None, block_bytes={"float32": 2500, "float64": 5000}
+    )
+    with pytest.raises(IsADirectoryError):
+        calibration.save(result, tmp_path / f"{key}.json")
+    assert [p.name for p in tmp_path.iterdir()] == [f"{key}.json"]  # no temporary file left
+    assert not any((tmp_path / f"{key}.json").iterdir())

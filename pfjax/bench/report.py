@@ -1,8 +1,13 @@
-"""Write a benchmark result: ``bench.json`` (strict JSON, with the config, its hash, the seed and the
-pfjax version), ``bench.parquet`` (one row per implementation, dtype and batch size),
+"""Write a benchmark result: ``bench.json`` (strict JSON, with the config, its hash, the seed, the
+pfjax version and the ``units`` the command adds: :func:`result_units`), ``bench.parquet`` (one row
+per implementation, dtype and batch size, each column with its unit: :data:`COLUMNS`),
 ``figures/throughput.png|svg`` (rollout-steps/s against batch size) and ``report.md``.
 Written through :class:`pfjax.outputs.OutputDir`: assembled beside the target and moved into place
-when complete, never over anything pfjax did not write."""
+when complete, never over anything pfjax did not write.
+
+The unit tables (:func:`summary_units`, :func:`result_units`) are in the form
+:func:`pfjax.cli.records.units` reads: a dotted key's unit, or ``"<parent>.*"`` the units of
+``<parent>``'s numbers by name."""
 
 from __future__ import annotations
 
@@ -14,6 +19,83 @@ from pfjax.outputs import OutputDir
 from pfjax.provenance import config_hash, parquet_metadata
 from pfjax.report.markdown import table
 from pfjax.tables import write_parquet
+
+#: The unit of a rate: million rollout-steps (runs x RK4 steps) per second.
+RATE = "1e6 rollout-steps/s"
+
+#: ``bench.parquet``'s columns (``bench.json``'s rows): unit and description (unit "": text or a count).
+COLUMNS: dict[str, tuple[str, str]] = {
+    "impl": ("", "implementation: pfjax, jax_minimal, numba, numpy or scipy"),
+    "dtype": ("", "floating-point precision"),
+    "batch": ("", "runs in the batch (scipy: runs integrated one at a time)"),
+    "seconds": ("s", "best wall-clock time of a call"),
+    "compile_s": ("s", "first call's time less the best call's: compilation"),
+    "msteps_per_s": (RATE, "million rollout-steps (runs x RK4 steps) per second"),
+    "failed_runs": ("", "runs whose status is not ok (pfjax's rows; null where not counted)"),
+    "config_sha256": ("", "SHA-256 of the benchmark's config"),
+    "pfjax_version": ("", "pfjax version"),
+}
+
+
+def summary_units(summary: dict, prefix: str = "") -> dict:
+    """The unit of each number of a benchmark ``summary`` (keys under ``prefix``): rates, ratios,
+    seconds, memory, the agreement's IAE differences and the vehicle models' costs. Goals state
+    their own units in their text; the gradient's entries are in the gains' units."""
+    ratios = [
+        *(f"ratio_vs_{impl}_{p}" for impl in ("numba", "numpy") for p in ("f32", "f64")),
+        "ratio_vs_scipy_f64",
+        "fraction_of_minimal_f32",
+        "fraction_of_minimal_f64",
+        "grad_over_forward",
+        "grad_over_forward_reverse",
+        *(f"model_cost_ratio_{m}_{p}" for m in ("st", "std") for p in ("f32", "f64")),
+    ]
+    rates = [
+        *(f"{impl}msteps_per_s_{p}" for impl in ("", "numba_", "numpy_", "minimal_") for p in ("f32", "f64")),
+        "scipy_msteps_per_s_f64",
+    ]
+    table: dict = {
+        **dict.fromkeys(rates, RATE),
+        **dict.fromkeys(ratios, "1"),
+        "compile_s_f32": "s",
+        "compile_s_f64": "s",
+        "peak_rss_mib": "MiB",
+        "fraction_of_minimal_by_batch.*": {"f32": "1", "f64": "1"},
+        "gradient.*": {
+            **dict.fromkeys(("forward_s", "grad_s", "grad_compile_s", "reverse_s", "reverse_compile_s"), "s"),
+            "modes_max_rel_diff": "1",
+        },
+    }
+    for name in summary.get("agreement") or {}:
+        table[f"agreement.{name}.*"] = {"max_abs_diff": "m s", "tolerance": "m s"}
+    for dtype in ("float32", "float64"):
+        row = (summary.get("models") or {}).get(dtype) or {}
+        table[f"models.{dtype}.*"] = {k: "1" for k in row if k.startswith("ratio_")}
+        for model in (k for k in row if not k.startswith("ratio_")):
+            table[f"models.{dtype}.{model}.*"] = {"wall_s": "s", "ns_per_rollout_step": "ns"}
+    return {prefix + k: v for k, v in table.items()}
+
+
+def result_units(result: dict) -> dict:
+    """The unit of each number of ``bench.json`` (:func:`summary_units` under ``summary.``, the rows
+    by :data:`COLUMNS`, the horizons and the step)."""
+    return {
+        **summary_units(result["summary"], "summary."),
+        "rows.*": {name: unit for name, (unit, _) in COLUMNS.items() if unit},
+        "config.horizon": "s",
+        "config.model_horizon": "s",
+        "problem.dt": "s",
+        "machine.block_bytes.*": {"float32": "B", "float64": "B"},
+    }
+
+
+def provenance(result: dict) -> dict:
+    """What a benchmark's outputs record of where they come from: ``config_sha256`` (of
+    ``result["config"]``), ``seed`` and ``pfjax_version``."""
+    return dict(
+        config_sha256=config_hash(result["config"]), seed=result["config"]["seed"], pfjax_version=pfjax.__version__
+    )
+
 
 _STYLE = {
     ("pfjax", "float32"): ("C0", "-", "o"),
@@ -200,22 +282,20 @@ def write(result: dict, output: OutputDir):
     import matplotlib.pyplot as plt
     import pandas as pd
 
-    result = dict(
-        result,
-        config_sha256=config_hash(result["config"]),
-        seed=result["config"]["seed"],
-        pfjax_version=pfjax.__version__,
-    )
+    result = dict(result, **provenance(result))
     tmp = output.staging
     (tmp / "figures").mkdir()
     (tmp / "bench.json").write_text(dumps(result) + "\n")
     df = pd.DataFrame(result["rows"])
     df.attrs = {}
+    # a whole count, null in the rows that do not count failures (not a float with NaN)
+    df["failed_runs"] = df["failed_runs"].astype("Int64")
     table = df.assign(config_sha256=result["config_sha256"], pfjax_version=pfjax.__version__)
     write_parquet(
         table,
         tmp / "bench.parquet",
         parquet_metadata(result["config"], result["seed"], config_sha256=result["config_sha256"]),
+        units=COLUMNS,
     )
     fig = throughput_figure(result["rows"], result["machine"])
     for ext in ("png", "svg"):

@@ -21,7 +21,14 @@ def register(sub) -> None:
         "Writes bench.json, bench.parquet, report.md and figures/throughput.png|svg.",
     )
     p.add_argument("--quick", action="store_true", help="small batches and a 2 s horizon (well under a minute)")
-    p.add_argument("--sizes", default=None, help="comma-separated pfjax batch sizes (default 1000,10000,100000)")
+    p.add_argument(
+        "--sizes",
+        default=None,
+        help="comma-separated batch sizes of pfjax and the minimal JAX implementation (default 1000,10000,100000; "
+        "--quick: 256,1024); the NumPy and Numba references run at most 10,000 (--quick: 256 and 1,024) of the "
+        "largest; the gradient's batch (2,000; --quick: 256) and the vehicle-model comparison (2,000 runs; "
+        "--quick: 64) do not follow --sizes",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the random batch")
     p.add_argument("--out", default="results/bench", help="output directory (default results/bench)")
     p.add_argument(
@@ -41,22 +48,31 @@ def _sizes(text: str):
         raise UsageError(f"--sizes: value {text!r}, expected comma-separated positive integers") from None
 
 
-def _cmd(args) -> dict:
+def config(quick: bool = False, sizes: str | None = None, seed: int = 0):
+    """The :class:`~pfjax.bench.run.BenchConfig` of ``pfjax bench [--quick] [--sizes SIZES] [--seed
+    SEED]``, checked: a :class:`~pfjax.cli.common.UsageError` naming the flag otherwise (also for
+    ``studies/bench/compare.py``, which judges its flags as pfjax bench does)."""
     from dataclasses import replace
 
     from pfjax.bench.run import QUICK, BenchConfig
 
     with as_flags({"sizes": "--sizes", "seed": "--seed"}):
-        cfg = QUICK if args.quick else BenchConfig()
-        if args.sizes is not None:
-            sizes = _sizes(args.sizes)
+        cfg = QUICK if quick else BenchConfig()
+        if sizes is not None:
+            given = _sizes(sizes)
             cfg = replace(
                 cfg,
-                sizes=sizes,
-                ref_size=min(cfg.ref_size, max(sizes, default=1)),
-                ref_numpy=min(cfg.ref_numpy, max(sizes, default=1)),
+                sizes=given,
+                ref_size=min(cfg.ref_size, max(given, default=1)),
+                ref_numpy=min(cfg.ref_numpy, max(given, default=1)),
             )
-        cfg = replace(cfg, seed=args.seed)
+        return replace(cfg, seed=seed)
+
+
+def _cmd(args) -> dict:
+    from pfjax.cli.records import units
+
+    cfg = config(args.quick, args.sizes, args.seed)
 
     from pfjax.bench import report, run
 
@@ -64,9 +80,11 @@ def _cmd(args) -> dict:
         t0 = time.perf_counter()
         say = lambda m: print(f"[bench {time.perf_counter() - t0:6.1f} s] {m}", file=sys.stderr, flush=True)
         result = run.run(cfg, progress=say)
+        result["units"] = units(result, report.result_units(result))  # bench.json's
         out = report.write(result, output)
-    s = result["summary"]
-    return dict(s, out=str(out), machine=result["machine"])
+    # the summary with the provenance of the outputs (config_sha256, seed, pfjax_version) and its units
+    printed = dict(result["summary"], out=str(out), machine=result["machine"], **report.provenance(result))
+    return dict(printed, units=units(printed, report.summary_units(result["summary"])))
 
 
 def _human(out: dict) -> None:

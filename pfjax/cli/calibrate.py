@@ -13,8 +13,9 @@ def register(sub) -> None:
         description="Simulate the benchmark problem (pfjax bench's) with pfjax's simulator program for every "
         "candidate vector width (XLA's default; 512 bits with AVX-512) and block size (2,500-20,000 bytes per "
         "batched array) in float32 and float64, and keep the fastest in the calibration directory "
-        "(PFJAX_CALIBRATION_DIR, default ~/.cache/pfjax/calibration), where every later pfjax process on a CPU "
-        "of the same identity reads it. PFJAX_CALIBRATION=off ignores it. About two minutes on 2 cores.",
+        "($PFJAX_CALIBRATION_DIR, else $XDG_CACHE_HOME/pfjax/calibration (default ~/.cache/pfjax/calibration), "
+        "whatever PFJAX_CACHE_DIR says), where every later pfjax process on a CPU of the same identity reads it. PFJAX_CALIBRATION=off ignores it. "
+        "The directory and the file are checked before measuring. About two minutes on 2 cores.",
     )
     p.add_argument("--quick", action="store_true", help="a small batch and a short horizon (seconds; a rough choice)")
     p.add_argument("--dry-run", action="store_true", help="measure and print, but keep nothing")
@@ -27,7 +28,7 @@ def _cmd(args) -> dict:
     from pfjax.numerics import calibration
 
     if not args.dry_run:
-        calibration.writable_directory()  # before two minutes of measuring: where the result goes
+        calibration.writable_directory()  # before two minutes of measuring: where the result goes, and its file
     t0 = time.perf_counter()
     say = lambda m: print(f"[calibrate {time.perf_counter() - t0:6.1f} s] {m}", file=sys.stderr, flush=True)
     if args.quick:

@@ -13,8 +13,9 @@ benchmark problem's throughput over the candidates on this CPU (:mod:`pfjax.benc
 writes the best to ``<directory>/<cpu key>.json``; every later process on a CPU of the same
 identity (vendor, family, model, model name, vector flags) and the same JAX version reads it at
 import. ``PFJAX_CALIBRATION=off`` ignores the file; ``PFJAX_VECTOR_WIDTH`` still overrides the
-width. The directory is ``$PFJAX_CALIBRATION_DIR``, else ``calibration/`` beside pfjax's
-compilation cache (``~/.cache/pfjax/calibration``).
+width. The directory is ``$PFJAX_CALIBRATION_DIR``, else ``$XDG_CACHE_HOME/pfjax/calibration``
+(default ``~/.cache/pfjax/calibration``), whatever ``PFJAX_CACHE_DIR`` says. A file that is
+unreadable or not a calibration is ignored with one warning line naming it.
 
 Results depend on the block and the width only through rounding (each block shape is compiled
 into its own vector code; :mod:`pfjax.sim.sharding`); a study records the settings it ran with.
@@ -36,6 +37,10 @@ DIR_ENV = "PFJAX_CALIBRATION_DIR"
 OFF = ("off", "0", "none", "false")
 #: The file format written by :func:`save` (a file of another version is ignored).
 VERSION = 1
+#: Vector widths a calibration may choose, bits (besides None: XLA's default): the register widths
+#: of SSE, AVX and AVX-512, the values of XLA's ``xla_cpu_prefer_vector_width``
+#: (:mod:`pfjax.numerics.compiler`; :func:`pfjax.bench.calibrate.widths` measures 512).
+WIDTHS = (128, 256, 512)
 
 
 def cpu_key(cpuinfo: str | None = None, jax_version: str | None = None) -> str:
@@ -51,18 +56,17 @@ def cpu_key(cpuinfo: str | None = None, jax_version: str | None = None) -> str:
 
 
 def directory(environ=None) -> Path | None:
-    """Where calibrations are kept (None: disabled by ``PFJAX_CALIBRATION=off``)."""
+    """Where calibrations are kept: ``$PFJAX_CALIBRATION_DIR``, else
+    ``$XDG_CACHE_HOME/pfjax/calibration`` (default ``~/.cache/pfjax/calibration``); None: disabled
+    by ``PFJAX_CALIBRATION=off``. The compilation cache's ``PFJAX_CACHE_DIR`` plays no part."""
     environ = os.environ if environ is None else environ
     if environ.get(ENV, "").strip().lower() in OFF:
         return None
     given = environ.get(DIR_ENV, "").strip()
     if given:
         return Path(given).expanduser()
-    from pfjax.cache import default_dir
-
-    cache = default_dir(environ)
-    base = cache.parent if cache is not None else Path.home() / ".cache" / "pfjax"
-    return base / "calibration"
+    base = environ.get("XDG_CACHE_HOME", "").strip() or str(Path.home() / ".cache")
+    return Path(base).expanduser() / "pfjax" / "calibration"
 
 
 def _valid(data) -> bool:
@@ -71,11 +75,18 @@ def _valid(data) -> bool:
         blocks = data["block_bytes"]
         return (
             data["version"] == VERSION
-            and (width is None or (isinstance(width, int) and width > 0))
-            and all(isinstance(blocks[d], int) and 64 <= blocks[d] <= 10**9 for d in ("float32", "float64"))
+            and (width is None or (type(width) is int and width in WIDTHS))
+            and all(type(blocks[d]) is int and 64 <= blocks[d] <= 10**9 for d in ("float32", "float64"))
         )
     except (KeyError, TypeError):
         return False
+
+
+def _warn(message: str) -> None:
+    """One line on stderr, ``pfjax:0: UserWarning: <message>``, as pfjax's other warnings about the
+    user's files and settings (:func:`pfjax.errors.deprecated`), not a line of pfjax's source that
+    happened to read the file."""
+    warnings.warn_explicit(message, UserWarning, "pfjax", 0, module="pfjax")
 
 
 @functools.cache
@@ -95,10 +106,10 @@ def load(path: str | None = None) -> dict | None:
     try:
         data = json.loads(file.read_text(encoding="utf-8"))
     except (OSError, ValueError) as e:
-        warnings.warn(f"{file}: calibration ignored, unreadable ({e})", stacklevel=2)
+        _warn(f"{file}: calibration ignored, unreadable ({e})")
         return None
     if not _valid(data):
-        warnings.warn(f"{file}: calibration ignored, not a pfjax calibration of version {VERSION}", stacklevel=2)
+        _warn(f"{file}: calibration ignored, not a pfjax calibration of version {VERSION}")
         return None
     return data
 
@@ -119,10 +130,12 @@ def vector_width() -> tuple[bool, int | None]:
     return (False, None) if cal is None else (True, cal["vector_width"])
 
 
-def writable_directory(environ=None) -> Path:
+def writable_directory(environ=None, key: str | None = None) -> Path:
     """:func:`directory`, checked before anything is measured or written: an
-    :class:`~pfjax.errors.InputError` naming the environment variable when calibrations are off or the
-    directory is not one that can be made and written (nothing is created here)."""
+    :class:`~pfjax.errors.InputError` naming the environment variable when calibrations are off, the
+    directory is not one that can be made and written, or the calibration file of ``key`` (default
+    this CPU's, :func:`cpu_key`) is there as something a file cannot replace (a directory). Nothing
+    is created here."""
     from pfjax.errors import InputError
 
     environ = os.environ if environ is None else environ
@@ -142,17 +155,29 @@ def writable_directory(environ=None) -> Path:
             f"set {DIR_ENV} to one",
             DIR_ENV,
         )
+    file = where / f"{cpu_key() if key is None else key}.json"
+    if file.is_dir() or (file.exists() and not file.is_file()):
+        raise InputError(
+            f"{DIR_ENV}: {file} is not a file, so the calibration cannot be written there; "
+            f"remove it or set {DIR_ENV} to another directory",
+            DIR_ENV,
+        )
     return where
 
 
 def save(result: dict, path: Path | None = None) -> Path:
     """Write a calibration (``result`` as :func:`pfjax.bench.calibrate.calibrate` returns it) to
-    ``path`` (default: this CPU's file in :func:`writable_directory`), atomically; returns the path."""
+    ``path`` (default: this CPU's file in :func:`writable_directory`), atomically; returns the path.
+    A write that fails leaves the previous file, if any, and no temporary file."""
     if path is None:
-        path = writable_directory() / f"{result['cpu_key']}.json"
+        path = writable_directory(key=result["cpu_key"]) / f"{result['cpu_key']}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     load.cache_clear()
     return path

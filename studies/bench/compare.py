@@ -9,7 +9,10 @@ gradient's cost over the forward pass; a change to the simulator states its effe
 
 Writes ``results/bench_compare/`` (``compare.json``: every round's bench summary and the ratios,
 with the machine and both commits; ``report.md``) through the one output writer. Bad input (an
-unknown revision, a bad count) stops with one line and exit code 2 before anything runs.
+unknown revision, a bad count, ``--sizes`` that ``pfjax bench`` would refuse) stops with one line and
+exit code 2 before anything runs; so does a ``pfjax bench`` of either revision that refuses its
+arguments. A benchmark that fails after some rounds are complete stops the comparison with one line
+(exit 1), and the complete rounds are written, marked ``incomplete``.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from pathlib import Path
 import pfjax  # noqa: F401  (before JAX: one CPU device per core)
 from pfjax import errors
 from pfjax.bench.run import machine
+from pfjax.cli.bench import config as bench_config
 from pfjax.cli.common import Parser
 from pfjax.errors import InputError, command_main
 from pfjax.jsonio import dumps
@@ -36,6 +40,14 @@ ROOT = Path(__file__).resolve().parents[2]
 #: The bench summary's keys compared (higher is better for the rates, lower for the gradient cost).
 RATES = ("msteps_per_s_f32", "msteps_per_s_f64")
 COSTS = ("grad_over_forward",)
+#: ``--sizes`` without ``--quick`` when none is given: the sizes of the performance goals.
+SIZES = "10000,100000"
+#: The start of a ``pfjax bench`` error line (:func:`pfjax.errors.command_main`).
+_BENCH_ERROR = "pfjax bench: error: "
+
+
+class BenchFailed(Exception):
+    """A ``pfjax bench`` of one revision failed (not for bad input): the message is one line."""
 
 
 def _git(*args: str, cwd: Path = ROOT) -> str:
@@ -64,13 +76,18 @@ class _Tree:
             _git("worktree", "add", "--detach", "--quiet", str(self.path), commit)
 
     def bench(self, args: list[str], out: Path) -> dict:
-        """One ``pfjax bench --json`` of this checkout (its own code: ``PYTHONPATH``); its summary."""
+        """One ``pfjax bench --json`` of this checkout (its own code: ``PYTHONPATH``); its summary.
+        :class:`~pfjax.errors.InputError` when it refuses its arguments (exit 2), :class:`BenchFailed`
+        when it fails otherwise."""
         env = {**os.environ, "PYTHONPATH": str(self.path)}
         cmd = [sys.executable, "-m", "pfjax.cli", "bench", *args, "--out", str(out), "--json"]
         r = subprocess.run(cmd, cwd=self.path, env=env, capture_output=True, text=True)
+        where = "the working tree" if self.commit == "." else self.commit[:12]
+        tail = (r.stderr.strip().splitlines() or ["(no output)"])[-1]
+        if r.returncode == errors.EXIT_USAGE:
+            raise InputError(f"{tail.removeprefix(_BENCH_ERROR)} (pfjax bench of {where})")
         if r.returncode != 0:
-            tail = (r.stderr.strip().splitlines() or ["(no output)"])[-1]
-            raise RuntimeError(f"pfjax bench failed in {self.commit[:12]} (exit {r.returncode}): {tail}")
+            raise BenchFailed(f"pfjax bench of {where} failed (exit {r.returncode}): {tail}")
         return json.loads(r.stdout)
 
     def remove(self) -> None:
@@ -122,6 +139,14 @@ def markdown(result: dict) -> str:
             f"({result['new']['commit'][:12]}), {result['rounds']} alternating rounds of `pfjax bench "
             f"{' '.join(result['bench_args'])}` on {m.get('cpu_model') or m.get('processor')}, {m.get('cpus')} CPUs.",
             "",
+            *(
+                [
+                    f"**Incomplete**: {result['rounds']} of {result['rounds_requested']} rounds; {result['incomplete']}.",
+                    "",
+                ]
+                if result.get("incomplete")
+                else []
+            ),
             table(["quantity", "BASE per round", "NEW per round", "NEW / BASE median", "spread"], rows),
             "",
             "Rates are million rollout-steps per second (higher is better); `grad_over_forward` is the "
@@ -136,7 +161,11 @@ def main(argv=None) -> int:
     ap.add_argument("base", nargs="?", default="HEAD", help="the revision compared against (default HEAD)")
     ap.add_argument("new", nargs="?", default=".", help="the revision compared (default . : the working tree)")
     ap.add_argument("--rounds", type=int, default=5, help="alternating rounds (default 5)")
-    ap.add_argument("--sizes", default="10000,100000", help="pfjax batch sizes, as pfjax bench (default 10000,100000)")
+    ap.add_argument(
+        "--sizes",
+        default=None,
+        help=f"pfjax batch sizes, as pfjax bench's --sizes (default {SIZES}; with --quick, pfjax bench --quick's)",
+    )
     ap.add_argument("--quick", action="store_true", help="pfjax bench --quick (small batches, 2 s horizon)")
     ap.add_argument("--out", default="results/bench_compare", help="output directory (default results/bench_compare)")
     ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
@@ -144,28 +173,50 @@ def main(argv=None) -> int:
     return command_main("bench-compare", lambda: main_checked(args))
 
 
+def bench_arguments(args) -> list[str]:
+    """The arguments of every ``pfjax bench``, checked as pfjax bench checks them (a one-line
+    :class:`~pfjax.errors.InputError` naming the flag): ``--sizes`` only where given (else
+    :data:`SIZES` without ``--quick``; ``--quick``'s own sizes with it)."""
+    sizes = args.sizes if args.sizes is not None or args.quick else SIZES
+    bench_config(args.quick, sizes)
+    return (["--sizes", sizes] if sizes is not None else []) + (["--quick"] if args.quick else [])
+
+
 def main_checked(args) -> int:
     errors.integer("--rounds", args.rounds, low=1, high=100)
+    bench_args = bench_arguments(args)
     base, new = _commit(args.base, "base"), _commit(args.new, "new")
-    bench_args = ["--sizes", args.sizes] + (["--quick"] if args.quick else [])
     cfg = {"base": base, "new": new, "rounds": args.rounds, "bench_args": bench_args}
     with OutputDir(args.out, command="bench-compare", config_sha256=config_hash(cfg), overwrite=args.overwrite) as out:
-        rounds = []
+        rounds, failure = [], None
         with tempfile.TemporaryDirectory(prefix="pfjax-compare-") as tmp:
-            trees = {"base": _Tree(base, Path(tmp)), "new": _Tree(new, Path(tmp))}
+            trees: dict = {}
             try:
+                trees["base"] = _Tree(base, Path(tmp))
+                trees["new"] = _Tree(new, Path(tmp))
                 for i in range(args.rounds):
                     rounds.append(
                         {name: tree.bench(bench_args, Path(tmp) / f"bench-{name}-{i}") for name, tree in trees.items()}
                     )
                     print(f"round {i + 1}/{args.rounds} done", file=sys.stderr, flush=True)
+            except BenchFailed as e:
+                failure = f"round {len(rounds) + 1}/{args.rounds}: {e}"
+            except InputError as e:  # a revision's pfjax bench refused its arguments
+                if not rounds:
+                    raise
+                failure = f"round {len(rounds) + 1}/{args.rounds}: {errors.one_line(e)}"
             finally:
                 for tree in trees.values():
                     tree.remove()
+        if failure is not None and not rounds:
+            print(f"bench-compare: error: {failure}; nothing was measured or written", file=sys.stderr)
+            return 1
         result = {
             "base": {"rev": args.base, "commit": base if base != "." else "working tree"},
             "new": {"rev": args.new, "commit": new if new != "." else "working tree"},
-            "rounds": args.rounds,
+            "rounds": len(rounds),
+            "rounds_requested": args.rounds,
+            **({"incomplete": failure} if failure is not None else {}),
             "bench_args": bench_args,
             "comparison": compare(rounds),
             "bench_summaries": rounds,
@@ -176,7 +227,13 @@ def main_checked(args) -> int:
         (out.staging / "report.md").write_text(markdown(result))
         path = out.commit()
     ratios = {k: c.get("ratio") for k, c in result["comparison"].items()}
-    print(dumps({"out": str(path), "ratios": ratios}))
+    print(dumps({"out": str(path), "rounds": len(rounds), "ratios": ratios}))
+    if failure is not None:
+        print(
+            f"bench-compare: error: {failure}; the {len(rounds)} complete round(s) are written to {path}",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
