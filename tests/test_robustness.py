@@ -451,16 +451,16 @@ def test_a_studys_metric_statistics_leave_failed_runs_out():
     import pandas as pd
 
     from pfjax.metrics.running import METRIC_NAMES
-    from pfjax.montecarlo.summary import _block
+    from pfjax.montecarlo.summary import run_statistics
 
     n = 6
     df = pd.DataFrame({m: np.ones(n) for m in METRIC_NAMES if m != "success"})
     df["iae"] = [2.0, 4.0, 6.0, 0.0, 0.0, 0.0]
     df["success"] = [True, True, False, False, False, False]
     df["status"] = ["ok", "ok", "ok", "diverged", "diverged", "nonfinite"]
-    b = _block(df)
+    b = run_statistics(df)
     assert b["n"] == 6 and b["k"] == 2
     assert b["iae_mean"] == 4.0 and b["quantiles"]["iae"]["n_finite"] == 3
     assert b["status_counts"] == {"ok": 3, "diverged": 2, "nonfinite": 1}
-    every_run_failed = _block(df.assign(status="diverged", success=False))
+    every_run_failed = run_statistics(df.assign(status="diverged", success=False))
     assert np.isnan(every_run_failed["iae_mean"]) and every_run_failed["success_rate"] == 0.0

@@ -36,8 +36,10 @@ from pfjax.sim.dynamic import SLIP_METRIC_NAMES
 QUANTILE_METRICS = [m for m in METRIC_NAMES if m != "success"]
 
 
-def _block(df: pd.DataFrame) -> dict:
-    """Success over every run; the metrics' statistics (``iae_mean``, ``iae_p95``, ``quantiles``) over
+def run_statistics(df: pd.DataFrame) -> dict:
+    """A controller's statistics over its rows of a run table (``success``, ``status`` and the
+    metrics' columns): ``n``, ``k``, ``success_rate``, ``success_ci95``, ``iae_mean``, ``iae_p95``,
+    ``steady_abs_d_p95``, ``status_counts`` and ``quantiles``. Success over every run; the metrics' statistics (``iae_mean``, ``iae_p95``, ``quantiles``) over
     the runs that ran the whole horizon (status ``ok``): a failed run's metrics describe it only up
     to its failure (a run that diverges at once has an IAE of about 0), so the failures are counted
     by ``status_counts`` and the success rate, not averaged into the metrics."""
@@ -131,10 +133,11 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         df = _controller_rows(runs, name)
         if params is None:  # every controller runs the same sampled scenarios (common random numbers)
             params = [c for c in column_names(spec) if df[c].nunique(dropna=True) > 1]
-        block = _block(df)
+        block = run_statistics(df)
         block["gains"] = gains.get(name, {})
         block["per_path"] = {
-            p: {k: v for k, v in _block(g).items() if k != "quantiles"} for p, g in df.groupby("path", sort=False)
+            p: {k: v for k, v in run_statistics(g).items() if k != "quantiles"}
+            for p, g in df.groupby("path", sort=False)
         }
         block["statement"] = supported_statement(len(df), int((~df["success"]).sum()))
         mg = margins(sweep, name, spec.margin.eps)

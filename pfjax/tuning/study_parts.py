@@ -102,9 +102,8 @@ def tune_K(cfg, spec, progress):
 
 
 def heldout(cfg, spec, controllers, progress):
-    from pfjax.metrics.robustness import clopper_pearson
     from pfjax.montecarlo.runner import margin_sweep, simulate_runs
-    from pfjax.montecarlo.summary import margins
+    from pfjax.montecarlo.summary import margins, run_statistics
 
     runs = np.arange(cfg["robust"]["heldout_runs"])
     frames = []
@@ -115,19 +114,17 @@ def heldout(cfg, spec, controllers, progress):
     sweep = margin_sweep(spec, controllers, progress=progress)
     table = []
     for name in controllers:
-        g = df[df.controller == name]
-        k, n = int(g.success.sum()), len(g)
-        lo, hi = clopper_pearson(k, n)
+        st = run_statistics(df[df.controller == name])  # as a study's summary states them
         m = margins(sweep, name, spec.margin.eps).get("joint", {})
         table.append(
             {
                 "controller": name,
-                "success_rate": k / n,
-                "success_ci95": [float(lo), float(hi)],
-                "n": n,
-                "iae_mean": float(g.iae.mean()),
-                "iae_p95": float(g.iae.quantile(0.95)),
-                "steady_abs_d_p95_mm": float(1e3 * g.steady_abs_d.quantile(0.95)),
+                "success_rate": st["success_rate"],
+                "success_ci95": [float(x) for x in st["success_ci95"]],
+                "n": st["n"],
+                "iae_mean": st["iae_mean"],
+                "iae_p95": st["iae_p95"],
+                "steady_abs_d_p95_mm": 1e3 * st["steady_abs_d_p95"],
                 "slip_margin_deg": None if m.get("fails_at_smallest") else m.get("margin"),
                 "margin_fails_at_smallest": m.get("fails_at_smallest"),
             }
