@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import numbers as _numbers
+from typing import Literal, overload
 
 #: Exit code of a command refused for bad input (argparse's convention).
 EXIT_USAGE = 2
@@ -188,6 +189,10 @@ def seed(key: str, value) -> int:
     return integer(key, value, low=0, high=MAX_SEED)
 
 
+@overload
+def boolean(key: str, value, *, or_none: Literal[False] = False) -> bool: ...
+@overload
+def boolean(key: str, value, *, or_none: Literal[True]) -> bool | None: ...
 def boolean(key: str, value, *, or_none: bool = False) -> bool | None:
     """``value`` as a bool (a NumPy boolean too; None where ``or_none``); :class:`InputError` naming
     ``key`` for anything else (``"no"``, ``0``), which Python's truth would read as a choice."""

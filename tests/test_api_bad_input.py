@@ -123,13 +123,16 @@ def test_tune_check_memory_is_refused_before_any_work(monkeypatch, capsys):
 def test_tune_on_a_study_refuses_runs_beyond_the_budget_before_drawing_them(monkeypatch, capsys):
     """One evaluation's runs (n_runs per path of the study) beyond the memory budget: refused naming
     n_runs (--n-runs) before a single run is drawn, whatever the method."""
-    from pfjax.montecarlo import sampling
+    from pfjax.montecarlo import chunk_runs, sampling
 
     def no_draws(*a, **kw):
         raise AssertionError("runs were drawn")
 
     monkeypatch.setenv("PFJAX_MEMORY_BUDGET", str(10**9))
+    # both homes of the sampler: chunk_runs binds it at its import (imported above, before the patch,
+    # so that a later first import cannot keep the stand-in)
     monkeypatch.setattr(sampling, "sample_runs", no_draws)
+    monkeypatch.setattr(chunk_runs, "sample_runs", no_draws)
     heldout = str(ROOT / "studies" / "tuning_heldout.toml")
     msg = _refused(lambda: pfjax.tune("stanley", heldout, check=[1.0, 1.0], n_runs=100_000), "n_runs")
     assert "one evaluation of 100000 runs x 3 paths" in msg, msg

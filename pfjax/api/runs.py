@@ -205,6 +205,8 @@ def _as_dists(values: dict, n: int) -> tuple[dict, dict]:
 
 def _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params, tau_delta_s, k_v) -> dict:
     """The study config (a dict) that describes the runs :func:`scenarios` draws."""
+    from pfjax.sim.settings import SimConfig
+
     data: dict[str, Any] = {
         "name": "scenarios",
         "n_runs": n,
@@ -212,8 +214,13 @@ def _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params
         "paths": [{"kind": path}],
         "controllers": [{"name": "none", "type": "state_feedback"}],
         # the horizon only sizes the slip sequences: the rest of the run's timing is simulate()'s, so
-        # the windows are kept inside any horizon and the step is the whole horizon (the ST model's below)
-        "sim": {"horizon": horizon, "dt": horizon, "steady_window": min(horizon, 5.0)},
+        # the windows are kept inside any horizon, and the step is the default one, adjusted to divide
+        # it into whole steps (the step count's limit still bounds the horizon; the ST model's below)
+        "sim": {
+            "horizon": horizon,
+            "dt": horizon / max(1, round(horizon / SimConfig.dt)),
+            "steady_window": min(horizon, 5.0),
+        },
         "success": {"from_s": min(horizon, 15.0)},
         "vehicle": {
             "model": model,

@@ -120,7 +120,7 @@ def tune(
     try:
         res = run_tune(
             problem,
-            method,
+            method or "gradient",  # a method is given or defaults when tuning (check is None here)
             key=k,
             ga_options=GAOptions()._replace(
                 **({} if population is None else {"population_size": population}),

@@ -104,7 +104,7 @@ def nominal(d: Dist) -> float:
         return d.number("value")
     if d.mean is not None:
         return float(d.mean)
-    if d.dist == "choice":
+    if d.dist == "choice" and d.values:
         return float(sum(d.values) / len(d.values))
     return 0.5 * (d.number("low") + d.number("high"))
 
