@@ -17,8 +17,8 @@ study scripts) writes them through :class:`OutputDir`:
      path ending in ``.`` or ``..``.
 
    A refusal is an :class:`~pfjax.errors.InputError` naming the flag (``--out``), and nothing is
-   touched. A Python function passes its own spellings (``flag="out"``, ``overwrite_flag="overwrite"``),
-   so its refusals name its arguments and advise ``pass overwrite=True``, not ``add --overwrite``.
+   touched. A Python function passes its own name for it (``flag="out"``), so its refusals name its
+   argument and advise ``pass overwrite=True``, not ``add --overwrite`` (:func:`switch_advice`).
 2. **One writer at a time.** The target's lock file ``.<name>.lock`` beside it is held with
    ``fcntl.flock`` for the whole command, so a second process writing to the same target is
    refused (:class:`OutputBusy`, naming the running process's pid and start time). The operating
@@ -57,7 +57,6 @@ __all__ = [
     "check_name",
     "check_target",
     "glob_escape",
-    "overwrite_advice",
     "read_marker",
     "sibling",
     "switch_advice",
@@ -129,13 +128,12 @@ def check_target(
     config_sha256: str | None,
     overwrite: bool = False,
     flag: str = "--out",
-    overwrite_flag: str | None = None,
 ) -> Path:
     """Check that ``target`` may receive a new output of ``command`` (see the module docstring).
 
     Touches nothing. Returns the target as an absolute path (symbolic links in its parents
     resolved). Raises :class:`~pfjax.errors.InputError` naming ``flag``, whose advice to replace
-    the target names ``overwrite_flag`` (:func:`overwrite_advice`).
+    the target is in the same words (:func:`switch_advice`).
     """
     resolved = _check_name(target, flag)
     if not resolved.exists():
@@ -147,24 +145,8 @@ def check_target(
         config_sha256=config_sha256,
         overwrite=overwrite,
         flag=flag,
-        overwrite_flag=overwrite_flag,
     )
     return resolved
-
-
-def overwrite_advice(flag: str, overwrite_flag: str | None = None) -> str:
-    """How a refusal tells its caller to replace an output, in the caller's spelling: ``"add
-    --overwrite"`` for a command-line flag, ``"pass overwrite=True"`` for a Python argument.
-
-    Args:
-        flag: the name the output directory goes by (``--out``, ``out``).
-        overwrite_flag: the name the overwrite option goes by (``--overwrite``, ``overwrite``);
-            default: ``--overwrite`` where ``flag`` is a command-line flag (starts with ``-``),
-            else ``overwrite``.
-    """
-    if overwrite_flag is None:
-        return switch_advice(flag, "overwrite")
-    return f"add {overwrite_flag}" if overwrite_flag.startswith("-") else f"pass {overwrite_flag}=True"
 
 
 def switch_advice(flag: str, option: str) -> str:
@@ -218,7 +200,6 @@ def _check_contents(
     config_sha256: str | None,
     overwrite: bool,
     flag: str,
-    overwrite_flag: str | None,
 ):
     """An existing target may be replaced only if empty, or holding only what pfjax wrote there
     (unchanged, of the same command and config unless ``overwrite``); raises InputError."""
@@ -253,7 +234,7 @@ def _check_contents(
         if not (isinstance(listed.get(f), list) and listed[f] == [st.st_size, st.st_mtime_ns])
     ]
     if not overwrite:
-        advice = overwrite_advice(flag, overwrite_flag)
+        advice = switch_advice(flag, "overwrite")
         if changed:
             raise InputError(
                 f"{flag}: {target}/{changed[0]} changed after pfjax wrote it; {advice} to replace "
@@ -282,10 +263,8 @@ class OutputDir:
             the marker; a re-run of the same command and config replaces its own output.
         config_sha256: the hash of the config the output comes from (recorded in the marker).
         overwrite: replace a pfjax output of another command or config, or one whose files changed.
-        flag: the flag or key named in error messages.
-        overwrite_flag: the flag or argument the refusals advise to replace the target
-            (:func:`overwrite_advice`; default: ``--overwrite`` with a ``flag`` such as ``--out``,
-            ``overwrite`` with a Python argument's name such as ``out``).
+        flag: the flag or argument named in error messages (``--out``; ``out`` from Python, whose
+            refusals then advise ``pass overwrite=True``, :func:`switch_advice`).
         extra: more fields for the marker (e.g. the study name, the seed).
     """
 
@@ -297,18 +276,15 @@ class OutputDir:
         config_sha256: str | None,
         overwrite: bool = False,
         flag: str = "--out",
-        overwrite_flag: str | None = None,
         extra: dict | None = None,
     ):
         self.command, self.config_sha256, self.overwrite, self.flag = command, config_sha256, overwrite, flag
-        self.overwrite_flag = overwrite_flag
         self.target = check_target(
             target,
             command=command,
             config_sha256=config_sha256,
             overwrite=overwrite,
             flag=flag,
-            overwrite_flag=overwrite_flag,
         )
         self.extra = dict(extra or {})
         self._lock = OutputLock(self.target, command=command, flag=flag)
@@ -335,7 +311,6 @@ class OutputDir:
                 config_sha256=self.config_sha256,
                 overwrite=self.overwrite,
                 flag=self.flag,
-                overwrite_flag=self.overwrite_flag,
             )
             for stale in own_temporary_dirs(self.target):  # nobody else holds this target's lock
                 shutil.rmtree(stale, ignore_errors=True)
@@ -408,7 +383,6 @@ class OutputDir:
                 config_sha256=self.config_sha256,
                 overwrite=self.overwrite,
                 flag=self.flag,
-                overwrite_flag=self.overwrite_flag,
             )  # nothing foreign arrived meanwhile
             old = temporary_dir(self.target, _OLD)
             os.replace(self.target, old / "output")

@@ -128,7 +128,7 @@ def run_study(
     out = Path("results") / spec.name if out is None else out
     # the output directory judged by pfjax.outputs as `pfjax study --out` is, its messages naming
     # this function's arguments (out, overwrite=True)
-    output = study_output(spec, out, overwrite=overwrite, flag="out", overwrite_flag="overwrite")
+    output = study_output(spec, out, overwrite=overwrite, flag="out")
     run(spec, output, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
     return load_study(out)
 

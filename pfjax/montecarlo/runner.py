@@ -79,12 +79,11 @@ def study_output(
     *,
     overwrite: bool = False,
     flag: str = "--out",
-    overwrite_flag: str | None = None,
 ) -> OutputDir:
     """The (unopened) :class:`~pfjax.outputs.OutputDir` of a study: ``out`` or ``results/<name>``.
-    Its refusals name ``out`` as ``flag`` and advise ``overwrite`` as ``overwrite_flag`` (the
-    caller's spellings: ``--out`` and ``--overwrite`` for ``pfjax study``, ``out`` and
-    ``overwrite`` for :func:`pfjax.run_study`; :func:`pfjax.outputs.overwrite_advice`)."""
+    Its refusals name ``out`` as ``flag`` and give their advice in the same words (``--out`` and
+    ``--overwrite`` for ``pfjax study``, ``out`` and ``overwrite=True`` for :func:`pfjax.run_study`;
+    :func:`pfjax.outputs.switch_advice`)."""
     from pathlib import Path
 
     from pfjax.montecarlo.config import study_hash
@@ -96,7 +95,6 @@ def study_output(
         config_sha256=study_hash(spec),
         overwrite=overwrite,
         flag=flag,
-        overwrite_flag=overwrite_flag,
         extra={"study": spec.name, "seed": spec.seed},
     )
 
