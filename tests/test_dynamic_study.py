@@ -145,10 +145,44 @@ def test_cli_simulate_model_st():
         (["--mu", "0.5"], "--mu"),
         (["--model", "st", "--mu", "-1"], "--mu"),
         (["--model", "st", "--tau-delta", "0"], "--tau-delta"),
-        (["--model", "st", "--mu", "10"], "--dt"),
+        (["--model", "st", "--mu", "10", "--dt", "0.005"], "--dt"),
     ]:
         code, _, err = _main("simulate", "--path", "line", "--controller", "stanley", *argv)
         assert code == 2 and err.strip().splitlines()[-1].startswith(f"pfjax simulate: error: {flag}: "), err
+
+
+def test_cli_simulate_chooses_a_stable_step_and_records_arguments_that_run_again():
+    """Without --dt the dynamic models take the largest stable step of the 1-2-5 series (STD at
+    1 m/s: 0.0002 s, where 0.005 s would be refused); the recorded arguments, given back as flags,
+    give the same run: no kinematic flag the dynamic models refuse, the chosen step filled in."""
+    code, out, err = _main(
+        "simulate", "--model", "std", "--path", "line", "--controller", "stanley", "--horizon", "0.5", "--json"
+    )
+    assert code in (0, None), err
+    r = json.loads(out)
+    assert r["dt"] == 0.0002 and r["metrics"]["status"] == "ok"
+    given = r["arguments"]
+    assert given["dt"] == 0.0002 and given["wheelbase"] is None and given["beta_r_deg"] is None
+    flags = [f"--{k.replace('_', '-')}={v}" for k, v in given.items() if v not in (None, False) and k != "continuous"]
+    code, again, err = _main("simulate", *flags, "--json")
+    assert code in (0, None), err
+    assert json.loads(again)["metrics"] == r["metrics"]
+    assert json.loads(again)["config_sha256"] == r["config_sha256"]
+
+
+@pytest.mark.parametrize("model", ["st", "std"])
+def test_stable_step_is_the_largest_of_the_series_within_the_bound(model):
+    from pfjax.models import single_track as st
+
+    names = st.PARAMETER_SETS if model == "st" else st.COMMONROAD_DRIFT_VEHICLES
+    series = [m * 10.0**-k for k in range(3, 8) for m in (5, 2, 1)]
+    for name in names:
+        p = st.model_parameter_set(model, name)
+        for v in (0.5, 1.0, 10.0, 20.0):
+            bound = st.max_stable_step(p, v, 0.05, 5.0)
+            step = st.stable_step(p, v, 0.05, 5.0)
+            assert step == pytest.approx(max(s for s in series if s <= bound), rel=1e-12)
+            st.check_step("dt", step, p, v, 0.05, 5.0)
 
 
 def test_api_checks_the_simulation_step_against_the_tyre_modes():

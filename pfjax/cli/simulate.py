@@ -6,10 +6,12 @@
     pfjax simulate --model st [--vehicle robot|vehicle1|vehicle2|vehicle3] [--mu MU]
                    [--tau-delta 0.05] [--k-v 5] --path ... --controller NAME [...]
 
-``--model st`` simulates CommonRoad's single-track model (:mod:`pfjax.sim.dynamic`): the slip
-comes from the tyre forces, so the slip flags, ``--wheelbase``, ``--delta-max-deg``,
-``--convention`` and ``--continuous`` are refused with it (the set's wheelbase and steering limit),
-and the output adds the slip the run produced.
+``--model st`` simulates CommonRoad's single-track model (:mod:`pfjax.sim.dynamic`; ``std`` its
+drift model): the slip comes from the tyre forces, so the slip flags, ``--wheelbase``,
+``--delta-max-deg``, ``--convention`` and ``--continuous`` are refused with it (the set's wheelbase
+and steering limit), and the output adds the slip the run produced. Without ``--dt`` the step is
+the largest stable one of 0.005, 0.002, 0.001, 0.0005, ... s
+(:func:`pfjax.models.single_track.stable_step`).
 
 ``--T``, ``--v`` and ``--L`` are deprecated spellings of ``--horizon``, ``--speed`` and
 ``--wheelbase`` (read for one release). ``--x0``'s THETA is in degrees, as in ``pfjax parking``.
@@ -73,9 +75,10 @@ def _parse_gains(controller: str, text: str | None) -> dict:
     return out
 
 
-def _controller_and_gains(args):
+def _controller_and_gains(args, wheelbase: float):
     """``(controller, parameter pytree, gains shown)``: the registry entry's defaults, a design's
-    gains (:data:`pfjax.controllers.DESIGNS`, made at ``--speed``, ``--wheelbase``) and ``--gains`` on top."""
+    gains (:data:`pfjax.controllers.DESIGNS`, made at ``--speed`` and ``wheelbase``: ``--wheelbase``
+    or the vehicle's) and ``--gains`` on top."""
     from pfjax import controllers as C
 
     e, d = C.resolve(args.controller, "--controller")
@@ -85,7 +88,7 @@ def _controller_and_gains(args):
         flat = C.flat_gains(e)
         if d is not None and not set(e.gains) <= set(given):
             with as_flags(SYNTH_FLAGS):
-                flat.update(C.design_gains(d, args.speed, args.wheelbase, "--controller"))
+                flat.update(C.design_gains(d, args.speed, wheelbase, "--controller"))
         flat.update(given)
         gains = C.params_from_flat(e, flat)
     return e.controller, gains, {k: flat[k] for k in e.gains}
@@ -112,15 +115,20 @@ KINEMATIC_DEFAULTS = {
 
 def _check_model_flags(args) -> None:
     """:class:`UsageError` naming the first flag given that the chosen ``--model`` does not take;
-    the kinematic flags' defaults filled in."""
+    the kinematic model's flags' defaults filled in (for the kinematic model only, so that the
+    recorded arguments run again)."""
     other = ST_FLAGS if args.model == "kinematic" else {**KINEMATIC_FLAGS, "continuous": "--continuous"}
     for dest, flag in other.items():
         if getattr(args, dest) not in (None, False):
             raise UsageError(f"{flag}: not with --model {args.model}")
-    for dest, value in KINEMATIC_DEFAULTS.items():
-        if getattr(args, dest) is None:
-            setattr(args, dest, value)
+    if args.model == "kinematic":  # the ST flags stay None (recorded as not given: pfjax.cli.records)
+        for dest, value in KINEMATIC_DEFAULTS.items():
+            if getattr(args, dest) is None:
+                setattr(args, dest, value)
 
+
+#: ``--dt``'s default for the kinematic model, s.
+KINEMATIC_DT = 0.005
 
 SIMULATE_FLAGS = {
     "v": "--speed",
@@ -165,7 +173,7 @@ def cmd(args) -> dict:
 
     from pfjax import paths
     from pfjax.metrics import METRIC_NAMES
-    from pfjax.sim import STATUS_NAMES, SimConfig
+    from pfjax.sim import STATUS_NAMES
     from pfjax.sim.scenario import paper_scenario
     from pfjax.sim.simulate import simulate_one
 
@@ -180,15 +188,10 @@ def cmd(args) -> dict:
         x, y, theta_deg = (finite(f"--x0[{i}]", v, unit=" deg" if i == 2 else "") for i, v in enumerate(args.x0))
         pose0 = (x, y, math.radians(theta_deg))
     with as_flags(SIMULATE_FLAGS):
-        cfg = SimConfig(
-            dt=args.dt,
-            horizon=args.horizon,
-            record=False,
-            control_every=None if args.continuous else (1 if args.control_every is None else args.control_every),
-        )
         if args.model in ("st", "std"):
-            return _simulate_st(args, cfg, pose0)
-        controller, gains, shown = _controller_and_gains(args)
+            return _simulate_st(args, pose0)
+        cfg = _config(args, KINEMATIC_DT if args.dt is None else args.dt)
+        controller, gains, shown = _controller_and_gains(args, args.wheelbase)
         sc = paper_scenario(
             args.path,
             gains,
@@ -228,9 +231,24 @@ def cmd(args) -> dict:
     }
 
 
-def _simulate_st(args, cfg, pose0) -> dict:
+def _config(args, dt: float):
+    """The run's :class:`~pfjax.sim.SimConfig`: ``--horizon``, the step ``dt`` (recorded as
+    ``--dt``'s value: :mod:`pfjax.cli.records`), the control flags."""
+    from pfjax.sim import SimConfig
+
+    args.dt = dt
+    return SimConfig(
+        dt=dt,
+        horizon=args.horizon,
+        record=False,
+        control_every=None if args.continuous else (1 if args.control_every is None else args.control_every),
+    )
+
+
+def _simulate_st(args, pose0) -> dict:
     """One run of the ST or STD model (``--model st``, ``std``): the output of the kinematic model's run plus the
-    model, its parameter set and the slip the run produced (``slip``, degrees)."""
+    model, its parameter set and the slip the run produced (``slip``, degrees). Without ``--dt`` the
+    step is :func:`pfjax.models.single_track.stable_step` for the vehicle at ``--speed``."""
     import jax
     import numpy as np
 
@@ -246,8 +264,7 @@ def _simulate_st(args, cfg, pose0) -> dict:
     if args.model == "std" and name not in st.COMMONROAD_DRIFT_VEHICLES:
         raise UsageError(f"--vehicle: --model std takes {', '.join(st.COMMONROAD_DRIFT_VEHICLES)}, got {name}")
     vehicle = st.parameter_set(name)
-    args.wheelbase = vehicle.l_f + vehicle.l_r  # the designs are made at the set's wheelbase
-    controller, gains, shown = _controller_and_gains(args)
+    controller, gains, shown = _controller_and_gains(args, float(vehicle.l_f + vehicle.l_r))  # the set's wheelbase
     e = paths.entry(args.path)
     assert e.build is not None and e.start_pose is not None  # --path takes fixed paths
     sc = make_dynamic_scenario(
@@ -262,7 +279,9 @@ def _simulate_st(args, cfg, pose0) -> dict:
         model=args.model,
     )
     mu = float(st.body(sc.vehicle).mu)
-    st.check_step("--dt", cfg.dt, sc.vehicle, args.speed, float(sc.tau_delta), float(sc.k_v))
+    step = (float(sc.tau_delta), float(sc.k_v))
+    cfg = _config(args, st.stable_step(sc.vehicle, args.speed, *step) if args.dt is None else args.dt)
+    st.check_step("--dt", cfg.dt, sc.vehicle, args.speed, *step)
     r = jax.device_get(dyn.simulate_one(sc, controller=controller, config=cfg))
     status = int(r.status)
     metrics: dict[str, bool | float | str] = {
@@ -327,9 +346,8 @@ def register(sub) -> None:
     m.add_argument(
         "--dt",
         type=float,
-        default=0.005,
-        help="RK4 step, s (default 0.005); on st and std it must be a stable step for the tyre modes, checked "
-        "(--model std at 1 m/s needs about 0.00025)",
+        help="RK4 step, s (default 0.005; st and std: the largest of 0.005, 0.002, 0.001, 0.0005, ... s that "
+        "is stable for the vehicle's tyre modes at --speed, e.g. 0.0002 for std at 1 m/s; a --dt given is checked)",
     )
     m.add_argument("--control-every", type=int, help="controller sampling period in steps (default 1)")
     m.add_argument("--continuous", action="store_true", help="evaluate the controller inside every RK4 stage")

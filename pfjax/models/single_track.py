@@ -103,6 +103,7 @@ __all__ = [
     "max_stable_step",
     "model_parameter_set",
     "parameter_set",
+    "stable_step",
     "params_from_commonroad",
     "rhs",
     "rhs_drift",
@@ -170,6 +171,26 @@ def max_stable_step(params: STParams | STDParams, v: float, tau_delta: float = m
     modes = drift_modes(params, v) if isinstance(params, STDParams) else lateral_eigenvalues(params, v)
     fastest = max(float(np.max(np.abs(modes))), 1 / tau_delta, k_v)
     return RK4_REACH / fastest
+
+
+def stable_step(
+    params: STParams | STDParams,
+    v: float,
+    tau_delta: float = math.inf,
+    k_v: float = 0.0,
+    *,
+    largest: float = 0.005,
+) -> float:
+    """The largest step (s) of the 1-2-5 series ``largest``, ``largest`` x 0.4, x 0.2, x 0.1, ...
+    (0.005, 0.002, 0.001, 0.0005, 0.0002 s, ...) within :func:`max_stable_step`, so that
+    :func:`check_step` accepts it. ``pfjax simulate --model st|std`` takes it when no ``--dt`` is
+    given: 0.0002 s for the STD model's ``vehicle2`` at 1 m/s, 0.005 s for the ST robot."""
+    bound = max_stable_step(params, v, tau_delta, k_v)
+    step, k = largest, 0
+    while step > bound:
+        k += 1
+        step = float(f"{largest * (1.0, 0.4, 0.2)[k % 3] * 10.0 ** -(k // 3):.6g}")
+    return step
 
 
 def check_step(
