@@ -9,8 +9,14 @@ $$
 $$
 
 unbiased for any ``q`` that covers the failure region; the 95 % interval is
-``p̂ (1 ± 1.96 δ)`` (central limit theorem; cut at 0). Draws are added in batches until
-``δ <= target_rel_error`` or the budget is spent.
+``p̂ (1 ± 1.96 δ)`` (central limit theorem; cut at 0 and 1). Draws are added in batches until
+``δ <= target_rel_error`` or the budget is spent. An estimate from fewer than 2 draws has no
+spread to measure: ``δ = ∞`` and the interval ``(0, 1)``.
+
+**Budget.** ``n_per_level`` draws of the budget are kept for the estimate: a cross-entropy level
+runs only where ``n_per_level`` rollouts remain after it, so the estimate rests on at least
+``n_per_level`` draws, and a budget below one level and that batch is refused before ``g`` is
+called.
 
 **Proposal.** ``q(u) = α φ(u) + (1 - α) Σ_c π_c N(u; μ_c, Σ_c)``, by default with
 ``Σ_c = I`` (the means shift, the spread stays that of the inputs: weighted covariance fits from a
@@ -190,7 +196,9 @@ def cross_entropy_is(
             ``full`` (covariances fitted too).
         n_batch: draws per batch of the final estimate.
         target_rel_error: stop adding batches once the relative error is at most this.
-        max_rollouts: budget of rollouts, the cross-entropy levels included.
+        max_rollouts: budget of rollouts, the cross-entropy levels included; at least
+            ``2 n_per_level`` (a level and the estimate's draws; ``n_per_level`` with
+            ``max_levels = 0``).
         seed: seed of the draws (``numpy.random.default_rng``).
         batch: most points per call of ``g``.
 
@@ -199,6 +207,10 @@ def cross_entropy_is(
         levels, the final mixture's ``modes`` (means, weights), the effective sample size and
         the largest weight's share of the estimate (``max_weight_share``,
         :mod:`pfjax.rare.check`).
+
+    Raises:
+        pfjax.errors.InputError: a bad argument, named; ``max_rollouts`` below the least budget
+            (module docstring, *Budget*), before ``g`` is called.
     """
     dim, seed, batch = check_common(dim, seed, batch)
     n = errors.integer("n_per_level", n_per_level, low=10, high=100_000_000)
@@ -207,10 +219,16 @@ def cross_entropy_is(
     max_rollouts = errors.integer("max_rollouts", max_rollouts, low=1, high=10**10)
     n_batch = errors.integer("n_batch", n_batch, low=10, high=100_000_000)
     max_levels = errors.integer("max_levels", max_levels, low=0, high=1000)
+    least = (2 if max_levels > 0 else 1) * n
+    if max_rollouts < least:
+        what = (
+            f"a cross-entropy level of n_per_level = {n} and {n} draws to estimate from" if max_levels else f"{n} draws"
+        )
+        raise errors.InputError(f"max_rollouts: needs at least {least} ({what}), got {max_rollouts}", "max_rollouts")
     starts, k = _check_starts(starts, n_components, dim)
     rng = np.random.default_rng(seed)
     mix = _first_proposal(rng, starts, k, dim)
-    ce = _ce_levels(g, rng, mix, k, n, rho, max_levels, refine, covariance == "full", max_rollouts, batch)
+    ce = _ce_levels(g, rng, mix, k, n, rho, max_levels, refine, covariance == "full", max_rollouts - n, batch)
     mix, used, levels, reached = ce
     s1, s2, wmax, n_is, used = _sample_estimate(
         g, rng, mix, defensive, n_batch, target_rel_error, max_rollouts, used, batch
@@ -267,13 +285,14 @@ def _first_proposal(rng, starts: np.ndarray | None, k: int, dim: int) -> Mixture
     return Mixture(np.full(len(sel), 1 / len(sel)), sel, np.repeat(np.eye(dim)[None], len(sel), axis=0))
 
 
-def _ce_levels(g, rng, mix, k, n, rho, max_levels, refine, full, max_rollouts, batch):
+def _ce_levels(g, rng, mix, k, n, rho, max_levels, refine, full, level_rollouts, batch):
     """The cross-entropy levels (module docstring; the fit uses no defensive share: it would pull
-    the fit back to 0): ``(mixture, rollouts, level records, converged)``."""
+    the fit back to 0), within ``level_rollouts`` (the budget less the estimate's reserved draws):
+    ``(mixture, rollouts, level records, converged)``."""
     dim = mix.means.shape[1]
     used, levels, reached, refined = 0, [], False, 0
     for _ in range(max_levels):
-        if used + n > max_rollouts:
+        if used + n > level_rollouts:
             break
         u = sample_proposal(rng, n, mix, 0.0)
         m = evaluate(g, u, batch)
@@ -296,8 +315,11 @@ def _ce_levels(g, rng, mix, k, n, rho, max_levels, refine, full, max_rollouts, b
 
 
 def _moments(s1: float, s2: float, n_is: int) -> tuple[float, float, float]:
-    """``(p̂, Var p̂, δ)`` from the sums of the weights and of their squares over ``n_is`` draws."""
-    p = s1 / n_is
+    """``(p̂, Var p̂, δ)`` from the sums of the weights and of their squares over ``n_is`` draws
+    (``Var p̂`` and ``δ`` infinite for fewer than 2 draws: one draw has no spread to measure)."""
+    p = s1 / n_is if n_is > 0 else 0.0
+    if n_is < 2:
+        return p, math.inf, math.inf
     var = max(s2 / n_is - p * p, 0.0) / n_is
     return p, var, (math.sqrt(var) / p if p > 0 else math.inf)
 
@@ -321,9 +343,4 @@ def _sample_estimate(g, rng, mix, defensive, n_batch, target, max_rollouts, used
         wmax = max(wmax, float(wi.max()))
         if _moments(s1, s2, n_is)[2] <= target:
             break
-    if n_is == 0:
-        raise errors.InputError(
-            f"max_rollouts: {max_rollouts} rollouts were spent by the cross-entropy levels; none left to estimate",
-            "max_rollouts",
-        )
     return s1, s2, wmax, n_is, used

@@ -30,6 +30,8 @@ from pfjax.rare.transform import Input, Stratum, to_physical, to_standard
 
 #: The box searched, in standard deviations of u per input.
 U_BOX = 6.0
+#: Rollouts along each ray of :func:`pull_in` (one per grid value of ``t``).
+N_RAY = 32
 #: The falsifier's objectives (pfjax.falsification.search.OBJECTIVES) a rare-event metric can be.
 _OBJECTIVES = ("iae", "ise", "itae", "max_abs_d", "late_max_abs_d")
 
@@ -102,7 +104,7 @@ def falsifier_points(spec: StudySpec, stratum: Stratum, inputs: list[Input], con
     return np.where(np.isfinite(u), u, np.sign(u) * U_BOX), int(fr.n_rollouts), int(fr.n_gradients)
 
 
-def pull_in(g, u_star: np.ndarray, *, n_ray: int = 32, batch: int = 4096) -> tuple[np.ndarray, int]:
+def pull_in(g, u_star: np.ndarray, *, n_ray: int = N_RAY, batch: int = 4096) -> tuple[np.ndarray, int]:
     """``t_min u*`` for each row of ``u_star`` (``(m, dim)``, module docstring): ``(starts (k, dim)``
     of the rows whose ray fails somewhere, ``rollouts)``."""
     t = np.linspace(0.0, 1.0, n_ray + 1)[1:]

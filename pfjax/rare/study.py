@@ -15,9 +15,13 @@ positive margins are rounded up to multiples of ``margin_resolution`` (its sign,
 set, unchanged), so runs that converge alike tie, and beside the margin ``g`` returns the
 tie-break ``-tie_break metric`` that orders tied runs in subset simulation (the larger the
 transient error, the nearer failure; :mod:`pfjax.rare.subset`, *Plateaus*). The
-strata combine as ``p = Σ_s w_s p_s`` with ``Var p = Σ_s w_s² Var p_s``; one stratum keeps its
-estimator's own interval, several get the lognormal one of
-:func:`pfjax.rare.estimate.lognormal_interval`.
+strata combine as ``p = Σ_s w_s p_s`` with ``Var p = Σ_s w_s² Var p_s`` (:func:`combine`); one
+stratum keeps its estimator's own interval, several get the lognormal one of
+:func:`pfjax.rare.estimate.lognormal_interval`. A stratum whose estimate is 0 or whose relative
+error is infinite (no failure seen, a stalled subset run, too few draws) has no variance to add:
+the controller's relative error is infinite, and the stratum's weighted interval ``w_s [lo_s,
+hi_s]`` is added to the interval of the other strata, so its upper bound stays in the
+controller's.
 
 An importance-sampling estimate is checked per stratum (:mod:`pfjax.rare.check`): always for
 weights concentrated on one draw, and with ``check = "subset"`` against subset simulation on the
@@ -39,7 +43,7 @@ from pfjax.numerics.random import seed_key
 from pfjax.rare.check import reliability
 from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
 from pfjax.rare.importance import cross_entropy_is, explore
-from pfjax.rare.starts import falsifier_points
+from pfjax.rare.starts import N_RAY, falsifier_points
 from pfjax.rare.subset import subset_simulation
 from pfjax.rare.transform import Input, Stratum, config_keys, study_inputs, to_physical
 
@@ -99,9 +103,12 @@ def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict
     wherever it does not fail) gives the cross-entropy levels nothing to follow, and they can end
     in one part of the failure region only; failure points of a widened law start the fit.
     ``falsifier``: the falsifier's worst run pulled in to the failure boundary
-    (:mod:`pfjax.rare.starts`); ``explore`` where the falsifier does not apply or finds no failure."""
+    (:mod:`pfjax.rare.starts`); ``explore`` where the falsifier does not apply or finds no failure.
+    ``detail["falsifier_rollouts"]``: the falsifier's gradient rollouts and its rays' rollouts
+    (0 where it did not run), part of ``rollouts`` whether or not it found a start."""
     if rare.starts == "none":
-        return None, 0, {"starts": "none"}
+        return None, 0, {"starts": "none", "falsifier_rollouts": 0}
+    spent, detail = 0, {"falsifier_rollouts": 0}
     if rare.starts == "falsifier":
         from pfjax.rare.starts import pull_in
 
@@ -109,28 +116,49 @@ def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict
         if found is not None:
             u_star, used, grads = found
             starts, ray = pull_in(g, u_star, batch=rare.batch)
+            spent = used + ray
+            detail = {"falsifier_rollouts": spent, "falsifier_gradients": grads, "u_star": u_star.tolist()}
             if len(starts):
-                detail = {"starts": "falsifier", "falsifier_rollouts": used, "falsifier_gradients": grads}
-                return starts, used + ray, {**detail, "u_star": u_star.tolist(), "start_points": starts.tolist()}
+                return starts, spent, {"starts": "falsifier", **detail, "start_points": starts.tolist()}
     starts, used = explore(g, dim, n=rare.n_per_level, seed=seed + 7919, batch=rare.batch)
-    return (starts if len(starts) else None), used, {"starts": "explore"}
+    return (starts if len(starts) else None), spent + used, {"starts": "explore", **detail}
+
+
+def falsifier_rollouts_at_most(spec: StudySpec) -> int:
+    """The most rollouts the falsifier's starts spend in one stratum (``starts = "falsifier"``):
+    ``n_restarts × steps`` gradient rollouts and ``1 + n_restarts`` rays of :data:`N_RAY`
+    (:mod:`pfjax.rare.starts`); 0 where it does not run (other starts, or slip that is not
+    constant)."""
+    if spec.rare_event.starts != "falsifier" or spec.slip.kind != "constant":
+        return 0
+    f = spec.falsifier
+    return f.n_restarts * f.steps + (1 + f.n_restarts) * N_RAY
 
 
 def rollouts_needed(spec: StudySpec) -> tuple[int, str]:
     """The fewest rollouts per stratum with which ``spec.rare_event.method`` yields an estimate, and
     what they are for: plain Monte Carlo 1; subset simulation ``n_per_level`` (its first level);
-    importance sampling ``n_per_level`` for its starts (``explore``, and the fallback of
-    ``falsifier``; none for ``none``), ``n_per_level`` for a cross-entropy level and 1 draw to
-    estimate from."""
+    importance sampling the falsifier's rollouts at most (:func:`falsifier_rollouts_at_most`, with
+    ``starts = "falsifier"``), ``n_per_level`` for its starts (``explore``, and the fallback of
+    ``falsifier``; none for ``none``), ``n_per_level`` for a cross-entropy level and
+    ``n_per_level`` draws to estimate from (:func:`pfjax.rare.cross_entropy_is` keeps them)."""
     rare = spec.rare_event
     n = rare.n_per_level
     if rare.method == "mc":
         return 1, "one run"
     if rare.method == "subset":
         return n, f"a first level of n_per_level = {n}"
+    ce = f"a cross-entropy level of n_per_level = {n} and {n} draws to estimate from"
     if rare.starts == "none":
-        return n + 1, f"a cross-entropy level of n_per_level = {n} and a draw"
-    return 2 * n + 1, f"{n} for the starts, a cross-entropy level of {n} (n_per_level) and a draw"
+        return 2 * n, ce
+    fals = falsifier_rollouts_at_most(spec)
+    if fals:
+        f = spec.falsifier
+        return fals + 3 * n, (
+            f"{fals} for the falsifier at most ({f.n_restarts} x {f.steps} gradient rollouts and "
+            f"{1 + f.n_restarts} rays of {N_RAY}), {n} for the starts where it finds none, {ce}"
+        )
+    return 3 * n, f"{n} for the starts, {ce}"
 
 
 def check_budget(spec: StudySpec) -> None:
@@ -165,6 +193,8 @@ def _estimate(g, dim, method, rare, budget, seed, target, falsifier=lambda: None
 
 
 def _importance(g, dim, rare, budget, seed, target, falsifier):
+    """Importance sampling of one stratum within ``budget`` (at least :func:`rollouts_needed`, so
+    the levels and the estimate have ``2 n_per_level`` left whatever the starts spent)."""
     starts, used, how = _starts(g, dim, rare, seed, falsifier)
     est = cross_entropy_is(
         g,
@@ -174,7 +204,7 @@ def _importance(g, dim, rare, budget, seed, target, falsifier):
         n_per_level=rare.n_per_level,
         n_batch=rare.n_per_level,
         target_rel_error=target,
-        max_rollouts=max(budget - used, rare.n_per_level),
+        max_rollouts=max(budget - used, 2 * rare.n_per_level),
         seed=seed,
         batch=rare.batch,
     )
@@ -220,15 +250,38 @@ def _failure_points(spec: StudySpec, s: Stratum, inputs: list[Input], r: RareEst
     ]
 
 
+def combine(parts: list[tuple[float, RareEstimate]]) -> tuple[float, tuple[float, float], float]:
+    """``(p, 95 % interval, relative error)`` of strata ``(weight, estimate)`` (module docstring):
+    ``p = Σ w_s p_s``; one stratum keeps its own interval and relative error; otherwise the strata
+    with ``p_s > 0`` and a finite relative error give the lognormal interval of their sum, and
+    every other stratum adds ``w_s lo_s`` and ``w_s hi_s`` to its ends (the top cut at 1) and makes
+    the relative error infinite."""
+    if len(parts) == 1:
+        w, r = parts[0]
+        return w * r.p_fail, (w * r.ci95[0], min(1.0, w * r.ci95[1])), r.rel_error
+    p = sum(w * r.p_fail for w, r in parts)
+    known = [(w, r) for w, r in parts if r.p_fail > 0 and math.isfinite(r.rel_error)]
+    unknown = [(w, r) for w, r in parts if not (r.p_fail > 0 and math.isfinite(r.rel_error))]
+    p_known = sum(w * r.p_fail for w, r in known)
+    rel = math.sqrt(sum((w * r.p_fail * r.rel_error) ** 2 for w, r in known)) / p_known if known else math.inf
+    lo, hi = lognormal_interval(p_known, rel) if known else (0.0, 0.0)
+    lo += sum(w * r.ci95[0] for w, r in unknown)
+    hi += sum(w * r.ci95[1] for w, r in unknown)
+    return p, (lo, min(1.0, hi)), (math.inf if unknown else rel)
+
+
 def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None) -> dict:
     """One controller's failure probability under ``spec.rare_event`` (module docstring).
 
     Returns:
         ``{"p_fail", "ci95", "rel_error", "n_rollouts", "method", "wall_s", "status", "warning",
-        "strata", "failure_points"}``: ``ci95`` ``[lo, hi]``, ``wall_s`` s; ``status`` and
+        "strata", "failure_points"}``: ``ci95`` ``[lo, hi]``, ``wall_s`` s; ``rel_error``
+        infinite where a stratum's is (:func:`combine`); ``status`` and
         ``warning`` the checks' verdict (module docstring; each stratum's ``check`` beside it,
         whose second estimate's rollouts are not in ``n_rollouts``; subset simulation's
-        ``run_estimates`` per stratum); ``failure_points`` the
+        ``run_estimates`` per stratum); each stratum's ``falsifier_rollouts`` (rollouts, the
+        falsifier's gradient rollouts and its rays', 0 where it did not run; part of the stratum's
+        ``n_rollouts`` and of the budget); ``failure_points`` the
         importance-sampling proposal's modes in the inputs' config units (its weight beside each),
         the most likely failure points it found, each with its ``drivers`` (:func:`drivers`;
         ``[]`` for the other methods).
@@ -244,12 +297,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
         g = limit_state(spec, s, inputs, controller, seed=rare.seed, stream=k, counter=progress)
         fals = partial(falsifier_points, spec, s, inputs, controller, seed=rare.seed + k)
         parts.append((s, _estimate(g, dim, rare.method, rare, budget, rare.seed + k, rare.target_rel_error, fals)))
-    p = sum(s.weight * r.p_fail for s, r in parts)
-    var = sum((s.weight * r.p_fail * r.rel_error) ** 2 for s, r in parts if r.p_fail > 0)
-    rel = math.sqrt(var) / p if p > 0 else math.inf
-    ci = parts[0][1].ci95 if len(parts) == 1 else lognormal_interval(p, rel)
-    if p == 0:  # no failure seen: the interval's top is the strata's tops, weighted
-        ci = (0.0, min(1.0, sum(s.weight * r.ci95[1] for s, r in parts)))
+    p, ci, rel = combine([(s.weight, r) for s, r in parts])
     points, keys = [q for s, r in parts for q in _failure_points(spec, s, inputs, r)], config_keys(spec)
     checks = [(spec.paths[s.path_index].label, r.detail["check"]) for s, r in parts if "check" in r.detail]
     flagged = [(label, c) for label, c in checks if c["status"] != "ok"]
@@ -268,6 +316,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
                 "values": {keys[k]: v for k, v in s.values.items()},
                 "weight": s.weight,
                 **{k: v for k, v in r._asdict().items() if k != "detail"},
+                "falsifier_rollouts": int(r.detail.get("falsifier_rollouts", 0)),
                 **{k: r.detail[k] for k in ("check", "run_estimates") if k in r.detail},
             }
             for s, r in parts
