@@ -26,6 +26,7 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "path": ("", "path label"),
     "controller": ("", "controller name"),
     "run": ("", "run index (the random stream of the run)"),
+    "config_sha256": ("", "SHA-256 of the study's config (pfjax.provenance.config_hash)"),
     # sampled quantities
     "speed": ("m/s", "rear-axle speed"),
     "L": ("m", "wheelbase"),

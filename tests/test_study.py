@@ -216,3 +216,36 @@ def test_report_md_and_html_carry_the_headline_numbers(runs, summary):
             assert n in text, n
         assert sum(text.count(v) for v in ("does not hold", "not reproduced", "no verdict")) > 0
     assert html.count("<tr>") >= len(summary["verdicts"]) and "data:image/png;base64," in html
+
+
+def test_every_parquet_column_carries_a_unit(runs, summary):
+    """pfjax.tables: each column of each Parquet the study writes has field metadata ``unit``; the
+    CSV tables carry the config's SHA-256 as runs.parquet does."""
+    import pyarrow.parquet as pq
+
+    out = runs[0]
+    for name in ("runs.parquet", "stability.parquet"):
+        schema = pq.read_schema(out / name)
+        missing = [f.name for f in schema if b"unit" not in (f.metadata or {})]
+        assert not missing, (name, missing)
+    for name in ("runs.csv", "pi_readings.csv"):
+        df = pd.read_csv(out / name)
+        assert (df.config_sha256 == summary["config_sha256"]).all(), name
+
+
+def test_report_text_follows_the_config(runs, summary):
+    """The report states the configured slip, thresholds and settling band, never the defaults."""
+    import copy
+
+    from pfjax.report.document import to_markdown
+    from pfjax.reproduce.paper_report import report
+
+    s = copy.deepcopy(summary)
+    s["config"]["model"].update(beta_r_deg=3.0, beta_f_deg=2.0)
+    s["config"]["source"].update(line_delta_deg=6.0, K=[-5.0, -1.0])
+    s["config"]["sim"]["settle_band"] = 0.02
+    s["pi_filters"]["thresholds"] = {"sat": 0.1, "delta_deg": 0.25, "ss_factor": 2.0}
+    md = to_markdown(report(s, {"pi_readings": pd.read_csv(runs[0] / "pi_readings.csv")}))
+    for text in ("K = [-5, -1] and β_r = 3°, β_f = 2°", "saturates < 10 %", "within 0.25° of 6°", "factor 2 of"):
+        assert text in md, text
+    assert "settling (2 cm)" in md and "β_r = β_f = 5°" not in md and "of 10° on the line" not in md

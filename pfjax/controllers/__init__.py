@@ -24,6 +24,7 @@ from pfjax.controllers.linear import (
     state_feedback,
     state_feedback_params,
     table3_assignments,
+    table3_label,
 )
 from pfjax.controllers.registry import (
     REGISTRY,
@@ -91,4 +92,5 @@ __all__ = [
     "step",
     "style",
     "table3_assignments",
+    "table3_label",
 ]

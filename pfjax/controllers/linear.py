@@ -73,16 +73,25 @@ def pi_params(kp_d, ki_d, kp_theta, ki_theta, k_aw=0.0) -> PIParams:
 #: The 24 ways to read Table 3 as (kp_d, ki_d, kp_theta, ki_theta); which one the source used is
 #: decided by simulation in the paper-reproduction study. ``"d:P,I|theta:P,I"`` is the printed order
 #: read as Kp1, Ki1, Kp2, Ki2 with e1 = d.
-def table3_assignments() -> dict[str, PIParams]:
+def table3_assignments(values=TABLE3_GAINS) -> dict[str, PIParams]:
+    """The 24 readings of Table 3's four printed ``values`` (default the published ones), labelled
+    by :func:`table3_label`, in the order of :func:`itertools.permutations` of the printed order."""
     from itertools import permutations
 
-    names = ("kp_d", "ki_d", "kp_theta", "ki_theta")
     out = {}
     for perm in permutations(range(4)):
-        gains = {names[j]: TABLE3_GAINS[perm[j]] for j in range(4)}
-        label = ",".join(f"{n}={gains[n]:g}" for n in names)
-        out[label] = pi_params(**gains)
+        gains = {n: float(values[perm[j]]) for j, n in enumerate(PI_GAIN_NAMES)}
+        out[table3_label(gains)] = pi_params(**gains)
     return out
+
+
+#: The PI's gains in the order Table 3's readings assign them.
+PI_GAIN_NAMES = ("kp_d", "ki_d", "kp_theta", "ki_theta")
+
+
+def table3_label(gains) -> str:
+    """``"kp_d=…,ki_d=…,kp_theta=…,ki_theta=…"``: the label of a reading of Table 3."""
+    return ",".join(f"{n}={gains[n]:g}" for n in PI_GAIN_NAMES)
 
 
 def _pi_output(p: PIParams, c: Array, obs: Observation) -> Array:

@@ -50,7 +50,7 @@ def hurwitz(inp: Inputs, add: Add) -> None:
 def table3(inp: Inputs, add: Add) -> None:
     """Table 3: the reading of the PI gains."""
     pi_df = inp.pi_df
-    claim = "Table 3: GA-optimal PI gains 1.6390, 0.0230, 39.5204, 11.6124 (row labels lost)"
+    claim = f"Table 3: GA-optimal PI gains {', '.join(f'{g:.4f}' for g in inp.src['table3'])} (row labels lost)"
     f = pi_df.attrs["filters"]
     counts = "; ".join(f"{k}: {v} of 24" for k, v in f["passing"].items())
     add(

@@ -22,7 +22,8 @@ from pfjax.paths import (
     global_parameter,
     shapes,
 )
-from pfjax.reproduce.paper_runs import fixed_path, sim_config
+from pfjax.reproduce.paper_config import sim_config
+from pfjax.reproduce.paper_runs import fixed_path, source_pi
 from pfjax.sim import (
     STATUS_NAMES,
     constant_slip,
@@ -56,9 +57,10 @@ def source_eigen_maxima(cfg: dict, K, params) -> dict:
 
 
 def _grid_runs(cfg: dict, BR, BF):
-    """The line test with the source's K at every (beta_r, beta_f) of the grid (deg), unrecorded."""
+    """The line test with the source's K (``source.K``) at every (beta_r, beta_f) of the grid (deg),
+    unrecorded."""
     st, m = cfg["stability"], cfg["model"]
-    gains = C.state_feedback_params(C.PAPER_K)
+    gains = C.state_feedback_params(cfg["source"]["K"])
     # The robot advances along the line at up to v / cos(beta_r): make the line long enough that
     # no run reaches its end within the horizon (the default line is 80 m).
     line = shapes.line(u_max=20.0 + 1.5 * m["v"] * st["horizon"] / math.cos(math.radians(st["grid_max_deg"])))
@@ -138,14 +140,15 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
 
 
 def part_long_pi(cfg) -> dict:
-    """The PI's line test run for ``long_horizon`` s: its steady |d| once settled, and when it
-    settles (|d| within 5 % of its final value from then on)."""
+    """The source's PI (:func:`pfjax.reproduce.paper_runs.source_pi`) on the line test for
+    ``long_horizon`` s: its steady |d| once settled, and when it settles (|d| within 5 % of its final
+    value from then on)."""
     h, m = cfg["long_horizon"], cfg["model"]
     line = shapes.line(u_max=20.0 + 1.5 * m["v"] * h)  # long enough not to end within the horizon
     sc = make_scenario(
         line,
         paths.entry("line").start_pose,
-        C.pi_params(**C.PAPER_PI),
+        C.pi_params(**source_pi(cfg)),
         slip=constant_slip(math.radians(m["beta_r_deg"]), math.radians(m["beta_f_deg"])),
         v=m["v"],
         L=m["L"],

@@ -5,7 +5,9 @@ metrics' windows), ``synthesis`` (the mixed H2/Hinf objective), ``source`` (the 
 values, compared against and never used to tune), ``stability`` (the (beta_r, beta_f) grid and
 its simulation cross-check), ``long_horizon`` and ``ga`` (Table 2's GA readings). Every key is
 optional; the defaults are the study's published settings. Loaded by :func:`load` with the same
-``--set key=value`` syntax and one-line :class:`pfjax.config.ConfigError` as the Monte Carlo study.
+``--set key=value`` syntax and one-line :class:`pfjax.config.ConfigError` as the Monte Carlo study;
+every simulation setting, synthesis weight, GA option and size the study uses is checked there,
+before any work.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from pfjax.config import POSITIVE, ConfigError, ConfigModel, Real, load_model
-from pfjax.errors import MAX_SEED, InputError
+from pfjax.errors import MAX_SEED, InputError, renamed
 from pfjax.resources import check_memory, check_steps, run_bytes
 
 #: ``--quick``: a 6 s horizon (the sine analysis needs > 5 s), 10 ms steps, the controller sampled
@@ -64,7 +66,9 @@ class PaperSynthesis(ConfigModel):
 
 
 class PaperSource(ConfigModel):
-    """The source's published values (compared against, never used to tune)."""
+    """The source's published values (compared against, never used to tune; ``K`` and ``table3`` are
+    also the gains the source's controllers run with: the "source's K" and the Table 3 PI, in the
+    adopted reading of :data:`pfjax.controllers.PAPER_PI`, and its 24 readings)."""
 
     K: list[Real] = Field([-2.7381, -2.0772], min_length=2, max_length=2, description="state feedback [1/m, -]")
     gamma_inf: Real = Field(1.1, description="published Hinf bound [-]")
@@ -78,6 +82,12 @@ class PaperSource(ConfigModel):
     eig_max_re: list[Real] = Field(
         [-1.3185, -5.1930], min_length=2, max_length=2, description="largest real parts, slow and fast [1/s]"
     )
+
+    @model_validator(mode="after")
+    def _check(self):
+        if len(set(self.table3)) != len(self.table3):  # the 24 readings would not be 24
+            raise ValueError(f"table3: the four values must differ (24 readings), got {self.table3}")
+        return self
 
 
 class PaperStability(ConfigModel):
@@ -118,27 +128,127 @@ class PaperStudy(ConfigModel):
     @model_validator(mode="after")
     def _check(self):
         s, st = self.sim, self.stability
-        if s.horizon < s.dt:
-            raise ValueError(f"sim.horizon: need dt <= horizon, got {s.dt:g}, {s.horizon:g}")
-        if st.horizon < s.dt:
-            raise ValueError(f"stability.horizon: must be >= sim.dt ({s.dt:g} s), got {st.horizon:g}")
         if s.steady_window > s.horizon:
             raise ValueError(f"sim.steady_window: must be in (0, sim.horizon], got {s.steady_window:g}")
-        for section in ("sim", "stability"):
+        sim = self.model_dump(mode="json")
+        # every simulation setting the study builds, built here: a bad horizon or step is named now
+        for key, horizon in (
+            ("sim.horizon", s.horizon),
+            ("stability.horizon", st.horizon),
+            ("long_horizon", self.long_horizon),
+        ):
             try:
-                check_steps(getattr(self, section).horizon, s.dt)
+                sim_config(sim, horizon=horizon)
             except InputError as e:
-                raise ValueError(f"{section}.horizon: {str(e).removeprefix('dt: ')}") from None
+                raise ValueError(str(_named(e, key))) from None
+        from pfjax.synthesis.lmi import check_weights
+
+        try:
+            check_weights(self.synthesis.alpha, self.synthesis.beta)
+        except InputError as e:
+            raise ValueError(str(renamed(renamed(e, "alpha", "synthesis.alpha"), "beta", "synthesis.beta"))) from None
+        _check_ga(self.ga)
         return self
 
 
+def _named(e: InputError, horizon_key: str) -> InputError:
+    """A :class:`pfjax.sim.SimConfig` error told by the study's key: the horizon (or the step count
+    ``horizon / dt``) as ``horizon_key``, any other setting as ``sim.<setting>``."""
+    if e.key in ("horizon", "dt"):
+        return renamed(e, e.key, horizon_key)
+    return renamed(e, e.key, f"sim.{e.key}") if e.key else e
+
+
+def _check_ga(ga: PaperGA) -> None:
+    """``ga.scenario`` names a tuning scenario and the GA's options are valid (named ``ga.<key>``)."""
+    from pfjax.tuning.ga import GAOptions, validate_options
+    from pfjax.tuning.problem import scenario_sets
+
+    sets = scenario_sets()
+    if ga.scenario not in sets and not (Path(ga.scenario).suffix == ".toml" and Path(ga.scenario).is_file()):
+        raise ValueError(
+            f"ga.scenario: value {ga.scenario!r}, expected one of {', '.join(sets)} or an existing study .toml"
+        )
+    try:
+        validate_options(GAOptions(population_size=ga.population, generations=ga.generations))
+    except InputError as e:
+        raise ValueError(
+            str(renamed(renamed(e, "population_size", "ga.population"), "generations", "ga.generations"))
+        ) from None
+
+
+def sim_config(cfg: dict, **changes):
+    """The :class:`pfjax.sim.SimConfig` of the study's runs from its config ``cfg`` (a dumped
+    :class:`PaperStudy`): its ``sim`` section, ``control_every = 0`` as continuous, ``changes`` applied."""
+    from pfjax.sim.settings import SimConfig
+
+    s = cfg["sim"]
+    base = dict(
+        dt=s["dt"],
+        horizon=s["horizon"],
+        control_every=None if s["control_every"] == 0 else s["control_every"],
+        settle_band=s["settle_band"],
+        steady_window=s["steady_window"],
+    )
+    base.update(changes)
+    return SimConfig(**base)
+
+
+#: Bytes one point of the eigenvalue scan (``stability.eig_n`` squared points) takes at its peak:
+#: the slip grid, the equilibrium and both linearisations with their eigenvalues, XLA's temporaries
+#: and the sorted real parts. Measured: 290-345 B per point at 2.3-9 x 10^6 points.
+EIG_POINT_BYTES = 400
+#: Recorded runs held at once by the source tests: the 24 readings of Table 3 on the three tests
+#: (one batch per test), their 24 line traces and the 3 x 6 runs of the controllers.
+RECORDED_RUNS = 3 * 24 + 24 + 3 * 6
+
+
 def check_resources(config: PaperStudy) -> None:
-    """:class:`pfjax.config.ConfigError` naming ``stability.n`` when the grid would not fit in memory."""
-    n_steps = check_steps(config.stability.horizon, config.sim.dt)
+    """:class:`pfjax.config.ConfigError` naming the key whose size would not fit in memory:
+    ``stability.n`` (the simulated grid), ``stability.eig_n`` (the eigenvalue scan), ``sim.horizon``
+    (the recorded runs of the source tests), ``long_horizon`` (the PI's recorded long run) and
+    ``ga.population`` (a GA generation on a named scenario set)."""
+    dt = config.sim.dt
     n = config.stability.n
+    n_steps = check_steps(config.stability.horizon, dt)
     check_memory(
         "stability.n", 2 * n**2 * run_bytes(n_steps), f"a stability grid of {n**2:.3g} runs", "lower stability.n"
     )
+    m = config.stability.eig_n
+    check_memory(
+        "stability.eig_n", m**2 * EIG_POINT_BYTES, f"an eigenvalue scan of {m**2:.3g} points", "lower stability.eig_n"
+    )
+    check_memory(
+        "sim.horizon",
+        2 * RECORDED_RUNS * run_bytes(check_steps(config.sim.horizon, dt), record=True),
+        f"{RECORDED_RUNS} recorded runs of {config.sim.horizon:g} s",
+        "lower sim.horizon or raise sim.dt",
+    )
+    check_memory(
+        "long_horizon",
+        2 * run_bytes(check_steps(config.long_horizon, dt), record=True),
+        f"a recorded run of {config.long_horizon:g} s",
+        "lower long_horizon",
+    )
+    _check_ga_memory(config.ga)
+
+
+def _check_ga_memory(ga: PaperGA) -> None:
+    """A GA generation simulates the whole population on every path of the scenario set at once
+    (:func:`pfjax.tuning.problem.tune` refuses more than the budget); a study .toml's runs are
+    sized by that study and checked when it is read."""
+    from pfjax.sim.settings import SimConfig
+    from pfjax.tuning.problem import scenario_sets
+
+    sets = scenario_sets()
+    if ga.scenario in sets:
+        runs = ga.population * len(sets[ga.scenario])
+        check_memory(
+            "ga.population",
+            2 * runs * run_bytes(SimConfig(record=False).n_steps),
+            f"a GA population of {ga.population} x {len(sets[ga.scenario])} runs",
+            "lower ga.population",
+        )
 
 
 def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: bool = False) -> PaperStudy:
@@ -165,4 +275,5 @@ __all__ = [
     "PaperSynthesis",
     "check_resources",
     "load",
+    "sim_config",
 ]

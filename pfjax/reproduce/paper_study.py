@@ -27,6 +27,41 @@ from pfjax.reproduce.paper_runs import fixed_path, part_paper_runs, part_pi_read
 from pfjax.sim.scenario import PAPER_TESTS
 from pfjax.tables import write_parquet
 
+#: Units of the study's own Parquet columns (beside :data:`pfjax.tables.COLUMNS`): column -> (unit,
+#: description). Angles in rad unless named ``_deg``; the trackers' gains carry the controller's name.
+UNITS: dict[str, tuple[str, str]] = {
+    # runs.parquet: the gains of each row's controller (NaN for another controller's)
+    "gain_k_d": ("rad/m", "state feedback: gain on d (delta = k_d d + k_theta theta_e)"),
+    "gain_k_theta": ("rad/rad", "state feedback: gain on theta_e"),
+    "gain_kp_d": ("rad/m", "PI: proportional gain on d"),
+    "gain_ki_d": ("rad/(m s)", "PI: integral gain on d"),
+    "gain_kp_theta": ("rad/rad", "PI: proportional gain on theta_e"),
+    "gain_ki_theta": ("1/s", "PI: integral gain on theta_e"),
+    "gain_stanley_k": ("1/s", "Stanley: cross-track gain"),
+    "gain_stanley_k_soft": ("m/s", "Stanley: softening speed"),
+    "gain_pure_pursuit_ld_gain": ("s", "pure pursuit: look-ahead time"),
+    "gain_pure_pursuit_ld_min": ("m", "pure pursuit: minimum look-ahead distance"),
+    "gain_rear_wheel_k_theta": ("1/m", "rear-wheel feedback: gain on theta_e"),
+    "gain_rear_wheel_k_d": ("1/m^2", "rear-wheel feedback: gain on d"),
+    "final_d": ("m", "lateral error at the end of the run, left positive"),
+    "final_theta_e": ("rad", "heading error at the end of the run"),
+    "final_delta": ("rad", "applied steering at the end of the run"),
+    "max_abs_delta_cmd": ("rad", "largest commanded steering |delta_cmd| (before saturation)"),
+    "max_abs_delta": ("rad", "largest applied steering |delta| (after saturation)"),
+    "delta_max": ("rad", "steering limit"),
+    # stability.parquet: one row per (beta_r, beta_f) of the grid, with the source's K
+    "source_max_re": ("1/s", "largest real part of the source's linearisation at [0, -beta_r]"),
+    "eq_exists": ("", "the true equilibrium exists (|beta_r + beta_f| < delta_max)"),
+    "eq_d": ("m", "true equilibrium: lateral error d*"),
+    "eq_theta_e": ("rad", "true equilibrium: heading error theta_e*"),
+    "eq_delta": ("rad", "true equilibrium: steering delta*"),
+    "eq_max_re": ("1/s", "largest real part of the eigenvalues at the true equilibrium"),
+    "eq_hurwitz": ("", "the true equilibrium is Hurwitz"),
+    "sim_status": ("", "run status name of the simulated line test"),
+    "sim_final_d": ("m", "lateral error at the end of the simulated line test"),
+    "sim_converged": ("", "the simulation ends at the predicted equilibrium (within stability.tol_d, tol_theta_deg)"),
+}
+
 
 def n_steps(config: PaperStudy) -> int:
     """The progress bar's total: the source tests per controller, the PI readings, the stability
@@ -83,10 +118,12 @@ def _write_tables(tmp: Path, cfg: dict, stamp: dict, rows: list[dict], pi_df, st
     runs = pd.DataFrame(rows)
     runs.insert(0, "config_sha256", stamp["config_sha256"])
     meta = parquet_metadata(cfg, cfg["seed"])
-    write_parquet(runs, tmp / "runs.parquet", meta)
+    write_parquet(runs, tmp / "runs.parquet", meta, units=UNITS)
     runs.to_csv(tmp / "runs.csv", index=False)
-    pi_df.to_csv(tmp / "pi_readings.csv", index=False)
-    write_parquet(stab_df, tmp / "stability.parquet", meta)
+    pi_df.assign(config_sha256=stamp["config_sha256"])[["config_sha256", *pi_df.columns]].to_csv(
+        tmp / "pi_readings.csv", index=False
+    )
+    write_parquet(stab_df, tmp / "stability.parquet", meta, units=UNITS)
 
 
 def run(config: PaperStudy, output, pbar) -> dict:
@@ -129,4 +166,4 @@ def run(config: PaperStudy, output, pbar) -> dict:
     return summary
 
 
-__all__ = ["n_steps", "run", "write_figures"]
+__all__ = ["UNITS", "n_steps", "run", "write_figures"]
