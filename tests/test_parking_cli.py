@@ -243,6 +243,14 @@ def test_study_quick(tmp_path):
     assert {"status", "switches", "time_s"} <= set(cases.columns)
     mc = pd.read_parquet(out / "montecarlo.parquet")
     assert len(mc) == 3 * s["config"]["montecarlo"]["n_runs"]
+    from pfjax.parking.study import TABLES
+    from pfjax.tables import units
+
+    for name in TABLES:  # every column of every table carries its unit and description
+        path = out / f"{name}.parquet"
+        described = units(path)
+        assert set(described) == set(pd.read_parquet(path).columns), name
+        assert all(d["description"] for d in described.values()), name
     for f in ("cases_parallel", "garage_xs", "search", "start_map", "montecarlo", "histories_D"):
         assert (out / "figures" / f"{f}.png").stat().st_size > 1000 and (out / "figures" / f"{f}.svg").exists()
     md, html = (out / "report.md").read_text(), (out / "report.html").read_text()

@@ -30,15 +30,17 @@ RUN_UNITS = {
     "error": _ERROR,
     "distance_m": "m",
 }
+#: The search's fitness J = 1 / (t_e + w e): the inverse of a time (--weight w in s/m).
+_FITNESS = "1/s (J = 1/(t_e + --weight x error))"
 #: The unit of each number ``pfjax parking-search --json`` prints.
 SEARCH_UNITS = {
     **_POSE,
     "xs": "m",
     "alpha1": "1",
     "alpha2": "1",
-    "fitness": "s (J: time plus --weight x error)",
-    "history_best_fitness": "s",
-    "history_mean_fitness": "s",
+    "fitness": _FITNESS,
+    "history_best_fitness": _FITNESS,
+    "history_mean_fitness": _FITNESS,
     "time_s": "s",
     "error": _ERROR,
 }

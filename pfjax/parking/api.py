@@ -12,7 +12,8 @@ Nothing is simulated before every argument has been checked. The results are com
 precision JAX is configured for; the command line enables float64 (``jax_enable_x64``), and a
 caller that does the same gets the command line's numbers.
 
-Only :mod:`pfjax.errors` is imported here at module level: importing :mod:`pfjax.parking` stays cheap.
+Only :mod:`pfjax.errors` and :mod:`pfjax.parking.limits` are imported here at module level:
+importing :mod:`pfjax.parking` stays cheap.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from typing import Any, NamedTuple
 
 from pfjax import errors
 from pfjax.errors import InputError
+from pfjax.parking.limits import MAX_PERIODS
 
 __all__ = ["run", "search"]
 
@@ -31,8 +33,6 @@ __all__ = ["run", "search"]
 DIRECTIONS = {"forward": 1, "backward": -1}
 #: Search methods :func:`search` accepts.
 METHODS = ("ga", "grid")
-#: Most scanner periods one run may take (``t_max / scan_period``; the simulator's loop bound).
-MAX_PERIODS = 20000
 #: Most scanner periods one search may simulate: its runs (``n^3`` on the grid, at most
 #: ``population * (generations + 1)`` for the GA) times ``t_max / scan_period`` each. Measured on a
 #: 2-core machine at the defaults (200 s / 0.1 s): the grid's 512 runs take 1.4 s and its 1,728
@@ -334,15 +334,19 @@ def search(
 def _check_work(method: str, n: int, generations: int, population: int, t_max: float, scan_period: float) -> None:
     """:class:`InputError` when the search would simulate more than :data:`MAX_SEARCH_PERIODS`
     scanner periods (named ``n`` on the grid, ``population/generations`` for the GA)."""
-    periods = math.ceil(t_max / scan_period)
     if method == "grid":
-        key, runs, how = "n", n**3, f"n^3 = {n}^3 = {n**3}"
+        check_search_work("n", n**3, f"n^3 = {n}^3 = {n**3}", t_max, scan_period)
     else:
         runs = population * (generations + 1)
-        key, how = (
-            "population/generations",
-            f"population x (generations + 1) = {population} x {generations + 1} = {runs}",
-        )
+        how = f"population x (generations + 1) = {population} x {generations + 1} = {runs}"
+        check_search_work("population/generations", runs, how, t_max, scan_period)
+
+
+def check_search_work(key: str, runs: int, how: str, t_max: float, scan_period: float) -> None:
+    """:class:`InputError` naming ``key`` when ``runs`` runs of ``ceil(t_max / scan_period)``
+    scanner periods each exceed :data:`MAX_SEARCH_PERIODS` (``how``: the runs' count as the message
+    spells it). The search's check here and the parking study's (:mod:`pfjax.parking.study_config`)."""
+    periods = math.ceil(t_max / scan_period)
     if runs * periods > MAX_SEARCH_PERIODS:
         raise InputError(
             f"{key}: the search may simulate at most {MAX_SEARCH_PERIODS:.0e} scanner periods (runs x t_max / "

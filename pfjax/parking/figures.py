@@ -85,8 +85,9 @@ def histories_figure(traj, result, control, title):
     return fig
 
 
-def search_figure(ga: dict, grid_table: dict, n: int):
-    """GA best/mean fitness per generation, and the grid's best fitness over α₂ for each (X_s, α₁)."""
+def search_figure(ga: dict, grid_table: dict, n: int, weight: float = 100.0):
+    """GA best/mean fitness per generation, and the grid's best fitness over α₂ for each (X_s, α₁)
+    (``weight``: w of J = 1/(t_e + w e), s/m)."""
     import matplotlib.pyplot as plt
 
     fig, axs = plt.subplots(1, 2, figsize=(10, 4))
@@ -94,7 +95,7 @@ def search_figure(ga: dict, grid_table: dict, n: int):
     axs[0].plot(ga["history_mean_fitness"], label="GA population mean")
     axs[0].axhline(grid_table["fitness"].max(), color="k", ls="--", lw=0.8, label=f"grid {n}³ best")
     axs[0].set_xlabel("generation")
-    axs[0].set_ylabel("J = 1/(t_e + 100 e) [1/s]")
+    axs[0].set_ylabel(f"J = 1/(t_e + {weight:g} e) [1/s]")
     axs[0].legend(fontsize=8)
     axs[0].grid(alpha=0.3)
     F = grid_table["fitness"].reshape(n, n, n).max(axis=2)

@@ -117,14 +117,20 @@ def decide(c: Carry, status, p: RunParams, omap: ObstacleMap, cfg: ParkingConfig
     return decided, status
 
 
-def stop_code(new, t_new, cfg: ParkingConfig):
-    """The status after one RK4 step to state ``new`` at ``t_new`` (s): the first stop that holds."""
+#: The timeout holds from ``t_max`` less this fraction of an RK4 step (the rounding of the accumulated time).
+TIME_SLACK = 1e-6
+
+
+def stop_code(new, t_new, h, cfg: ParkingConfig):
+    """The status after one RK4 step of ``h`` (s) to state ``new`` at ``t_new`` (s): the first stop
+    that holds; the timeout from ``t_new >= t_max - TIME_SLACK * h`` on (relative to the step, so a
+    run of any scanner period times out at ``t_max``, never one step before)."""
     return jnp.select(
         [
             ~jnp.all(jnp.isfinite(new)),
             jnp.abs(new[2]) >= 0.5 * math.pi,
             parking_error(new[0], new[1], new[2]) < cfg.tol,
-            t_new >= cfg.t_max - 1e-9,
+            t_new >= cfg.t_max - TIME_SLACK * h,
         ],
         [int(Status.NONFINITE), int(Status.HEADING_LIMIT), int(Status.CONVERGED), int(Status.TIMEOUT)],
         int(Status.RUNNING),
@@ -149,7 +155,7 @@ def integrate(c: Carry, status, p: RunParams, cfg: ParkingConfig) -> tuple[Carry
         return (
             jnp.where(keep, new, state),
             jnp.where(run, t + h, t),
-            jnp.where(run, stop_code(new, t + h, cfg), st),
+            jnp.where(run, stop_code(new, t + h, h, cfg), st),
             dist + jnp.where(run & moving, p.control.speed * h, 0.0),
             jnp.maximum(left - h, 0.0),
         )
@@ -171,6 +177,8 @@ def _record(p: RunParams, s: loop.Sample, _state) -> Trajectory:
 
 
 def _finish(p: RunParams, r: loop.Run):
+    """The run's result; a run still going when the loop ends has reached ``t_max`` (``timeout``):
+    ``cfg.max_samples`` and a recording's ``n_periods`` cover :func:`pfjax.parking.runs.periods_needed`."""
     c = r.aux
     status = jnp.where(r.status == Status.RUNNING, int(Status.TIMEOUT), r.status).astype(c.n_switches.dtype)
     x, y, th = c.state[0], c.state[1], c.state[2]

@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pandas as pd
 
+from pfjax.parking.runs import SEARCH_MAX_SWITCHES
 from pfjax.report import document as D
+from pfjax.reproduce.parking import SOURCE_PAUSE_S, TIME_TOL
 from pfjax.reproduce.verdict import Verdict, verdict_cells
 
 
@@ -77,7 +79,8 @@ def _header(s: dict) -> list[D.Block]:
             f"{sim['stuck_travel']:g} m of travel over the last {sim['stuck_switches']} legs between reversals: "
             "reversing in place), timed out, at the heading limit, non-finite, or not started (the rectangle meets "
             "an obstacle at the start pose); only the search fails a candidate beyond "
-            f"{s['config']['search']['max_switches']} switches (the source's search cut-off).",
+            f"{s['config']['search']['max_switches']} switches (search.max_switches; the source's search "
+            f"cuts off beyond {SEARCH_MAX_SWITCHES}).",
             style="note",
         )
     ]
@@ -88,9 +91,10 @@ def _verdicts(s: dict) -> list[D.Block]:
     return [
         D.Heading("Verdicts on the source's reported outcomes"),
         D.Paragraph(
-            "One row per outcome and criterion. Times count as reproduced within ±10 %. The source's experiments "
-            f"stood {s['config']['experiment']['pause']:g} s at each reversal; pfjax models that stop as an option "
-            "and shows both."
+            f"One row per outcome and criterion. Times count as reproduced within ±{100 * TIME_TOL:g} %. The "
+            f"source's experiments stood {SOURCE_PAUSE_S:g} s at each reversal; pfjax models that stop as an "
+            f"option ({s['config']['experiment']['pause']:g} s here, experiment.pause) and shows runs without and "
+            "with it."
         ),
         D.Table(header, rows),
     ]

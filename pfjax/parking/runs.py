@@ -16,6 +16,7 @@ import jax.numpy as jnp
 
 from pfjax.parking.calibrate import A_F
 from pfjax.parking.geometry import L1_WIDTH, L2_LENGTH, RobotShape, robot_shape
+from pfjax.parking.limits import MAX_PERIODS
 from pfjax.parking.model import ControlParams, control_params
 from pfjax.parking.schedules import pad_schedule
 
@@ -27,7 +28,7 @@ class Status(IntEnum):
 
     RUNNING = -1  #: internal only (the loop's live code)
     CONVERGED = 0  #: |x| + sqrt(y² + tan²θ) < tol
-    TIMEOUT = 1  #: not converged after t_max (200 s)
+    TIMEOUT = 1  #: not converged by t_max (200 s)
     TOO_MANY_SWITCHES = 2  #: more than max_switches direction switches (the GA search's cut-off only)
     HEADING_LIMIT = 3  #: |θ| ≥ π/2, where the controller is undefined
     NONFINITE = 4  #: the state became NaN or infinite
@@ -54,7 +55,10 @@ class ParkingConfig:
             None: no cut-off. The GA search uses 10 (:data:`SEARCH_MAX_SWITCHES`).
         tol: stop when ``|x| + sqrt(y² + tan²θ) < tol``.
         n_sub: RK4 steps per scanner period (0.05 s at T_s = 0.1 s; n_sub = 10 agrees, see tests).
-        max_samples: hard loop bound (scanner periods).
+        max_samples: the loop's bound, scanner periods: at least :func:`periods_needed` of every
+            run, so that each run ends by an event or at ``t_max`` (the default,
+            ``MAX_PERIODS + 1``, covers every ``t_max / scan_period <= MAX_PERIODS`` the entry
+            points accept; :func:`pfjax.parking.simulate.run_many` refuses a run that needs more).
         stuck_switches: the legs between reversals over which travel is measured (``stuck``,
             :mod:`pfjax.parking.simulate`); None disables the status.
         stuck_travel: m, travel over those legs below which a run is stuck (0.1 m: 2 s at the
@@ -66,7 +70,7 @@ class ParkingConfig:
     max_switches: int | None = None
     tol: float = 0.02
     n_sub: int = 2
-    max_samples: int = 20000
+    max_samples: int = MAX_PERIODS + 1
     stuck_switches: int | None = 4
     stuck_travel: float = 0.1
     log_capacity: int = 32
@@ -74,6 +78,12 @@ class ParkingConfig:
     @property
     def log_len(self) -> int:
         return self.log_capacity if self.max_switches is None else self.max_switches + 1
+
+
+def periods_needed(t_max: float, scan_period: float) -> int:
+    """The most scanner periods a run of timeout ``t_max`` (s) at period ``scan_period`` (s) takes:
+    ``ceil(t_max / scan_period)``, and one more for the rounding of the accumulated time."""
+    return math.ceil(t_max / scan_period) + 1
 
 
 #: The GA search's cut-off (docs/reproductions/parking.md §5): more than 10 switches and the candidate counts as failed.

@@ -15,7 +15,8 @@ with a status:
   again before getting anywhere (the source's case B: "switches repeatedly in place"). Travel is
   the progress measure: while it moves, the source's Lyapunov function decreases (its Theorem), so
   a run that keeps moving keeps progressing, however many times it reverses;
-* ``timeout``: ``t ≥ t_max`` (200 s);
+* ``timeout``: ``t ≥ t_max`` (200 s; the loop's bound :attr:`ParkingConfig.max_samples` covers
+  every run's ``t_max / scan_period``, so no run ends before ``t_max`` other than by an event);
 * ``start_overlap``: the rectangle meets an obstacle at the start pose (a start in a sweep over
   poses; a single run's start is refused with an error instead, :func:`pfjax.parking.maps.check_start`);
 * ``too_many_switches``: only with a cut-off ``max_switches`` (the GA search's: the source's
@@ -51,6 +52,7 @@ import math
 import jax
 import numpy as np
 
+from pfjax.errors import InputError
 from pfjax.numerics import compiler
 from pfjax.parking.geometry import ObstacleMap
 from pfjax.parking.maps import PARALLEL, to_obstacle_map
@@ -64,6 +66,7 @@ from pfjax.parking.runs import (  # noqa: F401  (re-exported: the run's types, s
     Status,
     SwitchCause,
     Trajectory,
+    periods_needed,
     run_params,
     stack_params,
 )
@@ -87,7 +90,8 @@ run_batch = compiler.jit(jax.vmap(run, in_axes=(0, None, None)), static_argnums=
 
 
 def n_periods_for(cfg: ParkingConfig, scan_period: float) -> int:
-    return int(math.ceil(cfg.t_max / scan_period)) + 1
+    """Scanner periods to record for a run at ``scan_period`` (s): :func:`periods_needed`."""
+    return periods_needed(cfg.t_max, scan_period)
 
 
 def _take(tree, sl):
@@ -104,8 +108,20 @@ def run_many(
     desc: str = "parking runs",
 ) -> RunResult:
     """Batched runs in jitted chunks of exactly ``chunk`` runs (short chunks padded by repeating the last run,
-    so every call with the same ``chunk`` reuses one compilation); NumPy out, in input order."""
+    so every call with the same ``chunk`` reuses one compilation); NumPy out, in input order.
+
+    Raises:
+        InputError: (``scan_period``) a run needs more scanner periods than ``cfg.max_samples``
+            (:func:`periods_needed`): it would be cut off before ``t_max``.
+    """
     n = int(params.pose0.shape[0])
+    shortest = float(np.min(np.asarray(params.scan_period))) if n else math.inf
+    if n and periods_needed(cfg.t_max, shortest) > cfg.max_samples:
+        raise InputError(
+            f"scan_period: a run of t_max {cfg.t_max:g} s at {shortest:g} s takes up to "
+            f"{periods_needed(cfg.t_max, shortest)} scanner periods, more than max_samples = {cfg.max_samples}",
+            "scan_period",
+        )
     size = chunk
     outs = []
     starts = range(0, n, size)

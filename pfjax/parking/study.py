@@ -33,6 +33,86 @@ from pfjax.tables import write_parquet
 #: the Parquet tables of a study folder
 TABLES = ("cases", "assumptions", "grid", "start_map", "montecarlo")
 
+_STATUS = (
+    "",
+    "run status: converged, timeout, too_many_switches, heading_limit, nonfinite, stuck, start_overlap "
+    "(pfjax.parking.runs.Status)",
+)
+_ERROR = ("m", "end error |x| + sqrt(y^2 + tan^2 theta) (the source's measure)")
+#: Each parking table's columns: unit and description (units: "1" dimensionless, "" text, flag or code).
+COLUMNS: dict[str, dict[str, tuple[str, str]]] = {
+    "cases": {
+        "case": ("", "source case A-D, or the garage try"),
+        "map": ("", "map: parallel or garage"),
+        "start": ("", "start pose (x m, y m, theta deg)"),
+        "direction": ("", "first travel direction"),
+        "schedule": ("1", "alpha at the start and after each switch, comma-separated"),
+        "xs": ("m", "garage switching point X_s (NaN: no garage rule)"),
+        "status": _STATUS,
+        "converged": ("", "the run parked"),
+        "time_s": ("s", "end time (parking time when converged)"),
+        "switches": ("", "direction switches"),
+        "final_x": ("m", "final x"),
+        "final_y": ("m", "final y"),
+        "final_theta_deg": ("deg", "final heading"),
+        "error": _ERROR,
+        "distance_m": ("m", "distance travelled"),
+        "switch_times_s": ("s", "times of the logged switches, comma-separated"),
+    },
+    "assumptions": {
+        "front": ("m", "a_f, the rectangle's reach ahead of the wheel axle"),
+        "zone": ("", "part of the rectangle checked toward the travel direction: middle, axle, whole"),
+        "scan_period": ("s", "scanner period"),
+        "decision_delay": ("", "the scanner decides on the pose one period old"),
+        "lag": ("", "yaw-rate PI loop on"),
+        "pause": ("s", "time standing still at each reversal"),
+        "case": ("", "source case A-D"),
+        "status": _STATUS,
+        "switches": ("", "direction switches"),
+        "time_s": ("s", "end time (parking time when converged)"),
+        "min_leg_m": ("m", "shortest travel between two reversals (NaN: no reversal)"),
+    },
+    "grid": {
+        "xs": ("m", "switching point X_s"),
+        "alpha1": ("1", "gain factor alpha from the 1st switch"),
+        "alpha2": ("1", "gain factor alpha from the 2nd switch"),
+        "status": _STATUS,
+        "time_s": ("s", "end time t_e (parking time when converged)"),
+        "switches": ("", "direction switches"),
+        "error": _ERROR,
+        "fitness": ("1/s", "J = 1/(t_e + search.weight x error); 0 for a failed run"),
+    },
+    "start_map": {
+        "x0": ("m", "start x"),
+        "theta0_deg": ("deg", "start heading"),
+        "y0": ("m", "start y"),
+        "xs": ("m", "best switching point X_s on the grid"),
+        "alpha1": ("1", "best alpha from the 1st switch"),
+        "alpha2": ("1", "best alpha from the 2nd switch"),
+        "fitness": ("1/s", "the best run's J = 1/(t_e + search.weight x error)"),
+        "time_s": ("s", "the best run's end time (parking time when converged)"),
+        "status": _STATUS,
+        "switches": ("", "the best run's direction switches"),
+        "converged_fraction": ("1", "fraction of the start's grid runs that park"),
+    },
+    "montecarlo": {
+        "schedule": ("", "the schedule: label with X_s, alpha1, alpha2"),
+        "run": ("", "run index (the random stream of the run; the same runs for every schedule)"),
+        "x0": ("m", "sampled start x"),
+        "y0": ("m", "sampled start y"),
+        "theta0_deg": ("deg", "sampled start heading"),
+        "scan_period_s": ("s", "sampled scanner period"),
+        "speed": ("m/s", "sampled travel speed |v1|"),
+        "lag": ("", "sampled: yaw-rate PI loop on"),
+        "status": _STATUS,
+        "status_code": ("", "run status code (pfjax.parking.runs.Status)"),
+        "converged": ("", "the run parked"),
+        "time_s": ("s", "end time (parking time when converged)"),
+        "switches": ("", "direction switches"),
+        "error": _ERROR,
+    },
+}
+
 
 def _parts(cfg: ParkingStudy, fig_dir: Path, progress: bool) -> tuple[dict, dict, dict]:
     """Run every part; returns ``(results, tables, timings_s)``."""
@@ -98,7 +178,7 @@ def run_study(config: ParkingStudy, out: Path, quick: bool = False, progress: bo
     results, tables, timings = _parts(config, fig_dir, progress)
     meta = parquet_metadata(cfg, cfg["seed"])
     for name in TABLES:
-        write_parquet(tables[name], out / f"{name}.parquet", meta)
+        write_parquet(tables[name], out / f"{name}.parquet", meta, units=COLUMNS[name])
     summary = {
         "study": cfg["name"],
         **provenance_stamp(cfg, cfg["seed"]),
@@ -113,6 +193,9 @@ def run_study(config: ParkingStudy, out: Path, quick: bool = False, progress: bo
         results["calibration"],
         results["assumptions"],
         {"runs": results["search"]["ga_runs"]},
+        pause=config.experiment.pause,
+        stuck_travel=config.sim.stuck_travel,
+        stuck_switches=config.sim.stuck_switches,
     )
     summary["verdicts"] = [v._asdict() for v in rows]
     (out / "summary.json").write_text(dumps(summary) + "\n")

@@ -13,6 +13,7 @@ from pydantic import Field, model_validator
 
 from pfjax.config import ConfigModel, Real, load_model
 from pfjax.errors import MAX_SEED
+from pfjax.tuning.ga import MAX_GENERATIONS, MAX_POPULATION
 
 #: a part of the robot's rectangle checked toward the travel direction (pfjax.parking.assumptions.ZONES)
 Zone = Literal["middle", "axle", "whole"]
@@ -40,7 +41,7 @@ class Sim(ConfigModel):
 
     @model_validator(mode="after")
     def _steps(self):
-        from pfjax.parking.api import MAX_PERIODS
+        from pfjax.parking.limits import MAX_PERIODS
 
         if self.t_max / self.scan_period > MAX_PERIODS:
             raise ValueError(
@@ -77,9 +78,11 @@ class Assumptions(ConfigModel):
 
 
 class Experiment(ConfigModel):
-    """The source's experiments."""
+    """The source's experiments, as pfjax models them."""
 
-    pause: Real = Field(1.0, ge=0, description="time standing at each reversal in the experiments [s]")
+    pause: Real = Field(
+        1.0, ge=0, description="pfjax's stop at each reversal in the experiments' runs (the source: 1 s) [s]"
+    )
 
 
 class Garage(ConfigModel):
@@ -91,9 +94,9 @@ class Garage(ConfigModel):
 class Search(ConfigModel):
     """docs/reproductions/parking.md §5: 24-bit GA and a grid on the chromosome lattice."""
 
-    weight: Real = Field(100.0, ge=0, description="weight of the time term in the fitness [-]")
-    population: int = Field(20, ge=2, description="GA population size [-]")
-    generations: int = Field(100, ge=1, description="GA generations [-]")
+    weight: Real = Field(100.0, ge=0, description="weight w of the end error in the fitness J = 1/(t_e + w e) [s/m]")
+    population: int = Field(20, ge=2, le=MAX_POPULATION, description="GA population size [-]")
+    generations: int = Field(100, ge=1, le=MAX_GENERATIONS, description="GA generations [-]")
     grid_n: int = Field(32, ge=2, le=64, description="grid points per schedule parameter [-]")
     ga_seeds: int = Field(3, ge=1, description="independent GA runs [-]")
     max_switches: int = Field(10, ge=1, description="a candidate switching more often fails [-]")
@@ -120,8 +123,8 @@ class MonteCarlo(ConfigModel):
     """Garage robustness: fixed schedule vs the GA's and the grid's best on the same sampled runs."""
 
     n_runs: int = Field(1000, ge=1, description="sampled runs per schedule [-]")
-    pos_scatter: Real = Field(0.05, ge=0, description="standard deviation of the start position [m]")
-    theta_scatter_deg: Real = Field(5.0, ge=0, description="standard deviation of the start heading [deg]")
+    pos_scatter: Real = Field(0.05, ge=0, description="half-width of the uniform scatter of x0 and y0 [m]")
+    theta_scatter_deg: Real = Field(5.0, ge=0, description="half-width of the uniform scatter of θ0 [deg]")
     scan_lo: Real = Field(0.05, gt=0, description="smallest scanner period [s]")
     scan_hi: Real = Field(0.2, gt=0, description="largest scanner period [s]")
     speed_lo: Real = Field(0.04, gt=0, description="smallest travel speed [m/s]")
@@ -151,6 +154,32 @@ class ParkingStudy(ConfigModel):
     search: Search = Field(default_factory=Search, description="GA and grid searches")
     start_map: StartMap = Field(default_factory=StartMap, description="start-pose map")
     montecarlo: MonteCarlo = Field(default_factory=MonteCarlo, description="robustness Monte Carlo")
+
+    @model_validator(mode="after")
+    def _work(self):
+        """Every scanner period the study simulates within the loop's bound, and the searches' size
+        within the API's (:func:`pfjax.parking.api.check_search_work`), each named by its key."""
+        from pfjax.parking.api import check_search_work
+        from pfjax.parking.limits import MAX_PERIODS
+
+        t_max = self.sim.t_max
+        periods = [(f"assumptions.scan_periods[{i}]", p) for i, p in enumerate(self.assumptions.scan_periods)]
+        for key, period in [*periods, ("montecarlo.scan_lo", self.montecarlo.scan_lo)]:
+            if t_max / period > MAX_PERIODS:
+                raise ValueError(
+                    f"{key}: sim.t_max / scan period may be at most {MAX_PERIODS}, got {t_max:g} / {period:g} = "
+                    f"{t_max / period:.3g}"
+                )
+        se, sm, scan = self.search, self.start_map, self.sim.scan_period
+        n = se.grid_n
+        check_search_work("search.grid_n", n**3, f"grid_n^3 = {n}^3 = {n**3}", t_max, scan)
+        runs = se.population * (se.generations + 1)
+        how = f"population x (generations + 1) = {se.population} x {se.generations + 1} = {runs}"
+        check_search_work("search.population", runs, how, t_max, scan)
+        starts, m = len(sm.x0) * len(sm.theta0_deg), sm.grid_n
+        how = f"starts x grid_n^3 = {starts} x {m}^3 = {starts * m**3}"
+        check_search_work("start_map.grid_n", starts * m**3, how, t_max, scan)
+        return self
 
 
 #: the ``--quick`` sizes (tests)

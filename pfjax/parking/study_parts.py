@@ -17,7 +17,7 @@ from pfjax.parking.schedules import GARAGE_START
 from pfjax.parking.simulate import STATUS_NAMES, run_params
 from pfjax.parking.study_config import ParkingStudy
 from pfjax.parking.study_runs import setup
-from pfjax.parking.switch_search import search_ga, search_grid, start_map
+from pfjax.parking.switch_search import garage_base, search_ga, search_grid, start_map
 from pfjax.report.figures import save
 from pfjax.tuning.ga import GAOptions
 
@@ -46,10 +46,17 @@ def part_assumptions(cfg: ParkingStudy, pmap):
     return df, sweep_summary(df)
 
 
+def search_base(cfg: ParkingStudy):
+    """The garage run the search and the start map vary: the study's controller, reach a_f and
+    scanner period (:func:`pfjax.parking.switch_search.garage_base`)."""
+    control, front, _, _ = setup(cfg)
+    return garage_base(front=front, scan_period=cfg.sim.scan_period, control=control)
+
+
 def part_search(cfg: ParkingStudy, fig_dir, gmap, key):
-    control, front, _, pc = setup(cfg)
+    _, _, _, pc = setup(cfg)
     se = cfg.search
-    base = run_params(GARAGE_START, 1, (1.0,), xs=-1.0, front=front, scan_period=cfg.sim.scan_period, control=control)
+    base = search_base(cfg)
     t0 = time.perf_counter()
     grid = search_grid(gmap, n=se.grid_n, base=base, weight=se.weight, cfg=pc, progress=True, chunk=cfg.sim.chunk)
     grid["wall_s"] = time.perf_counter() - t0
@@ -75,7 +82,7 @@ def part_search(cfg: ParkingStudy, fig_dir, gmap, key):
         )
         runs.append(r)
     ga = max(runs, key=lambda r: r["fitness"])
-    save(F.search_figure(ga, table, se.grid_n), fig_dir, "search")
+    save(F.search_figure(ga, table, se.grid_n, se.weight), fig_dir, "search")
     for d in (*runs, grid):
         d["status"] = STATUS_NAMES[int(d["status"])]
     df = pd.DataFrame({k: v for k, v in table.items()})
@@ -96,6 +103,7 @@ def part_start_map(cfg: ParkingStudy, fig_dir, gmap):
         cfg=pc,
         progress=True,
         chunk=cfg.sim.chunk,
+        base=search_base(cfg),
     )
     for r in rows:
         r["status"] = STATUS_NAMES[int(r["status"])] if isinstance(r["status"], int) else r["status"]

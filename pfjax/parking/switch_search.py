@@ -163,10 +163,23 @@ def search_grid(
 
 
 def start_map(
-    omap, x0s, theta0s_deg, *, y0=GARAGE_START[1], n=12, weight=100.0, cfg=SEARCH_CONFIG, chunk=1024, progress=False
+    omap,
+    x0s,
+    theta0s_deg,
+    *,
+    y0=GARAGE_START[1],
+    n=12,
+    weight=100.0,
+    cfg=SEARCH_CONFIG,
+    chunk=1024,
+    progress=False,
+    base: RunParams | None = None,
 ) -> list[dict]:
-    """For each start (x₀, θ₀): the best (X_s, α₁, α₂) on an n³ grid, its parking time, and α = 1 / X_s = −0.9 for reference."""
-    base = garage_base()
+    """For each start (x₀, θ₀): the best (X_s, α₁, α₂) on an n³ grid, its parking time, the best
+    run's status and switches, and the fraction of the grid's runs that converge. ``base``: the run
+    settings other than the start pose and the schedule (controller, reach a_f, scanner period;
+    default :func:`garage_base`)."""
+    base = base if base is not None else garage_base()
     xl, al = lattice(n)
     X, A1, A2 = (g.ravel() for g in np.meshgrid(xl, al, al, indexing="ij"))
     starts = [(x0, th) for x0 in x0s for th in theta0s_deg]

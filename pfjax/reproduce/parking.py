@@ -1,9 +1,9 @@
 """Verdicts on the parking source's reported outcomes (Yamakawa & Ebara 2017; docs/reproductions/parking.md §4's table):
 one row per outcome and criterion, from the parking study's runs.
 
-Inputs (``studies/parking.py``): ``outcomes``, the source's scenarios simulated by pfjax, keyed as
-:data:`SCENARIOS` (each a dict with ``status``, ``switches``, ``time_s``; ``+pause`` variants stand
-1 s at each reversal, as the source's experiments did); ``calibration`` (the a_f calibration, with
+Inputs (``studies/parking.py``): ``outcomes``, the source's scenarios simulated by pfjax (each a
+dict with ``status``, ``switches``, ``time_s``; ``+pause`` variants stand ``pause`` s at each
+reversal, pfjax's model of the experiments' stop, the source's :data:`SOURCE_PAUSE_S`); ``calibration`` (the a_f calibration, with
 the simulated first switch of case A); ``sweep`` (:func:`pfjax.parking.assumptions.sweep_summary`);
 ``ga`` (pfjax's own GA runs and grid, for the "several good solutions" statement).
 """
@@ -16,8 +16,12 @@ from pfjax.reproduce.verdict import Verdict
 
 #: Relative tolerance within which a parking time counts as reproduced.
 TIME_TOL = 0.10
-#: The scenarios the verdicts need: name -> (map, start, first direction, alpha schedule, X_s).
+#: The source's GA solutions (X_s m, α₁, α₂).
 GA_SOLUTIONS = ((-1.0, 4.57, 1.25), (-1.0, 0.82, 3.28))
+#: s the source's experiments stood still at each reversal.
+SOURCE_PAUSE_S = 1.0
+#: Rounding under which two GA results count as the same parameters: X_s to 1 mm, α₁ and α₂ to 0.01.
+DISTINCT_DIGITS = (3, 2, 2)
 
 
 #: The wording of a parking-time criterion.
@@ -83,8 +87,9 @@ def case_a_verdicts(a: dict) -> list[Verdict]:
     ]
 
 
-def case_b_verdicts(b: dict, sweep: dict) -> list[Verdict]:
-    """Case B stuck: with pfjax's reading, and in some combination of the open assumptions."""
+def case_b_verdicts(b: dict, sweep: dict, stuck_travel: float = 0.1, stuck_switches: int = 4) -> list[Verdict]:
+    """Case B stuck: with pfjax's reading (stuck: less than ``stuck_travel`` m of travel over
+    ``stuck_switches`` legs), and in some combination of the open assumptions."""
     n = sweep["n_combinations"]
     stuck = sweep["status_counts"]["B"].get("stuck", 0)
     zones = ", ".join(f"{z}: {v['B'].get('stuck', 0)}" for z, v in sweep["by_zone"].items())
@@ -94,7 +99,7 @@ def case_b_verdicts(b: dict, sweep: dict) -> list[Verdict]:
             claim,
             "parallel",
             "case B",
-            "status stuck (reverses again within 0.1 m of travel over 4 legs)",
+            f"status stuck (reverses again within {stuck_travel:g} m of travel over {stuck_switches} legs)",
             _outcome(b),
             "stuck",
             _says(b["status"] == "stuck"),
@@ -156,16 +161,17 @@ def case_c_verdicts(c: dict) -> list[Verdict]:
     ]
 
 
-def case_d_verdicts(d: dict, d_pause: dict) -> list[Verdict]:
-    """Case D parks in 44 s (simulation) and 47 s (experiment, 1 s stop at each reversal)."""
+def case_d_verdicts(d: dict, d_pause: dict, pause: float = SOURCE_PAUSE_S) -> list[Verdict]:
+    """Case D parks in 44 s (simulation) and 47 s (experiment, the source's 1 s stop at each
+    reversal; pfjax's run stands ``pause`` s)."""
     return [
         _row(
             "D: parks; 44 s", "parallel", "case D", f"parks, {WITHIN}", _outcome(d), "parks, 44 s", _parks_in(d, 44.0)
         ),
         _row(
-            "D: 47 s in the experiment, with a 1 s stop at each reversal",
+            f"D: 47 s in the experiment, with a {SOURCE_PAUSE_S:g} s stop at each reversal",
             "parallel",
-            "case D, 1 s stop at each reversal",
+            f"case D, {pause:g} s stop at each reversal",
             f"{WITHIN} (the stop modelled as a pfjax option)",
             _outcome(d_pause),
             "47 s (experiment)",
@@ -174,12 +180,12 @@ def case_d_verdicts(d: dict, d_pause: dict) -> list[Verdict]:
     ]
 
 
-def garage_verdicts(outcomes: dict) -> list[Verdict]:
+def garage_verdicts(outcomes: dict, pause: float = SOURCE_PAUSE_S) -> list[Verdict]:
     """The garage experiments at X_s = -0.9 (4 switches), -1.2 (61 s) and -1.8 m (86 s), without and
-    with a 1 s stop at each reversal."""
+    with a stop of ``pause`` s at each reversal."""
     out = []
     for xs, src, what in ((-0.9, 4, "switches"), (-1.2, 61.0, "time"), (-1.8, 86.0, "time")):
-        for suffix, label in (("", ""), ("+pause", ", 1 s stop at each reversal")):
+        for suffix, label in (("", ""), ("+pause", f", {pause:g} s stop at each reversal")):
             o = outcomes[f"garage {xs:g}{suffix}"]
             if what == "switches":
                 criterion, source = "parks, with the source's number of switches", f"{src} switches"
@@ -191,9 +197,9 @@ def garage_verdicts(outcomes: dict) -> list[Verdict]:
     return out
 
 
-def ga_solution_verdicts(outcomes: dict) -> list[Verdict]:
-    """The source's two GA solutions: the first parks with 2 switches in 48 s (experiment), the
-    second is one of several good solutions."""
+def ga_solution_verdicts(outcomes: dict, pause: float = SOURCE_PAUSE_S) -> list[Verdict]:
+    """The source's two GA solutions: the first parks with 2 switches in 48 s (experiment; pfjax's
+    run stands ``pause`` s at each reversal), the second is one of several good solutions."""
     (xs, a1, a2), (xs2, b1, b2) = GA_SOLUTIONS
     first, second = f"GA solution ({xs:g}, {a1:g}, {a2:g})", f"GA solution ({xs2:g}, {b1:g}, {b2:g})"
     o, op, o2 = outcomes[first], outcomes[first + "+pause"], outcomes[second]
@@ -209,7 +215,13 @@ def ga_solution_verdicts(outcomes: dict) -> list[Verdict]:
             _says(_parks(o) and o["switches"] == 2),
         ),
         _row(
-            claim, "garage", "1 s stop at each reversal", f"parks, {WITHIN}", _outcome(op), "48 s", _parks_in(op, 48.0)
+            claim,
+            "garage",
+            f"{pause:g} s stop at each reversal",
+            f"parks, {WITHIN}",
+            _outcome(op),
+            "48 s",
+            _parks_in(op, 48.0),
         ),
         _row(
             f"{second}: one of several good solutions",
@@ -224,14 +236,17 @@ def ga_solution_verdicts(outcomes: dict) -> list[Verdict]:
 
 
 def ga_runs_verdicts(runs: list[dict]) -> list[Verdict]:
-    """pfjax's GA runs end at distinct parameters, each within 15 % of the grid's best fitness."""
-    distinct = len({(round(r["xs"], 3), round(r["alpha1"], 2)) for r in runs}) > 1
+    """pfjax's GA runs end at distinct parameters (rounded as :data:`DISTINCT_DIGITS`), each within
+    15 % of the grid's best fitness."""
+    keys = {tuple(round(r[k], d) for k, d in zip(("xs", "alpha1", "alpha2"), DISTINCT_DIGITS)) for r in runs}
+    distinct = len(keys) > 1
     return [
         _row(
             "The GA finds several good solutions",
             "garage",
             f"{len(runs)} GA runs",
-            "the GA runs end at distinct (X_s, α₁, α₂), each within 15 % of the grid's best fitness",
+            "the GA runs end at distinct (X_s, α₁, α₂) (X_s to 1 mm, α to 0.01), each within 15 % of the "
+            "grid's best fitness",
             "; ".join(
                 f"({r['xs']:.3f}, {r['alpha1']:.2f}, {r['alpha2']:.2f}): {100 * r['fitness_ratio_to_grid_best']:.0f} %"
                 for r in runs
@@ -243,16 +258,27 @@ def ga_runs_verdicts(runs: list[dict]) -> list[Verdict]:
     ]
 
 
-def verdicts(outcomes: dict, calibration: dict, sweep: dict, ga: dict) -> list[Verdict]:
-    """Every verdict, in the table's order (one function per case)."""
+def verdicts(
+    outcomes: dict,
+    calibration: dict,
+    sweep: dict,
+    ga: dict,
+    *,
+    pause: float = SOURCE_PAUSE_S,
+    stuck_travel: float = 0.1,
+    stuck_switches: int = 4,
+) -> list[Verdict]:
+    """Every verdict, in the table's order (one function per case). ``pause``: s the ``+pause``
+    runs stood at each reversal (the study's ``experiment.pause``); ``stuck_travel`` (m) and
+    ``stuck_switches``: the stuck test of the runs (``sim.stuck_travel``, ``sim.stuck_switches``)."""
     return [
         *calibration_verdicts(calibration),
         *case_a_verdicts(outcomes["A"]),
-        *case_b_verdicts(outcomes["B"], sweep),
+        *case_b_verdicts(outcomes["B"], sweep, stuck_travel, stuck_switches),
         *all_four_verdicts(sweep),
         *case_c_verdicts(outcomes["C"]),
-        *case_d_verdicts(outcomes["D"], outcomes["D+pause"]),
-        *garage_verdicts(outcomes),
-        *ga_solution_verdicts(outcomes),
+        *case_d_verdicts(outcomes["D"], outcomes["D+pause"], pause),
+        *garage_verdicts(outcomes, pause),
+        *ga_solution_verdicts(outcomes, pause),
         *ga_runs_verdicts(ga["runs"]),
     ]
