@@ -13,7 +13,7 @@ mistaken for degrees, ``_hz``, ``_m``/``_s`` where the quantity could be mistake
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # imported where used, so that the unit table (COLUMNS) costs no pandas or Arrow import
     import pandas as pd
@@ -75,6 +75,33 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "axis": ("", "slipping axle(s): rear, front or joint"),
     "n": ("", "runs"),
     "k": ("", "successful runs"),
+}
+
+
+#: The unit of each number :func:`pfjax.tracking.run` returns (``pfjax track --json`` prints it
+#: with them, :func:`pfjax.cli.records.units`; the vehicle-tracking study's columns take their units
+#: from it, :data:`pfjax.tracking.study.COLUMNS`). ``"<parent>.*"``: the units under ``<parent>`` by
+#: name. "1": dimensionless. Here, not in :mod:`pfjax.tracking`, so that the command line reads it
+#: without importing the simulator.
+TRACK_UNITS: dict[str, Any] = {
+    "p": "1",
+    "l": "m",
+    "gamma_max_deg": "deg",
+    "final_error_norm": "m",
+    "final_phi_minus_pgamma": "rad",
+    "max_abs_gamma_deg": "deg",
+    "window_max_error": "m",
+    "window_max_abs_phi_minus_pgamma": "rad",
+    "iae": "m s",
+    "final_d": "m",
+    "limit_fraction": "1",
+    "min_abs_det_factor": "1",
+    "lemma_p_bound": "1",
+    "fail_time": "s",
+    "tolerances.*": {"window_s": "s", "tol_z_m": "m", "tol_phi_rad": "rad"},
+    "final.*": {"x": "m", "y": "m", "theta": "rad", "gamma": "rad"},
+    "T": "s",
+    "dt": "s",
 }
 
 

@@ -8,8 +8,8 @@ Writes ``results/vehicle_tracking/`` (or ``--out``): ``summary.json``, ``lemma_r
 ``lemma_table.parquet`` / ``.csv`` (the four outcomes per mode and region), ``geometry.parquet``,
 ``mc_runs.parquet``, ``figures/*.png|svg``, ``report.md`` and ``report.html``. The config keys are
 :class:`pfjax.tracking.study_config.TrackingStudy` (docs/studies.md). Outputs are assembled in a
-temporary directory and moved into place when complete; a bad key or value stops with one line,
-exit code 2, nothing written.
+temporary directory and moved into place when complete; a bad key or value, or sizes whose tables
+would not fit in memory, stop with one line naming the key, exit code 2, nothing written.
 """
 
 from __future__ import annotations

@@ -93,6 +93,49 @@ def _load_script():
     return mod
 
 
+@pytest.mark.slow
+def test_every_column_of_every_table_has_a_unit(out):
+    """Every Parquet column the study writes carries a unit and a description (field metadata); the
+    numeric ones a unit that is not empty, codes and counts of runs aside; lemma_table.csv carries
+    the config hash, as the other studies' CSV files do."""
+    import pyarrow as pa
+
+    from pfjax.tracking.study import COLUMNS
+
+    physical = {
+        "window_max_z": "m",
+        "window_max_phi_err": "rad",
+        "final_error_norm": "m",
+        "final_d": "m",
+        "offset_along": "m",
+        "offset_left": "m",
+        "gamma": "rad",
+        "phi": "rad",
+        "z_err": "m",
+        "iae": "m s",
+        "speed": "m/s",
+        "fail_time": "s",
+    }
+    seen = set()
+    for path in sorted(out.glob("*.parquet")):
+        for f in pq.read_schema(path):
+            md = f.metadata or {}
+            assert b"unit" in md and md.get(b"description"), (path.name, f.name)
+            unit = md[b"unit"].decode()
+            if pa.types.is_integer(f.type) or pa.types.is_floating(f.type):
+                assert unit or f.name in ("run", "status_code"), (path.name, f.name)
+            assert unit == COLUMNS[f.name][0]
+            seen.add(f.name)
+            if f.name in physical:
+                assert unit == physical[f.name], (path.name, f.name, unit)
+    assert set(physical) <= seen
+    assert set(TABLES) == {p.stem for p in out.glob("*.parquet")}
+    csv = pd.read_csv(out / "lemma_table.csv")
+    s = json.loads((out / "summary.json").read_text())
+    assert csv.columns[0] == "config_sha256" and (csv.config_sha256 == s["config_sha256"]).all()
+    assert csv.drop(columns="config_sha256").to_dict(orient="records") == s["lemma_grid"]["table"]
+
+
 @pytest.mark.parametrize(
     "setting, key",
     [

@@ -10,28 +10,7 @@
 from __future__ import annotations
 
 from pfjax.cli.common import Aliased, as_flags
-
-#: The unit of each number ``pfjax track --json`` prints (:func:`pfjax.cli.records.units`).
-UNITS = {
-    "p": "1",
-    "l": "m",
-    "gamma_max_deg": "deg",
-    "final_error_norm": "m",
-    "final_phi_minus_pgamma": "rad",
-    "max_abs_gamma_deg": "deg",
-    "window_max_error": "m",
-    "window_max_abs_phi_minus_pgamma": "rad",
-    "iae": "m s",
-    "final_d": "m",
-    "limit_fraction": "1",
-    "min_abs_det_factor": "1",
-    "lemma_p_bound": "1",
-    "fail_time": "s",
-    "tolerances.*": {"window_s": "s", "tol_z_m": "m", "tol_phi_rad": "rad"},
-    "final.*": {"x": "m", "y": "m", "theta": "rad", "gamma": "rad"},
-    "T": "s",
-    "dt": "s",
-}
+from pfjax.tables import TRACK_UNITS as UNITS
 
 #: The ``--leader`` choices: :data:`pfjax.tracking.api.LEADERS`, written out so that building the
 #: parser does not import the simulator (a test checks that the two agree).

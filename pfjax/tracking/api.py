@@ -13,16 +13,41 @@ from collections.abc import Mapping
 
 from pfjax import errors
 from pfjax.errors import InputError
-from pfjax.resources import whole_steps
+from pfjax.resources import MAX_STEPS, whole_steps
+from pfjax.tables import TRACK_UNITS as UNITS
 
-__all__ = ["LEADERS", "MODES", "run"]
+__all__ = ["LEADERS", "MAX_STEPS", "MODES", "UNITS", "check_time", "nonzero", "run"]
 
 #: The follower's driving modes: ``forward`` (f = +1, reference point P_f) and ``backward`` (f = -1, P_b).
 MODES = ("forward", "backward")
 #: The leader motions :func:`pfjax.tracking.leader.by_name` builds.
 LEADERS = ("line", "circle", "sine", "lane-change")
-#: Most integrator steps one run may take (``horizon / dt``).
-MAX_STEPS = 2_000_000
+
+
+def nonzero(key: str, value: float, symbol: str) -> float:
+    """``value``, or :class:`InputError` naming ``key`` when it is 0: the input matrix ``M`` is
+    singular at ``p = 0`` and at ``l = 0`` (``symbol``: which of the two ``value`` is)."""
+    if value == 0:
+        raise InputError(f"{key}: must be nonzero (M is singular at {symbol} = 0), got 0", key)
+    return value
+
+
+def check_time(horizon: float, dt: float, window: float | None = None) -> int:
+    """The number of integrator steps of a run of ``horizon`` s at step ``dt`` s (both > 0).
+
+    :class:`InputError` naming ``dt`` when ``dt > horizon``; ``horizon/dt`` above
+    :data:`pfjax.resources.MAX_STEPS` steps; ``horizon`` when it is not a whole number of steps
+    (:func:`pfjax.resources.whole_steps`: a run is never rounded); ``window`` when the final window
+    over which the limits are checked is longer than the horizon.
+    """
+    if dt > horizon:
+        raise InputError(f"dt: must be <= horizon ({horizon:g} s), got {dt:g}", "dt")
+    if horizon / dt > MAX_STEPS:  # names both: the command line shows it as --horizon/--dt
+        raise InputError(f"horizon/dt: at most {MAX_STEPS / 1e6:g}e6 steps, got {horizon / dt:.3g}", "horizon/dt")
+    n = whole_steps(horizon, dt)
+    if window is not None and window > horizon:
+        raise InputError(f"window: must be <= horizon ({horizon:g} s), got {window:g}", "window")
+    return n
 
 
 def _choice(key: str, value, choices: tuple[str, ...]) -> str:
@@ -80,10 +105,8 @@ def _check(
     f = 1.0 if mode == "forward" else -1.0
     p = f if p is None else errors.number("p", p)
     l = f if l is None else errors.number("l", l)
-    if p == 0:
-        raise InputError("p: must be nonzero (M is singular at p = 0), got 0", "p")
-    if l == 0:
-        raise InputError("l: must be nonzero (M is singular at l = 0), got 0", "l")
+    nonzero("p", p, "p")
+    nonzero("l", l, "l")
     out = {
         "mode": mode,
         "leader": leader,
@@ -106,12 +129,7 @@ def _check(
     out["heading_error_deg"] = errors.number("heading_error_deg", heading_error_deg)
     out["beta_r_deg"] = errors.number("beta_r_deg", beta_r_deg, below=90, unit=" deg")
     out["beta_f_deg"] = errors.number("beta_f_deg", beta_f_deg, below=90, unit=" deg")
-    T, dt = out["horizon"], out["dt"]
-    if dt > T:
-        raise InputError(f"dt: must be <= horizon ({T:g} s), got {dt:g}", "dt")
-    if T / dt > MAX_STEPS:  # names both: the command line shows it as --T/--dt
-        raise InputError(f"horizon/dt: at most 2e6 steps, got {T / dt:.3g}", "horizon/dt")
-    whole_steps(T, dt)  # a run is never rounded to whole steps
+    check_time(out["horizon"], out["dt"])
     return out
 
 

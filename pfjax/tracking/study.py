@@ -23,12 +23,70 @@ from pfjax.report import document
 from pfjax.tables import write_parquet
 from pfjax.tracking import batches as B
 from pfjax.tracking import report as R
+from pfjax.tracking.api import UNITS
 from pfjax.tracking.lemma import four_way, sample_geometry
 from pfjax.tracking.simulate import TrackConfig
 from pfjax.tracking.study_config import TrackingStudy
 
 #: per-run metrics summarised by quantiles in the Monte Carlo summary
 METRICS = ["final_error_norm", "iae", "max_abs_gamma_deg", "window_max_z", "limit_fraction"]
+
+#: column -> (unit, description) of every column of the study's Parquet tables (``lemma_runs``,
+#: ``mc_runs``, ``lemma_table``, ``geometry``), written as field metadata
+#: (:func:`pfjax.tables.write_parquet`). A quantity ``pfjax track --json`` also prints takes its unit
+#: from :data:`pfjax.tracking.api.UNITS`. Units: "1" dimensionless, "" text, flag or code.
+COLUMNS: dict[str, tuple[str, str]] = {
+    # a run's settings
+    "mode": ("", "forward (f = +1, reference point P_f) or backward (f = -1, P_b, the follower reverses)"),
+    "run": ("", "Monte Carlo run index (its random stream)"),
+    "leader": ("", "the leader's motion"),
+    "p": (UNITS["p"], "focus turning ratio p"),
+    "l": (UNITS["l"], "focus distance l, signed (l = f |l|)"),
+    "gamma_max_deg": (UNITS["gamma_max_deg"], "steering limit gamma_max"),
+    "speed": ("m/s", "leader speed V0"),
+    "offset_along": ("m", "the follower's initial displacement along the leader's direction of travel"),
+    "offset_left": ("m", "the follower's initial displacement left of the leader's direction of travel"),
+    "heading_error_deg": ("deg", "initial heading error"),
+    "beta_r_deg": ("deg", "constant rear-wheel slip angle"),
+    "beta_f_deg": ("deg", "constant front-wheel slip angle"),
+    "inside_bound": ("", "|p| < pi / (2 gamma_max) (Lemma 8.1's bound)"),
+    "invertible": ("", "the input matrix M is invertible for every |gamma| <= gamma_max"),
+    "region": ("", "which side of Lemma 8.1's bound p lies on"),
+    # a run's metrics (pfjax.tracking.simulate.TrackMetrics)
+    "iae": (UNITS["iae"], "integral of |z~| over the run (inf: the run failed)"),
+    "window_max_z": (UNITS["window_max_error"], "largest |z~| over the final window (NaN: the run failed)"),
+    "window_max_phi_err": (
+        UNITS["window_max_abs_phi_minus_pgamma"],
+        "largest |phi - p gamma| over the final window (NaN: the run failed)",
+    ),
+    "final_error_norm": (UNITS["final_error_norm"], "|z~| at the end of the run (or at its failure)"),
+    "final_phi_minus_pgamma": (UNITS["final_phi_minus_pgamma"], "phi - p gamma at the end of the run"),
+    "final_d": (UNITS["final_d"], "signed length d of the virtual connection at the end of the run"),
+    "min_abs_factor": (UNITS["min_abs_det_factor"], "smallest |det M / (l p)| met"),
+    "limit_fraction": (UNITS["limit_fraction"], "fraction of the steps with a speed or steering limit active"),
+    "max_abs_gamma_deg": (UNITS["max_abs_gamma_deg"], "largest |gamma|"),
+    "converged": ("", "z~ -> 0: status ok and max |z~| over the final window <= tol_z"),
+    "phi_converged": ("", "phi - p gamma -> 0: status ok and max |phi - p gamma| over the final window <= tol_phi"),
+    "success": ("", "status ok and max |z~| over the final window <= band"),
+    "status_code": ("", "run status code (pfjax.tracking.TrackStatus)"),
+    "status": ("", "run status name: ok, nonfinite, diverged, singular"),
+    "fail_time": (UNITS["fail_time"], "time of the first failure (inf: none)"),
+    # the four-outcome table (pfjax.tracking.lemma.four_way)
+    "n": ("1", "runs in the group"),
+    "both": ("1", "finished runs with z~ -> 0 and phi - p gamma -> 0"),
+    "z_only": ("1", "finished runs with z~ -> 0 only"),
+    "phi_only": ("1", "finished runs with phi - p gamma -> 0 only"),
+    "neither": ("1", "finished runs with neither limit"),
+    "failed": ("1", "runs that did not finish (status other than ok)"),
+    "equivalence_holds": ("", "z_only == phi_only == 0"),
+    # the geometric check (pfjax.tracking.lemma.sample_geometry)
+    "kind": ("", "on_focus (z_d the focus point) or wrong_distance (z_d on the focus direction, farther)"),
+    "gamma": (UNITS["final.*"]["gamma"], "steering angle gamma of the random state"),
+    "p_gamma": ("rad", "p gamma"),
+    "phi": ("rad", "connection angle phi, in (-pi/2, pi/2]"),
+    "phi_minus_pgamma": ("rad", "phi - p gamma"),
+    "z_err": (UNITS["final_error_norm"], "|z~| of the state"),
+}
 
 
 def track_config(cfg: dict) -> TrackConfig:
@@ -112,8 +170,9 @@ def definitions(cfg: dict) -> dict:
 
 def run(config: TrackingStudy, output, quick: bool = False) -> dict:
     """Run the study into ``output`` (an open :class:`pfjax.outputs.OutputDir`): ``summary.json``,
-    ``lemma_runs``/``lemma_table``/``geometry``/``mc_runs`` Parquet, ``lemma_table.csv``,
-    ``figures/`` and ``report.md`` + ``report.html``. Returns the summary."""
+    ``lemma_runs``/``lemma_table``/``geometry``/``mc_runs`` Parquet (units: :data:`COLUMNS`),
+    ``lemma_table.csv`` (``config_sha256`` first), ``figures/`` and ``report.md`` + ``report.html``.
+    Returns the summary."""
     t0 = time.time()
     cfg = config.model_dump(mode="json")
     key = seed_key(cfg["seed"])
@@ -137,8 +196,10 @@ def run(config: TrackingStudy, output, quick: bool = False) -> dict:
     tmp = output.staging
     meta = parquet_metadata(cfg, cfg["seed"])
     for name, df in (("lemma_runs", lemma_df), ("lemma_table", table), ("geometry", geo), ("mc_runs", mc)):
-        write_parquet(df, tmp / f"{name}.parquet", meta)
-    table.to_csv(tmp / "lemma_table.csv", index=False)
+        write_parquet(df, tmp / f"{name}.parquet", meta, units=COLUMNS)
+    table.assign(config_sha256=summary["config_sha256"])[["config_sha256", *table.columns]].to_csv(
+        tmp / "lemma_table.csv", index=False
+    )
     summary["figures"] = R.write_figures(tmp / "figures", cfg, lemma_df, geo, mc)
     summary["wall_s"] = time.time() - t0
     (tmp / "summary.json").write_text(dumps(summary))
@@ -146,4 +207,13 @@ def run(config: TrackingStudy, output, quick: bool = False) -> dict:
     return summary
 
 
-__all__ = ["METRICS", "definitions", "geometry_part", "lemma_part", "monte_carlo_part", "run", "track_config"]
+__all__ = [
+    "COLUMNS",
+    "METRICS",
+    "definitions",
+    "geometry_part",
+    "lemma_part",
+    "monte_carlo_part",
+    "run",
+    "track_config",
+]
