@@ -1,7 +1,8 @@
 """Plugins: modules that register controllers and paths before pfjax's command line reads its
 registries (:mod:`pfjax.controllers.registry`, :mod:`pfjax.paths.registry`).
 
-A plugin is any importable module that calls :func:`pfjax.controllers.register` or
+A plugin is any importable module (installed, or in a folder on ``PYTHONPATH``: the ``pfjax``
+command does not look in the current folder) that calls :func:`pfjax.controllers.register` or
 :func:`pfjax.paths.register` when imported. The command line imports
 
 - the modules named in the environment variable ``PFJAX_PLUGINS`` (comma-separated), and
@@ -10,7 +11,8 @@ A plugin is any importable module that calls :func:`pfjax.controllers.register` 
   ``pyproject.toml``),
 
 so ``PFJAX_PLUGINS=mypkg.controllers pfjax simulate --controller my-ctrl ...`` works without
-editing pfjax. A Python script simply imports its module before calling pfjax.
+editing pfjax (``PYTHONPATH=. PFJAX_PLUGINS=my_module pfjax ...`` for a ``my_module.py`` in the
+current folder). A Python script simply imports its module before calling pfjax.
 """
 
 from __future__ import annotations
@@ -37,7 +39,8 @@ def load(environ=None) -> list[str]:
         try:
             importlib.import_module(name)
         except Exception as e:  # any failure of a user's module is bad input here
-            raise InputError(f"{ENV}: cannot import {name!r}: {type(e).__name__}: {e}", ENV) from None
+            hint = " (a plugin is installed or in a folder on PYTHONPATH)" if isinstance(e, ModuleNotFoundError) else ""
+            raise InputError(f"{ENV}: cannot import {name!r}: {type(e).__name__}: {e}{hint}", ENV) from None
         loaded.append(name)
     from importlib.metadata import entry_points
 

@@ -249,6 +249,13 @@ def _sf_register(factory=None, **kw):
         ({"defaults": {"k_x": 1.0}}, "defaults"),
         ({"labels": {"K": "k_d"}}, "labels.K"),
         ({"gains": ("k_x",)}, "gains"),
+        ({"name": "my ctrl"}, "name"),  # names are lower-case ASCII identifiers
+        ({"name": "Sf"}, "name"),
+        ({"name": "sf_copy", "cli_name": "sf copy"}, "cli_name"),
+        ({"style": "red"}, "style"),  # a mapping of matplotlib keywords
+        ({"cli_name": "pi"}, "cli_name"),  # another entry's command-line name: unreachable
+        ({"cli_name": "pure_pursuit"}, "cli_name"),  # another entry's registry name
+        ({"name": "stanley", "cli_name": "pi"}, "cli_name"),  # replacing stanley under pi's name
     ],
 )
 def test_controller_register_checks_its_arguments(kw, key):
@@ -259,6 +266,18 @@ def test_controller_register_checks_its_arguments(kw, key):
         _sf_register(**kw)
     assert err.value.key == key and str(err.value).startswith(key) and "\n" not in str(err.value)
     assert "sf_copy" not in C.REGISTRY
+
+
+def test_controller_register_replaces_an_entry_of_the_same_name():
+    """Registering a name again replaces its entry (its own names are not taken from it); the
+    command-line name may change with it."""
+    e = C.entry("state_feedback")
+    try:
+        C.register(e.controller, e.make_params.factory, name="sf_copy", labels=e.labels)
+        again = C.register(e.controller, e.make_params.factory, name="sf_copy", labels=e.labels, cli_name="sf-again")
+        assert C.entry("sf-again") is again and C.REGISTRY["sf_copy"] is again
+    finally:
+        C.REGISTRY.pop("sf_copy", None)
 
 
 def test_controller_register_keeps_a_good_box():
@@ -282,6 +301,12 @@ def test_controller_register_keeps_a_good_box():
         ({"parametric": True}, "parametric"),  # only pfjax's own kinds are built from a path config
         ({"source": "yes"}, "source"),
         ({"description": 5}, "description"),
+        ({"name": "1gentle"}, "name"),  # a lower-case ASCII identifier
+        ({"name": "g\u00e9ntle"}, "name"),
+        ({"name": "my path"}, "name"),
+        ({"build": lambda: 3}, "build"),  # built once when registered: not a path
+        ({"build": lambda: 1 / 0}, "build"),  # a builder that raises
+        ({"build": lambda: paths.sine(u_min=5.0, u_max=1.0)}, "build"),  # an empty range of u
     ],
 )
 def test_path_register_checks_its_arguments(kw, key):

@@ -21,26 +21,35 @@ class Simulation(NamedTuple):
 
 def resolve_gains(e, d, gains, v: float, L: float) -> tuple[Any, dict]:
     """``(parameter pytree, flat gains)`` from a design, a flat dict, a parameter pytree or a
-    synthesis result with ``K``."""
+    synthesis result with ``K`` (as many elements as the controller's ``K``). ``gains`` is checked
+    before the design ``d`` is made; its gains replace the design's."""
     from pfjax import controllers as C
 
-    flat = C.flat_gains(e)
-    if d is not None:
-        flat.update(C.design_gains(d, v, L, "controller"))
+    given: dict = {}
     if gains is None:
         pass
     elif isinstance(gains, dict):
-        flat.update(gains)
+        given = gains
     elif hasattr(gains, "_asdict") and (e.controller.params is None or isinstance(gains, e.controller.params)):
-        flat = C.flat_gains(e, gains)
+        given = C.flat_gains(e, gains)
     elif hasattr(gains, "K") and "K" in e.labels:
-        flat.update(zip(e.labels["K"], np.ravel(np.asarray(gains.K, float)).tolist()))
+        names, K = e.labels["K"], np.ravel(np.asarray(gains.K, float))
+        if K.size != len(names):  # a design for another plant (an integral design for state feedback)
+            raise errors.InputError(
+                f"gains: the {e.name} controller takes {len(names)} gains K ({', '.join(names)}), got {K.size}",
+                "gains",
+            )
+        given = dict(zip(names, K.tolist()))
     else:
         kind = e.controller.params.__name__ if e.controller.params is not None else "parameter pytree"
         raise errors.InputError(
             f"gains: expected a dict of {', '.join(e.gains)}, a {kind} or a design with K, got {type(gains).__name__}",
             "gains",
         )
+    flat = C.flat_gains(e)
+    if d is not None:
+        flat.update(C.design_gains(d, v, L, "controller"))
+    flat.update(given)
     return C.params_from_flat(e, flat), {k: float(v) for k, v in flat.items()}
 
 
@@ -71,7 +80,8 @@ def simulate(
             ``integral``, ``stanley``, ``pure_pursuit``, ``rear_wheel``, ``lmi``, ``paper_k``, ...;
             :func:`pfjax.controllers.controller_types`).
         gains: the controller's gains: a dict of scalar gains (the others keep their defaults), its
-            parameter pytree, or a design with ``K`` (:func:`design_mixed`). A design name
+            parameter pytree, or a design with ``K`` (:func:`design_mixed`; as many elements as the
+            controller's ``K``: two for ``state_feedback``, three for ``integral``). A design name
             (``lmi``) is designed at the runs' mean speed and wheelbase.
         config: a :class:`pfjax.sim.SimConfig` or a dict of its fields (``horizon``, ``dt``,
             ``success_band``, ...; not ``record``: that is ``trajectories``); default 20 s at 5 ms.

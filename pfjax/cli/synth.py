@@ -3,6 +3,9 @@
     pfjax synth --method {mixed,hinf,h2} [--speed 1] [--wheelbase 0.2] [--alpha 10] [--beta 1]
                 [--max-real R] [--disk CENTER RADIUS] [--sector-deg DEG] [--json]
 
+``--alpha`` and ``--beta`` weigh the mixed design's objective and are refused with ``--method hinf``
+or ``h2``, which do not read them (nor record them in the output's ``arguments``).
+
 ``--v`` and ``--L`` are deprecated spellings of ``--speed`` and ``--wheelbase`` (read for one release).
 """
 
@@ -24,21 +27,28 @@ SYNTH_FLAGS = {
 }
 
 
-#: The unit of each number ``cmd`` returns (:func:`pfjax.cli.records.units`; the norms are of the
-#: source's performance channels, from the slip w (rad) to z = x = [d (m), theta_e (rad)], and to
-#: z_2 = [x; delta (rad)], unweighted).
+#: The unit of each number ``cmd`` returns (:func:`pfjax.cli.records.units`). The norms are of the
+#: source's performance channels of :func:`pfjax.synthesis.slip_design_plant`, from all of its
+#: exogenous inputs w = [beta_r (rad), beta_f (rad), kappa (1/m)] to z = x = [d (m), theta_e (rad)],
+#: and to z_2 = [x; delta (rad)], unweighted; poles and pole regions in 1/s, as
+#: :class:`pfjax.synthesis.PoleRegion` takes them.
+INPUTS = "w = [beta_r rad, beta_f rad, kappa 1/m]"
 UNITS = {
     "K": "rad/m (d), rad/rad (theta_e)",
-    "gamma_inf": "H-infinity bound, slip (rad) to [d m, theta_e rad]",
-    "hinf_norm": "H-infinity norm, slip (rad) to [d m, theta_e rad]",
-    "gamma_2": "H2 bound, slip (rad) to [d m, theta_e rad, delta rad]",
-    "h2_norm": "H2 norm, slip (rad) to [d m, theta_e rad, delta rad]",
-    "closed_loop_poles": "rad/s (real, imaginary)",
+    "gamma_inf": f"H-infinity bound, {INPUTS} to [d m, theta_e rad]",
+    "hinf_norm": f"H-infinity norm, {INPUTS} to [d m, theta_e rad]",
+    "gamma_2": f"H2 bound, {INPUTS} to [d m, theta_e rad, delta rad]",
+    "h2_norm": f"H2 norm, {INPUTS} to [d m, theta_e rad, delta rad]",
+    "closed_loop_poles": "1/s (real, imaginary)",
     "alpha": "1",
     "beta": "1",
     "v": "m/s",
     "L": "m",
+    "region.*": {"max_real": "1/s", "disk_center": "1/s", "disk_radius": "1/s", "sector_deg": "deg"},
 }
+
+#: The mixed design's weights when not given (:func:`pfjax.synthesis.synthesize`).
+WEIGHTS = {"alpha": 10.0, "beta": 1.0}
 
 
 def cmd(args) -> dict:
@@ -47,8 +57,15 @@ def cmd(args) -> dict:
 
     region = None
     with as_flags(SYNTH_FLAGS):
-        for name in ("alpha", "beta"):  # flags whatever the method (the designs read them for mixed only)
-            errors.number(name, getattr(args, name), nonnegative=True)
+        for name, default in WEIGHTS.items():  # the mixed design's weights: refused where not read
+            if args.method != "mixed":
+                if getattr(args, name) is not None:
+                    raise UsageError(f"--{name}: not with --method {args.method} (only with --method mixed)")
+                delattr(args, name)  # not an argument of this design: not recorded, not hashed
+            elif getattr(args, name) is None:
+                setattr(args, name, default)
+            else:
+                errors.number(name, getattr(args, name), nonnegative=True)
         # PoleRegion's bound on sector_angle, (0, pi/2] rad, in the flag's degrees
         if args.sector_deg is not None and not 0 < finite("--sector-deg", args.sector_deg) <= 90:
             raise UsageError(f"--sector-deg: expected a half-angle in (0, 90], got {args.sector_deg:g}")
@@ -59,15 +76,27 @@ def cmd(args) -> dict:
                 disk_radius=None if args.disk is None else args.disk[1],
                 sector_angle=None if args.sector_deg is None else math.radians(args.sector_deg),
             )
+        weights = {k: getattr(args, k) for k in WEIGHTS if hasattr(args, k)}
         try:
-            design = synthesize(
-                args.method, v=args.speed, L=args.wheelbase, alpha=args.alpha, beta=args.beta, region=region
-            )
-        except SynthesisError as e:
-            flags = "--max-real/--disk/--sector-deg" if region is not None else f"--method {args.method}"
-            raise UsageError(f"{flags}: no design exists ({e})") from None
+            design = synthesize(args.method, v=args.speed, L=args.wheelbase, region=region, **weights)
+        except SynthesisError as e:  # the operating point (or the region) admits no design
+            flags = "--max-real/--disk/--sector-deg" if region is not None else "--speed/--wheelbase"
+            where = " in this pole region" if region is not None else ""
+            raise UsageError(
+                f"{flags}: no {args.method} design exists{where} at speed {args.speed:g} m/s, wheelbase "
+                f"{args.wheelbase:g} m ({e})"
+            ) from None
     out = design.to_dict()
-    out.update(v=args.speed, L=args.wheelbase)
+    out.update(
+        v=args.speed,
+        L=args.wheelbase,
+        region={
+            "max_real": args.max_real,
+            "disk_center": None if args.disk is None else args.disk[0],
+            "disk_radius": None if args.disk is None else args.disk[1],
+            "sector_deg": args.sector_deg,
+        },
+    )
     return out
 
 
@@ -90,14 +119,20 @@ def register(sub) -> None:
         default=0.2,
         help="wheelbase, m (default 0.2)",
     )
-    s.add_argument("--alpha", type=float, default=10.0, help="weight on gamma_inf^2 (mixed; default 10)")
-    s.add_argument("--beta", type=float, default=1.0, help="weight on gamma_2^2 (mixed; default 1)")
-    s.add_argument("--max-real", type=float, help="pole region: Re(s) < MAX_REAL")
+    s.add_argument("--alpha", type=float, help="weight on gamma_inf^2 (--method mixed only; default 10)")
+    s.add_argument("--beta", type=float, help="weight on gamma_2^2 (--method mixed only; default 1)")
+    s.add_argument("--max-real", type=float, help="pole region: Re(s) < MAX_REAL, 1/s")
     s.add_argument(
-        "--disk", type=float, nargs=2, metavar=("CENTER", "RADIUS"), help="pole region: |s - CENTER| < RADIUS"
+        "--disk",
+        type=float,
+        nargs=2,
+        metavar=("CENTER", "RADIUS"),
+        help="pole region: |s - CENTER| < RADIUS, both 1/s",
     )
     s.add_argument(
-        "--sector-deg", type=float, help="pole region: conic sector of this half-angle about the negative real axis"
+        "--sector-deg",
+        type=float,
+        help="pole region: conic sector of this half-angle (deg) about the negative real axis",
     )
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=cmd, units=UNITS)

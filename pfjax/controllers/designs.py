@@ -17,6 +17,7 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from pfjax.cache import memoized_design
+from pfjax.controllers.registry import reserve
 
 
 class DesignEntry(NamedTuple):
@@ -119,6 +120,11 @@ DESIGNS: dict[str, DesignEntry] = {
         {"color": "#8c564b", "lw": 1.6, "label": "polytopic mixed H2/H∞ with integral action (LMI)"},
     ),
 }
+
+
+# A design is resolved before the registry (pfjax.controllers.entry): register keeps its names free.
+for _d in DESIGNS.values():
+    reserve((_d.name, _d.cli_name), f"the {_d.name} design")
 
 
 def controller_types() -> list[str]:

@@ -9,6 +9,7 @@ An entry unpacks into its first two fields as ``controller, make_params = entry[
 from __future__ import annotations
 
 import inspect
+import re
 from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
 
@@ -45,6 +46,13 @@ class ControllerEntry(NamedTuple):
 
 #: name -> entry.
 REGISTRY: dict[str, ControllerEntry] = {}
+
+#: name or command-line name -> what takes it outside the registry (:func:`reserve`).
+RESERVED: dict[str, str] = {}
+
+#: A registry name: a lower-case ASCII identifier; a command-line name: the same with ``-``.
+_NAME = re.compile(r"[a-z][a-z0-9_]*")
+_CLI = re.compile(r"[a-z][a-z0-9-]*")
 
 
 class CheckedFactory:
@@ -92,24 +100,46 @@ def register(
     Args:
         controller: the controller (a :class:`~pfjax.controllers.base.Controller`).
         factory: keyword gains -> parameter pytree (its parameters name the gain fields, in order).
-        name: registry name, a non-empty string (default ``controller.name``).
+        name: registry name, a lower-case ASCII identifier (a letter, then letters, digits, ``_``;
+            default ``controller.name``). Registering a name again replaces its entry.
         defaults: default gains the factory does not have itself (keys: its parameters).
-        cli_name: command-line name (default the name with ``_`` → ``-``).
+        cli_name: command-line name, lower-case ASCII letters, digits and ``-`` after a letter
+            (default the name with ``_`` → ``-``). Neither ``name`` nor ``cli_name`` may be a name
+            or command-line name of another entry or of a design (``lmi``, ``mixed``, ...;
+            :func:`reserve`): the new controller could not be reached by it.
         box: tuning box ``(fields, lower, upper)``, or None (not tunable): distinct gain fields
             and their flat bounds, in the gains' own units (:func:`check_box`).
-        style: plot style (default grey, the name as label).
+        style: plot style, a mapping of matplotlib keywords (``color``, ``lw``, ``ls``, ``label``;
+            default grey, the name as label).
         labels: names of a vector field's elements (``{"K": ("k_d", "k_theta")}``); a field
             without labels is a scalar.
         gains: the scalar gains ``--gains`` takes in order (default all of them).
 
     Raises:
-        InputError: an argument that is not as described, naming it (``box.lower[1]: ...``).
+        InputError: an argument that is not as described, naming it (``box.lower[1]: ...``,
+            ``cli_name: 'pi' is taken by controller 'pi'``).
     """
     if not isinstance(controller, Controller):
         raise errors.InputError(f"controller: expected a pfjax Controller, got {type(controller).__name__}")
     if not callable(factory):
         raise errors.InputError(f"factory: expected a callable (keyword gains -> parameters), got {factory!r}")
-    name = _text("name", controller.name if name is None else name)
+    name = _spelling(
+        "name", controller.name if name is None else name, _NAME, "identifier (a letter, then letters, digits, _)"
+    )
+    cli_name = _spelling(
+        "cli_name",
+        name.replace("_", "-") if cli_name is None else cli_name,
+        _CLI,
+        "command-line name (a letter, then letters, digits, -)",
+    )
+    taken = _taken(name)  # a second owner of a spelling would never be reached by it
+    for key, spelling in (("name", name), ("cli_name", cli_name)):
+        if spelling in taken:
+            raise errors.InputError(f"{key}: {spelling!r} is taken by {taken[spelling]}; choose another", key)
+    if style is not None and not isinstance(style, Mapping):
+        raise errors.InputError(
+            f"style: expected a mapping of matplotlib keywords (color, lw, ls, label), got {style!r}", "style"
+        )
     make = checked_factory(name, factory, defaults)
     for k in defaults or {}:
         _field("defaults", k, make)
@@ -127,7 +157,7 @@ def register(
         make,
         name,
         tuple(gains or flat),
-        _text("cli_name", cli_name or name.replace("_", "-")),
+        cli_name,
         None if box is None else check_box(box, make, labels),
         {"color": "#7f7f7f", "lw": 1.0, "label": name, **(style or {})},
         labels,
@@ -184,11 +214,30 @@ def _field(key: str, name, make: CheckedFactory) -> None:
         )
 
 
-def _text(key: str, value) -> str:
-    """``value`` if it is a non-empty string; InputError naming ``key`` otherwise."""
-    if not isinstance(value, str) or not value.strip():
-        raise errors.InputError(f"{key}: expected a non-empty string, got {value!r}", key)
+def _spelling(key: str, value, pattern: re.Pattern, rule: str) -> str:
+    """``value`` if it is a string matching ``pattern`` (``rule`` describes it); InputError naming
+    ``key`` otherwise."""
+    if not isinstance(value, str) or not pattern.fullmatch(value):
+        raise errors.InputError(f"{key}: expected a lower-case ASCII {rule}, got {value!r}", key)
     return value
+
+
+def reserve(spellings, owner: str) -> None:
+    """Keep ``spellings`` (names and command-line names resolved before the registry's, such as the
+    designs' ``lmi`` and ``mixed``: :mod:`pfjax.controllers.designs`) from :func:`register`;
+    ``owner`` says what takes them in its error (``"the lmi design"``)."""
+    for n in spellings:
+        RESERVED[n] = owner
+
+
+def _taken(name: str) -> dict[str, str]:
+    """spelling -> what takes it, for every name and command-line name :func:`register` must not
+    give the entry ``name`` (re-registering ``name`` replaces its own entry)."""
+    out = dict(RESERVED)
+    for e in REGISTRY.values():
+        if e.name != name:
+            out.update({e.name: f"controller {e.name!r}", e.cli_name: f"controller {e.name!r}"})
+    return out
 
 
 def flat_gains(e: ControllerEntry, params=None) -> dict[str, float]:

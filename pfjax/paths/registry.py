@@ -18,8 +18,9 @@ Two sorts of entry:
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from pfjax import errors
 
@@ -53,6 +54,9 @@ class PathEntry(NamedTuple):
 #: name -> entry, in registration order.
 PATHS: dict[str, PathEntry] = {}
 
+#: A path kind's name: a lower-case ASCII identifier.
+_NAME = re.compile(r"[a-z][a-z0-9_]*")
+
 #: The parametric kinds: :mod:`pfjax.montecarlo.sampling` builds them from a study's path config.
 PARAMETRIC = ("circle", "random", "spline")
 
@@ -70,11 +74,16 @@ def register(
 ) -> PathEntry:
     """Add a path kind (replacing one of the same name) and return its entry (see :class:`PathEntry`).
 
+    ``build`` is called once here, so a builder that raises or returns no path is refused when it
+    is registered rather than wherever the path is first used.
+
     Args:
-        name: the kind's config and command-line name, a lower-case identifier (``paths[i].kind``,
-            ``--path``).
-        build: ``() -> path``, a :mod:`pfjax.paths.shapes` pytree (a curve ``p(u)`` in m); None
-            only for the parametric kinds (:data:`PARAMETRIC`), built from a study's path config.
+        name: the kind's config and command-line name, a lower-case ASCII identifier (a letter, then
+            letters, digits and ``_``: ``paths[i].kind``, ``--path``).
+        build: ``() -> path``, a :mod:`pfjax.paths.shapes` pytree (a curve ``p(u)`` in m: a
+            ``NamedTuple`` with methods ``point``, ``d1``, ``d2`` of ``u`` and scalar fields
+            ``u_min < u_max``); None only for the parametric kinds (:data:`PARAMETRIC`), built from a
+            study's path config.
         start_pose: single runs' start ``(x, y, theta)`` (m, m, rad), three finite numbers; needed
             with ``build``.
         start_u: path parameter ``u`` (m: ``x`` on a graph ``y = f(x)``, arc length on a circle,
@@ -87,10 +96,42 @@ def register(
         description: one line for reports (default the name).
 
     Raises:
-        InputError: an argument that is not as described, naming it.
+        InputError: an argument that is not as described, naming it (``build: ...`` for a builder
+            that raises or returns something that is not a path).
     """
-    if not isinstance(name, str) or not name.replace("_", "").isalnum() or not name.islower():
-        raise errors.InputError(f"name: a path kind is a lower-case identifier, got {name!r}", "name")
+    e = _entry(
+        name,
+        build,
+        start_pose=start_pose,
+        start_u=start_u,
+        max_curvature=max_curvature,
+        source=source,
+        parametric=parametric,
+        description=description,
+    )
+    if build is not None:
+        _check_build(name, build)
+    PATHS[name] = e
+    return e
+
+
+def _entry(
+    name,
+    build,
+    *,
+    start_pose=None,
+    start_u=0.0,
+    max_curvature=None,
+    source=False,
+    parametric=False,
+    description="",
+) -> PathEntry:
+    """The entry of :func:`register`'s arguments, each checked (its builder is not called)."""
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise errors.InputError(
+            f"name: a path kind is a lower-case ASCII identifier (a letter, then letters, digits, _), got {name!r}",
+            "name",
+        )
     if build is not None and not callable(build):
         raise errors.InputError(f"build: expected a function () -> path, got {build!r}", "build")
     for key, flag in (("source", source), ("parametric", parametric)):
@@ -109,7 +150,7 @@ def register(
         )
     if not isinstance(description, str):
         raise errors.InputError(f"description: expected a string, got {description!r}", "description")
-    e = PathEntry(
+    return PathEntry(
         name,
         build,
         None if start_pose is None else _pose("start_pose", start_pose),
@@ -119,8 +160,49 @@ def register(
         parametric,
         " ".join(description.split()) or name,
     )
-    PATHS[name] = e
-    return e
+
+
+def _check_build(name: str, build: Callable) -> None:
+    """Call ``build`` once: InputError naming ``build`` if it raises or returns no path (a
+    ``NamedTuple`` with ``point``, ``d1``, ``d2`` giving ``(x, y)`` scalars at a scalar ``u``, and
+    finite scalars ``u_min < u_max``). The methods are traced (:func:`jax.eval_shape`), not run."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    def refuse(why: str):
+        return errors.InputError(f"build: the builder of path {name!r} {why}", "build")
+
+    try:
+        path = build()
+    except Exception as ex:  # a user's builder: any failure is bad input here
+        raise refuse(f"raised {type(ex).__name__}: {ex}") from None
+    expected = "expected a pfjax.paths.shapes pytree (Graph, Circle, Spline)"
+    got = f"{type(path).__name__} {path!r}"[:80]
+    if not (isinstance(path, tuple) and hasattr(path, "_fields")):
+        raise refuse(f"returned {got}, not a path; {expected} or a NamedTuple with point, d1, d2")
+    missing = [m for m in ("point", "d1", "d2") if not callable(getattr(path, m, None))]
+    missing += [f for f in ("u_min", "u_max") if f not in path._fields]
+    if missing:
+        raise refuse(f"returned a {type(path).__name__} without {', '.join(missing)}; {expected}")
+    try:
+        lo, hi = (np.asarray(getattr(path, f), dtype=float) for f in ("u_min", "u_max"))
+    except (TypeError, ValueError) as ex:
+        raise refuse(f"returned u_min, u_max that are not numbers ({ex})") from None
+    if lo.shape != () or hi.shape != ():
+        raise refuse(f"returned u_min, u_max of shapes {lo.shape}, {hi.shape}; expected scalars")
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise refuse(f"returned u_min = {float(lo):g}, u_max = {float(hi):g}; expected finite u_min < u_max")
+    shape: Any = path  # a NamedTuple with the methods checked above
+    u = jax.ShapeDtypeStruct((), jnp.result_type(float))
+    try:
+        out = jax.eval_shape(lambda u: (shape.point(u), shape.d1(u), shape.d2(u)), u)
+    except Exception as ex:  # a user's shape: its methods as the simulator traces them
+        first = (str(ex).splitlines() or [""])[0]
+        raise refuse(f"returned a {type(path).__name__} whose point/d1/d2 fail: {type(ex).__name__}: {first}") from None
+    for m, xy in zip(("point", "d1", "d2"), out):
+        if not (isinstance(xy, tuple) and len(xy) == 2 and all(getattr(c, "shape", None) == () for c in xy)):
+            raise refuse(f"returned a {type(path).__name__} whose {m}(u) is not a pair (x, y) of scalars")
 
 
 def _pose(key: str, value) -> tuple[float, float, float]:
@@ -152,10 +234,17 @@ def source_tests() -> tuple[str, ...]:
     return tuple(n for n, e in PATHS.items() if e.source)
 
 
+def _builtin(name: str, build: Callable | None = None, **kw) -> None:
+    """Add one of pfjax's own kinds, its arguments checked as :func:`register` checks them but its
+    builder not called: calling one would start JAX's runtime on ``import pfjax.paths``
+    (tests/test_extension_audit.py checks each as :func:`register` would)."""
+    PATHS[name] = _entry(name, build, **kw)
+
+
 def _register_builtins() -> None:
     from pfjax.paths import shapes
 
-    register(
+    _builtin(
         "line",
         shapes.line,
         start_pose=(1.0, 0.0, math.pi / 2),
@@ -164,7 +253,7 @@ def _register_builtins() -> None:
         description="the source's line y = x",
     )
     # y = x^2 peaks at curvature 2a = 2 at the vertex; runs start 2 m before it (x = -2)
-    register(
+    _builtin(
         "parabola",
         shapes.parabola,
         start_pose=(-2.0, 3.0, -math.pi / 2),
@@ -174,7 +263,7 @@ def _register_builtins() -> None:
         description="the source's parabola y = x^2",
     )
     # y = sin x: curvature at most A w^2 = 1
-    register(
+    _builtin(
         "sine",
         shapes.sine,
         start_pose=(0.0, -0.2, math.pi / 4),
@@ -182,7 +271,7 @@ def _register_builtins() -> None:
         source=True,
         description="the source's sine y = sin x",
     )
-    register(
+    _builtin(
         "circle",
         lambda: shapes.circle(radius=2.0, cy=2.0),
         start_pose=(0.0, -0.3, 0.0),
@@ -190,8 +279,8 @@ def _register_builtins() -> None:
         description="circle about (0, R) from the origin, counter-clockwise (pfjax's; single runs: R = 2 m)",
     )
     # random: 2 m of path behind the start
-    register("random", start_u=2.0, parametric=True, description="random smooth spline, one per run")
-    register("spline", parametric=True, description="natural cubic spline through the config's points")
+    _builtin("random", start_u=2.0, parametric=True, description="random smooth spline, one per run")
+    _builtin("spline", parametric=True, description="natural cubic spline through the config's points")
 
 
 _register_builtins()
