@@ -33,6 +33,10 @@ SCENARIO_BYTES = 300
 SAMPLE_BYTES = 8 * 12
 #: Most integrator steps one run may take (``horizon / dt``): a 20 s run at 10 us.
 MAX_STEPS = 2_000_000
+#: Largest population and number of generations a genetic algorithm accepts
+#: (:func:`pfjax.tuning.ga.ga`, the parking search).
+MAX_POPULATION = 1_000_000
+MAX_GENERATIONS = 1_000_000
 
 
 def check_steps(horizon: float, dt: float) -> int:

@@ -202,6 +202,7 @@ def test_the_stability_grid_and_the_long_pi_run_use_the_configured_source(monkey
         (["ga.population=2000000"], "ga.population"),
         (["synthesis.alpha=0", "synthesis.beta=0"], "synthesis.alpha"),  # the mixed objective would be empty
         (["source.table3=[1.0, 1.0, 2.0, 3.0]"], "source.table3"),  # 24 readings need 4 distinct values
+        (["source.table3=[1.0, 1.0000001, 2.0, 3.0]"], "source.table3"),  # equal as labelled (6 digits)
     ],
 )
 def test_config_errors_name_the_key_at_load(settings, key):

@@ -45,10 +45,10 @@ CASE_C = ((0.1, 0.5, 0.0), -1, (1.0, 0.5))
 @pytest.mark.parametrize(
     "override, key",
     [
-        (["assumptions.scan_periods=[0.1, 0.005]"], "assumptions.scan_periods[1]: sim.t_max / scan period"),
+        (["assumptions.scan_periods=[0.1, 0.005]"], "assumptions.scan_periods[1]: t_max / scan period"),
         (
             ["montecarlo.scan_lo=0.002", "montecarlo.scan_hi=0.004"],
-            "montecarlo.scan_lo: sim.t_max / scan period may be at most 20000, got 200 / 0.002",
+            "montecarlo.scan_lo: t_max / scan period may be at most 20000, got 200 / 0.002",
         ),
     ],
 )
@@ -179,7 +179,7 @@ def test_search_json_fitness_is_in_inverse_seconds():
         ("search.population=2000000", "search.population: must be <= 1000000"),
         ("search.generations=2000000", "search.generations: must be <= 1000000"),
         ("search.grid_n=64", "search.grid_n: the search may simulate at most 1e+08 scanner periods"),
-        ("search.population=1000", "search.population: the search may simulate at most 1e+08"),
+        ("search.population=1000", "search.population/search.generations: the search may simulate at most 1e+08"),
         ("start_map.grid_n=20", "start_map.grid_n: the search may simulate at most 1e+08"),
     ],
 )

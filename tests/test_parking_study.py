@@ -95,7 +95,7 @@ def test_every_field_has_a_description_with_a_unit():
         ("sim.scan_perod=0.1", "sim.scan_perod: unknown key"),
         ("controller.k1=0", "controller.k1:"),
         ("sim.front=0.6", "sim.front:"),
-        ("sim.scan_period=0.001", "sim.scan_period: t_max / scan_period may be at most 20000, got 200 / 0.001"),
+        ("sim.scan_period=0.001", "sim.scan_period: t_max / scan period may be at most 20000, got 200 / 0.001"),
         ("assumptions.fronts=[0.1, 0.7]", "assumptions.fronts[1]:"),
         ("assumptions.zones=['front']", "assumptions.zones"),
         ("assumptions.pauses=[-1.0]", "assumptions.pauses[0]:"),

@@ -98,6 +98,18 @@ def test_a_budget_below_a_level_and_the_estimate_is_refused_before_g_is_called()
     assert sum(calls) == r.n_rollouts == 300 and r.detail["n_is"] >= 100
 
 
+def test_the_falsifiers_rollouts_are_not_asked_for_where_it_does_not_run():
+    """Fixed slip angles (no slip among the uncertain inputs, the start offset uncertain instead):
+    the falsifier does not run, so the least budget is that of ``explore``."""
+    data = _spec(starts="falsifier", max_rollouts=300).model_dump(mode="json")
+    data["slip"]["beta_r_deg"] = data["slip"]["beta_f_deg"] = {"dist": "constant", "value": 2.0}
+    data["initial"]["lateral_offset"] = {"dist": "uniform", "low": -0.5, "high": 0.5}
+    spec = load_study(data=data)[0]
+    assert study.falsifier_rollouts_at_most(spec) == 0
+    assert study.rollouts_needed(spec)[0] == 300
+    study.check_budget(spec)
+
+
 @pytest.mark.parametrize(
     ("starts", "need"),
     [("none", 200), ("explore", 300), ("falsifier", 2 * 5 + 3 * 32 + 300)],  # falsifier: 2 x 5 steps, 3 rays

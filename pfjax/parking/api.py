@@ -25,7 +25,7 @@ from typing import Any, NamedTuple
 
 from pfjax import errors
 from pfjax.errors import InputError
-from pfjax.parking.limits import MAX_PERIODS
+from pfjax.parking.limits import check_periods
 
 __all__ = ["run", "search"]
 
@@ -128,12 +128,7 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
             raise InputError(f"front: must be < {L2_LENGTH:g} (the rectangle length), got {front:g}", "front")
     if scan_period > MAX_SCAN_PERIOD:
         raise InputError(f"scan_period: must be <= {MAX_SCAN_PERIOD:g} s, got {scan_period:g}", "scan_period")
-    if t_max / scan_period > MAX_PERIODS:  # the message shows both: either may be the one to change
-        raise InputError(
-            f"scan_period: t_max / scan_period may be at most {MAX_PERIODS}, got {t_max:g} / {scan_period:g} = "
-            f"{t_max / scan_period:.3g}",
-            "scan_period",
-        )
+    check_periods("scan_period", t_max, scan_period)
     errors.boolean("lag", lag)
     spec = _map_spec(map)
     try:

@@ -1,7 +1,22 @@
 """The parking simulator's loop bound, shared by the entry points' checks
 (:mod:`pfjax.parking.api`, :mod:`pfjax.parking.study_config`) and the simulator's default
-(:class:`pfjax.parking.runs.ParkingConfig`). Imports nothing, so the entry points stay cheap."""
+(:class:`pfjax.parking.runs.ParkingConfig`), and the one check of it. Imports only
+:mod:`pfjax.errors`, so the entry points stay cheap."""
+
+from pfjax.errors import InputError
 
 #: Most scanner periods one run may take (``t_max / scan_period``); the simulator's loop allows one
 #: more (:func:`pfjax.parking.runs.periods_needed`), so no accepted run ends before ``t_max``.
 MAX_PERIODS = 20000
+
+
+def check_periods(key: str, t_max: float, scan_period: float) -> None:
+    """:class:`~pfjax.errors.InputError` naming ``key`` when a run of ``t_max`` s at ``scan_period``
+    s would take more than :data:`MAX_PERIODS` scanner periods (the message shows both values:
+    either may be the one to change)."""
+    if t_max / scan_period > MAX_PERIODS:
+        raise InputError(
+            f"{key}: t_max / scan period may be at most {MAX_PERIODS}, got {t_max:g} / {scan_period:g} = "
+            f"{t_max / scan_period:.3g}",
+            key,
+        )

@@ -13,7 +13,7 @@ from pydantic import Field, model_validator
 
 from pfjax.config import ConfigModel, Real, load_model
 from pfjax.errors import MAX_SEED
-from pfjax.tuning.ga import MAX_GENERATIONS, MAX_POPULATION
+from pfjax.resources import MAX_GENERATIONS, MAX_POPULATION
 
 #: a part of the robot's rectangle checked toward the travel direction (pfjax.parking.assumptions.ZONES)
 Zone = Literal["middle", "axle", "whole"]
@@ -41,13 +41,9 @@ class Sim(ConfigModel):
 
     @model_validator(mode="after")
     def _steps(self):
-        from pfjax.parking.limits import MAX_PERIODS
+        from pfjax.parking.limits import check_periods
 
-        if self.t_max / self.scan_period > MAX_PERIODS:
-            raise ValueError(
-                f"scan_period: t_max / scan_period may be at most {MAX_PERIODS}, got {self.t_max:g} / {self.scan_period:g} = "
-                f"{self.t_max / self.scan_period:.3g}"
-            )
+        check_periods("scan_period", self.t_max, self.scan_period)
         return self
 
 
@@ -160,22 +156,18 @@ class ParkingStudy(ConfigModel):
         """Every scanner period the study simulates within the loop's bound, and the searches' size
         within the API's (:func:`pfjax.parking.api.check_search_work`), each named by its key."""
         from pfjax.parking.api import check_search_work
-        from pfjax.parking.limits import MAX_PERIODS
+        from pfjax.parking.limits import check_periods
 
         t_max = self.sim.t_max
         periods = [(f"assumptions.scan_periods[{i}]", p) for i, p in enumerate(self.assumptions.scan_periods)]
         for key, period in [*periods, ("montecarlo.scan_lo", self.montecarlo.scan_lo)]:
-            if t_max / period > MAX_PERIODS:
-                raise ValueError(
-                    f"{key}: sim.t_max / scan period may be at most {MAX_PERIODS}, got {t_max:g} / {period:g} = "
-                    f"{t_max / period:.3g}"
-                )
+            check_periods(key, t_max, period)
         se, sm, scan = self.search, self.start_map, self.sim.scan_period
         n = se.grid_n
         check_search_work("search.grid_n", n**3, f"grid_n^3 = {n}^3 = {n**3}", t_max, scan)
         runs = se.population * (se.generations + 1)
         how = f"population x (generations + 1) = {se.population} x {se.generations + 1} = {runs}"
-        check_search_work("search.population", runs, how, t_max, scan)
+        check_search_work("search.population/search.generations", runs, how, t_max, scan)
         starts, m = len(sm.x0) * len(sm.theta0_deg), sm.grid_n
         how = f"starts x grid_n^3 = {starts} x {m}^3 = {starts * m**3}"
         check_search_work("start_map.grid_n", starts * m**3, how, t_max, scan)

@@ -62,9 +62,9 @@ def falsifier_points(spec: StudySpec, stratum: Stratum, inputs: list[Input], con
     from pfjax.numerics.random import seed_key
     from pfjax.sim.simulate import unstack
 
-    slips = [b for b in (_box(inputs, "beta_r_deg"), _box(inputs, "beta_f_deg")) if b is not None]
-    if spec.slip.kind != "constant" or not slips:
+    if not falsifier_applies(spec, inputs):
         return None
+    slips = [b for b in (_box(inputs, "beta_r_deg"), _box(inputs, "beta_f_deg")) if b is not None]
     nominal = to_physical(inputs, np.zeros((1, len(inputs))))
     given = {**nominal, **{k: np.full(1, v) for k, v in stratum.values.items()}}
     run0 = unstack(sample_runs(spec, stratum.path_index, np.arange(1), given=given).scenarios, 0)
@@ -102,6 +102,13 @@ def falsifier_points(spec: StudySpec, stratum: Stratum, inputs: list[Input], con
             x[k] = v
     u = to_standard(inputs, x)
     return np.where(np.isfinite(u), u, np.sign(u) * U_BOX), int(fr.n_rollouts), int(fr.n_gradients)
+
+
+def falsifier_applies(spec: StudySpec, inputs: list[Input]) -> bool:
+    """Whether the falsifier searches the study's runs: constant slip with a slip angle among the
+    uncertain ``inputs`` (it searches constant slips and start errors)."""
+    slips = [b for b in (_box(inputs, "beta_r_deg"), _box(inputs, "beta_f_deg")) if b is not None]
+    return spec.slip.kind == "constant" and bool(slips)
 
 
 def pull_in(g, u_star: np.ndarray, *, n_ray: int = N_RAY, batch: int = 4096) -> tuple[np.ndarray, int]:

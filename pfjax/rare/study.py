@@ -43,7 +43,7 @@ from pfjax.numerics.random import seed_key
 from pfjax.rare.check import reliability
 from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
 from pfjax.rare.importance import cross_entropy_is, explore
-from pfjax.rare.starts import N_RAY, falsifier_points
+from pfjax.rare.starts import N_RAY, falsifier_applies, falsifier_points
 from pfjax.rare.subset import subset_simulation
 from pfjax.rare.transform import Input, Stratum, config_keys, study_inputs, to_physical
 
@@ -127,9 +127,9 @@ def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict
 def falsifier_rollouts_at_most(spec: StudySpec) -> int:
     """The most rollouts the falsifier's starts spend in one stratum (``starts = "falsifier"``):
     ``n_restarts × steps`` gradient rollouts and ``1 + n_restarts`` rays of :data:`N_RAY`
-    (:mod:`pfjax.rare.starts`); 0 where it does not run (other starts, or slip that is not
-    constant)."""
-    if spec.rare_event.starts != "falsifier" or spec.slip.kind != "constant":
+    (:mod:`pfjax.rare.starts`); 0 where it does not run (other starts, or
+    :func:`pfjax.rare.starts.falsifier_applies` false)."""
+    if spec.rare_event.starts != "falsifier" or not falsifier_applies(spec, study_inputs(spec)[0]):
         return 0
     f = spec.falsifier
     return f.n_restarts * f.steps + (1 + f.n_restarts) * N_RAY

@@ -85,8 +85,13 @@ class PaperSource(ConfigModel):
 
     @model_validator(mode="after")
     def _check(self):
-        if len(set(self.table3)) != len(self.table3):  # the 24 readings would not be 24
-            raise ValueError(f"table3: the four values must differ (24 readings), got {self.table3}")
+        # the readings are labelled by their values to 6 significant digits (controllers.table3_label):
+        # values equal there would give fewer than 24 readings
+        if len({f"{v:g}" for v in self.table3}) != len(self.table3):
+            raise ValueError(
+                f"table3: the four values must differ in their first 6 significant digits (24 readings), "
+                f"got {self.table3}"
+            )
         return self
 
 

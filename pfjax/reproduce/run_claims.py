@@ -10,10 +10,9 @@ import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
+from pfjax.reproduce.verdict import FILTERED
+
 CONTROLLERS = ("mixed", "pi")
-#: The basis of a row on the PI that checks the quantity one of the Table 3 filters chose its reading by
-#: (:func:`pfjax.reproduce.paper_runs.part_pi_readings`): on the same simulation, it passes by construction.
-FILTERED = "chosen by filters from the source"
 LABEL = {"mixed": "mixed H2/H∞ (pfjax's K)", "paper-k": "mixed H2/H∞ (source's K)", "pi": "PI (Table 3)"}
 
 
@@ -54,7 +53,7 @@ Add = Callable[..., None]
 
 def converge(inp: Inputs, add: Add) -> None:
     """Both controllers bring the robot onto all three paths. The PI's rows check the filter
-    "converges on all three paths" that chose its reading of Table 3 (:data:`FILTERED`)."""
+    "converges on all three paths" that chose its reading of Table 3 (:data:`pfjax.reproduce.verdict.FILTERED`)."""
     R, paths, band = inp.R, inp.paths, inp.band
     claim = "Both controllers bring the robot onto all three paths"
     for p in paths:
@@ -174,7 +173,7 @@ def line_mixed_error(inp: Inputs, add: Add) -> None:
 def line_pi_error(inp: Inputs, add: Add) -> None:
     """Line: the PI's steady-state position error near the source's, at the (assumed) horizon and
     settled. The first row checks the quantity of the filter "line steady |d| within a factor 3 of
-    the source's" that chose the PI's reading of Table 3 (:data:`FILTERED`)."""
+    the source's" that chose the PI's reading of Table 3 (:data:`pfjax.reproduce.verdict.FILTERED`)."""
     R, window, src, long_pi = inp.R, inp.window, inp.src, inp.long_pi
     claim = f"Line: steady-state position error about {src['line_ss_pi_mm']:g} mm (PI)"
     tol = 0.5

@@ -14,7 +14,8 @@ VERDICTS = ("holds", "does not hold", "reproduced", "not reproduced", "no verdic
 #: Whether a row is evidence. ``independent``: nothing in pfjax was chosen from it.
 #: ``used to choose the convention``: the source's statement fixed a modelling convention, so the row
 #: agrees by construction. ``chosen by filters from the source``: the row checks a reading selected
-#: with criteria taken from the same source statements. ``used to calibrate a parameter``: the
+#: with criteria taken from the same source statements, or checks such a reading on the quantity a
+#: filter chose it by, on the same simulation (it passes by construction). ``used to calibrate a parameter``: the
 #: source's number set one of pfjax's parameters (named in the criterion), so matching it is by
 #: construction. ``assumed``: the criterion rests on a parameter the source does not give (named in
 #: the criterion).
@@ -25,6 +26,8 @@ BASES = (
     "used to calibrate a parameter",
     "assumed",
 )
+#: :data:`BASES`' entry for a row on a reading chosen by the source's own statements.
+FILTERED = BASES[2]
 
 
 class Verdict(NamedTuple):

@@ -69,6 +69,8 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
+from pfjax import resources
+
 
 class GAOptions(NamedTuple):
     """Settings; defaults are the source's MATLAB ``ga`` settings (docs/reproductions/path-following.md §5, Table 2)."""
@@ -94,9 +96,8 @@ class GAResult(NamedTuple):
     costs: np.ndarray  # its costs, (P,)
 
 
-#: Largest population and number of generations the GA accepts.
-MAX_POPULATION = 1_000_000
-MAX_GENERATIONS = 1_000_000
+#: Largest population and number of generations the GA accepts (:mod:`pfjax.resources`).
+MAX_POPULATION, MAX_GENERATIONS = resources.MAX_POPULATION, resources.MAX_GENERATIONS
 
 
 def validate_options(options: GAOptions) -> tuple[int, int, int]:
