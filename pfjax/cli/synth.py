@@ -47,25 +47,20 @@ UNITS = {
     "region.*": {"max_real": "1/s", "disk_center": "1/s", "disk_radius": "1/s", "sector_deg": "deg"},
 }
 
-#: The mixed design's weights when not given (:func:`pfjax.synthesis.synthesize`).
-WEIGHTS = {"alpha": 10.0, "beta": 1.0}
-
 
 def cmd(args) -> dict:
-    from pfjax import errors
     from pfjax.synthesis import PoleRegion, SynthesisError, synthesize
 
     region = None
     with as_flags(SYNTH_FLAGS):
-        for name, default in WEIGHTS.items():  # the mixed design's weights: refused where not read
+        weights = {}  # the mixed design's weights, checked by the synthesis; refused where not read
+        for name in ("alpha", "beta"):
             if args.method != "mixed":
                 if getattr(args, name) is not None:
                     raise UsageError(f"--{name}: not with --method {args.method} (only with --method mixed)")
                 delattr(args, name)  # not an argument of this design: not recorded, not hashed
-            elif getattr(args, name) is None:
-                setattr(args, name, default)
-            else:
-                errors.number(name, getattr(args, name), nonnegative=True)
+            elif getattr(args, name) is not None:
+                weights[name] = getattr(args, name)
         # PoleRegion's bound on sector_angle, (0, pi/2] rad, in the flag's degrees
         if args.sector_deg is not None and not 0 < finite("--sector-deg", args.sector_deg) <= 90:
             raise UsageError(f"--sector-deg: expected a half-angle in (0, 90], got {args.sector_deg:g}")
@@ -76,7 +71,6 @@ def cmd(args) -> dict:
                 disk_radius=None if args.disk is None else args.disk[1],
                 sector_angle=None if args.sector_deg is None else math.radians(args.sector_deg),
             )
-        weights = {k: getattr(args, k) for k in WEIGHTS if hasattr(args, k)}
         try:
             design = synthesize(args.method, v=args.speed, L=args.wheelbase, region=region, **weights)
         except SynthesisError as e:  # the operating point (or the region) admits no design
@@ -87,6 +81,8 @@ def cmd(args) -> dict:
                 f"{args.wheelbase:g} m ({e})"
             ) from None
     out = design.to_dict()
+    if args.method == "mixed":  # recorded as run, the synthesis's defaults filled in
+        args.alpha, args.beta = out["alpha"], out["beta"]
     out.update(
         v=args.speed,
         L=args.wheelbase,
