@@ -18,7 +18,7 @@ from scipy.special import ndtr
 from pfjax.errors import InputError
 from pfjax.montecarlo.config import load_study
 from pfjax.rare import cross_entropy_is, study
-from pfjax.rare.importance import _moments
+from pfjax.rare.importance import _moments, least_rollouts
 
 
 def _spec(paths=("line",), **rare):
@@ -96,6 +96,17 @@ def test_a_budget_below_a_level_and_the_estimate_is_refused_before_g_is_called()
     assert calls == []
     r = cross_entropy_is(g, 1, n_per_level=100, max_rollouts=300)  # the levels leave the estimate its draws
     assert sum(calls) == r.n_rollouts == 300 and r.detail["n_is"] >= 100
+
+
+@pytest.mark.parametrize("max_levels, least", [(30, 200), (0, 100)])
+def test_the_least_budget_is_one_rule_for_the_estimator_and_the_study(max_levels, least):
+    """``least_rollouts`` is the budget ``cross_entropy_is`` refuses below (one rollout less is
+    refused, the least itself runs), with and without cross-entropy levels."""
+    assert least_rollouts(100, max_levels)[0] == least
+    with pytest.raises(InputError, match=rf"^max_rollouts: needs at least {least} "):
+        cross_entropy_is(tail, 1, n_per_level=100, max_levels=max_levels, max_rollouts=least - 1)
+    r = cross_entropy_is(tail, 1, n_per_level=100, max_levels=max_levels, max_rollouts=least)
+    assert r.n_rollouts <= least and r.detail["n_is"] >= 100
 
 
 def test_the_falsifiers_rollouts_are_not_asked_for_where_it_does_not_run():

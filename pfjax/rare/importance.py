@@ -159,6 +159,16 @@ def explore(g: Callable, dim: int, *, n: int = 1000, spread: float = 3.0, seed: 
     return u[evaluate(g, u, batch) <= 0], n
 
 
+def least_rollouts(n_per_level: int, max_levels: int = 30) -> tuple[int, str]:
+    """The fewest rollouts :func:`cross_entropy_is` accepts (module docstring, *Budget*), and what
+    they are for: a cross-entropy level of ``n_per_level`` and ``n_per_level`` draws to estimate
+    from; the draws alone with ``max_levels = 0``."""
+    n = n_per_level
+    if max_levels > 0:
+        return 2 * n, f"a cross-entropy level of n_per_level = {n} and {n} draws to estimate from"
+    return n, f"{n} draws"
+
+
 def cross_entropy_is(
     g: Callable,
     dim: int,
@@ -219,11 +229,8 @@ def cross_entropy_is(
     max_rollouts = errors.integer("max_rollouts", max_rollouts, low=1, high=10**10)
     n_batch = errors.integer("n_batch", n_batch, low=10, high=100_000_000)
     max_levels = errors.integer("max_levels", max_levels, low=0, high=1000)
-    least = (2 if max_levels > 0 else 1) * n
+    least, what = least_rollouts(n, max_levels)
     if max_rollouts < least:
-        what = (
-            f"a cross-entropy level of n_per_level = {n} and {n} draws to estimate from" if max_levels else f"{n} draws"
-        )
         raise errors.InputError(f"max_rollouts: needs at least {least} ({what}), got {max_rollouts}", "max_rollouts")
     starts, k = _check_starts(starts, n_components, dim)
     rng = np.random.default_rng(seed)

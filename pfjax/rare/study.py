@@ -42,7 +42,7 @@ from pfjax.montecarlo.config import StudySpec
 from pfjax.numerics.random import seed_key
 from pfjax.rare.check import reliability
 from pfjax.rare.estimate import RareEstimate, lognormal_interval, monte_carlo
-from pfjax.rare.importance import cross_entropy_is, explore
+from pfjax.rare.importance import cross_entropy_is, explore, least_rollouts
 from pfjax.rare.starts import N_RAY, falsifier_applies, falsifier_points
 from pfjax.rare.subset import subset_simulation
 from pfjax.rare.transform import Input, Stratum, config_keys, study_inputs, to_physical
@@ -141,24 +141,24 @@ def rollouts_needed(spec: StudySpec) -> tuple[int, str]:
     importance sampling the falsifier's rollouts at most (:func:`falsifier_rollouts_at_most`, with
     ``starts = "falsifier"``), ``n_per_level`` for its starts (``explore``, and the fallback of
     ``falsifier``; none for ``none``), ``n_per_level`` for a cross-entropy level and
-    ``n_per_level`` draws to estimate from (:func:`pfjax.rare.cross_entropy_is` keeps them)."""
+    ``n_per_level`` draws to estimate from (:func:`pfjax.rare.importance.least_rollouts`)."""
     rare = spec.rare_event
     n = rare.n_per_level
     if rare.method == "mc":
         return 1, "one run"
     if rare.method == "subset":
         return n, f"a first level of n_per_level = {n}"
-    ce = f"a cross-entropy level of n_per_level = {n} and {n} draws to estimate from"
+    least, ce = least_rollouts(n)
     if rare.starts == "none":
-        return 2 * n, ce
+        return least, ce
     fals = falsifier_rollouts_at_most(spec)
     if fals:
         f = spec.falsifier
-        return fals + 3 * n, (
+        return fals + n + least, (
             f"{fals} for the falsifier at most ({f.n_restarts} x {f.steps} gradient rollouts and "
             f"{1 + f.n_restarts} rays of {N_RAY}), {n} for the starts where it finds none, {ce}"
         )
-    return 3 * n, f"{n} for the starts, {ce}"
+    return n + least, f"{n} for the starts, {ce}"
 
 
 def check_budget(spec: StudySpec) -> None:
@@ -194,7 +194,8 @@ def _estimate(g, dim, method, rare, budget, seed, target, falsifier=lambda: None
 
 def _importance(g, dim, rare, budget, seed, target, falsifier):
     """Importance sampling of one stratum within ``budget`` (at least :func:`rollouts_needed`, so
-    the levels and the estimate have ``2 n_per_level`` left whatever the starts spent)."""
+    the levels and the estimate have :func:`~pfjax.rare.importance.least_rollouts` left whatever
+    the starts spent)."""
     starts, used, how = _starts(g, dim, rare, seed, falsifier)
     est = cross_entropy_is(
         g,
@@ -204,7 +205,7 @@ def _importance(g, dim, rare, budget, seed, target, falsifier):
         n_per_level=rare.n_per_level,
         n_batch=rare.n_per_level,
         target_rel_error=target,
-        max_rollouts=max(budget - used, 2 * rare.n_per_level),
+        max_rollouts=max(budget - used, least_rollouts(rare.n_per_level)[0]),
         seed=seed,
         batch=rare.batch,
     )
