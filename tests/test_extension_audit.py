@@ -45,6 +45,17 @@ def test_simulate_refuses_a_design_whose_K_has_another_size(controller, K, messa
     assert err.value.key == "gains"
 
 
+def test_simulate_refuses_a_parameter_pytree_whose_K_has_another_size():
+    """A ``StateFeedbackParams`` with three gains K is refused as bad input naming ``gains``."""
+    e = C.entry("state_feedback")
+    params = e.make_params()._replace(K=np.array([-1.0, -2.0, -0.5]))
+    with pytest.raises(
+        InputError, match=r"^gains: the state_feedback controller's K takes 2 values \(k_d, k_theta\), got 3$"
+    ) as err:
+        pfjax.simulate(pfjax.scenarios("line", 2), "state_feedback", gains=params)
+    assert err.value.key == "gains"
+
+
 def test_a_design_K_of_the_right_size_gives_every_gain():
     from pfjax.api.simulation import resolve_gains
 

@@ -240,9 +240,10 @@ def _taken(name: str) -> dict[str, str]:
     return out
 
 
-def flat_gains(e: ControllerEntry, params=None) -> dict[str, float]:
+def flat_gains(e: ControllerEntry, params=None, key: str = "gains") -> dict[str, float]:
     """A parameter pytree as scalar gains (vector fields split by ``e.labels``); default: the
-    controller's default gains. What outputs record and ``--gains`` names."""
+    controller's default gains. What outputs record and ``--gains`` names. A field with another
+    number of elements than its labels raises :class:`~pfjax.errors.InputError` naming ``key``."""
     import jax
     import numpy as np
 
@@ -254,7 +255,10 @@ def flat_gains(e: ControllerEntry, params=None) -> dict[str, float]:
         v = np.ravel(np.asarray(value, dtype=float))
         names = e.labels.get(field, (field,))
         if len(names) != v.size:
-            raise ValueError(f"{e.name}: field {field} has {v.size} elements, labels {names}")
+            raise errors.InputError(
+                f"{key}: the {e.name} controller's {field} takes {len(names)} values ({', '.join(names)}), got {v.size}",
+                key,
+            )
         out.update({n: float(x) for n, x in zip(names, v)})
     return out
 
