@@ -216,7 +216,7 @@ def test_tune_api_refuses_a_method_with_a_check_and_defaults_to_gradient(monkeyp
 
     monkeypatch.setattr(problem, "tune", record)
     with pytest.raises(Reached, match="^gradient$"):
-        pfjax.tune("pi", "paper-line", config={"horizon": 1.0}, n_runs=1)
+        pfjax.tune("pi", "paper-line", config={"horizon": 1.0})
 
 
 @pytest.mark.parametrize(
@@ -230,3 +230,51 @@ def test_make_problem_checks_a_given_box_as_register_does(box, key):
 
     with pytest.raises(InputError, match=rf"^{re.escape(key)}: "):
         make_problem("pi", "paper-line", box=box)
+
+
+def _fake_result(D: int):
+    from pfjax.tuning.gradient import TuneResult
+
+    h = np.asarray([1.0])
+    return TuneResult(np.zeros(D), 1.0, h, np.asarray([1]), h, 1, 0.0, 0, 1, 0.0)
+
+
+def test_rounds_are_checked_against_the_final_steps_in_the_cli_and_the_api(monkeypatch, capsys):
+    """``--rounds`` is checked once, after ``--steps`` is applied (70 rounds of 80 steps run), and
+    rounds above the steps are refused, not cut to them; the API alike, naming its argument. The
+    default 3 rounds fall to ``steps`` below 3."""
+    from pfjax.tuning import MultistartOptions, problem
+
+    seen = []
+
+    def fake_tune(pr, method, **kw):
+        seen.append(problem.check_options(method, kw["ga_options"], kw["steps"], None, None, kw["multistart"]))
+        return _fake_result(pr.lower.size)
+
+    monkeypatch.setattr(problem, "tune", fake_tune)
+    argv = ["tune", "--method", "gradient", "--controller", "pi", "--json"]
+    assert main([*argv, "--rounds", "70", "--steps", "80"]) == 0
+    assert (seen[-1].rounds, seen[-1].steps) == (70, 80)
+    capsys.readouterr()
+    err = _refused_cli([*argv, "--rounds", "50", "--steps", "30"], "--rounds", capsys)
+    assert "--rounds: must be <= --steps (30), got 50" in err, err
+    with pytest.raises(InputError, match=r"^multistart\.rounds: must be <= steps \(30\), got 50$") as e:
+        pfjax.tune("pi", steps=30, multistart=MultistartOptions(rounds=50))
+    assert e.value.key == "multistart.rounds"
+    with pytest.raises(InputError, match=r"^rounds: must be <= steps \(30\), got 50$"):
+        problem.check_options("gradient", problem.GAOptions(), 30, None, None, MultistartOptions(rounds=50))
+    assert problem.check_options("gradient", problem.GAOptions(), 2, None, None, None).rounds == 2
+    assert main([*argv, "--steps", "2"]) == 0 and seen[-1].rounds == 2
+
+
+def test_tune_api_refuses_what_the_cli_refuses(capsys):
+    """``n_runs`` with a paper set (one run per path) and ``key`` with ``check`` (a check draws
+    nothing) are refused as ``--n-runs`` and ``--seed`` are, before any problem is built."""
+    with pytest.raises(InputError, match=r"^n_runs: not with scenario paper-line \(it samples the runs of a study"):
+        pfjax.tune("pi", "paper-line", "ga", n_runs=7, population=4, generations=1, config={"horizon": 1.0})
+    _refused_cli(["tune", "--method", "ga", "--controller", "pi", "--n-runs", "7"], "--n-runs", capsys)
+    with pytest.raises(InputError, match=r"^key: not with a check \(only with method ga, gradient, "):
+        pfjax.tune("pi", check="39.5204,1.639,11.6124,0.023", key=5)
+    _refused_cli(
+        ["tune", "--check", "39.5204,1.639,11.6124,0.023", "--controller", "pi", "--seed", "5"], "--seed", capsys
+    )

@@ -160,3 +160,209 @@ def test_a_step_that_does_not_divide_a_horizon_is_refused_at_load(override, key,
     with pytest.raises(ConfigError, match=rf"^{re.escape(key)}: .*{re.escape(text)}"):
         load(overrides=[override])
     assert load(overrides=["sim.dt=0.008"], quick=True).sim.dt == 0.008
+
+
+# --------------------------------------------------------------------------- checked at load, reported as run
+
+
+def _load(*overrides, path=None):
+    from pfjax.tuning.study_config import load
+
+    return load(path, overrides, quick=True)
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (["robust.train_runs=2000000"], "robust.train_runs: must be <= 1000000, got 2000000"),
+        (["compare.cvar_runs=2000000"], "compare.cvar_runs: must be <= 1000000, got 2000000"),
+        (["robust.heldout_runs=200000000"], "robust.heldout_runs: must be <= 100000000"),
+        (
+            ["heldout=studies/tuning_ga_vs_gradient.toml"],
+            "heldout: studies/tuning_ga_vs_gradient.toml: name: required key is missing",
+        ),
+        (["compare.ablation.x={foo=1}"], "compare.ablation.x.foo: unknown key; expected one of n_screen, sampler, "),
+        (['compare.problems="pi:paper-line, pi:paper-line"'], "compare.problems: each problem once, repeated: pi:"),
+        (['compare.ablate_problems="pi:paper-line,pi:paper-line"', "compare.ablate=true"], "compare.ablate_problems: "),
+    ],
+)
+def test_a_bad_study_is_refused_at_load_naming_the_study_key(overrides, message):
+    """Before any tuning: the training sets' bound (make_problem's), the held-out study (loaded at
+    the study's sizes; its errors by the study's key or under ``heldout: <path>:``), the ablation's
+    keys, a problem listed twice."""
+    from pfjax.config import ConfigError
+
+    with pytest.raises(ConfigError, match="^" + re.escape(message)):
+        _load(*overrides)
+
+
+def test_a_training_set_beyond_the_memory_budget_is_refused_at_load(monkeypatch):
+    """pfjax.resources' estimates of the tuners (tune's own), named by the training set's runs: at
+    1 GiB a 6-member GA population on 200000 runs x 3 paths, and 2 chains with 2 tangents on
+    20000 x 3, are too large."""
+    from pfjax.config import ConfigError
+
+    monkeypatch.setenv("PFJAX_MEMORY_BUDGET", str(1 << 30))
+    with pytest.raises(
+        ConfigError, match=r"^compare\.cvar_runs: a GA population of 6 x 600000 runs needs about 16\.1 "
+    ):
+        _load('compare.problems="pi:paper-line, pi:heldout-cvar"', "compare.cvar_runs=200000")
+    with pytest.raises(ConfigError, match=r"^robust\.train_runs: 2 starts x 60000 runs with 2 tangents needs about "):
+        _load("robust.train_runs=20000")
+    _load('compare.problems="pi:paper-line, pi:heldout-cvar"', "compare.cvar_runs=2000", "robust.train_runs=2000")
+
+
+def _heldout_toml(tmp_path, axes: str) -> Path:
+    """The study's held-out set on the line alone, sweeping ``axes``."""
+    text = (ROOT / "studies" / "tuning_heldout.toml").read_text().replace('axes = ["joint"]', f"axes = {axes}")
+    text = text.split("[[paths]]")[0] + '[[paths]]\nkind = "line"\n\n[[controllers]]\nname = "pi-table3"\ntype = "pi"\n'
+    f = tmp_path / "heldout.toml"
+    f.write_text(text)
+    return f
+
+
+def test_a_heldout_study_without_a_joint_sweep_is_refused(tmp_path):
+    """The held-out table's margins and the robust-vs-source verdict read the joint sweep."""
+    from pfjax.config import ConfigError
+
+    f = _heldout_toml(tmp_path, '["rear"]')
+    with pytest.raises(ConfigError, match=rf"^heldout: {re.escape(str(f))}: .*margin\.axes must include 'joint'"):
+        _load(f'heldout="{f}"')
+
+
+def _summary(cfg: dict, heldout: dict, cli: dict) -> dict:
+    """A summary with every field the report reads (made-up numbers: the report's words are tested)."""
+    from pfjax.tuning.study_parts import wins_needed
+
+    g = {"median": 0.3, "min": 0.29, "max": 0.31, "wins": 1, "n": 2, "rollouts": 10, "rollout_fraction": 0.1}
+    g.update(forward_passes=30, forward_pass_fraction=0.3, wall_s_median=1.0, met=True)
+    row = {"ga_median": 0.3, **{m: g for m in ("ga", "gradient", "gradient-plain")}}
+    runs = [
+        {"problem": "pi:paper-line", "method": m, "seed": 0, "cost": 0.3, "n_rollouts": 10, "n_forward_passes": 30}
+        for m in ("ga", "gradient", "gradient-plain")
+    ]
+    h = {"controller": "pi-table3 (source)", "gains": "kp_d=1", "success_rate": 1.0, "success_ci95": [0.9, 1.0]}
+    h.update(n=3, iae_mean=0.4, iae_p95=0.5, steady_abs_d_p95_mm=20.0, slip_margin_deg=7.5)
+    t3 = {"cost": 0.7, "gradient": [0.0], "check_verdict": "-", "descent_steps": 1, "descent_cost": 0.5}
+    t3.update(relative_decrease=0.3, descent_gains={})
+    return {
+        "pfjax_version": "0",
+        "config": cfg,
+        "config_sha256": "0" * 64,
+        "machine": "-",
+        "wall_s": 1.0,
+        "tuning_runs": runs,
+        "checks": {},
+        "table3": t3,
+        "designs": {},
+        "heldout": {**heldout, "table": [h]},
+        "targets": {
+            "wins_needed": wins_needed(cfg["seeds"]),
+            "by_problem": {"pi:paper-line": row},
+            "cli": cli,
+            "robust_vs_source": "-",
+            "integral_steady_abs_d_m": 1e-7,
+        },
+    }
+
+
+def test_the_report_says_what_was_run(tmp_path, monkeypatch):
+    """Part 1b says "the command line's defaults" only when it ran them (the published config) and
+    names the study's settings otherwise (--quick); the target is the computed wins of the seeds
+    run; the held-out text names the held-out study's paths and sweeps; costs carry m·s."""
+    from pfjax.report.document import to_markdown
+    from pfjax.tuning import study_parts
+    from pfjax.tuning.study import heldout_spec, heldout_summary
+    from pfjax.tuning.study_config import load
+    from pfjax.tuning.study_report import report
+
+    published = load(STUDY.with_suffix(".toml")).model_dump(mode="json")
+    assert study_parts.cli_settings(published) == {}  # the published [ga], [multistart]: the command line's defaults
+
+    # part 1b runs the tuners at the study's [ga] and [multistart] and records what differs
+    seen = []
+
+    def fake_tune(pr, method, *, key, ga_options=None, multistart=None, progress=False):
+        seen.append((pr.config.dt, pr.config.horizon, method, ga_options, multistart))
+        return type("R", (), {"cost": 0.3})()
+
+    monkeypatch.setattr("pfjax.tuning.problem.tune", fake_tune)
+    f = _heldout_toml(tmp_path, '["rear", "joint"]')
+    cfg = _load("cli_seeds=1", f'heldout="{f}"').model_dump(mode="json")
+    cli = study_parts.cli_check(cfg, progress=False)  # quick: 6 x 2 GA, 2-step multi-start
+    assert [s[:3] for s in seen] == [(0.005, 20.0, "ga"), (0.005, 20.0, "gradient")]
+    assert seen[0][3].population_size == 6 and seen[1][4].steps == 2
+    assert cli["changed"]["ga.population"] == 6 and cli["changed"]["multistart.steps"] == 2
+
+    heldout = heldout_summary(cfg, heldout_spec(cfg), [])
+    assert heldout["paths"] == ["line"] and heldout["margin_axes"] == ["rear", "joint"]
+    text = to_markdown(report(_summary(cfg, heldout, cli)))
+    assert "command line's defaults (" not in text
+    assert "with the study's settings where they differ from its defaults (ga.population = 6, " in text
+    assert "the target is 1 of 2 seeds" in text and "19 of 20" not in text
+    assert "3 runs per path (line), " in text and "parabola" not in text
+    assert "slip margin from the joint sweep" in text and "also holds the rear sweep" in text
+    assert "iae_mean [m·s]" in text and "Costs in m·s" in text
+
+    cli["changed"] = {}
+    text = to_markdown(report(_summary(published, heldout, cli)))
+    assert "`pfjax tune --method gradient` at the command line's defaults (dt 0.005 s, horizon 20 s)" in text
+    assert "the target is 19 of 20 seeds" in text
+
+
+def test_sim_sets_the_training_sets_as_the_heldout_set(monkeypatch):
+    """``[sim]`` is the step and horizon of the held-out set and of the training sets drawn from its
+    distribution (heldout-cvar, the robust K); at the published defaults these are the held-out
+    study's own (10 ms, 20 s), so the published numbers stand."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from pfjax.tuning import study_parts
+    from pfjax.tuning.cost import CostSpec
+    from pfjax.tuning.problem import make_problem
+    from pfjax.tuning.study import heldout_spec, make_study_problem
+    from pfjax.tuning.study_config import load
+
+    cfg = _load("sim.horizon=30", "sim.dt=0.005", 'compare.problems="pi:paper-line, pi:heldout-cvar"')
+    cfg = cfg.model_dump(mode="json")
+    spec = heldout_spec(cfg)
+    assert (spec.sim.dt, spec.sim.horizon) == (0.005, 30.0)
+    pr = make_study_problem(cfg, "pi:heldout-cvar")
+    assert (pr.config.dt, pr.config.horizon) == (0.005, 30.0)
+    seen = []
+
+    def fake_tune(pr, method, **kw):
+        seen.append((pr.config.dt, pr.config.horizon))
+        return SimpleNamespace(theta=np.zeros(2), cost=0.0, n_rollouts=0, wall_s=0.0)
+
+    monkeypatch.setattr("pfjax.tuning.problem.tune", fake_tune)
+    study_parts.tune_K(cfg, spec, progress=False)
+    assert seen == [(0.005, 30.0), (0.005, 30.0)]  # K on the paper line, K on the training set
+
+    published = load(STUDY.with_suffix(".toml")).model_dump(mode="json")
+    own = make_problem("pi", published["heldout"], cost=CostSpec(aggregate="cvar"), n_runs=3, run_offset=1 << 20)
+    assert make_study_problem(published, "pi:heldout-cvar").config == own.config
+
+
+def test_tuning_runs_and_the_figure_carry_the_cost_unit(tmp_path, monkeypatch):
+    """Every problem's cost is an IAE (mean, or CVaR over the runs): m s in tuning_runs.parquet,
+    m·s on the figure's cost axis."""
+    import matplotlib.axes
+
+    from pfjax.tables import units
+    from pfjax.tuning.study import write_tables
+    from pfjax.tuning.study_report import figures
+
+    hist = pd.DataFrame(
+        {"problem": "pi:paper-line", "method": "ga", "seed": 0, "iteration": [0, 1]}
+        | {"best_cost": [0.5, 0.4], "rollouts": [6, 11], "wall_s": [0.1, 0.2]}
+    )
+    write_tables({"tuning_runs": hist}, tmp_path, {})
+    u = units(tmp_path / "tuning_runs.parquet")
+    assert set(u) == set(hist.columns)
+    assert (u["best_cost"]["unit"], u["wall_s"]["unit"], u["rollouts"]["unit"]) == ("m s", "s", "")
+    labels = []
+    monkeypatch.setattr(matplotlib.axes.Axes, "set_ylabel", lambda self, text, *a, **k: labels.append(text))
+    figures(hist, "pi:paper-line", tmp_path)
+    assert labels == ["best cost so far [m·s]"] * 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -16,10 +17,10 @@ def tune(
     scenario: str = "paper-line",
     method: str | None = None,
     *,
-    key=0,
+    key=None,
     cost=None,
     config=None,
-    n_runs: int = 16,
+    n_runs: int | None = None,
     steps: int | None = None,
     n_starts: int | None = None,
     learning_rate: float | None = None,
@@ -40,6 +41,8 @@ def tune(
             command line's spellings too); a design (``lmi``) is refused, as by ``pfjax tune``.
         scenario: ``paper-line`` | ``paper-parabola`` | ``paper-sine`` | ``paper-all`` | a
             registered path's name | a study TOML (``n_runs`` sampled runs per path).
+        n_runs: runs per path sampled from a study TOML (``None``: 16); not with a paper set or
+            a registered path (one run per path), as ``pfjax tune`` refuses ``--n-runs``.
         method: ``gradient`` (the multi-start tuner: Sobol screening with the controller's
             default gains, successive halving of projected BFGS chains, restarts;
             :mod:`pfjax.tuning.multistart`), ``gradient-plain`` (projected adam from ``n_starts``
@@ -47,7 +50,8 @@ def tune(
             adam steps from its best); ``None`` (default): ``gradient``, or a check when ``check`` is
             given (a method and ``check`` together are refused, as ``pfjax tune`` refuses
             ``--method`` with ``--check``).
-        key: int seed (or JAX key) of the GA population / the gradient's starts.
+        key: int seed (or JAX key) of the GA population / the gradient's starts (``None``: 0);
+            not with ``check`` (a check draws nothing), as ``pfjax tune`` refuses ``--seed``.
         cost: a :class:`pfjax.tuning.CostSpec` (metric, effort weight, aggregate); default mean IAE.
         config: a :class:`pfjax.sim.SimConfig`, or a dict of its fields that change the default
             settings (20 s at 5 ms) or the study's; on ``st`` and ``std`` its ``dt`` must be a stable RK4 step for the runs
@@ -56,10 +60,12 @@ def tune(
             study's ``[vehicle] model``, which ``model`` replaces); a paper set on ``st`` uses the
             robot's parameters, on ``std`` CommonRoad's vehicle2 (:func:`pfjax.tuning.problem.make_problem`).
         steps: gradient steps (``None``: the method's default; multi-start: evaluations of a
-            surviving chain).
+            surviving chain, at least ``multistart``'s rounds: rounds above it are refused naming
+            ``multistart.rounds``, except the default 3, which fall to ``steps`` below 3).
         n_starts: starts descended together (``None``: the method's default).
         learning_rate: multi-start: first BFGS trust radius; adam: step (box units; ``None``: default).
-        multistart: a :class:`pfjax.tuning.MultistartOptions` for ``gradient``.
+        multistart: a :class:`pfjax.tuning.MultistartOptions` for ``gradient`` (a bad field is
+            named ``multistart.<field>``; ``steps``, ``n_starts`` and ``learning_rate`` replace its own).
         generations, population: ``ga`` and ``ga+gradient``: the GA's (``None``: the source's 100
             and 50, :class:`pfjax.tuning.GAOptions`).
         check: gains to check instead of tuning (``{field: value}``, its JSON text or numbers in
@@ -78,15 +84,16 @@ def tune(
     Raises:
         pfjax.errors.InputError: a bad argument, named as here, before any run is simulated
             (``controller``, ``scenario``, ``method``, ``key``, ``model``, a setting the method does
-            not read, ``check`` with ``method``, ``config.<field>`` for a bad field of ``config``;
-            ``progress``: not True or False).
+            not read, ``check`` with ``method``, ``key`` with ``check``, ``n_runs`` with a paper set,
+            ``config.<field>`` for a bad field of ``config``, ``multistart.<field>``; ``progress``:
+            not True or False).
     """
     from pfjax import controllers as C
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
+    from pfjax.tuning.problem import METHODS, check_options, check_settings_apply, make_problem, scenario_sets
     from pfjax.tuning.problem import check as run_check
-    from pfjax.tuning.problem import check_settings_apply, make_problem
     from pfjax.tuning.problem import tune as run_tune
 
     progress = errors.boolean("progress", progress)
@@ -100,15 +107,33 @@ def tune(
     if check is not None and method is not None:
         raise errors.InputError("check: checks given gains; give method or check, not both", "check")
     method = "gradient" if method is None and check is None else method
-    k = prng_key(key)
+    if method is not None and method not in METHODS:
+        raise errors.InputError(f"method: value {method!r}, expected one of {', '.join(METHODS)}", "method")
+    settings: dict[str, object] = dict(generations=generations, population=population, steps=steps)
+    settings.update(n_starts=n_starts, learning_rate=learning_rate, multistart=multistart, key=key)
+    # a setting the method (or a check) does not read is refused, as pfjax tune refuses its flag
+    check_settings_apply(method, {k for k, v in settings.items() if v is not None})
+    if n_runs is not None and isinstance(scenario, str) and scenario in scenario_sets():
+        raise errors.InputError(f"n_runs: not with scenario {scenario} (it samples the runs of a study TOML)", "n_runs")
+    k = prng_key(0 if key is None else key)
     # a dict changes the default or the study's settings (make_problem); a bad field is named config.<field>
     config = config if isinstance(config, dict) else sim_config(config)
     cost = CostSpec() if cost is None else cost
-    settings: dict[str, object] = dict(generations=generations, population=population, steps=steps)
-    settings.update(n_starts=n_starts, learning_rate=learning_rate, multistart=multistart)
-    # a setting the method (or a check) does not read is refused, as pfjax tune refuses its flag
-    check_settings_apply(method, {k for k, v in settings.items() if v is not None})
-    problem = make_problem(name, scenario, cost=cost, config=config, n_runs=n_runs, model=model)
+    ga_options = GAOptions()._replace(
+        **({} if population is None else {"population_size": population}),
+        **({} if generations is None else {"generations": generations}),
+    )
+    # the arguments that replace a field of the multi-start options (a field's error is theirs)
+    given = {
+        a for a, v in (("steps", steps), ("n_starts", n_starts), ("learning_rate", learning_rate)) if v is not None
+    }
+    own = multistart is not None  # the other fields' errors name multistart.<field>
+    if check is None:  # every tuning setting, before the problem is built
+        with _named(given, own):
+            check_options(method, ga_options, steps, n_starts, learning_rate, multistart)
+    problem = make_problem(
+        name, scenario, cost=cost, config=config, n_runs=16 if n_runs is None else n_runs, model=model
+    )
     if check is not None:
         r = run_check(problem, check)
         return {
@@ -117,24 +142,36 @@ def tune(
             "check": as_dict(r, problem.tunable.fields, problem.tunable.sizes),
             "result": r,
         }
-    try:
+    with _named(given, own):
         res = run_tune(
             problem,
             method or "gradient",  # a method is given or defaults when tuning (check is None here)
             key=k,
-            ga_options=GAOptions()._replace(
-                **({} if population is None else {"population_size": population}),
-                **({} if generations is None else {"generations": generations}),
-            ),
+            ga_options=ga_options,
             steps=steps,
             n_starts=n_starts,
             learning_rate=learning_rate,
             multistart=multistart,
             progress=progress,
         )
-    except errors.InputError as e:  # the GA's population_size is this function's population
-        raise errors.renamed(e, "population_size", "population") from None
     return _tuned(C.flat_gains(C.entry(name), problem.tunable.gains(res.theta)), res)
+
+
+@contextlib.contextmanager
+def _named(given: set, multistart: bool):
+    """The tuner's errors by :func:`tune`'s argument names: the GA's ``population_size`` is
+    ``population``; with a ``multistart`` given, a field of it that no argument in ``given``
+    (``steps``, ``n_starts``, ``learning_rate``) replaced is ``multistart.<field>``."""
+    from pfjax.tuning.multistart import MultistartOptions
+
+    try:
+        yield
+    except errors.InputError as e:
+        if e.key == "population_size":
+            raise errors.renamed(e, "population_size", "population") from None
+        if multistart and e.key in MultistartOptions._fields and e.key not in given:
+            raise errors.renamed(e, e.key, f"multistart.{e.key}") from None
+        raise
 
 
 def _tuned(gains: dict, res) -> dict:

@@ -110,7 +110,12 @@ def _multistart_flags(p) -> None:
     """The multi-start tuner's flags (``--method gradient``) and ``--from-default``."""
     p.add_argument("--screen", type=int, default=None, help="gradient: space-filling points screened (64)")
     p.add_argument("--sampler", default=None, help="gradient: sobol | lhs | uniform (sobol)")
-    p.add_argument("--rounds", type=int, default=None, help="gradient: successive-halving rounds (3; 1: none)")
+    p.add_argument(
+        "--rounds",
+        type=int,
+        default=None,
+        help="gradient: successive-halving rounds, at most --steps (3, or --steps when below 3; 1: none)",
+    )
     p.add_argument("--restarts", type=int, default=None, help="gradient: perturbed restarts of the incumbent (3)")
     p.add_argument(
         "--polish",
@@ -161,7 +166,9 @@ FLAGS = {
 
 
 def _multistart(args):
-    """The multi-start tuner's options set by the flags (the rest at their defaults), checked."""
+    """The multi-start tuner's options set by the flags (the rest at their defaults), unchecked:
+    :func:`pfjax.tuning.problem.check_options` checks them once ``--steps``, ``--starts`` and ``--lr``
+    are applied."""
     from pfjax.tuning.multistart import MultistartOptions
 
     flags = (
@@ -172,7 +179,7 @@ def _multistart(args):
         ("polish_steps", args.polish),
         ("smoothing", args.smoothing),
     )
-    return MultistartOptions(**{k: v for k, v in flags if v is not None}).check()
+    return MultistartOptions(**{k: v for k, v in flags if v is not None})
 
 
 #: The cost's unit: its metric's, aggregated over the runs (pfjax.tuning.cost).
@@ -207,7 +214,7 @@ def _cmd(args) -> dict:
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import check, make_problem, tune
+    from pfjax.tuning.problem import check, check_options, make_problem, tune
 
     controllers = _controllers()
     _check_flags(args, controllers)
@@ -218,6 +225,9 @@ def _cmd(args) -> dict:
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
         multistart = _multistart(args)
+        options = GAOptions(population_size=args.population, generations=args.generations)
+        if args.method is not None:  # every tuning setting, once, with --steps, --starts and --lr applied
+            check_options(args.method, options, args.steps, args.starts, args.lr, multistart)
         changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
         try:  # the study's or the default settings with --dt and --horizon, checked as a whole
             problem = make_problem(
@@ -255,7 +265,6 @@ def _cmd(args) -> dict:
             }
         progress = (not args.json) and sys.stderr.isatty()
         theta0 = problem.tunable.flatten() if args.from_default else None
-        options = GAOptions(population_size=args.population, generations=args.generations)
         r = tune(
             problem,
             args.method,
@@ -305,11 +314,11 @@ def method_flags() -> dict[str, tuple[str, ...]]:
     the library's :data:`pfjax.tuning.problem.METHOD_SETTINGS` under the flags' names, and the
     flags the command line alone has (``--seed``, the multi-start tuner's settings one by one,
     ``--from-default``)."""
-    from pfjax.tuning.problem import METHOD_SETTINGS, METHODS
+    from pfjax.tuning.problem import METHOD_SETTINGS
 
     m = METHOD_SETTINGS
     return {
-        "seed": METHODS,
+        "seed": m["key"],
         "generations": m["generations"],
         "population": m["population"],
         "steps": m["steps"],

@@ -171,7 +171,19 @@ def _check_inputs(scenario: str, n_runs: int, run_offset: int, model: str | None
         )
     if model is not None and model not in MODELS:
         raise errors.InputError(f"model: value {model!r}, expected one of {', '.join(MODELS)}", "model")
-    errors.integer("n_runs", n_runs, low=1, high=1_000_000)
+    check_runs(n_runs, run_offset)
+
+
+#: The most runs per path a problem samples from a study TOML (:func:`make_problem`'s ``n_runs``).
+MAX_RUNS = 1_000_000
+
+
+def check_runs(n_runs: int, run_offset: int = 0) -> None:
+    """:class:`~pfjax.errors.InputError` naming ``n_runs`` or ``run_offset`` unless ``n_runs`` runs
+    per path from run index ``run_offset`` can be sampled from a study TOML (:func:`make_problem`)."""
+    from pfjax import errors
+
+    errors.integer("n_runs", n_runs, low=1, high=MAX_RUNS)
     errors.integer("run_offset", run_offset, low=0, high=errors.MAX_SEED - n_runs)
 
 
@@ -199,7 +211,7 @@ def _study_batches(scenario: str, base, n_runs: int, run_offset: int, model: str
     study's, or ``config`` as :func:`make_problem` reads it) of a study TOML; a horizon beyond the
     study's draws the runs' OU slip sequences for it.
     The runs of one evaluation are checked against the memory budget before any is drawn (the
-    methods' own checks, :func:`_check_memory`, follow once the problem is built)."""
+    methods' own checks, :func:`check_memory`, follow once the problem is built)."""
     from pfjax import errors, resources
     from pfjax.montecarlo.config import load_study
     from pfjax.montecarlo.runner import sim_config
@@ -261,8 +273,8 @@ def cost_functions(problem: Problem):
 #: Tuning methods of :func:`tune`.
 METHODS = ("ga", "gradient", "gradient-plain", "ga+gradient")
 #: The methods that read each method-specific setting (by :func:`pfjax.tune`'s argument names;
-#: ``pfjax tune``'s flags are these under their own names, :func:`pfjax.cli.tune.method_flags`).
-#: A check (``check=``) reads none of them.
+#: ``pfjax tune``'s flags are these under their own names, :func:`pfjax.cli.tune.method_flags`;
+#: ``key`` is ``--seed``). A check (``check=``) reads none of them.
 METHOD_SETTINGS = {
     "generations": ("ga", "ga+gradient"),
     "population": ("ga", "ga+gradient"),
@@ -270,6 +282,7 @@ METHOD_SETTINGS = {
     "n_starts": ("gradient", "gradient-plain"),
     "learning_rate": ("gradient", "gradient-plain", "ga+gradient"),
     "multistart": ("gradient",),
+    "key": METHODS,
 }
 
 
@@ -309,7 +322,8 @@ def tune(
     * ``"gradient"``: the multi-start gradient tuner (:mod:`pfjax.tuning.multistart`: Sobol
       screening with the controller's default gains (the source's gains or LMI design) and
       ``theta0`` as candidates, successive halving, smoothing, restarts); ``steps``, ``n_starts``
-      and ``learning_rate`` override the fields of ``multistart``;
+      and ``learning_rate`` override the fields of ``multistart`` (its ``rounds`` at most the
+      final ``steps``; the default 3 rounds fall to ``steps`` when ``steps`` is below 3);
     * ``"gradient-plain"``: projected adam from ``n_starts`` (default 1) starts, ``theta0`` or
       uniform in the box from ``key`` (:func:`pfjax.tuning.gradient.gradient_tune`; ``steps``
       default 100, ``learning_rate`` 0.05);
@@ -328,8 +342,17 @@ def tune(
     method or settings, or batches beyond the memory budget (:mod:`pfjax.resources`: the GA
     simulates a whole population at once, the gradient every start with one tangent per tuned
     gain)."""
-    ms = _checked_options(method, ga_options, steps, n_starts, learning_rate, multistart)
-    _check_memory(problem, method, ga_options, ms, n_starts)
+    ms = check_tune(
+        method,
+        problem.n_per_eval,
+        problem.lower.size,
+        problem.config.n_steps,
+        ga_options=ga_options,
+        steps=steps,
+        n_starts=n_starts,
+        learning_rate=learning_rate,
+        multistart=multistart,
+    )
     f_scalar, f_pop = cost_functions(problem)
     box = (problem.lower, problem.upper)
     rollout_steps = problem.n_per_eval * problem.config.n_steps if shared_programs else None
@@ -381,9 +404,36 @@ def tune(
     return _chained(r, p)
 
 
-def _checked_options(method, ga_options, steps, n_starts, learning_rate, multistart) -> MultistartOptions:
+def check_tune(
+    method: str,
+    n_per_eval: int,
+    n_gains: int,
+    n_steps: int,
+    *,
+    ga_options: GAOptions = GAOptions(),
+    steps: int | None = None,
+    n_starts: int | None = None,
+    learning_rate: float | None = None,
+    multistart: MultistartOptions | None = None,
+) -> MultistartOptions:
+    """Every check :func:`tune` makes before any work, on a problem of ``n_per_eval`` rollouts per
+    evaluation of ``n_steps`` steps and ``n_gains`` tuned gains (which need not be built): the
+    settings (:func:`check_options`) and the memory budget; returns the multi-start tuner's options
+    as :func:`tune` runs them."""
+    ms = check_options(method, ga_options, steps, n_starts, learning_rate, multistart)
+    check_memory(method, n_per_eval, n_gains, n_steps, ga_options, ms, n_starts)
+    return ms
+
+
+#: The multi-start tuner's default rounds, which fall to ``steps`` when ``steps`` is below them.
+DEFAULT_ROUNDS = MultistartOptions().rounds
+
+
+def check_options(method, ga_options, steps, n_starts, learning_rate, multistart) -> MultistartOptions:
     """:func:`tune`'s settings checked (:class:`~pfjax.errors.InputError` naming the argument); the
-    multi-start tuner's options with ``steps``, ``n_starts`` and ``learning_rate`` applied."""
+    multi-start tuner's options with ``steps``, ``n_starts`` and ``learning_rate`` applied, checked
+    once as a whole: ``rounds`` above the final ``steps`` is refused naming ``rounds``, except the
+    default :data:`DEFAULT_ROUNDS`, which fall to ``steps``."""
     from pfjax import errors
     from pfjax.tuning.ga import validate_options
 
@@ -405,56 +455,62 @@ def _checked_options(method, ga_options, steps, n_starts, learning_rate, multist
     }
     ms = ms._replace(**given)
     if method == "gradient":
-        ms = ms._replace(rounds=min(ms.rounds, ms.steps)).check()
+        if ms.rounds == DEFAULT_ROUNDS and errors.is_number(ms.steps) and ms.steps < ms.rounds:
+            ms = ms._replace(rounds=max(1, int(ms.steps)))
+        if errors.is_number(ms.rounds) and errors.is_number(ms.steps) and 1 <= ms.steps < ms.rounds:
+            raise errors.InputError(f"rounds: must be <= steps ({ms.steps}), got {ms.rounds}", "rounds")
+        ms = ms.check()
     return ms
 
 
-def _check_memory(
-    problem: Problem,
+def check_memory(
     method: str,
+    n_per_eval: int,
+    n_gains: int,
+    n_steps: int,
     ga_options: GAOptions = GAOptions(),
     ms: MultistartOptions | None = None,
     n_starts=None,
 ) -> None:
-    """Refuse batches beyond the memory budget (:mod:`pfjax.resources`): the GA simulates a whole
-    population at once, the gradient every start with one tangent per tuned gain, a ``check`` its
-    Hessian's gradients at once and then its probes (value only)."""
+    """Refuse batches beyond the memory budget (:mod:`pfjax.resources`) of ``method`` (or
+    ``"check"``) on a problem of ``n_per_eval`` rollouts per evaluation of ``n_steps`` steps and
+    ``n_gains`` tuned gains: the GA simulates a whole population at once, the gradient every start
+    with one tangent per tuned gain, a ``check`` its Hessian's gradients at once and then its
+    probes (value only)."""
     from pfjax import resources
     from pfjax.tuning.check import RADII, probe_directions
     from pfjax.tuning.ga import validate_options
 
-    D = problem.lower.size
-    per_run = resources.run_bytes(problem.config.n_steps)
+    D = n_gains
+    per_run = resources.run_bytes(n_steps)
     if method == "check":  # check_point: 2 D central differences of the gradient, then the probes
         resources.check_memory(
             "check",
-            2 * 2 * D * problem.n_per_eval * per_run * (1 + D),
-            f"the Hessian's {2 * D} gradients x {problem.n_per_eval} runs with {D} tangents",
+            2 * 2 * D * n_per_eval * per_run * (1 + D),
+            f"the Hessian's {2 * D} gradients x {n_per_eval} runs with {D} tangents",
         )
         n_probes = len(RADII) * len(probe_directions(D))
-        resources.check_memory(
-            "check", 2 * n_probes * problem.n_per_eval * per_run, f"{n_probes} probes x {problem.n_per_eval} runs"
-        )
+        resources.check_memory("check", 2 * n_probes * n_per_eval * per_run, f"{n_probes} probes x {n_per_eval} runs")
         return
     ms = ms or MultistartOptions()
     if method in ("ga", "ga+gradient"):
         population = validate_options(ga_options)[0]
         resources.check_memory(
             "population_size",
-            2 * population * problem.n_per_eval * per_run,
-            f"a GA population of {population} x {problem.n_per_eval} runs",
+            2 * population * n_per_eval * per_run,
+            f"a GA population of {population} x {n_per_eval} runs",
         )
     n_chains = {"gradient": max(ms.n_starts, ms.n_restarts + 1), "gradient-plain": n_starts or 1}.get(method, 1)
     resources.check_memory(
         "n_starts",
-        2 * n_chains * problem.n_per_eval * per_run * (1 + D),
-        f"{n_chains} starts x {problem.n_per_eval} runs with {D} tangents",
+        2 * n_chains * n_per_eval * per_run * (1 + D),
+        f"{n_chains} starts x {n_per_eval} runs with {D} tangents",
     )
     if method == "gradient":
         resources.check_memory(
             "n_screen",
-            2 * (ms.n_screen + 2) * problem.n_per_eval * per_run,
-            f"{ms.n_screen} screened points x {problem.n_per_eval} runs",
+            2 * (ms.n_screen + 2) * n_per_eval * per_run,
+            f"{ms.n_screen} screened points x {n_per_eval} runs",
         )
 
 
@@ -483,6 +539,7 @@ def check(problem: Problem, gains, *, h: float = 1e-4, rtol: float = 1e-4):
     from pfjax.tuning.check import check_point, parse_gains
 
     th = parse_gains(gains, problem.tunable.fields, problem.tunable.sizes, problem.lower, problem.upper)
-    _check_memory(problem, "check")  # before anything is compiled or simulated
+    # before anything is compiled or simulated
+    check_memory("check", problem.n_per_eval, problem.lower.size, problem.config.n_steps)
     f_scalar, _ = cost_functions(problem)
     return check_point(f_scalar, th, problem.lower, problem.upper, h=h, rtol=rtol, n_per_eval=problem.n_per_eval)

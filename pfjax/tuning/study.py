@@ -1,14 +1,16 @@
 """The tuning study: GA vs gradient tuners over seeds and problems, ablation, Table 3 check, robust designs.
 
 Part 1 runs, for every problem in ``compare.problems`` (controller, scenario set, cost) and every
-seed, the GA (the source's settings), the multi-start gradient tuner (``pfjax tune --method
-gradient``, settings in ``[multistart]``) and plain projected adam (``gradient-plain``,
-``[gradient]``); on the first problem also ``ga+gradient``, and on every problem of
-``compare.ablate_problems`` the ablation variants of ``compare.ablation`` (the multi-start tuner
-with one ingredient changed). Part 1b repeats ``pfjax tune --method gradient``'s default settings
-(5 ms step) for the first ``cli_seeds`` seeds against the GA on the same seeds. Parts 2 and 3
-(:mod:`pfjax.tuning.study_parts`): K tuned on one scenario and on a training sample, the LMI designs,
-and every controller on one held-out Monte Carlo set.
+seed, the GA (``[ga]``), the multi-start gradient tuner (``pfjax tune --method gradient``,
+settings in ``[multistart]``) and plain projected adam (``gradient-plain``, ``[gradient]``); on the
+first problem also ``ga+gradient``, and on every problem of ``compare.ablate_problems`` the
+ablation variants of ``compare.ablation`` (the multi-start tuner with one ingredient changed).
+Part 1b runs ``pfjax tune --method gradient`` and ``--method ga`` on the command line's problem (5
+ms step, 20 s) with the ``[ga]`` and ``[multistart]`` settings for the first ``cli_seeds`` seeds:
+the command line's defaults when those are the published sizes (the report lists any setting that
+differs). Parts 2 and 3 (:mod:`pfjax.tuning.study_parts`): K tuned on one scenario and on a
+training sample, the LMI designs, and every controller on one held-out Monte Carlo set. ``[sim]``
+sets the step and horizon of the paper-* problems, of the training sets and of the held-out set.
 
 :func:`run` writes ``summary.json``, ``tuning_runs.parquet`` (cost history of every tuning run),
 ``heldout.parquet`` (one row per held-out run and controller), ``margin.parquet`` (the slip-margin
@@ -28,22 +30,34 @@ import numpy as np
 import pandas as pd
 
 from pfjax.numerics.random import seed_key
-from pfjax.tuning.study_config import TuningStudy, problem_list
+from pfjax.tuning.study_config import TuningStudy, ga_options, heldout_study, methods, problem_list
+
+#: The units of ``tuning_runs.parquet``'s columns (:func:`pfjax.tables.write_parquet`): every
+#: problem's cost is an IAE (paper-*: the mean over its runs; heldout-cvar: the CVaR), in m s.
+COLUMNS: dict[str, tuple[str, str]] = {
+    "problem": ("", "CONTROLLER:SCENARIO of compare.problems"),
+    "method": ("", "tuning method (gradient:<variant>: an ablation variant)"),
+    "seed": ("", "PRNG seed of the run"),
+    "iteration": ("", "GA generation or gradient step (0: the first evaluations)"),
+    "best_cost": ("m s", "best cost so far: IAE over the problem's runs (mean or CVaR), a failed run +100"),
+    "rollouts": ("", "rollouts simulated so far"),
+    "wall_s": ("s", "wall time so far, compilation excluded"),
+}
 
 
 def make_study_problem(cfg: dict, name: str):
-    """``controller:scenario`` -> Problem. ``heldout-cvar``: CVaR of IAE over the held-out study's
-    distribution, ``compare.cvar_runs`` runs per path with run indices disjoint from the held-out runs."""
+    """``controller:scenario`` -> Problem at ``[sim]``'s step and horizon. ``heldout-cvar``: CVaR of
+    IAE over the held-out study's distribution, ``compare.cvar_runs`` runs per path with run indices
+    disjoint from the held-out runs (:func:`pfjax.tuning.study_parts.training_problem`)."""
     from pfjax.sim import SimConfig
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.problem import make_problem
+    from pfjax.tuning.study_parts import training_problem
 
     controller, _, scenario = name.partition(":")
     if scenario == "heldout-cvar":
         cost = CostSpec(aggregate="cvar", level=cfg["compare"]["cvar_level"])
-        return make_problem(
-            controller, cfg["heldout"], cost=cost, n_runs=cfg["compare"]["cvar_runs"], run_offset=1 << 20
-        )
+        return training_problem(cfg, controller, cfg["compare"]["cvar_runs"], cost)
     sim = SimConfig(dt=cfg["sim"]["dt"], horizon=cfg["sim"]["horizon"], record=False)
     return make_problem(controller, scenario, config=sim)
 
@@ -78,35 +92,11 @@ def _history_rows(problem_name, method, seed, r) -> list[dict]:
     ]
 
 
-def methods(cfg: dict, name: str, first: bool) -> dict[str, dict]:
-    """Label -> :func:`pfjax.tuning.problem.tune` keywords of every method run on problem ``name``."""
-    from pfjax.tuning.multistart import MultistartOptions
-
-    ms = MultistartOptions(**cfg["multistart"])
-    out: dict[str, dict] = {
-        "ga": dict(method="ga"),
-        "gradient": dict(method="gradient", multistart=ms),
-        "gradient-plain": dict(
-            method="gradient-plain",
-            steps=cfg["gradient"]["steps"],
-            n_starts=cfg["gradient"]["starts"],
-            learning_rate=cfg["gradient"]["lr"],
-        ),
-    }
-    if first:
-        out["ga+gradient"] = dict(method="ga+gradient")
-    if cfg["compare"]["ablate"] and name in problem_list(cfg["compare"]["ablate_problems"]):
-        for k, v in cfg["compare"]["ablation"].items():
-            out[f"gradient:{k}"] = dict(method="gradient", multistart=ms._replace(**v))
-    return out
-
-
 def compare(cfg: dict, progress: bool):
     """Every method on every problem and seed (module docstring); returns (histories, runs, problems)."""
-    from pfjax.tuning.ga import GAOptions
     from pfjax.tuning.problem import tune
 
-    opts = GAOptions(population_size=cfg["ga"]["population"], generations=cfg["ga"]["generations"])
+    opts = ga_options(cfg)
     rows, runs, problems = [], [], {}
     for i, name in enumerate(problem_list(cfg["compare"]["problems"])):
         pr = problems[name] = make_study_problem(cfg, name)
@@ -127,19 +117,36 @@ def compare(cfg: dict, progress: bool):
 
 
 def heldout_spec(cfg: dict):
-    """The held-out Monte Carlo study at the study's sizes, step and horizon."""
-    from pfjax.montecarlo.config import load_study
+    """The held-out Monte Carlo study at the study's sizes, step and horizon
+    (:func:`pfjax.tuning.study_config.heldout_study`)."""
+    return heldout_study(cfg)
 
-    spec, _ = load_study(
-        Path(cfg["heldout"]),
-        [
-            f"n_runs={cfg['robust']['heldout_runs']}",
-            f"margin.n_per_amplitude={cfg['robust']['margin_runs']}",
-            f"sim.horizon={cfg['sim']['horizon']}",
-            f"sim.dt={cfg['sim']['dt']}",
-        ],
-    )
-    return spec
+
+def heldout_summary(cfg: dict, spec, table: list) -> dict:
+    """The summary's ``heldout`` section: the held-out study, its paths and margin sweeps, ``table``."""
+    from pfjax.provenance import config_hash
+    from pfjax.tuning.study_config import MARGIN_AXIS
+
+    return {
+        "study": cfg["heldout"],
+        "seed": spec.seed,
+        "n_per_path": cfg["robust"]["heldout_runs"],
+        "paths": [p.label for p in spec.paths],
+        "margin_runs": cfg["robust"]["margin_runs"],
+        "margin_axis": MARGIN_AXIS,
+        "margin_axes": list(spec.margin.axes),
+        "config_sha256": config_hash(json.loads(spec.model_dump_json())),
+        "table": table,
+    }
+
+
+def write_tables(tables: dict, out: Path, meta: dict) -> None:
+    """``<name>.parquet`` of every frame in ``tables`` into ``out``, each column with its unit
+    (:data:`COLUMNS`, then :data:`pfjax.tables.COLUMNS`) and ``meta``."""
+    from pfjax.tables import write_parquet
+
+    for name, frame in tables.items():
+        write_parquet(frame, out / f"{name}.parquet", meta, units=COLUMNS)
 
 
 def _parts(cfg: dict, spec, progress: bool):
@@ -164,6 +171,7 @@ def _parts(cfg: dict, spec, progress: bool):
         r["gains"] = ", ".join(f"{k}={np.round(v, 4).tolist()}" for k, v in controllers[r["controller"]][2].items())
     verdicts, comparisons = P.robust_vs_source(table)
     targets = {
+        "wins_needed": P.wins_needed(cfg["seeds"]),
         "by_problem": by_problem,
         "cli": cli,
         "robust_vs_source": "; ".join(verdicts),
@@ -180,7 +188,6 @@ def run(config: TuningStudy, out: Path, progress: bool) -> dict:
     from pfjax.jsonio import dumps
     from pfjax.provenance import config_hash, parquet_metadata
     from pfjax.report import document
-    from pfjax.tables import write_parquet
     from pfjax.tuning.study_report import figures, report
 
     t0 = time.time()
@@ -196,26 +203,27 @@ def run(config: TuningStudy, out: Path, progress: bool) -> dict:
         "machine": f"{platform.machine()}, {jax.device_count()} {jax.default_backend()} device(s), "
         f"jax {jax.__version__}",
         **parts,
-        "heldout": {
-            "study": cfg["heldout"],
-            "seed": spec.seed,
-            "n_per_path": cfg["robust"]["heldout_runs"],
-            "margin_runs": cfg["robust"]["margin_runs"],
-            "config_sha256": config_hash(json.loads(spec.model_dump_json())),
-            "table": table,
-        },
+        "heldout": heldout_summary(cfg, spec, table),
         "targets": targets,
     }
     summary["wall_s"] = time.time() - t0
     out.mkdir(parents=True, exist_ok=True)
     meta = parquet_metadata(cfg, None, config_sha256=summary["config_sha256"])
     tables = {"tuning_runs": hist, "heldout": df, "margin": sweep}
-    for name, frame in tables.items():
-        write_parquet(frame, out / f"{name}.parquet", meta)
+    write_tables(tables, out, meta)
     figures(hist, problem_list(cfg["compare"]["problems"])[0], out)
     (out / "summary.json").write_text(dumps(summary) + "\n")
     document.write(report(summary, tables), out)
     return summary
 
 
-__all__ = ["compare", "heldout_spec", "make_study_problem", "methods", "run"]
+__all__ = [
+    "COLUMNS",
+    "compare",
+    "heldout_spec",
+    "heldout_summary",
+    "make_study_problem",
+    "methods",
+    "run",
+    "write_tables",
+]

@@ -1,6 +1,7 @@
 """The tuning study's configuration schema (``studies/tuning_ga_vs_gradient.toml``).
 
-Sections: ``sim`` (the paper-* problems' step and horizon), ``ga`` (the source's MATLAB ga),
+Sections: ``sim`` (the step and horizon of every simulation: the paper-* problems, the training
+sets and the held-out study), ``ga`` (the source's MATLAB ga),
 ``gradient`` (plain projected adam), ``multistart`` (the multi-start tuner,
 :class:`pfjax.tuning.multistart.MultistartOptions`), ``compare`` (problems and the ablation) and
 ``robust`` (robust tuning, the held-out set, the polytopic designs). Every key is optional; the
@@ -13,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 from pydantic import Field, model_validator
 
 from pfjax.config import POSITIVE, ConfigModel, Real, load_model
@@ -64,7 +66,8 @@ INTEGRAL_STEADY_HORIZON = 30.0
 
 
 class TuneSim(ConfigModel):
-    """The paper-* problems: the source's tests at 5 deg slip."""
+    """Step and horizon of the paper-* problems (the source's tests at 5 deg slip), of the training
+    sets drawn from the held-out study's distribution and of the held-out study itself."""
 
     dt: Real = Field(0.01, ge=POSITIVE, description="RK4 integration step [s]")
     horizon: Real = Field(20.0, gt=15.0, description="simulated time, > 15 s (success window from 15 s) [s]")
@@ -167,6 +170,16 @@ class TuneCompare(ConfigModel):
         from pfjax import controllers as C
 
         problems = problem_list(self.problems)
+        for key, items in (("problems", problems), ("ablate_problems", problem_list(self.ablate_problems))):
+            repeated = sorted({p for p in items if items.count(p) > 1})
+            if repeated:  # a problem listed twice would run, and count, its seeds twice
+                raise ValueError(f"{key}: each problem once, repeated: {', '.join(repeated)}")
+        for name, over in self.ablation.items():
+            unknown = [k for k in over if k not in MultistartOptions._fields]
+            if unknown:
+                raise ValueError(
+                    f"ablation.{name}.{unknown[0]}: unknown key; expected one of {', '.join(MultistartOptions._fields)}"
+                )
         for p in problems:
             c, _, sc = p.partition(":")
             if c not in C.REGISTRY or C.REGISTRY[c].box is None or sc not in SCENARIOS:
@@ -185,7 +198,9 @@ class TuneRobust(ConfigModel):
     """Robust tuning of K on a training sample of the held-out study's distribution, the held-out
     evaluation and the polytopic designs."""
 
-    train_runs: int = Field(6, ge=1, description="training runs per path (x 3 paths per cost evaluation) [-]")
+    train_runs: int = Field(
+        6, ge=1, description="training runs per path (x the held-out study's paths per cost evaluation) [-]"
+    )
     heldout_runs: int = Field(200, ge=1, description="held-out runs per path [-]")
     margin_runs: int = Field(40, ge=1, description="runs per slip amplitude in the margin sweep [-]")
     v_lo: Real = Field(0.8, gt=0, description="polytope: lowest speed [m/s]")
@@ -206,7 +221,13 @@ class TuningStudy(ConfigModel):
         "studies/tuning_heldout.toml", description="a Monte Carlo study TOML: the held-out set and training set [-]"
     )
     seeds: int = Field(20, ge=1, description="seeds 0..seeds-1 of every method on every problem [-]")
-    cli_seeds: int = Field(5, ge=0, description="seeds of `pfjax tune --method gradient` at its defaults [-]")
+    cli_seeds: int = Field(
+        5,
+        ge=0,
+        description="seeds of `pfjax tune --method gradient` and `--method ga` on the command line's problem "
+        "(5 ms step, 20 s) with the [ga] and [multistart] settings (the command line's defaults at the "
+        "published sizes) [-]",
+    )
     sim: TuneSim = TuneSim()
     ga: TuneGA = TuneGA()
     gradient: TuneGradient = TuneGradient()
@@ -226,7 +247,148 @@ class TuningStudy(ConfigModel):
                 raise ValueError(f"compare.ablation.{name}: {e}") from None
         if not Path(self.heldout).is_file():
             raise ValueError(f"heldout: file not found: {self.heldout}")
+        cfg = self.model_dump(mode="json")
+        spec = heldout_study(cfg)
+        check_sizes(cfg, len(spec.paths))
         return self
+
+
+#: First run index of the training sets drawn from the held-out study's distribution (the held-out
+#: runs are 0, 1, ...).
+TRAINING_OFFSET = 1 << 20
+
+#: The study's keys that set a held-out study's key (:func:`heldout_study`): its errors name them.
+HELDOUT_KEYS = {
+    "n_runs": "robust.heldout_runs",
+    "margin.n_per_amplitude": "robust.margin_runs",
+    "sim.horizon": "sim.horizon",
+    "sim.dt": "sim.dt",
+}
+#: The slip-margin sweep whose margins the held-out part compares (the held-out study must sweep it).
+MARGIN_AXIS = "joint"
+
+
+def heldout_study(cfg: dict):
+    """The held-out Monte Carlo study (``cfg["heldout"]``) at the study's sizes (``robust``), step and
+    horizon (``sim``); ``ValueError`` naming the study's key (:data:`HELDOUT_KEYS`), or ``heldout:
+    <path>: `` and the held-out study's own key, or ``heldout`` if it has no :data:`MARGIN_AXIS`
+    sweep."""
+    from pfjax.config import ConfigError
+    from pfjax.montecarlo.config import load_study
+
+    sets = {
+        "n_runs": cfg["robust"]["heldout_runs"],
+        "margin.n_per_amplitude": cfg["robust"]["margin_runs"],
+        "sim.horizon": cfg["sim"]["horizon"],
+        "sim.dt": cfg["sim"]["dt"],
+    }
+    path = cfg["heldout"]
+    try:
+        spec, _ = load_study(Path(path), [f"{k}={v}" for k, v in sets.items()])
+    except ConfigError as e:
+        head, _, rest = str(e).partition(": ")
+        if head in HELDOUT_KEYS:
+            raise ValueError(f"{HELDOUT_KEYS[head]}: {rest} (in the held-out study {path})") from None
+        raise ValueError(f"heldout: {path}: {e}") from None
+    if not spec.margin.enabled or MARGIN_AXIS not in spec.margin.axes:
+        swept = spec.margin.axes if spec.margin.enabled else "none (margin.enabled = false)"
+        raise ValueError(
+            f"heldout: {path}: the held-out part compares slip margins of a {MARGIN_AXIS} sweep; "
+            f"margin.axes must include {MARGIN_AXIS!r}, got {swept}"
+        )
+    return spec
+
+
+def methods(cfg: dict, name: str, first: bool) -> dict[str, dict]:
+    """Label -> :func:`pfjax.tuning.problem.tune` keywords of every method run on problem ``name``
+    (the GA's options aside: :func:`ga_options`)."""
+    ms = MultistartOptions(**cfg["multistart"])
+    out: dict[str, dict] = {
+        "ga": dict(method="ga"),
+        "gradient": dict(method="gradient", multistart=ms),
+        "gradient-plain": dict(
+            method="gradient-plain",
+            steps=cfg["gradient"]["steps"],
+            n_starts=cfg["gradient"]["starts"],
+            learning_rate=cfg["gradient"]["lr"],
+        ),
+    }
+    if first:
+        out["ga+gradient"] = dict(method="ga+gradient")
+    if cfg["compare"]["ablate"] and name in problem_list(cfg["compare"]["ablate_problems"]):
+        for k, v in cfg["compare"]["ablation"].items():
+            out[f"gradient:{k}"] = dict(method="gradient", multistart=ms._replace(**v))
+    return out
+
+
+def ga_options(cfg: dict):
+    """The GA's options of every GA run of the study (``[ga]``)."""
+    from pfjax.tuning.ga import GAOptions
+
+    return GAOptions(population_size=cfg["ga"]["population"], generations=cfg["ga"]["generations"])
+
+
+def check_sizes(cfg: dict, n_paths: int) -> None:
+    """Every tuning run of the study checked as :func:`pfjax.tuning.problem.make_problem` and
+    :func:`~pfjax.tuning.problem.tune` check it (the training sets' runs per path, the memory
+    budget of each method), before any work; ``ValueError`` naming the study's key: a training
+    set's ``compare.cvar_runs`` or ``robust.train_runs``, else the setting (``ga.population``,
+    ``multistart.<field>``, ``gradient.starts``). ``n_paths``: the held-out study's paths."""
+    from pfjax import controllers as C
+    from pfjax import errors
+    from pfjax.sim import SimConfig
+    from pfjax.tuning.problem import check_memory, check_runs, check_tune, scenario_sets
+
+    n_steps = SimConfig(dt=cfg["sim"]["dt"], horizon=cfg["sim"]["horizon"]).n_steps
+    problems = problem_list(cfg["compare"]["problems"])
+    # (problem, key of its runs or None, rollouts per evaluation, labelled tune keywords)
+    runs: list[tuple[str, str | None, int, dict[str, dict]]] = []
+    for runs_key in ("compare.cvar_runs", "robust.train_runs"):  # the training sets' runs per path
+        section, _, field = runs_key.partition(".")
+        try:
+            check_runs(cfg[section][field], TRAINING_OFFSET)
+        except errors.InputError as e:
+            raise ValueError(f"{runs_key}: {_body(e)}") from None
+    for i, name in enumerate(problems):
+        if name.endswith(":heldout-cvar"):
+            n = cfg["compare"]["cvar_runs"] * n_paths
+            runs.append((name, "compare.cvar_runs", n, methods(cfg, name, i == 0)))
+        else:
+            runs.append((name, None, len(scenario_sets()[name.partition(":")[2]]), methods(cfg, name, i == 0)))
+    # K of state feedback, tuned on the paper line and on the training set (study_parts.tune_K)
+    gradient = {"gradient": dict(method="gradient", multistart=MultistartOptions(**cfg["multistart"]))}
+    runs.append(("state_feedback:paper-line", None, 1, gradient))
+    runs.append(("state_feedback:training", "robust.train_runs", cfg["robust"]["train_runs"] * n_paths, gradient))
+    for name, key, n, labelled in runs:
+        box = C.REGISTRY[name.partition(":")[0]].box
+        assert box is not None  # compare.problems lists tunable controllers (TuneCompare)
+        D = int(np.size(box[1]))
+        for label, kw in labelled.items():
+            kw = dict(kw)
+            try:
+                check_tune(kw.pop("method"), n, D, n_steps, ga_options=ga_options(cfg), **kw)
+                if name == problems[0]:  # the local check of the first problem's best answers
+                    check_memory("check", n, D, n_steps)
+            except errors.InputError as e:
+                setting = _setting(label, e.key)
+                raise ValueError(f"{key or setting}: {_body(e)} ({label} on {name})") from None
+
+
+def _body(e) -> str:
+    """An :class:`~pfjax.errors.InputError`'s message without its leading key."""
+    text = str(e)
+    return text[len(e.key) + 2 :] if e.key and text.startswith(f"{e.key}: ") else text
+
+
+def _setting(label: str, key: str | None) -> str:
+    """The study's key of a tuner's setting ``key`` (an error of the method ``label``)."""
+    if key == "population_size":
+        return "ga.population"
+    if label == "gradient-plain":
+        return {"n_starts": "gradient.starts", "steps": "gradient.steps"}.get(key or "", "gradient")
+    if label.startswith("gradient:"):
+        return f"compare.ablation.{label.partition(':')[2]}"
+    return f"multistart.{key}" if key in MultistartOptions._fields else "compare.problems"
 
 
 def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: bool = False) -> TuningStudy:
@@ -237,8 +399,11 @@ def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: b
 
 __all__ = [
     "ABLATION",
+    "HELDOUT_KEYS",
+    "MARGIN_AXIS",
     "QUICK",
     "SCENARIOS",
+    "TRAINING_OFFSET",
     "TuneCompare",
     "TuneGA",
     "TuneGradient",
@@ -247,6 +412,10 @@ __all__ = [
     "TuneSim",
     "TuningStudy",
     "check_multistart",
+    "check_sizes",
+    "ga_options",
+    "heldout_study",
     "load",
+    "methods",
     "problem_list",
 ]

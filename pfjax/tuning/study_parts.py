@@ -69,6 +69,25 @@ def checks(runs, problems, name):
     return out
 
 
+def training_problem(cfg, controller: str, n_runs: int, cost=None):
+    """A problem on a training set: ``n_runs`` runs per path drawn from the held-out study's
+    distribution with run indices from :data:`~pfjax.tuning.study_config.TRAINING_OFFSET` (disjoint
+    from the held-out runs), at ``[sim]``'s step and horizon (as the held-out set,
+    :func:`~pfjax.tuning.study_config.heldout_study`); ``cost`` default mean IAE."""
+    from pfjax.tuning.cost import CostSpec
+    from pfjax.tuning.problem import make_problem
+    from pfjax.tuning.study_config import TRAINING_OFFSET
+
+    return make_problem(
+        controller,
+        cfg["heldout"],
+        cost=CostSpec() if cost is None else cost,
+        config={"dt": cfg["sim"]["dt"], "horizon": cfg["sim"]["horizon"]},
+        n_runs=n_runs,
+        run_offset=TRAINING_OFFSET,
+    )
+
+
 def tune_K(cfg, spec, progress):
     """K of state feedback tuned by the multi-start tuner on the paper line and on the training sample."""
     from pfjax.sim import SimConfig
@@ -77,7 +96,7 @@ def tune_K(cfg, spec, progress):
     sim = SimConfig(dt=cfg["sim"]["dt"], horizon=cfg["sim"]["horizon"], record=False)
     out = {}
     single = make_problem("state_feedback", "paper-line", config=sim)
-    robust = make_problem("state_feedback", cfg["heldout"], n_runs=cfg["robust"]["train_runs"], run_offset=1 << 20)
+    robust = training_problem(cfg, "state_feedback", cfg["robust"]["train_runs"])
     for name, pr in (("K-gradient-single", single), ("K-gradient-robust", robust)):
         r = tune(
             pr,
@@ -102,8 +121,12 @@ def tune_K(cfg, spec, progress):
 
 
 def heldout(cfg, spec, controllers, progress):
+    """Every controller on the held-out runs and the margin sweep: (run frame, sweep, table); the
+    slip margin is the :data:`~pfjax.tuning.study_config.MARGIN_AXIS` sweep's, which the held-out
+    study sweeps (checked at load)."""
     from pfjax.montecarlo.runner import margin_sweep, simulate_runs
     from pfjax.montecarlo.summary import margins, run_statistics
+    from pfjax.tuning.study_config import MARGIN_AXIS
 
     runs = np.arange(cfg["robust"]["heldout_runs"])
     frames = []
@@ -115,7 +138,7 @@ def heldout(cfg, spec, controllers, progress):
     table = []
     for name in controllers:
         st = run_statistics(df[df.controller == name])  # as a study's summary states them
-        m = margins(sweep, name, spec.margin.eps).get("joint", {})
+        m = margins(sweep, name, spec.margin.eps)[MARGIN_AXIS]
         table.append(
             {
                 "controller": name,
@@ -159,21 +182,39 @@ def integral_steady(cfg) -> float:
     return float(np.max(np.asarray(r.metrics.steady_abs_d)))
 
 
-def cli_check(cfg, progress):
-    """``pfjax tune --method {ga,gradient} --controller pi --scenario paper-line --seed S`` at the
-    command line's defaults (5 ms step, 20 s) for S < cli_seeds."""
+def cli_settings(cfg) -> dict:
+    """The study's ``[ga]`` and ``[multistart]`` settings that differ from ``pfjax tune``'s defaults
+    (:class:`~pfjax.tuning.GAOptions`, :class:`~pfjax.tuning.MultistartOptions`), by study key;
+    empty at the published sizes."""
     from pfjax.tuning.ga import GAOptions
+
+    ga = GAOptions()
+    pairs = (("population", ga.population_size), ("generations", ga.generations))
+    out = {f"ga.{k}": cfg["ga"][k] for k, d in pairs if cfg["ga"][k] != d}
+    default = MultistartOptions()._asdict()
+    out.update({f"multistart.{k}": v for k, v in cfg["multistart"].items() if v != default[k]})
+    return out
+
+
+def cli_check(cfg, progress):
+    """``pfjax tune --method {ga,gradient} --controller pi --scenario paper-line --seed S`` for S <
+    cli_seeds: the command line's problem (its 5 ms step, 20 s) with the study's ``[ga]`` and
+    ``[multistart]`` settings, the command line's defaults unless ``changed`` (:func:`cli_settings`)
+    lists some."""
     from pfjax.tuning.problem import make_problem, tune
+    from pfjax.tuning.study_config import ga_options
 
     pr = make_problem("pi", "paper-line")
     seeds = range(cfg["cli_seeds"])
-    opts = GAOptions(population_size=cfg["ga"]["population"], generations=cfg["ga"]["generations"])
+    opts = ga_options(cfg)
     ms = MultistartOptions(**cfg["multistart"])
     ga = [tune(pr, "ga", key=seed_key(s), ga_options=opts, progress=progress).cost for s in seeds]
     gr = [tune(pr, "gradient", key=seed_key(s), multistart=ms, progress=progress).cost for s in seeds]
     best = min(ga) if ga else float("nan")
     return {
         "dt": pr.config.dt,
+        "horizon": pr.config.horizon,
+        "changed": cli_settings(cfg),
         "ga_costs": ga,
         "gradient_costs": gr,
         "ga_best": best,
@@ -237,10 +278,16 @@ def heldout_controllers(tuning_runs, ks, des) -> dict:
     return controllers
 
 
+def wins_needed(seeds: int) -> int:
+    """Seeds a tuner must win of ``seeds`` to meet the target: all but one in 20 (19 of 20), at
+    least one loss allowed."""
+    return seeds - max(1, seeds // 20)
+
+
 def targets_by_problem(cfg, runs):
     """Per problem: the multi-start tuner (and plain adam) against the GA's median on the same seeds."""
     out = {}
-    need = cfg["seeds"] - max(1, cfg["seeds"] // 20)  # 19 of 20
+    need = wins_needed(cfg["seeds"])
     for name in problem_list(cfg["compare"]["problems"]):
         by = lambda m, name=name: [r for r in runs if r["problem"] == name and r["method"] == m]
         ga = by("ga")

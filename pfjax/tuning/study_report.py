@@ -13,6 +13,9 @@ import pandas as pd
 from pfjax.report.document import Code, Document, Figure, Heading, Paragraph, Table
 from pfjax.tuning.study_config import problem_list
 
+#: Every problem's cost (an IAE, mean or CVaR over the problem's runs: :data:`pfjax.tuning.study.COLUMNS`).
+COST_UNIT = "m·s"
+
 
 def figures(hist: pd.DataFrame, problem: str, out: Path) -> list[str]:
     """Best cost so far against rollouts and wall time on ``problem``: median over seeds, band min-max."""
@@ -38,7 +41,7 @@ def figures(hist: pd.DataFrame, problem: str, out: Path) -> list[str]:
     for ax, xl in zip(axes, ("simulated rollouts", "wall time [s] (compilation excluded)")):
         ax.set_xscale("log")
         ax.set_xlabel(xl)
-        ax.set_ylabel("best cost so far")
+        ax.set_ylabel(f"best cost so far [{COST_UNIT}]")
         ax.grid(alpha=0.3)
         ax.legend()
     axes[0].set_title(f"{problem}: cost vs rollouts (band: min-max over seeds)")
@@ -108,33 +111,58 @@ def _heldout_cell(r: dict, c: str) -> str:
 
 def _part1(s: dict) -> list:
     main = problem_list(s["config"]["compare"]["problems"])[0]
-    cli = s["targets"]["cli"]
+    cli, seeds = s["targets"]["cli"], s["config"]["seeds"]
     blocks = [
-        Heading(f"1. GA vs gradient tuners over {s['config']['seeds']} seeds"),
+        Heading(f"1. GA vs gradient tuners over {seeds} seeds"),
         Paragraph(
-            "A seed wins when the tuner's cost is at most the GA's median cost over the same seeds; "
-            "the target is 19 of 20 seeds with at most a tenth of the GA's rollouts."
+            f"Costs in {COST_UNIT}. A seed wins when the tuner's cost is at most the GA's median cost over "
+            f"the same seeds; the target is {s['targets']['wins_needed']} of {seeds} seeds with at most a "
+            "tenth of the GA's rollouts."
         ),
         *_method_tables(s, main),
         Figure("cost_vs_budget", f"{main}: best cost so far against rollouts and wall time (band: min-max over seeds)"),
     ]
     if cli["gradient_costs"]:
-        blocks.append(
-            Paragraph(
-                f"`pfjax tune --method gradient` at the command line's defaults (dt {cli['dt']} s), seeds "
-                f"0-{len(cli['gradient_costs']) - 1}: costs {np.round(cli['gradient_costs'], 5).tolist()} against "
-                f"the GA's best {cli['ga_best']:.5f} over the same seeds (relative: "
-                f"{np.round(cli['gradient_over_ga_best'], 4).tolist()}); "
-                f"**within 0.5 %: {'met' if cli['met'] else 'not met'}**.",
-                style="verdict",
-            )
-        )
+        blocks.append(Paragraph(_cli_verdict(cli), style="verdict"))
     checks = "; ".join(
         f"{m}: {c['verdict']} (cost {c['cost']:.5f}, best probe {100 * c['probe_decrease']:.3f} % lower)"
         for m, c in s["checks"].items()
     )
     blocks.append(Paragraph(f"Local check of the best answer of each method on the first problem: {checks}."))
     return blocks
+
+
+def _cli_verdict(cli: dict) -> str:
+    """Part 1b's verdict, naming the settings it ran: the command line's defaults, or the study's
+    settings that differ from them (``cli["changed"]``)."""
+    problem = f"dt {cli['dt']} s, horizon {cli['horizon']:g} s"
+    if cli["changed"]:
+        changed = ", ".join(f"{k} = {v}" for k, v in cli["changed"].items())
+        how = f"on the command line's problem ({problem}) with the study's settings where they differ from "
+        how += f"its defaults ({changed})"
+    else:
+        how = f"at the command line's defaults ({problem})"
+    return (
+        f"`pfjax tune --method gradient` {how}, seeds 0-{len(cli['gradient_costs']) - 1}: costs "
+        f"{np.round(cli['gradient_costs'], 5).tolist()} against the GA's best {cli['ga_best']:.5f} at the same "
+        f"settings over the same seeds (relative: {np.round(cli['gradient_over_ga_best'], 4).tolist()}); "
+        f"**within 0.5 %: {'met' if cli['met'] else 'not met'}**."
+    )
+
+
+def _heldout_text(h: dict) -> str:
+    """What the held-out set is: runs per path, the paths, the study, its margin sweeps."""
+    others = [a for a in h["margin_axes"] if a != h["margin_axis"]]
+    also = f" (`margin.parquet` also holds the {', '.join(others)} sweep{'s' if len(others) > 1 else ''})"
+    return (
+        f"{h['n_per_path']} runs per path ({', '.join(h['paths'])}), `{h['study']}` (seed {h['seed']}), slip "
+        f"margin from the {h['margin_axis']} sweep with {h['margin_runs']} runs per amplitude"
+        f"{also if others else ''}."
+    )
+
+
+#: The held-out table's column headers (units).
+HEADERS = {"iae_mean": f"iae_mean [{COST_UNIT}]"}
 
 
 def _parts23(s: dict) -> list:
@@ -149,11 +177,8 @@ def _parts23(s: dict) -> list:
             f"{t3['descent_cost']:.5f} ({t3['relative_decrease']:.1%} lower) at {t3['descent_gains']}."
         ),
         Heading("3. Held-out Monte Carlo set"),
-        Paragraph(
-            f"{h['n_per_path']} runs per path (line, parabola, sine), `{h['study']}` (seed {h['seed']}), slip "
-            f"margin from a joint sweep with {h['margin_runs']} runs per amplitude."
-        ),
-        Table(cols, [[_heldout_cell(r, c) for c in cols] for r in h["table"]]),
+        Paragraph(_heldout_text(h)),
+        Table([HEADERS.get(c, c) for c in cols], [[_heldout_cell(r, c) for c in cols] for r in h["table"]]),
         Paragraph(
             "**Target (robust designs beat the source's K and PI in held-out success and slip margin): "
             f"{t['robust_vs_source']}**",
