@@ -20,11 +20,13 @@ from pfjax.config import ConfigError
 from pfjax.dynamic_study import runs as study_runs
 from pfjax.dynamic_study.arms import ROBOT_WHEELBASE, car_study, check
 from pfjax.dynamic_study.config import load
-from pfjax.dynamic_study.report import percent, report
-from pfjax.dynamic_study.summary import bins, compare, slip_summary
+from pfjax.dynamic_study.designs import designs
+from pfjax.dynamic_study.report import design_tables, percent, report, slip_tables
+from pfjax.dynamic_study.summary import SLIP_COLS, UNITS, bins, compare, slip_summary
+from pfjax.jsonio import dumps
 from pfjax.models import single_track as st
 from pfjax.provenance import config_hash
-from pfjax.report.document import to_html, to_markdown
+from pfjax.report.document import Document, Table, to_html, to_markdown
 from pfjax.tables import units
 
 STUDY = Path(__file__).resolve().parents[1] / "studies" / "kinematic_vs_dynamic.py"
@@ -52,14 +54,38 @@ def _script():
         # the arms' own study configs, checked before the runs: the car's step, the robot's step in the ST arm
         ("car.dt=0.1", "car.dt"),
         ("study.sim.dt=0.05", "study.sim.dt"),
+        # the keys each arm sets itself, named as the user set them
+        ("study.slip.beta_r_deg=3.0", "study.slip.beta_r_deg"),
+        ("study.vehicle.model='st'", "study.vehicle.model"),
+        ("study.vehicle.mu=0.5", "study.vehicle.mu"),
     ],
 )
 def test_bad_config_one_line_exit_2_nothing_written(tmp_path, capsys, setting, key):
     out = tmp_path / "out"
     assert _script().main(["--quick", "--out", str(out), "--set", setting]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and f"{key}:" in err, err
+    assert len(err.splitlines()) == 1 and f"error: {key}:" in err, err
     assert not list(tmp_path.iterdir())
+
+
+def test_arm_keys_are_refused_naming_the_key_set():
+    """study.slip, study.vehicle.model and study.vehicle.mu are the arms' own: refused at load, named
+    as set; an arm's error maps to the study key behind it (the kinematic arms' slip to
+    slip_ranges_deg, the dynamic arms' friction to mu_high or mu_grip, anything else to study.*)."""
+    from pfjax.dynamic_study.arms import _config_key
+
+    for setting, message in (
+        ("study.slip.beta_r_deg=3.0", r"^study\.slip\.beta_r_deg: the arms set the slip .*; remove it$"),
+        ("study.vehicle.model='st'", r"^study\.vehicle\.model: the arms set the model .*; remove it$"),
+        ("study.vehicle.mu=0.5", r"^study\.vehicle\.mu: the arms set the friction .*; remove it$"),
+    ):
+        with pytest.raises(ConfigError, match=message):
+            load(quick=True, overrides=[setting])
+    assert _config_key("dynamic", "slip.beta_r_deg", "dynamic_mu3") == "study.slip.beta_r_deg"
+    assert _config_key("kinematic_10deg", "slip.beta_r_deg", "dynamic_mu3") == "slip_ranges_deg"
+    assert _config_key("designs_kinematic_10deg", "vehicle.mu", "dynamic_mu3") == "study.vehicle.mu"
+    assert _config_key("dynamic_mu3", "vehicle.mu", "dynamic_mu3") == "mu_grip"
+    assert _config_key("car_dynamic", "vehicle.mu", "dynamic_mu3") == "mu_high"
 
 
 def test_quick_preset_sets_sizes_and_set_overrides_it():
@@ -155,8 +181,6 @@ def test_car_scaling_scales_every_distribution_kind():
 
 
 def test_designs_take_the_speed_range_of_any_distribution():
-    from pfjax.dynamic_study.designs import designs
-
     config = load(
         quick=True,
         overrides=[
@@ -166,6 +190,36 @@ def test_designs_take_the_speed_range_of_any_distribution():
     )
     controllers, record = designs(config)
     assert record["operating_point"]["v"] == pytest.approx(1.1) and len(controllers) == 6
+
+
+def test_each_dynamic_design_starts_from_its_own_kinematic_gain():
+    """The polytopic redesign starts from the polytopic kinematic gain: its record's K0 is that gain
+    and criterion0 the criterion there over the corner plants; a start that does not stabilise
+    every plant gives no controller, and the record and the report say so."""
+    from pfjax.dynamic_study.designs import _plants
+    from pfjax.synthesis.dynamic_plant import _norms
+
+    config = load(quick=True)
+    controllers, record = designs(config)
+    g = record["gains"]
+    for name in ("mixed", "integral", "polytopic"):
+        assert np.ravel(g[f"{name}-dyn"]["K0"]).tolist() == g[f"{name}-kin"]["K"], name
+    corners = _plants(st.robot_params(), 0.05, [config.mu_low, config.mu_high], [0.7, 1.3])
+    hn, h2, pole = _norms(corners, np.asarray(g["polytopic-kin"]["K"]))
+    assert pole < 0
+    want = config.designs.alpha * hn**2 + config.designs.beta * h2**2
+    assert g["polytopic-dyn"]["criterion0"] == pytest.approx(want, rel=1e-12)
+    assert g["polytopic-dyn"]["criterion"] < g["polytopic-dyn"]["criterion0"]
+    # speeds 0.2-3 m/s: the polytopic kinematic gain does not stabilise every corner plant
+    wide = load(quick=True, overrides=["study.vehicle.speed={dist='uniform', low=0.2, high=3.0}"])
+    controllers, record = designs(wide)
+    failed = record["gains"]["polytopic-dyn"]
+    assert "polytopic-dyn" not in [c["name"] for c in controllers] and len(controllers) == 5
+    assert "K" not in failed and failed["criterion0"] == math.inf
+    assert failed["failed"].endswith("does not stabilise every plant")
+    table = next(b for b in design_tables(record) if isinstance(b, Table))
+    row = next(r for r in table.rows if r[0] == "polytopic-dyn")
+    assert row[1] == "none" and row[2].startswith("no design: K0: ")
 
 
 def test_bins_put_every_run_in_one_bin():
@@ -213,16 +267,61 @@ def test_slip_and_success_tables_count_each_run_once():
     assert sum(b["k"] for b in c["success_by_mu_dynamic"]) == int(dyn.success.sum())
 
 
+def test_slip_and_late_statistics_are_over_the_runs_that_ran_the_whole_horizon():
+    """Failed runs are counted (``n_failed``; success over every run) and left out of the slip and
+    late max |d| statistics: a run failed at t = 0 has NaN slip, one failed before the success
+    window a NaN late max |d|, and one failed later a number that is not a settled error."""
+    dyn = _runs("dynamic", 12)
+    failed = np.arange(12) % 4 == 0  # runs 0, 4, 8
+    dyn.loc[failed, "status"] = "diverged"
+    dyn.loc[failed, "success"] = False
+    dyn.loc[[0, 4], [*SLIP_COLS, "late_max_abs_d"]] = np.nan  # failed at t = 0
+    dyn.loc[8, "late_max_abs_d"] = 0.5  # failed inside the success window
+    dyn.loc[8, SLIP_COLS] = 40.0
+    ok = dyn[~failed]
+    s = slip_summary(dyn, 10.0)
+    assert (s["n"], s["n_failed"]) == (9, 3)
+    for part in ("by_mu", "by_speed"):  # bins over every run's range, statistics over the ok runs
+        assert [sum(b[k] for b in s[part]) for k in ("n", "n_failed")] == [9, 3], part
+    assert s["by_mu"][0]["mu"][0] == 0.3 and s["by_mu"][0]["n_failed"] == 1  # run 0 (mu 0.3) failed
+    assert [(b["n"], b["n_failed"]) for b in s["by_path"]] == [(9, 3)]
+    for c in SLIP_COLS:
+        assert s["all"][c] == pytest.approx({"q50": ok[c].median(), "q95": ok[c].quantile(0.95), "max": ok[c].max()})
+    assert s["fraction_max_beyond_declared"]["max_abs_beta_f_deg"] == pytest.approx(np.mean(ok.max_abs_beta_f_deg > 10))
+    table = pd.concat([dyn, _runs("kinematic_10deg", 12), _runs("kinematic_0deg", 12)], ignore_index=True)
+    c = compare(table, "dynamic", "kinematic_10deg", "kinematic_")["controllers"]["stanley"]
+    assert c["success"]["dynamic"]["n"] == 12 and c["n_ok"] == {
+        "dynamic": 9,
+        "kinematic_10deg": 12,
+        "kinematic_0deg": 12,
+    }
+    assert c["worst_late_max_abs_d"]["dynamic"] == ok.late_max_abs_d.max() < 0.5
+    assert c["late_max_abs_d_q95"]["dynamic"] == pytest.approx(ok.late_max_abs_d.quantile(0.95))
+    # an arm without a run that ran the whole horizon: no statistics, shown as a dash
+    none_ok = dyn.assign(status="diverged")
+    assert math.isnan(slip_summary(none_ok, 10.0)["all"]["max_abs_beta_r_deg"]["q50"])
+    text = to_markdown(Document("t", "", slip_tables(json.loads(dumps(slip_summary(none_ok, 10.0))))))
+    assert "| - / - / - |" in text and "rear - %" in text
+
+
 @pytest.fixture
 def hand_made_study(tmp_path, monkeypatch):
-    """The study's outputs (``out``) and config, each arm's runs a hand-made table in place of a simulation."""
-    config = load(quick=True, overrides=[*SMALL[:-1], "bench=false"])
+    """The study's outputs (``out``) and config, each arm's runs a hand-made table in place of a
+    simulation, the designs made once, the throughput a made-up record of the real one's keys."""
+    config = load(quick=True, overrides=[s for s in SMALL if s not in ("designs.enabled=false", "bench=false")])
+    made = designs(config)
 
     def fake_run_study(spec, out, **kw):  # each arm's runs, as pfjax.run_study returns them
-        arm = next(a for a, s in study_runs.arms(config).items() if s == spec)
+        arm = next(a for a, s in study_runs.arms(config, made[0]).items() if s == spec)
         return SimpleNamespace(runs=_runs(arm, 4).drop(columns="arm"))
 
+    costs = {m: {"wall_s": 1.0, "ns_per_rollout_step": 100.0} for m in ("kinematic", "st", "std")}
+    bench = {"runs": 2, "steps": 200, "controller": "stanley", "path": "sine"}
+    for dtype in ("float32", "float64"):
+        bench[dtype] = {**costs, "ratio_st_over_kinematic": 1.0, "ratio_std_over_kinematic": 1.0}
     monkeypatch.setattr(pfjax, "run_study", fake_run_study)
+    monkeypatch.setattr(study_runs, "designs", lambda c: made)
+    monkeypatch.setattr(study_runs, "throughput", lambda c: bench)
     study_runs.run(config, tmp_path / "out")
     return tmp_path / "out", config
 
@@ -247,4 +346,25 @@ def test_outputs_carry_units_and_provenance(hand_made_study):
     assert meta[b"pfjax.seed"] == b"2026" and meta[b"pfjax.version"].decode() == pfjax.__version__
     s = json.loads((out / "summary.json").read_text())
     assert (s["config_sha256"], s["seed"], s["pfjax_version"]) == (digest, 2026, pfjax.__version__)
-    assert s["units"]["late_max_abs_d_q95"] == "m" and s["units"]["speed"].startswith("m/s")
+    assert s["units"]["late_max_abs_d_q95"].startswith("m ") and s["units"]["speed"].startswith("m/s")
+    assert s["units"] == UNITS and s["designs"]["gains"] and s["throughput"]
+    # every number of summary.json (the config's aside: its schema describes them) has its unit:
+    # the unit of its own key or of a key above it
+    numbers = []
+
+    def walk(o, keys):
+        if isinstance(o, dict):
+            for k, v in o.items():
+                walk(v, (*keys, k))
+        elif isinstance(o, list):
+            for v in o:
+                walk(v, keys)
+        elif isinstance(o, (int, float)) and not isinstance(o, bool):
+            numbers.append(keys)
+
+    walk({k: v for k, v in s.items() if k not in ("config", "units")}, ())
+    assert len(numbers) > 100
+    missing = sorted({keys[-1] for keys in numbers if not any(k in UNITS for k in keys)})
+    assert not missing, missing
+    for key in ("criterion", "criterion0", "hinf_norm", "h2_norm", "evaluations"):
+        assert key in s["designs"]["gains"]["mixed-dyn"] and UNITS[key], key

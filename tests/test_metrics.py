@@ -290,3 +290,20 @@ def test_success_window_hand_computed():
     w_failed[-100:] = 0.0  # failed near the end: never a success
     m = _feed(t, d, z, z, z, w_failed, band=0.05, steady_from=6.0)
     assert not bool(m.success)
+
+
+def test_a_run_failed_before_the_success_window_has_no_late_max():
+    """late_max_abs_d over no sample of the success window (the run failed before success_from) is
+    NaN, not 0 (an unfinished run is no small late error); a run failed inside the window has the max
+    over its samples there; neither is a success."""
+    h, N = 0.01, 1000
+    t = np.arange(N + 1) * h
+    d = np.exp(-t)
+    z = np.zeros_like(t)
+    for k_fail, late in ((300, math.nan), (700, math.exp(-6.0))):  # success window from t = 6 (k = 600)
+        w = np.ones(N + 1)
+        w[0] = 0.5
+        w[k_fail:] = 0.0
+        m = _feed(t, d, z, z, z, w, band=0.05, steady_from=6.0)
+        np.testing.assert_allclose(m.late_max_abs_d, late, rtol=1e-12)
+        assert np.isfinite(m.max_abs_d) and not bool(m.success)

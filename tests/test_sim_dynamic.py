@@ -110,6 +110,11 @@ def test_failures_are_statuses():
     r = dyn.simulate_batch(stack([sc, far, nan]), controller=ctrl, config=config)
     assert [int(s) for s in r.status] == [Status.OK, Status.DIVERGED, Status.NONFINITE]
     assert np.isnan(float(r.fail_time[0])) and float(r.fail_time[1]) == 0.0
+    # the runs that failed at t = 0 have no samples: no slip (NaN, not 0 deg), as no max |d|
+    for name in dyn.SLIP_METRIC_NAMES:
+        values = np.asarray(getattr(r.slip, name))
+        assert np.isfinite(values[0]) and np.all(np.isnan(values[1:])), name
+    assert np.all(np.isnan(np.asarray(r.metrics.max_abs_d)[1:]))
     with pytest.raises(InputError, match="^control_every: "):
         dyn.simulate_batch(stack([sc]), controller=ctrl, config=SimConfig(horizon=1.0, control_every=None))
 

@@ -118,7 +118,9 @@ def car_study(config: KinematicVsDynamic) -> dict:
 
 def _config_key(arm: str, key: str, grip: str) -> str:
     """The study config's key behind the key ``key`` of arm ``arm``'s study config (``grip``: the
-    high-friction arm's name)."""
+    high-friction arm's name): the dynamic arms' friction comes from ``mu_low``, ``mu_high`` and
+    ``mu_grip``, the kinematic arms' slip from ``slip_ranges_deg``; every other key is
+    ``study.<key>``."""
     if arm.startswith("car_"):
         if key in ("sim.dt", "sim.horizon"):  # the car's step, and its horizon in whole steps of it
             return "car.dt"
@@ -126,9 +128,10 @@ def _config_key(arm: str, key: str, grip: str) -> str:
             return "car.n_runs"
         if key == "vehicle.params":
             return "car.params"
-    if key == "vehicle.mu":
+    kinematic = "kinematic_" in arm
+    if key == "vehicle.mu" and not kinematic:
         return "mu_grip" if arm == grip else "mu_high"
-    if key.startswith("slip."):
+    if key.startswith("slip.") and kinematic:
         return "slip_ranges_deg"
     return f"study.{key}"
 

@@ -3,7 +3,8 @@
 Top-level keys set the arms (friction range, the high-friction arm, the kinematic slip ranges and
 the throughput comparison); ``designs`` the LMI redesigns; ``car`` the passenger-car scale; ``study``
 the Monte Carlo study config the robot arms share (keys of :class:`pfjax.montecarlo.config.StudySpec`,
-given keys merged into :data:`STUDY` the way ``--set`` merges into a file). Every key is optional;
+given keys merged into :data:`STUDY` the way ``--set`` merges into a file; not the keys each arm sets
+itself, :data:`ARM_KEYS`: the slip, the vehicle's model and its friction). Every key is optional;
 the defaults are the study's published sizes. Loaded by :func:`load` with the same ``--set
 key=value`` syntax and one-line :class:`pfjax.config.ConfigError` as the Monte Carlo study.
 """
@@ -108,7 +109,7 @@ class KinematicVsDynamic(ConfigModel):
         default_factory=lambda: copy.deepcopy(STUDY),
         description="the Monte Carlo study config the robot arms share: keys of a study config, given keys "
         "replacing those of pfjax.dynamic_study.config.STUDY (the [study] tables of "
-        "studies/kinematic_vs_dynamic.toml) [-]",
+        "studies/kinematic_vs_dynamic.toml); not slip, vehicle.model or vehicle.mu, which the arms set [-]",
     )
 
     @field_validator("study", mode="before")
@@ -130,6 +131,7 @@ class KinematicVsDynamic(ConfigModel):
         bad = [a for a in self.slip_ranges_deg if not 0 <= a < 90]
         if bad:
             raise ValueError(f"slip_ranges_deg: expected angles in [0, 90) deg, got {bad[0]:g}")
+        _refuse_arm_keys(self.study)
         try:
             StudySpec.model_validate({**self.study, "name": self.name})
         except ValidationError as e:
@@ -139,10 +141,33 @@ class KinematicVsDynamic(ConfigModel):
         return self
 
 
+#: The ``study`` keys each arm sets itself (:mod:`pfjax.dynamic_study.arms`), and where they come from.
+ARM_KEYS = {
+    ("slip",): "the arms set the slip (the kinematic arms from slip_ranges_deg, the dynamic arms from the tyre forces)",
+    ("vehicle", "model"): "the arms set the model (st in the dynamic arms, kinematic in the kinematic arms)",
+    ("vehicle", "mu"): "the arms set the friction (mu_low, mu_high, mu_grip)",
+}
+
+
+def _refuse_arm_keys(study: dict) -> None:
+    """A ``ValueError`` naming the first key of ``study`` that the arms set themselves (:data:`ARM_KEYS`)."""
+    for path, why in ARM_KEYS.items():
+        table: Any = study
+        for part in path:
+            if not isinstance(table, dict) or part not in table:
+                break
+            table = table[part]
+        else:
+            key = ".".join(("study", *path))
+            if isinstance(table, dict) and table:  # the key the user set under it
+                key += "." + next(iter(table))
+            raise ValueError(f"{key}: {why}; remove it")
+
+
 def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: bool = False) -> KinematicVsDynamic:
     """The validated study config: defaults <- ``path`` <- (``--quick``) <- ``overrides``; raises
     :class:`pfjax.config.ConfigError` naming the key."""
     return load_model(KinematicVsDynamic, path, overrides, presets=[QUICK] if quick else [])[0]
 
 
-__all__ = ["QUICK", "STUDY", "Car", "Designs", "KinematicVsDynamic", "load"]
+__all__ = ["ARM_KEYS", "QUICK", "STUDY", "Car", "Designs", "KinematicVsDynamic", "load"]

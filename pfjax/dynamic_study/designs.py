@@ -5,6 +5,8 @@ midpoint) and ``tau_delta``, friction range ``[mu_low, mu_high]``."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pfjax.dynamic_study.arms import ROBOT_WHEELBASE
@@ -25,10 +27,26 @@ def _plants(p, tau: float, mus, speeds, integral: bool = False) -> list:
     return out
 
 
+def _redesign(plants: list, k0, w: dict) -> dict:
+    """The dynamic design over ``plants`` started from the kinematic gain ``k0``
+    (:func:`pfjax.synthesis.dynamic_mixed`) as a record: ``K``, ``K0``, the criteria, the norms, the
+    largest pole real part and the evaluations; where ``k0`` does not stabilise every plant, no ``K``:
+    ``K0``, ``criterion0`` = inf and the reason under ``failed``."""
+    from pfjax.synthesis import dynamic_mixed
+
+    try:
+        return dynamic_mixed(plants, k0, **w).to_dict()
+    except ValueError as e:
+        return {"K0": np.asarray(k0, float).reshape(1, -1).tolist(), "criterion0": math.inf, "failed": str(e)}
+
+
 def designs(config: KinematicVsDynamic) -> tuple[list[dict], dict]:
     """The kinematic and the dynamic designs as study controllers (``<design>-kin``,
-    ``<design>-dyn``), and their records (operating point, gains, criteria)."""
-    from pfjax.synthesis import dynamic_mixed, integral_mixed, mixed_h2_hinf, polytopic_mixed, slip_design_plant
+    ``<design>-dyn``), and their records (operating point, gains, criteria). Each dynamic design
+    starts from its own kinematic gain (the polytopic one over the corners of the friction and
+    speed ranges); a dynamic design whose kinematic gain does not stabilise every one of its plants
+    is no controller, and its record says why (:func:`_redesign`)."""
+    from pfjax.synthesis import integral_mixed, mixed_h2_hinf, polytopic_mixed, slip_design_plant
 
     d = config.designs
     w: dict = {"alpha": d.alpha, "beta": d.beta}
@@ -43,18 +61,21 @@ def designs(config: KinematicVsDynamic) -> tuple[list[dict], dict]:
     }
     corners = ([config.mu_low, config.mu_high], [v_lo, v_hi])
     dyn = {
-        "mixed": dynamic_mixed(_plants(p, tau, [mu0], [v0]), kin["mixed"], **w),
-        "integral": dynamic_mixed(_plants(p, tau, [mu0], [v0], True), kin["integral"], **w),
-        "polytopic": dynamic_mixed(_plants(p, tau, *corners), kin["mixed"], **w),
+        "mixed": _redesign(_plants(p, tau, [mu0], [v0]), kin["mixed"], w),
+        "integral": _redesign(_plants(p, tau, [mu0], [v0], True), kin["integral"], w),
+        "polytopic": _redesign(_plants(p, tau, *corners), kin["polytopic"], w),
     }
     controllers, record = [], {}
     for name in ("mixed", "integral", "polytopic"):
         typ = "integral" if name == "integral" else "state_feedback"
-        for origin, K in (("kin", kin[name]), ("dyn", dyn[name].K)):
+        for origin, K in (("kin", kin[name]), ("dyn", dyn[name].get("K"))):
             label = f"{name}-{origin}"
+            if K is None:  # no dynamic design (its start does not stabilise every plant)
+                record[label] = dyn[name]
+                continue
             flat = [float(k) for k in np.ravel(K)]
             controllers.append({"name": label, "type": typ, "K": flat})
-            record[label] = {**(dyn[name].to_dict() if origin == "dyn" else {}), "K": flat}
+            record[label] = {**(dyn[name] if origin == "dyn" else {}), "K": flat}
     return controllers, {"operating_point": {"v": v0, "mu": mu0, "tau_delta_s": tau}, "gains": record}
 
 

@@ -12,28 +12,44 @@ def percent(r: dict) -> str:
     return f"{100 * r['rate']:.1f} % [{100 * r['ci95'][0]:.1f}, {100 * r['ci95'][1]:.1f}]"
 
 
+def _num(x, digits: int = 2, scale: float = 1.0) -> str:
+    """``x / scale`` to ``digits`` decimals; a missing number (None, NaN) as a dash."""
+    return "-" if x is None or x != x else f"{x / scale:.{digits}f}"
+
+
 def _q(d: dict) -> str:
-    return f"{d['q50']:.2f} / {d['q95']:.2f} / {d['max']:.2f}"
+    return f"{_num(d['q50'])} / {_num(d['q95'])} / {_num(d['max'])}"
 
 
-_SLIP_HEAD = ["runs", "max abs beta_r q50 / q95 / max", "max abs beta_f q50 / q95 / max", "mean abs beta_f q50 / q95"]
+_SLIP_HEAD = [
+    "runs ok / failed",
+    "max abs beta_r q50 / q95 / max",
+    "max abs beta_f q50 / q95 / max",
+    "mean abs beta_f q50 / q95",
+]
 
 
 def _slip_row(label: str, b: dict) -> list[str]:
     mean_f = b["mean_abs_beta_f_deg"]
     return [
         label,
-        b["n"],
+        f"{b['n']} / {b['n_failed']}",
         _q(b["max_abs_beta_r_deg"]),
         _q(b["max_abs_beta_f_deg"]),
-        f"{mean_f['q50']:.2f} / {mean_f['q95']:.2f}",
+        f"{_num(mean_f['q50'])} / {_num(mean_f['q95'])}",
     ]
 
 
 def slip_tables(s: dict) -> list[Block]:
-    """The slip the dynamic arm produced (deg) by friction, speed and path."""
+    """The slip the dynamic arm produced (deg) by friction, speed and path, over its runs with status
+    ok (the failed runs counted, not in the statistics)."""
     fr = s["fraction_max_beyond_declared"]
     return [
+        Paragraph(
+            f"Over the {s['n']} runs that ran the whole horizon (status ok); the {s['n_failed']} failed runs are "
+            "left out (their slip describes them only up to the failure).",
+            style="note",
+        ),
         Table(["mu", *_SLIP_HEAD], [_slip_row(f"{b['mu'][0]:.2f}-{b['mu'][1]:.2f}", b) for b in s["by_mu"]]),
         Table(
             ["speed m/s", *_SLIP_HEAD],
@@ -44,8 +60,8 @@ def slip_tables(s: dict) -> list[Block]:
             [_slip_row(f"{b['path']} ({b['max_curvature_robot']})", b) for b in s["by_path"]],
         ),
         Paragraph(
-            f"Runs whose largest slip exceeds the declared +-{s['declared_range_deg']:g} deg: rear "
-            f"{100 * fr['max_abs_beta_r_deg']:.1f} %, front {100 * fr['max_abs_beta_f_deg']:.1f} %."
+            f"Runs (status ok) whose largest slip exceeds the declared +-{s['declared_range_deg']:g} deg: rear "
+            f"{_num(fr['max_abs_beta_r_deg'], 1, 0.01)} %, front {_num(fr['max_abs_beta_f_deg'], 1, 0.01)} %."
         ),
     ]
 
@@ -93,7 +109,8 @@ def comparison(c: dict, length_unit: float, unit: str) -> list[Block]:
         [
             name,
             *(
-                f"{x['late_max_abs_d_q95'][a] / length_unit:.1f} / {x['worst_late_max_abs_d'][a] / length_unit:.1f}"
+                f"{_num(x['late_max_abs_d_q95'][a], 1, length_unit)} / {_num(x['worst_late_max_abs_d'][a], 1, length_unit)}"
+                f" ({x['n_ok'][a]})"
                 for a in all_arms
             ),
         ]
@@ -112,19 +129,28 @@ def comparison(c: dict, length_unit: float, unit: str) -> list[Block]:
             [[name, *(percent(x["success"][a]) for a in arms_)] for name, x in ctrl.items()],
             caption="Success in the other arms",
         ),
-        Table(["controller", *all_arms], late, caption=f"Late max |d| ({unit}), 95th percentile / worst run"),
+        Table(
+            ["controller", *all_arms],
+            late,
+            caption=f"Late max |d| ({unit}) over the runs with status ok: 95th percentile / worst run (their number)",
+        ),
     ]
 
 
-def _designs(s: dict) -> list[Block]:
-    op = s["designs"]["operating_point"]
+def design_tables(d: dict) -> list[Block]:
+    """The designs' heading and gains table of a designs record (:func:`pfjax.dynamic_study.designs.designs`)."""
+    op = d["operating_point"]
     rows = [
         [
             name,
-            ", ".join(f"{k:.3f}" for k in g["K"]),
-            f"{g['criterion0']:.2f} -> {g['criterion']:.2f}" if "criterion" in g else "",
+            ", ".join(f"{k:.3f}" for k in g["K"]) if "K" in g else "none",
+            f"no design: {g['failed']}"
+            if "failed" in g
+            else f"{g['criterion0']:.2f} -> {g['criterion']:.2f}"
+            if "criterion" in g
+            else "",
         ]
-        for name, g in s["designs"]["gains"].items()
+        for name, g in d["gains"].items()
     ]
     return [
         Heading(
@@ -132,8 +158,11 @@ def _designs(s: dict) -> list[Block]:
             f"tau_delta = {op['tau_delta_s']:g} s; polytopic: mu and speed ranges' corners)"
         ),
         Table(["design", "K", "criterion at the kinematic gain -> at the dynamic gain"], rows),
-        *comparison(s["designs_comparison"], 1e-3, "mm"),
     ]
+
+
+def _designs(s: dict) -> list[Block]:
+    return [*design_tables(s["designs"]), *comparison(s["designs_comparison"], 1e-3, "mm")]
 
 
 def _throughput(s: dict) -> list[Block]:
@@ -203,4 +232,4 @@ def report(s: dict) -> Document:
     return Document(f"Kinematic vs dynamic ({cfg['name']})", subtitle, blocks)
 
 
-__all__ = ["comparison", "percent", "report", "slip_tables"]
+__all__ = ["comparison", "design_tables", "percent", "report", "slip_tables"]

@@ -1,6 +1,11 @@
 """Summary of the kinematic-vs-dynamic study's runs (:mod:`pfjax.dynamic_study.runs`): slip
 distributions of the dynamic arms, success rates with 95 % Clopper-Pearson intervals, paired
-differences, verdicts and equivalent kinematic slip ranges per controller and scale."""
+differences, verdicts and equivalent kinematic slip ranges per controller and scale.
+
+Success counts every run; the slip statistics and the late max |d| statistics are over the runs
+that ran the whole horizon (status ``ok``), as :func:`pfjax.montecarlo.summary.run_statistics`
+takes a study's metrics: a failed run's slip and errors describe it only up to its failure (a run
+that fails at its first sample has none), so the failures are counted, not averaged in."""
 
 from __future__ import annotations
 
@@ -15,6 +20,10 @@ from pfjax.metrics.robustness import clopper_pearson
 #: A verdict's line: a controller is robust in an arm if its success rate is at least this.
 ROBUST = 0.95
 SLIP_COLS = ["max_abs_beta_r_deg", "max_abs_beta_f_deg", "mean_abs_beta_r_deg", "mean_abs_beta_f_deg"]
+#: The design norms' channels (:mod:`pfjax.synthesis.dynamic_plant`); the norms are numbers of these
+#: channels in SI units (the channels' units differ, so a norm has no one unit).
+_INPUTS = "w = [w_r rad, w_f rad, kappa 1/m]"
+_Z_INF = "z_inf = [d m, theta_e rad(, int d m s)]"
 #: ``summary.json``'s units, by field name (a field has one meaning wherever it occurs).
 UNITS = {
     "mu": "1 (friction coefficient; a bin's [lo, hi])",
@@ -29,16 +38,31 @@ UNITS = {
     "diff": "1 (difference of success rates)",
     "equivalent_gap": "1 (difference of success rates)",
     "k": "runs",
-    "n": "runs",
+    "n": "runs (in the slip tables: those with status ok)",
+    "n_failed": "runs (failed, left out of the slip statistics)",
+    "n_ok": "runs (status ok: the late max |d| statistics' runs)",
     "failure_status_dynamic": "runs",
-    "late_max_abs_d_q95": "m",
-    "worst_late_max_abs_d": "m",
+    "late_max_abs_d_q95": "m (over runs with status ok)",
+    "worst_late_max_abs_d": "m (over runs with status ok)",
     "operating_point": "v m/s, mu 1, tau_delta_s s",
     **dict.fromkeys(("K", "K0"), "rad/m, rad/rad (state feedback); rad/m, rad/rad, rad/(m s) (integral)"),
+    "hinf_norm": f"H-infinity norm from {_INPUTS} to {_Z_INF} (channels in these SI units: no one unit), "
+    "the largest over the design's plants",
+    "h2_norm": f"H2 norm from {_INPUTS} to [{_Z_INF}; delta_c rad] (channels in these SI units: no one unit), "
+    "the largest over the design's plants",
+    "criterion": "1 (alpha hinf_norm^2 + beta h2_norm^2, alpha and beta dimensionless, at K)",
+    "criterion0": "1 (the criterion at K0, the kinematic gain; null: K0 does not stabilise every plant)",
+    "evaluations": "criterion evaluations (of the gain search)",
     "max_pole_real": "1/s",
     "ns_per_rollout_step": "ns",
+    "ratio_st_over_kinematic": "1 (ratio of ns_per_rollout_step)",
+    "ratio_std_over_kinematic": "1 (ratio of ns_per_rollout_step)",
+    "runs": "runs (per timed batch)",
+    "steps": "steps (per timed run)",
     "wall_s": "s",
     "load_average": "processes (1, 5, 15 min)",
+    "seed": "1 (the study's random seed)",
+    "cpu_settings": "vector_width bits (null: XLA's default), block_bytes bytes",
 }
 #: The source paths' largest curvature, 1/m (pfjax.paths registry), for the slip-by-curvature table.
 PATH_CURVATURE = {"line": 0.0, "sine": 1.0, "parabola": 2.0}
@@ -88,27 +112,38 @@ def bins(values: pd.Series, n: int) -> list[tuple[float, float, pd.Series]]:
     return out
 
 
+def _slip_stats(part: pd.DataFrame) -> dict:
+    """``n`` (the runs with status ok), ``n_failed`` and the slip quantiles over the ok runs of ``part``."""
+    ok = part[part.status == "ok"]
+    return {"n": len(ok), "n_failed": len(part) - len(ok), **{c: _q(ok[c]) for c in SLIP_COLS}}
+
+
 def _binned(dyn: pd.DataFrame, col: str, n: int) -> list[dict]:
-    return [
-        {col: [lo, hi], "n": int(mask.sum()), **{c: _q(dyn[mask][c]) for c in SLIP_COLS}}
-        for lo, hi, mask in bins(dyn[col], n)
-    ]
+    """:func:`_slip_stats` in :func:`bins` over the range of every run of ``dyn``."""
+    return [{col: [lo, hi], **_slip_stats(dyn[mask])} for lo, hi, mask in bins(dyn[col], n)]
 
 
 def slip_summary(dyn: pd.DataFrame, declared: float, speed_scale: float = 1.0) -> dict:
-    """The slip the dynamic arm ``dyn`` produced: by friction, speed and path (curvature)."""
+    """The slip the dynamic arm ``dyn`` produced, over its runs with status ``ok`` (module
+    docstring; ``n``: their number, ``n_failed``: the runs left out, in all and in each part): by
+    friction and speed (bins over the range of every run) and by path (curvature); quantiles NaN in a
+    part without an ok run."""
+    ok = dyn[dyn.status == "ok"]
     by_path = [
-        {"path": p, "max_curvature_robot": PATH_CURVATURE.get(p), "n": len(part), **{c: _q(part[c]) for c in SLIP_COLS}}
+        {"path": p, "max_curvature_robot": PATH_CURVATURE.get(p), **_slip_stats(part)}
         for p, part in dyn.groupby("path")
     ]
     return {
+        "n": len(ok),
+        "n_failed": len(dyn) - len(ok),
         "by_mu": _binned(dyn, "mu", 7),
         "by_speed": _binned(dyn, "speed", 3),
         "by_path": by_path,
-        "all": {c: _q(dyn[c]) for c in SLIP_COLS},
+        "all": {c: _q(ok[c]) for c in SLIP_COLS},
         "declared_range_deg": declared,
         "fraction_max_beyond_declared": {
-            c: float(np.mean(dyn[c] > declared)) for c in ("max_abs_beta_r_deg", "max_abs_beta_f_deg")
+            c: float(np.mean(ok[c] > declared)) if len(ok) else math.nan
+            for c in ("max_abs_beta_r_deg", "max_abs_beta_f_deg")
         },
     }
 
@@ -116,7 +151,8 @@ def slip_summary(dyn: pd.DataFrame, declared: float, speed_scale: float = 1.0) -
 def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, extra_arms=()) -> dict:
     """Per controller of ``dyn_arm``: success in it, in ``ref_arm`` and in every arm starting with
     ``kin_prefix``; the paired difference ``dyn_arm - ref_arm``; the verdicts; the equivalent
-    kinematic arm; success by path and friction; the late max |d|; the failure statuses."""
+    kinematic arm; success by path and friction; the late max |d| over the runs with status ``ok``
+    (``n_ok`` per arm; NaN where none is); the failure statuses."""
     key = ["path", "controller", "run"]
     arms_ = [dyn_arm, *extra_arms, *[a for a in dict.fromkeys(runs.arm) if a.startswith(kin_prefix)]]
     out = {}
@@ -129,6 +165,8 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
         kin_arms = {a: r for a, r in rates.items() if a.startswith(kin_prefix)}
         equivalent = min(kin_arms, key=lambda a: abs(kin_arms[a]["rate"] - rates[dyn_arm]["rate"]))
         dm = d.reset_index()
+        ok = mine[mine.status == "ok"]
+        late = {arm: ok[ok.arm == arm].late_max_abs_d for arm in arms_}  # over the runs with status ok
         out[name] = {
             "success": rates,
             "success_by_path": {
@@ -145,8 +183,9 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
             "equivalent_kinematic_arm": equivalent,
             "equivalent_gap": abs(kin_arms[equivalent]["rate"] - rates[dyn_arm]["rate"]),
             "failure_status_dynamic": {str(s): int(v) for s, v in d.status.value_counts().items()},
-            "late_max_abs_d_q95": {arm: float(mine[mine.arm == arm].late_max_abs_d.quantile(0.95)) for arm in arms_},
-            "worst_late_max_abs_d": {arm: float(mine[mine.arm == arm].late_max_abs_d.max()) for arm in arms_},
+            "n_ok": {arm: len(late[arm]) for arm in arms_},
+            "late_max_abs_d_q95": {arm: float(late[arm].quantile(0.95)) for arm in arms_},
+            "worst_late_max_abs_d": {arm: float(late[arm].max()) for arm in arms_},
         }
     return {"dynamic_arm": dyn_arm, "reference_arm": ref_arm, "controllers": out}
 

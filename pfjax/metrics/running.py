@@ -17,13 +17,15 @@ and the remaining metrics are sample statistics:
 * ``overshoot``: largest excursion of ``d`` past zero on the side opposite to ``d(0)`` (m, >= 0);
 * ``steer_tv``: total variation of the applied steering, sum |delta_k - delta_{k-1}| (rad);
 * ``sat_fraction``: fraction of the run's time with the command beyond the steering limit;
-* ``late_max_abs_d``: max |d| from ``success_from`` on (m);
+* ``late_max_abs_d``: max |d| from ``success_from`` on (m); NaN for a run that failed before
+  ``success_from`` (no sample in the success window);
 * ``success``: the run did not fail and ``late_max_abs_d <= success_band``.
 
 A failed run's metrics describe it up to its failure (the failing sample excluded). A run that
 fails at its first sample (``t = 0``: it starts beyond ``d_fail``, or not finite) has no samples:
 its integrals and ``steer_tv`` are 0, its maxima (``max_abs_d``, ``late_max_abs_d``,
-``overshoot``) and ``sat_fraction`` NaN.
+``overshoot``) and ``sat_fraction`` NaN. A run that did not fail has samples up to the horizon, and
+``success_from <= horizon``, so its ``late_max_abs_d`` is a number.
 """
 
 from __future__ import annotations
@@ -50,7 +52,7 @@ class Accumulator(NamedTuple):
     prev_delta: Array
     sat_time: Array
     time: Array  # total weighted time
-    late_max_abs_d: Array  # max |d| from success_from on
+    late_max_abs_d: Array  # max |d| from success_from on (-inf: no sample there yet)
 
 
 class Metrics(NamedTuple):
@@ -90,7 +92,7 @@ def init(d0: Array, delta0: Array) -> Accumulator:
         prev_delta=delta0,
         sat_time=z,
         time=z,
-        late_max_abs_d=z,
+        late_max_abs_d=jnp.full_like(d0, -jnp.inf),
     )
 
 
@@ -161,6 +163,7 @@ def finalize(acc: Accumulator, horizon: float, failed: Array, success_band: floa
         steer_energy=acc.steer_energy,
         steer_tv=acc.steer_tv,
         sat_fraction=jnp.where(empty, nan, acc.sat_time / jnp.where(empty, 1.0, acc.time)),
-        late_max_abs_d=jnp.where(empty, nan, acc.late_max_abs_d),
+        # no sample in the success window (a run that failed before success_from): NaN
+        late_max_abs_d=jnp.where(acc.late_max_abs_d >= 0, acc.late_max_abs_d, nan),
         success=~failed & (acc.late_max_abs_d <= success_band),
     )

@@ -95,7 +95,9 @@ class DynamicScenario(NamedTuple):
 
 
 class SlipMetrics(NamedTuple):
-    """Slip angles the run produced (up to its failure), degrees, in the kinematic model's convention."""
+    """Slip angles the run produced (up to its failure), degrees, in the kinematic model's convention;
+    NaN for a run that fails at its first sample (``t = 0``: it has no samples), as its ``max_abs_d``
+    (:func:`pfjax.metrics.running.finalize`)."""
 
     max_abs_beta_r_deg: Array  # deg, largest |rear-axle slip|
     max_abs_beta_f_deg: Array  # deg, largest |front-wheel slip|
@@ -279,8 +281,12 @@ def _record(sc: DynamicScenario, s: loop.Sample, state: _State) -> DynamicTrajec
 def _finish(config: SimConfig, sc: DynamicScenario, r: loop.Run) -> DynamicResult:
     metrics = running.finalize(r.metrics.path, config.n_steps * config.dt, r.failed, config.success_band)
     deg = 180.0 / math.pi
-    time = jnp.maximum(r.metrics.path.time, config.dt)
-    slip = SlipMetrics(*(m * deg for m in r.metrics.slip_max), *(total / time * deg for total in r.metrics.slip_sum))
+    empty = r.metrics.path.time <= 0  # failed at its first sample: no samples, no slip (as running.finalize)
+    time = jnp.where(empty, 1.0, r.metrics.path.time)
+    slip = SlipMetrics(
+        *(jnp.where(empty, jnp.nan, m * deg) for m in r.metrics.slip_max),
+        *(jnp.where(empty, jnp.nan, total / time * deg) for total in r.metrics.slip_sum),
+    )
     pose = rear_axle_pose(r.state.x, sc.vehicle)
     proj = measure(sc.path, pose.x, pose.y, pose.theta, r.aux.u_last)
     final = Final(pose.x, pose.y, pose.theta, proj.d, proj.theta_e, r.state.x.delta, proj.s)
