@@ -43,6 +43,26 @@ def _bench(*args):
     )
 
 
+def test_the_models_paragraph_describes_only_the_models_that_ran():
+    """--quick runs the kinematic and ST models: no STD clause; with STD, its vehicle and step."""
+    from pfjax.bench import report
+
+    row = lambda ns: {"wall_s": 0.1, "ns_per_rollout_step": ns}
+    quick = {"runs": 64, "steps": 400, "controller": "stanley", "path": "sine"}
+    for d in ("float32", "float64"):
+        quick[d] = {"kinematic": row(5.0), "st": row(10.0), "ratio_st_over_kinematic": 2.0}
+    text = "\n".join(report._models(quick))
+    assert "STD" not in text and "metrics on):" in text and "| st | 10.0 | 10.0 | 2.00x | 2.00x |" in text
+    full = {
+        **quick,
+        **{d: {**quick[d], "std": row(30.0), "ratio_std_over_kinematic": 6.0} for d in ("float32", "float64")},
+    }
+    text = "\n".join(report._models(full))
+    assert (
+        "metrics on; STD: vehicle 2 at 10 m/s, 2 ms step):" in text and "| std | 30.0 | 30.0 | 6.00x | 6.00x |" in text
+    )
+
+
 @pytest.mark.slow
 def test_quick_bench_contract_and_agreement(tmp_path):
     out = tmp_path / "bench"
@@ -386,6 +406,27 @@ def test_compare_passes_sizes_only_where_given_and_keeps_the_rounds_before_a_fai
     monkeypatch.setattr(cmp.subprocess, "run", child(0, stdout=ok))
     assert cmp.main([".", ".", "--quick", "--rounds", "1", "--out", str(tmp_path / "a")]) == 0
     assert calls and all("--sizes" not in c and "--quick" in c for c in calls)
+    import pfjax
+
+    written = json.loads((tmp_path / "a" / "compare.json").read_text())  # units and provenance, as bench.json's
+    assert written["seed"] == 0 and written["pfjax_version"] == pfjax.__version__
+    assert written["units"] == {
+        **{f"comparison.msteps_per_s_{p}.{k}": "1e6 rollout-steps/s" for p in ("f32", "f64") for k in ("base", "new")},
+        **{f"comparison.msteps_per_s_{p}.ratio_new_over_base": "1" for p in ("f32", "f64")},
+        **{f"comparison.{k}.ratio.{s}": "1" for k in cmp.RATES + cmp.COSTS for s in ("median", "min", "max")},
+        **{f"comparison.grad_over_forward.{k}": "1" for k in ("base", "new", "ratio_new_over_base")},
+        **{
+            f"bench_summaries.{n}.msteps_per_s_{p}": "1e6 rollout-steps/s"
+            for n in ("base", "new")
+            for p in ("f32", "f64")
+        },
+        **{f"bench_summaries.{n}.grad_over_forward": "1" for n in ("base", "new")},
+        **{
+            f"machine.block_bytes.{d}": "B"
+            for d in ("float32", "float64")
+            if d in written["machine"].get("block_bytes", {})
+        },
+    }
     calls.clear()
     assert cmp.main([".", ".", "--rounds", "1", "--out", str(tmp_path / "b")]) == 0
     assert all(c[c.index("--sizes") + 1] == cmp.SIZES for c in calls)

@@ -139,11 +139,10 @@ def test_pfjax_calibrate_refuses_where_it_could_keep_nothing_before_measuring(tm
         assert len(err) == 1 and err[0].startswith(f"pfjax calibrate: error: {name}: "), err
         monkeypatch.delenv(env)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"] and afile.read_text() == "the user's"
-    assert (
-        calibration.writable_directory({"PFJAX_CALIBRATION_DIR": str(tmp_path / "new" / "dir")})
-        == tmp_path / "new" / "dir"
-    )
-    assert not (tmp_path / "new").exists()
+    # a directory that is not there yet is made (pfjax's own), with nothing left in it
+    new = tmp_path / "new" / "dir"
+    assert calibration.writable_directory({"PFJAX_CALIBRATION_DIR": str(new)}) == new
+    assert new.is_dir() and not any(new.iterdir())
 
 
 def test_only_the_supported_vector_widths_are_read_and_a_bad_file_warns_in_one_line(tmp_path):
@@ -188,7 +187,88 @@ def test_a_calibration_file_that_is_a_directory_is_refused_before_measuring(tmp_
     result = dict(
         version=calibration.VERSION, cpu_key=key, vector_width=None, block_bytes={"float32": 2500, "float64": 5000}
     )
-    with pytest.raises(IsADirectoryError):
+    with pytest.raises(InputError, match="^PFJAX_CALIBRATION_DIR: "):
         calibration.save(result, tmp_path / f"{key}.json")
     assert [p.name for p in tmp_path.iterdir()] == [f"{key}.json"]  # no temporary file left
     assert not any((tmp_path / f"{key}.json").iterdir())
+
+
+def _result(key: str) -> dict:
+    return dict(
+        version=calibration.VERSION, cpu_key=key, vector_width=None, block_bytes={"float32": 2500, "float64": 5000}
+    )
+
+
+def test_a_directory_where_nothing_can_be_written_is_refused_before_measuring(tmp_path, monkeypatch, capsys):
+    """The check writes: a directory that cannot be made (under /proc, where permission bits say
+    yes to root) or one where no file can be created is one line naming PFJAX_CALIBRATION_DIR, exit 2,
+    before any measuring; a write that fails in :func:`save` is the same line, with no file left."""
+    from pfjax.cli import main
+    from pfjax.errors import InputError
+
+    monkeypatch.delenv("PFJAX_CALIBRATION", raising=False)  # the tests' "off" (conftest)
+    monkeypatch.setattr(C, "calibrate", lambda **kw: pytest.fail("measured before checking"))
+    if Path("/proc/self").is_dir():
+        monkeypatch.setenv("PFJAX_CALIBRATION_DIR", "/proc/pfjax-calibration")
+        assert main(["calibrate", "--quick"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("pfjax calibrate: error: PFJAX_CALIBRATION_DIR: "), err
+        with pytest.raises(InputError, match="^PFJAX_CALIBRATION_DIR: "):
+            calibration.save(_result("k"), Path("/proc/pfjax-calibration/k.json"))
+
+    def read_only(*a, **kw):  # a directory of another owner, or a read-only file system
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setenv("PFJAX_CALIBRATION_DIR", str(tmp_path))
+    with monkeypatch.context() as m:
+        m.setattr(calibration.tempfile, "mkstemp", read_only)
+        assert main(["calibrate", "--quick"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"pfjax calibrate: error: PFJAX_CALIBRATION_DIR: {tmp_path} cannot be made and written "
+                       "(Permission denied); set PFJAX_CALIBRATION_DIR to a writable directory"]  # fmt: skip
+    assert not any(tmp_path.iterdir())  # the probe is removed
+
+    key = calibration.cpu_key()
+    monkeypatch.setattr(C, "calibrate", lambda **kw: _result(key))
+    with monkeypatch.context() as m:  # the directory checked, then the write refused
+        m.setattr(calibration.os, "replace", read_only)
+        assert main(["calibrate", "--quick"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"pfjax calibrate: error: PFJAX_CALIBRATION_DIR: {tmp_path}"), err
+    assert not any(tmp_path.iterdir())  # no temporary file left
+    assert main(["calibrate", "--quick", "--json"]) == 0
+    capsys.readouterr()
+    calibration.load.cache_clear()
+    assert [p.name for p in tmp_path.iterdir()] == [f"{key}.json"]
+    assert json.loads((tmp_path / f"{key}.json").read_text()) == _result(key)
+
+
+def test_a_file_that_is_not_a_pfjax_calibration_is_never_replaced(tmp_path, monkeypatch, capsys):
+    """The user's file at ``<dir>/<cpu key>.json``: one line naming PFJAX_CALIBRATION_DIR and the
+    file, exit 2, before measuring, the file untouched; a pfjax calibration there is replaced."""
+    from pfjax.cli import main
+    from pfjax.errors import InputError
+
+    key = calibration.cpu_key()
+    mine = tmp_path / f"{key}.json"
+    monkeypatch.delenv("PFJAX_CALIBRATION", raising=False)  # the tests' "off" (conftest)
+    monkeypatch.setenv("PFJAX_CALIBRATION_DIR", str(tmp_path))
+    monkeypatch.setattr(C, "calibrate", lambda **kw: pytest.fail("measured before checking"))
+    for text in ("my notes\n", '{"notes": 1}', json.dumps(dict(_result(key), cpu_key="another"), indent=None)[:-1]):
+        mine.write_text(text)
+        assert main(["calibrate", "--quick"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"pfjax calibrate: error: PFJAX_CALIBRATION_DIR: {mine} "), err
+        with pytest.raises(InputError, match="^PFJAX_CALIBRATION_DIR: .* not a pfjax calibration"):
+            calibration.save(_result(key), mine)
+        assert mine.read_text() == text and [p.name for p in tmp_path.iterdir()] == [mine.name]
+
+    old = dict(_result(key), version=calibration.VERSION + 1)  # pfjax's, of another format
+    for previous in (_result(key), old):
+        mine.write_text(json.dumps(previous))
+        new = dict(_result(key), vector_width=512)
+        monkeypatch.setattr(C, "calibrate", lambda **kw: new)
+        assert main(["calibrate", "--quick", "--json"]) == 0
+        capsys.readouterr()
+        calibration.load.cache_clear()
+        assert json.loads(mine.read_text()) == new

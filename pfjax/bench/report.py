@@ -166,9 +166,10 @@ def _models(b: dict) -> list[str]:
         ]
         for m in names
     ]
+    std = "; STD: vehicle 2 at 10 m/s, 2 ms step" if "std" in names else ""  # the models that ran
     return [
         f"Vehicle models in the same loop ({b['runs']} runs of {b['steps']} steps, {b['controller']} on the "
-        f"{b['path']} path, metrics on; STD: vehicle 2 at 10 m/s, 2 ms step):",
+        f"{b['path']} path, metrics on{std}):",
         "",
         table(
             ["model", "ns/rollout-step f32", "ns/rollout-step f64", "over kinematic f32", "over kinematic f64"], rows

@@ -15,7 +15,8 @@ def register(sub) -> None:
         "batched array) in float32 and float64, and keep the fastest in the calibration directory "
         "($PFJAX_CALIBRATION_DIR, else $XDG_CACHE_HOME/pfjax/calibration (default ~/.cache/pfjax/calibration), "
         "whatever PFJAX_CACHE_DIR says), where every later pfjax process on a CPU of the same identity reads it. PFJAX_CALIBRATION=off ignores it. "
-        "The directory and the file are checked before measuring. About two minutes on 2 cores.",
+        "The directory is made and a file written and removed in it, and the calibration file is checked, before "
+        "measuring: a file there that is not a pfjax calibration is never replaced. About two minutes on 2 cores.",
     )
     p.add_argument("--quick", action="store_true", help="a small batch and a short horizon (seconds; a rough choice)")
     p.add_argument("--dry-run", action="store_true", help="measure and print, but keep nothing")

@@ -10,7 +10,8 @@ Two settings of pfjax's CPU programs depend on the CPU more than on anything els
 Without a calibration pfjax uses rules stated with their evidence in those modules (5,000 bytes
 per block; 512-bit vectors where the CPU has AVX-512). ``pfjax calibrate`` measures the
 benchmark problem's throughput over the candidates on this CPU (:mod:`pfjax.bench.calibrate`) and
-writes the best to ``<directory>/<cpu key>.json``; every later process on a CPU of the same
+writes the best to ``<directory>/<cpu key>.json`` (a file there that is not a pfjax calibration
+is never replaced); every later process on a CPU of the same
 identity (vendor, family, model, model name, vector flags) and the same JAX version reads it at
 import. ``PFJAX_CALIBRATION=off`` ignores the file; ``PFJAX_VECTOR_WIDTH`` still overrides the
 width. The directory is ``$PFJAX_CALIBRATION_DIR``, else ``$XDG_CACHE_HOME/pfjax/calibration``
@@ -23,10 +24,13 @@ into its own vector code; :mod:`pfjax.sim.sharding`); a study records the settin
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
 import os
+import secrets
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -130,12 +134,47 @@ def vector_width() -> tuple[bool, int | None]:
     return (False, None) if cal is None else (True, cal["vector_width"])
 
 
+def _ours(data, key: str) -> bool:
+    """Whether ``data`` (a file's JSON) is a calibration pfjax wrote for ``key``: one :func:`load`
+    reads, or a pfjax calibration of another format version for the same CPU key."""
+    if _valid(data):
+        return True
+    return isinstance(data, dict) and data.get("cpu_key") == key and type(data.get("version")) is int
+
+
+def _replaceable(file: Path) -> None:
+    """An :class:`~pfjax.errors.InputError` naming ``PFJAX_CALIBRATION_DIR`` and ``file`` unless a
+    calibration may be written there: nothing there yet, or a pfjax calibration (:func:`_ours`).
+    Anything else (a directory, the user's notes, an unreadable file) is never replaced."""
+    from pfjax.errors import InputError
+
+    if not file.exists() and not file.is_symlink():
+        return
+    if file.is_dir() or not file.is_file():
+        raise InputError(
+            f"{DIR_ENV}: {file} is not a file, so the calibration cannot be written there; "
+            f"remove it or set {DIR_ENV} to another directory",
+            DIR_ENV,
+        )
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        data = None
+    if not _ours(data, file.stem):
+        raise InputError(
+            f"{DIR_ENV}: {file} is not a pfjax calibration, so pfjax does not replace it; "
+            f"move it away or set {DIR_ENV} to another directory",
+            DIR_ENV,
+        )
+
+
 def writable_directory(environ=None, key: str | None = None) -> Path:
-    """:func:`directory`, checked before anything is measured or written: an
+    """:func:`directory`, made and checked before anything is measured: an
     :class:`~pfjax.errors.InputError` naming the environment variable when calibrations are off, the
-    directory is not one that can be made and written, or the calibration file of ``key`` (default
-    this CPU's, :func:`cpu_key`) is there as something a file cannot replace (a directory). Nothing
-    is created here."""
+    directory cannot be made or a file cannot be written in it (a uniquely named probe file is
+    created and removed), or the calibration file of ``key`` (default this CPU's, :func:`cpu_key`) is
+    there as something pfjax does not replace (a directory, a file that is not a pfjax calibration:
+    :func:`_replaceable`). The directory, pfjax's own cache directory, is left in place."""
     from pfjax.errors import InputError
 
     environ = os.environ if environ is None else environ
@@ -146,38 +185,51 @@ def writable_directory(environ=None, key: str | None = None) -> Path:
             f"unset it, or measure with --dry-run",
             ENV,
         )
-    probe = where
-    while not probe.exists() and probe != probe.parent:  # the nearest existing one must be a writable directory
-        probe = probe.parent
-    if not probe.is_dir() or not os.access(probe, os.W_OK):
+    try:
+        where.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".pfjax-probe-", suffix=".tmp", dir=where)  # a new name, never the user's
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
         raise InputError(
-            f"{DIR_ENV}: {where} cannot be made and written ({probe} is not a writable directory); "
-            f"set {DIR_ENV} to one",
+            f"{DIR_ENV}: {where} cannot be made and written ({e.strerror or e}); set {DIR_ENV} to a writable directory",
             DIR_ENV,
-        )
-    file = where / f"{cpu_key() if key is None else key}.json"
-    if file.is_dir() or (file.exists() and not file.is_file()):
-        raise InputError(
-            f"{DIR_ENV}: {file} is not a file, so the calibration cannot be written there; "
-            f"remove it or set {DIR_ENV} to another directory",
-            DIR_ENV,
-        )
+        ) from None
+    _replaceable(where / f"{cpu_key() if key is None else key}.json")
     return where
 
 
 def save(result: dict, path: Path | None = None) -> Path:
     """Write a calibration (``result`` as :func:`pfjax.bench.calibrate.calibrate` returns it) to
     ``path`` (default: this CPU's file in :func:`writable_directory`), atomically; returns the path.
-    A write that fails leaves the previous file, if any, and no temporary file."""
+    Only a missing file or a pfjax calibration is replaced (:func:`_replaceable`). A write that
+    fails is an :class:`~pfjax.errors.InputError` naming ``PFJAX_CALIBRATION_DIR``, and leaves the
+    previous file, if any, and no temporary file."""
+    from pfjax.errors import InputError
+
     if path is None:
         path = writable_directory(key=result["cpu_key"]) / f"{result['cpu_key']}.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    else:
+        _replaceable(path)
+    tmp = None
     try:
-        tmp.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # a new name (O_EXCL: never a file pfjax did not write), readable as the umask allows
+        name = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(6)}.tmp")
+        fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        tmp = name
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(json.dumps(result, indent=1) + "\n")
         os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
+    except BaseException as e:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        if isinstance(e, OSError):
+            raise InputError(
+                f"{DIR_ENV}: {path} cannot be written ({e.strerror or e}); set {DIR_ENV} to a writable directory",
+                DIR_ENV,
+            ) from None
         raise
     load.cache_clear()
     return path

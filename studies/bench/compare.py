@@ -8,11 +8,12 @@ the ratio NEW / BASE of each round, its median and its spread (min-max), and the
 gradient's cost over the forward pass; a change to the simulator states its effect with it.
 
 Writes ``results/bench_compare/`` (``compare.json``: every round's bench summary and the ratios,
-with the machine and both commits; ``report.md``) through the one output writer. Bad input (an
-unknown revision, a bad count, ``--sizes`` that ``pfjax bench`` would refuse) stops with one line and
-exit code 2 before anything runs; so does a ``pfjax bench`` of either revision that refuses its
-arguments. A benchmark that fails after some rounds are complete stops the comparison with one line
-(exit 1), and the complete rounds are written, marked ``incomplete``.
+with the machine, both commits, the seed of the benchmark's batch, the comparing pfjax's version and
+the ``units`` of its numbers (:func:`result_units`); ``report.md``) through the one output writer.
+Bad input (an unknown revision, a bad count, ``--sizes`` that ``pfjax bench`` would refuse) stops
+with one line and exit code 2 before anything runs; so does a ``pfjax bench`` of either revision
+that refuses its arguments. A benchmark that fails after some rounds are complete stops the
+comparison with one line (exit 1), and the complete rounds are written, marked ``incomplete``.
 """
 
 from __future__ import annotations
@@ -27,13 +28,15 @@ from pathlib import Path
 
 import pfjax  # noqa: F401  (before JAX: one CPU device per core)
 from pfjax import errors
+from pfjax.bench.report import RATE, summary_units
 from pfjax.bench.run import machine
 from pfjax.cli.bench import config as bench_config
 from pfjax.cli.common import Parser
+from pfjax.cli.records import units
 from pfjax.errors import InputError, command_main
 from pfjax.jsonio import dumps
 from pfjax.outputs import OutputDir
-from pfjax.provenance import config_hash
+from pfjax.provenance import config_hash, stamp
 from pfjax.report.markdown import table
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -113,6 +116,22 @@ def compare(rounds: list[dict]) -> dict:
             **({"ratio": _spread(ratios)} if ratios else {}),
         }
     return out
+
+
+def result_units(result: dict) -> dict:
+    """``compare.json``'s ``units`` (:func:`pfjax.cli.records.units`): the rates in
+    :data:`~pfjax.bench.report.RATE`, the gradient's cost and every ratio ``"1"``, each round's bench
+    summaries by :func:`~pfjax.bench.report.summary_units`, the CPU blocks in bytes."""
+    table: dict = {"machine.block_bytes.*": {"float32": "B", "float64": "B"}}
+    for key in RATES + COSTS:
+        unit = RATE if key in RATES else "1"
+        table[f"comparison.{key}.*"] = {"base": unit, "new": unit, "ratio_new_over_base": "1"}
+        table[f"comparison.{key}.ratio.*"] = dict.fromkeys(("median", "min", "max"), "1")
+    for r in result["bench_summaries"]:
+        for name, summary in r.items():
+            table.update(summary_units(summary, f"bench_summaries.{name}."))
+            table[f"bench_summaries.{name}.machine.block_bytes.*"] = table["machine.block_bytes.*"]
+    return units(result, table)
 
 
 def markdown(result: dict) -> str:
@@ -211,6 +230,9 @@ def main_checked(args) -> int:
         if failure is not None and not rounds:
             print(f"bench-compare: error: {failure}; nothing was measured or written", file=sys.stderr)
             return 1
+        # the seed of pfjax bench's batch (compare passes none: pfjax bench's default) and this
+        # checkout's pfjax version (each bench summary carries its own revision's)
+        prov = stamp(cfg, bench_config(args.quick).seed)
         result = {
             "base": {"rev": args.base, "commit": base if base != "." else "working tree"},
             "new": {"rev": args.new, "commit": new if new != "." else "working tree"},
@@ -221,8 +243,11 @@ def main_checked(args) -> int:
             "comparison": compare(rounds),
             "bench_summaries": rounds,
             "machine": machine(),
-            "config_sha256": config_hash(cfg),
+            "config_sha256": prov["config_sha256"],
+            "seed": prov["seed"],
+            "pfjax_version": prov["pfjax_version"],
         }
+        result["units"] = result_units(result)
         (out.staging / "compare.json").write_text(dumps(result) + "\n")
         (out.staging / "report.md").write_text(markdown(result))
         path = out.commit()
