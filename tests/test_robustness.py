@@ -464,3 +464,23 @@ def test_a_studys_metric_statistics_leave_failed_runs_out():
     assert b["status_counts"] == {"ok": 3, "diverged": 2, "nonfinite": 1}
     every_run_failed = run_statistics(df.assign(status="diverged", success=False))
     assert np.isnan(every_run_failed["iae_mean"]) and every_run_failed["success_rate"] == 0.0
+
+
+def test_rho_iae_of_the_failure_drivers_leaves_failed_runs_out():
+    """Runs that diverge at once (IAE 0) at large offsets would make IAE fall with the offset; over
+    the runs with status ok it rises, and equals scipy's Spearman rho there. rho fail uses every run."""
+    import pandas as pd
+    from scipy.stats import spearmanr
+
+    from pfjax.montecarlo.summary import driver_table
+
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.0, 1.0, 200)
+    failed = x > 0.7
+    iae = np.where(failed, 0.0, x + 0.1 * rng.normal(size=200))
+    df = pd.DataFrame({"d0": x, "iae": iae, "success": ~failed, "status": np.where(failed, "diverged", "ok")})
+    row = driver_table(df, ["d0"]).set_index("parameter").loc["d0"]
+    ok = ~failed
+    assert row["rho_metric"] == pytest.approx(spearmanr(x[ok], iae[ok]).statistic, abs=1e-12)
+    assert row["rho_metric"] > 0.5 and spearmanr(x, iae).statistic < 0
+    assert row["rho_failure"] == pytest.approx(spearmanr(x, failed).statistic, abs=1e-12)

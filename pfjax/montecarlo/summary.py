@@ -120,6 +120,14 @@ def _controller_rows(runs, name: str) -> pd.DataFrame:
     return df
 
 
+def driver_table(df: pd.DataFrame, params: list[str]) -> pd.DataFrame:
+    """:func:`~pfjax.metrics.robustness.failure_drivers` of one controller's runs: ``rho_failure``
+    and the effect size over every run, ``rho_metric`` (IAE) over the runs with status ``ok``, as
+    every metric statistic: a failed run's IAE stops at its failure, and one that fails at once has
+    an IAE of 0, which would rank it as the best run."""
+    return failure_drivers(df.assign(iae=df["iae"].where(df["status"] == "ok")), params, metric="iae")
+
+
 def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict, wall_s: float) -> dict:
     """The summary (module docstring). ``runs``: the run table as a DataFrame, or the path of
     ``runs.parquet``, read one controller at a time (large studies: peak memory is one
@@ -148,7 +156,7 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         block["slip_margin_deg"] = None if joint is None or fails else joint["margin"]
         block["slip_margin_fails_at_deg"] = joint["table"][0]["amplitude"] if fails and joint is not None else None
         block["slip_margin_censored"] = None if joint is None else joint["censored"]
-        drivers = failure_drivers(df, params, metric="iae") if params else pd.DataFrame()
+        drivers = driver_table(df, params) if params else pd.DataFrame()
         block["failure_drivers"] = drivers.head(6).replace({np.nan: None}).to_dict("records")
         block["success_by_param"] = {p: success_by_param(df, p) for p in params}
         controllers[name] = block

@@ -23,7 +23,7 @@ from pfjax.report.study_verdict import verdict
 __all__ = ["study_document"]
 
 _DRIVERS_NOTE = (
-    "Spearman rank correlation of each varied parameter with failure (ρ fail) and with IAE (ρ IAE); effect size: "
+    "Spearman rank correlation of each varied parameter with failure (ρ fail) and with IAE over the runs with status ok (ρ IAE); effect size: "
     "how many standard deviations the failed runs' mean sits above the successful runs'. abs_x is |x| (slip hurts "
     "in both directions). Dashes: undefined (no failure, or the parameter does not vary)."
 )
