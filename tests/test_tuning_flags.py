@@ -241,8 +241,8 @@ def _fake_result(D: int):
 
 def test_rounds_are_checked_against_the_final_steps_in_the_cli_and_the_api(monkeypatch, capsys):
     """``--rounds`` is checked once, after ``--steps`` is applied (70 rounds of 80 steps run), and
-    rounds above the steps are refused, not cut to them; the API alike, naming its argument. The
-    default 3 rounds fall to ``steps`` below 3."""
+    rounds above the steps are refused, not cut to them, an explicit 3 among them; the API alike,
+    naming its argument. Rounds not given (3) fall to ``steps`` below 3."""
     from pfjax.tuning import MultistartOptions, problem
 
     seen = []
@@ -265,6 +265,13 @@ def test_rounds_are_checked_against_the_final_steps_in_the_cli_and_the_api(monke
         problem.check_options("gradient", problem.GAOptions(), 30, None, None, MultistartOptions(rounds=50))
     assert problem.check_options("gradient", problem.GAOptions(), 2, None, None, None).rounds == 2
     assert main([*argv, "--steps", "2"]) == 0 and seen[-1].rounds == 2
+    capsys.readouterr()
+    assert "--rounds: must be <= --steps (2), got 3" in _refused_cli(
+        [*argv, "--rounds", "3", "--steps", "2"], "--rounds", capsys
+    )
+    with pytest.raises(InputError, match=r"^multistart\.rounds: must be <= steps \(2\), got 3$"):
+        pfjax.tune("pi", steps=2, multistart=MultistartOptions(rounds=3))
+    assert MultistartOptions(steps=2).check().rounds == 2 and MultistartOptions().check().rounds == 3
 
 
 def test_tune_api_refuses_what_the_cli_refuses(capsys):

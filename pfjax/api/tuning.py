@@ -61,7 +61,7 @@ def tune(
             robot's parameters, on ``std`` CommonRoad's vehicle2 (:func:`pfjax.tuning.problem.make_problem`).
         steps: gradient steps (``None``: the method's default; multi-start: evaluations of a
             surviving chain, at least ``multistart``'s rounds: rounds above it are refused naming
-            ``multistart.rounds``, except the default 3, which fall to ``steps`` below 3).
+            ``multistart.rounds``; unset rounds are 3, or ``steps`` below 3).
         n_starts: starts descended together (``None``: the method's default).
         learning_rate: multi-start: first BFGS trust radius; adam: step (box units; ``None``: default).
         multistart: a :class:`pfjax.tuning.MultistartOptions` for ``gradient`` (a bad field is

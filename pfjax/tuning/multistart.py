@@ -76,6 +76,10 @@ SAMPLERS = ("sobol", "lhs", "uniform")
 LOCALS = L.LOCALS
 
 
+#: The successive-halving rounds when none are given (fewer when ``steps`` is below them).
+DEFAULT_ROUNDS = 3
+
+
 class MultistartOptions(NamedTuple):
     """Settings of :func:`multistart_tune` (module docstring); lengths in normalised box units."""
 
@@ -84,7 +88,7 @@ class MultistartOptions(NamedTuple):
     n_starts: int = 8  # best screened points descended together
     separation: float = 0.1  # least RMS distance between two starts (0: the n_starts best)
     steps: int = 60  # cost-and-gradient evaluations of a chain that survives every round
-    rounds: int = 3  # successive-halving rounds (1: no halving)
+    rounds: int | None = None  # successive-halving rounds (1: no halving; None: 3, or steps when below 3)
     local: str = "bfgs"  # bfgs | adam: the local descent
     learning_rate: float = 0.1  # bfgs: first trust radius (inf-norm); adam: step, cosine-decayed to a tenth
     smoothing: float = 0.0  # randomised-smoothing radius of the first round, in [0, 1] (0: off)
@@ -94,8 +98,16 @@ class MultistartOptions(NamedTuple):
     polish_steps: int = 8  # value-only compass iterations around the incumbent (0: off)
     polish_scale: float = 0.05  # first compass step
 
+    @property
+    def n_rounds(self) -> int:
+        """The successive-halving rounds run: ``rounds``; unset, :data:`DEFAULT_ROUNDS`, or ``steps``
+        when below them."""
+        return min(DEFAULT_ROUNDS, int(self.steps)) if self.rounds is None else int(self.rounds)
+
     def check(self) -> MultistartOptions:
-        """``self`` if valid; :class:`~pfjax.errors.InputError` naming the bad field otherwise."""
+        """``self`` with ``rounds`` resolved (None: :data:`DEFAULT_ROUNDS`, or ``steps`` when below
+        them) if valid; :class:`~pfjax.errors.InputError` naming the bad field otherwise (``rounds``
+        above ``steps`` among them)."""
         errors.integer("n_screen", self.n_screen, low=0, high=1_000_000)
         if self.sampler not in SAMPLERS:
             raise errors.InputError(f"sampler: value {self.sampler!r}, expected one of {', '.join(SAMPLERS)}")
@@ -104,7 +116,10 @@ class MultistartOptions(NamedTuple):
         errors.integer("n_starts", self.n_starts, low=1, high=1_000_000)
         errors.number("separation", self.separation, low=0.0, high=1.0)
         errors.integer("steps", self.steps, low=1, high=1_000_000)
-        errors.integer("rounds", self.rounds, low=1, high=max(1, int(self.steps)))
+        rounds = min(DEFAULT_ROUNDS, int(self.steps)) if self.rounds is None else self.rounds  # unchecked
+        if errors.is_number(rounds) and rounds > self.steps:
+            raise errors.InputError(f"rounds: must be <= steps ({self.steps}), got {rounds}", "rounds")
+        errors.integer("rounds", rounds, low=1, high=int(self.steps))
         errors.number("learning_rate", self.learning_rate, positive=True)
         errors.number("smoothing", self.smoothing, low=0.0, high=1.0)
         errors.integer("n_restarts", self.n_restarts, low=0, high=1_000_000)
@@ -112,7 +127,7 @@ class MultistartOptions(NamedTuple):
         errors.number("restart_scale", self.restart_scale, nonnegative=True)
         errors.integer("polish_steps", self.polish_steps, low=0, high=1_000_000)
         errors.number("polish_scale", self.polish_scale, low=0.0, high=1.0)
-        return self
+        return self._replace(rounds=int(rounds))
 
 
 def space_filling(n: int, dim: int, sampler: str, key) -> np.ndarray:
@@ -244,9 +259,10 @@ class _Plan(NamedTuple):
         """The plan of ``o`` for ``n_screen`` screened points in ``D`` dimensions; ``rollout_steps``:
         the rollout-steps of one evaluation (None: unknown, no shared program), ``fpp``: the
         forward passes a gradient is charged."""
-        per_round = [o.steps // o.rounds + (1 if r < o.steps % o.rounds else 0) for r in range(o.rounds)]
+        rounds = o.n_rounds
+        per_round = [o.steps // rounds + (1 if r < o.steps % rounds else 0) for r in range(rounds)]
         sizes, n = [], o.n_starts
-        for _ in range(o.rounds):
+        for _ in range(rounds):
             sizes.append(n)
             n = max(1, n // 2)
         n_r = o.n_restarts + 1 if (o.n_restarts and o.restart_steps) else 0
@@ -322,7 +338,7 @@ def _halving(o, plan: _Plan, progs, bud: _Budget, z_starts, J_starts, k_smooth, 
         state = _rows(state, pad_rows(keep, size))  # a shared program's extra chains: copies of the first
         pad = np.zeros((size - m, z_starts.shape[1]), dtype)
         for k in range(n_steps):
-            sigma = o.smoothing * (1.0 - k / n_steps) if r == 0 and o.rounds > 1 else 0.0
+            sigma = o.smoothing * (1.0 - k / n_steps) if r == 0 and o.n_rounds > 1 else 0.0
             shape = (m, z_starts.shape[1])
             noise = (  # no draw where it would be scaled by 0
                 np.asarray(sigma * jax.random.normal(jax.random.fold_in(k_smooth, k_iter), shape, dtype))

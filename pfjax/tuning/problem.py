@@ -323,7 +323,7 @@ def tune(
       screening with the controller's default gains (the source's gains or LMI design) and
       ``theta0`` as candidates, successive halving, smoothing, restarts); ``steps``, ``n_starts``
       and ``learning_rate`` override the fields of ``multistart`` (its ``rounds`` at most the
-      final ``steps``; the default 3 rounds fall to ``steps`` when ``steps`` is below 3);
+      final ``steps``; unset, 3, or ``steps`` when ``steps`` is below 3);
     * ``"gradient-plain"``: projected adam from ``n_starts`` (default 1) starts, ``theta0`` or
       uniform in the box from ``key`` (:func:`pfjax.tuning.gradient.gradient_tune`; ``steps``
       default 100, ``learning_rate`` 0.05);
@@ -425,15 +425,11 @@ def check_tune(
     return ms
 
 
-#: The multi-start tuner's default rounds, which fall to ``steps`` when ``steps`` is below them.
-DEFAULT_ROUNDS = MultistartOptions().rounds
-
-
 def check_options(method, ga_options, steps, n_starts, learning_rate, multistart) -> MultistartOptions:
     """:func:`tune`'s settings checked (:class:`~pfjax.errors.InputError` naming the argument); the
     multi-start tuner's options with ``steps``, ``n_starts`` and ``learning_rate`` applied, checked
-    once as a whole: ``rounds`` above the final ``steps`` is refused naming ``rounds``, except the
-    default :data:`DEFAULT_ROUNDS`, which fall to ``steps``."""
+    once as a whole (:meth:`~pfjax.tuning.MultistartOptions.check`: ``rounds`` above the final
+    ``steps`` is refused naming ``rounds``; unset, they fall to ``steps`` below 3)."""
     from pfjax import errors
     from pfjax.tuning.ga import validate_options
 
@@ -455,10 +451,6 @@ def check_options(method, ga_options, steps, n_starts, learning_rate, multistart
     }
     ms = ms._replace(**given)
     if method == "gradient":
-        if ms.rounds == DEFAULT_ROUNDS and errors.is_number(ms.steps) and ms.steps < ms.rounds:
-            ms = ms._replace(rounds=max(1, int(ms.steps)))
-        if errors.is_number(ms.rounds) and errors.is_number(ms.steps) and 1 <= ms.steps < ms.rounds:
-            raise errors.InputError(f"rounds: must be <= steps ({ms.steps}), got {ms.rounds}", "rounds")
         ms = ms.check()
     return ms
 

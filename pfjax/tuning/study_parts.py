@@ -191,7 +191,7 @@ def cli_settings(cfg) -> dict:
     ga = GAOptions()
     pairs = (("population", ga.population_size), ("generations", ga.generations))
     out = {f"ga.{k}": cfg["ga"][k] for k, d in pairs if cfg["ga"][k] != d}
-    default = MultistartOptions()._asdict()
+    default = MultistartOptions().check()._asdict()  # the rounds resolved
     out.update({f"multistart.{k}": v for k, v in cfg["multistart"].items() if v != default[k]})
     return out
 
