@@ -87,6 +87,10 @@ COLUMNS: dict[str, tuple[str, str]] = {
 }
 
 
+#: The unit of a controller's gains: each gain's own (its parameter pytree's docstring).
+GAINS = "the controller's parameter units (pfjax.controllers)"
+
+
 #: The unit of each number :func:`pfjax.tracking.run` returns (``pfjax track --json`` prints it
 #: with them, :func:`pfjax.cli.records.units`; the vehicle-tracking study's columns take their units
 #: from it, :data:`pfjax.tracking.study.COLUMNS`). ``"<parent>.*"``: the units under ``<parent>`` by

@@ -415,6 +415,7 @@ def test_cli_study_and_bad_input(tmp_path):
     assert r.returncode == 0, r.stderr
     head = json.loads(r.stdout)
     assert head["n_runs_total"] == 4 and "st" in head["controllers"]
+    assert head["units"]["iae_mean"].startswith("m s") and head["units"]["slip_margin_deg"] == "deg"
     assert (out / "runs.parquet").is_file() and (out / "summary.json").is_file()
     for args, flag in (
         (["--set", "n_runs=0"], "n_runs"),

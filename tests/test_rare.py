@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from scipy import stats
 from scipy.special import ndtr
+from units_check import numbers_without_units
 
 import pfjax
 from pfjax.errors import InputError
@@ -305,6 +306,7 @@ def test_state_feedback_on_a_line_matches_the_equilibrium_integral():
     # the two most likely failure points: opposite slips (d* grows with beta_f - 1.08 beta_r)
     signs = {np.sign(q["slip.beta_f_deg"]) for q in r["failure_points"][:2]}
     assert signs == {-1.0, 1.0}
+    assert numbers_without_units(out) == [] and out["units"]["slip.beta_f_deg"] == "deg"
 
 
 def test_rare_event_validates_like_the_command_line():

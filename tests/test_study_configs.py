@@ -11,6 +11,7 @@ from pathlib import Path
 import matplotlib
 import pandas as pd
 import pytest
+from units_check import numbers_without_units
 
 from pfjax.montecarlo.config import load_study
 from pfjax.montecarlo.study import run
@@ -59,6 +60,7 @@ def test_study_config_runs_small(path, tmp_path):
             assert c["method"] == spec.rare_event.method and 0 < c["n_rollouts"] <= 15000
     assert set(summary["controllers"]) == {c.name for c in small.controllers}
     on_disk = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert numbers_without_units(on_disk) == []  # the rare-event estimates' too (rare_events.toml)
     for c in on_disk["controllers"].values():
         assert {"success_rate", "success_ci95", "iae_mean", "iae_p95", "steady_abs_d_p95", "slip_margin_deg"} <= set(c)
     html = (tmp_path / "out" / "report.html").read_text()
@@ -76,7 +78,9 @@ def test_default_study_falsifier_small_end_to_end(tmp_path):
     sets = [s for s in SMALL if not s.startswith("falsifier.enabled")] + ["margin.enabled=false"]
     small, _ = load_study(overrides=sets, data=data)
     summary = run(small, tmp_path / "out", progress=False, report=True)
-    wc = json.loads((tmp_path / "out" / "summary.json").read_text())["controllers"]["pi-table3"]["worst_case"]
+    on_disk = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert numbers_without_units(on_disk) == [] and on_disk["units"]["falsifier"] == "m s (iae)"
+    wc = on_disk["controllers"]["pi-table3"]["worst_case"]
     assert wc == summary["controllers"]["pi-table3"]["worst_case"]
     assert wc["path"] == "sine" and wc["n_rollouts"] == 2 * 2 and wc["falsifier"] >= 0 and wc["random"] >= 0
     assert len(wc["history"]) == len(wc["history_rollouts"]) and max(wc["history"]) == pytest.approx(

@@ -17,13 +17,14 @@ matplotlib.use("Agg")
 
 import pandas as pd
 import pytest
+from units_check import numbers_without_units
 
 from pfjax.montecarlo.config import load_study
 from pfjax.montecarlo.study import RUN_FIGURES, WORKER_SUMMARY_FIGURES, run
 from pfjax.montecarlo.summary import summarize
 from pfjax.report import figure_worker
 from pfjax.report.figure_set import report_figures
-from pfjax.report.study_format import fmt_ci, fmt_margin, fmt_pct
+from pfjax.report.study_format import fmt_ci, fmt_margin, fmt_num, fmt_pct
 from pfjax.report.study_report import write_report
 
 # 30 runs in chunks of 30, and the sweep's 3 amplitudes x 10 runs per axis are 30 too: one array shape,
@@ -345,6 +346,24 @@ def test_report_numbers_are_those_of_summary_json(study):
         "Reproducibility",
     ):
         assert heading in text
+
+
+def test_every_number_of_summary_json_has_a_unit(study):
+    _, _, summary = study
+    assert numbers_without_units(summary) == []
+    units = summary["units"]
+    assert units["iae_mean"].startswith("m s") and units["slip_margin_deg"] == "deg" and units["wall_s"] == "s"
+    assert units["quantiles"]["steady_abs_d"] == "m" and units["quantiles"]["steer_energy"] == "rad^2 s"
+    assert units["success_by_param"] == {"beta_r_deg": "deg", "beta_f_deg": "deg", "lateral_offset": "m"}
+
+
+def test_report_shows_the_wall_time_of_summary_json(study):
+    """The report (and ``pfjax report``, re-rendering it from summary.json) shows summary.json's
+    ``wall_s``: everything but writing the report out."""
+    _, out, summary = study
+    shown = f"{fmt_num(summary['wall_s'], 4)} s (runs, sweep, summary, side jobs and figures"
+    assert shown in (out / "report.md").read_text(encoding="utf-8")
+    assert sum(v for k, v in summary["timings_s"].items() if k != "side_jobs") >= summary["wall_s"]
 
 
 def test_report_without_margin_sweep(study, tmp_path):

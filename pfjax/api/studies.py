@@ -189,6 +189,7 @@ def rare_event(
     from pfjax.montecarlo.runner import controllers_of
     from pfjax.rare import METHODS
     from pfjax.rare.study import check_budget, estimate_study
+    from pfjax.rare.study import units as rare_units
 
     progress = errors.boolean("progress", progress, or_none=True)
     values = {k.replace("__", "."): v for k, v in overrides.items()}
@@ -217,7 +218,7 @@ def rare_event(
     return {
         "study": spec.name,
         "config_sha256": study_hash(spec),
-        "units": {"p_fail": "probability per run", "ci95": "probability", "rel_error": "1", "wall_s": "s"},
+        "units": rare_units(spec),
         "controllers": estimate_study(spec, controllers, names=chosen, progress=progress),
     }
 

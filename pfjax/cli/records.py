@@ -21,9 +21,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
-#: The unit of a controller's gains: each gain's own (its parameter pytree's docstring).
-GAINS = "the controller's parameter units (pfjax.controllers)"
-
 #: The keys :func:`stamped` adds to a result (where the result has no key of that name).
 RECORD = ("units", "arguments", "pfjax_version", "config_sha256", "seed", "machine", "cpu_settings")
 

@@ -22,9 +22,8 @@ from __future__ import annotations
 import math
 
 from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags, finite
-from pfjax.cli.records import GAINS
 from pfjax.cli.synth import SYNTH_FLAGS
-from pfjax.tables import COLUMNS
+from pfjax.tables import COLUMNS, GAINS
 
 
 def _gain_names(controller: str) -> tuple[str, ...]:

@@ -111,7 +111,21 @@ def _load_study_or_usage(args):
     return spec
 
 
+#: The per-controller numbers of ``pfjax study --json``.
+HEADLINE = (
+    "success_rate",
+    "success_ci95",
+    "iae_mean",
+    "iae_p95",
+    "steady_abs_d_p95",
+    "slip_margin_deg",
+    "slip_margin_fails_at_deg",
+)
+
+
 def _headline(summary: dict, out) -> dict:
+    """``pfjax study --json``: the summary's headline numbers, with their units (summary.json's)."""
+    units = summary.get("units", {})
     return {
         "study": summary["study"],
         "out": str(out),
@@ -119,21 +133,8 @@ def _headline(summary: dict, out) -> dict:
         "seed": summary["seed"],
         "config_sha256": summary["config_sha256"],
         "wall_s": summary["wall_s"],
-        "controllers": {
-            k: {
-                f: c[f]
-                for f in (
-                    "success_rate",
-                    "success_ci95",
-                    "iae_mean",
-                    "iae_p95",
-                    "steady_abs_d_p95",
-                    "slip_margin_deg",
-                    "slip_margin_fails_at_deg",
-                )
-            }
-            for k, c in summary["controllers"].items()
-        },
+        "controllers": {k: {f: c[f] for f in HEADLINE} for k, c in summary["controllers"].items()},
+        "units": {f: units[f] for f in ("n_runs_total", "seed", "wall_s", *HEADLINE) if f in units},
     }
 
 

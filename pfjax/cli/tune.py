@@ -26,7 +26,7 @@ from __future__ import annotations
 import sys
 
 from pfjax.cli.common import UsageError, as_flags
-from pfjax.cli.records import GAINS
+from pfjax.tables import GAINS
 
 
 def _controllers() -> dict:

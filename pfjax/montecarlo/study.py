@@ -206,10 +206,12 @@ def _finish(tmp: Path, runs_path: Path, controllers, store, *, job: dict) -> dic
         spec, controllers, _check_rows(spec, runs, runs_path), spec.f64_check_runs, sims=side.float64_runs()
     )
     mark("float64_check")
+    # the study's wall time: everything but writing the report out, so that the report (and
+    # `pfjax report`, re-rendering it) shows the same number as summary.json
+    summary["wall_s"] = time.time() - t0
     if report:
         write_report(tmp, spec, summary, runs, worst_traj, figures=figures)
         mark("report")
-        summary["wall_s"] = time.time() - t0
     timings = {k: timings[k] for k in PHASES if k in timings}
     # and the side jobs' own compute time (in the background thread when overlapped with the runs)
     summary["timings_s"] = {**timings, "side_jobs": {**side.seconds, "overlapped": overlap}}

@@ -32,8 +32,76 @@ from pfjax.montecarlo.config import StudySpec, study_hash
 from pfjax.montecarlo.sampling import column_names
 from pfjax.provenance import cpu_settings, machine
 from pfjax.sim.dynamic import SLIP_METRIC_NAMES
+from pfjax.tables import COLUMNS, GAINS
 
 QUANTILE_METRICS = [m for m in METRIC_NAMES if m != "success"]
+
+#: ``summary.json``'s units by field name (a field has one meaning wherever it occurs; "1":
+#: dimensionless). :func:`summary_units` adds the units that depend on the study: the metrics'
+#: (``quantiles``), the sampled parameters' (``success_by_param``) and the worst-case objective's.
+UNITS: dict[str, object] = {
+    **dict.fromkeys(("n_runs_total", "n_runs_per_controller_and_path", "n_margin_runs", "n"), "runs"),
+    "k": "runs (successful)",
+    "k_fail": "runs (failed)",
+    "status_counts": "runs",
+    "n_finite": "runs (with a finite value)",
+    "n_per_controller": "runs",
+    "chunks": "chunks of runs",
+    **dict.fromkeys(("run", "run_indices"), "run index (the random stream of the run)"),
+    "seed": "1 (the study's random seed)",
+    "wall_s": "s",
+    "timings_s": "s (wall clock per phase)",
+    "cpu_settings": "vector_width bits (null: XLA's default), block_bytes bytes",
+    "gains": GAINS,
+    "success_rate": "1",
+    "success_ci95": "1 (95 % Clopper-Pearson interval of the success rate)",
+    "iae_mean": "m s (over runs with status ok)",
+    "iae_p95": "m s (over runs with status ok)",
+    "steady_abs_d_p95": "m (over runs with status ok)",
+    **dict.fromkeys(("delta", "confidence", "hoeffding_eps", "hoeffding_lower", "zero_failure_eps", "cp_lower"), "1"),
+    **dict.fromkeys(("margin", "margin_lo", "margin_hi", "resolution", "amplitude"), "deg"),
+    **dict.fromkeys(("slip_margin_deg", "slip_margin_fails_at_deg", "worst_slip_peak_deg", "theta_e0_deg"), "deg"),
+    "eps": "1 (a margin's tolerance on the success rate)",
+    "rate": "1 (success rate at the amplitude)",
+    "lo": "1 in a margin table (95 % interval of rate); in success_by_param, the parameter's unit (below)",
+    "hi": "1 in a margin table (95 % interval of rate); in success_by_param, the parameter's unit (below)",
+    **dict.fromkeys(("rho_failure", "rho_metric"), "1 (Spearman rank correlation)"),
+    **dict.fromkeys(("p_failure", "p_metric"), "1 (p-value)"),
+    "effect_size": "1 (standard deviations of the parameter)",
+    **dict.fromkeys(("hoeffding", "zero_failure"), "runs"),
+    "max_abs_diff_iae": "m s",
+    "max_rel_diff_iae": "1",
+    "max_abs_diff_late_max_abs_d": "m",
+    **dict.fromkeys(("status_agreement", "success_agreement"), "1 (fraction of the runs checked)"),
+    "d0": "m",
+    "ratio": "1",
+    "n_rollouts": "rollouts (simulated runs)",
+    "n_gradients": "gradient evaluations",
+    **dict.fromkeys(("history_rollouts", "history_random_rollouts"), "rollouts (simulated runs)"),
+    "p_fail_ci95": "probability (95 % interval of p_fail)",
+}
+
+
+def summary_units(spec: StudySpec, params: list[str]) -> dict:
+    """:data:`UNITS` with the study's own: ``quantiles`` (each metric's unit, which its ``mean``,
+    ``std`` and quantiles take), ``success_by_param`` (each sampled parameter's unit, which its
+    bins' ``lo`` and ``hi`` take), the worst-case search's ``falsifier``, ``random``,
+    ``history`` and ``history_random`` (the objective's unit) and, with rare-event estimates,
+    their block's (:func:`pfjax.rare.study.units`)."""
+    units = {name: COLUMNS[name][0] for name in COLUMNS if COLUMNS[name][0]}
+    objective = spec.falsifier.objective
+    rare = {}
+    if spec.rare_event.enabled:  # the estimates' (p_fail, rel_error, ...), as pfjax rare-event gives them
+        from pfjax.rare.study import units as rare_units
+
+        rare = rare_units(spec)
+    return {
+        **rare,
+        **UNITS,
+        "quantiles": {m: units[m] for m in QUANTILE_METRICS + list(SLIP_METRIC_NAMES) if m in units},
+        "success_by_param": {p: units[p] for p in params if p in units},
+        **dict.fromkeys(("falsifier", "random", "history", "history_random"), f"{units[objective]} ({objective})"),
+    }
 
 
 def run_statistics(df: pd.DataFrame) -> dict:
@@ -176,6 +244,7 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         "config": spec.model_dump(mode="json"),
         "paths": [p.label for p in spec.paths],
         "controllers": controllers,
+        "units": summary_units(spec, params or []),
         "sample_size": {
             "note": "runs needed for P(success) within eps of the estimate (Hoeffding) or for zero failures to bound P(failure) <= eps (worst case), at confidence 1 - delta = 0.95",
             **{

@@ -46,6 +46,33 @@ from pfjax.rare.importance import cross_entropy_is, explore, least_rollouts
 from pfjax.rare.starts import N_RAY, falsifier_applies, falsifier_points
 from pfjax.rare.subset import subset_simulation
 from pfjax.rare.transform import Input, Stratum, config_keys, study_inputs, to_physical
+from pfjax.tables import COLUMNS
+
+#: The units of :func:`estimate_controller`'s numbers by field name ("1": dimensionless);
+#: :func:`units` adds the study's inputs'.
+UNITS: dict[str, str] = {
+    "p_fail": "probability per run",
+    "ci95": "probability (95 % interval of p_fail)",
+    "rel_error": "1 (coefficient of variation of p_fail)",
+    "p": "probability per run (one subset-simulation run's estimate)",
+    **dict.fromkeys(("delta_uncorrelated", "delta_correlated"), "1 (coefficient of variation)"),
+    **dict.fromkeys(("n_rollouts", "falsifier_rollouts"), "rollouts (simulated runs)"),
+    "wall_s": "s",
+    "weight": "1 (a stratum's probability; a failure point's: its share of the proposal times its stratum's)",
+    "max_weight_share": "1 (the largest importance weight over their sum)",
+    "z": "1 (the two estimates' log difference in standard errors)",
+    "u": "1 (standard deviations of the input's standard-normal coordinate)",
+    **dict.fromkeys(("value", "median"), "the unit of the input named by key"),
+}
+
+
+def units(spec: StudySpec) -> dict[str, str]:
+    """:data:`UNITS` and each input's and choice's unit by its config key (``slip.beta_r_deg``:
+    deg), as the strata's ``values`` and the failure points give them."""
+    return {
+        **UNITS,
+        **{key: COLUMNS[name][0] for name, key in config_keys(spec).items() if COLUMNS.get(name, ("", ""))[0]},
+    }
 
 
 def limit_state(

@@ -221,7 +221,7 @@ def _repro_blocks(summary: dict, written: str) -> list[D.Block]:
         _left("machine", summary["machine"]),
         _left(
             "wall time",
-            f"{fmt_num(summary.get('wall_s'), 4)} s (simulation, sweep and summary; this report not included)",
+            f"{fmt_num(summary.get('wall_s'), 4)} s (runs, sweep, summary, side jobs and figures; writing this report out not included)",
         ),
         _left("runs", runs),
         _left("written", written),
