@@ -594,3 +594,14 @@ def test_a_budget_below_what_the_method_needs_is_refused_before_anything_is_simu
     study.check_budget(spec)
     with pytest.raises(AssertionError, match="a rollout was spent"):  # past the check, the first rollout
         pfjax.rare_event(spec)
+    # the budget set in the config (or by --set), not by --max-rollouts: the key is named
+    over = [f"rare_event.method={method}", f"rare_event.max_rollouts={2 * need - 1}", *extra[1:]]
+    assert main(["rare-event", str(cfg), *[a for kv in over for a in ("--set", kv)]]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pfjax rare-event: error: rare_event.max_rollouts: "), err
+    with pytest.raises(InputError, match=r"^rare_event\.max_rollouts: "):
+        pfjax.rare_event(load_study(str(cfg), over)[0])
+    assert main(["study", str(cfg), "--out", str(tmp_path / "o"), *[a for kv in over for a in ("--set", kv)]]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pfjax study: error: rare_event.max_rollouts: "), err
+    assert not (tmp_path / "o").exists()

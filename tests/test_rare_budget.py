@@ -129,7 +129,7 @@ def test_rollouts_needed_counts_every_part_of_the_estimate(starts, need):
     spec = _spec(starts=starts, max_rollouts=need)
     assert study.rollouts_needed(spec)[0] == need
     study.check_budget(spec)
-    with pytest.raises(InputError, match=rf"^max_rollouts: is needs at least {need} rollouts per stratum"):
+    with pytest.raises(InputError, match=rf"^rare_event\.max_rollouts: is needs at least {need} rollouts per stratum"):
         study.check_budget(_spec(starts=starts, max_rollouts=need - 1))
 
 

@@ -180,8 +180,9 @@ def rare_event(
         pfjax.errors.InputError: before anything is simulated: a bad argument, named as here
             (``method``, ``target_rel_error``, ``max_rollouts``, ``seed``, ``controller``: not one
             of the study's; ``progress``: not True, False or None; ``config``: no such file or not
-            a path, dict or StudySpec); ``max_rollouts`` also when the budget leaves a stratum fewer
-            rollouts than its method needs (:func:`pfjax.rare.study.check_budget`); ``controllers[i]``
+            a path, dict or StudySpec); ``max_rollouts`` (or, not given, ``rare_event.max_rollouts``)
+            also when the budget leaves a stratum fewer rollouts than its method needs
+            (:func:`pfjax.rare.study.check_budget`); ``controllers[i]``
             for a design that cannot be made. Its subclass :class:`pfjax.config.ConfigError` names
             the config key (an override by its dotted key) of a bad key or value.
     """
@@ -212,7 +213,13 @@ def rare_event(
             f"controller: {controller!r} is not one of study {spec.name!r}'s controllers: {', '.join(names)}",
             "controller",
         )
-    check_budget(spec)  # an unsupported study or too small a budget fails here, before anything is simulated
+    try:  # an unsupported study or too small a budget fails here, before anything is simulated
+        check_budget(spec)
+    except errors.InputError as e:
+        if max_rollouts is None or e.key != "rare_event.max_rollouts":
+            raise
+        # the budget given here, not the config's: the error names the argument (--max-rollouts)
+        raise errors.InputError(str(e).replace("rare_event.max_rollouts", "max_rollouts", 1), "max_rollouts") from None
     controllers = controllers_of(spec)
     chosen = names if controller is None else [controller]
     return {

@@ -189,7 +189,7 @@ def rollouts_needed(spec: StudySpec) -> tuple[int, str]:
 
 
 def check_budget(spec: StudySpec) -> None:
-    """:class:`~pfjax.errors.InputError` naming ``max_rollouts`` when ``spec.rare_event.max_rollouts``,
+    """:class:`~pfjax.errors.InputError` naming ``rare_event.max_rollouts`` when that budget,
     split evenly over the study's strata (:func:`pfjax.rare.transform.study_inputs`), leaves a
     stratum fewer rollouts than its method needs (:func:`rollouts_needed`): refused before anything
     is simulated, not after a stratum has spent them."""
@@ -200,9 +200,9 @@ def check_budget(spec: StudySpec) -> None:
     need, what = rollouts_needed(spec)
     if rare.max_rollouts // strata < need:
         raise errors.InputError(
-            f"max_rollouts: {rare.method} needs at least {need} rollouts per stratum ({what}); the study has "
-            f"{strata} strata (paths x choice values), so at least {need * strata} in all, got {rare.max_rollouts}",
-            "max_rollouts",
+            f"rare_event.max_rollouts: {rare.method} needs at least {need} rollouts per stratum ({what}); the study "
+            f"has {strata} strata (paths x choice values), so at least {need * strata} in all, got {rare.max_rollouts}",
+            "rare_event.max_rollouts",
         )
 
 
