@@ -257,6 +257,13 @@ class TuningStudy(ConfigModel):
 #: runs are 0, 1, ...).
 TRAINING_OFFSET = 1 << 20
 
+#: The tunings of state feedback's K by the multi-start tuner (:func:`pfjax.tuning.study_parts.tune_K`),
+#: by label: the scenario, and the study's key of its training runs per path (None: a paper set).
+K_TUNINGS = {
+    "K-gradient-single": ("paper-line", None),
+    "K-gradient-robust": ("training", "robust.train_runs"),
+}
+
 #: The study's keys that set a held-out study's key (:func:`heldout_study`): its errors name them.
 HELDOUT_KEYS = {
     "n_runs": "robust.heldout_runs",
@@ -355,10 +362,11 @@ def check_sizes(cfg: dict, n_paths: int) -> None:
             runs.append((name, "compare.cvar_runs", n, methods(cfg, name, i == 0)))
         else:
             runs.append((name, None, len(scenario_sets()[name.partition(":")[2]]), methods(cfg, name, i == 0)))
-    # K of state feedback, tuned on the paper line and on the training set (study_parts.tune_K)
     gradient = {"gradient": dict(method="gradient", multistart=MultistartOptions(**cfg["multistart"]))}
-    runs.append(("state_feedback:paper-line", None, 1, gradient))
-    runs.append(("state_feedback:training", "robust.train_runs", cfg["robust"]["train_runs"] * n_paths, gradient))
+    for scenario, train_key in K_TUNINGS.values():
+        section, _, field = (train_key or "").partition(".")
+        n = len(scenario_sets()[scenario]) if train_key is None else cfg[section][field] * n_paths
+        runs.append((f"state_feedback:{scenario}", train_key, n, gradient))
     for name, key, n, labelled in runs:
         box = C.REGISTRY[name.partition(":")[0]].box
         assert box is not None  # compare.problems lists tunable controllers (TuneCompare)
@@ -400,6 +408,7 @@ def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: b
 __all__ = [
     "ABLATION",
     "HELDOUT_KEYS",
+    "K_TUNINGS",
     "MARGIN_AXIS",
     "QUICK",
     "SCENARIOS",

@@ -11,7 +11,7 @@ import pandas as pd
 
 from pfjax.numerics.random import seed_key
 from pfjax.tuning.multistart import MultistartOptions
-from pfjax.tuning.study_config import problem_list
+from pfjax.tuning.study_config import K_TUNINGS, problem_list
 
 
 def table3(cfg, pr, progress):
@@ -89,15 +89,21 @@ def training_problem(cfg, controller: str, n_runs: int, cost=None):
 
 
 def tune_K(cfg, spec, progress):
-    """K of state feedback tuned by the multi-start tuner on the paper line and on the training sample."""
+    """K of state feedback tuned by the multi-start tuner, for each of
+    :data:`~pfjax.tuning.study_config.K_TUNINGS` (the paper line and the training sample), which
+    the study's check of sizes at load reads too."""
     from pfjax.sim import SimConfig
     from pfjax.tuning.problem import make_problem, tune
 
     sim = SimConfig(dt=cfg["sim"]["dt"], horizon=cfg["sim"]["horizon"], record=False)
     out = {}
-    single = make_problem("state_feedback", "paper-line", config=sim)
-    robust = training_problem(cfg, "state_feedback", cfg["robust"]["train_runs"])
-    for name, pr in (("K-gradient-single", single), ("K-gradient-robust", robust)):
+    for name, (scenario, runs_key) in K_TUNINGS.items():
+        section, _, field = (runs_key or "").partition(".")
+        pr = (
+            make_problem("state_feedback", scenario, config=sim)
+            if runs_key is None
+            else training_problem(cfg, "state_feedback", cfg[section][field])
+        )
         r = tune(
             pr,
             "gradient",
