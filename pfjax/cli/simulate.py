@@ -126,9 +126,6 @@ def _check_model_flags(args) -> None:
                 setattr(args, dest, value)
 
 
-#: ``--dt``'s default for the kinematic model, s.
-KINEMATIC_DT = 0.005
-
 SIMULATE_FLAGS = {
     "v": "--speed",
     "L": "--wheelbase",
@@ -172,7 +169,7 @@ def cmd(args) -> dict:
 
     from pfjax import paths
     from pfjax.metrics import METRIC_NAMES
-    from pfjax.sim import STATUS_NAMES
+    from pfjax.sim import STATUS_NAMES, SimConfig
     from pfjax.sim.scenario import paper_scenario
     from pfjax.sim.simulate import simulate_one
 
@@ -189,7 +186,7 @@ def cmd(args) -> dict:
     with as_flags(SIMULATE_FLAGS):
         if args.model in ("st", "std"):
             return _simulate_st(args, pose0)
-        cfg = _config(args, KINEMATIC_DT if args.dt is None else args.dt)
+        cfg = _config(args, SimConfig().dt if args.dt is None else args.dt)  # the kinematic model's default
         controller, gains, shown = _controller_and_gains(args, args.wheelbase)
         sc = paper_scenario(
             args.path,
