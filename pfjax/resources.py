@@ -39,15 +39,15 @@ MAX_POPULATION = 1_000_000
 MAX_GENERATIONS = 1_000_000
 
 
-def check_steps(horizon: float, dt: float) -> int:
+def check_steps(horizon: float, dt: float, key: str = "dt") -> int:
     """The number of integrator steps ``horizon / dt``; :class:`~pfjax.errors.InputError` naming
-    ``dt`` above :data:`MAX_STEPS`."""
+    ``key`` above :data:`MAX_STEPS`."""
     n = horizon / dt
     if n > MAX_STEPS:
         raise InputError(
-            f"dt: horizon / dt (a run's integrator step count) may be at most {MAX_STEPS:.0e}, "
+            f"{key}: horizon / dt (a run's integrator step count) may be at most {MAX_STEPS:.0e}, "
             f"got {horizon:g} / {dt:g} = {n:.3g}",
-            "dt",
+            key,
         )
     return int(round(n))
 

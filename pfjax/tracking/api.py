@@ -13,7 +13,7 @@ from collections.abc import Mapping
 
 from pfjax import errors
 from pfjax.errors import InputError
-from pfjax.resources import MAX_STEPS, whole_steps
+from pfjax.resources import MAX_STEPS, check_steps, whole_steps
 from pfjax.tables import TRACK_UNITS as UNITS
 
 __all__ = ["LEADERS", "MAX_STEPS", "MODES", "UNITS", "check_time", "nonzero", "run"]
@@ -42,8 +42,7 @@ def check_time(horizon: float, dt: float, window: float | None = None) -> int:
     """
     if dt > horizon:
         raise InputError(f"dt: must be <= horizon ({horizon:g} s), got {dt:g}", "dt")
-    if horizon / dt > MAX_STEPS:  # names both: the command line shows it as --horizon/--dt
-        raise InputError(f"horizon/dt: at most {MAX_STEPS / 1e6:g}e6 steps, got {horizon / dt:.3g}", "horizon/dt")
+    check_steps(horizon, dt, "horizon/dt")  # names both: the command line shows it as --horizon/--dt
     n = whole_steps(horizon, dt)
     if window is not None and window > horizon:
         raise InputError(f"window: must be <= horizon ({horizon:g} s), got {window:g}", "window")
