@@ -255,7 +255,7 @@ def _sf_register(factory=None, **kw):
         ({"style": "red"}, "style"),  # a mapping of matplotlib keywords
         ({"cli_name": "pi"}, "cli_name"),  # another entry's command-line name: unreachable
         ({"cli_name": "pure_pursuit"}, "cli_name"),  # another entry's registry name
-        ({"name": "stanley", "cli_name": "pi"}, "cli_name"),  # replacing stanley under pi's name
+        ({"name": "stanley", "cli_name": "pi"}, "name"),  # pfjax's own stanley: not replaced by another module
     ],
 )
 def test_controller_register_checks_its_arguments(kw, key):

@@ -13,7 +13,7 @@ import re
 from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
 
-from pfjax import errors
+from pfjax import errors, plugins
 from pfjax.controllers.base import Controller
 
 
@@ -32,6 +32,9 @@ class ControllerEntry(NamedTuple):
         box: tuning box ``(fields, lower, upper)`` (bounds flat, in field order, in the gains' units;
             checked by :func:`check_box`) or None (not tunable).
         style: plot style (matplotlib keywords ``color``, ``lw``, ``ls`` and a ``label``).
+        labels: names of a vector field's elements (``{"K": ("k_d", "k_theta")}``).
+        module: the module that registered it (:func:`pfjax.plugins.registrant`), the only one that
+            may register its name again; ``pfjax.*`` for pfjax's own controllers.
     """
 
     controller: Controller
@@ -42,6 +45,7 @@ class ControllerEntry(NamedTuple):
     box: tuple | None
     style: dict
     labels: dict  # vector field -> names of its elements (K -> k_d, k_theta): the scalar gains
+    module: str
 
 
 #: name -> entry.
@@ -49,6 +53,13 @@ REGISTRY: dict[str, ControllerEntry] = {}
 
 #: name or command-line name -> what takes it outside the registry (:func:`reserve`).
 RESERVED: dict[str, str] = {}
+
+#: A controller's functions -> the arguments pfjax calls them with (:mod:`pfjax.controllers.base`).
+_CALLS = {
+    "init": ("params",),
+    "output": ("params", "c", "obs"),
+    "rate": ("params", "c", "obs", "delta_cmd", "delta_applied"),
+}
 
 #: A registry name: a lower-case ASCII identifier; a command-line name: the same with ``-``.
 _NAME = re.compile(r"[a-z][a-z0-9_]*")
@@ -95,17 +106,27 @@ def register(
     labels: dict | None = None,
     gains: tuple | None = None,
 ) -> ControllerEntry:
-    """Add a controller kind (replacing one of the same name) and return its entry.
+    """Add a controller kind and return its entry.
+
+    A name belongs to the module that registered it (the ``__name__`` of the module whose code
+    calls ``register``: :func:`pfjax.plugins.registrant`): registering it again from that module
+    replaces its entry (re-running a notebook cell, :func:`importlib.reload`); from any other module,
+    and for pfjax's own controllers (``pi``, ``stanley``, ...), it is refused.
 
     Args:
-        controller: the controller (a :class:`~pfjax.controllers.base.Controller`).
+        controller: the controller (a :class:`~pfjax.controllers.base.Controller`) whose functions
+            take the positional arguments pfjax calls them with: ``init(params)``,
+            ``output(params, c, obs)``, ``rate(params, c, obs, delta_cmd, delta_applied)``
+            (checked when the signature can be read).
         factory: keyword gains -> parameter pytree (its parameters name the gain fields, in order).
         name: registry name, a lower-case ASCII identifier (a letter, then letters, digits, ``_``;
-            default ``controller.name``). Registering a name again replaces its entry.
+            default ``controller.name``); not a name of pfjax's own controllers or of another
+            module's.
         defaults: default gains the factory does not have itself (keys: its parameters).
         cli_name: command-line name, lower-case ASCII letters, digits and ``-`` after a letter
             (default the name with ``_`` → ``-``). Neither ``name`` nor ``cli_name`` may be a name
-            or command-line name of another entry or of a design (``lmi``, ``mixed``, ...;
+            or command-line name of another entry (one of the same name registered by this module
+            is replaced, its names with it) or of a design (``lmi``, ``mixed``, ...;
             :func:`reserve`): the new controller could not be reached by it.
         box: tuning box ``(fields, lower, upper)``, or None (not tunable): distinct gain fields
             and their flat bounds, in the gains' own units (:func:`check_box`).
@@ -117,10 +138,14 @@ def register(
 
     Raises:
         InputError: an argument that is not as described, naming it (``box.lower[1]: ...``,
-            ``cli_name: 'pi' is taken by controller 'pi'``).
+            ``name: 'pi' is taken by pfjax's controller 'pi'; choose another``,
+            ``controller.output: expected output(params, c, obs), got (p, obs)``).
     """
+    module = plugins.registrant(__name__)
     if not isinstance(controller, Controller):
         raise errors.InputError(f"controller: expected a pfjax Controller, got {type(controller).__name__}")
+    for field, args in _CALLS.items():
+        plugins.check_call(f"controller.{field}", getattr(controller, field), args)
     if not callable(factory):
         raise errors.InputError(f"factory: expected a callable (keyword gains -> parameters), got {factory!r}")
     name = _spelling(
@@ -132,7 +157,7 @@ def register(
         _CLI,
         "command-line name (a letter, then letters, digits, -)",
     )
-    taken = _taken(name)  # a second owner of a spelling would never be reached by it
+    taken = _taken(name, module)  # a second owner of a spelling would never be reached by it
     for key, spelling in (("name", name), ("cli_name", cli_name)):
         if spelling in taken:
             raise errors.InputError(f"{key}: {spelling!r} is taken by {taken[spelling]}; choose another", key)
@@ -161,6 +186,7 @@ def register(
         None if box is None else check_box(box, make, labels),
         {"color": "#7f7f7f", "lw": 1.0, "label": name, **(style or {})},
         labels,
+        module,
     )
     REGISTRY[name] = entry
     return entry
@@ -230,13 +256,20 @@ def reserve(spellings, owner: str) -> None:
         RESERVED[n] = owner
 
 
-def _taken(name: str) -> dict[str, str]:
+def _taken(name: str, module: str) -> dict[str, str]:
     """spelling -> what takes it, for every name and command-line name :func:`register` must not
-    give the entry ``name`` (re-registering ``name`` replaces its own entry)."""
+    give the entry ``name`` registered by ``module`` (the entry ``name`` that ``module`` registered
+    is replaced, so its names are free)."""
     out = dict(RESERVED)
     for e in REGISTRY.values():
-        if e.name != name:
-            out.update({e.name: f"controller {e.name!r}", e.cli_name: f"controller {e.name!r}"})
+        if e.name == name and e.module == module:
+            continue
+        what = (
+            f"pfjax's controller {e.name!r}"
+            if plugins.is_builtin(e.module)
+            else f"controller {e.name!r} of module {e.module!r} (only that module may register it again)"
+        )
+        out.update({e.name: what, e.cli_name: what})
     return out
 
 

@@ -22,7 +22,7 @@ import re
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
-from pfjax import errors
+from pfjax import errors, plugins
 
 
 class PathEntry(NamedTuple):
@@ -39,6 +39,8 @@ class PathEntry(NamedTuple):
         source: one of the source's three test paths.
         parametric: built from the study's path config (``circle``, ``random``, ``spline``).
         description: one line for reports.
+        module: the module that registered it (:func:`pfjax.plugins.registrant`), the only one that
+            may register its name again; ``pfjax.paths.registry`` for pfjax's own kinds.
     """
 
     name: str
@@ -49,6 +51,7 @@ class PathEntry(NamedTuple):
     source: bool
     parametric: bool
     description: str
+    module: str
 
 
 #: name -> entry, in registration order.
@@ -72,17 +75,23 @@ def register(
     parametric: bool = False,
     description: str = "",
 ) -> PathEntry:
-    """Add a path kind (replacing one of the same name) and return its entry (see :class:`PathEntry`).
+    """Add a path kind and return its entry (see :class:`PathEntry`).
 
     ``build`` is called once here, so a builder that raises or returns no path is refused when it
     is registered rather than wherever the path is first used.
 
+    A name belongs to the module that registered it (the ``__name__`` of the module whose code
+    calls ``register``: :func:`pfjax.plugins.registrant`): registering it again from that module
+    replaces its entry (re-running a notebook cell, :func:`importlib.reload`); from any other module,
+    and for pfjax's own kinds (``line``, ``sine``, ``circle``, ...), it is refused.
+
     Args:
         name: the kind's config and command-line name, a lower-case ASCII identifier (a letter, then
-            letters, digits and ``_``: ``paths[i].kind``, ``--path``).
-        build: ``() -> path``, a :mod:`pfjax.paths.shapes` pytree (a curve ``p(u)`` in m: a
-            ``NamedTuple`` with methods ``point``, ``d1``, ``d2`` of ``u`` and scalar fields
-            ``u_min < u_max``); None only for the parametric kinds (:data:`PARAMETRIC`), built from a
+            letters, digits and ``_``: ``paths[i].kind``, ``--path``); not a name of pfjax's own
+            kinds or of another module's.
+        build: ``() -> path``, a function of no arguments returning a :mod:`pfjax.paths.shapes`
+            pytree (a curve ``p(u)`` in m: a ``NamedTuple`` with methods ``point``, ``d1``, ``d2``
+            of ``u`` and scalar fields ``u_min < u_max``); None only for the parametric kinds (:data:`PARAMETRIC`), built from a
             study's path config.
         start_pose: single runs' start ``(x, y, theta)`` (m, m, rad), three finite numbers; needed
             with ``build``.
@@ -97,8 +106,10 @@ def register(
 
     Raises:
         InputError: an argument that is not as described, naming it (``build: ...`` for a builder
-            that raises or returns something that is not a path).
+            that takes arguments, raises or returns something that is not a path;
+            ``name: 'sine' is taken by pfjax's path 'sine'; choose another``).
     """
+    module = plugins.registrant(__name__)
     e = _entry(
         name,
         build,
@@ -108,7 +119,16 @@ def register(
         source=source,
         parametric=parametric,
         description=description,
+        module=module,
     )
+    old = PATHS.get(name)
+    if old is not None and old.module != module:
+        what = (
+            f"pfjax's path {name!r}"
+            if plugins.is_builtin(old.module)
+            else f"path {name!r} of module {old.module!r} (only that module may register it again)"
+        )
+        raise errors.InputError(f"name: {name!r} is taken by {what}; choose another", "name")
     if build is not None:
         _check_build(name, build)
     PATHS[name] = e
@@ -125,8 +145,10 @@ def _entry(
     source=False,
     parametric=False,
     description="",
+    module: str,
 ) -> PathEntry:
-    """The entry of :func:`register`'s arguments, each checked (its builder is not called)."""
+    """The entry of :func:`register`'s arguments, each checked (its builder is not called), registered
+    by ``module``."""
     if not isinstance(name, str) or not _NAME.fullmatch(name):
         raise errors.InputError(
             f"name: a path kind is a lower-case ASCII identifier (a letter, then letters, digits, _), got {name!r}",
@@ -134,6 +156,8 @@ def _entry(
         )
     if build is not None and not callable(build):
         raise errors.InputError(f"build: expected a function () -> path, got {build!r}", "build")
+    if build is not None:
+        plugins.check_call("build", build, ())
     for key, flag in (("source", source), ("parametric", parametric)):
         if not isinstance(flag, bool):
             raise errors.InputError(f"{key}: expected True or False, got {flag!r}", key)
@@ -159,6 +183,7 @@ def _entry(
         source,
         parametric,
         " ".join(description.split()) or name,
+        module,
     )
 
 
@@ -238,7 +263,7 @@ def _builtin(name: str, build: Callable | None = None, **kw) -> None:
     """Add one of pfjax's own kinds, its arguments checked as :func:`register` checks them but its
     builder not called: calling one would start JAX's runtime on ``import pfjax.paths``
     (tests/test_extension_audit.py checks each as :func:`register` would)."""
-    PATHS[name] = _entry(name, build, **kw)
+    PATHS[name] = _entry(name, build, module=__name__, **kw)
 
 
 def _register_builtins() -> None:
