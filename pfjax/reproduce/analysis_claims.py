@@ -49,7 +49,8 @@ def hurwitz(inp: Inputs, add: Add) -> None:
 
 
 def table3(inp: Inputs, add: Add) -> None:
-    """Table 3: the reading of the PI gains."""
+    """Table 3: the reading of the PI gains. The sensitivity row has "no verdict" unless exactly one
+    reading passes every filter (there is no choice to test)."""
     pi_df = inp.pi_df
     claim = f"Table 3: GA-optimal PI gains {', '.join(f'{g:.4f}' for g in inp.src['table3'])} (row labels lost)"
     f = pi_df.attrs["filters"]
@@ -59,7 +60,7 @@ def table3(inp: Inputs, add: Add) -> None:
         "line, parabola, sine",
         "24 readings",
         "exactly one reading passes every filter taken from the source's claims about its PI (" + counts + ")",
-        f"{f['consistent']} reading(s): {', '.join(f['consistent_readings'])}",
+        f"{f['consistent']} reading(s): {', '.join(f['consistent_readings']) or 'none'}",
         "one PI",
         holds(f["consistent"] == 1),
         basis=FILTERED,
@@ -69,9 +70,11 @@ def table3(inp: Inputs, add: Add) -> None:
         "line, parabola, sine",
         "24 readings",
         "the chosen reading stays the only one under each filter threshold halved and doubled",
-        f"unique in {f['sensitivity_unique']} of {f['sensitivity_cases']} threshold settings",
+        f"unique in {f['sensitivity_unique']} of {f['sensitivity_cases']} threshold settings"
+        if f["consistent"] == 1
+        else f"no single reading chosen ({f['consistent']} pass every filter)",
         "—",
-        holds(f["sensitivity_unique"] == f["sensitivity_cases"]),
+        holds(f["sensitivity_unique"] == f["sensitivity_cases"]) if f["consistent"] == 1 else "no verdict",
         basis=FILTERED,
     )
 

@@ -10,7 +10,7 @@ import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
-from pfjax.reproduce.verdict import FILTERED
+from pfjax.reproduce.verdict import CONVENTION, FILTERED
 
 CONTROLLERS = ("mixed", "pi")
 LABEL = {"mixed": "mixed H2/H∞ (pfjax's K)", "paper-k": "mixed H2/H∞ (source's K)", "pi": "PI (Table 3)"}
@@ -94,10 +94,13 @@ def steering_limit(inp: Inputs, add: Add) -> None:
 
 
 def _mixed_below_pi(inp: Inputs, add: Add, claim: str, key: str, criterion: str, show: Callable[[float], str]) -> None:
-    """One row per path: the claim holds where the mixed design's ``key`` is below the PI's."""
+    """One row per path: the claim holds where the mixed design's ``key`` is below the PI's; "no
+    verdict" where either is NaN (the run gives no value; the status says why)."""
     for p in inp.paths:
         m, q = inp.R[(p, "mixed")][key], inp.R[(p, "pi")][key]
-        add(claim, p, "mixed vs PI", criterion, f"{show(m)} vs {show(q)}", "—", holds(m < q))
+        nan = [c for c, x in (("mixed", m), ("PI", q)) if x is None or math.isnan(x)]
+        shown = f"{show(m)} vs {show(q)}" if not nan else f"no value for {' and '.join(nan)} (NaN)"
+        add(claim, p, "mixed vs PI", criterion, shown, "—", holds(m < q) if not nan else "no verdict")
 
 
 def faster(inp: Inputs, add: Add) -> None:
@@ -205,7 +208,10 @@ def line_pi_error(inp: Inputs, add: Add) -> None:
 
 
 def line_steering(inp: Inputs, add: Add) -> None:
-    """Line: the steering settles near the source's angle."""
+    """Line: the steering settles near the source's angle. The angle fixed the sign of the front slip
+    (docs/reproductions/path-following.md §1), so every row agrees by construction; the PI's row
+    is also the filter "line steering within 0.5° of the source's angle" that chose its reading of
+    Table 3, on the same run (:data:`pfjax.reproduce.verdict.FILTERED`, the stronger of the two)."""
     R, src = inp.R, inp.src
     claim = f"Line: the steering settles at about {src['line_delta_deg']:g}° to compensate the slip"
     for c in CONTROLLERS:
@@ -218,7 +224,7 @@ def line_steering(inp: Inputs, add: Add) -> None:
             f"{fd:.3f}°",
             f"about {src['line_delta_deg']:g}°",
             holds(abs(fd - src["line_delta_deg"]) < 0.5),
-            basis="used to choose the convention",
+            **(dict(basis=FILTERED, also=CONVENTION) if c == "pi" else dict(basis=CONVENTION)),
         )
 
 
@@ -239,14 +245,26 @@ def line_yaw(inp: Inputs, add: Add) -> None:
         )
 
 
+def _finite(x) -> bool:
+    """``x`` is a finite number (a summary read back from JSON holds ``None`` for NaN)."""
+    return x is not None and math.isfinite(x)
+
+
 def sine_peaks(inp: Inputs, add: Add) -> None:
     """Sine: where the errors peak against the curvature. On y = sin x the |κ| maxima lie π m apart
     in x, so a point placed at random is a median π/4 m from the nearest one: the first row's
-    threshold is that chance level, and passing it is weak evidence."""
+    threshold is that chance level, and passing it is weak evidence. A median that is not finite (no
+    |d| peak after 5 s, or no maximum to measure to) gives "no verdict", with the reason."""
     sine = inp.sine
     claim = "Sine: the errors grow where the curvature changes fastest (near the extrema)"
     to_k, to_dk = sine["median_peak_to_kappa_max_m"], sine["median_peak_to_dkappa_max_m"]
     chance = math.pi / 4
+
+    def undecided(what: str) -> str:
+        if not sine.get("peak_x", [None]):
+            return "no |d| peak after 5 s (no median)"
+        return f"no {what} maximum in x after 5 s (no median)"
+
     add(
         claim,
         "sine",
@@ -254,16 +272,18 @@ def sine_peaks(inp: Inputs, add: Add) -> None:
         "after 5 s, the median distance in x from a |d| peak to the nearest extremum of the sine (|κ| maximum; "
         f"they are π m apart) is below π/4 = {chance:.2f} m, the median for points placed at random "
         "(chance level: weak evidence)",
-        f"median distance {to_k:.2f} m",
+        f"median distance {to_k:.2f} m" if _finite(to_k) else undecided("|κ|"),
         "near the extrema",
-        holds(to_k < chance),
+        holds(to_k < chance) if _finite(to_k) else "no verdict",
     )
     add(
         claim,
         "sine",
         LABEL["mixed"],
         "the |d| peaks lie closer to the |dκ/ds| maxima (curvature changing fastest) than to the |κ| maxima",
-        f"{to_dk:.2f} m vs {to_k:.2f} m",
+        f"{to_dk:.2f} m vs {to_k:.2f} m"
+        if _finite(to_k) and _finite(to_dk)
+        else undecided("|κ|" if not _finite(to_k) else "|dκ/ds|"),
         "where κ changes fastest",
-        holds(to_dk < to_k),
+        holds(to_dk < to_k) if _finite(to_k) and _finite(to_dk) else "no verdict",
     )

@@ -28,13 +28,16 @@ BASES = (
 )
 #: :data:`BASES`' entry for a row on a reading chosen by the source's own statements.
 FILTERED = BASES[2]
+#: :data:`BASES`' entry for a row on the statement that fixed a modelling convention.
+CONVENTION = BASES[1]
 
 
 class Verdict(NamedTuple):
     """One row: ``claim`` (the source's words), ``path`` (or ``"—"``), ``subject`` (controller or
     case), ``criterion`` (what is compared, with units, stated before any number), ``pfjax`` and
     ``source`` (numbers as text; ``"—"`` where the source gives none), ``verdict``
-    (:data:`VERDICTS`) and ``basis`` (:data:`BASES`)."""
+    (:data:`VERDICTS`), ``basis`` (:data:`BASES`) and ``also``: a second basis that applies to the
+    same row (``""`` for none; ``basis`` is then the stronger of the two)."""
 
     claim: str
     path: str
@@ -44,23 +47,29 @@ class Verdict(NamedTuple):
     source: str
     verdict: str
     basis: str = "independent"
+    also: str = ""
 
     def check(self) -> Verdict:
         if self.verdict not in VERDICTS:
             raise ValueError(f"verdict: {self.verdict!r} is not one of {VERDICTS}")
         if self.basis not in BASES:
             raise ValueError(f"basis: {self.basis!r} is not one of {BASES}")
+        if self.also and (self.also not in BASES[1:] or self.also == self.basis):
+            raise ValueError(f"also: {self.also!r} is not one of {BASES[1:]} other than the basis")
         return self
 
 
 def verdict_cells(rows) -> tuple[list[str], list[list[str]]]:
     """The verdict table as ``(header, rows)`` of inline-Markdown cells; ``rows`` are
-    :class:`Verdict` or their dicts (a summary's ``verdicts``)."""
+    :class:`Verdict` or their dicts (a summary's ``verdicts``). A row with two bases shows both in
+    its basis cell, the stronger first."""
     head = ["claim", "path", "subject", "criterion", "pfjax", "source", "verdict", "basis"]
     cells = []
     for r in rows:
         v = r if isinstance(r, Verdict) else Verdict(**r)
         basis = "" if v.basis == "independent" else v.basis
+        if v.also:
+            basis += f"; also {v.also}"
         cells.append([v.claim, v.path, v.subject, v.criterion, v.pfjax, v.source, f"**{v.verdict}**", basis])
     return head, cells
 
