@@ -51,8 +51,26 @@ class InputError(ValueError):
 
 
 def is_number(value) -> bool:
-    """A real number that is not a boolean (``True`` is not 1 here)."""
-    return isinstance(value, _numbers.Real) and not isinstance(value, bool)
+    """A real number that is not a boolean (``True`` is not 1 here): a Python or NumPy number, or
+    a NumPy or JAX array of one real number (shape ``()``; a JAX value under a transformation is
+    not a number here: its value is not known)."""
+    if isinstance(value, _numbers.Real):
+        return not isinstance(value, bool)
+    dtype = getattr(value, "dtype", None)
+    return (
+        getattr(value, "shape", None) == ()
+        and getattr(dtype, "kind", None) in ("i", "u", "f")
+        and type(value).__module__.split(".")[0] in ("numpy", "jaxlib", "jax")
+        and not _traced_leaf(value)
+    )
+
+
+def _traced_leaf(value) -> bool:
+    """Whether ``value`` is a JAX tracer (without importing JAX when it is not loaded)."""
+    import sys
+
+    jax = sys.modules.get("jax")
+    return jax is not None and isinstance(value, jax.core.Tracer)
 
 
 def number(
@@ -70,7 +88,8 @@ def number(
 
     Args:
         key: the name the message starts with.
-        value: the value to check (an int, float or NumPy scalar; not a bool or a string).
+        value: the value to check (an int, float, NumPy scalar or one-number array, :func:`is_number`;
+            not a bool or a string).
         positive: require ``value > 0`` (and at least :data:`MIN_POSITIVE`).
         nonnegative: require ``value >= 0``.
         below: require ``|value| < below``.
@@ -198,7 +217,8 @@ def boolean(key: str, value, *, or_none: bool = False) -> bool | None:
     ``key`` for anything else (``"no"``, ``0``), which Python's truth would read as a choice."""
     if value is None and or_none:
         return None
-    if not (isinstance(value, bool) or type(value).__name__ == "bool_"):  # NumPy's, without importing it
+    numpy_bool = type(value).__module__ == "numpy" and type(value).__name__ in ("bool", "bool_")
+    if not (isinstance(value, bool) or numpy_bool):  # NumPy's (np.bool, np.bool_), without importing it
         expected = "True, False or None" if or_none else "True or False"
         raise InputError(f"{key}: expected {expected}, got {value!r:.80}", key)
     return bool(value)

@@ -88,10 +88,32 @@ def test_scenarios_key_batch_of_keys_refused_one_key_accepted():
         (dict(config="x"), "config"),
         (dict(config={"horizont": 3.0}), "config"),
         (dict(multistart="x"), "multistart"),
+        (dict(scenario=3), "scenario"),  # not a name or a path: one line, not a TypeError
+        (dict(scenario=["x"]), "scenario"),
     ],
 )
 def test_tune_arguments(kw, key):
-    _refused(lambda: pfjax.tune("pi", "paper-line", "gradient", **kw), key)
+    kw = {"scenario": "paper-line", **kw}
+    _refused(lambda: pfjax.tune("pi", method="gradient", **kw), key)
+
+
+@pytest.mark.parametrize(
+    "kw", [dict(k_v=5.0), dict(tau_delta_s=0.05), dict(vehicle_params="robot"), dict(mu=1.0), dict(k_v=7.0)]
+)
+def test_scenarios_refuse_a_single_track_setting_on_the_kinematic_model_at_any_value(kw):
+    """As ``pfjax simulate --k-v 5`` is refused without ``--model st``: given is given, default or not."""
+    (name,) = kw
+    _refused(lambda: pfjax.scenarios("line", n=1, horizon=1.0, **kw), name)
+
+
+def test_simulate_records_every_gain_given():
+    """``Simulation.gains``: the controller's own gains and every one given (two runs that differ
+    by their feedforward differ in their recorded gains)."""
+    R = pfjax.scenarios("sine", n=2, horizon=2.0, key=0)
+    a = pfjax.simulate(R, "state_feedback", config={"horizon": 2.0})
+    b = pfjax.simulate(R, "state_feedback", gains={"feedforward": 1.0}, config={"horizon": 2.0})
+    assert a.gains == {"k_d": -2.7381, "k_theta": -2.0772} and b.gains == {**a.gains, "feedforward": 1.0}
+    assert a.table.iae[0] != b.table.iae[0]
 
 
 def test_tune_refuses_a_design_as_the_command_line_does(capsys):
@@ -322,6 +344,7 @@ def test_scenarios_beyond_the_memory_budget_are_refused_before_drawing(monkeypat
 def test_replay_of_a_directory_without_a_study_or_of_no_runs_names_its_argument(tmp_path):
     _refused(lambda: pfjax.replay(tmp_path, "line", "a", 0), "study")
     _refused(lambda: pfjax.replay(_spec(), "line", "a", []), "runs")
+    _refused(lambda: pfjax.replay(_spec(), "line", "a", [0, [1]]), "runs")  # ragged
 
 
 def _spec():
@@ -455,3 +478,31 @@ def test_nan_is_not_a_finite_number_rather_than_too_small():
     assert msg == "horizon: expected a finite number, got nan"
     msg = _refused(lambda: pfjax.scenarios("line", 2, model="st", tau_delta_s=float("nan")), "tau_delta_s")
     assert "expected a finite number, got nan" in msg
+
+
+def test_numpy_and_jax_scalars_are_numbers_and_booleans_everywhere():
+    """A one-number NumPy or JAX array and a NumPy boolean are accepted wherever a number or a
+    flag is (``design_mixed(v=...)`` as ``scenarios(speed=...)``); a longer array and a boolean
+    array are not numbers."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from pfjax import errors
+
+    assert errors.number("v", jnp.float32(2.0)) == 2.0 and errors.number("v", np.array(2)) == 2.0
+    assert errors.boolean("t", np.True_) is True and errors.boolean("t", np.bool_(False)) is False
+    for bad in (np.array([1.0]), np.array(True), "1", True):
+        _refused(lambda: errors.number("v", bad), "v")
+    a = pfjax.design_mixed(v=jnp.float32(1.0)).K
+    b = pfjax.design_mixed(v=1.0).K
+    np.testing.assert_array_equal(a, b)
+
+
+def test_keyword_overrides_reach_list_items():
+    from pfjax.api.studies import dotted
+
+    assert dotted("controllers__0__gains__k_d") == "controllers[0].gains.k_d"
+    assert dotted("sim__horizon") == "sim.horizon" and dotted("n_runs") == "n_runs"
+    assert dotted("paths__12") == "paths[12]"
+    with pytest.raises(pfjax.InputError, match=r"^controllers\[0\]\.gains\.k_d: "):
+        pfjax.run_study(STUDY, controllers__0__gains__k_d="x")

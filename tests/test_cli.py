@@ -656,6 +656,9 @@ def test_simulate_json_gives_units_arguments_and_the_provenance_record(capsys):
     assert a["arguments"]["horizon"] == 1.0 and a["arguments"]["speed"] == 1.0 and "func" not in a["arguments"]
     assert a["config_sha256"] == config_hash(a["arguments"]) == b["config_sha256"] != c["config_sha256"]
     assert {"pfjax_version", "machine", "cpu_settings", "seed"} <= set(a)
+    # the defaults are recorded as they ran: the same run with them given has the same hash
+    d = run_main(capsys, *base, "--control-every", "1", "--dt", "0.005", "--speed", "1")
+    assert a["arguments"]["control_every"] == 1 and d["config_sha256"] == a["config_sha256"]
 
 
 def test_examples_json_is_the_listing_alone(capsys):

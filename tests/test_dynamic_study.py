@@ -143,6 +143,10 @@ def test_cli_simulate_model_st():
         (["--model", "st", "--beta-r-deg", "3"], "--beta-r-deg"),
         (["--model", "st", "--wheelbase", "0.3"], "--wheelbase"),
         (["--mu", "0.5"], "--mu"),
+        (["--mu", "0"], "--mu"),  # a given 0 is given (not taken for "not given")
+        (["--k-v", "0"], "--k-v"),
+        (["--model", "st", "--beta-r-deg", "0"], "--beta-r-deg"),
+        (["--model", "st", "--wheelbase", "0"], "--wheelbase"),
         (["--model", "st", "--mu", "-1"], "--mu"),
         (["--model", "st", "--tau-delta", "0"], "--tau-delta"),
         (["--model", "st", "--mu", "10", "--dt", "0.005"], "--dt"),

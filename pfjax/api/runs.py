@@ -105,6 +105,12 @@ def scenarios(
         f"drawing {n} runs at once",
         "draw fewer runs per call, or run a study (pfjax.run_study), which streams any number in chunks",
     )
+    if model == "kinematic":  # the ST model's settings refused when given, at their defaults too
+        for name, value in (("vehicle_params", vehicle_params), ("mu", mu), ("tau_delta_s", tau_delta_s), ("k_v", k_v)):
+            if value is not None:
+                raise errors.InputError(
+                    f'{name}: not with model = "kinematic" (it is a setting of model = "st" or "std"); remove it', name
+                )
     if model == "kinematic":  # the kinematic defaults (None: not given, so the ST model can refuse a given one)
         beta_r_deg = 5.0 if beta_r_deg is None else beta_r_deg
         beta_f_deg = 5.0 if beta_f_deg is None else beta_f_deg

@@ -50,7 +50,8 @@ def resolve_gains(e, d, gains, v: float, L: float) -> tuple[Any, dict]:
     if d is not None:
         flat.update(C.design_gains(d, v, L, "controller"))
     flat.update(given)
-    return C.params_from_flat(e, flat), {k: float(v) for k, v in flat.items()}
+    # the scalar gains simulated: the controller's own and every one given (feedforward, k_aw, ...)
+    return C.params_from_flat(e, flat), {k: float(v) for k, v in flat.items() if k in e.gains or k in given}
 
 
 def sim_config(config, default=None):
@@ -145,7 +146,7 @@ def simulate(
         )
     res = simulate_scenarios(batch, controller=e.controller, config=config)
     res = jax.tree_util.tree_map(lambda a: np.asarray(a)[:n], res)
-    return Simulation(add_results(t.copy(), res, n), res, e.name, {k: flat[k] for k in e.gains})
+    return Simulation(add_results(t.copy(), res, n), res, e.name, flat)
 
 
 def replay(study, path: str, controller: str, runs, *, trajectories: bool = True) -> Simulation:
@@ -209,7 +210,10 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
             f"{', '.join(names)}",
             "controller",
         )
-    idx = np.atleast_1d(np.asarray(runs))
+    try:
+        idx = np.atleast_1d(np.asarray(runs))
+    except ValueError:  # a ragged sequence
+        idx = np.empty((0, 0))
     if idx.size == 0 or idx.ndim != 1:
         raise errors.InputError(f"runs: expected a run index or a non-empty sequence of them, got {runs!r}", "runs")
     for r in idx.tolist():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from typing import Any, NamedTuple
 
 from pfjax import errors
@@ -95,9 +96,10 @@ def run_study(
         fresh: True: discard the finished chunks of an interrupted run instead of resuming.
         progress: progress bars (None, the default: when stderr is a terminal).
         report: True: write the report (``report.md``, ``report.html`` and ``figures/``).
-        overrides: config values by key, nested keys with ``__`` (``n_runs=1000``,
-            ``sim__horizon=30``, ``paths=[{"kind": "line"}]``), as ``--set key=value`` but with
-            Python values (NumPy and JAX numbers and 1-D arrays too).
+        overrides: config values by key, nested keys with ``__`` and list items by their index
+            (``n_runs=1000``, ``sim__horizon=30``, ``controllers__0__gains__k_d=-2.5`` for
+            ``controllers[0].gains.k_d``, ``paths=[{"kind": "line"}]``), as ``--set key=value``
+            but with Python values (NumPy and JAX numbers and 1-D arrays too).
 
     Returns:
         the study's outputs, as :func:`load_study` reads them from ``out``.
@@ -124,7 +126,7 @@ def run_study(
     progress = errors.boolean("progress", progress, or_none=True)
     report = errors.boolean("report", report)
     out = None if out is None else _out_dir(out)
-    spec = _study_spec(config, {k.replace("__", "."): v for k, v in overrides.items()})
+    spec = _study_spec(config, {dotted(k): v for k, v in overrides.items()})
     out = Path("results") / spec.name if out is None else out
     # the output directory judged by pfjax.outputs as `pfjax study --out` is, its messages naming
     # this function's arguments (out, overwrite=True)
@@ -193,7 +195,7 @@ def rare_event(
     from pfjax.rare.study import units as rare_units
 
     progress = errors.boolean("progress", progress, or_none=True)
-    values = {k.replace("__", "."): v for k, v in overrides.items()}
+    values = {dotted(k): v for k, v in overrides.items()}
     if method is not None:
         if method not in METHODS:
             raise errors.InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}", "method")
@@ -228,6 +230,12 @@ def rare_event(
         "units": rare_units(spec),
         "controllers": estimate_study(spec, controllers, names=chosen, progress=progress),
     }
+
+
+def dotted(key: str) -> str:
+    """A keyword override's config key: ``__`` nests, an index between them is a list item
+    (``controllers__0__gains__k_d`` -> ``controllers[0].gains.k_d``)."""
+    return re.sub(r"__(\d+)(?=__|$)", r"[\1]", key).replace("__", ".")
 
 
 def _study_spec(config, values: dict):

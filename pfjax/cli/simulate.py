@@ -118,7 +118,8 @@ def _check_model_flags(args) -> None:
     recorded arguments run again)."""
     other = ST_FLAGS if args.model == "kinematic" else {**KINEMATIC_FLAGS, "continuous": "--continuous"}
     for dest, flag in other.items():
-        if getattr(args, dest) not in (None, False):
+        value = getattr(args, dest)
+        if value is not None and value is not False:  # by identity: a given 0 is given
             raise UsageError(f"{flag}: not with --model {args.model}")
     if args.model == "kinematic":  # the ST flags stay None (recorded as not given: pfjax.cli.records)
         for dest, value in KINEMATIC_DEFAULTS.items():
@@ -228,16 +229,19 @@ def cmd(args) -> dict:
 
 
 def _config(args, dt: float):
-    """The run's :class:`~pfjax.sim.SimConfig`: ``--horizon``, the step ``dt`` (recorded as
-    ``--dt``'s value: :mod:`pfjax.cli.records`), the control flags."""
+    """The run's :class:`~pfjax.sim.SimConfig`: ``--horizon``, the step ``dt`` and the control
+    flags (``--control-every`` 1 unless ``--continuous``), ``dt`` and ``--control-every`` recorded
+    as they ran (:mod:`pfjax.cli.records`: the same run gives one config hash, flags given or not)."""
     from pfjax.sim import SimConfig
 
     args.dt = dt
+    if not args.continuous and args.control_every is None:
+        args.control_every = 1
     return SimConfig(
         dt=dt,
         horizon=args.horizon,
         record=False,
-        control_every=None if args.continuous else (1 if args.control_every is None else args.control_every),
+        control_every=None if args.continuous else args.control_every,
     )
 
 

@@ -15,6 +15,7 @@ Scenario sets (``scenario`` argument):
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -165,6 +166,11 @@ def _check_inputs(scenario: str, n_runs: int, run_offset: int, model: str | None
     from pfjax import errors
 
     sets = scenario_sets()
+    if not isinstance(scenario, (str, os.PathLike)):
+        raise errors.InputError(
+            f"scenario: expected one of {', '.join(sets)} or the path of a study .toml, got {type(scenario).__name__}",
+            "scenario",
+        )
     if scenario not in sets and not (Path(scenario).suffix == ".toml" and Path(scenario).is_file()):
         raise errors.InputError(
             f"scenario: value {scenario!r}, expected one of {', '.join(sets)} or an existing study .toml"
