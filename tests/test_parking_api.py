@@ -135,9 +135,26 @@ def test_run_bad_argument_names_it(kw, key):
     ],
 )
 def test_search_bad_argument_names_it(kw, key):
+    method = "ga" if set(kw) & set(api.SEARCH_SETTINGS["ga"]) else "grid"  # the value checked by its method
     with pytest.raises(InputError) as e:
-        api.search(**{"method": "grid", **kw})
+        api.search(**{"method": method, **kw})
     assert e.value.key == key and str(e.value).startswith(key) and "\n" not in str(e.value)
+    assert "not with method" not in str(e.value)
+
+
+@pytest.mark.parametrize(
+    "method, kw",
+    [("grid", {"generations": 5}), ("grid", {"population": 5}), ("grid", {"seed": 1}), ("ga", {"n": 2})],
+)
+def test_search_refuses_a_setting_its_method_does_not_read(method, kw, capsys):
+    """As ``pfjax tune`` refuses ``steps`` with the GA: a setting the method would ignore is named,
+    at its default value too, in the library and on the command line."""
+    (key,) = kw
+    with pytest.raises(InputError, match=rf"^{key}: not with method {method}"):
+        api.search(method, **kw)
+    assert main(["parking-search", "--method", method, f"--{key}", str(kw[key]), "--json"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith(f"pfjax parking-search: error: --{key}: not with --method {method}"), err
 
 
 def test_map_errors_keep_their_message_and_name_the_argument(tmp_path):
@@ -176,3 +193,15 @@ def test_cli_names_the_flags(capsys):
         rc = main(args)
         out, err = capsys.readouterr()
         assert rc == 2 and out == "" and err == f"pfjax {args[0]}: error: {msg}\n"
+
+
+@pytest.mark.parametrize("t_max, expected", [(2.0, 2.0), (3.0, 3.0), (2.02, 2.05)])
+def test_a_float32_run_times_out_at_the_first_step_at_or_after_t_max(t_max, expected):
+    """The API computes in float32 (its default), where the accumulated time rounds by several ulps:
+    the timeout is counted in steps (h = 0.05 s here), so a run stops at ``t_max`` (or the first
+    step after it), never a step later, as the float64 command line does."""
+    import jax
+
+    with jax.enable_x64(False):
+        r = parking.run(t_max=t_max)
+    assert r["status"] == "timeout" and r["time_s"] == pytest.approx(expected, abs=1e-5), r["time_s"]

@@ -111,4 +111,6 @@ def test_cli_names_the_flags_in_the_library_message(capsys, kw, argv, line):
     assert main(["track", "--horizon", "3", "--dt", "0.05", *argv, "--json"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err == f"pfjax track: error: {line}\n"
-    assert str(e.value).split(": ", 1)[1] == line.split(": ", 1)[1].replace("--horizon", "horizon").replace("--dt", "dt")
+    assert str(e.value).split(": ", 1)[1] == line.split(": ", 1)[1].replace("--horizon", "horizon").replace(
+        "--dt", "dt"
+    )

@@ -91,10 +91,10 @@ def register(sub) -> None:
     s.add_argument("--method", choices=("ga", "grid"), required=True)
     s.add_argument("--map", default="garage", help="garage (default), parallel (with --x0), or a TOML/JSON map file")
     add_pose(s, "start pose, m m deg (default -0.9 0.6 -85)")
-    s.add_argument("--n", type=int, default=32, help="grid levels per parameter (default 32)")
-    s.add_argument("--generations", type=int, default=100, help="GA generations N (default 100)")
-    s.add_argument("--population", type=int, default=20, help="GA population n (default 20)")
-    s.add_argument("--seed", type=int, default=0, help="PRNG seed of the GA (default 0)")
+    s.add_argument("--n", type=int, default=None, help="grid: levels per parameter (default 32)")
+    s.add_argument("--generations", type=int, default=None, help="ga: generations N (default 100)")
+    s.add_argument("--population", type=int, default=None, help="ga: population n (default 20)")
+    s.add_argument("--seed", type=int, default=None, help="ga: PRNG seed (default 0)")
     s.add_argument("--weight", type=float, default=100.0, help="end-error weight w in J = 1/(t_e + w e) (default 100)")
     _common(s)
     s.set_defaults(func=_cmd_search, units=SEARCH_UNITS)
@@ -172,8 +172,11 @@ def _cmd_parking(args) -> dict:
 
 
 def _cmd_search(args) -> dict:
-    from pfjax.parking.api import search
+    from pfjax.parking.api import SEARCH_DEFAULTS, SEARCH_SETTINGS, search
 
+    for key in SEARCH_SETTINGS[args.method]:  # the method's own defaults recorded as they run
+        if getattr(args, key) is None:
+            setattr(args, key, SEARCH_DEFAULTS[key])
     with _flags(SEARCH_FLAGS):
         return search(
             args.method,

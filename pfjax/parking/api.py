@@ -248,15 +248,20 @@ def _one_run(c: dict, direction: str, schedule, xs) -> dict:
     }
 
 
+#: The settings each search method reads (:func:`search`), and their defaults.
+SEARCH_SETTINGS = {"grid": ("n",), "ga": ("generations", "population", "seed")}
+SEARCH_DEFAULTS = {"n": 32, "generations": 100, "population": 20, "seed": 0}
+
+
 def search(
     method,
     *,
     map="garage",
     x0=None,
-    n=32,
-    generations=100,
-    population=20,
-    seed=0,
+    n=None,
+    generations=None,
+    population=None,
+    seed=None,
     weight=100.0,
     k1=32.0,
     k2=8.0,
@@ -278,10 +283,12 @@ def search(
         map: ``"garage"``, ``"parallel"`` or the path (str or path-like) of a TOML/JSON map file.
         x0: start pose (x m, y m, theta deg), ``|theta| < 90 deg``; None: (-0.9 m, 0.6 m, -85 deg)
             on ``"garage"`` (required for any other map).
-        n: grid levels per parameter, 2..64 (grid only; ``n^3`` runs).
-        generations: GA generations N, >= 1 (GA only).
-        population: GA population size n, >= 2 (GA only; at most ``population * (generations + 1)`` runs).
-        seed: PRNG seed of the GA, 0..2^63 - 1 (GA only).
+        n: grid levels per parameter, 2..64 (grid only; ``n^3`` runs; None: 32).
+        generations: GA generations N, >= 1 (GA only; None: 100).
+        population: GA population size n, >= 2 (GA only; at most ``population * (generations + 1)``
+            runs; None: 20).
+        seed: PRNG seed of the GA, 0..2^63 - 1 (GA only; None: 0). A setting of the other method
+            given (not None) is refused, naming it: it would be ignored.
         weight: end-error weight w in J, s/m (>= 0).
         k1: gain on y, 1/m^2 (> 0).
         k2: gain on tan(theta), 1/m (> 0).
@@ -310,6 +317,11 @@ def search(
     """
     if not isinstance(method, str) or method not in METHODS:
         raise InputError(f"method: expected 'ga' or 'grid', got {method!r:.80}", "method")
+    given = {"n": n, "generations": generations, "population": population, "seed": seed}
+    for key, value in given.items():
+        if value is not None and key not in SEARCH_SETTINGS[method]:
+            raise InputError(f"{key}: not with method {method} (a setting of the other method)", key)
+    n, generations, population, seed = (SEARCH_DEFAULTS[k] if v is None else v for k, v in given.items())
     weight = errors.number("weight", weight, nonnegative=True)
     n = errors.integer("n", n, low=2, high=64)
     from pfjax.tuning.ga import MAX_GENERATIONS, MAX_POPULATION

@@ -117,20 +117,24 @@ def decide(c: Carry, status, p: RunParams, omap: ObstacleMap, cfg: ParkingConfig
     return decided, status
 
 
-#: The timeout holds from ``t_max`` less this fraction of an RK4 step (the rounding of the accumulated time).
+#: The timeout's step is the first whole step at or after ``t_max`` less this fraction of a step
+#: (the rounding of ``t_max / h``).
 TIME_SLACK = 1e-6
 
 
 def stop_code(new, t_new, h, cfg: ParkingConfig):
     """The status after one RK4 step of ``h`` (s) to state ``new`` at ``t_new`` (s): the first stop
-    that holds; the timeout from ``t_new >= t_max - TIME_SLACK * h`` on (relative to the step, so a
-    run of any scanner period times out at ``t_max``, never one step before)."""
+    that holds; the timeout from the first whole step at or after ``t_max`` on, counted in steps
+    (``round(t_new / h) >= ceil(t_max / h - TIME_SLACK)``: a run starts at t = 0 and its time
+    advances by ``h`` per step, so the count is exact although the accumulated time rounds, by
+    several float32 ulps after hundreds of steps; a run of any scanner period and precision times
+    out at ``t_max``, never one step before or after)."""
     return jnp.select(
         [
             ~jnp.all(jnp.isfinite(new)),
             jnp.abs(new[2]) >= 0.5 * math.pi,
             parking_error(new[0], new[1], new[2]) < cfg.tol,
-            t_new >= cfg.t_max - TIME_SLACK * h,
+            jnp.round(t_new / h) >= jnp.ceil(cfg.t_max / h - TIME_SLACK),
         ],
         [int(Status.NONFINITE), int(Status.HEADING_LIMIT), int(Status.CONVERGED), int(Status.TIMEOUT)],
         int(Status.RUNNING),
