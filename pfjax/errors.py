@@ -51,26 +51,9 @@ class InputError(ValueError):
 
 
 def is_number(value) -> bool:
-    """A real number that is not a boolean (``True`` is not 1 here): a Python or NumPy number, or
-    a NumPy or JAX array of one real number (shape ``()``; a JAX value under a transformation is
-    not a number here: its value is not known)."""
-    if isinstance(value, _numbers.Real):
-        return not isinstance(value, bool)
-    dtype = getattr(value, "dtype", None)
-    return (
-        getattr(value, "shape", None) == ()
-        and getattr(dtype, "kind", None) in ("i", "u", "f")
-        and type(value).__module__.split(".")[0] in ("numpy", "jaxlib", "jax")
-        and not _traced_leaf(value)
-    )
-
-
-def _traced_leaf(value) -> bool:
-    """Whether ``value`` is a JAX tracer (without importing JAX when it is not loaded)."""
-    import sys
-
-    jax = sys.modules.get("jax")
-    return jax is not None and isinstance(value, jax.core.Tracer)
+    """A real number that is not a boolean (``True`` is not 1 here): a Python or NumPy number (an
+    array, even of one number, is not: a value pfjax keeps must be a plain number)."""
+    return isinstance(value, _numbers.Real) and not isinstance(value, bool)
 
 
 def number(
@@ -88,8 +71,7 @@ def number(
 
     Args:
         key: the name the message starts with.
-        value: the value to check (an int, float, NumPy scalar or one-number array, :func:`is_number`;
-            not a bool or a string).
+        value: the value to check (an int, float or NumPy scalar; not a bool, a string or an array).
         positive: require ``value > 0`` (and at least :data:`MIN_POSITIVE`).
         nonnegative: require ``value >= 0``.
         below: require ``|value| < below``.

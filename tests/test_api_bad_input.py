@@ -345,6 +345,12 @@ def test_replay_of_a_directory_without_a_study_or_of_no_runs_names_its_argument(
     _refused(lambda: pfjax.replay(tmp_path, "line", "a", 0), "study")
     _refused(lambda: pfjax.replay(_spec(), "line", "a", []), "runs")
     _refused(lambda: pfjax.replay(_spec(), "line", "a", [0, [1]]), "runs")  # ragged
+    # each index checked as given, the bad one named: True is no run index, 0 is not blamed for 1.5
+    msg = _refused(lambda: pfjax.replay(_spec(), "line", "a", [0, True]), "runs")
+    assert msg.startswith("runs[1]: ") and msg.endswith("got True"), msg
+    msg = _refused(lambda: pfjax.replay(_spec(), "line", "a", [0, 1.5]), "runs")
+    assert msg.startswith("runs[1]: ") and msg.endswith("got 1.5"), msg
+    _refused(lambda: pfjax.replay(_spec(), "line", "a", True), "runs")
 
 
 def _spec():
@@ -480,22 +486,21 @@ def test_nan_is_not_a_finite_number_rather_than_too_small():
     assert "expected a finite number, got nan" in msg
 
 
-def test_numpy_and_jax_scalars_are_numbers_and_booleans_everywhere():
-    """A one-number NumPy or JAX array and a NumPy boolean are accepted wherever a number or a
-    flag is (``design_mixed(v=...)`` as ``scenarios(speed=...)``); a longer array and a boolean
-    array are not numbers."""
+def test_numpy_booleans_are_flags_and_arrays_are_not_numbers():
+    """A NumPy boolean (``np.True_``, ``np.bool_``) is a flag wherever one is taken; an array, even
+    of one number, is refused as a number with one line (a value pfjax keeps, e.g. in the
+    simulator's static settings, must be a plain number)."""
     import jax.numpy as jnp
     import numpy as np
 
     from pfjax import errors
 
-    assert errors.number("v", jnp.float32(2.0)) == 2.0 and errors.number("v", np.array(2)) == 2.0
     assert errors.boolean("t", np.True_) is True and errors.boolean("t", np.bool_(False)) is False
-    for bad in (np.array([1.0]), np.array(True), "1", True):
+    assert errors.number("v", np.float32(2.0)) == 2.0
+    for bad in (np.array(1.0), jnp.float32(1.0), np.array([1.0]), "1", True):
         _refused(lambda: errors.number("v", bad), "v")
-    a = pfjax.design_mixed(v=jnp.float32(1.0)).K
-    b = pfjax.design_mixed(v=1.0).K
-    np.testing.assert_array_equal(a, b)
+    R = pfjax.scenarios("line", n=2, key=0)
+    _refused(lambda: pfjax.simulate(R, "state_feedback", config={"horizon": np.array(1.0)}), "config.horizon")
 
 
 def test_keyword_overrides_reach_list_items():

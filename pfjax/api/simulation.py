@@ -210,14 +210,16 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
             f"{', '.join(names)}",
             "controller",
         )
-    try:
-        idx = np.atleast_1d(np.asarray(runs))
-    except ValueError:  # a ragged sequence
-        idx = np.empty((0, 0))
-    if idx.size == 0 or idx.ndim != 1:
+    single = isinstance(runs, (bool, int, np.integer))  # a bool is refused as an integer below
+    try:  # each item as given: np.asarray would make True a 1, and 0 a 0.0 beside a 1.5
+        items = [runs] if single else list(runs)
+    except TypeError:
+        items = []
+    if not items or any(isinstance(r, (list, tuple, np.ndarray)) for r in items):
         raise errors.InputError(f"runs: expected a run index or a non-empty sequence of them, got {runs!r}", "runs")
-    for r in idx.tolist():
-        errors.integer("runs", r, low=0, high=spec.n_runs - 1)
+    for i, r in enumerate(items):
+        errors.integer("runs" if single else f"runs[{i}]", r, low=0, high=spec.n_runs - 1)
+    idx = np.asarray([int(r) for r in items], np.int64)
     p, c = labels.index(path), names.index(controller)
     with precision(spec):
         sampled = sample_few(spec, p, idx.astype(np.int64))
