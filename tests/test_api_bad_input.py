@@ -511,3 +511,13 @@ def test_keyword_overrides_reach_list_items():
     assert dotted("paths__12") == "paths[12]"
     with pytest.raises(pfjax.InputError, match=r"^controllers\[0\]\.gains\.k_d: "):
         pfjax.run_study(STUDY, controllers__0__gains__k_d="x")
+
+
+def test_messages_name_the_argument_as_the_command_line_does(tmp_path):
+    """``run_study`` on a directory says what ``pfjax study`` says; a continuous controller on the
+    single-track model names ``config.control_every``; ``scenarios("spline")`` says why it cannot."""
+    msg = _refused(lambda: pfjax.run_study(str(tmp_path)), "config")
+    assert msg == f"config: {tmp_path} is not a file", msg
+    st = pfjax.scenarios("line", 2, model="st")
+    _refused(lambda: pfjax.simulate(st, "state_feedback", config={"control_every": None}), "config.control_every")
+    assert "waypoints" in _refused(lambda: pfjax.scenarios("spline"), "path")

@@ -98,6 +98,12 @@ def scenarios(
 
     from pfjax.montecarlo.sampling import sample_runs
 
+    if path == "spline":  # the one kind that needs more than its name: its waypoints
+        raise errors.InputError(
+            "path: kind 'spline' needs its waypoints, which scenarios() does not take; run a study whose "
+            '[[paths]] has kind = "spline" and points = [[x, y], ...]',
+            "path",
+        )
     n = errors.integer("n", n, low=1, high=100_000_000)
     resources.check_memory(
         "n",

@@ -121,6 +121,12 @@ def simulate(
         raise errors.InputError("config.record: pass trajectories=True to record the runs", "config.record")
     config = dataclasses.replace(sim_config(config, SimConfig()), record=trajectories)
     t = scenarios.table
+    if scenarios.spec.vehicle.model in ("st", "std") and config.control_every is None:
+        raise errors.InputError(
+            "config.control_every: the single-track models take a sampled controller (>= 1 steps); a "
+            "continuous one (None) is not supported",
+            "config.control_every",
+        )
     if scenarios.spec.vehicle.model in ("st", "std"):
         from pfjax.models.single_track import check_step, with_mu
 
@@ -161,7 +167,9 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
 
     Returns:
         a :class:`Simulation` of these runs: their rows as the study's ``runs.parquet`` holds them
-        (the same numbers), and with ``trajectories`` the recorded runs in ``result.trajectory``.
+        (bit for bit with ``trajectories=False``; recording the runs changes the order of a few
+        float32 sums, so ``steady_abs_d`` and ``steady_abs_theta_e_rad`` may differ by a rounding,
+        about 1e-7 relative), and with ``trajectories`` the recorded runs in ``result.trajectory``.
 
     Raises:
         InputError: ``study`` is not a study (or a directory without one), ``path`` or

@@ -249,9 +249,7 @@ def _study_spec(config, values: dict):
         return load_config(data=config.model_dump(mode="json"), values=values)[0]
     if isinstance(config, dict):
         return load_config(data=config, values=values)[0]
-    if isinstance(config, (str, Path)):
-        if not Path(config).is_file():
-            raise errors.InputError(f"config: no such file {str(config)!r}", "config")
+    if isinstance(config, (str, Path)):  # a missing file or a directory: as pfjax study says it
         return load_config(Path(config), values=values)[0]
     raise errors.InputError(
         f"config: expected a TOML path, a dict or a StudySpec, got {type(config).__name__}", "config"
