@@ -198,6 +198,44 @@ def test_stability_band_includes_its_boundary():
     assert "a point on the boundary has the steering at its limit and is not locally stable" in md
 
 
+@pytest.mark.parametrize(
+    "consistent, names, text",
+    [
+        (
+            1,
+            ["r"],
+            "All four: 1 (r). With each threshold halved or doubled (the others kept), that reading stays the "
+            "only one in 4 of 6 settings.",
+        ),
+        (0, [], "All four: none. No single reading passes all four, so there is no choice whose sensitivity to test."),
+        (2, ["a", "b"], "All four: 2 (a, b). No single reading passes all four, so there is no choice whose"),
+    ],
+)
+def test_filter_paragraph_follows_the_number_of_consistent_readings(consistent, names, text):
+    """--quick: no reading passes all four filters; the report does not speak of "that reading"."""
+    s = _summary()
+    s["pi_filters"].update(consistent=consistent, consistent_readings=names)
+    md = _md(s)
+    assert text in md
+    assert ("that reading stays" in md) == (consistent == 1) and "()" not in md
+
+
+def test_limit_equilibrium_names_its_eigenvalues_as_the_unsaturated_loops():
+    s = _summary()
+    s["stability"]["paper_case"].update(delta_star=math.radians(30.0))
+    md = _md(s)
+    assert "with the unsaturated loop's eigenvalues -1.550, -8.900 1/s (which do not apply there)" in md
+    assert "with eigenvalues -1.550, -8.900 1/s" in _md(_summary())
+
+
+def test_why_readings_fail_only_with_rear_slip():
+    s = _summary()
+    assert "Why readings fail: with rear slip" in _md(s)
+    s["config"]["model"]["beta_r_deg"] = 0.0
+    md = _md(s)
+    assert "Why readings fail" not in md and "(The 8 best of 24; all in `pi_readings.csv`.) The reading pfjax" in md
+
+
 def test_tracker_note_only_with_trackers():
     s = _summary()
     assert "Stanley" in _md(s)

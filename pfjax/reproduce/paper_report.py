@@ -223,6 +223,29 @@ def _adopted(pi_df: pd.DataFrame) -> tuple[bool, int]:
     return bool(pi_df[pi_df.is_default].consistent.any()), int(pi_df.consistent.sum())
 
 
+def _choice(f: dict) -> str:
+    """The readings passing all four filters and, when exactly one does, how it fares with each
+    threshold halved or doubled (with none or several there is no choice to test)."""
+    n, names = f["consistent"], ", ".join(f["consistent_readings"])
+    if n == 1:
+        return (
+            f"1 ({names}). With each threshold halved or doubled (the others kept), that reading stays the only one "
+            f"in {f['sensitivity_unique']} of {f['sensitivity_cases']} settings."
+        )
+    which = "none" if n == 0 else f"{n} ({names})"
+    return f"{which}. No single reading passes all four, so there is no choice whose sensitivity to test."
+
+
+def _why_readings_fail() -> str:
+    """Why a PI reading fails under rear slip (β_r ≠ 0)."""
+    return (
+        "Why readings fail: with rear slip, d' = 0 needs θₑ = −β_r ≠ 0, so the integral on θₑ ramps at Ki_θ·β_r "
+        "for ever and the PI loop has no equilibrium. The best it can do is a quasi-equilibrium in which the "
+        "integral on d ramps the other way, which needs a standing offset d_q = (Ki_θ / Ki_d)·β_r — metres for the "
+        "readings with a large Ki_θ / Ki_d — approached through a slow pole. "
+    )
+
+
 def _pi(s: dict, pi_df: pd.DataFrame) -> list:
     src, f = s["config"]["source"], s["pi_filters"]
     th = f["thresholds"]
@@ -250,17 +273,13 @@ def _pi(s: dict, pi_df: pd.DataFrame) -> list:
         Paragraph(
             "Readings passing each filter: "
             + "; ".join(f"{k}: {v} of 24" for k, v in f["passing"].items())
-            + f". All four: {f['consistent']} ({', '.join(f['consistent_readings'])}). With each threshold halved or "
-            f"doubled (the others kept), that reading stays the only one in {f['sensitivity_unique']} of "
-            f"{f['sensitivity_cases']} settings. The filters come from the source's own statements about its PI, so "
-            "this selects a reading; it does not confirm those statements."
+            + f". All four: {_choice(f)} The filters come from the source's own statements about its PI, so a "
+            "reading they select is chosen by those statements; it does not confirm them."
         ),
         Paragraph(
-            "(The 8 best of 24; all in `pi_readings.csv`.) Why readings fail: with rear slip, d' = 0 needs "
-            "θₑ = −β_r ≠ 0, so the integral on θₑ ramps at Ki_θ·β_r for ever and the PI loop has no equilibrium. "
-            "The best it can do is a quasi-equilibrium in which the integral on d ramps the other way, which needs a "
-            "standing offset d_q = (Ki_θ / Ki_d)·β_r — metres for the readings with a large Ki_θ / Ki_d — approached "
-            f"through a slow pole. The reading pfjax adopts as the source's PI (`pfjax.controllers.PAPER_PI`'s reading of the "
+            "(The 8 best of 24; all in `pi_readings.csv`.) "
+            + (_why_readings_fail() if s["config"]["model"]["beta_r_deg"] != 0 else "")
+            + f"The reading pfjax adopts as the source's PI (`pfjax.controllers.PAPER_PI`'s reading of the "
             f"printed order) is {adopted}."
         ),
         Figure("pi_readings", "The PI readings on the line test."),
@@ -286,15 +305,15 @@ def _paper_equilibrium(s: dict) -> str:
     if case == "none":
         return head + f"there is no equilibrium: it needs |δ*| = {fmt(_deg(delta))}° > δ_max = {m['delta_max_deg']:g}°."
     source = "the source's [0, −β_r]" if abs(d) < D_STAR_ZERO else "not the source's [0, −β_r]"
-    limit = (
-        " It lies on the steering limit, where the steering saturates and the point is not locally stable."
-        if case == "limit"
-        else ""
-    )
+    eig = ", ".join(f"{z[0]:.3f}" for z in pc["eig"])
+    if case == "limit":
+        eig = f"the unsaturated loop's eigenvalues {eig} 1/s (which do not apply there)"
+        limit = " It lies on the steering limit, where the steering saturates and the point is not locally stable."
+    else:
+        eig, limit = f"eigenvalues {eig} 1/s", ""
     return (
         head + f"the true equilibrium is d* = {1000 * d:.3f} mm, θₑ* = {math.degrees(pc['theta_e_star']):.3f}°, "
-        f"δ* = {math.degrees(delta):.3f}°, with eigenvalues {', '.join(f'{z[0]:.3f}' for z in pc['eig'])} 1/s — "
-        f"{source}.{limit}"
+        f"δ* = {math.degrees(delta):.3f}°, with {eig} — {source}.{limit}"
     )
 
 
