@@ -9,17 +9,22 @@ Closed loop on a path of constant curvature ``kappa`` (0: the straight line) wit
 **True equilibrium.** ``d' = 0`` forces ``theta_e* = -beta_r`` (forward travel). On a line the yaw
 rate must vanish, so ``delta* = beta_r + beta_f`` (source convention; ``beta_r - beta_f`` in
 Lenain's), and ``K x* = delta*`` gives ``d* = (delta* + K_2 beta_r) / K_1``. The equilibrium exists
-only if ``|delta*| < delta_max``: beyond, the saturated loop has no rest point. On a curve the
+only if ``|delta*| <= delta_max``: beyond, the saturated loop has no rest point. On a curve the
 same holds with ``d*`` solved by Newton, which counts as converged when its last step is below
 ``64 eps (|d| + L)`` (``eps`` of the working precision: a criterion that means the same in float32
 and float64; measured, converged points take last steps below ``8 eps (|d| + L)`` in both). The
-boundary ``|delta*| = delta_max``, up to ``max(1e-9, 1000 eps)`` rad, counts as existing: the loop
-rests there with the steering at its limit, and rounding must not decide which side a grid point
-falls on. The source instead linearises at ``[0, -beta_r]`` (appendix B), which is not an
+boundary ``|delta*| = delta_max``, up to ``max(1e-9, 1000 eps)`` rad, counts as existing (not as
+locally stable, below): the loop rests there with the steering at its limit, and rounding must not
+decide which side a grid point falls on. The source instead linearises at ``[0, -beta_r]`` (appendix B), which is not an
 equilibrium unless ``delta* = -K_2 beta_r``.
 
 **Local stability.** Eigenvalues of the Jacobian of the unsaturated field at the point
-(closed form for 2x2). All functions are jittable and vmap over slip grids.
+(closed form for 2x2). ``hurwitz`` asks, besides both real parts < 0, that the steering at the
+equilibrium is inside the limit, ``|delta*| < delta_max`` by more than the boundary's tolerance: on
+the boundary the steering is at its limit, so a disturbance that asks for more gets none, the yaw
+rate stays zero, ``theta_e`` stays where it is and ``d`` drifts (the runs of the line test from the
+source's start drift away there), whatever the unsaturated eigenvalues say. All functions are
+jittable and vmap over slip grids.
 """
 
 from __future__ import annotations
@@ -38,9 +43,9 @@ class Equilibrium(NamedTuple):
     d: Array  # m
     theta_e: Array  # rad
     delta: Array  # rad, steering at the equilibrium
-    exists: Array  # bool: Newton converged and |delta| < delta_max
-    eig: Array  # (2,) complex, eigenvalues of the Jacobian there
-    hurwitz: Array  # bool: exists and both real parts < 0
+    exists: Array  # bool: Newton converged and |delta| <= delta_max (the boundary included, up to a tolerance)
+    eig: Array  # (2,) complex, eigenvalues of the unsaturated loop's Jacobian there
+    hurwitz: Array  # bool: exists, |delta| < delta_max (off the boundary) and both real parts < 0
 
 
 def closed_loop_field(x: Array, K: Array, beta_r, beta_f, kappa, params: SlipParams, saturate=True) -> Array:
@@ -89,8 +94,9 @@ def equilibrium(K: Array, beta_r, beta_f, params: SlipParams, kappa=0.0, iters: 
     converged = jnp.abs(newton_step(d)) <= 64 * eps * (jnp.abs(d) + jnp.abs(params.L))
     boundary = jnp.maximum(1e-9, 1000 * eps)  # rad: the steering at its limit counts as existing
     exists = converged & (jnp.abs(delta) <= params.delta_max + boundary) & jnp.isfinite(d)
+    inside = jnp.abs(delta) < params.delta_max - boundary  # off the boundary: the steering has room
     eig = jacobian_eigenvalues(x, K, beta_r, beta_f, kappa, params)
-    return Equilibrium(d, theta, delta, exists, eig, exists & jnp.all(eig.real < 0))
+    return Equilibrium(d, theta, delta, exists, eig, exists & inside & jnp.all(eig.real < 0))
 
 
 @jax.jit
