@@ -13,7 +13,6 @@ import numpy as np
 import pandas as pd
 
 from pfjax import controllers as C
-from pfjax import paths
 from pfjax.analysis import equilibrium, stability_map
 from pfjax.models import SlipParams
 from pfjax.numerics.random import seed_key
@@ -23,7 +22,7 @@ from pfjax.paths import (
     shapes,
 )
 from pfjax.reproduce.paper_config import sim_config
-from pfjax.reproduce.paper_runs import fixed_path, source_pi
+from pfjax.reproduce.paper_runs import source_pi, source_scenario, source_test
 from pfjax.sim import (
     STATUS_NAMES,
     constant_slip,
@@ -64,12 +63,12 @@ def _grid_runs(cfg: dict, BR, BF):
     # The robot advances along the line at up to v / cos(beta_r): make the line long enough that
     # no run reaches its end within the horizon (the default line is 80 m).
     line = shapes.line(u_max=20.0 + 1.5 * m["v"] * st["horizon"] / math.cos(math.radians(st["grid_max_deg"])))
-    pose0 = paths.entry("line").start_pose
+    test = source_test("line", m["direction"], line)
     scs = stack(
         [
             make_scenario(
-                line,
-                pose0,
+                test.run_path,
+                test.pose0,
                 gains,
                 slip=constant_slip(math.radians(br), math.radians(bf)),
                 v=m["v"],
@@ -145,16 +144,7 @@ def part_long_pi(cfg) -> dict:
     value from then on)."""
     h, m = cfg["long_horizon"], cfg["model"]
     line = shapes.line(u_max=20.0 + 1.5 * m["v"] * h)  # long enough not to end within the horizon
-    sc = make_scenario(
-        line,
-        paths.entry("line").start_pose,
-        C.pi_params(**source_pi(cfg)),
-        slip=constant_slip(math.radians(m["beta_r_deg"]), math.radians(m["beta_f_deg"])),
-        v=m["v"],
-        L=m["L"],
-        delta_max_deg=m["delta_max_deg"],
-        convention=m["convention"],
-    )
+    sc = source_scenario(source_test("line", m["direction"], line), C.pi_params(**source_pi(cfg)), cfg)
     r = unstack(simulate_batch(stack([sc]), controller=C.pi, config=sim_config(cfg, horizon=h)), 0)
     t, d = np.asarray(r.trajectory.t), np.asarray(r.trajectory.d)
     final = float(d[-1])
@@ -203,10 +193,11 @@ def _local_maxima(x, y, frac=0.5):
     return x[i]
 
 
-def sine_error_analysis(trajs, settle_t=5.0) -> dict:
+def sine_error_analysis(trajs, settle_t=5.0, direction="increasing_x") -> dict:
     """Where does |d| peak on the sine after the transient: at the |kappa| maxima (the sine's extrema)
-    or at the |dkappa/ds| maxima (where the curvature changes fastest)?"""
-    path = fixed_path("sine")
+    or at the |dkappa/ds| maxima (where the curvature changes fastest)? ``trajs`` in the sine's frame
+    (:func:`pfjax.reproduce.paper_runs.to_world`), travelled in ``direction``."""
+    path = source_test("sine", direction).path
     tr = trajs["sine"]["mixed"]
     late = tr["t"] >= settle_t
     # each a jitted program: op by op, JAX would compile each operation of a new shape on its own

@@ -7,7 +7,7 @@ its simulation cross-check), ``long_horizon`` and ``ga`` (Table 2's GA readings)
 optional; the defaults are the study's published settings. Loaded by :func:`load` with the same
 ``--set key=value`` syntax and one-line :class:`pfjax.config.ConfigError` as the Monte Carlo study;
 every simulation setting, synthesis weight, GA option and size the study uses is checked there,
-before any work.
+and the study's two LMI problems are solved there (:func:`check_synthesis`), before any work.
 """
 
 from __future__ import annotations
@@ -34,16 +34,22 @@ QUICK = {
 
 
 class PaperModel(ConfigModel):
-    """The vehicle of the source (Table 1, §6); ``delta_max_deg`` is assumed."""
+    """The vehicle of the source (Table 1, §6) and the direction its paths are travelled;
+    ``delta_max_deg`` and ``direction`` are assumed."""
 
     v: Real = Field(1.0, ge=POSITIVE, description="forward speed [m/s]")
     L: Real = Field(0.2, ge=POSITIVE, description="wheelbase [m]")
-    delta_max_deg: Real = Field(30.0, gt=-90, lt=90, description="steering limit (assumed) [deg]")
+    delta_max_deg: Real = Field(30.0, gt=0, lt=90, description="steering limit (assumed) [deg]")
     convention: Literal["source", "lenain"] = Field(
         "source", description="front-slip sign: 'source' tan(delta - beta_f) or 'lenain' tan(delta + beta_f) [-]"
     )
     beta_r_deg: Real = Field(5.0, gt=-90, lt=90, description="constant rear slip angle [deg]")
     beta_f_deg: Real = Field(5.0, gt=-90, lt=90, description="constant front slip angle [deg]")
+    direction: Literal["increasing_x", "decreasing_x"] = Field(
+        "increasing_x",
+        description="direction of travel along the source's paths (assumed); 'decreasing_x' starts from the same "
+        "point with the heading mirrored in the path's normal (pfjax.reproduce.paper_runs.source_test) [-]",
+    )
 
 
 class PaperSim(ConfigModel):
@@ -68,23 +74,34 @@ class PaperSynthesis(ConfigModel):
 class PaperSource(ConfigModel):
     """The source's published values (compared against, never used to tune; ``K`` and ``table3`` are
     also the gains the source's controllers run with: the "source's K" and the Table 3 PI, in the
-    adopted reading of :data:`pfjax.controllers.PAPER_PI`, and its 24 readings)."""
+    adopted reading of :data:`pfjax.controllers.PAPER_PI`, and its 24 readings). Each is checked
+    where a value would make its comparison meaningless: ``K`` stabilising (both gains < 0, the
+    only sign for which ``A + B_u K`` of the design model is Hurwitz, docs §7), the bounds and
+    errors positive, the eigenvalue maxima nonzero (each is compared within a relative tolerance)."""
 
-    K: list[Real] = Field([-2.7381, -2.0772], min_length=2, max_length=2, description="state feedback [1/m, -]")
-    gamma_inf: Real = Field(1.1, description="published Hinf bound [-]")
-    gamma_2: Real = Field(4.07, description="published H2 bound [-]")
+    K: list[Real] = Field(
+        [-2.7381, -2.0772], min_length=2, max_length=2, description="state feedback, both < 0 [1/m, -]"
+    )
+    gamma_inf: Real = Field(1.1, gt=0, description="published Hinf bound [-]")
+    gamma_2: Real = Field(4.07, gt=0, description="published H2 bound [-]")
     table3: list[Real] = Field(
         [1.6390, 0.0230, 39.5204, 11.6124], min_length=4, max_length=4, description="Table 3 PI gains [-]"
     )
-    line_ss_mixed_mm_below: Real = Field(3.0, description="line test: mixed steady-state error below [mm]")
-    line_ss_pi_mm: Real = Field(8.0, description="line test: PI steady-state error [mm]")
-    line_delta_deg: Real = Field(10.0, description="line test: steering reading [deg]")
+    line_ss_mixed_mm_below: Real = Field(3.0, gt=0, description="line test: mixed steady-state error below [mm]")
+    line_ss_pi_mm: Real = Field(8.0, gt=0, description="line test: PI steady-state error [mm]")
+    line_delta_deg: Real = Field(10.0, gt=-90, lt=90, description="line test: steering reading [deg]")
     eig_max_re: list[Real] = Field(
-        [-1.3185, -5.1930], min_length=2, max_length=2, description="largest real parts, slow and fast [1/s]"
+        [-1.3185, -5.1930], min_length=2, max_length=2, description="largest real parts, slow and fast, nonzero [1/s]"
     )
 
     @model_validator(mode="after")
     def _check(self):
+        if not all(k < 0 for k in self.K):
+            raise ValueError(
+                f"K: both gains must be < 0 (A + B_u K is Hurwitz only for K_d, K_theta < 0), got {_values(self.K)}"
+            )
+        if 0 in self.eig_max_re:
+            raise ValueError(f"eig_max_re: both values must be nonzero, got {_values(self.eig_max_re)}")
         # the readings are labelled by their values to 6 significant digits (controllers.table3_label):
         # values equal there would give fewer than 24 readings
         if len({f"{v:g}" for v in self.table3}) != len(self.table3):
@@ -93,6 +110,10 @@ class PaperSource(ConfigModel):
                 f"got {self.table3}"
             )
         return self
+
+
+def _values(values) -> str:
+    return "[" + ", ".join(f"{v:g}" for v in values) + "]"
 
 
 class PaperStability(ConfigModel):
@@ -256,6 +277,35 @@ def _check_ga_memory(ga: PaperGA) -> None:
         )
 
 
+def check_synthesis(config: PaperStudy) -> None:
+    """:class:`pfjax.config.ConfigError` when one of the study's two LMI problems has no solution
+    (both solved here, in a fraction of a second): the mixed design (named ``synthesis``, with the
+    values of ``model.v``, ``model.L`` and the weights) or the certificate of the source's gain
+    (``source.K``). Each fails where the solver cannot meet its strictness margins: speeds or
+    wheelbases orders of magnitude from the source's, a gain near 0 or very large."""
+    import numpy as np
+
+    from pfjax.errors import SynthesisError
+    from pfjax.synthesis import mixed_bounds_for_gain, mixed_h2_hinf, slip_design_plant
+
+    m, a, b = config.model, config.synthesis.alpha, config.synthesis.beta
+    plant = slip_design_plant(v=m.v, L=m.L)
+    at = f"model.v = {m.v:g} m/s, model.L = {m.L:g} m"
+    try:
+        mixed_h2_hinf(plant, alpha=a, beta=b)
+    except SynthesisError as e:
+        raise ConfigError(
+            f"synthesis: no mixed H2/Hinf design at {at}, synthesis.alpha = {a:g}, synthesis.beta = {b:g} ({e})",
+            "synthesis",
+        ) from None
+    try:
+        mixed_bounds_for_gain(plant, np.reshape(config.source.K, (1, 2)), a, b)
+    except SynthesisError as e:
+        raise ConfigError(
+            f"source.K: no LMI certificate of the gain {_values(config.source.K)} at {at} ({e})"
+        ) from None
+
+
 def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: bool = False) -> PaperStudy:
     """The validated study config: defaults <- ``path`` <- (``--quick``) <- ``overrides``; raises
     :class:`pfjax.config.ConfigError` naming the key."""
@@ -266,6 +316,7 @@ def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: b
         raise
     except InputError as e:
         raise ConfigError(str(e)) from None
+    check_synthesis(config)
     return config
 
 
@@ -279,6 +330,7 @@ __all__ = [
     "PaperStudy",
     "PaperSynthesis",
     "check_resources",
+    "check_synthesis",
     "load",
     "sim_config",
 ]

@@ -9,21 +9,26 @@ dumped) and a progress bar with an ``update(n)`` method.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
 from pfjax import controllers as C
 from pfjax import paths
+from pfjax.paths import global_parameter, tangent_angle
 from pfjax.reproduce.paper_config import sim_config
 from pfjax.sim import (
     STATUS_NAMES,
     SimConfig,
+    constant_slip,
     simulate_batch,
     stack,
     unstack,
 )
-from pfjax.sim.scenario import PAPER_TESTS, paper_scenario
+from pfjax.sim.scenario import PAPER_TESTS, make_scenario
 from pfjax.synthesis import mixed_bounds_for_gain, mixed_h2_hinf, slip_design_plant
 from pfjax.synthesis.norms import closed_loop, h2_norm, hinf_norm
 
@@ -51,11 +56,59 @@ def fixed_path(name: str):
     return build()
 
 
-def scenario_kw(cfg):
+class SourceTest(NamedTuple):
+    """One of the source's tests travelled in the study's direction (``model.direction``)."""
+
+    path: paths.Graph  # the source's graph y = f(x) as drawn, on the domain the run may use
+    run_path: paths.Graph  # what the simulator follows, towards increasing x: path, or path turned (half_turn)
+    pose0: tuple[float, float, float]  # start (x, y, theta) in run_path's frame, m, m, rad
+    u0: float | None  # decreasing_x: x of the start's closest point on path (the mirror's foot), m
+
+    @property
+    def turned(self) -> bool:
+        """``run_path`` is ``path`` turned half a turn (decreasing_x): :func:`to_world` turns the
+        run's ``x``, ``y``, ``theta`` back."""
+        return self.u0 is not None
+
+
+def half_turn(path: paths.Graph) -> paths.Graph:
+    """The graph ``y = f(x)`` turned half a turn about the origin, ``(x, y) -> (-x, -y)``: the graph
+    ``y = -f(-x)`` (``y0``, ``a`` and the phase negated) on ``[-u_max, -u_min]``. Travelled towards
+    increasing ``x``, it is ``path`` travelled towards decreasing ``x``, turned as a rigid body: the
+    run's lateral error, heading error, curvature and metrics are those on ``path``."""
+    return path._replace(y0=-path.y0, a=-path.a, phase=-path.phase, u_min=-path.u_max, u_max=-path.u_min)
+
+
+def source_test(test: str, direction: str, path: paths.Graph | None = None) -> SourceTest:
+    """The source's test ``test`` (its registered graph, or ``path``, and start pose) travelled in
+    ``direction``. ``"increasing_x"``: as registered. ``"decreasing_x"``: from the same start point,
+    the heading mirrored in the path's normal at the closest point ``u*``, ``theta -> 2 theta_p(u*) + pi
+    - theta`` (the start's ``d`` and ``theta_e`` change sign: on the line, the mirror image of the
+    run towards increasing ``x`` under the opposite slip), and the domain reflected about ``u*`` (as
+    much path ahead as towards increasing ``x``); simulated on :func:`half_turn` of the path."""
+    e = paths.entry(test)
+    path = fixed_path(test) if path is None else path
+    if e.start_pose is None or not isinstance(path, paths.Graph):
+        raise ValueError(f"path {test!r}: the source's tests are graphs with a start pose")
+    x0, y0, theta0 = e.start_pose
+    if direction == "increasing_x":
+        return SourceTest(path, path, (x0, y0, theta0), None)
+    u = jax.jit(global_parameter)(path, jnp.asarray(x0), jnp.asarray(y0))
+    theta = 2 * float(tangent_angle(path, u)) + math.pi - theta0
+    lo, hi = 2 * u - path.u_max, 2 * u - path.u_min
+    path = path._replace(u_min=lo.astype(path.u_min.dtype), u_max=hi.astype(path.u_max.dtype))
+    pose0 = (-x0, -y0, math.remainder(theta + math.pi, 2 * math.pi))
+    return SourceTest(path, half_turn(path), pose0, float(u))
+
+
+def source_scenario(st: SourceTest, gains, cfg):
+    """The run of ``st`` with ``gains`` and the config's vehicle and constant slip."""
     m = cfg["model"]
-    return dict(
-        beta_r_deg=m["beta_r_deg"],
-        beta_f_deg=m["beta_f_deg"],
+    return make_scenario(
+        st.run_path,
+        st.pose0,
+        gains,
+        slip=constant_slip(math.radians(m["beta_r_deg"]), math.radians(m["beta_f_deg"])),
         v=m["v"],
         L=m["L"],
         delta_max_deg=m["delta_max_deg"],
@@ -64,7 +117,8 @@ def scenario_kw(cfg):
 
 
 def run_batch(controller, gains_list, test, cfg, config: SimConfig):
-    scs = stack([paper_scenario(test, g, **scenario_kw(cfg)) for g in gains_list])
+    st = source_test(test, cfg["model"]["direction"])
+    scs = stack([source_scenario(st, g, cfg) for g in gains_list])
     return simulate_batch(scs, controller=controller, config=config)
 
 
@@ -74,6 +128,14 @@ def traj_dict(r) -> dict:
         k: np.asarray(getattr(t, k))
         for k in ("t", "x", "y", "theta", "d", "theta_e", "kappa", "s", "delta_cmd", "delta")
     }
+
+
+def to_world(traj: dict, st: SourceTest) -> dict:
+    """A :func:`traj_dict` of a run of ``st`` in the frame of ``st.path`` (turned back if it ran on
+    the turned path); ``d``, ``theta_e``, ``kappa`` and the steering are the same in both frames."""
+    if not st.turned:
+        return traj
+    return {**traj, "x": -traj["x"], "y": -traj["y"], "theta": np.remainder(traj["theta"], 2 * np.pi) - np.pi}
 
 
 def row_of(r, test, name, gains: dict, delta_max) -> dict:
@@ -152,11 +214,12 @@ def part_paper_runs(cfg, K_ours, pbar) -> tuple[list[dict], dict]:
         )
     rows: list[dict] = []
     trajs: dict[str, dict] = {t: {} for t in PAPER_TESTS}
+    tests = {t: source_test(t, cfg["model"]["direction"]) for t in PAPER_TESTS}
     for name, (gains, shown) in entries.items():
         for test in PAPER_TESTS:
             r = unstack(run_batch(C.resolve(name)[0].controller, [gains], test, cfg, config), 0)
             rows.append(row_of(r, test, name, shown, dmax))
-            trajs[test][name] = traj_dict(r)
+            trajs[test][name] = to_world(traj_dict(r), tests[test])
             pbar.update(1)
     return rows, trajs
 
@@ -176,9 +239,10 @@ def part_pi_readings(cfg, rows, pbar) -> tuple[pd.DataFrame, dict]:
     pbar.update(1)
     mixed = {r["path"]: r for r in rows if r["controller"] == "mixed"}
     out, line_traces = [], {}
+    line_test = source_test("line", cfg["model"]["direction"])
     for i, (label, g) in enumerate(readings.items()):
         per = {t: unstack(res[t], i) for t in PAPER_TESTS}
-        line_traces[label] = traj_dict(per["line"])
+        line_traces[label] = to_world(traj_dict(per["line"]), line_test)
         rec: dict = {"reading": label, **{k: float(v) for k, v in g._asdict().items() if k != "k_aw"}}
         conv, sat_ok, better = True, True, True
         for t, r in per.items():

@@ -23,9 +23,9 @@ from pfjax.reproduce import path_following
 from pfjax.reproduce.paper_analysis import part_ga_readings, part_long_pi, part_stability, sine_error_analysis
 from pfjax.reproduce.paper_config import PaperStudy
 from pfjax.reproduce.paper_report import report
-from pfjax.reproduce.paper_runs import fixed_path, part_paper_runs, part_pi_readings, part_synthesis
+from pfjax.reproduce.paper_runs import part_paper_runs, part_pi_readings, part_synthesis, source_test
 from pfjax.sim.scenario import PAPER_TESTS
-from pfjax.tables import write_parquet
+from pfjax.tables import COLUMNS, write_parquet
 
 #: Units of the study's own Parquet columns (beside :data:`pfjax.tables.COLUMNS`): column -> (unit,
 #: description). Angles in rad unless named ``_deg``; the trackers' gains carry the controller's name.
@@ -51,16 +51,89 @@ UNITS: dict[str, tuple[str, str]] = {
     "delta_max": ("rad", "steering limit"),
     # stability.parquet: one row per (beta_r, beta_f) of the grid, with the source's K
     "source_max_re": ("1/s", "largest real part of the source's linearisation at [0, -beta_r]"),
-    "eq_exists": ("", "the true equilibrium exists (|beta_r + beta_f| < delta_max)"),
+    "eq_exists": ("", "the true equilibrium exists (|delta*| <= delta_max: the boundary included)"),
     "eq_d": ("m", "true equilibrium: lateral error d*"),
     "eq_theta_e": ("rad", "true equilibrium: heading error theta_e*"),
     "eq_delta": ("rad", "true equilibrium: steering delta*"),
     "eq_max_re": ("1/s", "largest real part of the eigenvalues at the true equilibrium"),
-    "eq_hurwitz": ("", "the true equilibrium is Hurwitz"),
+    "eq_hurwitz": (
+        "",
+        "the true equilibrium is locally stable: |delta*| < delta_max and both eigenvalues' real parts < 0",
+    ),
     "sim_status": ("", "run status name of the simulated line test"),
     "sim_final_d": ("m", "lateral error at the end of the simulated line test"),
     "sim_converged": ("", "the simulation ends at the predicted equilibrium (within stability.tol_d, tol_theta_deg)"),
 }
+
+#: The design norms' channels (:func:`pfjax.synthesis.slip_design_plant`): a norm or bound is a number
+#: of these channels in SI units (their units differ, so it has no one unit).
+_W = "w = [beta_r rad, beta_f rad, kappa 1/m]"
+_HINF = f"from {_W} to z_inf = [d m, theta_e rad]"
+_H2 = f"from {_W} to z_2 = [d m, theta_e rad, delta rad]"
+#: The PI's gains (:func:`pfjax.controllers.pi_params`), as the ``gain_*`` columns give them.
+_PI_GAINS = "kp_d rad/m, ki_d rad/(m s), kp_theta rad/rad, ki_theta 1/s"
+#: ``summary.json``'s own units, by field name (a field has one meaning wherever it occurs; "1":
+#: dimensionless); :func:`summary_units` adds the run table's and the stability table's.
+SUMMARY_UNITS: dict[str, str] = {
+    "seed": "1 (recorded; the study is deterministic)",
+    "wall_s": "s",
+    "cpu_settings": "vector_width bits (null: XLA's default), block_bytes bytes",
+    # synthesis
+    "K": "rad/m, rad/rad (K_d, K_theta: delta = K_d d + K_theta theta_e)",
+    "alpha": "1 (weight of gamma_inf^2)",
+    "beta": "1 (weight of gamma_2^2)",
+    **dict.fromkeys(("gamma_inf", "gamma_inf_certified"), f"1 (H-infinity bound {_HINF})"),
+    "hinf_norm": f"1 (H-infinity norm {_HINF})",
+    **dict.fromkeys(("gamma_2", "gamma_2_certified"), f"1 (H2 bound {_H2})"),
+    "h2_norm": f"1 (H2 norm {_H2})",
+    "objective": "1 (alpha gamma_inf^2 + beta gamma_2^2)",
+    "closed_loop_poles": "1/s ([real, imaginary] per pole)",
+    "rel_diff": "1 (|pfjax's - source's| / |source's|)",
+    "success": "1 (1: no failure and within the success band, 0: not)",
+    # the PI readings' filters
+    **dict.fromkeys(("passing", "consistent"), "readings (of the 24 of Table 3)"),
+    **dict.fromkeys(("sensitivity_cases", "sensitivity_unique"), "threshold cases (one threshold halved or doubled)"),
+    "thresholds": "sat 1 (fraction of a run), delta_deg deg, ss_factor 1",
+    # the stability grid
+    "grid_deg": "deg, deg, points (first and last value of each axis, points per axis)",
+    **dict.fromkeys(
+        (
+            "source_hurwitz_fraction",
+            "equilibrium_exists_fraction",
+            "sim_converged_fraction",
+            "sim_agrees_with_analysis_fraction",
+        ),
+        "1 (fraction of the grid)",
+    ),
+    "hurwitz_where_exists_fraction": "1 (fraction of the grid points where the equilibrium exists)",
+    "hurwitz_fraction": "1 (fraction of the eigenvalue scan)",
+    "d_star": "m",
+    "theta_e_star": "rad",
+    "delta_star": "rad",
+    "eig": "1/s ([real, imaginary] per eigenvalue)",
+    "grid_max_deg": "deg",
+    "n": "points per axis (of the eigenvalue scan)",
+    **dict.fromkeys(("max_re_slow", "max_re_fast", "source_max_re_slow", "source_max_re_fast"), "1/s"),
+    **dict.fromkeys(("max_re_slow_at", "max_re_fast_at"), "deg (beta_r, beta_f)"),
+    # the sine test's error against the curvature
+    "peak_x": "m (x of each |d| peak after the transient)",
+    **dict.fromkeys(("median_peak_to_kappa_max_m", "median_peak_to_dkappa_max_m"), "m (along x)"),
+    # the PI's long line run
+    **dict.fromkeys(("horizon_s", "settle_time_s"), "s"),
+    **dict.fromkeys(("steady_abs_d_mm", "final_d_mm"), "mm"),
+    # Table 2's GA readings
+    "crossover_fraction": "1",
+    **dict.fromkeys(("costs", "median_cost"), "m s (the tuning cost: IAE, mean over the scenario set)"),
+    "best_gains": _PI_GAINS,
+    "n_rollouts": "rollouts (simulated runs)",
+}
+
+
+def summary_units() -> dict[str, str]:
+    """``summary.json``'s ``units``: the run table's columns (:data:`pfjax.tables.COLUMNS` and
+    :data:`UNITS`, those with a unit), then :data:`SUMMARY_UNITS`."""
+    columns = {**COLUMNS, **UNITS}
+    return {**{k: u for k, (u, _) in columns.items() if u}, **SUMMARY_UNITS}
 
 
 def n_steps(config: PaperStudy) -> int:
@@ -69,13 +142,17 @@ def n_steps(config: PaperStudy) -> int:
     return 3 * (6 if config.trackers else 3) + 3 + 3
 
 
+#: The stretch of each source test's path its figure draws, x in m (towards increasing x).
+DRAWN = {"line": (-1.0, 16.0), "parabola": (-2.6, 4.0), "sine": (-3.0, 16.0)}
+
+
 def _tracking_figures(figdir: Path, cfg: dict, trajs: dict) -> None:
     for test in PAPER_TESTS:
-        p = fixed_path(test)
-        uu = jnp.linspace(-3.0 if test != "line" else -1.0, 16.0, 2000)
-        if test == "parabola":
-            uu = jnp.linspace(-2.6, 4.0, 2000)
-        px, py = p.point(uu)
+        st = source_test(test, cfg["model"]["direction"])
+        lo, hi = DRAWN[test]
+        if st.u0 is not None:  # decreasing_x: the same stretch reflected about the start's closest point
+            lo, hi = 2 * st.u0 - hi, 2 * st.u0 - lo
+        px, py = st.path.point(jnp.linspace(lo, hi, 2000))
         shown = {k: v for k, v in trajs[test].items() if k in ("mixed", "paper-k", "pi")}
         figures.save(
             figures.tracking_figure(
@@ -137,7 +214,7 @@ def run(config: PaperStudy, output, pbar) -> dict:
     rows, trajs = part_paper_runs(cfg, syn["ours"]["K"], pbar)
     pi_df, line_traces = part_pi_readings(cfg, rows, pbar)
     stab_df, stab = part_stability(cfg, pbar)
-    sine = sine_error_analysis(trajs)
+    sine = sine_error_analysis(trajs, direction=cfg["model"]["direction"])
     long_pi = part_long_pi(cfg)
     pbar.update(1)
     ga = part_ga_readings(cfg)
@@ -160,10 +237,11 @@ def run(config: PaperStudy, output, pbar) -> dict:
         "pi_long_horizon": long_pi,
         "ga_crossover_readings": ga,
         "verdicts": [v._asdict() for v in verdict_rows],
+        "units": summary_units(),
     }
     (tmp / "summary.json").write_text(dumps(summary) + "\n")
     document.write(report(summary, {"pi_readings": pi_df}), tmp)
     return summary
 
 
-__all__ = ["UNITS", "n_steps", "run", "write_figures"]
+__all__ = ["SUMMARY_UNITS", "UNITS", "n_steps", "run", "summary_units", "write_figures"]
