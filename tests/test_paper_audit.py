@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from paper_inputs import run_rows
 
 from pfjax import controllers as C
 from pfjax.config import ConfigError
@@ -27,21 +28,7 @@ FILTERED = "chosen by filters from the source"
 def _inputs() -> tuple:
     """``verdicts``' arguments for a made-up run: every number plausible, none from a simulation."""
     cfg = PaperStudy().model_dump(mode="json")
-    run = dict(
-        status="ok",
-        settling_time=1.0,
-        max_abs_delta_cmd=0.3,
-        sat_fraction=0.0,
-        steady_abs_d=0.002,
-        steady_abs_theta_e_rad=0.087,
-        max_abs_delta=0.3,
-        steer_energy=0.5,
-        final_delta=math.radians(10.0),
-        final_theta_e=math.radians(-5.0),
-    )
-    rows = [
-        {"path": p, "controller": c, **run} for p in ("line", "parabola", "sine") for c in ("mixed", "paper-k", "pi")
-    ]
+    rows = run_rows()
     em = dict(grid_max_deg=89.9, n=11, hurwitz_fraction=1.0, max_re_slow=-1.3, max_re_slow_at=[0.0, -89.9])
     em.update(max_re_fast=-5.2, max_re_fast_at=[-89.9, -6.7], source_max_re_slow=-1.3185, source_max_re_fast=-5.193)
     stab = dict(

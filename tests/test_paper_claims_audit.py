@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from paper_inputs import run_rows
 
 from pfjax.report.document import to_markdown
 from pfjax.reproduce import path_following
@@ -249,23 +250,7 @@ def test_tracker_note_only_with_trackers():
 def _verdicts(sine=None, filters=None, **run) -> list[Verdict]:
     """``path_following.verdicts`` on made-up runs (the sine analysis and run metrics overridable)."""
     cfg = PaperStudy().model_dump(mode="json")
-    base = dict(
-        status="ok",
-        settling_time=1.0,
-        max_abs_delta_cmd=0.3,
-        sat_fraction=0.0,
-        steady_abs_d=0.002,
-        steady_abs_theta_e_rad=0.087,
-        max_abs_delta=0.3,
-        steer_energy=0.5,
-        final_delta=math.radians(10.0),
-        final_theta_e=math.radians(-5.0),
-    )
-    rows = [
-        {"path": p, "controller": c, **base, **(run if c == "mixed" else {})}
-        for p in ("line", "parabola", "sine")
-        for c in ("mixed", "paper-k", "pi")
-    ]
+    rows = run_rows(**run)
     s = _summary()
     pi_df = pd.DataFrame({"reading": ["r"]})
     pi_df.attrs["filters"] = {**s["pi_filters"], **(filters or {})}
