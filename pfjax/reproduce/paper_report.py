@@ -6,12 +6,25 @@ reading, how the controller is evaluated) is decided from the summary's numbers.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pandas as pd
 
 from pfjax.report.document import Bullets, Document, Figure, Heading, Paragraph, Table
+from pfjax.reproduce.paper_prose import (
+    D_STAR_ZERO,
+    FLAT_REL_TOL,
+    control_sentence,
+    deg,
+    flatness,
+    fmt,
+    long_pi,
+    norms_vs_bounds,
+    objective_gap,
+    paper_case,
+    paper_equilibrium,
+    pi_choice,
+    why_readings_fail,
+)
 from pfjax.reproduce.verdict import verdict_block
 from pfjax.sim.scenario import PAPER_TESTS
 
@@ -28,85 +41,6 @@ PI_COLUMNS = [
     "sine_steady_abs_d_mm",
     "n_criteria_met",
 ]
-
-
-#: the largest relative objective gap (source's K against pfjax's optimum) the report calls a flat optimum
-FLAT_REL_TOL = 1e-3
-#: |d*| below this (m), half the printed 0.001 mm, counts as zero: the equilibrium is the source's [0, −β_r]
-D_STAR_ZERO = 5e-7
-
-
-def fmt(x, p=3):
-    """``x`` with ``p`` decimals; an en dash for a missing or non-finite number."""
-    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{p}f}"
-
-
-def _deg(x):
-    return None if x is None else math.degrees(x)
-
-
-def _finite(x) -> bool:
-    return x is not None and math.isfinite(x)
-
-
-def _control(sim: dict) -> str:
-    """How the controller is evaluated, from ``sim.control_every`` and ``sim.dt``."""
-    n = sim["control_every"]
-    if n == 0:
-        return "the controller is evaluated continuously inside every RK4 step, as in the source's Simulink model"
-    steps = "step" if n == 1 else f"{n} steps"
-    return (
-        f"the controller is sampled every {steps} ({1000 * n * sim['dt']:g} ms) and held in between, not evaluated "
-        "continuously as in the source's Simulink model"
-    )
-
-
-def _objective_gap(syn: dict) -> tuple[float, float, bool]:
-    """``(gap, relative gap, flat)``: the objective the source's K certifies minus pfjax's optimum,
-    and whether it is within :data:`FLAT_REL_TOL` of that optimum."""
-    ours, theirs = syn["ours"]["objective"], syn["source_K_checked_by_pfjax"]["objective"]
-    gap = theirs - ours
-    rel = gap / abs(ours)
-    return gap, rel, abs(rel) <= FLAT_REL_TOL
-
-
-def _flatness(syn: dict, alpha: float, beta: float) -> str:
-    gap, rel, flat = _objective_gap(syn)
-    where = "above" if gap >= 0 else "below"
-    head = f"The source's gain certifies an objective {abs(gap):.2e} ({100 * abs(rel):.2g} %) {where} pfjax's optimum"
-    if flat:
-        return (
-            f"{head}, within the {100 * FLAT_REL_TOL:g} % tolerance for a flat optimum: the objective is flat along K_d, so the "
-            "K_d difference is where each solver stopped on a flat optimum, not a different formulation."
-        )
-    return (
-        f"{head}, beyond the {100 * FLAT_REL_TOL:g} % tolerance for a flat optimum: the two gains are not equally good for "
-        f"this objective (α = {alpha:g}, β = {beta:g}), so the difference in K is not that of a flat optimum."
-    )
-
-
-def _norms_vs_bounds(syn: dict) -> str:
-    """Each gain's true norms against the source's published bounds and the bounds pfjax certifies
-    for that gain: which comparisons hold."""
-    o, p, c = syn["ours"], syn["source_published"], syn["source_K_checked_by_pfjax"]
-    gains = (
-        ("pfjax's K", o["hinf_norm"], o["h2_norm"], o["gamma_inf"], o["gamma_2"]),
-        ("the source's K", c["hinf_norm"], c["h2_norm"], c["gamma_inf_certified"], c["gamma_2_certified"]),
-    )
-    misses, n = [], 0
-    for gain, hinf, h2, own_inf, own_2 in gains:
-        for norm, v, bounds in (
-            ("‖T∞‖∞", hinf, (("the source's γ∞", p["gamma_inf"]), ("pfjax's γ∞ for it", own_inf))),
-            ("‖T₂‖₂", h2, (("the source's γ₂", p["gamma_2"]), ("pfjax's γ₂ for it", own_2))),
-        ):
-            for name, b in bounds:
-                n += 1
-                if not v < b:
-                    misses.append(f"{gain}'s true {norm} {v:.4f} is not below {name} {b:.4g}")
-    scope = "each gain's true norms against the source's published bounds and against the bounds pfjax certifies for it"
-    if not misses:
-        return f"The true norms of both gains are below both sets of bounds ({scope}: all {n} hold)."
-    return f"Of the {n} comparisons ({scope}), {n - len(misses)} hold; " + "; ".join(misses) + "."
 
 
 def _subtitle(s: dict) -> str:
@@ -156,9 +90,9 @@ def _design(s: dict) -> list:
         Paragraph(
             f"Relative differences from the source: K_d {100 * rd['K_d']:.2f} %, K_θ {100 * rd['K_theta']:.2f} %, "
             f"γ∞ {100 * rd['gamma_inf']:.2f} %, γ₂ {100 * rd['gamma_2']:.2f} %. "
-            + _flatness(syn, cfg["synthesis"]["alpha"], cfg["synthesis"]["beta"])
+            + flatness(syn, cfg["synthesis"]["alpha"], cfg["synthesis"]["beta"])
             + " "
-            + _norms_vs_bounds(syn)
+            + norms_vs_bounds(syn)
         ),
     ]
 
@@ -170,11 +104,11 @@ def _run_row(r: dict) -> list:
         r["status"],
         fmt(r["iae"]),
         fmt(None if r["steady_abs_d"] is None else 1000 * r["steady_abs_d"], 2),
-        fmt(_deg(r["steady_abs_theta_e_rad"]), 2),
+        fmt(deg(r["steady_abs_theta_e_rad"]), 2),
         fmt(r["settling_time"], 2),
-        fmt(_deg(r["final_delta"]), 2),
-        fmt(_deg(r["max_abs_delta_cmd"]), 1),
-        fmt(_deg(r["max_abs_delta"]), 1),
+        fmt(deg(r["final_delta"]), 2),
+        fmt(deg(r["max_abs_delta_cmd"]), 1),
+        fmt(deg(r["max_abs_delta"]), 1),
         fmt(r["steer_energy"]),
         fmt(r["steer_tv"]),
         f"{100 * r['sat_fraction']:.1f} %",
@@ -223,29 +157,6 @@ def _adopted(pi_df: pd.DataFrame) -> tuple[bool, int]:
     return bool(pi_df[pi_df.is_default].consistent.any()), int(pi_df.consistent.sum())
 
 
-def _choice(f: dict) -> str:
-    """The readings passing all four filters and, when exactly one does, how it fares with each
-    threshold halved or doubled (with none or several there is no choice to test)."""
-    n, names = f["consistent"], ", ".join(f["consistent_readings"])
-    if n == 1:
-        return (
-            f"1 ({names}). With each threshold halved or doubled (the others kept), that reading stays the only one "
-            f"in {f['sensitivity_unique']} of {f['sensitivity_cases']} settings."
-        )
-    which = "none" if n == 0 else f"{n} ({names})"
-    return f"{which}. No single reading passes all four, so there is no choice whose sensitivity to test."
-
-
-def _why_readings_fail() -> str:
-    """Why a PI reading fails under rear slip (β_r ≠ 0)."""
-    return (
-        "Why readings fail: with rear slip, d' = 0 needs θₑ = −β_r ≠ 0, so the integral on θₑ ramps at Ki_θ·β_r "
-        "for ever and the PI loop has no equilibrium. The best it can do is a quasi-equilibrium in which the "
-        "integral on d ramps the other way, which needs a standing offset d_q = (Ki_θ / Ki_d)·β_r — metres for the "
-        "readings with a large Ki_θ / Ki_d — approached through a slow pole. "
-    )
-
-
 def _pi(s: dict, pi_df: pd.DataFrame) -> list:
     src, f = s["config"]["source"], s["pi_filters"]
     th = f["thresholds"]
@@ -273,12 +184,12 @@ def _pi(s: dict, pi_df: pd.DataFrame) -> list:
         Paragraph(
             "Readings passing each filter: "
             + "; ".join(f"{k}: {v} of 24" for k, v in f["passing"].items())
-            + f". All four: {_choice(f)} The filters come from the source's own statements about its PI, so a "
+            + f". All four: {pi_choice(f)} The filters come from the source's own statements about its PI, so a "
             "reading they select is chosen by those statements; it does not confirm them."
         ),
         Paragraph(
             "(The 8 best of 24; all in `pi_readings.csv`.) "
-            + (_why_readings_fail() if s["config"]["model"]["beta_r_deg"] != 0 else "")
+            + (why_readings_fail() if s["config"]["model"]["beta_r_deg"] != 0 else "")
             + f"The reading pfjax adopts as the source's PI (`pfjax.controllers.PAPER_PI`'s reading of the "
             f"printed order) is {adopted}."
         ),
@@ -286,43 +197,12 @@ def _pi(s: dict, pi_df: pd.DataFrame) -> list:
     ]
 
 
-def _paper_case(s: dict) -> str:
-    """The source's K at the configured slip: ``"none"`` (no equilibrium: |δ*| beyond δ_max, 1e-9 rad
-    of rounding allowed), ``"limit"`` (on δ_max), ``"zero"`` (|d*| below :data:`D_STAR_ZERO`: the
-    source's [0, −β_r]) or ``"offset"``."""
-    pc, dmax = s["stability"]["paper_case"], math.radians(s["config"]["model"]["delta_max_deg"])
-    d, delta = pc["d_star"], pc["delta_star"]
-    if not (_finite(d) and _finite(delta)) or abs(delta) > dmax + 1e-9:
-        return "none"
-    return "limit" if abs(delta) >= dmax - 1e-9 else "zero" if abs(d) < D_STAR_ZERO else "offset"
-
-
-def _paper_equilibrium(s: dict) -> str:
-    """Where the source's K's equilibrium is, or that it has none (:func:`_paper_case`)."""
-    pc, m, K = s["stability"]["paper_case"], s["config"]["model"], s["config"]["source"]["K"]
-    head = f"For the source's K = [{K[0]:g}, {K[1]:g}] and β_r = {m['beta_r_deg']:g}°, β_f = {m['beta_f_deg']:g}°, "
-    d, delta, case = pc["d_star"], pc["delta_star"], _paper_case(s)
-    if case == "none":
-        return head + f"there is no equilibrium: it needs |δ*| = {fmt(_deg(delta))}° > δ_max = {m['delta_max_deg']:g}°."
-    source = "the source's [0, −β_r]" if abs(d) < D_STAR_ZERO else "not the source's [0, −β_r]"
-    eig = ", ".join(f"{z[0]:.3f}" for z in pc["eig"])
-    if case == "limit":
-        eig = f"the unsaturated loop's eigenvalues {eig} 1/s (which do not apply there)"
-        limit = " It lies on the steering limit, where the steering saturates and the point is not locally stable."
-    else:
-        eig, limit = f"eigenvalues {eig} 1/s", ""
-    return (
-        head + f"the true equilibrium is d* = {1000 * d:.3f} mm, θₑ* = {math.degrees(pc['theta_e_star']):.3f}°, "
-        f"δ* = {math.degrees(delta):.3f}°, with {eig} — {source}.{limit}"
-    )
-
-
 def _stability(s: dict) -> list:
     stab, em = s["stability"], s["stability"]["eigen_maxima"]
     return [
         Heading("Equilibrium and stability (docs/reproductions/path-following.md §7)"),
         Paragraph(
-            _paper_equilibrium(s) + f" Over the "
+            paper_equilibrium(s) + f" Over the "
             f"±{stab['grid_deg'][1]:g}° grid ({stab['grid_deg'][2]}² points): the source's linearisation is Hurwitz on "
             f"{100 * stab['source_hurwitz_fraction']:.0f} %; an equilibrium exists on "
             f"{100 * stab['equilibrium_exists_fraction']:.1f} % (the band |β_r + β_f| ≤ δ_max between the dashed "
@@ -345,27 +225,6 @@ def _stability(s: dict) -> list:
     ]
 
 
-def _long_pi(lp: dict, cfg: dict) -> str:
-    """The PI's line test at the long horizon, and whether |d| had settled by the study's horizon
-    (settled: within 5 % of its final value from then on)."""
-    h, long_h, ts = cfg["sim"]["horizon"], lp["horizon_s"], lp["settle_time_s"]
-    settled = f"|d| settles (within 5 % of its final value from then on) at t = {ts:.1f} s" if _finite(ts) else None
-    if settled is None:
-        run = f"Run for {long_h:g} s, |d| does not settle (it does not stay within 5 % of its final value)"
-    else:
-        run = f"Run for {long_h:g} s, {settled}"
-    if long_h < h:
-        at_h = ""
-    elif _finite(ts) and ts <= h:
-        at_h = f"At the {h:g} s horizon the PI's line error has settled. "
-    else:
-        at_h = f"At the {h:g} s horizon the PI's line error is still drifting. "
-    return (
-        f"{at_h}{run}; its steady |d| is {lp['steady_abs_d_mm']:.2f} mm (final d = {lp['final_d_mm']:.2f} mm); "
-        f"the source reports about {cfg['source']['line_ss_pi_mm']:g} mm."
-    )
-
-
 def _long_pi_and_ga(s: dict) -> list:
     lp, ga, cfg = s["pi_long_horizon"], s["ga_crossover_readings"], s["config"]
     rows = [
@@ -381,7 +240,7 @@ def _long_pi_and_ga(s: dict) -> list:
     ]
     return [
         Heading("The PI's steady error once settled"),
-        Paragraph(_long_pi(lp, cfg)),
+        Paragraph(long_pi(lp, cfg)),
         Heading("Table 2: the GA's crossover"),
         Paragraph(
             'Table 2 lists a crossover fraction of 0.8 beside a row "Crossover Operation: none". pfjax adopts '
@@ -397,14 +256,14 @@ def _long_pi_and_ga(s: dict) -> list:
 def _differences(s: dict, pi_df: pd.DataFrame) -> list:
     syn = s["synthesis"]
     rd = syn["rel_diff"]
-    _, rel, flat = _objective_gap(syn)
+    _, rel, flat = objective_gap(syn)
     why = (
         f"a flat LMI optimum (objective within {100 * FLAT_REL_TOL:g} %)"
         if flat
         else f"not a flat optimum (the source's K certifies an objective {100 * abs(rel):.2g} % "
         f"{'above' if rel >= 0 else 'below'} pfjax's optimum)"
     )
-    d, case = s["stability"]["paper_case"]["d_star"], _paper_case(s)
+    d, case = s["stability"]["paper_case"]["d_star"], paper_case(s)
     if case == "none":
         steady = "**The source's K has no equilibrium** at this slip (above)"
     elif abs(d) < D_STAR_ZERO:
@@ -434,7 +293,7 @@ def _differences(s: dict, pi_df: pd.DataFrame) -> list:
                 f"**K_d differs by {100 * rd['K_d']:.2f} %** (K_θ by {100 * rd['K_theta']:.2f} %): {why}, see above; "
                 f"the bounds differ by {100 * rd['gamma_inf']:.2f} % (γ∞) and {100 * rd['gamma_2']:.2f} % (γ₂).",
                 "**Steering limit, horizon, travel direction** are assumed (docs/reproductions/path-following.md §6), "
-                f"not the source's; {_control(s['config']['sim'])}.",
+                f"not the source's; {control_sentence(s['config']['sim'])}.",
                 f"{steady}; the source's appendix-B point is used only to reproduce its eigenvalue figure.",
                 f"**PI gains**: {pi}.",
             ]
@@ -451,4 +310,4 @@ def report(summary: dict, tables: dict[str, pd.DataFrame]) -> Document:
     return Document("Paper reproduction: path following under wheel slip", _subtitle(s), blocks)
 
 
-__all__ = ["PI_COLUMNS", "fmt", "report"]
+__all__ = ["PI_COLUMNS", "report"]
