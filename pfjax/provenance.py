@@ -44,6 +44,14 @@ def stamp(config: dict, seed: int | None = None) -> dict:
     }
 
 
+#: The units of the numbers :func:`stamp` records (a summary's or a command's ``units`` map takes
+#: them from here; "1": dimensionless).
+STAMP_UNITS: dict[str, str] = {
+    "seed": "1 (the random seed)",
+    "cpu_settings": "vector_width bits (null: XLA's default), block_bytes bytes",
+}
+
+
 def cpu_settings() -> dict:
     """The CPU settings the simulator programs ran with: the vector width asked of XLA (None: its
     default), the bytes per batched array in a CPU block per precision, and where they came from

@@ -636,6 +636,7 @@ def test_simulate_json_gives_units_arguments_and_the_provenance_record(capsys):
     """Every number of ``pfjax simulate --json`` has its unit (the metrics' from the run table's
     COLUMNS), the arguments it ran with (defaults filled in) and a study summary's provenance record;
     the same arguments give the same hash, another argument another."""
+    from pfjax import provenance
     from pfjax.provenance import config_hash
     from pfjax.tables import COLUMNS
 
@@ -656,6 +657,7 @@ def test_simulate_json_gives_units_arguments_and_the_provenance_record(capsys):
     assert a["arguments"]["horizon"] == 1.0 and a["arguments"]["speed"] == 1.0 and "func" not in a["arguments"]
     assert a["config_sha256"] == config_hash(a["arguments"]) == b["config_sha256"] != c["config_sha256"]
     assert {"pfjax_version", "machine", "cpu_settings", "seed"} <= set(a)
+    assert u["cpu_settings"] == provenance.STAMP_UNITS["cpu_settings"] and "seed" not in u  # simulate takes no seed
     # the defaults are recorded as they ran: the same run with them given has the same hash
     d = run_main(capsys, *base, "--control-every", "1", "--dt", "0.005", "--speed", "1")
     assert a["arguments"]["control_every"] == 1 and d["config_sha256"] == a["config_sha256"]
@@ -704,3 +706,4 @@ def test_one_run_commands_give_every_number_its_unit_and_hash_their_arguments(ca
     missing = [k for k in _numbers(out) if k not in out["units"]]
     assert not missing, missing
     assert out["config_sha256"] == config_hash(out["arguments"]) and out["pfjax_version"]
+    assert "cpu_settings" in out["units"] and ("seed" in out["units"]) == isinstance(out["seed"], int)

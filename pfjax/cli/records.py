@@ -6,7 +6,8 @@ A command that computes a result without a config of its own (``simulate``, ``sy
 
 * ``units``: the unit of each number, by its dotted key (``"final.theta": "rad"``), from that
   table (a key ``"<parent>.*"`` gives the unit of every number under ``<parent>`` by its name, e.g.
-  the metrics by :data:`pfjax.tables.COLUMNS`);
+  the metrics by :data:`pfjax.tables.COLUMNS`) and the provenance record's (``seed``, ``cpu_settings``:
+  :data:`pfjax.provenance.STAMP_UNITS`);
 * ``arguments``: every argument the command ran with, defaults filled in (run it again with them);
 * the provenance record of a study's ``summary.json`` (:func:`pfjax.provenance.stamp`): pfjax's
   version, ``config_sha256`` (over ``arguments``: the same arguments, the same hash), the seed where
@@ -76,9 +77,7 @@ def stamped(out, args):
     if table is None or not isinstance(out, dict) or "config_sha256" in out:
         return out
     given = arguments(args)
-    record = {
-        "units": units(out, table),
-        "arguments": given,
-        **provenance.stamp(given, given.get("seed")),
-    }
+    stamp = provenance.stamp(given, given.get("seed"))
+    stamp_units = {k: u for k, u in provenance.STAMP_UNITS.items() if {**stamp, **out}[k] is not None}
+    record = {"units": {**stamp_units, **units(out, table)}, "arguments": given, **stamp}
     return {**out, **{k: v for k, v in record.items() if k not in out}}

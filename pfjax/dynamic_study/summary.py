@@ -16,6 +16,7 @@ import pandas as pd
 
 from pfjax.dynamic_study.config import KinematicVsDynamic
 from pfjax.metrics.robustness import clopper_pearson
+from pfjax.provenance import STAMP_UNITS
 
 #: A verdict's line: a controller is robust in an arm if its success rate is at least this.
 ROBUST = 0.95
@@ -61,8 +62,7 @@ UNITS = {
     "steps": "steps (per timed run)",
     "wall_s": "s",
     "load_average": "processes (1, 5, 15 min)",
-    "seed": "1 (the study's random seed)",
-    "cpu_settings": "vector_width bits (null: XLA's default), block_bytes bytes",
+    **STAMP_UNITS,
 }
 #: The source paths' largest curvature, 1/m (pfjax.paths registry), for the slip-by-curvature table.
 PATH_CURVATURE = {"line": 0.0, "sine": 1.0, "parabola": 2.0}

@@ -30,7 +30,7 @@ from pfjax.metrics.robustness import (
 from pfjax.metrics.running import METRIC_NAMES
 from pfjax.montecarlo.config import StudySpec, study_hash
 from pfjax.montecarlo.sampling import column_names
-from pfjax.provenance import cpu_settings, machine
+from pfjax.provenance import STAMP_UNITS, cpu_settings, machine
 from pfjax.sim.dynamic import SLIP_METRIC_NAMES
 from pfjax.tables import COLUMNS, GAINS
 
@@ -48,10 +48,9 @@ UNITS: dict[str, object] = {
     "n_per_controller": "runs",
     "chunks": "chunks of runs",
     **dict.fromkeys(("run", "run_indices"), "run index (the random stream of the run)"),
-    "seed": "1 (the study's random seed)",
+    **STAMP_UNITS,
     "wall_s": "s",
     "timings_s": "s (wall clock per phase)",
-    "cpu_settings": "vector_width bits (null: XLA's default), block_bytes bytes",
     "gains": GAINS,
     "success_rate": "1",
     "success_ci95": "1 (95 % Clopper-Pearson interval of the success rate)",

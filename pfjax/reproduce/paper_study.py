@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from pfjax.jsonio import dumps
-from pfjax.provenance import parquet_metadata
+from pfjax.provenance import STAMP_UNITS, parquet_metadata
 from pfjax.provenance import stamp as provenance_stamp
 from pfjax.report import document, figures
 from pfjax.reproduce import path_following
@@ -75,9 +75,9 @@ _PI_GAINS = "kp_d rad/m, ki_d rad/(m s), kp_theta rad/rad, ki_theta 1/s"
 #: ``summary.json``'s own units, by field name (a field has one meaning wherever it occurs; "1":
 #: dimensionless); :func:`summary_units` adds the run table's and the stability table's.
 SUMMARY_UNITS: dict[str, str] = {
+    **STAMP_UNITS,
     "seed": "1 (recorded; the study is deterministic)",
     "wall_s": "s",
-    "cpu_settings": "vector_width bits (null: XLA's default), block_bytes bytes",
     # synthesis
     "K": "rad/m, rad/rad (K_d, K_theta: delta = K_d d + K_theta theta_e)",
     "alpha": "1 (weight of gamma_inf^2)",
