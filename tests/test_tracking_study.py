@@ -1,5 +1,6 @@
 """Smoke test of ``studies/vehicle_tracking.py --quick``: every output is written, pandas reads it, and the
-numbers agree across files (summary.json vs the Parquet tables vs a recomputation from the run rows).
+numbers agree across files (summary.json vs the Parquet tables vs a recomputation from the run rows), and every
+number of summary.json has a unit in its ``units`` map (``tests/units_check.py``).
 
 References: the config hash is recomputed with :func:`pfjax.provenance.config_hash` from the stored config;
 the four-outcome table is recounted from ``lemma_runs.parquet``; Clopper-Pearson success is recounted
@@ -17,6 +18,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 from scipy.stats import beta
+from units_check import numbers_without_units
 
 from pfjax.provenance import config_hash
 
@@ -38,6 +40,12 @@ def out(tmp_path_factory):
 def test_quick_study_outputs_consistent(out):
     s = json.loads((out / "summary.json").read_text())
     assert s["quick"] and s["config_sha256"] == config_hash(s["config"])
+    units = s["units"]  # every number of summary.json has a unit, the metrics' those of pfjax track --json
+    assert numbers_without_units(s) == []
+    assert units["quantiles"]["iae"] == "m s" and units["quantiles"]["max_abs_gamma_deg"] == "deg"
+    assert (
+        units["wrong_distance_min_z_err"] == "m" and units["max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2"] == "rad"
+    )
     for name in ("lemma_outcomes", "lemma_geometry", "mc_final_error"):
         assert (out / "figures" / f"{name}.png").stat().st_size > 1000 and (out / "figures" / f"{name}.svg").exists()
     html = (out / "report.html").read_text()
@@ -115,6 +123,7 @@ def test_every_column_of_every_table_has_a_unit(out):
         "iae": "m s",
         "speed": "m/s",
         "fail_time": "s",
+        "n": "runs",
     }
     seen = set()
     for path in sorted(out.glob("*.parquet")):

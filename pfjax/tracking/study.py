@@ -17,8 +17,9 @@ import pandas as pd
 import pfjax
 from pfjax.jsonio import dumps
 from pfjax.metrics.robustness import metric_quantiles, success_summary
+from pfjax.montecarlo.summary import UNITS as MONTE_CARLO_UNITS
 from pfjax.numerics.random import seed_key
-from pfjax.provenance import config_hash, machine, parquet_metadata
+from pfjax.provenance import STAMP_UNITS, config_hash, machine, parquet_metadata
 from pfjax.report import document
 from pfjax.tables import write_parquet
 from pfjax.tracking import batches as B
@@ -72,12 +73,12 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "status": ("", "run status name: ok, nonfinite, diverged, singular"),
     "fail_time": (UNITS["fail_time"], "time of the first failure (inf: none)"),
     # the four-outcome table (pfjax.tracking.lemma.four_way)
-    "n": ("1", "runs in the group"),
-    "both": ("1", "finished runs with z~ -> 0 and phi - p gamma -> 0"),
-    "z_only": ("1", "finished runs with z~ -> 0 only"),
-    "phi_only": ("1", "finished runs with phi - p gamma -> 0 only"),
-    "neither": ("1", "finished runs with neither limit"),
-    "failed": ("1", "runs that did not finish (status other than ok)"),
+    "n": ("runs", "runs in the group"),
+    "both": ("runs", "finished runs with z~ -> 0 and phi - p gamma -> 0"),
+    "z_only": ("runs", "finished runs with z~ -> 0 only"),
+    "phi_only": ("runs", "finished runs with phi - p gamma -> 0 only"),
+    "neither": ("runs", "finished runs with neither limit"),
+    "failed": ("runs", "runs that did not finish (status other than ok)"),
     "equivalence_holds": ("", "z_only == phi_only == 0"),
     # the geometric check (pfjax.tracking.lemma.sample_geometry)
     "kind": ("", "on_focus (z_d the focus point) or wrong_distance (z_d on the focus direction, farther)"),
@@ -86,6 +87,29 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "phi": ("rad", "connection angle phi, in (-pi/2, pi/2]"),
     "phi_minus_pgamma": ("rad", "phi - p gamma"),
     "z_err": (UNITS["final_error_norm"], "|z~| of the state"),
+}
+
+#: ``summary.json``'s units by field name (a field has one meaning wherever it occurs; "1":
+#: dimensionless), written as ``summary["units"]``: the four-outcome table's counts as in
+#: :data:`COLUMNS`; the success statistics as in ``pfjax study``'s summary
+#: (:data:`pfjax.montecarlo.summary.UNITS`); ``quantiles``, each metric's unit (:data:`COLUMNS`),
+#: which its ``mean``, ``std`` and quantiles over the runs with status ok take.
+SUMMARY_UNITS: dict[str, object] = {
+    **STAMP_UNITS,
+    "wall_s": "s",
+    # the Lemma 8.1 grid
+    "n_runs": "runs",
+    **{c: COLUMNS[c][0] for c in ("n", "both", "z_only", "phi_only", "neither", "failed")},
+    # the geometric check
+    "n_states_z_err_0": "states (random states with z~ = 0)",
+    "n_counterexamples_abs_pgamma_gt_pi_2": "states (with z~ = 0 and |p gamma| >= pi/2)",
+    "max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2": COLUMNS["phi_minus_pgamma"][0],
+    "counterexample_abs_phi_minus_pgamma_range": f"{COLUMNS['phi_minus_pgamma'][0]} "
+    "([smallest, largest] |phi - p gamma| of the states with |p gamma| >= pi/2)",
+    "wrong_distance_min_z_err": COLUMNS["z_err"][0],
+    # the Monte Carlo, per mode and per leader motion
+    **{k: MONTE_CARLO_UNITS[k] for k in ("k", "success_rate", "success_ci95", "status_counts", "n_finite")},
+    "quantiles": {m: COLUMNS[m][0] for m in METRICS},
 }
 
 
@@ -169,10 +193,10 @@ def definitions(cfg: dict) -> dict:
 
 
 def run(config: TrackingStudy, output, quick: bool = False) -> dict:
-    """Run the study into ``output`` (an open :class:`pfjax.outputs.OutputDir`): ``summary.json``,
-    ``lemma_runs``/``lemma_table``/``geometry``/``mc_runs`` Parquet (units: :data:`COLUMNS`),
-    ``lemma_table.csv`` (``config_sha256`` first), ``figures/`` and ``report.md`` + ``report.html``.
-    Returns the summary."""
+    """Run the study into ``output`` (an open :class:`pfjax.outputs.OutputDir`): ``summary.json``
+    (units: its ``units`` map, :data:`SUMMARY_UNITS`), ``lemma_runs``/``lemma_table``/``geometry``/``mc_runs``
+    Parquet (units: :data:`COLUMNS`), ``lemma_table.csv`` (``config_sha256`` first), ``figures/`` and
+    ``report.md`` + ``report.html``. Returns the summary."""
     t0 = time.time()
     cfg = config.model_dump(mode="json")
     key = seed_key(cfg["seed"])
@@ -192,6 +216,7 @@ def run(config: TrackingStudy, output, quick: bool = False) -> dict:
         "lemma_grid": {"n_runs": int(len(lemma_df)), "table": table.to_dict(orient="records")},
         "geometry": geometry,
         "monte_carlo": mc_summary,
+        "units": SUMMARY_UNITS,
     }
     tmp = output.staging
     meta = parquet_metadata(cfg, cfg["seed"])
@@ -210,6 +235,7 @@ def run(config: TrackingStudy, output, quick: bool = False) -> dict:
 __all__ = [
     "COLUMNS",
     "METRICS",
+    "SUMMARY_UNITS",
     "definitions",
     "geometry_part",
     "lemma_part",
