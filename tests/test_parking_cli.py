@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from units_check import numbers_without_units
 
 from pfjax.cli import main
 from pfjax.parking.maps import GARAGE, MAX_VERTICES, to_obstacle_map
@@ -238,6 +239,10 @@ def test_study_quick(tmp_path):
     assert study["main"](["--quick", "--out", str(out)]) == 0
     s = json.loads((out / "summary.json").read_text())
     assert len(s["config_sha256"]) == 64 and s["pfjax_version"] and s["seed"] == 0
+    assert numbers_without_units(s) == []  # every number of summary.json has its unit
+    u = s["units"]
+    assert u["a_f"] == u["error"] == u["xs"] == "m" and u["time_s"] == "s" and u["fitness"] == "1/s"
+    assert {"front", "scan_period", "pause"} <= set(u)  # all_four_reproduced's combinations (none in quick mode)
     cases = pd.read_parquet(out / "cases.parquet")
     assert list(cases["case"][:4]) == ["A", "B", "C", "D"] and len(cases) == 7
     assert {"status", "switches", "time_s"} <= set(cases.columns)

@@ -25,7 +25,7 @@ from pfjax.parking.simulate import simulated_first_switch
 from pfjax.parking.study_config import ParkingStudy, load
 from pfjax.parking.study_parts import part_assumptions, part_montecarlo, part_search, part_start_map
 from pfjax.parking.study_runs import part_cases, part_outcomes
-from pfjax.provenance import config_hash, parquet_metadata
+from pfjax.provenance import STAMP_UNITS, config_hash, parquet_metadata
 from pfjax.provenance import stamp as provenance_stamp
 from pfjax.reproduce.parking import verdicts as parking_verdicts
 from pfjax.tables import write_parquet
@@ -114,6 +114,52 @@ COLUMNS: dict[str, dict[str, tuple[str, str]]] = {
 }
 
 
+#: ``summary.json``'s units by field name, beyond the tables' columns (:func:`summary_units`); a
+#: field has one meaning wherever it occurs, a block's key names the unit of everything under it
+#: (``time_s``: its quantiles over converged runs in ``montecarlo``); "1": dimensionless.
+SUMMARY_UNITS: dict[str, str] = {
+    **STAMP_UNITS,
+    "wall_s": "s",
+    "timings_s": "s (wall clock per part)",
+    # calibration
+    "a_f": "m",
+    "reach_per_obstacle": "m (the reach a_f at which the corner touches each obstacle)",
+    "theta_deg_at_switch": "deg",
+    "y_closed_form_at_switch_x": "m",
+    "y_source": "m",
+    "switch_x": "m",
+    "t": "s",
+    "x": "m",
+    "y": "m",
+    "theta_deg": "deg",
+    # runs, searches, the Monte Carlo
+    "switches": "direction switches (in montecarlo, their statistics over converged runs)",
+    "n": "runs (in search.grid: levels per gene of the n x n x n grid)",
+    "k": "runs (converged)",
+    "n_finite": "runs (converged, the statistic's sample)",
+    "status_counts": "runs",
+    "by_zone": "runs (per case and status)",
+    "success_rate": "1",
+    "success_ci95": "1 (95 % Clopper-Pearson interval of the success rate)",
+    "n_combinations": "combinations of the assumptions",
+    "b_min_leg_m": "m",
+    "n_simulations": "runs (simulated)",
+    "seed_index": "1 (index of the GA run, folded into its key)",
+    "bits": "1 (the chromosome's bits, 0 or 1)",
+    "history_best_fitness": "1/s (the best fitness per generation)",
+    "history_mean_fitness": "1/s (the population's mean fitness per generation)",
+    "grid_fraction_better": "1 (fraction of the grid's runs with a higher fitness)",
+    "fitness_ratio_to_grid_best": "1",
+}
+
+
+def summary_units() -> dict[str, str]:
+    """``summary.json``'s ``units``: the tables' columns that have a unit (:data:`COLUMNS`), then
+    :data:`SUMMARY_UNITS`."""
+    columns = {k: u for table in COLUMNS.values() for k, (u, _) in table.items() if u}
+    return {**columns, **SUMMARY_UNITS}
+
+
 def _parts(cfg: ParkingStudy, fig_dir: Path, progress: bool) -> tuple[dict, dict, dict]:
     """Run every part; returns ``(results, tables, timings_s)``."""
     pmap, gmap = to_obstacle_map(list(PARALLEL.values())), to_obstacle_map(list(GARAGE.values()))
@@ -198,6 +244,7 @@ def run_study(config: ParkingStudy, out: Path, quick: bool = False, progress: bo
         stuck_switches=config.sim.stuck_switches,
     )
     summary["verdicts"] = [v._asdict() for v in rows]
+    summary["units"] = summary_units()
     (out / "summary.json").write_text(dumps(summary) + "\n")
     write_report(out, summary, tables)
     return summary
