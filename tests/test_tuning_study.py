@@ -6,7 +6,7 @@ every held-out success rate and Clopper-Pearson interval is recounted from ``hel
 scipy's beta quantiles (1e-9); the GA's rollout count is the MATLAB formula P + G (P - E) with E = 1;
 the multi-start tuner's count is recomputed from its options (screened points plus the default gains, the
 halving chains, the restart chains, the compass polish); the cost history of every run is non-increasing and ends at the run's
-reported cost.
+reported cost; every number of summary.json has a unit in its ``units`` map (``tests/units_check.py``).
 """
 
 from __future__ import annotations
@@ -22,8 +22,9 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 from scipy.stats import beta
+from units_check import numbers_without_units
 
-from pfjax.provenance import config_hash
+from pfjax.provenance import STAMP_UNITS, config_hash
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "studies" / "tuning_ga_vs_gradient.py"
@@ -48,6 +49,13 @@ def out(tmp_path_factory):
 def test_quick_tuning_study_outputs_consistent(out):
     s = json.loads((out / "summary.json").read_text())
     assert s["config_sha256"] == config_hash(s["config"])
+    # every number of summary.json has a unit in its units map: costs IAE in m s, the held-out
+    # steady error in mm, the seeds as the provenance record gives them
+    units = s["units"]
+    assert numbers_without_units(s) == []
+    assert units["cost"].startswith("m s (") and units["steady_abs_d_p95_mm"].startswith("mm ")
+    assert units["n"].startswith("runs in heldout.table") and "seeds in targets.by_problem" in units["n"]
+    assert units["seed"] == STAMP_UNITS["seed"]
     for name in ("tuning_runs", "heldout", "margin"):
         assert pq.read_schema(out / f"{name}.parquet").metadata[b"pfjax.config_sha256"].decode() == s["config_sha256"]
     assert (out / "figures" / "cost_vs_budget.png").stat().st_size > 1000

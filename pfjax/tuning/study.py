@@ -12,7 +12,8 @@ differs). Parts 2 and 3 (:mod:`pfjax.tuning.study_parts`): K tuned on one scenar
 training sample, the LMI designs, and every controller on one held-out Monte Carlo set. ``[sim]``
 sets the step and horizon of the paper-* problems, of the training sets and of the held-out set.
 
-:func:`run` writes ``summary.json``, ``tuning_runs.parquet`` (cost history of every tuning run),
+:func:`run` writes ``summary.json`` (every number's unit in its ``units`` map, :data:`SUMMARY_UNITS`),
+``tuning_runs.parquet`` (cost history of every tuning run),
 ``heldout.parquet`` (one row per held-out run and controller), ``margin.parquet`` (the slip-margin
 sweep's successes ``k`` of ``n`` runs per controller, axis and amplitude), ``figures/*.png|svg`` and
 ``report.md`` / ``report.html`` (:mod:`pfjax.tuning.study_report`).
@@ -29,7 +30,10 @@ import jax
 import numpy as np
 import pandas as pd
 
+from pfjax.montecarlo.summary import UNITS as MONTE_CARLO_UNITS
 from pfjax.numerics.random import seed_key
+from pfjax.provenance import STAMP_UNITS
+from pfjax.tables import GAINS
 from pfjax.tuning.study_config import TuningStudy, ga_options, heldout_study, methods, problem_list
 
 #: The units of ``tuning_runs.parquet``'s columns (:func:`pfjax.tables.write_parquet`): every
@@ -42,6 +46,76 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "best_cost": ("m s", "best cost so far: IAE over the problem's runs (mean or CVaR), a failed run +100"),
     "rollouts": ("", "rollouts simulated so far"),
     "wall_s": ("s", "wall time so far, compilation excluded"),
+}
+
+#: A tuning cost (:mod:`pfjax.tuning.cost`), as :data:`COLUMNS`'s ``best_cost``.
+_COST = f"{COLUMNS['best_cost'][0]} (IAE over the problem's runs: mean, heldout-cvar the CVaR; a failed run +100)"
+#: The design norms' channels (:func:`pfjax.synthesis.slip_design_plant`, with ``int d`` in the
+#: integral designs); a norm is a number of these channels in SI units, which differ: no one unit.
+_W = "w = [beta_r rad, beta_f rad, kappa 1/m]"
+_Z_INF = "z_inf = [d m, theta_e rad(, int d m s)]"
+_HINF = f"from {_W} to {_Z_INF} (SI units: no one unit)"
+_H2 = f"from {_W} to [{_Z_INF}; delta rad] (SI units: no one unit)"
+_PASSES = "forward-pass equivalents (a value-only rollout 1, one with its gradient 1 + D forward mode, 4 reverse)"
+
+#: ``summary.json``'s units by field name (a field has one meaning wherever it occurs; "1":
+#: dimensionless; a block's key names the unit of every number under it), written as
+#: ``summary["units"]``; the held-out table's as in ``pfjax study``'s summary
+#: (:data:`pfjax.montecarlo.summary.UNITS`).
+SUMMARY_UNITS: dict[str, object] = {
+    **STAMP_UNITS,
+    "wall_s": "s (wall clock: the whole study; of a tuning run, compilation excluded)",
+    "compile_s": "s (ahead-of-time compilation, not in wall_s)",
+    # part 1: the tuning runs, the Table 3 check and the local checks
+    **dict.fromkeys(("cost", "descent_cost", "median", "min", "max", "ga_median", "ga_best"), _COST),
+    **dict.fromkeys(("ga_costs", "gradient_costs"), _COST),
+    "gains": GAINS,
+    "descent_gains": GAINS,
+    "n_rollouts": MONTE_CARLO_UNITS["n_rollouts"],
+    **dict.fromkeys(("rollouts", "ga_rollouts"), f"{MONTE_CARLO_UNITS['n_rollouts']} of one tuning run"),
+    **dict.fromkeys(("n_forward_passes", "forward_passes"), _PASSES),
+    "n_nonfinite_grad": "gradient components (not finite, replaced by 0)",
+    "gradient": f"{COLUMNS['best_cost'][0]} per gain unit (table3: d cost / d gain, in the order of gains); "
+    "elsewhere the gradient tuner's block, its numbers by their own keys",
+    "projected_gradient_norm": f"{COLUMNS['best_cost'][0]} per box width (gains normalised to the tuning box)",
+    **dict.fromkeys(
+        ("eigenvalues", "check_eigenvalues"),
+        f"{COLUMNS['best_cost'][0]} per box width^2 (the cost's Hessian on the free coordinates)",
+    ),
+    **dict.fromkeys(
+        ("probe_decrease", "check_probe_decrease"), "1 (largest (J - J_probe) / |J| over the probes; <= 0: none lower)"
+    ),
+    "active": "1 (per gain: -1 on the lower bound, +1 on the upper bound, 0 free)",
+    "descent_steps": "adam steps",
+    "relative_decrease": "1 (1 - descent_cost / cost)",
+    # part 2: K, the LMI designs
+    "K": "rad/m, rad/rad (delta = K [d, theta_e]); integral designs rad/m, rad/rad, rad/(m s) (K [d, theta_e, int d])",
+    "train_cost": f"{COLUMNS['best_cost'][0]} (mean IAE over the paper line's or the training set's runs, a failed run +100)",
+    "rollouts_per_eval": "rollouts per cost evaluation",
+    "gamma_inf": f"H-infinity bound {_HINF}",
+    "hinf_norm": f"H-infinity norm {_HINF}, the largest over the design's plants",
+    "gamma_2": f"H2 bound {_H2}",
+    "h2_norm": f"H2 norm {_H2}, the largest over the design's plants",
+    "closed_loop_poles": "1/s ([real, imaginary] per pole)",
+    "max_vertex_pole_real": "1/s (largest real part of a closed-loop pole over the design's plants)",
+    "alpha": "1 (weight of gamma_inf^2)",
+    "beta": "1 (weight of gamma_2^2)",
+    "steer_bound": "rad (largest |K x| on the invariant ellipsoid)",
+    # part 3: the held-out evaluation
+    "n_per_path": "runs (held-out runs per path and controller)",
+    "margin_runs": "runs (per slip amplitude, path and controller in the margin sweep)",
+    **{k: MONTE_CARLO_UNITS[k] for k in ("success_rate", "success_ci95", "iae_mean", "iae_p95", "slip_margin_deg")},
+    "steady_abs_d_p95_mm": "mm (95th percentile of steady_abs_d over runs with status ok)",
+    "n": "runs in heldout.table (a controller's held-out runs); seeds in targets.by_problem (tuning runs)",
+    # the targets
+    "wins_needed": "seeds (a tuner must win)",
+    "wins": "seeds (with a cost at most the GA's median)",
+    **dict.fromkeys(("rollout_fraction", "forward_pass_fraction"), "1 (ratio to the GA's)"),
+    **dict.fromkeys(("wall_s_median", "ga_wall_s_median"), "s (median over seeds, compilation excluded)"),
+    **dict.fromkeys(("dt", "horizon"), "s"),
+    "changed": "the setting's unit (pfjax.tuning.study_config: a count, or normalised box units)",
+    "gradient_over_ga_best": "1 (cost / ga_best - 1)",
+    "integral_steady_abs_d_m": "m (largest steady_abs_d of the integral design under three constant slips)",
 }
 
 
@@ -205,6 +279,7 @@ def run(config: TuningStudy, out: Path, progress: bool) -> dict:
         **parts,
         "heldout": heldout_summary(cfg, spec, table),
         "targets": targets,
+        "units": SUMMARY_UNITS,
     }
     summary["wall_s"] = time.time() - t0
     out.mkdir(parents=True, exist_ok=True)
@@ -219,6 +294,7 @@ def run(config: TuningStudy, out: Path, progress: bool) -> dict:
 
 __all__ = [
     "COLUMNS",
+    "SUMMARY_UNITS",
     "compare",
     "heldout_spec",
     "heldout_summary",
