@@ -22,11 +22,9 @@ sweep's successes ``k`` of ``n`` runs per controller, axis and amplitude), ``fig
 from __future__ import annotations
 
 import json
-import platform
 import time
 from pathlib import Path
 
-import jax
 import numpy as np
 import pandas as pd
 
@@ -258,9 +256,8 @@ def _parts(cfg: dict, spec, progress: bool):
 
 def run(config: TuningStudy, out: Path, progress: bool) -> dict:
     """Run the study at ``config`` and write its outputs into ``out``; returns the summary."""
-    from pfjax import __version__
     from pfjax.jsonio import dumps
-    from pfjax.provenance import config_hash, parquet_metadata
+    from pfjax.provenance import parquet_metadata, stamp
     from pfjax.report import document
     from pfjax.tuning.study_report import figures, report
 
@@ -270,12 +267,9 @@ def run(config: TuningStudy, out: Path, progress: bool) -> dict:
     hist, parts, table, targets, df, sweep = _parts(cfg, spec, progress)
     summary = {
         "study": "tuning_ga_vs_gradient",
-        "pfjax_version": __version__,
+        **stamp(cfg),
+        "seed": list(range(cfg["seeds"])),  # the tuners' seeds 0, 1, ...
         "config": cfg,
-        "config_sha256": config_hash(cfg),
-        "seed": list(range(cfg["seeds"])),
-        "machine": f"{platform.machine()}, {jax.device_count()} {jax.default_backend()} device(s), "
-        f"jax {jax.__version__}",
         **parts,
         "heldout": heldout_summary(cfg, spec, table),
         "targets": targets,
