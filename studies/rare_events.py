@@ -26,7 +26,8 @@ Parts (each entry records estimate, 95 % interval, relative error, rollouts and 
 The study's importance-sampling estimates carry the reliability check of ``[rare_event] check =
 "subset"`` (:mod:`pfjax.rare.check`: ``status``, ``warning`` and each stratum's ``check``).
 
-Writes ``results/rare_events/verification.json`` (or ``--out``): the parts above, the provenance
+Writes ``results/rare_events/verification.json`` (``--quick``: ``results/rare_events_quick/``; or
+``--out``): the parts above, the provenance
 record (pfjax version, the SHA-256 of the sizes and the known case's settings, seed, machine, CPU
 settings) and a ``units`` map by field name. The parts, their sizes and budgets are
 :mod:`pfjax.rare.verification`; ``--quick`` runs them on budgets of a few thousand rollouts.
@@ -53,14 +54,19 @@ STUDY = Path(__file__).resolve().with_suffix(".toml")
 
 def run(args) -> int:
     sizes = verification.QUICK if args.quick else verification.FULL
-    out = default_out(args.out, "rare_events")
+    out = default_out(args.out, "rare_events_quick" if args.quick else "rare_events")
     result = verification.run(sizes, out, STUDY, overwrite=args.overwrite)
     print(f"wrote {out} in {result['wall_s']:.1f} s")
     return 0
 
 
 def main(argv=None) -> int:
-    ap = script_parser(__doc__, config=None, out_default="results/rare_events", quick="small sizes (tests)")
+    ap = script_parser(
+        __doc__,
+        config=None,
+        out_default="results/rare_events, or results/rare_events_quick with --quick",
+        quick="small sizes (tests)",
+    )
     args = ap.parse_args(argv)
     return command_main("rare-events", lambda: run(args))
 
