@@ -90,6 +90,14 @@ COLUMNS: dict[str, tuple[str, str]] = {
 #: The unit of a controller's gains: each gain's own (its parameter pytree's docstring).
 GAINS = "the controller's parameter units (pfjax.controllers)"
 
+#: The channels of the slip design's norms (:func:`pfjax.synthesis.slip_design_plant`; ``int d`` in
+#: the integral designs): an H-infinity or H2 norm or bound is a number of these channels in SI units,
+#: which differ, so it has no one unit. ``"H-infinity norm " + HINF_CHANNELS``.
+_W = "w = [beta_r rad, beta_f rad, kappa 1/m]"
+_Z_INF = "z_inf = [d m, theta_e rad(, int d m s in the integral designs)]"
+HINF_CHANNELS = f"from {_W} to {_Z_INF} (SI units: no one unit)"
+H2_CHANNELS = f"from {_W} to z_2 = [{_Z_INF}; delta rad] (SI units: no one unit)"
+
 
 #: The unit of each number :func:`pfjax.tracking.run` returns (``pfjax track --json`` prints it
 #: with them, :func:`pfjax.cli.records.units`; the vehicle-tracking study's columns take their units

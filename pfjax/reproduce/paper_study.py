@@ -25,7 +25,7 @@ from pfjax.reproduce.paper_config import PaperStudy
 from pfjax.reproduce.paper_report import report
 from pfjax.reproduce.paper_runs import part_paper_runs, part_pi_readings, part_synthesis, source_test
 from pfjax.sim.scenario import PAPER_TESTS
-from pfjax.tables import COLUMNS, write_parquet
+from pfjax.tables import COLUMNS, H2_CHANNELS, HINF_CHANNELS, write_parquet
 
 #: Units of the study's own Parquet columns (beside :data:`pfjax.tables.COLUMNS`): column -> (unit,
 #: description). Angles in rad unless named ``_deg``; the trackers' gains carry the controller's name.
@@ -65,11 +65,6 @@ UNITS: dict[str, tuple[str, str]] = {
     "sim_converged": ("", "the simulation ends at the predicted equilibrium (within stability.tol_d, tol_theta_deg)"),
 }
 
-#: The design norms' channels (:func:`pfjax.synthesis.slip_design_plant`): a norm or bound is a number
-#: of these channels in SI units (their units differ, so it has no one unit).
-_W = "w = [beta_r rad, beta_f rad, kappa 1/m]"
-_HINF = f"from {_W} to z_inf = [d m, theta_e rad]"
-_H2 = f"from {_W} to z_2 = [d m, theta_e rad, delta rad]"
 #: The PI's gains (:func:`pfjax.controllers.pi_params`), as the ``gain_*`` columns give them.
 _PI_GAINS = "kp_d rad/m, ki_d rad/(m s), kp_theta rad/rad, ki_theta 1/s"
 #: ``summary.json``'s own units, by field name (a field has one meaning wherever it occurs; "1":
@@ -82,10 +77,10 @@ SUMMARY_UNITS: dict[str, str] = {
     "K": "rad/m, rad/rad (K_d, K_theta: delta = K_d d + K_theta theta_e)",
     "alpha": "1 (weight of gamma_inf^2)",
     "beta": "1 (weight of gamma_2^2)",
-    **dict.fromkeys(("gamma_inf", "gamma_inf_certified"), f"1 (H-infinity bound {_HINF})"),
-    "hinf_norm": f"1 (H-infinity norm {_HINF})",
-    **dict.fromkeys(("gamma_2", "gamma_2_certified"), f"1 (H2 bound {_H2})"),
-    "h2_norm": f"1 (H2 norm {_H2})",
+    **dict.fromkeys(("gamma_inf", "gamma_inf_certified"), f"H-infinity bound {HINF_CHANNELS}"),
+    "hinf_norm": f"H-infinity norm {HINF_CHANNELS}",
+    **dict.fromkeys(("gamma_2", "gamma_2_certified"), f"H2 bound {H2_CHANNELS}"),
+    "h2_norm": f"H2 norm {H2_CHANNELS}",
     "objective": "1 (alpha gamma_inf^2 + beta gamma_2^2)",
     "closed_loop_poles": "1/s ([real, imaginary] per pole)",
     "rel_diff": "1 (|pfjax's - source's| / |source's|)",

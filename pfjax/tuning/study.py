@@ -31,7 +31,7 @@ import pandas as pd
 from pfjax.montecarlo.summary import UNITS as MONTE_CARLO_UNITS
 from pfjax.numerics.random import seed_key
 from pfjax.provenance import STAMP_UNITS
-from pfjax.tables import GAINS
+from pfjax.tables import GAINS, H2_CHANNELS, HINF_CHANNELS
 from pfjax.tuning.study_config import TuningStudy, ga_options, heldout_study, methods, problem_list
 
 #: The units of ``tuning_runs.parquet``'s columns (:func:`pfjax.tables.write_parquet`): every
@@ -48,12 +48,6 @@ COLUMNS: dict[str, tuple[str, str]] = {
 
 #: A tuning cost (:mod:`pfjax.tuning.cost`), as :data:`COLUMNS`'s ``best_cost``.
 _COST = f"{COLUMNS['best_cost'][0]} (IAE over the problem's runs: mean, heldout-cvar the CVaR; a failed run +100)"
-#: The design norms' channels (:func:`pfjax.synthesis.slip_design_plant`, with ``int d`` in the
-#: integral designs); a norm is a number of these channels in SI units, which differ: no one unit.
-_W = "w = [beta_r rad, beta_f rad, kappa 1/m]"
-_Z_INF = "z_inf = [d m, theta_e rad(, int d m s)]"
-_HINF = f"from {_W} to {_Z_INF} (SI units: no one unit)"
-_H2 = f"from {_W} to [{_Z_INF}; delta rad] (SI units: no one unit)"
 _PASSES = "forward-pass equivalents (a value-only rollout 1, one with its gradient 1 + D forward mode, 4 reverse)"
 
 #: ``summary.json``'s units by field name (a field has one meaning wherever it occurs; "1":
@@ -90,10 +84,10 @@ SUMMARY_UNITS: dict[str, object] = {
     "K": "rad/m, rad/rad (delta = K [d, theta_e]); integral designs rad/m, rad/rad, rad/(m s) (K [d, theta_e, int d])",
     "train_cost": f"{COLUMNS['best_cost'][0]} (mean IAE over the paper line's or the training set's runs, a failed run +100)",
     "rollouts_per_eval": "rollouts per cost evaluation",
-    "gamma_inf": f"H-infinity bound {_HINF}",
-    "hinf_norm": f"H-infinity norm {_HINF}, the largest over the design's plants",
-    "gamma_2": f"H2 bound {_H2}",
-    "h2_norm": f"H2 norm {_H2}, the largest over the design's plants",
+    "gamma_inf": f"H-infinity bound {HINF_CHANNELS}",
+    "hinf_norm": f"H-infinity norm {HINF_CHANNELS}, the largest over the design's plants",
+    "gamma_2": f"H2 bound {H2_CHANNELS}",
+    "h2_norm": f"H2 norm {H2_CHANNELS}, the largest over the design's plants",
     "closed_loop_poles": "1/s ([real, imaginary] per pole)",
     "max_vertex_pole_real": "1/s (largest real part of a closed-loop pole over the design's plants)",
     "alpha": "1 (weight of gamma_inf^2)",
