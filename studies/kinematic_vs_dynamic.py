@@ -17,11 +17,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
-import pfjax.cache
-from pfjax.cli.study import NAMED_OUT, default_out, script_parser
+from pfjax.cli.study import NAMED_OUT, default_out, script_parser, start_script
 
-pfjax.cache.enable()
+start_script(x64=False)
 
 from pfjax.dynamic_study import config as study_config  # noqa: E402
 from pfjax.dynamic_study.report import report  # noqa: E402

@@ -18,16 +18,9 @@ import sys
 import time
 from pathlib import Path
 
-import jax
-import matplotlib
+from pfjax.cli.study import NAMED_OUT, default_out, script_parser, start_script
 
-import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
-import pfjax.cache
-from pfjax.cli.study import NAMED_OUT, default_out, script_parser
-
-jax.config.update("jax_enable_x64", True)
-pfjax.cache.enable()
-matplotlib.use("Agg")
+start_script()
 
 from tqdm import tqdm  # noqa: E402
 

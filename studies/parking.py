@@ -18,16 +18,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import jax
-import matplotlib
+import pfjax
+from pfjax.cli.study import NAMED_OUT, default_out, script_parser, start_script
 
-import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
-import pfjax.cache
-from pfjax.cli.study import NAMED_OUT, default_out, script_parser
-
-jax.config.update("jax_enable_x64", True)
-pfjax.cache.enable()
-matplotlib.use("Agg")
+start_script()
 
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.parking.study_config import load  # noqa: E402

@@ -37,14 +37,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import jax
+from pfjax.cli.study import default_out, script_parser, start_script
 
-import pfjax  # before JAX: one CPU device per core
-import pfjax.cache
-from pfjax.cli.study import default_out, script_parser
-
-jax.config.update("jax_enable_x64", True)
-pfjax.cache.enable()
+start_script(figures=False)
 
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.rare import verification  # noqa: E402

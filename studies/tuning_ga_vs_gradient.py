@@ -17,14 +17,9 @@ import json
 import sys
 from pathlib import Path
 
-import jax
+from pfjax.cli.study import default_out, script_parser, start_script
 
-import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
-import pfjax.cache
-from pfjax.cli.study import default_out, script_parser
-
-jax.config.update("jax_enable_x64", True)
-pfjax.cache.enable()
+start_script()
 
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.outputs import OutputDir  # noqa: E402

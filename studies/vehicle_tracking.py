@@ -17,16 +17,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import jax
-import matplotlib
+from pfjax.cli.study import NAMED_OUT, default_out, script_parser, start_script
 
-import pfjax  # before JAX: one CPU device per core (pfjax.default_host_devices)
-import pfjax.cache
-from pfjax.cli.study import NAMED_OUT, default_out, script_parser
-
-jax.config.update("jax_enable_x64", True)
-pfjax.cache.enable()
-matplotlib.use("Agg")
+start_script()
 
 from pfjax.errors import command_main  # noqa: E402
 from pfjax.jsonio import dumps  # noqa: E402

@@ -57,6 +57,24 @@ def first_paragraph(doc: str | None) -> str:
     return " ".join(text.split())
 
 
+def start_script(*, x64: bool = True, figures: bool = True) -> None:
+    """The start of a study script (``studies/*.py``), before anything imports the simulator (importing
+    this module has imported :mod:`pfjax`: one CPU device per core): float64 for the whole process (``x64``: the
+    studies compare to references at 1e-9), pfjax's persistent compilation cache
+    (:func:`pfjax.cache.enable`), and figures drawn without a display (``figures``: matplotlib's Agg)."""
+    import jax
+
+    import pfjax.cache
+
+    if x64:
+        jax.config.update("jax_enable_x64", True)
+    pfjax.cache.enable()
+    if figures:
+        import matplotlib
+
+        matplotlib.use("Agg")
+
+
 def script_parser(doc: str | None, *, config: Path | None, out_default: str, quick: str) -> Parser:
     """The parser of a study script (``studies/*.py``): its docstring's first paragraph as the
     description; ``--config`` (default ``config``, the TOML beside the script) and ``--set`` (both
