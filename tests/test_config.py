@@ -7,10 +7,8 @@ import copy
 import hashlib
 import json
 import math
-import subprocess
-import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Literal
 
 import pytest
@@ -207,8 +205,23 @@ def test_config_hash():
 # ------------------------------------------------------------------ the study script's CLI
 
 
-def run_study(*args, timeout=120):
-    return subprocess.run([sys.executable, str(STUDY), *args], capture_output=True, text=True, timeout=timeout)
+def run_study(*args) -> SimpleNamespace:
+    """The study script's ``main`` (its return value is the script's exit code) in this process, its
+    stdout and stderr captured. The script as a process: tests/test_paper_config_audit.py."""
+    import contextlib
+    import importlib.util
+    import io
+
+    spec = importlib.util.spec_from_file_location("paper_reproduction_script", STUDY)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = script.main(list(args))
+        except SystemExit as e:  # argparse's own errors
+            code = e.code
+    return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
 
 
 STUDY_BAD = {  # --set override -> the key the message must name
@@ -221,14 +234,13 @@ STUDY_BAD = {  # --set override -> the key the message must name
 
 @pytest.fixture(scope="module")
 def study_errors(tmp_path_factory):
-    """Each bad invocation in its own empty parent directory, run two at a time."""
+    """Each bad invocation in its own empty parent directory."""
     jobs = {o: tmp_path_factory.mktemp("bad") for o in STUDY_BAD}
     missing = tmp_path_factory.mktemp("missing")
     jobs["<missing config>"] = missing
     argv = {o: ["--set", o, "--out", str(d / "out")] for o, d in jobs.items() if o in STUDY_BAD}
     argv["<missing config>"] = ["--config", str(missing / "missing.toml"), "--out", str(missing / "out")]
-    with ThreadPoolExecutor(max_workers=2) as ex:
-        res = dict(zip(argv, ex.map(lambda a: run_study(*a), argv.values())))
+    res = {o: run_study(*a) for o, a in argv.items()}
     return {o: (res[o], jobs[o]) for o in jobs}
 
 

@@ -97,7 +97,8 @@ def test_two_processes_give_the_runs_of_two_devices_and_only_process_0_writes(tm
     assert lead["process_count"] == 2 and lead["out"] == str(tmp_path / "p0")
     assert not (tmp_path / "p1").exists() and not list(scratch.iterdir())  # process 1 kept nothing
     one = _cli(
-        ["study", str(cfg), "--out", str(tmp_path / "one"), "--quiet", "--json"], {**env, "PFJAX_HOST_DEVICES": "2"}
+        ["study", str(cfg), "--out", str(tmp_path / "one"), "--quiet", "--json", "--no-report"],
+        {**env, "PFJAX_HOST_DEVICES": "2"},
     )
     out, err = one.communicate(timeout=600)
     assert one.returncode == 0, err[-2000:]

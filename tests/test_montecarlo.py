@@ -400,7 +400,12 @@ def test_few_runs_are_sampled_by_the_chunk_program_exactly():
         np.testing.assert_array_equal(few.columns[k], own.columns[k])
 
 
-def test_cli_study_and_bad_input(tmp_path):
+def test_cli_study_and_bad_input(tmp_path, capsys):
+    """``pfjax study`` as a process: its JSON on stdout and its outputs. Bad input through the same
+    entry point (:func:`pfjax.cli.main`, whose return value is the process's exit code): exit code 2,
+    one line on stderr naming the key or flag, nothing on stdout, nothing written."""
+    from pfjax.cli import main
+
     cfg = tmp_path / "s.toml"
     cfg.write_text(
         'name = "cli"\nn_runs = 4\nseed = 1\nchunk_size = 4\n[sim]\nhorizon = 2.0\nsteady_window = 1.0\n'
@@ -417,20 +422,17 @@ def test_cli_study_and_bad_input(tmp_path):
     assert head["n_runs_total"] == 4 and "st" in head["controllers"]
     assert head["units"]["iae_mean"].startswith("m s") and head["units"]["slip_margin_deg"] == "deg"
     assert (out / "runs.parquet").is_file() and (out / "summary.json").is_file()
+    capsys.readouterr()
     for args, flag in (
         (["--set", "n_runs=0"], "n_runs"),
         (["--set", "sim.dtt=0.1"], "sim.dtt"),
         (["--set", "nokey"], "--set"),
     ):
         o2 = tmp_path / "bad"
-        r = subprocess.run(
-            exe + ["study", str(cfg), "--out", str(o2), "--quiet"] + args, capture_output=True, text=True
-        )
-        assert r.returncode == 2 and r.stdout == "" and len(r.stderr.strip().splitlines()) == 1 and flag in r.stderr, (
-            r.stderr
-        )
+        code = main(["study", str(cfg), "--out", str(o2), "--quiet"] + args)
+        std = capsys.readouterr()
+        assert code == 2 and std.out == "" and len(std.err.strip().splitlines()) == 1 and flag in std.err, std.err
         assert not o2.exists()
-    r = subprocess.run(exe + ["study", str(tmp_path / "missing.toml")], capture_output=True, text=True)
-    assert r.returncode == 2 and "not found" in r.stderr
-    r = subprocess.run(exe + ["report", str(cfg), "--out", str(out), "--set", "seed=2"], capture_output=True, text=True)
-    assert r.returncode == 2 and "config hash differs" in r.stderr
+    assert main(["study", str(tmp_path / "missing.toml")]) == 2 and "not found" in capsys.readouterr().err
+    assert main(["report", str(cfg), "--out", str(out), "--set", "seed=2"]) == 2
+    assert "config hash differs" in capsys.readouterr().err

@@ -54,7 +54,10 @@ import pfjax  # before JAX: sets the host device count from PFJAX_HOST_DEVICES
 import jax
 assert jax.device_count() == int(sys.argv[1]), jax.devices()
 from pfjax.cli import main
-sys.exit(main(["study", sys.argv[2], "--out", sys.argv[3], "--no-report", "--quiet"]))
+for cfg, out in zip(sys.argv[2::2], sys.argv[3::2]):  # (config, --out) pairs, one study after the other
+    rc = main(["study", cfg, "--out", out, "--no-report", "--quiet"])
+    if rc:
+        sys.exit(rc)
 """
 
 
@@ -239,9 +242,31 @@ def test_one_run_alone_gives_its_numbers_in_a_batch(model):
         _assert_same_runs(unstack(ref, i), jax.device_get(run_one(unstack(batch, i))), f"run {i}")
 
 
+@pytest.fixture(scope="module")
+def device_runs(tmp_path_factory):
+    """The study (float32 and float64) run by a process with one host device and by a process with
+    two: ``{devices: directory}``, each holding ``float32/`` and ``float64/`` outputs."""
+    base = tmp_path_factory.mktemp("devices")
+    pairs = []
+    for dtype in ("float32", "float64"):
+        cfg = base / f"{dtype}.toml"
+        cfg.write_text(STUDY.format(dtype=dtype))
+        pairs.append((cfg, dtype))
+    dirs = {}
+    for n in (1, 2):
+        env = dict(os.environ, PFJAX_HOST_DEVICES=str(n), XLA_FLAGS="", JAX_PLATFORMS="cpu")
+        dirs[n] = base / f"dev{n}"
+        args = [str(a) for cfg, dtype in pairs for a in (cfg, dirs[n] / dtype)]
+        r = subprocess.run(
+            [sys.executable, "-c", CHILD, str(n), *args], env=env, capture_output=True, text=True, timeout=600
+        )
+        assert r.returncode == 0, r.stderr[-3000:]
+    return dirs
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("dtype", ["float32", "float64"])
-def test_one_and_two_host_devices_give_the_same_runs(tmp_path, dtype):
+def test_one_and_two_host_devices_give_the_same_runs(device_runs, dtype):
     """45 runs (padded to 64, split 32 + 32 over two devices) of the PI controller with OU slip and
     sensor noise. float64: the run tables are bit-identical. float32: the sampled parameters,
     statuses, success flags and failure times are identical, and every metric agrees to 1e-5
@@ -253,22 +278,7 @@ def test_one_and_two_host_devices_give_the_same_runs(tmp_path, dtype):
     512-bit vectors pfjax asks for on AVX-512 CPUs (pfjax.numerics.compiler) in 1-35 of the 45 runs
     per metric, at most 3.2e-6 relative, except the late maximum of |d|: 1.2e-7 m on 8 mm (1.5e-5
     relative, half an ulp of a 2 m coordinate)."""
-    cfg = tmp_path / "s.toml"
-    cfg.write_text(STUDY.format(dtype=dtype))
-    tables = {}
-    for n in (1, 2):
-        env = dict(os.environ, PFJAX_HOST_DEVICES=str(n), XLA_FLAGS="", JAX_PLATFORMS="cpu")
-        out = tmp_path / f"dev{n}"
-        r = subprocess.run(
-            [sys.executable, "-c", CHILD, str(n), str(cfg), str(out)],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-        assert r.returncode == 0, r.stderr[-3000:]
-        tables[n] = pd.read_parquet(out / "runs.parquet")
-    one, two = tables[1], tables[2]
+    one, two = (pd.read_parquet(device_runs[n] / dtype / "runs.parquet") for n in (1, 2))
     assert len(one) == 45 and one["iae"].dtype == np.dtype(dtype)
     if dtype == "float64":
         pd.testing.assert_frame_equal(one, two, check_exact=True)

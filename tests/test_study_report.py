@@ -122,6 +122,20 @@ def study(tmp_path_factory):
     return spec, out, summary
 
 
+def _toml(v) -> str:
+    """A TOML inline value."""
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {_toml(x)}" for k, x in v.items()) + "}"
+    if isinstance(v, list):
+        return "[" + ", ".join(map(_toml, v)) + "]"
+    return json.dumps(v)
+
+
+def _config_sets() -> list[str]:
+    """CONFIG as ``--set`` values of the command line."""
+    return [f"{k}={_toml(v)}" for k, v in CONFIG.items()]
+
+
 def _in_process(spec, out, summary, dest):
     """The figures the worker drew, drawn again in this process into ``dest``."""
     runs = pd.read_parquet(out / "runs.parquet")
@@ -153,14 +167,7 @@ def test_cli_study_starts_the_worker_before_its_imports_and_draws_the_same_repor
         lambda self, _init=figure_worker.FigureWorker.__init__, **kw: (started.append(1), _init(self, **kw))[1],
     )
 
-    def toml(v):  # a TOML inline value
-        if isinstance(v, dict):
-            return "{" + ", ".join(f"{k} = {toml(x)}" for k, x in v.items()) + "}"
-        if isinstance(v, list):
-            return "[" + ", ".join(map(toml, v)) + "]"
-        return json.dumps(v)
-
-    sets = [f"{k}={toml(v)}" for k, v in CONFIG.items()]
+    sets = _config_sets()
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         assert (
@@ -419,12 +426,10 @@ def test_study_without_report_streams_and_gives_the_same_summary(study, tmp_path
 def test_worst_case_figure_asked_of_the_worker_by_the_last_search_equals_the_one_drawn_here(tmp_path, monkeypatch):
     """With a falsifier, the worker draws the worst-case figure (asked for by whichever thread ends
     the search): every figure of the report is the same as a study's without a worker."""
-    data = {
+    data = {  # CONFIG's simulation (8 runs, padded to 32 as its 30): the fixture's compiled simulator
         **CONFIG,
         "n_runs": 8,
         "chunk_size": 8,
-        "sim": {"horizon": 2.0, "steady_window": 1.0},
-        "success": {"from_s": 1.0},
         "margin": {"enabled": False},
         "controllers": [{"name": "lmi", "type": "lmi"}],
         "falsifier": {"enabled": True, "path": "line", "n_restarts": 2, "steps": 2},
@@ -542,15 +547,13 @@ def test_a_study_with_its_report_does_not_import_scipy_stats(tmp_path):
     import sys
 
     cfg = tmp_path / "s.toml"
-    cfg.write_text(
-        'name = "imports"\nn_runs = 8\nseed = 1\nchunk_size = 8\n[sim]\nhorizon = 2.0\nsteady_window = 1.0\n'
-        "[success]\nfrom_s = 1.0\n[margin]\namplitudes_deg = [0.0, 10.0]\nn_per_amplitude = 4\n"
-        '[[paths]]\nkind = "line"\n[[controllers]]\nname = "st"\ntype = "stanley"\n'
-        '[[controllers]]\nname = "pp"\ntype = "pure_pursuit"\n'
-    )
+    cfg.write_text('name = "imports"\n')
     out = tmp_path / "o"
     cmd = [sys.executable, "-X", "importtime", "-m", "pfjax.cli", "study", str(cfg), "--out", str(out), "--quiet"]
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    # the module's study (two controllers, a margin sweep) on this process's one device: the
+    # simulators the `study` fixture compiled, loaded from the persistent cache
+    cmd += sum((["--set", a] for a in _config_sets()), [])
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env={**os.environ, "PFJAX_HOST_DEVICES": "1"})
     assert r.returncode == 0, r.stderr[-3000:]
     assert (out / "report.html").is_file()
     imported = {line.rsplit("|", 1)[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time:")}
