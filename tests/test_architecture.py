@@ -111,6 +111,20 @@ def test_nothing_in_the_library_imports_the_command_line():
     assert not offenders, offenders
 
 
+def test_the_domain_does_not_import_the_api_layer():
+    """``pfjax.api`` is the Python entry layer over the domain packages (as the command line is
+    over it): only the package's top, the API and the command line import it."""
+    graph = _edges()
+    offenders = sorted(
+        m
+        for m, ts in graph.items()
+        if m != "pfjax"
+        and not m.startswith(("pfjax.api", "pfjax.cli"))
+        and any(t == "pfjax.api" or t.startswith("pfjax.api.") for t in ts)
+    )
+    assert not offenders, offenders
+
+
 def test_the_library_has_no_import_circles():
     graph = _edges()
     library = {m: {t for t in ts if not t.startswith("pfjax.cli")} for m, ts in graph.items()}

@@ -40,12 +40,13 @@ from pathlib import Path
 
 import numpy as np
 
-from pfjax.api.studies import dotted, rare_event
 from pfjax.jsonio import dumps
 from pfjax.montecarlo.config import StudySpec, load_study, study_hash
+from pfjax.montecarlo.runner import controllers_of
 from pfjax.outputs import OutputDir
 from pfjax.provenance import STAMP_UNITS, stamp
 from pfjax.rare.reference import line_offset_failure_probability
+from pfjax.rare.study import check_budget, estimate_study
 from pfjax.rare.study import units as estimate_units
 
 #: the known case's state feedback ``[k_d rad/m, k_θ rad/rad]`` (the default state feedback)
@@ -151,11 +152,20 @@ def units(known_spec: StudySpec, study_spec: StudySpec) -> dict[str, str]:
     return {**STAMP_UNITS, **estimate_units(known_spec), **estimate_units(study_spec), **UNITS}
 
 
-def estimate(config, name: str, **kw) -> dict:
-    """:func:`pfjax.rare_event` for controller ``name`` (``kw`` its arguments and overrides): the
-    estimate's fields and ``wall_s``, the call's wall time (s)."""
+def estimate(config, name: str, *, paths: list | None = None, **rare) -> dict:
+    """Controller ``name``'s failure probability in the study ``config`` (a TOML path or a config
+    dict), ``rare`` overriding its ``[rare_event]`` settings (``method``, ``seed``,
+    ``max_rollouts``, ``threshold``, ...) and ``paths`` its paths, computed as
+    :func:`pfjax.rare_event` computes it (:func:`pfjax.rare.study.estimate_study`, after
+    :func:`pfjax.rare.study.check_budget`): the estimate's fields and ``wall_s``, the call's wall
+    time (s)."""
     t0 = time.time()
-    r = rare_event(config, controller=name, progress=False, **kw)["controllers"][name]
+    values = {f"rare_event.{k}": v for k, v in rare.items()}
+    if paths is not None:
+        values["paths"] = paths
+    spec = _spec(config, values)
+    check_budget(spec)
+    r = estimate_study(spec, controllers_of(spec), names=[name], progress=False)[name]
     keep = ("p_fail", "ci95", "rel_error", "n_rollouts", "method", "status", "warning", "strata", "failure_points")
     r = {k: r[k] for k in keep}
     r["wall_s"] = time.time() - t0
@@ -234,10 +244,7 @@ def starts_comparison(sizes: dict, p: float, log: Log) -> dict:
     config = known_case(KNOWN_STD["1e-6"], sizes["known_budget"], sizes["known_falsifier"])
     out: dict = {"reference": p}
     for how in sizes["starts"]:
-        rs = [
-            estimate(config, "state-feedback", method="is", seed=s, rare_event__starts=how)
-            for s in range(sizes["start_seeds"])
-        ]
+        rs = [estimate(config, "state-feedback", method="is", seed=s, starts=how) for s in range(sizes["start_seeds"])]
         out[how] = {
             "n_rollouts": [r["n_rollouts"] for r in rs],
             "p_fail": [r["p_fail"] for r in rs],
@@ -281,8 +288,9 @@ def _spec(study_config, values: dict | None = None) -> StudySpec:
 
 
 def _budget(sizes: dict) -> dict:
-    """``study_budget`` as :func:`pfjax.rare_event` overrides (``rare_event__max_rollouts``, ...)."""
-    return {f"rare_event__{k}": v for k, v in sizes["study_budget"].items()}
+    """``study_budget``: the study's ``[rare_event]`` settings overridden (``max_rollouts``, ...);
+    a method's own ``max_rollouts`` (plain Monte Carlo's) replaces its ``max_rollouts``."""
+    return dict(sizes["study_budget"])
 
 
 def study(study_config, names: list[str], sizes: dict, log: Log) -> dict:
@@ -293,11 +301,9 @@ def study(study_config, names: list[str], sizes: dict, log: Log) -> dict:
     budget, out = _budget(sizes), {}
     for name in names:
         path = {m: estimate(study_config, name, method=m, **budget) for m in ("is", "subset")}
-        band = {
-            m: estimate(study_config, name, method=m, rare_event__threshold=BAND, **budget) for m in ("is", "subset")
-        }
+        band = {m: estimate(study_config, name, method=m, threshold=BAND, **budget) for m in ("is", "subset")}
         band["mc"] = estimate(
-            study_config, name, method="mc", max_rollouts=sizes["mc_study"], rare_event__threshold=BAND, **budget
+            study_config, name, **{**budget, "method": "mc", "max_rollouts": sizes["mc_study"]}, threshold=BAND
         )
         out[name] = {"path": path, "band": band}
         log(f"{name} {_short(path)} {_short(band)}")
@@ -309,7 +315,7 @@ def sine_check(study_config, sizes: dict, log: Log) -> dict:
     importance sampling and subset simulation."""
     budget = _budget(sizes)
     out = {
-        m: estimate(study_config, "pi-table3", method=m, paths=[{"kind": "sine"}], **budget, **kw)
+        m: estimate(study_config, "pi-table3", paths=[{"kind": "sine"}], **{**budget, "method": m, **kw})
         for m, kw in (("mc", {"max_rollouts": sizes["mc_sine"]}), ("is", {}), ("subset", {}))
     }
     log(f"sine check {_short(out)}")
@@ -329,7 +335,7 @@ def run(
     ``sine_check`` and ``wall_s`` (s, in all)."""
     t0 = time.time()
     study_spec = _spec(study_config)
-    budget = {dotted(k): v for k, v in _budget(sizes).items()}
+    budget = {f"rare_event.{k}": v for k, v in _budget(sizes).items()}
     names = [c.name for c in _spec(study_config, budget).controllers]
     known_spec = load_study(data=known_case(KNOWN_STD["1e-4"], sizes["known_budget"]))[0]
     config = verification_config(sizes, study_spec)
