@@ -156,9 +156,6 @@ def geometry_part(cfg: dict, key) -> tuple[pd.DataFrame, dict]:
         ]
         if (~inside).any()
         else None,
-        "counterexamples_only_outside_bound": bool(
-            (on[~inside].p.abs() * np.radians(on[~inside].gamma_max_deg) > math.pi / 2).all()
-        ),
         "wrong_distance_min_z_err": float(geo_df[geo_df.kind == "wrong_distance"].z_err.min()),
     }
     return geo_df, summary
