@@ -18,6 +18,7 @@ from pfjax.errors import EXIT_INTERRUPTED, EXIT_USAGE, InputError
 from pfjax.montecarlo.chunks import partial_dir
 from pfjax.montecarlo.config import load_study
 from pfjax.montecarlo.study import run
+from pfjax.montecarlo.summary import missing_key
 from pfjax.outputs import (
     MARKER,
     TEMP_MARK,
@@ -347,7 +348,16 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
     code, err = _cli(["report", str(study_toml), "--out", str(out)], capsys)
     assert code == 0 and (out / "report.html").is_file()
     assert read_marker(out)["files"].keys() >= {"report.html", "runs.parquet", "summary.json"}
-    for name, text in (("runs.parquet", b"not parquet"), ("summary.json", b"{")):
+    summary = json.loads((out / "summary.json").read_text())
+    assert missing_key(summary) is None  # what the study writes has every key a report reads
+    name = next(iter(summary["controllers"]))
+    del summary["controllers"][name]["success_rate"]
+    edited = [json.dumps(summary).encode(), b'{"controllers": {}}', b"[]"]
+    for name, text in (
+        ("runs.parquet", b"not parquet"),
+        ("summary.json", b"{"),
+        *(("summary.json", t) for t in edited),
+    ):
         saved = (out / name).read_bytes()
         (out / name).write_bytes(text)
         before = _tree(out)
@@ -363,8 +373,9 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
     (out / "runs.parquet").unlink()
     code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)
     assert code == EXIT_USAGE and "runs.parquet is missing" in err[0]
-    code, err = _cli(["report", str(study_toml), "--out", str(tmp_path / "nothing")], capsys)
+    code, err = _cli(["report", str(study_toml), "--set", "seed=5", "--out", str(tmp_path / "nothing")], capsys)
     assert code == EXIT_USAGE and "no finished study" in err[0]
+    assert f"(run `pfjax study {study_toml} --set seed=5 --out {tmp_path / 'nothing'}` first)" in err[0]
 
 
 def test_a_bad_config_leaves_no_partial_directory_behind(study_toml, tmp_path, capsys):

@@ -275,7 +275,11 @@ def _cmd_report(args) -> dict:
     out = default_out(args.out, spec.name)
     marker = read_marker(out) if out.is_dir() else None
     if marker is None or marker.get("command") != "study":
-        raise UsageError(f"--out: no finished study in {out} (run `pfjax study {_source(args)}` first)")
+        import shlex
+
+        again = [*(a for kv in args.set for a in ("--set", kv)), *(("--out", str(args.out)) if args.out else ())]
+        command = " ".join(["pfjax study", _source(args), *map(shlex.quote, again)])
+        raise UsageError(f"--out: no finished study in {out} (run `{command}` first)")
     if marker.get("config_sha256") != study_hash(spec):
         raise UsageError(
             f"config: {_source(args)} (with --set) does not match the study in {out} (config hash differs)"

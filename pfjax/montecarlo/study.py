@@ -17,7 +17,7 @@ import pandas as pd
 from pfjax.montecarlo.config import StudySpec
 from pfjax.montecarlo.runner import margin_sweep, run_study
 from pfjax.montecarlo.side_jobs import SideJobs
-from pfjax.montecarlo.summary import summarize
+from pfjax.montecarlo.summary import missing_key, summarize
 from pfjax.report import figure_worker
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -283,8 +283,10 @@ def read_finished(out) -> tuple[dict, pd.DataFrame]:
             raise InputError(f"--out: {f} cannot be read ({one_line(e)}); re-run the study") from None
 
     summary = load("summary.json", lambda f: json.loads(f.read_text(encoding="utf-8")))
-    if not isinstance(summary, dict) or not isinstance(summary.get("controllers"), dict):
-        raise InputError(f"--out: {out / 'summary.json'} is not a study summary; re-run the study")
+    key = missing_key(summary)
+    if key is not None:
+        what = f" (no {key})" if key else ""
+        raise InputError(f"--out: {out / 'summary.json'} is not a study summary{what}; re-run the study")
     return summary, load("runs.parquet", read_runs)
 
 

@@ -36,6 +36,14 @@ from pfjax.tables import COLUMNS, GAINS
 
 QUANTILE_METRICS = [m for m in METRIC_NAMES if m != "success"]
 
+#: The keys :func:`summarize` always writes, at the top and in each controller's block (what a
+#: report of a finished study reads: :func:`missing_key`).
+SUMMARY_KEYS = ("study", "n_runs_total", "seed", "config_sha256", "dtype", "config", "controllers", "units")
+CONTROLLER_KEYS = (
+    *("n", "k", "success_rate", "success_ci95", "iae_mean", "iae_p95", "steady_abs_d_p95", "status_counts"),
+    *("quantiles", "gains", "per_path", "statement", "slip_margin", "failure_drivers", "success_by_param"),
+)
+
 #: ``summary.json``'s units by field name (a field has one meaning wherever it occurs; "1":
 #: dimensionless). :func:`summary_units` adds the units that depend on the study: the metrics'
 #: (``quantiles``), the sampled parameters' (``success_by_param``) and the worst-case objective's.
@@ -193,6 +201,24 @@ def driver_table(df: pd.DataFrame, params: list[str]) -> pd.DataFrame:
     every metric statistic: a failed run's IAE stops at its failure, and one that fails at once has
     an IAE of 0, which would rank it as the best run."""
     return failure_drivers(df.assign(iae=df["iae"].where(df["status"] == "ok")), params, metric="iae")
+
+
+def missing_key(summary) -> str | None:
+    """The first of :data:`SUMMARY_KEYS`, or ``controllers.<name>.<key>`` of :data:`CONTROLLER_KEYS`,
+    that ``summary`` (a parsed ``summary.json``) lacks; ``""`` if it is not a JSON object, None if
+    none is missing."""
+    if not isinstance(summary, dict):
+        return ""
+    top = [k for k in SUMMARY_KEYS if k not in summary]
+    if top or not isinstance(summary["controllers"], dict):
+        return top[0] if top else "controllers"
+    for name, block in summary["controllers"].items():
+        if not isinstance(block, dict):
+            return f"controllers.{name}"
+        keys = [k for k in CONTROLLER_KEYS if k not in block]
+        if keys:
+            return f"controllers.{name}.{keys[0]}"
+    return None
 
 
 def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict, wall_s: float) -> dict:

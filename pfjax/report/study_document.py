@@ -29,7 +29,12 @@ _DRIVERS_NOTE = (
 )
 _STATUS_NOTE = (
     "Every run is counted: a run succeeds only if it reaches the end of the horizon (status ok) inside the band. "
-    "Failed runs are listed below and count as +∞ in the distributions (their metrics stop at the failure)."
+    "Failed runs are listed below and count as +∞ in the figures' distributions; the tables' IAE and steady |d| "
+    "statistics are over the runs with status ok (a failed run's metrics stop at its failure)."
+)
+_HEADLINE_NOTE = (
+    "Success counts every run. IAE and steady |d| are over the runs with status ok (a failed run's metrics stop at "
+    "its failure; see Run status below)."
 )
 _REPRO_NOTE = (
     "Same config (hash) and seed give a bit-identical runs.parquet and margin.parquet, whatever the chunk size "
@@ -104,6 +109,7 @@ def _headline_blocks(summary: dict, colors: dict, axes: list[str]) -> list[D.Blo
     return [
         D.Heading("Headline per controller", anchor="headline"),
         D.Table(head, T.headline_rows(summary, colors, axes)),
+        D.Paragraph(_HEADLINE_NOTE, style="note"),
         D.Heading("What the sample supports (95 % confidence)", level=3),
         D.Bullets([f"**{n}**: {c['statement']['text']}" for n, c in ctrl.items()], [colors[n] for n in ctrl]),
         D.Heading("Per path", anchor="paths"),
