@@ -159,6 +159,9 @@ def monte_carlo_figure(df):
     axs[0].legend(fontsize=8)
     counts = df.groupby(["schedule", "status"], sort=False).size().unstack(fill_value=0)
     counts.plot.bar(ax=axs[1], rot=0)
+    # the schedule's name only ("GA best"): its parameters are in the left panel's legend
+    axs[1].set_xticklabels([str(s).split(":")[0] for s in counts.index])
+    axs[1].set_xlabel("schedule (parameters: left legend)")
     axs[1].set_ylabel("runs")
     axs[1].legend(fontsize=7)
     fig.tight_layout()
