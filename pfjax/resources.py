@@ -64,9 +64,10 @@ def whole_steps(horizon: float, dt: float, key: str = "horizon") -> int:
     n = horizon / dt
     if abs(n - round(n)) > STEPS_RTOL * n:
         lo, hi = math.floor(n) * dt, math.ceil(n) * dt
+        g = lambda x: f"{x:.15g}"  # every digit the value has (20.0000001 is not 20), not float noise
         raise InputError(
-            f"{key}: must be a whole number of steps dt = {dt:g} s, got {horizon:g} s = {n:.6g} steps "
-            f"(e.g. {lo:g} or {hi:g} s)",
+            f"{key}: must be a whole number of steps dt = {g(dt)} s, got {g(horizon)} s = {n:.10g} steps "
+            f"(e.g. {g(lo)} or {g(hi)} s)",
             key,
         )
     return int(round(n))

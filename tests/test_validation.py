@@ -63,6 +63,10 @@ CLI_CASES = [
     (SIM + ["--delta-max-deg", "0"], "--delta-max-deg: must be > 0 deg, got 0"),
     (SIM + ["--speed", "-1"], "--speed: must be > 0 m/s, got -1"),
     (SIM + ["--wheelbase", "0"], "--wheelbase: must be > 0 m, got 0"),
+    # a design controller is made at --speed and --wheelbase: they are checked before the synthesis
+    (SIM[:-1] + ["mixed", "--speed", "nan"], "--speed: expected a finite number, got nan"),
+    (SIM[:-1] + ["mixed", "--speed", "0"], "--speed: must be > 0 m/s, got 0"),
+    (SIM[:-1] + ["polytopic-integral", "--wheelbase", "-1"], "--wheelbase: must be > 0 m, got -1"),
     (SIM + ["--dt", "0"], "--dt: must be > 0 s, got 0"),
     (SIM + ["--horizon", "inf"], "--horizon: expected a finite number, got inf"),
     (SIM + ["--dt", "2", "--horizon", "1"], "--horizon: must be >= --dt (2 s), got 1"),
@@ -407,6 +411,9 @@ def test_a_horizon_of_a_fraction_of_a_step_is_refused_everywhere(tmp_path, capsy
 
     with pytest.raises(InputError, match=r"^horizon: must be a whole number of steps dt = 0.01 s, got 0.015 s = 1.5 "):
         SimConfig(dt=0.01, horizon=0.015)
+    with pytest.raises(InputError) as e:  # the value as given, never rounded to the horizon it suggests
+        SimConfig(dt=0.005, horizon=20.0000001)
+    assert "got 20.0000001 s = 4000.00002 steps (e.g. 20 or 20.005 s)" in str(e.value)
     assert SimConfig(dt=0.01, horizon=30.0).n_steps == 3000  # 30 / 0.01 = 2999.9999999999995
     assert SimConfig(dt=0.003, horizon=19.998).n_steps == 6666
     assert main(["simulate", "--path", "line", "--controller", "pi", "--horizon", "20", "--dt", "0.003", "--json"]) == 2

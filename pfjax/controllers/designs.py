@@ -81,9 +81,14 @@ def design_gains(d: DesignEntry, v: float, L: float, key: str, **kw) -> dict:
     """``d.make(v, L, **kw)`` for a controller a study, command or API call asks for under ``key``: a
     synthesis that fails (infeasible, ill-conditioned, a solver error) is an
     :class:`~pfjax.errors.InputError` naming ``key``, with the solver's status and the operating
-    point, in one line (the controller cannot be built, so nothing is run)."""
+    point, in one line (the controller cannot be built, so nothing is run). The operating point
+    is checked first: ``v`` (m/s) and ``L`` (m) finite and positive, an
+    :class:`~pfjax.errors.InputError` naming ``v`` or ``L``."""
+    from pfjax import errors
     from pfjax.errors import InputError, SynthesisError
 
+    errors.numbers("v", v, positive=True, unit=" m/s")
+    errors.numbers("L", L, positive=True, unit=" m")
     try:
         return d.make(v, L, **kw)
     except SynthesisError as e:
