@@ -50,6 +50,39 @@ class InputError(ValueError):
         self.key = key
 
 
+class ArgumentError(InputError, TypeError):
+    """A call with a keyword the function does not take, or without an argument it needs: an
+    :class:`InputError` naming the argument, and a ``TypeError`` as Python's own would be."""
+
+
+def arguments_checked(f):
+    """``f`` (a public API function) whose call is first bound to its signature: an argument it
+    does not take, or one missing, is an :class:`ArgumentError` naming it, with the closest name it
+    takes (``beta_r: pfjax.scenarios takes no such argument (did you mean 'beta_r_deg'?)``)."""
+    import difflib
+    import functools
+    import inspect
+
+    sig = inspect.signature(f)
+    takes = [n for n, p in sig.parameters.items() if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+    where = f"pfjax.{f.__name__}"
+
+    @functools.wraps(f)
+    def checked(*args, **kwargs):
+        try:
+            sig.bind(*args, **kwargs)
+        except TypeError as e:
+            unknown = [k for k in kwargs if k not in sig.parameters]
+            if unknown:
+                hint = difflib.get_close_matches(unknown[0], takes, n=1)
+                also = f" (did you mean {hint[0]!r}?)" if hint else f"; it takes {', '.join(takes)}"
+                raise ArgumentError(f"{unknown[0]}: {where} takes no such argument{also}", unknown[0]) from None
+            raise ArgumentError(f"{where}: {e}") from None
+        return f(*args, **kwargs)
+
+    return checked
+
+
 def is_number(value) -> bool:
     """A real number that is not a boolean (``True`` is not 1 here): a Python or NumPy number (an
     array, even of one number, is not: a value pfjax keeps must be a plain number)."""

@@ -163,6 +163,25 @@ def test_bad_arguments_are_one_line_errors_naming_them(call, key):
     assert "\n" not in msg and re.match(rf"{re.escape(key)}\b", msg), msg
 
 
+@pytest.mark.parametrize("name", [n for n in pfjax.api.__all__ if not isinstance(getattr(pfjax.api, n), type)])
+def test_an_argument_a_function_does_not_take_is_named_with_the_closest_one(name):
+    """As ``--set`` names an unknown key: an InputError (and a TypeError, as Python's own) naming
+    the keyword, before anything runs."""
+    import inspect
+
+    f = getattr(pfjax, name)
+    params = inspect.signature(f).parameters
+    if any(p.kind is p.VAR_KEYWORD for p in params.values()):  # its extra keywords are config keys
+        return
+    first = next(iter(params))
+    with pytest.raises(pfjax.InputError) as e:
+        f(**{first + "x": 1})
+    assert isinstance(e.value, TypeError) and e.value.key == first + "x"
+    assert str(e.value) == f"{first}x: pfjax.{name} takes no such argument (did you mean {first!r}?)"
+    with pytest.raises(TypeError, match=rf"pfjax.{name}: too many positional arguments"):
+        f(*range(len(params) + 1))
+
+
 def test_run_load_and_replay_a_study(tmp_path):
     config = ROOT / "studies" / "robustness_default.toml"
     res = pfjax.run_study(

@@ -11,7 +11,9 @@ A user's script needs nothing else::
     print(pfjax.success_rate(sim))
 
 Every argument is checked as the command line checks it: a bad value raises
-:class:`pfjax.InputError` (a ``ValueError``) whose message starts with the argument's name.
+:class:`pfjax.InputError` (a ``ValueError``) whose message starts with the argument's name, and so
+does a keyword a function does not take (:class:`pfjax.errors.ArgumentError`, also a
+``TypeError``), with the closest name it takes.
 Angles are in degrees where the name ends in ``_deg``, everything else in SI units.
 
 The functions live in small modules by task (:mod:`pfjax.api.distributions`, :mod:`~pfjax.api.design`,

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from pfjax import errors
+from pfjax.errors import arguments_checked
 
 
+@arguments_checked
 def design_mixed(v: float = 1.0, L: float = 0.2, alpha: float = 10.0, beta: float = 1.0, region=None):
     """The mixed H2/H∞ state feedback of the slip plant at speed ``v`` (m/s) and wheelbase ``L``
     (m), minimising ``alpha γ∞² + beta γ₂²`` by LMIs (cvxpy + Clarabel).

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from pfjax import errors
+from pfjax.errors import arguments_checked
 
 
+@arguments_checked
 def uniform(low: float, high: float):
     """A uniform distribution on ``[low, high]`` (for :func:`scenarios`)."""
     from pfjax.montecarlo.config import Dist
@@ -12,6 +14,7 @@ def uniform(low: float, high: float):
     return _dist(Dist, dist="uniform", low=low, high=high)
 
 
+@arguments_checked
 def normal(mean: float, std: float):
     """A normal distribution (for :func:`scenarios`)."""
     from pfjax.montecarlo.config import Dist
@@ -19,6 +22,7 @@ def normal(mean: float, std: float):
     return _dist(Dist, dist="normal", mean=mean, std=std)
 
 
+@arguments_checked
 def truncnormal(mean: float, std: float, low: float, high: float):
     """A normal distribution truncated to ``[low, high]`` (for :func:`scenarios`)."""
     from pfjax.montecarlo.config import Dist
@@ -26,6 +30,7 @@ def truncnormal(mean: float, std: float, low: float, high: float):
     return _dist(Dist, dist="truncnormal", mean=mean, std=std, low=low, high=high)
 
 
+@arguments_checked
 def choice(values):
     """A uniform choice among ``values``, a non-empty list (tuple, 1-D NumPy or JAX array) of numbers
     (for :func:`scenarios`)."""

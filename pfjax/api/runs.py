@@ -7,6 +7,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from pfjax import errors, resources
+from pfjax.errors import arguments_checked
 from pfjax.resources import MAX_STEPS
 
 #: :func:`scenarios`'s arguments -> the study config's keys.
@@ -39,6 +40,7 @@ class Scenarios(NamedTuple):
         return len(self.table)
 
 
+@arguments_checked
 def scenarios(
     path: str = "sine",
     n: int = 1,

@@ -8,6 +8,7 @@ import numpy as np
 
 from pfjax import errors
 from pfjax.api.runs import Scenarios
+from pfjax.errors import arguments_checked
 
 
 class Simulation(NamedTuple):
@@ -70,6 +71,7 @@ def sim_config(config, default=None):
     return config
 
 
+@arguments_checked
 def simulate(
     scenarios: Scenarios, controller="state_feedback", gains=None, config=None, *, trajectories: bool = False
 ) -> Simulation:
@@ -155,6 +157,7 @@ def simulate(
     return Simulation(add_results(t.copy(), res, n), res, e.name, flat)
 
 
+@arguments_checked
 def replay(study, path: str, controller: str, runs, *, trajectories: bool = True) -> Simulation:
     """Simulate runs of a finished study again, with their trajectories: the same scenarios (the
     study's draws for these run indices), gains, settings and precision as the study.
@@ -265,6 +268,7 @@ class SuccessRate(NamedTuple):
         )
 
 
+@arguments_checked
 def success_rate(x, conf: float = 0.95) -> SuccessRate:
     """The success rate of a :class:`Simulation` (or a table with a ``success`` column, or a
     boolean array) with its exact (Clopper-Pearson) ``conf`` interval.

@@ -6,6 +6,7 @@ import re
 from typing import Any, NamedTuple
 
 from pfjax import errors
+from pfjax.errors import arguments_checked
 
 
 class StudyResult(NamedTuple):
@@ -18,6 +19,7 @@ class StudyResult(NamedTuple):
     headline: Any  # pandas DataFrame: one row per controller (success rate, interval, margin)
 
 
+@arguments_checked
 def load_study(out) -> StudyResult:
     """Read a finished study's outputs from its directory ``out``, as ``pfjax report`` reads them.
 
@@ -71,6 +73,7 @@ def _out_dir(out):
     return Path(out)
 
 
+@arguments_checked
 def run_study(
     config,
     out=None,
@@ -135,6 +138,7 @@ def run_study(
     return load_study(out)
 
 
+@arguments_checked
 def rare_event(
     config,
     *,
@@ -167,9 +171,12 @@ def rare_event(
         overrides: config values by key, nested keys with ``__``, as :func:`run_study`.
 
     Returns:
-        ``{"study", "config_sha256", "units", "controllers": {name: {"p_fail", "ci95",
+        ``{"study", "pfjax_version", "config_sha256", "seed", "machine", "cpu_settings", "config",
+        "units", "controllers": {name: {"p_fail", "ci95",
         "rel_error", "n_rollouts", "method", "wall_s", "status", "warning", "strata",
-        "failure_points"}}}`` (:func:`pfjax.rare.study.estimate_controller`): ``ci95`` ``[lo, hi]``,
+        "failure_points"}}}`` (:func:`pfjax.rare.study.estimate_controller`), with the provenance
+        record (:func:`pfjax.provenance.stamp`; ``seed`` is the estimator's, ``rare_event.seed``,
+        ``config`` the validated study): ``ci95`` ``[lo, hi]``,
         ``wall_s`` s; ``status`` the verdict of the importance-sampling checks
         (:mod:`pfjax.rare.check`): ``"ok"``, or the first flagged stratum's ``"disagree"``
         (``rare_event.check = "subset"`` and subset simulation's estimate beyond the 95 %
@@ -190,6 +197,7 @@ def rare_event(
     """
     from pfjax.montecarlo.config import study_hash
     from pfjax.montecarlo.runner import controllers_of
+    from pfjax.provenance import STAMP_UNITS, stamp
     from pfjax.rare import METHODS
     from pfjax.rare.study import check_budget, estimate_study
     from pfjax.rare.study import units as rare_units
@@ -224,10 +232,13 @@ def rare_event(
         raise errors.InputError(str(e).replace("rare_event.max_rollouts", "max_rollouts", 1), "max_rollouts") from None
     controllers = controllers_of(spec)
     chosen = names if controller is None else [controller]
+    config = spec.model_dump(mode="json")
     return {
         "study": spec.name,
+        **stamp(config, spec.rare_event.seed),
         "config_sha256": study_hash(spec),
-        "units": rare_units(spec),
+        "config": config,
+        "units": {**STAMP_UNITS, "seed": "1 (the estimator's seed, rare_event.seed)", **rare_units(spec)},
         "controllers": estimate_study(spec, controllers, names=chosen, progress=progress),
     }
 

@@ -10,8 +10,10 @@ import numpy as np
 from pfjax import errors
 from pfjax.api.runs import prng_key
 from pfjax.api.simulation import resolve_gains, sim_config
+from pfjax.errors import arguments_checked
 
 
+@arguments_checked
 def tune(
     controller: str = "pi",
     scenario: str = "paper-line",
@@ -189,6 +191,7 @@ def _tuned(gains: dict, res) -> dict:
     }
 
 
+@arguments_checked
 def falsify(
     controller: str = "state_feedback",
     path: str = "sine",
