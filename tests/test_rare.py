@@ -25,6 +25,7 @@ from units_check import numbers_without_units
 
 import pfjax
 from pfjax.errors import InputError
+from pfjax.provenance import config_hash
 from pfjax.rare import cross_entropy_is, monte_carlo, subset_simulation
 from pfjax.rare.reference import line_offset_failure_probability
 from pfjax.rare.transform import study_inputs, to_physical, to_standard
@@ -365,6 +366,10 @@ def test_command_line_prints_one_json_object(tmp_path, capsys):
     assert r["method"] == "mc" and r["n_rollouts"] == 1000 and r["p_fail"] == 0.0
     assert r["ci95"][0] == 0.0 and r["ci95"][1] == pytest.approx(1 - 0.025 ** (1 / 1000))
     assert len(obj["config_sha256"]) == 64 and list(tmp_path.iterdir()) == [tmp_path / "rare.toml"]
+    # the provenance every output records: the validated config (which it hashes), the estimator's seed
+    assert obj["seed"] == obj["config"]["rare_event"]["seed"] == 3 and obj["pfjax_version"]
+    assert obj["config_sha256"] == config_hash(obj["config"]) and obj["machine"] and obj["cpu_settings"]
+    assert numbers_without_units(obj) == []
 
 
 @pytest.mark.parametrize(

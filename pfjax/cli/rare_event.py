@@ -4,8 +4,9 @@ down to 1e-6 and below, with its 95 % interval (:func:`pfjax.rare_event`).
     pfjax rare-event CONFIG.toml [--set key=value ...] [--controller NAME] [--method {is,subset,mc}]
                      [--target-rel-error 0.1] [--max-rollouts N] [--seed S] [--json]
 
-Prints ``{"study", "config_sha256", "units", "controllers": {name: {"p_fail", "ci95",
-"rel_error", "n_rollouts", "method", ...}}}``; a progress bar of rollouts on stderr when it is a
+Prints ``{"study", "pfjax_version", "config_sha256", "seed", "machine", "cpu_settings", "config",
+"units", "controllers": {name: {"p_fail", "ci95", "rel_error", "n_rollouts", "method", ...}}}``
+(:func:`pfjax.rare_event`'s result); a progress bar of rollouts on stderr when it is a
 terminal and ``--json`` is not given. Nothing is written to disk.
 """
 
