@@ -21,13 +21,17 @@ def config_hash(cfg: dict) -> str:
 
 
 def machine() -> str:
-    """One line: CPU architecture and OS, the JAX devices, the JAX and Python versions."""
+    """One line: CPU architecture and OS, the JAX devices (of every process, with their number when
+    there are several: the CPUs are then this process's host's), the JAX and Python versions."""
     import jax
 
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    n = jax.process_count()
+    here = f" on process {jax.process_index()}'s host" if n > 1 else ""
+    over = f" over {n} processes" if n > 1 else ""
     return (
-        f"{platform.machine()} {platform.system()}, {cores} CPU(s), {jax.device_count()} {jax.default_backend()} "
-        f"device(s), jax {jax.__version__}, Python {platform.python_version()}"
+        f"{platform.machine()} {platform.system()}, {cores} CPU(s){here}, {jax.device_count()} "
+        f"{jax.default_backend()} device(s){over}, jax {jax.__version__}, Python {platform.python_version()}"
     )
 
 

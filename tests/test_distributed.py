@@ -106,13 +106,16 @@ def test_two_processes_give_the_runs_of_two_devices_and_only_process_0_writes(tm
         pd.testing.assert_frame_equal(
             pd.read_parquet(tmp_path / "p0" / f), pd.read_parquet(tmp_path / "one" / f), check_exact=True
         )
-    strip = lambda s: {k: v for k, v in s.items() if k not in ("wall_s", "timings_s")}
+    strip = lambda s: {k: v for k, v in s.items() if k not in ("wall_s", "timings_s", "machine")}
     a, b = (json.loads((tmp_path / d / "summary.json").read_text()) for d in ("p0", "one"))
     assert strip(a) == strip(b)  # worst-case search and float64 check included (process 0's own device)
+    assert "2 cpu device(s) over 2 processes" in a["machine"] and "process" not in b["machine"]
     assert a["controllers"]["lmi"]["worst_case"]["n_rollouts"] == 4 and a["float64_check"]["checked"]
 
 
-def _pair(cfg, out, env, *extra):
+def _pair(cfg, out, env, *extra, out1=None, extra1=()):
+    """Processes 0 and 1 of one study; process 1 writes nothing, so its ``--out`` (``out1``, default
+    ``out``) matters only for the checks, as on another host; ``extra1``: process 1's own flags."""
     coord = f"127.0.0.1:{_free_port()}"
     procs = [
         _cli(
@@ -120,7 +123,7 @@ def _pair(cfg, out, env, *extra):
                 "study",
                 str(cfg),
                 "--out",
-                str(out),
+                str(out if i == 0 or out1 is None else out1),
                 "--quiet",
                 "--json",
                 "--no-report",
@@ -131,6 +134,7 @@ def _pair(cfg, out, env, *extra):
                 "--process-id",
                 str(i),
                 *extra,
+                *(extra1 if i == 1 else ()),
             ],
             {**env, "PFJAX_HOST_DEVICES": "1"},
         )
@@ -195,13 +199,30 @@ def test_a_refused_resume_stops_every_process_with_one_line(case, tmp_path):
         (partial_dir(out) / "manifest.json").write_text(json.dumps({"config_sha256": "0" * 64, "pfjax_version": "0"}))
         (partial_dir(out) / "runs-p000-c000-0000000000.parquet").write_bytes(b"a finished chunk")
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
-    procs, outs = _pair(cfg, out, {**os.environ, "PFJAX_FIGURE_WORKER": "0"})
+    # process 1's --out as on another host (its own, empty): only process 0 refuses, and tells it at once
+    procs, outs = _pair(
+        cfg, out, {**os.environ, "PFJAX_FIGURE_WORKER": "0"}, "--coordinator-timeout", "300", out1=tmp_path / "p1"
+    )
     assert [p.returncode for p in procs] == [EXIT_USAGE, EXIT_USAGE], [o[1][-2000:] for o in outs]
     for _, err in outs:
         line = [x for x in err.strip().splitlines() if x.startswith("pfjax study:")]
         assert len(line) == 1 and line[0].startswith("pfjax study: error: --out: "), err[-2000:]
         assert ("--fresh" in line[0]) == (case != "a user directory"), line
     assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
+
+
+def test_processes_given_other_studies_stop_alike_before_any_run(tmp_path):
+    """Process 1 given another --set: every process stops with the same line naming the config
+    (each would otherwise simulate its share with its own settings, and process 0 would write the
+    mixture under its own hash); nothing is written."""
+    cfg = tmp_path / "dist.toml"
+    cfg.write_text(STUDY)
+    procs, outs = _pair(cfg, tmp_path / "out", {**os.environ, "PFJAX_FIGURE_WORKER": "0"}, extra1=("--set", "seed=12"))
+    assert [p.returncode for p in procs] == [EXIT_USAGE, EXIT_USAGE], [o[1][-2000:] for o in outs]
+    lines = [[x for x in err.strip().splitlines() if x.startswith("pfjax study:")] for _, err in outs]
+    assert lines[0] == lines[1] and len(lines[0]) == 1, lines
+    assert lines[0][0].startswith("pfjax study: error: config: process 1's study differs from process 0's"), lines
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dist.toml"]
 
 
 @pytest.mark.parametrize(
@@ -213,6 +234,8 @@ def test_a_refused_resume_stops_every_process_with_one_line(case, tmp_path):
         (["--coordinator", "nohostport", "--num-processes", "2", "--process-id", "0"], "--coordinator"),
         (["--coordinator", "127.0.0.1:1234", "--num-processes", "0", "--process-id", "0"], "--num-processes"),
         (["--coordinator", "127.0.0.1:1234", "--num-processes", "2", "--process-id", "2"], "--process-id"),
+        (["--coordinator", "127.0.0.1:1234", "--num-processes", "2", "--process-id", "-1"], "--process-id"),
+        (["--coordinator-timeout", "nan"], "--coordinator-timeout"),
     ],
 )
 def test_bad_distributed_flags_are_one_line_naming_the_flag(flags, flag, tmp_path, capsys):
@@ -222,3 +245,47 @@ def test_bad_distributed_flags_are_one_line_naming_the_flag(flags, flag, tmp_pat
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"pfjax study: error: {flag}:"), err
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize(
+    "args, key",
+    [
+        (("127.0.0.1:1234", 2, 5), "process_id"),
+        (("127.0.0.1:1234", 2, -1), "process_id"),
+        (("127.0.0.1:1234", 0, 0), "num_processes"),
+        (("nohostport", 2, 0), "coordinator"),
+        (("127.0.0.1:70000", 2, 0), "coordinator"),
+        (("127.0.0.1:1234", 2, 1.5), "process_id"),
+    ],
+)
+def test_the_library_checks_the_distributed_settings_as_the_command_line(args, key, monkeypatch):
+    """``initialize_distributed`` refuses bad settings at once, naming them (the command line maps
+    the names onto its flags), before waiting for anything."""
+    from pfjax.errors import InputError
+    from pfjax.sim import sharding
+
+    monkeypatch.setattr(sharding, "reach_coordinator", lambda *a: pytest.fail("waited"))
+    with pytest.raises(InputError) as e:
+        sharding.initialize_distributed(*args)
+    assert e.value.key == key and str(e.value).startswith(f"{key}: ")
+    with pytest.raises(InputError, match=r"^timeout_s: "):
+        sharding.initialize_distributed("127.0.0.1:1234", 2, 0, timeout_s=-1)
+    assert not sharding.joined()
+
+
+def test_a_failed_command_in_a_joined_process_ends_without_the_shutdown_barrier(tmp_path, monkeypatch, capsys):
+    """JAX's exit handler waits (minutes) for every process at a shutdown barrier; a process whose
+    command failed or was interrupted ends at once with its exit code instead."""
+    from pfjax.sim import sharding
+
+    class Ended(BaseException):
+        pass
+
+    def exit_now(code):
+        raise Ended(code)
+
+    monkeypatch.setattr(sharding, "joined", lambda: True)
+    monkeypatch.setattr(os, "_exit", exit_now)
+    with pytest.raises(Ended) as e:
+        main(["study", str(tmp_path / "missing.toml")])
+    assert e.value.args == (EXIT_USAGE,) and "missing.toml" in capsys.readouterr().err

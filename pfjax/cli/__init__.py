@@ -26,6 +26,7 @@ the ``pfjax.plugins`` entry points) appear in every subcommand's choices.
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 
 from pfjax.cli.common import EXIT_USAGE, Parser, UsageError, as_flags, join_negative_values, print_human
@@ -77,7 +78,15 @@ def main(argv=None) -> int:
             getattr(args, "human", print_human)(out)
         return 0
 
-    return command_main(f"pfjax {args.command}", body, interrupted=resume)
+    code = command_main(f"pfjax {args.command}", body, interrupted=resume)
+    sharding = sys.modules.get("pfjax.sim.sharding")
+    if code and sharding is not None and sharding.joined():
+        # a multi-process run that failed or was interrupted: no shutdown barrier (JAX's, at exit),
+        # which would wait minutes for processes that are stopping too or blocked in a collective
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
 
 
 def run() -> None:

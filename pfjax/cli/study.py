@@ -11,7 +11,7 @@ import re
 import sys
 from pathlib import Path
 
-from pfjax.cli.common import Parser, UsageError, as_flags, finite
+from pfjax.cli.common import Parser, UsageError, as_flags
 from pfjax.errors import InputError, one_line
 
 #: ``--overwrite`` of a command that writes a new output (``pfjax study``, the study scripts)
@@ -174,12 +174,29 @@ def _stdout_to_stderr(active: bool):
         os.close(saved)
 
 
+#: The library's names of the distributed run's settings, by flag (:func:`pfjax.sim.sharding.check_distributed`).
+DISTRIBUTED_FLAGS = {
+    "coordinator": "--coordinator",
+    "num_processes": "--num-processes",
+    "process_id": "--process-id",
+    "timeout_s": "--coordinator-timeout",
+}
+
+
+def _joining(args) -> bool:
+    """Whether the flags ask to join a multi-process study."""
+    return args.distributed or any(v is not None for v in (args.coordinator, args.num_processes, args.process_id))
+
+
 def _distributed(args) -> tuple[int, int]:
     """Join a multi-process study if the flags ask for one; ``(process index, process count)``."""
+    from pfjax.sim import sharding
+
     flags = {"--coordinator": args.coordinator, "--num-processes": args.num_processes, "--process-id": args.process_id}
     given = [k for k, v in flags.items() if v is not None]
-    timeout = finite("--coordinator-timeout", args.coordinator_timeout, positive=True, unit=" s")  # given alone too
-    if not given and not args.distributed:
+    with as_flags(DISTRIBUTED_FLAGS):  # --coordinator-timeout given alone too
+        sharding.check_distributed(args.coordinator, args.num_processes, args.process_id, args.coordinator_timeout)
+    if not _joining(args):
         return 0, 1
     if given and len(given) < 3:
         missing = next(k for k, v in flags.items() if v is None)
@@ -187,23 +204,13 @@ def _distributed(args) -> tuple[int, int]:
             f"{missing}: required with {given[0]} (give --coordinator, --num-processes and --process-id "
             f"together, or --distributed to detect them)"
         )
-    if given:
-        host, _, port = args.coordinator.rpartition(":")
-        if not host or not port.isdigit():
-            raise UsageError(f"--coordinator: expected HOST:PORT, got {args.coordinator!r}")
-        if not 1 <= int(port) <= 65535:
-            raise UsageError(f"--coordinator: expected a port in 1..65535, got {port} in {args.coordinator!r}")
-        if args.num_processes < 1:
-            raise UsageError(f"--num-processes: expected >= 1, got {args.num_processes}")
-        if not 0 <= args.process_id < args.num_processes:
-            raise UsageError(f"--process-id: expected 0..{args.num_processes - 1}, got {args.process_id}")
     import jax
 
-    from pfjax.sim import sharding
-
     try:
-        with as_flags({"coordinator": "--coordinator"}):
-            sharding.initialize_distributed(args.coordinator, args.num_processes, args.process_id, timeout_s=timeout)
+        with as_flags(DISTRIBUTED_FLAGS):
+            sharding.initialize_distributed(
+                args.coordinator, args.num_processes, args.process_id, timeout_s=args.coordinator_timeout
+            )
     except InputError:
         raise
     except Exception as e:  # no cluster to detect, or JAX refused the settings
@@ -214,10 +221,7 @@ def _distributed(args) -> tuple[int, int]:
 
 def _cmd_study(args) -> dict:
     # A distributed run's libraries (Gloo) print to stdout: there it carries only the result (--json)
-    distributed = args.distributed or any(
-        v is not None for v in (args.coordinator, args.num_processes, args.process_id)
-    )
-    with _stdout_to_stderr(distributed):
+    with _stdout_to_stderr(_joining(args)):
         return _study(args)
 
 
@@ -229,10 +233,22 @@ def _study(args) -> dict:
 
     spec = _load_study_or_usage(args)
     check_resources(spec, report=not args.no_report)  # every process alike, before any joins
-    output = study_output(spec, args.out, overwrite=args.overwrite)
+    # one process: --out refused before anything starts; several: by process 0 once all have joined,
+    # which tells the others (pfjax.montecarlo.processes), so that none waits for a process that stopped
+    output = None if _joining(args) else study_output(spec, args.out, overwrite=args.overwrite)
     index, count = _distributed(args)
     lead = index == 0  # the process that writes; the others only lend their devices
+    if count > 1:
+        from pfjax.montecarlo.processes import check_same_study
+
+        check_same_study(spec)  # every process stops alike if another was given another config or --set
+    if lead and output is None:
+        from pfjax.montecarlo.processes import refused
+
+        with refused(count):
+            output = study_output(spec, args.out, overwrite=args.overwrite)
     if lead and count == 1:  # refused before anything starts (several processes: process 0 tells the others)
+        assert output is not None
         check_target(
             output.target, command=output.command, config_sha256=output.config_sha256, overwrite=args.overwrite
         )
@@ -248,6 +264,7 @@ def _study(args) -> dict:
         from pfjax.montecarlo.processes import follow
 
         return {"process_index": index, "process_count": count, "written_by": "process 0", "chunks": follow(spec)}
+    assert output is not None  # process 0 has opened it (or refused above)
     summary = run(
         spec,
         output,

@@ -14,14 +14,19 @@ in every process, and process 0 decides both (:func:`lead`, broadcast once, befo
   feedback: the same compiled program, see :func:`pfjax.montecarlo.runner.controller_of`), and
   skip the synthesis.
 
-If process 0 fails before that point (a config whose partial directory holds another study's
-chunks, an infeasible design), it sends the error instead, and every process stops with it.
+Before that, every process checks that all were given the same study (:func:`check_same_study`:
+the config with its ``--set`` values, by its hash), and process 0 opens its output directory. If
+process 0 fails before the hand-over (an ``--out`` it refuses, a config whose partial directory
+holds another study's chunks, an infeasible design), it sends the error instead
+(:func:`refused`, :func:`lead`), and every process stops with it.
 
 The other processes (:func:`follow`) only simulate: no side jobs (worst-case search, float64
 check: process 0 runs them on its own device), no summary, no report, nothing written.
 """
 
 from __future__ import annotations
+
+import contextlib
 
 import numpy as np
 
@@ -48,6 +53,35 @@ class _Skip:
         compute()
         self.computed += 1
         return pd.DataFrame()
+
+
+def check_same_study(spec: StudySpec) -> None:
+    """Every process's study hash (:func:`pfjax.montecarlo.config.study_hash`), compared in every
+    process (a collective, before any chunk): :class:`~pfjax.config.ConfigError`, the same line in
+    every process, if one was given another config or other ``--set`` values. Each would otherwise
+    simulate its share of every chunk with its own settings, and process 0 would write the mixture
+    under its own hash."""
+    from pfjax.montecarlo.config import study_hash
+
+    hashes = sharding.every_process(study_hash(spec))
+    other = next((i for i, h in enumerate(hashes) if h != hashes[0]), None)
+    if other is not None:
+        raise ConfigError(
+            f"config: process {other}'s study differs from process 0's (config hash {hashes[other][:12]} against "
+            f"{hashes[0][:12]}); give every process the same config file and --set values"
+        )
+
+
+@contextlib.contextmanager
+def refused(count: int):
+    """Around process 0's steps before the hand-over that can refuse (opening ``--out``): an
+    error is sent to the other processes (as :func:`lead` sends its own), then raised."""
+    try:
+        yield
+    except Exception as e:
+        if count > 1:
+            sharding.broadcast_json({"error": str(e), "usage": isinstance(e, InputError)})
+        raise
 
 
 def lead(spec: StudySpec, output, *, fresh: bool = False) -> dict:

@@ -234,6 +234,36 @@ def reach_coordinator(coordinator: str, process_id: int, timeout_s: float) -> No
             time.sleep(0.2)
 
 
+def check_distributed(
+    coordinator: str | None, num_processes: int | None, process_id: int | None, timeout_s: float
+) -> None:
+    """The arguments of :func:`initialize_distributed`, checked before anything waits:
+    :class:`~pfjax.errors.InputError` naming ``coordinator`` (``HOST:PORT``, a port in 1..65535),
+    ``num_processes`` (>= 1), ``process_id`` (``0 .. num_processes - 1``) or ``timeout_s`` (finite,
+    > 0 s)."""
+    from pfjax import errors
+    from pfjax.errors import InputError
+
+    errors.number("timeout_s", timeout_s, positive=True, unit=" s")
+    if coordinator is not None:
+        host, _, port = str(coordinator).rpartition(":")
+        if not host or not port.isdigit():
+            raise InputError(f"coordinator: expected HOST:PORT, got {coordinator!r}", "coordinator")
+        if not 1 <= int(port) <= 65535:
+            raise InputError(f"coordinator: expected a port in 1..65535, got {port} in {coordinator!r}", "coordinator")
+    if num_processes is not None:
+        errors.integer("num_processes", num_processes, low=1)
+    if process_id is not None:
+        high = None if num_processes is None else num_processes - 1
+        if errors.is_number(process_id) and high is not None and not 0 <= process_id <= high:
+            raise InputError(f"process_id: expected 0..{high}, got {process_id}", "process_id")
+        errors.integer("process_id", process_id, low=0)
+
+
+#: Whether this process has joined a multi-process run (:func:`initialize_distributed`).
+_joined = False
+
+
 def initialize_distributed(
     coordinator: str | None = None,
     num_processes: int | None = None,
@@ -245,19 +275,48 @@ def initialize_distributed(
     ``jax.distributed.initialize`` with the given coordinator (``host:port`` of process 0), number
     of processes and this process's id; all ``None`` lets JAX detect them (SLURM, Open MPI). Call it
     in every process before any JAX work. CPU devices exchange data through Gloo (JAX's default CPU
-    backend has no cross-process collectives); GPUs use NCCL as usual. With an explicit
-    coordinator, :func:`reach_coordinator` checks it first, and JAX waits at most ``timeout_s``
-    seconds for the processes to register.
+    backend has no cross-process collectives); GPUs use NCCL as usual. The arguments are checked
+    first (:func:`check_distributed`). With an explicit coordinator, :func:`reach_coordinator`
+    checks it, and JAX waits at most ``timeout_s`` seconds for the processes to register; process
+    0 whose peers do not all register in that time is ended by JAX (exit code 134, JAX's own
+    message), which no Python code can catch.
+
+    JAX's preemption service is turned off: it would take SIGTERM (``kill``, ``timeout``, a batch
+    system's cancel) for a notice and run on; SIGTERM ends the process as usual, and an
+    interrupted study resumes from its finished chunks.
     """
+    global _joined
+    check_distributed(coordinator, num_processes, process_id, timeout_s)
     if coordinator is not None and process_id is not None:
         reach_coordinator(coordinator, process_id, timeout_s)
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    jax.config.update("jax_enable_preemption_service", False)
     jax.distributed.initialize(
         coordinator_address=coordinator,
         num_processes=num_processes,
         process_id=process_id,
         initialization_timeout=max(1, int(math.ceil(timeout_s))),
     )
+    _joined = True
+
+
+def joined() -> bool:
+    """Whether this process has joined a multi-process run (:func:`initialize_distributed`)."""
+    return _joined
+
+
+def every_process(text: str) -> list[str]:
+    """``text`` (ASCII, at most 256 characters) of every process, in process order: a collective
+    that every process must call at the same point. In a single process, ``[text]``."""
+    if jax.process_count() == 1:
+        return [text]
+    from jax.experimental import multihost_utils
+
+    raw = np.zeros(256, np.uint8)
+    b = text.encode("ascii")[:256]
+    raw[: len(b)] = np.frombuffer(b, np.uint8)
+    rows = np.asarray(multihost_utils.process_allgather(raw), dtype=np.uint8).reshape(-1, 256)
+    return [bytes(r).rstrip(b"\0").decode("ascii") for r in rows]
 
 
 def gather(tree):
