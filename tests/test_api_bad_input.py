@@ -292,8 +292,12 @@ def test_load_study_corrupt_summary_is_the_report_commands_error(summary, tmp_pa
 def test_load_study_corrupt_runs_or_margin(tmp_path):
     out = tmp_path / "s"
     out.mkdir()
-    (out / "summary.json").write_text(json.dumps({"controllers": {}}))
+    from pfjax.montecarlo.summary import SUMMARY_KEYS
+
     (out / "runs.parquet").write_text("not parquet")
+    (out / "summary.json").write_text(json.dumps({"controllers": {"a": {}}}))  # a summary the study did not write
+    assert "summary.json is not a study summary (no study)" in _refused(lambda: pfjax.load_study(out), "out")
+    (out / "summary.json").write_text(json.dumps({**dict.fromkeys(SUMMARY_KEYS), "controllers": {}}))
     assert "runs.parquet cannot be read" in _refused(lambda: pfjax.load_study(out), "out")
     pd.DataFrame({"run": [0]}).to_parquet(out / "runs.parquet")
     (out / "margin.parquet").write_text("not parquet")
