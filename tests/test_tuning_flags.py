@@ -5,6 +5,7 @@ checked whatever the method. Every refusal here comes before anything is compile
 
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -156,6 +157,19 @@ def test_tune_api_names_its_own_arguments():
         pfjax.tune("pi", "paper-line", "ga", config={"horizon": 0.0})
     with pytest.raises(InputError, match=r"^config\.dt: "):
         make_problem("pi", "paper-line", config={"dt": -1.0})
+    from pfjax.tuning.cost import CostSpec
+
+    # as --level with --aggregate mean: a level the mean would not read is refused, not ignored
+    with pytest.raises(InputError, match=r"^level: not with aggregate mean") as e:
+        pfjax.tune("pi", "paper-line", "ga", cost=CostSpec(level=0.5))
+    assert e.value.key == "level"
+    assert CostSpec(aggregate="cvar").check().quantile_level == 0.9
+
+
+def test_a_horizon_too_short_for_the_scenario_sets_windows_names_the_flag(capsys):
+    toml = str(Path(__file__).resolve().parents[1] / "studies" / "tuning_heldout.toml")
+    argv = ["tune", "--controller", "pi", "--method", "ga", "--scenario", toml, "--horizon", "5", "--json"]
+    _refused_cli(argv, "--horizon", capsys)
 
 
 @pytest.mark.parametrize(

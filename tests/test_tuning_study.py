@@ -307,7 +307,7 @@ def test_the_report_says_what_was_run(tmp_path, monkeypatch):
     text = to_markdown(report(_summary(cfg, heldout, cli)))
     assert "command line's defaults (" not in text
     assert "with the study's settings where they differ from its defaults (ga.population = 6, " in text
-    assert "the target is 1 of 2 seeds" in text and "19 of 20" not in text
+    assert "the target is 2 of 2 seeds" in text and "19 of 20" not in text
     assert "3 runs per path (line), " in text and "parabola" not in text
     assert "slip margin from the joint sweep" in text and "also holds the rear sweep" in text
     assert "iae_mean [m·s]" in text and "Costs in m·s" in text
@@ -374,3 +374,9 @@ def test_tuning_runs_and_the_figure_carry_the_cost_unit(tmp_path, monkeypatch):
     monkeypatch.setattr(matplotlib.axes.Axes, "set_ylabel", lambda self, text, *a, **k: labels.append(text))
     figures(hist, "pi:paper-line", tmp_path)
     assert labels == ["best cost so far [m·s]"] * 2
+
+
+def test_the_win_target_is_95_percent_of_the_seeds_rounded_up():
+    from pfjax.tuning.study_parts import wins_needed
+
+    assert [wins_needed(n) for n in (1, 2, 10, 19, 20, 21, 40)] == [1, 2, 10, 19, 19, 20, 38]

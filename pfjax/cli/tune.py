@@ -239,6 +239,9 @@ def _cmd(args) -> dict:
                 model=args.model,
             )
         except errors.InputError as e:
+            if args.horizon is not None and e.key in ("config.success_from", "config.steady_window"):
+                # a window of the scenario set's that a shorter --horizon no longer holds
+                raise UsageError(f"--horizon: {args.horizon:g} s is too short for the scenario set ({e})") from None
             raise errors.renamed(errors.renamed(e, "config.dt", "--dt"), "config.horizon", "--horizon") from None
         common = {
             "controller": args.controller,
@@ -306,7 +309,7 @@ def _model_of(problem) -> str:
 
 #: The defaults of the flags that only some methods or scenarios read (``None`` in the parser, so
 #: that a given one can be told apart).
-DEFAULTS = {"seed": 0, "generations": 100, "population": 50, "n_runs": 16, "level": 0.9}
+DEFAULTS = {"seed": 0, "generations": 100, "population": 50, "n_runs": 16}
 
 
 def method_flags() -> dict[str, tuple[str, ...]]:
@@ -352,5 +355,3 @@ def _check_flags(args, controllers: dict) -> None:
             raise UsageError(f"--{dest.replace('_', '-')}: not with {mode} (only with --method {', '.join(methods)})")
     if args.n_runs is not None and args.scenario in scenario_sets():
         raise UsageError(f"--n-runs: not with --scenario {args.scenario} (it samples the runs of a study TOML)")
-    if args.level is not None and args.aggregate == "mean":
-        raise UsageError("--level: not with --aggregate mean (only with quantile, cvar)")

@@ -40,6 +40,8 @@ from pfjax.sim.status import Status
 
 METRICS = ("iae", "ise", "itae")
 AGGREGATES = ("mean", "quantile", "cvar")
+#: The quantile / CVaR level when :class:`CostSpec` is given none.
+LEVEL = 0.9
 
 
 class CostSpec(NamedTuple):
@@ -48,19 +50,28 @@ class CostSpec(NamedTuple):
     metric: str = "iae"  # iae | ise | itae
     effort: float = 0.0  # weight on int delta^2 dt (metric units per rad^2 s)
     aggregate: str = "mean"  # mean | quantile | cvar
-    level: float = 0.9  # quantile / CVaR level
+    level: float | None = None  # quantile / CVaR level (None: LEVEL); not with the mean
     fail_penalty: float = 100.0  # added to a failed run's cost (metric units)
 
+    @property
+    def quantile_level(self) -> float:
+        """The quantile / CVaR level: ``level``, or :data:`LEVEL` when it is not given."""
+        return LEVEL if self.level is None else self.level
+
     def check(self) -> CostSpec:
-        """``self`` if every field is valid; :class:`~pfjax.errors.InputError` naming the field."""
+        """``self`` if every field is valid; :class:`~pfjax.errors.InputError` naming the field (a
+        ``level`` with the mean, which reads none, too)."""
         from pfjax import errors
 
         if self.metric not in METRICS:
             raise errors.InputError(f"metric: value {self.metric!r}, expected one of {', '.join(METRICS)}")
         if self.aggregate not in AGGREGATES:
             raise errors.InputError(f"aggregate: value {self.aggregate!r}, expected one of {', '.join(AGGREGATES)}")
-        if not 0.0 < errors.number("level", self.level) < 1.0:
-            raise errors.InputError(f"level: value {self.level:g}, expected in (0, 1)")
+        if self.level is not None:
+            if self.aggregate == "mean":
+                raise errors.InputError("level: not with aggregate mean (only with quantile, cvar)", "level")
+            if not 0.0 < errors.number("level", self.level) < 1.0:
+                raise errors.InputError(f"level: value {self.level:g}, expected in (0, 1)")
         errors.number("effort", self.effort, nonnegative=True)
         errors.number("fail_penalty", self.fail_penalty, nonnegative=True)
         return self
@@ -107,8 +118,8 @@ def aggregate(J, spec: CostSpec):
     if spec.aggregate == "mean":
         return jnp.mean(J)
     if spec.aggregate == "quantile":
-        return jnp.quantile(J, spec.level)
-    k = max(1, int(math.ceil((1.0 - spec.level) * J.shape[0])))
+        return jnp.quantile(J, spec.quantile_level)
+    k = max(1, int(math.ceil((1.0 - spec.quantile_level) * J.shape[0])))
     return jnp.mean(jnp.sort(J)[-k:])
 
 
