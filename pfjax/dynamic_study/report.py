@@ -79,7 +79,9 @@ def _verdicts(c: dict) -> Table:
                 f"{100 * p['diff']:+.1f} pp [{100 * p['ci95'][0]:+.1f}, {100 * p['ci95'][1]:+.1f}]",
                 f"{x['verdict_kinematic']} -> {x['verdict_dynamic']}",
                 "yes" if x["verdict_survives"] else "no",
-                f"{x['equivalent_kinematic_arm']} (gap {100 * x['equivalent_gap']:.1f} pp)",
+                f"{x['equivalent_kinematic_arm']} (gap {100 * x['equivalent_gap']:.1f} pp)"
+                if x["equivalent_kinematic_arm"] is not None
+                else f"none (closest {x['closest_kinematic_arm']}, gap {100 * x['equivalent_gap']:.1f} pp)",
             ]
         )
     head = ["controller", dyn, ref, "paired difference", "verdict kinematic -> dynamic", "survives"]

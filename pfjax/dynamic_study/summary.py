@@ -152,7 +152,9 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
     """Per controller of ``dyn_arm``: success in it, in ``ref_arm`` and in every arm starting with
     ``kin_prefix``; the paired difference ``dyn_arm - ref_arm``; the verdicts; the equivalent
     kinematic arm; success by path and friction; the late max |d| over the runs with status ``ok``
-    (``n_ok`` per arm; NaN where none is); the failure statuses."""
+    (``n_ok`` per arm; NaN where none is); the failure statuses. The equivalent kinematic arm is
+    the one whose success rate is closest to the dynamic arm's (``closest_kinematic_arm``, the gap
+    ``equivalent_gap``) if the dynamic rate lies in its 95 % interval, else None."""
     key = ["path", "controller", "run"]
     arms_ = [dyn_arm, *extra_arms, *[a for a in dict.fromkeys(runs.arm) if a.startswith(kin_prefix)]]
     out = {}
@@ -163,7 +165,11 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
         d = mine[mine.arm == dyn_arm].set_index(key).sort_index()
         k = mine[mine.arm == ref_arm].set_index(key).sort_index()
         kin_arms = {a: r for a, r in rates.items() if a.startswith(kin_prefix)}
-        equivalent = min(kin_arms, key=lambda a: abs(kin_arms[a]["rate"] - rates[dyn_arm]["rate"]))
+        closest = min(kin_arms, key=lambda a: abs(kin_arms[a]["rate"] - rates[dyn_arm]["rate"]))
+        gap = abs(kin_arms[closest]["rate"] - rates[dyn_arm]["rate"])
+        # equivalent only if the dynamic rate lies in that arm's 95 % interval, not merely nearest
+        lo, hi = kin_arms[closest]["ci95"]
+        equivalent = closest if lo <= rates[dyn_arm]["rate"] <= hi else None
         dm = d.reset_index()
         ok = mine[mine.status == "ok"]
         late = {arm: ok[ok.arm == arm].late_max_abs_d for arm in arms_}  # over the runs with status ok
@@ -181,7 +187,8 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
             "verdict_dynamic": _side(rates[dyn_arm]),
             "verdict_survives": _side(rates[ref_arm]) == _side(rates[dyn_arm]),
             "equivalent_kinematic_arm": equivalent,
-            "equivalent_gap": abs(kin_arms[equivalent]["rate"] - rates[dyn_arm]["rate"]),
+            "closest_kinematic_arm": closest,
+            "equivalent_gap": gap,
             "failure_status_dynamic": {str(s): int(v) for s, v in d.status.value_counts().items()},
             "n_ok": {arm: len(late[arm]) for arm in arms_},
             "late_max_abs_d_q95": {arm: float(late[arm].quantile(0.95)) for arm in arms_},
