@@ -102,4 +102,27 @@ def stop_if_interrupted() -> None:
         raise KeyboardInterrupt
 
 
-__all__ = ["RESEND_S", "guard", "stop_if_interrupted"]
+@contextlib.contextmanager
+def deferred():
+    """Within: SIGINT and SIGTERM are held, not acted on, and delivered once the block has run
+    (to the handlers in place before it), so that a few steps that must not be split (an output's
+    two final renames) run whole. In the main thread only (where Python runs signal handlers);
+    elsewhere it changes nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    # a handler installed outside Python (getsignal gives None) cannot be put back: left as it is
+    before = {k: h for k in (signal.SIGINT, signal.SIGTERM) if (h := signal.getsignal(k)) is not None}
+    for k in before:
+        signal.signal(k, lambda signum, frame: held.append(signum))
+    try:
+        yield
+    finally:
+        for k, handler in before.items():
+            signal.signal(k, handler)
+        for k in dict.fromkeys(held):
+            signal.raise_signal(k)
+
+
+__all__ = ["RESEND_S", "deferred", "guard", "stop_if_interrupted"]

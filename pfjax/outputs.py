@@ -26,7 +26,11 @@ study scripts) writes them through :class:`OutputDir`:
    stale lock.
 3. **Assembled beside the target, moved into place when complete.** Files are written to a
    private staging directory ``.<name>.pfjax-staging-*`` beside the target (same filesystem),
-   the marker is written last, and :meth:`OutputDir.commit` renames it into place. A run that
+   the marker is written last, and :meth:`OutputDir.commit` renames it into place, with the mode
+   and group of the directory it replaces (``0o777`` less the umask when new); Ctrl-C and SIGTERM
+   are held during its two renames (:func:`pfjax.interrupts.deferred`), and a previous output a
+   kill left aside between them is put back by the next writer. An empty mount point is refused
+   (it cannot be replaced). A run that
    stops early (an error, Ctrl-C, a kill) leaves the previous output as it was; its staging
    directory is removed on the way out, or, after a kill, by the next run that holds the lock
    (with any half-created partial directory ``.<name>.partial-*`` of a study's chunks). Each such
@@ -42,9 +46,11 @@ import json
 import os
 import re
 import shutil
+import stat
 import tempfile
 from pathlib import Path
 
+from pfjax import interrupts
 from pfjax.errors import InputError
 from pfjax.output_lock import OutputBusy, OutputLock, now_utc, sibling
 
@@ -210,6 +216,12 @@ def _check_contents(
     except OSError as e:
         raise InputError(f"{flag}: {target} cannot be read ({e.strerror})", flag) from None
     if empty:
+        if os.path.ismount(resolved):  # replaced whole at the end, which a mount point cannot be
+            raise InputError(
+                f"{flag}: {target} is a mount point, which pfjax cannot replace with its output; "
+                f"give a directory inside it ({Path(target) / 'run1'})",
+                flag,
+            )
         return
     marker = read_marker(resolved)
     if marker is None:
@@ -305,6 +317,7 @@ class OutputDir:
         self.target.parent.mkdir(parents=True, exist_ok=True)
         self._lock.acquire()
         try:
+            _restore_stranded(self.target)
             check_target(
                 self.target,
                 command=self.command,
@@ -374,7 +387,7 @@ class OutputDir:
             "dirs": sorted(dirs),
         }
         (staging / MARKER).write_text(json.dumps(marker, indent=1) + "\n", encoding="utf-8")
-        staging.chmod(0o755)  # mkdtemp makes it private; results are for everyone who can read the parent
+        _take_mode(staging, self.target)  # mkdtemp makes it private
         old = None
         if self.target.exists():
             check_target(
@@ -385,12 +398,56 @@ class OutputDir:
                 flag=self.flag,
             )  # nothing foreign arrived meanwhile
             old = temporary_dir(self.target, _OLD)
-            os.replace(self.target, old / "output")
-        os.replace(staging, self.target)
-        self.committed = True
+        with interrupts.deferred():  # never between the two renames (a kill there: _restore_stranded)
+            if old is not None:
+                os.replace(self.target, old / "output")
+            os.replace(staging, self.target)
+            self.committed = True
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
         return self.target
+
+
+def _take_mode(staging: Path, target: Path) -> None:
+    """Give the staging directory the mode (and group) of the directory it replaces, a user's
+    empty one or a previous output, so that replacing it changes neither who may read it nor its
+    group; a new output gets ``0o777`` less the umask, as ``mkdir`` would."""
+    try:
+        st = os.stat(target)
+    except OSError:
+        staging.chmod(0o777 & ~_umask())
+        return
+    try:
+        os.chown(staging, -1, st.st_gid)
+    except OSError:  # not a group of this user's: the mode still says who may read
+        pass
+    staging.chmod(stat.S_IMODE(st.st_mode))
+
+
+def _umask() -> int:
+    """This process's umask (from ``/proc/self/status`` where Linux gives it; else set and reset)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _restore_stranded(target: Path) -> None:
+    """A previous output that a run killed between its two final renames left in its
+    ``.<name>.pfjax-old-*`` directory, with nothing at ``target``: moved back into place (under
+    the target's lock), so that the next run finds it as it was."""
+    if target.exists() or target.is_symlink():
+        return
+    for old in own_temporary_dirs(target):
+        if old.name.startswith(f".{target.name}.{_OLD}-") and (old / "output").is_dir():
+            os.replace(old / "output", target)
+            shutil.rmtree(old, ignore_errors=True)
+            return
 
 
 def temporary_dir(target: Path, kind: str) -> Path:

@@ -5,6 +5,7 @@ later run does not clean up. With real processes for the lock, Ctrl-C and kills.
 import json
 import os
 import signal
+import stat
 import subprocess
 import sys
 import time
@@ -180,6 +181,67 @@ def test_stale_staging_of_a_killed_run_is_removed_by_the_next_writer(tmp_path):
     other = temporary_dir(tmp_path / "outer", "pfjax-staging")  # another target's: not this writer's business
     _write(out, {"a": "1"})
     assert not any(s.exists() for s in stale) and other.exists()
+
+
+def test_a_previous_output_stranded_by_a_kill_between_the_final_renames_is_put_back(tmp_path):
+    """A kill after the previous output was moved aside and before the new one was moved in leaves
+    nothing at the target: the next writer puts the previous output back before it checks the
+    target (so a refusal leaves it in place too)."""
+    out = tmp_path / "out"
+    _write(out, {"summary.json": "old"})
+    before = _tree(out)
+    old = temporary_dir(out, "pfjax-old")
+    os.replace(out, old / "output")  # the state the kill leaves
+    with pytest.raises(InputError, match="holds the output of `pfjax study`"):
+        OutputDir(out, command="study", config_sha256="b" * 64).open()  # another config: refused ...
+    assert _tree(out) == before and not old.exists()  # ... with the previous output back in place
+
+
+def test_the_final_renames_are_not_split_by_ctrl_c(tmp_path, monkeypatch):
+    """SIGINT during the two final renames is held and acted on once both are done."""
+    import signal
+
+    out = tmp_path / "out"
+    _write(out, {"summary.json": "old"})
+    real, calls = os.replace, []
+
+    def replace(a, b):
+        calls.append(1)
+        if len(calls) == 1:
+            signal.raise_signal(signal.SIGINT)  # between the two renames
+        real(a, b)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt), OutputDir(out, command="study", config_sha256="a" * 64) as o:
+        (o.staging / "summary.json").write_text("new")
+        o.commit()
+    assert (out / "summary.json").read_text() == "new" and len(calls) == 2
+
+
+@pytest.mark.parametrize("mode", [0o700, 0o2750])
+def test_a_users_empty_directory_keeps_its_mode_when_replaced(tmp_path, mode):
+    """An empty --out the user made is replaced by the output directory: with its mode (who may
+    read it, a setgid bit) and group, not pfjax's."""
+    out = tmp_path / "out"
+    out.mkdir()
+    out.chmod(mode)
+    _write(out, {"a": "1"})
+    assert stat.S_IMODE(out.stat().st_mode) == mode
+    new = tmp_path / "new"
+    old_mask = os.umask(0o077)
+    try:
+        _write(new, {"a": "1"})
+    finally:
+        os.umask(old_mask)
+    assert stat.S_IMODE(new.stat().st_mode) == 0o700  # a new one: 0o777 less the umask, as mkdir
+
+
+def test_an_empty_mount_point_is_refused_before_any_work(tmp_path, monkeypatch):
+    out = tmp_path / "mnt"
+    out.mkdir()
+    monkeypatch.setattr(os.path, "ismount", lambda p: str(p) == str(out))
+    with pytest.raises(InputError, match=r"^--out: .* is a mount point"):
+        check_target(out, command="study", config_sha256="a" * 64)
 
 
 def test_a_writer_leaves_the_temporary_directories_of_a_target_named_like_its_own(tmp_path):
@@ -358,7 +420,7 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
         ("summary.json", b"{"),
         *(("summary.json", t) for t in edited),
     ):
-        saved = (out / name).read_bytes()
+        saved, st = (out / name).read_bytes(), (out / name).stat()
         (out / name).write_bytes(text)
         before = _tree(out)
         code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)
@@ -369,7 +431,14 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
             and name in err[0]
         ), err
         assert _tree(out) == before
+        # the file as the study wrote it (its time too), so that the study's own files are checked next
         (out / name).write_bytes(saved)
+        os.utime(out / name, ns=(st.st_atime_ns, st.st_mtime_ns))
+        # edited but readable: never built from, nor recorded as pfjax's by --overwrite
+        (out / name).write_bytes(saved)
+        code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)
+        assert code == EXIT_USAGE and f"{name} changed after the study wrote it" in err[0], err
+        os.utime(out / name, ns=(st.st_atime_ns, st.st_mtime_ns))
     (out / "runs.parquet").unlink()
     code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)
     assert code == EXIT_USAGE and "runs.parquet is missing" in err[0]

@@ -290,6 +290,25 @@ def read_finished(out) -> tuple[dict, pd.DataFrame]:
     return summary, load("runs.parquet", read_runs)
 
 
+def _unchanged_inputs(out: Path) -> None:
+    """:class:`~pfjax.errors.InputError` naming ``--out`` if a file the report is built from
+    (``summary.json``, ``runs.parquet``, ``margin.parquet``) changed after the study wrote it
+    (its size or time differs from the output marker's): a report follows from the study's own
+    files, and ``--overwrite`` would otherwise record the edited file as pfjax's."""
+    from pfjax.errors import InputError
+    from pfjax.outputs import read_marker
+
+    listed = (read_marker(out) or {}).get("files", {})
+    for name in ("summary.json", "runs.parquet", "margin.parquet"):
+        f = out / name
+        if f.is_file() and listed.get(name) != [f.stat().st_size, f.stat().st_mtime_ns]:
+            raise InputError(
+                f"--out: {f} changed after the study wrote it; a report is built from the study's own files: "
+                "re-run the study",
+                "--out",
+            )
+
+
 def rewrite_report(out, spec: StudySpec, *, overwrite: bool = False) -> Path:
     """Render the report of the finished study in ``out`` again (``pfjax report``), without
     simulating: the figures that need only the summary and runs are redrawn, the worst-case figure
@@ -301,6 +320,7 @@ def rewrite_report(out, spec: StudySpec, *, overwrite: bool = False) -> Path:
 
     output = study_output(spec, out, overwrite=overwrite)
     with output:
+        _unchanged_inputs(output.target)
         summary, runs = read_finished(output.target)
         redraw = [n for n in FIGURES if n != "worst_cases"]
         output.start_from_existing(

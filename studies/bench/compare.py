@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -189,6 +190,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="results/bench_compare", help="output directory (default results/bench_compare)")
     ap.add_argument("--overwrite", action="store_true", help="replace a pfjax output of another config in --out")
     args = ap.parse_args(argv)
+    # SIGTERM (kill, timeout, a batch system) as an exit, so that the worktrees are removed (finally)
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     return command_main("bench-compare", lambda: main_checked(args))
 
 
