@@ -289,6 +289,10 @@ def test_quick_bench_without_numba_skips_its_reference_with_a_note(tmp_path):
     assert math.isfinite(s["msteps_per_s_f32"]) and math.isfinite(s["ratio_vs_numpy_f64"])
     assert set(pd.read_parquet(out / "bench.parquet").impl) == {"pfjax", "jax_minimal", "numpy", "scipy"}
     assert f"Note: {NUMBA_MISSING}" in report
+    assert "; Numba not run." in report and "nanx" not in report
+    from pfjax.bench.report import markdown
+
+    assert markdown(json.loads((out / "bench.json").read_text())) == report  # from bench.json alone
     assert (out / "figures" / "throughput.png").is_file()
 
 
@@ -594,3 +598,10 @@ def test_goals_not_measured_when_the_run_lacks_their_batch_horizon_or_mode():
         "numba_f32",
     }
     assert measured({"horizon": 2.0, "grad_size": 2000}) == set()
+
+
+def test_a_compile_time_is_never_negative():
+    """The first call's excess over the best repeat: 0 when the first was not the slowest."""
+    from pfjax.bench.run import compile_time
+
+    assert compile_time(2.5, 0.5) == 2.0 and compile_time(0.4, 0.5) == 0.0

@@ -272,3 +272,25 @@ def test_a_file_that_is_not_a_pfjax_calibration_is_never_replaced(tmp_path, monk
         capsys.readouterr()
         calibration.load.cache_clear()
         assert json.loads(mine.read_text()) == new
+
+
+def test_a_calibration_of_another_cpu_is_ignored_and_an_unknown_switch_warns(tmp_path, monkeypatch):
+    """A file at this CPU's name whose key is another CPU's (a copied file) is ignored with one
+    warning; a PFJAX_CALIBRATION value that is neither on nor off warns and leaves it on."""
+    monkeypatch.setenv("PFJAX_CALIBRATION_DIR", str(tmp_path))
+    monkeypatch.delenv("PFJAX_CALIBRATION", raising=False)
+    data = json.loads(Path(_file(tmp_path, cpu_key="genuineintel-6-85-deadbeef", vector_width=256)).read_text())
+    (tmp_path / f"{calibration.cpu_key()}.json").write_text(json.dumps(data))
+    calibration.load.cache_clear()
+    try:
+        with pytest.warns(UserWarning, match="measured on another CPU"):
+            assert calibration.load() is None
+        data["cpu_key"] = calibration.cpu_key()
+        (tmp_path / f"{calibration.cpu_key()}.json").write_text(json.dumps(data))
+        calibration.load.cache_clear()
+        assert calibration.load()["vector_width"] == 256
+    finally:
+        calibration.load.cache_clear()
+    with pytest.warns(UserWarning, match="PFJAX_CALIBRATION='disabled' not understood"):
+        assert calibration.directory({"PFJAX_CALIBRATION": "disabled", "PFJAX_CALIBRATION_DIR": str(tmp_path)})
+    assert calibration.directory({"PFJAX_CALIBRATION": "on", "PFJAX_CALIBRATION_DIR": str(tmp_path)}) == tmp_path

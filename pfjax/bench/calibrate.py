@@ -89,6 +89,20 @@ def _rates(dtype, batch: int, horizon: float, blocks, width_set, rounds: int, sa
     ]
 
 
+#: The units of a calibration's numbers, by field name ("1": dimensionless).
+UNITS = {
+    "vector_width": "bits (null: XLA's default)",
+    "block_bytes": "B (per batched array in one CPU block)",
+    "msteps_per_s": "million rollout-steps (runs x RK4 steps) per second",
+    "seconds": "s (the best of the rounds)",
+    "max_abs_iae_diff": "m s (largest |IAE difference| from the first candidate's, over the runs)",
+    "batch": "runs",
+    "horizon_s": "s",
+    "rounds": "timed calls per candidate",
+    "n_steps": "RK4 steps per run",
+}
+
+
 def choose(rows: Sequence[dict]) -> dict:
     """The width and per-precision blocks from measured ``rows`` (see the module docstring)."""
     best: dict = {}
@@ -114,11 +128,12 @@ def calibrate(
     width_set: Sequence[int | None] | None = None,
     progress=None,
 ) -> dict:
-    """Measure every candidate on this CPU; returns ``{"cpu_key", "version", "vector_width",
-    "block_bytes", "msteps_per_s", "rows", "machine", "sizes"}`` (the file
+    """Measure every candidate on this CPU; returns ``{"cpu_key", "version", "pfjax_version",
+    "vector_width", "block_bytes", "msteps_per_s", "rows", "machine", "sizes", "units"}`` (the file
     :func:`pfjax.numerics.calibration.save` writes)."""
     import jax
 
+    from pfjax.bench.report import MACHINE_UNITS
     from pfjax.bench.run import machine
     from pfjax.numerics import calibration
 
@@ -128,11 +143,15 @@ def calibrate(
     for dtype, x64 in ((np.float32, False), (np.float64, True)):
         with jax.enable_x64(x64):
             rows += _rates(dtype, batch, horizon, blocks, ws, rounds, say)
+    import pfjax
+
     return dict(
         version=calibration.VERSION,
         cpu_key=calibration.cpu_key(),
+        pfjax_version=pfjax.__version__,
         **choose(rows),
         rows=rows,
         sizes=dict(batch=batch, horizon_s=horizon, rounds=rounds, n_steps=P.n_steps(horizon)),
         machine=machine(),
+        units={**UNITS, **MACHINE_UNITS},
     )

@@ -11,6 +11,7 @@ The unit tables (:func:`summary_units`, :func:`result_units`) are in the form
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict
 
 import pfjax
@@ -76,6 +77,11 @@ def summary_units(summary: dict, prefix: str = "") -> dict:
     return {prefix + k: v for k, v in table.items()}
 
 
+#: The units of :func:`pfjax.bench.run.machine`'s numbers, under ``machine.`` (every output that
+#: records the machine carries them).
+MACHINE_UNITS = {"machine.block_bytes.*": {"float32": "B", "float64": "B"}}
+
+
 def result_units(result: dict) -> dict:
     """The unit of each number of ``bench.json`` (:func:`summary_units` under ``summary.``, the rows
     by :data:`COLUMNS`, the horizons and the step)."""
@@ -85,7 +91,7 @@ def result_units(result: dict) -> dict:
         "config.horizon": "s",
         "config.model_horizon": "s",
         "problem.dt": "s",
-        "machine.block_bytes.*": {"float32": "B", "float64": "B"},
+        **MACHINE_UNITS,
     }
 
 
@@ -218,6 +224,14 @@ def _goals(goals: list[dict]) -> list[str]:
     ]
 
 
+def _numba_clause(s: dict) -> str:
+    """The headline's ratios over Numba, or that Numba did not run (its ratios null)."""
+    r32, r64 = s.get("ratio_vs_numba_f32"), s.get("ratio_vs_numba_f64")
+    if r32 is None or r64 is None or not (math.isfinite(r32) and math.isfinite(r64)):
+        return "; Numba not run."
+    return f"; {r32:.3g}x / {r64:.3g}x Numba."
+
+
 def markdown(result: dict) -> str:
     s, m = result["summary"], result["machine"]
     lines = [
@@ -238,7 +252,7 @@ def markdown(result: dict) -> str:
             for f in s.get("fraction_of_minimal_by_batch", [])
             if f["batch"] != s["batch"]
         )
-        + f"; {s['ratio_vs_numba_f32']:.3g}x / {s['ratio_vs_numba_f64']:.3g}x Numba.",
+        + _numba_clause(s),
         "",
         table(
             ["implementation", "dtype", "batch", "M rollout-steps/s", "compile s"],

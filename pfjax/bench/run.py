@@ -192,11 +192,11 @@ def _grad(batch, dtype, cfg: BenchConfig):
     return dict(
         forward_s=t_fwd,
         grad_s=t_grad,
-        grad_compile_s=first - t_grad,
+        grad_compile_s=compile_time(first, t_grad),
         grad=g.tolist(),
         mode=mode,
         reverse_s=t_rev,
-        reverse_compile_s=first_rev - t_rev,
+        reverse_compile_s=compile_time(first_rev, t_rev),
         grad_reverse=g_rev.tolist(),
         modes_max_rel_diff=float(np.max(np.abs(g - g_rev)) / np.max(np.abs(g_rev))),
         grad_finite=bool(np.all(np.isfinite(g)) and np.all(np.isfinite(g_rev))),
@@ -231,6 +231,13 @@ def machine() -> dict:
         block_bytes={"float32": cpu_block_bytes(4), "float64": cpu_block_bytes(8)},
         settings="calibrated" if calibrated else "rules",  # pfjax calibrate's file, or the stated rules
     )
+
+
+def compile_time(first: float, best: float) -> float:
+    """The compile time of a call, s: its first run's excess over its best repeat, never below 0
+    (a first call that was not the slowest, its program from the compilation cache on a busy
+    machine, compiled nothing worth measuring)."""
+    return max(0.0, first - best)
 
 
 def _row(impl: str, dtype: str, batch: int, seconds: float, compile_s: float, n_steps: int, failed=None) -> dict:
@@ -268,13 +275,13 @@ def _jax_rows(cfg: BenchConfig, n_steps: int, say) -> tuple[list[dict], dict, di
                 say(f"pfjax {name} B={b}")
                 res, first, best = _pfjax(batch, dtype, n_steps, cfg)
                 failed = int(np.sum(np.asarray(res.status) != 0))
-                rows.append(_row("pfjax", name, b, best, first - best, n_steps, failed))
+                rows.append(_row("pfjax", name, b, best, compile_time(first, best), n_steps, failed))
                 if b == top:
                     iae[name] = np.asarray(res.metrics.iae, np.float64)
                 say(f"minimal JAX {name} B={b}")
                 runs = M.runs(batch, dtype)
                 out, first, best = _timed(lambda: jax.block_until_ready(M.simulate(runs, n_steps)), cfg.repeats)
-                rows.append(_row("jax_minimal", name, b, best, first - best, n_steps))
+                rows.append(_row("jax_minimal", name, b, best, compile_time(first, best), n_steps))
                 diffs.setdefault(f"jax_minimal_{name}", []).append(_max_diff(out, res.metrics.iae))
     return rows, iae, {k: float(np.max(v)) for k, v in diffs.items()}  # NaN if any difference is NaN
 
@@ -293,7 +300,7 @@ def _reference_rows(cfg: BenchConfig, n_steps: int, iae: dict, have_numba: bool,
         if have_numba:
             say(f"numba {name} B={nr}")
             out, first, best = _timed(lambda: R.iae_numba(sub(nr), dtype, n_steps), cfg.repeats)
-            rows.append(_row("numba", name, nr, best, first - best, n_steps))
+            rows.append(_row("numba", name, nr, best, compile_time(first, best), n_steps))
             agree[f"numba_{name}"] = _max_diff(out, iae[name][:nr])
         say(f"numpy {name} B={k}")
         out, _, best = _timed(lambda: R.iae_numpy(sub(k), dtype, n_steps), 0)

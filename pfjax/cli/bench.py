@@ -84,7 +84,7 @@ def _cmd(args) -> dict:
         out = report.write(result, output)
     # the summary with the provenance of the outputs (config_sha256, seed, pfjax_version) and its units
     printed = dict(result["summary"], out=str(out), machine=result["machine"], **report.provenance(result))
-    return dict(printed, units=units(printed, report.summary_units(result["summary"])))
+    return dict(printed, units=units(printed, {**report.summary_units(result["summary"]), **report.MACHINE_UNITS}))
 
 
 def _human(out: dict) -> None:

@@ -39,6 +39,8 @@ from pfjax.numerics.cpu import VECTOR_FLAGS, cpu_info
 ENV = "PFJAX_CALIBRATION"
 DIR_ENV = "PFJAX_CALIBRATION_DIR"
 OFF = ("off", "0", "none", "false")
+#: ``PFJAX_CALIBRATION`` values that leave it on (unset or empty included); any other warns.
+ON = ("", "on", "1", "true", "yes")
 #: The file format written by :func:`save` (a file of another version is ignored).
 VERSION = 1
 #: Vector widths a calibration may choose, bits (besides None: XLA's default): the register widths
@@ -64,8 +66,13 @@ def directory(environ=None) -> Path | None:
     ``$XDG_CACHE_HOME/pfjax/calibration`` (default ``~/.cache/pfjax/calibration``); None: disabled
     by ``PFJAX_CALIBRATION=off``. The compilation cache's ``PFJAX_CACHE_DIR`` plays no part."""
     environ = os.environ if environ is None else environ
-    if environ.get(ENV, "").strip().lower() in OFF:
+    value = environ.get(ENV, "").strip().lower()
+    if value in OFF:
         return None
+    if value not in ON:  # a typo is not silent: on, with a warning naming the variable
+        _warn(
+            f"{ENV}={environ.get(ENV)!r} not understood (expected one of {', '.join((*ON[1:], *OFF))}); calibration on"
+        )
     given = environ.get(DIR_ENV, "").strip()
     if given:
         return Path(given).expanduser()
@@ -114,6 +121,9 @@ def load(path: str | None = None) -> dict | None:
         return None
     if not _valid(data):
         _warn(f"{file}: calibration ignored, not a pfjax calibration of version {VERSION}")
+        return None
+    if path is None and data.get("cpu_key") != cpu_key():  # measured on another CPU (a copied file)
+        _warn(f"{file}: calibration ignored, measured on another CPU ({data.get('cpu_key')!r}, this one {cpu_key()!r})")
         return None
     return data
 

@@ -68,15 +68,33 @@ def _commit(rev: str, key: str) -> str:
         raise InputError(f"{key}: {rev!r} is not a commit of this repository", key) from None
 
 
+def _identity(commit: str) -> dict:
+    """What was measured: ``{"commit"}`` for a commit; for the working tree (``"."``) its ``HEAD``
+    and the SHA-256 of its changes against it (``git diff HEAD`` and the untracked files' names and
+    contents), so that another state of the tree is another comparison (another config hash)."""
+    if commit != ".":
+        return {"commit": commit}
+    import hashlib
+
+    h = hashlib.sha256(_git("diff", "HEAD", "--binary").encode())
+    for name in _git("ls-files", "--others", "--exclude-standard").splitlines():
+        h.update(name.encode())
+        try:
+            h.update((ROOT / name).read_bytes())
+        except OSError:
+            pass
+    return {"commit": "working tree", "head": _git("rev-parse", "HEAD"), "changes_sha256": h.hexdigest()}
+
+
 class _Tree:
     """A checkout of one revision (a temporary worktree; the repository itself for ``"."``)."""
 
-    def __init__(self, commit: str, parent: Path):
+    def __init__(self, commit: str, parent: Path, role: str):
         self.commit = commit
         if commit == ".":
             self.path, self._temporary = ROOT, False
-        else:
-            self.path, self._temporary = parent / commit[:12], True
+        else:  # by role too: BASE and NEW may name the same commit (a comparison of the noise)
+            self.path, self._temporary = parent / f"{role}-{commit[:12]}", True
             _git("worktree", "add", "--detach", "--quiet", str(self.path), commit)
 
     def bench(self, args: list[str], out: Path) -> dict:
@@ -208,14 +226,15 @@ def main_checked(args) -> int:
     errors.integer("--rounds", args.rounds, low=1, high=100)
     bench_args = bench_arguments(args)
     base, new = _commit(args.base, "base"), _commit(args.new, "new")
-    cfg = {"base": base, "new": new, "rounds": args.rounds, "bench_args": bench_args}
+    trees_measured = {k: _identity(c) for k, c in (("base", base), ("new", new))}
+    cfg = {**trees_measured, "rounds": args.rounds, "bench_args": bench_args}
     with OutputDir(args.out, command="bench-compare", config_sha256=config_hash(cfg), overwrite=args.overwrite) as out:
         rounds, failure = [], None
         with tempfile.TemporaryDirectory(prefix="pfjax-compare-") as tmp:
             trees: dict = {}
             try:
-                trees["base"] = _Tree(base, Path(tmp))
-                trees["new"] = _Tree(new, Path(tmp))
+                trees["base"] = _Tree(base, Path(tmp), "base")
+                trees["new"] = _Tree(new, Path(tmp), "new")
                 for i in range(args.rounds):
                     rounds.append(
                         {name: tree.bench(bench_args, Path(tmp) / f"bench-{name}-{i}") for name, tree in trees.items()}
@@ -237,8 +256,8 @@ def main_checked(args) -> int:
         # checkout's pfjax version (each bench summary carries its own revision's)
         prov = stamp(cfg, bench_config(args.quick).seed)
         result = {
-            "base": {"rev": args.base, "commit": base if base != "." else "working tree"},
-            "new": {"rev": args.new, "commit": new if new != "." else "working tree"},
+            "base": {"rev": args.base, **trees_measured["base"]},
+            "new": {"rev": args.new, **trees_measured["new"]},
             "rounds": len(rounds),
             "rounds_requested": args.rounds,
             **({"incomplete": failure} if failure is not None else {}),

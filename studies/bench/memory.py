@@ -181,6 +181,7 @@ def _stop(proc, err: _Stderr) -> None:
 
 def measure(args, sets: list[str], out: Path, config_sha256: str) -> int:
     """Run the study in a child process into ``out/study`` and write ``out/memory.json``."""
+    from pfjax.bench.report import MACHINE_UNITS
     from pfjax.bench.run import machine
     from pfjax.cli.records import units
     from pfjax.jsonio import dumps
@@ -226,7 +227,7 @@ def measure(args, sets: list[str], out: Path, config_sha256: str) -> int:
         "command": cmd,
         "rss_trace_mib": trace,
     }
-    result["units"] = units(result, UNITS)
+    result["units"] = units(result, {**UNITS, **MACHINE_UNITS})
     (out / "memory.json").write_text(dumps(result) + "\n")
     print(dumps({k: v for k, v in result.items() if k not in ("rss_trace_mib", "command", "machine")}, indent=1))
     return 0
