@@ -104,6 +104,13 @@ def read_marker(directory: Path) -> dict | None:
     return m
 
 
+def as_written(listed: dict, name: str, st: os.stat_result) -> bool:
+    """Whether file ``name`` (its ``stat``) is as pfjax wrote it: its size and modification time
+    those of the marker's ``files`` entry (``listed``)."""
+    entry = listed.get(name)
+    return isinstance(entry, list) and entry == [st.st_size, st.st_mtime_ns]
+
+
 def _entries(directory: Path) -> tuple[dict[str, os.stat_result], set[str]]:
     """Files (and links) and directories under ``directory``, as paths relative to it."""
     files, dirs = {}, set()
@@ -240,11 +247,7 @@ def _check_contents(
             f"away or choose another {flag} (pfjax never deletes what it did not write)",
             flag,
         )
-    changed = [
-        f
-        for f, st in files.items()
-        if not (isinstance(listed.get(f), list) and listed[f] == [st.st_size, st.st_mtime_ns])
-    ]
+    changed = [f for f, st in files.items() if not as_written(listed, f, st)]
     if not overwrite:
         advice = switch_advice(flag, "overwrite")
         if changed:

@@ -296,12 +296,12 @@ def _unchanged_inputs(out: Path) -> None:
     (its size or time differs from the output marker's): a report follows from the study's own
     files, and ``--overwrite`` would otherwise record the edited file as pfjax's."""
     from pfjax.errors import InputError
-    from pfjax.outputs import read_marker
+    from pfjax.outputs import as_written, read_marker
 
     listed = (read_marker(out) or {}).get("files", {})
     for name in ("summary.json", "runs.parquet", "margin.parquet"):
         f = out / name
-        if f.is_file() and listed.get(name) != [f.stat().st_size, f.stat().st_mtime_ns]:
+        if f.is_file() and not as_written(listed, name, f.stat()):
             raise InputError(
                 f"--out: {f} changed after the study wrote it; a report is built from the study's own files: "
                 "re-run the study",
