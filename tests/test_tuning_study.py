@@ -229,6 +229,29 @@ def _heldout_toml(tmp_path, axes: str) -> Path:
     return f
 
 
+def test_the_heldout_set_by_its_example_name_loads_from_any_directory(tmp_path, monkeypatch):
+    """``heldout`` is a study TOML relative to the working directory, or a packaged example's name,
+    which reads the same held-out study wherever the study runs (the schema's default)."""
+    from pfjax import examples
+    from pfjax.config import ConfigError
+    from pfjax.tuning.study_config import heldout_file, heldout_study
+
+    toml = ROOT / "studies" / "tuning_ga_vs_gradient.toml"
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(
+        ConfigError,
+        match=r"^heldout: file not found: studies/tuning_heldout\.toml \(a study TOML relative to the working "
+        r"directory, or a packaged example's name: heldout\)$",
+    ):
+        _load(path=toml)
+    cfg = _load("heldout='heldout'", path=toml)
+    assert heldout_file(cfg.heldout).read_bytes() == (ROOT / "studies" / "tuning_heldout.toml").read_bytes()
+    assert heldout_study(cfg.model_dump(mode="json")).name == "tuning_heldout"
+    assert _load().heldout == "heldout"  # the schema's default
+    (tmp_path / "mine.toml").write_bytes(examples.path("heldout").read_bytes())
+    assert heldout_file(_load("heldout='mine.toml'").heldout).resolve() == (tmp_path / "mine.toml").resolve()
+
+
 def test_a_heldout_study_without_a_joint_sweep_is_refused(tmp_path):
     """The held-out table's margins and the robust-vs-source verdict read the joint sweep."""
     from pfjax.config import ConfigError

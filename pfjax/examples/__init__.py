@@ -16,7 +16,7 @@ from pathlib import Path
 
 from pfjax.errors import InputError
 
-__all__ = ["FILES", "describe", "description", "names", "path"]
+__all__ = ["FILES", "describe", "description", "names", "path", "study_file"]
 
 #: Example name -> its file in this package (the same name under ``studies/`` in the repository).
 FILES = {
@@ -39,6 +39,15 @@ def path(name: str) -> Path:
     if name not in FILES:
         raise InputError(f"example: unknown example {name!r}; expected one of {', '.join(FILES)}", "example")
     return Path(str(resources.files(__name__).joinpath(FILES[name])))
+
+
+def study_file(value: str | Path) -> Path:
+    """A study TOML named in a config: the packaged example if ``value`` is an example's name
+    (``"heldout"``, the same meaning wherever the command runs), else the path ``value`` (relative
+    to the working directory)."""
+    if isinstance(value, str) and value in FILES:
+        return path(value)
+    return Path(value)
 
 
 def description(name: str) -> str:

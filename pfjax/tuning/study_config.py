@@ -218,7 +218,9 @@ class TuningStudy(ConfigModel):
     """The tuning study (``studies/tuning_ga_vs_gradient.py``)."""
 
     heldout: str = Field(
-        "studies/tuning_heldout.toml", description="a Monte Carlo study TOML: the held-out set and training set [-]"
+        "heldout",
+        description="the held-out set and training set: a Monte Carlo study TOML, or the name of a packaged "
+        "example (`pfjax examples`; the default, the packaged copy of studies/tuning_heldout.toml) [-]",
     )
     seeds: int = Field(20, ge=1, description="seeds 0..seeds-1 of every method on every problem [-]")
     cli_seeds: int = Field(
@@ -245,8 +247,11 @@ class TuningStudy(ConfigModel):
                 check_multistart({**base, **over})
             except ValueError as e:
                 raise ValueError(f"compare.ablation.{name}: {e}") from None
-        if not Path(self.heldout).is_file():
-            raise ValueError(f"heldout: file not found: {self.heldout}")
+        if not heldout_file(self.heldout).is_file():
+            raise ValueError(
+                f"heldout: file not found: {self.heldout} (a study TOML relative to the working directory, "
+                "or a packaged example's name: heldout)"
+            )
         cfg = self.model_dump(mode="json")
         spec = heldout_study(cfg)
         check_sizes(cfg, len(spec.paths))
@@ -275,6 +280,13 @@ HELDOUT_KEYS = {
 MARGIN_AXIS = "joint"
 
 
+def heldout_file(value: str) -> Path:
+    """The held-out study's TOML: a packaged example's name or a path (:func:`pfjax.examples.study_file`)."""
+    from pfjax.examples import study_file
+
+    return study_file(value)
+
+
 def heldout_study(cfg: dict):
     """The held-out Monte Carlo study (``cfg["heldout"]``) at the study's sizes (``robust``), step and
     horizon (``sim``); ``ValueError`` naming the study's key (:data:`HELDOUT_KEYS`), or ``heldout:
@@ -291,7 +303,7 @@ def heldout_study(cfg: dict):
     }
     path = cfg["heldout"]
     try:
-        spec, _ = load_study(Path(path), [f"{k}={v}" for k, v in sets.items()])
+        spec, _ = load_study(heldout_file(path), [f"{k}={v}" for k, v in sets.items()])
     except ConfigError as e:
         head, _, rest = str(e).partition(": ")
         if head in HELDOUT_KEYS:
@@ -423,6 +435,7 @@ __all__ = [
     "check_multistart",
     "check_sizes",
     "ga_options",
+    "heldout_file",
     "heldout_study",
     "load",
     "methods",

@@ -76,11 +76,11 @@ def training_problem(cfg, controller: str, n_runs: int, cost=None):
     :func:`~pfjax.tuning.study_config.heldout_study`); ``cost`` default mean IAE."""
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.problem import make_problem
-    from pfjax.tuning.study_config import TRAINING_OFFSET
+    from pfjax.tuning.study_config import TRAINING_OFFSET, heldout_file
 
     return make_problem(
         controller,
-        cfg["heldout"],
+        str(heldout_file(cfg["heldout"])),
         cost=CostSpec() if cost is None else cost,
         config={"dt": cfg["sim"]["dt"], "horizon": cfg["sim"]["horizon"]},
         n_runs=n_runs,
