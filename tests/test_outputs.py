@@ -493,6 +493,39 @@ def test_chunks_of_another_config_are_never_reused(study_toml, tmp_path):
     pd.testing.assert_frame_equal(pd.read_parquet(out / "runs.parquet"), pd.read_parquet(ref / "runs.parquet"))
 
 
+@pytest.mark.parametrize(
+    "files",
+    [
+        {"manifest.json": '{"mine": 1}', "a.parquet": None},  # a user's manifest, a user's table
+        {"manifest.json": None},  # pfjax's manifest keys, a user's table below
+        {"notes.txt": "x"},  # no manifest at all
+        {},  # empty: no manifest, so not pfjax's
+    ],
+    ids=["user-manifest", "user-parquet", "no-manifest", "empty"],
+)
+def test_a_user_directory_named_like_the_partial_one_is_never_removed(study_toml, tmp_path, capsys, files):
+    """``.<out>.partial`` that pfjax did not write (its manifest not pfjax's, a Parquet file without a
+    study's identity, or no manifest) is refused with one line naming --out, even with --fresh,
+    and left as it was."""
+    out = tmp_path / "out"
+    user = partial_dir(out)
+    user.mkdir()
+    for name, text in files.items():
+        if name.endswith(".parquet"):
+            pd.DataFrame({"x": [1.0]}).to_parquet(user / name)
+        elif text is None:  # the manifest pfjax writes, with a user's table beside it
+            (user / name).write_text(json.dumps({"study": "s", "config_sha256": "0", "seed": 0, "pfjax_version": "0"}))
+            pd.DataFrame({"x": [1.0]}).to_parquet(user / "t.parquet")
+        else:
+            (user / name).write_text(text)
+    before = sorted((p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in user.iterdir())
+    code, err = _cli(["study", str(study_toml), "--out", str(out), "--fresh"], capsys)
+    assert code == EXIT_USAGE and len(err) == 1 and err[0].startswith(f"pfjax study: error: --out: {user} "), err
+    assert "pfjax did not" in err[0] and err[0].endswith("move it away"), err
+    assert sorted((p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in user.iterdir()) == before
+    assert not out.exists()
+
+
 # ------------------------------------------------------------------------------ real processes
 
 

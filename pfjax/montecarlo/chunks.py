@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -109,19 +110,36 @@ class ChunkStore:
         return [f for f in self.dir.iterdir() if f.suffix == ".parquet" and not f.name.startswith(".")]
 
     def _discard_checked(self, out: Path) -> None:
-        """Remove the partial directory if it holds only what a study writes there."""
-        foreign = [
-            f.name
-            for f in self.dir.iterdir()
-            if not (f.is_file() and (f.name == "manifest.json" or ".parquet" in f.name))
-        ]
+        """Remove the partial directory if it holds only what a study writes there: its manifest
+        (:meth:`_written_by_pfjax`), chunk files stamped with a study's identity, and chunk files
+        a kill left half-written under their temporary names."""
+        where = f"{self.flag}: {self.dir} (where pfjax keeps the finished chunks of {out})"
+        foreign = [f.name for f in sorted(self.dir.iterdir()) if not self._written_by_pfjax(f)]
         if foreign:
-            raise ConfigError(
-                f"{self.flag}: {self.dir} (where pfjax keeps the finished chunks of {out}) holds "
-                f"{foreign[0]!r}, which pfjax did not write; move it away",
-                self.flag,
-            )
+            raise ConfigError(f"{where} holds {foreign[0]!r}, which pfjax did not write; move it away", self.flag)
+        if not (self.dir / "manifest.json").is_file():
+            raise ConfigError(f"{where} has no manifest.json, so pfjax did not make it; move it away", self.flag)
         shutil.rmtree(self.dir)
+
+    def _written_by_pfjax(self, f: Path) -> bool:
+        """Whether ``f`` in the partial directory is a file a study writes there: the manifest (a
+        JSON object with exactly the manifest's keys), a chunk (Parquet with a study's config
+        hash in its metadata), or a chunk's temporary file (``.<key>.parquet.tmp<pid>``)."""
+        if f.is_symlink() or not f.is_file():
+            return False
+        if f.name == "manifest.json":
+            try:
+                old = json.loads(f.read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                return False
+            return isinstance(old, dict) and set(old) == set(self.manifest)
+        if f.suffix == ".parquet" and not f.name.startswith("."):
+            try:
+                meta = pq.read_schema(f).metadata or {}
+            except (OSError, pa.ArrowException):
+                return False
+            return IDENTITY[0] in meta
+        return re.fullmatch(r"\.[^/]+\.parquet\.tmp[0-9]+", f.name) is not None
 
     def _check_manifest(self, out: Path) -> None:
         try:
