@@ -6,6 +6,7 @@ boxes and plot styles are read from."""
 import importlib
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -74,6 +75,22 @@ def test_unknown_names_are_one_line_errors():
         load_study(data={**base, "paths": [{"kind": "nope"}]})
     with pytest.raises(InputError, match=r"K is only for types with a vector gain"):
         load_study(data={**base, "controllers": [{"name": "a", "type": "pi", "K": [1, 2]}]})
+
+
+@pytest.mark.parametrize("name", ["nope", "random", "spline"])
+def test_a_single_run_names_only_the_paths_it_can_use(name):
+    """pfjax.falsify and a paper scenario take a fixed path: an unknown name or a kind built only
+    from a study config is refused listing the fixed paths, not the kinds it would then refuse."""
+    import pfjax
+    from pfjax.errors import InputError
+    from pfjax.sim.scenario import paper_scenario
+
+    fixed = ", ".join(paths.fixed_paths())
+    assert "random" not in fixed and "spline" not in fixed
+    why = "unknown path 'nope'" if name == "nope" else f"{name!r} is built only from a study config"
+    for call in (lambda: pfjax.falsify("pi", path=name), lambda: paper_scenario(name, None)):
+        with pytest.raises(InputError, match=f"^path: {re.escape(why)}; expected one of {re.escape(fixed)}$"):
+            call()
 
 
 def test_dummy_single_run(dummy):

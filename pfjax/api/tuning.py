@@ -250,12 +250,7 @@ def falsify(
     from pfjax.sim import SimConfig
 
     e, d = C.resolve(controller)
-    entry = paths.entry(path)
-    if entry.build is None:
-        raise errors.InputError(
-            f"path: {path!r} is built only from a study config; expected one of {', '.join(paths.fixed_paths())}",
-            "path",
-        )
+    entry = paths.fixed_entry(path)
     errors.number("speed", speed, positive=True, unit=" m/s")
     errors.number("L", L, positive=True, unit=" m")
     errors.number("delta_max_deg", delta_max_deg, positive=True, below=90, unit=" deg")

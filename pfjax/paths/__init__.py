@@ -11,7 +11,7 @@ from pfjax.paths.geometry import (
     tangent_angle,
     wrap_angle,
 )
-from pfjax.paths.registry import PATHS, PathEntry, entry, fixed_paths, register, source_tests
+from pfjax.paths.registry import PATHS, PathEntry, entry, fixed_entry, fixed_paths, register, source_tests
 from pfjax.paths.shapes import (
     Circle,
     Graph,
@@ -35,6 +35,7 @@ __all__ = [
     "closest_parameter",
     "curvature",
     "entry",
+    "fixed_entry",
     "fixed_paths",
     "global_parameter",
     "line",

@@ -249,6 +249,18 @@ def entry(name: str, key: str = "path") -> PathEntry:
     return PATHS[name]
 
 
+def fixed_entry(name: str, key: str = "path") -> PathEntry:
+    """The entry of ``name`` if a single run can use it (:func:`fixed_paths`); else
+    :class:`~pfjax.errors.InputError` naming ``key`` and listing those paths (an unknown name, or a
+    kind built only from a study config: ``random``, ``spline``)."""
+    fixed = ", ".join(fixed_paths())
+    if name not in PATHS:
+        raise errors.InputError(f"{key}: unknown path {name!r}; expected one of {fixed}", key)
+    if PATHS[name].build is None:
+        raise errors.InputError(f"{key}: {name!r} is built only from a study config; expected one of {fixed}", key)
+    return PATHS[name]
+
+
 def fixed_paths() -> list[str]:
     """Names of the paths a single run can use (those with a builder and a start pose)."""
     return [n for n, e in PATHS.items() if e.build is not None]

@@ -90,12 +90,10 @@ def paper_scenario(
     "parabola", "sine", pfjax's "circle", any registered path) from its start pose (or ``pose0``)
     with constant slip ``beta_r_deg``, ``beta_f_deg`` (deg, magnitude below 90); ``kwargs`` as
     :func:`make_scenario`."""
-    if test not in paths.fixed_paths():
-        raise InputError(f"path: expected one of {', '.join(paths.fixed_paths())}, got {test!r}")
+    e = paths.fixed_entry(test)
     errors.numbers("beta_r_deg", beta_r_deg, below=90, unit=" deg")
     errors.numbers("beta_f_deg", beta_f_deg, below=90, unit=" deg")
-    e = paths.entry(test)
-    assert e.build is not None  # a fixed path (checked above)
+    assert e.build is not None  # a fixed path (fixed_entry)
     slip = constant_slip(math.radians(beta_r_deg), math.radians(beta_f_deg))
     return make_scenario(e.build(), e.start_pose if pose0 is None else pose0, gains, slip=slip, **kwargs)
 
