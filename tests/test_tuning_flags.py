@@ -299,3 +299,39 @@ def test_tune_api_refuses_what_the_cli_refuses(capsys):
     _refused_cli(
         ["tune", "--check", "39.5204,1.639,11.6124,0.023", "--controller", "pi", "--seed", "5"], "--seed", capsys
     )
+
+
+@pytest.mark.parametrize(
+    "argv, read, unread",
+    [
+        (["--method", "gradient"], {"seed": 0}, ("population", "generations", "n_runs")),
+        (["--method", "ga"], {"seed": 0, "population": 50, "generations": 100}, ("n_runs", "steps")),
+        (["--check", "10,0,2,0"], {}, ("seed", "population", "generations", "n_runs")),
+    ],
+    ids=["gradient", "ga", "check"],
+)
+def test_tune_json_records_only_the_arguments_the_run_read(monkeypatch, capsys, argv, read, unread):
+    """``arguments`` (and the hash over it) holds the defaults of the flags the run reads and None
+    for those it does not (the GA's sizes with the gradient tuner, --n-runs with a paper set): two
+    runs that differ only in what they did not read would otherwise record different inputs."""
+    import json
+
+    from pfjax.cli import tune as cli_tune
+    from pfjax.tuning import GAOptions, problem
+
+    assert (cli_tune.DEFAULTS["population"], cli_tune.DEFAULTS["generations"]) == (
+        GAOptions().population_size,
+        GAOptions().generations,
+    )
+    seen = []
+
+    def fake_tune(pr, method, **kw):
+        seen.append(kw["ga_options"])
+        return _fake_result(pr.lower.size)
+
+    monkeypatch.setattr(problem, "tune", fake_tune)
+    assert main(["tune", "--controller", "pi", "--json", *argv]) == 0
+    got = json.loads(capsys.readouterr().out)["arguments"]
+    assert {k: got[k] for k in read} == read and all(got[k] is None for k in unread), got
+    if seen:
+        assert seen[-1] == GAOptions()

@@ -9,6 +9,8 @@ A command that computes a result without a config of its own (``simulate``, ``sy
   the metrics by :data:`pfjax.tables.COLUMNS`) and the provenance record's (``seed``, ``cpu_settings``:
   :data:`pfjax.provenance.STAMP_UNITS`);
 * ``arguments``: every argument the command ran with, defaults filled in (run it again with them);
+  a flag the run does not read is null (``pfjax tune``'s GA sizes with the gradient tuner,
+  ``--n-runs`` with a paper set), so it does not enter the hash;
 * the provenance record of a study's ``summary.json`` (:func:`pfjax.provenance.stamp`): pfjax's
   version, ``config_sha256`` (over ``arguments``: the same arguments, the same hash), the seed where
   the command takes one, the machine and the CPU settings.

@@ -218,14 +218,15 @@ def _cmd(args) -> dict:
 
     controllers = _controllers()
     _check_flags(args, controllers)
-    for dest, value in DEFAULTS.items():
-        if getattr(args, dest) is None:
+    for dest, value in DEFAULTS.items():  # the defaults of the flags this run reads (the rest stay None)
+        if getattr(args, dest) is None and _reads(args, dest):
             setattr(args, dest, value)
-    key = seed_key(errors.seed("--seed", args.seed))
+    key = seed_key(errors.seed("--seed", args.seed)) if args.seed is not None else None
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
         multistart = _multistart(args)
-        options = GAOptions(population_size=args.population, generations=args.generations)
+        ga = {"population_size": args.population, "generations": args.generations}
+        options = GAOptions(**{k: v for k, v in ga.items() if v is not None})
         if args.method is not None:  # every tuning setting, once, with --steps, --starts and --lr applied
             check_options(args.method, options, args.steps, args.starts, args.lr, multistart)
         changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
@@ -235,7 +236,7 @@ def _cmd(args) -> dict:
                 args.scenario,
                 cost=cost,
                 config=changes or None,
-                n_runs=args.n_runs,
+                **({} if args.n_runs is None else {"n_runs": args.n_runs}),
                 model=args.model,
             )
         except errors.InputError as e:
@@ -308,8 +309,20 @@ def _model_of(problem) -> str:
 
 
 #: The defaults of the flags that only some methods or scenarios read (``None`` in the parser, so
-#: that a given one can be told apart).
+#: that a given one can be told apart; filled in only where the run reads them, so that the JSON's
+#: ``arguments`` and its hash hold only what the run used).
 DEFAULTS = {"seed": 0, "generations": 100, "population": 50, "n_runs": 16}
+
+
+def _reads(args, dest: str) -> bool:
+    """Whether this run reads flag ``dest``: a method flag if the method reads it
+    (:func:`method_flags`; ``--check`` reads none), ``--n-runs`` if the scenario is a study TOML."""
+    from pfjax.tuning.problem import scenario_sets
+
+    flags = method_flags()
+    if dest in flags:
+        return args.method in flags[dest]
+    return dest == "n_runs" and args.scenario not in scenario_sets()
 
 
 def method_flags() -> dict[str, tuple[str, ...]]:
