@@ -22,7 +22,10 @@ norm is not small from either side, and a difference of gradients across the kin
 large curvature. So the **verdict** comes from the probes: ``"local minimum"`` when no probe
 lowers the cost by more than ``rtol |J|`` (default 1e-4: a local minimum within the box at the
 probed scales, up to 0.01 % of the cost),
-``"not a local minimum"`` otherwise (``best_probe`` gives the direction and the decrease). The
+``"not a local minimum"`` otherwise (``best_probe`` gives the direction and the decrease), and
+``"flat"`` when every probe's cost equals the cost exactly and so does every gradient component
+zero: a plateau, such as a region where every run fails and costs the fail penalty, which the
+probes cannot tell from its surroundings (no minimum is claimed there). The
 gradient and Hessian are reported beside it as the smooth picture. A cost or gradient that is not
 finite at ``theta`` (a failed rollout in the batch) is data, not an error: the verdict is
 ``"non-finite cost"`` where the cost itself is not finite, and the quadratic model is
@@ -43,7 +46,7 @@ import numpy as np
 from pfjax import errors
 from pfjax.numerics import autodiff
 
-VERDICTS = ("local minimum", "not a local minimum", "non-finite cost")
+VERDICTS = ("local minimum", "not a local minimum", "flat", "non-finite cost")
 #: :func:`check_point`'s probe radii, box units.
 RADII = (1e-3, 1e-2)
 
@@ -122,6 +125,8 @@ def check_point(
     i = int(np.argmin(Jp))
     probe_dec = (J - float(Jp[i])) / max(abs(J), 1e-300)
     verdict = "not a local minimum" if probe_dec > rtol else "local minimum"
+    if np.all(Jp == J) and not np.any(g):
+        verdict = "flat"
     if not np.isfinite(J):
         verdict, probe_dec = "non-finite cost", float("nan")
     fpp = forward_passes_per_gradient(lo.size, mode)
