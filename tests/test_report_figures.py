@@ -244,3 +244,30 @@ def test_the_image_comparison_catches_a_scrambled_overlay(study, tmp_path):
 
     fig = _slip_map(study, predicted={"sf": scrambled})
     assert _compare(fig, "slip_map", tmp_path, baseline=False) is not None
+
+
+def test_worst_case_figure_gives_the_objectives_unit():
+    """The worst-case figure's title and search axis carry the objective's unit, from the metric table."""
+    from pfjax.falsification import OBJECTIVES
+    from pfjax.report.worst_case_figures import objective_unit, worst_case_figure
+
+    assert {o: objective_unit(o) for o in OBJECTIVES} == {
+        "iae": "m·s",
+        "ise": "m²·s",
+        "itae": "m·s²",
+        "max_abs_d": "m",
+        "late_max_abs_d": "m",
+    }
+    t = np.linspace(0.0, 1.0, 5)
+    trajs = {"pi": {k: t for k in ("t", "x", "y", "path_x", "path_y", "beta_r", "beta_f", "d")}}
+    wc = {"objective": "ise", "falsifier": 0.5, "falsifier_status": "ok", "ratio": 2.0}
+    wc |= {
+        "history_rollouts": [1, 2],
+        "history": [0.1, 0.5],
+        "history_random_rollouts": [1, 2],
+        "history_random": [0.1, 0.2],
+    }
+    fig = worst_case_figure(trajs, {"controllers": {"pi": {"worst_case": wc}}}, {"pi": "C0"})
+    axes = fig.get_axes()
+    assert axes[0].get_title() == "pi: worst ise = 0.5 m²·s (ok)"
+    assert axes[3].get_ylabel() == "worst ise found [m²·s]"

@@ -5,6 +5,15 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
+from pfjax.tables import COLUMNS
+
+
+def objective_unit(objective: str) -> str:
+    """The unit of a worst-case objective (a metric of :data:`pfjax.tables.COLUMNS`) as a figure
+    writes it: ``m·s`` for IAE, ``m²·s`` for ISE."""
+    unit = COLUMNS[objective][0] if objective in COLUMNS else ""
+    return unit.replace("^2", "²").replace(" ", "·")
+
 
 def worst_case_figure(trajs: dict, summary: dict, colors: dict[str, str]) -> Figure | None:
     """One row per controller: (a) the worst run's rear-axle path against the reference path,
@@ -17,6 +26,7 @@ def worst_case_figure(trajs: dict, summary: dict, colors: dict[str, str]) -> Fig
     ax = np.atleast_2d(fig.subplots(len(names), 4))
     for row, name in zip(ax, names):
         tr, wc, c = trajs[name], summary["controllers"][name]["worst_case"], colors.get(name, "C0")
+        unit = objective_unit(wc["objective"])
         a = row[0]
         inside = (tr["path_x"] > tr["x"].min() - 1) & (tr["path_x"] < tr["x"].max() + 1)
         a.plot(np.where(inside, tr["path_x"], np.nan), tr["path_y"], color="0.6", lw=3, alpha=0.5, label="path")
@@ -32,7 +42,7 @@ def worst_case_figure(trajs: dict, summary: dict, colors: dict[str, str]) -> Fig
         a.set(
             xlabel="x [m]",
             ylabel="y [m]",
-            title=f"{name}: worst {wc['objective']} = {wc['falsifier']:.3g} ({wc['falsifier_status']})",
+            title=f"{name}: worst {wc['objective']} = {wc['falsifier']:.3g} {unit} ({wc['falsifier_status']})",
         )
         a.set_aspect("equal", adjustable="datalim")
         a.autoscale(enable=True, tight=False)
@@ -53,7 +63,7 @@ def worst_case_figure(trajs: dict, summary: dict, colors: dict[str, str]) -> Fig
         a.plot(wc["history_random_rollouts"], wc["history_random"], color="0.4", ls="--", label="random search")
         a.set(
             xlabel="rollouts simulated",
-            ylabel=f"worst {wc['objective']} found",
+            ylabel=f"worst {wc['objective']} found [{unit}]",
             title=f"search: ratio {wc['ratio']:.2f}×",
         )
         a.legend(fontsize=7)
