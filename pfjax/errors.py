@@ -280,7 +280,8 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
         print(f"{prog}: error: {one_line(e)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
-        sys.stderr.write("\n")  # below a progress bar's partial line
+        if sys.stderr.isatty():  # below a progress bar's partial line (bars are drawn on a terminal only)
+            sys.stderr.write("\n")
         print(f"{prog}: interrupted; {interrupted}", file=sys.stderr)
         return EXIT_INTERRUPTED
 

@@ -728,3 +728,19 @@ def test_ctrl_c_whose_exception_python_drops_still_interrupts_the_command(monkey
     assert waited == ["backstop"] and dropped == [] and late == []  # no exception reached the hook, no late signal
     assert sys.unraisablehook == dropped.append and interrupts._running is None  # restored, forgotten
     interrupts.stop_if_interrupted()  # outside a command: nothing to stop
+
+
+@pytest.mark.parametrize("tty", [False, True])
+def test_ctrl_c_prints_one_line_and_a_blank_line_only_below_a_terminals_progress_bar(monkeypatch, capsys, tty):
+    """Ctrl-C: ``<prog>: interrupted; ...`` on stderr; a newline first only on a terminal (where a
+    progress bar may have left a partial line), never blank lines into a log or a pipe."""
+    from pfjax import errors
+
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: tty)
+
+    def body():
+        raise KeyboardInterrupt
+
+    assert errors.command_main("prog", body) == EXIT_INTERRUPTED
+    out, err = capsys.readouterr()
+    assert out == "" and err == ("\n" if tty else "") + "prog: interrupted; nothing was written\n"
