@@ -12,17 +12,23 @@ def design_mixed(v: float = 1.0, L: float = 0.2, alpha: float = 10.0, beta: floa
     (m), minimising ``alpha γ∞² + beta γ₂²`` by LMIs (cvxpy + Clarabel).
 
     Args:
+        v: the design speed, m/s, above 0.
+        L: the wheelbase, m, above 0.
+        alpha: the weight of ``γ∞²`` (dimensionless, at least 0; the source's 10).
+        beta: the weight of ``γ₂²`` (dimensionless, at least 0; the source's 1); ``alpha`` and
+            ``beta`` may not both be 0.
         region: an optional pole region for the closed loop: a :class:`pfjax.synthesis.PoleRegion`
             or a dict of its fields (``max_real``, ``disk_center``, ``disk_radius``, 1/s;
             ``sector_angle``, rad).
 
     Returns:
-        a :class:`pfjax.synthesis.Design`: ``K`` (1×2: rad/m, rad/rad, for ``[d, θ_e]``), the LMI
+        pfjax.synthesis.Design: ``K`` (1×2: rad/m, rad/rad, for ``[d, θ_e]``), the LMI
         bounds ``gamma_inf``, ``gamma_2``, the closed loop's true norms ``hinf_norm``,
         ``h2_norm`` and its poles. Pass it as ``gains`` to :func:`simulate` with ``"state_feedback"``.
 
     Raises:
-        InputError: a bad argument. SynthesisError: the LMIs are infeasible.
+        InputError: a bad argument, named (``v``, ``L``, ``alpha``, ``beta``, ``region.<field>``).
+        SynthesisError: the LMIs are infeasible (:class:`pfjax.errors.SynthesisError`, a ``ValueError``).
     """
     from pfjax.synthesis import synthesize
 

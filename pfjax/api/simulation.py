@@ -12,7 +12,20 @@ from pfjax.errors import arguments_checked
 
 
 class Simulation(NamedTuple):
-    """The outcome of :func:`simulate`."""
+    """The outcome of :func:`simulate` (and :func:`replay`).
+
+    Attributes:
+        table: a pandas DataFrame, one row per run: the sampled values (``*_deg`` in degrees, the
+            rest in SI units), every metric (:data:`pfjax.tables.COLUMNS` gives each unit),
+            ``success``, ``status_code``, ``status`` and ``fail_time`` (s; NaN for a run that ran
+            the whole horizon).
+        result: the simulator's output, a :class:`pfjax.sim.SimResult` of NumPy arrays with one
+            entry per run (``final``, ``metrics``, ``status``, ``fail_time``; ``trajectory`` only
+            with ``trajectories=True``).
+        controller: the controller's registry name (``state_feedback`` for a design such as ``lmi``).
+        gains: the scalar gains simulated, by name (``{"k_d": ..., "k_theta": ...}``; rad/m, rad/rad
+            for a state feedback).
+    """
 
     table: Any  # pandas DataFrame: one row per run: sampled values, metrics, status, fail_time
     result: Any  # pfjax.sim.SimResult (NumPy arrays; trajectory only if asked for)
@@ -86,15 +99,15 @@ def simulate(
             parameter pytree, or a design with ``K`` (:func:`design_mixed`; as many elements as the
             controller's ``K``: two for ``state_feedback``, three for ``integral``). A design name
             (``lmi``) is designed at the runs' mean speed and wheelbase.
-        config: a :class:`pfjax.sim.SimConfig` or a dict of its fields (``horizon``, ``dt``,
-            ``success_band``, ...; not ``record``: that is ``trajectories``); default 20 s at 5 ms.
+        config: a :class:`pfjax.sim.SimConfig` or a dict of its fields (``horizon``, s; ``dt``, s;
+            ``success_band``, m; ...; not ``record``: that is ``trajectories``); default 20 s at 5 ms.
         trajectories: ``True`` also records every run's trajectory (memory grows with the horizon).
 
     Computed in the precision JAX is configured for (float32 unless ``jax_enable_x64``); the command
     line enables float64, and a caller that does the same gets its numbers.
 
     Returns:
-        a :class:`Simulation` (per-run table with metrics and statuses, the raw result).
+        the per-run table with metrics and statuses, and the simulator's raw result.
 
     Raises:
         InputError: a bad argument, named (``controller``, ``gains.k_d``, ``config.dt``,
@@ -164,12 +177,13 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
 
     Args:
         study: a :class:`StudyResult`, its output directory, or its config (``StudySpec``).
-        path: the path's label in the study. controller: the controller's name in the study.
+        path: the path's label in the study.
+        controller: the controller's name in the study.
         runs: run indices (an int or a sequence).
         trajectories: ``True`` (default) also records the runs' trajectories.
 
     Returns:
-        a :class:`Simulation` of these runs: their rows as the study's ``runs.parquet`` holds them
+        these runs, their rows as the study's ``runs.parquet`` holds them
         (bit for bit with ``trajectories=False``; recording the runs changes the order of a few
         float32 sums, so ``steady_abs_d`` and ``steady_abs_theta_e_rad`` may differ by a rounding,
         about 1e-7 relative), and with ``trajectories`` the recorded runs in ``result.trajectory``.
@@ -252,7 +266,17 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
 
 
 class SuccessRate(NamedTuple):
-    """A success rate with its Clopper-Pearson interval."""
+    """A success rate with its Clopper-Pearson interval (:func:`success_rate`); ``str()`` gives it in
+    one line.
+
+    Attributes:
+        rate: successes over runs, ``k / n`` (a fraction, 0 to 1).
+        lo: the interval's lower end (a fraction).
+        hi: the interval's upper end (a fraction).
+        k: the number of successful runs.
+        n: the number of runs.
+        conf: the interval's confidence level (a fraction, e.g. 0.95).
+    """
 
     rate: float
     lo: float
@@ -272,6 +296,14 @@ class SuccessRate(NamedTuple):
 def success_rate(x, conf: float = 0.95) -> SuccessRate:
     """The success rate of a :class:`Simulation` (or a table with a ``success`` column, or a
     boolean array) with its exact (Clopper-Pearson) ``conf`` interval.
+
+    Args:
+        x: a :class:`Simulation`, a pandas DataFrame with a ``success`` column (a study's run table,
+            ``StudyResult.runs``), or booleans, one per run (True: the run succeeded).
+        conf: the interval's two-sided confidence level, in (0, 1) (default 0.95).
+
+    Returns:
+        ``rate``, ``lo``, ``hi`` (fractions), ``k`` successes in ``n`` runs, ``conf``.
 
     Raises:
         InputError: no runs, or successes that are not booleans (``success: ...``); ``conf`` not in (0, 1).

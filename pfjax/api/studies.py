@@ -10,7 +10,24 @@ from pfjax.errors import arguments_checked
 
 
 class StudyResult(NamedTuple):
-    """A study's outputs (:func:`run_study`, :func:`load_study`)."""
+    """A study's outputs (:func:`run_study`, :func:`load_study`).
+
+    Attributes:
+        out: the output directory (a :class:`pathlib.Path`).
+        summary: ``summary.json`` as a dict: per controller its success rate and interval, metric
+            statistics, slip margins and failure drivers, with the provenance (``config_sha256``,
+            ``seed``, pfjax's version) and the unit of every number.
+        runs: ``runs.parquet`` as a pandas DataFrame, one row per run (path, controller, run index,
+            sampled values, metrics, ``success``, ``status``, ``fail_time``); the unit of every column
+            is in :data:`pfjax.tables.COLUMNS` and in the file's column metadata.
+        margin: ``margin.parquet`` as a pandas DataFrame, one row per run of the slip-margin sweep
+            (None without a margin sweep).
+        headline: a pandas DataFrame, one row per controller, all paths pooled: ``runs``,
+            ``success_rate`` with its 95 % Clopper-Pearson interval ``ci95_lo``, ``ci95_hi``,
+            ``iae_mean`` and ``iae_p95`` (m s), ``steady_abs_d_p95_mm`` (mm) over the runs with status
+            ``ok``, and the joint-axis ``slip_margin_deg`` (deg; missing, None or NaN, where the
+            controller already fails at the sweep's smallest amplitude, and without a sweep).
+    """
 
     out: Any  # pathlib.Path of the output directory
     summary: dict  # summary.json
@@ -27,8 +44,8 @@ def load_study(out) -> StudyResult:
         out: the study's output directory (a str or path-like).
 
     Returns:
-        a :class:`StudyResult`: the directory, ``summary.json``, the run table, the margin table
-        (None without a margin sweep) and the headline table.
+        the directory, ``summary.json``, the run table, the margin table (None without a margin
+        sweep) and the headline table.
 
     Raises:
         pfjax.errors.InputError: naming ``out``: not a str or path-like, no finished study there
