@@ -36,7 +36,8 @@ def site(tmp_path_factory):
     out = tmp_path_factory.mktemp("site")
     env = {**os.environ, "PFJAX_DOCS_EXECUTE": "false", "NO_MKDOCS_2_WARNING": "1"}
     r = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(out)],
+        # not -q: mkdocs's quiet mode hides the warnings that --strict turns into a failure
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(out)],
         cwd=ROOT,
         env=env,
         capture_output=True,

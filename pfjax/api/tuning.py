@@ -68,8 +68,9 @@ def tune(
         learning_rate: multi-start: first BFGS trust radius; adam: step (box units; ``None``: default).
         multistart: a :class:`pfjax.tuning.MultistartOptions` for ``gradient`` (a bad field is
             named ``multistart.<field>``; ``steps``, ``n_starts`` and ``learning_rate`` replace its own).
-        generations, population: ``ga`` and ``ga+gradient``: the GA's (``None``: the source's 100
-            and 50, :class:`pfjax.tuning.GAOptions`).
+        generations: ``ga`` and ``ga+gradient``: the GA's generations (``None``: the source's 100,
+            :class:`pfjax.tuning.GAOptions`).
+        population: ``ga`` and ``ga+gradient``: the GA's population (``None``: the source's 50).
         check: gains to check instead of tuning (``{field: value}``, its JSON text or numbers in
             field order, inside the tuning box): gradient, projected gradient, active bounds,
             Hessian eigenvalues on the free coordinates, verdict (:mod:`pfjax.tuning.check`).

@@ -92,7 +92,7 @@ class KinematicVsDynamic(ConfigModel):
     """The kinematic-versus-dynamic study (``studies/kinematic_vs_dynamic.py``)."""
 
     name: str = Field("kinematic_vs_dynamic", description="output folder name under results/ [-]")
-    mu_low: Real = Field(0.3, gt=0, le=10, description="the dynamic arms' friction: uniform on [mu_low, mu_high] [-]")
+    mu_low: Real = Field(0.3, gt=0, le=10, description="the dynamic arms' friction: uniform from mu_low to mu_high [-]")
     mu_high: Real = Field(1.0, gt=0, le=10, description="upper end of the dynamic arms' friction [-]")
     mu_grip: Real = Field(3.0, gt=0, le=10, description="friction of a high-friction arm (little slip) [-]")
     slip_ranges_deg: list[Real] = Field(
