@@ -13,10 +13,17 @@
 - ``<!-- column-reference -->``: every column of the run and margin tables with its unit and meaning
   (:data:`pfjax.tables.COLUMNS`, the same metadata the Parquet files carry);
 - ``<!-- controller-reference -->`` and ``<!-- path-reference -->``: the registries.
+
+The docstrings cross-reference in Sphinx's roles (``:func:`simulate```), which the API reference's
+renderer shows as written; :func:`on_page_content` turns each into a link to the object where the
+site documents it, else into plain code.
 """
 
 from __future__ import annotations
 
+import bisect
+import html
+import re
 import typing
 
 
@@ -150,3 +157,42 @@ def on_page_markdown(markdown: str, **kwargs) -> str:
         if marker in markdown:
             markdown = markdown.replace(marker, make())
     return markdown
+
+
+#: A Sphinx role as the Markdown of a docstring renders it: ``:func:<code>~pfjax.simulate</code>``.
+ROLE = re.compile(r":(?:func|class|mod|data|meth|attr|exc|obj):<code>(~?)([A-Za-z_][\w.]*)(\(\))?</code>")
+#: An object's anchor on an API page (mkdocstrings: ``id="pfjax.api.simulate"``).
+ANCHOR = re.compile(r'id="(pfjax[\w.]*)"')
+
+
+def _target(name: str, context: str, ids: set[str]) -> str:
+    """The anchor on this page that ``name`` (as a docstring writes it) means: itself, or the name
+    relative to the documented object it appears in (``context``) or to one of its parents, or a
+    name exported by ``pfjax`` at its home in ``pfjax.api``; else ``name`` (another page may have it)."""
+    if name in ids:
+        return name
+    parts = context.split(".")
+    for k in range(len(parts), 0, -1):
+        candidate = ".".join(parts[:k]) + "." + name
+        if candidate in ids:
+            return candidate
+    if name.startswith("pfjax.") and "pfjax.api." + name[6:] in ids:
+        return "pfjax.api." + name[6:]
+    return name
+
+
+def on_page_content(content: str, **kwargs) -> str:
+    """Each role as mkdocs-autorefs' optional reference (:func:`_target`): a link where the site
+    documents the object, else plain code; ``~`` shows the name's last part."""
+    anchors = [(m.start(), m.group(1)) for m in ANCHOR.finditer(content)]
+    starts = [a for a, _ in anchors]
+    ids = {name for _, name in anchors}
+
+    def autoref(match: re.Match) -> str:
+        tilde, name, call = match.groups()
+        i = bisect.bisect_right(starts, match.start()) - 1
+        target = _target(name, anchors[i][1] if i >= 0 else "", ids)
+        shown = html.escape((name.rsplit(".", 1)[-1] if tilde else name) + (call or ""))
+        return f'<autoref identifier="{html.escape(target)}" optional><code>{shown}</code></autoref>'
+
+    return ROLE.sub(autoref, content)

@@ -10,8 +10,8 @@ What the loop owns (the same for every system):
 * freezing: once the run has failed its state is kept as it was before the failing step;
 * the running metrics hook (called on every sample, told whether the run is still live);
 * the recording switch (``record=False``: no trajectory, memory independent of the horizon);
-* optionally, the run's small inputs as scalars inside the loop (:func:`pfjax.numerics.layout.
-  as_scalars`) and a reverse-mode checkpoint policy for the loop body.
+* optionally, the run's small inputs as scalars inside the loop
+  (:func:`pfjax.numerics.layout.as_scalars`) and a reverse-mode checkpoint policy for the loop body.
 
 What a system (a new vehicle model) supplies: a :class:`System` of pure single-run functions of the
 run's ``inputs`` (a pytree, e.g. a scenario; static settings are closed over, e.g. with
