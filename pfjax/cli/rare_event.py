@@ -38,16 +38,26 @@ def register(sub) -> None:
     p.add_argument("config", help="study TOML (its [rare_event] table sets the defaults)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value")
     p.add_argument("--controller", default=None, help="only this controller of the study (default: all)")
-    p.add_argument("--method", default=None, help="is | subset | mc (default: the config's, else is)")
-    p.add_argument("--target-rel-error", type=float, default=None, help="stop at this relative error (0.1)")
+    p.add_argument("--method", default=None, help="is | subset | mc (default: the config's rare_event.method, else is)")
+    p.add_argument(
+        "--target-rel-error",
+        type=float,
+        default=None,
+        help="stop at this relative error (default: the config's rare_event.target_rel_error, else 0.1)",
+    )
     p.add_argument(
         "--max-rollouts",
         type=int,
         default=None,
         help="rollouts per controller, split over the strata; subset simulation completes a run it has started "
-        "(100000)",
+        "(default: the config's rare_event.max_rollouts, else 100000)",
     )
-    p.add_argument("--seed", type=int, default=None, help="seed of the estimator's draws (0)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="seed of the estimator's draws (default: the config's rare_event.seed, else 0)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd)
 

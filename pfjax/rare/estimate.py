@@ -72,15 +72,16 @@ def evaluate_ranked(g: Callable, u: np.ndarray, batch: int) -> tuple[np.ndarray,
     ``g`` returns ``(n,)`` margins, or ``(n, 2)``: the margin and a tie-break, a continuous
     quantity that orders points whose margins are equal (smaller: nearer failure; zeros when ``g``
     gives none). Only :func:`pfjax.rare.subset_simulation` uses the tie-break; failure is
-    ``margin <= 0`` whatever it is. Non-finite margins count as failures (a run whose margin is NaN
-    has left the model's domain), non-finite tie-breaks as ``-inf``."""
+    ``margin <= 0`` whatever it is. A NaN margin counts as a failure, as ``-inf`` (a run whose
+    margin is NaN has left the model's domain); ``+inf`` is a margin like any other, no failure;
+    non-finite tie-breaks count as ``-inf``."""
     out = [np.asarray(g(u[a : a + batch]), dtype=float) for a in range(0, len(u), batch)]
     out = [x.reshape(len(x), -1) if x.ndim == 2 else x.reshape(-1, 1) for x in out]
     m = np.concatenate(out) if out else np.zeros((0, 1))
     if m.shape not in ((len(u), 1), (len(u), 2)):
         raise errors.InputError(f"g: expected {len(u)} margins for {len(u)} points, got shape {m.shape}", "g")
     t = m[:, 1] if m.shape[1] == 2 else np.zeros(len(u))
-    return np.where(np.isfinite(m[:, 0]), m[:, 0], -np.inf), np.where(np.isfinite(t), t, -np.inf)
+    return np.where(np.isnan(m[:, 0]), -np.inf, m[:, 0]), np.where(np.isfinite(t), t, -np.inf)
 
 
 def evaluate(g: Callable, u: np.ndarray, batch: int) -> np.ndarray:

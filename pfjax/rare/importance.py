@@ -214,7 +214,7 @@ def cross_entropy_is(
 
     Returns:
         a :class:`~pfjax.rare.estimate.RareEstimate` with ``method="is"``; ``detail`` holds the
-        levels, the final mixture's ``modes`` (means, weights), the effective sample size and
+        levels, the final mixture's distinct ``modes`` (means, weights: :func:`modes`), the effective sample size and
         the largest weight's share of the estimate (``max_weight_share``,
         :mod:`pfjax.rare.check`).
 
@@ -229,6 +229,7 @@ def cross_entropy_is(
     max_rollouts = errors.integer("max_rollouts", max_rollouts, low=1, high=10**10)
     n_batch = errors.integer("n_batch", n_batch, low=10, high=100_000_000)
     max_levels = errors.integer("max_levels", max_levels, low=0, high=1000)
+    refine = errors.integer("refine", refine, low=0, high=1000)
     least, what = least_rollouts(n, max_levels)
     if max_rollouts < least:
         raise errors.InputError(f"max_rollouts: needs at least {least} ({what}), got {max_rollouts}", "max_rollouts")
@@ -255,9 +256,20 @@ def cross_entropy_is(
             "n_is": n_is,
             "effective_sample_size": ess,
             "max_weight_share": wmax / s1 if s1 > 0 else 0.0,
-            "modes": {"means": mix.means.tolist(), "weights": mix.weights.tolist()},
+            "modes": modes(mix),
         },
     )
+
+
+def modes(mix: Mixture) -> dict[str, list]:
+    """The mixture's distinct means, the most likely failure points it found, largest weight
+    first: ``{"means": (K', dim), "weights": (K',)}``, the weights of components that share a
+    mean summed (EM cannot part two components that reach the same mean: their responsibilities
+    stay equal)."""
+    means, inverse = np.unique(mix.means, axis=0, return_inverse=True)
+    weights = np.bincount(inverse.reshape(-1), weights=mix.weights, minlength=len(means))
+    order = np.argsort(-weights, kind="stable")
+    return {"means": means[order].tolist(), "weights": weights[order].tolist()}
 
 
 def _check_proposal_args(covariance, rho, defensive) -> tuple[float, float]:
@@ -276,10 +288,10 @@ def _check_starts(starts, n_components, dim) -> tuple[np.ndarray | None, int]:
         starts = np.atleast_2d(np.asarray(errors.numbers("starts", starts), dtype=float))
         if starts.shape[1] != dim:
             raise errors.InputError(f"starts: expected points of dimension {dim}, got shape {starts.shape}", "starts")
+        if len(starts) < 1:
+            raise errors.InputError("starts: expected at least one point", "starts")
     k = n_components if n_components is not None else (len(starts) if starts is not None else 2)
     k = errors.integer("n_components", min(k, 8) if n_components is None else k, low=1, high=64)
-    if starts is not None and len(starts) < 1:
-        raise errors.InputError("starts: expected at least one point", "starts")
     return starts, k
 
 
@@ -304,13 +316,15 @@ def _ce_levels(g, rng, mix, k, n, rho, max_levels, refine, full, level_rollouts,
         u = sample_proposal(rng, n, mix, 0.0)
         m = evaluate(g, u, batch)
         used += n
-        gamma = max(0.0, float(np.quantile(m, rho)))
+        # the nearest margin where interpolating between two infinite ones gives NaN
+        q = float(np.quantile(m, rho, method="nearest" if np.isinf(m).any() else "linear"))
+        gamma = q if q > 0 else 0.0
         elite = m <= gamma
-        logw = _std_logpdf(u[elite]) - proposal_logpdf(u[elite], mix, 0.0)
-        w = np.exp(logw - logw.max())
         if elite.sum() < 2 * dim:
             levels.append({"threshold": gamma, "elite": int(elite.sum())})
             break
+        logw = _std_logpdf(u[elite]) - proposal_logpdf(u[elite], mix, 0.0)
+        w = np.exp(logw - logw.max())
         mix = fit_mixture(u[elite], w, _initial(rng, u[elite], w, k, mix), full=full)
         ess = float(w.sum() ** 2 / np.sum(w * w))
         levels.append({"threshold": gamma, "elite": int(elite.sum()), "ess": ess, "components": len(mix.weights)})

@@ -58,9 +58,13 @@ correlation, between levels and along the chains, whatever its form). The relati
 ``sqrt(max(V_a, V_b)) / p``; the 95 % interval is on the log scale,
 ``p exp(±h)``, ``h = max(1.96 s_a, t_{0.975, R-1} s_b)``, ``s² = ln(1 + V / p²)`` for each
 (Student's ``t`` with ``R - 1`` degrees of freedom: ``V_b`` rests on ``R`` runs). One run
-(``target_rel_error`` None, or the target met by the first) has ``V_a`` alone, the lognormal
-interval of :func:`pfjax.rare.estimate.lognormal_interval`, and ``detail["error"]`` says so
-(``"levels uncorrelated"``, else ``"runs"``).
+(``target_rel_error`` None, the target met by the first, or the budget spent) has no spread of
+runs to measure, and its levels-uncorrelated error understates its spread: it takes Au and
+Beck's upper bound, relative error ``Σ_j δ_j`` and its lognormal interval
+(:func:`pfjax.rare.estimate.lognormal_interval`; conservative). Runs that all end at level 0
+(``p >= p_0`` about) are independent sampling: ``k`` failures in ``R N`` draws, ``p = k / (R N)``
+with the exact (Clopper-Pearson) interval and relative error ``sqrt((1 - p) / (R N p))``.
+``detail["error"]`` says which: ``"runs"``, ``"levels fully correlated"`` or ``"binomial"``.
 """
 
 from __future__ import annotations
@@ -104,8 +108,8 @@ def level(m: np.ndarray, t: np.ndarray, nc: int) -> tuple[float, float]:
     of them strictly below the last threshold); the tied key itself only where nothing lies below."""
     order = np.lexsort((t, m))
     a, c = order[nc - 1], order[nc]
-    if m[a] < m[c]:
-        return 0.5 * (m[a] + m[c]), math.inf
+    if m[a] < m[c]:  # midway, or at m[a] where m[c] is infinite (no midpoint)
+        return (0.5 * (m[a] + m[c]) if math.isfinite(m[c]) else float(m[a])), math.inf
     if t[a] < t[c]:
         return float(m[a]), 0.5 * (t[a] + t[c])
     tied = (m == m[a]) & (t == t[a])
@@ -194,6 +198,25 @@ def pooled(ps: np.ndarray, d2: np.ndarray) -> tuple[float, float, tuple[float, f
     return est, rel, (est * math.exp(-h), min(1.0, est * math.exp(h)))
 
 
+def _error(runs: list, n: int) -> tuple[float, float, tuple[float, float], str]:
+    """``(p, relative error, 95 % interval, error)`` of the runs ``(p_r, δ_r², levels)`` so far
+    (module docstring, *Error*): ``"binomial"`` where every run ended at level 0 (independent
+    draws: ``k`` failures in ``R N``, the exact interval), ``"levels fully correlated"`` for one
+    run of several levels, ``"runs"`` for several (:func:`pooled`)."""
+    from pfjax.metrics.robustness import clopper_pearson
+
+    if all(len(r[2]) == 1 and not r[2][0]["stalled"] for r in runs):
+        k, m = int(round(sum(r[0] for r in runs) * n)), n * len(runs)
+        lo, hi = clopper_pearson(k, m, 0.95)
+        rel = math.sqrt((m - k) / (m * k)) if k else math.inf
+        return k / m, rel, (float(lo), float(hi)), "binomial"
+    if len(runs) == 1:
+        p, d = runs[0][0], runs[0][2][-1]["delta_correlated"]
+        rel = d if p > 0 and math.isfinite(d) else math.inf
+        return p, rel, lognormal_interval(p, rel), "levels fully correlated"
+    return (*pooled(np.array([r[0] for r in runs]), np.array([r[1] for r in runs])), "runs")
+
+
 def subset_simulation(
     g: Callable,
     dim: int,
@@ -223,7 +246,8 @@ def subset_simulation(
     Returns:
         a :class:`~pfjax.rare.estimate.RareEstimate` with ``method="subset"``; ``detail`` holds
         each run's levels (threshold, conditional probability, γ, δ_j, acceptance), each run's
-        estimate with its two errors (``run_estimates``), the error used (``error``) and the last run's
+        estimate with its two errors (``run_estimates``), the error used (``error``: ``"runs"``,
+        ``"levels fully correlated"`` or ``"binomial"``, module docstring) and the last run's
         failure points (``(m, dim)``, distributed as ``φ`` restricted to the failure region: the
         starts :func:`pfjax.rare.cross_entropy_is` takes).
     """
@@ -242,11 +266,11 @@ def subset_simulation(
         p, d2, used, levels, failures = _one_run(g, dim, n, p0, rng, batch, max_levels)
         runs.append((p, d2, levels))
         total += used
-        est, rel, ci = pooled(np.array([r[0] for r in runs]), np.array([r[1] for r in runs]))
+        est, rel, ci, error = _error(runs, n)
         per_run = total / len(runs)
         if target_rel_error is None or rel <= target_rel_error or total + per_run > max_rollouts or math.isinf(d2):
             break
-    detail: dict = {"runs": len(runs), "error": "runs" if len(runs) > 1 else "levels uncorrelated"}
+    detail: dict = {"runs": len(runs), "error": error}
     detail.update(levels=[r[2] for r in runs], n_per_level=n, p0=p0, failure_points=failures)
     detail["run_estimates"] = [{"p": r[0], **{k: r[2][-1][k] for k in DELTAS}} for r in runs]
     return RareEstimate(est, ci, rel, int(total), "subset", detail)
