@@ -130,7 +130,7 @@ def test_tune_cli_contract(capsys):
         out = json.loads(capsys.readouterr().out)
         for k in ("gains", "cost", "n_rollouts_simulated", "wall_s", "history"):
             assert k in out
-        assert len(out["gains"]["K"]) == 2 and np.isfinite(out["cost"])
+        assert set(out["gains"]) == {"k_d", "k_theta", "feedforward"} and np.isfinite(out["cost"])
         assert out["n_rollouts_simulated"] == (6 + 2 * 5 if method == "ga" else 3)
         assert out["history"] == sorted(out["history"], reverse=True) and out["cost"] == out["history"][-1]
 

@@ -335,3 +335,30 @@ def test_tune_json_records_only_the_arguments_the_run_read(monkeypatch, capsys, 
     assert {k: got[k] for k in read} == read and all(got[k] is None for k in unread), got
     if seen:
         assert seen[-1] == GAOptions()
+
+
+def test_cli_and_api_report_the_same_gains_and_check_takes_them_back(capsys):
+    """``pfjax tune --json`` and :func:`pfjax.tune` report every gain by its scalar name (what
+    ``--gains`` and :func:`pfjax.simulate` take), and ``--check`` / ``check=`` take that dict back;
+    an untuned gain given away from the problem's value, or a tuned one left out, is refused."""
+    import json
+
+    argv = ["tune", "--controller", "state-feedback", "--horizon", "16", "--dt", "0.01", "--json"]
+    assert main([*argv, "--method", "gradient", "--steps", "2", "--screen", "2", "--starts", "1"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    api = pfjax.tune("state_feedback", config={"horizon": 16.0, "dt": 0.01}, steps=2, n_starts=1)
+    assert set(cli["gains"]) == set(api["gains"]) == {"k_d", "k_theta", "feedforward"}
+    given = json.dumps(cli["gains"])
+    assert main([*argv, "--check", given]) == 0
+    checked = json.loads(capsys.readouterr().out)
+    assert checked["gains"] == cli["gains"]
+    again = pfjax.tune("state_feedback", config={"horizon": 16.0, "dt": 0.01}, check=cli["gains"])
+    assert again["gains"] == cli["gains"] and again["cost"] == pytest.approx(checked["cost"], rel=1e-6)
+    for bad, text in (
+        ({**cli["gains"], "feedforward": 0.5}, "feedforward is not tuned here"),
+        ({"k_d": cli["gains"]["k_d"]}, "k_theta missing"),
+    ):
+        msg = _refused_cli([*argv, "--check", json.dumps(bad)], "--check", capsys)
+        assert text in msg, msg
+        with pytest.raises(InputError, match=f"^check: .*{text}"):
+            pfjax.tune("state_feedback", config={"horizon": 16.0, "dt": 0.01}, check=bad)

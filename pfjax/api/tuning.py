@@ -95,7 +95,14 @@ def tune(
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import METHODS, check_options, check_settings_apply, make_problem, scenario_sets
+    from pfjax.tuning.problem import (
+        METHODS,
+        check_options,
+        check_settings_apply,
+        make_problem,
+        reported_gains,
+        scenario_sets,
+    )
     from pfjax.tuning.problem import check as run_check
     from pfjax.tuning.problem import tune as run_tune
 
@@ -138,9 +145,9 @@ def tune(
         name, scenario, cost=cost, config=config, n_runs=16 if n_runs is None else n_runs, model=model
     )
     if check is not None:
-        r = run_check(problem, check)
+        r = run_check(problem, check, controller=name)
         return {
-            "gains": C.flat_gains(C.entry(name), problem.tunable.gains(r.theta)),
+            "gains": reported_gains(name, problem, r.theta),
             "cost": r.cost,
             "check": as_dict(r, problem.tunable.fields, problem.tunable.sizes),
             "result": r,
@@ -157,7 +164,7 @@ def tune(
             multistart=multistart,
             progress=progress,
         )
-    return _tuned(C.flat_gains(C.entry(name), problem.tunable.gains(res.theta)), res)
+    return _tuned(reported_gains(name, problem, res.theta), res)
 
 
 @contextlib.contextmanager

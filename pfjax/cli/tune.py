@@ -214,7 +214,7 @@ def _cmd(args) -> dict:
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import check, check_options, make_problem, tune
+    from pfjax.tuning.problem import check, check_options, make_problem, reported_gains, tune
 
     controllers = _controllers()
     _check_flags(args, controllers)
@@ -260,9 +260,9 @@ def _cmd(args) -> dict:
             "pfjax_version": __version__,
         }
         if args.check is not None:
-            c = check(problem, args.check)
+            c = check(problem, args.check, controller=controllers[args.controller])
             return {
-                "gains": problem.tunable.named(c.theta),
+                "gains": reported_gains(controllers[args.controller], problem, c.theta),
                 "cost": c.cost,
                 "check": as_dict(c, problem.tunable.fields, problem.tunable.sizes),
                 **common,
@@ -283,7 +283,7 @@ def _cmd(args) -> dict:
         )
     return {
         "method": args.method,
-        "gains": problem.tunable.named(r.theta),
+        "gains": reported_gains(controllers[args.controller], problem, r.theta),
         "cost": r.cost,
         "n_rollouts_simulated": r.n_rollouts,
         "n_forward_passes": r.n_forward_passes,

@@ -530,12 +530,59 @@ def _chained(r: TuneResult, p: TuneResult) -> TuneResult:
     )
 
 
-def check(problem: Problem, gains, *, h: float = 1e-4, rtol: float = 1e-4):
+def reported_gains(controller: str, problem: Problem, theta) -> dict[str, float]:
+    """The gains a tuning or a check reports: every gain of ``controller`` (a registry name) by its
+    scalar name (:func:`pfjax.controllers.flat_gains`: what ``--gains``, :func:`pfjax.simulate` and
+    :func:`check` take), the tuned ones from ``theta`` in float64, the others the problem's."""
+    with jax.enable_x64(True):
+        g = problem.tunable.gains(np.asarray(theta, np.float64))
+    return C.flat_gains(C.entry(controller), g)
+
+
+def _tuned_fields(controller: str, problem: Problem, gains, key: str = "check"):
+    """``gains`` given by scalar names (what :func:`reported_gains` reports; also as JSON text) as
+    ``{tuned field: value}``: every tuned gain given, an untuned one left out or at the problem's
+    value; :class:`~pfjax.errors.InputError` naming ``key`` otherwise. Anything else unchanged."""
+    import json
+    from collections.abc import Mapping
+
+    from pfjax import errors
+
+    g = gains
+    if isinstance(g, str) and g.strip().startswith("{"):
+        try:
+            g = json.loads(g)
+        except json.JSONDecodeError:
+            return gains  # parse_gains names the error
+    if not isinstance(g, Mapping) or set(g) <= set(problem.tunable.fields):
+        return gains
+    e = C.entry(controller)
+    params = C.params_from_flat(e, g, key)
+    tuned = [n for f in problem.tunable.fields for n in e.labels.get(f, (f,))]
+    missing = [n for n in tuned if n not in g]
+    if missing:
+        raise errors.InputError(f"{key}: {', '.join(missing)} missing; the tuned gains are {', '.join(tuned)}", key)
+    base = C.flat_gains(e, problem.tunable.base)
+    for n, v in C.flat_gains(e, params).items():
+        if n in g and n not in tuned and v != base[n]:
+            raise errors.InputError(
+                f"{key}: {n} is not tuned here (the tuned gains are {', '.join(tuned)}); give it as {base[n]:g} "
+                "or leave it out",
+                key,
+            )
+    return {f: np.ravel(np.asarray(getattr(params, f), np.float64)).tolist() for f in problem.tunable.fields}
+
+
+def check(problem: Problem, gains, *, h: float = 1e-4, rtol: float = 1e-4, controller: str | None = None):
     """First- and second-order check of ``gains`` on ``problem`` (:func:`pfjax.tuning.check.check_point`):
-    ``gains`` as :func:`pfjax.tuning.check.parse_gains` reads them (a ``{field: value}`` mapping, its
-    JSON text or numbers in field order), inside the problem's box."""
+    ``gains`` as :func:`pfjax.tuning.check.parse_gains` reads them (a ``{field: value}`` mapping of
+    the tuned fields, its JSON text or numbers in field order), inside the problem's box; with
+    ``controller`` (its registry name) also every gain by its scalar name, as a tuning reports them
+    (:func:`reported_gains`)."""
     from pfjax.tuning.check import check_point, parse_gains
 
+    if controller is not None:
+        gains = _tuned_fields(controller, problem, gains)
     th = parse_gains(gains, problem.tunable.fields, problem.tunable.sizes, problem.lower, problem.upper)
     # before anything is compiled or simulated
     check_memory("check", problem.n_per_eval, problem.lower.size, problem.config.n_steps)
