@@ -259,6 +259,7 @@ def falsify(
 
     e, d = C.resolve(controller)
     entry = paths.fixed_entry(path)
+    assert entry.build is not None  # a fixed path (fixed_entry)
     errors.number("speed", speed, positive=True, unit=" m/s")
     errors.number("L", L, positive=True, unit=" m")
     errors.number("delta_max_deg", delta_max_deg, positive=True, below=90, unit=" deg")
