@@ -22,15 +22,17 @@ Schur form ``[[A X + X A' + Bu Y + Y' Bu', Bw], [Bw', -I]] < 0`` are affine in `
 they hold on the whole box (hence for every ``(v, beta_r)`` in range) and ``gamma_inf``,
 ``gamma_2`` bound the norms at every operating point.
 
-**Bounded steering from a given initial error** (``x0s``, ``delta_max`` arguments). With
-``E = {x : x' X^-1 x <= 1}``::
+**Bounded steering from a given initial error** (``x0s``, ``delta_max`` arguments). The
+performance LMIs imply ``(A + Bu K) X + X (A + Bu K)' < 0``, so every ellipsoid
+``E_mu = {x : x' (mu X)^-1 x <= 1}``, ``mu > 0``, is invariant for the undisturbed linear loop. The
+scale is free: ``X`` itself is sized by the disturbance (it bounds the loop's controllability
+Gramian), and fixing ``mu = 1`` would ask the steering bound to hold on the states a unit
+disturbance reaches, whatever the initial errors. With ``nu = 1 / mu`` a variable::
 
-    [[1, x0'], [x0, X]] >= 0      (x0 in E, for each given initial error x0)
-    [[delta_max^2, Y], [Y', X]] >= 0   (|K x| <= delta_max on E)
+    X - nu x0 x0' >= 0                  (x0 in E_mu, for each given initial error x0)
+    [[delta_max^2 nu, Y], [Y', X]] >= 0   (|K x| <= delta_max on E_mu: mu K X K' <= delta_max^2)
 
-Since the performance LMIs imply ``(A + Bu K) X + X (A + Bu K)' < 0``, ``E`` is invariant for the
-undisturbed linear loop, so from any such ``x0`` the command never exceeds ``delta_max`` (the
-pole placement that the steering limit asks for, expressed on the Lyapunov ellipsoid; an
+both affine in ``(X, Y, nu)``, so from any such ``x0`` the command never exceeds ``delta_max`` (an
 optional :class:`~pfjax.synthesis.regions.PoleRegion` can be added as well).
 
 Every result is checked independently: the true norms (:mod:`pfjax.synthesis.norms`) at every
@@ -181,13 +183,14 @@ def robust_mixed(
         cons.append(sym(cp.bmat([[W, Z], [Z.T, X]])) >> eps * np.eye(n_z2 + n_x))
         if region is not None:
             cons += region_constraints(region, M, X, eps)
+    nu = cp.Variable(nonneg=True)  # 1 / mu, the steering ellipsoid's scale (module docstring)
     if delta_max is not None:
         if x0s is None:
             raise ValueError("x0s: required with delta_max")
         for x0 in np.atleast_2d(np.asarray(x0s, float)):
             c = x0.reshape(n_x, 1)
-            cons.append(sym(cp.bmat([[np.ones((1, 1)), c.T], [c, X]])) >> 0)
-        cons.append(sym(cp.bmat([[np.full((1, 1), float(delta_max) ** 2), Y], [Y.T, X]])) >> 0)
+            cons.append(sym(X - nu * (c @ c.T)) >> 0)
+        cons.append(sym(cp.bmat([[cp.reshape(float(delta_max) ** 2 * nu, (1, 1), order="C"), Y], [Y.T, X]])) >> 0)
         method = method + "+steer"
     prob = cp.Problem(cp.Minimize(float(alpha) * g_sq + float(beta) * cp.trace(W)), cons)
     status = solve_or_raise(prob, f"{method} synthesis")
@@ -200,9 +203,9 @@ def robust_mixed(
         h2n.append(h2_norm(Acl, Bw, C2))
         poles.append(np.linalg.eigvals(Acl))
     steer = None
-    if delta_max is not None:  # max over the ellipsoid of |K x| = sqrt(K X K')
+    if delta_max is not None:  # max over the ellipsoid E_mu of |K x| = sqrt(mu K X K')
         Xv = 0.5 * (solved(X) + solved(X).T)
-        steer = float(np.sqrt(np.squeeze(K @ Xv @ K.T)))
+        steer = float(np.sqrt(np.squeeze(K @ Xv @ K.T) / max(float(solved(nu)), 1e-300)))
     warns = bound_warnings(gi, g2, max(hn), max(h2n), cond)
     return RobustDesign(method, K, gi, g2, float(max(hn)), float(max(h2n)), np.asarray(poles), steer, status, warns)
 
