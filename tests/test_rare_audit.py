@@ -189,3 +189,24 @@ def test_command_line_help_names_the_config_defaults(capsys):
     spec = RareEventSpec()
     for key in ("method", "target_rel_error", "max_rollouts", "seed"):
         assert f"(default: the config's rare_event.{key}, else {getattr(spec, key)})" in out, key
+
+
+def test_a_stratum_without_a_failure_is_flagged_no_failures():
+    """Plain Monte Carlo on too small a budget sees no failure of the study's PI: every stratum's
+    estimate is 0, and the controller says so (status ``no_failures``, each path named with the
+    rollouts spent and the interval's upper end) instead of ``ok``."""
+    import pfjax
+
+    root = Path(__file__).resolve().parents[1]
+    out = pfjax.rare_event(
+        str(root / "studies" / "rare_events.toml"),
+        controller="pi-table3",
+        method="mc",
+        max_rollouts=300,
+        **{"sim.horizon": 16.0},
+    )
+    r = out["controllers"]["pi-table3"]
+    assert r["p_fail"] == 0 and r["status"] == "no_failures", r["status"]
+    for s in r["strata"]:
+        assert f"{s['path']}: no failure found in {s['n_rollouts']} rollouts" in r["warning"], r["warning"]
+    assert f"upper end {r['strata'][0]['ci95'][1]:.3g}" in r["warning"]

@@ -198,9 +198,10 @@ def rare_event(
         (:mod:`pfjax.rare.check`): ``"ok"``, or the first flagged stratum's ``"disagree"``
         (``rare_event.check = "subset"`` and subset simulation's estimate beyond the 95 %
         intervals) or ``"concentrated"`` (one draw carries more than
-        :data:`pfjax.rare.check.MAX_WEIGHT_SHARE` of the estimate); always ``"ok"`` with
-        ``subset`` and ``mc``; ``warning`` None, or each flagged stratum's path and what was found,
-        joined by ``"; "``.
+        :data:`pfjax.rare.check.MAX_WEIGHT_SHARE` of the estimate), else ``"no_failures"`` where
+        a stratum's estimate is 0 (no failing draw seen, by any method: ``p_fail`` is then bounded
+        only by its interval); ``warning`` None, or each flagged stratum's path and what was
+        found, joined by ``"; "``.
 
     Raises:
         pfjax.errors.InputError: before anything is simulated: a bad argument, named as here

@@ -25,8 +25,10 @@ controller's.
 
 An importance-sampling estimate is checked per stratum (:mod:`pfjax.rare.check`): always for
 weights concentrated on one draw, and with ``check = "subset"`` against subset simulation on the
-same target and budget; the controller's ``status`` is the first stratum's flag (``ok`` where
-none is raised) and its ``warning`` names each flagged stratum's path.
+same target and budget. A stratum whose estimate is 0 (no failure seen, by any method) is flagged
+``no_failures`` (:func:`no_failures`). The controller's ``status`` is the first stratum's flag
+(the checks' first; ``ok`` where none is raised) and its ``warning`` names each flagged stratum's
+path.
 """
 
 from __future__ import annotations
@@ -298,6 +300,16 @@ def combine(parts: list[tuple[float, RareEstimate]]) -> tuple[float, tuple[float
     return p, (lo, min(1.0, hi)), (math.inf if unknown else rel)
 
 
+def no_failures(r: RareEstimate) -> dict:
+    """The flag of a stratum whose estimate is 0 (no failing draw seen): ``status`` ``"no_failures"``
+    and a warning giving the rollouts spent and the interval's upper end, all that bounds ``p``."""
+    return {
+        "status": "no_failures",
+        "warning": f"no failure found in {r.n_rollouts} rollouts: p_fail is 0 and only bounded, by the "
+        f"interval's upper end {r.ci95[1]:.3g}; a larger max_rollouts resolves it",
+    }
+
+
 def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None) -> dict:
     """One controller's failure probability under ``spec.rare_event`` (module docstring).
 
@@ -329,6 +341,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     points, keys = [q for s, r in parts for q in _failure_points(spec, s, inputs, r)], config_keys(spec)
     checks = [(spec.paths[s.path_index].label, r.detail["check"]) for s, r in parts if "check" in r.detail]
     flagged = [(label, c) for label, c in checks if c["status"] != "ok"]
+    flagged += [(spec.paths[s.path_index].label, no_failures(r)) for s, r in parts if r.p_fail == 0]
     return {
         "p_fail": float(p),
         "ci95": [float(ci[0]), float(ci[1])],
