@@ -25,6 +25,7 @@ RUN_UNITS = {
     "xs": "m",
     "a_f": "m",
     "time_s": "s",
+    "switches": "direction switches (count)",
     "switch_log.*": {"t": "s", "x": "m", "y": "m", "theta_deg": "deg"},
     "final.*": {"x": "m", "y": "m", "theta_deg": "deg"},
     "error": _ERROR,
@@ -42,6 +43,10 @@ SEARCH_UNITS = {
     "history_best_fitness": _FITNESS,
     "history_mean_fitness": _FITNESS,
     "time_s": "s",
+    "switches": "direction switches (count)",
+    "n_simulations": "runs (simulated)",
+    "n": "levels per gene of the n x n x n grid",
+    "bits": "1 (the chromosome's length in bits)",
     "error": _ERROR,
 }
 

@@ -110,6 +110,27 @@ def _schedule(alpha_schedule):
     return pad_schedule(values, "alpha_schedule")
 
 
+def _check_touch(polygons: dict, p0, omap) -> None:
+    """MapError ``x0`` when the rectangle at the start pose touches an obstacle (a contact of zero
+    area, which :func:`pfjax.parking.maps.check_start` lets pass): the simulation's own start test
+    (:func:`pfjax.parking.geometry.obstacle_ahead` on both halves, closed sets, in the run's
+    precision) would end the run at once as ``start_overlap``."""
+    from pfjax.parking.geometry import obstacle_ahead
+    from pfjax.parking.maps import MapError, to_obstacle_map
+
+    def touches(m) -> bool:
+        return bool(obstacle_ahead(p0.pose0, p0.shape, 1.0, m) | obstacle_ahead(p0.pose0, p0.shape, -1.0, m))
+
+    if not touches(omap):
+        return
+    name = next((n for n, poly in polygons.items() if touches(to_obstacle_map([poly]))), "?")
+    raise MapError(
+        f"x0: the robot's rectangle at the start pose touches obstacle {name!r} (the run would end at once "
+        "as start_overlap); move the start away from it",
+        "x0",
+    )
+
+
 def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     """The arguments :func:`run` and :func:`search` share, checked in the command line's order;
     the map loaded and the start pose checked against it."""
@@ -139,15 +160,17 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     from pfjax.parking.model import control_params
     from pfjax.parking.simulate import run_params
 
-    shape = run_params(x0, front=front).shape  # the rectangle the run will simulate
+    p0 = run_params(x0, front=front)  # the pose and rectangle the run will simulate
     try:
-        check_start(polygons, x0, shape, key="x0")
+        check_start(polygons, x0, p0.shape, key="x0")
     except MapError as e:
         raise MapError(str(e), "x0") from None
+    omap = to_obstacle_map(list(polygons.values()))
+    _check_touch(polygons, p0, omap)
     return {
         "name": name,
         "spec": spec,
-        "omap": to_obstacle_map(list(polygons.values())),
+        "omap": omap,
         "x0": x0,
         "front": front,
         "scan_period": scan_period,
@@ -179,7 +202,8 @@ def run(
             path-like) of a TOML/JSON map file (:mod:`pfjax.parking.maps`).
         x0: start pose (x m, y m, theta deg), ``|theta| < 90 deg``; None: case A's
             (-0.4 m, 0.5 m, 0 deg) on ``"parallel"``, (-0.9 m, 0.6 m, -85 deg) on ``"garage"``
-            (required for a map file). The robot's body must not overlap an obstacle there.
+            (required for a map file). The robot's body must not overlap an obstacle there, nor
+            its rectangle touch one.
         direction: first travel direction, ``"forward"`` or ``"backward"``.
         alpha_schedule: the gain factor alpha (dimensionless, each in [1e-12, 1e12]) at the start,
             then after each direction switch, the last one holding from then on; 1 to 8 numbers (a
@@ -282,7 +306,7 @@ def search(
         method: ``"ga"`` or ``"grid"``.
         map: ``"garage"``, ``"parallel"`` or the path (str or path-like) of a TOML/JSON map file.
         x0: start pose (x m, y m, theta deg), ``|theta| < 90 deg``; None: (-0.9 m, 0.6 m, -85 deg)
-            on ``"garage"`` (required for any other map).
+            on ``"garage"`` (required for any other map); checked as for :func:`run`.
         n: grid levels per parameter, 2..64 (grid only; ``n^3`` runs; None: 32).
         generations: GA generations N, >= 1 (GA only; None: 100).
         population: GA population size n, >= 2 (GA only; at most ``population * (generations + 1)``

@@ -56,6 +56,23 @@ def trajectory_axes(ax, polygons, traj, result, shape, title, xlim=(-1.6, 0.9), 
     ax.set_ylabel("y [m]")
 
 
+def add_trajectory_legend(fig, ncol: int = 6):
+    """A figure-level legend, below the panels, for what :func:`trajectory_axes` draws (it covers no
+    panel; call ``fig.tight_layout(rect=(0, 0.07, 1, 1))`` or similar to leave it room)."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles = [
+        Line2D([], [], color="k", lw=1.2, label="path of the axle midpoint"),
+        Patch(fill=False, edgecolor="#1f77b4", ls="--", label="rectangle at the start"),
+        Patch(fill=False, edgecolor=SWITCH_COLORS[1], label="rectangle at switch n (numbered)"),
+        Patch(fill=False, edgecolor="#000000", lw=1.5, label="rectangle at the end"),
+        Line2D([], [], color="m", marker="+", ms=10, ls="none", label="target (0, 0)"),
+        Patch(facecolor="#bbbbbb", edgecolor="#555555", label="obstacle"),
+    ]
+    fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+
+
 def histories_figure(traj, result, control, title):
     """x, y, θ and the inputs v₁, v₂ against time (source Figs. 5-8 bottom)."""
     import matplotlib.pyplot as plt
@@ -67,7 +84,7 @@ def histories_figure(traj, result, control, title):
     a = np.asarray(traj.alpha)[run]
     v1 = d * float(control.speed)
     v2 = np.asarray(yaw_rate_command(st[:, 2], st[:, 1], v1, a, float(control.k1), float(control.k2)))
-    fig, axs = plt.subplots(2, 1, figsize=(7, 5.2), sharex=True)
+    fig, axs = plt.subplots(2, 1, figsize=(8.4, 5.2), sharex=True)
     axs[0].plot(t, st[:, 0], label="x [m]")
     axs[0].plot(t, st[:, 1], label="y [m]")
     axs[0].plot(t, st[:, 2], label="θ [rad]")
@@ -77,8 +94,10 @@ def histories_figure(traj, result, control, title):
     for ax in axs:
         for ts in np.asarray(result.log_t)[: int(result.n_switches)]:
             ax.axvline(ts, color="#cccccc", lw=0.6, zorder=0)
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the axes: covers no curve
         ax.grid(alpha=0.3)
+    axs[0].set_ylabel("state (units in legend)")
+    axs[1].set_ylabel("input, gain (units in legend)")
     axs[1].set_xlabel("t [s]")
     axs[0].set_title(title, fontsize=9)
     fig.tight_layout()
@@ -109,6 +128,7 @@ def search_figure(ga: dict, grid_table: dict, n: int, weight: float = 100.0):
     axs[1].plot(ga["alpha1"], ga["xs"], "r*", ms=12, label="GA best")
     axs[1].set_xlabel("α₁")
     axs[1].set_ylabel("X_s [m]")
+    axs[1].set_title("grid: best over α₂ (blank: every α₂ fails)", fontsize=9)
     axs[1].legend(fontsize=8)
     fig.tight_layout()
     return fig
@@ -137,7 +157,9 @@ def start_map_figure(rows: list[dict]):
     ):
         im = ax.pcolormesh(x0, th, grid[k], shading="nearest", cmap="viridis")
         fig.colorbar(im, ax=ax)
-        ax.set_title(label + (" (blank: unused)" if k != "time_s" else ""), fontsize=9)
+        ax.set_title(
+            label + (" (blank: unused or no run parks)" if k != "time_s" else " (blank: no run parks)"), fontsize=9
+        )
         ax.set_facecolor("#eeeeee")
         ax.set_xlabel("x₀ [m]")
         ax.set_ylabel("θ₀ [deg]")
@@ -149,7 +171,7 @@ def monte_carlo_figure(df):
     """Parking-time ECDF (failures at +∞) and status counts per schedule."""
     import matplotlib.pyplot as plt
 
-    fig, axs = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, axs = plt.subplots(1, 2, figsize=(11.5, 3.8))
     for label, g in df.groupby("schedule", sort=False):
         t = np.sort(np.where(g["converged"], g["time_s"], np.inf))
         axs[0].step(t, np.arange(1, len(t) + 1) / len(t), where="post", label=label)
@@ -163,6 +185,6 @@ def monte_carlo_figure(df):
     axs[1].set_xticklabels([str(s).split(":")[0] for s in counts.index])
     axs[1].set_xlabel("schedule (parameters: left legend)")
     axs[1].set_ylabel("runs")
-    axs[1].legend(fontsize=7)
+    axs[1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the bars: covers none
     fig.tight_layout()
     return fig

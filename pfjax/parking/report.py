@@ -61,9 +61,9 @@ def _b_verdict(a: dict, b_outcome: str) -> str:
     )
     return (
         f"**Verdict on case B**: not reproduced with pfjax's reading (the half toward the travel direction, "
-        f"split at the middle, decisions on the current pose, no stop; chosen from the model's reading before and "
-        f"independently of these outcomes), under which B {b_outcome}. {k} of the {n} combinations reproduce "
-        f"all four outcomes together{share}."
+        f"split at the middle, decisions on the current pose, no stop: docs/reproductions/parking.md §3), under "
+        f"which B {b_outcome}. {k} of the {n} combinations give all four outcomes together{share}; a combination "
+        "found by matching the source's outcomes is a reading selected by them, not evidence for it."
     )
 
 
@@ -244,7 +244,9 @@ def _montecarlo(s: dict) -> list[D.Block]:
         )
     header = ["schedule", "success [95 % CI]", "statuses", "parking time p50 / p95 [s]", "success lag off / on"]
     return [
-        D.Heading(f"Robustness Monte Carlo (garage, {m['n_runs']} runs per schedule, same runs for both)"),
+        D.Heading(
+            f"Robustness Monte Carlo (garage, {m['n_runs']} runs per schedule, the same runs for every schedule)"
+        ),
         D.Paragraph(
             f"Start scatter ±{m['pos_scatter']:g} m and ±{m['theta_scatter_deg']:g}°, scanner period "
             f"U[{m['scan_lo']:g}, {m['scan_hi']:g}] s, speed U[{m['speed_lo']:g}, {m['speed_hi']:g}] m/s, yaw-rate "

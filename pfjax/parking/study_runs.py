@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import matplotlib.pyplot as plt
+import numpy as np
 
 from pfjax.parking import figures as F
 from pfjax.parking.maps import GARAGE, PARALLEL
@@ -62,21 +63,38 @@ def one(cfg: ParkingStudy, x0, direction, schedule, *, xs=None, omap, front=None
 #: figure layout per map: (rows, columns or None for one row, figure size per panel, x limits, y limits)
 _LAYOUT = {
     "cases_parallel": ((2, 2), (5.5, 4.0), (-1.0, 1.0), (-0.45, 1.0)),
-    "garage_xs": (None, (5.0, 4.6), (-2.2, 0.6), (-1.0, 1.0)),
+    "garage_xs": (None, (5.0, 3.6), (-2.2, 0.6), (-1.0, 1.0)),
 }
 
 
 def _trajectory_figure(runs, names, shapes, fig_dir, figure, label, switches):
     """One panel per run ``names`` (trajectory over the map ``shapes``), titled with the outcome."""
     grid, (w, h), xlim, ylim = _LAYOUT[figure]
+    xlim, ylim = _covering([runs[name] for name in names], xlim, ylim)
     nr, nc = grid or (1, len(names))
-    fig, axs = plt.subplots(nr, nc, figsize=(w * nc, h * nr), squeeze=False)
+    fig, axs = plt.subplots(nr, nc, figsize=(w * nc, h * nr + 0.5), squeeze=False)
     for ax, name in zip(axs.ravel(), names):
         p, r, tr = runs[name]
         title = f"{label.format(name=name)}: {STATUS_NAMES[int(r.status)]}, {int(r.n_switches)} {switches}, "
         F.trajectory_axes(ax, shapes, tr, r, p.shape, title + f"{float(r.time):.1f} s", xlim=xlim, ylim=ylim)
-    fig.tight_layout()
+    F.add_trajectory_legend(fig, ncol=3 if nc < 3 else 6)
+    fig.tight_layout(rect=(0, 0.9 / (h * nr + 0.5), 1, 1))
     save(fig, fig_dir, figure)
+
+
+def _covering(runs, xlim, ylim):
+    """The layout's limits (m), widened so that every run's recorded path and its rectangle (the
+    farthest corner's distance from the axle around each point) are in view: a config's X_s or a_f
+    far from the source's would otherwise leave the panel."""
+    lo, hi = np.array([xlim[0], ylim[0]], float), np.array([xlim[1], ylim[1]], float)
+    for p, _, tr in runs:
+        pts = np.asarray(tr.state)[np.asarray(tr.running)][:, :2]
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        if len(pts):
+            f, length, width = (float(v) for v in (p.shape.front, p.shape.length, p.shape.width))
+            reach = math.hypot(max(f, length - f), 0.5 * width)
+            lo, hi = np.minimum(lo, pts.min(axis=0) - reach), np.maximum(hi, pts.max(axis=0) + reach)
+    return (float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1]))
 
 
 def part_cases(cfg: ParkingStudy, fig_dir, pmap, gmap):
