@@ -106,6 +106,10 @@ def test_parking_garage_user_map(capsys, tmp_path):
         (["parking", "--scan-period", "0.001"], "--scan-period"),
         (["parking", "--horizon", "0"], "--horizon"),  # the timeout (once --t-max)
         (["parking-search", "--method", "grid", "--horizon", "nan"], "--horizon"),
+        # too many scanner periods: the flag whose value makes it so (the timeout at the default period)
+        (["parking", "--horizon", "1e9"], "--horizon: --horizon / scan period may be at most 20000"),
+        (["parking-search", "--method", "grid", "--horizon", "1e9"], "--horizon: "),
+        (["parking", "--scan-period", "0.00001"], "--scan-period: --horizon / scan period may be at most"),
     ],
 )
 def test_bad_values_exit_2_one_line(capsys, args, flag):

@@ -25,7 +25,7 @@ from typing import Any, NamedTuple
 
 from pfjax import errors
 from pfjax.errors import InputError
-from pfjax.parking.limits import check_periods
+from pfjax.parking.limits import MAX_PERIODS, check_periods
 
 __all__ = ["run", "search"]
 
@@ -42,6 +42,8 @@ METHODS = ("ga", "grid")
 MAX_SEARCH_PERIODS = 10**8
 #: Longest scanner period, s.
 MAX_SCAN_PERIOD = 10.0
+#: The scanner period of :func:`run` and :func:`search` unless given, s (the source's).
+DEFAULT_SCAN_PERIOD = 0.1
 #: Garage rule of :func:`run` on the built-in garage: switch back to forward when backing past this x, m.
 GARAGE_XS = -0.9
 
@@ -149,7 +151,8 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
             raise InputError(f"front: must be < {L2_LENGTH:g} (the rectangle length), got {front:g}", "front")
     if scan_period > MAX_SCAN_PERIOD:
         raise InputError(f"scan_period: must be <= {MAX_SCAN_PERIOD:g} s, got {scan_period:g}", "scan_period")
-    check_periods("scan_period", t_max, scan_period)
+    # the product names t_max where the timeout alone is too long for the default period
+    check_periods("t_max" if t_max / DEFAULT_SCAN_PERIOD > MAX_PERIODS else "scan_period", t_max, scan_period)
     errors.boolean("lag", lag)
     spec = _map_spec(map)
     try:
@@ -189,7 +192,7 @@ def run(
     k1=32.0,
     k2=8.0,
     speed=0.05,
-    scan_period=0.1,
+    scan_period=DEFAULT_SCAN_PERIOD,
     front=None,
     lag=False,
     t_max=200.0,
@@ -290,7 +293,7 @@ def search(
     k1=32.0,
     k2=8.0,
     speed=0.05,
-    scan_period=0.1,
+    scan_period=DEFAULT_SCAN_PERIOD,
     front=None,
     lag=False,
     t_max=200.0,
