@@ -140,3 +140,23 @@ def test_json_counts_carry_units(capsys):
         for key in ("switches", "time_s", "error"):
             assert out["units"].get(key), key
     assert grid["units"]["n_simulations"].startswith("runs") and grid["units"]["n"]
+
+
+def test_rows_that_search_the_assumptions_for_the_outcome_are_not_independent():
+    """ "B is stuck in some combination" and "all four outcomes at once" hold for readings selected by
+    the source's outcomes: their basis says so (not independent evidence)."""
+    from pfjax.reproduce.parking import all_four_verdicts, case_b_verdicts
+    from pfjax.reproduce.verdict import FILTERED
+
+    sweep = {
+        "n_combinations": 504,
+        "all_four_reproduced": [{"a_f": 0.17}],
+        "by_zone": {"whole": {"B": {"stuck": 167}}},
+        "status_counts": {"B": {"stuck": 167}},
+        "b_min_leg_m": 0.21,
+    }
+    rows = [
+        r for r in case_b_verdicts({"status": "stuck", "switches": 9, "time_s": 60.0}, sweep) if "every" in r.subject
+    ]
+    rows += all_four_verdicts(sweep)
+    assert len(rows) == 2 and all(r.basis == FILTERED for r in rows), rows

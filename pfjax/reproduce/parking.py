@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from pfjax.reproduce.verdict import Verdict
+from pfjax.reproduce.verdict import FILTERED, Verdict
 
 #: Relative tolerance within which a parking time counts as reproduced.
 TIME_TOL = 0.10
@@ -113,6 +113,7 @@ def case_b_verdicts(b: dict, sweep: dict, stuck_travel: float = 0.1, stuck_switc
             f"stuck in {stuck} of {n} (by detection zone: {zones}); shortest leg {100 * sweep['b_min_leg_m']:.1f} cm",
             "stuck",
             _says(bool(stuck)),
+            basis=FILTERED,  # a search of the assumptions for the source's outcome: its hits are selected by it
         ),
     ]
 
@@ -131,6 +132,7 @@ def all_four_verdicts(sweep: dict) -> list[Verdict]:
             f"{len(found)}" + (": " + listed if found else ""),
             "all four",
             _says(bool(found)),
+            basis=FILTERED,  # the combinations are selected by the four outcomes they are checked on
         )
     ]
 
