@@ -5,7 +5,7 @@ the linearisation over the slip grid, Table 3's PI readings and Table 2's GA rea
 from __future__ import annotations
 
 from pfjax.reproduce.run_claims import Add, Inputs, holds
-from pfjax.reproduce.verdict import FILTERED
+from pfjax.reproduce.verdict import ASSUMED, FILTERED
 
 
 def hurwitz(inp: Inputs, add: Add) -> None:
@@ -39,12 +39,13 @@ def hurwitz(inp: Inputs, add: Add) -> None:
         "line",
         "source's K",
         "the true equilibrium (not [0, −β_r]) exists and is Hurwitz for every slip on "
-        f"the ±{stab['grid_deg'][1]:g}° grid",
+        f"the ±{stab['grid_deg'][1]:g}° grid, with the steering limited to ±δ_max (assumed)",
         f"exists on {100 * stab['equilibrium_exists_fraction']:.0f} % "
         f"(|β_r + β_f| ≤ δ_max), Hurwitz on {100 * stab['hurwitz_where_exists_fraction']:.0f} % of those; simulation "
         f"agrees on {100 * stab['sim_agrees_with_analysis_fraction']:.1f} %",
         "every slip",
         holds(stab["equilibrium_exists_fraction"] == 1.0 and stab["hurwitz_where_exists_fraction"] == 1.0),
+        basis=ASSUMED,
     )
 
 

@@ -135,6 +135,9 @@ class PaperGA(ConfigModel):
     scenario: str = Field("paper-line", description="tuning scenario [-]")
     population: int = Field(50, ge=2, description="population size [-]")
     generations: int = Field(100, ge=1, description="generations [-]")
+    cost: Literal["iae", "ise", "itae"] = Field(
+        "iae", description="the tuning cost of eq. 15, whose exact form was lost (assumed, docs §5) [-]"
+    )
 
 
 class PaperStudy(ConfigModel):

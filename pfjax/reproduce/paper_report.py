@@ -64,7 +64,8 @@ def _verdicts(s: dict) -> list:
             "independent evidence; \"used to choose the convention\" where the source's statement fixed pfjax's model "
             'convention (so it agrees by construction); "chosen by filters from the source" where the row checks a '
             "reading selected with the source's own statements, or checks the PI on the quantity a filter chose its "
-            'reading by; "assumed" where the criterion rests on a value the source does not give (the steering limit). '
+            'reading by, or a comparison that filter alone decides; "assumed" where the criterion rests on a value '
+            "the source does not give (the steering limit or the horizon, named in the criterion). "
             "A row on two of these grounds names both, the stronger first."
         ),
         verdict_block(s["verdicts"]),
@@ -171,7 +172,8 @@ def _pi(s: dict, pi_df: pd.DataFrame) -> list:
         Paragraph(
             f"Table 3 prints {', '.join(f'{g:g}' for g in src['table3'])} without row labels. pfjax simulates all 24 "
             "assignments to (Kp_d, Ki_d, Kp_θ, Ki_θ) on the three tests and checks each against what the source says "
-            "of its PI: converges on all three paths (settles within the band), saturates "
+            "of its PI: converges on all three paths (settles within the band and stays there over at least the "
+            f"final {s['config']['sim']['steady_window']:g} s), saturates "
             f"< {100 * th['sat']:g} % of the time, steering settles within {th['delta_deg']:g}° of "
             f"{src['line_delta_deg']:g}° on the line, line steady |d| within a factor {th['ss_factor']:g} of "
             f"{src['line_ss_pi_mm']:g} mm. (Whether the mixed design beats it is a claim under test, shown for "

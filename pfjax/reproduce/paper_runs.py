@@ -20,6 +20,7 @@ from pfjax import controllers as C
 from pfjax import paths
 from pfjax.paths import global_parameter, tangent_angle
 from pfjax.reproduce.paper_config import sim_config
+from pfjax.reproduce.run_claims import settled
 from pfjax.sim import (
     STATUS_NAMES,
     SimConfig,
@@ -246,8 +247,9 @@ def part_pi_readings(cfg, rows, pbar) -> tuple[pd.DataFrame, dict]:
         rec: dict = {"reading": label, **{k: float(v) for k, v in g._asdict().items() if k != "k_aw"}}
         conv, sat_ok, better = True, True, True
         for t, r in per.items():
-            ok = int(r.status) == 0 and math.isfinite(float(r.metrics.settling_time))
-            conv &= ok
+            conv &= settled(
+                int(r.status) == 0, float(r.metrics.settling_time), cfg["sim"]["horizon"], cfg["sim"]["steady_window"]
+            )
             sat_ok &= float(r.metrics.sat_fraction) < th["sat"]
             better &= mixed[t]["iae"] < float(r.metrics.iae)
             rec[f"{t}_status"] = STATUS_NAMES[int(r.status)]

@@ -118,7 +118,10 @@ SUMMARY_UNITS: dict[str, str] = {
     **dict.fromkeys(("steady_abs_d_mm", "final_d_mm"), "mm"),
     # Table 2's GA readings
     "crossover_fraction": "1",
-    **dict.fromkeys(("costs", "median_cost"), "m s (the tuning cost: IAE, mean over the scenario set)"),
+    **dict.fromkeys(
+        ("costs", "median_cost"),
+        "the tuning cost's unit, mean over the scenario set: m s for IAE (the default), m^2 s for ISE, m s^2 for ITAE (ga.cost)",
+    ),
     "best_gains": _PI_GAINS,
     "n_rollouts": "rollouts (simulated runs)",
 }

@@ -30,6 +30,8 @@ BASES = (
 FILTERED = BASES[2]
 #: :data:`BASES`' entry for a row on the statement that fixed a modelling convention.
 CONVENTION = BASES[1]
+#: :data:`BASES`' entry for a row whose criterion rests on an assumed parameter (named in it).
+ASSUMED = BASES[4]
 
 
 class Verdict(NamedTuple):
