@@ -203,9 +203,13 @@ def robust_mixed(
         h2n.append(h2_norm(Acl, Bw, C2))
         poles.append(np.linalg.eigvals(Acl))
     steer = None
-    if delta_max is not None:  # max over the ellipsoid E_mu of |K x| = sqrt(mu K X K')
+    if delta_max is not None:
+        # max of |K x| over the smallest invariant ellipsoid E_mu that holds every start:
+        # mu = max x0' X^-1 x0, max |K x| = sqrt(mu K X K') (<= delta_max; nu is not unique where the
+        # limit does not bind, so the solver's 1 / nu is not used)
         Xv = 0.5 * (solved(X) + solved(X).T)
-        steer = float(np.sqrt(np.squeeze(K @ Xv @ K.T) / max(float(solved(nu)), 1e-300)))
+        mu = max(float(x0 @ np.linalg.solve(Xv, x0)) for x0 in np.atleast_2d(np.asarray(x0s, float)))
+        steer = float(np.sqrt(mu * np.squeeze(K @ Xv @ K.T)))
     warns = bound_warnings(gi, g2, max(hn), max(h2n), cond)
     return RobustDesign(method, K, gi, g2, float(max(hn)), float(max(h2n)), np.asarray(poles), steer, status, warns)
 
