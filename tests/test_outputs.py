@@ -499,14 +499,16 @@ def test_chunks_of_another_config_are_never_reused(study_toml, tmp_path):
         {"manifest.json": '{"mine": 1}', "a.parquet": None},  # a user's manifest, a user's table
         {"manifest.json": None},  # pfjax's manifest keys, a user's table below
         {"notes.txt": "x"},  # no manifest at all
+        {"mine.parquet": None},  # a table of a user's, no manifest
         {},  # empty: no manifest, so not pfjax's
     ],
-    ids=["user-manifest", "user-parquet", "no-manifest", "empty"],
+    ids=["user-manifest", "user-parquet", "no-manifest", "parquet-only", "empty"],
 )
-def test_a_user_directory_named_like_the_partial_one_is_never_removed(study_toml, tmp_path, capsys, files):
+@pytest.mark.parametrize("fresh", [["--fresh"], []], ids=["fresh", "resume"])
+def test_a_user_directory_named_like_the_partial_one_is_never_removed(study_toml, tmp_path, capsys, files, fresh):
     """``.<out>.partial`` that pfjax did not write (its manifest not pfjax's, a Parquet file without a
-    study's identity, or no manifest) is refused with one line naming --out, even with --fresh,
-    and left as it was."""
+    study's identity, or no manifest) is refused with one line naming --out and left as it was,
+    with --fresh and without (never "an interrupted study" to resume or discard)."""
     out = tmp_path / "out"
     user = partial_dir(out)
     user.mkdir()
@@ -519,7 +521,7 @@ def test_a_user_directory_named_like_the_partial_one_is_never_removed(study_toml
         else:
             (user / name).write_text(text)
     before = sorted((p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in user.iterdir())
-    code, err = _cli(["study", str(study_toml), "--out", str(out), "--fresh"], capsys)
+    code, err = _cli(["study", str(study_toml), "--out", str(out), *fresh], capsys)
     assert code == EXIT_USAGE and len(err) == 1 and err[0].startswith(f"pfjax study: error: --out: {user} "), err
     assert "pfjax did not" in err[0] and err[0].endswith("move it away"), err
     assert sorted((p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in user.iterdir()) == before

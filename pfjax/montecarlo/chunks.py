@@ -95,8 +95,10 @@ class ChunkStore:
                 f"directory; move it away",
                 flag,
             )
+        if self.dir.exists():
+            self._refuse_foreign(out)  # whatever follows: a directory pfjax did not write is never used
         if self.dir.exists() and (fresh or not self._chunk_files()):
-            self._discard_checked(out)
+            shutil.rmtree(self.dir)
         if self.dir.exists():
             self._check_manifest(out)
         else:
@@ -109,17 +111,17 @@ class ChunkStore:
     def _chunk_files(self) -> list[Path]:
         return [f for f in self.dir.iterdir() if f.suffix == ".parquet" and not f.name.startswith(".")]
 
-    def _discard_checked(self, out: Path) -> None:
-        """Remove the partial directory if it holds only what a study writes there: its manifest
-        (:meth:`_written_by_pfjax`), chunk files stamped with a study's identity, and chunk files
-        a kill left half-written under their temporary names."""
+    def _refuse_foreign(self, out: Path) -> None:
+        """:class:`~pfjax.config.ConfigError` naming the flag unless the partial directory holds only
+        what a study writes there: its manifest (:meth:`_written_by_pfjax`), chunk files stamped
+        with a study's identity, and chunk files a kill left half-written under their temporary
+        names. Checked before the directory is resumed or removed."""
         where = f"{self.flag}: {self.dir} (where pfjax keeps the finished chunks of {out})"
         foreign = [f.name for f in sorted(self.dir.iterdir()) if not self._written_by_pfjax(f)]
         if foreign:
             raise ConfigError(f"{where} holds {foreign[0]!r}, which pfjax did not write; move it away", self.flag)
         if not (self.dir / "manifest.json").is_file():
             raise ConfigError(f"{where} has no manifest.json, so pfjax did not make it; move it away", self.flag)
-        shutil.rmtree(self.dir)
 
     def _written_by_pfjax(self, f: Path) -> bool:
         """Whether ``f`` in the partial directory is a file a study writes there: the manifest (a
@@ -132,6 +134,7 @@ class ChunkStore:
                 old = json.loads(f.read_text(encoding="utf-8"))
             except (OSError, ValueError):
                 return False
+            # the keys of every manifest pfjax has written (a version that adds one reads these too)
             return isinstance(old, dict) and set(old) == set(self.manifest)
         if f.suffix == ".parquet" and not f.name.startswith("."):
             try:
