@@ -209,4 +209,18 @@ def test_a_stratum_without_a_failure_is_flagged_no_failures():
     assert r["p_fail"] == 0 and r["status"] == "no_failures", r["status"]
     for s in r["strata"]:
         assert f"{s['path']}: no failure found in {s['n_rollouts']} rollouts" in r["warning"], r["warning"]
-    assert f"upper end {r['strata'][0]['ci95'][1]:.3g}" in r["warning"]
+    assert f"a 95 % upper bound of {r['strata'][0]['ci95'][1]:.3g} (exact binomial)" in r["warning"]
+
+
+def test_no_failures_says_what_bounds_p_by_method():
+    """Importance sampling and subset simulation that never reach the failure region give no bound
+    (their interval reaches 1), and the flag says so; plain Monte Carlo's exact upper end is given."""
+    from pfjax.rare.study import no_failures
+
+    never = lambda u: np.full(len(u), np.inf)
+    for est in (cross_entropy_is(never, 2, n_per_level=500), subset_simulation(never, 2, n_per_level=500)):
+        assert est.p_fail == 0 and est.ci95[1] == 1.0
+        flag = no_failures(est)
+        assert flag["status"] == "no_failures" and f"{est.method} gives no bound" in flag["warning"], flag
+    mc = monte_carlo(never, 2, n=1000)
+    assert "95 % upper bound of" in no_failures(mc)["warning"]

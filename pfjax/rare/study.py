@@ -302,12 +302,14 @@ def combine(parts: list[tuple[float, RareEstimate]]) -> tuple[float, tuple[float
 
 def no_failures(r: RareEstimate) -> dict:
     """The flag of a stratum whose estimate is 0 (no failing draw seen): ``status`` ``"no_failures"``
-    and a warning giving the rollouts spent and the interval's upper end, all that bounds ``p``."""
-    return {
-        "status": "no_failures",
-        "warning": f"no failure found in {r.n_rollouts} rollouts: p_fail is 0 and only bounded, by the "
-        f"interval's upper end {r.ci95[1]:.3g}; a larger max_rollouts resolves it",
-    }
+    and a warning giving the rollouts spent and what bounds ``p`` there: plain Monte Carlo's exact
+    interval has an upper end; importance sampling and subset simulation, whose proposal or
+    levels never reached the failure region, give none (their interval reaches 1)."""
+    if r.method == "mc":
+        bound = f"p_fail is 0 with a 95 % upper bound of {r.ci95[1]:.3g} (exact binomial)"
+    else:
+        bound = f"p_fail is 0 and {r.method} gives no bound (its levels never reached the failure region)"
+    return {"status": "no_failures", "warning": f"no failure found in {r.n_rollouts} rollouts: {bound}"}
 
 
 def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None) -> dict:
