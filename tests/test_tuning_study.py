@@ -241,7 +241,7 @@ def test_the_heldout_set_by_its_example_name_loads_from_any_directory(tmp_path, 
     with pytest.raises(
         ConfigError,
         match=r"^heldout: file not found: studies/tuning_heldout\.toml \(a study TOML relative to the working "
-        r"directory, or a packaged example's name: heldout\)$",
+        r"directory, or a packaged example's name: default, heldout, random_paths, slip_frequency, rare_events\)$",
     ):
         _load(path=toml)
     cfg = _load("heldout='heldout'", path=toml)

@@ -43,10 +43,10 @@ def first_failure(status, fail_time, now, t, live=Status.OK):
 
     ``status`` is carried as a *float* code (``Status`` values are small integers, exact in any float
     type; convert to int32 for output) so that it can be computed once
-    (:func:`pfjax.numerics.elementary.computed_once`): every value a simulator step freezes or accumulates reads whether the
-    run is still live, and XLA's CPU backend would otherwise recompute the status checks (finiteness,
-    distances, the Frenet singularity, the path's end) in each kernel that reads it, and the failure
-    time from the checks again. Measured on the benchmark (README, Performance): float32 about 5 %
+    (:func:`pfjax.numerics.elementary.computed_once`): every value a simulator step freezes or
+    accumulates reads whether the run is still live, and XLA's CPU backend would otherwise recompute
+    the status checks (finiteness, distances, the Frenet singularity, the path's end) in each kernel
+    that reads it, and the failure time from the checks again. Measured on the benchmark (README, Performance): float32 about 5 %
     more rollout-steps/s. Values are exact.
     """
     ok = status == live

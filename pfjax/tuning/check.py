@@ -23,9 +23,9 @@ large curvature. So the **verdict** comes from the probes: ``"local minimum"`` w
 lowers the cost by more than ``rtol |J|`` (default 1e-4: a local minimum within the box at the
 probed scales, up to 0.01 % of the cost),
 ``"not a local minimum"`` otherwise (``best_probe`` gives the direction and the decrease), and
-``"flat"`` when every probe's cost equals the cost exactly and so does every gradient component
-zero: a plateau, such as a region where every run fails and costs the fail penalty, which the
-probes cannot tell from its surroundings (no minimum is claimed there). The
+``"flat"`` when every probe costs the same as the point (to 1e-12 relative) and the gradient is
+exactly zero: a plateau, such as gains at which every run fails at once and costs the fail
+penalty, where the probes cannot tell a minimum from its surroundings (none is claimed). The
 gradient and Hessian are reported beside it as the smooth picture. A cost or gradient that is not
 finite at ``theta`` (a failed rollout in the batch) is data, not an error: the verdict is
 ``"non-finite cost"`` where the cost itself is not finite, and the quadratic model is
@@ -125,7 +125,7 @@ def check_point(
     i = int(np.argmin(Jp))
     probe_dec = (J - float(Jp[i])) / max(abs(J), 1e-300)
     verdict = "not a local minimum" if probe_dec > rtol else "local minimum"
-    if np.all(Jp == J) and not np.any(g):
+    if np.all(np.abs(Jp - J) <= 1e-12 * abs(J)) and not np.any(g):  # two programs: a rounding apart
         verdict = "flat"
     if not np.isfinite(J):
         verdict, probe_dec = "non-finite cost", float("nan")

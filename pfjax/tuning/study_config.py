@@ -248,9 +248,11 @@ class TuningStudy(ConfigModel):
             except ValueError as e:
                 raise ValueError(f"compare.ablation.{name}: {e}") from None
         if not heldout_file(self.heldout).is_file():
+            from pfjax import examples
+
             raise ValueError(
                 f"heldout: file not found: {self.heldout} (a study TOML relative to the working directory, "
-                "or a packaged example's name: heldout)"
+                f"or a packaged example's name: {', '.join(examples.names())})"
             )
         cfg = self.model_dump(mode="json")
         spec = heldout_study(cfg)
