@@ -314,6 +314,7 @@ def test_tune_json_records_only_the_arguments_the_run_read(monkeypatch, capsys, 
     """``arguments`` (and the hash over it) holds the defaults of the flags the run reads and None
     for those it does not (the GA's sizes with the gradient tuner, --n-runs with a paper set): two
     runs that differ only in what they did not read would otherwise record different inputs."""
+    import inspect
     import json
 
     from pfjax.cli import tune as cli_tune
@@ -323,6 +324,7 @@ def test_tune_json_records_only_the_arguments_the_run_read(monkeypatch, capsys, 
         GAOptions().population_size,
         GAOptions().generations,
     )
+    assert cli_tune.DEFAULTS["n_runs"] == inspect.signature(problem.make_problem).parameters["n_runs"].default
     seen = []
 
     def fake_tune(pr, method, **kw):

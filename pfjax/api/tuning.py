@@ -142,7 +142,7 @@ def tune(
         with _named(given, own):
             check_options(method, ga_options, steps, n_starts, learning_rate, multistart)
     problem = make_problem(
-        name, scenario, cost=cost, config=config, n_runs=16 if n_runs is None else n_runs, model=model
+        name, scenario, cost=cost, config=config, model=model, **({} if n_runs is None else {"n_runs": n_runs})
     )
     if check is not None:
         r = run_check(problem, check, controller=name)

@@ -349,7 +349,7 @@ def _check_flags(args, controllers: dict) -> None:
     """:class:`UsageError` naming the first bad flag among ``--controller``, ``--method``, ``--check``
     and ``--model``, or the first flag given that the chosen method (or ``--check``), scenario or
     aggregate does not read."""
-    from pfjax.tuning.problem import METHODS, MODELS, scenario_sets
+    from pfjax.tuning.problem import METHODS, MODELS
 
     if args.controller not in controllers:
         raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}")
@@ -363,8 +363,8 @@ def _check_flags(args, controllers: dict) -> None:
         raise UsageError(f"--model: value {args.model!r}, expected one of {', '.join(MODELS)}")
     for dest, methods in method_flags().items():
         given = getattr(args, dest) is not None and getattr(args, dest) is not False  # 0 is given
-        if given and args.method not in methods:
+        if given and not _reads(args, dest):
             mode = "--check" if args.method is None else f"--method {args.method}"
             raise UsageError(f"--{dest.replace('_', '-')}: not with {mode} (only with --method {', '.join(methods)})")
-    if args.n_runs is not None and args.scenario in scenario_sets():
+    if args.n_runs is not None and not _reads(args, "n_runs"):
         raise UsageError(f"--n-runs: not with --scenario {args.scenario} (it samples the runs of a study TOML)")
