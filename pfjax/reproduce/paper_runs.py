@@ -50,10 +50,10 @@ def rel(a, b):
 
 
 def fixed_path(name: str):
-    """The fixed path ``name`` of the path registry (one of the source's tests)."""
-    build = paths.entry(name).build
-    if build is None:
-        raise ValueError(f"path {name!r} has no fixed geometry")
+    """The fixed path ``name`` of the path registry (one of the source's tests;
+    :func:`pfjax.paths.fixed_entry` refuses any other)."""
+    build = paths.fixed_entry(name).build
+    assert build is not None  # a fixed path (fixed_entry)
     return build()
 
 
