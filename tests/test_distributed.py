@@ -195,9 +195,14 @@ def test_a_refused_resume_stops_every_process_with_one_line(case, tmp_path):
         out.mkdir()
         (out / "thesis.tex").write_text("data")
     else:
-        partial_dir(out).mkdir()
-        (partial_dir(out) / "manifest.json").write_text(json.dumps({"config_sha256": "0" * 64, "pfjax_version": "0"}))
-        (partial_dir(out) / "runs-p000-c000-0000000000.parquet").write_bytes(b"a finished chunk")
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        partial_dir(out).mkdir()  # as pfjax writes it, for another config
+        manifest = {"study": "dist", "config_sha256": "0" * 64, "seed": 0, "pfjax_version": "0"}
+        (partial_dir(out) / "manifest.json").write_text(json.dumps(manifest))
+        chunk = pa.table({"x": [1.0]}).replace_schema_metadata({b"pfjax.config_sha256": b"0" * 64})
+        pq.write_table(chunk, partial_dir(out) / "runs-p000-c000-0000000000.parquet")
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
     # process 1's --out as on another host (its own, empty): only process 0 refuses, and tells it at once
     procs, outs = _pair(
