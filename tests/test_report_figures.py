@@ -271,3 +271,23 @@ def test_worst_case_figure_gives_the_objectives_unit():
     axes = fig.get_axes()
     assert axes[0].get_title() == "pi: worst ise = 0.5 m²·s (ok)"
     assert axes[3].get_ylabel() == "worst ise found [m²·s]"
+
+
+@pytest.mark.parametrize("late", [(-5.0, 5.5), (-14.0, -8.0)], ids=["room-below", "room-above"])
+def test_the_lateral_error_zoom_covers_no_curve_past_the_transient(late):
+    """The paper reproduction's zoom of d sits in the taller band clear of every run's d after the
+    transient (the right half of the panel), so it hides none of the curves it magnifies."""
+    import matplotlib.pyplot as plt
+
+    from pfjax.report.figures import _free_band
+
+    fig, a = plt.subplots()
+    a.set_ylim(-15.0, 6.0)
+    t = np.linspace(0.0, 20.0, 201)
+    d = np.where(t > 1.0, late[0] + (late[1] - late[0]) * (0.5 + 0.5 * np.sin(t)), -0.14) / 100.0  # m
+    x0, y0, w, h = _free_band(a, {"run": {"d": d}}, t > 8.0)
+    lo, hi = a.get_ylim()
+    bottom, top = lo + y0 * (hi - lo), lo + (y0 + h) * (hi - lo)
+    assert x0 >= 0.4 and x0 + w <= 1.0 and h > 0.1
+    assert top < 100 * d[t > 8.0].min() or bottom > 100 * d[t > 8.0].max(), (bottom, top, late)
+    plt.close(fig)

@@ -69,7 +69,7 @@ def tracking_figure(title: str, path_xy: np.ndarray, trajs: dict, delta_max: flo
     late = t > 0.5 * t[-1]
     lo = min(float(np.min(100 * tr["d"][late])) for tr in trajs.values())
     hi = max(float(np.max(100 * tr["d"][late])) for tr in trajs.values())
-    ins = a.inset_axes([0.45, 0.45, 0.5, 0.45])
+    ins = a.inset_axes(_free_band(a, trajs, t > 0.4 * t[-1]))
     for name, tr in trajs.items():
         ins.plot(tr["t"][late], 100 * tr["d"][late], **{k: v for k, v in _style(name).items() if k != "label"})
     pad = 0.1 * max(hi - lo, 1e-3)
@@ -135,6 +135,21 @@ def pi_assignment_figure(labels: list[str], line_traces: dict, ok: dict):
     return fig
 
 
+def _free_band(a, trajs: dict, after: np.ndarray) -> list[float]:
+    """Where the zoom of the lateral error goes in axes ``a`` (axes fractions ``[x0, y0, w, h]``):
+    the right half, in the taller of the bands below and above every trajectory's ``d`` at the
+    times ``after`` (past the transient), so that it covers none of them."""
+    y0, y1 = a.get_ylim()
+    lo = min(float(np.min(100 * tr["d"][after])) for tr in trajs.values())
+    hi = max(float(np.max(100 * tr["d"][after])) for tr in trajs.values())
+    below, above = (lo - y0) / (y1 - y0), (y1 - hi) / (y1 - y0)
+    if max(below, above) < 0.3:  # no room clear of the curves: the upper right, as before
+        return [0.45, 0.45, 0.5, 0.45]
+    if below >= above:
+        return [0.45, 0.04, 0.5, below - 0.14]  # room for the zoom's title above it
+    return [0.45, 1.0 - above + 0.06, 0.5, above - 0.16]
+
+
 def sine_error_figure(x: np.ndarray, d: np.ndarray, xk: np.ndarray, kappa: np.ndarray, dkappa: np.ndarray, label: str):
     """|d| along the sine path (at closest-point x) against the path's |kappa| and |dkappa/ds| (at xk)."""
     fig, ax = plt.subplots(figsize=(10, 4))
@@ -143,8 +158,12 @@ def sine_error_figure(x: np.ndarray, d: np.ndarray, xk: np.ndarray, kappa: np.nd
     ax2 = ax.twinx()
     ax2.plot(xk, np.abs(kappa), color="#1f77b4", ls="--", label="|κ| [1/m]")
     ax2.plot(xk, np.abs(dkappa), color="#ff7f0e", ls=":", label="|dκ/ds| [1/m²]")
+    ax2.set_ylabel("|κ| [1/m], |dκ/ds| [1/m²]")
     lines = ax.get_lines() + ax2.get_lines()
-    ax.legend(lines, [str(l.get_label()) for l in lines], fontsize=8, loc="upper right")
+    # below the axes: every x has a peak of one of the three curves
+    ax.legend(
+        lines, [str(l.get_label()) for l in lines], fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.15), ncol=3
+    )
     ax.set_title("Sine path after the transient: error against curvature and its rate of change")
     fig.tight_layout()
     return fig
