@@ -338,7 +338,9 @@ def check_start(polygons: dict[str, list], x0, shape, key: str = "--x0") -> None
 
     First the axle point (x, y): inside or on an obstacle is refused
     (:func:`~pfjax.parking.overlap.point_in_polygon_np`). Then the body: the rectangle at the pose overlapping an
-    obstacle is refused (:func:`~pfjax.parking.overlap.body_overlaps`; touching is allowed).
+    obstacle is refused (:func:`~pfjax.parking.overlap.body_overlaps`; touching is allowed here, and
+    refused after this check by the single-run entry points of :mod:`pfjax.parking.api`, with the
+    simulation's own closed-set start test, which would end such a run at once).
 
     Args:
         polygons: {name: (n, 2) vertices, m}, as :func:`load_map` returns.
