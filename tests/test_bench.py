@@ -605,3 +605,43 @@ def test_a_compile_time_is_never_negative():
     from pfjax.bench.run import compile_time
 
     assert compile_time(2.5, 0.5) == 2.0 and compile_time(0.4, 0.5) == 0.0
+
+
+class _Clock:
+    """A virtual clock for :mod:`pfjax.bench.timing`: calls advance it instead of sleeping."""
+
+    def __init__(self):
+        self.now = 0.0
+        self.debt = 0.0  # what the last call left behind, paid by the next one
+
+    def perf_counter(self):
+        return self.now
+
+    def call(self, work: float, release: float):
+        """A compiled call that runs ``work`` seconds and leaves ``release`` seconds behind (XLA
+        frees its buffers after the result is ready)."""
+
+        def f():
+            self.now += self.debt + work
+            self.debt = release
+            return work
+
+        return f
+
+
+def test_interleaved_timing_charges_each_function_its_own_release_and_not_the_previous_one(monkeypatch):
+    from pfjax.bench import timing
+
+    clock = _Clock()
+    monkeypatch.setattr(timing.time, "perf_counter", clock.perf_counter)
+    forward, reverse = clock.call(1.0, 0.0), clock.call(3.0, 0.5)
+    outs, firsts, bests = timing.interleaved([forward, reverse], rounds=3)
+    # the steady state of a loop over each alone: forward 1.0 s, reverse 3.0 + its 0.5 s release
+    assert bests == [1.0, 3.5]
+    assert outs == [1.0, 3.0] and firsts == [1.0, 3.0]
+    # a single timed call per function in turn charged reverse's release to forward
+    clock.debt = 0.0
+    _, _, one_each = timing.interleaved([forward, reverse], rounds=3, window=1)
+    assert one_each == [1.0, 3.5]  # the untimed call absorbs it even with a window of one
+    _, _, alone = timing.best_of(reverse, 2)
+    assert alone == 3.5  # consecutive calls of one function: each pays the previous one's release

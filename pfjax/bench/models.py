@@ -6,17 +6,18 @@ of the dynamic models), on batches of the same size and step count, float32 and 
 The problem: ``n`` runs on the sine path under Stanley, lateral offsets uniform in ±0.5 m, metrics
 only. The kinematic and ST runs are the robot's (1 m/s, the study's step); the STD runs are
 CommonRoad's vehicle 2 at 10 m/s with a 2 ms step (its wheel-speed modes need it), the same number
-of steps. The time of a model is the best of ``repeats`` calls, interleaved with the other models'
-so that all see the same load on a shared machine, after one compiling call.
+of steps. The time of a model is the best of ``repeats`` rounds, each model timed in turn with the
+other models so that all see the same load on a shared machine, after one compiling call
+(:func:`pfjax.bench.timing.interleaved`).
 """
 
 from __future__ import annotations
 
-import math
-import time
 from collections.abc import Callable, Sequence
 
 import jax
+
+from pfjax.bench import timing
 
 #: a model's scenario keywords (:func:`pfjax.scenarios`) and its step, s (None: the caller's step)
 MODELS: dict[str, tuple[dict, float | None]] = {
@@ -40,7 +41,7 @@ def model_costs(
         n: runs per batch.
         steps: steps per run.
         dt: the kinematic and ST models' step, s.
-        repeats: timed calls per model (the best is kept).
+        repeats: timed rounds per model (the best is kept).
         models: names in :data:`MODELS`; ``"kinematic"`` first (the ratios' denominator).
         progress: called with a short message before each precision.
 
@@ -63,13 +64,8 @@ def model_costs(
                 runs = pfjax.scenarios("sine", n=n, lateral_offset=pfjax.uniform(-0.5, 0.5), key=0, **kw)
                 cfg = {"horizon": steps * h, "dt": h}
                 calls[model] = lambda runs=runs, cfg=cfg: pfjax.simulate(runs, "stanley", config=cfg)
-                calls[model]()  # compiles
-            best = dict.fromkeys(calls, math.inf)
-            for _ in range(repeats):
-                for model, call in calls.items():
-                    t = time.perf_counter()
-                    call()
-                    best[model] = min(best[model], time.perf_counter() - t)
+            _, _, seconds = timing.interleaved(list(calls.values()), repeats)
+            best = dict(zip(calls, seconds))
         row: dict = {m: {"wall_s": b, "ns_per_rollout_step": 1e9 * b / (n * steps)} for m, b in best.items()}
         for m in models:
             if m != "kinematic":

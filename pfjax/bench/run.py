@@ -17,9 +17,10 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
   null and the result's ``summary["notes"]`` says so;
 * the value and gradient of the batch-mean IAE with respect to the controller gains over the
   forward pass at the same batch size, as the tuner takes it (forward mode for the 2 gains,
-  :mod:`pfjax.numerics.autodiff`) and in reverse mode (``jax.value_and_grad``): the three called
-  in turn ``grad_rounds`` times, best of each, so the ratios survive a shared machine's slow
-  periods;
+  :mod:`pfjax.numerics.autodiff`) and in reverse mode (``jax.value_and_grad``): the three timed
+  in turn ``grad_rounds`` times, each in a window of consecutive calls that holds the release of
+  its own buffers and not the previous one's (:func:`pfjax.bench.timing.interleaved`), best of
+  each, so the ratios survive a shared machine's slow periods;
 * the cost per rollout-step of the dynamic vehicle models (ST, STD) against the kinematic model in
   the same loop (:mod:`pfjax.bench.models`, ``model_runs`` runs of ``model_horizon`` s, best of
   ``repeats + 1`` interleaved calls; ``model_runs = 0`` skips it);
@@ -37,7 +38,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from pfjax.bench import goals
+from pfjax.bench import goals, timing
 from pfjax.bench import problem as P
 
 #: max |IAE_ref - IAE_pfjax| (m s) accepted as agreement, per reference and dtype. float64: the
@@ -117,36 +118,6 @@ QUICK = BenchConfig(
 )
 
 
-def _timed(f, repeats):
-    t0 = time.perf_counter()
-    out = f()
-    first = time.perf_counter() - t0
-    best = np.inf if repeats else first
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = f()
-        best = min(best, time.perf_counter() - t0)
-    return out, first, best
-
-
-def _timed_interleaved(fs, rounds):
-    """Like :func:`_timed` for several functions, called in turn ``rounds`` times after a first call
-    each: a slow period of a shared machine then slows every function alike instead of one, and the
-    ratios of their best times are not skewed by it."""
-    outs, firsts, bests = [], [], []
-    for f in fs:
-        t0 = time.perf_counter()
-        outs.append(f())
-        firsts.append(time.perf_counter() - t0)
-    bests = list(firsts) if not rounds else [np.inf] * len(fs)
-    for _ in range(rounds):
-        for i, f in enumerate(fs):
-            t0 = time.perf_counter()
-            outs[i] = f()
-            bests[i] = min(bests[i], time.perf_counter() - t0)
-    return outs, firsts, bests
-
-
 def _pfjax(batch, dtype, n_steps, cfg: BenchConfig):
     import jax
 
@@ -156,7 +127,7 @@ def _pfjax(batch, dtype, n_steps, cfg: BenchConfig):
     sc = P.scenarios(batch, dtype)
     sim = SimConfig(dt=P.DT, horizon=cfg.horizon, newton_iters=P.NEWTON_ITERS, record=False)
     run = lambda: jax.block_until_ready(simulate_batch(sc, controller=state_feedback, config=sim))
-    res, first, best = _timed(run, cfg.repeats)
+    res, first, best = timing.best_of(run, cfg.repeats)
     return res, first, best
 
 
@@ -187,7 +158,7 @@ def _grad(batch, dtype, cfg: BenchConfig):
     fwd = compiler.jit(loss)
     auto, rev = compiler.jit(autodiff.value_and_grad(loss)), compiler.jit(jax.value_and_grad(loss))
     calls = [lambda f=f: jax.block_until_ready(f(K, sc)) for f in (fwd, auto, rev)]
-    (_, (_, g), (_, g_rev)), (_, first, first_rev), (t_fwd, t_grad, t_rev) = _timed_interleaved(calls, cfg.grad_rounds)
+    (_, (_, g), (_, g_rev)), (_, first, first_rev), (t_fwd, t_grad, t_rev) = timing.interleaved(calls, cfg.grad_rounds)
     g, g_rev = np.asarray(g, np.float64), np.asarray(g_rev, np.float64)
     return dict(
         forward_s=t_fwd,
@@ -280,7 +251,7 @@ def _jax_rows(cfg: BenchConfig, n_steps: int, say) -> tuple[list[dict], dict, di
                     iae[name] = np.asarray(res.metrics.iae, np.float64)
                 say(f"minimal JAX {name} B={b}")
                 runs = M.runs(batch, dtype)
-                out, first, best = _timed(lambda: jax.block_until_ready(M.simulate(runs, n_steps)), cfg.repeats)
+                out, first, best = timing.best_of(lambda: jax.block_until_ready(M.simulate(runs, n_steps)), cfg.repeats)
                 rows.append(_row("jax_minimal", name, b, best, compile_time(first, best), n_steps))
                 diffs.setdefault(f"jax_minimal_{name}", []).append(_max_diff(out, res.metrics.iae))
     return rows, iae, {k: float(np.max(v)) for k, v in diffs.items()}  # NaN if any difference is NaN
@@ -299,11 +270,11 @@ def _reference_rows(cfg: BenchConfig, n_steps: int, iae: dict, have_numba: bool,
     for name, dtype in (("float32", np.float32), ("float64", np.float64)):
         if have_numba:
             say(f"numba {name} B={nr}")
-            out, first, best = _timed(lambda: R.iae_numba(sub(nr), dtype, n_steps), cfg.repeats)
+            out, first, best = timing.best_of(lambda: R.iae_numba(sub(nr), dtype, n_steps), cfg.repeats)
             rows.append(_row("numba", name, nr, best, compile_time(first, best), n_steps))
             agree[f"numba_{name}"] = _max_diff(out, iae[name][:nr])
         say(f"numpy {name} B={k}")
-        out, _, best = _timed(lambda: R.iae_numpy(sub(k), dtype, n_steps), 0)
+        out, _, best = timing.best_of(lambda: R.iae_numpy(sub(k), dtype, n_steps), 0)
         rows.append(_row("numpy", name, k, best, 0.0, n_steps))
         agree[f"numpy_{name}"] = _max_diff(out, iae[name][:k])
     say(f"scipy solve_ivp, {cfg.scipy_runs} run(s)")
