@@ -2,20 +2,31 @@
 
 A simulated loss ``J(theta)`` of ``D`` parameters has two ways to its gradient:
 
-* **forward mode**: ``D`` Jacobian-vector products ``dJ = J'(theta) e_i`` (``jax.jvp``, vmapped over
-  the basis vectors ``e_i``), evaluated alongside the forward pass. Cost about ``1 + c D`` forward
-  passes, memory independent of the horizon.
+* **forward mode**: ``D`` Jacobian-vector products ``dJ = J'(theta) e_i`` along the basis vectors,
+  evaluated alongside the forward pass. Cost about ``1 + c D`` forward passes, memory independent
+  of the horizon.
 * **reverse mode** (``jax.value_and_grad``): one backward pass through the ``lax.scan``, which
   recomputes every step (``jax.checkpoint``) and stores the carry per step: a fixed multiple of
   the forward pass whatever ``D``, memory O(horizon) per run.
 
-Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices;
-README, Performance): forward mode costs 1.33 / 2.19 / 3.03 / 4.87 forward passes for D = 1 / 2 / 4 / 8
-(value and all D derivatives, CPU time), reverse mode 3.2-3.4 for any D (see :data:`FORWARD_MAX`;
-about 5 % less since reverse mode saves the projection's last-but-one Newton iterate).
-``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters (controller
-gains) and reverse mode above it (a falsifier's scenario parameters). Both give the same derivative
-up to rounding (tested).
+Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices,
+the 2-core AMD EPYC of CPU family 26 (Zen 5), jax 0.10.2; wall time of the value and all ``D``
+derivatives over the forward pass, each function timed in a window of consecutive calls,
+:func:`pfjax.bench.timing.interleaved`): forward mode 1.48 / 2.19 / 3.14 / 3.69 for
+D = 1 / 2 / 3 / 4, reverse mode 4.97 for any D (its stored steps, 112 MB per device, are fresh
+memory at every call: 55,000 page faults). ``mode="auto"`` takes forward mode up to
+:data:`FORWARD_MAX` parameters (controller gains) and reverse mode above it (a falsifier's
+scenario parameters). Both give the same derivative up to rounding (tested).
+
+**How the tangents travel** (:data:`NESTED_MAX`). ``D`` tangents as one batch (``vmap`` of
+``jax.jvp`` over the basis) are arrays of shape ``(D, runs)`` beside the ``(runs,)`` primal values,
+and XLA's CPU backend fuses the two shapes into separate kernels: the second tangent cost 1.03
+forward passes where the first cost 0.48. Nested ``jax.jvp`` calls, one direction each, keep every
+array at the primal's shape; they also trace the ``2^D - 1 - D`` higher derivatives that nothing
+uses, which XLA removes from the loop but which lengthen compilation. Measured as above (forward
+pass over the gradient, first call including compilation): D = 2: 2.19x nested against 2.53x
+batched, compiled in 1.75 against 1.68 s; D = 3: 2.77x against 3.14x, 2.44 against 1.60 s;
+D = 4: 3.23x against 3.69x, 4.14 against 1.65 s. Nested up to D = 2, where it costs no compilation.
 """
 
 from __future__ import annotations
@@ -33,6 +44,9 @@ from jax.flatten_util import ravel_pytree
 #: mode about 30 % cheaper and forward mode about 13 % dearer).
 FORWARD_MAX = 4
 MODES = ("auto", "forward", "reverse")
+#: Parameters up to which forward mode nests one ``jax.jvp`` per direction instead of batching the
+#: directions (module docstring: faster at every D measured, but its compilation grows as 2^D).
+NESTED_MAX = 2
 
 
 def resolve_mode(mode: str, n_params: int) -> str:
@@ -72,12 +86,33 @@ def value_and_grad(fun: Callable, *, mode: str = "auto", has_aux: bool = False) 
             return jax.value_and_grad(fun, has_aux=has_aux)(params, *args)
         f = lambda v: fun(unravel(v), *args)
         basis = jnp.eye(flat.size, dtype=flat.dtype)
-        if has_aux:
+        if flat.size <= NESTED_MAX:
+            (value, *dirs), aux = _nested_jvp(f if has_aux else lambda v: (f(v), None), flat, basis)
+            dirs = jnp.stack(dirs)
+        elif has_aux:
             value, dirs, aux = jax.vmap(lambda t: jax.jvp(f, (flat,), (t,), has_aux=True), out_axes=(None, 0, None))(
                 basis
             )
-            return (value, aux), unravel(dirs)
-        value, dirs = jax.vmap(lambda t: jax.jvp(f, (flat,), (t,)), out_axes=(None, 0))(basis)
-        return value, unravel(dirs)
+        else:
+            value, dirs = jax.vmap(lambda t: jax.jvp(f, (flat,), (t,)), out_axes=(None, 0))(basis)
+        return ((value, aux), unravel(dirs)) if has_aux else (value, unravel(dirs))
 
     return vg
+
+
+def _nested_jvp(f: Callable, x, basis) -> tuple[tuple, object]:
+    """``((f(x), f'(x) e_1, ..., f'(x) e_D), aux)`` for ``f(x) -> (scalar, aux)``, by one
+    ``jax.jvp`` per basis vector ``e_i``, each around the previous (module docstring); of each
+    level's tangents only the new direction's first derivative is kept."""
+
+    def level(g, e):
+        def lifted(v):
+            values, tangents, aux = jax.jvp(g, (v,), (e,), has_aux=True)
+            return (*values, tangents[0]), aux
+
+        return lifted
+
+    g = lambda v: (lambda out: ((out[0],), out[1]))(f(v))
+    for e in basis:
+        g = level(g, e)
+    return g(x)
