@@ -10,23 +10,23 @@ A simulated loss ``J(theta)`` of ``D`` parameters has two ways to its gradient:
   the forward pass whatever ``D``, memory O(horizon) per run.
 
 Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices,
-the 2-core AMD EPYC of CPU family 26 (Zen 5), jax 0.10.2; wall time of the value and all ``D``
+a 2-core AMD EPYC of CPU family 26 (Zen 5), jax 0.10.2; wall time of the value and all ``D``
 derivatives over the forward pass, each function timed in a window of consecutive calls,
-:func:`pfjax.bench.timing.interleaved`): forward mode 1.48 / 2.19 / 3.14 / 3.69 for
-D = 1 / 2 / 3 / 4, reverse mode 4.97 for any D (its stored steps, 112 MB per device, are fresh
-memory at every call: 55,000 page faults). ``mode="auto"`` takes forward mode up to
-:data:`FORWARD_MAX` parameters (controller gains) and reverse mode above it (a falsifier's
-scenario parameters). Both give the same derivative up to rounding (tested).
+:func:`pfjax.bench.timing.interleaved`): forward mode 1.48 / 2.11-2.19 / 3.14 / 3.69 for
+D = 1 / 2 / 3 / 4, reverse mode 4.8-5.0 for any D (docs/performance.md, Gradients).
+``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters (controller
+gains) and reverse mode above it (a falsifier's scenario parameters). Both give the same derivative
+up to rounding (tested).
 
 **How the tangents travel** (:data:`NESTED_MAX`). ``D`` tangents as one batch (``vmap`` of
 ``jax.jvp`` over the basis) are arrays of shape ``(D, runs)`` beside the ``(runs,)`` primal values,
-and XLA's CPU backend fuses the two shapes into separate kernels: the second tangent cost 1.03
+and XLA's CPU backend puts the two shapes in separate kernels: the second tangent cost 1.03
 forward passes where the first cost 0.48. Nested ``jax.jvp`` calls, one direction each, keep every
 array at the primal's shape; they also trace the ``2^D - 1 - D`` higher derivatives that nothing
-uses, which XLA removes from the loop but which lengthen compilation. Measured as above (forward
-pass over the gradient, first call including compilation): D = 2: 2.19x nested against 2.53x
-batched, compiled in 1.75 against 1.68 s; D = 3: 2.77x against 3.14x, 2.44 against 1.60 s;
-D = 4: 3.23x against 3.69x, 4.14 against 1.65 s. Nested up to D = 2, where it costs no compilation.
+reads, which XLA removes from the loop but which lengthen compilation. Measured as above (gradient
+over the forward pass; first call, with compilation): D = 2: 2.19x nested against 2.53x batched,
+1.75 against 1.68 s; D = 3: 2.77x against 3.14x, 2.44 against 1.60 s; D = 4: 3.23x against 3.69x,
+4.14 against 1.65 s. Nested up to D = 2, where it costs no compilation.
 """
 
 from __future__ import annotations
@@ -37,11 +37,11 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-#: Parameters up to which ``mode="auto"`` uses forward mode. Measured on the benchmark (CPU time,
-#: value and gradient over the forward pass): forward mode 1.33 / 2.19 / 3.03 / 4.87 for D = 1 / 2 /
-#: 4 / 8, reverse mode 3.2-3.4 for any D, so the crossover is about 5 (it was about 12, with forward
-#: 8, before the simulator computed its command, steering and closest point once, which made reverse
-#: mode about 30 % cheaper and forward mode about 13 % dearer).
+#: Parameters up to which ``mode="auto"`` uses forward mode. Measured on the benchmark (module
+#: docstring): forward mode 3.69 forward passes for D = 4, reverse mode 4.8-5.0 for any D. Forward
+#: mode's cost grows by about half a forward pass per parameter, so the crossover lies near
+#: D = 6 at that batch. A smaller batch stores fewer steps, so reverse mode takes fewer page faults
+#: (docs/performance.md) and the crossover moves down; 4 is kept, not measured at other batches.
 FORWARD_MAX = 4
 MODES = ("auto", "forward", "reverse")
 #: Parameters up to which forward mode nests one ``jax.jvp`` per direction instead of batching the
