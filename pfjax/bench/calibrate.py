@@ -3,9 +3,9 @@
 The benchmark problem (:mod:`pfjax.bench.problem`: the slip model on the sine path, state feedback,
 metrics on) is simulated with pfjax's own simulator program, compiled for each candidate vector
 width (XLA's default, and 512 bits where the CPU has AVX-512) and run over each candidate block
-size, in float32 and float64, on every device. The candidates are called in turn ``rounds`` times
-after a compiling call each (best time of each), so a slow period of a shared machine slows them
-alike. The choice:
+size, in float32 and float64, on every device. The candidates are timed in turn ``rounds`` times
+after a compiling call each, each timed call after an untimed one (best time of each;
+:func:`pfjax.bench.timing.interleaved`), so a slow period of a shared machine slows them alike. The choice:
 
 * per precision, the block (bytes per batched array) with the highest rate at the chosen width;
 * one width for both precisions (XLA's option is per program, pfjax sets one for all): the width
@@ -18,12 +18,12 @@ writes it where every later process on this CPU reads it.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Sequence
 
 import numpy as np
 
 from pfjax.bench import problem as P
+from pfjax.bench import timing
 
 #: Candidate bytes per batched array in one CPU block (float32 runs = bytes / 4, float64 / 8).
 BLOCK_BYTES = (2_500, 5_000, 10_000, 20_000)
@@ -70,11 +70,9 @@ def _rates(dtype, batch: int, horizon: float, blocks, width_set, rounds: int, sa
             say(f"{np.dtype(dtype).name} width {width or 'default'} block {bb} B: compiling")
             iae = np.asarray(call(), np.float64)
             cands.append(dict(width=width, block_bytes=bb, call=call, iae=iae, best=math.inf))
-    for _ in range(rounds):
-        for c in cands:
-            t0 = time.perf_counter()
-            c["call"]()
-            c["best"] = min(c["best"], time.perf_counter() - t0)
+    _, _, bests = timing.interleaved([c["call"] for c in cands], rounds, window=1)
+    for c, best in zip(cands, bests):
+        c["best"] = best
     ref = cands[0]["iae"]
     return [
         dict(
