@@ -224,3 +224,23 @@ def test_no_failures_says_what_bounds_p_by_method():
         assert flag["status"] == "no_failures" and f"{est.method} gives no bound" in flag["warning"], flag
     mc = monte_carlo(never, 2, n=1000)
     assert "95 % upper bound of" in no_failures(mc)["warning"]
+
+
+def test_a_subset_study_says_what_each_stratum_interval_rests_on():
+    """A study by subset simulation carries each stratum's ``error`` (what its interval rests on:
+    one run per stratum here, so the fully-correlated bound), as the estimator's ``detail`` does."""
+    import pfjax
+
+    root = Path(__file__).resolve().parents[1]
+    out = pfjax.rare_event(
+        str(root / "studies" / "rare_events.toml"),
+        controller="pi-table3",
+        method="subset",
+        max_rollouts=6000,
+        **{"rare_event.n_per_level": 500, "sim.horizon": 16.0},
+    )
+    strata = out["controllers"]["pi-table3"]["strata"]
+    assert len(strata) == 3
+    for s in strata:
+        assert s["error"] in ("runs", "levels fully correlated", "binomial"), s
+        assert (s["error"] == "runs") == (len(s["run_estimates"]) >= 2), s

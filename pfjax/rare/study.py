@@ -321,7 +321,8 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
         infinite where a stratum's is (:func:`combine`); ``status`` and
         ``warning`` the checks' verdict (module docstring; each stratum's ``check`` beside it,
         whose second estimate's rollouts are not in ``n_rollouts``; subset simulation's
-        ``run_estimates`` per stratum); each stratum's ``falsifier_rollouts`` (rollouts, the
+        ``run_estimates`` per stratum and its ``error``, what its interval rests on:
+        :mod:`pfjax.rare.subset`); each stratum's ``falsifier_rollouts`` (rollouts, the
         falsifier's gradient rollouts and its rays', 0 where it did not run; part of the stratum's
         ``n_rollouts`` and of the budget); ``failure_points`` the
         importance-sampling proposal's modes in the inputs' config units (its weight beside each),
@@ -360,7 +361,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
                 "weight": s.weight,
                 **{k: v for k, v in r._asdict().items() if k != "detail"},
                 "falsifier_rollouts": int(r.detail.get("falsifier_rollouts", 0)),
-                **{k: r.detail[k] for k in ("check", "run_estimates") if k in r.detail},
+                **{k: r.detail[k] for k in ("check", "run_estimates", "error") if k in r.detail},
             }
             for s, r in parts
         ],

@@ -99,7 +99,7 @@ def stability_figure(
     masked = np.where(exists, true_max_re, np.nan)
     im = ax[1].imshow(masked.T, cmap="viridis", **kw)
     fig.colorbar(im, ax=ax[1], label="max Re λ at the true equilibrium [1/s]")
-    ax[1].set_title("true equilibrium (white: none exists,\n|β_r+β_f| ≥ δ_max)")
+    ax[1].set_title("true equilibrium (white: none exists,\n|β_r+β_f| > δ_max)")
     cmap = matplotlib.colors.ListedColormap(["#d62728", "#2ca02c"])
     ax[2].imshow(sim_converged.T.astype(float), cmap=cmap, vmin=0, vmax=1, **kw)
     ax[2].set_title("simulation (line test, 40 s): green = converged\nto the predicted equilibrium, red = not")
