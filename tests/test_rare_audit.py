@@ -191,21 +191,26 @@ def test_command_line_help_names_the_config_defaults(capsys):
         assert f"(default: the config's rare_event.{key}, else {getattr(spec, key)})" in out, key
 
 
-def test_a_stratum_without_a_failure_is_flagged_no_failures():
-    """Plain Monte Carlo on too small a budget sees no failure of the study's PI: every stratum's
-    estimate is 0, and the controller says so (status ``no_failures``, each path named with the
-    rollouts spent and the interval's upper end) instead of ``ok``."""
+def _study_pi(method: str, max_rollouts: int, **overrides) -> dict:
+    """The packaged rare-event study's PI (16 s runs) by ``method``: its result."""
     import pfjax
 
     root = Path(__file__).resolve().parents[1]
     out = pfjax.rare_event(
         str(root / "studies" / "rare_events.toml"),
         controller="pi-table3",
-        method="mc",
-        max_rollouts=300,
-        **{"sim.horizon": 16.0},
+        method=method,
+        max_rollouts=max_rollouts,
+        **{"sim.horizon": 16.0, **overrides},
     )
-    r = out["controllers"]["pi-table3"]
+    return out["controllers"]["pi-table3"]
+
+
+def test_a_stratum_without_a_failure_is_flagged_no_failures():
+    """Plain Monte Carlo on too small a budget sees no failure of the study's PI: every stratum's
+    estimate is 0, and the controller says so (status ``no_failures``, each path named with the
+    rollouts spent and the interval's upper end) instead of ``ok``."""
+    r = _study_pi("mc", 300)
     assert r["p_fail"] == 0 and r["status"] == "no_failures", r["status"]
     for s in r["strata"]:
         assert f"{s['path']}: no failure found in {s['n_rollouts']} rollouts" in r["warning"], r["warning"]
@@ -229,17 +234,7 @@ def test_no_failures_says_what_bounds_p_by_method():
 def test_a_subset_study_says_what_each_stratum_interval_rests_on():
     """A study by subset simulation carries each stratum's ``error`` (what its interval rests on:
     one run per stratum here, so the fully-correlated bound), as the estimator's ``detail`` does."""
-    import pfjax
-
-    root = Path(__file__).resolve().parents[1]
-    out = pfjax.rare_event(
-        str(root / "studies" / "rare_events.toml"),
-        controller="pi-table3",
-        method="subset",
-        max_rollouts=6000,
-        **{"rare_event.n_per_level": 500, "sim.horizon": 16.0},
-    )
-    strata = out["controllers"]["pi-table3"]["strata"]
+    strata = _study_pi("subset", 6000, **{"rare_event.n_per_level": 500})["strata"]
     assert len(strata) == 3
     for s in strata:
         assert s["error"] in ("runs", "levels fully correlated", "binomial"), s
