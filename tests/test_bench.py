@@ -14,6 +14,7 @@ import math
 import os
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import numpy as np
@@ -633,15 +634,18 @@ def test_interleaved_timing_charges_each_function_its_own_release_and_not_the_pr
     from pfjax.bench import timing
 
     clock = _Clock()
-    monkeypatch.setattr(timing.time, "perf_counter", clock.perf_counter)
+    monkeypatch.setattr(timing, "time", types.SimpleNamespace(perf_counter=clock.perf_counter))
     forward, reverse = clock.call(1.0, 0.0), clock.call(3.0, 0.5)
     outs, firsts, bests = timing.interleaved([forward, reverse], rounds=3)
     # the steady state of a loop over each alone: forward 1.0 s, reverse 3.0 + its 0.5 s release
     assert bests == [1.0, 3.5]
     assert outs == [1.0, 3.0] and firsts == [1.0, 3.0]
-    # a single timed call per function in turn charged reverse's release to forward
+    # a window of one call holds the function's own release too: the untimed call absorbs the other's
     clock.debt = 0.0
     _, _, one_each = timing.interleaved([forward, reverse], rounds=3, window=1)
-    assert one_each == [1.0, 3.5]  # the untimed call absorbs it even with a window of one
+    assert one_each == [1.0, 3.5]
+    for bad in ({"rounds": -1}, {"window": 0}):
+        with pytest.raises(ValueError):
+            timing.interleaved([forward], **{"rounds": 1, **bad})
     _, _, alone = timing.best_of(reverse, 2)
     assert alone == 3.5  # consecutive calls of one function: each pays the previous one's release

@@ -69,7 +69,7 @@ def _rates(dtype, batch: int, horizon: float, blocks, width_set, rounds: int, sa
             )[:n]  # the padding cut off
             say(f"{np.dtype(dtype).name} width {width or 'default'} block {bb} B: compiling")
             iae = np.asarray(call(), np.float64)
-            cands.append(dict(width=width, block_bytes=bb, call=call, iae=iae, best=math.inf))
+            cands.append(dict(width=width, block_bytes=bb, call=call, iae=iae))
     _, _, bests = timing.interleaved([c["call"] for c in cands], rounds, window=1)
     for c, best in zip(cands, bests):
         c["best"] = best

@@ -23,7 +23,7 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
   each, so the ratios survive a shared machine's slow periods;
 * the cost per rollout-step of the dynamic vehicle models (ST, STD) against the kinematic model in
   the same loop (:mod:`pfjax.bench.models`, ``model_runs`` runs of ``model_horizon`` s, best of
-  ``repeats + 1`` interleaved calls; ``model_runs = 0`` skips it);
+  ``repeats + 1`` rounds timed by :func:`pfjax.bench.timing.interleaved`; ``model_runs = 0`` skips it);
 * the process's peak resident memory (``getrusage``);
 * pfjax's performance goals against these numbers (:mod:`pfjax.bench.goals`): ``summary["goals"]``.
 """
@@ -133,7 +133,8 @@ def _pfjax(batch, dtype, n_steps, cfg: BenchConfig):
 
 def _grad(batch, dtype, cfg: BenchConfig):
     """Seconds of the forward pass and of the value and gradient of the batch-mean IAE w.r.t. K
-    (all jitted; best of ``grad_rounds`` interleaved calls after a compiling call each), on the same
+    (all jitted; after a compiling call each, the best of ``grad_rounds`` rounds of
+    :func:`pfjax.bench.timing.interleaved`), on the same
     sharded batch: as the tuner takes it (:func:`pfjax.numerics.autodiff.value_and_grad`,
     ``mode="auto"``: forward mode for K's 2 entries) and in reverse mode (``jax.value_and_grad``,
     what a loss of many parameters gets)."""
