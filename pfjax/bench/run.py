@@ -17,7 +17,8 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
   null and the result's ``summary["notes"]`` says so;
 * the value and gradient of the batch-mean IAE with respect to the controller gains over the
   forward pass at the same batch size, as the tuner takes it (forward mode for the 2 gains,
-  :mod:`pfjax.numerics.autodiff`) and in reverse mode (``jax.value_and_grad``): the three timed
+  :mod:`pfjax.numerics.autodiff`, in blocks of runs sized for a value and its tangents,
+  ``gradient["grad_block"]``) and in reverse mode (``jax.value_and_grad``): the three timed
   in turn ``grad_rounds`` times, each in a window of consecutive calls that holds the release of
   its own buffers and not the previous one's (:func:`pfjax.bench.timing.interleaved`), best of
   each, so the ratios survive a shared machine's slow periods;
@@ -135,9 +136,10 @@ def _grad(batch, dtype, cfg: BenchConfig):
     """Seconds of the forward pass and of the value and gradient of the batch-mean IAE w.r.t. K
     (all jitted; after a compiling call each, the best of ``grad_rounds`` rounds of
     :func:`pfjax.bench.timing.interleaved`), on the same
-    sharded batch: as the tuner takes it (:func:`pfjax.numerics.autodiff.value_and_grad`,
-    ``mode="auto"``: forward mode for K's 2 entries) and in reverse mode (``jax.value_and_grad``,
-    what a loss of many parameters gets)."""
+    sharded batch: by :func:`pfjax.numerics.autodiff.value_and_grad` (``mode="auto"``: forward mode
+    for K's 2 entries, in blocks of runs sized for a value and its 2 tangents,
+    :func:`pfjax.sim.sharding.default_block`) and in reverse mode (``jax.value_and_grad``, what a
+    loss of many parameters gets, unblocked as the forward pass)."""
     import jax
     import jax.numpy as jnp
 
@@ -148,16 +150,21 @@ def _grad(batch, dtype, cfg: BenchConfig):
     sc, _ = sharding.shard_batch(P.scenarios(batch, dtype))
     sim = SimConfig(dt=P.DT, horizon=cfg.horizon, newton_iters=P.NEWTON_ITERS, record=False)
 
-    def loss(K, sc):
+    def loss(K, sc, block="auto"):
         gains = sc.gains._replace(K=jnp.broadcast_to(K, sc.gains.K.shape))
-        return jnp.mean(simulate_batch(sc._replace(gains=gains), controller=state_feedback, config=sim).metrics.iae)
+        res = simulate_batch(sc._replace(gains=gains), controller=state_feedback, config=sim, block=block)
+        return jnp.mean(res.metrics.iae)
 
     K = jnp.asarray(P.K, dtype)
     mode = autodiff.resolve_mode("auto", K.size)
+    # forward mode in blocks of runs sized for the value and its tangents (sharding.default_block);
+    # the forward pass and reverse mode as a loss is written, unblocked (reverse mode is slower in blocks)
+    block = sharding.default_block(sc, tangents=K.size) if mode == "forward" else "auto"
     # the simulator's compiler options (pfjax.numerics.compiler): a jit around simulate_batch
     # compiles with its own options, so the three programs take the same ones
     fwd = compiler.jit(loss)
-    auto, rev = compiler.jit(autodiff.value_and_grad(loss)), compiler.jit(jax.value_and_grad(loss))
+    auto = compiler.jit(autodiff.value_and_grad(lambda K, sc: loss(K, sc, block)))
+    rev = compiler.jit(jax.value_and_grad(loss))
     calls = [lambda f=f: jax.block_until_ready(f(K, sc)) for f in (fwd, auto, rev)]
     (_, (_, g), (_, g_rev)), (_, first, first_rev), (t_fwd, t_grad, t_rev) = timing.interleaved(calls, cfg.grad_rounds)
     g, g_rev = np.asarray(g, np.float64), np.asarray(g_rev, np.float64)
@@ -165,6 +172,7 @@ def _grad(batch, dtype, cfg: BenchConfig):
         forward_s=t_fwd,
         grad_s=t_grad,
         grad_compile_s=compile_time(first, t_grad),
+        grad_block=block if isinstance(block, int) else None,
         grad=g.tolist(),
         mode=mode,
         reverse_s=t_rev,

@@ -12,8 +12,10 @@ A simulated loss ``J(theta)`` of ``D`` parameters has two ways to its gradient:
 Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices,
 a 2-core AMD EPYC of CPU family 26 (Zen 5), jax 0.10.2; wall time of the value and all ``D``
 derivatives over the forward pass, each function timed in a window of consecutive calls,
-:func:`pfjax.bench.timing.interleaved`): forward mode 1.48 / 2.11-2.19 / 3.14 / 3.69 for
-D = 1 / 2 / 3 / 4, reverse mode 4.8-5.0 for any D (docs/performance.md, Gradients).
+:func:`pfjax.bench.timing.interleaved`): forward mode 1.48 / 2.15-2.20 / 3.14 / 3.69 for
+D = 1 / 2 / 3 / 4 with the batch in one block per device (2.02-2.05 for D = 2 in blocks sized for
+a value and its tangents, :func:`pfjax.sim.sharding.default_block`), reverse mode 4.8-5.0 for any
+D (docs/performance.md, Gradients).
 ``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters (controller
 gains) and reverse mode above it (a falsifier's scenario parameters). Both give the same derivative
 up to rounding (tested).

@@ -36,7 +36,17 @@ import jax
 from pfjax.numerics import calibration
 from pfjax.numerics.cpu import CPUINFO, cpu_info, has_avx512
 
-__all__ = ["OPTIONS", "PROGRAMS", "at_top_level", "cpu_info", "has_avx512", "jit", "options", "vector_width"]
+__all__ = [
+    "OPTIONS",
+    "PROGRAMS",
+    "at_top_level",
+    "compiled_vector_width",
+    "cpu_info",
+    "has_avx512",
+    "jit",
+    "options",
+    "vector_width",
+]
 
 VECTOR_WIDTH_ENV = "PFJAX_VECTOR_WIDTH"
 _OPTION = "xla_cpu_prefer_vector_width"
@@ -70,6 +80,12 @@ def options(environ=None, cpuinfo: str = CPUINFO) -> dict:
 
 #: The options every simulator entry point is compiled with (decided once, at import).
 OPTIONS: dict = options()
+
+
+def compiled_vector_width() -> int | None:
+    """The vector width in bits the simulator programs are compiled for (:data:`OPTIONS`; ``None``:
+    XLA's default)."""
+    return OPTIONS.get(_OPTION)
 
 
 def at_top_level() -> bool:

@@ -79,7 +79,8 @@ def call(jitted, scenarios, *, devices=None, block: int | str | None = "auto", *
     """``jitted`` (from :func:`program`) on a batch of scenarios (leading axis of every leaf), sharded
     over ``devices`` (default: every device JAX sees) and, on CPU, in blocks of ``block`` runs
     (``"auto"``, or ``None`` for one block); the padding runs are cut off the result. Under
-    ``jit``/``grad`` the batch is not re-sharded or blocked (the outer call decides)."""
+    ``jit``/``grad`` the batch is not re-sharded, and is blocked only when ``block`` is a number of
+    runs (:func:`pfjax.sim.sharding.plan_batch`)."""
     placed, n, layout = sharding.plan_batch(scenarios, devices, block)
     return sharding.unpad(jitted(placed, layout=layout, **static), n)
 
