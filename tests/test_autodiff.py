@@ -59,6 +59,54 @@ def test_forward_mode_nested_and_batched_tangents_agree_with_jax_grad(n, has_aux
     np.testing.assert_allclose(np.asarray(out[1]["k"]), np.asarray(out_ref[1]["k"]), rtol=1e-13, atol=1e-15)
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 4])
+def test_forward_mode_keeps_aux_leaves_that_are_not_arrays_and_nests_up_to_nested_max(n, monkeypatch):
+    """An aux's names, Python numbers and ``None`` come back as they are, nested or batched, as
+    ``jax.value_and_grad`` gives them; the tangents are nested exactly up to ``NESTED_MAX``."""
+    calls: list = []
+    nested = autodiff._nested_jvp
+    monkeypatch.setattr(autodiff, "_nested_jvp", lambda *a: calls.append(1) or nested(*a))
+
+    def loss(p):
+        return jnp.sum(jnp.sin(p) ** 2), {"name": "iae", "count": n, "none": None, "cos": jnp.cos(p)}
+
+    p = jnp.linspace(0.2, 0.9, n)
+    (v, aux), g = autodiff.value_and_grad(loss, mode="forward", has_aux=True)(p)
+    (v_ref, aux_ref), g_ref = jax.value_and_grad(loss, has_aux=True)(p)
+    assert aux["name"] == "iae" and aux["count"] == n and aux["none"] is None
+    np.testing.assert_array_equal(np.asarray(aux["cos"]), np.asarray(aux_ref["cos"]))
+    assert float(v) == float(v_ref)
+    np.testing.assert_allclose(np.asarray(g), np.asarray(g_ref), rtol=1e-13)
+    assert len(calls) == (1 if n <= autodiff.NESTED_MAX else 0)
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_forward_mode_gives_each_leaf_its_dtype_and_refuses_what_jax_grad_refuses(n):
+    """float64 and float32 parameters into a float32 value: the gradient in each leaf's dtype, as
+    ``jax.grad``'s; a vector or integer value and integer parameters: a ``TypeError``."""
+
+    def loss(p):
+        return jnp.sum(jnp.sin(p["a"].astype(jnp.float32))) + 2.0 * p["b"]
+
+    p = {"a": jnp.linspace(0.1, 0.4, n - 1, dtype=jnp.float64), "b": jnp.asarray(0.3, jnp.float32)}
+    v, g = autodiff.value_and_grad(loss, mode="forward")(p)
+    v_ref, g_ref = jax.value_and_grad(loss)(p)
+    assert v.dtype == v_ref.dtype == jnp.float32 and float(v) == float(v_ref)
+    assert g["a"].dtype == g_ref["a"].dtype == jnp.float64 and g["b"].dtype == jnp.float32
+    np.testing.assert_allclose(np.asarray(g["a"]), np.asarray(g_ref["a"]), rtol=1e-6)
+    assert float(g["b"]) == float(g_ref["b"]) == 2.0
+    q = jnp.linspace(0.1, 0.4, n)
+    for bad, match in (
+        (lambda q: jnp.sin(q[:1]), "scalar-output"),
+        (lambda q: jnp.sum(q > 0), "real-valued output"),
+    ):
+        for vg in (autodiff.value_and_grad(bad, mode="forward"), jax.value_and_grad(bad)):
+            with pytest.raises(TypeError, match=match):
+                vg(q)
+    with pytest.raises(TypeError, match="floating parameters"):
+        autodiff.value_and_grad(lambda k: 1.0 * jnp.sum(k), mode="forward")(jnp.arange(n))
+
+
 def test_auto_mode_picks_by_parameter_count_and_bad_mode_is_named():
     assert autodiff.resolve_mode("auto", autodiff.FORWARD_MAX) == "forward"
     assert autodiff.resolve_mode("auto", autodiff.FORWARD_MAX + 1) == "reverse"

@@ -42,6 +42,7 @@ from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.flatten_util import ravel_pytree
 
 #: Parameters up to which ``mode="auto"`` uses forward mode. Measured on the benchmark (module
@@ -83,7 +84,9 @@ def value_and_grad(fun: Callable, *, mode: str = "auto", has_aux: bool = False) 
 
     Returns:
         ``g(params, *args) -> (value, grad)`` or ``((value, aux), grad)``, ``grad`` shaped like
-        ``params``. Works under ``jit`` and ``vmap``.
+        ``params`` and of its leaves' dtypes (as ``jax.grad``'s, whatever the value's precision).
+        Works under ``jit`` and ``vmap``. In either mode, as ``jax.value_and_grad``, a ``TypeError``
+        for parameters that are not floating and for a value that is not a real scalar.
     """
     resolve_mode(mode, 0)  # validate early
 
@@ -91,20 +94,58 @@ def value_and_grad(fun: Callable, *, mode: str = "auto", has_aux: bool = False) 
         flat, unravel = ravel_pytree(params)
         if flat.size == 0 or resolve_mode(mode, flat.size) == "reverse":
             return jax.value_and_grad(fun, has_aux=has_aux)(params, *args)
+        _check_inputs(params)
         f = lambda v: fun(unravel(v), *args)
         basis = jnp.eye(flat.size, dtype=flat.dtype)
         if flat.size <= NESTED_MAX:
             (value, *dirs), aux = _nested_jvp(f if has_aux else lambda v: (f(v), None), flat, basis)
             dirs = jnp.stack(dirs)
         elif has_aux:
-            value, dirs, aux = jax.vmap(lambda t: jax.jvp(f, (flat,), (t,), has_aux=True), out_axes=(None, 0, None))(
-                basis
-            )
+            value, dirs, aux = _batched_jvp_with_aux(f, flat, basis)
         else:
             value, dirs = jax.vmap(lambda t: jax.jvp(f, (flat,), (t,)), out_axes=(None, 0))(basis)
-        return ((value, aux), unravel(dirs)) if has_aux else (value, unravel(dirs))
+        _check_output(value)
+        grad = unravel(dirs.astype(flat.dtype))  # each leaf back to its own dtype
+        return ((value, aux), grad) if has_aux else (value, grad)
 
     return vg
+
+
+def _batched_jvp_with_aux(f: Callable, x, basis) -> tuple:
+    """``(f(x), (f'(x) e_i)_i, aux)`` for ``f(x) -> (scalar, aux)``, the directions as one batch
+    (``vmap`` of ``jax.jvp``). A batched function returns only JAX values, so the aux's other
+    leaves (a name, a Python number) leave it by the one trace and join its arrays after."""
+    static: list = []
+
+    def one(t):
+        value, tangent, aux = jax.jvp(f, (x,), (t,), has_aux=True)
+        leaves, treedef = jax.tree_util.tree_flatten(aux)
+        is_array = [isinstance(leaf, (jax.Array, np.ndarray, np.generic)) for leaf in leaves]
+        static[:] = [treedef, is_array, [leaf for leaf, a in zip(leaves, is_array) if not a]]
+        return value, tangent, [leaf for leaf, a in zip(leaves, is_array) if a]
+
+    value, dirs, arrays = jax.vmap(one, out_axes=(None, 0, None))(basis)
+    treedef, is_array, others = static
+    arrays, others = iter(arrays), iter(others)
+    return value, dirs, jax.tree_util.tree_unflatten(treedef, [next(arrays if a else others) for a in is_array])
+
+
+def _check_inputs(params) -> None:
+    """``jax.grad``'s refusal of parameters that are not floating (forward mode would give float0
+    tangents)."""
+    for leaf in jax.tree_util.tree_leaves(params):
+        dtype = jnp.result_type(leaf)
+        if not jnp.issubdtype(dtype, jnp.floating):
+            raise TypeError(f"value_and_grad requires floating parameters, got {dtype}")
+
+
+def _check_output(value) -> None:
+    """``jax.grad``'s refusal of a value that is not a real scalar (forward mode would return the
+    Jacobian of a vector, or float0 tangents of an integer)."""
+    if jnp.shape(value) != ():
+        raise TypeError(f"Gradient only defined for scalar-output functions. Output had shape: {jnp.shape(value)}.")
+    if not jnp.issubdtype(jnp.result_type(value), jnp.floating):
+        raise TypeError(f"value_and_grad requires a real-valued output, got {jnp.result_type(value)}")
 
 
 def _nested_jvp(f: Callable, x, basis) -> tuple[tuple, object]:
