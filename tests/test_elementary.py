@@ -152,6 +152,57 @@ def test_atan2_gradient_matches_xla():
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
+def test_clip_is_jnp_clip_with_a_derivative_that_selects(dtype):
+    """Values bit for bit ``jnp.clip``'s (NaN, infinities, ties, bounds that are arrays); the
+    derivative ``dx`` on ``[lo, hi]`` (ties included), ``dlo`` below, ``dhi`` above, in forward and
+    reverse mode, and no division in the forward-mode program (JAX's own max/min rule divides)."""
+    x = np.concatenate([RNG.uniform(-3, 3, 200), [np.nan, np.inf, -np.inf, -1.0, 1.0, 0.0, -0.0]]).astype(dtype)
+    lo = np.full_like(x, -1.0)
+    hi = np.concatenate([RNG.uniform(0.5, 2.0, 200), np.full(7, 1.0)]).astype(dtype)
+    got = np.asarray(E.clip(x, lo, hi))
+    np.testing.assert_array_equal(got, np.asarray(jnp.clip(x, lo, hi)))
+    assert got.dtype == dtype
+    np.testing.assert_array_equal(np.asarray(E.clip(x, -1.0, 1.0)), np.clip(x, dtype(-1.0), dtype(1.0)))
+    dx, dlo, dhi = (np.full_like(x, v) for v in (1.0, 10.0, 100.0))
+    _, tangent = jax.jvp(E.clip, (x, lo, hi), (dx, dlo, dhi))
+    want = np.where(x < lo, 10.0, np.where(x > hi, 100.0, 1.0))
+    ok = ~np.isnan(x)
+    np.testing.assert_array_equal(np.asarray(tangent)[ok], want[ok])
+    g = jax.vmap(jax.grad(E.clip, argnums=(0, 1, 2)))(x[ok], lo[ok], hi[ok])
+    for got_g, arg in zip(g, (1.0, 10.0, 100.0)):
+        np.testing.assert_array_equal(np.asarray(got_g) * arg, np.where(want[ok] == arg, arg, 0.0))
+    hlo = jax.jit(lambda a: jax.jvp(lambda v: E.clip(v, lo, hi), (a,), (dx,))).lower(x).as_text()
+    assert "divide" not in hlo
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_divide_is_the_quotient_with_one_division_per_tangent(dtype):
+    """Values bit for bit ``x / y``'s; derivatives ``dx / y - x dy / y^2`` to rounding, with either
+    argument constant, in forward and reverse mode and under vmap; one division per tangent where
+    JAX's quotient rule takes two."""
+    x, y = RNG.uniform(-3, 3, 300).astype(dtype), RNG.uniform(0.5, 3, 300).astype(dtype)
+    np.testing.assert_array_equal(np.asarray(E.divide(x, y)), x / y)
+    np.testing.assert_array_equal(np.asarray(E.divide(x, 2.0)), x / dtype(2.0))
+    rtol = 1e-6 if dtype == np.float32 else 1e-14
+    dx, dy = RNG.standard_normal(300).astype(dtype), RNG.standard_normal(300).astype(dtype)
+    for tx, ty in ((dx, dy), (dx, np.zeros_like(dy)), (np.zeros_like(dx), dy)):
+        _, t = jax.jvp(E.divide, (x, y), (tx, ty))
+        np.testing.assert_allclose(np.asarray(t), tx / y - x * ty / y**2, rtol=rtol, atol=rtol)
+    _, t = jax.jvp(lambda a: E.divide(a, y), (x,), (dx,))  # y constant: a symbolic zero
+    np.testing.assert_allclose(np.asarray(t), dx / y, rtol=rtol)
+    _, t = jax.jvp(lambda b: E.divide(x, b), (y,), (dy,))
+    np.testing.assert_allclose(np.asarray(t), -x * dy / y**2, rtol=rtol, atol=rtol)
+    gx, gy = jax.vmap(jax.grad(E.divide, argnums=(0, 1)))(x, y)
+    np.testing.assert_allclose(np.asarray(gx), 1.0 / y, rtol=rtol)
+    np.testing.assert_allclose(np.asarray(gy), -x / y**2, rtol=rtol, atol=rtol)
+
+    def divisions(f):
+        return jax.jit(lambda a, b: jax.jvp(f, (a, b), (dx, dy))).lower(x, y).compile().as_text().count(" divide(")
+
+    assert divisions(E.divide) == 2 and divisions(lambda a, b: a / b) == 3  # value + tangent(s)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
 def test_computed_once_pair_is_an_exact_identity_and_cpu_only(dtype):
     """The (sin, cos) pair's division by 1 + 0i changes no value (NaN stays NaN, a sine of -0 stays -0), and
     only the CPU lowering carries it (XLA's GPU backend fuses several outputs by itself)."""

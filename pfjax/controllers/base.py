@@ -29,6 +29,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from pfjax.models.slip import Pose
+from pfjax.numerics import elementary as E
 
 
 class Observation(NamedTuple):
@@ -89,6 +90,6 @@ def step(controller: Controller, params, c, obs: Observation, period: Array | fl
         ``(delta_cmd, c_next)``; the caller saturates ``delta_cmd``.
     """
     delta_cmd = controller.output(params, c, obs)
-    delta = jnp.clip(delta_cmd, -obs.delta_max, obs.delta_max)
+    delta = E.clip(delta_cmd, -obs.delta_max, obs.delta_max)
     dc = controller.rate(params, c, obs, delta_cmd, delta)
     return delta_cmd, jax.tree_util.tree_map(lambda a, b: a + period * b, c, dc)

@@ -132,7 +132,7 @@ def frenet_rhs(
     v = jnp.asarray(params.v)
     s, c = E.sincos(state.theta_e)
     tbr = E.tan(beta_r)
-    s_dot = v * (c - tbr * s) / (1.0 - kappa * state.d)
+    s_dot = E.divide(v * (c - tbr * s), 1.0 - kappa * state.d)
     return FrenetState(
         d=v * (s + tbr * c),
         theta_e=yaw_rate(delta, beta_r, beta_f, params) - kappa * s_dot,

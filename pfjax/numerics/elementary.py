@@ -1,5 +1,5 @@
 """Fast, vectorisable elementary functions in plain ``jnp`` (sin, cos, tan, atan, atan2, angle wrap,
-reciprocal square root).
+reciprocal square root), and a clip and a quotient whose derivatives cost no extra division.
 
 XLA's CPU ``sin``/``cos``/``tan``/``atan2`` cost several times a multiply-add chain per element and
 each call repeats its own range reduction. These versions are short polynomial chains that XLA
@@ -21,8 +21,12 @@ Method (classic Cody-Waite / Cephes scheme):
 
 Derivatives are exact formulas on the primal outputs (``jax.custom_jvp``): ``d sin = cos dx``,
 ``d cos = -sin dx``, ``d atan = dx / (1 + x^2)``, ``d atan2 = (x dy - y dx) / (x^2 + y^2)``,
-``d wrap = da``, so reverse mode through a simulator costs two multiplies per call instead of the
-polynomial chain's derivative. Each function is jitted: a simulator calls them hundreds of times
+``d wrap = da``, ``d tan = (1 + tan^2) dx``, so reverse mode through a simulator costs two multiplies
+per call instead of the polynomial chain's derivative. :func:`clip` and :func:`divide` keep
+``jnp.clip``'s and ``/``'s values but not JAX's derivative rules, which divide: ``max`` and ``min``
+split a tie's derivative by a division per operand, and a quotient's rule takes two divisions per
+tangent. A vector division costs several multiplies, and a forward-mode tangent pays for each
+(docs/performance.md, Gradients). Each function is jitted: a simulator calls them hundreds of times
 per step, and tracing each call op by op made tracing the slowest part of compiling a simulation.
 
 The polynomial coefficients are least-squares fits on Chebyshev nodes in NumPy float64, computed
@@ -44,6 +48,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
+from jax.custom_derivatives import SymbolicZero
 
 _PI_DIGITS = "3.14159265358979323846264338327950288419716939937510582097494459230781640628620899863"
 
@@ -247,9 +252,26 @@ def cos(x) -> Array:
 
 
 def tan(x) -> Array:
-    """``tan x = sin x / cos x`` (x in rad; one reduction, one division)."""
-    s, c = sincos(x)
+    """``tan x = sin x / cos x`` (x in rad; one reduction, one division). Derivative
+    ``d tan = (1 + tan^2 x) dx`` on the output: no division per tangent (the quotient's own rule
+    takes two)."""
+    return _tan_jit(_float(x))
+
+
+@jax.custom_jvp
+def _tan(x):
+    s, c = _sincos(x)
     return s / c
+
+
+@_tan.defjvp
+def _tan_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    t = _tan(x)
+    return t, (1.0 + t * t) * dx
+
+
+_tan_jit = jax.jit(_tan)
 
 
 def _atan_reduced(num, den, base):
@@ -389,3 +411,60 @@ def _rsqrt_jvp(primals, tangents):
 
 
 _rsqrt_jit = jax.jit(_rsqrt)
+
+
+def clip(x, lo, hi) -> Array:
+    """``min(max(x, lo), hi)``, as ``jnp.clip(x, lo, hi)``, with a derivative that selects.
+
+    JAX differentiates ``max`` and ``min`` by a balanced rule that splits a tie's derivative
+    ``1/2 : 1/2`` and costs a division per operand and tangent: two vector divisions per clip in a
+    forward-mode tangent, in the simulator's step and its Newton projection. Here the derivative is
+    ``dx`` on ``lo <= x <= hi`` (ties included), ``dlo`` below and ``dhi`` above, with no division.
+    Values are ``jnp.clip``'s (NaN in, NaN out).
+    """
+    dtype = jnp.result_type(x, lo, hi)
+    x, lo, hi = jnp.broadcast_arrays(*(jnp.asarray(a, dtype) for a in (x, lo, hi)))
+    return _clip_jit(x, lo, hi)
+
+
+@jax.custom_jvp
+def _clip(x, lo, hi):
+    return jnp.minimum(jnp.maximum(x, lo), hi)
+
+
+@_clip.defjvp
+def _clip_jvp(primals, tangents):
+    (x, lo, hi), (dx, dlo, dhi) = primals, tangents
+    return _clip(x, lo, hi), jnp.where(x < lo, dlo, jnp.where(x > hi, dhi, dx))
+
+
+_clip_jit = jax.jit(_clip)
+
+
+def divide(x, y) -> Array:
+    """``x / y`` with a derivative of one division per tangent.
+
+    JAX differentiates a quotient as ``dx / y - x dy / y^2``: two vector divisions per tangent
+    where both ``x`` and ``y`` carry one. Here ``dq = (dx - q dy) / y`` on the output ``q``: one
+    division (``dx / y`` where ``y`` carries none). Values are ``x / y``'s.
+    """
+    dtype = jnp.result_type(x, y)
+    x, y = jnp.broadcast_arrays(jnp.asarray(x, dtype), jnp.asarray(y, dtype))
+    return _divide_jit(x, y)
+
+
+@jax.custom_jvp
+def _divide(x, y):
+    return x / y
+
+
+def _divide_jvp(primals, tangents):
+    (x, y), (dx, dy) = primals, tangents
+    q = _divide(x, y)
+    if isinstance(dy, SymbolicZero):
+        return q, (jnp.zeros_like(q) if isinstance(dx, SymbolicZero) else dx / y)
+    return q, ((-q * dy) if isinstance(dx, SymbolicZero) else (dx - q * dy)) / y
+
+
+_divide.defjvp(_divide_jvp, symbolic_zeros=True)
+_divide_jit = jax.jit(_divide)

@@ -62,7 +62,7 @@ def curvature(path, u: Array) -> Array:
     dx, dy = path.d1(u)
     ddx, ddy = path.d2(u)
     speed2 = dx * dx + dy * dy
-    return (dx * ddy - dy * ddx) / (speed2 * jnp.sqrt(speed2))
+    return E.divide(dx * ddy - dy * ddx, speed2 * jnp.sqrt(speed2))
 
 
 def arc_length(path, u: Array) -> Array:
@@ -93,15 +93,15 @@ def _newton_update(path, u: Array, qx: Array, qy: Array) -> Array:
     g = ex * dx + ey * dy
     gp = speed2 + ex * ddx + ey * ddy
     gp = jnp.where(gp > 0.01 * speed2, gp, speed2)
-    step = -g / gp
+    step = E.divide(-g, gp)
     # max(|p - q|, 0.25) / |p'| written as sqrt(max(|p - q|^2, 0.0625) / |p'|^2): the same value, a
     # finite derivative when the robot is exactly on the path (d sqrt/dx is infinite at 0, and
     # 0 * inf = NaN in the derivative even where the maximum picks 0.25), and one square root and no
     # rsqrt (XLA rewrites sqrt(a) / sqrt(b) into sqrt(a) * rsqrt(b): slow in float64 on CPU, see
     # pfjax.numerics.elementary.rsqrt)
-    max_step = jnp.sqrt(jnp.maximum(ex * ex + ey * ey, 0.0625) / speed2)
-    step = jnp.clip(step, -max_step, max_step)
-    return jnp.clip(u + step, path.u_min, path.u_max)
+    max_step = jnp.sqrt(E.divide(E.clip(ex * ex + ey * ey, 0.0625, np.inf), speed2))
+    step = E.clip(step, -max_step, max_step)
+    return E.clip(u + step, path.u_min, path.u_max)
 
 
 def closest_parameter(path, qx: Array, qy: Array, u_guess: Array, iters: int = 3) -> Array:
