@@ -68,12 +68,20 @@ def test_forward_mode_keeps_aux_leaves_that_are_not_arrays_and_nests_up_to_neste
     monkeypatch.setattr(autodiff, "_nested_jvp", lambda *a: calls.append(1) or nested(*a))
 
     def loss(p):
-        return jnp.sum(jnp.sin(p) ** 2), {"name": "iae", "count": n, "none": None, "cos": jnp.cos(p)}
+        return jnp.sum(jnp.sin(p) ** 2), {
+            "name": "iae",
+            "count": n,
+            "none": None,
+            "cos": jnp.cos(p),
+            "labels": np.array(["a", "b"]),
+            "numpy": np.float64(0.5),
+        }
 
     p = jnp.linspace(0.2, 0.9, n)
     (v, aux), g = autodiff.value_and_grad(loss, mode="forward", has_aux=True)(p)
     (v_ref, aux_ref), g_ref = jax.value_and_grad(loss, has_aux=True)(p)
     assert aux["name"] == "iae" and aux["count"] == n and aux["none"] is None
+    assert aux["labels"].tolist() == ["a", "b"] and float(aux["numpy"]) == 0.5
     np.testing.assert_array_equal(np.asarray(aux["cos"]), np.asarray(aux_ref["cos"]))
     assert float(v) == float(v_ref)
     np.testing.assert_allclose(np.asarray(g), np.asarray(g_ref), rtol=1e-13)
@@ -103,8 +111,15 @@ def test_forward_mode_gives_each_leaf_its_dtype_and_refuses_what_jax_grad_refuse
         for vg in (autodiff.value_and_grad(bad, mode="forward"), jax.value_and_grad(bad)):
             with pytest.raises(TypeError, match=match):
                 vg(q)
-    with pytest.raises(TypeError, match="floating parameters"):
-        autodiff.value_and_grad(lambda k: 1.0 * jnp.sum(k), mode="forward")(jnp.arange(n))
+    for vg in (autodiff.value_and_grad(lambda k: 1.0 * jnp.sum(k), mode="forward"), jax.grad(jnp.sum)):
+        with pytest.raises(TypeError, match="real- or complex-valued inputs"):
+            vg(jnp.arange(n))
+    # complex parameters: jax.value_and_grad's (conjugate) gradient, not the real axis's derivative
+    z = jnp.arange(1.0, n + 1) * (1 + 2j)
+    loss = lambda z: jnp.sum(jnp.abs(z) ** 2)
+    np.testing.assert_array_equal(
+        np.asarray(autodiff.value_and_grad(loss, mode="forward")(z)[1]), np.asarray(jax.value_and_grad(loss)(z)[1])
+    )
 
 
 def test_auto_mode_picks_by_parameter_count_and_bad_mode_is_named():

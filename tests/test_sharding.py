@@ -5,6 +5,7 @@ The device count of a process is fixed when JAX starts, so the comparison runs t
 two subprocesses, one with ``PFJAX_HOST_DEVICES=1`` and one with two forced host devices.
 """
 
+import math
 import os
 import subprocess
 import sys
@@ -147,25 +148,37 @@ def test_plan_batch_splits_devices_into_blocks():
 
 
 def test_a_traced_batch_is_split_into_interleaved_blocks_only_when_given_a_size():
-    """Under ``jit`` an ``"auto"`` or ``None`` block leaves the batch whole; a number of runs pads it
-    as a placed batch would be (the devices taken as its split) and splits it into interleaved blocks
-    (block ``j``: runs ``j, j + blocks, ...``), and the runs come back in their order."""
+    """Under ``jit`` an ``"auto"`` or ``None`` block leaves the batch whole; a number of runs splits
+    it inside the program (the device shares padded at their ends, interleaved blocks), and the runs
+    come back in their order, with no run moved between devices where the run count is a multiple
+    of them."""
+    from pfjax import errors
+
     devices = jax.devices()
     k, seen = len(devices), {}
 
     def run(tree, block):
         placed, n, layout = sharding.plan_batch(tree, devices, block=block)
-        seen[block] = (placed["a"].shape[0], layout)
+        seen[(placed["a"].shape[0], block)] = layout
         return sharding.unpad(sharding.map_runs(lambda t: 10.0 * t["a"] + t["b"], placed, layout), n)
 
-    tree = {"a": np.arange(11.0), "b": np.arange(11.0) ** 2}
-    for block in ("auto", None, 2):
-        out = jax.jit(lambda t, block=block: run(t, block))(tree)
-        np.testing.assert_array_equal(out, 10.0 * tree["a"] + tree["b"])
-    assert seen["auto"] == seen[None] == (11, sharding.Layout(None, 1))
-    per_device = -(-11 // k)
-    blocks = -(-per_device // 2)
-    assert seen[2] == (k * blocks * -(-per_device // blocks), sharding.Layout(None, blocks, True))
+    for n in (11, 12 * k):
+        tree = {"a": np.arange(float(n)), "b": np.arange(float(n)) ** 2}
+        for block in ("auto", None, 2):
+            out = jax.jit(lambda t, block=block: run(t, block))(tree)
+            np.testing.assert_array_equal(out, 10.0 * tree["a"] + tree["b"])
+        assert seen[(n, "auto")] == seen[(n, None)] == sharding.Layout(None, 1)
+        blocks = math.ceil(math.ceil(n / k) / 2)
+        shares = k if n % k == 0 else 1
+        assert seen[(n, 2)] == sharding.Layout(None, blocks, shares, math.ceil(n // shares / blocks))
+    if k > 1:  # the runs stay on their devices: no collective moves them
+        placed, _ = sharding.shard_batch({"a": np.arange(24.0 * k)})
+        text = jax.jit(lambda t: run(t, 5)).lower({"a": placed["a"], "b": placed["a"]}).compile().as_text()
+        for collective in ("all-gather", "all-to-all", "collective-permute"):
+            assert collective not in text
+    for bad in (0, -3, 2.5, "big"):
+        with pytest.raises(errors.InputError, match="^block: "):
+            sharding.plan_batch({"a": np.arange(4.0)}, devices, block=bad)
     # the splits themselves: block j holds runs j, j + 3, j + 6, j + 9 (interleaved) or 4j..4j + 3
     runs = {"a": np.arange(12.0), "b": np.arange(24.0).reshape(12, 2)}
     inter, contiguous = sharding.split_blocks(runs, 3, True), sharding.split_blocks(runs, 3)

@@ -66,6 +66,7 @@ def summary_units(summary: dict, prefix: str = "") -> dict:
             **dict.fromkeys(("forward_s", "grad_s", "grad_compile_s", "reverse_s", "reverse_compile_s"), "s"),
             "modes_max_rel_diff": "1",
             "grad_block": "runs",
+            "grad_blocks": "1",
         },
     }
     for name in summary.get("agreement") or {}:
@@ -273,7 +274,11 @@ def markdown(result: dict) -> str:
         "",
         f"Value and gradient of the batch-mean IAE w.r.t. K over the forward pass: {s['grad_over_forward']:.2f}x "
         f"({s['grad_mode']} mode, as the tuner takes it"
-        + (f", in blocks of at most {g['grad_block']} runs per device" if g.get("grad_block") else "")
+        + (
+            f", in {g['grad_blocks']} blocks of {g['grad_block']} runs per device"
+            if (g.get("grad_blocks") or 1) > 1
+            else ""
+        )
         + f"); reverse mode {s['grad_over_forward_reverse']:.2f}x "
         f"(the two gradients differ by {g['modes_max_rel_diff']:.1e} relative). "
         f"Peak RSS {s['peak_rss_mib']:.0f} MiB.",

@@ -147,19 +147,21 @@ def _grad(batch, dtype, cfg: BenchConfig):
     from pfjax.numerics import autodiff, compiler
     from pfjax.sim import SimConfig, sharding, simulate_batch
 
-    sc, _ = sharding.shard_batch(P.scenarios(batch, dtype))
+    sc, n = sharding.shard_batch(P.scenarios(batch, dtype))
     sim = SimConfig(dt=P.DT, horizon=cfg.horizon, newton_iters=P.NEWTON_ITERS, record=False)
 
     def loss(K, sc, block="auto"):
         gains = sc.gains._replace(K=jnp.broadcast_to(K, sc.gains.K.shape))
         res = simulate_batch(sc._replace(gains=gains), controller=state_feedback, config=sim, block=block)
-        return jnp.mean(res.metrics.iae)
+        return jnp.mean(res.metrics.iae[:n])  # not the padding's copies of run 0
 
     K = jnp.asarray(P.K, dtype)
     mode = autodiff.resolve_mode("auto", K.size)
     # forward mode in blocks of runs sized for the value and its tangents (sharding.default_block);
     # the forward pass and reverse mode as a loss is written, unblocked (reverse mode is slower in blocks)
     block = sharding.default_block(sc, tangents=K.size) if mode == "forward" else "auto"
+    devices = jax.device_count()
+    layout = sharding.traced_layout(sc.gains.K.shape[0], block, devices) if isinstance(block, int) else None
     # the simulator's compiler options (pfjax.numerics.compiler): a jit around simulate_batch
     # compiles with its own options, so the three programs take the same ones
     fwd = compiler.jit(loss)
@@ -172,7 +174,9 @@ def _grad(batch, dtype, cfg: BenchConfig):
         forward_s=t_fwd,
         grad_s=t_grad,
         grad_compile_s=compile_time(first, t_grad),
-        grad_block=block if isinstance(block, int) else None,
+        # runs per device in each block of the forward-mode gradient, and the blocks
+        grad_block=(layout.size if layout.blocks > 1 else -(-sc.gains.K.shape[0] // devices)) if layout else None,
+        grad_blocks=layout.blocks if layout else None,
         grad=g.tolist(),
         mode=mode,
         reverse_s=t_rev,

@@ -85,16 +85,17 @@ def value_and_grad(fun: Callable, *, mode: str = "auto", has_aux: bool = False) 
     Returns:
         ``g(params, *args) -> (value, grad)`` or ``((value, aux), grad)``, ``grad`` shaped like
         ``params`` and of its leaves' dtypes (as ``jax.grad``'s, whatever the value's precision).
-        Works under ``jit`` and ``vmap``. In either mode, as ``jax.value_and_grad``, a ``TypeError``
-        for parameters that are not floating and for a value that is not a real scalar.
+        Works under ``jit`` and ``vmap``. Parameters that are not all real floating (complex,
+        integer) go to ``jax.value_and_grad`` whatever ``mode``, which takes complex ones and
+        refuses integer ones; a value that is not a real scalar is refused with JAX's
+        ``TypeError`` in either mode.
     """
     resolve_mode(mode, 0)  # validate early
 
     def vg(params, *args):
         flat, unravel = ravel_pytree(params)
-        if flat.size == 0 or resolve_mode(mode, flat.size) == "reverse":
+        if flat.size == 0 or resolve_mode(mode, flat.size) == "reverse" or not _real_floating(params):
             return jax.value_and_grad(fun, has_aux=has_aux)(params, *args)
-        _check_inputs(params)
         f = lambda v: fun(unravel(v), *args)
         basis = jnp.eye(flat.size, dtype=flat.dtype)
         if flat.size <= NESTED_MAX:
@@ -120,7 +121,7 @@ def _batched_jvp_with_aux(f: Callable, x, basis) -> tuple:
     def one(t):
         value, tangent, aux = jax.jvp(f, (x,), (t,), has_aux=True)
         leaves, treedef = jax.tree_util.tree_flatten(aux)
-        is_array = [isinstance(leaf, (jax.Array, np.ndarray, np.generic)) for leaf in leaves]
+        is_array = [_jax_value(leaf) for leaf in leaves]
         static[:] = [treedef, is_array, [leaf for leaf, a in zip(leaves, is_array) if not a]]
         return value, tangent, [leaf for leaf, a in zip(leaves, is_array) if a]
 
@@ -130,13 +131,20 @@ def _batched_jvp_with_aux(f: Callable, x, basis) -> tuple:
     return value, dirs, jax.tree_util.tree_unflatten(treedef, [next(arrays if a else others) for a in is_array])
 
 
-def _check_inputs(params) -> None:
-    """``jax.grad``'s refusal of parameters that are not floating (forward mode would give float0
-    tangents)."""
-    for leaf in jax.tree_util.tree_leaves(params):
-        dtype = jnp.result_type(leaf)
-        if not jnp.issubdtype(dtype, jnp.floating):
-            raise TypeError(f"value_and_grad requires floating parameters, got {dtype}")
+def _real_floating(params) -> bool:
+    """Whether every leaf is real floating: forward mode's basis tangents are real, so a complex
+    parameter would get the derivative along its real axis only, an integer one float0 tangents."""
+    return all(jnp.issubdtype(jnp.result_type(leaf), jnp.floating) for leaf in jax.tree_util.tree_leaves(params))
+
+
+def _jax_value(leaf) -> bool:
+    """Whether an aux leaf is a JAX value a batched function may return: a JAX array, or a NumPy
+    array or scalar of a numeric or boolean dtype (not strings, objects or dates)."""
+    if isinstance(leaf, jax.Array):
+        return True
+    if isinstance(leaf, (np.ndarray, np.generic)):
+        return bool(jnp.issubdtype(leaf.dtype, jnp.number) or jnp.issubdtype(leaf.dtype, jnp.bool_))
+    return False
 
 
 def _check_output(value) -> None:

@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from pfjax import errors
 from pfjax.numerics import calibration, compiler
 
 AXIS = "runs"
@@ -68,14 +69,20 @@ class Layout(NamedTuple):
     """How a padded batch is evaluated (static: it fixes the compiled program).
 
     ``mesh``: the devices the batch is split over (``None``: one device, or under a transformation);
-    ``blocks``: blocks per device, evaluated one after another; ``interleaved``: block ``j`` holds
-    runs ``j, j + blocks, j + 2 blocks, ...`` instead of a contiguous share (a traced batch, whose
-    placement the outer call decided: each block then keeps that placement's split over devices).
+    ``blocks``: blocks per device, evaluated one after another.
+
+    ``shares``, ``size``: a traced batch's split (``shares = 0``: a placed batch, padded and split
+    before the call). The outer call decided where the runs are, so the program leaves them there:
+    the runs are taken as ``shares`` contiguous shares (the devices' when the run count is a multiple
+    of their number, else one), each padded at its end to ``blocks * size`` runs (copies of the
+    share's first run, cut off again), and evaluated in interleaved blocks (block ``j``: runs
+    ``j, j + blocks, ...``), so that every block holds ``size`` runs of every share.
     """
 
     mesh: Mesh | None
     blocks: int
-    interleaved: bool = False
+    shares: int = 0
+    size: int = 0
 
 
 def mesh(devices=None) -> Mesh:
@@ -172,55 +179,93 @@ def plan_batch(tree, devices=None, block: int | str | None = "auto", align: int 
     of ``align`` runs when a block has more. The padding (repeats of the first run) is less than
     ``align + 1`` runs per block and device.
 
-    Under a JAX transformation the tree is not placed (the outer call decided its placement): with
-    ``block`` ``"auto"`` or ``None`` it is returned as it is, in one block; with a number of runs it
-    is padded as above, taking ``devices`` as the devices its runs are split over, and split into
-    interleaved blocks (:class:`Layout`), each of which keeps that split. Forward-mode gradients pay
-    for it (:func:`default_block` with ``tangents``).
+    Under a JAX transformation the tree is returned as it is (the outer call decided its placement):
+    with ``block`` ``"auto"`` or ``None`` in one block; with a number of runs in blocks of at most
+    that many runs per device (``devices`` taken as the devices its runs are split over), padded and
+    split inside the program so that the runs stay on their devices (:class:`Layout`; when the run
+    count is not a multiple of the devices, the padding moves runs between them once, before the
+    loop). Forward-mode gradients pay for it (:func:`default_block` with ``tangents``).
+    ``block``: a number of runs >= 1, ``"auto"`` or ``None`` (:class:`~pfjax.errors.InputError`
+    naming ``block`` otherwise).
     """
+    if block is not None and not (isinstance(block, str) and block == "auto"):
+        block = errors.integer("block", block, low=1)
     n = jax.tree_util.tree_leaves(tree)[0].shape[0]
-    traced = _is_traced(tree)
-    if traced and (block is None or block == "auto"):
-        return tree, n, Layout(None, 1)
     m = mesh(devices)
     k = m.devices.size
+    if _is_traced(tree):
+        if block is None or isinstance(block, str):
+            return tree, n, Layout(None, 1)
+        return tree, n, traced_layout(n, int(block), k, align)
     if block == "auto":
         block = default_block(tree, m.devices.flat)
     per_device = -(-n // k)
     blocks = 1 if block is None else max(1, -(-per_device // int(block)))
-    size = -(-per_device // blocks)  # runs per block
-    if size > align:
-        size = -(-size // align) * align
-    if traced:
-        return (
-            (tree, n, Layout(None, 1))
-            if blocks == 1
-            else (_pad(tree, k * blocks * size), n, Layout(None, blocks, True))
-        )
+    size = _block_size(per_device, blocks, align)
     padded = _pad(tree, k * blocks * size)
     if k == 1:
         return padded, n, Layout(None, blocks)
     return jax.device_put(padded, NamedSharding(m, PartitionSpec(AXIS))), n, Layout(m, blocks)
 
 
+def traced_layout(n: int, block: int, devices: int, align: int = ALIGN) -> Layout:
+    """The :class:`Layout` of a traced batch of ``n`` runs over ``devices`` devices in blocks of at
+    most ``block`` runs per device (:func:`plan_batch`): its ``blocks`` and, in blocks, its
+    ``shares`` and ``size`` (runs of each share per block)."""
+    per_device = -(-n // devices)
+    blocks = max(1, -(-per_device // block))
+    if blocks == 1:
+        return Layout(None, 1)
+    shares = devices if n % devices == 0 else 1
+    return Layout(None, blocks, shares, _block_size(n // shares, blocks, align))
+
+
+def _block_size(runs: int, blocks: int, align: int) -> int:
+    """Runs per block of ``runs`` in ``blocks`` blocks, rounded up to a multiple of ``align`` when
+    a block has more than ``align`` runs."""
+    size = -(-runs // blocks)
+    return -(-size // align) * align if size > align else size
+
+
 def map_runs(fn: Callable[[Any], Any], tree, layout: Layout):
     """``vmap(fn)`` over the leading axis of a batch placed by :func:`plan_batch` (call under ``jit``).
 
     Each device evaluates its share (``shard_map`` over ``layout.mesh``) in ``layout.blocks``
-    blocks, one after another (``lax.map`` of the vmapped ``fn``); interleaved blocks
-    (``layout.interleaved``) take every ``blocks``-th run.
+    blocks, one after another (``lax.map`` of the vmapped ``fn``); a traced batch's shares
+    (``layout.shares``) are padded, split into interleaved blocks and cut again here.
     """
+    if layout.shares:
+        return _map_shares(fn, tree, layout)
 
     def local(t):
         if layout.blocks == 1:
             return jax.vmap(fn)(t)
-        out = jax.lax.map(jax.vmap(fn), split_blocks(t, layout.blocks, layout.interleaved))
-        return join_blocks(out, layout.interleaved)
+        return join_blocks(jax.lax.map(jax.vmap(fn), split_blocks(t, layout.blocks)))
 
     if layout.mesh is None:
         return local(tree)
     spec = PartitionSpec(AXIS)
     return jax.shard_map(local, mesh=layout.mesh, in_specs=spec, out_specs=spec, check_vma=False)(tree)
+
+
+def _map_shares(fn: Callable[[Any], Any], tree, layout: Layout):
+    """:func:`map_runs` of a traced batch (:class:`Layout`'s ``shares`` and ``size``): every array
+    keeps its runs' order along the run axis, so the outer call's split over devices holds."""
+    shares, per_share = layout.shares, layout.blocks * layout.size
+    n = jax.tree_util.tree_leaves(tree)[0].shape[0]
+    m = n // shares
+
+    def pad(a):
+        a = a.reshape((shares, m) + a.shape[1:])
+        a = jnp.concatenate([a, jnp.repeat(a[:, :1], per_share - m, axis=1)], axis=1)
+        return a.reshape((shares * per_share,) + a.shape[2:])
+
+    def cut(a):
+        return a.reshape((shares, per_share) + a.shape[1:])[:, :m].reshape((n,) + a.shape[1:])
+
+    padded = jax.tree_util.tree_map(pad, tree)
+    out = jax.lax.map(jax.vmap(fn), split_blocks(padded, layout.blocks, interleaved=True))
+    return jax.tree_util.tree_map(cut, join_blocks(out, interleaved=True))
 
 
 def split_blocks(tree, blocks: int, interleaved: bool = False):
