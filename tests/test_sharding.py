@@ -191,15 +191,13 @@ def test_a_traced_batch_is_split_into_interleaved_blocks_only_when_given_a_size(
         np.testing.assert_array_equal(back["b"], runs["b"])
 
 
-@pytest.mark.parametrize("width, shared", [(512, 3), (None, 1), (256, 1)])
-def test_forward_mode_blocks_share_an_arrays_budget_with_512_bit_vectors(monkeypatch, width, shared):
-    """A value and its 2 tangents share one array's budget where the simulator is compiled for
-    512-bit vectors; with narrower vectors (XLA's default) the forward pass's block stands."""
-    monkeypatch.setattr(sharding.compiler, "compiled_vector_width", lambda: width)
+def test_forward_mode_blocks_share_an_arrays_budget():
+    """A value and its D tangents share one array's budget: 1 + D times fewer runs per block."""
     cpu = jax.devices()[:1]
     tree = {"x": np.zeros(3, np.float32)}
-    assert sharding.default_block(tree, cpu, tangents=2) == sharding.cpu_block_bytes(4) // (4 * shared)
-    assert sharding.default_block(tree, cpu) == sharding.cpu_block_bytes(4) // 4
+    for tangents in (0, 1, 2, 4):
+        want = sharding.cpu_block_bytes(4) // (4 * (1 + tangents))
+        assert sharding.default_block(tree, cpu, tangents=tangents) == want
     with pytest.raises(ValueError, match="tangents"):
         sharding.default_block(tree, cpu, tangents=-1)
 

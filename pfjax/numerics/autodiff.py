@@ -12,28 +12,28 @@ A simulated loss ``J(theta)`` of ``D`` parameters has two ways to its gradient:
 Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices,
 a 2-core AMD EPYC of CPU family 26 (Zen 5), jax 0.10.2; wall time of the value and all ``D``
 derivatives over the forward pass, each function timed in a window of consecutive calls,
-:func:`pfjax.bench.timing.interleaved`): forward mode 1.48 / 2.15-2.20 / 3.14 / 3.69 for
-D = 1 / 2 / 3 / 4 with the batch in one block per device (2.02-2.05 for D = 2 in blocks sized for
-a value and its tangents, :func:`pfjax.sim.sharding.default_block`), reverse mode 4.8-5.0 for any
-D (docs/performance.md, Gradients).
-``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters (controller
-gains) and reverse mode above it (a falsifier's scenario parameters). Both give the same derivative
-up to rounding (tested).
+:func:`pfjax.bench.timing.interleaved`): forward mode 1.44-1.46 / 1.85-1.91 / 2.92-3.04 /
+3.59-3.66 for D = 1 / 2 / 3 / 4 with each device's runs in one block, 1.33-1.34 / 1.59-1.65 /
+2.49-2.52 / 2.90-3.00 in blocks sized for a value and its tangents
+(:func:`pfjax.sim.sharding.default_block`); reverse mode 4.6-4.9 for any D (docs/performance.md,
+Gradients). ``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters
+(controller gains) and reverse mode above it (a falsifier's scenario parameters). Both give the
+same derivative up to rounding (tested).
 
 **How the tangents travel** (:data:`NESTED_MAX`). ``D`` tangents as one batch (``vmap`` of
 ``jax.jvp`` over the basis) are arrays of shape ``(D, runs)`` beside the ``(runs,)`` primal values,
-and XLA's CPU backend puts the two shapes in separate kernels: the second tangent cost 1.03
-forward passes where the first cost 0.48. Nested ``jax.jvp`` calls, one direction each, keep every
-array at the primal's shape; they also trace the ``2^D - 1 - D`` higher derivatives that nothing
-reads, which XLA removes from the loop but which lengthen compilation. Measured as above (gradient
-over the forward pass; first call, with compilation): D = 2: 2.19x nested against 2.53x batched,
-1.75 against 1.68 s; D = 3: 2.77x against 3.14x, 2.44 against 1.60 s; D = 4: 3.23x against 3.69x,
-4.14 against 1.65 s. Nested up to D = 2, where one program compiles in about the same time. A
-tuning run compiles several, and there the nesting cost some compilation and saved no run time
-where the batch is small: ``pfjax tune --method gradient --controller pi --scenario paper-all``
-(9 runs) compiled in 25.1 and 25.9 s against 24.7 and 25.3 s batched, ran in 0.97-0.99 s both
-ways, and reached the same gains; a test's short tunings took 23.4-23.7 s against 21.3-22.4 s
-(no compilation cache, two runs each, alternated).
+and XLA's CPU backend puts the two shapes in separate kernels: batched, the second tangent cost
+0.87 forward passes where the first cost 0.45 (nested, 0.41). Nested ``jax.jvp`` calls, one
+direction each, keep every array at the primal's shape; they also trace the ``2^D - 1 - D`` higher
+derivatives that nothing reads, which XLA removes from the loop but which lengthen compilation.
+Measured as above (one block per device, no compilation cache; gradient over the forward pass,
+then compile time): D = 2: 1.86x nested against 2.32x batched, 1.92 against 1.38 s; D = 3: 2.45x
+against 3.01x, 2.55 against 1.64 s. Nested up to D = 2, where one program compiles in about the
+same time. A tuning run compiles several, and there the nesting cost some compilation and saved no
+run time where the batch is small: ``pfjax tune --method gradient --controller pi --scenario
+paper-all`` (9 runs) compiled in 25.1 and 25.9 s against 24.7 and 25.3 s batched, ran in
+0.97-0.99 s both ways, and reached the same gains; a test's short tunings took 23.4-23.7 s against
+21.3-22.4 s (no compilation cache, two runs each, alternated).
 """
 
 from __future__ import annotations
@@ -46,10 +46,11 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 #: Parameters up to which ``mode="auto"`` uses forward mode. Measured on the benchmark (module
-#: docstring): forward mode 3.69 forward passes for D = 4, reverse mode 4.8-5.0 for any D. Forward
-#: mode's cost grows by about half a forward pass per parameter, so the crossover lies near
-#: D = 6 at that batch. A smaller batch stores fewer steps, so reverse mode takes fewer page faults
-#: (docs/performance.md) and the crossover moves down; 4 is kept, not measured at other batches.
+#: docstring): forward mode 3.59-3.66 forward passes for D = 4 in one block per device (2.90-3.00 in
+#: blocks), reverse mode 4.6-4.9 for any D. Forward mode's cost grows by about half a forward pass
+#: per parameter, so the crossover lies near D = 6 at that batch (further in blocks). A smaller
+#: batch stores fewer steps, so reverse mode takes fewer page faults (docs/performance.md) and the
+#: crossover moves down; 4 is kept, not measured at other batches.
 FORWARD_MAX = 4
 MODES = ("auto", "forward", "reverse")
 #: Parameters up to which forward mode nests one ``jax.jvp`` per direction instead of batching the

@@ -40,7 +40,6 @@ __all__ = [
     "OPTIONS",
     "PROGRAMS",
     "at_top_level",
-    "compiled_vector_width",
     "cpu_info",
     "has_avx512",
     "jit",
@@ -80,12 +79,6 @@ def options(environ=None, cpuinfo: str = CPUINFO) -> dict:
 
 #: The options every simulator entry point is compiled with (decided once, at import).
 OPTIONS: dict = options()
-
-
-def compiled_vector_width() -> int | None:
-    """The vector width in bits the simulator programs are compiled for (:data:`OPTIONS`; ``None``:
-    XLA's default)."""
-    return OPTIONS.get(_OPTION)
 
 
 def at_top_level() -> bool:

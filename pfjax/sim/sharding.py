@@ -49,7 +49,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from pfjax import errors
-from pfjax.numerics import calibration, compiler
+from pfjax.numerics import calibration
 
 AXIS = "runs"
 #: Bytes per batched array in one CPU block. Measured (2-core AMD EPYC with AVX-512, 512-bit vectors,
@@ -134,20 +134,17 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
     ``None`` (no blocks) on any other platform.
 
     ``tangents``: forward-mode tangents each value carries (``D`` for the gradient in ``D``
-    parameters, :func:`pfjax.numerics.autodiff.value_and_grad`). Where the simulator is compiled for
-    512-bit vectors (:func:`pfjax.numerics.compiler.compiled_vector_width`), a value and its tangents
-    share one array's budget, so a block holds ``1 + tangents`` times fewer runs and its loop stays
-    as small as the forward pass's; with narrower vectors the forward pass's block stands (on the
-    CPU below at XLA's default width, D = 2 at 2,000 runs took 1.82x whole against 1.87-1.89x in
-    blocks of 336 or 500 runs: the block's caches matter where the wider vectors make the arithmetic
-    cheap). Measured with 512-bit vectors (the benchmark's gradient in K, float32, 2 devices, a
-    2-core AMD EPYC of CPU family 26; value and gradient over the unblocked forward pass, best of 5 interleaved
-    rounds, several sittings): D = 2 at 2,000 runs (1,000 per device), in one block 2.15-2.20x,
-    in blocks of 500 runs 1.92-2.06x, of 336 runs (this rule's 416, padded to a multiple of 8)
-    2.01-2.03x, of 250 runs 2.12-2.19x; at 2,400 runs, one block 2.20-2.23x, 600 runs 2.00-2.03x,
-    400 runs 1.89-1.96x, 300 runs 2.07-2.11x. D = 1: 1.50-1.51x in one block and in blocks (no
-    gain). Reverse mode is slower in blocks (its stored steps are the same in total, and the loop
-    over blocks stores its own): 6.72x against 4.91x in blocks of 400 runs, so it takes none.
+    parameters, :func:`pfjax.numerics.autodiff.value_and_grad`). A value and its tangents share one
+    array's budget, so a block holds ``1 + tangents`` times fewer runs and its loop stays as small
+    as the forward pass's. Measured (the benchmark's gradient in K, and for D = 3, 4 also in the two
+    slip angles' scale, float32, 2,000 runs, 2 devices, a 2-core AMD EPYC of CPU family 26; value and
+    gradient over the forward pass, best of 5 interleaved rounds, two sittings): with 512-bit
+    vectors, D = 1 / 2 / 3 / 4 took 1.44-1.46x / 1.85-1.91x / 2.92-3.04x / 3.59-3.66x with each
+    device's 1,000 runs in one block, 1.33-1.34x / 1.59-1.64x / 2.49-2.52x / 2.90-3.00x in blocks
+    of this rule's size; with XLA's default width, D = 1 / 2 1.32-1.33x / 1.61-1.62x whole against
+    1.31x / 1.58-1.59x in blocks. Reverse mode is slower in blocks (its stored steps are the same
+    in total, and the loop over blocks stores its own): at 2,400 runs 6.66x in blocks of 400 runs
+    against 4.65x whole, so it takes none.
     """
     if int(tangents) < 0:
         raise ValueError(f"tangents: must be at least 0, got {tangents}")
@@ -160,8 +157,7 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
         if hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating)
     ]
     itemsize = max((np.dtype(d).itemsize for d in floats), default=4)
-    shared = 1 + int(tangents) if (compiler.compiled_vector_width() or 0) >= 512 else 1
-    return max(1, cpu_block_bytes(itemsize) // (itemsize * shared))
+    return max(1, cpu_block_bytes(itemsize) // (itemsize * (1 + int(tangents))))
 
 
 def cpu_block_bytes(itemsize: int) -> int:
