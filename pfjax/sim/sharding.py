@@ -196,7 +196,7 @@ def plan_batch(tree, devices=None, block: int | str | None = "auto", align: int 
     if block == "auto":
         block = default_block(tree, m.devices.flat)
     per_device = -(-n // k)
-    blocks = 1 if block is None else max(1, -(-per_device // int(block)))
+    blocks = 1 if block is None else _block_count(per_device, int(block))
     size = _block_size(per_device, blocks, align)
     padded = _pad(tree, k * blocks * size)
     if k == 1:
@@ -208,12 +208,16 @@ def traced_layout(n: int, block: int, devices: int, align: int = ALIGN) -> Layou
     """The :class:`Layout` of a traced batch of ``n`` runs over ``devices`` devices in blocks of at
     most ``block`` runs per device (:func:`plan_batch`): its ``blocks`` and, in blocks, its
     ``shares`` and ``size`` (runs of each share per block)."""
-    per_device = -(-n // devices)
-    blocks = max(1, -(-per_device // block))
+    blocks = _block_count(-(-n // devices), block)
     if blocks == 1:
         return Layout(None, 1)
     shares = devices if n % devices == 0 else 1
     return Layout(None, blocks, shares, _block_size(n // shares, blocks, align))
+
+
+def _block_count(per_device: int, block: int) -> int:
+    """Blocks of at most ``block`` runs for a device's ``per_device`` runs (at least one)."""
+    return max(1, -(-per_device // block))
 
 
 def _block_size(runs: int, blocks: int, align: int) -> int:
