@@ -137,6 +137,48 @@ def test_recording_switch_scalar_inputs_and_checkpointing_change_nothing():
     assert float(g2) == pytest.approx(float(g), rel=1e-12)
 
 
+def test_checkpoint_segments_are_square_roots_of_the_samples_above_the_byte_threshold():
+    """Per-sample checkpoints up to :data:`loop.SEGMENT_BYTES` of carry over all samples of the runs a
+    device evaluates together; beyond, segments of ``ceil(sqrt(n))`` samples."""
+    seg = loop.checkpoint_segment
+    limit = loop.SEGMENT_BYTES
+    assert seg(4001, 100, limit // (4001 * 100)) == 0
+    assert seg(4001, 100, limit // (4001 * 100) + 1) == 64  # ceil(sqrt(4001)) = 64
+    assert seg(4096, limit, 1) == 64 and seg(4097, limit, 1) == 65 and seg(2, limit, 1) == 2
+    assert seg(10**6, 8, 0) == 0  # a run alone outside any batch (runs 0 or 1)
+
+
+@pytest.mark.parametrize("n_samples", [N, N - 1])  # 6 segments of 5; 4 of 6 and a tail of 5
+def test_checkpoint_segments_change_no_value_record_or_gradient(n_samples):
+    """The loop in checkpointed segments (forced by ``runs``) gives the per-sample loop's values,
+    records and reverse-mode gradient; its program holds the segments' nested loop."""
+    p = Params(*(jnp.asarray(v, float) for v in (1.0, 0.5, 0.1)))
+    policy = jax.checkpoint_policies.nothing_saveable
+    many = 10**9  # runs: any carry over that many runs is above the threshold
+
+    def run(b, runs, record=True):
+        return loop.run(
+            integrator(False), p._replace(b=b), n_samples, record=record, checkpoint_policy=policy, runs=runs
+        )
+
+    assert loop.checkpoint_segment(n_samples, 8 * 6, many) in (6, 5)
+    one, seg = jax.jit(lambda b: run(b, 1))(0.1), jax.jit(lambda b: run(b, many))(0.1)
+    for a, b in zip(jax.tree_util.tree_leaves(one), jax.tree_util.tree_leaves(seg), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert seg.records[0].shape == (n_samples,)
+
+    def loss(b, runs):
+        out = run(b, runs, record=False)
+        return out.metrics[0] + out.state
+
+    scans = [str(jax.make_jaxpr(jax.grad(lambda b, r=r: loss(b, r)))(0.1)).count("scan[") for r in (1, many)]
+    assert scans[0] < scans[1]  # the segments' outer and inner loops (and a tail)
+    g1, g2 = (float(jax.jit(jax.grad(lambda b, r=r: loss(b, r)))(0.1)) for r in (1, many))
+    h = 1e-6
+    fd = (float(loss(0.1 + h, 1)) - float(loss(0.1 - h, 1))) / (2 * h)
+    assert g1 == pytest.approx(fd, rel=1e-6) and g2 == pytest.approx(g1, rel=1e-13)
+
+
 def test_the_carry_is_named():
     assert loop.LoopCarry._fields == ("state", "aux", "metrics", "status", "fail_time", "k")
 

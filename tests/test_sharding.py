@@ -5,6 +5,7 @@ The device count of a process is fixed when JAX starts, so the comparison runs t
 two subprocesses, one with ``PFJAX_HOST_DEVICES=1`` and one with two forced host devices.
 """
 
+import importlib
 import math
 import os
 import subprocess
@@ -140,7 +141,7 @@ def test_plan_batch_splits_devices_into_blocks():
     placed, _, layout = sharding.plan_batch({"a": np.arange(1001.0)}, devices, block=None)
     per = placed["a"].shape[0] // k
     assert layout.blocks == 1 and per % sharding.ALIGN == 0 and 0 <= per - -(-1001 // k) < sharding.ALIGN
-    assert sharding.plan_batch(tree, devices[:1], block=None)[2] == sharding.Layout(None, 1)
+    assert sharding.plan_batch(tree, devices[:1], block=None)[2] == sharding.Layout(None, 1)  # placed: runs 0
     # block sizes: CPU_BLOCK_BYTES per array on CPU, none on another platform
     assert sharding.default_block({"x": np.zeros(3, np.float32)}, devices[:1]) == sharding.CPU_BLOCK_BYTES // 4
     assert sharding.default_block({"x": np.zeros(3, np.float64)}, devices[:1]) == sharding.CPU_BLOCK_BYTES // 8
@@ -167,10 +168,12 @@ def test_a_traced_batch_is_split_into_interleaved_blocks_only_when_given_a_size(
         for block in ("auto", None, 2):
             out = jax.jit(lambda t, block=block: run(t, block))(tree)
             np.testing.assert_array_equal(out, 10.0 * tree["a"] + tree["b"])
-        assert seen[(n, "auto")] == seen[(n, None)] == sharding.Layout(None, 1)
+        # runs: each device's runs in one loop (they decide reverse mode's checkpoints)
+        assert seen[(n, "auto")] == seen[(n, None)] == sharding.Layout(None, 1, runs=math.ceil(n / k))
         blocks = math.ceil(math.ceil(n / k) / 2)
         shares = k if n % k == 0 else 1
-        assert seen[(n, 2)] == sharding.Layout(None, blocks, shares, math.ceil(n // shares / blocks))
+        size = math.ceil(n // shares / blocks)
+        assert seen[(n, 2)] == sharding.Layout(None, blocks, shares, size, runs=math.ceil(size * shares / k))
     if k > 1:  # the runs stay on their devices: no collective moves them
         placed, _ = sharding.shard_batch({"a": np.arange(24.0 * k)})
         text = jax.jit(lambda t: run(t, 5)).lower({"a": placed["a"], "b": placed["a"]}).compile().as_text()
@@ -374,3 +377,63 @@ def test_one_and_two_host_devices_give_the_same_runs(device_runs, dtype):
     others = [m for m in metrics if m not in metres]
     pd.testing.assert_frame_equal(one[others], two[others], check_exact=False, rtol=1e-5, atol=0)
     pd.testing.assert_frame_equal(one[metres], two[metres], check_exact=False, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("model", ["slip", "st"])
+def test_reverse_mode_in_checkpointed_segments_gives_the_per_sample_gradient(model, monkeypatch):
+    """A traced batch tells the loop how many runs each device evaluates together
+    (``Layout.runs``; a placed batch, never differentiated, 0), and past
+    :data:`pfjax.sim.loop.SEGMENT_BYTES` of carry the loop checkpoints its samples in segments.
+    The gradient is the per-sample checkpoints' (float64, 1e-12 relative: the same arithmetic,
+    compiled into other machine code), for the slip vehicle and the dynamic (ST) vehicle."""
+    import jax.numpy as jnp
+
+    from pfjax import controllers as C
+    from pfjax.sim import SimConfig, loop, stack
+
+    cfg = SimConfig(dt=0.01, horizon=0.37, record=False)  # 38 samples: segments of 7, a tail of 3
+    if model == "slip":
+        from pfjax.bench import problem as P
+
+        sim = importlib.import_module("pfjax.sim.simulate")  # the module (the package exports the function)
+        batch, controller = P.scenarios(P.random_batch(13, seed=4), np.float64), C.state_feedback
+        name = "K"
+    else:
+        from pfjax import paths
+        from pfjax.sim.scenario import make_dynamic_scenario
+
+        e = C.entry("stanley")
+        gains = C.params_from_flat(e, C.flat_gains(e))
+        sine = paths.entry("sine")
+        assert sine.build is not None and sine.start_pose is not None
+        runs = [make_dynamic_scenario(sine.build(), sine.start_pose, gains, mu=0.4 + 0.05 * i) for i in range(13)]
+        batch, controller, name = stack(runs), e.controller, "k"
+        sim = importlib.import_module("pfjax.sim.dynamic")
+    gain = getattr(batch.gains, name)
+    assert loop.checkpoint_segment(cfg.n_steps + 1, 1, 10**9) == 7
+
+    def loss(g, runs):
+        sc = batch._replace(gains=batch.gains._replace(**{name: g}))
+        res = jax.vmap(lambda s: sim.simulate(controller, s, cfg, runs=runs))(sc)
+        return jnp.sum(res.metrics.iae)
+
+    g1, g2 = (np.asarray(jax.jit(jax.grad(lambda g, r=r: loss(g, r)))(gain)) for r in (1, 10**9))
+    assert np.all(np.isfinite(g1)) and np.any(g1 != 0.0)
+    np.testing.assert_allclose(g2, g1, rtol=1e-12, atol=1e-15)
+
+    seen = []
+    real = loop.run
+    monkeypatch.setattr(loop, "run", lambda *a, **kw: seen.append(kw["runs"]) or real(*a, **kw))
+    monkeypatch.setattr(loop, "SEGMENT_BYTES", 0)  # every traced batch in segments
+
+    def batch_loss(g):
+        sc = batch._replace(gains=batch.gains._replace(**{name: g}))
+        return jnp.sum(sim.simulate_batch(sc, controller=controller, config=cfg).metrics.iae)
+
+    k = len(jax.devices())
+    text = str(jax.make_jaxpr(jax.grad(batch_loss))(gain))
+    assert seen == [-(-13 // k)] and text.count("scan[") > 1
+    np.testing.assert_allclose(np.asarray(jax.jit(jax.grad(batch_loss))(gain)), g1, rtol=1e-12, atol=1e-15)
+    seen.clear()
+    sim.simulate_batch(batch, controller=controller, config=cfg)  # placed: never differentiated
+    assert seen == [0]

@@ -27,15 +27,17 @@ from pfjax.sim import sharding
 def program(run_one: Callable[..., Any], *, module: str, name: str, static: tuple[str, ...]):
     """The jitted ``vmap(run_one)`` over a batch placed by :func:`pfjax.sim.sharding.plan_batch`.
 
-    ``run_one(sc, **kwargs)`` is one run (pure, unbatched); its keyword arguments ``static`` (a
-    controller, a config: hashable) and the batch's ``layout`` are static arguments of the program,
+    ``run_one(sc, runs=..., **kwargs)`` is one run (pure, unbatched; ``runs``: the layout's runs per
+    device and loop, which decide its reverse-mode checkpoints, :func:`pfjax.sim.loop.run`); its
+    keyword arguments ``static`` (a controller, a config: hashable) and the batch's ``layout`` are
+    static arguments of the program,
     so it compiles once per their values, the batch's shape, device set and block count. The program
     is registered as ``module.name`` (:data:`pfjax.numerics.compiler.PROGRAMS`) and keeps that
     name in its compiled module.
     """
 
     def run_batch(scenarios, *, layout: sharding.Layout = sharding.Layout(None, 1), **kwargs):
-        return sharding.map_runs(lambda sc: run_one(sc, **kwargs), scenarios, layout)
+        return sharding.map_runs(lambda sc: run_one(sc, runs=layout.runs, **kwargs), scenarios, layout)
 
     run_batch.__module__ = module
     run_batch.__name__ = run_batch.__qualname__ = name

@@ -311,7 +311,7 @@ def system(controller: Controller, config: SimConfig) -> loop.System:
     )
 
 
-def simulate(controller: Controller, sc: DynamicScenario, config: SimConfig) -> DynamicResult:
+def simulate(controller: Controller, sc: DynamicScenario, config: SimConfig, *, runs: int = 1) -> DynamicResult:
     """Simulate one run (pure, unbatched; :func:`simulate_batch` is the entry point): samples
     ``k = 0..N`` of :func:`system` through :func:`pfjax.sim.loop.run`.
 
@@ -319,6 +319,8 @@ def simulate(controller: Controller, sc: DynamicScenario, config: SimConfig) -> 
         controller: the controller (static).
         sc: the run's scenario.
         config: static settings (``config.control_every`` must be an integer).
+        runs: the runs evaluated together with this one on its device (static; as
+            :func:`pfjax.sim.simulate.simulate`).
 
     Returns:
         :class:`DynamicResult`: metrics, slip metrics, status, failure time, final state, trajectory.
@@ -331,13 +333,16 @@ def simulate(controller: Controller, sc: DynamicScenario, config: SimConfig) -> 
         record=config.record,
         scalar_inputs=True,
         checkpoint_policy=_SAVED,
+        runs=runs,
     )
 
 
 #: The jitted, vmapped :func:`simulate` and the jitted single run without a batch axis
 #: (:func:`pfjax.sim.batch.programs`).
 _simulate_vmapped, _simulate_one = batch.programs(
-    lambda sc, *, controller, config: simulate(controller, sc, config), module=__name__, static=("controller", "config")
+    lambda sc, *, controller, config, runs=1: simulate(controller, sc, config, runs=runs),
+    module=__name__,
+    static=("controller", "config"),
 )
 
 

@@ -71,6 +71,10 @@ class Layout(NamedTuple):
     ``mesh``: the devices the batch is split over (``None``: one device, or under a transformation);
     ``blocks``: blocks per device, evaluated one after another.
 
+    ``runs``: the runs each device evaluates together in one loop of a traced batch, which a
+    transformation may differentiate (:func:`pfjax.sim.loop.checkpoint_segment`; 0: a placed batch,
+    which none does).
+
     ``shares``, ``size``: a traced batch's split (``shares = 0``: a placed batch, padded and split
     before the call). The outer call decided where the runs are, so the program leaves them there:
     the runs are taken as ``shares`` contiguous shares (the devices' when the run count is a multiple
@@ -83,6 +87,7 @@ class Layout(NamedTuple):
     blocks: int
     shares: int = 0
     size: int = 0
+    runs: int = 0
 
 
 def mesh(devices=None) -> Mesh:
@@ -190,9 +195,7 @@ def plan_batch(tree, devices=None, block: int | str | None = "auto", align: int 
     m = mesh(devices)
     k = m.devices.size
     if _is_traced(tree):
-        if block is None or isinstance(block, str):
-            return tree, n, Layout(None, 1)
-        return tree, n, traced_layout(n, int(block), k, align)
+        return tree, n, traced_layout(n, None if block is None or isinstance(block, str) else int(block), k, align)
     if block == "auto":
         block = default_block(tree, m.devices.flat)
     per_device = -(-n // k)
@@ -204,15 +207,18 @@ def plan_batch(tree, devices=None, block: int | str | None = "auto", align: int 
     return jax.device_put(padded, NamedSharding(m, PartitionSpec(AXIS))), n, Layout(m, blocks)
 
 
-def traced_layout(n: int, block: int, devices: int, align: int = ALIGN) -> Layout:
+def traced_layout(n: int, block: int | None, devices: int, align: int = ALIGN) -> Layout:
     """The :class:`Layout` of a traced batch of ``n`` runs over ``devices`` devices in blocks of at
-    most ``block`` runs per device (:func:`plan_batch`): its ``blocks`` and, in blocks, its
-    ``shares`` and ``size`` (runs of each share per block)."""
-    blocks = _block_count(-(-n // devices), block)
+    most ``block`` runs per device (``None``: one block; :func:`plan_batch`): its ``blocks``, its
+    ``runs`` per device and loop and, in blocks, its ``shares`` and ``size`` (runs of each share per
+    block)."""
+    per_device = -(-n // devices)
+    blocks = 1 if block is None else _block_count(per_device, block)
     if blocks == 1:
-        return Layout(None, 1)
+        return Layout(None, 1, runs=per_device)
     shares = devices if n % devices == 0 else 1
-    return Layout(None, blocks, shares, _block_size(n // shares, blocks, align))
+    size = _block_size(n // shares, blocks, align)
+    return Layout(None, blocks, shares, size, runs=-(-size * shares // devices))
 
 
 def _block_count(per_device: int, block: int) -> int:

@@ -282,7 +282,7 @@ def system(controller: Controller, config: SimConfig) -> loop.System:
     )
 
 
-def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResult:
+def simulate(controller: Controller, sc: Scenario, config: SimConfig, *, runs: int = 1) -> SimResult:
     """Simulate one run (pure, unbatched; see :func:`simulate_batch` for the entry point): samples
     ``k = 0..N`` of :func:`system` through :func:`pfjax.sim.loop.run`.
 
@@ -294,6 +294,8 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
         controller: the controller (static).
         sc: the run's scenario.
         config: static settings.
+        runs: the runs evaluated together with this one on its device (static; the batched entry
+            point's layout): they decide reverse mode's checkpoints (:func:`pfjax.sim.loop.run`).
 
     Returns:
         ``SimResult``: metrics, status, failure time, final state, trajectory (if ``config.record``).
@@ -306,13 +308,16 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig) -> SimResu
         record=config.record,
         scalar_inputs=True,
         checkpoint_policy=_SAVED,
+        runs=runs,
     )
 
 
 #: The jitted, vmapped :func:`simulate` and the jitted single run without a batch axis
 #: (:func:`pfjax.sim.batch.programs`).
 _simulate_vmapped, _simulate_one = batch.programs(
-    lambda sc, *, controller, config: simulate(controller, sc, config), module=__name__, static=("controller", "config")
+    lambda sc, *, controller, config, runs=1: simulate(controller, sc, config, runs=runs),
+    module=__name__,
+    static=("controller", "config"),
 )
 
 
