@@ -168,12 +168,12 @@ def test_a_traced_batch_is_split_into_interleaved_blocks_only_when_given_a_size(
         for block in ("auto", None, 2):
             out = jax.jit(lambda t, block=block: run(t, block))(tree)
             np.testing.assert_array_equal(out, 10.0 * tree["a"] + tree["b"])
-        # runs: each device's runs in one loop (they decide reverse mode's checkpoints)
+        # runs: each device's runs in all its blocks (they decide reverse mode's checkpoints)
         assert seen[(n, "auto")] == seen[(n, None)] == sharding.Layout(None, 1, runs=math.ceil(n / k))
         blocks = math.ceil(math.ceil(n / k) / 2)
         shares = k if n % k == 0 else 1
         size = math.ceil(n // shares / blocks)
-        assert seen[(n, 2)] == sharding.Layout(None, blocks, shares, size, runs=math.ceil(size * shares / k))
+        assert seen[(n, 2)] == sharding.Layout(None, blocks, shares, size, runs=math.ceil(blocks * size * shares / k))
     if k > 1:  # the runs stay on their devices: no collective moves them
         placed, _ = sharding.shard_batch({"a": np.arange(24.0 * k)})
         text = jax.jit(lambda t: run(t, 5)).lower({"a": placed["a"], "b": placed["a"]}).compile().as_text()

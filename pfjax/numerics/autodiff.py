@@ -6,8 +6,9 @@ A simulated loss ``J(theta)`` of ``D`` parameters has two ways to its gradient:
   evaluated alongside the forward pass. Cost about ``1 + c D`` forward passes, memory independent
   of the horizon.
 * **reverse mode** (``jax.value_and_grad``): one backward pass through the ``lax.scan``, which
-  recomputes every step (``jax.checkpoint``) and stores the carry per step: a fixed multiple of
-  the forward pass whatever ``D``, memory O(horizon) per run.
+  recomputes every step (``jax.checkpoint``) and stores the carry per step, or for many runs over
+  many steps per segment of steps (:func:`pfjax.sim.loop.checkpoint_segment`): a fixed multiple of
+  the forward pass whatever ``D``, memory O(horizon) per run (O(sqrt(horizon)) in segments).
 
 Measured on the benchmark problem (slip model, 2,000 runs, 4,000 steps, float32, 2 CPU devices,
 a 2-core AMD EPYC of CPU family 26 (Zen 5), jax 0.10.2; wall time of the value and all ``D``
@@ -15,8 +16,8 @@ derivatives over the forward pass, each function timed in a window of consecutiv
 :func:`pfjax.bench.timing.interleaved`): forward mode 1.44-1.46 / 1.85-1.91 / 2.92-3.04 /
 3.59-3.66 for D = 1 / 2 / 3 / 4 with each device's runs in one block, 1.33-1.34 / 1.59-1.65 /
 2.49-2.52 / 2.90-3.00 in blocks sized for a value and its tangents
-(:func:`pfjax.sim.sharding.default_block`); reverse mode 4.6-4.9 for any D (docs/performance.md,
-Gradients). ``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters
+(:func:`pfjax.sim.sharding.default_block`); reverse mode 3.71-3.73 for any D, in checkpointed
+segments (docs/performance.md, Gradients). ``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters
 (controller gains) and reverse mode above it (a falsifier's scenario parameters). Both give the
 same derivative up to rounding (tested).
 
@@ -47,10 +48,9 @@ from jax.flatten_util import ravel_pytree
 
 #: Parameters up to which ``mode="auto"`` uses forward mode. Measured on the benchmark (module
 #: docstring): forward mode 3.59-3.66 forward passes for D = 4 in one block per device (2.90-3.00 in
-#: blocks), reverse mode 4.6-4.9 for any D. Forward mode's cost grows by about half a forward pass
-#: per parameter, so the crossover lies near D = 6 at that batch (further in blocks). A smaller
-#: batch stores fewer steps, so reverse mode takes fewer page faults (docs/performance.md) and the
-#: crossover moves down; 4 is kept, not measured at other batches.
+#: blocks), reverse mode 3.71-3.73 for any D. Forward mode's cost grows by about half a forward pass
+#: per parameter, so the crossover lies at D = 4 whole and near D = 5 in blocks at that batch; not
+#: measured at other batches (at 250 runs per device reverse mode took 3.15 forward passes).
 FORWARD_MAX = 4
 MODES = ("auto", "forward", "reverse")
 #: Parameters up to which forward mode nests one ``jax.jvp`` per direction instead of batching the

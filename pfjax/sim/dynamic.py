@@ -319,7 +319,7 @@ def simulate(controller: Controller, sc: DynamicScenario, config: SimConfig, *, 
         controller: the controller (static).
         sc: the run's scenario.
         config: static settings (``config.control_every`` must be an integer).
-        runs: the runs evaluated together with this one on its device (static; as
+        runs: the runs on its device, this one included (static; as
             :func:`pfjax.sim.simulate.simulate`).
 
     Returns:

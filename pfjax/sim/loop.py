@@ -149,7 +149,7 @@ class System(NamedTuple):
     live: int = Status.OK  # the status code of a run still going (the status table)
 
 
-#: Carry bytes over all samples of the runs one device evaluates together beyond which reverse mode
+#: Carry bytes over all samples of the runs on one device (every block's) beyond which reverse mode
 #: checkpoints the loop in segments (:func:`checkpoint_segment`). Placed between the measurements on
 #: the benchmark problem (4,001 samples, a 100-byte float32 carry of which reverse mode stores 28
 #: bytes, 2 devices; :mod:`pfjax.bench`): 250 runs per device (100 MB of carry) took 3.15x the
@@ -173,8 +173,8 @@ def checkpoint_segment(n_samples: int, carry_bytes: int, runs: int) -> int:
     other): 3.7-3.8x the forward pass against 4.8-4.9x; float64 3.5x against 4.2x. Below the
     threshold the extra forward pass costs more than the memory saves.
 
-    ``runs``: the runs one device evaluates together (a ``vmap`` hides them from the loop; 0 or 1
-    for a run alone). The values are the same either way; the arithmetic of each sample is the
+    ``runs``: the runs on one device, in every block (reverse mode through a loop over blocks stores
+    every block's steps; a ``vmap`` hides them from the loop; 0 or 1 for a run alone). The values are the same either way; the arithmetic of each sample is the
     same, compiled into other machine code.
     """
     if runs * n_samples * carry_bytes <= SEGMENT_BYTES:
@@ -245,8 +245,8 @@ def run(
         checkpoint_policy: ``None``, or a ``jax.checkpoint`` policy: reverse mode then stores the
             carry (and what the policy saves) per sample and recomputes the sample; for many
             ``runs`` over many samples, in checkpointed segments (:func:`checkpoint_segment`).
-        runs: the runs evaluated together with this one on its device (the ``vmap`` around it;
-            static): with a checkpoint policy, it decides the segments.
+        runs: the runs on this one's device, this one included, in every block (the ``vmap``
+            around it; static): with a checkpoint policy, it decides the segments.
 
     Returns:
         ``system.finish(inputs, Run(...))``.

@@ -71,9 +71,10 @@ class Layout(NamedTuple):
     ``mesh``: the devices the batch is split over (``None``: one device, or under a transformation);
     ``blocks``: blocks per device, evaluated one after another.
 
-    ``runs``: the runs each device evaluates together in one loop of a traced batch, which a
-    transformation may differentiate (:func:`pfjax.sim.loop.checkpoint_segment`; 0: a placed batch,
-    which none does).
+    ``runs``: the runs of a traced batch on each device, padding included, in all its blocks
+    (reverse mode through the loop over blocks stores every block's steps), which decide the loop's
+    checkpoints (:func:`pfjax.sim.loop.checkpoint_segment`; 0: a placed batch, which no
+    transformation differentiates).
 
     ``shares``, ``size``: a traced batch's split (``shares = 0``: a placed batch, padded and split
     before the call). The outer call decided where the runs are, so the program leaves them there:
@@ -147,9 +148,11 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
     vectors, D = 1 / 2 / 3 / 4 took 1.44-1.46x / 1.85-1.91x / 2.92-3.04x / 3.59-3.66x with each
     device's 1,000 runs in one block, 1.33-1.34x / 1.59-1.64x / 2.49-2.52x / 2.90-3.00x in blocks
     of this rule's size; with XLA's default width, D = 1 / 2 1.32-1.33x / 1.61-1.62x whole against
-    1.31x / 1.58-1.59x in blocks. Reverse mode is slower in blocks (its stored steps are the same
-    in total, and the loop over blocks stores its own): at 2,400 runs 6.66x in blocks of 400 runs
-    against 4.65x whole, so it takes none.
+    1.31x / 1.58-1.59x in blocks. Reverse mode gains less in blocks (its stored steps are the same
+    in total, so the loop checkpoints them in the same segments, :func:`pfjax.sim.loop.checkpoint_segment`):
+    at 2,000 runs 3.53x / 3.60x / 3.67x in blocks of 336 / 500 / 250 runs against 3.77x whole, for
+    1-1.5 s more compilation, so ``tangents=0`` gives it the forward pass's blocks (one per device
+    at that batch).
     """
     if int(tangents) < 0:
         raise ValueError(f"tangents: must be at least 0, got {tangents}")
@@ -218,7 +221,7 @@ def traced_layout(n: int, block: int | None, devices: int, align: int = ALIGN) -
         return Layout(None, 1, runs=per_device)
     shares = devices if n % devices == 0 else 1
     size = _block_size(n // shares, blocks, align)
-    return Layout(None, blocks, shares, size, runs=-(-size * shares // devices))
+    return Layout(None, blocks, shares, size, runs=-(-blocks * size * shares // devices))
 
 
 def _block_count(per_device: int, block: int) -> int:

@@ -294,7 +294,7 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig, *, runs: i
         controller: the controller (static).
         sc: the run's scenario.
         config: static settings.
-        runs: the runs evaluated together with this one on its device (static; the batched entry
+        runs: the runs on its device, this one included, in every block (static; the batched entry
             point's layout): they decide reverse mode's checkpoints (:func:`pfjax.sim.loop.run`).
 
     Returns:

@@ -324,7 +324,7 @@ def system(config: TrackConfig) -> loop.System:
 
 def simulate(sc: TrackScenario, config: TrackConfig, *, runs: int = 1) -> TrackResult:
     """One run (see module doc); pure, for ``vmap``: steps ``k = 0..N-1`` of :func:`system` through
-    :func:`pfjax.sim.loop.run` (``runs``: the runs evaluated together on its device, which the
+    :func:`pfjax.sim.loop.run` (``runs``: the runs on its device, which the
     batched entry point passes; without a checkpoint policy the loop does not use it)."""
     return loop.run(system(config), sc, config.n_steps, record=config.record, runs=runs)
 

@@ -15,9 +15,10 @@ step simulates ``n`` rollouts per start (the batch), so ``n_rollouts = steps * n
 ``wall_s`` excludes it (``compile_s``). :mod:`pfjax.tuning.multistart` builds a reliable tuner from
 this step (screening, successive halving, restarts, smoothing). With
 a few gains (``mode="auto"``: at most 4) the gradient is taken in forward mode, one tangent per
-gain alongside the forward pass (2 gains: 2.0-2.2 forward passes for value and gradient, O(1) memory
-in the horizon); with more, in reverse mode (3.2-3.4 forward passes, O(horizon) memory per run for
-the scan's carries). Measured: :mod:`pfjax.numerics.autodiff`.
+gain alongside the forward pass (2 gains: 1.6-1.9 forward passes for value and gradient, O(1) memory
+in the horizon); with more, in reverse mode (3.2-3.7 forward passes, O(horizon) memory per run for
+the scan's carries, O(sqrt(horizon)) in the checkpointed segments of a large batch). Measured:
+:mod:`pfjax.numerics.autodiff`.
 
 Non-smooth points, and what the gradient is there (JAX's derivative of the active branch):
 
