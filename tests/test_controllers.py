@@ -279,3 +279,16 @@ def test_linear_controller_reproduces_state_feedback_and_pi(gains):
 def test_linear_params_rejects_other_gains():
     with pytest.raises(TypeError, match="gains"):
         C.linear_params(C.stanley_params())
+
+
+def test_steering_saturation_is_a_clip_whose_derivative_selects():
+    """``saturate``: ``jnp.clip``'s values bit for bit; derivative 1 in the command inside the limits
+    (ties included), 0 beyond them, and the limit's own there (d/d delta_max = +-1)."""
+    from pfjax.controllers.base import saturate
+
+    cmd = jnp.asarray([-1.0, -0.5, -0.2, 0.0, 0.3, 0.5, 2.0])
+    np.testing.assert_array_equal(saturate(cmd, 0.5), jnp.clip(cmd, -0.5, 0.5))
+    d_cmd = jax.vmap(jax.grad(saturate))(cmd, jnp.full_like(cmd, 0.5))
+    np.testing.assert_array_equal(d_cmd, [0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0])
+    d_max = jax.vmap(jax.grad(saturate, argnums=1))(cmd, jnp.full_like(cmd, 0.5))
+    np.testing.assert_array_equal(d_max, [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])

@@ -6,8 +6,8 @@ A controller is a continuous-time system with (possibly empty) internal state ``
     c'        = rate(params, c, obs, delta_cmd, delta_applied)
 
 ``params`` is a plain pytree (what tuners differentiate and samples vary), ``c`` a pytree
-of arrays (the PI's integrators). ``delta_applied`` is the saturated steering, so
-anti-windup schemes can see the saturation.
+of arrays (the PI's integrators). ``delta_applied`` is the saturated steering
+(:func:`saturate`), so anti-windup schemes can see the saturation.
 
 The simulator uses it two ways, with no code in the controllers for either:
 
@@ -83,6 +83,14 @@ def no_rate(params, c, obs, delta_cmd, delta_applied):
     return c
 
 
+def saturate(delta_cmd, delta_max):
+    """The steering saturation ``delta = clip(delta_cmd, -delta_max, delta_max)`` (rad), the one
+    every simulator applies to a command. Its derivative is
+    :func:`pfjax.numerics.elementary.clip`'s: ``d delta_cmd`` inside the limits (ties included),
+    the limit's own beyond them (no division)."""
+    return E.clip(delta_cmd, -delta_max, delta_max)
+
+
 def step(controller: Controller, params, c, obs: Observation, period: Array | float):
     """One sample of a sampled controller: ``delta = output(c, obs)``, ``c <- c + period * rate``.
 
@@ -90,6 +98,6 @@ def step(controller: Controller, params, c, obs: Observation, period: Array | fl
         ``(delta_cmd, c_next)``; the caller saturates ``delta_cmd``.
     """
     delta_cmd = controller.output(params, c, obs)
-    delta = E.clip(delta_cmd, -obs.delta_max, obs.delta_max)
+    delta = saturate(delta_cmd, obs.delta_max)
     dc = controller.rate(params, c, obs, delta_cmd, delta)
     return delta_cmd, jax.tree_util.tree_map(lambda a, b: a + period * b, c, dc)

@@ -53,7 +53,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from pfjax.controllers.base import Controller
+from pfjax.controllers.base import Controller, saturate
 from pfjax.errors import InputError
 from pfjax.metrics import running
 from pfjax.models import single_track as st
@@ -235,7 +235,7 @@ def _step(controller: Controller, config: SimConfig, sc: DynamicScenario, carry:
     v_rear = x.v * E.sincos(x.beta)[1]  # m/s, the rear axle's longitudinal speed
     obs = noisy_observation(observation(proj, pose, v_rear, p.l_f + p.l_r, dmax, sc.path), sc.noise, k)
     cmd, c_next = held_command(controller, config, sc.gains, c, obs, carry.aux.cmd, k, last)
-    delta_c = E.clip(cmd, -dmax, dmax)
+    delta_c = saturate(cmd, dmax)
     x_next = rk4_step_rolled(lambda tt, xx: closed_loop_rhs(xx, delta_c, sc), t, x, dt)
     finite = jnp.isfinite(proj.d)
     for value in x:

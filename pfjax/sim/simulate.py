@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from pfjax.controllers.base import Controller, Observation, step
+from pfjax.controllers.base import Controller, Observation, saturate, step
 from pfjax.metrics import running
 from pfjax.models.slip import Pose, SlipParams, world_rhs
 from pfjax.numerics import elementary as E
@@ -168,7 +168,7 @@ def _closed_loop_rhs(controller: Controller, sc: Scenario, u_guess, k, iters):
         pose, c = y
         obs = noisy_observation(_observation(measure_pose(sc, pose, u_guess, iters), pose, sc), sc.noise, k)
         cmd = E.computed_once(controller.output(sc.gains, c, obs))
-        delta = E.clip(cmd, -dmax, dmax)
+        delta = saturate(cmd, dmax)
         br, bf = slip_at(sc.slip, t)
         return world_rhs(pose, delta, br, bf, sc.params), controller.rate(sc.gains, c, obs, cmd, delta)
 
@@ -196,7 +196,7 @@ def _sampled_command(controller: Controller, config: SimConfig, sc: Scenario, c,
     cmd, c_next = held_command(controller, config, sc.gains, c, obs, held.cmd, k, last)
     dmax = jnp.asarray(sc.params.delta_max, float)
     rate = jnp.asarray(sc.params.delta_rate_max, float)
-    delta, prev = E.clip(cmd, -dmax, dmax), held.delta
+    delta, prev = saturate(cmd, dmax), held.delta
     # steering rate limit (exactly a no-op when rate = inf); held at sample N
     limited = prev + E.clip(delta - prev, -rate * dt, rate * dt)
     delta = E.computed_once(jnp.where(last, prev, jnp.where(jnp.isfinite(rate), limited, delta)))
@@ -216,7 +216,7 @@ def _step(controller: Controller, config: SimConfig, sc: Scenario, carry: loop.L
     obs = noisy_observation(_observation(proj, pose, sc), sc.noise, k)
     if config.control_every is None:
         cmd = E.computed_once(controller.output(sc.gains, c, obs))
-        delta = E.clip(cmd, -dmax, dmax)
+        delta = saturate(cmd, dmax)
         new_pose, c_next = rk4_step_rolled(_closed_loop_rhs(controller, sc, proj.u, k, iters), t, (pose, c), dt)
     else:
         cmd, c_next, delta = _sampled_command(controller, config, sc, c, obs, carry.aux, k, last)
