@@ -35,7 +35,11 @@ def register(sub) -> None:
         "importance sampling (cross-entropy Gaussian mixture), subset simulation or plain Monte Carlo; "
         "prints the estimate, its 95 % interval, relative error and rollouts.",
     )
-    p.add_argument("config", help="study TOML (its [rare_event] table sets the defaults)")
+    p.add_argument(
+        "config",
+        help="study TOML (its [rare_event] table sets the defaults; its enabled key only tells pfjax study "
+        "whether to estimate too)",
+    )
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value")
     p.add_argument("--controller", default=None, help="only this controller of the study (default: all)")
     p.add_argument("--method", default=None, help="is | subset | mc (default: the config's rare_event.method, else is)")
