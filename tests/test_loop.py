@@ -145,9 +145,9 @@ def test_checkpoint_segments_are_square_roots_of_the_samples_above_the_byte_thre
     assert seg(4001, 100, limit // (4001 * 100)) == 0
     assert seg(4001, 100, limit // (4001 * 100) + 1) == 64  # ceil(sqrt(4001)) = 64
     # a divisor of n from ceil(sqrt(n)) down to half of it: no last partial segment
-    assert seg(4096, limit, 1) == 64 and seg(4097, limit, 1) == 65 and seg(2001, limit, 1) == 29
-    assert seg(4095, limit, 1) == 63 and seg(2, limit, 1) == 2 and seg(38, limit, 1) == 7
-    assert seg(10**6, 8, 0) == 0  # a run alone outside any batch (runs 0 or 1)
+    assert seg(4096, limit, 2) == 64 and seg(4097, limit, 2) == 65 and seg(2001, limit, 2) == 29
+    assert seg(4095, limit, 2) == 63 and seg(2, limit, 2) == 2 and seg(38, limit, 2) == 7
+    assert seg(10**9, limit, 0) == seg(10**9, limit, 1) == 0  # a run alone (placed batches: runs 0)
 
 
 @pytest.mark.parametrize("n_samples", [N, N - 1])  # 5 segments of 6; 4 of 6 and a tail of 5

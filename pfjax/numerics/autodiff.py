@@ -17,9 +17,9 @@ derivatives over the forward pass, each function timed in a window of consecutiv
 3.59-3.66 for D = 1 / 2 / 3 / 4 with each device's runs in one block, 1.33-1.34 / 1.59-1.65 /
 2.49-2.52 / 2.90-3.00 in blocks sized for a value and its tangents
 (:func:`pfjax.sim.sharding.default_block`); reverse mode 3.71-3.73 for any D, in checkpointed
-segments (docs/performance.md, Gradients). ``mode="auto"`` therefore takes forward mode up to :data:`FORWARD_MAX` parameters
-(controller gains) and reverse mode above it (a falsifier's scenario parameters). Both give the
-same derivative up to rounding (tested).
+segments (docs/performance.md, Gradients). ``mode="auto"`` therefore takes forward mode up to
+:data:`FORWARD_MAX` parameters (controller gains) and reverse mode above it (a falsifier's scenario
+parameters). Both give the same derivative up to rounding (tested).
 
 **How the tangents travel** (:data:`NESTED_MAX`). ``D`` tangents as one batch (``vmap`` of
 ``jax.jvp`` over the basis) are arrays of shape ``(D, runs)`` beside the ``(runs,)`` primal values,
@@ -49,7 +49,7 @@ from jax.flatten_util import ravel_pytree
 #: Parameters up to which ``mode="auto"`` uses forward mode. Measured on the benchmark (module
 #: docstring): forward mode 3.59-3.66 forward passes for D = 4 in one block per device (2.90-3.00 in
 #: blocks), reverse mode 3.71-3.73 for any D. Forward mode's cost grows by about half a forward pass
-#: per parameter, so the crossover lies at D = 4 whole and near D = 5 in blocks at that batch; not
+#: per parameter, so the crossover lies at D = 4 whole and between D = 5 and 6 in blocks at that batch; not
 #: measured at other batches (at 250 runs per device reverse mode took 3.15 forward passes).
 FORWARD_MAX = 4
 MODES = ("auto", "forward", "reverse")

@@ -72,7 +72,8 @@ class Layout(NamedTuple):
     ``blocks``: blocks per device, evaluated one after another.
 
     ``runs``: the runs of a traced batch on each device, padding included, in all its blocks
-    (reverse mode through the loop over blocks stores every block's steps), which decide the loop's
+    (reverse mode through the loop over blocks stores every block's steps; counted as if the batch
+    were split over every device, as :func:`plan_batch` places one), which decide the loop's
     checkpoints (:func:`pfjax.sim.loop.checkpoint_segment`; 0: a placed batch, which no
     transformation differentiates).
 
@@ -150,7 +151,7 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
     of this rule's size; with XLA's default width, D = 1 / 2 1.32-1.33x / 1.61-1.62x whole against
     1.31x / 1.58-1.59x in blocks. Reverse mode gains less in blocks (its stored steps are the same
     in total, so the loop checkpoints them in the same segments, :func:`pfjax.sim.loop.checkpoint_segment`):
-    at 2,000 runs 3.53x / 3.60x / 3.67x in blocks of 336 / 500 / 250 runs against 3.77x whole, for
+    at 2,000 runs 3.53x / 3.60x / 3.67x in blocks of 336 / 500 / 250 runs against 3.65-3.77x whole, for
     1-1.5 s more compilation, so ``tangents=0`` gives it the forward pass's blocks (one per device
     at that batch).
     """

@@ -16,9 +16,9 @@ step simulates ``n`` rollouts per start (the batch), so ``n_rollouts = steps * n
 this step (screening, successive halving, restarts, smoothing). With
 a few gains (``mode="auto"``: at most 4) the gradient is taken in forward mode, one tangent per
 gain alongside the forward pass (2 gains: 1.6-1.9 forward passes for value and gradient, O(1) memory
-in the horizon); with more, in reverse mode (3.2-3.7 forward passes, O(horizon) memory per run for
-the scan's carries, O(sqrt(horizon)) in the checkpointed segments of a large batch). Measured:
-:mod:`pfjax.numerics.autodiff`.
+in the horizon); with more, in reverse mode (3.2-4.9 forward passes, O(horizon) memory per run for
+the scan's carries: the cost vmaps the single-run simulator itself, so its loop checkpoints every
+step). Measured: :mod:`pfjax.numerics.autodiff`.
 
 Non-smooth points, and what the gradient is there (JAX's derivative of the active branch):
 
