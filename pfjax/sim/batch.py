@@ -87,6 +87,16 @@ def call(jitted, scenarios, *, devices=None, block: int | str | None = "auto", *
     return sharding.unpad(jitted(placed, layout=layout, **static), n)
 
 
+def vehicle_programs(simulate: Callable[..., Any], *, module: str):
+    """:func:`programs` of a controlled vehicle's ``simulate(controller, sc, config, *, runs)`` (the
+    slip and the dynamic vehicle): the controller and the config static, ``runs`` from the layout."""
+    return programs(
+        lambda sc, *, controller, config, runs=1: simulate(controller, sc, config, runs=runs),
+        module=module,
+        static=("controller", "config"),
+    )
+
+
 def check_record(
     scenarios, n_steps: int, *, copies: int = 1, key: str = "record", runs: int | None = None, hint: str | None = None
 ) -> None:

@@ -49,7 +49,6 @@ import math
 from functools import partial
 from typing import Any, NamedTuple
 
-import jax
 import jax.numpy as jnp
 from jax import Array
 
@@ -59,7 +58,7 @@ from pfjax.metrics import running
 from pfjax.models import single_track as st
 from pfjax.models.slip import Pose
 from pfjax.numerics import elementary as E
-from pfjax.paths.geometry import NEWTON_START, global_parameter, measure, polish_parameter
+from pfjax.paths.geometry import global_parameter, measure, polish_parameter
 from pfjax.sim import batch, loop
 from pfjax.sim.integrators import rk4_step_rolled
 from pfjax.sim.simulate import (
@@ -71,13 +70,10 @@ from pfjax.sim.simulate import (
     measure_pose,
     noisy_observation,
     observation,
+    run_vehicle,
     update_metrics,
 )
 from pfjax.sim.status import classify
-
-#: Reverse mode saves the carry and the projection's last-but-one Newton iterate per step and
-#: recomputes the step (as the slip vehicle, :func:`pfjax.sim.simulate.simulate`).
-_SAVED = jax.checkpoint_policies.save_only_these_names(NEWTON_START)
 
 
 class DynamicScenario(NamedTuple):
@@ -326,24 +322,12 @@ def simulate(controller: Controller, sc: DynamicScenario, config: SimConfig, *, 
         :class:`DynamicResult`: metrics, slip metrics, status, failure time, final state, trajectory.
     """
     controller.check_params(sc.gains)
-    return loop.run(
-        system(controller, config),
-        sc,
-        config.n_steps + 1,
-        record=config.record,
-        scalar_inputs=True,
-        checkpoint_policy=_SAVED,
-        runs=runs,
-    )
+    return run_vehicle(system(controller, config), sc, config, runs)
 
 
 #: The jitted, vmapped :func:`simulate` and the jitted single run without a batch axis
-#: (:func:`pfjax.sim.batch.programs`).
-_simulate_vmapped, _simulate_one = batch.programs(
-    lambda sc, *, controller, config, runs=1: simulate(controller, sc, config, runs=runs),
-    module=__name__,
-    static=("controller", "config"),
-)
+#: (:func:`pfjax.sim.batch.vehicle_programs`).
+_simulate_vmapped, _simulate_one = batch.vehicle_programs(simulate, module=__name__)
 
 
 def simulate_batch(

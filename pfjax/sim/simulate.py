@@ -301,8 +301,15 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig, *, runs: i
         ``SimResult``: metrics, status, failure time, final state, trajectory (if ``config.record``).
     """
     controller.check_params(sc.gains)  # at trace time: a PI given state-feedback gains is bad input
+    return run_vehicle(system(controller, config), sc, config, runs)
+
+
+def run_vehicle(system: loop.System, sc, config: SimConfig, runs: int):
+    """A controlled vehicle's samples ``k = 0..N`` through :func:`pfjax.sim.loop.run` (the slip and
+    the dynamic vehicle): the small inputs as scalars, reverse mode's checkpoints by ``_SAVED``
+    (in segments for many ``runs``)."""
     return loop.run(
-        system(controller, config),
+        system,
         sc,
         config.n_steps + 1,
         record=config.record,
@@ -313,12 +320,8 @@ def simulate(controller: Controller, sc: Scenario, config: SimConfig, *, runs: i
 
 
 #: The jitted, vmapped :func:`simulate` and the jitted single run without a batch axis
-#: (:func:`pfjax.sim.batch.programs`).
-_simulate_vmapped, _simulate_one = batch.programs(
-    lambda sc, *, controller, config, runs=1: simulate(controller, sc, config, runs=runs),
-    module=__name__,
-    static=("controller", "config"),
-)
+#: (:func:`pfjax.sim.batch.vehicle_programs`).
+_simulate_vmapped, _simulate_one = batch.vehicle_programs(simulate, module=__name__)
 
 
 def simulate_batch(
