@@ -28,10 +28,10 @@ def program(run_one: Callable[..., Any], *, module: str, name: str, static: tupl
     """The jitted ``vmap(run_one)`` over a batch placed by :func:`pfjax.sim.sharding.plan_batch`.
 
     ``run_one(sc, runs=..., **kwargs)`` is one run (pure, unbatched; ``runs``: the layout's runs per
-    device and loop, which decide its reverse-mode checkpoints, :func:`pfjax.sim.loop.run`); its
-    keyword arguments ``static`` (a controller, a config: hashable) and the batch's ``layout`` are
-    static arguments of the program,
-    so it compiles once per their values, the batch's shape, device set and block count. The program
+    device in all blocks, which decide its reverse-mode checkpoints, :func:`pfjax.sim.loop.run`);
+    its keyword arguments ``static`` (a controller, a config: hashable) and the batch's ``layout``
+    are static arguments of the program, so it compiles once per their values, the batch's shape,
+    device set and block count. The program
     is registered as ``module.name`` (:data:`pfjax.numerics.compiler.PROGRAMS`) and keeps that
     name in its compiled module.
     """

@@ -160,10 +160,10 @@ SEGMENT_BYTES = 128 * 2**20
 def checkpoint_segment(n_samples: int, carry_bytes: int, runs: int) -> int:
     """Samples per checkpointed segment of a reverse-differentiated loop: 0 (every sample its own
     checkpoint) for a run alone (``runs`` 0 or 1) and unless ``runs * n_samples * carry_bytes``
-    exceeds :data:`SEGMENT_BYTES`; then the
-    largest divisor of ``n_samples`` from ``ceil(sqrt(n_samples))`` down to half of it, or where
-    none is, ``ceil(sqrt(n_samples))`` itself (the last ``n_samples mod S`` samples then loop on their
-    own: a second copy of the step in the program, about 2 s more to compile on the benchmark).
+    exceeds :data:`SEGMENT_BYTES`; then the largest divisor of ``n_samples`` from
+    ``ceil(sqrt(n_samples))`` down to half of it, or where none is, ``ceil(sqrt(n_samples))`` itself
+    (the last ``n_samples mod S`` samples then loop on their own: a second copy of the step in the
+    program, about 2 s more to compile on the benchmark).
 
     Reverse mode through a loop of per-sample checkpoints stores the carry of every sample and runs
     the loop, then each sample again and its transpose. Stored for thousands of runs over thousands
