@@ -31,9 +31,8 @@ def program(run_one: Callable[..., Any], *, module: str, name: str, static: tupl
     device in all blocks, which decide its reverse-mode checkpoints, :func:`pfjax.sim.loop.run`);
     its keyword arguments ``static`` (a controller, a config: hashable) and the batch's ``layout``
     are static arguments of the program, so it compiles once per their values, the batch's shape,
-    device set and block count. The program
-    is registered as ``module.name`` (:data:`pfjax.numerics.compiler.PROGRAMS`) and keeps that
-    name in its compiled module.
+    device set and block count. The program is registered as ``module.name``
+    (:data:`pfjax.numerics.compiler.PROGRAMS`) and keeps that name in its compiled module.
     """
 
     def run_batch(scenarios, *, layout: sharding.Layout = sharding.Layout(None, 1), **kwargs):
