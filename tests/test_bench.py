@@ -100,6 +100,8 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     # forward mode (2 gains) and reverse mode: one derivative, float32 rounding apart
     assert s["grad_mode"] == "forward" and s["gradient"]["modes_max_rel_diff"] < 1e-3
     assert s["grad_over_forward_reverse"] > 0
+    # a small batch: reverse mode checkpoints every step, and the report says so
+    assert s["gradient"]["reverse_segment"] == 0
     assert s["ratio_vs_numba_f32"] == pytest.approx(s["msteps_per_s_f32"] / s["numba_msteps_per_s_f32"], rel=1e-12)
     # the vehicle models in the same loop (--quick: kinematic and ST), the ratio recomputed from the times
     for p, dtype in (("f32", "float32"), ("f64", "float64")):
@@ -128,6 +130,7 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     report = (out / "report.md").read_text()
     assert "Goals on this machine (docs/performance.md, Scale targets): none measured" in report
     assert report.count("| not measured | – |") == len(GOALS)
+    assert "reverse mode " in report and "x (every step checkpointed; the two gradients differ by" in report
 
 
 @pytest.mark.parametrize(

@@ -150,6 +150,32 @@ def test_checkpoint_segments_are_square_roots_of_the_samples_above_the_byte_thre
     assert seg(10**9, limit, 0) == seg(10**9, limit, 1) == 0  # a run alone (placed batches: runs 0)
 
 
+def test_the_benchmarks_reverse_mode_is_checkpointed_as_it_states(monkeypatch):
+    """``pfjax bench`` reports reverse mode's segments from :func:`loop.carry_bytes` and the traced
+    batch's runs per device; the loop, traced for the benchmark's gradient (2,000 float32 runs,
+    4,001 samples), weighs the same carry (100 bytes) and runs, and decides the same 64 samples."""
+    from pfjax.bench import problem as P
+    from pfjax.controllers import state_feedback
+    from pfjax.sim import SimConfig, simulate_batch
+    from pfjax.sim.simulate import system
+
+    sim = SimConfig(dt=P.DT, horizon=P.HORIZON, newton_iters=P.NEWTON_ITERS, record=False)
+    k = len(jax.devices())
+    seen = []
+    real = loop.checkpoint_segment
+    monkeypatch.setattr(loop, "checkpoint_segment", lambda *a: seen.append(a) or real(*a))
+    loss = lambda K, s: jnp.sum(
+        simulate_batch(s._replace(gains=s.gains._replace(K=K)), controller=state_feedback, config=sim).metrics.iae
+    )
+    with jax.enable_x64(False):  # as the benchmark's float32 runs (the tests run with x64 on)
+        sc = P.scenarios(P.random_batch(2000, 0), np.float32)
+        one = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype), sc)
+        stated = (sim.n_steps + 1, loop.carry_bytes(system(state_feedback, sim), one), -(-2000 // k))
+        jax.make_jaxpr(jax.grad(loss))(sc.gains.K, sc)  # traced, not compiled
+    assert stated[:2] == (4001, 100) and seen == [stated]
+    assert real(*stated) == 64  # over the threshold on up to 5 devices (more than 335 runs each)
+
+
 @pytest.mark.parametrize("n_samples", [N, N - 1])  # 5 segments of 6; 4 of 6 and a tail of 5
 def test_checkpoint_segments_change_no_value_record_or_gradient(n_samples):
     """The loop in checkpointed segments (forced by ``runs``) gives the per-sample loop's values,

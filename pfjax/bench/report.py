@@ -67,6 +67,7 @@ def summary_units(summary: dict, prefix: str = "") -> dict:
             "modes_max_rel_diff": "1",
             "grad_block": "runs",
             "grad_blocks": "1",
+            "reverse_segment": "samples",
         },
     }
     for name in summary.get("agreement") or {}:
@@ -279,8 +280,13 @@ def markdown(result: dict) -> str:
             if (g.get("grad_blocks") or 1) > 1
             else ""
         )
-        + f"); reverse mode {s['grad_over_forward_reverse']:.2f}x "
-        f"(the two gradients differ by {g['modes_max_rel_diff']:.1e} relative). "
+        + f"); reverse mode {s['grad_over_forward_reverse']:.2f}x ("
+        + (
+            f"in checkpointed segments of {g['reverse_segment']} steps; "
+            if g.get("reverse_segment")
+            else "every step checkpointed; "
+        )
+        + f"the two gradients differ by {g['modes_max_rel_diff']:.1e} relative). "
         f"Peak RSS {s['peak_rss_mib']:.0f} MiB.",
         "",
         *_models(s.get("models") or {}),

@@ -18,7 +18,8 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
 * the value and gradient of the batch-mean IAE with respect to the controller gains over the
   forward pass at the same batch size, as the tuner takes it (forward mode for the 2 gains,
   :mod:`pfjax.numerics.autodiff`, in blocks of runs sized for a value and its tangents,
-  ``gradient["grad_block"]``) and in reverse mode (``jax.value_and_grad``): the three timed
+  ``gradient["grad_block"]``) and in reverse mode (``jax.value_and_grad``; its loop checkpointed in
+  segments of ``gradient["reverse_segment"]`` samples, :func:`pfjax.sim.loop.checkpoint_segment`): the three timed
   in turn ``grad_rounds`` times, each in a window of consecutive calls that holds the release of
   its own buffers and not the previous one's (:func:`pfjax.bench.timing.interleaved`), best of
   each, so the ratios survive a shared machine's slow periods;
@@ -145,7 +146,8 @@ def _grad(batch, dtype, cfg: BenchConfig):
 
     from pfjax.controllers import state_feedback
     from pfjax.numerics import autodiff, compiler
-    from pfjax.sim import SimConfig, sharding, simulate_batch
+    from pfjax.sim import SimConfig, loop, sharding, simulate_batch
+    from pfjax.sim.simulate import system
 
     sc, n = sharding.shard_batch(P.scenarios(batch, dtype))
     sim = SimConfig(dt=P.DT, horizon=cfg.horizon, newton_iters=P.NEWTON_ITERS, record=False)
@@ -162,6 +164,13 @@ def _grad(batch, dtype, cfg: BenchConfig):
     block = sharding.default_block(sc, tangents=K.size) if mode == "forward" else "auto"
     devices = jax.device_count()
     layout = sharding.traced_layout(sc.gains.K.shape[0], block, devices) if isinstance(block, int) else None
+    # reverse mode's checkpoints, as the loop decides them for the unblocked batch (pfjax.sim.loop)
+    one_run = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype), sc)
+    segment = loop.checkpoint_segment(
+        sim.n_steps + 1,
+        loop.carry_bytes(system(state_feedback, sim), one_run),
+        sharding.traced_layout(sc.gains.K.shape[0], None, devices).runs,
+    )
     # the simulator's compiler options (pfjax.numerics.compiler): a jit around simulate_batch
     # compiles with its own options, so the three programs take the same ones
     fwd = compiler.jit(loss)
@@ -181,6 +190,7 @@ def _grad(batch, dtype, cfg: BenchConfig):
         mode=mode,
         reverse_s=t_rev,
         reverse_compile_s=compile_time(first_rev, t_rev),
+        reverse_segment=segment,  # samples per checkpointed segment (0: every sample checkpointed)
         grad_reverse=g_rev.tolist(),
         modes_max_rel_diff=float(np.max(np.abs(g - g_rev)) / np.max(np.abs(g_rev))),
         grad_finite=bool(np.all(np.isfinite(g)) and np.all(np.isfinite(g_rev))),

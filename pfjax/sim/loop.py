@@ -198,6 +198,19 @@ def _tree_bytes(tree) -> int:
     return sum(int(np.size(a)) * jnp.result_type(a).itemsize for a in jax.tree_util.tree_leaves(tree))
 
 
+def _start(system: System, inputs) -> LoopCarry:
+    """The loop's carry before sample 0."""
+    start = system.init(inputs)
+    status = start.zero if start.status is None else start.status
+    return LoopCarry(start.state, start.aux, start.metrics, status, start.zero + system.no_failure)
+
+
+def carry_bytes(system: System, inputs) -> int:
+    """Bytes of one run's loop carry (``inputs``: one run's, arrays or ``jax.ShapeDtypeStruct``;
+    nothing is computed): what :func:`checkpoint_segment` weighs."""
+    return _tree_bytes(jax.eval_shape(lambda x: _start(system, x), inputs))
+
+
 def _scan(body, carry, n_samples: int, segment: int):
     """``lax.scan(body, carry, arange(n_samples))``, in checkpointed segments of ``segment``
     samples (the last ``n_samples mod segment`` samples on their own) when ``segment > 1``."""
@@ -263,9 +276,7 @@ def run(
     Returns:
         ``system.finish(inputs, Run(...))``.
     """
-    start = system.init(inputs)
-    status = start.zero if start.status is None else start.status
-    carry = LoopCarry(start.state, start.aux, start.metrics, status, start.zero + system.no_failure)
+    carry = _start(system, inputs)
     if scalar_inputs:
         parts, join = as_scalars(inputs)
         body = lambda c, k: _sample(system, join(parts), c, k, record)
