@@ -184,7 +184,7 @@ def _grad(batch, dtype, cfg: BenchConfig):
         grad_s=t_grad,
         grad_compile_s=compile_time(first, t_grad),
         # runs per device in each block of the forward-mode gradient, and the blocks
-        grad_block=(layout.size if layout.blocks > 1 else -(-sc.gains.K.shape[0] // devices)) if layout else None,
+        grad_block=(layout.size if layout.blocks > 1 else layout.runs) if layout else None,
         grad_blocks=layout.blocks if layout else None,
         grad=g.tolist(),
         mode=mode,
