@@ -24,7 +24,7 @@ from pfjax.montecarlo.study import RUN_FIGURES, WORKER_SUMMARY_FIGURES, run
 from pfjax.montecarlo.summary import summarize
 from pfjax.report import figure_worker
 from pfjax.report.figure_set import report_figures
-from pfjax.report.study_format import fmt_ci, fmt_margin, fmt_num, fmt_pct
+from pfjax.report.study_format import fmt_ci, fmt_gains, fmt_margin, fmt_num, fmt_pct
 from pfjax.report.study_report import write_report
 
 # 30 runs in chunks of 30, and the sweep's 3 amplitudes x 10 runs per axis are 30 too: one array shape,
@@ -559,3 +559,11 @@ def test_a_study_with_its_report_does_not_import_scipy_stats(tmp_path):
     imported = {line.rsplit("|", 1)[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time:")}
     # (an import through scipy's lazy attributes lists only scipy.stats' submodules)
     assert "scipy.special" in imported and not [m for m in imported if m.split(".")[:2] == ["scipy", "stats"]]
+
+
+def test_gains_are_shown_by_scalar_name_to_four_significant_digits():
+    from pfjax import controllers as C
+
+    flat = C.flat_gains(C.entry("state_feedback"), C.state_feedback_params(C.PAPER_K))
+    assert fmt_gains(flat) == "k_d = -2.738, k_theta = -2.077, feedforward = 0"
+    assert fmt_gains({}) == "—" and fmt_gains({}, "defaults") == "defaults"

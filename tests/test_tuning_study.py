@@ -24,6 +24,7 @@ import pytest
 from scipy.stats import beta
 from units_check import numbers_without_units
 
+from pfjax import controllers as C
 from pfjax.provenance import STAMP_UNITS, config_hash
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -94,7 +95,9 @@ def test_quick_tuning_study_outputs_consistent(out):
     assert set(runs.method) == set(expected)
     for r in s["tuning_runs"]:
         # the compass polish: 2 D value-only points per iteration (D gains)
-        D = sum(len(v) if isinstance(v, list) else 1 for v in r["gains"].values())
+        # D tuned gains: the registry's tuning box (the gains record every gain by its scalar name)
+        D = len(C.REGISTRY[r["problem"].partition(":")[0]].box[1])
+        assert set(r["gains"]) == set(C.REGISTRY[r["problem"].partition(":")[0]].gains), r["gains"]
         polish = ms["polish_steps"] * 2 * D if r["method"] == "gradient" else 0
         assert r["n_rollouts"] == expected[r["method"]] + polish, r
         assert r["n_forward_passes"] >= r["n_rollouts"]

@@ -12,6 +12,7 @@ __all__ = [
     "cell",
     "fmt_ci",
     "fmt_dist",
+    "fmt_gains",
     "fmt_margin",
     "fmt_mm",
     "fmt_num",
@@ -62,6 +63,12 @@ def fmt_dist(d) -> str:
     if k == "truncnormal":
         return f"normal, mean {d['mean']:g}, std {d['std']:g}, truncated to [{d['low']:g}, {d['high']:g}]"
     return "one of {" + ", ".join(f"{v:g}" for v in d["values"]) + "} (equally likely)"
+
+
+def fmt_gains(gains, empty: str = DASH) -> str:
+    """Scalar gains by name (:func:`pfjax.controllers.flat_gains`, what outputs record):
+    ``{"k_d": -2.7381, "k_theta": -2.0772} -> "k_d = -2.738, k_theta = -2.077"``; ``empty`` for none."""
+    return ", ".join(f"{k} = {v:.4g}" for k, v in gains.items()) or empty
 
 
 def fmt_p(p: float) -> str:

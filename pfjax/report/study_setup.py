@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pfjax.controllers import style
 from pfjax.montecarlo.sampling import SLIP_COLUMNS
-from pfjax.report.study_format import fmt_dist, missing
+from pfjax.report.study_format import fmt_dist, fmt_gains, missing
 
 __all__ = ["controller_rows", "path_rows", "setup", "uncertain_rows"]
 
@@ -105,7 +105,7 @@ def controller_rows(cfg: dict, summary: dict) -> list[dict]:
                 "name": c["name"],
                 "type": c["type"],
                 "how": how,
-                "gains": ", ".join(f"{k} = {v:.4g}" for k, v in gains.items()) or "defaults",
+                "gains": fmt_gains(gains, "defaults"),
             }
         )
     return ctrls

@@ -168,7 +168,7 @@ def part_ga_readings(cfg) -> dict:
     0.8 (adopted) and no crossover (children by mutation only), the PI tuned on the same seeds."""
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import make_problem, tune
+    from pfjax.tuning.problem import make_problem, reported_gains, tune
 
     g = cfg["ga"]
     problem = make_problem("pi", g["scenario"], cost=CostSpec(metric=g["cost"]))
@@ -182,7 +182,7 @@ def part_ga_readings(cfg) -> dict:
             "crossover_fraction": fraction,
             "costs": costs,
             "median_cost": float(np.median(costs)),
-            "best_gains": problem.tunable.named(best.theta),
+            "best_gains": reported_gains("pi", problem, best.theta),
             "n_rollouts": int(sum(r.n_rollouts for r in runs)),
         }
     a, b = out["crossover"]["best_gains"], out["none"]["best_gains"]

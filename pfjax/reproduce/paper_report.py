@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from pfjax.report.document import Bullets, Document, Figure, Heading, Paragraph, Table
+from pfjax.report.study_format import fmt_gains
 from pfjax.reproduce.paper_prose import (
     D_STAR_ZERO,
     FLAT_REL_TOL,
@@ -235,7 +236,7 @@ def _long_pi_and_ga(s: dict) -> list:
             r["crossover_fraction"],
             ", ".join(f"{c:.4f}" for c in r["costs"]),
             f"{r['median_cost']:.4f}",
-            ", ".join(f"{k} = {v:.4g}" for k, v in r["best_gains"].items()),
+            fmt_gains(r["best_gains"]),
             r["n_rollouts"],
         ]
         for name, r in (("scattered, 0.8 (adopted)", ga["crossover"]), ("none", ga["none"]))

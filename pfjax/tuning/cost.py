@@ -100,11 +100,6 @@ class Tunable(NamedTuple):
             i += n
         return self.base._replace(**out)
 
-    def named(self, theta) -> dict:
-        """``{field: value}`` with vectors as lists (for JSON)."""
-        g = self.gains(np.asarray(theta, dtype=np.float64))
-        return {f: (np.asarray(getattr(g, f)).tolist()) for f in self.fields}
-
 
 def run_costs(metrics, status, spec: CostSpec):
     """``J_i`` of each run (module docstring); ``metrics`` / ``status`` batched along axis 0."""

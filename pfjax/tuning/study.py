@@ -31,6 +31,7 @@ import pandas as pd
 from pfjax.montecarlo.summary import UNITS as MONTE_CARLO_UNITS
 from pfjax.numerics.random import seed_key
 from pfjax.provenance import STAMP_UNITS
+from pfjax.report.study_format import fmt_gains
 from pfjax.tables import GAINS, H2_CHANNELS, HINF_CHANNELS
 from pfjax.tuning.study_config import TuningStudy, ga_options, heldout_study, methods, problem_list
 
@@ -129,6 +130,8 @@ def make_study_problem(cfg: dict, name: str):
 
 
 def _run_row(problem_name, method, seed, r, pr) -> dict:
+    from pfjax.tuning.problem import reported_gains
+
     return {
         "problem": problem_name,
         "method": method,
@@ -138,7 +141,7 @@ def _run_row(problem_name, method, seed, r, pr) -> dict:
         "n_forward_passes": int(r.n_forward_passes),
         "wall_s": float(r.wall_s),
         "compile_s": float(r.compile_s),
-        "gains": pr.tunable.named(r.theta),
+        "gains": reported_gains(problem_name.partition(":")[0], pr, r.theta),
         "n_nonfinite_grad": int(r.n_nonfinite_grad),
     }
 
@@ -234,7 +237,7 @@ def _parts(cfg: dict, spec, progress: bool):
     print("part 3: held-out evaluation", flush=True)
     df, sweep, table = P.heldout(cfg, spec, controllers, progress)
     for r in table:
-        r["gains"] = ", ".join(f"{k}={np.round(v, 4).tolist()}" for k, v in controllers[r["controller"]][2].items())
+        r["gains"] = fmt_gains(controllers[r["controller"]][2])
     verdicts, comparisons = P.robust_vs_source(table)
     targets = {
         "wins_needed": P.wins_needed(cfg["seeds"]),

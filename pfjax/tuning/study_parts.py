@@ -17,7 +17,7 @@ from pfjax.tuning.study_config import K_TUNINGS, problem_list
 def table3(cfg, pr, progress):
     """Cost and gradient at the Table 3 gains, the local check, and where plain descent from them goes."""
     from pfjax.controllers import PAPER_PI
-    from pfjax.tuning.problem import check, cost_functions, evaluate, tune
+    from pfjax.tuning.problem import check, cost_functions, evaluate, reported_gains, tune
 
     th3 = pr.tunable.flatten(pr.tunable.base._replace(**{k: PAPER_PI[k] for k in pr.tunable.fields}))
     g3 = np.asarray(jax.grad(cost_functions(pr)[0])(jax.numpy.asarray(th3)))
@@ -32,7 +32,7 @@ def table3(cfg, pr, progress):
     )
     c3 = check(pr, th3)
     return {
-        "gains": pr.tunable.named(th3),
+        "gains": reported_gains("pi", pr, th3),
         "cost": evaluate(pr, th3),
         "gradient": g3.tolist(),
         "check_verdict": c3.verdict,
@@ -40,7 +40,7 @@ def table3(cfg, pr, progress):
         "check_eigenvalues": c3.eigenvalues.tolist(),
         "descent_steps": cfg["gradient"]["table3_steps"],
         "descent_cost": r3.cost,
-        "descent_gains": pr.tunable.named(r3.theta),
+        "descent_gains": reported_gains("pi", pr, r3.theta),
         "relative_decrease": 1.0 - r3.cost / evaluate(pr, th3),
     }
 
@@ -55,7 +55,7 @@ def checks(runs, problems, name):
         if not rs:
             continue
         best = min(rs, key=lambda r: r["cost"])
-        c = check(pr, best["gains"])
+        c = check(pr, best["gains"], controller=name.partition(":")[0])
         out[method] = {
             "seed": best["seed"],
             "cost": c.cost,
@@ -267,12 +267,15 @@ def heldout_controllers(tuning_runs, ks, des) -> dict:
     best = lambda m: min(
         (r for r in tuning_runs if r["method"] == m and r["problem"] == "pi:paper-line"), key=lambda r: r["cost"]
     )["gains"]
-    sf = lambda K: (C.state_feedback, C.state_feedback_params(K), {"K": list(map(float, np.ravel(K)))})
-    integ = lambda K: (C.integral, C.integral_params(K), {"K": list(map(float, np.ravel(K)))})
+    # the gains shown by scalar name, as a tuning reports them (pfjax.controllers.flat_gains)
+    shown = lambda name, params: (C.entry(name).controller, params, C.flat_gains(C.entry(name), params))
+    pi = lambda flat: shown("pi", C.params_from_flat(C.entry("pi"), flat))
+    sf = lambda K: shown("state_feedback", C.state_feedback_params(K))
+    integ = lambda K: shown("integral", C.integral_params(K))
     controllers = {
-        "pi-table3 (source)": (C.pi, C.entry("pi").make_params(), dict(C.PAPER_PI)),
-        "pi-ga": (C.pi, C.entry("pi").make_params(**best("ga")), best("ga")),
-        "pi-gradient": (C.pi, C.entry("pi").make_params(**best("gradient")), best("gradient")),
+        "pi-table3 (source)": pi({}),
+        "pi-ga": pi(best("ga")),
+        "pi-gradient": pi(best("gradient")),
         "K-paper (source)": sf(C.PAPER_K),
         "K-lmi-mixed": sf(des["lmi-mixed"]["K"]),
         "K-gradient-single": sf(ks["K-gradient-single"]["K"]),

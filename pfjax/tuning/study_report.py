@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from pfjax.report.document import Code, Document, Figure, Heading, Paragraph, Table
+from pfjax.report.study_format import fmt_gains
 from pfjax.tuning.study_config import problem_list
 
 #: Every problem's cost (an IAE, mean or CVaR over the problem's runs: :data:`pfjax.tuning.study.COLUMNS`).
@@ -174,7 +175,7 @@ def _parts23(s: dict) -> list:
         Paragraph(
             f"Table 3 (adopted reading) cost {t3['cost']:.5f}, gradient {np.round(t3['gradient'], 5).tolist()}, "
             f"check: {t3['check_verdict']}; {t3['descent_steps']} projected adam steps from there reach "
-            f"{t3['descent_cost']:.5f} ({t3['relative_decrease']:.1%} lower) at {t3['descent_gains']}."
+            f"{t3['descent_cost']:.5f} ({t3['relative_decrease']:.1%} lower) at {fmt_gains(t3['descent_gains'])}."
         ),
         Heading("3. Held-out Monte Carlo set"),
         Paragraph(_heldout_text(h)),
