@@ -182,7 +182,8 @@ def part_ga_readings(cfg) -> dict:
             "crossover_fraction": fraction,
             "costs": costs,
             "median_cost": float(np.median(costs)),
-            "best_gains": reported_gains("pi", problem, best.theta),
+            # the source's four PI gains, by scalar name (k_aw, the anti-windup it does not have, stays 0)
+            "best_gains": {k: v for k, v in reported_gains("pi", problem, best.theta).items() if k in C.PAPER_PI},
             "n_rollouts": int(sum(r.n_rollouts for r in runs)),
         }
     a, b = out["crossover"]["best_gains"], out["none"]["best_gains"]
