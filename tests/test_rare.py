@@ -610,3 +610,17 @@ def test_a_budget_below_what_the_method_needs_is_refused_before_anything_is_simu
     err = capsys.readouterr().err
     assert err.startswith("pfjax study: error: rare_event.max_rollouts: "), err
     assert not (tmp_path / "o").exists()
+
+
+def test_importance_sampling_where_every_draw_fails_reports_a_probability_in_its_interval():
+    # every draw fails: the weights' mean estimates 1 and can exceed it; p_fail is capped at 1
+    r = cross_entropy_is(lambda u: -np.ones(len(u)), 3, seed=0, n_per_level=200, n_batch=500, max_rollouts=2000)
+    assert 0.0 < r.p_fail <= 1.0 and r.ci95[0] <= r.p_fail <= r.ci95[1] <= 1.0
+    capped = [
+        cross_entropy_is(lambda u: -np.ones(len(u)), 3, seed=s, n_per_level=200, n_batch=500, max_rollouts=2000)
+        for s in range(6)
+    ]
+    for e in capped:
+        assert e.p_fail <= 1.0 and e.ci95[0] <= e.p_fail <= e.ci95[1] <= 1.0
+        assert ("uncapped_p" in e.detail) == (e.p_fail == 1.0) and e.detail.get("uncapped_p", 1.0) >= 1.0
+    assert any("uncapped_p" in e.detail for e in capped)  # the case arises: a mean above 1 was capped

@@ -216,7 +216,10 @@ def cross_entropy_is(
         a :class:`~pfjax.rare.estimate.RareEstimate` with ``method="is"``; ``detail`` holds the
         levels, the final mixture's distinct ``modes`` (means, weights: :func:`modes`), the effective sample size and
         the largest weight's share of the estimate (``max_weight_share``,
-        :mod:`pfjax.rare.check`).
+        :mod:`pfjax.rare.check`). ``p_fail`` is the weights' mean ``Σ w_i 1[g <= 0] / N`` capped at 1
+        (where nearly every draw fails, the mean of the weights, about 1, can exceed it); a capped
+        estimate keeps the mean in ``detail["uncapped_p"]``, its relative error is the mean's, and its
+        interval ``[1 - h, 1]`` (``h`` the mean's half-width).
 
     Raises:
         pfjax.errors.InputError: a bad argument, named; ``max_rollouts`` below the least budget
@@ -241,8 +244,8 @@ def cross_entropy_is(
     s1, s2, wmax, n_is, used = _sample_estimate(
         g, rng, mix, defensive, n_batch, target_rel_error, max_rollouts, used, batch
     )
-    p, var, rel = _moments(s1, s2, n_is)
-    half = Z95 * math.sqrt(var)
+    mean, var, rel = _moments(s1, s2, n_is)
+    p, half = min(mean, 1.0), Z95 * math.sqrt(var)  # a probability: the weights' mean can pass 1
     ess = s1 * s1 / s2 if s2 > 0 else 0.0
     return RareEstimate(
         p,
@@ -251,6 +254,7 @@ def cross_entropy_is(
         int(used),
         "is",
         {
+            **({"uncapped_p": mean} if mean > 1.0 else {}),
             "levels": levels,
             "converged": reached,
             "n_is": n_is,
