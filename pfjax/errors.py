@@ -44,9 +44,10 @@ class InputError(ValueError):
     def __init__(self, message: str, key: str | None = None):
         message = " ".join(str(message).split())  # one line, whatever the parts contained
         super().__init__(message)
-        if key is None:
-            head, sep, _ = message.partition(": ")
-            key = head if sep and " " not in head else None
+        head, sep, _ = message.partition(": ")
+        head = head if sep and " " not in head else None
+        if key is None or (head and head.startswith((f"{key}.", f"{key}["))):
+            key = head  # the whole key the message names: gains.foo, not gains
         self.key = key
 
 

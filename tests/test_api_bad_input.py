@@ -36,6 +36,8 @@ def _refused(call, key: str) -> str:
         call()
     msg = str(e.value)
     assert "\n" not in msg and re.match(rf"{re.escape(key)}\b", msg), msg
+    head = msg.partition(": ")[0]
+    assert e.value.key == head or " " in head, (e.value.key, msg)  # the key is the whole key the message names
     return msg
 
 
@@ -525,3 +527,18 @@ def test_messages_name_the_argument_as_the_command_line_does(tmp_path):
     st = pfjax.scenarios("line", 2, model="st")
     _refused(lambda: pfjax.simulate(st, "state_feedback", config={"control_every": None}), "config.control_every")
     assert "waypoints" in _refused(lambda: pfjax.scenarios("spline"), "path")
+
+
+@pytest.mark.parametrize(
+    "call, key",
+    [
+        (lambda: pfjax.simulate(pfjax.scenarios("line", 2), "state_feedback", gains={"foo": 1}), "gains.foo"),
+        (lambda: pfjax.simulate(pfjax.scenarios("line", 2), "stanley", config={"foo": 1}), "config.foo"),
+        (lambda: pfjax.design_mixed(region={"sector_angle": 2.0}), "region.sector_angle"),
+        (lambda: pfjax.tune("stanley", "line", check={"k": 1, "foo": 2}), "check.foo"),
+    ],
+)
+def test_a_nested_key_is_the_errors_key_as_the_message_names_it(call, key):
+    with pytest.raises(pfjax.InputError) as e:
+        call()
+    assert e.value.key == key and str(e.value).startswith(f"{key}: ")
