@@ -44,8 +44,8 @@ class InputError(ValueError):
     def __init__(self, message: str, key: str | None = None):
         message = " ".join(str(message).split())  # one line, whatever the parts contained
         super().__init__(message)
-        head, sep, _ = message.partition(": ")
-        head = head if sep and " " not in head else None
+        first, sep, _ = message.partition(": ")
+        head = first if sep and " " not in first else None
         if key is None or (head and head.startswith((f"{key}.", f"{key}["))):
             key = head  # the whole key the message names: gains.foo, not gains
         self.key = key
@@ -304,6 +304,16 @@ class SynthesisError(ValueError):
 
     def __init__(self, message: str, status: str | None = None):
         super().__init__(message)
+        self.status = status
+
+
+class NoDesignError(InputError, SynthesisError):
+    """A synthesis that finds no design for the values a caller gave (the operating point, the pole
+    region): an :class:`InputError` naming what the caller can change, and a :class:`SynthesisError`
+    with the solver's ``status``, so that code catching either catches it."""
+
+    def __init__(self, message: str, key: str | None = None, status: str | None = None):
+        super().__init__(message, key)
         self.status = status
 
 

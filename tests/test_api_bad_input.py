@@ -542,3 +542,22 @@ def test_a_nested_key_is_the_errors_key_as_the_message_names_it(call, key):
     with pytest.raises(pfjax.InputError) as e:
         call()
     assert e.value.key == key and str(e.value).startswith(f"{key}: ")
+
+
+@pytest.mark.parametrize(
+    "kwargs, argv, key, flags",
+    [
+        ({"v": 1e6}, ["--speed", "1e6"], "v/L", "--speed/--wheelbase"),
+        ({"region": {"max_real": -1e6}}, ["--max-real", "-1e6"], "region", "--max-real/--disk/--sector-deg"),
+    ],
+)
+def test_no_design_is_bad_input_named_alike_by_the_api_and_pfjax_synth(kwargs, argv, key, flags, capsys):
+    from pfjax.errors import SynthesisError
+
+    with pytest.raises(InputError) as e:
+        pfjax.design_mixed(**kwargs)
+    # an InputError naming what the caller can change, and a SynthesisError with the solver's status
+    assert e.value.key == key and isinstance(e.value, SynthesisError) and e.value.status == "infeasible"
+    assert main(["synth", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"pfjax synth: error: {flags}: {str(e.value).removeprefix(key + ': ')}"

@@ -27,12 +27,31 @@ def design_mixed(v: float = 1.0, L: float = 0.2, alpha: float = 10.0, beta: floa
         ``h2_norm`` and its poles. Pass it as ``gains`` to :func:`simulate` with ``"state_feedback"``.
 
     Raises:
-        InputError: a bad argument, named (``v``, ``L``, ``alpha``, ``beta``, ``region.<field>``).
-        SynthesisError: the LMIs are infeasible (:class:`pfjax.errors.SynthesisError`, a ``ValueError``).
+        InputError: a bad argument, named (``v``, ``L``, ``alpha``, ``beta``, ``region.<field>``);
+            no design at these values (the LMIs infeasible, the solver failing): a
+            :class:`pfjax.errors.NoDesignError` naming ``region`` where one is given, else ``v/L``
+            (:func:`synthesized`), as ``pfjax synth`` refuses them.
     """
-    from pfjax.synthesis import synthesize
+    return synthesized("mixed", v=v, L=L, region=_region(region), alpha=alpha, beta=beta)
 
-    return synthesize("mixed", v=v, L=L, alpha=alpha, beta=beta, region=_region(region))
+
+def synthesized(method: str, *, v: float, L: float, region=None, **weights):
+    """:func:`pfjax.synthesis.synthesize` for a caller's values (:func:`design_mixed`, ``pfjax
+    synth``): a synthesis that finds no design is a one-line :class:`~pfjax.errors.NoDesignError`
+    (an ``InputError`` and a ``SynthesisError`` with the solver's status) naming what the caller can
+    change: ``region`` where a pole region is given, else ``v/L``, with the operating point and the
+    solver's verdict."""
+    from pfjax.synthesis import SynthesisError, synthesize
+
+    try:
+        return synthesize(method, v=v, L=L, region=region, **weights)
+    except errors.NoDesignError:
+        raise
+    except SynthesisError as e:  # the operating point (or the region) admits no design
+        key, what = ("region", "has its closed-loop poles there") if region is not None else ("v/L", "exists")
+        raise errors.NoDesignError(
+            f"{key}: no {method} design {what} at speed {v:g} m/s, wheelbase {L:g} m ({e})", key, e.status
+        ) from None
 
 
 def _region(region):

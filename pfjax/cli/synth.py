@@ -24,6 +24,8 @@ SYNTH_FLAGS = {
     "max_real": "--max-real",
     "disk_center": "--disk",
     "disk_radius": "--disk",
+    "v/L": "--speed/--wheelbase",  # no design at the operating point (pfjax.api.design.synthesized)
+    "region": "--max-real/--disk/--sector-deg",  # no design in the pole region
 }
 
 
@@ -49,7 +51,8 @@ UNITS = {
 
 
 def cmd(args) -> dict:
-    from pfjax.synthesis import PoleRegion, SynthesisError, synthesize
+    from pfjax.api.design import synthesized
+    from pfjax.synthesis import PoleRegion
 
     region = None
     with as_flags(SYNTH_FLAGS):
@@ -71,15 +74,7 @@ def cmd(args) -> dict:
                 disk_radius=None if args.disk is None else args.disk[1],
                 sector_angle=None if args.sector_deg is None else math.radians(args.sector_deg),
             )
-        try:
-            design = synthesize(args.method, v=args.speed, L=args.wheelbase, region=region, **weights)
-        except SynthesisError as e:  # the operating point (or the region) admits no design
-            flags = "--max-real/--disk/--sector-deg" if region is not None else "--speed/--wheelbase"
-            where = " in this pole region" if region is not None else ""
-            raise UsageError(
-                f"{flags}: no {args.method} design exists{where} at speed {args.speed:g} m/s, wheelbase "
-                f"{args.wheelbase:g} m ({e})"
-            ) from None
+        design = synthesized(args.method, v=args.speed, L=args.wheelbase, region=region, **weights)
     out = design.to_dict()
     if args.method == "mixed":  # recorded as run, the synthesis's defaults filled in
         args.alpha, args.beta = out["alpha"], out["beta"]
