@@ -95,11 +95,10 @@ def test_bad_config_names_the_key(override, expected):
     assert "\n" not in msg
 
 
-def test_bad_controller_gain_is_named_at_run_time(tmp_path):
-    spec = spec_of("controllers[1].gains={kk=2.0}")
-    with pytest.raises(ConfigError, match=r"controllers\[1\]\.gains\.kk: unknown gain"):
-        run_study(spec, tmp_path / "out", progress=False)
-    assert not (tmp_path / "out").exists() and list(tmp_path.iterdir()) == []
+def test_bad_controller_gain_name_is_refused_as_the_config_loads(tmp_path):
+    with pytest.raises(ConfigError, match=r"^controllers\[1\]\.gains\.kk: unknown gain for controller 'stanley'"):
+        spec_of("controllers[1].gains={kk=2.0}")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_sampled_distributions():

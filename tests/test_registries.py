@@ -258,7 +258,7 @@ def _sf_register(factory=None, **kw):
         ({"box": (("K",), (-1.0,), (0.0,))}, "box.lower"),  # K has two elements
         ({"box": (("K",), (-1.0, -1.0), (0.0, 0.0, 0.0))}, "box.upper"),
         ({"box": (("K",), (-1.0, float("nan")), (0.0, 0.0))}, "box.lower[1]"),
-        ({"box": (("K", "K"), (-1.0,) * 4, (0.0,) * 4)}, "box.fields"),
+        ({"box": (("K", "K"), (-1.0,) * 4, (0.0,) * 4)}, "box.fields[1]"),  # the repeated field
         ({"box": ("K", -1.0, 0.0, 1.0)}, "box"),
         ({"name": ""}, "name"),
         ({"name": 5}, "name"),

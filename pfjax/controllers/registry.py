@@ -300,12 +300,9 @@ def params_from_flat(e: ControllerEntry, flat: Mapping[str, Any], key: str = "ga
     """The parameter pytree from scalar gains ``{name: value}`` (the others at their defaults); an
     unknown name, or a value that is not one finite number, raises
     :class:`~pfjax.errors.InputError` naming ``<key>.<name>``."""
+    check_gain_names(e, flat, key)
     default = flat_gains(e)
     for k, v in flat.items():
-        if k not in default:
-            raise errors.InputError(
-                f"{key}.{k}: unknown gain for controller {e.name!r}; expected one of {', '.join(default)}", key
-            )
         _scalar(f"{key}.{k}", v)
     merged = {**default, **flat}
     fields = {}
@@ -313,6 +310,18 @@ def params_from_flat(e: ControllerEntry, flat: Mapping[str, Any], key: str = "ga
         names = e.labels.get(field)
         fields[field] = [merged[n] for n in names] if names else merged[field]
     return e.make_params(**fields)
+
+
+def check_gain_names(e: ControllerEntry, names, key: str = "gains") -> None:
+    """:class:`~pfjax.errors.InputError` naming ``<key>.<name>`` for the first of ``names`` that is
+    not one of the controller's scalar gains (:func:`flat_gains`' names: every field, vector fields
+    by their labels); nothing is built (a study config checks its gains' names as it loads)."""
+    known = [n for f in e.make_params.gain_names for n in e.labels.get(f, (f,))]
+    for k in names:
+        if k not in known:
+            raise errors.InputError(
+                f"{key}.{k}: unknown gain for controller {e.name!r}; expected one of {', '.join(known)}", key
+            )
 
 
 def _scalar(key: str, value) -> None:

@@ -96,8 +96,10 @@ class ControllerSpec(ConfigModel):
     @model_validator(mode="after")
     def _check(self):
         from pfjax.controllers import resolve
+        from pfjax.controllers.registry import check_gain_names
 
         e, d = resolve(self.type)
+        check_gain_names(e, self.gains)  # as it loads, like every other key (before --out is looked at)
         if self.K is not None:
             if d is not None or "K" not in e.labels:
                 raise ValueError(
