@@ -661,6 +661,11 @@ def test_simulate_json_gives_units_arguments_and_the_provenance_record(capsys):
     # the defaults are recorded as they ran: the same run with them given has the same hash
     d = run_main(capsys, *base, "--control-every", "1", "--dt", "0.005", "--speed", "1")
     assert a["arguments"]["control_every"] == 1 and d["config_sha256"] == a["config_sha256"]
+    # the path's start and the controller's gains too
+    x0, gains = a["arguments"]["x0"], a["arguments"]["gains"]
+    assert x0 == [a["x0"]["x"], a["x0"]["y"], a["x0"]["theta_deg"]] and gains == a["gains"]
+    e = run_main(capsys, *base, "--x0", *map(str, x0), "--gains", ",".join(f"{k}={v!r}" for k, v in gains.items()))
+    assert e["config_sha256"] == a["config_sha256"] and e["metrics"] == a["metrics"]
 
 
 def test_examples_json_is_the_listing_alone(capsys):

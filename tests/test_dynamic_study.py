@@ -167,7 +167,14 @@ def test_cli_simulate_chooses_a_stable_step_and_records_arguments_that_run_again
     assert r["dt"] == 0.0002 and r["metrics"]["status"] == "ok"
     given = r["arguments"]
     assert given["dt"] == 0.0002 and given["wheelbase"] is None and given["beta_r_deg"] is None
-    flags = [f"--{k.replace('_', '-')}={v}" for k, v in given.items() if v not in (None, False) and k != "continuous"]
+    assert given["x0"] == [r["x0"]["x"], r["x0"]["y"], r["x0"]["theta_deg"]] and given["gains"] == r["gains"]
+
+    def flag(k, v):  # a recorded argument as the flag it came from (--gains as name=value pairs, --x0 its three)
+        if isinstance(v, dict):
+            v = ",".join(f"{n}={x!r}" for n, x in v.items())
+        return [f"--{k.replace('_', '-')}", *map(str, v)] if isinstance(v, list) else [f"--{k.replace('_', '-')}={v}"]
+
+    flags = [f for k, v in given.items() if v not in (None, False) and k != "continuous" for f in flag(k, v)]
     code, again, err = _main("simulate", *flags, "--json")
     assert code in (0, None), err
     assert json.loads(again)["metrics"] == r["metrics"]

@@ -82,7 +82,6 @@ def _controller_and_gains(args, wheelbase: float):
 
     e, d = C.resolve(args.controller, "--controller")
     given = _parse_gains(args.controller, args.gains)
-    args.gains = given or None  # recorded as parsed (pfjax.cli.records): "-4,-1.5" and "k_d=-4,k_theta=-1.5" alike
     with as_flags({"gains": "--gains", "K": "--gains"}):
         flat = C.flat_gains(e)
         if d is not None and not set(e.gains) <= set(given):
@@ -90,7 +89,11 @@ def _controller_and_gains(args, wheelbase: float):
                 flat.update(C.design_gains(d, args.speed, wheelbase, "--controller"))
         flat.update(given)
         gains = C.params_from_flat(e, flat)
-    return e.controller, gains, {k: flat[k] for k in e.gains}
+    shown = {k: flat[k] for k in e.gains}
+    # recorded as they ran (pfjax.cli.records): "-4,-1.5", "k_d=-4,k_theta=-1.5" and the defaults
+    # (or the design's gains) given or not, alike
+    args.gains = shown
+    return e.controller, gains, shown
 
 
 #: Flags of one model only: given with the other model they are a usage error naming the flag.
@@ -168,7 +171,6 @@ def cmd(args) -> dict:
     import jax
     import numpy as np
 
-    from pfjax import paths
     from pfjax.metrics import METRIC_NAMES
     from pfjax.sim import STATUS_NAMES, SimConfig
     from pfjax.sim.scenario import paper_scenario
@@ -206,12 +208,7 @@ def cmd(args) -> dict:
         k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES
     }
     metrics["status"] = STATUS_NAMES[status]
-    if args.x0 is None:
-        start = paths.entry(args.path).start_pose
-        assert start is not None  # --path takes fixed paths, which have a start pose
-        x0 = (start[0], start[1], math.degrees(start[2]))
-    else:
-        x0 = args.x0
+    x0 = _start(args)
     return {
         "path": args.path,
         "controller": args.controller,
@@ -226,6 +223,19 @@ def cmd(args) -> dict:
         "status_code": status,
         "fail_time": float(r.fail_time) if np.isfinite(r.fail_time) else None,
     }
+
+
+def _start(args) -> list[float]:
+    """The start pose that ran (x m, y m, θ deg): ``--x0``, else the path's own start, recorded
+    in ``args`` as ``--x0`` (:mod:`pfjax.cli.records`: the same run gives one config hash, the
+    default start given or not)."""
+    from pfjax import paths
+
+    if args.x0 is None:
+        start = paths.entry(args.path).start_pose
+        assert start is not None  # --path takes fixed paths, which have a start pose
+        args.x0 = [float(start[0]), float(start[1]), math.degrees(start[2])]
+    return [float(v) for v in args.x0]
 
 
 def _config(args, dt: float):
@@ -288,7 +298,7 @@ def _simulate_st(args, pose0) -> dict:
         k: (bool if k == "success" else float)(getattr(r.metrics, k)) for k in METRIC_NAMES
     }
     metrics["status"] = STATUS_NAMES[status]
-    x0 = args.x0 if args.x0 is not None else (*e.start_pose[:2], math.degrees(e.start_pose[2]))
+    x0 = _start(args)
     return {
         "model": args.model,
         "vehicle": name,
