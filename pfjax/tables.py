@@ -123,6 +123,23 @@ TRACK_UNITS: dict[str, Any] = {
     "final.*": {"x": "m", "y": "m", "theta": "rad", "gamma": "rad"},
     "T": "s",
     "dt": "s",
+    "arguments.*": {  # pfjax track's flags
+        "p": "1",
+        "l": "m",
+        "gamma_max_deg": "deg",
+        "speed": "m/s",
+        "stop_and_go": "1",
+        "wheelbase": "m",
+        "k": "1/s",
+        "v_max": "m/s",
+        "omega_max_deg": "deg/s",
+        "offset": "m, m",
+        "heading_error_deg": "deg",
+        "beta_r_deg": "deg",
+        "beta_f_deg": "deg",
+        "horizon": "s",
+        "dt": "s",
+    },
 }
 
 

@@ -187,6 +187,8 @@ def test_bench_outputs_carry_units_and_the_config_hash(tmp_path, monkeypatch, ca
         "msteps_per_s_f32": "1e6 rollout-steps/s",
         "ratio_vs_numpy_f32": "1",
         "peak_rss_mib": "MiB",
+        "failed_runs": "runs (not status ok, over every row)",
+        "seed": "1 (the random seed)",
         "gradient.forward_s": "s",
         "gradient.grad_s": "s",
         "agreement.numpy_float32.max_abs_diff": "m s",

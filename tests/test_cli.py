@@ -712,3 +712,46 @@ def test_one_run_commands_give_every_number_its_unit_and_hash_their_arguments(ca
     assert not missing, missing
     assert out["config_sha256"] == config_hash(out["arguments"]) and out["pfjax_version"]
     assert "cpu_settings" in out["units"] and ("seed" in out["units"]) == isinstance(out["seed"], int)
+
+
+def _is_number(v) -> bool:
+    number = lambda x: isinstance(x, (int, float)) and not isinstance(x, bool)
+    return number(v) or (isinstance(v, list) and bool(v) and all(number(x) for x in v))
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["simulate", "--path", "line", "--controller", "pi", "--horizon", "1"],
+        ["synth", "--max-real", "-0.5"],
+        [
+            "tune",
+            "--controller",
+            "stanley",
+            "--scenario",
+            "line",
+            "--method",
+            "gradient-plain",
+            "--steps",
+            "2",
+            "--horizon",
+            "2",
+            "--dt",
+            "0.01",
+        ],
+        ["parking", "--horizon", "5"],
+        ["parking-search", "--method", "grid", "--n", "2", "--horizon", "5"],
+        ["track", "--horizon", "1"],
+    ],
+    ids=lambda argv: argv[0],
+)
+def test_every_number_an_argument_took_has_its_unit(argv, capsys):
+    """The JSON's ``arguments`` are numbers too: each that the run read has its unit under
+    ``units["arguments.<flag>"]`` (a gain by name under ``arguments.gains.<name>``), one it did not
+    read (null) none."""
+    out = run_main(capsys, *argv, "--json")
+    args, u = out["arguments"], out["units"]
+    numbers = [f"{k}.{n}" for k, v in args.items() if isinstance(v, dict) for n, x in v.items() if _is_number(x)]
+    numbers += [k for k, v in args.items() if _is_number(v)]
+    assert numbers and all(f"arguments.{k}" in u for k in numbers), [k for k in numbers if f"arguments.{k}" not in u]
+    assert all(args[k.split(".")[1]] is not None for k in u if k.startswith("arguments."))

@@ -435,3 +435,7 @@ def test_cli_study_and_bad_input(tmp_path, capsys):
     assert main(["study", str(tmp_path / "missing.toml")]) == 2 and "not found" in capsys.readouterr().err
     assert main(["report", str(cfg), "--out", str(out), "--set", "seed=2"]) == 2
     assert "config hash differs" in capsys.readouterr().err
+    # the report of the finished study, with the config hash it matched
+    assert main(["report", str(cfg), "--out", str(out), "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["config_sha256"] == head["config_sha256"] and again["report"] == str(out / "report.html")

@@ -61,7 +61,10 @@ def summary_units(summary: dict, prefix: str = "") -> dict:
         "compile_s_f32": "s",
         "compile_s_f64": "s",
         "peak_rss_mib": "MiB",
-        "fraction_of_minimal_by_batch.*": {"f32": "1", "f64": "1"},
+        "batch": "runs (the largest batch: the headline rates')",
+        "failed_runs": "runs (not status ok, over every row)",
+        "seed": "1 (the random seed)",
+        "fraction_of_minimal_by_batch.*": {"f32": "1", "f64": "1", "batch": "runs"},
         "gradient.*": {
             **dict.fromkeys(("forward_s", "grad_s", "grad_compile_s", "reverse_s", "reverse_compile_s"), "s"),
             "modes_max_rel_diff": "1",

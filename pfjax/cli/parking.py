@@ -16,6 +16,17 @@ from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags
 from pfjax.errors import InputError
 
 _POSE = {"x0.x": "m", "x0.y": "m", "x0.theta_deg": "deg"}
+#: The flags both parking commands take, by unit.
+_COMMON_ARGUMENTS = {
+    "x0": "m, m, deg",
+    "xs": "m",
+    "k1": "1/m^2",
+    "k2": "1/m",
+    "speed": "m/s",
+    "scan_period": "s",
+    "front": "m",
+    "horizon": "s",
+}
 #: The source's end error ``|x| + sqrt(y^2 + tan^2 theta)`` (m and the tangent's 1, as it defines it).
 _ERROR = "m (|x| + sqrt(y^2 + tan^2 theta), the source's measure)"
 #: The unit of each number ``pfjax parking --json`` prints (:func:`pfjax.cli.records.units`).
@@ -30,6 +41,7 @@ RUN_UNITS = {
     "final.*": {"x": "m", "y": "m", "theta_deg": "deg"},
     "error": _ERROR,
     "distance_m": "m",
+    "arguments.*": {**_COMMON_ARGUMENTS, "alpha_schedule": "1"},
 }
 #: The search's fitness J = 1 / (t_e + w e): the inverse of a time (--weight w in s/m).
 _FITNESS = "1/s (J = 1/(t_e + --weight x error))"
@@ -48,6 +60,14 @@ SEARCH_UNITS = {
     "n": "levels per gene of the n x n x n grid",
     "bits": "1 (the chromosome's length in bits)",
     "error": _ERROR,
+    "arguments.*": {
+        **_COMMON_ARGUMENTS,
+        "n": "levels per gene (count)",
+        "seed": "1 (the random seed)",
+        "generations": "GA generations (count)",
+        "population": "GA individuals (count)",
+        "weight": "s/m",
+    },
 }
 
 

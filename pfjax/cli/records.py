@@ -4,7 +4,8 @@ A command that computes a result without a config of its own (``simulate``, ``sy
 ``parking``, ``parking-search``, ``track``) declares the unit of each number it prints
 (``set_defaults(units=...)`` on its parser), and prints its result with:
 
-* ``units``: the unit of each number, by its dotted key (``"final.theta": "rad"``), from that
+* ``units``: the unit of each number, by its dotted key (``"final.theta": "rad"``; the arguments'
+  as ``"arguments.speed": "m/s"``, by the table's ``"arguments.*"``), from that
   table (a key ``"<parent>.*"`` gives the unit of every number under ``<parent>`` by its name, e.g.
   the metrics by :data:`pfjax.tables.COLUMNS`) and the provenance record's (``seed``, ``cpu_settings``:
   :data:`pfjax.provenance.STAMP_UNITS`);
@@ -81,5 +82,7 @@ def stamped(out, args):
     given = arguments(args)
     stamp = provenance.stamp(given, given.get("seed"))
     stamp_units = {k: u for k, u in provenance.STAMP_UNITS.items() if {**stamp, **out}[k] is not None}
-    record = {"units": {**stamp_units, **units(out, table)}, "arguments": given, **stamp}
+    # the arguments' units by the table's "arguments.*" (every number a flag took)
+    ran = {k: v for k, v in given.items() if v is not None}  # a flag the run did not read has no unit
+    record = {"units": {**stamp_units, **units({**out, "arguments": ran}, table)}, "arguments": given, **stamp}
     return {**out, **{k: v for k, v in record.items() if k not in out}}

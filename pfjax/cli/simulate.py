@@ -164,6 +164,21 @@ UNITS = {
     "slip.*": {name: unit for name, (unit, _) in COLUMNS.items()},
     "fail_time": "s",
     "gains.*": GAINS,
+    "arguments.*": {
+        "x0": "m, m, deg",
+        "beta_r_deg": "deg",
+        "beta_f_deg": "deg",
+        "horizon": "s",
+        "dt": "s",
+        "control_every": "steps (of dt)",
+        "speed": "m/s",
+        "wheelbase": "m",
+        "delta_max_deg": "deg",
+        "mu": "1",
+        "tau_delta": "s",
+        "k_v": "1/s",
+    },
+    "arguments.gains.*": GAINS,
 }
 
 

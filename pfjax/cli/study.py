@@ -301,7 +301,8 @@ def _cmd_report(args) -> dict:
         raise UsageError(
             f"config: {_source(args)} (with --set) does not match the study in {out} (config hash differs)"
         )
-    return {"report": str(rewrite_report(out, spec, overwrite=args.overwrite) / "report.html")}
+    report = rewrite_report(out, spec, overwrite=args.overwrite) / "report.html"
+    return {"report": str(report), "config_sha256": marker["config_sha256"]}  # the study's, which it matched
 
 
 def register(sub) -> None:

@@ -36,6 +36,15 @@ SYNTH_FLAGS = {
 #: :class:`pfjax.synthesis.PoleRegion` takes them.
 INPUTS = "w = [beta_r rad, beta_f rad, kappa 1/m]"
 UNITS = {
+    "arguments.*": {
+        "speed": "m/s",
+        "wheelbase": "m",
+        "alpha": "1",
+        "beta": "1",
+        "max_real": "1/s",
+        "disk": "1/s (center, radius)",
+        "sector_deg": "deg",
+    },
     "K": "rad/m (d), rad/rad (theta_e)",
     "gamma_inf": f"H-infinity bound, {INPUTS} to [d m, theta_e rad]",
     "hinf_norm": f"H-infinity norm, {INPUTS} to [d m, theta_e rad]",

@@ -204,6 +204,24 @@ UNITS = {
     "horizon": "s",
     "wall_s": "s",
     "compile_s": "s",
+    "arguments.*": {
+        "level": "1",
+        "seed": "1 (the random seed)",
+        "effort": "cost per rad^2 s",
+        "generations": "GA generations (count)",
+        "population": "GA individuals (count)",
+        "steps": "evaluations (count)",
+        "starts": "starts (count)",
+        "lr": "box widths",
+        "screen": "points (count)",
+        "rounds": "rounds (count)",
+        "restarts": "restarts (count)",
+        "polish": "iterations (count)",
+        "smoothing": "box widths",
+        "n_runs": "runs per path (count)",
+        "dt": "s",
+        "horizon": "s",
+    },
 }
 
 
