@@ -198,7 +198,7 @@ def test_simulate_line_paper_k_json_matches_closed_form_equilibrium():
     assert out["final"]["delta"] == pytest.approx(math.radians(10.0), abs=1e-3)
     assert out["final"]["d"] == pytest.approx(d_star, abs=1e-5)
     assert out["final"]["theta_e"] == pytest.approx(-BETA, abs=1e-6)
-    assert out["gains"] == {"k_d": K1, "k_theta": K2}
+    assert out["gains"] == {"k_d": K1, "k_theta": K2, "feedforward": 0.0}  # every gain by name
     # the source's start (1, 0) is 1/sqrt(2) m from y = x: the largest |d| is the initial one
     assert out["metrics"]["max_abs_d"] == pytest.approx(1 / math.sqrt(2), rel=1e-9)
     assert out["metrics"]["steady_abs_d"] == pytest.approx(abs(d_star), abs=1e-5)
@@ -231,13 +231,13 @@ def test_gains_positional_and_named(capsys):
     a = run_main(capsys, *base, "--gains=-4,-1.5")
     b = run_main(capsys, *base, "--gains", "k_d=-4, k_theta=-1.5")
     assert a == b  # the arguments recorded as parsed: the same hash
-    assert a["gains"] == {"k_d": -4.0, "k_theta": -1.5}
+    assert a["gains"] == {"k_d": -4.0, "k_theta": -1.5, "feedforward": 0.0}
     d_star = (2 * BETA - 1.5 * BETA) / -4.0
     assert a["final"]["d"] == pytest.approx(d_star, abs=1e-5)
     assert a["final"]["theta_e"] == pytest.approx(-BETA, abs=1e-6)
     # a named subset keeps the rest at the source's K
     c = run_main(capsys, *base, "--gains", "k_theta=-1.5")
-    assert c["gains"] == {"k_d": SOURCE_K[0], "k_theta": -1.5}
+    assert c["gains"] == {"k_d": SOURCE_K[0], "k_theta": -1.5, "feedforward": 0.0}
     assert c["final"]["d"] == pytest.approx((2 * BETA - 1.5 * BETA) / SOURCE_K[0], abs=1e-5)
 
     short = ("simulate", "--path", "line", "--controller", "stanley", "--horizon", "3", "--json")
@@ -247,6 +247,11 @@ def test_gains_positional_and_named(capsys):
     s3 = run_main(capsys, *short, "--gains", "k=1.5")  # a named subset: the rest at defaults
     assert s3["gains"] == {"k": 1.5, "k_soft": 0.1}
     assert s3["final"] != s1["final"]
+    # by name, any of the controller's gains: the feedforward too, which no position takes
+    sine = ("simulate", "--path", "sine", "--controller", "paper-k", "--horizon", "3", "--json")
+    f = run_main(capsys, *sine, "--gains", "feedforward=0.5")
+    assert f["gains"] == {"k_d": SOURCE_K[0], "k_theta": SOURCE_K[1], "feedforward": 0.5}
+    assert f["final"] != run_main(capsys, *sine)["final"]  # the curvature's feedforward acts on the sine
     # a bare prefix is refused (which gains it meant is a guess), and so is a gain given twice
     for gains, say in (("1.5", "expected all 2 gains"), ("k=1,k=2", "k is given twice"), ("1,k=2", "mixes")):
         assert main([*short, "--gains", gains]) == 2

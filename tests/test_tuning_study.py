@@ -97,7 +97,7 @@ def test_quick_tuning_study_outputs_consistent(out):
         # the compass polish: 2 D value-only points per iteration (D gains)
         # D tuned gains: the registry's tuning box (the gains record every gain by its scalar name)
         D = len(C.REGISTRY[r["problem"].partition(":")[0]].box[1])
-        assert set(r["gains"]) == set(C.REGISTRY[r["problem"].partition(":")[0]].gains), r["gains"]
+        assert set(r["gains"]) == set(C.flat_gains(C.entry(r["problem"].partition(":")[0]))), r["gains"]
         polish = ms["polish_steps"] * 2 * D if r["method"] == "gradient" else 0
         assert r["n_rollouts"] == expected[r["method"]] + polish, r
         assert r["n_forward_passes"] >= r["n_rollouts"]

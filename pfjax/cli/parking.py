@@ -19,7 +19,6 @@ _POSE = {"x0.x": "m", "x0.y": "m", "x0.theta_deg": "deg"}
 #: The flags both parking commands take, by unit.
 _COMMON_ARGUMENTS = {
     "x0": "m, m, deg",
-    "xs": "m",
     "k1": "1/m^2",
     "k2": "1/m",
     "speed": "m/s",
@@ -41,7 +40,7 @@ RUN_UNITS = {
     "final.*": {"x": "m", "y": "m", "theta_deg": "deg"},
     "error": _ERROR,
     "distance_m": "m",
-    "arguments.*": {**_COMMON_ARGUMENTS, "alpha_schedule": "1"},
+    "arguments.*": {**_COMMON_ARGUMENTS, "alpha_schedule": "1", "xs": "m"},
 }
 #: The search's fitness J = 1 / (t_e + w e): the inverse of a time (--weight w in s/m).
 _FITNESS = "1/s (J = 1/(t_e + --weight x error))"
@@ -59,6 +58,7 @@ SEARCH_UNITS = {
     "n_simulations": "runs (simulated)",
     "n": "levels per gene of the n x n x n grid",
     "bits": "1 (the chromosome's length in bits)",
+    "a_f": "m",
     "error": _ERROR,
     "arguments.*": {
         **_COMMON_ARGUMENTS,
@@ -193,7 +193,17 @@ def _cmd_parking(args) -> dict:
     from pfjax.parking.api import run
 
     with _flags(RUN_FLAGS):
-        return run(direction=args.direction, alpha_schedule=args.alpha_schedule, xs=args.xs, **_common_args(args))
+        out = run(direction=args.direction, alpha_schedule=args.alpha_schedule, xs=args.xs, **_common_args(args))
+    args.alpha_schedule, args.xs = out["alpha_schedule"], out["xs"]
+    return _ran(args, out)
+
+
+def _ran(args, out: dict) -> dict:
+    """``out``, with ``args`` set to what ran (pfjax.cli.records: the same run gives one config hash,
+    defaults given or not): the start pose (m, m, deg) and the rectangle's reach ``a_f`` (m)."""
+    args.x0 = [out["x0"]["x"], out["x0"]["y"], out["x0"]["theta_deg"]]
+    args.front = out["a_f"]
+    return out
 
 
 def _cmd_search(args) -> dict:
@@ -203,7 +213,7 @@ def _cmd_search(args) -> dict:
         if getattr(args, key) is None:
             setattr(args, key, SEARCH_DEFAULTS[key])
     with _flags(SEARCH_FLAGS):
-        return search(
+        out = search(
             args.method,
             n=args.n,
             generations=args.generations,
@@ -212,3 +222,4 @@ def _cmd_search(args) -> dict:
             weight=args.weight,
             **_common_args(args),
         )
+    return _ran(args, out)

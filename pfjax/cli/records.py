@@ -63,7 +63,7 @@ def units(out: Mapping, table: Mapping) -> dict[str, str]:
                     walk(item, f"{key}.")
                 continue
             unit = table.get(key, by_name.get(name) if isinstance(by_name, Mapping) else by_name)
-            if isinstance(unit, str) and unit:
+            if isinstance(unit, str) and unit and not isinstance(value, str):  # text has no unit
                 found[key] = unit
 
     walk(out, "")

@@ -26,11 +26,14 @@ from pfjax.cli.synth import SYNTH_FLAGS
 from pfjax.tables import COLUMNS, GAINS
 
 
-def _gain_names(controller: str) -> tuple[str, ...]:
-    """The gains ``--gains`` takes for a command-line controller name, in order."""
+def _gain_names(controller: str) -> tuple[tuple[str, ...], list[str]]:
+    """The gains ``--gains`` takes for a command-line controller name: by position, in order, and
+    by name (every gain, :func:`pfjax.controllers.registry.gain_names`)."""
     from pfjax import controllers as C
+    from pfjax.controllers.registry import gain_names
 
-    return C.resolve(controller, "--controller")[0].gains
+    e = C.resolve(controller, "--controller")[0]
+    return e.gains, gain_names(e)
 
 
 #: Modules that add subcommands: each has ``register(sub)`` which calls ``sub.add_parser(...)``
@@ -39,9 +42,9 @@ def _gain_names(controller: str) -> tuple[str, ...]:
 
 
 def _parse_gains(controller: str, text: str | None) -> dict:
-    """``--gains``: every gain of the controller as comma-separated numbers in order, or some of
-    them as ``name=value`` pairs (the others keep their defaults); values checked by the library."""
-    names = _gain_names(controller)
+    """``--gains``: the controller's gains as comma-separated numbers in order, or any of its gains
+    as ``name=value`` pairs (the others keep their defaults); values checked by the library."""
+    names, every = _gain_names(controller)
     if text is None:
         return {}
     parts = [p.strip() for p in text.split(",")]
@@ -63,8 +66,8 @@ def _parse_gains(controller: str, text: str | None) -> dict:
         pairs = list(zip(names, parts))
     out = {}
     for k, v in pairs:
-        if k not in names:
-            raise UsageError(f"--gains: unknown gain {k!r} for --controller {controller}; expected {', '.join(names)}")
+        if k not in every:
+            raise UsageError(f"--gains: unknown gain {k!r} for --controller {controller}; expected {', '.join(every)}")
         if k in out:
             raise UsageError(f"--gains: {k} is given twice")
         try:
@@ -89,7 +92,7 @@ def _controller_and_gains(args, wheelbase: float):
                 flat.update(C.design_gains(d, args.speed, wheelbase, "--controller"))
         flat.update(given)
         gains = C.params_from_flat(e, flat)
-    shown = {k: flat[k] for k in e.gains}
+    shown = dict(flat)  # every gain by name, as pfjax tune reports them
     # recorded as they ran (pfjax.cli.records): "-4,-1.5", "k_d=-4,k_theta=-1.5" and the defaults
     # (or the design's gains) given or not, alike
     args.gains = shown
@@ -305,6 +308,7 @@ def _simulate_st(args, pose0) -> dict:
     )
     mu = float(st.body(sc.vehicle).mu)
     step = (float(sc.tau_delta), float(sc.k_v))
+    args.vehicle, args.mu, args.tau_delta, args.k_v = name, mu, *step  # as they ran: one hash, given or not
     cfg = _config(args, st.stable_step(sc.vehicle, args.speed, *step) if args.dt is None else args.dt)
     st.check_step("--dt", cfg.dt, sc.vehicle, args.speed, *step)
     r = jax.device_get(dyn.simulate_one(sc, controller=controller, config=cfg))
@@ -362,8 +366,8 @@ def register(sub) -> None:
     )
     m.add_argument(
         "--gains",
-        help="comma-separated gains (or name=value pairs): "
-        + "; ".join(f"{c}: {','.join(_gain_names(c))}" for c in C.cli_names()),
+        help="comma-separated gains in order (or name=value pairs, any of the controller's gains, e.g. "
+        "feedforward): " + "; ".join(f"{c}: {','.join(_gain_names(c)[0])}" for c in C.cli_names()),
     )
     m.add_argument(
         "--horizon", "--T", action=Aliased, dest="horizon", type=float, default=20.0, help="horizon, s (default 20)"

@@ -95,7 +95,7 @@ def _cmd(args) -> dict:
     from pfjax.tracking.api import run
 
     with as_flags(FLAGS):
-        return run(
+        out = run(
             args.mode,
             p=args.p,
             l=args.l,
@@ -114,3 +114,5 @@ def _cmd(args) -> dict:
             horizon=args.horizon,
             dt=args.dt,
         )
+    args.p, args.l = out["p"], out["l"]  # as they ran (the mode's defaults): one config hash, given or not
+    return out

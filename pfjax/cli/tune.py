@@ -165,6 +165,33 @@ FLAGS = {
 }
 
 
+def _record_settings(args, ms) -> None:
+    """The method's settings as they run, in ``args`` (:mod:`pfjax.cli.records`: the same run gives
+    one config hash, defaults given or not): the multi-start tuner's from its checked options
+    ``ms``, the projected-adam methods' from :data:`pfjax.tuning.problem.DESCENT_DEFAULTS`."""
+    from pfjax.tuning.problem import DESCENT_DEFAULTS
+
+    if args.method == "gradient":
+        ran = dict(
+            steps=ms.steps,
+            starts=ms.n_starts,
+            lr=ms.learning_rate,
+            screen=ms.n_screen,
+            sampler=ms.sampler,
+            rounds=ms.rounds,
+            restarts=ms.n_restarts,
+            polish=ms.polish_steps,
+            smoothing=ms.smoothing,
+        )
+    else:
+        d = DESCENT_DEFAULTS.get(args.method, {})
+        ran = {flag: d[name] for flag, name in (("steps", "steps"), ("starts", "n_starts"), ("lr", "learning_rate"))
+               if name in d}  # fmt: skip
+    for dest, value in ran.items():
+        if getattr(args, dest) is None:
+            setattr(args, dest, value)
+
+
 def _multistart(args):
     """The multi-start tuner's options set by the flags (the rest at their defaults), unchecked:
     :func:`pfjax.tuning.problem.check_options` checks them once ``--steps``, ``--starts`` and ``--lr``
@@ -210,7 +237,7 @@ UNITS = {
         "effort": "cost per rad^2 s",
         "generations": "GA generations (count)",
         "population": "GA individuals (count)",
-        "steps": "evaluations (count)",
+        "steps": "steps (count; --method gradient: evaluations of a surviving chain)",
         "starts": "starts (count)",
         "lr": "box widths",
         "screen": "points (count)",
@@ -246,7 +273,8 @@ def _cmd(args) -> dict:
         ga = {"population_size": args.population, "generations": args.generations}
         options = GAOptions(**{k: v for k, v in ga.items() if v is not None})
         if args.method is not None:  # every tuning setting, once, with --steps, --starts and --lr applied
-            check_options(args.method, options, args.steps, args.starts, args.lr, multistart)
+            ms = check_options(args.method, options, args.steps, args.starts, args.lr, multistart)
+            _record_settings(args, ms)
         changes = {k: v for k, v in (("dt", args.dt), ("horizon", args.horizon)) if v is not None}
         try:  # the study's or the default settings with --dt and --horizon, checked as a whole
             problem = make_problem(
@@ -262,6 +290,8 @@ def _cmd(args) -> dict:
                 # a window of the scenario set's that a shorter --horizon no longer holds
                 raise UsageError(f"--horizon: {args.horizon:g} s is too short for the scenario set ({e})") from None
             raise errors.renamed(errors.renamed(e, "config.dt", "--dt"), "config.horizon", "--horizon") from None
+        # as they ran (the scenario set's): one config hash, given or not
+        args.dt, args.horizon, args.model = problem.config.dt, problem.config.horizon, _model_of(problem)
         common = {
             "controller": args.controller,
             "scenario": args.scenario,

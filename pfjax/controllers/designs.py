@@ -79,13 +79,15 @@ def _polytopic_integral(v: float, L: float, alpha: float = 10.0, beta: float = 1
 
 def design_gains(d: DesignEntry, v: float, L: float, key: str, **kw) -> dict:
     """``d.make(v, L, **kw)`` for a controller a study, command or API call asks for under ``key``: a
-    synthesis that fails (infeasible, ill-conditioned, a solver error) is an
-    :class:`~pfjax.errors.InputError` naming ``key``, with the solver's status and the operating
-    point, in one line (the controller cannot be built, so nothing is run). The operating point
+    synthesis that fails (infeasible, ill-conditioned, a solver error) is a
+    :class:`~pfjax.errors.NoDesignError` (an ``InputError`` and a ``SynthesisError``) naming ``key``,
+    with the solver's status and the operating point, in one line (the controller cannot be built,
+    so nothing is run; :func:`pfjax.api.design.synthesized` names the operating point instead, for
+    a design asked for by its values). The operating point
     is checked first: ``v`` (m/s) and ``L`` (m) finite and positive, an
     :class:`~pfjax.errors.InputError` naming ``v`` or ``L``."""
     from pfjax import errors
-    from pfjax.errors import InputError, SynthesisError
+    from pfjax.errors import NoDesignError, SynthesisError
 
     errors.numbers("v", v, positive=True, unit=" m/s")
     errors.numbers("L", L, positive=True, unit=" m")
@@ -93,8 +95,8 @@ def design_gains(d: DesignEntry, v: float, L: float, key: str, **kw) -> dict:
         return d.make(v, L, **kw)
     except SynthesisError as e:
         given = "".join(f", {k} {val:g}" for k, val in kw.items() if val is not None)
-        raise InputError(
-            f"{key}: {e} (the {d.name} design at speed {v:g} m/s, wheelbase {L:g} m{given})", key
+        raise NoDesignError(
+            f"{key}: {e} (the {d.name} design at speed {v:g} m/s, wheelbase {L:g} m{given})", key, e.status
         ) from None
 
 

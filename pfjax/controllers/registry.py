@@ -312,11 +312,18 @@ def params_from_flat(e: ControllerEntry, flat: Mapping[str, Any], key: str = "ga
     return e.make_params(**fields)
 
 
+def gain_names(e: ControllerEntry) -> list[str]:
+    """Every scalar gain of the controller by name (:func:`flat_gains`' names: every field, vector
+    fields by their labels), without building its parameters; ``e.gains``, those ``--gains``
+    takes by position, are some of them."""
+    return [n for f in e.make_params.gain_names for n in e.labels.get(f, (f,))]
+
+
 def check_gain_names(e: ControllerEntry, names, key: str = "gains") -> None:
     """:class:`~pfjax.errors.InputError` naming ``<key>.<name>`` for the first of ``names`` that is
-    not one of the controller's scalar gains (:func:`flat_gains`' names: every field, vector fields
-    by their labels); nothing is built (a study config checks its gains' names as it loads)."""
-    known = [n for f in e.make_params.gain_names for n in e.labels.get(f, (f,))]
+    not one of the controller's scalar gains (:func:`gain_names`); nothing is built (a study config
+    checks its gains' names as it loads)."""
+    known = gain_names(e)
     for k in names:
         if k not in known:
             raise errors.InputError(

@@ -329,8 +329,8 @@ def search(
     Returns:
         What ``pfjax parking-search --json`` prints: ``map`` (name), ``x0`` ({x m, y m,
         theta_deg}), ``method``, the best ``xs`` (m), ``alpha1``, ``alpha2``, its ``fitness``,
-        ``time_s``, ``status`` (name), ``converged``, ``switches`` and ``error``, and
-        ``n_simulations``; the grid adds ``n``, the GA ``bits`` (24), ``history_best_fitness``,
+        ``time_s``, ``status`` (name), ``converged``, ``switches`` and ``error``,
+        ``n_simulations`` and ``a_f`` (m, the rectangle's reach ahead of the axle); the grid adds ``n``, the GA ``bits`` (24), ``history_best_fitness``,
         ``history_mean_fitness`` (per generation) and ``seed``.
 
     The search's size is checked before anything is simulated: its runs times ``t_max /
@@ -416,4 +416,5 @@ def _search(c: dict, method: str, *, n: int, generations: int, population: int, 
         out.pop("table")
     out["status"] = STATUS_NAMES[int(out["status"])]
     out["converged"] = out["status"] == "converged"
+    out["a_f"] = float(base.shape.front)
     return out

@@ -278,6 +278,12 @@ def cost_functions(problem: Problem):
 
 #: Tuning methods of :func:`tune`.
 METHODS = ("ga", "gradient", "gradient-plain", "ga+gradient")
+#: The projected-adam methods' settings where :func:`tune` is given none (the multi-start tuner's
+#: are :class:`~pfjax.tuning.MultistartOptions`' fields, the GA's :class:`~pfjax.tuning.ga.GAOptions`').
+DESCENT_DEFAULTS = {
+    "gradient-plain": {"steps": 100, "n_starts": 1, "learning_rate": 0.05},
+    "ga+gradient": {"steps": 30, "learning_rate": 0.01},
+}
 #: The methods that read each method-specific setting (by :func:`pfjax.tune`'s argument names;
 #: ``pfjax tune``'s flags are these under their own names, :func:`pfjax.cli.tune.method_flags`;
 #: ``key`` is ``--seed``). A check (``check=``) reads none of them.
@@ -380,10 +386,10 @@ def tune(
             *box,
             theta0=theta0,
             key=key,
-            steps=steps or 100,
-            n_starts=n_starts or 1,
+            steps=steps or DESCENT_DEFAULTS[method]["steps"],
+            n_starts=n_starts or DESCENT_DEFAULTS[method]["n_starts"],
             n_per_eval=problem.n_per_eval,
-            learning_rate=learning_rate or 0.05,
+            learning_rate=learning_rate or DESCENT_DEFAULTS[method]["learning_rate"],
             progress=progress,
         )
     r = ga_tune(
@@ -402,9 +408,9 @@ def tune(
         *box,
         theta0=r.theta,
         key=key,
-        steps=steps or 30,
+        steps=steps or DESCENT_DEFAULTS["ga+gradient"]["steps"],
         n_per_eval=problem.n_per_eval,
-        learning_rate=learning_rate or 0.01,
+        learning_rate=learning_rate or DESCENT_DEFAULTS["ga+gradient"]["learning_rate"],
         progress=progress,
     )
     return _chained(r, p)

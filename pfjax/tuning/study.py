@@ -68,7 +68,8 @@ SUMMARY_UNITS: dict[str, object] = {
     **dict.fromkeys(("rollouts", "ga_rollouts"), f"{MONTE_CARLO_UNITS['n_rollouts']} of one tuning run"),
     **dict.fromkeys(("n_forward_passes", "forward_passes"), _PASSES),
     "n_nonfinite_grad": "gradient components (not finite, replaced by 0)",
-    "gradient": f"{COLUMNS['best_cost'][0]} per gain unit (table3: d cost / d gain, in the order of gains); "
+    "gradient": f"{COLUMNS['best_cost'][0]} per gain unit (table3: d cost / d gain, in the order of the tuned "
+    "gains kp_d, ki_d, kp_theta, ki_theta); "
     "elsewhere the gradient tuner's block, its numbers by their own keys",
     "projected_gradient_norm": f"{COLUMNS['best_cost'][0]} per box width (gains normalised to the tuning box)",
     **dict.fromkeys(
