@@ -100,6 +100,7 @@ def test_the_choice_takes_each_precisions_best_block_at_the_best_width():
 def test_a_small_calibration_measures_agrees_and_round_trips(tmp_path):
     result = C.calibrate(batch=100, horizon=0.05, rounds=1, blocks=(256, 2500), width_set=(None,))  # 100: padded blocks
     assert result["cpu_key"] == calibration.cpu_key() and result["vector_width"] is None
+    assert len(result["config_sha256"]) == 64  # over what was measured
     assert {(r["dtype"], r["block_bytes"]) for r in result["rows"]} == {
         (d, b) for d in ("float32", "float64") for b in (256, 2500)
     }

@@ -127,8 +127,9 @@ def calibrate(
     progress=None,
 ) -> dict:
     """Measure every candidate on this CPU; returns ``{"cpu_key", "version", "pfjax_version",
-    "vector_width", "block_bytes", "msteps_per_s", "rows", "machine", "sizes", "units"}`` (the file
-    :func:`pfjax.numerics.calibration.save` writes)."""
+    "config_sha256", "vector_width", "block_bytes", "msteps_per_s", "rows", "machine", "sizes",
+    "units"}`` (the file :func:`pfjax.numerics.calibration.save` writes; ``config_sha256`` over what
+    was measured: the sizes, the blocks and the widths)."""
     import jax
 
     from pfjax.bench.report import MACHINE_UNITS
@@ -142,11 +143,14 @@ def calibrate(
         with jax.enable_x64(x64):
             rows += _rates(dtype, batch, horizon, blocks, ws, rounds, say)
     import pfjax
+    from pfjax.provenance import config_hash
 
+    measured = dict(batch=batch, horizon_s=horizon, rounds=rounds, blocks=list(blocks), widths=list(ws))
     return dict(
         version=calibration.VERSION,
         cpu_key=calibration.cpu_key(),
         pfjax_version=pfjax.__version__,
+        config_sha256=config_hash(measured),
         **choose(rows),
         rows=rows,
         sizes=dict(batch=batch, horizon_s=horizon, rounds=rounds, n_steps=P.n_steps(horizon)),
