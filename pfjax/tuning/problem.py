@@ -280,7 +280,7 @@ def cost_functions(problem: Problem):
 METHODS = ("ga", "gradient", "gradient-plain", "ga+gradient")
 #: The projected-adam methods' settings where :func:`tune` is given none (the multi-start tuner's
 #: are :class:`~pfjax.tuning.MultistartOptions`' fields, the GA's :class:`~pfjax.tuning.ga.GAOptions`').
-DESCENT_DEFAULTS = {
+DESCENT_DEFAULTS: dict[str, dict[str, Any]] = {
     "gradient-plain": {"steps": 100, "n_starts": 1, "learning_rate": 0.05},
     "ga+gradient": {"steps": 30, "learning_rate": 0.01},
 }
