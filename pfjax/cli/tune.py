@@ -137,6 +137,21 @@ def _multistart_flags(p) -> None:
     )
 
 
+#: The multi-start tuner's own flags (by destination) and the :class:`~pfjax.tuning.MultistartOptions`
+#: field each sets.
+MULTISTART_FLAGS = {
+    "screen": "n_screen",
+    "sampler": "sampler",
+    "rounds": "rounds",
+    "restarts": "n_restarts",
+    "polish": "polish_steps",
+    "smoothing": "smoothing",
+}
+#: The flags the gradient methods read (by destination) and the :func:`pfjax.tuning.problem.tune`
+#: argument each sets (the multi-start tuner's option field of the same name).
+DESCENT_FLAGS = {"steps": "steps", "starts": "n_starts", "lr": "learning_rate"}
+
+
 #: ``pfjax tune``'s flags by the library argument they set.
 FLAGS = {
     "method": "--method",
@@ -149,15 +164,7 @@ FLAGS = {
     "effort": "--effort",
     "population_size": "--population",
     "generations": "--generations",
-    "steps": "--steps",
-    "n_starts": "--starts",
-    "learning_rate": "--lr",
-    "n_screen": "--screen",
-    "sampler": "--sampler",
-    "rounds": "--rounds",
-    "n_restarts": "--restarts",
-    "polish_steps": "--polish",
-    "smoothing": "--smoothing",
+    **{name: f"--{dest}" for dest, name in {**DESCENT_FLAGS, **MULTISTART_FLAGS}.items()},
     "check": "--check",
     "n_runs": "--n-runs",
     "dt": "--dt",
@@ -172,21 +179,10 @@ def _record_settings(args, ms) -> None:
     from pfjax.tuning.problem import DESCENT_DEFAULTS
 
     if args.method == "gradient":
-        ran = dict(
-            steps=ms.steps,
-            starts=ms.n_starts,
-            lr=ms.learning_rate,
-            screen=ms.n_screen,
-            sampler=ms.sampler,
-            rounds=ms.rounds,
-            restarts=ms.n_restarts,
-            polish=ms.polish_steps,
-            smoothing=ms.smoothing,
-        )
+        ran = {flag: getattr(ms, name) for flag, name in {**DESCENT_FLAGS, **MULTISTART_FLAGS}.items()}
     else:
         d = DESCENT_DEFAULTS.get(args.method, {})
-        ran = {flag: d[name] for flag, name in (("steps", "steps"), ("starts", "n_starts"), ("lr", "learning_rate"))
-               if name in d}  # fmt: skip
+        ran = {flag: d[name] for flag, name in DESCENT_FLAGS.items() if name in d}
     for dest, value in ran.items():
         if getattr(args, dest) is None:
             setattr(args, dest, value)
@@ -198,15 +194,8 @@ def _multistart(args):
     are applied."""
     from pfjax.tuning.multistart import MultistartOptions
 
-    flags = (
-        ("n_screen", args.screen),
-        ("sampler", args.sampler),
-        ("rounds", args.rounds),
-        ("n_restarts", args.restarts),
-        ("polish_steps", args.polish),
-        ("smoothing", args.smoothing),
-    )
-    return MultistartOptions(**{k: v for k, v in flags if v is not None})
+    given = {name: getattr(args, flag) for flag, name in MULTISTART_FLAGS.items()}
+    return MultistartOptions(**{k: v for k, v in given.items() if v is not None})
 
 
 #: The cost's unit: its metric's, aggregated over the runs (pfjax.tuning.cost).
@@ -385,10 +374,8 @@ def method_flags() -> dict[str, tuple[str, ...]]:
         "seed": m["key"],
         "generations": m["generations"],
         "population": m["population"],
-        "steps": m["steps"],
-        "starts": m["n_starts"],
-        "lr": m["learning_rate"],
-        **{dest: m["multistart"] for dest in ("screen", "sampler", "rounds", "restarts", "polish", "smoothing")},
+        **{dest: m[name] for dest, name in DESCENT_FLAGS.items()},
+        **dict.fromkeys(MULTISTART_FLAGS, m["multistart"]),
         "from_default": ("gradient-plain",),
     }
 
