@@ -129,9 +129,23 @@ def _entries(directory: Path) -> tuple[dict[str, os.stat_result], set[str]]:
     return files, dirs
 
 
+#: The study scripts' outputs by the ``command`` their markers record, and the script that writes
+#: each (the other commands are ``pfjax`` subcommands).
+SCRIPTS = {
+    "paper-reproduction": "studies/paper_reproduction.py",
+    "parking-study": "studies/parking.py",
+    "vehicle-tracking": "studies/vehicle_tracking.py",
+    "kinematic-vs-dynamic": "studies/kinematic_vs_dynamic.py",
+    "rare-events": "studies/rare_events.py",
+    "tuning-study": "studies/tuning_ga_vs_gradient.py",
+}
+
+
 def _describe(marker: dict) -> str:
     sha = str(marker.get("config_sha256") or "")[:12]
-    return f"the output of `pfjax {marker.get('command', '?')}`" + (f" (config {sha})" if sha else "")
+    command = str(marker.get("command", "?"))
+    runner = f"python {SCRIPTS[command]}" if command in SCRIPTS else f"pfjax {command}"
+    return f"the output of `{runner}`" + (f" (config {sha})" if sha else "")
 
 
 def check_target(
@@ -148,7 +162,7 @@ def check_target(
     resolved). Raises :class:`~pfjax.errors.InputError` naming ``flag``, whose advice to replace
     the target is in the same words (:func:`switch_advice`).
     """
-    resolved = _check_name(target, flag)
+    resolved = target_path(target, flag)
     if not resolved.exists():
         return resolved
     _check_contents(
@@ -169,7 +183,7 @@ def switch_advice(flag: str, option: str) -> str:
     return f"add --{option}" if flag.startswith("-") else f"pass {option}=True"
 
 
-def _check_name(target, flag: str) -> Path:
+def target_path(target, flag: str) -> Path:
     """The target as an absolute path, if it names a directory of its own whose parent pfjax may
     write into (not a root, the home or current directory, a symbolic link); raises InputError."""
     given = Path(target)

@@ -71,15 +71,18 @@ def cpu_settings() -> dict:
     }
 
 
-def parquet_metadata(config: dict, seed: int | None = None, *, config_sha256: str | None = None) -> dict[bytes, bytes]:
+def parquet_metadata(
+    config: dict, seed: int | list[int] | None = None, *, config_sha256: str | None = None
+) -> dict[bytes, bytes]:
     """Parquet key-value metadata: ``pfjax.config_sha256``, ``pfjax.config`` (strict JSON),
-    ``pfjax.seed`` and ``pfjax.version``."""
+    ``pfjax.seed`` (the seed as a decimal integer; a study of several seeds, their JSON list;
+    ``null`` for none) and ``pfjax.version``."""
     import pfjax
     from pfjax.jsonio import dumps
 
     return {
         b"pfjax.config_sha256": (config_sha256 or config_hash(config)).encode(),
         b"pfjax.config": dumps(config).encode(),
-        b"pfjax.seed": str(seed).encode(),
+        b"pfjax.seed": (str(seed) if isinstance(seed, int) else dumps(seed)).encode(),
         b"pfjax.version": pfjax.__version__.encode(),
     }

@@ -2,6 +2,7 @@
 """Reproduce Fakharian et al. (docs/reproductions/path-following.md) and check every claim it makes.
 
     python studies/paper_reproduction.py [--config studies/paper_reproduction.toml] [--set key=value ...] [--out DIR] [--quick]
+                                         [--overwrite]
 
 Writes to ``results/paper_reproduction/`` (or ``--out``): ``summary.json``, ``runs.parquet`` /
 ``runs.csv`` (one row per path x controller), ``pi_readings.csv`` (the 24 readings of Table 3),

@@ -3,7 +3,7 @@
 the a_f calibration, the garage X_s tries, the GA and grid searches, the start-pose map and a
 robustness Monte Carlo.
 
-    python studies/parking.py [--config studies/parking.toml] [--set key=value ...] [--out DIR] [--quick]
+    python studies/parking.py [--config studies/parking.toml] [--set key=value ...] [--out DIR] [--quick] [--overwrite]
 
 Writes to ``results/parking/`` (or ``--out``): ``summary.json`` (config, SHA-256, seed, version),
 ``cases.parquet``, ``assumptions.parquet`` (cases A-D under every combination of the open assumptions),

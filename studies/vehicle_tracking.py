@@ -3,6 +3,7 @@
 and a robustness Monte Carlo of pfjax's input-output linearising controller.
 
     python studies/vehicle_tracking.py [--config studies/vehicle_tracking.toml] [--set key=value ...] [--out DIR] [--quick]
+                                       [--overwrite]
 
 Writes ``results/vehicle_tracking/`` (or ``--out``): ``summary.json``, ``lemma_runs.parquet``,
 ``lemma_table.parquet`` / ``.csv`` (the four outcomes per mode and region), ``geometry.parquet``,

@@ -122,6 +122,8 @@ def test_quick_study_writes_every_output_and_the_report_carries_the_headline(tmp
     ]  # fmt: skip
     s = json.loads((out / "summary.json").read_text())
     assert s["config_sha256"] == config_hash(s["config"]) and s["throughput"] == {}
+    marker = json.loads((out / ".pfjax-output.json").read_text())
+    assert marker["config_sha256"] == s["config_sha256"] and marker["seed"] == s["seed"]
     runs = pd.read_parquet(out / "runs.parquet")
     assert set(runs.arm) == {"dynamic", "dynamic_mu3", "kinematic_10deg", "kinematic_0deg"}
     assert len(runs) == 4 * 4

@@ -97,7 +97,7 @@ def test_provenance_stamp(verified):
     config = verification.verification_config(TINY, load_study(data=study)[0])
     assert result["config"] == config
     assert result["config_sha256"] == on_disk["config_sha256"] == config_hash(config)
-    assert read_marker(out)["config_sha256"] == config_hash(config)
+    assert read_marker(out)["config_sha256"] == config_hash(config) and read_marker(out)["seed"] == 0
     import pfjax
 
     assert result["pfjax_version"] == pfjax.__version__ and result["seed"] == verification.SEED

@@ -187,3 +187,46 @@ def test_a_set_of_another_kinds_key_is_refused_and_defaults_still_load():
     spec, _ = load_study(data={**BASE, "paths": [{"kind": "line"}, {"kind": "circle", "radius": 3.0}]})
     again, _ = load_study(data=spec.model_dump(mode="json"))
     assert again == spec
+
+
+#: What a script needs to run from another directory (the held-out set by its packaged name).
+ELSEWHERE = {"tuning_ga_vs_gradient": ["--set", "heldout=heldout"]}
+
+
+def test_an_empty_out_is_refused_by_every_script_never_read_as_the_default(tmp_path):
+    """``--out ''`` (an unset shell variable) is refused naming ``--out``, exit code 2, as ``pfjax
+    study`` refuses it: the default ``results/<name>`` under the working directory is not written."""
+    procs = {
+        name: subprocess.Popen(
+            [sys.executable, str(STUDIES / f"{name}.py"), "--quick", "--out", "", *ELSEWHERE.get(name, [])],
+            cwd=tmp_path,
+            env=_env(),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for name in SCRIPTS
+    }
+    for name, p in procs.items():
+        _, err = p.communicate(timeout=300)
+        assert p.returncode == 2, (name, err)
+        assert len(err.strip().splitlines()) == 1 and "--out: '' does not name a new directory" in err, (name, err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_every_output_marker_command_names_a_pfjax_subcommand_or_a_study_script():
+    """An output's refusal names what wrote it (``pfjax.outputs.SCRIPTS``): each ``command=`` an
+    output is written under is a ``pfjax`` subcommand or a study script that exists."""
+    from pfjax.cli import build_parser
+    from pfjax.outputs import SCRIPTS as WRITERS
+    from pfjax.outputs import _describe
+
+    sub = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+    found = set()
+    for path in [*ROOT.joinpath("pfjax").rglob("*.py"), *STUDIES.glob("*.py")]:
+        found |= set(re.findall(r'command="([\w+-]+)"', path.read_text()))
+    assert found - set(sub.choices) == set(WRITERS), found
+    assert all((ROOT / script).is_file() for script in WRITERS.values())
+    assert _describe({"command": "parking-study", "config_sha256": "c" * 64}) == (
+        "the output of `python studies/parking.py` (config cccccccccccc)"
+    )

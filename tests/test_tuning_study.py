@@ -58,7 +58,9 @@ def test_quick_tuning_study_outputs_consistent(out):
     assert units["n"].startswith("runs in heldout.table") and "seeds in targets.by_problem" in units["n"]
     assert units["seed"] == STAMP_UNITS["seed"]
     for name in ("tuning_runs", "heldout", "margin"):
-        assert pq.read_schema(out / f"{name}.parquet").metadata[b"pfjax.config_sha256"].decode() == s["config_sha256"]
+        meta = pq.read_schema(out / f"{name}.parquet").metadata
+        assert meta[b"pfjax.config_sha256"].decode() == s["config_sha256"]
+        assert json.loads(meta[b"pfjax.seed"]) == s["seed"] == list(range(s["config"]["seeds"]))  # the tuners' seeds
     assert (out / "figures" / "cost_vs_budget.png").stat().st_size > 1000
     report = (out / "report.md").read_text()
     html = (out / "report.html").read_text()

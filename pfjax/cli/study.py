@@ -32,10 +32,17 @@ REPORT_OVERWRITE_HELP = (
 NAMED_OUT = "results/<name> (<name>: the config's name)"
 
 
-def default_out(out, name: str) -> Path:
+def default_out(out, name: str):
     """The output directory a command writes: ``out`` (``--out``), else ``results/<name>`` under the
-    current directory (``pfjax study``, ``pfjax report`` and the study scripts alike)."""
-    return Path(out) if out else Path("results") / name
+    current directory (``pfjax study``, ``pfjax report`` and the study scripts alike). An empty
+    ``--out ''`` (a variable that was not set) is refused as ``pfjax study`` refuses it
+    (:func:`pfjax.outputs.target_path`), never read as the default."""
+    from pfjax.outputs import target_path
+
+    if out is None:
+        return Path("results") / name
+    target_path(out, "--out")  # an empty or '.'-ending name: InputError naming --out
+    return Path(out)
 
 
 def add_output_flags(parser, *, set_help: str | None, out_default: str, overwrite_help: str = OVERWRITE_HELP) -> None:

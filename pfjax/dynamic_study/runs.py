@@ -55,7 +55,10 @@ def run(config: KinematicVsDynamic, out: str | Path, overwrite: bool = False, lo
     the key, before anything is written or run)."""
     check(config)
     digest = config_hash(config.model_dump(mode="json"))
-    with OutputDir(out, command="kinematic-vs-dynamic", config_sha256=digest, overwrite=overwrite) as output:
+    marker = {"seed": config.study["seed"]}
+    with OutputDir(
+        out, command="kinematic-vs-dynamic", config_sha256=digest, overwrite=overwrite, extra=marker
+    ) as output:
         t0 = time.time()
         designed, design_record = designs(config) if config.designs.enabled else ([], {})
         t_designs = time.time() - t0

@@ -340,7 +340,10 @@ def run(
     known_spec = load_study(data=known_case(KNOWN_STD["1e-4"], sizes["known_budget"]))[0]
     config = verification_config(sizes, study_spec)
     result: dict = {**stamp(config, SEED), "config": config, "units": units(known_spec, study_spec)}
-    with OutputDir(out, command="rare-events", config_sha256=result["config_sha256"], overwrite=overwrite) as output:
+    marker = {"seed": SEED}
+    with OutputDir(
+        out, command="rare-events", config_sha256=result["config_sha256"], overwrite=overwrite, extra=marker
+    ) as output:
         refs = references()
         result["known"] = known(sizes, refs, log)
         result["starts"] = starts_comparison(sizes, refs["1e-6"], log)

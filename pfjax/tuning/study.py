@@ -275,7 +275,7 @@ def run(config: TuningStudy, out: Path, progress: bool) -> dict:
     }
     summary["wall_s"] = time.time() - t0
     out.mkdir(parents=True, exist_ok=True)
-    meta = parquet_metadata(cfg, None, config_sha256=summary["config_sha256"])
+    meta = parquet_metadata(cfg, summary["seed"], config_sha256=summary["config_sha256"])  # the tuners' seeds
     tables = {"tuning_runs": hist, "heldout": df, "margin": sweep}
     write_tables(tables, out, meta)
     figures(hist, problem_list(cfg["compare"]["problems"])[0], out)
