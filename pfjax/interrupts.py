@@ -125,4 +125,15 @@ def deferred():
             signal.raise_signal(k)
 
 
-__all__ = ["RESEND_S", "deferred", "guard", "stop_if_interrupted"]
+def finished(code):
+    """``code``, with Ctrl-C ignored from now on, for a process whose command has ended (its outputs
+    written, its result printed): a late interrupt then neither breaks into the exit handlers (JAX's
+    runtime teardown, with a traceback) nor turns a finished run's exit code into 130. The ``pfjax``
+    console script and the study scripts call it as their process ends; the Python API never does.
+    In the main thread only (elsewhere it changes nothing)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return code
+
+
+__all__ = ["RESEND_S", "deferred", "finished", "guard", "stop_if_interrupted"]

@@ -47,4 +47,6 @@ def run(args) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from pfjax.interrupts import finished
+
+    sys.exit(finished(main()))  # a Ctrl-C after the study ended changes nothing

@@ -67,4 +67,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from pfjax.interrupts import finished
+
+    raise SystemExit(finished(main()))  # a Ctrl-C after the study ended changes nothing

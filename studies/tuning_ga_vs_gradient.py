@@ -55,4 +55,6 @@ def main_checked(args) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from pfjax.interrupts import finished
+
+    sys.exit(finished(main()))  # a Ctrl-C after the study ended changes nothing

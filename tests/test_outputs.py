@@ -746,3 +746,16 @@ def test_ctrl_c_prints_one_line_and_a_blank_line_only_below_a_terminals_progress
     assert errors.command_main("prog", body) == EXIT_INTERRUPTED
     out, err = capsys.readouterr()
     assert out == "" and err == ("\n" if tty else "") + "prog: interrupted; nothing was written\n"
+
+
+def test_a_ctrl_c_after_the_command_ended_changes_nothing():
+    """``pfjax.interrupts.finished`` (the console script's and the study scripts' last step): a
+    SIGINT after it neither interrupts the exit handlers with a traceback nor changes the exit code."""
+    code = (
+        "import atexit, os, signal, sys, time\n"
+        "from pfjax.interrupts import finished\n"
+        "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(0.1), print('exit handler ran')))\n"
+        "sys.exit(finished(3))\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 3 and r.stdout == "exit handler ran\n" and r.stderr == "", r

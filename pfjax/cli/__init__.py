@@ -96,7 +96,8 @@ def run() -> None:
     Once a command has written and closed its outputs, the teardown of a process that imported JAX
     (freeing its modules, compiled programs and runtime) changes nothing, and took 0.22-0.34 s of a
     warm ``pfjax simulate`` or ``pfjax track`` (medians; 2-core AMD EPYC, jax 0.10.2;
-    docs/performance.md). So the script waits for any non-daemon thread, runs the exit handlers
+    docs/performance.md). So the script ignores Ctrl-C from then on (:func:`pfjax.interrupts.finished`:
+    the command has ended), waits for any non-daemon thread, runs the exit handlers
     (:mod:`atexit`: JAX's, logging's, multiprocessing's), flushes stdout and stderr and ends with
     :func:`os._exit` and the command's exit code (as :func:`sys.exit` would give it). If a stream
     cannot be flushed (a closed pipe), or the command raised, it exits the usual way.
@@ -107,11 +108,14 @@ def run() -> None:
     import os
     import threading
 
+    from pfjax import interrupts
+
     result: int | str | None
     try:
         result = main()
     except SystemExit as e:  # argparse's --help and usage errors
         result = e.code
+    interrupts.finished(result)  # the command has ended: a late Ctrl-C stops neither exit handler nor code
     if result is not None and not isinstance(result, int):
         print(result, file=sys.stderr)  # sys.exit's message form
         result = 1

@@ -3,5 +3,6 @@
 import sys
 
 from pfjax.cli import main
+from pfjax.interrupts import finished
 
-sys.exit(main())
+sys.exit(finished(main()))  # a Ctrl-C after the command ended changes nothing
