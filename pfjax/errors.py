@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import numbers as _numbers
+import re
 from typing import Literal, overload
 
 #: Exit code of a command refused for bad input (argparse's convention).
@@ -66,7 +67,8 @@ def arguments_checked(f):
 
     sig = inspect.signature(f)
     takes = [n for n, p in sig.parameters.items() if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
-    where = f"pfjax.{f.__name__}"
+    module = f.__module__.removesuffix(".api")  # pfjax.parking.api.run: pfjax.parking.run
+    where = f"pfjax.{f.__name__}" if module.startswith("pfjax.api") else f"{module}.{f.__name__}"
 
     @functools.wraps(f)
     def checked(*args, **kwargs):
@@ -78,6 +80,10 @@ def arguments_checked(f):
                 hint = difflib.get_close_matches(unknown[0], takes, n=1)
                 also = f" (did you mean {hint[0]!r}?)" if hint else f"; it takes {', '.join(takes)}"
                 raise ArgumentError(f"{unknown[0]}: {where} takes no such argument{also}", unknown[0]) from None
+            missing = re.search(r"missing a required argument: '(\w+)'", str(e))
+            if missing:
+                name = missing.group(1)
+                raise ArgumentError(f"{name}: {where} needs this argument", name) from None
             raise ArgumentError(f"{where}: {e}") from None
         return f(*args, **kwargs)
 

@@ -561,3 +561,32 @@ def test_no_design_is_bad_input_named_alike_by_the_api_and_pfjax_synth(kwargs, a
     assert main(["synth", *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert err == f"pfjax synth: error: {flags}: {str(e.value).removeprefix(key + ': ')}"
+
+
+@pytest.mark.parametrize(
+    "call, key, hint",
+    [
+        (lambda: pfjax.run_study(STUDY, "unused", overwite=True), "overwite", "overwrite"),
+        (lambda: pfjax.rare_event(STUDY, max_rollout=100), "max_rollout", "max_rollouts"),
+        (lambda: pfjax.rare_event(STUDY, controler="a"), "controler", "controller"),
+        (lambda: pfjax.tracking.run(horizn=1.0), "horizn", "horizon"),
+        (lambda: pfjax.parking.run(t_mx=1.0), "t_mx", "t_max"),
+        (lambda: pfjax.parking.search(metod="ga"), "metod", "method"),
+    ],
+)
+def test_a_misspelt_keyword_is_named_with_the_argument_meant(call, key, hint, tmp_path, monkeypatch):
+    """A keyword a function does not take, also where the function reads config overrides as
+    keywords (``run_study``, ``rare_event``), is an ArgumentError naming it and the closest
+    argument; nothing is run or written."""
+    from pfjax.errors import ArgumentError
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ArgumentError) as e:
+        call()
+    assert e.value.key == key and str(e.value).endswith(f"(did you mean {hint!r}?)") and list(tmp_path.iterdir()) == []
+
+
+def test_a_missing_argument_is_named():
+    with pytest.raises(InputError) as e:
+        pfjax.simulate()
+    assert e.value.key == "scenarios" and str(e.value) == "scenarios: pfjax.simulate needs this argument"

@@ -24,7 +24,7 @@ def design_mixed(v: float = 1.0, L: float = 0.2, alpha: float = 10.0, beta: floa
     Returns:
         pfjax.synthesis.Design: ``K`` (1×2: rad/m, rad/rad, for ``[d, θ_e]``), the LMI
         bounds ``gamma_inf``, ``gamma_2``, the closed loop's true norms ``hinf_norm``,
-        ``h2_norm`` and its poles. Pass it as ``gains`` to :func:`simulate` with ``"state_feedback"``.
+        ``h2_norm`` and its poles ``closed_loop_poles``. Pass it as ``gains`` to :func:`simulate` with ``"state_feedback"``.
 
     Raises:
         InputError: a bad argument, named (``v``, ``L``, ``alpha``, ``beta``, ``region.<field>``);

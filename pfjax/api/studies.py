@@ -146,6 +146,7 @@ def run_study(
     progress = errors.boolean("progress", progress, or_none=True)
     report = errors.boolean("report", report)
     out = None if out is None else _out_dir(out)
+    _misspelt(run_study, overrides)
     spec = _study_spec(config, {dotted(k): v for k, v in overrides.items()})
     out = Path("results") / spec.name if out is None else out
     # the output directory judged by pfjax.outputs as `pfjax study --out` is, its messages naming
@@ -221,6 +222,7 @@ def rare_event(
     from pfjax.rare.study import units as rare_units
 
     progress = errors.boolean("progress", progress, or_none=True)
+    _misspelt(rare_event, overrides)
     values = {dotted(k): v for k, v in overrides.items()}
     if method is not None:
         if method not in METHODS:
@@ -259,6 +261,24 @@ def rare_event(
         "units": {**STAMP_UNITS, "seed": "1 (the estimator's seed, rare_event.seed)", **rare_units(spec)},
         "controllers": estimate_study(spec, controllers, names=chosen, progress=progress),
     }
+
+
+def _misspelt(f, overrides: dict) -> None:
+    """:class:`~pfjax.errors.ArgumentError` for an override that is no config key and is closest to
+    one of ``f``'s own keyword arguments (``overwite=True``: a misspelt ``overwrite``, not a config
+    value), naming it with that argument; the rest are left to the config's own check."""
+    import difflib
+    import inspect
+
+    from pfjax.montecarlo.config import StudySpec
+
+    keys = list(StudySpec.model_fields)
+    takes = [n for n, p in inspect.signature(f).parameters.items() if p.kind is p.KEYWORD_ONLY]
+    for k in overrides:
+        top = re.split(r"__", k, maxsplit=1)[0]
+        best = [] if top in keys else difflib.get_close_matches(top, [*takes, *keys], n=1)
+        if best and best[0] in takes:
+            raise errors.ArgumentError(f"{k}: pfjax.{f.__name__} takes no such argument (did you mean {best[0]!r}?)", k)
 
 
 def dotted(key: str) -> str:

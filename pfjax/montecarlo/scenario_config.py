@@ -115,9 +115,12 @@ class VehicleSpec(ConfigModel):
         for name in other:  # a value other than the default (a dumped config holds every key, at its default)
             if getattr(self, name) != type(self).model_fields[name].get_default(call_default_factory=True):
                 why = (
-                    "the ST model's wheelbase and steering limit are its parameter set's (vehicle.params)"
-                    if theirs == "kinematic"
-                    else 'it is a setting of model = "st"'
+                    'it is a setting of model = "st"'
+                    if theirs == "st"
+                    else "the front slip's sign convention is the declared-slip model's; the ST model's slip "
+                    "comes from its tyres"
+                    if name == "convention"
+                    else "the ST model's wheelbase and steering limits are its parameter set's (vehicle.params)"
                 )
                 raise ValueError(f'{name}: not with model = "{self.model}" ({why}); remove it')
         if self.model == "std" and self.params == "robot":

@@ -182,6 +182,7 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     }
 
 
+@errors.arguments_checked
 def run(
     map="parallel",
     x0=None,
@@ -280,6 +281,7 @@ SEARCH_SETTINGS = {"grid": ("n",), "ga": ("generations", "population", "seed")}
 SEARCH_DEFAULTS = {"n": 32, "generations": 100, "population": 20, "seed": 0}
 
 
+@errors.arguments_checked
 def search(
     method,
     *,

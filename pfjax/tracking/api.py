@@ -132,6 +132,7 @@ def _check(
     return out
 
 
+@errors.arguments_checked
 def run(
     mode="forward",
     *,
