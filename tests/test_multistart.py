@@ -262,7 +262,6 @@ def test_parse_gains_forms_and_errors():
         np.testing.assert_array_equal(parse_gains(g, f, n, lo, hi), want)
     for g, msg in (
         ("1,2", "2 values, expected 3"),
-        ("1,-2,3", "outside the tuning box"),
         ("1,x,3", "expected numbers"),
         ({"a": 1, "b": 2}, r"K missing; b unknown; expected a, K\[2\]$"),
         ({"a": 1}, r"K missing; expected a, K\[2\]$"),
@@ -273,6 +272,10 @@ def test_parse_gains_forms_and_errors():
     ):
         with pytest.raises(ValueError, match=f"^check: .*{msg}"):
             parse_gains(g, f, n, lo, hi)
+    # a value outside the box is named by its field (and element)
+    with pytest.raises(ValueError, match=r"^check\.K\[1\]: 3 outside the tuning box \[-5, 0\]") as e:
+        parse_gains("1,-2,3", f, n, lo, hi)
+    assert e.value.key == "check.K[1]"
 
 
 def test_tune_api_methods_and_check_on_the_simulator():

@@ -257,8 +257,10 @@ def parse_gains(gains, fields, sizes, lower, upper, *, key: str = "check") -> np
     out = (th < lo) | (th > hi)
     if out.any():
         i = int(np.flatnonzero(out)[0])
+        element = [f"{f}[{j}]" if n > 1 else f for f, n in zip(fields, sizes) for j in range(n)][i]
         raise errors.InputError(
-            f"{key}: value {i + 1} ({th[i]:g}) outside the tuning box [{lo[i]:g}, {hi[i]:g}]; bounds {lo.tolist()} to {hi.tolist()}",
+            f"{key}.{element}: {th[i]:g} outside the tuning box [{lo[i]:g}, {hi[i]:g}]; bounds {lo.tolist()} to "
+            f"{hi.tolist()}",
             key,
         )
     return th
