@@ -78,8 +78,7 @@ def arguments_checked(f):
             unknown = [k for k in kwargs if k not in sig.parameters]
             if unknown:
                 hint = difflib.get_close_matches(unknown[0], takes, n=1)
-                also = f" (did you mean {hint[0]!r}?)" if hint else f"; it takes {', '.join(takes)}"
-                raise ArgumentError(f"{unknown[0]}: {where} takes no such argument{also}", unknown[0]) from None
+                raise no_such_argument(where, unknown[0], takes, hint) from None
             missing = re.search(r"missing a required argument: '(\w+)'", str(e))
             if missing:
                 name = missing.group(1)
@@ -88,6 +87,13 @@ def arguments_checked(f):
         return f(*args, **kwargs)
 
     return checked
+
+
+def no_such_argument(where: str, name: str, takes, hint: list[str]) -> ArgumentError:
+    """The :class:`ArgumentError` of a keyword ``name`` that ``where`` (``pfjax.simulate``) does not
+    take: with the closest argument (``hint``, at most one) or, without one, every argument it takes."""
+    also = f" (did you mean {hint[0]!r}?)" if hint else f"; it takes {', '.join(takes)}"
+    return ArgumentError(f"{name}: {where} takes no such argument{also}", name)
 
 
 def is_number(value) -> bool:

@@ -33,13 +33,11 @@ def _env() -> dict:
     return {**os.environ, "PFJAX_CACHE_DIR": str(ROOT / ".pytest_cache" / "xla")}
 
 
-@pytest.fixture(scope="module")
-def helps(tmp_path_factory) -> dict[str, subprocess.CompletedProcess]:
-    """Every script's ``--help``, run from an empty directory that is not the checkout (in parallel)."""
-    cwd = tmp_path_factory.mktemp("elsewhere")
+def _every_script(cwd, *args, extra=None) -> dict[str, subprocess.CompletedProcess]:
+    """Every script run with ``args`` (and its ``extra`` arguments) from ``cwd``, in parallel."""
     procs = {
         name: subprocess.Popen(
-            [sys.executable, str(STUDIES / f"{name}.py"), "--help"],
+            [sys.executable, str(STUDIES / f"{name}.py"), *args, *(extra or {}).get(name, [])],
             cwd=cwd,
             env=_env(),
             stdout=subprocess.PIPE,
@@ -52,6 +50,14 @@ def helps(tmp_path_factory) -> dict[str, subprocess.CompletedProcess]:
     for name, p in procs.items():
         stdout, stderr = p.communicate(timeout=300)
         out[name] = subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr)
+    return out
+
+
+@pytest.fixture(scope="module")
+def helps(tmp_path_factory) -> dict[str, subprocess.CompletedProcess]:
+    """Every script's ``--help``, run from an empty directory that is not the checkout (in parallel)."""
+    cwd = tmp_path_factory.mktemp("elsewhere")
+    out = _every_script(cwd, "--help")
     assert not list(cwd.iterdir())  # --help writes nothing
     return out
 
@@ -196,20 +202,9 @@ ELSEWHERE = {"tuning_ga_vs_gradient": ["--set", "heldout=heldout"]}
 def test_an_empty_out_is_refused_by_every_script_never_read_as_the_default(tmp_path):
     """``--out ''`` (an unset shell variable) is refused naming ``--out``, exit code 2, as ``pfjax
     study`` refuses it: the default ``results/<name>`` under the working directory is not written."""
-    procs = {
-        name: subprocess.Popen(
-            [sys.executable, str(STUDIES / f"{name}.py"), "--quick", "--out", "", *ELSEWHERE.get(name, [])],
-            cwd=tmp_path,
-            env=_env(),
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        for name in SCRIPTS
-    }
-    for name, p in procs.items():
-        _, err = p.communicate(timeout=300)
-        assert p.returncode == 2, (name, err)
+    for name, r in _every_script(tmp_path, "--quick", "--out", "", extra=ELSEWHERE).items():
+        err = r.stderr
+        assert r.returncode == 2, (name, err)
         assert len(err.strip().splitlines()) == 1 and "--out: '' does not name a new directory" in err, (name, err)
     assert list(tmp_path.iterdir()) == []
 

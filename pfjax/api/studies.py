@@ -278,7 +278,7 @@ def _misspelt(f, overrides: dict) -> None:
         top = re.split(r"__", k, maxsplit=1)[0]
         best = [] if top in keys else difflib.get_close_matches(top, [*takes, *keys], n=1)
         if best and best[0] in takes:
-            raise errors.ArgumentError(f"{k}: pfjax.{f.__name__} takes no such argument (did you mean {best[0]!r}?)", k)
+            raise errors.no_such_argument(f"pfjax.{f.__name__}", k, takes, best)
 
 
 def dotted(key: str) -> str:
