@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import pfjax
 from pfjax.config import ConfigError
 from pfjax.metrics.robustness import clopper_pearson
 from pfjax.montecarlo.config import load_study, study_hash
@@ -202,6 +203,23 @@ def test_runs_are_independent_of_chunk_size_and_shared_by_controllers(tmp_path):
     g = ra.groupby("controller")
     np.testing.assert_array_equal(g.get_group("lmi")[params].to_numpy(), g.get_group("stanley")[params].to_numpy())
     assert len(ra) == 24 * 2 * 2
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_run_table_inputs_are_in_the_precision_they_ran_in(tmp_path, dtype):
+    """runs.parquet holds every sampled input in the study's precision, as the simulator got it: a
+    float32 study's 1.3 m/s is float32's 1.3, not that number widened to 1.2999999523...; a column a
+    path lacks (the line's radius) is NaN in the same type. pfjax.scenarios' table likewise."""
+    spec = spec_of("margin.enabled=false", f"dtype='{dtype}'", "n_runs=8", "chunk_size=8", "vehicle.speed=1.3")
+    run_study(spec, tmp_path / "s", progress=False)
+    runs = pd.read_parquet(tmp_path / "s" / "runs.parquet")
+    inputs = ["speed", "L", "beta_r_deg", "beta_f_deg", "lateral_offset", "heading_error_deg", "radius"]
+    assert {c: runs[c].dtype for c in inputs} == {c: np.dtype(dtype) for c in inputs}
+    assert (runs.speed == np.asarray(1.3, dtype)).all() and runs.speed.astype(str).eq("1.3").all()
+    assert runs[runs.path == "line"].radius.isna().all() and runs[runs.path != "line"].radius.between(2, 3).all()
+    with jax.enable_x64(dtype == "float64"):
+        t = pfjax.scenarios("sine", 4, speed=1.3, lateral_offset=pfjax.uniform(-0.1, 0.1)).table
+    assert (t.drop(columns="run").dtypes == np.dtype(dtype)).all() and t.speed.astype(str).eq("1.3").all()
 
 
 def test_summary_contract_and_numbers(tmp_path):

@@ -138,7 +138,7 @@ def scenarios(
         path, n, 0 if seed is None else seed, horizon, model, values, convention, vehicle_params, tau_delta_s, k_v
     )
     sampled = sample_runs(spec, 0, np.arange(n), key=jkey, given=given)
-    table = pd.DataFrame({"run": np.arange(n), **{k: np.asarray(v, float) for k, v in sampled.columns.items()}})
+    table = pd.DataFrame({"run": np.arange(n), **{k: np.asarray(v) for k, v in sampled.columns.items()}})
     return Scenarios(sampled.scenarios, table, spec)
 
 

@@ -259,7 +259,7 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
             "path": path,
             "controller": controller,
             "run": idx,
-            **{k: np.asarray(v, float) for k, v in sampled.columns.items()},
+            **{k: np.asarray(v) for k, v in sampled.columns.items()},
         }
     )
     return Simulation(add_results(table, res, n), res, spec.controllers[c].type, flat)

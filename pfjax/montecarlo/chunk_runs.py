@@ -162,7 +162,10 @@ def simulate_chunk(
     )
     df = pd.DataFrame({"path": spec.paths[path_index].label, "controller": name, "run": idx})
     for col in column_names(spec):
-        df[col] = np.asarray(sampled.columns[col], dtype=float) if col in sampled.columns else np.nan
+        # in the study's precision, as the simulation ran them (a column this path lacks: NaN)
+        df[col] = (
+            np.asarray(sampled.columns[col], spec.dtype) if col in sampled.columns else np.full(n, np.nan, spec.dtype)
+        )
     return add_results(df, res, n)
 
 
@@ -174,10 +177,10 @@ def add_results(df: pd.DataFrame, res, n: int) -> pd.DataFrame:
         df[m] = np.asarray(getattr(res.metrics, m))[:n]
     df["status_code"] = np.asarray(res.status)[:n].astype(np.int8)
     df["status"] = [STATUS_NAMES[int(s)] for s in df["status_code"]]
-    df["fail_time"] = np.asarray(res.fail_time, dtype=float)[:n]
+    df["fail_time"] = np.asarray(res.fail_time)[:n]
     df["success"] = df["success"].astype(bool)
     for m in dynamic.SLIP_METRIC_NAMES if isinstance(res, dynamic.DynamicResult) else ():
-        df[m] = np.asarray(getattr(res.slip, m), dtype=float)[:n]
+        df[m] = np.asarray(getattr(res.slip, m))[:n]
     return df
 
 
