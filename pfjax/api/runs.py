@@ -32,7 +32,7 @@ class Scenarios(NamedTuple):
     """A batch of runs of one path (:func:`scenarios`)."""
 
     batch: Any  # pfjax.sim.Scenario (model st: pfjax.sim.dynamic.DynamicScenario) with a leading run axis (gains None)
-    table: Any  # pandas DataFrame: one row per run, the sampled values (config units)
+    table: Any  # pandas DataFrame: one row per run, the sampled values (config units, in the simulation's precision)
     spec: Any  # the study config that describes them (pfjax.montecarlo.config.StudySpec)
 
     @property
