@@ -326,7 +326,7 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
         falsifier's gradient rollouts and its rays', 0 where it did not run; part of the stratum's
         ``n_rollouts`` and of the budget); ``failure_points`` the
         importance-sampling proposal's modes in the inputs' config units (its weight beside each),
-        the most likely failure points it found, each with its ``drivers`` (:func:`drivers`;
+        the failure modes it found (:mod:`pfjax.rare.importance`), each with its ``drivers`` (:func:`drivers`;
         ``[]`` for the other methods).
     """
     rare = spec.rare_event

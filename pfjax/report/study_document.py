@@ -163,7 +163,7 @@ def _search_blocks(summary: dict, colors: dict, figures: Mapping) -> list[D.Bloc
         head = ["controller", "P(fail) [95 % interval]", "rel. error", "rollouts (method)"]
         head += [
             "plain failure rate of the runs [95 %]",
-            "most likely failure points: path, weight, inputs far from their medians (σ of u)",
+            "failure modes (mean failure inputs): path, weight, inputs far from their medians (σ of u)",
         ]
         note = (
             "P(fail) from pfjax.rare over the study's uncertain inputs (importance sampling, subset simulation or "

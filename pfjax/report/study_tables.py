@@ -194,7 +194,7 @@ def _failure_point_text(q: dict) -> str:
 
 def rare_event_rows(summary: dict, colors: dict) -> list:
     """Per controller: the rare-event estimate beside the plain failure rate of the study's runs, and
-    the most likely failure points the estimate found, with what drives each (``[rare_event]``,
+    the failure modes the estimate found (:mod:`pfjax.rare.importance`), with what drives each (``[rare_event]``,
     :mod:`pfjax.rare`)."""
     rows = []
     for n, c in summary["controllers"].items():
