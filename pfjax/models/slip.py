@@ -94,7 +94,8 @@ def world_rhs(pose: Pose, delta: Array, beta_r: Array, beta_f: Array, params: Sl
     Args:
         pose: current pose (m, m, rad).
         delta: applied steering angle, rad (already saturated).
-        beta_r, beta_f: rear and front slip angles, rad.
+        beta_r: rear slip angle, rad.
+        beta_f: front slip angle, rad.
         params: physical parameters.
 
     Returns:
@@ -125,7 +126,8 @@ def frenet_rhs(
     Args:
         state: Frenet state (m, rad, m).
         delta: applied steering, rad.
-        beta_r, beta_f: slip angles, rad.
+        beta_r: rear slip angle, rad.
+        beta_f: front slip angle, rad.
         kappa: path curvature at ``s``, 1/m (left turn positive).
         params: physical parameters.
     """

@@ -157,7 +157,8 @@ def robust_mixed(
 
     Args:
         plants: vertex plants (same shapes).
-        alpha, beta: objective weights (source: 10, 1).
+        alpha: weight of the H-infinity bound, ``gamma_inf^2`` (source: 10).
+        beta: weight of the H2 bound, ``gamma_2^2`` (source: 1).
         x0s: (m, n_x) initial errors that must lie in the invariant ellipsoid (with ``delta_max``).
         delta_max: steering limit, rad, enforced on the ellipsoid.
         region: optional pole region, imposed at every vertex.

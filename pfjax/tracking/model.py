@@ -74,7 +74,8 @@ def follower_rhs(
         state: current state (m, m, rad, rad).
         v: rear-axle speed, m/s (already limited).
         omega: steering rate, rad/s (already limited).
-        beta_r, beta_f: rear and front slip angles, rad (0 for the slip-free model).
+        beta_r: rear slip angle, rad (0 for the slip-free model).
+        beta_f: front slip angle, rad (0 for the slip-free model).
         params: vehicle parameters.
 
     Returns:

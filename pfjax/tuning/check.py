@@ -100,7 +100,8 @@ def check_point(
     Args:
         cost: ``theta (D,) -> scalar``, traceable.
         theta: ``(D,)`` point inside ``[lower, upper]``.
-        lower, upper: ``(D,)`` box.
+        lower: ``(D,)`` lower corner of the box.
+        upper: ``(D,)`` upper corner of the box.
         h: finite-difference step of the Hessian, box units.
         radii: probe radii, box units.
         rtol: a probe lower than ``J - rtol |J|`` refutes a local minimum.

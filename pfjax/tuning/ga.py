@@ -214,7 +214,8 @@ def ga(
 
     Args:
         cost_batch: ``(P, D) float64 -> (P,)`` costs, minimised; non-finite ranks worst.
-        lower, upper: ``(D,)`` finite bounds, ``lower < upper``.
+        lower: ``(D,)`` finite lower bounds, ``lower < upper``.
+        upper: ``(D,)`` finite upper bounds.
         key: JAX PRNG key (same key, same result).
         options: :class:`GAOptions` (defaults: the source's Table 2).
         progress: show a tqdm bar over the generations.

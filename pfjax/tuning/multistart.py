@@ -177,7 +177,8 @@ def multistart_tune(
 
     Args:
         cost: ``theta (D,) -> scalar``, traceable (e.g. :func:`pfjax.tuning.cost.batch_cost`).
-        lower, upper: ``(D,)`` box, ``lower < upper``.
+        lower: ``(D,)`` lower corner of the box, ``lower < upper``.
+        upper: ``(D,)`` upper corner of the box.
         key: JAX PRNG key (space-filling points, smoothing noise, restarts).
         options: :class:`MultistartOptions`.
         candidates: ``(K, D)`` extra points screened beside the space-filling ones (clipped to
