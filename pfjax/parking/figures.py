@@ -88,7 +88,7 @@ def histories_figure(traj, result, control, title):
     axs[0].plot(t, st[:, 0], label="x [m]")
     axs[0].plot(t, st[:, 1], label="y [m]")
     axs[0].plot(t, st[:, 2], label="θ [rad]")
-    axs[1].plot(t, v1 * 10, label="v₁ [×0.1 m/s]")
+    axs[1].plot(t, v1 * 10, label="10·v₁ [m/s]")
     axs[1].plot(t, v2, label="v₂ [rad/s]")
     axs[1].step(t, a / 10, where="post", label="α / 10", color="#999999", lw=0.8)
     for ax in axs:

@@ -74,8 +74,8 @@ def tracking_figure(title: str, path_xy: np.ndarray, trajs: dict, delta_max: flo
         ins.plot(tr["t"][late], 100 * tr["d"][late], **{k: v for k, v in _style(name).items() if k != "label"})
     pad = 0.1 * max(hi - lo, 1e-3)
     ins.set_ylim(lo - pad, hi + pad)
-    ins.set_title("second half (zoom)", fontsize=7)
-    ins.tick_params(labelsize=6)
+    ins.set_title("second half (zoom), d [cm] against t [s]", fontsize=7)
+    ins.tick_params(labelsize=7)
     fig.suptitle(title)
     fig.tight_layout()
     return fig
@@ -119,7 +119,7 @@ def pi_assignment_figure(labels: list[str], line_traces: dict, ok: dict):
     for lab in labels:
         tr = line_traces[lab]
         if ok[lab]:
-            ax.plot(tr["t"], 100 * tr["d"], lw=2, label=lab)
+            ax.plot(tr["t"], 100 * tr["d"], lw=2, label=lab.replace("=", " = ").replace(",", ", "))
         else:
             ax.plot(tr["t"], 100 * tr["d"], color="0.75", lw=0.7)
     ax.plot([], [], color="0.75", lw=0.7, label="other readings")
@@ -146,7 +146,7 @@ def _free_band(a, trajs: dict, after: np.ndarray) -> list[float]:
     if max(below, above) < 0.3:  # no room clear of the curves: the upper right, as before
         return [0.45, 0.45, 0.5, 0.45]
     if below >= above:
-        return [0.45, 0.04, 0.5, below - 0.14]  # room for the zoom's title above it
+        return [0.45, 0.1, 0.5, below - 0.2]  # room for its tick labels below it and its title above
     return [0.45, 1.0 - above + 0.06, 0.5, above - 0.16]
 
 
