@@ -12,6 +12,7 @@ from pathlib import Path
 
 import jax
 import numpy as np
+import pandas as pd
 import pytest
 
 import pfjax
@@ -60,6 +61,19 @@ def test_scenarios_numbers_arrays_distributions():
     # a JAX key is accepted too, and a study-config dict as a distribution
     d = pfjax.scenarios("line", 8, beta_r_deg={"dist": "choice", "values": [-2, 2]}, key=jax.random.PRNGKey(3))
     assert set(d.table.beta_r_deg) <= {-2.0, 2.0}
+
+
+def test_an_int_seed_draws_a_studys_runs_and_a_key_folds_in_the_run():
+    """scenarios(key=s) draws run i from fold_in(fold_in(seed_key(s), 0), i), the runs of a study with
+    seed s on its first path; a key k draws run i from fold_in(k, i) (the docstring's contract)."""
+    from pfjax.numerics.random import seed_key
+
+    kw = dict(lateral_offset=pfjax.uniform(-0.1, 0.1), heading_error_deg=pfjax.normal(0, 2))
+    by_seed = pfjax.scenarios("sine", 6, key=5, **kw).table
+    by_key = pfjax.scenarios("sine", 6, key=jax.random.fold_in(seed_key(5), 0), **kw).table
+    pd.testing.assert_frame_equal(by_seed, by_key)
+    other = pfjax.scenarios("sine", 6, key=jax.random.key(5), **kw).table
+    assert not np.allclose(other.lateral_offset, by_seed.lateral_offset)
 
 
 def test_scenario_matches_one_built_by_hand():

@@ -81,8 +81,12 @@ def scenarios(
         delta_max_deg: steering limit, deg (kinematic model; default 30).
         convention: front-slip sign convention (``source`` or ``lenain``; kinematic model).
         horizon: s, only to size slip sequences (the simulation's horizon is :func:`simulate`'s).
-        key: an int seed or a JAX PRNG key; run ``i`` draws from ``fold_in(key, i)``, so the first
-            runs of a larger ``n`` are the same runs.
+        key: an int seed or a JAX PRNG key. An int seed ``s`` draws the runs a study with
+            ``seed = s`` draws on its first path (run ``i`` from
+            ``fold_in(fold_in(seed_key(s), 0), i)``, :func:`pfjax.numerics.random.seed_key`); a key
+            ``k`` draws run ``i`` from ``fold_in(k, i)``. So ``key=0`` and
+            ``key=jax.random.key(0)`` draw different runs. Either way the first runs of a larger
+            ``n`` are the same runs.
         model: ``"kinematic"`` (slip declared by ``beta_r_deg``, ``beta_f_deg``), ``"st"``
             (CommonRoad's single-track model, :mod:`pfjax.sim.dynamic`: the slip comes from the tyre
             forces, so a slip, ``L``, ``delta_max_deg`` or ``convention`` other than a study config's
