@@ -138,20 +138,28 @@ def number(
     if not math.isfinite(x):
         raise InputError(f"{key}: expected a finite number, got {x}", key)
     if abs(x) > MAX_MAGNITUDE:
-        raise InputError(f"{key}: expected a magnitude <= {MAX_MAGNITUDE:g}{unit}, got {x:g}", key)
+        raise InputError(f"{key}: expected a magnitude <= {MAX_MAGNITUDE:g}{unit}, got {shown(x)}", key)
     if positive and not x > 0:
-        raise InputError(f"{key}: must be > 0{unit}, got {x:g}", key)
+        raise InputError(f"{key}: must be > 0{unit}, got {shown(x)}", key)
     if positive and not x >= MIN_POSITIVE:
-        raise InputError(f"{key}: must be at least {MIN_POSITIVE:g}{unit}, got {x:g}", key)
+        raise InputError(f"{key}: must be at least {MIN_POSITIVE:g}{unit}, got {shown(x)}", key)
     if nonnegative and x < 0:
-        raise InputError(f"{key}: must be >= 0{unit}, got {x:g}", key)
+        raise InputError(f"{key}: must be >= 0{unit}, got {shown(x)}", key)
     if below is not None and not abs(x) < below:
-        raise InputError(f"{key}: magnitude must be < {below:g}{unit}, got {x:g}", key)
+        raise InputError(f"{key}: magnitude must be < {below:g}{unit}, got {shown(x)}", key)
     if low is not None and x < low:
-        raise InputError(f"{key}: must be >= {low:g}{unit}, got {x:g}", key)
+        raise InputError(f"{key}: must be >= {low:g}{unit}, got {shown(x)}", key)
     if high is not None and x > high:
-        raise InputError(f"{key}: must be <= {high:g}{unit}, got {x:g}", key)
+        raise InputError(f"{key}: must be <= {high:g}{unit}, got {shown(x)}", key)
     return x
+
+
+def shown(x: float) -> str:
+    """A number as a refusal shows it: ``:g`` (``0.1``, ``2e+04``) where that reads back as the
+    same number, else every digit (``1.0000001``), so a value just past a bound never reads as
+    the bound itself."""
+    short = f"{x:g}"
+    return short if float(short) == float(x) else repr(float(x))
 
 
 def is_traced(value) -> bool:

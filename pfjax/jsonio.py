@@ -25,9 +25,10 @@ def _default(o):
 
 
 def clean(o):
-    """``o`` with every non-finite float replaced by None (recursively through dicts and lists)."""
+    """``o`` with every non-finite float replaced by None and -0.0 by 0.0 (recursively through
+    dicts and lists)."""
     if isinstance(o, float):
-        return o if math.isfinite(o) else None
+        return o + 0.0 if math.isfinite(o) else None  # -0.0 + 0.0 is 0.0
     if isinstance(o, dict):
         return {k: clean(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import os
 
-from pfjax.errors import InputError
+from pfjax.errors import InputError, shown
 
 #: Environment variable: the memory budget in bytes (default: half the machine's physical memory).
 ENV = "PFJAX_MEMORY_BUDGET"
@@ -46,7 +46,7 @@ def check_steps(horizon: float, dt: float, key: str = "dt") -> int:
     if n > MAX_STEPS:
         raise InputError(
             f"{key}: horizon / dt (a run's integrator step count) may be at most {MAX_STEPS:.0e}, "
-            f"got {horizon:g} / {dt:g} = {n:.3g}",
+            f"got {shown(horizon)} / {shown(dt)} = {shown(n)}",
             key,
         )
     return int(round(n))

@@ -328,7 +328,7 @@ def success_rate(x, conf: float = 0.95) -> SuccessRate:
             )
         a = a.astype(bool)  # booleans of an object array
     if not 0.0 < errors.number("conf", conf) < 1.0:
-        raise errors.InputError(f"conf: expected in (0, 1), got {conf:g}", "conf")
+        raise errors.InputError(f"conf: expected in (0, 1), got {errors.shown(conf)}", "conf")
     k, n = int(a.sum()), int(a.size)
     lo, hi = clopper_pearson(k, n, conf)
     return SuccessRate(k / n, float(lo), float(hi), k, n, float(conf))

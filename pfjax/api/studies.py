@@ -231,7 +231,9 @@ def rare_event(
     if target_rel_error is not None:
         values["rare_event.target_rel_error"] = errors.number("target_rel_error", target_rel_error, positive=True)
         if target_rel_error > 10:
-            raise errors.InputError(f"target_rel_error: must be <= 10, got {target_rel_error:g}", "target_rel_error")
+            raise errors.InputError(
+                f"target_rel_error: must be <= 10, got {errors.shown(target_rel_error)}", "target_rel_error"
+            )
     if max_rollouts is not None:
         values["rare_event.max_rollouts"] = errors.integer("max_rollouts", max_rollouts, low=100, high=100_000_000)
     if seed is not None:

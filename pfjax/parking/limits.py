@@ -3,7 +3,7 @@
 (:class:`pfjax.parking.runs.ParkingConfig`), and the one check of it. Imports only
 :mod:`pfjax.errors`, so the entry points stay cheap."""
 
-from pfjax.errors import InputError
+from pfjax.errors import InputError, shown
 
 #: Most scanner periods one run may take (``t_max / scan_period``); the simulator's loop allows one
 #: more (:func:`pfjax.parking.runs.periods_needed`), so no accepted run ends before ``t_max``.
@@ -16,7 +16,7 @@ def check_periods(key: str, t_max: float, scan_period: float) -> None:
     either may be the one to change)."""
     if t_max / scan_period > MAX_PERIODS:
         raise InputError(
-            f"{key}: t_max / scan period may be at most {MAX_PERIODS}, got {t_max:g} / {scan_period:g} = "
-            f"{t_max / scan_period:.3g}",
+            f"{key}: t_max / scan period may be at most {MAX_PERIODS}, got {shown(t_max)} / {shown(scan_period)} = "
+            f"{shown(t_max / scan_period)}",
             key,
         )

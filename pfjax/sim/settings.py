@@ -47,7 +47,7 @@ class SimConfig:
         errors.number("dt", self.dt, positive=True, unit=" s")
         errors.number("horizon", self.horizon, positive=True, unit=" s")
         if not self.horizon >= self.dt:
-            raise InputError(f"horizon: must be >= dt ({self.dt:g} s), got {self.horizon:g}")
+            raise InputError(f"horizon: must be >= dt ({self.dt:g} s), got {errors.shown(self.horizon)}")
         resources.check_steps(self.horizon, self.dt)
         resources.whole_steps(self.horizon, self.dt)  # never rounded to whole steps
         if self.control_every is not None:
@@ -65,7 +65,8 @@ class SimConfig:
             errors.number("success_from", self.success_from, nonnegative=True, unit=" s")
             if self.success_from > self.horizon:  # an empty success window would pass every run
                 raise InputError(
-                    f"success_from: must be <= horizon ({self.horizon:g} s), got {self.success_from:g}", "success_from"
+                    f"success_from: must be <= horizon ({self.horizon:g} s), got {errors.shown(self.success_from)}",
+                    "success_from",
                 )
 
     @property
