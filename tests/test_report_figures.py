@@ -291,3 +291,22 @@ def test_the_lateral_error_zoom_covers_no_curve_past_the_transient(late):
     assert x0 >= 0.4 and x0 + w <= 1.0 and h > 0.1
     assert top < 100 * d[t > 8.0].min() or bottom > 100 * d[t > 8.0].max(), (bottom, top, late)
     plt.close(fig)
+
+
+def test_a_figure_saved_twice_gives_the_same_bytes(tmp_path):
+    """figures.save: the SVG's element ids come from a fixed salt and it carries no date, so two
+    runs of a study write identical figures (matplotlib salts its ids at random by default)."""
+    import matplotlib.pyplot as plt
+
+    from pfjax.report.figures import save
+
+    def draw(d):
+        fig, ax = plt.subplots()
+        ax.plot([0, 1, 2], [0, 1, 4], "o-", label="a")
+        ax.legend()
+        save(fig, tmp_path / d, "f")
+
+    draw("a")
+    draw("b")
+    for ext in ("png", "svg"):
+        assert (tmp_path / "a" / f"f.{ext}").read_bytes() == (tmp_path / "b" / f"f.{ext}").read_bytes(), ext

@@ -311,8 +311,9 @@ def output_dir(out, cfg, *, overwrite: bool = False) -> OutputDir:
 
 def write(result: dict, output: OutputDir):
     """Write ``result`` into ``output`` (opened) and move it into place; returns the directory."""
-    import matplotlib.pyplot as plt
     import pandas as pd
+
+    from pfjax.report.figures import save
 
     result = dict(result, **provenance(result))
     tmp = output.staging
@@ -330,8 +331,6 @@ def write(result: dict, output: OutputDir):
         units=COLUMNS,
     )
     fig = throughput_figure(result["rows"], result["machine"])
-    for ext in ("png", "svg"):
-        fig.savefig(tmp / "figures" / f"throughput.{ext}", dpi=150)
-    plt.close(fig)
+    save(fig, tmp / "figures", "throughput", dpi=150, tight=False)
     (tmp / "report.md").write_text(markdown(result))
     return output.commit()

@@ -156,7 +156,8 @@ def start_map_figure(rows: list[dict]):
         axs, [("time_s", "best parking time [s]"), ("xs", "best X_s [m]"), ("alpha1", "best α₁"), ("alpha2", "best α₂")]
     ):
         im = ax.pcolormesh(x0, th, grid[k], shading="nearest", cmap="viridis")
-        fig.colorbar(im, ax=ax)
+        if np.isfinite(grid[k]).any():  # an all-blank panel gets no (empty) colour scale
+            fig.colorbar(im, ax=ax)
         ax.set_title(
             label + (" (blank: unused or no run parks)" if k != "time_s" else " (blank: no run parks)"), fontsize=9
         )

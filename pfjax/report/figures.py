@@ -22,11 +22,16 @@ def _style(name: str) -> dict:
     return style(name)
 
 
-def save(fig, out_dir: Path, name: str, svg: bool = True) -> str:
+def save(fig, out_dir: Path, name: str, svg: bool = True, *, dpi: int = 130, tight: bool = True) -> str:
+    """Write ``fig`` as ``out_dir/name.png`` (``dpi``) and, with ``svg``, ``name.svg``, cropped to
+    what is drawn unless not ``tight``; close it and return the PNG's name. The same figure gives
+    the same bytes in both files (the SVG's element ids from a fixed salt, no date in it)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out_dir / f"{name}.png", dpi=130, bbox_inches="tight")
+    box = "tight" if tight else None
+    fig.savefig(out_dir / f"{name}.png", dpi=dpi, bbox_inches=box)
     if svg:
-        fig.savefig(out_dir / f"{name}.svg", bbox_inches="tight")
+        with matplotlib.rc_context({"svg.hashsalt": "pfjax"}):
+            fig.savefig(out_dir / f"{name}.svg", bbox_inches=box, metadata={"Date": None})
     plt.close(fig)
     return f"{name}.png"
 

@@ -59,7 +59,8 @@ def write_figures(fig_dir: Path, cfg: dict, lemma_df: pd.DataFrame, geo: pd.Data
     fig, ax = plt.subplots(figsize=(6.5, 4))
     ax.scatter(np.degrees(on.p_gamma), np.degrees(on.phi_minus_pgamma), s=3, alpha=0.4, color="#264653")
     for x in (-90, 90):
-        ax.axvline(x, color="#e76f51", lw=1, ls="--")
+        ax.axvline(x, color="#e76f51", lw=1, ls="--", label="|p γ| = 90°" if x > 0 else None)
+    ax.legend(frameon=False, fontsize=8)
     ax.set_xlabel("p γ (deg)")
     ax.set_ylabel("φ − p γ at z~ = 0 (deg)")
     ax.set_title("Geometry: z~ = 0 forces φ = pγ only while |pγ| < 90°")
@@ -75,7 +76,7 @@ def write_figures(fig_dir: Path, cfg: dict, lemma_df: pd.DataFrame, geo: pd.Data
         d = mc[mc["mode"] == mode]
         for lname, g in d.groupby("leader"):
             ax.step(*final_error_ecdf(g), where="post", label=lname)
-        ax.axvline(cfg["sim"]["band"], color="k", lw=1, ls="--")
+        ax.axvline(cfg["sim"]["band"], color="k", lw=1, ls="--", label=f"success band ({cfg['sim']['band']:g} m)")
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(NullFormatter())  # the decades only: minor labels overlap on a short range
         ax.set_xlabel("max |z~| over the final window (m)")

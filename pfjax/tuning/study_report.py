@@ -25,7 +25,8 @@ def figures(hist: pd.DataFrame, problem: str, out: Path) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    (out / "figures").mkdir(parents=True, exist_ok=True)
+    from pfjax.report.figures import save
+
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
     colors = {"ga": "tab:blue", "gradient": "tab:red", "gradient-plain": "tab:gray", "ga+gradient": "tab:green"}
     h = hist[hist.problem == problem]
@@ -47,12 +48,8 @@ def figures(hist: pd.DataFrame, problem: str, out: Path) -> list[str]:
         ax.legend()
     axes[0].set_title(f"{problem}: cost vs rollouts (band: min-max over seeds)")
     axes[1].set_title("cost vs wall time (median over seeds)")
-    names = []
-    for ext in ("png", "svg"):
-        fig.savefig(out / "figures" / f"cost_vs_budget.{ext}", dpi=130)
-        names.append(f"figures/cost_vs_budget.{ext}")
-    plt.close(fig)
-    return names
+    save(fig, out / "figures", "cost_vs_budget", tight=False)
+    return ["figures/cost_vs_budget.png", "figures/cost_vs_budget.svg"]
 
 
 def _method_tables(s: dict, main: str) -> list:
