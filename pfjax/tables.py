@@ -82,8 +82,8 @@ COLUMNS: dict[str, tuple[str, str]] = {
     # the margin sweep
     "amplitude_deg": ("deg", "slip amplitude A of the sweep"),
     "axis": ("", "slipping axle(s): rear, front or joint"),
-    "n": ("", "runs"),
-    "k": ("", "successful runs"),
+    "n": ("runs", "runs"),
+    "k": ("runs", "successful runs"),
 }
 
 
@@ -105,18 +105,19 @@ H2_CHANNELS = f"from {_W} to z_2 = [{_Z_INF}; delta rad] (SI units: no one unit)
 #: name. "1": dimensionless. Here, not in :mod:`pfjax.tracking`, so that the command line reads it
 #: without importing the simulator.
 TRACK_UNITS: dict[str, Any] = {
+    "f": "1 (travel direction: 1 forward, -1 backward)",
     "p": "1",
     "l": "m",
     "gamma_max_deg": "deg",
     "final_error_norm": "m",
     "final_phi_minus_pgamma": "rad",
     "max_abs_gamma_deg": "deg",
-    "window_max_error": "m",
-    "window_max_abs_phi_minus_pgamma": "rad",
+    "window_max_z": "m",
+    "window_max_phi_err": "rad",
     "iae": "m s",
     "final_d": "m",
     "limit_fraction": "1",
-    "min_abs_det_factor": "1",
+    "min_abs_factor": "1",
     "lemma_p_bound": "1",
     "fail_time": "s",
     "tolerances.*": {"window_s": "s", "tol_z_m": "m", "tol_phi_rad": "rad"},

@@ -197,11 +197,53 @@ def test_cli_names_the_flags(capsys):
 
 @pytest.mark.parametrize("t_max, expected", [(2.0, 2.0), (3.0, 3.0), (2.02, 2.05)])
 def test_a_float32_run_times_out_at_the_first_step_at_or_after_t_max(t_max, expected):
-    """The API computes in float32 (its default), where the accumulated time rounds by several ulps:
-    the timeout is counted in steps (h = 0.05 s here), so a run stops at ``t_max`` (or the first
-    step after it), never a step later, as the float64 command line does."""
+    """In float32 (a study's or a caller's own precision; pfjax.parking.run itself runs float64) the
+    accumulated time rounds by several ulps: the timeout is counted in steps (h = 0.05 s here), so
+    a run stops at ``t_max`` (or the first step after it), never a step later, as in float64."""
     import jax
 
+    from pfjax.parking.maps import PARALLEL, to_obstacle_map
+    from pfjax.parking.schedules import CASES
+    from pfjax.parking.simulate import ParkingConfig, run_jit, run_params
+
     with jax.enable_x64(False):
-        r = parking.run(t_max=t_max)
-    assert r["status"] == "timeout" and r["time_s"] == pytest.approx(expected, abs=1e-5), r["time_s"]
+        p = run_params(CASES["A"]["x0"])
+        r = run_jit(p, to_obstacle_map(list(PARALLEL.values())), ParkingConfig(t_max=t_max))
+        status, t = int(r.status), float(r.time)
+    assert status == 1 and t == pytest.approx(expected, abs=1e-5), (status, t)  # 1: timeout
+
+
+def test_the_api_checks_the_start_as_the_command_does_in_float32_too(capsys):
+    """A start 1e-10 m clear of the kerb: the command (float64) runs it, and so does the API in a
+    float32 process (it checks and simulates in float64, whatever jax_enable_x64 says)."""
+    import jax
+
+    x0 = (-0.4, 0.3850000001, 0.0)
+    assert main(["parking", "--x0", *map(str, x0), "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    with jax.enable_x64(False):
+        api = parking.run(x0=x0)
+    assert api["status"] == cli["status"] and api["time_s"] == cli["time_s"]
+
+
+def test_a_map_file_edited_in_place_is_another_run_and_a_spelling_is_not(tmp_path, monkeypatch, capsys):
+    """The config hash covers the map's obstacles (map_sha256), not only its path; ./m.toml and
+    m.toml are one run; -0 and 0 are one run."""
+    monkeypatch.chdir(tmp_path)
+    slot = "[[obstacles]]\nname = 'box'\nvertices = [[1.0, 1.0], [2.0, 1.0], [2.0, 2.0], [1.0, 2.0], [1.0, 1.0]]\n"
+    (tmp_path / "m.toml").write_text(slot)
+
+    def hashes(*args):
+        assert main(["parking", "--x0", "-0.4", "0.5", "0", "--horizon", "1", "--json", *args]) == 0
+        out = json.loads(capsys.readouterr().out)
+        return out["config_sha256"], out["map_sha256"]
+
+    first, spelt = hashes("--map", "m.toml"), hashes("--map", "./m.toml")
+    assert first == spelt
+    (tmp_path / "m.toml").write_text(slot.replace("[2.0, 2.0]", "[2.5, 2.0]"))
+    edited = hashes("--map", "m.toml")
+    assert edited[0] != first[0] and edited[1] != first[1]
+    assert main(["parking", "--x0", "-0.4", "0.5", "-0", "--horizon", "1", "--json"]) == 0
+    minus = json.loads(capsys.readouterr().out)["config_sha256"]
+    assert main(["parking", "--x0", "-0.4", "0.5", "0", "--horizon", "1", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["config_sha256"] == minus

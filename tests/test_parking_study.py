@@ -104,6 +104,12 @@ def test_every_field_has_a_description_with_a_unit():
         ("montecarlo.scan_lo=0.3", "montecarlo.scan_lo: must be <= scan_hi"),
         ("montecarlo.lag_probability=1.5", "montecarlo.lag_probability:"),
         ("seed=-1", "seed:"),
+        ("sim.stuck_switches=10000000000", "sim.stuck_switches:"),
+        ("sim.n_sub=1000000000", "sim.n_sub:"),
+        ("search.ga_seeds=1000000", "search.ga_seeds:"),
+        ("search.ga_seeds=900", "search.ga_seeds: the GA runs together may simulate at most 1e+08"),
+        ("montecarlo.n_runs=10000000000", "montecarlo.n_runs: the Monte Carlo may simulate at most 1e+08"),
+        ("sim.t_max=2000.5", "sim.scan_period: t_max / scan period may be at most 20000, got 2000.5 / 0.1 = 20005"),
     ],
 )
 def test_a_bad_key_or_value_is_one_line_naming_the_key(override, key):
@@ -123,3 +129,23 @@ def test_the_script_exits_2_with_one_line_and_writes_nothing(tmp_path, override,
     )
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and key in bad.stderr, bad.stderr
     assert not out.exists()
+
+
+def test_a_search_where_every_candidate_fails_is_data_not_a_crash(tmp_path):
+    """With one switch allowed no candidate parks (fitness 0 everywhere): the study finishes, the
+    GA's ratio to the grid's best is null and the verdict says not reproduced."""
+    import json
+
+    out = tmp_path / "out"
+    r = subprocess.run(
+        [sys.executable, str(ROOT / "studies" / "parking.py"), "--quick", "--set", "search.max_switches=1"]
+        + ["--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["search"]["grid"]["fitness"] == 0
+    assert all(g["fitness_ratio_to_grid_best"] is None for g in s["search"]["ga_runs"])
+    assert "no grid point scores" in (out / "report.md").read_text()

@@ -78,6 +78,10 @@ def test_run_equals_cli_json(capsys, mode, extra):
         ({"dt": 0}, "dt"),
         ({"dt": 5.0}, "dt"),
         ({"horizon": 1e6, "dt": 0.1}, "horizon/dt"),
+        ({"p": 1e-200}, "p"),  # 1 / p overflows: refused below 1e-12 in magnitude
+        ({"p": -5e-324}, "p"),
+        ({"l": 1e-300}, "l"),
+        ({"offset": (-51.0, 0.0)}, "offset"),  # would start diverged (|z~| > 50 m)
     ],
 )
 def test_bad_argument_raises_input_error_naming_it(monkeypatch, kw, key):
@@ -95,6 +99,12 @@ def test_bad_argument_raises_input_error_naming_it(monkeypatch, kw, key):
         ({"p": 0}, ["--p", "0"], "--p: must be nonzero (M is singular at p = 0), got 0"),
         ({"dt": 5.0}, ["--dt", "5"], "--dt: must be <= --horizon (3 s), got 5"),
         ({"stop_and_go": 1.5}, ["--stop-and-go", "1.5"], "--stop-and-go: expected a depth in [0, 1], got 1.5"),
+        # a value just past the bound is shown with every digit, not rounded onto the bound
+        (
+            {"stop_and_go": 1.0000001},
+            ["--stop-and-go", "1.0000001"],
+            "--stop-and-go: expected a depth in [0, 1], got 1.0000001",
+        ),
         ({"gamma_max_deg": 95}, ["--gamma-max-deg", "95"], "--gamma-max-deg: magnitude must be < 90 deg, got 95"),
         ({"offset": (0.0, math.nan)}, ["--offset", "0", "nan"], "--offset: expected a finite number, got nan"),
         (

@@ -99,5 +99,5 @@ def test_the_script_exits_2_before_any_work(tmp_path, capsys, monkeypatch, setti
 
 def test_the_study_columns_take_the_command_lines_units():
     """The study's columns and ``pfjax track --json`` read one table (pfjax.tables.TRACK_UNITS)."""
-    assert study.COLUMNS["window_max_z"][0] == api.UNITS["window_max_error"] == "m"
+    assert study.COLUMNS["window_max_z"][0] == api.UNITS["window_max_z"] == "m"
     assert study.COLUMNS["gamma"][0] == api.UNITS["final.*"]["gamma"] == "rad"

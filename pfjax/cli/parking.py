@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 
 from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags
 from pfjax.errors import InputError
@@ -57,7 +58,7 @@ SEARCH_UNITS = {
     "switches": "direction switches (count)",
     "n_simulations": "runs (simulated)",
     "n": "levels per gene of the n x n x n grid",
-    "bits": "1 (the chromosome's length in bits)",
+    "bits": "1 (the chromosome's 24 bits, each 0 or 1)",
     "a_f": "m",
     "error": _ERROR,
     "arguments.*": {
@@ -200,9 +201,13 @@ def _cmd_parking(args) -> dict:
 
 def _ran(args, out: dict) -> dict:
     """``out``, with ``args`` set to what ran (pfjax.cli.records: the same run gives one config hash,
-    defaults given or not): the start pose (m, m, deg) and the rectangle's reach ``a_f`` (m)."""
+    defaults given or not): the start pose (m, m, deg), the rectangle's reach ``a_f`` (m) and the
+    map's obstacles by their SHA-256 (a map file edited in place is another run), the file's
+    path as given, normalised (``./m.toml`` is ``m.toml``)."""
     args.x0 = [out["x0"]["x"], out["x0"]["y"], out["x0"]["theta_deg"]]
     args.front = out["a_f"]
+    args.map = os.path.normpath(args.map)
+    args.map_sha256 = out["map_sha256"]
     return out
 
 

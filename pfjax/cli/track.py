@@ -55,7 +55,8 @@ def register(sub) -> None:
         nargs=2,
         default=(-0.5, 0.5),
         metavar=("ALONG", "LEFT"),
-        help="initial displacement of the follower in the leader's frame, m (default -0.5 0.5)",
+        help="initial displacement of the follower in the leader's frame, m, less than 50 m long: a run whose "
+        "tracking error passes 50 m ends as diverged (default -0.5 0.5)",
     )
     p.add_argument("--heading-error-deg", type=float, default=10.0, help="initial heading error, deg (default 10)")
     p.add_argument("--beta-r-deg", type=float, default=0.0, help="constant rear slip, deg (default 0)")

@@ -133,6 +133,14 @@ def _check_touch(polygons: dict, p0, omap) -> None:
     )
 
 
+def map_sha256(polygons: dict) -> str:
+    """SHA-256 of a map's obstacles (``{name: vertices}``, m), as canonical JSON: what a run's
+    outputs record, so that a map file edited under the same name gives another config hash."""
+    from pfjax.provenance import config_hash
+
+    return config_hash({name: [[float(v) for v in p] for p in poly] for name, poly in polygons.items()})
+
+
 def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     """The arguments :func:`run` and :func:`search` share, checked in the command line's order;
     the map loaded and the start pose checked against it."""
@@ -148,9 +156,13 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     if front is not None:
         front = errors.number("front", front, positive=True)
         if front >= L2_LENGTH:
-            raise InputError(f"front: must be < {L2_LENGTH:g} (the rectangle length), got {front:g}", "front")
+            raise InputError(
+                f"front: must be < {L2_LENGTH:g} (the rectangle length), got {errors.shown(front)}", "front"
+            )
     if scan_period > MAX_SCAN_PERIOD:
-        raise InputError(f"scan_period: must be <= {MAX_SCAN_PERIOD:g} s, got {scan_period:g}", "scan_period")
+        raise InputError(
+            f"scan_period: must be <= {MAX_SCAN_PERIOD:g} s, got {errors.shown(scan_period)}", "scan_period"
+        )
     # the product names t_max where the timeout alone is too long for the default period
     check_periods("t_max" if t_max / DEFAULT_SCAN_PERIOD > MAX_PERIODS else "scan_period", t_max, scan_period)
     errors.boolean("lag", lag)
@@ -172,6 +184,7 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     _check_touch(polygons, p0, omap)
     return {
         "name": name,
+        "sha256": map_sha256(polygons),
         "spec": spec,
         "omap": omap,
         "x0": x0,
@@ -199,7 +212,8 @@ def run(
     t_max=200.0,
 ) -> dict:
     """One run of the switching parking controller (``pfjax parking``): outcome, parking time and
-    the log of direction switches.
+    the log of direction switches. Checked and simulated in float64, as the command does, whatever
+    ``jax_enable_x64`` says.
 
     Args:
         map: ``"parallel"`` (the parallel-parking slot), ``"garage"``, or the path (str or
@@ -218,14 +232,16 @@ def run(
         k1: gain on y, 1/m^2 (> 0).
         k2: gain on tan(theta), 1/m (> 0).
         speed: travel speed |v1|, m/s (> 0).
-        scan_period: the scanner's sampling period, s (> 0, at most 10 s and ``t_max / 20000``).
+        scan_period: the scanner's sampling period, s (> 0, at most 10 s, and at least
+            ``t_max / 20000``: a run is at most 20,000 scanner periods).
         front: reach a_f of the robot's rectangle ahead of the axle, m, in (0, 0.54); None: the
             calibrated value (:mod:`pfjax.parking.calibrate`).
         lag: True: the yaw rate follows the command through the PI loop (kP 0.8, kI 16 1/s).
         t_max: timeout, s (> 0).
 
     Returns:
-        What ``pfjax parking --json`` prints: ``map`` (name), ``x0`` ({x m, y m, theta_deg}),
+        What ``pfjax parking --json`` prints: ``map`` (name), ``map_sha256`` (the obstacles'
+        SHA-256, :func:`map_sha256`), ``x0`` ({x m, y m, theta_deg}),
         ``direction``, ``alpha_schedule`` (padded to 8 values), ``xs`` (m or None), ``a_f`` (m),
         then :func:`pfjax.parking.summary.run_summary`: ``converged``, ``status``, ``time_s``,
         ``switches``, ``switch_log`` ([{t s, x m, y m, theta_deg, cause}]), ``final``
@@ -243,10 +259,13 @@ def run(
     schedule = _schedule(alpha_schedule)
     xs = None if xs is None else errors.number("xs", xs)
     settings = _Settings(k1, k2, speed, scan_period, front, lag, t_max)
-    c = _checked(map, x0, settings, {"parallel": CASES["A"]["x0"], "garage": GARAGE_START})
-    if xs is None and c["spec"] == "garage":  # the garage always has its X_s rule
-        xs = GARAGE_XS
-    return _one_run(c, direction, schedule, xs)
+    import jax
+
+    with jax.enable_x64(True):  # as pfjax parking: the same start checks and numbers
+        c = _checked(map, x0, settings, {"parallel": CASES["A"]["x0"], "garage": GARAGE_START})
+        if xs is None and c["spec"] == "garage":  # the garage always has its X_s rule
+            xs = GARAGE_XS
+        return _one_run(c, direction, schedule, xs)
 
 
 def _one_run(c: dict, direction: str, schedule, xs) -> dict:
@@ -267,6 +286,7 @@ def _one_run(c: dict, direction: str, schedule, xs) -> dict:
     r = run_jit(p, c["omap"], ParkingConfig(t_max=c["t_max"]))
     return {
         "map": c["name"],
+        "map_sha256": c["sha256"],
         "x0": _pose(x0),
         "direction": direction,
         "alpha_schedule": [float(a) for a in schedule],
@@ -305,7 +325,8 @@ def search(
     (:mod:`pfjax.parking.switch_search`), maximising ``J = 1 / (t_e + weight * e)``.
 
     Each candidate runs forward from ``x0`` with alpha = 1, then alpha1 after the first switch and
-    alpha2 from the second on, and the garage rule at X_s; more than 10 switches fail it.
+    alpha2 from the second on, and the garage rule at X_s; more than 10 switches fail it. Checked
+    and simulated in float64, as the command does, whatever ``jax_enable_x64`` says.
 
     Args:
         method: ``"ga"`` or ``"grid"``.
@@ -322,17 +343,18 @@ def search(
         k1: gain on y, 1/m^2 (> 0).
         k2: gain on tan(theta), 1/m (> 0).
         speed: travel speed |v1|, m/s (> 0).
-        scan_period: the scanner's sampling period, s (> 0, at most 10 s and ``t_max / 20000``).
+        scan_period: the scanner's sampling period, s (> 0, at most 10 s, and at least
+            ``t_max / 20000``: a run is at most 20,000 scanner periods).
         front: reach a_f of the robot's rectangle ahead of the axle, m, in (0, 0.54); None: the
             calibrated value.
         lag: True: the yaw rate follows the command through the PI loop (kP 0.8, kI 16 1/s).
         t_max: timeout of each run, s (> 0).
 
     Returns:
-        What ``pfjax parking-search --json`` prints: ``map`` (name), ``x0`` ({x m, y m,
+        What ``pfjax parking-search --json`` prints: ``map`` (name), ``map_sha256``, ``x0`` ({x m, y m,
         theta_deg}), ``method``, the best ``xs`` (m), ``alpha1``, ``alpha2``, its ``fitness``,
         ``time_s``, ``status`` (name), ``converged``, ``switches`` and ``error``,
-        ``n_simulations`` and ``a_f`` (m, the rectangle's reach ahead of the axle); the grid adds ``n``, the GA ``bits`` (24), ``history_best_fitness``,
+        ``n_simulations`` and ``a_f`` (m, the rectangle's reach ahead of the axle); the grid adds ``n``, the GA ``bits`` (its best chromosome: 24 values, each 0 or 1), ``history_best_fitness``,
         ``history_mean_fitness`` (per generation) and ``seed``.
 
     The search's size is checked before anything is simulated: its runs times ``t_max /
@@ -361,10 +383,13 @@ def search(
     from pfjax.parking.schedules import GARAGE_START
 
     settings = _Settings(k1, k2, speed, scan_period, front, lag, t_max)
-    c = _checked(map, x0, settings, {"garage": GARAGE_START, "parallel": None})
-    _check_work(method, n, generations, population, c["t_max"], c["scan_period"])
-    out = _search(c, method, n=n, generations=generations, population=population, seed=seed, weight=weight)
-    return {"map": c["name"], "x0": _pose(c["x0"]), **out}
+    import jax
+
+    with jax.enable_x64(True):  # as pfjax parking-search: the same start checks and numbers
+        c = _checked(map, x0, settings, {"garage": GARAGE_START, "parallel": None})
+        _check_work(method, n, generations, population, c["t_max"], c["scan_period"])
+        out = _search(c, method, n=n, generations=generations, population=population, seed=seed, weight=weight)
+    return {"map": c["name"], "map_sha256": c["sha256"], "x0": _pose(c["x0"]), **out}
 
 
 def _check_work(method: str, n: int, generations: int, population: int, t_max: float, scan_period: float) -> None:
@@ -378,14 +403,17 @@ def _check_work(method: str, n: int, generations: int, population: int, t_max: f
         check_search_work("population/generations", runs, how, t_max, scan_period)
 
 
-def check_search_work(key: str, runs: int, how: str, t_max: float, scan_period: float) -> None:
+def check_search_work(
+    key: str, runs: int, how: str, t_max: float, scan_period: float, what: str = "the search"
+) -> None:
     """:class:`InputError` naming ``key`` when ``runs`` runs of ``ceil(t_max / scan_period)``
     scanner periods each exceed :data:`MAX_SEARCH_PERIODS` (``how``: the runs' count as the message
-    spells it). The search's check here and the parking study's (:mod:`pfjax.parking.study_config`)."""
+    spells it; ``what``: the work it is). The search's check here and the parking study's
+    (:mod:`pfjax.parking.study_config`: its searches and its Monte Carlo)."""
     periods = math.ceil(t_max / scan_period)
     if runs * periods > MAX_SEARCH_PERIODS:
         raise InputError(
-            f"{key}: the search may simulate at most {MAX_SEARCH_PERIODS:.0e} scanner periods (runs x t_max / "
+            f"{key}: {what} may simulate at most {MAX_SEARCH_PERIODS:.0e} scanner periods (runs x t_max / "
             f"scan_period), got {how} runs x {periods} periods = {runs * periods:.3g}",
             key,
         )

@@ -193,13 +193,18 @@ def _search(s: dict) -> list[D.Block]:
         ),
         D.Table(header, rows),
         D.Paragraph(
-            f"Over {len(runs)} independent GA run(s) the best reaches {100 * ga['fitness_ratio_to_grid_best']:.1f} % "
+            f"Over {len(runs)} independent GA run(s) the best reaches {_share(ga['fitness_ratio_to_grid_best'])} "
             f"of the grid's best J ({100 * ga['grid_fraction_better']:.2f} % of the grid points are better); per run: "
-            + ", ".join(f"{100 * r['fitness_ratio_to_grid_best']:.1f} %" for r in runs)
+            + ", ".join(_share(r["fitness_ratio_to_grid_best"]) for r in runs)
             + " of the grid's best."
         ),
         D.Figure("search", "search"),
     ]
+
+
+def _share(ratio: float | None) -> str:
+    """A fitness ratio to the grid's best as a percentage; none where no grid point scored."""
+    return "n/a (no grid point scores)" if ratio is None else f"{100 * ratio:.1f} %"
 
 
 def _start_map(s: dict) -> list[D.Block]:

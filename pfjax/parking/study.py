@@ -51,7 +51,7 @@ COLUMNS: dict[str, dict[str, tuple[str, str]]] = {
         "status": _STATUS,
         "converged": ("", "the run parked"),
         "time_s": ("s", "end time (parking time when converged)"),
-        "switches": ("", "direction switches"),
+        "switches": ("switches", "direction switches (a count)"),
         "final_x": ("m", "final x"),
         "final_y": ("m", "final y"),
         "final_theta_deg": ("deg", "final heading"),
@@ -68,7 +68,7 @@ COLUMNS: dict[str, dict[str, tuple[str, str]]] = {
         "pause": ("s", "time standing still at each reversal"),
         "case": ("", "source case A-D"),
         "status": _STATUS,
-        "switches": ("", "direction switches"),
+        "switches": ("switches", "direction switches (a count)"),
         "time_s": ("s", "end time (parking time when converged)"),
         "min_leg_m": ("m", "shortest travel between two reversals (NaN: no reversal)"),
     },
@@ -78,7 +78,7 @@ COLUMNS: dict[str, dict[str, tuple[str, str]]] = {
         "alpha2": ("1", "gain factor alpha from the 2nd switch"),
         "status": _STATUS,
         "time_s": ("s", "end time t_e (parking time when converged)"),
-        "switches": ("", "direction switches"),
+        "switches": ("switches", "direction switches (a count)"),
         "error": _ERROR,
         "fitness": ("1/s", "J = 1/(t_e + search.weight x error); 0 for a failed run"),
     },
@@ -92,7 +92,7 @@ COLUMNS: dict[str, dict[str, tuple[str, str]]] = {
         "fitness": ("1/s", "the best run's J = 1/(t_e + search.weight x error)"),
         "time_s": ("s", "the best run's end time (parking time when converged)"),
         "status": _STATUS,
-        "switches": ("", "the best run's direction switches"),
+        "switches": ("switches", "the best run's direction switches (a count)"),
         "converged_fraction": ("1", "fraction of the start's grid runs that park"),
     },
     "montecarlo": {
@@ -108,7 +108,7 @@ COLUMNS: dict[str, dict[str, tuple[str, str]]] = {
         "status_code": ("", "run status code (pfjax.parking.runs.Status)"),
         "converged": ("", "the run parked"),
         "time_s": ("s", "end time (parking time when converged)"),
-        "switches": ("", "direction switches"),
+        "switches": ("switches", "direction switches (a count)"),
         "error": _ERROR,
     },
 }
@@ -149,7 +149,7 @@ SUMMARY_UNITS: dict[str, str] = {
     "history_best_fitness": "1/s (the best fitness per generation)",
     "history_mean_fitness": "1/s (the population's mean fitness per generation)",
     "grid_fraction_better": "1 (fraction of the grid's runs with a higher fitness)",
-    "fitness_ratio_to_grid_best": "1",
+    "fitness_ratio_to_grid_best": "1 (null where no grid point scores)",
 }
 
 

@@ -33,10 +33,12 @@ class Sim(ConfigModel):
     scan_period: Real = Field(0.1, gt=0, description="scanner sampling period [s]")
     t_max: Real = Field(200.0, gt=0, description="timeout of a run [s]")
     tol: Real = Field(0.02, gt=0, description="stop when |x| + sqrt(y² + tan²θ) < tol [m]")
-    n_sub: int = Field(2, ge=1, description="RK4 steps per scanner period [-]")
+    n_sub: int = Field(2, ge=1, le=100, description="RK4 steps per scanner period, at most 100 [-]")
     front: Real = Field(0.0, ge=0, lt=0.54, description="a_f, reach ahead of the axle; 0 = calibrated [m]")
     chunk: int = Field(1024, ge=1, description="runs per jitted batch [-]")
-    stuck_switches: int = Field(4, ge=1, description="legs over which stuck_travel is measured [-]")
+    stuck_switches: int = Field(
+        4, ge=1, le=1000, description="legs over which stuck_travel is measured, at most 1000 [-]"
+    )
     stuck_travel: Real = Field(0.1, ge=0, description="stuck: less travel than this over stuck_switches legs [m]")
 
     @model_validator(mode="after")
@@ -94,7 +96,7 @@ class Search(ConfigModel):
     population: int = Field(20, ge=2, le=MAX_POPULATION, description="GA population size [-]")
     generations: int = Field(100, ge=1, le=MAX_GENERATIONS, description="GA generations [-]")
     grid_n: int = Field(32, ge=2, le=64, description="grid points per schedule parameter [-]")
-    ga_seeds: int = Field(3, ge=1, description="independent GA runs [-]")
+    ga_seeds: int = Field(3, ge=1, le=1000, description="independent GA runs (work-checked) [-]")
     max_switches: int = Field(10, ge=1, description="a candidate switching more often fails [-]")
 
 
@@ -118,7 +120,7 @@ class StartMap(ConfigModel):
 class MonteCarlo(ConfigModel):
     """Garage robustness: fixed schedule vs the GA's and the grid's best on the same sampled runs."""
 
-    n_runs: int = Field(1000, ge=1, description="sampled runs per schedule [-]")
+    n_runs: int = Field(1000, ge=1, description="sampled runs per schedule (work-checked) [-]")
     pos_scatter: Real = Field(0.05, ge=0, description="half-width of the uniform scatter of x0 and y0 [m]")
     theta_scatter_deg: Real = Field(5.0, ge=0, description="half-width of the uniform scatter of θ0 [deg]")
     scan_lo: Real = Field(0.05, gt=0, description="smallest scanner period [s]")
@@ -168,6 +170,12 @@ class ParkingStudy(ConfigModel):
         runs = se.population * (se.generations + 1)
         how = f"population x (generations + 1) = {se.population} x {se.generations + 1} = {runs}"
         check_search_work("search.population/search.generations", runs, how, t_max, scan)
+        how = f"ga_seeds x population x (generations + 1) = {se.ga_seeds} x {runs} = {se.ga_seeds * runs}"
+        check_search_work("search.ga_seeds", se.ga_seeds * runs, how, t_max, scan, "the GA runs together")
+        # the Monte Carlo's three schedules, each n_runs runs, at its shortest scanner period
+        mc = self.montecarlo
+        how = f"3 schedules x n_runs = 3 x {mc.n_runs} = {3 * mc.n_runs}"
+        check_search_work("montecarlo.n_runs", 3 * mc.n_runs, how, t_max, mc.scan_lo, "the Monte Carlo")
         starts, m = len(sm.x0) * len(sm.theta0_deg), sm.grid_n
         how = f"starts x grid_n^3 = {starts} x {m}^3 = {starts * m**3}"
         check_search_work("start_map.grid_n", starts * m**3, how, t_max, scan)

@@ -78,7 +78,8 @@ def part_search(cfg: ParkingStudy, fig_dir, gmap, key):
             seed_index=i,
             wall_s=time.perf_counter() - t0,
             grid_fraction_better=float(np.mean(f > r["fitness"])),
-            fitness_ratio_to_grid_best=r["fitness"] / grid["fitness"],
+            # null where no grid point scores (every candidate failed): no ratio to state
+            fitness_ratio_to_grid_best=r["fitness"] / grid["fitness"] if grid["fitness"] > 0 else None,
         )
         runs.append(r)
     ga = max(runs, key=lambda r: r["fitness"])

@@ -250,11 +250,13 @@ def ga_runs_verdicts(runs: list[dict]) -> list[Verdict]:
             "the GA runs end at distinct (X_s, α₁, α₂) (X_s to 1 mm, α to 0.01), each within 15 % of the "
             "grid's best fitness",
             "; ".join(
-                f"({r['xs']:.3f}, {r['alpha1']:.2f}, {r['alpha2']:.2f}): {100 * r['fitness_ratio_to_grid_best']:.0f} %"
+                f"({r['xs']:.3f}, {r['alpha1']:.2f}, {r['alpha2']:.2f}): "
+                + ("no grid point scores" if ratio is None else f"{100 * ratio:.0f} %")
                 for r in runs
+                for ratio in (r["fitness_ratio_to_grid_best"],)
             ),
             "several",
-            _says(distinct and all(r["fitness_ratio_to_grid_best"] >= 0.85 for r in runs)),
+            _says(distinct and all((r["fitness_ratio_to_grid_best"] or 0.0) >= 0.85 for r in runs)),
             basis="assumed",
         )
     ]

@@ -25,10 +25,17 @@ LEADERS = ("line", "circle", "sine", "lane-change")
 
 
 def nonzero(key: str, value: float, symbol: str) -> float:
-    """``value``, or :class:`InputError` naming ``key`` when it is 0: the input matrix ``M`` is
-    singular at ``p = 0`` and at ``l = 0`` (``symbol``: which of the two ``value`` is)."""
+    """``value``, or :class:`InputError` naming ``key`` when it is 0 or smaller in magnitude than
+    :data:`pfjax.errors.MIN_POSITIVE`: the input matrix ``M`` is singular at ``p = 0`` and at
+    ``l = 0`` (``symbol``: which of the two ``value`` is), and ``1 / p`` overflows near it."""
     if value == 0:
         raise InputError(f"{key}: must be nonzero (M is singular at {symbol} = 0), got 0", key)
+    if abs(value) < errors.MIN_POSITIVE:
+        raise InputError(
+            f"{key}: must be at least {errors.MIN_POSITIVE:g} in magnitude (M is singular at {symbol} = 0), "
+            f"got {value!r}",
+            key,
+        )
     return value
 
 
@@ -64,7 +71,7 @@ def _depth(value) -> float:
     except OverflowError:
         x = math.inf if value > 0 else -math.inf
     if not 0.0 <= x <= 1.0:
-        raise InputError(f"stop_and_go: expected a depth in [0, 1], got {x:g}", "stop_and_go")
+        raise InputError(f"stop_and_go: expected a depth in [0, 1], got {errors.shown(x)}", "stop_and_go")
     return x
 
 
@@ -125,6 +132,15 @@ def _check(
         out[key] = errors.number(key, v, positive=True)
     out["stop_and_go"] = _depth(stop_and_go)
     out["offset"] = _pair("offset", offset)
+    from pfjax.tracking.simulate import TrackConfig
+
+    z_fail = TrackConfig.z_fail
+    if math.hypot(*out["offset"]) >= z_fail:  # the run would end at once as diverged
+        raise InputError(
+            f"offset: must be less than {z_fail:g} m from the start on the leader (a run whose tracking error "
+            f"passes {z_fail:g} m ends as diverged), got {math.hypot(*out['offset']):g} m",
+            "offset",
+        )
     out["heading_error_deg"] = errors.number("heading_error_deg", heading_error_deg)
     out["beta_r_deg"] = errors.number("beta_r_deg", beta_r_deg, below=90, unit=" deg")
     out["beta_f_deg"] = errors.number("beta_f_deg", beta_f_deg, below=90, unit=" deg")
@@ -176,7 +192,8 @@ def run(
         v_max: the follower's speed limit, m/s, > 0.
         omega_max_deg: steering-rate limit, deg/s, > 0.
         offset: the follower's initial displacement ``(along, left)`` in the leader's frame, m
-            (two numbers; a sequence, not a mapping).
+            (two numbers; a sequence, not a mapping), less than 50 m long: a run whose tracking
+            error passes ``TrackConfig.z_fail`` (50 m) ends as ``diverged``.
         heading_error_deg: initial heading error, deg.
         beta_r_deg: constant rear-wheel slip angle, deg, |beta_r_deg| < 90.
         beta_f_deg: constant front-wheel slip angle, deg, |beta_f_deg| < 90.
@@ -189,9 +206,9 @@ def run(
         The dict ``pfjax track --json`` prints: the arguments used (``mode``, ``f``, ``p``, ``l``,
         ``gamma_max_deg``, ``leader``); the outcome (``converged``, ``phi_converged``, ``status``,
         ``status_code``, ``fail_time`` in s or None); the errors (``final_error_norm``, m;
-        ``final_phi_minus_pgamma``, rad; ``window_max_error``, m; ``window_max_abs_phi_minus_pgamma``,
+        ``final_phi_minus_pgamma``, rad; ``window_max_z``, m; ``window_max_phi_err``,
         rad; ``iae``, m s; ``final_d``, m); the steering (``max_abs_gamma_deg``, deg;
-        ``limit_fraction``; ``min_abs_det_factor``); Lemma 8.1 (``lemma_p_bound``,
+        ``limit_fraction``; ``min_abs_factor``); Lemma 8.1 (``lemma_p_bound``,
         ``inside_lemma_bound``, ``input_matrix_invertible_for_all_gamma``,
         ``zero_dynamics_stable_straight``); ``tolerances`` (``window_s``, s; ``tol_z_m``, m;
         ``tol_phi_rad``, rad); ``final`` (the follower's final state); ``T`` (the simulated time, s)
@@ -267,12 +284,12 @@ def _simulate(c: dict) -> dict:
         "final_error_norm": float(m.final_error_norm),
         "final_phi_minus_pgamma": float(m.final_phi_minus_pgamma),
         "max_abs_gamma_deg": math.degrees(float(m.max_abs_gamma)),
-        "window_max_error": float(m.window_max_z),
-        "window_max_abs_phi_minus_pgamma": float(m.window_max_phi_err),
+        "window_max_z": float(m.window_max_z),
+        "window_max_phi_err": float(m.window_max_phi_err),
         "iae": float(m.iae),
         "final_d": float(m.final_d),
         "limit_fraction": float(m.limit_fraction),
-        "min_abs_det_factor": float(m.min_abs_factor),
+        "min_abs_factor": float(m.min_abs_factor),
         "status": TRACK_STATUS_NAMES[status],
         "status_code": status,
         "fail_time": float(r.fail_time) if math.isfinite(float(r.fail_time)) else None,

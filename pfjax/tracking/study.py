@@ -55,15 +55,15 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "region": ("", "which side of Lemma 8.1's bound p lies on"),
     # a run's metrics (pfjax.tracking.simulate.TrackMetrics)
     "iae": (UNITS["iae"], "integral of |z~| over the run (inf: the run failed)"),
-    "window_max_z": (UNITS["window_max_error"], "largest |z~| over the final window (NaN: the run failed)"),
+    "window_max_z": (UNITS["window_max_z"], "largest |z~| over the final window (NaN: the run failed)"),
     "window_max_phi_err": (
-        UNITS["window_max_abs_phi_minus_pgamma"],
+        UNITS["window_max_phi_err"],
         "largest |phi - p gamma| over the final window (NaN: the run failed)",
     ),
     "final_error_norm": (UNITS["final_error_norm"], "|z~| at the end of the run (or at its failure)"),
     "final_phi_minus_pgamma": (UNITS["final_phi_minus_pgamma"], "phi - p gamma at the end of the run"),
     "final_d": (UNITS["final_d"], "signed length d of the virtual connection at the end of the run"),
-    "min_abs_factor": (UNITS["min_abs_det_factor"], "smallest |det M / (l p)| met"),
+    "min_abs_factor": (UNITS["min_abs_factor"], "smallest |det M / (l p)| met"),
     "limit_fraction": (UNITS["limit_fraction"], "fraction of the steps with a speed or steering limit active"),
     "max_abs_gamma_deg": (UNITS["max_abs_gamma_deg"], "largest |gamma|"),
     "converged": ("", "z~ -> 0: status ok and max |z~| over the final window <= tol_z"),
