@@ -264,6 +264,25 @@ def test_randomness_outside_u_is_drawn_afresh_and_estimated_without_bias(case):
     assert abs(mc["p_fail"] - est["p_fail"]) <= 3 * both, (case, mc, est)
 
 
+def test_the_single_track_model_is_estimated_through_its_own_simulator():
+    """A study of CommonRoad's single-track model (vehicle.model = "st", the friction mu an input):
+    the limit state runs the dynamic simulator, as the study's runs do, and importance sampling
+    agrees with plain runs within 3 joint standard errors (p about 0.14: the start offset)."""
+    cfg = _small(paths=[{"kind": "line"}])
+    cfg.pop("slip")
+    cfg.update(
+        sim={"horizon": 3.0, "dt": 0.005, "steady_window": 1.0},
+        success={"band": 0.006, "from_s": 2.5},
+        vehicle={"model": "st", "mu": {"dist": "truncnormal", "mean": 0.6, "std": 0.2, "low": 0.1, "high": 1.1}},
+        initial={"lateral_offset": {"dist": "uniform", "low": -0.3, "high": 0.3}},
+    )
+    mc = pfjax.rare_event(cfg, method="mc", max_rollouts=4000, progress=False)["controllers"]["sf"]
+    est = pfjax.rare_event(cfg, method="is", target_rel_error=0.15, progress=False)["controllers"]["sf"]
+    assert mc["status"] == est["status"] == "ok" and mc["p_fail"] > 0.05, (mc, est)
+    both = math.hypot(mc["p_fail"] * mc["rel_error"], est["p_fail"] * est["rel_error"])
+    assert abs(mc["p_fail"] - est["p_fail"]) <= 3 * both, (mc, est)
+
+
 # ------------------------------------------------------------------------- the physical case
 
 K = np.array([-2.7381, -2.0772])  # the default state feedback's gains (rad/m, rad/rad)

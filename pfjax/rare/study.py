@@ -89,9 +89,9 @@ def limit_state(
     ``fold_in(fold_in(seed_key(seed), stream), c)``: fresh at every rollout, the same for the same seed and calls."""
     import jax
 
+    from pfjax.montecarlo.chunk_runs import simulate_scenarios
     from pfjax.montecarlo.runner import batch_size, sim_config, with_gains
     from pfjax.montecarlo.sampling import sample_runs
-    from pfjax.sim.simulate import simulate_batch
 
     ctrl, gains, _ = controller
     rare = spec.rare_event
@@ -108,7 +108,8 @@ def limit_state(
         x.update({k: np.full(n, v) for k, v in stratum.values.items()})
         given = {k: np.concatenate([v, np.repeat(v[:1], m - n)]) for k, v in x.items()}
         sampled = sample_runs(spec, stratum.path_index, np.arange(m), key=key, given=given)
-        res = simulate_batch(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
+        # the study's vehicle model: the slip model's simulator, or the single-track one (model st, std)
+        res = simulate_scenarios(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
         metric = np.asarray(getattr(res.metrics, rare.metric), dtype=float)[:n]
         margin = threshold - metric
         if counter is not None:
