@@ -264,6 +264,46 @@ def test_randomness_outside_u_is_drawn_afresh_and_estimated_without_bias(case):
     assert abs(mc["p_fail"] - est["p_fail"]) <= 3 * both, (case, mc, est)
 
 
+def test_each_part_of_the_failure_region_gets_a_centre_near_its_likeliest_start():
+    """Two symmetric half-spaces, starts from a widened law (explore): the first proposal's centres
+    are drawn by the starts' likelihood, so each part gets one near its likeliest start (within 1.5
+    in u) in 94 of 100 seeds; drawn uniformly (the seeds of k-means++ alone), in 10 of 100, the rest
+    putting a part's only centre far out in its tail."""
+    from pfjax.rare.importance import _first_proposal, explore
+
+    a = np.array([1.0, -0.9]) / math.hypot(1.0, 0.9)
+
+    def g(u):
+        return 3.89 - np.abs(u @ a)
+
+    far = 0
+    for s in range(100):
+        starts, _ = explore(g, 2, n=2000, seed=s)
+        centres = _first_proposal(np.random.default_rng(s), starts, 4, 2).means
+        for side in (1, -1):
+            mine = starts[np.sign(starts @ a) == side]
+            likeliest = mine[np.argmin(np.sum(mine * mine, axis=1))]
+            near = centres[np.sign(centres @ a) == side]
+            if not len(near) or np.min(np.linalg.norm(near - likeliest, axis=1)) > 1.5:
+                far += 1
+                break
+    assert far <= 20, far
+
+
+def test_the_known_case_keeps_both_parts_of_its_failure_region():
+    """The known case at p = 1e-4 (two symmetric parts), estimator seed 2130: with a part's only
+    first centre far out in its tail, importance sampling lost that part and reported 4.9e-5
+    [4.4e-5, 5.4e-5], status ok; now both parts keep a mode and the interval holds p."""
+    from pfjax.rare.verification import known_case
+
+    budget = {"n_per_level": 2000, "batch": 2000, "max_rollouts": 400_000}
+    est = pfjax.rare_event(known_case(1.372, budget), seed=2130, progress=False)["controllers"]["state-feedback"]
+    reference = line_offset_failure_probability(K, 1.372)
+    assert est["ci95"][0] <= reference <= est["ci95"][1], (est["p_fail"], est["ci95"], reference)
+    signs = {np.sign(p["slip.beta_r_deg"]) for p in est["failure_points"]}
+    assert signs == {-1.0, 1.0}, est["failure_points"]
+
+
 def test_the_single_track_model_is_estimated_through_its_own_simulator():
     """A study of CommonRoad's single-track model (vehicle.model = "st", the friction mu an input):
     the limit state runs the dynamic simulator, as the study's runs do, and importance sampling
@@ -389,6 +429,25 @@ def test_command_line_prints_one_json_object(tmp_path, capsys):
     assert obj["seed"] == obj["config"]["rare_event"]["seed"] == 3 and obj["pfjax_version"]
     assert obj["config_sha256"] == config_hash(obj["config"]) and obj["machine"] and obj["cpu_settings"]
     assert numbers_without_units(obj) == []
+    assert obj["units"]["config.rare_event.threshold"] == "m"  # the metric's (late_max_abs_d)
+    # without --json: one line per controller, the estimate first
+    assert main(["rare-event", cfg, "--method", "mc", "--max-rollouts", "1000", "--seed", "3"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 3 and lines[1].startswith("  sf: p_fail 0 [0, ") and "1000 rollouts (mc)" in lines[1]
+
+
+def test_only_the_chosen_controller_is_designed(monkeypatch):
+    """rare_event(controller=...) builds that controller alone: another's LMI design is not solved."""
+    from pfjax.montecarlo import chunk_runs
+
+    built = []
+    real = chunk_runs.controller_of
+    monkeypatch.setattr(chunk_runs, "controller_of", lambda c, *a: built.append(c.name) or real(c, *a))
+    monkeypatch.setattr("pfjax.montecarlo.runner.controller_of", chunk_runs.controller_of)
+    data = line_study(1.091, method="mc", max_rollouts=100)
+    data["controllers"].append({"name": "lmi", "type": "lmi"})
+    pfjax.rare_event(data, controller="sf", progress=False)
+    assert built == ["sf"]
 
 
 @pytest.mark.parametrize(
@@ -436,6 +495,20 @@ def test_study_summary_gains_the_estimates(tmp_path):
     assert "rare_event" in res.summary["timings_s"]
     html = (tmp_path / "out" / "report.html").read_text()
     assert 'id="rare"' in html and "rollouts (method)" in html
+
+
+def test_the_plain_rate_beside_p_fail_counts_the_same_event(tmp_path):
+    """summary.json's plain_fail is the share of the study's runs failing by the rare-event event
+    (status not ok, or the metric past rare_event.threshold), not the success band's failures."""
+    data = line_study(1.091, method="mc", max_rollouts=1000, threshold=0.003)
+    data["n_runs"] = 64
+    res = pfjax.run_study(data, tmp_path / "out")
+    c, runs = res.summary["controllers"]["sf"], res.runs
+    k = int(((runs.status_code != 0) | (runs.late_max_abs_d > 0.003)).sum())
+    assert 0 < k < len(runs) and c["plain_fail"] == k / len(runs)
+    assert c["plain_fail_ci95"][0] <= c["plain_fail"] <= c["plain_fail_ci95"][1]
+    assert c["plain_fail"] != pytest.approx(1 - c["success_rate"])  # the band (5 cm) is another event
+    assert "its late_max_abs_d passes 0.003 (m)" in (tmp_path / "out" / "report.md").read_text()
 
 
 def test_choices_are_strata():

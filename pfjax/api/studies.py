@@ -181,7 +181,8 @@ def rare_event(
         controller: only this controller of the study (default: all).
         method: ``is`` (cross-entropy importance sampling), ``subset`` (subset simulation) or
             ``mc`` (plain Monte Carlo, exact binomial interval).
-        target_rel_error: stop once the relative error (coefficient of variation) is at most this.
+        target_rel_error: ``is``, ``subset``: stop once the relative error (coefficient of
+            variation) is at most this; plain Monte Carlo (``mc``) runs all of ``max_rollouts``.
         max_rollouts: rollouts per controller, split evenly over the strata (docs/rare-events.md, *The budget*:
             at least :func:`pfjax.rare.study.rollouts_needed` per stratum, checked before anything is simulated).
         seed: seed of the estimator's draws.
@@ -215,7 +216,7 @@ def rare_event(
             the config key (an override by its dotted key) of a bad key or value.
     """
     from pfjax.montecarlo.config import study_hash
-    from pfjax.montecarlo.runner import controllers_of
+    from pfjax.montecarlo.runner import controller_of, precision
     from pfjax.provenance import STAMP_UNITS, stamp
     from pfjax.rare import METHODS
     from pfjax.rare.study import check_budget, estimate_study
@@ -252,8 +253,9 @@ def rare_event(
             raise
         # the budget given here, not the config's: the error names the argument (--max-rollouts)
         raise errors.InputError(str(e).replace("rare_event.max_rollouts", "max_rollouts", 1), "max_rollouts") from None
-    controllers = controllers_of(spec)
     chosen = names if controller is None else [controller]
+    with precision(spec):  # only the controllers estimated (an LMI design is solved only if chosen)
+        controllers = {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers) if c.name in chosen}
     config = spec.model_dump(mode="json")
     return {
         "study": spec.name,

@@ -4,10 +4,11 @@ down to 1e-6 and below, with its 95 % interval (:func:`pfjax.rare_event`).
     pfjax rare-event CONFIG.toml [--set key=value ...] [--controller NAME] [--method {is,subset,mc}]
                      [--target-rel-error 0.1] [--max-rollouts N] [--seed S] [--json]
 
-Prints ``{"study", "pfjax_version", "config_sha256", "seed", "machine", "cpu_settings", "config",
-"units", "controllers": {name: {"p_fail", "ci95", "rel_error", "n_rollouts", "method", ...}}}``
-(:func:`pfjax.rare_event`'s result); a progress bar of rollouts on stderr when it is a
-terminal and ``--json`` is not given. Nothing is written to disk.
+With ``--json`` prints ``{"study", "pfjax_version", "config_sha256", "seed", "machine",
+"cpu_settings", "config", "units", "controllers": {name: {"p_fail", "ci95", "rel_error",
+"n_rollouts", "method", ...}}}`` (:func:`pfjax.rare_event`'s result), else one line per controller;
+a progress bar of rollouts on stderr when it is a terminal and ``--json`` is not given. Nothing
+is written to disk.
 """
 
 from __future__ import annotations
@@ -47,7 +48,8 @@ def register(sub) -> None:
         "--target-rel-error",
         type=float,
         default=None,
-        help="stop at this relative error (default: the config's rare_event.target_rel_error, else 0.1)",
+        help="is, subset: stop at this relative error (default: the config's rare_event.target_rel_error, else "
+        "0.1); plain Monte Carlo (mc) runs all of --max-rollouts",
     )
     p.add_argument(
         "--max-rollouts",
@@ -62,8 +64,22 @@ def register(sub) -> None:
         default=None,
         help="seed of the estimator's draws (default: the config's rare_event.seed, else 0)",
     )
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(func=_cmd)
+    p.add_argument("--json", action="store_true", help="print one JSON object (else one line per controller)")
+    p.set_defaults(func=_cmd, human=_human)
+
+
+def _human(out: dict) -> None:
+    """One line per controller: the estimate, its interval, relative error, rollouts and status."""
+    print(f"study {out['study']} (config {out['config_sha256'][:12]}), estimator seed {out['seed']}")
+    for name, c in out["controllers"].items():
+        lo, hi = c["ci95"]
+        rel = "-" if c["rel_error"] is None else f"{100 * c['rel_error']:.1f} %"
+        line = (
+            f"  {name}: p_fail {c['p_fail']:.3g} [{lo:.3g}, {hi:.3g}], rel. error {rel}, "
+            f"{c['n_rollouts']} rollouts ({c['method']}), status {c['status']}"
+        )
+        print(line + (f": {c['warning']}" if c.get("warning") else ""))
+    print("(--json: every number, the strata and the failure modes, with units)")
 
 
 def _cmd(args) -> dict:

@@ -306,7 +306,8 @@ def _cmd_report(args) -> dict:
         raise UsageError(f"--out: no finished study in {out} (run `{command}` first)")
     if marker.get("config_sha256") != study_hash(spec):
         raise UsageError(
-            f"config: {_source(args)} (with --set) does not match the study in {out} (config hash differs)"
+            f"config: {_source(args)}{' (with --set)' if args.set else ''} does not match the study in {out} "
+            "(config hash differs)"
         )
     report = rewrite_report(out, spec, overwrite=args.overwrite) / "report.html"
     return {"report": str(report), "config_sha256": marker["config_sha256"]}  # the study's, which it matched

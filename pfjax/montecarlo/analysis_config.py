@@ -96,7 +96,11 @@ class RareEventSpec(ConfigModel):
         None, ge=0, description="failure where metric > threshold (metric's unit; default success.band, m)"
     )
     target_rel_error: Real = Field(
-        0.1, gt=0, le=10, description="stop once the estimate's relative error (c.o.v.) is at most this"
+        0.1,
+        gt=0,
+        le=10,
+        description="is, subset: stop once the estimate's relative error (c.o.v.) is at most this "
+        "(mc runs all of max_rollouts)",
     )
     max_rollouts: int = Field(
         100_000,

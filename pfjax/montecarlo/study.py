@@ -194,7 +194,7 @@ def _finish(tmp: Path, runs_path: Path, controllers, store, *, job: dict) -> dic
         summary["controllers"][name]["worst_case"] = block
     mark("worst_case")
     if spec.rare_event.enabled:
-        _add_rare_events(spec, controllers, summary, progress)
+        _add_rare_events(spec, controllers, summary, progress, runs_path)
         mark("rare_event")
     if report:
         worst_figure = side.worst_figure.result() if side.worst_figure is not None else None
@@ -234,17 +234,29 @@ def _start_figures(job: dict, tmp: Path, runs_path: Path):
     return early
 
 
-def _add_rare_events(spec: StudySpec, controllers, summary: dict, progress) -> None:
-    """Each controller's rare-event failure estimate (:mod:`pfjax.rare`) into its summary block."""
+def _add_rare_events(spec: StudySpec, controllers, summary: dict, progress, runs_path: Path) -> None:
+    """Each controller's rare-event failure estimate (:mod:`pfjax.rare`) into its summary block,
+    beside the share of the study's own runs that fail by the same event (``plain_fail``, with its
+    Clopper-Pearson ``plain_fail_ci95``): a run that failed, or whose ``rare_event.metric`` passes
+    the threshold (``rare_event.threshold``, else ``success.band``)."""
+    from pfjax.metrics.robustness import clopper_pearson
     from pfjax.rare.study import estimate_study
 
+    rare = spec.rare_event
+    threshold = spec.success.band if rare.threshold is None else rare.threshold
+    runs = read_runs(runs_path, columns=["controller", "status_code", rare.metric])
+    fails = (runs["status_code"] != 0) | (runs[rare.metric] > threshold)
     for name, est in estimate_study(spec, controllers, progress=progress).items():
+        mine = fails[runs["controller"] == name]
+        k, n = int(mine.sum()), len(mine)
         summary["controllers"][name].update(
             p_fail=est["p_fail"],
             p_fail_ci95=est["ci95"],
             rel_error=est["rel_error"],
             n_rollouts=est["n_rollouts"],
             method=est["method"],
+            plain_fail=k / n if n else None,
+            plain_fail_ci95=list(clopper_pearson(k, n)) if n else None,
             rare_event=est,
         )
 

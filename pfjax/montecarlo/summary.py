@@ -86,6 +86,8 @@ UNITS: dict[str, object] = {
     "n_gradients": "gradient evaluations",
     **dict.fromkeys(("history_rollouts", "history_random_rollouts"), "rollouts (simulated runs)"),
     "p_fail_ci95": "probability (95 % interval of p_fail)",
+    "plain_fail": "probability (share of the study's runs failing by the rare-event event)",
+    "plain_fail_ci95": "probability (Clopper-Pearson 95 % interval of plain_fail)",
 }
 
 

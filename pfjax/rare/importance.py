@@ -304,10 +304,15 @@ def _check_starts(starts, n_components, dim) -> tuple[np.ndarray | None, int]:
 
 def _first_proposal(rng, starts: np.ndarray | None, k: int, dim: int) -> Mixture:
     """``N(0, I)``, or unit-covariance components centred on ``starts`` (``k`` k-means++ seeds among
-    them where there are more than ``k``)."""
+    them where there are more than ``k``, each point weighted by its density under the input law
+    ``N(0, I)``: the seeds are the likelier failure points of each part of the region. Unweighted,
+    a part could get only a start far out in its tail, whose draws the cross-entropy weights
+    ``φ / q`` count as nothing, and the fit would leave that part out)."""
     if starts is None:
         return Mixture(np.ones(1), np.zeros((1, dim)), np.eye(dim)[None])
-    sel = starts if len(starts) <= k else _kmeanspp(rng, starts, np.ones(len(starts)), k)
+    r2 = np.sum(starts * starts, axis=1)
+    likely = np.exp(-0.5 * (r2 - r2.min()))  # φ(u) / φ(the likeliest start)
+    sel = starts if len(starts) <= k else _kmeanspp(rng, starts, likely, k)
     return Mixture(np.full(len(sel), 1 / len(sel)), sel, np.repeat(np.eye(dim)[None], len(sel), axis=0))
 
 

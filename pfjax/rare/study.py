@@ -62,7 +62,7 @@ UNITS: dict[str, str] = {
     "wall_s": "s",
     "weight": "1 (a stratum's probability; a failure point's: its share of the proposal times its stratum's)",
     "max_weight_share": "1 (the largest importance weight over their sum)",
-    "z": "1 (the two estimates' log difference in standard errors)",
+    "z": "1 (the two estimates' log difference in standard errors; null: infinite, one estimate 0)",
     "u": "1 (standard deviations of the input's standard-normal coordinate)",
     **dict.fromkeys(("value", "median"), "the unit of the input named by key"),
 }
@@ -70,10 +70,13 @@ UNITS: dict[str, str] = {
 
 def units(spec: StudySpec) -> dict[str, str]:
     """:data:`UNITS` and each input's and choice's unit by its config key (``slip.beta_r_deg``:
-    deg), as the strata's ``values`` and the failure points give them."""
+    deg), as the strata's ``values`` and the failure points give them; the failure threshold's
+    (``config.rare_event.threshold``, the unit of ``rare_event.metric``: m for ``late_max_abs_d``,
+    m·s for ``iae``)."""
     return {
         **UNITS,
         **{key: COLUMNS[name][0] for name, key in config_keys(spec).items() if COLUMNS.get(name, ("", ""))[0]},
+        "config.rare_event.threshold": COLUMNS[spec.rare_event.metric][0],
     }
 
 

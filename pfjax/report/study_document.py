@@ -19,6 +19,7 @@ from pfjax.report import study_tables as T
 from pfjax.report.study_format import cell, fmt_margin, fmt_num
 from pfjax.report.study_setup import setup
 from pfjax.report.study_verdict import verdict
+from pfjax.tables import COLUMNS
 
 __all__ = ["study_document"]
 
@@ -165,10 +166,14 @@ def _search_blocks(summary: dict, colors: dict, figures: Mapping) -> list[D.Bloc
             "plain failure rate of the runs [95 %]",
             "failure modes (mean failure inputs): path, weight, inputs far from their medians (σ of u)",
         ]
+        rare_cfg = summary["config"]["rare_event"]
+        threshold = summary["config"]["success"]["band"] if rare_cfg["threshold"] is None else rare_cfg["threshold"]
         note = (
             "P(fail) from pfjax.rare over the study's uncertain inputs (importance sampling, subset simulation or "
-            "plain Monte Carlo); the plain rate is the share of the study's own runs that fail, with its "
-            "Clopper-Pearson interval."
+            f"plain Monte Carlo): a run fails if its status is not ok or its {rare_cfg['metric']} passes "
+            f"{threshold:g} ({COLUMNS.get(rare_cfg['metric'], ('', ''))[0]}). The plain rate is the share of the "
+            "study's own runs that fail by the same event, with its Clopper-Pearson interval (not the "
+            "success band's failures of the headline)."
         )
         out += [D.Heading("Rare failures", anchor="rare"), D.Table(head, rare), D.Paragraph(note, style="note")]
     return out

@@ -201,8 +201,7 @@ def rare_event_rows(summary: dict, colors: dict) -> list:
         if "p_fail" not in c:
             continue
         lo, hi = c["p_fail_ci95"]
-        plain = 1 - c["success_rate"]
-        plain_ci = (1 - c["success_ci95"][1], 1 - c["success_ci95"][0])
+        plain, plain_ci = c.get("plain_fail"), c.get("plain_fail_ci95")  # the same event as p_fail
         points = c["rare_event"].get("failure_points") or []
         top = "; ".join(_failure_point_text(q) for q in points[:RARE_POINTS]) if points else "—"
         rel = "—" if c["rel_error"] is None else f"{100 * c['rel_error']:.1f} %"
@@ -213,7 +212,7 @@ def rare_event_rows(summary: dict, colors: dict) -> list:
                 cell(f"{c['p_fail']:.3g} [{lo:.3g}, {hi:.3g}]" + (f" (warning: {warn})" if warn else "")),
                 cell(rel),
                 cell(f"{c['n_rollouts']} ({c['method']})"),
-                cell(f"{plain:.3g} [{plain_ci[0]:.3g}, {plain_ci[1]:.3g}]"),
+                cell("—" if plain is None else f"{plain:.3g} [{plain_ci[0]:.3g}, {plain_ci[1]:.3g}]"),
                 cell(top),
             ]
         )
