@@ -295,3 +295,21 @@ def test_a_calibration_of_another_cpu_is_ignored_and_an_unknown_switch_warns(tmp
     with pytest.warns(UserWarning, match="PFJAX_CALIBRATION='disabled' not understood"):
         assert calibration.directory({"PFJAX_CALIBRATION": "disabled", "PFJAX_CALIBRATION_DIR": str(tmp_path)})
     assert calibration.directory({"PFJAX_CALIBRATION": "on", "PFJAX_CALIBRATION_DIR": str(tmp_path)}) == tmp_path
+
+
+def test_the_printed_calibration_gives_units_only_for_what_it_prints(monkeypatch, capsys):
+    """pfjax calibrate --json leaves the machine record in the file, and its units with it: every
+    unit the output names belongs to a number it prints."""
+    from pfjax.cli import main
+
+    fake = {
+        "vector_width": 512,
+        "block_bytes": {"float32": 5000, "float64": 5000},
+        "machine": {"block_bytes": {"float32": 5000, "float64": 5000}},
+        "units": {"block_bytes.*": {"float32": "B", "float64": "B"}, "machine.block_bytes.*": {"float32": "B"}},
+    }
+    monkeypatch.setattr(C, "calibrate", lambda **kw: fake)
+    assert main(["calibrate", "--quick", "--dry-run", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert "machine" not in out and not any(k.startswith("machine.") for k in out["units"])
+    assert out["units"]["block_bytes.*"] == {"float32": "B", "float64": "B"} and out["file"] is None

@@ -37,4 +37,7 @@ def _cmd(args) -> dict:
     else:
         result = calibrate(progress=say)
     out = None if args.dry_run else str(calibration.save(result))
-    return dict({k: v for k, v in result.items() if k != "machine"}, file=out)
+    shown = {k: v for k, v in result.items() if k != "machine"}  # the machine record stays in the file
+    if isinstance(shown.get("units"), dict):  # and so do its units
+        shown["units"] = {k: u for k, u in shown["units"].items() if not k.startswith("machine.")}
+    return dict(shown, file=out)
