@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 import pfjax
-from pfjax.sim import SimConfig
+from pfjax.sim import STATUS_NAMES, SimConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = {"horizon": 4.0, "dt": 0.01, "steady_window": 1.0}
@@ -241,6 +241,7 @@ def test_tune_and_falsify_small():
     assert set(out["gains"]) >= {"kp_d", "ki_d", "kp_theta", "ki_theta"} and np.isfinite(out["cost"])
     worst = pfjax.falsify("paper_k", "sine", slip_bound_deg=5.0, restarts=2, steps=3, config=cfg, key=0)
     assert np.isfinite(float(worst.objective))
+    assert worst.status_name == STATUS_NAMES[int(worst.status)]  # the status by name
 
 
 def test_readme_script_runs():

@@ -71,7 +71,26 @@ OBJECTIVES = ("iae", "ise", "itae", "max_abs_d", "late_max_abs_d")
 
 
 class FalsifierResult(NamedTuple):
-    """The worst scenario found and how the search got there."""
+    """The worst scenario found and how the search got there.
+
+    Attributes:
+        objective: ``J`` of the worst run, in the objective's unit (m·s for ``iae``, m for
+            ``max_abs_d``; :data:`pfjax.tables.COLUMNS`).
+        status: that run's status code, an int32 (:class:`pfjax.sim.status.Status`; its name:
+            :attr:`status_name`).
+        slip: ``(n, 2)`` rad, its slip sequence (rear, front), each value held for ``seq_dt``.
+        seq_dt: s, how long each slip value is held.
+        ic: ``(3,)``: its start's lateral offset ``d0`` (m), heading error ``theta_e0`` (rad) and
+            path parameter ``u0``.
+        pose0: its start pose (x m, y m, heading rad).
+        scenario: the run itself (re-simulate it with :func:`worst_trajectory`).
+        history: ``J`` of the best run so far after ``history_rollouts[i]`` rollouts.
+        history_rollouts: rollouts spent at each history entry (ints).
+        n_rollouts: scenarios simulated.
+        n_gradients: of those, how many also ran the backward pass.
+        n_nonfinite_grad: gradient components that were not finite (replaced by 0).
+        restarts: every start's last scenario (slip ``(R, n, 2)`` rad, ``ic`` ``(R, 3)``), or None.
+    """
 
     objective: Array  # () J of the worst run (units of the objective: m s for IAE)
     status: Array  # () int32, that run's pfjax.sim.status.Status
@@ -86,6 +105,13 @@ class FalsifierResult(NamedTuple):
     n_gradients: int  # of those, how many also ran the backward pass
     n_nonfinite_grad: int  # gradient components that were not finite (replaced by 0)
     restarts: tuple[Array, Array] | None = None  # falsify: every start's last (slip (R, n, 2) rad, ic (R, 3))
+
+    @property
+    def status_name(self) -> str:
+        """The worst run's status by name (``ok``, ``diverged``, ...; :data:`pfjax.sim.STATUS_NAMES`)."""
+        from pfjax.sim.status import STATUS_NAMES
+
+        return STATUS_NAMES[int(self.status)]
 
 
 class _Best(NamedTuple):
