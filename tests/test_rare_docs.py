@@ -286,12 +286,14 @@ def claims(res: dict) -> list[tuple[str, bool]]:
             one_sign,
         )
     )
-    fp = path["pi-table3"]["is"]["failure_points"][0]
+    points = path["pi-table3"]["is"]["failure_points"]
+    fp = points[0]
+    stratum = next(s for s in path["pi-table3"]["is"]["strata"] if s["path"] == fp["path"])
     out.append(
         (
-            f"`pi-table3` on the {fp['path']} ({pct(fp['weight'], 0)} of its failure probability) at "
-            f"`β_f = {fp['slip.beta_f_deg']:.1f}°`, `β_r = {fp['slip.beta_r_deg']:.1f}°`",
-            True,
+            f"`pi-table3`'s heaviest mode, on the {fp['path']} ({pct(fp['weight'] / stratum['weight'], 0)} of that "
+            f"path's proposal), at `β_f = {fp['slip.beta_f_deg']:.1f}°`, `β_r = {fp['slip.beta_r_deg']:.1f}°`",
+            fp["weight"] == max(q["weight"] for q in points),
         )
     )
 

@@ -171,3 +171,25 @@ def test_sigkill_mid_run_then_same_command_resumes(spec, reference, tmp_path):
     for a, b in zip(_frames(out), _frames(reference[0])):
         pd.testing.assert_frame_equal(a, b)
     assert not partial_dir(out).exists() and sorted(p.name for p in tmp_path.iterdir()) == ["jax_cache", "out"]
+
+
+def test_a_chunk_of_another_table_layout_is_simulated_again(tmp_path):
+    """A finished chunk without this run-table layout's stamp (written before the sampled inputs
+    were kept in the study's precision) is not resumed: its config, seed and version match, but it
+    would be merged with chunks of other column types."""
+    from pfjax.montecarlo.chunks import TABLE_FORMAT, ChunkStore
+
+    data = {"name": "t", "n_runs": 4, "seed": 0, "paths": [{"kind": "line"}]}
+    spec, _ = load_study(data=data | {"controllers": [{"name": "sf", "type": "state_feedback"}]})
+    out = tmp_path / "out"
+    store = ChunkStore(out, spec)
+    store.get("k0", lambda: pd.DataFrame({"speed": [1.0, 2.0]}))
+    assert store.finished() == ["k0"]
+    f = store.path("k0")
+    table = pq.read_table(f)
+    old = {k: v for k, v in table.schema.metadata.items() if k not in TABLE_FORMAT}
+    pq.write_table(table.replace_schema_metadata(old), f)
+    again = ChunkStore(out, spec)
+    assert again.finished() == []
+    recomputed = again.get("k0", lambda: pd.DataFrame({"speed": [3.0, 4.0]}))
+    assert list(recomputed.speed) == [3.0, 4.0] and again.computed == 1

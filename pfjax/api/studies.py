@@ -216,7 +216,7 @@ def rare_event(
             the config key (an override by its dotted key) of a bad key or value.
     """
     from pfjax.montecarlo.config import study_hash
-    from pfjax.montecarlo.runner import controller_of, precision
+    from pfjax.montecarlo.runner import controllers_of
     from pfjax.provenance import STAMP_UNITS, stamp
     from pfjax.rare import METHODS
     from pfjax.rare.study import check_budget, estimate_study
@@ -254,8 +254,7 @@ def rare_event(
         # the budget given here, not the config's: the error names the argument (--max-rollouts)
         raise errors.InputError(str(e).replace("rare_event.max_rollouts", "max_rollouts", 1), "max_rollouts") from None
     chosen = names if controller is None else [controller]
-    with precision(spec):  # only the controllers estimated (an LMI design is solved only if chosen)
-        controllers = {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers) if c.name in chosen}
+    controllers = controllers_of(spec, chosen)  # an LMI design is solved only if chosen
     config = spec.model_dump(mode="json")
     return {
         "study": spec.name,

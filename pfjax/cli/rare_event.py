@@ -13,6 +13,7 @@ is written to disk.
 
 from __future__ import annotations
 
+import math
 import sys
 
 from pfjax.cli.common import as_flags
@@ -73,7 +74,8 @@ def _human(out: dict) -> None:
     print(f"study {out['study']} (config {out['config_sha256'][:12]}), estimator seed {out['seed']}")
     for name, c in out["controllers"].items():
         lo, hi = c["ci95"]
-        rel = "-" if c["rel_error"] is None else f"{100 * c['rel_error']:.1f} %"
+        r = c["rel_error"]  # infinite (null in JSON) where no failure was seen
+        rel = "-" if r is None or not math.isfinite(r) else f"{100 * r:.1f} %"
         line = (
             f"  {name}: p_fail {c['p_fail']:.3g} [{lo:.3g}, {hi:.3g}], rel. error {rel}, "
             f"{c['n_rollouts']} rollouts ({c['method']}), status {c['status']}"

@@ -93,7 +93,7 @@ class RareEventSpec(ConfigModel):
         "late_max_abs_d", description="per-run metric whose excess over threshold is a failure"
     )
     threshold: Real | None = Field(
-        None, ge=0, description="failure where metric > threshold (metric's unit; default success.band, m)"
+        None, ge=0, description="failure where metric >= threshold (metric's unit; default success.band, m)"
     )
     target_rel_error: Real = Field(
         0.1,

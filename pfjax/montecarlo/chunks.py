@@ -42,6 +42,10 @@ from pfjax.tables import ParquetAppender
 
 #: The Parquet metadata keys that identify what a chunk was computed with.
 IDENTITY = (b"pfjax.config_sha256", b"pfjax.seed", b"pfjax.version")
+#: The run table's layout, stamped on every chunk beside :data:`IDENTITY`: a chunk of another
+#: layout (one written before the sampled inputs were stored in the study's precision) is
+#: simulated again on resume, never merged with this layout's chunks into one file.
+TABLE_FORMAT = {b"pfjax.run_table_format": b"2"}
 
 
 def file_metadata(spec: StudySpec) -> dict[bytes, bytes]:
@@ -86,7 +90,7 @@ class ChunkStore:
             "seed": spec.seed,
             "pfjax_version": pfjax.__version__,
         }
-        self.identity = {k: v for k, v in file_metadata(spec).items() if k in IDENTITY}
+        self.identity = {k: v for k, v in file_metadata(spec).items() if k in IDENTITY} | TABLE_FORMAT
         self.computed = 0  #: chunks simulated by this process
         self.reused = 0  #: chunks found finished on disk (resumed)
         if self.dir.is_symlink() or (self.dir.exists() and not self.dir.is_dir()):

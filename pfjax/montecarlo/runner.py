@@ -40,10 +40,15 @@ from pfjax.montecarlo.margin import (  # noqa: F401  (re-exported: the slip-marg
 from pfjax.outputs import OutputDir
 
 
-def controllers_of(spec: StudySpec) -> dict:
-    """``{name: (controller, gains, flat gains)}`` for the study's controllers (LMI designs synthesised)."""
+def controllers_of(spec: StudySpec, names=None) -> dict:
+    """``{name: (controller, gains, flat gains)}`` for the study's controllers (LMI designs
+    synthesised), or only those named in ``names``."""
     with precision(spec):
-        return {c.name: controller_of(c, spec, i) for i, c in enumerate(spec.controllers)}
+        return {
+            c.name: controller_of(c, spec, i)
+            for i, c in enumerate(spec.controllers)
+            if names is None or c.name in names
+        }
 
 
 def run_study(

@@ -12,6 +12,7 @@ import functools
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from pfjax.montecarlo.config import StudySpec
@@ -238,17 +239,16 @@ def _add_rare_events(spec: StudySpec, controllers, summary: dict, progress, runs
     """Each controller's rare-event failure estimate (:mod:`pfjax.rare`) into its summary block,
     beside the share of the study's own runs that fail by the same event (``plain_fail``, with its
     Clopper-Pearson ``plain_fail_ci95``): a run that failed, or whose ``rare_event.metric`` passes
-    the threshold (``rare_event.threshold``, else ``success.band``)."""
+    the threshold (``rare_event.threshold``, else ``success.band``): the limit state's own test,
+    :func:`pfjax.rare.study.margins`. The run table is read one controller at a time."""
     from pfjax.metrics.robustness import clopper_pearson
-    from pfjax.rare.study import estimate_study
+    from pfjax.rare.study import estimate_study, failure_threshold, margins
 
     rare = spec.rare_event
-    threshold = spec.success.band if rare.threshold is None else rare.threshold
-    runs = read_runs(runs_path, columns=["controller", "status_code", rare.metric])
-    fails = (runs["status_code"] != 0) | (runs[rare.metric] > threshold)
+    threshold = failure_threshold(rare.model_dump(), spec.success.band)
     for name, est in estimate_study(spec, controllers, progress=progress).items():
-        mine = fails[runs["controller"] == name]
-        k, n = int(mine.sum()), len(mine)
+        runs = read_runs(runs_path, columns=["status_code", rare.metric], filters=[("controller", "==", name)])
+        k, n = int(np.sum(margins(runs["status_code"], runs[rare.metric], threshold) <= 0)), len(runs)
         summary["controllers"][name].update(
             p_fail=est["p_fail"],
             p_fail_ci95=est["ci95"],

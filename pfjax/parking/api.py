@@ -8,9 +8,9 @@ map file, or in the start pose against the map, raise its subclass
 :class:`~pfjax.parking.maps.MapError`: the message is the map check's own (it names the key in
 the file, e.g. ``obstacles[1].name: ...``) and the ``key`` is ``"map"`` or ``"x0"``.
 
-Nothing is simulated before every argument has been checked. The results are computed in the
-precision JAX is configured for; the command line enables float64 (``jax_enable_x64``), and a
-caller that does the same gets the command line's numbers.
+Nothing is simulated before every argument has been checked. Both check and simulate in float64,
+as the command line does, whatever ``jax_enable_x64`` says: the same start pose is refused or run
+alike, and the numbers are the command line's.
 
 Only :mod:`pfjax.errors` and :mod:`pfjax.parking.limits` are imported here at module level:
 importing :mod:`pfjax.parking` stays cheap.

@@ -80,6 +80,20 @@ def units(spec: StudySpec) -> dict[str, str]:
     }
 
 
+def failure_threshold(rare: dict, band: float) -> float:
+    """The rare-event failure threshold, in its metric's unit: ``rare_event.threshold``, else the
+    success band (m). ``rare``: the ``[rare_event]`` table as a dict (a spec's ``model_dump()``)."""
+    return band if rare["threshold"] is None else rare["threshold"]
+
+
+def margins(status, metric, threshold: float) -> np.ndarray:
+    """The limit state's margins of runs (float64): ``threshold - metric``, and a failed run (status
+    not ok) fails whatever its metric (NaN for a run failed at t = 0: fmin). A run fails where its
+    margin is at most 0 (:func:`limit_state`; the study's ``plain_fail`` counts the same)."""
+    margin = threshold - np.asarray(metric, dtype=float)
+    return np.where(np.asarray(status) != 0, np.fmin(margin, -1e-9), margin)
+
+
 def limit_state(
     spec: StudySpec, stratum: Stratum, inputs: list[Input], controller, *, seed: int = 0, stream: int = 0, counter=None
 ):
@@ -98,7 +112,7 @@ def limit_state(
 
     ctrl, gains, _ = controller
     rare = spec.rare_event
-    threshold = spec.success.band if rare.threshold is None else rare.threshold
+    threshold = failure_threshold(rare.model_dump(), spec.success.band)
     cfg = sim_config(spec)
     calls = itertools.count()
     base = jax.random.fold_in(seed_key(seed), stream)
@@ -113,12 +127,9 @@ def limit_state(
         sampled = sample_runs(spec, stratum.path_index, np.arange(m), key=key, given=given)
         # the study's vehicle model: the slip model's simulator, or the single-track one (model st, std)
         res = simulate_scenarios(with_gains(sampled.scenarios, gains, m), controller=ctrl, config=cfg)
-        metric = np.asarray(getattr(res.metrics, rare.metric), dtype=float)[:n]
-        margin = threshold - metric
+        margin = margins(np.asarray(res.status)[:n], np.asarray(getattr(res.metrics, rare.metric))[:n], threshold)
         if counter is not None:
             counter(n)
-        # a failed run fails the limit state whatever its metric (NaN for a run failed at t = 0: fmin)
-        margin = np.where(np.asarray(res.status)[:n] != 0, np.fmin(margin, -1e-9), margin)
         if rare.margin_resolution > 0:
             r = rare.margin_resolution
             margin = np.where(margin > 0, r * np.maximum(np.ceil(margin / r), 1.0), margin)

@@ -167,7 +167,9 @@ def _search_blocks(summary: dict, colors: dict, figures: Mapping) -> list[D.Bloc
             "failure modes (mean failure inputs): path, weight, inputs far from their medians (σ of u)",
         ]
         rare_cfg = summary["config"]["rare_event"]
-        threshold = summary["config"]["success"]["band"] if rare_cfg["threshold"] is None else rare_cfg["threshold"]
+        from pfjax.rare.study import failure_threshold
+
+        threshold = failure_threshold(rare_cfg, summary["config"]["success"]["band"])
         note = (
             "P(fail) from pfjax.rare over the study's uncertain inputs (importance sampling, subset simulation or "
             f"plain Monte Carlo): a run fails if its status is not ok or its {rare_cfg['metric']} passes "
