@@ -148,8 +148,11 @@ def verification_config(sizes: dict, study_spec: StudySpec) -> dict:
 
 def units(known_spec: StudySpec, study_spec: StudySpec) -> dict[str, str]:
     """The result's ``units``: :data:`UNITS`, the stamp's and the estimates' of both studies
-    (:func:`pfjax.rare.study.units`: their inputs' config keys)."""
-    return {**STAMP_UNITS, **estimate_units(known_spec), **estimate_units(study_spec), **UNITS}
+    (:func:`pfjax.rare.study.units`: their inputs' config keys; not the study config's threshold,
+    whose config this file does not hold)."""
+    both = {**estimate_units(known_spec), **estimate_units(study_spec)}
+    both.pop("config.rare_event.threshold")
+    return {**STAMP_UNITS, **both, **UNITS}
 
 
 def estimate(config, name: str, *, paths: list | None = None, **rare) -> dict:
