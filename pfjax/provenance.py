@@ -18,18 +18,9 @@ import platform
 def config_hash(cfg: dict) -> str:
     """SHA-256 of the canonical JSON of ``cfg`` (keys sorted, no spaces, -0.0 as 0.0: the same run
     whichever zero was typed)."""
-    return hashlib.sha256(json.dumps(_zeros(cfg), sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    from pfjax.jsonio import clean  # the outputs' own canonical numbers (a config holds no NaN)
 
-
-def _zeros(o):
-    """``o`` with every -0.0 as 0.0 (recursively through dicts, lists and tuples)."""
-    if isinstance(o, float):
-        return o + 0.0
-    if isinstance(o, dict):
-        return {k: _zeros(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_zeros(v) for v in o]
-    return o
+    return hashlib.sha256(json.dumps(clean(cfg), sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
 def machine() -> str:
