@@ -12,9 +12,10 @@ study scripts) writes them through :class:`OutputDir`:
      re-run); another command's or config's output is replaced only with ``overwrite=True``
      (``--overwrite``), and so is one whose files changed since pfjax wrote them;
    - anything else is refused: a file, a symbolic link, a non-empty directory without the marker,
-     a marked directory that also holds files the marker does not list (even with ``overwrite``),
-     the current directory or one that contains it, the home directory, a filesystem root, and a
-     path ending in ``.`` or ``..``.
+     the current directory or one that contains it, the home directory, a filesystem root, a path
+     ending in ``.`` or ``..``, and, even with ``overwrite``, a marked directory that also holds
+     files the marker does not list or a symbolic link where it lists a file (pfjax writes no
+     links).
 
    A refusal is an :class:`~pfjax.errors.InputError` naming the flag (``--out``), and nothing is
    touched. A Python function passes its own name for it (``flag="out"``), so its refusals name its
@@ -253,7 +254,8 @@ def _check_contents(
         )
     files, dirs = _entries(resolved)
     listed = marker["files"]
-    foreign = sorted(set(files) - set(listed)) + sorted(dirs - set(marker["dirs"]))
+    links = sorted(f for f, st in files.items() if f in listed and stat.S_ISLNK(st.st_mode))
+    foreign = sorted(set(files) - set(listed)) + links + sorted(dirs - set(marker["dirs"]))
     if foreign:
         more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
         raise InputError(

@@ -153,6 +153,25 @@ def test_foreign_and_changed_files_in_an_output(tmp_path):
     check_target(out, command="study", config_sha256="a" * 64, overwrite=True)
 
 
+def test_a_link_where_pfjax_wrote_a_file_is_the_users_even_with_overwrite(tmp_path):
+    """pfjax writes no links: one in place of a file it listed was put there by the user, and
+    --overwrite, which may replace pfjax's own changed files, does not remove it."""
+    out = tmp_path / "out"
+    _write(out, {"summary.json": "{}", "figures/a.png": "png"})
+    mine = tmp_path / "mine.json"
+    mine.write_text("precious")
+    (out / "summary.json").unlink()
+    (out / "summary.json").symlink_to(mine)
+    with pytest.raises(InputError, match=r"holds 'summary.json', which pfjax did not write"):
+        check_target(out, command="study", config_sha256="a" * 64, overwrite=True)
+    with (
+        pytest.raises(InputError, match=r"holds 'summary.json'"),
+        OutputDir(out, command="study", config_sha256="b" * 64, overwrite=True),
+    ):
+        pass
+    assert (out / "summary.json").is_symlink() and mine.read_text() == "precious"
+
+
 @pytest.mark.parametrize("name", ["", ".", "..", "a/b", "../x", ".hidden", "a b", "x" * 101, 3, None])
 def test_bad_names(name):
     with pytest.raises(InputError, match=r"^name: expected a name"):
