@@ -183,8 +183,11 @@ FIGURE_VERDICT = 'assert not _NOTEBOOK_FIGURE_PROBLEMS, "\\n".join(dict.fromkeys
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
-def test_notebook_runs(path: Path):
-    """Every cell runs, and every figure passes :func:`figure_problems`."""
+def test_notebook_runs(path: Path, tmp_path: Path, monkeypatch):
+    """Every cell runs, and every figure passes :func:`figure_problems`. The kernel's temporary
+    directory (``$TMPDIR``, which a notebook's study output goes to) is the test's own, so a run
+    leaves nothing behind in the system's."""
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
     nb = nbformat.read(path, as_version=4)
     nb.cells.insert(0, nbformat.v4.new_code_cell(FIGURE_CHECK))
     nb.cells.append(nbformat.v4.new_code_cell(FIGURE_VERDICT))
