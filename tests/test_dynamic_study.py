@@ -70,6 +70,10 @@ def test_api_validates_as_the_config_naming_the_argument():
     for kw, message in [
         ({"model": "st", "beta_r_deg": 3.0}, 'beta_r_deg: not with model = "st"'),
         ({"model": "st", "L": 0.3}, 'L: not with model = "st"'),
+        # at their defaults too, as pfjax simulate --model st refuses --wheelbase 0.2 and --convention source
+        ({"model": "st", "L": 0.2}, 'L: not with model = "st"'),
+        ({"model": "std", "convention": "source"}, 'convention: not with model = "std"'),
+        ({"model": "st", "beta_f_deg": 0.0}, 'beta_f_deg: not with model = "st"'),
         ({"mu": 0.5}, 'mu: not with model = "kinematic"'),
         ({"model": "st", "mu": -1.0}, "mu: must lie in (0, 10]"),
         ({"model": "st", "vehicle_params": "truck"}, "vehicle_params: Input should be"),

@@ -89,9 +89,10 @@ def scenarios(
             ``n`` are the same runs.
         model: ``"kinematic"`` (slip declared by ``beta_r_deg``, ``beta_f_deg``), ``"st"``
             (CommonRoad's single-track model, :mod:`pfjax.sim.dynamic`: the slip comes from the tyre
-            forces, so a slip, ``L``, ``delta_max_deg`` or ``convention`` other than a study config's
-            default, no slip, 0.2 m, 30 deg and ``source``, is refused with it) or ``"std"`` (its
-            drift model, CommonRoad's vehicles only).
+            forces and the wheelbase and steering limit from the parameter set, so ``beta_r_deg``,
+            ``beta_f_deg``, ``L``, ``delta_max_deg`` and ``convention`` are refused with it, at any
+            value, as ``pfjax simulate --model st`` refuses their flags) or ``"std"`` (its drift
+            model, CommonRoad's vehicles only).
         vehicle_params: st, std: parameter set, ``robot`` or ``vehicle1``-``vehicle3`` (default
             ``robot`` for st, ``vehicle2`` for std).
         mu: st: friction coefficient (default the set's). tau_delta_s: st: steering actuator time
@@ -122,6 +123,22 @@ def scenarios(
             if value is not None:
                 raise errors.InputError(
                     f'{name}: not with model = "kinematic" (it is a setting of model = "st" or "std"); remove it', name
+                )
+    elif model in ("st", "std"):  # the kinematic model's settings refused when given, at their defaults too, as
+        # pfjax simulate --model st does
+        for name, value in (
+            ("beta_r_deg", beta_r_deg),
+            ("beta_f_deg", beta_f_deg),
+            ("L", L),
+            ("delta_max_deg", delta_max_deg),
+            ("convention", convention),
+        ):
+            if value is not None:
+                raise errors.InputError(
+                    f'{name}: not with model = "{model}" (a setting of the kinematic model: the {model} model '
+                    f"takes its wheelbase and steering limit from its parameter set, its slip from the tyre "
+                    f"forces); remove it",
+                    name,
                 )
     if model == "kinematic":  # the kinematic defaults (None: not given, so the ST model can refuse a given one)
         beta_r_deg = 5.0 if beta_r_deg is None else beta_r_deg
