@@ -10,7 +10,7 @@ import pytest
 
 from pfjax import controllers as C
 from pfjax.sim import SimConfig
-from pfjax.tuning.cost import CostSpec, aggregate, batch_cost
+from pfjax.tuning.cost import CostSpec, aggregate, batch_cost, tail_count
 from pfjax.tuning.gradient import gradient_tune
 from pfjax.tuning.problem import make_problem
 
@@ -62,6 +62,12 @@ def test_aggregates_match_numpy():
     assert float(aggregate(J, CostSpec(aggregate="quantile", level=0.8))) == pytest.approx(np.quantile(J, 0.8))
     assert float(aggregate(J, CostSpec(aggregate="cvar", level=0.8))) == pytest.approx((9.0 + 8.0) / 2)
     assert float(aggregate(J, CostSpec(aggregate="cvar", level=0.75))) == pytest.approx((9 + 8 + 7) / 3)  # ceil(2.5)
+    # (1 - 0.7) * 10 is 3.0000000000000004 in floating point: still the 3 largest, not 4
+    assert float(aggregate(J, CostSpec(aggregate="cvar", level=0.7))) == pytest.approx((9 + 8 + 7) / 3)
+    assert float(aggregate(jnp.arange(1.0, 21.0), CostSpec(aggregate="cvar", level=0.95))) == 20.0
+    for pct in range(1, 100):  # every level of two decimals: (1 - level) n is a whole number for n = 100, 300
+        for n in (100, 300):
+            assert tail_count(pct / 100, n) == (100 - pct) * n // 100, (pct, n)
     with pytest.raises(ValueError, match="^metric: "):
         CostSpec(metric="mse").check()
 
