@@ -6,6 +6,7 @@ callback inside the cost (one call per evaluated point, whatever the batching an
 """
 
 import json
+import re
 
 import jax
 import jax.numpy as jnp
@@ -231,6 +232,24 @@ def test_check_known_minimum_saddle_and_kink():
     assert kink.verdict == "local minimum" and abs(kink.gradient[0]) == pytest.approx(1.0)
 
 
+def test_check_point_refuses_a_point_outside_its_box():
+    """A point outside the box (or not finite), or a box that is not one, is an input error naming
+    the argument: the check works in box units and would otherwise check the clipped point."""
+    from pfjax.errors import InputError
+
+    bowl = lambda th: jnp.sum((th - 0.3) ** 2)
+    for theta, lo, hi, key, msg in (
+        ([2.0, 0.3], [0, 0], [1, 1], "theta", r"theta\[0\]: 2 is not a finite value in \[0, 1\]"),
+        ([0.5, np.nan], [0, 0], [1, 1], "theta", r"theta\[1\]: nan"),
+        ([0.5, 0.5], [0, 1], [1, 1], "lower", "lower < upper"),
+        ([0.5, 0.5], [0, 0], [1, np.inf], "lower", "finite corners"),
+        ([0.5, 0.5], [0, 0], [1], "lower", "of one size"),
+    ):
+        with pytest.raises(InputError, match=f"^{key}") as e:
+            check_point(bowl, theta, lo, hi)
+        assert re.search(msg, str(e.value)) and e.value.key.startswith(key), str(e.value)
+
+
 def test_check_of_a_plateau_is_flat_not_a_minimum():
     """A cost constant around the point (every run failed: the fail penalty), with a zero gradient,
     is "flat" (to 1e-12 relative); a minimum whose probes rise by more than that, though by less
@@ -269,6 +288,9 @@ def test_parse_gains_forms_and_errors():
         ('{"a": 1, "K": [1]}', "K has 1 values"),
         ('{"a": ', "not valid JSON"),
         ("nan,-1,-1", "finite"),
+        ("1,,-2,-3", "an empty item"),
+        ("1,-2,-3,", "an empty item"),
+        ("", "an empty item"),
     ):
         with pytest.raises(ValueError, match=f"^check: .*{msg}"):
             parse_gains(g, f, n, lo, hi)

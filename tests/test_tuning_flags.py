@@ -339,6 +339,25 @@ def test_tune_json_records_only_the_arguments_the_run_read(monkeypatch, capsys, 
         assert seen[-1] == GAOptions()
 
 
+def test_the_level_a_quantile_or_cvar_ran_at_is_recorded_given_or_not(monkeypatch, capsys):
+    """``--aggregate cvar`` without ``--level`` runs at level 0.9 and records it, in ``arguments``
+    and ``cost_spec``: the same run as ``--level 0.9``, with the same config hash."""
+    import json
+
+    from pfjax.tuning import problem
+
+    monkeypatch.setattr(problem, "tune", lambda pr, method, **kw: _fake_result(pr.lower.size))
+    outs = []
+    for extra in ([], ["--level", "0.9"]):
+        assert (
+            main(["tune", "--controller", "pi", "--method", "gradient", "--aggregate", "cvar", "--json", *extra]) == 0
+        )
+        outs.append(json.loads(capsys.readouterr().out))
+    assert [o["arguments"]["level"] for o in outs] == [0.9, 0.9]
+    assert [o["cost_spec"]["level"] for o in outs] == [0.9, 0.9]
+    assert outs[0]["config_sha256"] == outs[1]["config_sha256"]
+
+
 def test_cli_and_api_report_the_same_gains_and_check_takes_them_back(capsys):
     """``pfjax tune --json`` and :func:`pfjax.tune` report every gain by its scalar name (what
     ``--gains`` and :func:`pfjax.simulate` take), and ``--check`` / ``check=`` take that dict back;

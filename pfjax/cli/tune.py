@@ -213,7 +213,7 @@ UNITS = {
     "check.gradient.*": "cost per gain unit",
     "check.projected_gradient_norm": "cost per box width",
     "check.hessian_eigenvalues": "cost per box width^2",
-    "check.best_probe.*": "box widths",
+    "check.best_probe.*": GAINS,
     "check.newton_decrease_relative": "1",
     "check.probe_decrease_relative": "1",
     "dt": "s",
@@ -258,6 +258,7 @@ def _cmd(args) -> dict:
     key = seed_key(errors.seed("--seed", args.seed)) if args.seed is not None else None
     with as_flags(FLAGS):
         cost = CostSpec(metric=args.cost, effort=args.effort, aggregate=args.aggregate, level=args.level).check()
+        args.level = cost.level  # the quantile's or CVaR's level as it ran (one config hash, given or not)
         multistart = _multistart(args)
         ga = {"population_size": args.population, "generations": args.generations}
         options = GAOptions(**{k: v for k, v in ga.items() if v is not None})

@@ -110,8 +110,7 @@ def check_point(
     """
     from pfjax.numerics.autodiff import forward_passes_per_gradient
 
-    lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
-    th = _checked_point(theta, lo, h, rtol)
+    th, lo, hi = _checked_point(theta, lower, upper, h, rtol)
     radii = [errors.number("radii", r, positive=True, high=1.0) for r in np.ravel(radii)]
     dtype = jnp.result_type(float)
     span = hi - lo
@@ -157,15 +156,27 @@ def _values_and_gradients(Z, lo, span, *, cost, mode):
     return jax.vmap(autodiff.value_and_grad(lambda z: cost(lo + span * z), mode=mode))(Z)
 
 
-def _checked_point(theta, lo: np.ndarray, h: float, rtol: float) -> np.ndarray:
-    """``theta`` as a flat float64 array of the box's size; :class:`~pfjax.errors.InputError` for a
-    wrong size or a bad ``h`` or ``rtol``."""
+def _checked_point(theta, lower, upper, h: float, rtol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(theta, lower, upper)`` as flat float64 arrays: the box's corners finite with ``lower <
+    upper``, ``theta`` of its size, finite and inside it (a point outside would be checked where
+    the box clips it); :class:`~pfjax.errors.InputError` naming the argument otherwise, or a bad
+    ``h`` or ``rtol``."""
+    lo, hi = (np.asarray(b, np.float64).reshape(-1) for b in (lower, upper))
+    if lo.shape != hi.shape or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
+        raise errors.InputError(
+            f"lower: expected finite corners of one size with lower < upper, got {lo.tolist()} and {hi.tolist()}",
+            "lower",
+        )
     th = np.asarray(theta, np.float64).reshape(-1)
     if th.shape != (lo.size,):
-        raise errors.InputError(f"theta: {th.size} values, expected {lo.size}")
+        raise errors.InputError(f"theta: {th.size} values, expected {lo.size}", "theta")
+    bad = np.flatnonzero(~np.isfinite(th) | (th < lo) | (th > hi))
+    if bad.size:
+        i = int(bad[0])
+        raise errors.InputError(f"theta[{i}]: {th[i]:g} is not a finite value in [{lo[i]:g}, {hi[i]:g}]", "theta")
     errors.number("h", h, positive=True, high=0.1)
     errors.number("rtol", rtol, nonnegative=True)
-    return th
+    return th, lo, hi
 
 
 def _gradient_and_hessian(vg, z: np.ndarray, h: float, dtype):
@@ -229,8 +240,11 @@ def parse_gains(gains, fields, sizes, lower, upper, *, key: str = "check") -> np
             except json.JSONDecodeError as e:
                 raise errors.InputError(f"{key}: not valid JSON ({e.msg}): {text!r}", key) from None
         else:
+            items = [v.strip() for v in text.replace(";", ",").split(",")]
+            if "" in items:
+                raise errors.InputError(f"{key}: an empty item in {text!r}; expected {names}", key)
             try:
-                gains = [float(v) for v in text.replace(";", ",").split(",") if v.strip()]
+                gains = [float(v) for v in items]
             except ValueError:
                 raise errors.InputError(
                     f"{key}: expected numbers ({names}) or a JSON object, got {text!r}", key

@@ -59,8 +59,10 @@ class CostSpec(NamedTuple):
         return LEVEL if self.level is None else self.level
 
     def check(self) -> CostSpec:
-        """``self`` if every field is valid; :class:`~pfjax.errors.InputError` naming the field (a
-        ``level`` with the mean, which reads none, too)."""
+        """``self`` if every field is valid, with the quantile's or CVaR's ``level`` filled in
+        (:data:`LEVEL` when not given, so that a record of the spec says what ran);
+        :class:`~pfjax.errors.InputError` naming the field (a ``level`` with the mean, which reads
+        none, too)."""
         from pfjax import errors
 
         if self.metric not in METRICS:
@@ -74,7 +76,7 @@ class CostSpec(NamedTuple):
                 raise errors.InputError(f"level: value {self.level:g}, expected in (0, 1)")
         errors.number("effort", self.effort, nonnegative=True)
         errors.number("fail_penalty", self.fail_penalty, nonnegative=True)
-        return self
+        return self if self.level is not None or self.aggregate == "mean" else self._replace(level=LEVEL)
 
 
 class Tunable(NamedTuple):
