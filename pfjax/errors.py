@@ -239,6 +239,27 @@ def integer(key: str, value, *, low: int | None = None, high: int | None = None)
     return n
 
 
+def box(lower, upper):
+    """A tuner's box ``(lower, upper)`` as two flat float64 arrays: of one size, finite, with
+    ``lower < upper`` in every coordinate; :class:`InputError` naming ``lower`` otherwise."""
+    import numpy as np
+
+    try:
+        lo, hi = (np.asarray(b, np.float64).reshape(-1) for b in (lower, upper))
+    except (TypeError, ValueError):
+        raise InputError(f"lower: expected two arrays of numbers, got {lower!r} and {upper!r}", "lower") from None
+    if (
+        lo.size == 0
+        or lo.shape != hi.shape
+        or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi))
+    ):
+        raise InputError(
+            f"lower: expected finite corners of one size with lower < upper, got {lo.tolist()} and {hi.tolist()}",
+            "lower",
+        )
+    return lo, hi
+
+
 def seed(key: str, value) -> int:
     """A PRNG seed: an integer in ``[0, 2**63 - 1]``."""
     return integer(key, value, low=0, high=MAX_SEED)

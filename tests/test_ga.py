@@ -144,8 +144,38 @@ def test_ga_bits_onemax_and_decoded_integer():
 def test_bad_options_raise():
     with pytest.raises(ValueError, match="elite_count"):
         ga(sphere, [0], [1], key=jax.random.PRNGKey(0), options=GAOptions(elite_count=50))
-    with pytest.raises(ValueError, match="lower/upper"):
+    with pytest.raises(ValueError, match="^lower: expected finite corners"):
         ga(sphere, [1], [0], key=jax.random.PRNGKey(0))
+
+
+def test_every_tuner_checks_its_box_and_key_alike():
+    """The GA, the gradient tuner, the multi-start tuner and the check refuse the same boxes with the
+    same one line (:func:`pfjax.errors.box`), and the random tuners a missing key."""
+    import jax.numpy as jnp
+
+    from pfjax.errors import InputError
+    from pfjax.tuning.check import check_point
+    from pfjax.tuning.gradient import gradient_tune
+    from pfjax.tuning.multistart import MultistartOptions, multistart_tune
+
+    f = lambda th: jnp.sum(th**2)
+    k = jax.random.PRNGKey(0)
+    tuners = {
+        "ga": lambda lo, hi, key=k: ga(lambda X: np.sum(X**2, axis=1), lo, hi, key=key),
+        "gradient": lambda lo, hi, key=k: gradient_tune(f, lo, hi, key=key, steps=1),
+        "multistart": lambda lo, hi, key=k: multistart_tune(f, lo, hi, key=key),
+        "check": lambda lo, hi, key=k: check_point(f, [0.5], lo, hi),
+    }
+    for name, tune in tuners.items():
+        for lo, hi in (([1.0], [0.0]), ([0.0], [np.inf]), ([0.0, 0.0], [1.0]), ([], []), ([0.0], [0.0])):
+            with pytest.raises(InputError, match="^lower: expected finite corners of one size with lower < upper"):
+                tune(lo, hi)
+        if name != "check":
+            with pytest.raises(InputError, match="^key: required"):
+                tune([0.0], [1.0], key=None)
+    with pytest.raises(InputError, match="^options: expected a MultistartOptions, got dict"):
+        multistart_tune(f, [0.0], [1.0], key=k, options={"n_starts": 2})
+    assert isinstance(MultistartOptions(), MultistartOptions)
 
 
 def test_ga_tune_evaluates_the_children_on_the_population_program_when_cheap():

@@ -161,12 +161,7 @@ def _checked_point(theta, lower, upper, h: float, rtol: float) -> tuple[np.ndarr
     upper``, ``theta`` of its size, finite and inside it (a point outside would be checked where
     the box clips it); :class:`~pfjax.errors.InputError` naming the argument otherwise, or a bad
     ``h`` or ``rtol``."""
-    lo, hi = (np.asarray(b, np.float64).reshape(-1) for b in (lower, upper))
-    if lo.shape != hi.shape or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
-        raise errors.InputError(
-            f"lower: expected finite corners of one size with lower < upper, got {lo.tolist()} and {hi.tolist()}",
-            "lower",
-        )
+    lo, hi = errors.box(lower, upper)
     th = np.asarray(theta, np.float64).reshape(-1)
     if th.shape != (lo.size,):
         raise errors.InputError(f"theta: {th.size} values, expected {lo.size}", "theta")

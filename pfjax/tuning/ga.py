@@ -69,7 +69,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from pfjax import resources
+from pfjax import errors, resources
 
 
 class GAOptions(NamedTuple):
@@ -224,12 +224,11 @@ def ga(
         :class:`GAResult`; ``x`` is the best point ever evaluated (the elite keeps it in the
         population), inside the bounds.
     """
-    lo = np.atleast_1d(np.asarray(lower, dtype=np.float64))
-    hi = np.atleast_1d(np.asarray(upper, dtype=np.float64))
-    if lo.shape != hi.shape or lo.ndim != 1:
-        raise ValueError(f"lower/upper: shapes {lo.shape} and {hi.shape}, expected equal (D,)")
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
-        raise ValueError("lower/upper: expected finite bounds with lower < upper")
+    lo, hi = errors.box(lower, upper)
+    if key is None:
+        raise errors.InputError(
+            "key: required, a JAX PRNG key (the first population, selection, crossover, mutation)", "key"
+        )
     P, _, _ = validate_options(options)
     span = hi - lo
     k0, kr = jax.random.split(key)

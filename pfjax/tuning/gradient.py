@@ -121,7 +121,7 @@ def gradient_tune(
         mode: differentiation mode, ``"auto"`` (forward mode for at most 4 parameters, reverse
             above), ``"forward"`` or ``"reverse"`` (:func:`pfjax.numerics.autodiff.value_and_grad`).
     """
-    lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
+    lo, hi = errors.box(lower, upper)
     span = hi - lo
     n_starts = errors.integer("n_starts", n_starts, low=1, high=1_000_000)
     errors.integer("steps", steps, low=1, high=1_000_000)

@@ -200,8 +200,15 @@ def multistart_tune(
         :class:`~pfjax.tuning.gradient.TuneResult`; ``history`` has one entry after the screening
         and one per gradient step and polish iteration (best cost so far).
     """
+    if not isinstance(options, MultistartOptions):
+        raise errors.InputError(
+            f"options: expected a MultistartOptions, got {type(options).__name__} (MultistartOptions(**d) takes a dict)",
+            "options",
+        )
     o = options.check()
-    lo, hi = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
+    lo, hi = errors.box(lower, upper)
+    if key is None:
+        raise errors.InputError("key: required, a JAX PRNG key (space-filling points, smoothing, restarts)", "key")
     span, D = hi - lo, lo.size
     autodiff.resolve_mode(mode, D)
     cand = np.zeros((0, D)) if candidates is None else np.atleast_2d(np.asarray(candidates, np.float64))
@@ -209,8 +216,10 @@ def multistart_tune(
         raise errors.InputError(f"candidates: shape {cand.shape}, expected (K, {D})")
     k_screen, k_smooth, k_restart = jax.random.split(key, 3)
     z0 = np.concatenate([np.clip((cand - lo) / span, 0.0, 1.0), space_filling(o.n_screen, D, o.sampler, k_screen)])
-    if len(z0) < o.n_starts:  # too few screened points: fill the starts uniformly
-        z0 = np.concatenate([z0, np.asarray(jax.random.uniform(k_restart, (o.n_starts - len(z0), D)), np.float64)])
+    if len(z0) < o.n_starts:  # too few screened points: fill the starts uniformly (a key of their own,
+        # not the restarts', whose perturbations would repeat these draws)
+        k_fill = jax.random.fold_in(k_restart, 1)
+        z0 = np.concatenate([z0, np.asarray(jax.random.uniform(k_fill, (o.n_starts - len(z0), D)), np.float64)])
     dtype = jnp.result_type(float)
     fpp = autodiff.forward_passes_per_gradient(D, mode)
     plan = _Plan.of(o, len(z0), D, None if rollout_steps is None else int(rollout_steps), fpp)
