@@ -172,6 +172,21 @@ def test_a_horizon_too_short_for_the_scenario_sets_windows_names_the_flag(capsys
     _refused_cli(argv, "--horizon", capsys)
 
 
+def test_too_many_steps_names_the_flag_given(capsys):
+    """A run of more integrator steps than a run may take names --horizon when only it was given,
+    --dt when the step was given too."""
+    base = ["tune", "--controller", "pi", "--method", "ga", "--horizon", "1e7"]
+    _refused_cli(base, "--horizon", capsys)
+    _refused_cli([*base, "--dt", "0.001"], "--dt", capsys)
+    # the API names its config fields as the command line names its flags
+    for config, key in (({"horizon": 1e7}, "config.horizon"), ({"horizon": 1e7, "dt": 0.001}, "config.dt")):
+        with pytest.raises(InputError, match=rf"^{key}: horizon / dt"):
+            pfjax.tune("pi", "paper-line", "ga", config=config)
+    toml = str(Path(__file__).resolve().parents[1] / "studies" / "tuning_heldout.toml")
+    with pytest.raises(InputError, match=r"^config\.horizon: 4 s is too short for the scenario set"):
+        pfjax.tune("pi", toml, "ga", config={"horizon": 4.0})
+
+
 @pytest.mark.parametrize(
     "argv,flag",
     [

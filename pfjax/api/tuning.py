@@ -99,6 +99,7 @@ def tune(
         METHODS,
         check_options,
         check_settings_apply,
+        in_words_of,
         make_problem,
         reported_gains,
         scenario_sets,
@@ -141,9 +142,12 @@ def tune(
     if check is None:  # every tuning setting, before the problem is built
         with _named(given, own):
             check_options(method, ga_options, steps, n_starts, learning_rate, multistart)
-    problem = make_problem(
-        name, scenario, cost=cost, config=config, model=model, **({} if n_runs is None else {"n_runs": n_runs})
-    )
+    try:
+        problem = make_problem(
+            name, scenario, cost=cost, config=config, model=model, **({} if n_runs is None else {"n_runs": n_runs})
+        )
+    except errors.InputError as e:  # named by the config fields given, as pfjax tune names its flags
+        raise in_words_of(e, config if isinstance(config, dict) else None) from None
     if check is not None:
         r = run_check(problem, check, controller=name)
         return {

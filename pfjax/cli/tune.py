@@ -13,7 +13,8 @@ A flag the chosen method (or ``--check``), scenario or aggregate does not read i
 (:func:`method_flags`); ``--dt`` and ``--horizon`` change the default or the study's settings and
 the result is checked by :func:`pfjax.tuning.problem.make_problem` (a stable step on ``st`` and ``std``).
 
-Prints ``gains``, ``cost``, ``n_rollouts_simulated`` (every rollout, value-only or with a gradient),
+Prints ``gains``, ``cost``, ``n_rollouts_simulated`` (every rollout evaluated, value-only or with a gradient; the padding of a
+shared program's batch not counted),
 ``n_forward_passes`` (a rollout with its gradient counted as ``1 + D`` forward passes in forward
 mode), ``wall_s`` (compilation excluded; ``compile_s``), ``history`` (best cost so far per
 generation / step) and ``history_rollouts``; with ``--check``: the gains' cost and
@@ -248,7 +249,7 @@ def _cmd(args) -> dict:
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import check, check_options, make_problem, reported_gains, tune
+    from pfjax.tuning.problem import check, check_options, in_words_of, make_problem, reported_gains, tune
 
     controllers = _controllers()
     _check_flags(args, controllers)
@@ -275,10 +276,8 @@ def _cmd(args) -> dict:
                 **({} if args.n_runs is None else {"n_runs": args.n_runs}),
                 model=args.model,
             )
-        except errors.InputError as e:
-            if args.horizon is not None and e.key in ("config.success_from", "config.steady_window"):
-                # a window of the scenario set's that a shorter --horizon no longer holds
-                raise UsageError(f"--horizon: {args.horizon:g} s is too short for the scenario set ({e})") from None
+        except errors.InputError as e:  # named by the flags given (in_words_of), as the API names its arguments
+            e = in_words_of(e, changes)
             raise errors.renamed(errors.renamed(e, "config.dt", "--dt"), "config.horizon", "--horizon") from None
         # as they ran (the scenario set's): one config hash, given or not
         args.dt, args.horizon, args.model = problem.config.dt, problem.config.horizon, _model_of(problem)

@@ -23,6 +23,7 @@ import jax
 import numpy as np
 
 from pfjax import controllers as C
+from pfjax import errors
 from pfjax.sim.simulate import SimConfig
 from pfjax.tuning.cost import CostSpec, Tunable, batch_cost, n_scenarios, population_cost
 from pfjax.tuning.ga import GAOptions
@@ -58,6 +59,23 @@ class Problem(NamedTuple):
 MODELS = ("kinematic", "st", "std")
 #: The parameter set of the paper sets and registered paths on the dynamic models (as ``pfjax simulate --model``).
 DYNAMIC_PARAMS = {"st": "robot", "std": "vehicle2"}
+
+
+def in_words_of(e: errors.InputError, changes: dict | None) -> errors.InputError:
+    """:func:`make_problem`'s error named by what the caller changed (``changes``: its ``config``
+    dict): a scenario set's window that a shorter ``horizon`` no longer holds, and a run of too many
+    integrator steps when only the horizon was changed, name ``config.horizon``, not a key the
+    caller did not give."""
+    changes = changes or {}
+    if "horizon" not in changes:
+        return e
+    if e.key in ("config.success_from", "config.steady_window"):
+        return errors.InputError(
+            f"config.horizon: {changes['horizon']:g} s is too short for the scenario set ({e})", "config.horizon"
+        )
+    if e.key == "config.dt" and "dt" not in changes and "horizon / dt" in str(e):
+        return errors.renamed(e, "config.dt", "config.horizon")
+    return e
 
 
 def make_problem(
@@ -96,8 +114,6 @@ def make_problem(
             slip coming from the tyre forces instead of the declared 5°.
     """
     import dataclasses
-
-    from pfjax import errors
 
     ctrl, lo, hi, tun = _tunable(controller, base_gains, box)
     if not isinstance(cost, CostSpec):
