@@ -189,6 +189,10 @@ def _load(*overrides, path=None):
     [
         (["robust.train_runs=2000000"], "robust.train_runs: must be <= 1000000, got 2000000"),
         (["compare.cvar_runs=2000000"], "compare.cvar_runs: must be <= 1000000, got 2000000"),
+        # the GA's own bounds (pfjax.tuning.ga.validate_options), as pfjax tune checks --generations
+        (["ga.generations=-1"], "ga.generations: must be >= 0"),
+        (["ga.generations=100000000"], "ga.generations: must be <= "),
+        (["ga.population=1"], "ga.population: must be >= 2"),
         (["robust.heldout_runs=200000000"], "robust.heldout_runs: must be <= 100000000"),
         (
             ["heldout=studies/tuning_ga_vs_gradient.toml"],
@@ -279,7 +283,14 @@ def _summary(cfg: dict, heldout: dict, cli: dict) -> dict:
     ]
     h = {"controller": "pi-table3 (source)", "gains": "kp_d=1", "success_rate": 1.0, "success_ci95": [0.9, 1.0]}
     h.update(n=3, iae_mean=0.4, iae_p95=0.5, steady_abs_d_p95_mm=20.0, slip_margin_deg=7.5)
-    t3 = {"cost": 0.7, "gradient": [0.0], "check_verdict": "-", "descent_steps": 1, "descent_cost": 0.5}
+    t3 = {
+        "cost": 0.7,
+        "gradient": [0.0],
+        "check_verdict": "-",
+        "descent_steps": 1,
+        "descent_lr": 0.01,
+        "descent_cost": 0.5,
+    }
     t3.update(relative_decrease=0.3, descent_gains={})
     return {
         "pfjax_version": "0",

@@ -81,6 +81,7 @@ SUMMARY_UNITS: dict[str, object] = {
     ),
     "active": "1 (per gain: -1 on the lower bound, +1 on the upper bound, 0 free)",
     "descent_steps": "adam steps",
+    "descent_lr": "normalised box units (adam step)",
     "relative_decrease": "1 (1 - descent_cost / cost)",
     # part 2: K, the LMI designs
     "K": "rad/m, rad/rad (delta = K [d, theta_e]); integral designs rad/m, rad/rad, rad/(m s) (K [d, theta_e, int d])",

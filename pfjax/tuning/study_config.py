@@ -18,6 +18,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from pfjax.config import POSITIVE, ConfigModel, Real, load_model
+from pfjax.resources import MAX_GENERATIONS, MAX_POPULATION
 from pfjax.tuning.multistart import MultistartOptions
 
 #: The multi-start tuner with one ingredient changed, at about the same budget (``compare.ablation``).
@@ -91,8 +92,10 @@ class TuneSim(ConfigModel):
 class TuneGA(ConfigModel):
     """The source's MATLAB ga settings (Table 2)."""
 
-    population: int = Field(50, ge=2, description="individuals per generation [-]")
-    generations: int = Field(100, ge=1, description="generations [-]")
+    population: int = Field(50, ge=2, le=MAX_POPULATION, description="individuals per generation [-]")
+    generations: int = Field(
+        100, ge=0, le=MAX_GENERATIONS, description="generations after the first population [-] (0: that one only)"
+    )
 
 
 class TuneGradient(ConfigModel):
@@ -100,8 +103,10 @@ class TuneGradient(ConfigModel):
 
     steps: int = Field(100, ge=1, description="adam steps per seed [-]")
     starts: int = Field(4, ge=1, description="starts descended together [-]")
-    lr: Real = Field(0.05, gt=0, description="adam step [normalised box units]")
-    table3_steps: int = Field(60, ge=1, description="adam steps from the Table 3 gains (local-optimum check) [-]")
+    lr: Real = Field(0.05, gt=0, description="gradient-plain's adam step [normalised box units]")
+    table3_steps: int = Field(
+        60, ge=1, description="adam steps from the Table 3 gains (local-optimum check; step 0.01 box units) [-]"
+    )
 
 
 class TuneMultistart(ConfigModel):

@@ -171,7 +171,8 @@ def _parts23(s: dict) -> list:
         Heading("2. Are the Table 3 gains a local optimum of this cost?"),
         Paragraph(
             f"Table 3 (adopted reading) cost {t3['cost']:.5f}, gradient {np.round(t3['gradient'], 5).tolist()}, "
-            f"check: {t3['check_verdict']}; {t3['descent_steps']} projected adam steps from there reach "
+            f"check: {t3['check_verdict']}; {t3['descent_steps']} projected adam steps of {t3['descent_lr']:g} box "
+            f"widths from there reach "
             f"{t3['descent_cost']:.5f} ({t3['relative_decrease']:.1%} lower) at {fmt_gains(t3['descent_gains'])}."
         ),
         Heading("3. Held-out Monte Carlo set"),
