@@ -457,3 +457,10 @@ def test_cli_study_and_bad_input(tmp_path, capsys):
     assert main(["report", str(cfg), "--out", str(out), "--json"]) == 0
     again = json.loads(capsys.readouterr().out)
     assert again["config_sha256"] == head["config_sha256"] and again["report"] == str(out / "report.html")
+    # built from the study's files only: a second rebuild, later, gives the same bytes (the time
+    # shown is the study's, from summary.json)
+    first = (out / "report.md").read_bytes()
+    assert main(["report", str(cfg), "--out", str(out), "--json"]) == 0
+    capsys.readouterr()
+    finished = json.loads((out / "summary.json").read_text())["finished"]
+    assert (out / "report.md").read_bytes() == first and f"| study finished | {finished} |" in first.decode()

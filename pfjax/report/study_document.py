@@ -223,7 +223,7 @@ def _precision_blocks(summary: dict, colors: dict) -> list[D.Block]:
     return out + [D.Paragraph(note, style="note"), D.Table(head, rows)]
 
 
-def _repro_blocks(summary: dict, written: str) -> list[D.Block]:
+def _repro_blocks(summary: dict) -> list[D.Block]:
     n_sweep, chunks = summary.get("n_margin_runs", 0), summary.get("chunks") or {}
     runs = f"{summary['n_runs_total']} study runs" + (f", {n_sweep} slip-margin runs" if n_sweep else "")
     rows = [
@@ -237,8 +237,9 @@ def _repro_blocks(summary: dict, written: str) -> list[D.Block]:
             f"{fmt_num(summary.get('wall_s'), 4)} s (runs, sweep, summary, side jobs and figures; writing this report out not included)",
         ),
         _left("runs", runs),
-        _left("written", written),
     ]
+    if summary.get("finished"):  # the study's time, so that pfjax report rebuilds the same report
+        rows.append(_left("study finished", summary["finished"]))
     if chunks:
         resumed = f", {chunks['resumed']} resumed from an interrupted run" if chunks.get("resumed") else ""
         rows.append(_left("chunks", f"{chunks['simulated']} simulated{resumed}"))
@@ -250,7 +251,7 @@ def _repro_blocks(summary: dict, written: str) -> list[D.Block]:
 
 
 def study_document(
-    summary: dict, runs: pd.DataFrame, figures: Mapping, params: Sequence[str], colors: dict, written: str = ""
+    summary: dict, runs: pd.DataFrame, figures: Mapping, params: Sequence[str], colors: dict
 ) -> D.Document:
     """The Monte Carlo study's report.
 
@@ -261,7 +262,6 @@ def study_document(
             (:func:`pfjax.report.figure_set.report_figures`); figures not there are left out.
         params: the sampled run-table columns shown beside the worst runs.
         colors: one colour per controller (:func:`pfjax.report.study_figures.controller_colors`).
-        written: when the report is written (UTC), shown under reproducibility.
     """
     cfg, ctrl = summary["config"], summary["controllers"]
     axes = [x for x in ("rear", "front", "joint") if any(x in c.get("slip_margin", {}) for c in ctrl.values())]
@@ -288,6 +288,6 @@ def study_document(
         *_driver_blocks(summary, figures),
         *_sample_blocks(summary),
         *_precision_blocks(summary, colors),
-        *_repro_blocks(summary, written),
+        *_repro_blocks(summary),
     ]
     return D.Document(f"Robustness study “{summary['study']}”", subtitle, blocks)

@@ -12,7 +12,6 @@ HTML page with the figures embedded as base64 PNG. The verdict's paired comparis
 
 from __future__ import annotations
 
-import datetime as _dt
 from pathlib import Path
 
 import pandas as pd
@@ -54,6 +53,5 @@ def write_report(
     params = [c for c in column_names(spec) if c in runs.columns and runs[c].nunique(dropna=True) > 1]
     if figures is None:
         figures = draw_figures(out_dir, spec, summary, runs, colors, worst_trajectories)
-    written = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
-    doc = study_document({**summary, "config": cfg}, runs, figures, params, colors, written)
+    doc = study_document({**summary, "config": cfg}, runs, figures, params, colors)
     return document.write(doc, out_dir)
