@@ -320,6 +320,7 @@ class OutputDir:
         self.extra = dict(extra or {})
         self._lock = OutputLock(self.target, command=command, flag=flag)
         self._staging: Path | None = None
+        self._kept_changed: set[str] = set()  # files start_from_existing kept that pfjax did not write as they are
         self.committed = False
 
     # -- life cycle
@@ -376,11 +377,16 @@ class OutputDir:
     def start_from_existing(self, keep) -> None:
         """Fill the staging directory with the current output's files for which ``keep(relative
         path)`` is true (hard links where the filesystem allows, else copies): to rewrite part of an
-        output (``pfjax report``) and still replace it whole."""
+        output (``pfjax report``) and still replace it whole. A kept file that changed since pfjax
+        wrote it (replaced with ``overwrite``) is kept as it is but left out of the new marker: it is
+        the user's from now on, and no later run replaces it without its owner moving it away."""
         current = read_marker(self.target) if self.target.is_dir() else None
-        for rel in (current or {}).get("files", {}):
+        listed = (current or {}).get("files", {})
+        for rel in listed:
             src = self.target / rel
-            if keep(rel) and src.is_file():
+            if keep(rel) and src.is_file() and not src.is_symlink():
+                if not as_written(listed, rel, src.lstat()):
+                    self._kept_changed.add(rel)
                 dst = self.staging / rel
                 dst.parent.mkdir(parents=True, exist_ok=True)
                 try:
@@ -402,7 +408,9 @@ class OutputDir:
             **extra,
             "pfjax_version": _version(),
             "written": now_utc(),
-            "files": {f: [st.st_size, st.st_mtime_ns] for f, st in sorted(files.items())},
+            "files": {
+                f: [st.st_size, st.st_mtime_ns] for f, st in sorted(files.items()) if f not in self._kept_changed
+            },
             "dirs": sorted(dirs),
         }
         (staging / MARKER).write_text(json.dumps(marker, indent=1) + "\n", encoding="utf-8")

@@ -172,6 +172,23 @@ def test_a_link_where_pfjax_wrote_a_file_is_the_users_even_with_overwrite(tmp_pa
     assert (out / "summary.json").is_symlink() and mine.read_text() == "precious"
 
 
+def test_a_changed_file_kept_by_a_rewrite_stays_the_users(tmp_path):
+    """``pfjax report --overwrite`` keeps the files it does not redraw (start_from_existing), an edited
+    one too; that one is then the user's, left out of the new marker, so that a later run refuses
+    to replace it instead of deleting the edit."""
+    out = tmp_path / "out"
+    _write(out, {"summary.json": "{}", "figures/worst.svg": "<svg/>", "figures/a.png": "png"})
+    (out / "figures" / "worst.svg").write_text("<svg/><!-- my edit -->")
+    with OutputDir(out, command="study", config_sha256="a" * 64, overwrite=True) as o:
+        o.start_from_existing(lambda rel: rel.startswith("figures/"))
+        (o.staging / "summary.json").write_text("{}")
+        o.commit()
+    assert (out / "figures" / "worst.svg").read_text() == "<svg/><!-- my edit -->"
+    assert sorted(read_marker(out)["files"]) == ["figures/a.png", "summary.json"]
+    with pytest.raises(InputError, match=r"holds 'figures/worst.svg', which pfjax did not write"):
+        check_target(out, command="study", config_sha256="a" * 64, overwrite=True)
+
+
 @pytest.mark.parametrize("name", ["", ".", "..", "a/b", "../x", ".hidden", "a b", "x" * 101, 3, None])
 def test_bad_names(name):
     with pytest.raises(InputError, match=r"^name: expected a name"):
@@ -464,6 +481,20 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
     code, err = _cli(["report", str(study_toml), "--set", "seed=5", "--out", str(tmp_path / "nothing")], capsys)
     assert code == EXIT_USAGE and "no finished study" in err[0]
     assert f"(run `pfjax study {study_toml} --set seed=5 --out {tmp_path / 'nothing'}` first)" in err[0]
+
+
+def test_a_report_refuses_a_study_whose_margin_table_was_deleted(tmp_path):
+    """Every file a report is built from that the study wrote must still be there: a deleted
+    margin.parquet is refused, not dropped from the new output while the report still shows the
+    margins of summary.json."""
+    from pfjax.montecarlo.study import _unchanged_inputs
+
+    out = tmp_path / "out"
+    _write(out, {"summary.json": "{}", "runs.parquet": "r", "margin.parquet": "m"})
+    _unchanged_inputs(out)
+    (out / "margin.parquet").unlink()
+    with pytest.raises(InputError, match=r"^--out: .*margin\.parquet is missing \(the study wrote it\)"):
+        _unchanged_inputs(out)
 
 
 def test_a_bad_config_leaves_no_partial_directory_behind(study_toml, tmp_path, capsys):

@@ -23,7 +23,8 @@ OVERWRITE_HELP = (
 #: what it allows is only replacing files changed since pfjax wrote them (:func:`_cmd_report`)
 REPORT_OVERWRITE_HELP = (
     "rebuild the report even if files in --out changed since pfjax wrote them (an edited report.md, "
-    "report.html or redrawn figure is replaced, other files are kept as they are); the study in --out "
+    "report.html or redrawn figure is replaced, other files are kept as they are, an edited one then "
+    "yours, which later runs refuse to replace); the study in --out "
     "must still be of this config"
 )
 

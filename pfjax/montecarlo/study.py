@@ -306,7 +306,7 @@ def read_finished(out) -> tuple[dict, pd.DataFrame]:
 
 def _unchanged_inputs(out: Path) -> None:
     """:class:`~pfjax.errors.InputError` naming ``--out`` if a file the report is built from
-    (``summary.json``, ``runs.parquet``, ``margin.parquet``) changed after the study wrote it
+    (``summary.json``, ``runs.parquet``, ``margin.parquet``) is missing or changed after the study wrote it
     (its size or time differs from the output marker's): a report follows from the study's own
     files, and ``--overwrite`` would otherwise record the edited file as pfjax's."""
     from pfjax.errors import InputError
@@ -315,6 +315,12 @@ def _unchanged_inputs(out: Path) -> None:
     listed = (read_marker(out) or {}).get("files", {})
     for name in ("summary.json", "runs.parquet", "margin.parquet"):
         f = out / name
+        if name in listed and not f.exists():
+            raise InputError(
+                f"--out: {f} is missing (the study wrote it); a report is built from the study's own files: "
+                "re-run the study",
+                "--out",
+            )
         if f.is_file() and not as_written(listed, name, f.stat()):
             raise InputError(
                 f"--out: {f} changed after the study wrote it; a report is built from the study's own files: "
