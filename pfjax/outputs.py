@@ -30,15 +30,17 @@ study scripts) writes them through :class:`OutputDir`:
    the marker is written last, and :meth:`OutputDir.commit` renames it into place, with the mode
    and group of the directory it replaces (``0o777`` less the umask when new); Ctrl-C and SIGTERM
    are held during its two renames (:func:`pfjax.interrupts.deferred`), and a previous output a
-   kill left aside between them is put back by the next writer. An empty mount point is refused
-   (it cannot be replaced). A run that
+   kill left aside between them is put back by the next writer. A mount point is refused, empty
+   or not (it cannot be replaced). A run that
    stops early (an error, Ctrl-C, a kill) leaves the previous output as it was; its staging
    directory is removed on the way out, or, after a kill, by the next run that holds the lock
    (with any half-created partial directory ``.<name>.partial-*`` of a study's chunks). Each such
    temporary directory holds the file ``.pfjax-temporary`` from its creation until it is moved
    into place (:func:`temporary_dir`), and only a directory holding it is removed: an entry of the
    same name that pfjax did not make is left as it is, and so is a lock file pfjax did not write
-   (a symbolic link, a directory or a file of other content at ``.<name>.lock`` is refused).
+   (a symbolic link, a directory or a file of other content at ``.<name>.lock`` is refused). A
+   temporary directory's mark is removed last (:func:`remove_temporary`): a file the filesystem
+   will not let go of leaves it marked, with one warning, and the next run tries again.
 """
 
 from __future__ import annotations
@@ -237,13 +239,13 @@ def _check_contents(
         empty = not any(resolved.iterdir())
     except OSError as e:
         raise InputError(f"{flag}: {target} cannot be read ({e.strerror})", flag) from None
+    if os.path.ismount(resolved):  # replaced whole at the end, which a mount point cannot be, empty or not
+        raise InputError(
+            f"{flag}: {target} is a mount point, which pfjax cannot replace with its output; "
+            f"give a directory inside it ({Path(target) / 'run1'})",
+            flag,
+        )
     if empty:
-        if os.path.ismount(resolved):  # replaced whole at the end, which a mount point cannot be
-            raise InputError(
-                f"{flag}: {target} is a mount point, which pfjax cannot replace with its output; "
-                f"give a directory inside it ({Path(target) / 'run1'})",
-                flag,
-            )
         return
     marker = read_marker(resolved)
     if marker is None:
@@ -346,7 +348,7 @@ class OutputDir:
                 flag=self.flag,
             )
             for stale in own_temporary_dirs(self.target):  # nobody else holds this target's lock
-                shutil.rmtree(stale, ignore_errors=True)
+                remove_temporary(stale)
         except BaseException:
             self._lock.release()
             raise
@@ -361,7 +363,7 @@ class OutputDir:
     def close(self) -> None:
         """Remove the staging directory if it was not committed; release the lock."""
         if self._staging is not None and not self.committed:
-            shutil.rmtree(self._staging, ignore_errors=True)
+            remove_temporary(self._staging)
         self._lock.release()
 
     # -- writing
@@ -431,7 +433,7 @@ class OutputDir:
             os.replace(staging, self.target)
             self.committed = True
         if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+            remove_temporary(old)
         return self.target
 
 
@@ -473,8 +475,37 @@ def _restore_stranded(target: Path) -> None:
     for old in own_temporary_dirs(target):
         if old.name.startswith(f".{target.name}.{_OLD}-") and (old / "output").is_dir():
             os.replace(old / "output", target)
-            shutil.rmtree(old, ignore_errors=True)
+            remove_temporary(old)
             return
+
+
+def remove_temporary(directory: Path) -> bool:
+    """Remove a :func:`temporary_dir` (a staging directory, a previous output set aside), its mark
+    last: what cannot be removed (a file the filesystem keeps) stays in a directory still marked as
+    pfjax's, which the next run that holds the target's lock tries again (:func:`own_temporary_dirs`),
+    with one warning naming it. Returns whether it is gone."""
+    import warnings
+
+    for child in list(directory.iterdir()) if directory.is_dir() else []:
+        if child.name != TEMP_MARK:
+            if child.is_dir() and not child.is_symlink():
+                shutil.rmtree(child, ignore_errors=True)
+            else:
+                try:
+                    child.unlink()
+                except OSError:
+                    pass
+    left = [c.name for c in directory.iterdir() if c.name != TEMP_MARK] if directory.is_dir() else []
+    if left:
+        warnings.warn(
+            f"pfjax could not remove {directory / left[0]}; the next run into its output tries again, "
+            f"or remove {directory} yourself",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        return False
+    shutil.rmtree(directory, ignore_errors=True)
+    return not directory.exists()
 
 
 def temporary_dir(target: Path, kind: str) -> Path:

@@ -272,9 +272,16 @@ def test_a_users_empty_directory_keeps_its_mode_when_replaced(tmp_path, mode):
     assert stat.S_IMODE(new.stat().st_mode) == 0o700  # a new one: 0o777 less the umask, as mkdir
 
 
-def test_an_empty_mount_point_is_refused_before_any_work(tmp_path, monkeypatch):
+def test_a_mount_point_is_refused_before_any_work_empty_or_not(tmp_path, monkeypatch):
+    """An output is moved into place whole at the end, which a mount point cannot be: refused up
+    front, whether empty or holding a previous pfjax output (which would fail only after the run)."""
     out = tmp_path / "mnt"
     out.mkdir()
+    monkeypatch.setattr(os.path, "ismount", lambda p: str(p) == str(out))
+    with pytest.raises(InputError, match=r"^--out: .* is a mount point"):
+        check_target(out, command="study", config_sha256="a" * 64)
+    monkeypatch.undo()
+    _write(out, {"summary.json": "{}"})
     monkeypatch.setattr(os.path, "ismount", lambda p: str(p) == str(out))
     with pytest.raises(InputError, match=r"^--out: .* is a mount point"):
         check_target(out, command="study", config_sha256="a" * 64)
@@ -481,6 +488,54 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
     code, err = _cli(["report", str(study_toml), "--set", "seed=5", "--out", str(tmp_path / "nothing")], capsys)
     assert code == EXIT_USAGE and "no finished study" in err[0]
     assert f"(run `pfjax study {study_toml} --set seed=5 --out {tmp_path / 'nothing'}` first)" in err[0]
+
+
+def test_a_previous_output_that_cannot_be_removed_stays_marked_and_is_retried(tmp_path, monkeypatch):
+    """A file of the previous output that the filesystem keeps (an immutable file, a file a
+    non-root user may not delete) is left with a warning, in a directory still marked as pfjax's,
+    so that the next run into the output removes it once it can, and never leaves it unmarked."""
+    import pfjax.outputs as outputs
+
+    out = tmp_path / "out"
+    _write(out, {"summary.json": "{}", "runs.parquet": "old"})
+    real_unlink = Path.unlink
+
+    def stuck(self, *a, **k):
+        if self.name == "runs.parquet" and ".pfjax-old-" in str(self):
+            raise PermissionError(1, "Operation not permitted")
+        return real_unlink(self, *a, **k)
+
+    monkeypatch.setattr(outputs.shutil, "rmtree", lambda p, ignore_errors=False: _rmtree_with(p, stuck))
+    monkeypatch.setattr(Path, "unlink", stuck)
+    with pytest.warns(
+        RuntimeWarning, match=r"could not remove .*pfjax-old-\w+/output; the next run into its output tries again"
+    ):
+        _write(out, {"summary.json": "{}", "runs.parquet": "new"})
+    assert (out / "runs.parquet").read_text() == "new"
+    (left,) = [p for p in tmp_path.iterdir() if ".pfjax-old-" in p.name]
+    assert (left / TEMP_MARK).is_file() and (left / "output" / "runs.parquet").read_text() == "old"
+    monkeypatch.undo()
+    _write(out, {"summary.json": "{}", "runs.parquet": "newer"})  # the next run removes it
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def _rmtree_with(path, unlink):
+    """``shutil.rmtree(path, ignore_errors=True)`` whose file removals go through ``unlink``."""
+    for root, dirs, files in os.walk(path, topdown=False):
+        for f in files:
+            try:
+                unlink(Path(root) / f)
+            except OSError:
+                pass
+        for d in dirs:
+            try:
+                os.rmdir(Path(root) / d)
+            except OSError:
+                pass
+    try:
+        os.rmdir(path)
+    except OSError:
+        pass
 
 
 def test_a_report_refuses_a_study_whose_margin_table_was_deleted(tmp_path):
