@@ -125,12 +125,7 @@ class Sampled(NamedTuple):
     scenarios: Scenario | DynamicScenario  # batched (by vehicle.model), gains = None (filled per controller)
 
 
-SLIP_COLUMNS = {
-    "constant": (),
-    "step": ("step_time_s", "step_r_deg", "step_f_deg"),
-    "sinusoid": ("amp_r_deg", "amp_f_deg", "freq_hz"),
-    "ou": ("ou_sigma_deg", "ou_tau_s"),
-}
+SLIP_COLUMNS = SlipSpec.KIND_KEYS
 
 
 def column_names(spec: StudySpec) -> list[str]:

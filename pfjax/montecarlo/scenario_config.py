@@ -165,6 +165,15 @@ class SlipSpec(ConfigModel):
     ``sinusoid`` (beta_* mean + amp_* sin(2 pi freq_hz t + phase)), ``ou`` (Ornstein-Uhlenbeck around
     beta_* with stationary std ou_sigma_deg and time constant ou_tau_s, sampled every seq_dt)."""
 
+    #: The keys each profile adds to ``beta_*`` (the run table's columns of that kind); another
+    #: kind's key is refused at any value but its default (a dumped config holds every key).
+    KIND_KEYS: ClassVar[dict[str, tuple[str, ...]]] = {
+        "constant": (),
+        "step": ("step_time_s", "step_r_deg", "step_f_deg"),
+        "sinusoid": ("amp_r_deg", "amp_f_deg", "freq_hz"),
+        "ou": ("ou_sigma_deg", "ou_tau_s"),
+    }
+
     kind: Literal["constant", "step", "sinusoid", "ou"] = Field(
         "constant", description="slip profile: constant, step, sinusoid or ou (Ornstein-Uhlenbeck)"
     )
@@ -229,6 +238,13 @@ class SlipSpec(ConfigModel):
             lo, _ = getattr(self, name).bounds()
             if lo < 0 or (name == "ou_tau_s" and lo < POSITIVE):
                 raise ValueError(f"{name}: must be {'> 0' if name == 'ou_tau_s' else '>= 0'}, got a lower bound {lo:g}")
+        for other, keys in self.KIND_KEYS.items():
+            for name in keys if other != self.kind else ():
+                if getattr(self, name) != type(self).model_fields[name].get_default(call_default_factory=True):
+                    raise ValueError(
+                        f'{name}: not with kind = "{self.kind}" (a setting of kind = "{other}", which this '
+                        f'study\'s slip does not read); remove it, or set kind = "{other}"'
+                    )
         return self
 
 

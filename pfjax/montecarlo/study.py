@@ -19,7 +19,6 @@ from pfjax.montecarlo.config import StudySpec
 from pfjax.montecarlo.runner import margin_sweep, run_study
 from pfjax.montecarlo.side_jobs import SideJobs
 from pfjax.montecarlo.summary import missing_key, summarize
-from pfjax.output_lock import now_utc
 from pfjax.report import figure_worker
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -211,7 +210,6 @@ def _finish(tmp: Path, runs_path: Path, controllers, store, *, job: dict) -> dic
     # the study's wall time: everything but writing the report out, so that the report (and
     # `pfjax report`, re-rendering it) shows the same number as summary.json
     summary["wall_s"] = time.time() - t0
-    summary["finished"] = now_utc()  # when the study's results were complete (UTC), before the report
     if report:
         write_report(tmp, spec, summary, runs, worst_traj, figures=figures)
         mark("report")

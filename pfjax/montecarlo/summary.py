@@ -58,7 +58,6 @@ UNITS: dict[str, object] = {
     **dict.fromkeys(("run", "run_indices"), "run index (the random stream of the run)"),
     **STAMP_UNITS,
     "wall_s": "s",
-    "finished": "UTC time, ISO 8601 (the study's results complete, before its report)",
     "timings_s": "s (wall clock per phase)",
     "gains": GAINS,
     "success_rate": "1",

@@ -238,8 +238,6 @@ def _repro_blocks(summary: dict) -> list[D.Block]:
         ),
         _left("runs", runs),
     ]
-    if summary.get("finished"):  # the study's time, so that pfjax report rebuilds the same report
-        rows.append(_left("study finished", summary["finished"]))
     if chunks:
         resumed = f", {chunks['resumed']} resumed from an interrupted run" if chunks.get("resumed") else ""
         rows.append(_left("chunks", f"{chunks['simulated']} simulated{resumed}"))
