@@ -124,6 +124,18 @@ Real = Annotated[float, AfterValidator(_real)]
 POSITIVE = MIN_POSITIVE
 
 
+def _label(v: str) -> str:
+    if not v.strip():
+        raise ValueError(f"expected a name shown in tables and reports, got {v!r}")
+    if len(v) > 100 or any(ord(c) < 32 or ord(c) == 127 for c in v):
+        raise ValueError(f"expected one line of at most 100 characters (a label in tables and reports), got {v[:40]!r}")
+    return v
+
+
+#: A label in outputs (a controller's or a path's name): not blank, one line, at most 100 characters.
+Label = Annotated[str, AfterValidator(_label)]
+
+
 class ConfigModel(BaseModel):
     """Base of every config model: unknown keys refused, values immutable, types strict (an integer
     is accepted where a number is expected, nothing else converts)."""

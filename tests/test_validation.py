@@ -107,6 +107,9 @@ CLI_CASES = [
         "vehicle.delta_max_deg: must lie in (0, 90) deg, got range [90, 90]",
     ),
     (["study", "CFG", "--set", "slip.beta_r_deg=-90"], "slip.beta_r_deg: slip magnitudes must stay below 90 deg"),
+    # a label in tables and reports: not blank, one line
+    (["study", "CFG", "--set", 'controllers[0].name=""'], "controllers[0].name: expected a name shown in tables"),
+    (["study", "CFG", "--set", 'paths[0].name="a\\nb"'], "paths[0].name: expected one line of at most 100"),
     # another profile's key: refused at any value but its default, as another path kind's or vehicle model's
     (["study", "CFG", "--set", "slip.ou_sigma_deg=-1"], 'slip.ou_sigma_deg: not with kind = "constant"'),
     (["study", "CFG", "--set", "slip.amp_r_deg=500"], 'slip.amp_r_deg: not with kind = "constant"'),

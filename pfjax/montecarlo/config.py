@@ -20,7 +20,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from pfjax.config import ConfigModel, Real, load_model
+from pfjax.config import ConfigModel, Label, Real, load_model
 from pfjax.errors import MAX_SEED
 from pfjax.montecarlo.analysis_config import Axis, FalsifierSpec, MarginSpec, RareEventSpec
 from pfjax.montecarlo.dists import Dist, dist_field, nominal
@@ -71,7 +71,7 @@ class ControllerSpec(ConfigModel):
     paper_k: the source's published gain; :data:`pfjax.controllers.DESIGNS`). ``gains`` by name
     override the defaults or the design; ``K`` is the vector gain of state_feedback and integral."""
 
-    name: str = Field(description="label in outputs")
+    name: Label = Field(description="label in outputs")
     type: str = Field(
         description="a registered controller or design: lmi, paper_k, state_feedback, pi, integral, stanley, ..."
     )

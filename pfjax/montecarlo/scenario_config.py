@@ -8,7 +8,7 @@ from typing import ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from pfjax.config import POSITIVE, ConfigModel, Real
+from pfjax.config import POSITIVE, ConfigModel, Label, Real
 from pfjax.montecarlo.dists import Dist, as_dist, dist_field, nominal
 
 
@@ -293,7 +293,7 @@ class PathSpec(ConfigModel):
     }
 
     kind: str = Field(description="a registered path kind: line, parabola, sine, circle, random, spline, ...")
-    name: str | None = Field(None, description="label in outputs (default: the kind)")
+    name: Label | None = Field(None, description="label in outputs (default: the kind)")
     radius: Dist = dist_field(2.0, "circle: radius, m")
     length: Real = Field(40.0, ge=POSITIVE, description="random paths: length, m")
     curvature_margin: Real = Field(
