@@ -15,7 +15,7 @@ import pytest
 
 from pfjax.config import ConfigError
 from pfjax.montecarlo import chunk_runs as runner  # the chunk loop reads simulate_chunk from its home
-from pfjax.montecarlo.chunks import partial_dir
+from pfjax.montecarlo.chunks import chunk_key, partial_dir
 from pfjax.montecarlo.config import load_study
 from pfjax.montecarlo.study import run
 
@@ -183,13 +183,36 @@ def test_a_chunk_of_another_table_layout_is_simulated_again(tmp_path):
     spec, _ = load_study(data=data | {"controllers": [{"name": "sf", "type": "state_feedback"}]})
     out = tmp_path / "out"
     store = ChunkStore(out, spec)
-    store.get("k0", lambda: pd.DataFrame({"speed": [1.0, 2.0]}))
-    assert store.finished() == ["k0"]
-    f = store.path("k0")
+    k0 = chunk_key("runs", 0, 0, 0)
+    store.get(k0, lambda: pd.DataFrame({"speed": [1.0, 2.0]}))
+    assert store.finished() == [k0]
+    f = store.path(k0)
     table = pq.read_table(f)
     old = {k: v for k, v in table.schema.metadata.items() if k not in TABLE_FORMAT}
     pq.write_table(table.replace_schema_metadata(old), f)
     again = ChunkStore(out, spec)
     assert again.finished() == []
-    recomputed = again.get("k0", lambda: pd.DataFrame({"speed": [3.0, 4.0]}))
+    recomputed = again.get(k0, lambda: pd.DataFrame({"speed": [3.0, 4.0]}))
     assert list(recomputed.speed) == [3.0, 4.0] and again.computed == 1
+
+
+@pytest.mark.parametrize("fresh", [True, False], ids=["fresh", "resume"])
+def test_a_users_copy_of_a_chunk_in_the_partial_directory_is_never_removed(tmp_path, fresh):
+    """A Parquet file carrying a study's identity (a user's copy of a chunk or of runs.parquet) under a
+    name pfjax does not give its chunks is the user's: the partial directory is refused, with --fresh
+    too, and left as it is."""
+    import shutil
+
+    from pfjax.config import ConfigError
+    from pfjax.montecarlo.chunks import ChunkStore
+
+    data = {"name": "t", "n_runs": 4, "seed": 0, "paths": [{"kind": "line"}]}
+    spec, _ = load_study(data=data | {"controllers": [{"name": "sf", "type": "state_feedback"}]})
+    out = tmp_path / "out"
+    store = ChunkStore(out, spec)
+    store.get(chunk_key("margin-joint", 0, 1, 4096), lambda: pd.DataFrame({"speed": [1.0]}))
+    shutil.copy(store.path(chunk_key("margin-joint", 0, 1, 4096)), store.dir / "my_backup.parquet")
+    before = sorted(p.name for p in store.dir.iterdir())
+    with pytest.raises(ConfigError, match=r"^--out: .* holds 'my_backup.parquet', which pfjax did not write"):
+        ChunkStore(out, spec, fresh=fresh)
+    assert sorted(p.name for p in store.dir.iterdir()) == before

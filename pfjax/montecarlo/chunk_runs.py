@@ -17,7 +17,7 @@ from pfjax import controllers as C
 from pfjax.config import ConfigError
 from pfjax.errors import InputError
 from pfjax.metrics.running import METRIC_NAMES
-from pfjax.montecarlo.chunks import ChunkSource
+from pfjax.montecarlo.chunks import ChunkSource, chunk_key
 from pfjax.montecarlo.config import ControllerSpec, StudySpec, nominal
 from pfjax.montecarlo.sampling import column_names, sample_runs
 from pfjax.sim import batch, dynamic, sharding
@@ -212,7 +212,7 @@ def simulate_runs(
         for a in range(0, len(runs), chunk):
             idx = runs[a : a + chunk]
             over = None if slip_override is None else tuple(np.asarray(o)[a : a + chunk] for o in slip_override)
-            key = f"{prefix}-p{path_index:03d}-c{ci:03d}-{a:010d}"
+            key = chunk_key(prefix, path_index, ci, a)
 
             def compute(a=a, idx=idx, over=over, name=name, controller=controller, last=ci == len(controllers) - 1):
                 nonlocal shared

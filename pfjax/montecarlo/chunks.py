@@ -48,6 +48,17 @@ IDENTITY = (b"pfjax.config_sha256", b"pfjax.seed", b"pfjax.version")
 TABLE_FORMAT = {b"pfjax.run_table_format": b"2"}
 
 
+def chunk_key(prefix: str, path_index: int, controller_index: int, start: int) -> str:
+    """The name of a chunk's file (without ``.parquet``): the study's runs (``prefix`` ``runs``) or a
+    margin sweep's (``margin-<axis>``) of one path and controller, from run ``start`` on."""
+    return f"{prefix}-p{path_index:03d}-c{controller_index:03d}-{start:010d}"
+
+
+#: The file names :func:`chunk_key` gives (``.parquet``), and nothing else: a user's Parquet file in
+#: the partial directory is never taken for a chunk, whatever its metadata.
+CHUNK_FILE = re.compile(r"(?:runs|margin-[a-z]+)-p[0-9]{3,}-c[0-9]{3,}-[0-9]{10,}\.parquet")
+
+
 def file_metadata(spec: StudySpec) -> dict[bytes, bytes]:
     """Parquet key-value metadata stamped on every table a study writes: config (strict JSON), hash,
     seed, version (:func:`pfjax.provenance.parquet_metadata`)."""
@@ -130,7 +141,8 @@ class ChunkStore:
     def _written_by_pfjax(self, f: Path) -> bool:
         """Whether ``f`` in the partial directory is a file a study writes there: the manifest (a
         JSON object with exactly the manifest's keys), a chunk (Parquet with a study's config
-        hash in its metadata), or a chunk's temporary file (``.<key>.parquet.tmp<pid>``)."""
+        hash in its metadata) under a name :func:`chunk_key` gives, or a chunk's temporary file
+        (``.<key>.parquet.tmp<pid>``)."""
         if f.is_symlink() or not f.is_file():
             return False
         if f.name == "manifest.json":
@@ -140,13 +152,14 @@ class ChunkStore:
                 return False
             # the keys of every manifest pfjax has written (a version that adds one reads these too)
             return isinstance(old, dict) and set(old) == set(self.manifest)
-        if f.suffix == ".parquet" and not f.name.startswith("."):
+        if CHUNK_FILE.fullmatch(f.name):
             try:
                 meta = pq.read_schema(f).metadata or {}
             except (OSError, pa.ArrowException):
                 return False
             return IDENTITY[0] in meta
-        return re.fullmatch(r"\.[^/]+\.parquet\.tmp[0-9]+", f.name) is not None
+        tmp = re.fullmatch(r"\.(.+)\.tmp[0-9]+", f.name)
+        return tmp is not None and CHUNK_FILE.fullmatch(tmp.group(1)) is not None
 
     def _check_manifest(self, out: Path) -> None:
         try:
