@@ -81,7 +81,7 @@ class FalsifierSpec(ConfigModel):
 
 class RareEventSpec(ConfigModel):
     """Small failure probabilities per controller (:mod:`pfjax.rare`): a run fails where its status is
-    a failure or ``metric > threshold``; the estimator works on the margin ``threshold - metric``
+    a failure or ``metric >= threshold`` (margin ``<= 0``); the estimator works on the margin ``threshold - metric``
     over the study's uncertain inputs mapped to the standard-normal space (choices and paths as
     strata, :mod:`pfjax.rare.transform`)."""
 

@@ -252,7 +252,7 @@ def summarize(spec: StudySpec, runs, sweep: pd.DataFrame | None, *, gains: dict,
         block["slip_margin_fails_at_deg"] = joint["table"][0]["amplitude"] if fails and joint is not None else None
         block["slip_margin_censored"] = None if joint is None else joint["censored"]
         drivers = driver_table(df, params) if params else pd.DataFrame()
-        block["failure_drivers"] = drivers.head(6).replace({np.nan: None}).to_dict("records")
+        block["failure_drivers"] = drivers.replace({np.nan: None}).to_dict("records")  # every parameter, ranked
         block["success_by_param"] = {p: success_by_param(df, p) for p in params}
         controllers[name] = block
         del df  # before the next controller's rows are read
