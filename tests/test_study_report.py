@@ -232,6 +232,32 @@ def test_worst_case_figure_from_the_worker_equals_the_one_drawn_here(study, tmp_
     ).read_bytes()
 
 
+def test_a_worst_case_search_without_its_figure_says_why(study):
+    """The worst-case figure needs the search's trajectories, which ``pfjax report`` does not have:
+    a report whose study ran with ``--no-report`` says why the figure is missing."""
+    from pfjax.report.document import to_markdown
+    from pfjax.report.study_document import study_document
+
+    spec, out, summary = study
+    summary = json.loads(json.dumps(summary))
+    for name in summary["controllers"]:
+        summary["controllers"][name]["worst_case"] = {
+            "path": "line",
+            "objective": "iae",
+            "falsifier": 1.0,
+            "falsifier_status": "ok",
+            "random": 0.5,
+            "random_status": "ok",
+            "ratio": 2.0,
+            "n_rollouts": 6,
+            "worst_ic": {"d0": 0.1, "theta_e0_deg": 2.0},
+            "worst_slip_peak_deg": [3.0, 4.0],
+        }
+    runs = pd.read_parquet(out / "runs.parquet")
+    text = to_markdown(study_document(summary, runs, {}, [], {n: "#000000" for n in summary["controllers"]}))
+    assert "## Worst cases found" in text and "No figure of the worst runs" in text
+
+
 def test_figure_worker_that_cannot_start_or_dies_falls_back_to_this_process(study, tmp_path):
     spec, out, summary = study
     want = {n: (out / "figures" / f"{n}.png").read_bytes() for n in RUN_FIGURES}

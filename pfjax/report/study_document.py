@@ -158,7 +158,14 @@ def _search_blocks(summary: dict, colors: dict, figures: Mapping) -> list[D.Bloc
     if wc:
         head = ["controller", "path", "objective", "falsifier (status)", "random search (status)", "ratio"]
         head += ["rollouts each", "worst scenario"]
-        out += [D.Heading("Worst cases found", anchor="worst"), D.Table(head, wc), *_figure(figures, "worst_cases")]
+        shown = _figure(figures, "worst_cases") or [
+            D.Paragraph(
+                "No figure of the worst runs: it is drawn from the search's trajectories when the study "
+                "runs with its report, and `pfjax report` cannot redraw it (re-run the study to have it).",
+                style="note",
+            )
+        ]
+        out += [D.Heading("Worst cases found", anchor="worst"), D.Table(head, wc), *shown]
     rare = T.rare_event_rows(summary, colors)
     if rare:
         head = ["controller", "P(fail) [95 % interval]", "rel. error", "rollouts (method)"]
