@@ -106,6 +106,8 @@ def test_every_field_has_a_description_with_a_unit():
         ("seed=-1", "seed:"),
         ("sim.stuck_switches=10000000000", "sim.stuck_switches:"),
         ("sim.n_sub=1000000000", "sim.n_sub:"),
+        ("sim.chunk=1000000000000", "sim.chunk: must be <= 10000000"),
+        ("search.max_switches=1000000000000", "search.max_switches: must be <= 1000"),
         ("search.ga_seeds=1000000", "search.ga_seeds:"),
         ("search.ga_seeds=900", "search.ga_seeds: the GA runs together may simulate at most 1e+08"),
         ("montecarlo.n_runs=10000000000", "montecarlo.n_runs: the Monte Carlo may simulate at most 1e+08"),
@@ -116,6 +118,13 @@ def test_a_bad_key_or_value_is_one_line_naming_the_key(override, key):
     with pytest.raises(ConfigError) as e:
         load(TOML, [override])
     assert str(e.value).startswith(key) and "\n" not in str(e.value)
+
+
+def test_a_batch_beyond_the_memory_budget_names_sim_chunk():
+    """A batch of sim.chunk runs with the searches' switch logs (1.4 TB here) is refused by the
+    memory budget, before anything is compiled or allocated."""
+    with pytest.raises(ConfigError, match=r"^sim\.chunk: a batch of sim\.chunk = 9000000 runs needs about"):
+        load(TOML, ["sim.chunk=9000000", "search.max_switches=1000"])
 
 
 @pytest.mark.parametrize("override, key", [("sim.tol=-1", "sim.tol"), ("montecarlo.n_runs=0", "montecarlo.n_runs")])

@@ -80,6 +80,13 @@ class ParkingConfig:
         return self.log_capacity if self.max_switches is None else self.max_switches + 1
 
 
+def run_bytes(log_len: int) -> int:
+    """An upper estimate of the bytes one run of a batch holds (float64): its :class:`RunResult`
+    (8 numbers and a switch log of ``log_len`` entries of 5 numbers), and as much again three
+    times for the loop's carry and the compiled program's temporaries."""
+    return 4 * 8 * (8 + 5 * int(log_len))
+
+
 def periods_needed(t_max: float, scan_period: float) -> int:
     """The most scanner periods a run of timeout ``t_max`` (s) at period ``scan_period`` (s) takes:
     ``ceil(t_max / scan_period)``, and one more for the rounding of the accumulated time."""

@@ -35,7 +35,7 @@ class Sim(ConfigModel):
     tol: Real = Field(0.02, gt=0, description="stop when |x| + sqrt(y² + tan²θ) < tol [m]")
     n_sub: int = Field(2, ge=1, le=100, description="RK4 steps per scanner period, at most 100 [-]")
     front: Real = Field(0.0, ge=0, lt=0.54, description="a_f, reach ahead of the axle; 0 = calibrated [m]")
-    chunk: int = Field(1024, ge=1, description="runs per jitted batch [-]")
+    chunk: int = Field(1024, ge=1, le=10_000_000, description="runs per jitted batch (memory-checked) [-]")
     stuck_switches: int = Field(
         4, ge=1, le=1000, description="legs over which stuck_travel is measured, at most 1000 [-]"
     )
@@ -97,7 +97,7 @@ class Search(ConfigModel):
     generations: int = Field(100, ge=1, le=MAX_GENERATIONS, description="GA generations [-]")
     grid_n: int = Field(32, ge=2, le=64, description="grid points per schedule parameter [-]")
     ga_seeds: int = Field(3, ge=1, le=1000, description="independent GA runs (work-checked) [-]")
-    max_switches: int = Field(10, ge=1, description="a candidate switching more often fails [-]")
+    max_switches: int = Field(10, ge=1, le=1000, description="a candidate switching more often fails, at most 1000 [-]")
 
 
 class StartMap(ConfigModel):
@@ -159,6 +159,8 @@ class ParkingStudy(ConfigModel):
         within the API's (:func:`pfjax.parking.api.check_search_work`), each named by its key."""
         from pfjax.parking.api import check_search_work
         from pfjax.parking.limits import check_periods
+        from pfjax.parking.runs import ParkingConfig, run_bytes
+        from pfjax.resources import check_memory
 
         t_max = self.sim.t_max
         periods = [(f"assumptions.scan_periods[{i}]", p) for i, p in enumerate(self.assumptions.scan_periods)]
@@ -179,6 +181,14 @@ class ParkingStudy(ConfigModel):
         starts, m = len(sm.x0) * len(sm.theta0_deg), sm.grid_n
         how = f"starts x grid_n^3 = {starts} x {m}^3 = {starts * m**3}"
         check_search_work("start_map.grid_n", starts * m**3, how, t_max, scan)
+        # one jitted batch of sim.chunk runs, each with a switch log of the searches' length or the default's
+        log_len = max(se.max_switches + 1, ParkingConfig().log_capacity)
+        check_memory(
+            "sim.chunk",
+            self.sim.chunk * run_bytes(log_len),
+            f"a batch of sim.chunk = {self.sim.chunk} runs",
+            "lower sim.chunk (1024 by default)",
+        )
         return self
 
 
