@@ -281,6 +281,26 @@ def test_nan_metric_gives_no_verdict():
     assert all(v.verdict == "no verdict" and v.pfjax == "no value for mixed (NaN)" for v in rows)
 
 
+def test_a_failed_run_gives_no_verdict_on_its_metrics():
+    """A run that diverged stops there: its steady errors, steering, effort and final angles describe
+    it up to its failure, so every claim compared on them says "no verdict" with the status. The
+    claims on convergence decide on the status itself: a run that never settled did not converge,
+    nor converge faster ("does not hold")."""
+    rows = _verdicts(status="diverged")
+    on_mixed = [v for v in rows if v.subject.startswith("mixed H2/H∞ (pfjax") or v.subject == "mixed vs PI"]
+    on_status = ("bring the robot onto", "converges faster", "steering limit")
+    compared = [v for v in on_mixed if not any(c in v.claim for c in on_status)]
+    assert compared and all(v.verdict == "no verdict" for v in compared), [
+        (v.claim, v.verdict) for v in compared if v.verdict != "no verdict"
+    ]
+    assert all("status diverged" in v.pfjax for v in compared if not v.claim.startswith("Sine")), compared
+    converge = [v for v in on_mixed if "bring the robot onto" in v.claim]
+    assert converge and all(v.verdict == "does not hold" for v in converge)
+    # the same runs ended ok: verdicts again
+    ok = [v for v in _verdicts() if v.subject == "mixed vs PI" and not any(c in v.claim for c in on_status)]
+    assert sum(v.verdict == "no verdict" for v in ok) < len(ok) / 2  # only where both are 0 (effort)
+
+
 def test_table3_sensitivity_needs_a_chosen_reading():
     """--quick: no reading passes every filter, so there is no choice whose sensitivity to test."""
     rows = _verdicts(filters=dict(consistent=0, consistent_readings=[], sensitivity_unique=0))

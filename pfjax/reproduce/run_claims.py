@@ -134,8 +134,11 @@ def _mixed_below_pi(
     for p in inp.paths:
         m, q = inp.R[(p, "mixed")][key], inp.R[(p, "pi")][key]
         nan = [c for c, x in (("mixed", m), ("PI", q)) if x is None or math.isnan(x)]
+        failed = _failed(inp, (p, "mixed"), (p, "pi"))
         shown = f"{show(m)} vs {show(q)}" if not nan else f"no value for {' and '.join(nan)} (NaN)"
-        add(claim, p, "mixed vs PI", criterion, shown, "—", holds(m < q) if not nan else "no verdict", **bases(p, m))
+        shown += f" ({failed})" if failed and not nan else ""
+        verdict = holds(m < q) if not (nan or failed) else "no verdict"
+        add(claim, p, "mixed vs PI", criterion, shown, "—", verdict, **bases(p, m))
 
 
 def faster(inp: Inputs, add: Add) -> None:
@@ -206,6 +209,7 @@ def effort(inp: Inputs, add: Add) -> None:
     claim = "The mixed design needs less steering effort than the PI"
     for p in paths:
         m, q = R[(p, "mixed")], R[(p, "pi")]
+        failed = _failed(inp, (p, "mixed"), (p, "pi"))
         for what, key, fmt in (
             (
                 "peak commanded steering max |δ_cmd| (before saturation)",
@@ -222,9 +226,9 @@ def effort(inp: Inputs, add: Add) -> None:
                 p,
                 "mixed vs PI",
                 f"{what}: mixed < PI",
-                f"{fmt(mv)} vs {fmt(qv)}",
+                f"{fmt(mv)} vs {fmt(qv)}" + (f" ({failed})" if failed else ""),
                 "—",
-                holds(mv < qv) if not (mv == qv == 0) else "no verdict",
+                holds(mv < qv) if not (mv == qv == 0 or failed) else "no verdict",
             )
 
 
@@ -233,15 +237,16 @@ def line_mixed_error(inp: Inputs, add: Add) -> None:
     R, window, src, stab = inp.R, inp.window, inp.src, inp.stab
     claim = f"Line: steady-state position error below {src['line_ss_mixed_mm_below']:g} mm (mixed)"
     for c in ("mixed", "paper-k"):
-        r = R[("line", c)]
+        r, failed = R[("line", c)], _failed(inp, ("line", c))
         add(
             claim,
             "line",
             LABEL[c],
             f"steady |d| (mean over the last {window:g} s) < {src['line_ss_mixed_mm_below']:g} mm",
-            f"{mm(r['steady_abs_d'])} (equilibrium d* = {mm(stab['paper_case']['d_star'])} for the source's K)",
+            f"{mm(r['steady_abs_d'])} (equilibrium d* = {mm(stab['paper_case']['d_star'])} for the source's K)"
+            + (f" ({failed})" if failed else ""),
             f"< {src['line_ss_mixed_mm_below']:g} mm",
-            holds(1000 * r["steady_abs_d"] < src["line_ss_mixed_mm_below"]),
+            holds(1000 * r["steady_abs_d"] < src["line_ss_mixed_mm_below"]) if not failed else "no verdict",
         )
 
 
@@ -252,7 +257,7 @@ def line_pi_error(inp: Inputs, add: Add) -> None:
     R, window, src, long_pi = inp.R, inp.window, inp.src, inp.long_pi
     claim = f"Line: steady-state position error about {src['line_ss_pi_mm']:g} mm (PI)"
     tol = 0.5
-    r = R[("line", "pi")]
+    r, failed = R[("line", "pi")], _failed(inp, ("line", "pi"))
     ratio = 1000 * r["steady_abs_d"] / src["line_ss_pi_mm"]
     add(
         claim,
@@ -260,9 +265,9 @@ def line_pi_error(inp: Inputs, add: Add) -> None:
         LABEL["pi"],
         f"steady |d| at the {inp.horizon:g} s horizon (assumed; mean over the last "
         f"{window:g} s) within ±{100 * tol:g} % of {src['line_ss_pi_mm']:g} mm",
-        mm(r["steady_abs_d"]),
+        mm(r["steady_abs_d"]) + (f" ({failed})" if failed else ""),
         f"about {src['line_ss_pi_mm']:g} mm",
-        "reproduced" if abs(ratio - 1) <= tol else "not reproduced",
+        ("reproduced" if abs(ratio - 1) <= tol else "not reproduced") if not failed else "no verdict",
         basis=FILTERED,
         also=ASSUMED,
     )
@@ -288,15 +293,15 @@ def line_steering(inp: Inputs, add: Add) -> None:
     R, src = inp.R, inp.src
     claim = f"Line: the steering settles at about {src['line_delta_deg']:g}° to compensate the slip"
     for c in CONTROLLERS:
-        fd = math.degrees(R[("line", c)]["final_delta"])
+        fd, failed = math.degrees(R[("line", c)]["final_delta"]), _failed(inp, ("line", c))
         add(
             claim,
             "line",
             LABEL[c],
             f"final applied steering within 0.5° of {src['line_delta_deg']:g}°",
-            f"{fd:.3f}°",
+            f"{fd:.3f}°" + (f" ({failed})" if failed else ""),
             f"about {src['line_delta_deg']:g}°",
-            holds(abs(fd - src["line_delta_deg"]) < 0.5),
+            holds(abs(fd - src["line_delta_deg"]) < 0.5) if not failed else "no verdict",
             **(dict(basis=FILTERED, also=CONVENTION) if c == "pi" else dict(basis=CONVENTION)),
         )
 
@@ -306,21 +311,30 @@ def line_yaw(inp: Inputs, add: Add) -> None:
     R = inp.R
     claim = "Line: the yaw error settles at a non-zero value"
     for c in CONTROLLERS:
-        te = math.degrees(R[("line", c)]["final_theta_e"])
+        te, failed = math.degrees(R[("line", c)]["final_theta_e"]), _failed(inp, ("line", c))
         add(
             claim,
             "line",
             LABEL[c],
             "final |θₑ| > 1° (the equilibrium needs θₑ* = −β_r)",
-            f"{te:.3f}°",
+            f"{te:.3f}°" + (f" ({failed})" if failed else ""),
             "non-zero",
-            holds(abs(te) > 1.0),
+            holds(abs(te) > 1.0) if not failed else "no verdict",
         )
 
 
 def _finite(x) -> bool:
     """``x`` is a finite number (a summary read back from JSON holds ``None`` for NaN)."""
     return x is not None and math.isfinite(x)
+
+
+def _failed(inp: Inputs, *runs: tuple[str, str]) -> str:
+    """The runs ``(path, controller)`` among ``runs`` that did not end ``ok``, as the row shows them
+    (``"mixed H2/H∞ (pfjax's K): status diverged"``); ``""`` if every one did. A failed run's
+    metrics stop at its failure, so a claim compared on them gets "no verdict", as the convergence
+    rows do."""
+    bad = [f"{LABEL.get(c, c)}: status {inp.R[(p, c)]['status']}" for p, c in runs if inp.R[(p, c)]["status"] != "ok"]
+    return "; ".join(bad)
 
 
 def sine_peaks(inp: Inputs, add: Add) -> None:
@@ -333,7 +347,13 @@ def sine_peaks(inp: Inputs, add: Add) -> None:
     to_k, to_dk = sine["median_peak_to_kappa_max_m"], sine["median_peak_to_dkappa_max_m"]
     chance = math.pi / 4
 
+    failed = _failed(inp, ("sine", "mixed")) if ("sine", "mixed") in inp.R else ""
+    if failed:  # the peaks of a run that stopped at its failure
+        to_k = to_dk = math.nan
+
     def undecided(what: str) -> str:
+        if failed:
+            return f"no verdict on a failed run ({failed})"
         if not sine.get("peak_x", [None]):
             return "no |d| peak after 5 s (no median)"
         return f"no {what} maximum in x after 5 s (no median)"
