@@ -13,7 +13,6 @@ assembled beside the output directory and moved into place at the end
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -22,8 +21,8 @@ from pfjax.cli.study import default_out, script_parser, start_script
 start_script()
 
 from pfjax.errors import command_main  # noqa: E402
+from pfjax.jsonio import dumps  # noqa: E402
 from pfjax.outputs import OutputDir  # noqa: E402
-from pfjax.provenance import config_hash  # noqa: E402
 from pfjax.tuning import study, study_config  # noqa: E402
 
 
@@ -44,13 +43,13 @@ def main_checked(args) -> int:
     with OutputDir(
         out,
         command="tuning-study",
-        config_sha256=config_hash(config.model_dump(mode="json")),
+        config_sha256=study.study_hash(config.model_dump(mode="json")),
         overwrite=args.overwrite,
         extra={"seeds": config.seeds},
     ) as output:
         summary = study.run(config, output.staging, progress=sys.stderr.isatty())
         out = output.commit()
-    print(json.dumps({"out": str(out), "wall_s": round(summary["wall_s"], 1), "targets": summary["targets"]}, indent=1))
+    print(dumps({"out": str(out), "wall_s": round(summary["wall_s"], 1), "targets": summary["targets"]}, indent=1))
     return 0
 
 

@@ -43,13 +43,24 @@ def out(tmp_path_factory):
     d = tmp_path_factory.mktemp("tuning") / "out"
     r = _run("--quick", "--out", str(d))
     assert r.returncode == 0, r.stderr[-3000:]
+    (d.parent / "stdout.json").write_text(r.stdout)
     return d
 
 
 @pytest.mark.slow
 def test_quick_tuning_study_outputs_consistent(out):
     s = json.loads((out / "summary.json").read_text())
-    assert s["config_sha256"] == config_hash(s["config"])
+    # the config and the held-out study as read: the marker's hash too (a held-out file edited in
+    # place gives another hash, so its output is not replaced as a re-run of the same config)
+    assert s["config_sha256"] == config_hash({**s["config"], "heldout_config_sha256": s["heldout"]["config_sha256"]})
+    assert json.loads((out / ".pfjax-output.json").read_text())["config_sha256"] == s["config_sha256"]
+
+    def not_json(c):
+        raise AssertionError(f"the script printed {c}, which is not JSON")
+
+    text = (out.parent / "stdout.json").read_text()  # the parts' lines, then the JSON object
+    printed = json.loads(text[text.rfind("\n{") + 1 :], parse_constant=not_json)  # strict JSON
+    assert printed["out"] == str(out) and printed["targets"].keys() == s["targets"].keys()
     # every number of summary.json has a unit in its units map: costs IAE in m s, the held-out
     # steady error in mm, the seeds as the provenance record gives them
     units = s["units"]

@@ -193,9 +193,24 @@ def heldout_spec(cfg: dict):
     return heldout_study(cfg)
 
 
+def heldout_hash(spec) -> str:
+    """The config hash of the held-out study as the tuning study loads it (its file, at the study's
+    sizes)."""
+    from pfjax.provenance import config_hash
+
+    return config_hash(json.loads(spec.model_dump_json()))
+
+
+def study_hash(cfg: dict, spec=None) -> str:
+    """The tuning study's config hash: of its config and of the held-out study it reads
+    (``spec``, else loaded from ``cfg["heldout"]``), whose file can change under the same path."""
+    from pfjax.provenance import config_hash
+
+    return config_hash({**cfg, "heldout_config_sha256": heldout_hash(spec if spec is not None else heldout_spec(cfg))})
+
+
 def heldout_summary(cfg: dict, spec, table: list) -> dict:
     """The summary's ``heldout`` section: the held-out study, its paths and margin sweeps, ``table``."""
-    from pfjax.provenance import config_hash
     from pfjax.tuning.study_config import MARGIN_AXIS
 
     return {
@@ -206,7 +221,7 @@ def heldout_summary(cfg: dict, spec, table: list) -> dict:
         "margin_runs": cfg["robust"]["margin_runs"],
         "margin_axis": MARGIN_AXIS,
         "margin_axes": list(spec.margin.axes),
-        "config_sha256": config_hash(json.loads(spec.model_dump_json())),
+        "config_sha256": heldout_hash(spec),
         "table": table,
     }
 
@@ -267,6 +282,7 @@ def run(config: TuningStudy, out: Path, progress: bool) -> dict:
     summary = {
         "study": "tuning_ga_vs_gradient",
         **stamp(cfg),
+        "config_sha256": study_hash(cfg, spec),  # the held-out study's file too
         "seed": list(range(cfg["seeds"])),  # the tuners' seeds 0, 1, ...
         "config": cfg,
         **parts,
