@@ -264,6 +264,19 @@ def test_a_file_that_is_not_a_pfjax_calibration_is_never_replaced(tmp_path, monk
             calibration.save(_result(key), mine)
         assert mine.read_text() == text and [p.name for p in tmp_path.iterdir()] == [mine.name]
 
+    # a symbolic link, even to a pfjax calibration, is the user's: refused, the link and its file kept
+    shared = tmp_path.parent / f"{tmp_path.name}-shared.json"
+    shared.write_text(json.dumps(_result(key)))
+    mine.unlink()
+    mine.symlink_to(shared)
+    assert main(["calibrate", "--quick"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is a symbolic link, which pfjax does not replace" in err[0], err
+    with pytest.raises(InputError, match="^PFJAX_CALIBRATION_DIR: .* is a symbolic link"):
+        calibration.save(_result(key), mine)
+    assert mine.is_symlink() and json.loads(shared.read_text()) == _result(key)
+    mine.unlink()
+
     old = dict(_result(key), version=calibration.VERSION + 1)  # pfjax's, of another format
     for previous in (_result(key), old):
         mine.write_text(json.dumps(previous))

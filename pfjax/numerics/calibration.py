@@ -155,11 +155,18 @@ def _ours(data, key: str) -> bool:
 def _replaceable(file: Path) -> None:
     """An :class:`~pfjax.errors.InputError` naming ``PFJAX_CALIBRATION_DIR`` and ``file`` unless a
     calibration may be written there: nothing there yet, or a pfjax calibration (:func:`_ours`).
-    Anything else (a directory, the user's notes, an unreadable file) is never replaced."""
+    Anything else (a directory, a symbolic link, the user's notes, an unreadable file) is never
+    replaced."""
     from pfjax.errors import InputError
 
     if not file.exists() and not file.is_symlink():
         return
+    if file.is_symlink():  # pfjax writes no links: the user's, even to a calibration
+        raise InputError(
+            f"{DIR_ENV}: {file} is a symbolic link, which pfjax does not replace; "
+            f"remove it or set {DIR_ENV} to another directory",
+            DIR_ENV,
+        )
     if file.is_dir() or not file.is_file():
         raise InputError(
             f"{DIR_ENV}: {file} is not a file, so the calibration cannot be written there; "
