@@ -48,6 +48,7 @@ def _script():
         ("slip_ranges_deg=[95.0]", "slip_ranges_deg"),
         ("car.params='vehicle9'", "car.params"),
         ("bench_runs=0", "bench_runs"),
+        ("car.n_runs=100000000", "car.n_runs"),  # one chunk of the car's runs: at most 10^7
         ("study.n_runs=0", "study.n_runs"),  # the arms' study config, validated by the study schema
         ("study.sim.dtt=0.1", "study.sim.dtt"),
         ("designs.alpha='x'", "designs.alpha"),  # wrong type

@@ -77,7 +77,9 @@ class Car(ConfigModel):
     params: str = Field(
         "vehicle2", description=f"CommonRoad parameter set, one of {', '.join(COMMONROAD_VEHICLES)} [-]"
     )
-    n_runs: int = Field(200, ge=1, le=100_000_000, description="runs per controller and path [-]")
+    n_runs: int = Field(
+        200, ge=1, le=10_000_000, description="runs per controller and path (one chunk: at most 10^7) [-]"
+    )
     dt: Real = Field(0.01, ge=POSITIVE, description="integration step of the car's runs [s]")
 
     @field_validator("params")
