@@ -208,6 +208,8 @@ def test_synth_checks_alpha_and_beta_whatever_the_method(argv, flag, capsys):
         ("ga", {"learning_rate": 0.1}, "learning_rate"),
         ("gradient-plain", {"multistart": object()}, "multistart"),
         ("ga+gradient", {"n_starts": 2}, "n_starts"),
+        ("gradient", {"from_default": True}, "from_default"),
+        ("ga", {"from_default": True}, "from_default"),
     ],
 )
 def test_tune_api_refuses_a_setting_its_method_does_not_read(method, kwargs, name):
@@ -352,6 +354,28 @@ def test_tune_json_records_only_the_arguments_the_run_read(monkeypatch, capsys, 
     assert {k: got[k] for k in read} == read and all(got[k] is None for k in unread), got
     if seen:
         assert seen[-1] == GAOptions()
+
+
+def test_from_default_starts_the_plain_descent_at_the_default_gains_in_the_cli_and_the_api(monkeypatch, capsys):
+    """``pfjax tune --from-default`` and ``pfjax.tune(from_default=True)`` hand the tuner the
+    controller's default gains as its first start; without it there is none."""
+    from pfjax.tuning import problem
+
+    seen = []
+
+    def fake_tune(pr, method, **kw):
+        seen.append(kw["theta0"])
+        return _fake_result(pr.lower.size)
+
+    monkeypatch.setattr(problem, "tune", fake_tune)
+    assert main(["tune", "--controller", "pi", "--method", "gradient-plain", "--from-default", "--json"]) == 0
+    capsys.readouterr()
+    pfjax.tune("pi", "paper-line", "gradient-plain", from_default=True)
+    pfjax.tune("pi", "paper-line", "gradient-plain")
+    default = problem.make_problem("pi", "paper-line").tunable.flatten()
+    np.testing.assert_array_equal(seen[0], default)
+    np.testing.assert_array_equal(seen[1], default)
+    assert seen[2] is None
 
 
 def test_the_level_a_quantile_or_cvar_ran_at_is_recorded_given_or_not(monkeypatch, capsys):

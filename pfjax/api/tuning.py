@@ -32,6 +32,7 @@ def tune(
     check=None,
     progress: bool = False,
     model: str | None = None,
+    from_default: bool = False,
 ) -> dict:
     """Tune a controller's gains, or check given gains, as ``pfjax tune`` does.
 
@@ -75,6 +76,8 @@ def tune(
             field order, inside the tuning box): gradient, projected gradient, active bounds,
             Hessian eigenvalues on the free coordinates, verdict (:mod:`pfjax.tuning.check`).
         progress: True: a progress bar on stderr over the tuner's steps or generations.
+        from_default: ``gradient-plain``: the first start is the controller's default gains (the
+            others uniform), as ``pfjax tune --from-default``.
 
     A setting the method does not read (``generations`` with ``gradient``, ``steps`` with ``ga``,
     any of them with ``check``; :data:`pfjax.tuning.problem.METHOD_SETTINGS`) is refused naming it,
@@ -108,6 +111,7 @@ def tune(
     from pfjax.tuning.problem import tune as run_tune
 
     progress = errors.boolean("progress", progress)
+    from_default = errors.boolean("from_default", from_default)
     # a command-line spelling names its registry entry; anything else (a design such as lmi: its
     # gains are designed, not tuned) is refused by make_problem, as `pfjax tune --controller` refuses it
     if not isinstance(controller, str):
@@ -122,6 +126,7 @@ def tune(
         raise errors.InputError(f"method: value {method!r}, expected one of {', '.join(METHODS)}", "method")
     settings: dict[str, object] = dict(generations=generations, population=population, steps=steps)
     settings.update(n_starts=n_starts, learning_rate=learning_rate, multistart=multistart, key=key)
+    settings.update(from_default=from_default or None)  # given when True, as the flag
     # a setting the method (or a check) does not read is refused, as pfjax tune refuses its flag
     check_settings_apply(method, {k for k, v in settings.items() if v is not None})
     if n_runs is not None and isinstance(scenario, str) and scenario in scenario_sets():
@@ -165,6 +170,7 @@ def tune(
             steps=steps,
             n_starts=n_starts,
             learning_rate=learning_rate,
+            theta0=problem.tunable.flatten() if from_default else None,
             multistart=multistart,
             progress=progress,
         )

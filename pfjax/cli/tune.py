@@ -365,8 +365,7 @@ def _reads(args, dest: str) -> bool:
 def method_flags() -> dict[str, tuple[str, ...]]:
     """The methods that read each method-specific flag (by its destination; ``--check`` reads none):
     the library's :data:`pfjax.tuning.problem.METHOD_SETTINGS` under the flags' names, and the
-    flags the command line alone has (``--seed``, the multi-start tuner's settings one by one,
-    ``--from-default``)."""
+    flags the command line alone has (``--seed``, the multi-start tuner's settings one by one)."""
     from pfjax.tuning.problem import METHOD_SETTINGS
 
     m = METHOD_SETTINGS
@@ -376,7 +375,7 @@ def method_flags() -> dict[str, tuple[str, ...]]:
         "population": m["population"],
         **{dest: m[name] for dest, name in DESCENT_FLAGS.items()},
         **dict.fromkeys(MULTISTART_FLAGS, m["multistart"]),
-        "from_default": ("gradient-plain",),
+        "from_default": m["from_default"],
     }
 
 

@@ -310,6 +310,7 @@ METHOD_SETTINGS = {
     "n_starts": ("gradient", "gradient-plain"),
     "learning_rate": ("gradient", "gradient-plain", "ga+gradient"),
     "multistart": ("gradient",),
+    "from_default": ("gradient-plain",),
     "key": METHODS,
 }
 
