@@ -241,21 +241,23 @@ def integer(key: str, value, *, low: int | None = None, high: int | None = None)
 
 def box(lower, upper):
     """A tuner's box ``(lower, upper)`` as two flat float64 arrays: of one size, finite, with
-    ``lower < upper`` in every coordinate; :class:`InputError` naming ``lower`` otherwise."""
+    ``lower < upper`` in every coordinate; :class:`InputError` naming ``lower``, or ``upper`` where
+    only it is at fault (not numbers, not finite), otherwise."""
     import numpy as np
 
-    try:
-        lo, hi = (np.asarray(b, np.float64).reshape(-1) for b in (lower, upper))
-    except (TypeError, ValueError):
-        raise InputError(f"lower: expected two arrays of numbers, got {lower!r} and {upper!r}", "lower") from None
-    if (
-        lo.size == 0
-        or lo.shape != hi.shape
-        or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi))
-    ):
+    corners = []
+    for name, b in (("lower", lower), ("upper", upper)):
+        try:
+            c = np.asarray(b, np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise InputError(f"{name}: expected an array of numbers, got a {type(b).__name__}", name) from None
+        if c.size == 0 or not np.all(np.isfinite(c)):
+            raise InputError(f"{name}: expected finite numbers, got {c.tolist()}", name)
+        corners.append(c)
+    lo, hi = corners
+    if lo.shape != hi.shape or not np.all(lo < hi):
         raise InputError(
-            f"lower: expected finite corners of one size with lower < upper, got {lo.tolist()} and {hi.tolist()}",
-            "lower",
+            f"lower: expected corners of one size with lower < upper, got {lo.tolist()} and {hi.tolist()}", "lower"
         )
     return lo, hi
 

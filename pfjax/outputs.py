@@ -473,10 +473,17 @@ def _restore_stranded(target: Path) -> None:
     if target.exists() or target.is_symlink():
         return
     for old in own_temporary_dirs(target):
-        if old.name.startswith(f".{target.name}.{_OLD}-") and (old / "output").is_dir():
+        if old.name.startswith(f".{target.name}.{_OLD}-") and _whole(old / "output"):
             os.replace(old / "output", target)
             remove_temporary(old)
             return
+
+
+def _whole(output: Path) -> bool:
+    """Whether ``output`` is a pfjax output with every file its marker lists: one a kill left aside
+    whole, not the rest of one :func:`remove_temporary` could not finish removing."""
+    marker = read_marker(output) if output.is_dir() else None
+    return marker is not None and all((output / f).is_file() for f in marker["files"])
 
 
 def remove_temporary(directory: Path) -> bool:

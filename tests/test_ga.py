@@ -1,5 +1,7 @@
 """The MATLAB-style GA: operators against literal transcriptions, known optima, determinism, bounds."""
 
+import re
+
 import jax
 import numpy as np
 import pytest
@@ -144,7 +146,7 @@ def test_ga_bits_onemax_and_decoded_integer():
 def test_bad_options_raise():
     with pytest.raises(ValueError, match="elite_count"):
         ga(sphere, [0], [1], key=jax.random.PRNGKey(0), options=GAOptions(elite_count=50))
-    with pytest.raises(ValueError, match="^lower: expected finite corners"):
+    with pytest.raises(ValueError, match="^lower: expected corners of one size with lower < upper"):
         ga(sphere, [1], [0], key=jax.random.PRNGKey(0))
 
 
@@ -167,8 +169,15 @@ def test_every_tuner_checks_its_box_and_key_alike():
         "check": lambda lo, hi, key=k: check_point(f, [0.5], lo, hi),
     }
     for name, tune in tuners.items():
-        for lo, hi in (([1.0], [0.0]), ([0.0], [np.inf]), ([0.0, 0.0], [1.0]), ([], []), ([0.0], [0.0])):
-            with pytest.raises(InputError, match="^lower: expected finite corners of one size with lower < upper"):
+        for lo, hi, msg in (
+            ([1.0], [0.0], "lower: expected corners of one size with lower < upper"),
+            ([0.0, 0.0], [1.0], "lower: expected corners of one size"),
+            ([0.0], [0.0], "lower: expected corners of one size with lower < upper"),
+            ([0.0], [np.inf], "upper: expected finite numbers, got [inf]"),
+            ([], [], "lower: expected finite numbers"),
+            ([0.0], "x", "upper: expected an array of numbers, got a str"),
+        ):
+            with pytest.raises(InputError, match=f"^{re.escape(msg)}"):
                 tune(lo, hi)
         if name != "check":
             with pytest.raises(InputError, match="^key: required"):

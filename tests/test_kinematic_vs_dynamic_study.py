@@ -40,6 +40,15 @@ def _script():
     return mod
 
 
+def test_the_cars_runs_are_bounded_by_the_one_chunk_they_take(tmp_path, capsys):
+    """car.n_runs is refused by its own bound, before any arm's study config is built from it."""
+    out = tmp_path / "out"
+    assert _script().main(["--quick", "--out", str(out), "--set", "car.n_runs=100000000"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("error: car.n_runs: must be <= 10000000 (got 100000000)"), err
+    assert not list(tmp_path.iterdir())
+
+
 @pytest.mark.parametrize(
     "setting, key",
     [
@@ -48,7 +57,6 @@ def _script():
         ("slip_ranges_deg=[95.0]", "slip_ranges_deg"),
         ("car.params='vehicle9'", "car.params"),
         ("bench_runs=0", "bench_runs"),
-        ("car.n_runs=100000000", "car.n_runs"),  # one chunk of the car's runs: at most 10^7
         ("study.n_runs=0", "study.n_runs"),  # the arms' study config, validated by the study schema
         ("study.sim.dtt=0.1", "study.sim.dtt"),
         ("designs.alpha='x'", "designs.alpha"),  # wrong type

@@ -248,6 +248,10 @@ def test_summary_contract_and_numbers(tmp_path):
             assert c["slip_margin_deg"] is None and c["slip_margin_fails_at_deg"] == joint["table"][0]["amplitude"]
         else:
             assert c["slip_margin_deg"] == joint["margin"] and c["slip_margin_fails_at_deg"] is None
+        # every sampled parameter ranked (and the magnitude of the four signed ones): 10 rows, not 6
+        ranked = [d["parameter"] for d in c["failure_drivers"]]
+        signed = ["beta_r_deg", "beta_f_deg", "lateral_offset", "heading_error_deg"]
+        assert sorted(ranked) == sorted([*signed, *(f"abs_{p}" for p in signed), "start_along_m", "radius"])
     # the sweep's slip is exactly the amplitude on the swept axis
     rear = sweep[sweep.axis == "rear"]
     assert set(rear.amplitude_deg) == {0.0, 10.0}

@@ -242,7 +242,7 @@ def test_check_point_refuses_a_point_outside_its_box():
         ([2.0, 0.3], [0, 0], [1, 1], "theta", r"theta\[0\]: 2 is not a finite value in \[0, 1\]"),
         ([0.5, np.nan], [0, 0], [1, 1], "theta", r"theta\[1\]: nan"),
         ([0.5, 0.5], [0, 1], [1, 1], "lower", "lower < upper"),
-        ([0.5, 0.5], [0, 0], [1, np.inf], "lower", "finite corners"),
+        ([0.5, 0.5], [0, 0], [1, np.inf], "upper", "finite numbers"),
         ([0.5, 0.5], [0, 0], [1], "lower", "of one size"),
     ):
         with pytest.raises(InputError, match=f"^{key}") as e:

@@ -4,6 +4,7 @@ later run does not clean up. With real processes for the lock, Ctrl-C and kills.
 
 import json
 import os
+import shutil
 import signal
 import stat
 import subprocess
@@ -515,8 +516,10 @@ def test_a_previous_output_that_cannot_be_removed_stays_marked_and_is_retried(tm
     (left,) = [p for p in tmp_path.iterdir() if ".pfjax-old-" in p.name]
     assert (left / TEMP_MARK).is_file() and (left / "output" / "runs.parquet").read_text() == "old"
     monkeypatch.undo()
+    # the user removes the output meanwhile: the leftover is not "restored" as the output
+    shutil.rmtree(out)
     _write(out, {"summary.json": "{}", "runs.parquet": "newer"})  # the next run removes it
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"] and (out / "runs.parquet").read_text() == "newer"
 
 
 def _rmtree_with(path, unlink):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import math
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -299,6 +300,29 @@ def test_a_failed_run_gives_no_verdict_on_its_metrics():
     # the same runs ended ok: verdicts again
     ok = [v for v in _verdicts() if v.subject == "mixed vs PI" and not any(c in v.claim for c in on_status)]
     assert sum(v.verdict == "no verdict" for v in ok) < len(ok) / 2  # only where both are 0 (effort)
+
+
+def test_a_failed_pi_run_gives_no_verdict_on_the_comparisons_and_its_own_rows(monkeypatch):
+    """Only the PI's runs diverge: the comparisons with the mixed design, the PI's line error and
+    its line steering and yaw rows say "no verdict" with the PI's status; the mixed design's own
+    rows still decide."""
+    import paper_inputs
+
+    real = paper_inputs.run_rows
+
+    def pi_failed(**mixed):
+        return [{**r, "status": "diverged"} if r["controller"] == "pi" else r for r in real(**mixed)]
+
+    monkeypatch.setattr(sys.modules[__name__], "run_rows", pi_failed)
+    rows = _verdicts()
+    compared = [v for v in rows if v.subject == "mixed vs PI" and "converges faster" not in v.claim]
+    assert compared and all(v.verdict == "no verdict" and "PI (Table 3): status diverged" in v.pfjax for v in compared)
+    pi_line = [v for v in rows if v.subject == "PI (Table 3)" and v.claim.startswith("Line")]
+    assert pi_line and all(v.verdict == "no verdict" for v in pi_line if "once settled" not in v.criterion), [
+        (v.claim, v.verdict) for v in pi_line
+    ]
+    mixed_line = [v for v in rows if v.subject.startswith("mixed H2/H∞ (pfjax") and v.claim.startswith("Line")]
+    assert mixed_line and all(v.verdict in ("holds", "does not hold") for v in mixed_line)
 
 
 def test_table3_sensitivity_needs_a_chosen_reading():

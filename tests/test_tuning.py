@@ -66,7 +66,7 @@ def test_aggregates_match_numpy():
     assert float(aggregate(J, CostSpec(aggregate="cvar", level=0.7))) == pytest.approx((9 + 8 + 7) / 3)
     assert float(aggregate(jnp.arange(1.0, 21.0), CostSpec(aggregate="cvar", level=0.95))) == 20.0
     for pct in range(1, 100):  # every level of two decimals: (1 - level) n is a whole number for n = 100, 300
-        for n in (100, 300):
+        for n in (100, 300, 10**7, 10**8):
             assert tail_count(pct / 100, n) == (100 - pct) * n // 100, (pct, n)
     with pytest.raises(ValueError, match="^metric: "):
         CostSpec(metric="mse").check()

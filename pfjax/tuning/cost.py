@@ -120,10 +120,11 @@ def aggregate(J, spec: CostSpec):
 
 
 def tail_count(level: float, n: int) -> int:
-    """The CVaR's ``k = ceil((1 - level) n)``, at least 1, with ``(1 - level) n`` rounded to 9 decimals
-    first: ``(1 - 0.7) * 10`` is ``3.0000000000000004`` in floating point, and its ceiling would keep
-    4 runs, not 3."""
-    return max(1, math.ceil(round((1.0 - level) * n, 9)))
+    """The CVaR's ``k = ceil((1 - level) n)``, at least 1, with ``x = (1 - level) n`` lowered by a
+    relative 1e-9 first: ``(1 - 0.7) * 10`` is ``3.0000000000000004`` in floating point (and
+    ``(1 - 0.18) * 10^7`` one spacing above 8,200,000), whose ceiling would keep one run too many."""
+    x = (1.0 - level) * n
+    return max(1, math.ceil(x - 1e-9 * max(1.0, x)))
 
 
 def batch_cost(controller: Controller, tunable: Tunable, scenarios, config: SimConfig, spec: CostSpec):

@@ -98,6 +98,12 @@ class TuneGA(ConfigModel):
     )
 
 
+#: The Adam step of the descent from the source's Table 3 gains (normalised box units): a short,
+#: careful descent that tells a local minimum from a point beside one; ``[gradient] lr`` is the
+#: plain tuner's.
+TABLE3_LR = 0.01
+
+
 class TuneGradient(ConfigModel):
     """Plain projected adam (``--method gradient-plain``) and the descent from the Table 3 gains."""
 
@@ -105,7 +111,9 @@ class TuneGradient(ConfigModel):
     starts: int = Field(4, ge=1, description="starts descended together [-]")
     lr: Real = Field(0.05, gt=0, description="gradient-plain's adam step [normalised box units]")
     table3_steps: int = Field(
-        60, ge=1, description="adam steps from the Table 3 gains (local-optimum check; step 0.01 box units) [-]"
+        60,
+        ge=1,
+        description=f"adam steps from the Table 3 gains (local-optimum check; step {TABLE3_LR:g} box units) [-]",
     )
 
 

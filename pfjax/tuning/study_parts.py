@@ -11,12 +11,7 @@ import pandas as pd
 
 from pfjax.numerics.random import seed_key
 from pfjax.tuning.multistart import MultistartOptions
-from pfjax.tuning.study_config import K_TUNINGS, problem_list
-
-#: The Adam step of the descent from the source's Table 3 gains (normalised box units): a short,
-#: careful descent that tells a local minimum from a point beside one; ``[gradient] lr`` is the
-#: plain tuner's.
-TABLE3_LR = 0.01
+from pfjax.tuning.study_config import K_TUNINGS, TABLE3_LR, problem_list
 
 
 def table3(cfg, pr, progress):
