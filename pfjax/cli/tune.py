@@ -15,9 +15,9 @@ the result is checked by :func:`pfjax.tuning.problem.make_problem` (a stable ste
 
 Prints ``gains``, ``cost``, ``n_rollouts_simulated`` (every rollout evaluated, value-only or with a
 gradient; the padding of a shared program's batch not counted), ``n_forward_passes`` (a rollout
-with its gradient counted as ``1 + D`` forward passes in forward mode), ``wall_s`` (compilation excluded; ``compile_s``), ``history`` (best cost so far per
-generation / step) and ``history_rollouts``; with ``--check``: the gains' cost and
-:mod:`pfjax.tuning.check`'s report. A progress bar on stderr when it is a terminal and ``--json``
+with its gradient counted as ``1 + D`` forward passes in forward mode), ``wall_s`` (compilation
+excluded; ``compile_s``), ``history`` (best cost so far per generation / step) and
+``history_rollouts``; with ``--check``: the gains' cost and :mod:`pfjax.tuning.check`'s report. A progress bar on stderr when it is a terminal and ``--json``
 is not given.
 """
 
