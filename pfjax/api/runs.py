@@ -118,28 +118,9 @@ def scenarios(
         f"drawing {n} runs at once",
         "draw fewer runs per call, or run a study (pfjax.run_study), which streams any number in chunks",
     )
-    if model == "kinematic":  # the ST model's settings refused when given, at their defaults too
-        for name, value in (("vehicle_params", vehicle_params), ("mu", mu), ("tau_delta_s", tau_delta_s), ("k_v", k_v)):
-            if value is not None:
-                raise errors.InputError(
-                    f'{name}: not with model = "kinematic" (it is a setting of model = "st" or "std"); remove it', name
-                )
-    elif model in ("st", "std"):  # the kinematic model's settings refused when given, at their defaults too, as
-        # pfjax simulate --model st does
-        for name, value in (
-            ("beta_r_deg", beta_r_deg),
-            ("beta_f_deg", beta_f_deg),
-            ("L", L),
-            ("delta_max_deg", delta_max_deg),
-            ("convention", convention),
-        ):
-            if value is not None:
-                raise errors.InputError(
-                    f'{name}: not with model = "{model}" (a setting of the kinematic model: the {model} model '
-                    f"takes its wheelbase and steering limit from its parameter set, its slip from the tyre "
-                    f"forces); remove it",
-                    name,
-                )
+    given = dict(beta_r_deg=beta_r_deg, beta_f_deg=beta_f_deg, L=L, delta_max_deg=delta_max_deg)
+    given.update(convention=convention, vehicle_params=vehicle_params, mu=mu, tau_delta_s=tau_delta_s, k_v=k_v)
+    _refuse_other_models(model, given)
     if model == "kinematic":  # the kinematic defaults (None: not given, so the ST model can refuse a given one)
         beta_r_deg = 5.0 if beta_r_deg is None else beta_r_deg
         beta_f_deg = 5.0 if beta_f_deg is None else beta_f_deg
@@ -161,6 +142,34 @@ def scenarios(
     sampled = sample_runs(spec, 0, np.arange(n), key=jkey, given=given)
     table = pd.DataFrame({"run": np.arange(n), **{k: np.asarray(v) for k, v in sampled.columns.items()}})
     return Scenarios(sampled.scenarios, table, spec)
+
+
+#: :func:`scenarios`' arguments that only one vehicle model reads, and why the other refuses them
+#: (as ``pfjax simulate`` refuses their flags, :data:`pfjax.cli.simulate.KINEMATIC_FLAGS` and
+#: ``ST_FLAGS``): given with the other model they are refused at any value, their defaults too.
+MODEL_ARGUMENTS = {
+    "kinematic": (
+        ("beta_r_deg", "beta_f_deg", "L", "delta_max_deg", "convention"),
+        "a setting of the kinematic model: the {model} model takes its wheelbase and steering limit "
+        "from its parameter set, its slip from the tyre forces",
+    ),
+    "st": (("vehicle_params", "mu", "tau_delta_s", "k_v"), 'it is a setting of model = "st" or "std"'),
+}
+
+
+def _refuse_other_models(model: str, given: dict) -> None:
+    """:class:`~pfjax.errors.InputError` naming the first argument of ``given`` (not None) that only
+    the other vehicle model reads (:data:`MODEL_ARGUMENTS`); an unknown ``model`` is the config's to refuse."""
+    if model not in ("kinematic", "st", "std"):
+        return
+    for owner, (names, why) in MODEL_ARGUMENTS.items():
+        if (owner == "kinematic") == (model == "kinematic"):
+            continue
+        for name in names:
+            if given[name] is not None:
+                raise errors.InputError(
+                    f'{name}: not with model = "{model}" ({why.format(model=model)}); remove it', name
+                )
 
 
 def seed_or_key(key, name: str = "key") -> tuple[int | None, Any]:
