@@ -6,6 +6,7 @@ a small study's run table with the friction and the slip the runs produced."""
 from __future__ import annotations
 
 import contextlib
+import inspect
 import io
 import json
 
@@ -16,7 +17,7 @@ import pfjax
 from pfjax.cli import main
 from pfjax.config import ConfigError
 from pfjax.errors import InputError
-from pfjax.montecarlo.config import load_study
+from pfjax.montecarlo.config import MODEL_SETTINGS, VehicleSpec, load_study
 
 BASE = {
     "name": "st",
@@ -54,6 +55,54 @@ def test_config_refuses_keys_of_the_other_model_naming_them(vehicle, top, messag
     with pytest.raises(ConfigError) as e:
         _spec(vehicle, **top)
     assert str(e.value).startswith(message) and "\n" not in str(e.value)
+
+
+#: A valid value, other than the default, for every name in MODEL_SETTINGS.
+SETTING_VALUES = {
+    **dict.fromkeys(["beta_r_deg", "beta_f_deg", "--beta-r-deg", "--beta-f-deg"], "3"),
+    **dict.fromkeys(["L", "--wheelbase"], "0.3"),
+    **dict.fromkeys(["delta_max_deg", "--delta-max-deg"], "20"),
+    "delta_rate_max_deg": "50",
+    **dict.fromkeys(["convention", "--convention"], "lenain"),
+    **dict.fromkeys(["params", "vehicle_params", "--vehicle"], "vehicle2"),
+    **dict.fromkeys(["mu", "--mu"], "0.5"),
+    **dict.fromkeys(["tau_delta_s", "--tau-delta"], "0.1"),
+    **dict.fromkeys(["k_v", "--k-v"], "3"),
+}
+
+
+def _value(name: str):
+    """The value as the config and the API take it: a number, or a name."""
+    try:
+        return float(SETTING_VALUES[name])
+    except ValueError:
+        return SETTING_VALUES[name]
+
+
+@pytest.mark.parametrize("setting", MODEL_SETTINGS, ids=lambda s: s.flag or s.key)
+def test_the_study_config_the_api_and_the_cli_refuse_each_setting_of_the_other_model_alike(setting):
+    """One table (MODEL_SETTINGS), three places that read it: each refuses the setting with the
+    other kind of model under its own name, for the same reason."""
+    model = "st" if setting.reader == "kinematic" else "kinematic"
+    why = f"({setting.refusal(model)})"
+    assert setting.key or setting.argument or setting.flag
+    if setting.key is not None:
+        assert setting.key in VehicleSpec.model_fields
+        with pytest.raises(ConfigError) as e:
+            _spec({"model": model, setting.key: _value(setting.key)}, margin={"enabled": False})
+        assert str(e.value) == f'vehicle.{setting.key}: not with model = "{model}" {why}; remove it'
+    if setting.argument is not None:
+        assert setting.argument in inspect.signature(pfjax.scenarios).parameters
+        with pytest.raises(InputError) as e:
+            pfjax.scenarios("sine", n=2, model=model, **{setting.argument: _value(setting.argument)})
+        assert str(e.value) == f'{setting.argument}: not with model = "{model}" {why}; remove it'
+    if setting.flag is not None:
+        value = [] if setting.flag == "--continuous" else [SETTING_VALUES[setting.flag]]
+        code, _, err = _main(
+            "simulate", "--model", model, "--path", "line", "--controller", "stanley", setting.flag, *value
+        )
+        assert code == 2
+        assert err.strip().splitlines()[-1] == f"pfjax simulate: error: {setting.flag}: not with --model {model} {why}"
 
 
 def test_config_st_reads_the_parameter_set_and_friction():

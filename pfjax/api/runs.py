@@ -144,32 +144,18 @@ def scenarios(
     return Scenarios(sampled.scenarios, table, spec)
 
 
-#: :func:`scenarios`' arguments that only one vehicle model reads, and why the other refuses them
-#: (as ``pfjax simulate`` refuses their flags, :data:`pfjax.cli.simulate.KINEMATIC_FLAGS` and
-#: ``ST_FLAGS``): given with the other model they are refused at any value, their defaults too.
-MODEL_ARGUMENTS = {
-    "kinematic": (
-        ("beta_r_deg", "beta_f_deg", "L", "delta_max_deg", "convention"),
-        "a setting of the kinematic model: the {model} model takes its wheelbase and steering limit "
-        "from its parameter set, its slip from the tyre forces",
-    ),
-    "st": (("vehicle_params", "mu", "tau_delta_s", "k_v"), 'it is a setting of model = "st" or "std"'),
-}
-
-
 def _refuse_other_models(model: str, given: dict) -> None:
     """:class:`~pfjax.errors.InputError` naming the first argument of ``given`` (not None) that only
-    the other vehicle model reads (:data:`MODEL_ARGUMENTS`); an unknown ``model`` is the config's to refuse."""
+    the other vehicle model reads (:data:`pfjax.montecarlo.config.MODEL_SETTINGS`, the table the
+    study config and ``pfjax simulate`` refuse from); an unknown ``model`` is the config's to refuse."""
+    from pfjax.montecarlo.scenario_config import other_models_settings
+
     if model not in ("kinematic", "st", "std"):
         return
-    for owner, (names, why) in MODEL_ARGUMENTS.items():
-        if (owner == "kinematic") == (model == "kinematic"):
-            continue
-        for name in names:
-            if given[name] is not None:
-                raise errors.InputError(
-                    f'{name}: not with model = "{model}" ({why.format(model=model)}); remove it', name
-                )
+    for setting in other_models_settings(model):
+        name = setting.argument
+        if name is not None and given[name] is not None:
+            raise errors.InputError(f'{name}: not with model = "{model}" ({setting.refusal(model)}); remove it', name)
 
 
 def seed_or_key(key, name: str = "key") -> tuple[int | None, Any]:

@@ -99,15 +99,6 @@ def _controller_and_gains(args, wheelbase: float):
     return e.controller, gains, shown
 
 
-#: Flags of one model only: given with the other model they are a usage error naming the flag.
-KINEMATIC_FLAGS = {
-    "beta_r_deg": "--beta-r-deg",
-    "beta_f_deg": "--beta-f-deg",
-    "wheelbase": "--wheelbase",
-    "delta_max_deg": "--delta-max-deg",
-    "convention": "--convention",
-}
-ST_FLAGS = {"vehicle": "--vehicle", "mu": "--mu", "tau_delta": "--tau-delta", "k_v": "--k-v"}
 #: The kinematic flags' defaults (``None`` in the parser, so that a given one can be told apart).
 KINEMATIC_DEFAULTS = {
     "beta_r_deg": 5.0,
@@ -119,14 +110,18 @@ KINEMATIC_DEFAULTS = {
 
 
 def _check_model_flags(args) -> None:
-    """:class:`UsageError` naming the first flag given that the chosen ``--model`` does not take;
-    the kinematic model's flags' defaults filled in (for the kinematic model only, so that the
-    recorded arguments run again)."""
-    other = ST_FLAGS if args.model == "kinematic" else {**KINEMATIC_FLAGS, "continuous": "--continuous"}
-    for dest, flag in other.items():
-        value = getattr(args, dest)
+    """:class:`UsageError` naming the first flag given that the chosen ``--model`` does not take
+    (:data:`pfjax.montecarlo.config.MODEL_SETTINGS`, the table the study config and
+    :func:`pfjax.scenarios` refuse from); the kinematic model's flags' defaults filled in (for the
+    kinematic model only, so that the recorded arguments run again)."""
+    from pfjax.montecarlo.scenario_config import other_models_settings
+
+    for setting in other_models_settings(args.model):
+        if setting.flag is None:
+            continue
+        value = getattr(args, setting.flag[2:].replace("-", "_"))
         if value is not None and value is not False:  # by identity: a given 0 is given
-            raise UsageError(f"{flag}: not with --model {args.model}")
+            raise UsageError(f"{setting.flag}: not with --model {args.model} ({setting.refusal(args.model)})")
     if args.model == "kinematic":  # the ST flags stay None (recorded as not given: pfjax.cli.records)
         for dest, value in KINEMATIC_DEFAULTS.items():
             if getattr(args, dest) is None:

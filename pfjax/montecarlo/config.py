@@ -25,9 +25,8 @@ from pfjax.errors import MAX_SEED
 from pfjax.montecarlo.analysis_config import Axis, FalsifierSpec, MarginSpec, RareEventSpec
 from pfjax.montecarlo.dists import Dist, dist_field, nominal
 from pfjax.montecarlo.scenario_config import (
-    KINEMATIC_ONLY,
+    MODEL_SETTINGS,
     OU_REACH,
-    ST_ONLY,
     InitialSpec,
     NoiseSpec,
     PathSpec,
@@ -35,14 +34,14 @@ from pfjax.montecarlo.scenario_config import (
     SlipSpec,
     SuccessSpec,
     VehicleSpec,
+    slip_refusal,
 )
 from pfjax.provenance import config_hash
 from pfjax.resources import MAX_STEPS
 
 __all__ = [
-    "KINEMATIC_ONLY",
+    "MODEL_SETTINGS",
     "OU_REACH",
-    "ST_ONLY",
     "Axis",
     "ControllerSpec",
     "Dist",
@@ -178,8 +177,8 @@ class StudySpec(ConfigModel):
             if changed:
                 key = changed[0]
                 raise ValueError(
-                    f'slip.{key}: not with vehicle.model = "{self.vehicle.model}" (its slip comes from the tyre '
-                    "forces); remove it"
+                    f'slip.{key}: not with vehicle.model = "{self.vehicle.model}" '
+                    f"({slip_refusal(self.vehicle.model)}); remove it"
                 )
             from pfjax.models.single_track import check_step, with_mu
 

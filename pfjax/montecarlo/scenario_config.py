@@ -4,7 +4,7 @@ vehicle, slip, initial condition, measurement noise and paths (:mod:`pfjax.monte
 from __future__ import annotations
 
 import math
-from typing import ClassVar, Literal
+from typing import ClassVar, Literal, NamedTuple
 
 from pydantic import Field, field_validator, model_validator
 
@@ -40,9 +40,63 @@ class SuccessSpec(ConfigModel):
     from_s: Real = Field(15.0, ge=0, description="start of the success window, s")
 
 
-#: Keys of ``[vehicle]`` that only the kinematic model reads, and those only the ST model reads.
-KINEMATIC_ONLY = ("L", "delta_max_deg", "delta_rate_max_deg", "convention")
-ST_ONLY = ("params", "mu", "tau_delta_s", "k_v")
+class ModelSetting(NamedTuple):
+    """A setting that only one kind of vehicle model reads, under its name in each place that takes
+    it (``None`` where that place does not): given with the other kind it is refused, naming it."""
+
+    reader: Literal["kinematic", "dynamic"]  # the declared-slip model, or the single-track ones (st, std)
+    key: str | None  # the study config's [vehicle] key
+    argument: str | None  # pfjax.scenarios' argument
+    flag: str | None  # pfjax simulate's flag
+    reason: str  # why the other kind refuses it ({model}: the model it was given with)
+
+    def refusal(self, model: str) -> str:
+        """Why ``model`` does not take this setting, the words every refusal of it uses."""
+        return self.reason.format(model=model)
+
+
+_SLIP = "the {model} model's slip comes from its tyre forces"
+_SET = "the {model} model's wheelbase and steering limits are its parameter set's"
+_DYNAMIC = 'a setting of model = "st" or "std"'
+#: Which vehicle model reads which setting: the one table the study config (``[vehicle]``; the
+#: whole ``[slip]`` section is the kinematic model's too), :func:`pfjax.scenarios` and
+#: ``pfjax simulate`` refuse the other model's settings from.
+MODEL_SETTINGS = (
+    ModelSetting("kinematic", None, "beta_r_deg", "--beta-r-deg", _SLIP),
+    ModelSetting("kinematic", None, "beta_f_deg", "--beta-f-deg", _SLIP),
+    ModelSetting("kinematic", "L", "L", "--wheelbase", _SET),
+    ModelSetting("kinematic", "delta_max_deg", "delta_max_deg", "--delta-max-deg", _SET),
+    ModelSetting("kinematic", "delta_rate_max_deg", None, None, _SET),
+    ModelSetting(
+        "kinematic",
+        "convention",
+        "convention",
+        "--convention",
+        "the front-slip sign convention is the declared-slip model's; the {model} model's slip comes from its "
+        "tyre forces",
+    ),
+    ModelSetting(
+        "kinematic", None, None, "--continuous", "the {model} model takes a sampled controller, not a continuous one"
+    ),
+    ModelSetting("dynamic", "params", "vehicle_params", "--vehicle", _DYNAMIC),
+    ModelSetting("dynamic", "mu", "mu", "--mu", _DYNAMIC),
+    ModelSetting("dynamic", "tau_delta_s", "tau_delta_s", "--tau-delta", _DYNAMIC),
+    ModelSetting("dynamic", "k_v", "k_v", "--k-v", _DYNAMIC),
+)
+
+
+def other_models_settings(model: str) -> tuple[ModelSetting, ...]:
+    """The settings of :data:`MODEL_SETTINGS` that ``model`` (``kinematic``, ``st`` or ``std``) does
+    not read."""
+    reader = "kinematic" if model == "kinematic" else "dynamic"
+    return tuple(s for s in MODEL_SETTINGS if s.reader != reader)
+
+
+def slip_refusal(model: str) -> str:
+    """Why ``model`` (a single-track one) refuses the ``[slip]`` section's keys."""
+    return _SLIP.format(model=model)
+
+
 #: The parameter set of each dynamic model when ``params`` is not given: the 0.2 m robot for ``"st"``;
 #: ``"std"`` has no robot set (no magic-formula tyre), so CommonRoad's vehicle2 (the command line's
 #: ``pfjax simulate --model std`` takes the same).
@@ -111,18 +165,12 @@ class VehicleSpec(ConfigModel):
             lo, hi = self.mu.bounds()
             if not (lo > 0 and hi <= 10):
                 raise ValueError(f"mu: must lie in (0, 10] over its whole range, got range [{lo:g}, {hi:g}]")
-        other, theirs = (ST_ONLY, "st") if self.model == "kinematic" else (KINEMATIC_ONLY, "kinematic")
-        for name in other:  # a value other than the default (a dumped config holds every key, at its default)
-            if getattr(self, name) != type(self).model_fields[name].get_default(call_default_factory=True):
-                why = (
-                    'it is a setting of model = "st"'
-                    if theirs == "st"
-                    else "the front slip's sign convention is the declared-slip model's; the ST model's slip "
-                    "comes from its tyres"
-                    if name == "convention"
-                    else "the ST model's wheelbase and steering limits are its parameter set's (vehicle.params)"
-                )
-                raise ValueError(f'{name}: not with model = "{self.model}" ({why}); remove it')
+        for setting in other_models_settings(self.model):
+            name = setting.key  # a value other than the default (a dumped config holds every key, at its default)
+            if name is not None and getattr(self, name) != type(self).model_fields[name].get_default(
+                call_default_factory=True
+            ):
+                raise ValueError(f'{name}: not with model = "{self.model}" ({setting.refusal(self.model)}); remove it')
         if self.model == "std" and self.params == "robot":
             raise ValueError('params: model = "std" has no robot set (no magic-formula tyre); use vehicle1-3')
         return self
