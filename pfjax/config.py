@@ -305,7 +305,10 @@ def load_model(
             (:func:`plain`).
         presets: nested dicts applied between the file and the overrides (a study's ``--quick`` sizes).
     """
-    raw: dict = {} if data is None else copy.deepcopy(plain(dict(data)))
+    try:  # a Python value nested deeper than the interpreter's recursion limit: one line naming it
+        raw: dict = {} if data is None else copy.deepcopy(plain(dict(data)))
+    except RecursionError:
+        raise ConfigError("config: the value is nested too deeply") from None
     if path is not None:
         raw = read_toml(path)
     for preset in presets:
@@ -313,9 +316,14 @@ def load_model(
     for text in overrides:
         set_nested(raw, parse_override(text))
     for key, value in (values or {}).items():
-        set_nested(raw, nested(key, plain(value)))
+        try:
+            set_nested(raw, nested(key, plain(value)))
+        except RecursionError:
+            raise ConfigError(f"{key}: the value is nested too deeply") from None
     try:
         config = model.model_validate(raw)
     except ValidationError as e:
         raise ConfigError(format_error(e, model)) from None
+    except RecursionError:
+        raise ConfigError("config: the value is nested too deeply") from None
     return config, raw

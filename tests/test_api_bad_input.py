@@ -271,6 +271,17 @@ def test_run_and_load_study_out(out, tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []  # nothing written
 
 
+def _marked(out):
+    """``out`` marked as a study's output holding its files as they are now (the marker
+    :class:`pfjax.outputs.OutputDir` writes): files that were corrupt when the study wrote them, as
+    a disk's damage that keeps their size and time would leave them."""
+    from pfjax.outputs import MARKER
+
+    files = {f.name: [f.stat().st_size, f.stat().st_mtime_ns] for f in out.iterdir() if f.name != MARKER}
+    (out / MARKER).write_text(json.dumps({"command": "study", "config_sha256": "0" * 64, "files": files, "dirs": []}))
+    return out
+
+
 @pytest.mark.parametrize(
     "summary",
     ["{bad", "[]", json.dumps({"controllers": {"a": {}}}), "\xff"],
@@ -281,7 +292,7 @@ def test_load_study_corrupt_summary_is_the_report_commands_error(summary, tmp_pa
     out.mkdir()
     (out / "summary.json").write_bytes(summary.encode("latin-1"))
     pd.DataFrame({"run": [0]}).to_parquet(out / "runs.parquet")
-    msg = _refused(lambda: pfjax.load_study(out), "out")
+    msg = _refused(lambda: pfjax.load_study(_marked(out)), "out")
     assert str(out / "summary.json") in msg and "re-run the study" in msg, msg
     if summary != json.dumps({"controllers": {"a": {}}}):  # pfjax report reads the file as load_study does
         from pfjax.montecarlo.study import read_finished
@@ -298,12 +309,12 @@ def test_load_study_corrupt_runs_or_margin(tmp_path):
 
     (out / "runs.parquet").write_text("not parquet")
     (out / "summary.json").write_text(json.dumps({"controllers": {"a": {}}}))  # a summary the study did not write
-    assert "summary.json is not a study summary (no study)" in _refused(lambda: pfjax.load_study(out), "out")
+    assert "summary.json is not a study summary (no study)" in _refused(lambda: pfjax.load_study(_marked(out)), "out")
     (out / "summary.json").write_text(json.dumps({**dict.fromkeys(SUMMARY_KEYS), "controllers": {}}))
-    assert "runs.parquet cannot be read" in _refused(lambda: pfjax.load_study(out), "out")
+    assert "runs.parquet cannot be read" in _refused(lambda: pfjax.load_study(_marked(out)), "out")
     pd.DataFrame({"run": [0]}).to_parquet(out / "runs.parquet")
     (out / "margin.parquet").write_text("not parquet")
-    assert "margin.parquet cannot be read" in _refused(lambda: pfjax.load_study(out), "out")
+    assert "margin.parquet cannot be read" in _refused(lambda: pfjax.load_study(_marked(out)), "out")
 
 
 def test_a_design_that_cannot_be_made_names_the_controller():
@@ -590,3 +601,91 @@ def test_a_missing_argument_is_named():
     with pytest.raises(InputError) as e:
         pfjax.simulate()
     assert e.value.key == "scenarios" and str(e.value) == "scenarios: pfjax.simulate needs this argument"
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda out: (out / "summary.json").write_text((out / "summary.json").read_text() + " "), "changed after"),
+        (lambda out: pd.read_parquet(out / "runs.parquet").head(2).to_parquet(out / "runs.parquet"), "changed after"),
+        (lambda out: (out / "runs.parquet").unlink(), "is missing (the study wrote it)"),
+        (lambda out: (out / ".pfjax-output.json").unlink(), "holds no finished study (no output marker"),
+        (
+            lambda out: (out / ".pfjax-output.json").write_text(
+                (out / ".pfjax-output.json").read_text().replace('"command": "study"', '"command": "tune"')
+            ),
+            "holds no finished study (the output of pfjax tune",
+        ),
+    ],
+    ids=["summary-edited", "runs-cut", "runs-deleted", "no-marker", "another-command"],
+)
+def test_load_study_reads_only_the_studys_own_files(finished, tmp_path, edit, message):
+    """As pfjax report: tables edited, cut or mixed in after the study wrote them are refused, not
+    returned as the study's."""
+    import shutil
+
+    out = tmp_path / "s"
+    shutil.copytree(finished, out)  # sizes and times kept: the copy is the study's own
+    assert pfjax.load_study(out).summary == pfjax.load_study(finished).summary
+    edit(out)
+    msg = _refused(lambda: pfjax.load_study(out), "out")
+    assert message in msg and "--out" not in msg, msg
+
+
+def test_report_on_an_edited_summary_says_to_re_run_the_study_first(finished, tmp_path):
+    """The real way out, not --overwrite (which is then refused for the same file)."""
+    import shutil
+
+    from pfjax.montecarlo.config import load_study
+    from pfjax.montecarlo.study import rewrite_report
+
+    out = tmp_path / "s"
+    shutil.copytree(finished, out)
+    (out / "summary.json").write_text((out / "summary.json").read_text() + " ")
+    spec = load_study(data=TINY)[0]
+    for overwrite in (False, True):
+        with pytest.raises(pfjax.InputError) as e:
+            rewrite_report(out, spec, overwrite=overwrite)
+        assert "summary.json changed after the study wrote it" in str(e.value) and "re-run the study" in str(e.value)
+
+
+def test_run_study_memory_refusal_comes_first_in_the_apis_words(tmp_path):
+    """As pfjax study: the budget before the output directory; the advice names report=False."""
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep")
+    msg = _refused(lambda: pfjax.run_study(TINY, mine, n_runs=100_000_000), "n_runs")
+    assert "report=False" in msg and "--no-report" not in msg, msg
+    assert [p.name for p in mine.iterdir()] == ["notes.txt"]
+
+
+def test_a_config_nested_too_deeply_is_one_line_naming_it(tmp_path):
+    import functools
+
+    deep = functools.reduce(lambda a, _: [a], range(5000), [])
+    assert _refused(lambda: pfjax.run_study(TINY, tmp_path / "x", paths=deep), "paths").endswith("nested too deeply")
+    assert _refused(lambda: pfjax.run_study({**TINY, "paths": deep}, tmp_path / "x"), "config").endswith(
+        "nested too deeply"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_run_study_takes_any_path_like_config(tmp_path):
+    from pathlib import PurePosixPath
+
+    from pfjax.api.studies import _study_spec
+
+    toml = tmp_path / "s.toml"
+    toml.write_text('name = "s"\nn_runs = 3\nseed = 0\n[[paths]]\nkind = "line"\n[[controllers]]\nname = "a"\ntype = "pi"\n')
+    assert _study_spec(PurePosixPath(toml), {}).n_runs == 3
+
+
+def test_run_study_warns_as_pfjax_study_prints(tmp_path):
+    """A path sharper than the steering limit follows: a RuntimeWarning (pfjax study: stderr), the
+    study runs, and summary.json records it."""
+    with pytest.warns(RuntimeWarning, match=r"paths\[0\]"):
+        res = pfjax.run_study(
+            TINY, tmp_path / "w", paths=[{"kind": "circle", "radius": 0.3}], n_runs=2, report=False, progress=False
+        )
+    assert res.summary["warnings"] and "paths[0]" in res.summary["warnings"][0]
+    assert "slip_margin_fails_at_deg" in res.headline.columns

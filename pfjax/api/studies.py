@@ -25,8 +25,10 @@ class StudyResult(NamedTuple):
         headline: a pandas DataFrame, one row per controller, all paths pooled: ``runs``,
             ``success_rate`` with its 95 % Clopper-Pearson interval ``ci95_lo``, ``ci95_hi``,
             ``iae_mean`` and ``iae_p95`` (m s), ``steady_abs_d_p95_mm`` (mm) over the runs with status
-            ``ok``, and the joint-axis ``slip_margin_deg`` (deg; missing, None or NaN, where the
-            controller already fails at the sweep's smallest amplitude, and without a sweep).
+            ``ok``, the joint-axis ``slip_margin_deg`` (deg; None or NaN where the controller
+            already fails at the sweep's smallest amplitude, and without a sweep) and
+            ``slip_margin_fails_at_deg`` (deg: that smallest amplitude where the controller fails
+            at it; None or NaN otherwise), as ``pfjax study --json`` gives them.
     """
 
     out: Any  # pathlib.Path of the output directory
@@ -48,34 +50,22 @@ def load_study(out) -> StudyResult:
         sweep) and the headline table.
 
     Raises:
-        pfjax.errors.InputError: naming ``out``: not a str or path-like, no finished study there
-            (``summary.json`` and ``runs.parquet``), or one of its files corrupt or unreadable.
+        pfjax.errors.InputError: naming ``out``: not a str or path-like; no output of ``pfjax study``
+            there (its ``.pfjax-output.json``); ``summary.json``, ``runs.parquet`` or
+            ``margin.parquet`` missing, changed since the study wrote it, or unreadable. These are
+            ``pfjax report``'s refusals: the tables returned are the study's own.
     """
-    import pandas as pd
-
-    from pfjax.montecarlo.study import read_finished
+    from pfjax.montecarlo.study import read_study
     from pfjax.montecarlo.summary import headline
 
     out = _out_dir(out)
-    if not (out / "summary.json").is_file() or not (out / "runs.parquet").is_file():
-        raise errors.InputError(f"out: {out} holds no finished study (summary.json and runs.parquet)", "out")
+    summary, runs, margin = read_study(out, "out", "pfjax.load_study reads")
     try:
-        summary, runs = read_finished(out)
         rows = headline(summary)
-    except errors.InputError as e:  # pfjax report's message
-        raise errors.renamed(e, "--out", "out") from None
     except (KeyError, TypeError, ValueError):  # a summary.json without a controller's numbers
         raise errors.InputError(
             f"out: {out / 'summary.json'} is not a study summary; re-run the study", "out"
         ) from None
-    margin = None
-    if (out / "margin.parquet").is_file():
-        try:
-            margin = pd.read_parquet(out / "margin.parquet")
-        except (OSError, ValueError) as e:  # pyarrow's errors are ValueErrors too
-            raise errors.InputError(
-                f"out: {out / 'margin.parquet'} cannot be read ({errors.one_line(e)}); re-run the study", "out"
-            ) from None
     return StudyResult(out, summary, runs, margin, rows)
 
 
@@ -87,6 +77,8 @@ def _out_dir(out):
 
     if not isinstance(out, (str, os.PathLike)):
         raise errors.InputError(f"out: expected a directory path, got {out!r}", "out")
+    if str(out).strip() == "":  # Path("") would be the current directory
+        raise errors.InputError("out: '' names no directory; give a directory name such as results/my_study", "out")
     return Path(out)
 
 
@@ -111,8 +103,9 @@ def run_study(
         config: a study TOML path, a config dict, or a :class:`pfjax.montecarlo.config.StudySpec`.
         out: output directory (default ``results/<name>``), written with pfjax's output rules
             (:mod:`pfjax.outputs`: another pfjax output is replaced only with ``overwrite``).
-        overwrite: True: replace a pfjax output of another config or command in ``out`` (never
-            files pfjax did not write there).
+        overwrite: True: replace a pfjax output of another config or command in ``out``, or one
+            whose files changed since pfjax wrote them (an edited report too); never files pfjax
+            did not write there.
         fresh: True: discard the finished chunks of an interrupted run instead of resuming.
         progress: progress bars (None, the default: when stderr is a terminal).
         report: True: write the report (``report.md``, ``report.html`` and ``figures/``).
@@ -123,6 +116,12 @@ def run_study(
 
     Returns:
         the study's outputs, as :func:`load_study` reads them from ``out``.
+
+    Warns:
+        RuntimeWarning: each feasibility warning (a path sharper than the steering limit follows, a
+            spline path shorter than a run travels; :func:`pfjax.montecarlo.checks.study_warnings`)
+            that ``pfjax study`` prints on stderr, before the simulation starts; the study runs, and
+            ``summary["warnings"]`` records them.
 
     Raises:
         pfjax.errors.InputError: before anything is written: a bad argument, named as here
@@ -136,8 +135,10 @@ def run_study(
             the config key (an override by its dotted key) of a bad key or value.
         OSError: the file system refuses a write (what ``out`` held stays as it was).
     """
+    import warnings
     from pathlib import Path
 
+    from pfjax.montecarlo.checks import check_resources
     from pfjax.montecarlo.runner import study_output
     from pfjax.montecarlo.study import run
 
@@ -149,10 +150,13 @@ def run_study(
     _misspelt(run_study, overrides)
     spec = _study_spec(config, {dotted(k): v for k, v in overrides.items()})
     out = Path("results") / spec.name if out is None else out
+    check_resources(spec, report=report, no_report="report=False")  # in pfjax study's order: before out
     # the output directory judged by pfjax.outputs as `pfjax study --out` is, its messages naming
     # this function's arguments (out, overwrite=True)
     output = study_output(spec, out, overwrite=overwrite, flag="out")
-    run(spec, output, progress=progress, report=report, fresh=fresh, overwrite=overwrite)
+    # the feasibility warnings pfjax study prints on stderr, as Python warnings (also in summary.json)
+    warn = lambda m: warnings.warn(m, RuntimeWarning, stacklevel=4)
+    run(spec, output, progress=progress, report=report, fresh=fresh, overwrite=overwrite, warn=warn)
     return load_study(out)
 
 
@@ -292,6 +296,7 @@ def dotted(key: str) -> str:
 
 def _study_spec(config, values: dict):
     """A validated study config from a TOML path, a dict or a StudySpec, with ``values`` overriding."""
+    import os
     from pathlib import Path
 
     from pfjax.montecarlo.config import StudySpec
@@ -301,7 +306,7 @@ def _study_spec(config, values: dict):
         return load_config(data=config.model_dump(mode="json"), values=values)[0]
     if isinstance(config, dict):
         return load_config(data=config, values=values)[0]
-    if isinstance(config, (str, Path)):  # a missing file or a directory: as pfjax study says it
+    if isinstance(config, (str, os.PathLike)):  # a missing file or a directory: as pfjax study says it
         return load_config(Path(config), values=values)[0]
     raise errors.InputError(
         f"config: expected a TOML path, a dict or a StudySpec, got {type(config).__name__}", "config"

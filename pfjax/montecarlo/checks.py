@@ -51,12 +51,13 @@ def path_length(p: PathSpec) -> float:
     return float(np.linalg.norm(np.diff(np.asarray(p.points, float), axis=0), axis=1).sum())
 
 
-def check_resources(spec: StudySpec, *, report: bool = True) -> None:
+def check_resources(spec: StudySpec, *, report: bool = True, no_report: str = "pfjax study --no-report") -> None:
     """Refuse a study whose memory need exceeds :func:`pfjax.resources.memory_budget`, before it
     starts (:class:`~pfjax.errors.InputError` naming the key). The runs stream chunk by chunk, so
     a chunk bounds the simulation's memory (its batch of scenarios, slip sequences and paths, the
     simulator's state and the chunk's table); the report loads the whole run table; the slip-margin
-    sweep holds its run indices."""
+    sweep holds its run indices. ``no_report``: how the caller leaves the report out, in the advice
+    (``report=False`` for :func:`pfjax.run_study`)."""
     from pfjax.resources import check_memory, run_bytes
 
     s = spec.sim
@@ -79,7 +80,7 @@ def check_resources(spec: StudySpec, *, report: bool = True) -> None:
             "n_runs",
             8 * 64 * rows,
             f"the report's run table ({rows:.3g} rows)",
-            "run without the report (pfjax study --no-report), or lower n_runs",
+            f"run without the report ({no_report}), or lower n_runs",
         )
     if spec.margin.enabled:
         per_axis = spec.margin.n_per_amplitude * len(spec.margin.amplitudes_deg)

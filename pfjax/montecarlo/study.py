@@ -276,9 +276,9 @@ def read_runs(path: Path, **kw) -> pd.DataFrame:
     return pd.read_parquet(path, **kw)
 
 
-def read_finished(out) -> tuple[dict, pd.DataFrame]:
+def read_finished(out, flag: str = "--out") -> tuple[dict, pd.DataFrame]:
     """A finished study's ``(summary, runs)`` from its output directory;
-    :class:`~pfjax.errors.InputError` naming ``--out`` (one line) if a file is missing or corrupt."""
+    :class:`~pfjax.errors.InputError` naming ``flag`` (one line) if a file is missing or corrupt."""
     import json
 
     from pfjax.errors import InputError, one_line
@@ -288,25 +288,26 @@ def read_finished(out) -> tuple[dict, pd.DataFrame]:
     def load(name, reader):
         f = out / name
         if not f.is_file():
-            raise InputError(f"--out: {f} is missing; re-run the study (pfjax study CONFIG --out {out})")
+            raise InputError(f"{flag}: {f} is missing; re-run the study (pfjax study CONFIG --out {out})", flag)
         try:
             return reader(f)
         except (OSError, ValueError, UnicodeDecodeError) as e:  # pyarrow's errors are ValueErrors too
-            raise InputError(f"--out: {f} cannot be read ({one_line(e)}); re-run the study") from None
+            raise InputError(f"{flag}: {f} cannot be read ({one_line(e)}); re-run the study", flag) from None
 
     summary = load("summary.json", lambda f: json.loads(f.read_text(encoding="utf-8")))
     key = missing_key(summary)
     if key is not None:
         what = f" (no {key})" if key else ""
-        raise InputError(f"--out: {out / 'summary.json'} is not a study summary{what}; re-run the study")
+        raise InputError(f"{flag}: {out / 'summary.json'} is not a study summary{what}; re-run the study", flag)
     return summary, load("runs.parquet", read_runs)
 
 
-def _unchanged_inputs(out: Path) -> None:
-    """:class:`~pfjax.errors.InputError` naming ``--out`` if a file the report is built from
+def _unchanged_inputs(out: Path, flag: str = "--out", reader: str = "a report is built from") -> None:
+    """:class:`~pfjax.errors.InputError` naming ``flag`` if a file the report is built from
     (``summary.json``, ``runs.parquet``, ``margin.parquet``) is missing or changed after the study wrote it
     (its size or time differs from the output marker's): a report follows from the study's own
-    files, and ``--overwrite`` would otherwise record the edited file as pfjax's."""
+    files, and ``--overwrite`` would otherwise record the edited file as pfjax's. ``reader``: who
+    reads them, in the message (``pfjax.load_study reads``)."""
     from pfjax.errors import InputError
     from pfjax.outputs import as_written, read_marker
 
@@ -315,16 +316,45 @@ def _unchanged_inputs(out: Path) -> None:
         f = out / name
         if name in listed and not f.exists():
             raise InputError(
-                f"--out: {f} is missing (the study wrote it); a report is built from the study's own files: "
-                "re-run the study",
-                "--out",
+                f"{flag}: {f} is missing (the study wrote it); {reader} the study's own files: re-run the study",
+                flag,
             )
         if f.is_file() and not as_written(listed, name, f.stat()):
             raise InputError(
-                f"--out: {f} changed after the study wrote it; a report is built from the study's own files: "
-                "re-run the study",
-                "--out",
+                f"{flag}: {f} changed after the study wrote it; {reader} the study's own files: re-run the study",
+                flag,
             )
+
+
+def read_study(
+    out, flag: str = "--out", reader: str = "a report is built from"
+) -> tuple[dict, pd.DataFrame, pd.DataFrame | None]:
+    """A finished study's ``(summary, runs, margin)`` from its output directory, as the study wrote
+    them (``margin`` None without a slip-margin sweep); :class:`~pfjax.errors.InputError` naming
+    ``flag`` (one line) where ``out`` holds no output of ``pfjax study`` (its marker), or a file is
+    missing, changed since the study wrote it (:func:`_unchanged_inputs`) or unreadable. What
+    ``pfjax report`` and :func:`pfjax.load_study` read."""
+    from pfjax.errors import InputError, one_line
+    from pfjax.outputs import MARKER, read_marker
+
+    out = Path(out)
+    marker = read_marker(out)
+    if marker is None or marker.get("command") != "study":
+        what = "no output marker" if marker is None else f"the output of pfjax {marker.get('command')}"
+        raise InputError(
+            f"{flag}: {out} holds no finished study ({what}: {MARKER} of pfjax study); run the study first", flag
+        )
+    _unchanged_inputs(out, flag, reader)
+    summary, runs = read_finished(out, flag)
+    margin = None
+    if (out / "margin.parquet").is_file():
+        try:
+            margin = pd.read_parquet(out / "margin.parquet")
+        except (OSError, ValueError) as e:  # pyarrow's errors are ValueErrors too
+            raise InputError(
+                f"{flag}: {out / 'margin.parquet'} cannot be read ({one_line(e)}); re-run the study", flag
+            ) from None
+    return summary, runs, margin
 
 
 def rewrite_report(out, spec: StudySpec, *, overwrite: bool = False) -> Path:
@@ -333,13 +363,17 @@ def rewrite_report(out, spec: StudySpec, *, overwrite: bool = False) -> Path:
     (which needs the search's trajectories) is kept. The output is replaced whole, as a study's
     (:class:`~pfjax.outputs.OutputDir`); returns its directory."""
     from pfjax.montecarlo.runner import study_output
+    from pfjax.outputs import read_marker
     from pfjax.report.figure_set import FIGURES, figure_entries, ordered_figures, report_figures
     from pfjax.report.study_report import write_report
 
+    target = Path("results") / spec.name if out is None else Path(out)
+    marker = None if target.is_symlink() else read_marker(target)
+    if marker is not None and marker.get("command") == "study":  # before the output's rules advise --overwrite
+        _unchanged_inputs(target)
     output = study_output(spec, out, overwrite=overwrite)
     with output:
-        _unchanged_inputs(output.target)
-        summary, runs = read_finished(output.target)
+        summary, runs, _ = read_study(output.target)  # again, under the output's lock
         redraw = [n for n in FIGURES if n != "worst_cases"]
         output.start_from_existing(
             lambda rel: (

@@ -300,6 +300,7 @@ def headline(summary: dict) -> pd.DataFrame:
                 if c["steady_abs_d_p95"] is not None and math.isfinite(c["steady_abs_d_p95"])
                 else math.nan,
                 "slip_margin_deg": c["slip_margin_deg"],
+                "slip_margin_fails_at_deg": c.get("slip_margin_fails_at_deg"),
             }
         )
     return pd.DataFrame(rows)
