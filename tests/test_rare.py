@@ -526,6 +526,34 @@ def test_choices_are_strata():
     assert r["n_rollouts"] == sum(s["n_rollouts"] for s in r["strata"]) <= 40_000
 
 
+def test_no_stratum_shares_its_draws_with_a_stratum_of_another_seed():
+    """Stratum k draws from the seed itself for k = 0 and from ``SeedSequence((seed, k))`` otherwise:
+    seed 0's second stratum is not seed 1's first (as ``seed + k`` made it: on a line, where the two
+    strata are the same case, their estimates were equal), and the largest seed has strata and an
+    explore stage too."""
+    from pfjax.errors import MAX_SEED
+    from pfjax.rare.study import stratum_seed
+
+    seeds = {stratum_seed(s, k) for s in [*range(100), MAX_SEED] for k in range(8)}
+    assert len(seeds) == 808 and all(0 <= x <= MAX_SEED for x in seeds)
+    assert [stratum_seed(s, 0) for s in range(100)] == list(range(100))
+    data = line_study(4.0)  # p about 0.14: the failure count of 200 draws tells two streams apart
+    data["initial"] = {"start_along_m": {"dist": "choice", "values": [0.0, 1.0]}}
+    kw = dict(method="mc", max_rollouts=400, progress=False, rare_event__batch=200)
+    a, b = (pfjax.rare_event(data, seed=s, **kw)["controllers"]["sf"]["strata"] for s in (0, 1))
+    assert a[1]["p_fail"] != b[0]["p_fail"], (a, b)
+    top = pfjax.rare_event(
+        data,
+        seed=MAX_SEED,
+        method="is",
+        max_rollouts=600,
+        rare_event__n_per_level=100,
+        rare_event__batch=100,
+        progress=False,
+    )["controllers"]["sf"]
+    assert top["n_rollouts"] <= 600 and 0 < top["p_fail"] < 1
+
+
 # ------------------------------------------------------------------------- plateaus
 
 

@@ -140,6 +140,21 @@ def limit_state(
     return g
 
 
+#: The explore stage's seed is the stratum's plus this (modulo ``2**63``, so that every seed has one).
+EXPLORE_OFFSET = 7919
+
+
+def stratum_seed(seed: int, k: int) -> int:
+    """The seed of stratum ``k``'s draws (its estimator's and its falsifier's) in a study whose
+    ``rare_event.seed`` is ``seed``: ``seed`` itself for the first stratum, so that a study of one
+    stratum draws as the estimator called with ``seed``; for the others a 63-bit seed drawn by
+    NumPy's ``SeedSequence((seed, k))``, so that no stratum shares its draws with a stratum of
+    another seed (with ``seed + k``, seed 0's second stratum would draw seed 1's first)."""
+    if k == 0:
+        return seed
+    return int(np.random.SeedSequence((seed, k)).generate_state(1, np.uint64)[0] >> np.uint64(1))
+
+
 def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict]:
     """The first proposal's centres by ``rare.starts``: ``(points or None, rollouts, detail)``.
 
@@ -164,7 +179,7 @@ def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict
             detail = {"falsifier_rollouts": spent, "falsifier_gradients": grads, "u_star": u_star.tolist()}
             if len(starts):
                 return starts, spent, {"starts": "falsifier", **detail, "start_points": starts.tolist()}
-    starts, used = explore(g, dim, n=rare.n_per_level, seed=seed + 7919, batch=rare.batch)
+    starts, used = explore(g, dim, n=rare.n_per_level, seed=(seed + EXPLORE_OFFSET) % 2**63, batch=rare.batch)
     return (starts if len(starts) else None), spent + used, {"starts": "explore", **detail}
 
 
@@ -353,8 +368,9 @@ def estimate_controller(spec: StudySpec, name: str, controller, *, progress=None
     parts: list[tuple[Stratum, RareEstimate]] = []
     for k, s in enumerate(strata):
         g = limit_state(spec, s, inputs, controller, seed=rare.seed, stream=k, counter=progress)
-        fals = partial(falsifier_points, spec, s, inputs, controller, seed=rare.seed + k)
-        parts.append((s, _estimate(g, dim, rare.method, rare, budget, rare.seed + k, rare.target_rel_error, fals)))
+        seed = stratum_seed(rare.seed, k)
+        fals = partial(falsifier_points, spec, s, inputs, controller, seed=seed)
+        parts.append((s, _estimate(g, dim, rare.method, rare, budget, seed, rare.target_rel_error, fals)))
     p, ci, rel = combine([(s.weight, r) for s, r in parts])
     points, keys = [q for s, r in parts for q in _failure_points(spec, s, inputs, r)], config_keys(spec)
     checks = [(spec.paths[s.path_index].label, r.detail["check"]) for s, r in parts if "check" in r.detail]
