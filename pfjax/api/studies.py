@@ -175,8 +175,9 @@ def rare_event(
     """Each controller's probability of failure under a study's uncertain inputs, down to 1e-6 and
     below, with a 95 % interval (:mod:`pfjax.rare`), as ``pfjax rare-event`` does.
 
-    A run fails where its status is a failure or the study's ``rare_event.metric`` exceeds
-    ``rare_event.threshold`` (default: ``late_max_abs_d`` above ``success.band``, m). The keyword
+    A run fails where its status is a failure or the study's ``rare_event.metric`` reaches
+    ``rare_event.threshold`` (``metric >= threshold``; default: ``late_max_abs_d`` against
+    ``success.band``, m). The keyword
     arguments override the config's ``[rare_event]`` table. The runs are computed in the study's
     ``dtype``, whatever JAX is configured for, as :func:`run_study`'s.
 
@@ -186,7 +187,8 @@ def rare_event(
         method: ``is`` (cross-entropy importance sampling), ``subset`` (subset simulation) or
             ``mc`` (plain Monte Carlo, exact binomial interval).
         target_rel_error: ``is``, ``subset``: stop once the relative error (coefficient of
-            variation) is at most this; plain Monte Carlo (``mc``) runs all of ``max_rollouts``.
+            variation) is at most this; plain Monte Carlo (``mc``) runs all of ``max_rollouts`` (its
+            strata's even shares).
         max_rollouts: rollouts per controller, split evenly over the strata (docs/rare-events.md, *The budget*:
             at least :func:`pfjax.rare.study.rollouts_needed` per stratum, checked before anything is simulated).
         seed: seed of the estimator's draws.

@@ -238,8 +238,8 @@ def falsify(
     ``restarts`` and ``steps`` are checked as a study config's ``[falsifier]`` keys are (``restarts``
     is its ``n_restarts``); ``config`` is a :class:`pfjax.sim.SimConfig` or a dict of its fields.
 
-    Computed in the precision JAX is configured for (float32 unless ``jax_enable_x64``); the
-    command line enables float64, and a caller that does the same gets its numbers.
+    Computed in the precision JAX is configured for (float32 unless ``jax_enable_x64``); a study's
+    worst-case search (``[falsifier]`` of ``pfjax study``) runs in the study's ``dtype``.
 
     Args:
         controller: a registered controller or design (the command line's spellings too).

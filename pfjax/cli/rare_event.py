@@ -50,7 +50,7 @@ def register(sub) -> None:
         type=float,
         default=None,
         help="is, subset: stop at this relative error (default: the config's rare_event.target_rel_error, else "
-        "0.1); plain Monte Carlo (mc) runs all of --max-rollouts",
+        "0.1); plain Monte Carlo (mc) runs all of --max-rollouts (its strata's even shares)",
     )
     p.add_argument(
         "--max-rollouts",

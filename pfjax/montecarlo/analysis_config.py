@@ -100,7 +100,7 @@ class RareEventSpec(ConfigModel):
         gt=0,
         le=10,
         description="is, subset: stop once the estimate's relative error (c.o.v.) is at most this "
-        "(mc runs all of max_rollouts)",
+        "(mc runs all of max_rollouts, its strata's even shares)",
     )
     max_rollouts: int = Field(
         100_000,

@@ -195,9 +195,9 @@ def computed_once_pair(a, b, x):
     cannot fold it away (``x == x`` is false only for NaN, and then ``a`` and ``b`` are NaN anyway):
     one kernel computes both, the others read them. The division is exact (``r = 0/1``), so values
     and derivatives are unchanged; it costs one complex division. Measured on the benchmark (B = 10^5,
-    blocks of 10^4): float64 12.0 -> 17.4 M rollout-steps/s, float32 47.0 -> 49.8 (README,
-    Performance). CPU only: XLA's GPU backend fuses several outputs into one kernel by itself, and
-    there the complex division cost 15-19 % of the float64 throughput (H100, measured).
+    blocks of 10^4): float64 12.0 -> 17.4 M rollout-steps/s, float32 47.0 -> 49.8. CPU only: XLA's
+    GPU backend fuses several outputs into one kernel by itself, and there the complex division
+    cost 14-19 % of the float64 throughput (H100; docs/performance.md, *On a GPU*).
     """
     return jax.lax.platform_dependent(a, b, x, cpu=_divided_by_one, default=lambda a, b, x: (a, b))
 
