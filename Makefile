@@ -40,8 +40,10 @@ test: $(STAMP)
 # the notebooks executed and rendered (mkdocs-jupyter). --strict: a broken link, a missing page or
 # reference, or a docstring warning fails the build. The test suite builds it too (without
 # executing the notebooks, which tests/test_notebooks.py runs).
+# The notebooks' temporary outputs (notebook 02's study) go to a directory removed after the build.
 docs: $(STAMP)
-	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
+	tmp=$$(mktemp -d) && NO_MKDOCS_2_WARNING=1 TMPDIR=$$tmp $(VENV)/bin/mkdocs build --strict; \
+		rc=$$?; rm -rf $$tmp; exit $$rc
 
 # Lint and types (also run by the test suite, tests/test_lint.py); the rules are in pyproject.toml.
 LINT_TARGETS := pfjax studies tests docs/hooks.py
