@@ -609,12 +609,15 @@ def test_a_missing_argument_is_named():
         (lambda out: (out / "summary.json").write_text((out / "summary.json").read_text() + " "), "changed after"),
         (lambda out: pd.read_parquet(out / "runs.parquet").head(2).to_parquet(out / "runs.parquet"), "changed after"),
         (lambda out: (out / "runs.parquet").unlink(), "is missing (the study wrote it)"),
-        (lambda out: (out / ".pfjax-output.json").unlink(), "holds no finished study (no output marker"),
+        (
+            lambda out: (out / ".pfjax-output.json").unlink(),
+            "holds no finished study (no .pfjax-output.json of pfjax study)",
+        ),
         (
             lambda out: (out / ".pfjax-output.json").write_text(
                 (out / ".pfjax-output.json").read_text().replace('"command": "study"', '"command": "tune"')
             ),
-            "holds no finished study (the output of pfjax tune",
+            "holds no finished study (the output of pfjax tune is there)",
         ),
     ],
     ids=["summary-edited", "runs-cut", "runs-deleted", "no-marker", "another-command"],
@@ -676,7 +679,9 @@ def test_run_study_takes_any_path_like_config(tmp_path):
     from pfjax.api.studies import _study_spec
 
     toml = tmp_path / "s.toml"
-    toml.write_text('name = "s"\nn_runs = 3\nseed = 0\n[[paths]]\nkind = "line"\n[[controllers]]\nname = "a"\ntype = "pi"\n')
+    toml.write_text(
+        'name = "s"\nn_runs = 3\nseed = 0\n[[paths]]\nkind = "line"\n[[controllers]]\nname = "a"\ntype = "pi"\n'
+    )
     assert _study_spec(PurePosixPath(toml), {}).n_runs == 3
 
 

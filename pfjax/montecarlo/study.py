@@ -340,10 +340,10 @@ def read_study(
     out = Path(out)
     marker = read_marker(out)
     if marker is None or marker.get("command") != "study":
-        what = "no output marker" if marker is None else f"the output of pfjax {marker.get('command')}"
-        raise InputError(
-            f"{flag}: {out} holds no finished study ({what}: {MARKER} of pfjax study); run the study first", flag
+        what = (
+            f"no {MARKER} of pfjax study" if marker is None else f"the output of pfjax {marker.get('command')} is there"
         )
+        raise InputError(f"{flag}: {out} holds no finished study ({what}); run the study first", flag)
     _unchanged_inputs(out, flag, reader)
     summary, runs = read_finished(out, flag)
     margin = None
