@@ -162,3 +162,40 @@ def test_the_study_script_names_its_out_flag_in_the_whole_refusal(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert r.stderr.startswith("parking: error: --out: ") and "choose another --out" in r.stderr, r.stderr
     assert [p.name for p in mine.iterdir()] == ["notes.txt"]
+
+
+@pytest.mark.parametrize(
+    "override, key",
+    [
+        ("controller.k1=1e-300", "controller.k1"),
+        ("sim.t_max=1e-300", "sim.t_max"),
+        ("sim.front=1e-300", "sim.front"),
+        ("sim.scan_period=100", "sim.scan_period"),
+        ("montecarlo.scan_hi=100", "montecarlo.scan_hi"),
+        ("montecarlo.speed_lo=1e-300", "montecarlo.speed_lo"),
+    ],
+)
+def test_the_study_config_refuses_what_the_command_line_refuses(override, key):
+    """Positive values at least 1e-12 and scanner periods at most MAX_SCAN_PERIOD, as pfjax parking
+    takes them (docs/studies.md): one line naming the key."""
+    from pfjax.config import ConfigError
+    from pfjax.parking.study_config import load
+
+    with pytest.raises(ConfigError) as e:
+        load(None, [override], quick=True)
+    assert str(e.value).startswith(f"{key}: ") and "\n" not in str(e.value), str(e.value)
+
+
+def test_a_scanner_period_longer_than_the_run_is_refused_everywhere(capsys):
+    """One RK4 step of a 10 s period would run a 0.01 s run to 5 s: refused, naming the period."""
+    from pfjax.config import ConfigError
+    from pfjax.parking.study_config import load
+
+    rc, _, err = cli(capsys, "parking", "--horizon", "0.01", "--scan-period", "10", "--json")
+    assert rc == 2 and err.strip().splitlines()[-1].startswith(
+        "pfjax parking: error: --scan-period: must be <= --horizon"
+    )
+    with pytest.raises(InputError, match=r"^scan_period: must be <= t_max"):
+        parking.run(t_max=0.01, scan_period=10.0)
+    with pytest.raises(ConfigError, match=r"^sim.scan_period: must be <= t_max"):
+        load(None, ["sim.t_max=0.05", "sim.scan_period=0.1"], quick=True)

@@ -51,3 +51,30 @@ def test_offset_mapping_refused(monkeypatch):
     with pytest.raises(InputError) as e:
         api.run(offset={1: 2, 3: 4})
     assert e.value.key == "offset" and str(e.value).startswith("offset: expected two numbers")
+
+
+@pytest.mark.parametrize(
+    "override, key",
+    [("lemma.offsets=[[60.0, 0.0]]", "lemma.offsets[0]"), ("mc.offset_max=100", "mc.offset_max")],
+)
+def test_the_study_config_checks_offsets_as_pfjax_track_does(override, key):
+    """A start 50 m or more from the leading vehicle's start point would end at once as diverged:
+    refused in a study config too, naming the key (the one check, api.check_offset)."""
+    from pfjax.config import ConfigError
+    from pfjax.tracking.study_config import load
+
+    with pytest.raises(ConfigError) as e:
+        load(None, [override], quick=True)
+    assert str(e.value).startswith(f"{key}: must start less than 50 m"), str(e.value)
+    assert load(None, ["mc.offset_max=35"], quick=True).mc.offset_max == 35  # 35 sqrt(2) = 49.5 m
+
+
+@pytest.mark.parametrize(
+    "argv", [["track", "--horizon", "10", "--T", "20"], ["parking", "--horizon", "5", "--t-max", "6"]]
+)
+def test_a_flag_and_its_deprecated_spelling_together_are_refused(capsys, argv):
+    """Which one won was argparse's order: refused, naming both."""
+    with pytest.raises(SystemExit) as e:
+        main([*argv, "--json"])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert e.value.code == 2 and "not with" in err and argv[1] in err and argv[3] in err, err

@@ -39,7 +39,8 @@ class Aliased(argparse._StoreAction):
         p.add_argument("--horizon", "--T", action=Aliased, dest="horizon", type=float, default=20.0,
                        help="horizon, s (default 20)")
 
-    ``--help`` lists the canonical flag first and adds ``(--T: deprecated spelling)``."""
+    ``--help`` lists the canonical flag first and adds ``(--T: deprecated spelling)``; both
+    spellings on one command line are a usage error naming them."""
 
     def __init__(self, option_strings, dest, help=None, **kwargs):
         old = list(option_strings[1:])
@@ -48,6 +49,13 @@ class Aliased(argparse._StoreAction):
         super().__init__(option_strings, dest, help=help, **kwargs)
 
     def __call__(self, parser, namespace, values, option_string=None):
+        # both spellings on one command line: which one wins would be argparse's order, not the user's
+        earlier = getattr(self, "_given", None)
+        if earlier is not None and earlier[0] is namespace and earlier[1] != option_string:
+            parser.error(
+                f"{option_string}: not with {earlier[1]} (two spellings of one setting); give {self.option_strings[0]} once"
+            )
+        self._given = (namespace, option_string)
         if option_string is not None and option_string != self.option_strings[0]:
             from pfjax.errors import deprecated
 

@@ -25,7 +25,7 @@ from typing import Any, NamedTuple
 
 from pfjax import errors
 from pfjax.errors import InputError
-from pfjax.parking.limits import MAX_PERIODS, check_periods
+from pfjax.parking.limits import MAX_PERIODS, MAX_SCAN_PERIOD, check_periods
 
 __all__ = ["run", "search"]
 
@@ -40,8 +40,6 @@ METHODS = ("ga", "grid")
 #: about 2 minutes and this limit about 3; ``n = 64`` at the defaults (5.2e8) and a GA of
 #: 1,000 x 1,000 (2e9) are refused.
 MAX_SEARCH_PERIODS = 10**8
-#: Longest scanner period, s.
-MAX_SCAN_PERIOD = 10.0
 #: The scanner period of :func:`run` and :func:`search` unless given, s (the source's).
 DEFAULT_SCAN_PERIOD = 0.1
 #: Garage rule of :func:`run` on the built-in garage: switch back to forward when backing past this x, m.

@@ -11,8 +11,9 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from pfjax.config import ConfigModel, Real, load_model
+from pfjax.config import POSITIVE, ConfigModel, Real, load_model
 from pfjax.errors import MAX_SEED
+from pfjax.parking.limits import MAX_SCAN_PERIOD
 from pfjax.resources import MAX_GENERATIONS, MAX_POPULATION
 
 #: a part of the robot's rectangle checked toward the travel direction (pfjax.parking.assumptions.ZONES)
@@ -22,17 +23,17 @@ Zone = Literal["middle", "axle", "whole"]
 class Controller(ConfigModel):
     """The source's controller: gains k1, k2 (roots -4 ± 4i) and travel speed |v1|."""
 
-    k1: Real = Field(32.0, gt=0, description="gain on the lateral error [1/m²]")
-    k2: Real = Field(8.0, gt=0, description="gain on the heading error [1/m]")
-    speed: Real = Field(0.05, gt=0, description="travel speed |v1| [m/s]")
+    k1: Real = Field(32.0, ge=POSITIVE, description="gain on the lateral error [1/m²]")
+    k2: Real = Field(8.0, ge=POSITIVE, description="gain on the heading error [1/m]")
+    speed: Real = Field(0.05, ge=POSITIVE, description="travel speed |v1| [m/s]")
 
 
 class Sim(ConfigModel):
     """Single runs: scanner period, timeout, tolerance, integration and the stuck test."""
 
-    scan_period: Real = Field(0.1, gt=0, description="scanner sampling period [s]")
-    t_max: Real = Field(200.0, gt=0, description="timeout of a run [s]")
-    tol: Real = Field(0.02, gt=0, description="stop when |x| + sqrt(y² + tan²θ) < tol [m]")
+    scan_period: Real = Field(0.1, ge=POSITIVE, le=MAX_SCAN_PERIOD, description="scanner sampling period [s]")
+    t_max: Real = Field(200.0, ge=POSITIVE, description="timeout of a run [s]")
+    tol: Real = Field(0.02, ge=POSITIVE, description="stop when |x| + sqrt(y² + tan²θ) < tol [m]")
     n_sub: int = Field(2, ge=1, le=100, description="RK4 steps per scanner period, at most 100 [-]")
     front: Real = Field(0.0, ge=0, lt=0.54, description="a_f, reach ahead of the axle; 0 = calibrated [m]")
     chunk: int = Field(1024, ge=1, le=10_000_000, description="runs per jitted batch (memory-checked) [-]")
@@ -45,6 +46,8 @@ class Sim(ConfigModel):
     def _steps(self):
         from pfjax.parking.limits import check_periods
 
+        if 0 < self.front < POSITIVE:  # 0 is the calibrated reach; any other as pfjax parking --front takes it
+            raise ValueError(f"front: must be 0 (calibrated) or at least {POSITIVE:g} m, got {self.front:g}")
         check_periods("scan_period", self.t_max, self.scan_period)
         return self
 
@@ -123,10 +126,10 @@ class MonteCarlo(ConfigModel):
     n_runs: int = Field(1000, ge=1, description="sampled runs per schedule (work-checked) [-]")
     pos_scatter: Real = Field(0.05, ge=0, description="half-width of the uniform scatter of x0 and y0 [m]")
     theta_scatter_deg: Real = Field(5.0, ge=0, description="half-width of the uniform scatter of θ0 [deg]")
-    scan_lo: Real = Field(0.05, gt=0, description="smallest scanner period [s]")
-    scan_hi: Real = Field(0.2, gt=0, description="largest scanner period [s]")
-    speed_lo: Real = Field(0.04, gt=0, description="smallest travel speed [m/s]")
-    speed_hi: Real = Field(0.06, gt=0, description="largest travel speed [m/s]")
+    scan_lo: Real = Field(0.05, ge=POSITIVE, description="smallest scanner period [s]")
+    scan_hi: Real = Field(0.2, ge=POSITIVE, le=MAX_SCAN_PERIOD, description="largest scanner period [s]")
+    speed_lo: Real = Field(0.04, ge=POSITIVE, description="smallest travel speed [m/s]")
+    speed_hi: Real = Field(0.06, ge=POSITIVE, description="largest travel speed [m/s]")
     lag_probability: Real = Field(0.5, ge=0, le=1, description="probability of the yaw-rate lag [-]")
 
     @model_validator(mode="after")
@@ -164,7 +167,8 @@ class ParkingStudy(ConfigModel):
 
         t_max = self.sim.t_max
         periods = [(f"assumptions.scan_periods[{i}]", p) for i, p in enumerate(self.assumptions.scan_periods)]
-        for key, period in [*periods, ("montecarlo.scan_lo", self.montecarlo.scan_lo)]:
+        mc = [("montecarlo.scan_lo", self.montecarlo.scan_lo), ("montecarlo.scan_hi", self.montecarlo.scan_hi)]
+        for key, period in [*periods, *mc]:
             check_periods(key, t_max, period)
         se, sm, scan = self.search, self.start_map, self.sim.scan_period
         n = se.grid_n

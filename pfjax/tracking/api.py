@@ -24,6 +24,21 @@ MODES = ("forward", "backward")
 LEADERS = ("line", "circle", "sine", "lane-change")
 
 
+def check_offset(key: str, distance: float) -> None:
+    """:class:`InputError` naming ``key`` when a start ``distance`` m from the leading vehicle's
+    start point reaches ``TrackConfig.z_fail``: the run would end at once as diverged. The one
+    check of :func:`run`'s ``offset`` and the study config's (``lemma.offsets``, ``mc.offset_max``)."""
+    from pfjax.tracking.simulate import TrackConfig
+
+    z_fail = TrackConfig.z_fail
+    if distance >= z_fail:
+        raise InputError(
+            f"{key}: must start less than {z_fail:g} m from the leading vehicle's start point (a run whose "
+            f"tracking error passes {z_fail:g} m ends as diverged), got {distance:g} m",
+            key,
+        )
+
+
 def nonzero(key: str, value: float, symbol: str) -> float:
     """``value``, or :class:`InputError` naming ``key`` when it is 0 or smaller in magnitude than
     :data:`pfjax.errors.MIN_POSITIVE`: the input matrix ``M`` is singular at ``p = 0`` and at
@@ -132,15 +147,7 @@ def _check(
         out[key] = errors.number(key, v, positive=True)
     out["stop_and_go"] = _depth(stop_and_go)
     out["offset"] = _pair("offset", offset)
-    from pfjax.tracking.simulate import TrackConfig
-
-    z_fail = TrackConfig.z_fail
-    if math.hypot(*out["offset"]) >= z_fail:  # the run would end at once as diverged
-        raise InputError(
-            f"offset: must be less than {z_fail:g} m from the start on the leader (a run whose tracking error "
-            f"passes {z_fail:g} m ends as diverged), got {math.hypot(*out['offset']):g} m",
-            "offset",
-        )
+    check_offset("offset", math.hypot(*out["offset"]))
     out["heading_error_deg"] = errors.number("heading_error_deg", heading_error_deg)
     out["beta_r_deg"] = errors.number("beta_r_deg", beta_r_deg, below=90, unit=" deg")
     out["beta_f_deg"] = errors.number("beta_f_deg", beta_f_deg, below=90, unit=" deg")
@@ -205,7 +212,8 @@ def run(
     Returns:
         The dict ``pfjax track --json`` prints: the arguments used (``mode``, ``f``, ``p``, ``l``,
         ``gamma_max_deg``, ``leader``); the outcome (``converged``, ``phi_converged``, ``status``,
-        ``status_code``, ``fail_time`` in s or None); the errors (``final_error_norm``, m;
+        ``status_code``, ``fail_time`` in s or None); the errors, of a failed run at its last step
+        before the failure, as every metric (``final_error_norm``, m;
         ``final_phi_minus_pgamma``, rad; ``window_max_z``, m; ``window_max_phi_err``,
         rad; ``iae``, m s; ``final_d``, m); the steering (``max_abs_gamma_deg``, deg;
         ``limit_fraction``; ``min_abs_factor``); Lemma 8.1 (``lemma_p_bound``,

@@ -60,7 +60,10 @@ COLUMNS: dict[str, tuple[str, str]] = {
         UNITS["window_max_phi_err"],
         "largest |phi - p gamma| over the final window (NaN: the run failed)",
     ),
-    "final_error_norm": (UNITS["final_error_norm"], "|z~| at the end of the run (or at its failure)"),
+    "final_error_norm": (
+        UNITS["final_error_norm"],
+        "|z~| at the end of the run (a failed run: at its last step before the failure)",
+    ),
     "final_phi_minus_pgamma": (UNITS["final_phi_minus_pgamma"], "phi - p gamma at the end of the run"),
     "final_d": (UNITS["final_d"], "signed length d of the virtual connection at the end of the run"),
     "min_abs_factor": (UNITS["min_abs_factor"], "smallest |det M / (l p)| met"),

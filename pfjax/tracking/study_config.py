@@ -11,6 +11,7 @@ before any work.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated
@@ -20,7 +21,7 @@ from pydantic import Field, model_validator
 from pfjax.config import POSITIVE, ConfigError, ConfigModel, Real, load_model
 from pfjax.errors import MAX_SEED, InputError
 from pfjax.resources import check_memory
-from pfjax.tracking.api import MAX_STEPS, check_time, nonzero
+from pfjax.tracking.api import MAX_STEPS, check_offset, check_time, nonzero
 
 #: an (along, left) offset in metres
 Pair = Annotated[list[Real], Field(min_length=2, max_length=2)]
@@ -104,6 +105,8 @@ class TrackLemma(ConfigModel):
             nonzero("p", v, "p")
         if not all(0 < g < 90 for g in self.gamma_max_deg):
             raise ValueError(f"gamma_max_deg: expected values in (0, 90) deg, got {self.gamma_max_deg}")
+        for i, (along, left) in enumerate(self.offsets):
+            check_offset(f"offsets[{i}]", math.hypot(along, left))
         return self
 
 
@@ -128,6 +131,7 @@ class TrackMC(ConfigModel):
     def _check(self):
         nonzero("p_forward", self.p_forward, "p")
         nonzero("p_backward", self.p_backward, "p")
+        check_offset("offset_max", math.hypot(self.offset_max, self.offset_max))  # the sample's farthest corner
         if self.speed_high < self.speed_low:
             raise ValueError(f"speed_high: must be >= speed_low ({self.speed_low:g}), got {self.speed_high:g}")
         return self
