@@ -7,10 +7,12 @@ study scripts) writes them through :class:`OutputDir`:
 
    - it may not exist yet, or be an empty directory;
    - or it is a directory pfjax wrote: it holds the marker file ``.pfjax-output.json`` (the
-     command, config hash, pfjax version, time, and every file pfjax wrote there with its size and
-     modification time). It is replaced when it holds the output of the same command and config (a
-     re-run); another command's or config's output is replaced only with ``overwrite=True``
-     (``--overwrite``), and so is one whose files changed since pfjax wrote them;
+     command, config hash, pfjax version, time, and every file pfjax wrote there with its size,
+     modification time and SHA-256). It is replaced when it holds the output of the same command
+     and config (a re-run); another command's or config's output is replaced only with
+     ``overwrite=True`` (``--overwrite``), and so is one whose files changed since pfjax wrote them
+     (:func:`as_written`: a file of another size or contents; one copied with new times, by ``cp
+     -r`` or an archive, is unchanged);
    - anything else is refused: a file, a symbolic link, a non-empty directory without the marker,
      the current directory or one that contains it, the home directory, a filesystem root, a path
      ending in ``.`` or ``..``, and, even with ``overwrite``, a marked directory that also holds
@@ -45,6 +47,7 @@ study scripts) writes them through :class:`OutputDir`:
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -73,7 +76,7 @@ __all__ = [
 
 MARKER = ".pfjax-output.json"
 #: Version of the marker's format (its ``format`` field).
-MARKER_FORMAT = 1
+MARKER_FORMAT = 2
 STAGING = "pfjax-staging"
 _OLD = "pfjax-old"
 #: The file that marks a temporary directory as pfjax's (:func:`temporary_dir`).
@@ -107,11 +110,28 @@ def read_marker(directory: Path) -> dict | None:
     return m
 
 
-def as_written(listed: dict, name: str, st: os.stat_result) -> bool:
-    """Whether file ``name`` (its ``stat``) is as pfjax wrote it: its size and modification time
-    those of the marker's ``files`` entry (``listed``)."""
+def file_sha256(path) -> str:
+    """The SHA-256 of a file's contents, hex (read in blocks of 1 MiB)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def as_written(listed: dict, name: str, st: os.stat_result, path=None) -> bool:
+    """Whether file ``name`` (its ``stat``; ``path``, the file itself) is as pfjax wrote it, by the
+    marker's ``files`` entry (``listed``: ``[size, mtime_ns, sha256]``; a marker of format 1 has no
+    hash): the same size, and the same modification time or, where the time differs (a copy made
+    with new times, an archive extracted), the same contents. A file of the same size and time is
+    taken as written without reading it."""
     entry = listed.get(name)
-    return isinstance(entry, list) and entry == [st.st_size, st.st_mtime_ns]
+    if not isinstance(entry, list) or len(entry) < 2 or entry[0] != st.st_size:
+        return False
+    if entry[1] == st.st_mtime_ns:
+        return True
+    digest = entry[2] if len(entry) > 2 else None
+    return isinstance(digest, str) and path is not None and stat.S_ISREG(st.st_mode) and file_sha256(path) == digest
 
 
 def _entries(directory: Path) -> tuple[dict[str, os.stat_result], set[str]]:
@@ -265,7 +285,7 @@ def _check_contents(
             f"away or choose another {flag} (pfjax never deletes what it did not write)",
             flag,
         )
-    changed = [f for f, st in files.items() if not as_written(listed, f, st)]
+    changed = [f for f, st in files.items() if not as_written(listed, f, st, resolved / f)]
     if not overwrite:
         advice = switch_advice(flag, "overwrite")
         if changed:
@@ -387,7 +407,7 @@ class OutputDir:
         for rel in listed:
             src = self.target / rel
             if keep(rel) and src.is_file() and not src.is_symlink():
-                if not as_written(listed, rel, src.lstat()):
+                if not as_written(listed, rel, src.lstat(), src):
                     self._kept_changed.add(rel)
                 dst = self.staging / rel
                 dst.parent.mkdir(parents=True, exist_ok=True)
@@ -411,7 +431,9 @@ class OutputDir:
             "pfjax_version": _version(),
             "written": now_utc(),
             "files": {
-                f: [st.st_size, st.st_mtime_ns] for f, st in sorted(files.items()) if f not in self._kept_changed
+                f: [st.st_size, st.st_mtime_ns, file_sha256(staging / f)]
+                for f, st in sorted(files.items())
+                if f not in self._kept_changed
             },
             "dirs": sorted(dirs),
         }

@@ -635,6 +635,25 @@ def test_load_study_reads_only_the_studys_own_files(finished, tmp_path, edit, me
     assert message in msg and "--out" not in msg, msg
 
 
+def test_a_study_copied_with_new_times_is_still_the_studys_own(finished, tmp_path):
+    """cp -r, an archive extracted: new modification times, the same contents (the marker's
+    SHA-256). load_study, replay and pfjax report read it; a re-run into it needs no overwrite."""
+    import shutil
+
+    from pfjax.montecarlo.config import load_study
+    from pfjax.montecarlo.study import rewrite_report
+
+    out = tmp_path / "copy"
+    shutil.copytree(finished, out, copy_function=shutil.copy)  # contents only: times are new
+    marker = json.loads((out / ".pfjax-output.json").read_text())
+    assert any(marker["files"][f.name][1] != f.stat().st_mtime_ns for f in out.iterdir() if f.name in marker["files"])
+    assert pfjax.load_study(out).summary == pfjax.load_study(finished).summary
+    row = pfjax.load_study(out).runs.iloc[0]
+    assert pfjax.replay(out, row.path, row.controller, [int(row.run)]).table.iae[0] == row.iae
+    rewrite_report(out, load_study(data=TINY)[0])  # no overwrite needed: the study's own output
+    assert (out / "report.html").is_file()
+
+
 def test_report_on_an_edited_summary_says_to_re_run_the_study_first(finished, tmp_path):
     """The real way out, not --overwrite (which is then refused for the same file)."""
     import shutil

@@ -2,6 +2,7 @@
 replaces its own outputs whole, holds one writer per output, and leaves nothing behind that a
 later run does not clean up. With real processes for the lock, Ctrl-C and kills."""
 
+import io
 import json
 import os
 import shutil
@@ -26,6 +27,7 @@ from pfjax.outputs import (
     TEMP_MARK,
     OutputBusy,
     OutputDir,
+    as_written,
     check_name,
     check_target,
     mark_temporary,
@@ -478,10 +480,17 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
         # the file as the study wrote it (its time too), so that the study's own files are checked next
         (out / name).write_bytes(saved)
         os.utime(out / name, ns=(st.st_atime_ns, st.st_mtime_ns))
-        # edited but readable: never built from, nor recorded as pfjax's by --overwrite
-        (out / name).write_bytes(saved)
+        # edited but readable (the same table or summary written anew, other bytes): never built
+        # from, nor recorded as pfjax's by --overwrite
+        if name == "summary.json":
+            (out / name).write_text(json.dumps(json.loads(saved), indent=2))
+        else:
+            pd.read_parquet(io.BytesIO(saved)).to_parquet(out / name, compression="gzip")
         code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)
         assert code == EXIT_USAGE and f"{name} changed after the study wrote it" in err[0], err
+        # the same bytes with a new time (a copy): the study's own file
+        (out / name).write_bytes(saved)
+        assert as_written(read_marker(out)["files"], name, (out / name).stat(), out / name)
         os.utime(out / name, ns=(st.st_atime_ns, st.st_mtime_ns))
     (out / "runs.parquet").unlink()
     code, err = _cli(["report", str(study_toml), "--out", str(out), "--overwrite"], capsys)

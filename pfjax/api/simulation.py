@@ -101,6 +101,10 @@ def simulate(
             (``lmi``) is designed at the runs' mean speed and wheelbase.
         config: a :class:`pfjax.sim.SimConfig` or a dict of its fields (``horizon``, s; ``dt``, s;
             ``success_band``, m; ...; not ``record``: that is ``trajectories``); default 20 s at 5 ms.
+            Runs of the single-track models (``scenarios(model="st" | "std")``) without a ``dt``
+            take the largest stable step of 0.005, 0.002, 0.001, 0.0005, ... s for the runs' worst
+            case (:func:`pfjax.models.single_track.stable_step`), as ``pfjax simulate --model``
+            does.
         trajectories: ``True`` also records every run's trajectory (memory grows with the horizon).
 
     Computed in the precision JAX is configured for (float32 unless ``jax_enable_x64``); the command
@@ -134,6 +138,7 @@ def simulate(
     trajectories = errors.boolean("trajectories", trajectories)
     if isinstance(config, dict) and "record" in config:  # one way to ask for trajectories, not two
         raise errors.InputError("config.record: pass trajectories=True to record the runs", "config.record")
+    dt_given = isinstance(config, SimConfig) or (isinstance(config, dict) and "dt" in config)
     config = dataclasses.replace(sim_config(config, SimConfig()), record=trajectories)
     t = scenarios.table
     if scenarios.spec.vehicle.model in ("st", "std") and config.control_every is None:
@@ -143,11 +148,13 @@ def simulate(
             "config.control_every",
         )
     if scenarios.spec.vehicle.model in ("st", "std"):
-        from pfjax.models.single_track import check_step, with_mu
+        from pfjax.models.single_track import check_step, stable_step, with_mu
 
         veh = scenarios.spec.vehicle
         params = with_mu(veh.model_params(), float(t["mu"].max()))
         v_lo = float(t["speed"].min())
+        if not dt_given:  # the step pfjax simulate --model takes without --dt, for the runs' worst case
+            config = dataclasses.replace(config, dt=stable_step(params, v_lo, veh.tau_delta_s, veh.k_v))
         check_step("config.dt", config.dt, params, v_lo, veh.tau_delta_s, veh.k_v, worst_case="the runs' worst case")
     params, flat = resolve_gains(e, d, gains, float(t["speed"].mean()), float(t["L"].mean()))
     n = scenarios.n

@@ -305,7 +305,8 @@ def read_finished(out, flag: str = "--out") -> tuple[dict, pd.DataFrame]:
 def _unchanged_inputs(out: Path, flag: str = "--out", reader: str = "a report is built from") -> None:
     """:class:`~pfjax.errors.InputError` naming ``flag`` if a file the report is built from
     (``summary.json``, ``runs.parquet``, ``margin.parquet``) is missing or changed after the study wrote it
-    (its size or time differs from the output marker's): a report follows from the study's own
+    (:func:`pfjax.outputs.as_written`: its size or contents differ from the output marker's; a copy
+    with new times is unchanged): a report follows from the study's own
     files, and ``--overwrite`` would otherwise record the edited file as pfjax's. ``reader``: who
     reads them, in the message (``pfjax.load_study reads``)."""
     from pfjax.errors import InputError
@@ -319,7 +320,7 @@ def _unchanged_inputs(out: Path, flag: str = "--out", reader: str = "a report is
                 f"{flag}: {f} is missing (the study wrote it); {reader} the study's own files: re-run the study",
                 flag,
             )
-        if f.is_file() and not as_written(listed, name, f.stat()):
+        if f.is_file() and not as_written(listed, name, f.stat(), f):
             raise InputError(
                 f"{flag}: {f} changed after the study wrote it; {reader} the study's own files: re-run the study",
                 flag,
