@@ -532,10 +532,11 @@ def test_no_stratum_shares_its_draws_with_a_stratum_of_another_seed():
     strata are the same case, their estimates were equal), and the largest seed has strata and an
     explore stage too."""
     from pfjax.errors import MAX_SEED
-    from pfjax.rare.study import stratum_seed
+    from pfjax.rare.study import explore_seed, stratum_seed
 
     seeds = {stratum_seed(s, k) for s in [*range(100), MAX_SEED] for k in range(8)}
-    assert len(seeds) == 808 and all(0 <= x <= MAX_SEED for x in seeds)
+    seeds |= {explore_seed(stratum_seed(s, k)) for s in [*range(100), MAX_SEED] for k in range(8)}
+    assert len(seeds) == 2 * 808 and all(0 <= x <= MAX_SEED for x in seeds)  # the explore stage's too
     assert [stratum_seed(s, 0) for s in range(100)] == list(range(100))
     data = line_study(4.0)  # p about 0.14: the failure count of 200 draws tells two streams apart
     data["initial"] = {"start_along_m": {"dist": "choice", "values": [0.0, 1.0]}}

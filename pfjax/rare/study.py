@@ -140,10 +140,6 @@ def limit_state(
     return g
 
 
-#: The explore stage's seed is the stratum's plus this (modulo ``2**63``, so that every seed has one).
-EXPLORE_OFFSET = 7919
-
-
 def stratum_seed(seed: int, k: int) -> int:
     """The seed of stratum ``k``'s draws (its estimator's and its falsifier's) in a study whose
     ``rare_event.seed`` is ``seed``: ``seed`` itself for the first stratum, so that a study of one
@@ -152,7 +148,23 @@ def stratum_seed(seed: int, k: int) -> int:
     another seed (with ``seed + k``, seed 0's second stratum would draw seed 1's first)."""
     if k == 0:
         return seed
-    return int(np.random.SeedSequence((seed, k)).generate_state(1, np.uint64)[0] >> np.uint64(1))
+    return _derived(seed, k)
+
+
+def explore_seed(seed: int) -> int:
+    """The seed of the explore stage's draws for an estimate seeded ``seed`` (a stratum's,
+    :func:`stratum_seed`): a 63-bit seed drawn by ``SeedSequence((seed, EXPLORE))``, so that it is
+    no estimator's seed of another study (``seed + c`` would be seed ``seed + c``'s)."""
+    return _derived(seed, EXPLORE)
+
+
+#: The second entropy word of the explore stage's :class:`numpy.random.SeedSequence` (a stratum's is
+#: its index, below 10⁸ strata).
+EXPLORE = 2**32 - 1
+
+
+def _derived(seed: int, word: int) -> int:
+    return int(np.random.SeedSequence((seed, word)).generate_state(1, np.uint64)[0] >> np.uint64(1))
 
 
 def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict]:
@@ -179,7 +191,7 @@ def _starts(g, dim, rare, seed, falsifier) -> tuple[np.ndarray | None, int, dict
             detail = {"falsifier_rollouts": spent, "falsifier_gradients": grads, "u_star": u_star.tolist()}
             if len(starts):
                 return starts, spent, {"starts": "falsifier", **detail, "start_points": starts.tolist()}
-    starts, used = explore(g, dim, n=rare.n_per_level, seed=(seed + EXPLORE_OFFSET) % 2**63, batch=rare.batch)
+    starts, used = explore(g, dim, n=rare.n_per_level, seed=explore_seed(seed), batch=rare.batch)
     return (starts if len(starts) else None), spent + used, {"starts": "explore", **detail}
 
 
