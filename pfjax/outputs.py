@@ -86,6 +86,12 @@ TEMP_MARK = ".pfjax-temporary"
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
 
 
+def default_target(name: str, out=None) -> Path:
+    """The directory an output goes to: ``out``, else ``results/<name>`` under the current
+    directory (every command, study script and API function that writes a named output)."""
+    return Path("results") / name if out is None else Path(out)
+
+
 def check_name(key: str, name) -> str:
     """A study or output name used as a directory name: 1-100 characters, a letter or digit first,
     then letters, digits, ``_``, ``.`` or ``-`` (so never ``.``, ``..``, empty, hidden, or with a

@@ -611,13 +611,13 @@ def test_a_missing_argument_is_named():
         (lambda out: (out / "runs.parquet").unlink(), "is missing (the study wrote it)"),
         (
             lambda out: (out / ".pfjax-output.json").unlink(),
-            "holds no finished study (no .pfjax-output.json of pfjax study)",
+            "no finished study in",
         ),
         (
             lambda out: (out / ".pfjax-output.json").write_text(
                 (out / ".pfjax-output.json").read_text().replace('"command": "study"', '"command": "tune"')
             ),
-            "holds no finished study (the output of pfjax tune is there)",
+            "(the output of pfjax tune)",
         ),
     ],
     ids=["summary-edited", "runs-cut", "runs-deleted", "no-marker", "another-command"],

@@ -250,9 +250,28 @@ def test_stable_step_is_the_largest_of_the_series_within_the_bound(model):
 
 
 def test_api_checks_the_simulation_step_against_the_tyre_modes():
+    """A step given is checked; none given, the largest stable one of the series is taken for the
+    runs' worst case, as pfjax simulate --model st takes it without --dt."""
     runs = pfjax.scenarios("line", n=2, model="st", mu=10.0)  # the step is simulate's
     with pytest.raises(InputError, match=r"^config\.dt: the ST model at mu = 10 "):
-        pfjax.simulate(runs, "stanley", config={"horizon": 1.0})
+        pfjax.simulate(runs, "stanley", config={"horizon": 1.0, "dt": 0.005})
+    r = pfjax.simulate(runs, "stanley", config={"horizon": 1.0})
+    assert (r.table["status"] == "ok").all()
+    code, out, _ = _main(
+        "simulate",
+        "--model",
+        "st",
+        "--mu",
+        "10",
+        "--path",
+        "line",
+        "--controller",
+        "stanley",
+        "--horizon",
+        "1",
+        "--json",
+    )
+    assert code in (0, None) and json.loads(out)["arguments"]["dt"] == 0.002
 
 
 def test_a_dumped_config_loads_again_under_either_model():

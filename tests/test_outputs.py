@@ -497,7 +497,7 @@ def test_report_of_a_missing_or_corrupt_study_is_one_line(study_toml, tmp_path, 
     assert code == EXIT_USAGE and "runs.parquet is missing" in err[0]
     code, err = _cli(["report", str(study_toml), "--set", "seed=5", "--out", str(tmp_path / "nothing")], capsys)
     assert code == EXIT_USAGE and "no finished study" in err[0]
-    assert f"(run `pfjax study {study_toml} --set seed=5 --out {tmp_path / 'nothing'}` first)" in err[0]
+    assert f"; run `pfjax study {study_toml} --set seed=5 --out {tmp_path / 'nothing'}` first" in err[0]
 
 
 def test_a_previous_output_that_cannot_be_removed_stays_marked_and_is_retried(tmp_path, monkeypatch):

@@ -173,6 +173,7 @@ def test_the_study_script_names_its_out_flag_in_the_whole_refusal(tmp_path):
         ("sim.scan_period=100", "sim.scan_period"),
         ("montecarlo.scan_hi=100", "montecarlo.scan_hi"),
         ("montecarlo.speed_lo=1e-300", "montecarlo.speed_lo"),
+        ("assumptions.fronts=[1e-300]", "assumptions.fronts[0]"),
     ],
 )
 def test_the_study_config_refuses_what_the_command_line_refuses(override, key):
@@ -197,5 +198,5 @@ def test_a_scanner_period_longer_than_the_run_is_refused_everywhere(capsys):
     )
     with pytest.raises(InputError, match=r"^scan_period: must be <= t_max"):
         parking.run(t_max=0.01, scan_period=10.0)
-    with pytest.raises(ConfigError, match=r"^sim.scan_period: must be <= t_max"):
+    with pytest.raises(ConfigError, match=r"^sim.scan_period: must be <= sim.t_max \(one scanner period"):
         load(None, ["sim.t_max=0.05", "sim.scan_period=0.1"], quick=True)

@@ -66,6 +66,8 @@ def test_the_study_config_checks_offsets_as_pfjax_track_does(override, key):
     with pytest.raises(ConfigError) as e:
         load(None, [override], quick=True)
     assert str(e.value).startswith(f"{key}: must start less than 50 m"), str(e.value)
+    if key == "mc.offset_max":  # the distance refused is the sample's farthest start, and says so
+        assert str(e.value).endswith("got 141.421 m for the sample's corner (100, 100) m"), str(e.value)
     assert load(None, ["mc.offset_max=35"], quick=True).mc.offset_max == 35  # 35 sqrt(2) = 49.5 m
 
 

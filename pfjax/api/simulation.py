@@ -200,12 +200,12 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
             ``controller`` is not one of the study's, or ``runs`` is empty or out of range.
     """
     import dataclasses
-    from pathlib import Path
+    import os
 
     import jax
     import pandas as pd
 
-    from pfjax.api.studies import StudyResult, load_study
+    from pfjax.api.studies import StudyResult, read_result
     from pfjax.montecarlo.config import StudySpec
     from pfjax.montecarlo.config import load_study as load_config
     from pfjax.montecarlo.runner import (
@@ -219,11 +219,8 @@ def replay(study, path: str, controller: str, runs, *, trajectories: bool = True
     )
 
     trajectories = errors.boolean("trajectories", trajectories)
-    if isinstance(study, (str, Path)):
-        try:
-            study = load_study(study)
-        except errors.InputError as e:
-            raise errors.renamed(e, "out", "study") from None
+    if isinstance(study, (str, os.PathLike)):  # the study's own files, as load_study reads them
+        study = read_result(study, "study", "pfjax.replay reads")
     if not isinstance(study, (StudyResult, StudySpec)):
         raise errors.InputError(
             f"study: expected a StudyResult, a study's output directory or a StudySpec, got {type(study).__name__}",

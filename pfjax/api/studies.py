@@ -55,30 +55,36 @@ def load_study(out) -> StudyResult:
             ``margin.parquet`` missing, changed since the study wrote it, or unreadable. These are
             ``pfjax report``'s refusals: the tables returned are the study's own.
     """
+    return read_result(out)
+
+
+def read_result(out, name: str = "out", reader: str = "pfjax.load_study reads") -> StudyResult:
+    """:func:`load_study`, its refusals naming the caller's argument ``name`` and the caller as
+    ``reader`` (:func:`pfjax.replay` reads a study directory so too)."""
     from pfjax.montecarlo.study import read_study
     from pfjax.montecarlo.summary import headline
 
-    out = _out_dir(out)
-    summary, runs, margin = read_study(out, "out", "pfjax.load_study reads")
+    out = _out_dir(out, name)
+    summary, runs, margin = read_study(out, name, reader)
     try:
         rows = headline(summary)
     except (KeyError, TypeError, ValueError):  # a summary.json without a controller's numbers
         raise errors.InputError(
-            f"out: {out / 'summary.json'} is not a study summary; re-run the study", "out"
+            f"{name}: {out / 'summary.json'} is not a study summary; re-run the study", name
         ) from None
     return StudyResult(out, summary, runs, margin, rows)
 
 
-def _out_dir(out):
-    """``out`` (a str or path-like) as a Path; :class:`~pfjax.errors.InputError` naming ``out`` otherwise
-    (which directories pfjax writes is :mod:`pfjax.outputs`' rule)."""
+def _out_dir(out, name: str = "out"):
+    """``out`` (a str or path-like) as a Path; :class:`~pfjax.errors.InputError` naming ``name``
+    otherwise (which directories pfjax writes is :mod:`pfjax.outputs`' rule)."""
     import os
     from pathlib import Path
 
     if not isinstance(out, (str, os.PathLike)):
-        raise errors.InputError(f"out: expected a directory path, got {out!r}", "out")
+        raise errors.InputError(f"{name}: expected a directory path, got {out!r}", name)
     if str(out).strip() == "":  # Path("") would be the current directory
-        raise errors.InputError("out: '' names no directory; give a directory name such as results/my_study", "out")
+        raise errors.InputError(f"{name}: '' names no directory; give a directory name such as results/my_study", name)
     return Path(out)
 
 
@@ -136,10 +142,9 @@ def run_study(
         OSError: the file system refuses a write (what ``out`` held stays as it was).
     """
     import warnings
-    from pathlib import Path
 
     from pfjax.montecarlo.checks import check_resources
-    from pfjax.montecarlo.runner import study_output
+    from pfjax.montecarlo.runner import study_output, study_target
     from pfjax.montecarlo.study import run
 
     overwrite = errors.boolean("overwrite", overwrite)
@@ -149,7 +154,7 @@ def run_study(
     out = None if out is None else _out_dir(out)
     _misspelt(run_study, overrides)
     spec = _study_spec(config, {dotted(k): v for k, v in overrides.items()})
-    out = Path("results") / spec.name if out is None else out
+    out = study_target(spec, out)
     check_resources(spec, report=report, no_report="report=False")  # in pfjax study's order: before out
     # the output directory judged by pfjax.outputs as `pfjax study --out` is, its messages naming
     # this function's arguments (out, overwrite=True)

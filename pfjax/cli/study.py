@@ -38,12 +38,11 @@ def default_out(out, name: str):
     current directory (``pfjax study``, ``pfjax report`` and the study scripts alike). An empty
     ``--out ''`` (a variable that was not set) is refused as ``pfjax study`` refuses it
     (:func:`pfjax.outputs.target_path`), never read as the default."""
-    from pfjax.outputs import target_path
+    from pfjax.outputs import default_target, target_path
 
-    if out is None:
-        return Path("results") / name
-    target_path(out, "--out")  # an empty or '.'-ending name: InputError naming --out
-    return Path(out)
+    if out is not None:
+        target_path(out, "--out")  # an empty or '.'-ending name: InputError naming --out
+    return default_target(name, out)
 
 
 def add_output_flags(parser, *, set_help: str | None, out_default: str, overwrite_help: str = OVERWRITE_HELP) -> None:
@@ -292,19 +291,16 @@ def _study(args) -> dict:
 
 
 def _cmd_report(args) -> dict:
+    import shlex
+
     from pfjax.montecarlo.config import study_hash
-    from pfjax.montecarlo.study import rewrite_report
-    from pfjax.outputs import read_marker
+    from pfjax.montecarlo.study import rewrite_report, study_marker
 
     spec = _load_study_or_usage(args)
     out = default_out(args.out, spec.name)
-    marker = read_marker(out) if out.is_dir() else None
-    if marker is None or marker.get("command") != "study":
-        import shlex
-
-        again = [*(a for kv in args.set for a in ("--set", kv)), *(("--out", str(args.out)) if args.out else ())]
-        command = " ".join(["pfjax study", _source(args), *map(shlex.quote, again)])
-        raise UsageError(f"--out: no finished study in {out} (run `{command}` first)")
+    again = [*(a for kv in args.set for a in ("--set", kv)), *(("--out", str(args.out)) if args.out else ())]
+    command = " ".join(["pfjax study", _source(args), *map(shlex.quote, again)])
+    marker = study_marker(out, "--out", f"run `{command}` first")
     if marker.get("config_sha256") != study_hash(spec):
         raise UsageError(
             f"config: {_source(args)}{' (with --set)' if args.set else ''} does not match the study in {out} "

@@ -78,6 +78,13 @@ def run_study(
         return _run_study(spec, output, progress=progress, extra=extra, fresh=fresh, controllers=controllers)
 
 
+def study_target(spec: StudySpec, out=None):
+    """A study's output directory: ``out``, or ``results/<name>`` (:func:`pfjax.outputs.default_target`)."""
+    from pfjax.outputs import default_target
+
+    return default_target(spec.name, out)
+
+
 def study_output(
     spec: StudySpec,
     out=None,
@@ -89,13 +96,10 @@ def study_output(
     Its refusals name ``out`` as ``flag`` and give their advice in the same words (``--out`` and
     ``--overwrite`` for ``pfjax study``, ``out`` and ``overwrite=True`` for :func:`pfjax.run_study`;
     :func:`pfjax.outputs.switch_advice`)."""
-    from pathlib import Path
-
     from pfjax.montecarlo.config import study_hash
 
-    target = Path("results") / spec.name if out is None else out
     return OutputDir(
-        target,
+        study_target(spec, out),
         command="study",
         config_sha256=study_hash(spec),
         overwrite=overwrite,

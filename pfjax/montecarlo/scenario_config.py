@@ -57,7 +57,7 @@ class ModelSetting(NamedTuple):
 
 _SLIP = "the {model} model's slip comes from its tyre forces"
 _SET = "the {model} model's wheelbase and steering limits are its parameter set's"
-_DYNAMIC = 'a setting of model = "st" or "std"'
+_DYNAMIC = "a setting of the single-track models, st and std"
 #: Which vehicle model reads which setting: the one table the study config (``[vehicle]``; the
 #: whole ``[slip]`` section is the kinematic model's too), :func:`pfjax.scenarios` and
 #: ``pfjax simulate`` refuse the other model's settings from.

@@ -327,6 +327,21 @@ def _unchanged_inputs(out: Path, flag: str = "--out", reader: str = "a report is
             )
 
 
+def study_marker(out, flag: str = "--out", run_first: str = "run the study first") -> dict:
+    """The output marker of the finished study in ``out``; :class:`~pfjax.errors.InputError` naming
+    ``flag`` where ``out`` holds none (no marker of ``pfjax study``: nothing there, or another
+    command's output), its advice ``run_first``."""
+    from pfjax.errors import InputError
+    from pfjax.outputs import MARKER, read_marker
+
+    out = Path(out)
+    marker = read_marker(out) if out.is_dir() else None
+    if marker is None or marker.get("command") != "study":
+        what = f"no {MARKER} of pfjax study" if marker is None else f"the output of pfjax {marker.get('command')}"
+        raise InputError(f"{flag}: no finished study in {out} ({what}); {run_first}", flag)
+    return marker
+
+
 def read_study(
     out, flag: str = "--out", reader: str = "a report is built from"
 ) -> tuple[dict, pd.DataFrame, pd.DataFrame | None]:
@@ -336,15 +351,9 @@ def read_study(
     missing, changed since the study wrote it (:func:`_unchanged_inputs`) or unreadable. What
     ``pfjax report`` and :func:`pfjax.load_study` read."""
     from pfjax.errors import InputError, one_line
-    from pfjax.outputs import MARKER, read_marker
 
     out = Path(out)
-    marker = read_marker(out)
-    if marker is None or marker.get("command") != "study":
-        what = (
-            f"no {MARKER} of pfjax study" if marker is None else f"the output of pfjax {marker.get('command')} is there"
-        )
-        raise InputError(f"{flag}: {out} holds no finished study ({what}); run the study first", flag)
+    study_marker(out, flag)
     _unchanged_inputs(out, flag, reader)
     summary, runs = read_finished(out, flag)
     margin = None
@@ -363,12 +372,12 @@ def rewrite_report(out, spec: StudySpec, *, overwrite: bool = False) -> Path:
     simulating: the figures that need only the summary and runs are redrawn, the worst-case figure
     (which needs the search's trajectories) is kept. The output is replaced whole, as a study's
     (:class:`~pfjax.outputs.OutputDir`); returns its directory."""
-    from pfjax.montecarlo.runner import study_output
+    from pfjax.montecarlo.runner import study_output, study_target
     from pfjax.outputs import read_marker
     from pfjax.report.figure_set import FIGURES, figure_entries, ordered_figures, report_figures
     from pfjax.report.study_report import write_report
 
-    target = Path("results") / spec.name if out is None else Path(out)
+    target = study_target(spec, out)
     marker = None if target.is_symlink() else read_marker(target)
     if marker is not None and marker.get("command") == "study":  # before the output's rules advise --overwrite
         _unchanged_inputs(target)

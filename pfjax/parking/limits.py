@@ -12,15 +12,16 @@ MAX_PERIODS = 20000
 MAX_SCAN_PERIOD = 10.0
 
 
-def check_periods(key: str, t_max: float, scan_period: float) -> None:
+def check_periods(key: str, t_max: float, scan_period: float, t_max_key: str = "t_max") -> None:
     """:class:`~pfjax.errors.InputError` naming the period (``key``, or ``scan_period`` where ``key``
-    is ``t_max``) when one scanner period is longer than the run, and naming ``key`` when a run of
-    ``t_max`` s at ``scan_period`` s would take more than :data:`MAX_PERIODS` scanner periods (the message shows both values:
-    either may be the one to change)."""
+    is ``t_max``) when one scanner period is longer than the run (``t_max_key``: the timeout's own
+    key, in the message), and naming ``key`` when a run of ``t_max`` s at ``scan_period`` s would
+    take more than :data:`MAX_PERIODS` scanner periods (the message shows both values: either may
+    be the one to change)."""
     if scan_period > t_max:  # one period longer than the run: its RK4 steps would run past t_max
         period = "scan_period" if key == "t_max" else key  # the period's own key
         raise InputError(
-            f"{period}: must be <= t_max (one scanner period within the run), got {shown(scan_period)} s > "
+            f"{period}: must be <= {t_max_key} (one scanner period within the run), got {shown(scan_period)} s > "
             f"{shown(t_max)} s",
             period,
         )

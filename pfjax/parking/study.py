@@ -17,7 +17,7 @@ from pfjax import errors
 from pfjax.errors import InputError
 from pfjax.jsonio import dumps
 from pfjax.numerics.random import seed_key
-from pfjax.outputs import OutputDir, check_name
+from pfjax.outputs import OutputDir, check_name, default_target
 from pfjax.parking.calibrate import calibrate_front
 from pfjax.parking.maps import GARAGE, PARALLEL, to_obstacle_map
 from pfjax.parking.report import write_report
@@ -296,7 +296,7 @@ def run(
         except InputError as e:  # the config module's flag, by this function's argument
             raise errors.renamed(e, "--set", "overrides") from None
     check_name("name", config.name)
-    folder = Path(out) if out is not None else Path("results") / config.name
+    folder = default_target(config.name, out)
     with OutputDir(
         folder,
         command="parking-study",

@@ -48,7 +48,7 @@ class Sim(ConfigModel):
 
         if 0 < self.front < POSITIVE:  # 0 is the calibrated reach; any other as pfjax parking --front takes it
             raise ValueError(f"front: must be 0 (calibrated) or at least {POSITIVE:g} m, got {self.front:g}")
-        check_periods("scan_period", self.t_max, self.scan_period)
+        check_periods("scan_period", self.t_max, self.scan_period, "sim.t_max")
         return self
 
 
@@ -68,10 +68,11 @@ class Assumptions(ConfigModel):
 
     @model_validator(mode="after")
     def _ranges(self):
-        for key, vals, lo, hi in (("fronts", self.fronts, 0, 0.54), ("scan_periods", self.scan_periods, 0, 1)):
-            for i, f in enumerate(vals):
-                if not lo < f <= hi or (key == "fronts" and f >= hi):
-                    raise ValueError(f"{key}[{i}]: must be in ({lo}, {hi}{')' if key == 'fronts' else ']'}, got {f}")
+        for key, vals, hi in (("fronts", self.fronts, 0.54), ("scan_periods", self.scan_periods, 1)):
+            for i, f in enumerate(vals):  # positive: at least 1e-12, as every positive length and step
+                if not POSITIVE <= f <= hi or (key == "fronts" and f >= hi):
+                    close = ")" if key == "fronts" else "]"
+                    raise ValueError(f"{key}[{i}]: must be in [{POSITIVE:g}, {hi}{close}, got {f}")
         for i, p in enumerate(self.pauses):
             if p < 0:
                 raise ValueError(f"pauses[{i}]: must be >= 0 s, got {p}")
@@ -169,7 +170,7 @@ class ParkingStudy(ConfigModel):
         periods = [(f"assumptions.scan_periods[{i}]", p) for i, p in enumerate(self.assumptions.scan_periods)]
         mc = [("montecarlo.scan_lo", self.montecarlo.scan_lo), ("montecarlo.scan_hi", self.montecarlo.scan_hi)]
         for key, period in [*periods, *mc]:
-            check_periods(key, t_max, period)
+            check_periods(key, t_max, period, "sim.t_max")
         se, sm, scan = self.search, self.start_map, self.sim.scan_period
         n = se.grid_n
         check_search_work("search.grid_n", n**3, f"grid_n^3 = {n}^3 = {n**3}", t_max, scan)

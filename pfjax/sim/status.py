@@ -19,7 +19,7 @@ class Status(IntEnum):
     OK = 0  #: ran the whole horizon
     NONFINITE = 1  #: a state or measurement became NaN or infinite
     DIVERGED = 2  #: |d| exceeded ``SimConfig.d_fail``
-    SINGULAR = 3  #: left the Frenet model's valid region, 1 - kappa d <= 0 (inside the bend's centre)
+    SINGULAR = 3  #: left the Frenet model's valid region, 1 - kappa d <= 1e-6 (at or past the bend's centre)
     PATH_END = 4  #: the closest point reached an end of the path's valid domain
 
 

@@ -24,17 +24,18 @@ MODES = ("forward", "backward")
 LEADERS = ("line", "circle", "sine", "lane-change")
 
 
-def check_offset(key: str, distance: float) -> None:
+def check_offset(key: str, distance: float, of: str = "") -> None:
     """:class:`InputError` naming ``key`` when a start ``distance`` m from the leading vehicle's
-    start point reaches ``TrackConfig.z_fail``: the run would end at once as diverged. The one
-    check of :func:`run`'s ``offset`` and the study config's (``lemma.offsets``, ``mc.offset_max``)."""
+    start point reaches ``TrackConfig.z_fail``: the run would end at once as diverged (``of``: what
+    the distance is of, in the message). The one check of :func:`run`'s ``offset`` and the study
+    config's (``lemma.offsets``, ``mc.offset_max``)."""
     from pfjax.tracking.simulate import TrackConfig
 
     z_fail = TrackConfig.z_fail
     if distance >= z_fail:
         raise InputError(
             f"{key}: must start less than {z_fail:g} m from the leading vehicle's start point (a run whose "
-            f"tracking error passes {z_fail:g} m ends as diverged), got {distance:g} m",
+            f"tracking error passes {z_fail:g} m ends as diverged), got {distance:g} m{of}",
             key,
         )
 

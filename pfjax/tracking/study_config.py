@@ -131,7 +131,8 @@ class TrackMC(ConfigModel):
     def _check(self):
         nonzero("p_forward", self.p_forward, "p")
         nonzero("p_backward", self.p_backward, "p")
-        check_offset("offset_max", math.hypot(self.offset_max, self.offset_max))  # the sample's farthest corner
+        o = self.offset_max  # the sample's farthest start: the corner (o, o)
+        check_offset("offset_max", math.hypot(o, o), f" for the sample's corner ({o:g}, {o:g}) m")
         if self.speed_high < self.speed_low:
             raise ValueError(f"speed_high: must be >= speed_low ({self.speed_low:g}), got {self.speed_high:g}")
         return self
