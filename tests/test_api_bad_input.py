@@ -707,9 +707,10 @@ def test_run_study_takes_any_path_like_config(tmp_path):
 def test_run_study_warns_as_pfjax_study_prints(tmp_path):
     """A path sharper than the steering limit follows: a RuntimeWarning (pfjax study: stderr), the
     study runs, and summary.json records it."""
-    with pytest.warns(RuntimeWarning, match=r"paths\[0\]"):
+    with pytest.warns(RuntimeWarning, match=r"paths\[0\]") as w:
         res = pfjax.run_study(
             TINY, tmp_path / "w", paths=[{"kind": "circle", "radius": 0.3}], n_runs=2, report=False, progress=False
         )
+    assert {x.filename for x in w if issubclass(x.category, RuntimeWarning)} == {__file__}  # the caller's line
     assert res.summary["warnings"] and "paths[0]" in res.summary["warnings"][0]
     assert "slip_margin_fails_at_deg" in res.headline.columns

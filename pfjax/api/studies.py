@@ -160,7 +160,7 @@ def run_study(
     # this function's arguments (out, overwrite=True)
     output = study_output(spec, out, overwrite=overwrite, flag="out")
     # the feasibility warnings pfjax study prints on stderr, as Python warnings (also in summary.json)
-    warn = lambda m: warnings.warn(m, RuntimeWarning, stacklevel=4)
+    warn = lambda m: warnings.warn(m, RuntimeWarning, stacklevel=6)  # lambda, _run, run, run_study, its check
     run(spec, output, progress=progress, report=report, fresh=fresh, overwrite=overwrite, warn=warn)
     return load_study(out)
 
