@@ -5,6 +5,7 @@ directories, a tuning check's memory and a finished study's corrupt files."""
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -619,8 +620,9 @@ def test_a_missing_argument_is_named():
             ),
             "(the output of pfjax tune)",
         ),
+        (lambda out: shutil.copy(out / "runs.parquet", out / "margin.parquet"), "margin.parquet was not written by"),
     ],
-    ids=["summary-edited", "runs-cut", "runs-deleted", "no-marker", "another-command"],
+    ids=["summary-edited", "runs-cut", "runs-deleted", "no-marker", "another-command", "margin-added"],
 )
 def test_load_study_reads_only_the_studys_own_files(finished, tmp_path, edit, message):
     """As pfjax report: tables edited, cut or mixed in after the study wrote them are refused, not

@@ -321,10 +321,8 @@ def _unchanged_inputs(out: Path, flag: str = "--out", reader: str = "a report is
                 flag,
             )
         if f.is_file() and not as_written(listed, name, f.stat(), f):
-            raise InputError(
-                f"{flag}: {f} changed after the study wrote it; {reader} the study's own files: re-run the study",
-                flag,
-            )
+            how = "changed after the study wrote it" if name in listed else "was not written by the study"
+            raise InputError(f"{flag}: {f} {how}; {reader} the study's own files: re-run the study", flag)
 
 
 def study_marker(out, flag: str = "--out", run_first: str = "run the study first") -> dict:
