@@ -249,7 +249,7 @@ def test_first_true_and_all_true_equal_select_and_all_without_a_short_axis_reduc
     )
     np.testing.assert_array_equal(
         np.asarray(f(*args)),
-        np.asarray(jnp.select([~args[0], args[1] > 10.0, args[2] <= 1e-6, args[3]], [1, 2, 3, 4], 0)),
+        np.asarray(jnp.select([~args[0], args[3], args[1] > 10.0, args[2] <= 1e-6], [1, 4, 2, 3], 0)),
     )
     hlo = f.lower(*args).compile().as_text()
     assert " reduce(" not in hlo and "argmax" not in hlo

@@ -490,3 +490,14 @@ def test_batched_programs_are_named_after_their_simulators():
     cfg = SimConfig(dt=0.01, horizon=0.05, record=False)
     text = mods[0]._simulate_vmapped.lower(stack([healthy()] * 2), controller=C.state_feedback, config=cfg).as_text()
     assert "jit__simulate_vmapped" in text
+
+
+def test_a_start_beyond_the_paths_end_is_path_end_not_a_divergence():
+    """The closest point held at the domain's end: ``d`` is the distance to that end point, not a
+    lateral error, so the run ends as path_end at t = 0 (it read as diverged, d = 72 m)."""
+    import pfjax
+
+    sc = pfjax.scenarios("sine", n=2, start_along_m=np.array([3.0, 200.0]))
+    r = pfjax.simulate(sc, "paper_k", config={"horizon": 1.0})
+    assert r.table["status"].tolist() == ["ok", "path_end"]
+    assert r.table["fail_time"].iloc[1] == 0.0

@@ -27,10 +27,13 @@ STATUS_NAMES = {int(s): s.name.lower() for s in Status}
 
 
 def classify(finite, abs_d, one_minus_kd, at_end, d_fail: float):
-    """Status of one sample (int32), checked in order of severity (the first that holds wins)."""
+    """Status of one sample (int32), the first that holds winning: non-finite; the path's end (the
+    closest point held at the end of the path's domain, where ``d`` is the distance to that end
+    point and ``kappa`` the end's, no longer Frenet quantities: a start beyond the end is
+    ``path_end``, not a divergence); diverged; singular."""
     return first_true(
-        [~finite, abs_d > d_fail, one_minus_kd <= 1e-6, at_end],
-        [Status.NONFINITE, Status.DIVERGED, Status.SINGULAR, Status.PATH_END],
+        [~finite, at_end, abs_d > d_fail, one_minus_kd <= 1e-6],
+        [Status.NONFINITE, Status.PATH_END, Status.DIVERGED, Status.SINGULAR],
         jnp.int32(Status.OK),
     )
 
