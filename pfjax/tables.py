@@ -28,7 +28,7 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "run": ("", "run index (the random stream of the run)"),
     "config_sha256": ("", "SHA-256 of the study's config (pfjax.provenance.config_hash)"),
     # sampled quantities
-    "speed": ("m/s", "rear-axle speed"),
+    "speed": ("m/s", "rear-axle speed (st, std: the reference of the centre of mass's speed loop)"),
     "L": ("m", "wheelbase"),
     "delta_max_deg": ("deg", "steering limit"),
     "beta_r_deg": ("deg", "declared rear slip angle (constant part); NaN on st and std (slip from the tyres)"),

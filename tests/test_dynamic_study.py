@@ -290,3 +290,15 @@ def test_kinematic_vs_dynamic_toml_documents_the_schema_defaults():
     toml = Path(__file__).resolve().parents[1] / "studies" / "kinematic_vs_dynamic.toml"
     assert load(toml) == load()
     assert load(toml).model_dump() == load().model_dump()
+
+
+def test_a_speed_above_the_parameter_sets_top_speed_is_refused_everywhere():
+    """CommonRoad's acceleration constraint only stops speeding up past v_max: a run started above it
+    stays there. Refused by the study config, pfjax.scenarios and pfjax simulate alike."""
+    with pytest.raises(ConfigError, match=r"^vehicle\.speed: must be at most the parameter set's top speed, 15\.57"):
+        _spec({"model": "st", "speed": {"dist": "uniform", "low": 1.0, "high": 20.0}}, margin={"enabled": False})
+    with pytest.raises(InputError, match=r"^speed: must be at most the parameter set's top speed"):
+        pfjax.scenarios("sine", n=2, model="st", speed=20.0)
+    code, _, err = _main("simulate", "--model", "st", "--path", "sine", "--controller", "stanley", "--speed", "20")
+    assert code == 2 and err.strip().splitlines()[-1].startswith("pfjax simulate: error: --speed: must be at most")
+    assert pfjax.scenarios("sine", n=2, model="std", speed=20.0).table["speed"].tolist() == [20.0, 20.0]  # vehicle2

@@ -87,6 +87,7 @@ def test_arm_keys_are_refused_naming_the_key_set():
         ("study.slip.beta_r_deg=3.0", r"^study\.slip\.beta_r_deg: the arms set the slip .*; remove it$"),
         ("study.vehicle.model='st'", r"^study\.vehicle\.model: the arms set the model .*; remove it$"),
         ("study.vehicle.mu=0.5", r"^study\.vehicle\.mu: the arms set the friction .*; remove it$"),
+        ("study.vehicle.params='vehicle1'", r"^study\.vehicle\.params: the arms set the parameter set .*; remove it$"),
     ):
         with pytest.raises(ConfigError, match=message):
             load(quick=True, overrides=[setting])

@@ -76,7 +76,8 @@ def scenarios(
         lateral_offset: start offset left of the path, m.
         heading_error_deg: start heading error, deg.
         start_along_m: start, m along the path from its nominal start.
-        speed: rear-axle speed, m/s.
+        speed: rear-axle speed, m/s (``st``, ``std``: the reference of the centre of mass's speed
+            loop, at most the parameter set's top speed).
         L: wheelbase, m (kinematic model; default 0.2).
         delta_max_deg: steering limit, deg (kinematic model; default 30).
         convention: front-slip sign convention (``source`` or ``lenain``; kinematic model).

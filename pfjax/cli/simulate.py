@@ -304,6 +304,7 @@ def _simulate_st(args, pose0) -> dict:
     mu = float(st.body(sc.vehicle).mu)
     step = (float(sc.tau_delta), float(sc.k_v))
     args.vehicle, args.mu, args.tau_delta, args.k_v = name, mu, *step  # as they ran: one hash, given or not
+    st.check_speed("--speed", args.speed, sc.vehicle)
     cfg = _config(args, st.stable_step(sc.vehicle, args.speed, *step) if args.dt is None else args.dt)
     st.check_step("--dt", cfg.dt, sc.vehicle, args.speed, *step)
     r = jax.device_get(dyn.simulate_one(sc, controller=controller, config=cfg))

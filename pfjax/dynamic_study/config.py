@@ -148,6 +148,7 @@ ARM_KEYS = {
     ("slip",): "the arms set the slip (the kinematic arms from slip_ranges_deg, the dynamic arms from the tyre forces)",
     ("vehicle", "model"): "the arms set the model (st in the dynamic arms, kinematic in the kinematic arms)",
     ("vehicle", "mu"): "the arms set the friction (mu_low, mu_high, mu_grip)",
+    ("vehicle", "params"): "the arms set the parameter set (the robot's in the robot arms, car.params in the car arms)",
 }
 
 

@@ -221,6 +221,19 @@ def check_step(
         )
 
 
+def check_speed(key: str, v: float, params: STParams | STDParams) -> None:
+    """:class:`~pfjax.errors.InputError` naming ``key`` when the speed ``v`` (m/s; a range's
+    upper end) is above the parameter set's top speed ``v_max``: CommonRoad's acceleration
+    constraint only stops the vehicle from speeding up past it, so a run started above it would stay
+    there. The one check of a single-track run's speed, for a study config (and
+    :func:`pfjax.scenarios`) and ``pfjax simulate --model``."""
+    from pfjax.errors import InputError
+
+    v_max = float(body(params).v_max)
+    if v > v_max:
+        raise InputError(f"{key}: must be at most the parameter set's top speed, {v_max:.4g} m/s, got {v:g} m/s", key)
+
+
 def body(params: STParams | STDParams) -> STParams:
     """The :class:`STParams` of either model's parameters (the drift model's ``params.body``)."""
     return params.body if isinstance(params, STDParams) else params

@@ -88,7 +88,7 @@ def robot_params() -> STParams:
 
     Scaling with the geometric factor ``s = 0.2 / 0.3302 = 0.606`` at equal density (Froude scaling):
     lengths ``x s`` (``l_f = 0.0962``, ``l_r = 0.1038``, ``h = 0.0448`` m), mass ``x s^3`` (0.831 kg),
-    inertia ``x s^5`` (0.00383 kg m^2), speeds ``x sqrt(s)`` (``v_switch = 5.70``, limits -3.89..15.6 m/s),
+    inertia ``x s^5`` (0.003841 kg m^2), speeds ``x sqrt(s)`` (``v_switch = 5.70``, limits -3.89..15.6 m/s),
     accelerations, angles, ``mu`` and the per-load cornering stiffnesses unchanged; the steering rate
     ``x 1/sqrt(s)`` (4.11 rad/s). These are assumptions of a plausible small car-like robot, not
     measurements of the source's robot (which publishes only its wheelbase, speed and slip).

@@ -126,7 +126,9 @@ class VehicleSpec(ConfigModel):
     )
     tau_delta_s: Real = Field(0.05, ge=POSITIVE, description="st: steering actuator time constant, s")
     k_v: Real = Field(5.0, ge=POSITIVE, description="st: speed loop gain, 1/s")
-    speed: Dist = dist_field(1.0, "rear-axle speed, m/s (a distribution; st: the speed loop's reference)")
+    speed: Dist = dist_field(
+        1.0, "rear-axle speed, m/s (a distribution; st, std: the reference of the centre of mass's speed loop)"
+    )
     L: Dist = dist_field(0.2, "wheelbase, m (a distribution)")
     delta_max_deg: Dist = dist_field(30.0, "steering limit, deg (a distribution)")
     delta_rate_max_deg: Real | None = Field(
@@ -173,6 +175,10 @@ class VehicleSpec(ConfigModel):
                 raise ValueError(f'{name}: not with model = "{self.model}" ({setting.refusal(self.model)}); remove it')
         if self.model == "std" and self.params == "robot":
             raise ValueError('params: model = "std" has no robot set (no magic-formula tyre); use vehicle1-3')
+        if self.model != "kinematic":
+            from pfjax.models.single_track import check_speed
+
+            check_speed("speed", self.speed.bounds()[1], self.model_params())
         return self
 
     def st_params(self):
