@@ -141,7 +141,10 @@ def test_gradient_through_the_dynamic_vehicle_matches_finite_differences():
 
 def test_max_stable_step_separates_stable_from_unstable_integration():
     """At ``mu = 10`` and 1 m/s the tyre modes are fast (about -1100 and -500 1/s): a step below
-    :func:`st.max_stable_step` runs, one 30 % above it blows up (the run fails, as data)."""
+    :func:`st.max_stable_step` runs, one 30 % above it blows up (the run fails, as data; the entry
+    points refuse that step, so the pure single-run function is jitted here)."""
+    from functools import partial
+
     ctrl, sc = _scenario("line", "stanley")
     sc = sc._replace(vehicle=sc.vehicle._replace(mu=10.0))
     dt_max = st.max_stable_step(sc.vehicle, 1.0, sc.tau_delta, sc.k_v)
@@ -149,7 +152,24 @@ def test_max_stable_step_separates_stable_from_unstable_integration():
     ev = st.lateral_eigenvalues(sc.vehicle, 1.0)
     assert np.all(ev.real < 0)
     for dt, ok in ((0.002, True), (1.3 * dt_max, False)):
-        r = dyn.simulate_batch(
-            stack([sc]), controller=ctrl, config=SimConfig(horizon=round(1.0 / dt) * dt, dt=dt, record=False)
-        )
-        assert (int(r.status[0]) == Status.OK) == ok, dt
+        config = SimConfig(horizon=round(1.0 / dt) * dt, dt=dt, record=False)
+        r = jax.jit(partial(dyn.simulate, ctrl, config=config))(sc)
+        assert (int(r.status) == Status.OK) == ok, dt
+        if not ok:
+            with pytest.raises(InputError, match=r"^config\.dt: the ST model at mu = 10 "):
+                dyn.simulate_batch(stack([sc]), controller=ctrl, config=config)
+
+
+def test_the_entry_points_check_the_step_against_the_batchs_worst_case():
+    """CommonRoad's vehicle 2 on the drift model at 1 m/s needs dt <= 0.27 ms: 5 ms is refused by
+    simulate_one and simulate_batch as by pfjax.simulate (it ran 'ok' with 101 deg of front slip)."""
+    from pfjax.sim.scenario import make_dynamic_scenario
+
+    ctrl, gains = _gains("stanley")
+    e = paths.entry("sine")
+    sc = make_dynamic_scenario(e.build(), e.start_pose, gains, params="vehicle2", model="std", v=1.0)
+    config = SimConfig(horizon=0.1, dt=0.005, record=False)
+    with pytest.raises(InputError, match=r"^config\.dt: the STD model at mu = 1\.0489 and speed 1 m/s"):
+        dyn.simulate_one(sc, controller=ctrl, config=config)
+    with pytest.raises(InputError, match=r"^config\.dt: "):
+        dyn.simulate_batch(stack([sc, sc]), controller=ctrl, config=config)

@@ -354,8 +354,28 @@ def simulate_one(scenario: DynamicScenario, *, controller: Controller, config: S
 
 def _check(scenarios: DynamicScenario, controller: Controller, config: SimConfig) -> None:
     """The entry points' input checks on a batch (leading axis), before tracing: the controller's
-    gains, the settings (:func:`system`) and the memory of a recorded batch (states and slips)."""
+    gains, the settings (:func:`system`), the step (:func:`check_step`) and the memory of a
+    recorded batch (states and slips)."""
     controller.check_params(scenarios.gains)
     system(controller, config)
+    check_step(scenarios, config)
     if config.record:
         batch.check_record(scenarios, config.n_steps, copies=RECORD_COPIES)
+
+
+def check_step(scenarios: DynamicScenario, config: SimConfig, key: str = "config.dt") -> None:
+    """:class:`~pfjax.errors.InputError` naming ``key`` if ``config.dt`` is beyond the stable RK4
+    step (:func:`pfjax.models.single_track.check_step`) of the batch's worst case: its highest
+    friction and lowest reference speed, shortest steering time constant and stiffest speed loop.
+    A batch of traced values (inside a caller's ``jit``) is not checked: its numbers are not known."""
+    import jax
+    import numpy as np
+
+    from pfjax.errors import is_traced
+
+    if is_traced((scenarios.vehicle, scenarios.v_ref, scenarios.tau_delta, scenarios.k_v)):
+        return
+    first = jax.tree_util.tree_map(lambda a: np.asarray(a).reshape(-1)[0], scenarios.vehicle)
+    params = st.with_mu(first, float(np.max(st.body(scenarios.vehicle).mu)))
+    v, tau = float(np.min(scenarios.v_ref)), float(np.min(scenarios.tau_delta))
+    st.check_step(key, config.dt, params, v, tau, float(np.max(scenarios.k_v)), worst_case="the runs' worst case")

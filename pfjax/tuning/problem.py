@@ -146,16 +146,11 @@ def _check_step(batches: list, cfg: SimConfig) -> None:
     step (:func:`pfjax.models.single_track.max_stable_step`) of a dynamic batch's worst case: its
     highest friction and lowest speed, shortest steering time constant and stiffest speed loop
     (the kinematic model has no such bound)."""
-    from pfjax.models.single_track import body, check_step, with_mu
-    from pfjax.sim.dynamic import DynamicScenario
+    from pfjax.sim.dynamic import DynamicScenario, check_step
 
     for b in batches:
-        if not isinstance(b, DynamicScenario):
-            continue
-        first = jax.tree_util.tree_map(lambda a: np.asarray(a).reshape(-1)[0], b.vehicle)
-        params = with_mu(first, float(np.max(body(b.vehicle).mu)))
-        v, tau, k_v = float(np.min(b.v_ref)), float(np.min(b.tau_delta)), float(np.max(b.k_v))
-        check_step("config.dt", cfg.dt, params, v, tau, k_v, worst_case="the runs' worst case")
+        if isinstance(b, DynamicScenario):
+            check_step(b, cfg)
 
 
 def _tunable(controller: str, base_gains, box):
