@@ -716,3 +716,15 @@ def test_run_study_warns_as_pfjax_study_prints(tmp_path):
     assert {x.filename for x in w if issubclass(x.category, RuntimeWarning)} == {__file__}  # the caller's line
     assert res.summary["warnings"] and "paths[0]" in res.summary["warnings"][0]
     assert "slip_margin_fails_at_deg" in res.headline.columns
+
+
+def test_a_design_the_solver_cannot_make_names_the_weights_given():
+    """alpha = 1e12 leaves the solver without a design where the source's weights find one: the
+    refusal names the weights with the operating point, in the API and the command line alike."""
+    with pytest.raises(pfjax.InputError) as e:
+        pfjax.design_mixed(alpha=1e12)
+    assert str(e.value).startswith(
+        "v/L/alpha: the solver found no mixed design at speed 1 m/s, wheelbase 0.2 m, alpha 1e+12"
+    )
+    code = main(["synth", "--alpha", "1e12"])
+    assert code == 2

@@ -193,5 +193,7 @@ def test_synth_records_only_the_arguments_it_reads_and_their_units(capsys):
 def test_synth_names_the_plant_flags_when_no_design_exists(capsys):
     assert main(["synth", "--speed", "1e12"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("pfjax synth: error: --speed/--wheelbase: no mixed design exists at speed 1e+12 m/s")
+    assert err.startswith(
+        "pfjax synth: error: --speed/--wheelbase: the solver found no mixed design at speed 1e+12 m/s"
+    )
     assert err.count("\n") == 1

@@ -30,7 +30,8 @@ def design_mixed(v: float = 1.0, L: float = 0.2, alpha: float = 10.0, beta: floa
         InputError: a bad argument, named (``v``, ``L``, ``alpha``, ``beta``, ``region.<field>``);
             no design at these values (the LMIs infeasible, the solver failing): a
             :class:`pfjax.errors.NoDesignError` naming ``region`` where one is given, else ``v/L``
-            (:func:`synthesized`), as ``pfjax synth`` refuses them.
+            (and ``alpha``, ``beta`` where not the source's: ``v/L/alpha``; :func:`synthesized`),
+            as ``pfjax synth`` refuses them.
     """
     return synthesized("mixed", v=v, L=L, region=_region(region), alpha=alpha, beta=beta)
 
@@ -40,18 +41,30 @@ def synthesized(method: str, *, v: float, L: float, region=None, **weights):
     synth``): a synthesis that finds no design is a one-line :class:`~pfjax.errors.NoDesignError`
     (an ``InputError`` and a ``SynthesisError`` with the solver's status) naming what the caller can
     change: ``region`` where a pole region is given, else ``v/L``, with the operating point and the
-    solver's verdict."""
+    solver's verdict. Weights other than the source's (``alpha`` 10, ``beta`` 1) are named with
+    ``v/L`` and shown: a weight ratio of many decades can leave the solver without a design where
+    the source's weights find one."""
     from pfjax.synthesis import SynthesisError, synthesize
 
     try:
         return synthesize(method, v=v, L=L, region=region, **weights)
     except errors.NoDesignError:
         raise
-    except SynthesisError as e:  # the operating point (or the region) admits no design
-        key, what = ("region", "has its closed-loop poles there") if region is not None else ("v/L", "exists")
+    except SynthesisError as e:  # the operating point, the weights or the region: the solver found none
+        changed = {k: w for k, w in weights.items() if w is not None and w != SOURCE_WEIGHTS.get(k)}
+        key = "region" if region is not None else "/".join(["v", "L", *changed])
+        what = "with its closed-loop poles there" if region is not None else ""
+        shown = "".join(f", {k} {w:g}" for k, w in changed.items())
         raise errors.NoDesignError(
-            f"{key}: no {method} design {what} at speed {v:g} m/s, wheelbase {L:g} m ({e})", key, e.status
+            f"{key}: the solver found no {method} design{' ' + what if what else ''} at speed {v:g} m/s, "
+            f"wheelbase {L:g} m{shown} ({e})",
+            key,
+            e.status,
         ) from None
+
+
+#: The source's weights of the mixed design's objective, ``alpha γ∞² + beta γ₂²``.
+SOURCE_WEIGHTS = {"alpha": 10.0, "beta": 1.0}
 
 
 def _region(region):

@@ -73,8 +73,10 @@ def scenarios(
             :data:`pfjax.resources.SCENARIO_BYTES`; :func:`pfjax.resources.memory_budget`).
         beta_r_deg: constant rear slip angle, deg (kinematic model; default 5).
         beta_f_deg: constant front slip angle, deg (kinematic model; default 5).
-        lateral_offset: start offset left of the path, m.
-        heading_error_deg: start heading error, deg.
+        lateral_offset: start offset left of the path, m (default 0: a run starts on the path,
+            where ``pfjax simulate``, which runs the source's scenario, starts at the path's own
+            start pose unless given ``--x0``; :data:`pfjax.paths.PATHS`' ``start_pose``).
+        heading_error_deg: start heading error, deg (default 0).
         start_along_m: start, m along the path from its nominal start.
         speed: rear-axle speed, m/s (``st``, ``std``: the reference of the centre of mass's speed
             loop, at most the parameter set's top speed).

@@ -62,7 +62,7 @@ def resolve_gains(e, d, gains, v: float, L: float) -> tuple[Any, dict]:
         )
     flat = C.flat_gains(e)
     if d is not None:
-        flat.update(C.design_gains(d, v, L, "controller"))
+        flat.update(C.design_gains(d, v, L, "controller", operating=("speed", "L")))  # scenarios' names
     flat.update(given)
     # the scalar gains simulated: the controller's own and every one given (feedforward, k_aw, ...)
     return C.params_from_flat(e, flat), {k: float(v) for k, v in flat.items() if k in e.gains or k in given}

@@ -24,7 +24,12 @@ SYNTH_FLAGS = {
     "max_real": "--max-real",
     "disk_center": "--disk",
     "disk_radius": "--disk",
-    "v/L": "--speed/--wheelbase",  # no design at the operating point (pfjax.api.design.synthesized)
+    # no design at the operating point, with the weights where they are not the source's
+    # (pfjax.api.design.synthesized)
+    "v/L": "--speed/--wheelbase",
+    "v/L/alpha": "--speed/--wheelbase/--alpha",
+    "v/L/beta": "--speed/--wheelbase/--beta",
+    "v/L/alpha/beta": "--speed/--wheelbase/--alpha/--beta",
     "region": "--max-real/--disk/--sector-deg",  # no design in the pole region
 }
 

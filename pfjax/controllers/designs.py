@@ -77,7 +77,7 @@ def _polytopic_integral(v: float, L: float, alpha: float = 10.0, beta: float = 1
     return memoized_design("polytopic_integral_lmi", dict(args, alpha=alpha, beta=beta), compute)
 
 
-def design_gains(d: DesignEntry, v: float, L: float, key: str, **kw) -> dict:
+def design_gains(d: DesignEntry, v: float, L: float, key: str, *, operating=("v", "L"), **kw) -> dict:
     """``d.make(v, L, **kw)`` for a controller a study, command or API call asks for under ``key``: a
     synthesis that fails (infeasible, ill-conditioned, a solver error) is a
     :class:`~pfjax.errors.NoDesignError` (an ``InputError`` and a ``SynthesisError``) naming ``key``,
@@ -85,12 +85,12 @@ def design_gains(d: DesignEntry, v: float, L: float, key: str, **kw) -> dict:
     so nothing is run; :func:`pfjax.api.design.synthesized` names the operating point instead, for
     a design asked for by its values). The operating point
     is checked first: ``v`` (m/s) and ``L`` (m) finite and positive, an
-    :class:`~pfjax.errors.InputError` naming ``v`` or ``L``."""
+    :class:`~pfjax.errors.InputError` naming ``v`` or ``L`` by the caller's names ``operating``."""
     from pfjax import errors
     from pfjax.errors import NoDesignError, SynthesisError
 
-    errors.numbers("v", v, positive=True, unit=" m/s")
-    errors.numbers("L", L, positive=True, unit=" m")
+    errors.numbers(operating[0], v, positive=True, unit=" m/s")
+    errors.numbers(operating[1], L, positive=True, unit=" m")
     try:
         return d.make(v, L, **kw)
     except SynthesisError as e:
