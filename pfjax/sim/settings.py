@@ -14,7 +14,12 @@ class SimConfig:
     """Static settings (they fix array shapes; hashable so they can be jit-static).
 
     Attributes:
-        dt: integrator step, s (default 5 ms).
+        dt: integrator step, s (default 5 ms). The single-track models' step is checked against
+            their tyre modes (:func:`pfjax.models.single_track.check_step`); the kinematic model's
+            stiffness is the controller's, and is not checked: a heading gain ``k_theta`` (rad/rad)
+            needs about ``dt v |k_theta| / L < 2.8`` for a stable RK4 step, and a step beyond it
+            shows as steering that chatters between its limits (``sat_fraction`` near 1), not as
+            a failed status.
         horizon: simulated time, s (docs/reproductions/path-following.md §6: *assumed* 20 s), a whole
             number of steps ``dt`` (to a relative 1e-9, :func:`pfjax.resources.whole_steps`).
         control_every: controller sampling period in integrator steps (zero-order hold);
