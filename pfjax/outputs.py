@@ -117,12 +117,21 @@ def read_marker(directory: Path) -> dict | None:
 
 
 def file_sha256(path) -> str:
-    """The SHA-256 of a file's contents, hex (read in blocks of 1 MiB)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    """The SHA-256 of a file's contents, hex (read in blocks of 1 MiB); remembered for the process
+    by the file's device, inode, size and modification time, so that the checks of one command read
+    a large file once."""
+    st = os.stat(path)
+    state = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    if state not in _DIGESTS:
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+        _DIGESTS[state] = h.hexdigest()
+    return _DIGESTS[state]
+
+
+_DIGESTS: dict[tuple, str] = {}
 
 
 def as_written(listed: dict, name: str, st: os.stat_result, path=None) -> bool:
@@ -137,7 +146,12 @@ def as_written(listed: dict, name: str, st: os.stat_result, path=None) -> bool:
     if entry[1] == st.st_mtime_ns:
         return True
     digest = entry[2] if len(entry) > 2 else None
-    return isinstance(digest, str) and path is not None and stat.S_ISREG(st.st_mode) and file_sha256(path) == digest
+    if not (isinstance(digest, str) and path is not None and stat.S_ISREG(st.st_mode)):
+        return False
+    try:
+        return file_sha256(path) == digest
+    except OSError:  # a file that cannot be read is not known to be as written
+        return False
 
 
 def _entries(directory: Path) -> tuple[dict[str, os.stat_result], set[str]]:
@@ -291,8 +305,8 @@ def _check_contents(
             f"away or choose another {flag} (pfjax never deletes what it did not write)",
             flag,
         )
-    changed = [f for f, st in files.items() if not as_written(listed, f, st, resolved / f)]
-    if not overwrite:
+    if not overwrite:  # with overwrite a changed file is replaced: no verdict needed
+        changed = [f for f, st in files.items() if not as_written(listed, f, st, resolved / f)]
         advice = switch_advice(flag, "overwrite")
         if changed:
             raise InputError(

@@ -257,6 +257,9 @@ def test_api_checks_the_simulation_step_against_the_tyre_modes():
         pfjax.simulate(runs, "stanley", config={"horizon": 1.0, "dt": 0.005})
     r = pfjax.simulate(runs, "stanley", config={"horizon": 1.0})
     assert (r.table["status"] == "ok").all()
+    # the step taken is the config's from then on: a horizon of no whole number of it is named so
+    with pytest.raises(InputError, match=r"^config\.horizon: "):
+        pfjax.simulate(runs, "stanley", config={"horizon": 1.005})
     code, out, _ = _main(
         "simulate",
         "--model",

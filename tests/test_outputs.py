@@ -876,3 +876,19 @@ def test_a_ctrl_c_after_the_command_ended_changes_nothing():
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 3 and r.stdout == "exit handler ran\n" and r.stderr == "", r
+
+
+def test_a_file_of_the_same_size_and_other_bytes_is_changed_whatever_its_time(tmp_path):
+    """Only the contents decide where the time differs: a same-size edit is changed; a marker of
+    format 1 (no hash) takes any new time for a change."""
+    f = tmp_path / "summary.json"
+    f.write_text('{"a": 1}')
+    st = f.stat()
+    listed = {"summary.json": [st.st_size, st.st_mtime_ns, __import__("hashlib").sha256(f.read_bytes()).hexdigest()]}
+    assert as_written(listed, "summary.json", f.stat(), f)
+    f.write_text('{"a": 2}')  # the same size, other bytes, a new time
+    assert f.stat().st_size == st.st_size and not as_written(listed, "summary.json", f.stat(), f)
+    f.write_text('{"a": 1}')  # the bytes pfjax wrote, a new time: as written
+    os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    assert as_written(listed, "summary.json", f.stat(), f)
+    assert not as_written({"summary.json": listed["summary.json"][:2]}, "summary.json", f.stat(), f)

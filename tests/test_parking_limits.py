@@ -200,3 +200,5 @@ def test_a_scanner_period_longer_than_the_run_is_refused_everywhere(capsys):
         parking.run(t_max=0.01, scan_period=10.0)
     with pytest.raises(ConfigError, match=r"^sim.scan_period: must be <= sim.t_max \(one scanner period"):
         load(None, ["sim.t_max=0.05", "sim.scan_period=0.1"], quick=True)
+    with pytest.raises(ConfigError, match=r"^sim.scan_period: sim.t_max / scan period may be at most 20000"):
+        load(None, ["sim.t_max=1000", "sim.scan_period=0.01"], quick=True)

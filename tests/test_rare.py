@@ -537,6 +537,9 @@ def test_no_stratum_shares_its_draws_with_a_stratum_of_another_seed():
     seeds = {stratum_seed(s, k) for s in [*range(100), MAX_SEED] for k in range(8)}
     seeds |= {explore_seed(stratum_seed(s, k)) for s in [*range(100), MAX_SEED] for k in range(8)}
     assert len(seeds) == 2 * 808 and all(0 <= x <= MAX_SEED for x in seeds)  # the explore stage's too
+    # no explore stage draws what another study's estimator draws (seed + 7919 was study 7919's)
+    estimators = {stratum_seed(s, k) for s in range(10_000) for k in range(8)}
+    assert not {explore_seed(s) for s in range(100)} & estimators
     assert [stratum_seed(s, 0) for s in range(100)] == list(range(100))
     data = line_study(4.0)  # p about 0.14: the failure count of 200 draws tells two streams apart
     data["initial"] = {"start_along_m": {"dist": "choice", "values": [0.0, 1.0]}}

@@ -173,3 +173,18 @@ def test_the_entry_points_check_the_step_against_the_batchs_worst_case():
         dyn.simulate_one(sc, controller=ctrl, config=config)
     with pytest.raises(InputError, match=r"^config\.dt: "):
         dyn.simulate_batch(stack([sc, sc]), controller=ctrl, config=config)
+
+
+def test_a_batch_a_callers_jit_captures_is_checked_on_the_host_and_still_runs():
+    """Inside a caller's jit only the gains are traced: the step is checked on the batch's concrete
+    numbers (host copies), and the value and its gradient come back."""
+    ctrl, sc = _scenario("line", "stanley")
+    batch = stack([sc, sc])
+    config = SimConfig(horizon=0.2, dt=0.01, record=False)
+
+    def loss(k):
+        gains = jax.tree_util.tree_map(lambda g: k * g, batch.gains)
+        return dyn.simulate_batch(batch._replace(gains=gains), controller=ctrl, config=config).metrics.iae.sum()
+
+    value, grad = jax.jit(loss)(1.0), jax.jit(jax.grad(loss))(1.0)
+    assert np.isfinite(value) and np.isfinite(grad)

@@ -41,7 +41,8 @@ def synthesized(method: str, *, v: float, L: float, region=None, **weights):
     synth``): a synthesis that finds no design is a one-line :class:`~pfjax.errors.NoDesignError`
     (an ``InputError`` and a ``SynthesisError`` with the solver's status) naming what the caller can
     change: ``region`` where a pole region is given, else ``v/L``, with the operating point and the
-    solver's verdict. Weights other than the source's (``alpha`` 10, ``beta`` 1) are named with
+    solver's verdict. Weights other than the source's (:func:`~pfjax.synthesis.synthesize`'s
+    defaults, ``alpha`` 10, ``beta`` 1) are named with
     ``v/L`` and shown: a weight ratio of many decades can leave the solver without a design where
     the source's weights find one."""
     from pfjax.synthesis import SynthesisError, synthesize
@@ -51,7 +52,10 @@ def synthesized(method: str, *, v: float, L: float, region=None, **weights):
     except errors.NoDesignError:
         raise
     except SynthesisError as e:  # the operating point, the weights or the region: the solver found none
-        changed = {k: w for k, w in weights.items() if w is not None and w != SOURCE_WEIGHTS.get(k)}
+        import inspect
+
+        source = {k: p.default for k, p in inspect.signature(synthesize).parameters.items()}  # its own defaults
+        changed = {k: w for k, w in weights.items() if w is not None and w != source.get(k)}
         key = "region" if region is not None else "/".join(["v", "L", *changed])
         what = "with its closed-loop poles there" if region is not None else ""
         shown = "".join(f", {k} {w:g}" for k, w in changed.items())
@@ -61,10 +65,6 @@ def synthesized(method: str, *, v: float, L: float, region=None, **weights):
             key,
             e.status,
         ) from None
-
-
-#: The source's weights of the mixed design's objective, ``alpha γ∞² + beta γ₂²``.
-SOURCE_WEIGHTS = {"alpha": 10.0, "beta": 1.0}
 
 
 def _region(region):

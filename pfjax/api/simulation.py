@@ -69,16 +69,17 @@ def resolve_gains(e, d, gains, v: float, L: float) -> tuple[Any, dict]:
 
 
 def sim_config(config, default=None):
-    """``config`` (a :class:`pfjax.sim.SimConfig`, a dict of its fields, or None for ``default``) as a
-    ``SimConfig``; :class:`~pfjax.errors.InputError` naming ``config`` otherwise (the fields are
-    checked by ``SimConfig``)."""
+    """``config`` (a :class:`pfjax.sim.SimConfig`, a dict of its fields changing ``default`` or, with
+    no ``default``, ``SimConfig()``), or ``default`` for None, as a ``SimConfig``;
+    :class:`~pfjax.errors.InputError` naming ``config`` otherwise (the fields are checked by
+    ``SimConfig``)."""
     from pfjax.sim import SimConfig
     from pfjax.sim.settings import changed
 
     if config is None:
         return default
     if isinstance(config, dict):
-        return changed(SimConfig(), config)
+        return changed(SimConfig() if default is None else default, config)
     if not isinstance(config, SimConfig):
         raise errors.InputError(f"config: expected a SimConfig or a dict, got {type(config).__name__}", "config")
     return config
@@ -104,7 +105,8 @@ def simulate(
             Runs of the single-track models (``scenarios(model="st" | "std")``) without a ``dt``
             take the largest stable step of 0.005, 0.002, 0.001, 0.0005, ... s for the runs' worst
             case (:func:`pfjax.models.single_track.stable_step`), as ``pfjax simulate --model``
-            does.
+            does; ``horizon`` is then a whole number of those steps and ``control_every`` counts
+            them.
         trajectories: ``True`` also records every run's trajectory (memory grows with the horizon).
 
     Computed in the precision JAX is configured for (float32 unless ``jax_enable_x64``); the command
@@ -138,24 +140,25 @@ def simulate(
     trajectories = errors.boolean("trajectories", trajectories)
     if isinstance(config, dict) and "record" in config:  # one way to ask for trajectories, not two
         raise errors.InputError("config.record: pass trajectories=True to record the runs", "config.record")
-    dt_given = isinstance(config, SimConfig) or (isinstance(config, dict) and "dt" in config)
-    config = dataclasses.replace(sim_config(config, SimConfig()), record=trajectories)
     t = scenarios.table
-    if scenarios.spec.vehicle.model in ("st", "std") and config.control_every is None:
+    dynamic = scenarios.spec.vehicle.model in ("st", "std")
+    base = SimConfig()
+    if dynamic:  # the step pfjax simulate --model takes without --dt, for the runs' worst case
+        from pfjax.models.single_track import check_step, stable_step, with_mu
+
+        veh = scenarios.spec.vehicle
+        st_params = with_mu(veh.model_params(), float(t["mu"].max()))
+        v_lo = float(t["speed"].min())
+        base = SimConfig(dt=stable_step(st_params, v_lo, veh.tau_delta_s, veh.k_v))
+    config = dataclasses.replace(sim_config(config, base), record=trajectories)
+    if dynamic and config.control_every is None:
         raise errors.InputError(
             "config.control_every: the single-track models take a sampled controller (>= 1 steps); a "
             "continuous one (None) is not supported",
             "config.control_every",
         )
-    if scenarios.spec.vehicle.model in ("st", "std"):
-        from pfjax.models.single_track import check_step, stable_step, with_mu
-
-        veh = scenarios.spec.vehicle
-        params = with_mu(veh.model_params(), float(t["mu"].max()))
-        v_lo = float(t["speed"].min())
-        if not dt_given:  # the step pfjax simulate --model takes without --dt, for the runs' worst case
-            config = dataclasses.replace(config, dt=stable_step(params, v_lo, veh.tau_delta_s, veh.k_v))
-        check_step("config.dt", config.dt, params, v_lo, veh.tau_delta_s, veh.k_v, worst_case="the runs' worst case")
+    if dynamic:
+        check_step("config.dt", config.dt, st_params, v_lo, veh.tau_delta_s, veh.k_v, worst_case="the runs' worst case")
     params, flat = resolve_gains(e, d, gains, float(t["speed"].mean()), float(t["L"].mean()))
     n = scenarios.n
     m = batch_size(n)  # padded like a study's chunks: every run takes the same vector code

@@ -46,6 +46,7 @@ single-track drift model (CommonRoad's STD: Pacejka tyres and wheel speeds) is :
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -167,7 +168,17 @@ def max_stable_step(params: STParams | STDParams, v: float, tau_delta: float = m
     ``v`` (the ST model's lateral-yaw modes, :func:`lateral_eigenvalues`; the drift model's, wheel
     speeds included, :func:`~pfjax.models.single_track_drift.drift_modes`), a first-order steering
     actuator (``lambda = -1 / tau_delta``) and a proportional speed loop (``lambda = -k_v``). A step
-    beyond it lets the integration blow up (a run then fails as ``diverged`` or ``nonfinite``)."""
+    beyond it lets the integration blow up (a run then fails as ``diverged`` or ``nonfinite``). The
+    modes of a set of plain numbers are remembered (the drift model's take tens of milliseconds, and
+    every chunk of a study checks its step)."""
+    try:
+        return _max_stable_step(params, float(v), float(tau_delta), float(k_v))
+    except TypeError:  # parameters holding arrays: not hashable, computed each time
+        return _max_stable_step.__wrapped__(params, v, tau_delta, k_v)
+
+
+@functools.lru_cache(maxsize=256)
+def _max_stable_step(params, v: float, tau_delta: float, k_v: float) -> float:
     modes = drift_modes(params, v) if isinstance(params, STDParams) else lateral_eigenvalues(params, v)
     fastest = max(float(np.max(np.abs(modes))), 1 / tau_delta, k_v)
     return RK4_REACH / fastest

@@ -27,7 +27,7 @@ def check_periods(key: str, t_max: float, scan_period: float, t_max_key: str = "
         )
     if t_max / scan_period > MAX_PERIODS:
         raise InputError(
-            f"{key}: t_max / scan period may be at most {MAX_PERIODS}, got {shown(t_max)} / {shown(scan_period)} = "
+            f"{key}: {t_max_key} / scan period may be at most {MAX_PERIODS}, got {shown(t_max)} / {shown(scan_period)} = "
             f"{shown(t_max / scan_period)}",
             key,
         )

@@ -153,8 +153,9 @@ def stratum_seed(seed: int, k: int) -> int:
 
 def explore_seed(seed: int) -> int:
     """The seed of the explore stage's draws for an estimate seeded ``seed`` (a stratum's,
-    :func:`stratum_seed`): a 63-bit seed drawn by ``SeedSequence((seed, EXPLORE))``, so that it is
-    no estimator's seed of another study (``seed + c`` would be seed ``seed + c``'s)."""
+    :func:`stratum_seed`): a 63-bit seed drawn by ``SeedSequence((seed, EXPLORE))``, so that it
+    meets another study's estimator seed only by chance, not by rule (``seed + c`` is the estimator
+    seed of the study seeded ``seed + c``)."""
     return _derived(seed, EXPLORE)
 
 

@@ -373,9 +373,19 @@ def check_step(scenarios: DynamicScenario, config: SimConfig, key: str = "config
 
     from pfjax.errors import is_traced
 
-    if is_traced((scenarios.vehicle, scenarios.v_ref, scenarios.tau_delta, scenarios.k_v)):
+    parts = (scenarios.vehicle, scenarios.v_ref, scenarios.tau_delta, scenarios.k_v)
+    if is_traced(parts):
         return
-    first = jax.tree_util.tree_map(lambda a: np.asarray(a).reshape(-1)[0], scenarios.vehicle)
-    params = st.with_mu(first, float(np.max(st.body(scenarios.vehicle).mu)))
-    v, tau = float(np.min(scenarios.v_ref)), float(np.min(scenarios.tau_delta))
-    st.check_step(key, config.dt, params, v, tau, float(np.max(scenarios.k_v)), worst_case="the runs' worst case")
+    # host copies: a concrete batch a caller's jit captured would otherwise be reduced as traced values
+    vehicle, v_ref, tau, k_v = jax.tree_util.tree_map(np.asarray, parts)
+    first = jax.tree_util.tree_map(lambda a: a.reshape(-1)[0], vehicle)
+    params = st.with_mu(first, float(np.max(st.body(vehicle).mu)))
+    st.check_step(
+        key,
+        config.dt,
+        params,
+        float(np.min(v_ref)),
+        float(np.min(tau)),
+        float(np.max(k_v)),
+        worst_case="the runs' worst case",
+    )

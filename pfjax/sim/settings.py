@@ -17,9 +17,10 @@ class SimConfig:
         dt: integrator step, s (default 5 ms). The single-track models' step is checked against
             their tyre modes (:func:`pfjax.models.single_track.check_step`); the kinematic model's
             stiffness is the controller's, and is not checked: a heading gain ``k_theta`` (rad/rad)
-            needs about ``dt v |k_theta| / L < 2.8`` for a stable RK4 step, and a step beyond it
-            shows as steering that chatters between its limits (``sat_fraction`` near 1), not as
-            a failed status.
+            needs ``control_every dt v |k_theta| / L < 2`` with the command held over its period
+            (an Euler step of the heading error), about 2.8 for a continuous controller (RK4), and
+            a step beyond it shows as steering that chatters between its limits
+            (``sat_fraction`` near 1), not as a failed status.
         horizon: simulated time, s (docs/reproductions/path-following.md §6: *assumed* 20 s), a whole
             number of steps ``dt`` (to a relative 1e-9, :func:`pfjax.resources.whole_steps`).
         control_every: controller sampling period in integrator steps (zero-order hold);
