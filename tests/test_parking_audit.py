@@ -45,10 +45,10 @@ CASE_C = ((0.1, 0.5, 0.0), -1, (1.0, 0.5))
 @pytest.mark.parametrize(
     "override, key",
     [
-        (["assumptions.scan_periods=[0.1, 0.005]"], "assumptions.scan_periods[1]: t_max / scan period"),
+        (["assumptions.scan_periods=[0.1, 0.005]"], "assumptions.scan_periods[1]: sim.t_max / scan period"),
         (
             ["montecarlo.scan_lo=0.002", "montecarlo.scan_hi=0.004"],
-            "montecarlo.scan_lo: t_max / scan period may be at most 20000, got 200 / 0.002",
+            "montecarlo.scan_lo: sim.t_max / scan period may be at most 20000, got 200 / 0.002",
         ),
     ],
 )

@@ -95,7 +95,7 @@ def test_every_field_has_a_description_with_a_unit():
         ("sim.scan_perod=0.1", "sim.scan_perod: unknown key"),
         ("controller.k1=0", "controller.k1:"),
         ("sim.front=0.6", "sim.front:"),
-        ("sim.scan_period=0.001", "sim.scan_period: t_max / scan period may be at most 20000, got 200 / 0.001"),
+        ("sim.scan_period=0.001", "sim.scan_period: sim.t_max / scan period may be at most 20000, got 200 / 0.001"),
         ("assumptions.fronts=[0.1, 0.7]", "assumptions.fronts[1]:"),
         ("assumptions.zones=['front']", "assumptions.zones"),
         ("assumptions.pauses=[-1.0]", "assumptions.pauses[0]:"),
@@ -111,7 +111,7 @@ def test_every_field_has_a_description_with_a_unit():
         ("search.ga_seeds=1000000", "search.ga_seeds:"),
         ("search.ga_seeds=900", "search.ga_seeds: the GA runs together may simulate at most 1e+08"),
         ("montecarlo.n_runs=10000000000", "montecarlo.n_runs: the Monte Carlo may simulate at most 1e+08"),
-        ("sim.t_max=2000.5", "sim.scan_period: t_max / scan period may be at most 20000, got 2000.5 / 0.1 = 20005"),
+        ("sim.t_max=2000.5", "sim.scan_period: sim.t_max / scan period may be at most 20000, got 2000.5 / 0.1 = 20005"),
     ],
 )
 def test_a_bad_key_or_value_is_one_line_naming_the_key(override, key):
