@@ -87,9 +87,6 @@ COLUMNS: dict[str, tuple[str, str]] = {
 }
 
 
-#: The unit of a controller's gains: each gain's own (its parameter pytree's docstring).
-GAINS = "the controller's parameter units (pfjax.controllers)"
-
 #: The channels of the slip design's norms (:func:`pfjax.synthesis.slip_design_plant`; ``int d`` in
 #: the integral designs): an H-infinity or H2 norm or bound is a number of these channels in SI units,
 #: which differ, so it has no one unit. ``"H-infinity norm " + HINF_CHANNELS``.

@@ -443,6 +443,8 @@ def test_cli_study_and_bad_input(tmp_path, capsys):
     assert head["n_runs_total"] == 4 and "st" in head["controllers"]
     assert head["units"]["iae_mean"].startswith("m s") and head["units"]["slip_margin_deg"] == "deg"
     assert (out / "runs.parquet").is_file() and (out / "summary.json").is_file()
+    units = json.loads((out / "summary.json").read_text())["units"]
+    assert units["gains"] == {"st": {"k": "1/s", "k_soft": "m/s"}}  # each controller's gains' units
     capsys.readouterr()
     for args, flag in (
         (["--set", "n_runs=0"], "n_runs"),

@@ -381,4 +381,8 @@ def test_tune_cli_check_json(capsys):
     out = json.loads(capsys.readouterr().out)
     c = out["check"]
     assert set(c["gradient"]) == {"K[0]", "K[1]"} and c["n_rollouts"] == 1 + 4 + 16
+    # the units by the controller's registration: the gains', the box's elements' and the check's
+    u = out["units"]
+    assert u["gains.k_d"] == "rad/m" and u["gains.k_theta"] == "rad/rad" and u["bounds.lower"] == "rad/m, rad/rad"
+    assert u["check.gradient.K[0]"] == "cost per rad/m" and u["check.best_probe.K[1]"] == "rad/rad"
     assert c["verdict"] == "not a local minimum"  # the source's K is far from the IAE optimum

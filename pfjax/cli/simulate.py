@@ -23,7 +23,7 @@ import math
 
 from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags, finite
 from pfjax.cli.synth import SYNTH_FLAGS
-from pfjax.tables import COLUMNS, GAINS
+from pfjax.tables import COLUMNS
 
 
 def _gain_names(controller: str) -> tuple[tuple[str, ...], list[str]]:
@@ -96,6 +96,8 @@ def _controller_and_gains(args, wheelbase: float):
     # recorded as they ran (pfjax.cli.records): "-4,-1.5", "k_d=-4,k_theta=-1.5" and the defaults
     # (or the design's gains) given or not, alike
     args.gains = shown
+    # each gain's unit, by the controller's registration (the same name has other units elsewhere)
+    args.units = {**args.units, "gains.*": C.gain_units(e), "arguments.gains.*": C.gain_units(e)}
     return e.controller, gains, shown
 
 
@@ -147,7 +149,8 @@ SIMULATE_FLAGS = {
 }
 
 
-#: The unit of each number ``cmd`` returns (:func:`pfjax.cli.records.units`).
+#: The unit of each number ``cmd`` returns (:func:`pfjax.cli.records.units`); the gains' are the
+#: controller's (:func:`pfjax.controllers.gain_units`), added as it runs.
 UNITS = {
     "x0.x": "m",
     "x0.y": "m",
@@ -161,7 +164,6 @@ UNITS = {
     "metrics.*": {name: unit for name, (unit, _) in COLUMNS.items()},
     "slip.*": {name: unit for name, (unit, _) in COLUMNS.items()},
     "fail_time": "s",
-    "gains.*": GAINS,
     "arguments.*": {
         "x0": "m, m, deg",
         "beta_r_deg": "deg",
@@ -176,7 +178,6 @@ UNITS = {
         "tau_delta": "s",
         "k_v": "1/s",
     },
-    "arguments.gains.*": GAINS,
 }
 
 

@@ -26,7 +26,6 @@ from __future__ import annotations
 import sys
 
 from pfjax.cli.common import UsageError, as_flags
-from pfjax.tables import GAINS
 
 
 def _controllers() -> dict:
@@ -200,20 +199,16 @@ def _multistart(args):
 
 #: The cost's unit: its metric's, aggregated over the runs (pfjax.tuning.cost).
 COST = "the metric's (iae m s, ise m^2 s, itae m s^2; effort: per rad^2 s of steering)"
-#: The unit of each number ``_cmd`` returns (:func:`pfjax.cli.records.units`).
+#: The unit of each number ``_cmd`` returns (:func:`pfjax.cli.records.units`); the gains', the
+#: bounds' and the check's coordinates' are the controller's, added as it runs (:func:`gain_units`).
 UNITS = {
-    "gains.*": GAINS,
-    "bounds.lower": GAINS,
-    "bounds.upper": GAINS,
     "cost": COST,
     "history": COST,
     "cost_spec.fail_penalty": COST,
     "cost_spec.effort": "cost per rad^2 s",
     "cost_spec.level": "1",
-    "check.gradient.*": "cost per gain unit",
     "check.projected_gradient_norm": "cost per box width",
     "check.hessian_eigenvalues": "cost per box width^2",
-    "check.best_probe.*": GAINS,
     "check.newton_decrease_relative": "1",
     "check.probe_decrease_relative": "1",
     "dt": "s",
@@ -280,6 +275,7 @@ def _cmd(args) -> dict:
             raise errors.renamed(errors.renamed(e, "config.dt", "--dt"), "config.horizon", "--horizon") from None
         # as they ran (the scenario set's): one config hash, given or not
         args.dt, args.horizon, args.model = problem.config.dt, problem.config.horizon, _model_of(problem)
+        args.units = gain_units(args.units, controllers[args.controller], problem.tunable)
         common = {
             "controller": args.controller,
             "scenario": args.scenario,
@@ -330,6 +326,25 @@ def _cmd(args) -> dict:
         "seed": args.seed,
         "n_nonfinite_grad": r.n_nonfinite_grad,
         **common,
+    }
+
+
+def gain_units(table: dict, controller: str, tunable) -> dict:
+    """``table`` with the units of the controller's gains (:func:`pfjax.controllers.gain_units`): the
+    reported gains', the box's bounds (one per element, in ``bounds.fields`` order) and the check's
+    coordinates (the gradient's, cost per gain unit, and the best probe's)."""
+    from pfjax import controllers as C
+    from pfjax.tuning.check import coordinate_names
+
+    e = C.entry(controller)
+    box = C.box_units(e, tunable.fields)
+    coordinates = coordinate_names(tunable.fields, tunable.sizes)
+    return {
+        **table,
+        "gains.*": C.gain_units(e),
+        **dict.fromkeys(("bounds.lower", "bounds.upper"), ", ".join(box)),
+        "check.gradient.*": {n: "cost" if u == "1" else f"cost per {u}" for n, u in zip(coordinates, box)},
+        "check.best_probe.*": dict(zip(coordinates, box)),
     }
 
 

@@ -28,11 +28,14 @@ from pfjax.controllers.linear import (
 )
 from pfjax.controllers.registry import (
     REGISTRY,
+    UNSTATED,
     ControllerEntry,
+    box_units,
     check_box,
     checked_factory,
     entry,
     flat_gains,
+    gain_units,
     params_from_flat,
     register,
 )
@@ -54,6 +57,7 @@ __all__ = [
     "PAPER_PI",
     "REGISTRY",
     "TABLE3_GAINS",
+    "UNSTATED",
     "Controller",
     "ControllerEntry",
     "DesignEntry",
@@ -65,6 +69,7 @@ __all__ = [
     "RearWheelParams",
     "StanleyParams",
     "StateFeedbackParams",
+    "box_units",
     "check_box",
     "checked_factory",
     "cli_names",
@@ -72,6 +77,7 @@ __all__ = [
     "design_gains",
     "entry",
     "flat_gains",
+    "gain_units",
     "integral",
     "integral_params",
     "linear",

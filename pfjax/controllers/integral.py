@@ -63,4 +63,5 @@ register(
     style={"color": "#e377c2", "lw": 1.4, "label": "state feedback with integral action"},
     labels={"K": ("k_d", "k_theta", "k_i")},
     gains=("k_d", "k_theta", "k_i", "k_aw"),
+    units={"k_d": "rad/m", "k_theta": "rad/rad", "k_i": "rad/(m s)", "k_aw": "1/s", "feedforward": "1"},
 )

@@ -48,6 +48,7 @@ register(
     style={"color": "#17becf", "lw": 1.2, "ls": "--", "label": "state feedback"},
     labels={"K": ("k_d", "k_theta")},
     gains=("k_d", "k_theta"),
+    units={"k_d": "rad/m", "k_theta": "rad/rad", "feedforward": "1"},
 )
 
 
@@ -121,6 +122,7 @@ register(
     defaults=PAPER_PI,
     box=(("kp_d", "ki_d", "kp_theta", "ki_theta"), (0.0, 0.0, 0.0, 0.0), (60.0, 5.0, 30.0, 1.0)),
     style={"color": "#d62728", "lw": 1.6, "label": "MISO PI (Table 3)"},
+    units={"kp_d": "rad/m", "ki_d": "rad/(m s)", "kp_theta": "rad/rad", "ki_theta": "1/s", "k_aw": "1/s"},
 )
 
 

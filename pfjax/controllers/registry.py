@@ -35,6 +35,9 @@ class ControllerEntry(NamedTuple):
         labels: names of a vector field's elements (``{"K": ("k_d", "k_theta")}``).
         module: the module that registered it (:func:`pfjax.plugins.registrant`), the only one that
             may register its name again; ``pfjax.*`` for pfjax's own controllers.
+        units: each scalar gain's unit by its name (``{"kp_d": "rad/m", ...}``; names of
+            :func:`gain_names`); what outputs record as the gains' units (:func:`gain_units`). A
+            gain without one is recorded as :data:`UNSTATED`.
     """
 
     controller: Controller
@@ -46,7 +49,11 @@ class ControllerEntry(NamedTuple):
     style: dict
     labels: dict  # vector field -> names of its elements (K -> k_d, k_theta): the scalar gains
     module: str
+    units: dict  # scalar gain -> its unit
 
+
+#: The unit recorded for a gain whose controller was registered without one (``register(units=...)``).
+UNSTATED = "not stated (registered without units)"
 
 #: name -> entry.
 REGISTRY: dict[str, ControllerEntry] = {}
@@ -105,6 +112,7 @@ def register(
     style: dict | None = None,
     labels: dict | None = None,
     gains: tuple | None = None,
+    units: Mapping[str, str] | None = None,
 ) -> ControllerEntry:
     """Add a controller kind and return its entry.
 
@@ -135,6 +143,9 @@ def register(
         labels: names of a vector field's elements (``{"K": ("k_d", "k_theta")}``); a field
             without labels is a scalar.
         gains: the scalar gains ``--gains`` takes in order (default all of them).
+        units: each scalar gain's unit by its name (``{"k": "1/s", "k_soft": "m/s"}``; a vector
+            field's elements by their ``labels``), which outputs record beside the gains; a gain
+            left out is recorded as :data:`UNSTATED`.
 
     Raises:
         InputError: an argument that is not as described, naming it (``box.lower[1]: ...``,
@@ -177,6 +188,7 @@ def register(
     for k in gains or ():
         if k not in flat:
             raise errors.InputError(f"gains: unknown gain {k!r} of {name!r}; expected one of {', '.join(flat)}")
+    units = _units(units, name, flat)
     entry = ControllerEntry(
         controller,
         make,
@@ -187,9 +199,26 @@ def register(
         {"color": "#7f7f7f", "lw": 1.0, "label": name, **(style or {})},
         labels,
         module,
+        units,
     )
     REGISTRY[name] = entry
     return entry
+
+
+def _units(units, name: str, flat: tuple[str, ...]) -> dict[str, str]:
+    """``register``'s ``units`` as a dict, checked: a mapping from scalar gains of ``name`` (``flat``)
+    to non-empty strings; an :class:`~pfjax.errors.InputError` naming ``units`` or ``units.<gain>``
+    otherwise."""
+    if units is None:
+        return {}
+    if not isinstance(units, Mapping):
+        raise errors.InputError(f"units: expected a mapping of gain name -> unit, got {units!r}", "units")
+    for k, u in units.items():
+        if k not in flat:
+            raise errors.InputError(f"units.{k}: unknown gain of {name!r}; expected one of {', '.join(flat)}", "units")
+        if not isinstance(u, str) or not u.strip():
+            raise errors.InputError(f"units.{k}: expected a unit (a non-empty string), got {u!r}", "units")
+    return dict(units)
 
 
 def check_box(box, make: CheckedFactory, labels: Mapping[str, tuple], key: str = "box") -> tuple:
@@ -317,6 +346,19 @@ def gain_names(e: ControllerEntry) -> list[str]:
     fields by their labels), without building its parameters; ``e.gains``, those ``--gains``
     takes by position, are some of them."""
     return [n for f in e.make_params.gain_names for n in e.labels.get(f, (f,))]
+
+
+def gain_units(e: ControllerEntry) -> dict[str, str]:
+    """Every scalar gain's unit by its name (:func:`gain_names`' order): what outputs record beside
+    :func:`flat_gains`; :data:`UNSTATED` for a gain the registration gives none."""
+    return {n: e.units.get(n, UNSTATED) for n in gain_names(e)}
+
+
+def box_units(e: ControllerEntry, fields) -> list[str]:
+    """The unit of each element of a tuning box over ``fields`` (gain fields of ``e``), flat in field
+    order (a vector field by its ``labels``): the units of a box's bounds and of a point in it."""
+    units = gain_units(e)
+    return [units[n] for f in fields for n in e.labels.get(f, (f,))]
 
 
 def check_gain_names(e: ControllerEntry, names, key: str = "gains") -> None:

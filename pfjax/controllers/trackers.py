@@ -54,6 +54,7 @@ register(
     stanley_params,
     box=(("k", "k_soft"), (0.1, 0.01), (20.0, 2.0)),
     style={"color": "#2ca02c", "lw": 1.0, "label": "Stanley"},
+    units={"k": "1/s", "k_soft": "m/s"},
 )
 
 
@@ -101,6 +102,7 @@ register(
     pure_pursuit_params,
     box=(("ld_gain", "ld_min"), (0.05, 0.05), (3.0, 2.0)),
     style={"color": "#9467bd", "lw": 1.0, "label": "pure pursuit"},
+    units={"ld_gain": "s", "ld_min": "m"},
 )
 
 
@@ -135,4 +137,5 @@ register(
     rear_wheel_params,
     box=(("k_theta", "k_d"), (0.1, 0.1), (20.0, 40.0)),
     style={"color": "#8c564b", "lw": 1.0, "label": "rear-wheel feedback"},
+    units={"k_theta": "1/m", "k_d": "1/m^2"},
 )

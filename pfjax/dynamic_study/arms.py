@@ -25,8 +25,66 @@ from pfjax.montecarlo.dists import Dist
 from pfjax.montecarlo.scenario_config import NoiseSpec, SimSpec
 
 ROBOT_WHEELBASE = 0.2  # m, the source robot's (the kinematic studies' L)
-#: Froude scaling exponents of the controllers' gains (the gain's unit in m and s -> S^exponent).
-GAIN_SCALING = {"kp_d": -1.0, "ki_d": -1.5, "ki_theta": -0.5, "k_aw": -0.5, "k": -0.5, "k_soft": 0.5}
+#: The base units of a gain's unit (:func:`froude_exponent`): their powers of length and time.
+_BASE = {"m": (1, 0), "s": (0, 1), "rad": (0, 0), "1": (0, 0)}
+
+
+def _powers(product: str) -> tuple[float, float] | None:
+    """The powers of m and s of a product of base units (``"m s"``, ``"m^2"``, ``"(m s)"``); None
+    if it has another unit."""
+    a = b = 0.0
+    for token in product.strip().removeprefix("(").removesuffix(")").split():
+        base, _, power = token.partition("^")
+        if base not in _BASE:
+            return None
+        try:
+            n = float(power) if power else 1.0
+        except ValueError:
+            return None
+        a, b = a + n * _BASE[base][0], b + n * _BASE[base][1]
+    return a, b
+
+
+def froude_exponent(unit: str) -> float | None:
+    """The exponent ``e`` of a gain's Froude scaling, ``gain x S^e`` (lengths x ``S``, times x
+    ``sqrt(S)``): for a unit ``m^a s^b`` (``rad`` and ``1`` dimensionless), ``e = a + b / 2``
+    (``rad/(m s)`` -> -1.5, ``m/s`` -> 0.5). None for a unit written otherwise (a controller
+    registered without units: :data:`pfjax.controllers.UNSTATED`)."""
+    num, _, den = unit.partition("/")
+    top, bottom = _powers(num), _powers(den) if den else (0.0, 0.0)
+    if top is None or bottom is None:
+        return None
+    return (top[0] - bottom[0]) + (top[1] - bottom[1]) / 2
+
+
+def scaled_gains(c: dict, s: float, key: str) -> dict:
+    """A study's controller ``c`` (its config table) with its gains Froude-scaled by ``S = s``: every
+    scalar gain of a registered controller (``K`` by its labels, ``gains``, the defaults) by its unit
+    (:func:`froude_exponent`), written as ``gains``. A design (``lmi``, ...) is unchanged: it is made
+    at the car's speed and wheelbase. A gain whose unit is not in m, s and rad raises an
+    :class:`~pfjax.errors.InputError` naming ``key``."""
+    from pfjax import errors
+
+    e, d = C.resolve(c["type"], f"{key}.type")
+    if d is not None:
+        return c
+    flat = C.flat_gains(e)
+    K = c.get("K")
+    if K is not None and "K" in e.labels and len(K) == len(e.labels["K"]):  # else the config refuses it
+        flat.update(zip(e.labels["K"], K))
+        c = {k: v for k, v in c.items() if k != "K"}
+    flat.update(c.get("gains", {}))
+    units, out = C.gain_units(e), {}
+    for k, v in flat.items():
+        x = froude_exponent(units[k])
+        if x is None:
+            raise errors.InputError(
+                f"{key}.type: the car arms scale {e.name}'s gains by their units, and {k}'s is {units[k]!r}, "
+                "not one in m, s and rad (pfjax.controllers.register(units=...))",
+                f"{key}.type",
+            )
+        out[k] = v * s**x
+    return {**c, "gains": out}
 
 
 def _dynamic(spec: dict, config: KinematicVsDynamic, mu=None) -> dict:
@@ -82,7 +140,8 @@ def _scale(d, f: float):
 def car_study(config: KinematicVsDynamic) -> dict:
     """The robot study scaled to the car (module docstring): lengths x S, speeds and times x sqrt(S)
     (the horizon rounded to whole steps of the car's ``dt``; the failure, settling and success bands
-    and the lateral noise are lengths too), the paths as splines through the scaled source paths, the controllers' gains Froude-scaled."""
+    and the lateral noise are lengths too), the paths as splines through the scaled source paths, the
+    controllers' gains Froude-scaled by their units (:func:`scaled_gains`)."""
     p = st.parameter_set(config.car.params)
     s = float(p.l_f + p.l_r) / ROBOT_WHEELBASE
     rs = math.sqrt(s)
@@ -108,11 +167,7 @@ def car_study(config: KinematicVsDynamic) -> dict:
         L=p.l_f + p.l_r, delta_max_deg=math.degrees(p.delta_max), delta_rate_max_deg=math.degrees(p.v_delta_max)
     )
     spec["paths"] = [{"kind": "spline", "name": q["kind"], "points": scaled_path(q["kind"], s)} for q in spec["paths"]]
-    for c in spec["controllers"]:
-        if c["type"] in ("pi", "stanley"):
-            e, _ = C.resolve(c["type"], "type")
-            flat = {**C.flat_gains(e), **c.get("gains", {})}
-            c["gains"] = {k: v * s ** GAIN_SCALING.get(k, 0.0) for k, v in flat.items()}
+    spec["controllers"] = [scaled_gains(c, s, f"study.controllers[{i}]") for i, c in enumerate(spec["controllers"])]
     return spec
 
 
@@ -188,4 +243,4 @@ def scaled_path(kind: str, s: float, length: float = 45.0, n: int = 301) -> list
     return [[float(s * x[i]), float(s * y[i])] for i in keep]
 
 
-__all__ = ["GAIN_SCALING", "ROBOT_WHEELBASE", "arms", "car_study", "check", "scaled_path"]
+__all__ = ["ROBOT_WHEELBASE", "arms", "car_study", "check", "froude_exponent", "scaled_gains", "scaled_path"]

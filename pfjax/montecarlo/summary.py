@@ -32,7 +32,7 @@ from pfjax.montecarlo.config import StudySpec, study_hash
 from pfjax.montecarlo.sampling import column_names
 from pfjax.provenance import STAMP_UNITS, cpu_settings, machine
 from pfjax.sim.dynamic import SLIP_METRIC_NAMES
-from pfjax.tables import COLUMNS, GAINS
+from pfjax.tables import COLUMNS
 
 QUANTILE_METRICS = [m for m in METRIC_NAMES if m != "success"]
 
@@ -59,7 +59,6 @@ UNITS: dict[str, object] = {
     **STAMP_UNITS,
     "wall_s": "s",
     "timings_s": "s (wall clock per phase)",
-    "gains": GAINS,
     "success_rate": "1",
     "success_ci95": "1 (95 % Clopper-Pearson interval of the success rate)",
     "iae_mean": "m s (over runs with status ok)",
@@ -96,7 +95,11 @@ def summary_units(spec: StudySpec, params: list[str]) -> dict:
     ``std`` and quantiles take), ``success_by_param`` (each sampled parameter's unit, which its
     bins' ``lo`` and ``hi`` take), the worst-case search's ``falsifier``, ``random``,
     ``history`` and ``history_random`` (the objective's unit) and, with rare-event estimates,
-    their block's (:func:`pfjax.rare.study.units`)."""
+    their block's (:func:`pfjax.rare.study.units`), and ``gains``: each controller's gains' units
+    by its name (:func:`pfjax.controllers.gain_units`: a gain's name has other units in other
+    controllers)."""
+    from pfjax import controllers as C
+
     units = {name: COLUMNS[name][0] for name in COLUMNS if COLUMNS[name][0]}
     objective = spec.falsifier.objective
     rare = {}
@@ -109,6 +112,7 @@ def summary_units(spec: StudySpec, params: list[str]) -> dict:
         **UNITS,
         "quantiles": {m: units[m] for m in QUANTILE_METRICS + list(SLIP_METRIC_NAMES) if m in units},
         "success_by_param": {p: units[p] for p in params if p in units},
+        "gains": {c.name: C.gain_units(C.resolve(c.type, "type")[0]) for c in spec.controllers},
         **dict.fromkeys(("falsifier", "random", "history", "history_random"), f"{units[objective]} ({objective})"),
     }
 

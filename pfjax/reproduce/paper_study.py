@@ -15,6 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
+from pfjax import controllers as C
+from pfjax.controllers.linear import PI_GAIN_NAMES
 from pfjax.jsonio import dumps
 from pfjax.provenance import STAMP_UNITS, parquet_metadata
 from pfjax.provenance import stamp as provenance_stamp
@@ -27,22 +29,28 @@ from pfjax.reproduce.paper_runs import part_paper_runs, part_pi_readings, part_s
 from pfjax.sim.scenario import PAPER_TESTS
 from pfjax.tables import COLUMNS, H2_CHANNELS, HINF_CHANNELS, write_parquet
 
+
+def _gain(controller: str, name: str, text: str) -> tuple[str, str]:
+    """A gain column's ``(unit, description)``, its unit the controller's (:func:`pfjax.controllers.gain_units`)."""
+    return C.gain_units(C.entry(controller))[name], text
+
+
 #: Units of the study's own Parquet columns (beside :data:`pfjax.tables.COLUMNS`): column -> (unit,
 #: description). Angles in rad unless named ``_deg``; the trackers' gains carry the controller's name.
 UNITS: dict[str, tuple[str, str]] = {
     # runs.parquet: the gains of each row's controller (NaN for another controller's)
-    "gain_k_d": ("rad/m", "state feedback: gain on d (delta = k_d d + k_theta theta_e)"),
-    "gain_k_theta": ("rad/rad", "state feedback: gain on theta_e"),
-    "gain_kp_d": ("rad/m", "PI: proportional gain on d"),
-    "gain_ki_d": ("rad/(m s)", "PI: integral gain on d"),
-    "gain_kp_theta": ("rad/rad", "PI: proportional gain on theta_e"),
-    "gain_ki_theta": ("1/s", "PI: integral gain on theta_e"),
-    "gain_stanley_k": ("1/s", "Stanley: cross-track gain"),
-    "gain_stanley_k_soft": ("m/s", "Stanley: softening speed"),
-    "gain_pure_pursuit_ld_gain": ("s", "pure pursuit: look-ahead time"),
-    "gain_pure_pursuit_ld_min": ("m", "pure pursuit: minimum look-ahead distance"),
-    "gain_rear_wheel_k_theta": ("1/m", "rear-wheel feedback: gain on theta_e"),
-    "gain_rear_wheel_k_d": ("1/m^2", "rear-wheel feedback: gain on d"),
+    "gain_k_d": _gain("state_feedback", "k_d", "state feedback: gain on d (delta = k_d d + k_theta theta_e)"),
+    "gain_k_theta": _gain("state_feedback", "k_theta", "state feedback: gain on theta_e"),
+    "gain_kp_d": _gain("pi", "kp_d", "PI: proportional gain on d"),
+    "gain_ki_d": _gain("pi", "ki_d", "PI: integral gain on d"),
+    "gain_kp_theta": _gain("pi", "kp_theta", "PI: proportional gain on theta_e"),
+    "gain_ki_theta": _gain("pi", "ki_theta", "PI: integral gain on theta_e"),
+    "gain_stanley_k": _gain("stanley", "k", "Stanley: cross-track gain"),
+    "gain_stanley_k_soft": _gain("stanley", "k_soft", "Stanley: softening speed"),
+    "gain_pure_pursuit_ld_gain": _gain("pure_pursuit", "ld_gain", "pure pursuit: look-ahead time"),
+    "gain_pure_pursuit_ld_min": _gain("pure_pursuit", "ld_min", "pure pursuit: minimum look-ahead distance"),
+    "gain_rear_wheel_k_theta": _gain("rear_wheel", "k_theta", "rear-wheel feedback: gain on theta_e"),
+    "gain_rear_wheel_k_d": _gain("rear_wheel", "k_d", "rear-wheel feedback: gain on d"),
     "final_d": ("m", "lateral error at the end of the run, left positive"),
     "final_theta_e": ("rad", "heading error at the end of the run"),
     "final_delta": ("rad", "applied steering at the end of the run"),
@@ -66,7 +74,7 @@ UNITS: dict[str, tuple[str, str]] = {
 }
 
 #: The PI's gains (:func:`pfjax.controllers.pi_params`), as the ``gain_*`` columns give them.
-_PI_GAINS = "kp_d rad/m, ki_d rad/(m s), kp_theta rad/rad, ki_theta 1/s"
+_PI_GAINS = ", ".join(f"{n} {C.gain_units(C.entry('pi'))[n]}" for n in PI_GAIN_NAMES)
 #: ``summary.json``'s own units, by field name (a field has one meaning wherever it occurs; "1":
 #: dimensionless); :func:`summary_units` adds the run table's and the stability table's.
 SUMMARY_UNITS: dict[str, str] = {

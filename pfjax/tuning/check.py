@@ -276,9 +276,15 @@ def parse_gains(gains, fields, sizes, lower, upper, *, key: str = "check") -> np
     return th
 
 
+def coordinate_names(fields, sizes) -> list[str]:
+    """The tuning box's coordinates by name: a scalar field by its name, a vector field's elements
+    as ``K[0]``, ``K[1]``, ... (``sizes``: each field's number of elements)."""
+    return [f"{f}[{i}]" if n > 1 else f for f, n in zip(fields, sizes) for i in range(n)]
+
+
 def as_dict(r: CheckResult, fields, sizes) -> dict:
-    """``r`` as JSON-ready values, coordinates named by the box's ``fields`` (``K[0]`` for vectors)."""
-    names = [f"{f}[{i}]" if n > 1 else f for f, n in zip(fields, sizes) for i in range(n)]
+    """``r`` as JSON-ready values, coordinates named by the box's ``fields`` (:func:`coordinate_names`)."""
+    names = coordinate_names(fields, sizes)
     return {
         "verdict": r.verdict,
         "gradient": dict(zip(names, r.gradient.tolist())),

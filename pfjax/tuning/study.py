@@ -12,7 +12,7 @@ differs). Parts 2 and 3 (:mod:`pfjax.tuning.study_parts`): K tuned on one scenar
 training sample, the LMI designs, and every controller on one held-out Monte Carlo set. ``[sim]``
 sets the step and horizon of the paper-* problems, of the training sets and of the held-out set.
 
-:func:`run` writes ``summary.json`` (every number's unit in its ``units`` map, :data:`SUMMARY_UNITS`),
+:func:`run` writes ``summary.json`` (every number's unit in its ``units`` map, :func:`summary_units`),
 ``tuning_runs.parquet`` (cost history of every tuning run),
 ``heldout.parquet`` (one row per held-out run and controller), ``margin.parquet`` (the slip-margin
 sweep's successes ``k`` of ``n`` runs per controller, axis and amplitude), ``figures/*.png|svg`` and
@@ -32,7 +32,7 @@ from pfjax.montecarlo.summary import UNITS as MONTE_CARLO_UNITS
 from pfjax.numerics.random import seed_key
 from pfjax.provenance import STAMP_UNITS
 from pfjax.report.study_format import fmt_gains
-from pfjax.tables import GAINS, H2_CHANNELS, HINF_CHANNELS
+from pfjax.tables import H2_CHANNELS, HINF_CHANNELS
 from pfjax.tuning.study_config import TuningStudy, ga_options, heldout_study, methods, problem_list
 
 #: The units of ``tuning_runs.parquet``'s columns (:func:`pfjax.tables.write_parquet`): every
@@ -62,8 +62,6 @@ SUMMARY_UNITS: dict[str, object] = {
     # part 1: the tuning runs, the Table 3 check and the local checks
     **dict.fromkeys(("cost", "descent_cost", "median", "min", "max", "ga_median", "ga_best"), _COST),
     **dict.fromkeys(("ga_costs", "gradient_costs"), _COST),
-    "gains": GAINS,
-    "descent_gains": GAINS,
     "n_rollouts": MONTE_CARLO_UNITS["n_rollouts"],
     **dict.fromkeys(("rollouts", "ga_rollouts"), f"{MONTE_CARLO_UNITS['n_rollouts']} of one tuning run"),
     **dict.fromkeys(("n_forward_passes", "forward_passes"), _PASSES),
@@ -112,6 +110,18 @@ SUMMARY_UNITS: dict[str, object] = {
     "gradient_over_ga_best": "1 (cost / ga_best - 1)",
     "integral_steady_abs_d_m": "m (largest steady_abs_d of the integral design under three constant slips)",
 }
+
+
+def summary_units(cfg: dict) -> dict:
+    """:data:`SUMMARY_UNITS` with the gains' units by controller (:func:`pfjax.controllers.gain_units`;
+    a gain's name has other units in other controllers): ``gains`` for each controller of
+    ``compare.problems`` (a problem's name before ``:``) and the Table 3 check's ``pi``,
+    ``descent_gains`` for the ``pi`` (the Table 3 check's descent)."""
+    from pfjax import controllers as C
+
+    names = dict.fromkeys(["pi", *(p.partition(":")[0] for p in problem_list(cfg["compare"]["problems"]))])
+    by = {n: C.gain_units(C.entry(n)) for n in names}
+    return {**SUMMARY_UNITS, "gains": by, "descent_gains": {"pi": by["pi"]}}
 
 
 def make_study_problem(cfg: dict, name: str):
@@ -288,7 +298,7 @@ def run(config: TuningStudy, out: Path, progress: bool) -> dict:
         **parts,
         "heldout": heldout_summary(cfg, spec, table),
         "targets": targets,
-        "units": SUMMARY_UNITS,
+        "units": summary_units(cfg),
     }
     summary["wall_s"] = time.time() - t0
     out.mkdir(parents=True, exist_ok=True)
@@ -310,5 +320,6 @@ __all__ = [
     "make_study_problem",
     "methods",
     "run",
+    "summary_units",
     "write_tables",
 ]

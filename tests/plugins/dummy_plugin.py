@@ -31,6 +31,7 @@ C.register(
     heading_params,
     box=(("k_d", "k_h"), (-6.0, -6.0), (0.0, 0.0)),
     style={"color": "#bcbd22", "label": "dummy heading"},
+    units={"k_d": "rad/m", "k_h": "rad/rad"},
 )
 
 # y = 0.5 sin(0.5 x): curvature at most A w^2 = 0.125 1/m; start on the path, tangent to it
