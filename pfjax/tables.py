@@ -57,7 +57,7 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "overshoot": ("m", "largest lateral error past the path, opposite to the initial one"),
     "steer_energy": ("rad^2 s", "integral of delta^2"),
     "steer_tv": ("rad", "total variation of the applied steering"),
-    "sat_fraction": ("1", "fraction of the run at the steering limit"),
+    "sat_fraction": ("1", "fraction of the run with the command beyond the steering limit"),
     "late_max_abs_d": ("m", "largest |d| from the success window's start on; NaN for a run that failed before it"),
     "success": ("", "no failure and |d| <= success band from success.from_s on"),
     "status_code": ("", "run status code (pfjax.sim.status)"),

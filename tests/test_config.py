@@ -7,6 +7,7 @@ import copy
 import hashlib
 import json
 import math
+import tomllib
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Literal
@@ -271,6 +272,12 @@ def test_study_toml_matches_schema_defaults():
     cfg = load_paper(ROOT / "studies" / "paper_reproduction.toml").model_dump(mode="json")
     assert config_hash(cfg) == config_hash(PaperStudy().model_dump(mode="json"))
     assert math.isclose(cfg["model"]["delta_max_deg"], 30.0)
+    # and it lists every key ("these are the defaults")
+    keys = lambda d, pre="": {
+        k for n, v in d.items() for k in (keys(v, f"{pre}{n}.") if isinstance(v, dict) else [pre + n])
+    }
+    raw = tomllib.loads((ROOT / "studies" / "paper_reproduction.toml").read_text())
+    assert keys(raw) == keys(PaperStudy().model_dump(mode="json"))
 
 
 @pytest.mark.parametrize(

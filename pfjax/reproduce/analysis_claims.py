@@ -7,6 +7,12 @@ from __future__ import annotations
 from pfjax.reproduce.run_claims import Add, Inputs, holds
 from pfjax.reproduce.verdict import ASSUMED, FILTERED
 
+#: The eigenvalue maxima's tolerance against ``source.eig_max_re`` (relative): the maxima are
+#: suprema on the open slip square's edge, and pfjax's move by about 0.002 % between scans to ±89°,
+#: ±89.9° and ±89.99° (721 points per axis); 0.1 % is fifty times that, far below a difference of
+#: linearisation.
+EIG_REL_TOL = 1e-3
+
 
 def hurwitz(inp: Inputs, add: Add) -> None:
     """Theorem 4, Figs. 4-5: the linearised loop over the slip square."""
@@ -23,16 +29,19 @@ def hurwitz(inp: Inputs, add: Add) -> None:
         "100 %",
         "reproduced" if em["hurwitz_fraction"] == 1.0 else "not reproduced",
     )
-    for name, key in (("λ₁", "max_re_slow"), ("λ₂", "max_re_fast")):
+    for i, (name, key) in enumerate((("λ₁", "max_re_slow"), ("λ₂", "max_re_fast"))):
         v, s = em[key], em[f"source_{key}"]
         add(
             claim,
             "line",
             "source's K",
-            f"max Re {name} of the source's linearisation over the open square, within 0.1 % of the source's figure",
+            f"max Re {name} of the source's linearisation over the open square, within {100 * EIG_REL_TOL:g} % of "
+            f"source.eig_max_re[{i}] (attributed to Figs. 4-5; the reconstructed source gives no number for "
+            "it, so it is an assumed parameter)",
             f"{v:.4f} 1/s (at β_r, β_f = {em[key + '_at'][0]:.1f}°, {em[key + '_at'][1]:.1f}°)",
             f"{s:.4f} 1/s",
-            "reproduced" if abs(v - s) <= 1e-3 * abs(s) else "not reproduced",
+            "reproduced" if abs(v - s) <= EIG_REL_TOL * abs(s) else "not reproduced",
+            basis=ASSUMED,
         )
     add(
         claim,
@@ -56,14 +65,18 @@ def table3(inp: Inputs, add: Add) -> None:
     claim = f"Table 3: GA-optimal PI gains {', '.join(f'{g:.4f}' for g in inp.src['table3'])} (row labels lost)"
     f = pi_df.attrs["filters"]
     counts = "; ".join(f"{k}: {v} of 24" for k, v in f["passing"].items())
+    adopted = f["adopted_reading"]
+    ours = f["consistent_readings"] == [adopted]  # the one that passes is the one the PI rows run
     add(
         claim,
         "line, parabola, sine",
         "24 readings",
-        "exactly one reading passes every filter taken from the source's claims about its PI (" + counts + ")",
-        f"{f['consistent']} reading(s): {', '.join(f['consistent_readings']) or 'none'}",
+        "exactly one reading passes every filter taken from the source's claims about its PI (" + counts + "), "
+        "and it is the reading the study's PI rows run",
+        f"{f['consistent']} reading(s): {', '.join(f['consistent_readings']) or 'none'}"
+        + ("" if ours or f["consistent"] != 1 else f"; the PI rows run another: {adopted}"),
         "one PI",
-        holds(f["consistent"] == 1),
+        holds(f["consistent"] == 1 and ours),
         basis=FILTERED,
     )
     add(

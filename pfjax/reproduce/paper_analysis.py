@@ -165,17 +165,21 @@ GA_COSTS = {"iae": "mean IAE ∫|d| dt, m·s", "ise": "mean ISE ∫d² dt, m²·
 
 def part_ga_readings(cfg) -> dict:
     """Table 2's two readings of the GA's crossover: MATLAB's default scattered crossover with fraction
-    0.8 (adopted) and no crossover (children by mutation only), the PI tuned on the same seeds."""
+    0.8 (adopted) and no crossover (children by mutation only), the PI tuned on the same seeds
+    (``seed``, ``seed + 1``, ...: ``ga.seeds`` of them). Besides each reading's best gains, each
+    seed's (``seed_gains``): a difference between the readings is an effect of the reading only
+    where it exceeds the spread over the seeds within each (``gain_change`` says which)."""
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import make_problem, reported_gains, tune
+    from pfjax.tuning.problem import make_problem, tune
 
     g = cfg["ga"]
     problem = make_problem("pi", g["scenario"], cost=CostSpec(metric=g["cost"]))
     out = {"scenario": g["scenario"], "cost": GA_COSTS[g["cost"]]}
     for name, fraction in (("crossover", 0.8), ("none", 0.0)):
         opts = GAOptions(population_size=g["population"], generations=g["generations"], crossover_fraction=fraction)
-        runs = [tune(problem, "ga", key=seed_key(seed), ga_options=opts) for seed in range(g["seeds"])]
+        seeds = range(cfg["seed"], cfg["seed"] + g["seeds"])
+        runs = [tune(problem, "ga", key=seed_key(seed), ga_options=opts) for seed in seeds]
         costs = [float(r.cost) for r in runs]
         best = runs[int(np.argmin(costs))]
         out[name] = {
@@ -183,14 +187,40 @@ def part_ga_readings(cfg) -> dict:
             "costs": costs,
             "median_cost": float(np.median(costs)),
             # the source's four PI gains, by scalar name (k_aw, the anti-windup it does not have, stays 0)
-            "best_gains": {k: v for k, v in reported_gains("pi", problem, best.theta).items() if k in C.PAPER_PI},
+            "best_gains": _pi_gains(problem, best.theta),
+            "seed_gains": [_pi_gains(problem, r.theta) for r in runs],
             "n_rollouts": int(sum(r.n_rollouts for r in runs)),
         }
-    a, b = out["crossover"]["best_gains"], out["none"]["best_gains"]
-    change = {k: abs(a[k] - b[k]) / max(abs(a[k]), abs(b[k]), 1e-12) for k in a}
-    worst = max(change, key=lambda k: change[k])
-    out["gain_change"] = f"largest: {worst} {a[worst]:.4g} vs {b[worst]:.4g} ({100 * change[worst]:.0f} %)"
+    out["gain_change"] = gain_change(out["crossover"], out["none"])
     return out
+
+
+def _pi_gains(problem, theta) -> dict[str, float]:
+    """The source's four PI gains of a tuned ``theta`` by scalar name (``k_aw``, the anti-windup the
+    source does not have, stays 0 and is left out)."""
+    from pfjax.tuning.problem import reported_gains
+
+    return {k: v for k, v in reported_gains("pi", problem, theta).items() if k in C.PAPER_PI}
+
+
+def gain_change(a: dict, b: dict) -> str:
+    """The largest relative difference between two readings' best gains, weighed against the
+    seeds: that gain's range over each reading's seeds (``seed_gains``) and the exact two-sided
+    Mann-Whitney test of the two samples. With p above 0.05 the difference is no evidence that the
+    reading moves the gain (three seeds each cannot give less than p = 0.1)."""
+    from scipy.stats import mannwhitneyu
+
+    x, y = a["best_gains"], b["best_gains"]
+    change = {k: abs(x[k] - y[k]) / max(abs(x[k]), abs(y[k]), 1e-12) for k in x}
+    k = max(change, key=lambda n: change[n])
+    ra, rb = ([g[k] for g in r["seed_gains"]] for r in (a, b))
+    p = float(mannwhitneyu(ra, rb, alternative="two-sided", method="exact").pvalue)
+    return (
+        f"largest: {k} {x[k]:.4g} vs {y[k]:.4g} ({100 * change[k]:.0f} %); over the seeds {k} spans "
+        f"{min(ra):.4g} to {max(ra):.4g} and {min(rb):.4g} to {max(rb):.4g} (exact Mann-Whitney p = {p:.2g}, "
+        f"{len(ra)} and {len(rb)} seeds: "
+        + ("no evidence that the reading moves it)" if p > 0.05 else "the reading moves it)")
+    )
 
 
 def _local_maxima(x, y, frac=0.5):

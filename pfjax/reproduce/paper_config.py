@@ -91,7 +91,11 @@ class PaperSource(ConfigModel):
     line_ss_pi_mm: Real = Field(8.0, gt=0, description="line test: PI steady-state error [mm]")
     line_delta_deg: Real = Field(10.0, gt=-90, lt=90, description="line test: steering reading [deg]")
     eig_max_re: list[Real] = Field(
-        [-1.3185, -5.1930], min_length=2, max_length=2, description="largest real parts, slow and fast, nonzero [1/s]"
+        [-1.3185, -5.1930],
+        min_length=2,
+        max_length=2,
+        description="largest real parts, slow and fast, nonzero, attributed to Figs. 4-5 (assumed: the "
+        "reconstructed source gives no number) [1/s]",
     )
 
     @model_validator(mode="after")
@@ -122,8 +126,12 @@ class PaperStability(ConfigModel):
     grid_max_deg: Real = Field(60.0, gt=0, lt=90, description="grid half-width in each slip angle [deg]")
     n: int = Field(31, ge=2, description="grid points per axis [-]")
     horizon: Real = Field(40.0, ge=POSITIVE, description="simulated time of the cross-check runs [s]")
-    tol_d: Real = Field(0.001, ge=POSITIVE, description="converged when |d| <= tol_d at the end [m]")
-    tol_theta_deg: Real = Field(0.1, ge=POSITIVE, description="converged when |theta_e| <= tol_theta_deg [deg]")
+    tol_d: Real = Field(
+        0.001, ge=POSITIVE, description="converged when |d - d*| < tol_d at the end (d* the true equilibrium) [m]"
+    )
+    tol_theta_deg: Real = Field(
+        0.1, ge=POSITIVE, description="converged when |theta_e - theta_e*| < tol_theta_deg at the end [deg]"
+    )
     eig_grid_max_deg: Real = Field(89.9, gt=0, lt=90, description="half-width of the eigenvalue scan [deg]")
     eig_n: int = Field(721, ge=2, description="points of the eigenvalue scan per axis [-]")
 
@@ -134,7 +142,7 @@ class PaperGA(ConfigModel):
     seeds: int = Field(3, ge=1, description="GA runs per reading [-]")
     scenario: str = Field("paper-line", description="tuning scenario [-]")
     population: int = Field(50, ge=2, description="population size [-]")
-    generations: int = Field(100, ge=1, description="generations [-]")
+    generations: int = Field(100, ge=1, description="generations (assumed: Table 2 gives no generation count) [-]")
     cost: Literal["iae", "ise", "itae"] = Field(
         "iae", description="the tuning cost of eq. 15, whose exact form was lost (assumed, docs §5) [-]"
     )
@@ -144,7 +152,13 @@ class PaperStudy(ConfigModel):
     """The paper-reproduction study (``studies/paper_reproduction.py``)."""
 
     name: str = Field("paper_reproduction", description="output folder name under results/ [-]")
-    seed: int = Field(0, ge=0, le=MAX_SEED, description="recorded in every output; the study is deterministic [-]")
+    seed: int = Field(
+        0,
+        ge=0,
+        le=MAX_SEED,
+        description="the first of the GA readings' seeds (seed, seed + 1, ...: ga.seeds of them); the rest of the "
+        "study draws nothing [-]",
+    )
     model: PaperModel = PaperModel()
     sim: PaperSim = PaperSim()
     synthesis: PaperSynthesis = PaperSynthesis()
@@ -157,6 +171,10 @@ class PaperStudy(ConfigModel):
     @model_validator(mode="after")
     def _check(self):
         s, st = self.sim, self.stability
+        if self.seed + self.ga.seeds - 1 > MAX_SEED:  # the GA readings' last seed
+            raise ValueError(
+                f"seed: at most {MAX_SEED - self.ga.seeds + 1} with ga.seeds = {self.ga.seeds}, got {self.seed}"
+            )
         if s.steady_window > s.horizon:
             raise ValueError(f"sim.steady_window: must be in (0, sim.horizon], got {s.steady_window:g}")
         sim = self.model_dump(mode="json")

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import math
 
-#: the largest relative objective gap (source's K against pfjax's optimum) the report calls a flat optimum
+#: the largest relative objective gap (source's K against pfjax's optimum) the report calls a flat
+#: optimum: below the precision of the published bounds the objective is made of (γ₂ = 4.07 is
+#: printed to ±0.12 %), so no published number could tell the two gains apart
 FLAT_REL_TOL = 1e-3
 #: |d*| below this (m), half the printed 0.001 mm, counts as zero: the equilibrium is the source's [0, −β_r]
 D_STAR_ZERO = 5e-7
@@ -149,14 +151,19 @@ def long_pi(lp: dict, cfg: dict) -> str:
     """The PI's line test at the long horizon, and whether |d| had settled by the study's horizon
     (settled: within 5 % of its final value from then on)."""
     h, long_h, ts = cfg["sim"]["horizon"], lp["horizon_s"], lp["settle_time_s"]
-    settled = f"|d| settles (within 5 % of its final value from then on) at t = {ts:.1f} s" if finite(ts) else None
-    if settled is None:
+    window = cfg["sim"]["steady_window"]
+    if not finite(ts):
         run = f"Run for {long_h:g} s, |d| does not settle (it does not stay within 5 % of its final value)"
+    elif ts > long_h - window:  # too late for the final window to lie after it: still drifting
+        run = (
+            f"Run for {long_h:g} s, |d| is within 5 % of its final value only from t = {ts:.1f} s, later than "
+            f"{long_h - window:g} s: it has not settled"
+        )
     else:
-        run = f"Run for {long_h:g} s, {settled}"
+        run = f"Run for {long_h:g} s, |d| settles (within 5 % of its final value from then on) at t = {ts:.1f} s"
     if long_h < h:
         at_h = ""
-    elif finite(ts) and ts <= h:
+    elif finite(ts) and ts <= min(h, long_h - window):
         at_h = f"At the {h:g} s horizon the PI's line error has settled. "
     else:
         at_h = f"At the {h:g} s horizon the PI's line error is still drifting. "

@@ -20,7 +20,7 @@ from pfjax import controllers as C
 from pfjax import paths
 from pfjax.paths import global_parameter, tangent_angle
 from pfjax.reproduce.paper_config import sim_config
-from pfjax.reproduce.run_claims import settled
+from pfjax.reproduce.run_claims import PI_THRESHOLDS, settled
 from pfjax.sim import (
     STATUS_NAMES,
     SimConfig,
@@ -225,11 +225,6 @@ def part_paper_runs(cfg, K_ours, pbar) -> tuple[list[dict], dict]:
     return rows, trajs
 
 
-#: The Table 3 filters' thresholds: saturated time (fraction), steering tolerance on the line (deg),
-#: and the factor around the source's steady error; :func:`pi_filter_stats` halves and doubles each.
-PI_THRESHOLDS = {"sat": 0.05, "delta_deg": 0.5, "ss_factor": 3.0}
-
-
 def part_pi_readings(cfg, rows, pbar) -> tuple[pd.DataFrame, dict]:
     """Score each of the 24 readings of Table 3 against the source's claims about its PI."""
     src = cfg["source"]
@@ -307,6 +302,7 @@ def pi_filter_stats(df: pd.DataFrame, src: dict) -> dict:
         ),
     }
     chosen = set(df[df.consistent].reading)
+    adopted = df[df.is_default].reading.tolist()
     cases, unique = 0, 0
     for name in t:
         for f in (0.5, 2.0):
@@ -317,6 +313,7 @@ def pi_filter_stats(df: pd.DataFrame, src: dict) -> dict:
         "passing": passing,
         "consistent": len(chosen),
         "consistent_readings": sorted(chosen),
+        "adopted_reading": adopted[0] if adopted else None,  # the reading the study's PI rows run
         "sensitivity_cases": cases,
         "sensitivity_unique": unique,
         "thresholds": dict(t),

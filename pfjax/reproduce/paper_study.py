@@ -130,7 +130,7 @@ SUMMARY_UNITS: dict[str, str] = {
         ("costs", "median_cost"),
         "the tuning cost's unit, mean over the scenario set: m s for IAE (the default), m^2 s for ISE, m s^2 for ITAE (ga.cost)",
     ),
-    "best_gains": _PI_GAINS,
+    **dict.fromkeys(("best_gains", "seed_gains"), _PI_GAINS),
     "n_rollouts": "rollouts (simulated runs)",
 }
 

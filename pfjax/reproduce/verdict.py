@@ -9,7 +9,8 @@ from pfjax.report.markdown import table
 
 #: What a verdict says. ``holds`` / ``does not hold``: pfjax's number meets / misses the criterion.
 #: ``reproduced`` / ``not reproduced``: pfjax's number matches / misses the source's number within the
-#: tolerance the criterion states. ``no verdict``: the data cannot decide (stated why).
+#: tolerance the criterion states. ``no verdict``: the data cannot decide (stated why), or the source
+#: states no outcome to compare with (a row that shows what a reading of the source changes).
 VERDICTS = ("holds", "does not hold", "reproduced", "not reproduced", "no verdict")
 #: Whether a row is evidence. ``independent``: nothing in pfjax was chosen from it.
 #: ``used to choose the convention``: the source's statement fixed a modelling convention, so the row

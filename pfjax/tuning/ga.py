@@ -73,7 +73,9 @@ from pfjax import errors, resources
 
 
 class GAOptions(NamedTuple):
-    """Settings; defaults are the source's MATLAB ``ga`` settings (docs/reproductions/path-following.md §5, Table 2)."""
+    """Settings; defaults are the source's MATLAB ``ga`` settings (docs/reproductions/path-following.md §5, Table 2:
+    population, elite count, crossover fraction, mutation scale and shrink) and, where Table 2 gives
+    none, assumed: 100 generations, and the bit-flip rate of MATLAB's ``mutationuniform``."""
 
     population_size: int = 50
     generations: int = 100

@@ -1,0 +1,56 @@
+"""The paper reproduction's verdict rules that need a counter-example: a long PI run that has not
+settled gives no verdict on its settled error, the Table 3 verdict holds only for the reading the
+study runs, and the GA readings' gain change is weighed against the seeds' spread."""
+
+from __future__ import annotations
+
+from test_paper_audit import _inputs
+
+from pfjax.reproduce import path_following
+from pfjax.reproduce.paper_analysis import gain_change
+
+
+def _rows(long_pi=None, filters=None):
+    cfg, rows, stab, pi_df, sine, lp, ga = _inputs()
+    pi_df.attrs["filters"] = {**pi_df.attrs["filters"], **(filters or {})}
+    return path_following.verdicts(cfg, rows, stab, pi_df, sine, {**lp, **(long_pi or {})}, ga)
+
+
+def _settled_row(rows):
+    (row,) = [v for v in rows if "once settled" in v.criterion]
+    return row
+
+
+def test_a_long_pi_run_still_drifting_at_its_end_gives_no_verdict():
+    """At a 40 s horizon the PI's |d| is within 5 % of its final value only from 38.6 s: the final
+    5 s window does not lie after it, so the run has not settled and its "settled" error is none."""
+    row = _settled_row(_rows({"horizon_s": 40.0, "settle_time_s": 38.62, "steady_abs_d_mm": 8.29}))
+    assert row.verdict == "no verdict" and "not settled by 35 s" in row.pfjax and "38.62 s" in row.pfjax
+    assert "from 35 s at the latest" in row.criterion
+    row = _settled_row(_rows({"horizon_s": 40.0, "settle_time_s": 30.0, "steady_abs_d_mm": 8.29}))
+    assert row.verdict == "reproduced" and "settled from t = 30.00 s" in row.pfjax
+    row = _settled_row(_rows({"status": "diverged"}))
+    assert row.verdict == "no verdict" and "status diverged" in row.pfjax
+
+
+def test_table3_holds_only_for_the_reading_the_study_runs():
+    (row,) = [v for v in _rows() if v.claim.startswith("Table 3") and "exactly one" in v.criterion]
+    assert row.verdict == "holds"
+    other = _rows(filters={"consistent_readings": ["q"], "adopted_reading": "r"})
+    (row,) = [v for v in other if v.claim.startswith("Table 3") and "exactly one" in v.criterion]
+    assert row.verdict == "does not hold" and "the PI rows run another: r" in row.pfjax
+
+
+def test_ga_gain_change_is_weighed_against_the_seeds_spread():
+    """Three seeds per reading: even ranges that do not overlap are no evidence (exact Mann-Whitney
+    p = 2 / C(6, 3) = 0.1); six seeds each, separated, are (p = 2 / C(12, 6) = 0.0022)."""
+    seeds = lambda *k: [{"ki_theta": x, "kp_d": 1.0} for x in k]
+    a = {"best_gains": {"ki_theta": 0.0095, "kp_d": 1.0}, "seed_gains": seeds(0.0095, 0.31, 0.0088)}
+    b = {"best_gains": {"ki_theta": 0.0054, "kp_d": 1.0}, "seed_gains": seeds(0.0054, 0.0011, 0.0053)}
+    text = gain_change(a, b)
+    assert text.startswith("largest: ki_theta 0.0095 vs 0.0054 (43 %)"), text
+    assert "0.0088 to 0.31" in text and "p = 0.1" in text and "no evidence that the reading moves it" in text
+    a["seed_gains"] = seeds(0.0095, 0.31, 0.0088, 0.02, 0.03, 0.04)
+    b["seed_gains"] = seeds(0.0054, 0.0011, 0.0053, 0.001, 0.002, 0.003)
+    text = gain_change(a, b)
+    assert "p = 0.0022" in text and "the reading moves it" in text and "no evidence" not in text
