@@ -54,3 +54,18 @@ def test_ga_gain_change_is_weighed_against_the_seeds_spread():
     b["seed_gains"] = seeds(0.0054, 0.0011, 0.0053, 0.001, 0.002, 0.003)
     text = gain_change(a, b)
     assert "p = 0.0022" in text and "the reading moves it" in text and "no evidence" not in text
+
+
+def test_a_config_built_in_python_is_checked_as_the_command_checks_a_file():
+    """paper_study.run checks its config first, as load does a file: nothing runs, nothing is written
+    (no output is given: the check comes before any use of it)."""
+    import pytest
+
+    from pfjax.config import ConfigError
+    from pfjax.reproduce.paper_config import PaperStudy
+    from pfjax.reproduce.paper_study import run
+
+    with pytest.raises(ConfigError, match=r"^synthesis: no mixed H2/Hinf design at model.v = 1e\+06 m/s"):
+        run(PaperStudy(model={"v": 1e6}), None, None)
+    with pytest.raises(ConfigError, match=r"^stability\.eig_n"):
+        run(PaperStudy(stability={"eig_n": 10**7}), None, None)

@@ -330,7 +330,14 @@ def check_synthesis(config: PaperStudy) -> None:
 def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: bool = False) -> PaperStudy:
     """The validated study config: defaults <- ``path`` <- (``--quick``) <- ``overrides``; raises
     :class:`pfjax.config.ConfigError` naming the key."""
-    config = load_model(PaperStudy, path, overrides, presets=[QUICK] if quick else [])[0]
+    return check(load_model(PaperStudy, path, overrides, presets=[QUICK] if quick else [])[0])
+
+
+def check(config: PaperStudy) -> PaperStudy:
+    """``config`` if the study can run it: its sizes fit in memory (:func:`check_resources`) and its
+    LMI problems have solutions (:func:`check_synthesis`); :class:`pfjax.config.ConfigError`
+    naming the key otherwise. :func:`load` and :func:`pfjax.reproduce.paper_study.run` both check,
+    so a config built in Python is refused as the command refuses its file."""
     try:
         check_resources(config)
     except ConfigError:
@@ -350,6 +357,7 @@ __all__ = [
     "PaperStability",
     "PaperStudy",
     "PaperSynthesis",
+    "check",
     "check_resources",
     "check_synthesis",
     "load",

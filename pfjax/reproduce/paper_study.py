@@ -23,7 +23,7 @@ from pfjax.provenance import stamp as provenance_stamp
 from pfjax.report import document, figures
 from pfjax.reproduce import path_following
 from pfjax.reproduce.paper_analysis import part_ga_readings, part_long_pi, part_stability, sine_error_analysis
-from pfjax.reproduce.paper_config import PaperStudy
+from pfjax.reproduce.paper_config import PaperStudy, check
 from pfjax.reproduce.paper_report import report
 from pfjax.reproduce.paper_runs import part_paper_runs, part_pi_readings, part_synthesis, source_test
 from pfjax.sim.scenario import PAPER_TESTS
@@ -212,8 +212,10 @@ def _write_tables(tmp: Path, cfg: dict, stamp: dict, rows: list[dict], pi_df, st
 def run(config: PaperStudy, output, pbar) -> dict:
     """Run the study into ``output.staging``: ``summary.json``, ``runs.parquet``/``.csv``,
     ``pi_readings.csv``, ``stability.parquet``, ``figures/``, ``report.md`` and ``report.html``.
-    Returns the summary (its ``verdicts`` as dicts)."""
+    Returns the summary (its ``verdicts`` as dicts). ``config`` is checked first as
+    :func:`pfjax.reproduce.paper_config.load` checks a file (:func:`~pfjax.reproduce.paper_config.check`)."""
     t0 = time.time()
+    check(config)
     cfg = config.model_dump(mode="json")
     tmp = output.staging
     syn = part_synthesis(cfg)
