@@ -292,7 +292,7 @@ def _summary(cfg: dict, heldout: dict, cli: dict) -> dict:
         {"problem": "pi:paper-line", "method": m, "seed": 0, "cost": 0.3, "n_rollouts": 10, "n_forward_passes": 30}
         for m in ("ga", "gradient", "gradient-plain")
     ]
-    h = {"controller": "pi-table3 (source)", "gains": "kp_d=1", "success_rate": 1.0, "success_ci95": [0.9, 1.0]}
+    h = {"controller": "pi-table3 (source)", "gains": {"kp_d": 1.0}, "success_rate": 1.0, "success_ci95": [0.9, 1.0]}
     h.update(n=3, iae_mean=0.4, iae_p95=0.5, steady_abs_d_p95_mm=20.0, slip_margin_deg=7.5)
     t3 = {
         "cost": 0.7,

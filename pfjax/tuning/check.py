@@ -123,7 +123,11 @@ def check_point(
     model, decrease = _quadratic_model(J, pg[free], H, eig)
     Zp, Jp = _probes(cost, z, radii, lo_j, span_j, dtype)
     i = int(np.argmin(Jp))
-    probe_dec = (J - float(Jp[i])) / max(abs(J), 1e-300)
+    jp = float(Jp[i])
+    if J != 0 and np.isfinite(J) and np.isfinite(jp):
+        probe_dec = (J - jp) / abs(J)
+    else:  # a zero cost or a probe not finite: no relative decrease to state, only whether one is lower
+        probe_dec = 0.0 if not jp < J else np.inf
     verdict = "not a local minimum" if probe_dec > rtol else "local minimum"
     if np.all(np.abs(Jp - J) <= 1e-12 * abs(J)) and not np.any(g):  # two programs: a rounding apart
         verdict = "flat"

@@ -168,8 +168,9 @@ def _starts(theta0, key, n_starts: int, lo: np.ndarray, span: np.ndarray):
 
 def _descend(step, z, state, steps: int, progress: bool, t0: float):
     """``steps`` calls of the compiled ``step``; returns the best cost and its point (box units), the
-    best cost so far and the wall time after each step, and the count of non-finite gradients."""
-    best_J, best_z = np.inf, np.asarray(z)
+    best cost so far and the wall time after each step, and the count of non-finite gradients.
+    Where no cost is finite, the point is the first start (one point, as always) and the cost inf."""
+    best_J, best_z = np.inf, np.asarray(z)[0]
     hist, hist_t, n_bad = [], [], 0
     bar = None
     if progress:

@@ -123,6 +123,14 @@ class MultistartOptions(NamedTuple):
         errors.integer("rounds", rounds, low=1, high=int(self.steps))
         errors.number("learning_rate", self.learning_rate, positive=True)
         errors.number("smoothing", self.smoothing, low=0.0, high=1.0)
+        if (
+            self.smoothing > 0 and rounds == 1
+        ):  # the smoothed round is the first of several: the last sees the true cost
+            raise errors.InputError(
+                f"smoothing: smooths the first of several rounds, and rounds = 1; give rounds >= 2 or smoothing = 0, "
+                f"got {self.smoothing:g}",
+                "smoothing",
+            )
         errors.integer("n_restarts", self.n_restarts, low=0, high=1_000_000)
         errors.integer("restart_steps", self.restart_steps, low=0, high=1_000_000)
         errors.number("restart_scale", self.restart_scale, nonnegative=True)

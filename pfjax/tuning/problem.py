@@ -67,6 +67,12 @@ def in_words_of(e: errors.InputError, changes: dict | None) -> errors.InputError
     integrator steps when only the horizon was changed, name ``config.horizon``, not a key the
     caller did not give."""
     changes = changes or {}
+    if e.key == "config.horizon" and "horizon" not in changes and "dt" in changes and "must be >= dt" in str(e):
+        # a step longer than the (default) horizon: the step is what the caller gave
+        horizon = str(e).rpartition("got ")[2]  # SimConfig's "must be >= dt (.. s), got <horizon>"
+        return errors.InputError(
+            f"config.dt: must be at most the horizon ({horizon} s), got {changes['dt']:g}", "config.dt"
+        )
     if "horizon" not in changes:
         return e
     if e.key in ("config.success_from", "config.steady_window"):
@@ -517,10 +523,14 @@ def check_memory(
             f"a GA population of {population} x {n_per_eval} runs",
         )
     n_chains = {"gradient": max(ms.n_starts, ms.n_restarts + 1), "gradient-plain": n_starts or 1}.get(method, 1)
+    # named by the setting that sets the number of chains descended at once: the restarts' at the end
+    # (the incumbent and its perturbations) where they outnumber the starts
+    restarts = method == "gradient" and ms.n_restarts + 1 > ms.n_starts
     resources.check_memory(
-        "n_starts",
+        "n_restarts" if restarts else "n_starts",
         2 * n_chains * n_per_eval * per_run * (1 + D),
-        f"{n_chains} starts x {n_per_eval} runs with {D} tangents",
+        f"{n_chains} {'restart chains (the incumbent and its restarts)' if restarts else 'starts'} x {n_per_eval} "
+        f"runs with {D} tangents",
     )
     if method == "gradient":
         resources.check_memory(
@@ -575,6 +585,14 @@ def _tuned_fields(controller: str, problem: Problem, gains, key: str = "check"):
     if not isinstance(g, Mapping) or set(g) <= set(problem.tunable.fields):
         return gains
     e = C.entry(controller)
+    vectors = [k for k in g if k in e.labels]  # a vector field among scalar gains: two forms mixed
+    if vectors:
+        raise errors.InputError(
+            f"{key}: mixes the field {vectors[0]} with gains by name ({', '.join(k for k in g if k not in vectors)}); "
+            f"give the tuned fields ({', '.join(problem.tunable.fields)}) or every gain by name "
+            f"({', '.join(n for f in problem.tunable.fields for n in e.labels.get(f, (f,)))}, ...)",
+            key,
+        )
     params = C.params_from_flat(e, g, key)
     tuned = [n for f in problem.tunable.fields for n in e.labels.get(f, (f,))]
     missing = [n for n in tuned if n not in g]

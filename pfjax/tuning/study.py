@@ -31,7 +31,6 @@ import pandas as pd
 from pfjax.montecarlo.summary import UNITS as MONTE_CARLO_UNITS
 from pfjax.numerics.random import seed_key
 from pfjax.provenance import STAMP_UNITS
-from pfjax.report.study_format import fmt_gains
 from pfjax.tables import H2_CHANNELS, HINF_CHANNELS
 from pfjax.tuning.study_config import TuningStudy, ga_options, heldout_study, methods, problem_list
 
@@ -112,14 +111,15 @@ SUMMARY_UNITS: dict[str, object] = {
 }
 
 
-def summary_units(cfg: dict) -> dict:
+def summary_units(cfg: dict, types=()) -> dict:
     """:data:`SUMMARY_UNITS` with the gains' units by controller (:func:`pfjax.controllers.gain_units`;
     a gain's name has other units in other controllers): ``gains`` for each controller of
-    ``compare.problems`` (a problem's name before ``:``) and the Table 3 check's ``pi``,
-    ``descent_gains`` for the ``pi`` (the Table 3 check's descent)."""
+    ``compare.problems`` (a problem's name before ``:``), the Table 3 check's ``pi`` and ``types``
+    (the held-out rows' ``type``), ``descent_gains`` for the ``pi`` (the Table 3 check's descent)."""
     from pfjax import controllers as C
 
-    names = dict.fromkeys(["pi", *(p.partition(":")[0] for p in problem_list(cfg["compare"]["problems"]))])
+    problems = (p.partition(":")[0] for p in problem_list(cfg["compare"]["problems"]))
+    names = dict.fromkeys(["pi", *problems, *types])
     by = {n: C.gain_units(C.entry(n)) for n in names}
     return {**SUMMARY_UNITS, "gains": by, "descent_gains": {"pi": by["pi"]}}
 
@@ -263,8 +263,8 @@ def _parts(cfg: dict, spec, progress: bool):
     controllers = P.heldout_controllers(tuning_runs, ks, des)
     print("part 3: held-out evaluation", flush=True)
     df, sweep, table = P.heldout(cfg, spec, controllers, progress)
-    for r in table:
-        r["gains"] = fmt_gains(controllers[r["controller"]][2])
+    for r in table:  # every gain by scalar name, as pfjax tune --check takes it, and whose they are
+        r["gains"], r["type"] = dict(controllers[r["controller"]][2]), controllers[r["controller"]][0].name
     verdicts, comparisons = P.robust_vs_source(table)
     targets = {
         "wins_needed": P.wins_needed(cfg["seeds"]),
@@ -298,7 +298,7 @@ def run(config: TuningStudy, out: Path, progress: bool) -> dict:
         **parts,
         "heldout": heldout_summary(cfg, spec, table),
         "targets": targets,
-        "units": summary_units(cfg),
+        "units": summary_units(cfg, [r["type"] for r in table]),
     }
     summary["wall_s"] = time.time() - t0
     out.mkdir(parents=True, exist_ok=True)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field, model_validator
 
+from pfjax import errors
 from pfjax.config import POSITIVE, ConfigModel, Real, load_model
 from pfjax.resources import MAX_GENERATIONS, MAX_POPULATION
 from pfjax.tuning.multistart import MultistartOptions
@@ -52,7 +53,7 @@ QUICK = {
         "n_screen": 4,
         "n_starts": 2,
         "steps": 2,
-        "rounds": 1,
+        "rounds": 2,  # two: the ablation's smoothing variant smooths the first
         "n_restarts": 0,
         "restart_steps": 1,
         "polish_steps": 0,
@@ -125,7 +126,9 @@ class TuneMultistart(ConfigModel):
     n_starts: int = Field(8, description="best screened points descended together [-]")
     separation: Real = Field(0.1, description="least RMS distance between two starts [normalised box units]")
     steps: int = Field(60, description="cost-and-gradient evaluations of a chain that survives every round [-]")
-    rounds: int = Field(3, description="successive-halving rounds (1: no halving) [-]")
+    rounds: int = Field(
+        3, description="successive-halving rounds (1: no halving; not given: 3, or steps when below 3) [-]"
+    )
     local: str = Field("bfgs", description="local descent: bfgs | adam [-]")
     learning_rate: Real = Field(0.1, description="bfgs first trust radius / adam step [normalised box units]")
     smoothing: Real = Field(
@@ -136,6 +139,15 @@ class TuneMultistart(ConfigModel):
     restart_scale: Real = Field(0.05, description="standard deviation of the perturbations [normalised box units]")
     polish_steps: int = Field(8, description="value-only compass iterations around the incumbent [-]")
     polish_scale: Real = Field(0.05, description="first compass step [normalised box units]")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _rounds(cls, data):
+        """``rounds`` not given follows ``steps`` as the tuner's does (:class:`MultistartOptions`):
+        3, or ``steps`` when below 3."""
+        if isinstance(data, dict) and "rounds" not in data and errors.is_number(data.get("steps")):
+            return {**data, "rounds": min(3, data["steps"])} if data["steps"] < 3 else data
+        return data
 
     @model_validator(mode="after")
     def _check(self):

@@ -94,7 +94,7 @@ def tune_K(cfg, spec, progress):
     :data:`~pfjax.tuning.study_config.K_TUNINGS` (the paper line and the training sample), which
     the study's check of sizes at load reads too."""
     from pfjax.sim import SimConfig
-    from pfjax.tuning.problem import make_problem, tune
+    from pfjax.tuning.problem import make_problem, reported_gains, tune
 
     sim = SimConfig(dt=cfg["sim"]["dt"], horizon=cfg["sim"]["horizon"], record=False)
     out = {}
@@ -115,6 +115,7 @@ def tune_K(cfg, spec, progress):
         )
         out[name] = {
             "K": r.theta.tolist(),
+            "gains": reported_gains("state_feedback", pr, r.theta),  # by scalar name, as pfjax tune reports
             "train_cost": r.cost,
             "n_rollouts": r.n_rollouts,
             "wall_s": r.wall_s,

@@ -104,6 +104,8 @@ def _heldout_cell(r: dict, c: str) -> str:
         return f"[{100 * r[c][0]:.1f}, {100 * r[c][1]:.1f}]"
     if c == "slip_margin_deg":
         return "none (fails at 0°)" if r.get("margin_fails_at_smallest") else _num(r[c], 1)
+    if c == "gains":
+        return fmt_gains(r[c])
     return _num(r[c], 4) if isinstance(r[c], float) else str(r[c])
 
 
