@@ -72,7 +72,7 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     s = json.loads(r.stdout)
     for k in KEYS:
         assert math.isfinite(s[k]) and s[k] > 0, k
-    assert s["all_agree"], s["agreement"]
+    assert s["all_agree"] and s["disagreeing"] == [], s["agreement"]
     assert set(s["agreement"]) == {
         "jax_minimal_float32",
         "jax_minimal_float64",
@@ -115,6 +115,9 @@ def test_quick_bench_contract_and_agreement(tmp_path):
     assert full["summary"] == {k: v for k, v in s.items() if k not in printed}
     assert s["config_sha256"] == full["config_sha256"] and s["units"]["msteps_per_s_f32"] == "1e6 rollout-steps/s"
     assert full["config"]["sizes"] == [64, 128] and full["config_sha256"] and full["machine"]["cpus"] >= 1
+    from test_bench_agreement import numbers_without_units
+
+    assert numbers_without_units(full) == []  # every number of bench.json with its unit
     assert set(rows.impl) == {"pfjax", "jax_minimal", "numba", "numpy", "scipy"}
     for impl in ("pfjax", "jax_minimal"):
         assert sorted(rows[(rows.impl == impl) & (rows.dtype == "float32")].batch) == [64, 128]
@@ -196,15 +199,23 @@ def test_bench_outputs_carry_units_and_the_config_hash(tmp_path, monkeypatch, ca
         "models.float32.kinematic.wall_s": "s",
         "models.float32.kinematic.ns_per_rollout_step": "ns",
         "models.float32.ratio_st_over_kinematic": "1",
+        "machine.cpus": "CPUs",
     }
-    assert {k: v for k, v in full["units"].items() if not k.startswith("summary.")} == {
+    assert {k: v for k, v in full["units"].items() if not k.startswith(("summary.", "config."))} == {
+        "rows.batch": "runs",
         "rows.seconds": "s",
         "rows.compile_s": "s",
         "rows.msteps_per_s": "1e6 rollout-steps/s",
-        "config.horizon": "s",
-        "config.model_horizon": "s",
+        "rows.failed_runs": "runs",
         "problem.dt": "s",
+        "machine.cpus": "CPUs",
+        "seed": "1 (the random seed)",
     }
+    assert {k: v for k, v in full["units"].items() if k.startswith("config.")} == {
+        f"config.{k}": report.CONFIG_UNITS[k]
+        for k, v in full["config"].items()
+        if k == "sizes" or (isinstance(v, (int, float)) and not isinstance(v, bool))
+    }  # every number of the config, the batch sizes too
     assert full["units"]["summary.agreement.numpy_float32.max_abs_diff"] == "m s"
     got = units(out / "bench.parquet")
     assert got["seconds"]["unit"] == "s" and got["msteps_per_s"]["unit"] == "1e6 rollout-steps/s"
@@ -417,6 +428,8 @@ def test_compare_passes_sizes_only_where_given_and_keeps_the_rounds_before_a_fai
     assert cmp.main([".", ".", "--quick", "--rounds", "1", "--out", str(tmp_path / "a")]) == 0
     assert calls and all("--sizes" not in c and "--quick" in c for c in calls)
     import pfjax
+    from pfjax.bench.report import MACHINE_UNITS
+    from pfjax.cli.records import units as records_units
 
     written = json.loads((tmp_path / "a" / "compare.json").read_text())  # units and provenance, as bench.json's
     assert written["seed"] == 0 and written["pfjax_version"] == pfjax.__version__
@@ -431,12 +444,12 @@ def test_compare_passes_sizes_only_where_given_and_keeps_the_rounds_before_a_fai
             for p in ("f32", "f64")
         },
         **{f"bench_summaries.{n}.grad_over_forward": "1" for n in ("base", "new")},
-        **{
-            f"machine.block_bytes.{d}": "B"
-            for d in ("float32", "float64")
-            if d in written["machine"].get("block_bytes", {})
-        },
+        **records_units({"machine": written["machine"]}, MACHINE_UNITS),
+        "rounds": "rounds",
+        "rounds_requested": "rounds",
+        "seed": "1 (the random seed)",
     }
+    assert {"machine.cpus", "machine.load_average_1m"} <= set(written["units"])
     calls.clear()
     assert cmp.main([".", ".", "--rounds", "1", "--out", str(tmp_path / "b")]) == 0
     assert all(c[c.index("--sizes") + 1] == cmp.SIZES for c in calls)

@@ -75,7 +75,7 @@ def test_the_directory_and_the_cpu_key(tmp_path):
 
 def test_the_choice_takes_each_precisions_best_block_at_the_best_width():
     rows = [
-        dict(dtype=d, vector_width=w, block_bytes=b, msteps_per_s=r)
+        dict(dtype=d, vector_width=w, block_bytes=b, msteps_per_s=r, max_abs_iae_diff=0.0)
         for d, w, b, r in [
             ("float32", None, 2500, 100.0),
             ("float32", None, 5000, 120.0),
@@ -107,7 +107,8 @@ def test_a_small_calibration_measures_agrees_and_round_trips(tmp_path):
     for r in result["rows"]:
         assert math.isfinite(r["msteps_per_s"]) and r["msteps_per_s"] > 0
         # blocks change the result only by rounding
-        assert r["max_abs_iae_diff"] <= (1e-5 if r["dtype"] == "float32" else 1e-12)
+        assert r["max_abs_iae_diff"] <= (1e-5 if r["dtype"] == "float32" else 1e-12) and r["agrees"] is True
+    assert result["iae_tolerance"] == {"float32": 1e-4, "float64": 1e-10} and "failed" not in result
     path = calibration.save(result, tmp_path / "c.json")
     calibration.load.cache_clear()
     try:
@@ -326,3 +327,140 @@ def test_the_printed_calibration_gives_units_only_for_what_it_prints(monkeypatch
     out = json.loads(capsys.readouterr().out)
     assert "machine" not in out and not any(k.startswith("machine.") for k in out["units"])
     assert out["units"]["block_bytes.*"] == {"float32": "B", "float64": "B"} and out["file"] is None
+
+
+# --------------------------------------------------------------- a file that cannot be a calibration
+
+
+def _warned_once(call) -> str:
+    """The one warning line ``call()`` gives (as printed), asserting ``call()`` is None."""
+    import warnings
+
+    calibration.load.cache_clear()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            assert call() is None
+    finally:
+        calibration.load.cache_clear()
+    (w,) = caught
+    text = warnings.formatwarning(w.message, w.category, w.filename, w.lineno, w.line)
+    assert text.count("\n") == 1 and text.startswith("pfjax:0: UserWarning: "), text
+    return text
+
+
+def test_a_calibration_nested_too_deeply_to_parse_is_ignored_with_one_warning(tmp_path, monkeypatch, capsys):
+    """JSON nested beyond Python's recursion limit: one warning line at import (every command still
+    runs), and pfjax calibrate refuses it as the user's file (one line, exit 2), never a traceback."""
+    import os
+    import subprocess
+    import sys
+
+    from pfjax.cli import main
+
+    key = calibration.cpu_key()
+    deep = tmp_path / f"{key}.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    text = _warned_once(lambda: calibration.load(str(deep)))
+    assert f"{deep}: calibration ignored, unreadable (maximum recursion depth exceeded" in text
+    env = {k: v for k, v in os.environ.items() if k != "PFJAX_CALIBRATION"}
+    r = subprocess.run(
+        [sys.executable, "-c", "import pfjax.numerics.compiler as c; print(c.OPTIONS is not None)"],
+        env={**env, "PFJAX_CALIBRATION_DIR": str(tmp_path)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 0 and r.stdout == "True\n", r.stderr[-2000:]
+    assert r.stderr.count("calibration ignored, unreadable") == 1 and "Traceback" not in r.stderr
+    monkeypatch.delenv("PFJAX_CALIBRATION", raising=False)  # the tests' "off" (conftest)
+    monkeypatch.setenv("PFJAX_CALIBRATION_DIR", str(tmp_path))
+    monkeypatch.setattr(C, "calibrate", lambda **kw: pytest.fail("measured before checking"))
+    assert main(["calibrate", "--quick"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"pfjax calibrate: error: PFJAX_CALIBRATION_DIR: {deep} is not a pfjax")
+    assert deep.read_text().startswith("[[[")  # the user's file, untouched
+
+
+def test_a_directory_at_the_calibration_files_path_is_ignored_with_one_warning(tmp_path, monkeypatch):
+    (tmp_path / f"{calibration.cpu_key()}.json").mkdir()
+    monkeypatch.delenv("PFJAX_CALIBRATION", raising=False)
+    monkeypatch.setenv("PFJAX_CALIBRATION_DIR", str(tmp_path))
+    text = _warned_once(calibration.load)
+    assert f"{tmp_path / calibration.cpu_key()}.json: calibration ignored, not a file" in text
+    assert "not a file" in _warned_once(lambda: calibration.load(str(tmp_path)))
+    calibration.load.cache_clear()
+    assert calibration.load(str(tmp_path / "absent.json")) is None  # none written: no warning
+    calibration.load.cache_clear()
+
+
+# ------------------------------------------------------ a candidate that disagrees is never chosen
+
+
+def _candidates(**diff) -> list[dict]:
+    """Measured rows of two widths and two blocks; ``diff``: the max |IAE difference| (m s) of a
+    row by ``<dtype>_<width>_<block>`` (0 otherwise). The fastest: float32 512-bit 2,500 bytes."""
+    return [
+        dict(dtype=d, vector_width=w, block_bytes=b, msteps_per_s=r, max_abs_iae_diff=diff.get(f"{d}_{w}_{b}", 0.0))
+        for d, w, b, r in [
+            ("float32", None, 2500, 100.0),
+            ("float32", None, 5000, 120.0),
+            ("float32", 512, 2500, 200.0),
+            ("float32", 512, 5000, 150.0),
+            ("float64", None, 2500, 60.0),
+            ("float64", None, 5000, 50.0),
+            ("float64", 512, 2500, 40.0),
+            ("float64", 512, 5000, 45.0),
+        ]
+    ]
+
+
+def test_a_candidate_whose_results_disagree_is_never_chosen():
+    """Beyond the benchmark's tolerance (float32 1e-4, float64 1e-10 m s), or not finite: not chosen,
+    however fast; a width with no agreeing candidate in a precision is not chosen; none at all:
+    ``failed``, nothing to keep."""
+    from pfjax.bench.run import TOLERANCE
+
+    assert C.choose(_candidates())["block_bytes"] == {"float32": 2500, "float64": 5000}  # 512: 200 * 45
+    assert C.choose(_candidates(float32_512_2500=TOLERANCE["float32"]))["block_bytes"]["float32"] == 2500  # at it
+    for bad in (2 * TOLERANCE["float32"], math.nan):
+        got = C.choose(_candidates(float32_512_2500=bad))  # 512: 150 * 45 = 6750 < default 120 * 60
+        assert got["vector_width"] is None and got["block_bytes"] == {"float32": 5000, "float64": 2500}
+    both = C.choose(_candidates(float64_512_2500=1e-9, float64_512_5000=1e-9))  # no 512-bit float64 agrees
+    assert both["vector_width"] is None and "failed" not in both
+    every = {f"{d}_{w}_{b}": math.nan for d in ("float32", "float64") for w in (None, 512) for b in (2500, 5000)}
+    got = C.choose(_candidates(**every))
+    assert (
+        got["vector_width"] is None and got["block_bytes"] is None and got["failed"].startswith("no candidate agrees")
+    )
+    assert C.agrees(_candidates()[0]) and not C.agrees(_candidates(float32_None_2500=math.nan)[0])
+
+
+def test_pfjax_calibrate_keeps_nothing_when_no_candidate_agrees(tmp_path, monkeypatch, capsys):
+    from pfjax.cli import main
+
+    key = calibration.cpu_key()
+    every = {f"{d}_{w}_{b}": math.nan for d in ("float32", "float64") for w in (None, 512) for b in (2500, 5000)}
+    rows = _candidates(**every)
+    result = dict(_result(key), **C.choose(rows), rows=[dict(r, agrees=C.agrees(r)) for r in rows])
+    monkeypatch.delenv("PFJAX_CALIBRATION", raising=False)  # the tests' "off" (conftest)
+    monkeypatch.setenv("PFJAX_CALIBRATION_DIR", str(tmp_path))
+    monkeypatch.setattr(C, "calibrate", lambda **kw: result)
+    with pytest.raises(SystemExit) as e:
+        main(["calibrate", "--quick", "--json"])
+    assert e.value.code == 1
+    got = capsys.readouterr()
+    assert got.err.splitlines() == [f"pfjax calibrate: error: {result['failed']}; nothing was kept"]
+    printed = json.loads(got.out)  # the measurement, printed
+    assert printed["file"] is None and printed["block_bytes"] is None and len(printed["rows"]) == 8
+    assert not any(tmp_path.iterdir())
+
+
+def test_the_calibrate_help_states_what_it_runs_not_how_long(capsys):
+    from pfjax.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["calibrate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "20,000 runs of 5 s (1,000 steps), best of 3 rounds" in text and "1,024 runs of 0.5 s" in text
+    assert "minute" not in text and "float32 1e-4 m s, float64 1e-10 m s" in text

@@ -11,6 +11,15 @@ after a compiling call each, each timed call after an untimed one (best time of 
 * one width for both precisions (XLA's option is per program, pfjax sets one for all): the width
   whose best rates have the largest product over the two precisions.
 
+Only a candidate whose per-run IAE agrees with the first candidate's (XLA's default width, the
+first block) within :data:`TOLERANCE` is chosen: the settings change the results only by rounding,
+so a larger difference (or one that is not finite) is a fault of that program, not a faster setting.
+The tolerance is the benchmark's for pfjax against its references (:data:`pfjax.bench.run.TOLERANCE`:
+float32 1e-4 m s, rounding amplified over 4,000 steps, measured ~3e-6; float64 1e-10 m s, measured
+~5e-15), which also bounds the shorter runs calibrated here. Each row records ``agrees``; when no
+candidate of a width agrees in both precisions that width is not chosen, and when none agrees at
+all nothing is chosen (``failed`` says why, and ``pfjax calibrate`` keeps nothing).
+
 :func:`calibrate` returns every measurement and the choice; :func:`pfjax.numerics.calibration.save`
 writes it where every later process on this CPU reads it.
 """
@@ -24,6 +33,7 @@ import numpy as np
 
 from pfjax.bench import problem as P
 from pfjax.bench import timing
+from pfjax.bench.run import TOLERANCE
 
 #: Candidate bytes per batched array in one CPU block (float32 runs = bytes / 4, float64 / 8).
 BLOCK_BYTES = (2_500, 5_000, 10_000, 20_000)
@@ -74,7 +84,7 @@ def _rates(dtype, batch: int, horizon: float, blocks, width_set, rounds: int, sa
     for c, best in zip(cands, bests):
         c["best"] = best
     ref = cands[0]["iae"]
-    return [
+    rows = [
         dict(
             dtype=np.dtype(dtype).name,
             vector_width=c["width"],
@@ -85,6 +95,13 @@ def _rates(dtype, batch: int, horizon: float, blocks, width_set, rounds: int, sa
         )
         for c in cands
     ]
+    return [dict(r, agrees=agrees(r)) for r in rows]
+
+
+def agrees(row: dict) -> bool:
+    """Whether a measured candidate's per-run IAE agrees with the first candidate's: its
+    ``max_abs_iae_diff`` (m s) within :data:`TOLERANCE` of its precision (False where not finite)."""
+    return row["max_abs_iae_diff"] <= TOLERANCE[row["dtype"]]
 
 
 #: The units of a calibration's numbers, by field name ("1": dimensionless).
@@ -98,23 +115,33 @@ UNITS = {
     "horizon_s": "s",
     "rounds": "timed calls per candidate",
     "n_steps": "RK4 steps per run",
+    "iae_tolerance": "m s (the largest max_abs_iae_diff of a candidate that may be chosen)",
 }
+DTYPES = ("float32", "float64")
 
 
 def choose(rows: Sequence[dict]) -> dict:
-    """The width and per-precision blocks from measured ``rows`` (see the module docstring)."""
+    """The width and per-precision blocks from measured ``rows`` (see the module docstring), among
+    the candidates that agree with the first (``max_abs_iae_diff`` within :data:`TOLERANCE`); with
+    none to choose, ``{"vector_width": None, "block_bytes": None, "msteps_per_s": None, "failed":
+    reason}``."""
     best: dict = {}
     for r in rows:
         key = (r["vector_width"], r["dtype"])
-        if key not in best or r["msteps_per_s"] > best[key]["msteps_per_s"]:
+        if agrees(r) and (key not in best or r["msteps_per_s"] > best[key]["msteps_per_s"]):
             best[key] = r
-    ws = sorted({r["vector_width"] for r in rows}, key=lambda w: w or 0)
-    score = {w: sum(math.log(best[(w, d)]["msteps_per_s"]) for d in ("float32", "float64")) for w in ws}
+    ws = sorted({w for w, _ in best if all((w, d) in best for d in DTYPES)}, key=lambda w: w or 0)
+    if not ws:
+        reason = "no candidate agrees with the first on the per-run IAE in both precisions (m s): " + ", ".join(
+            f"{d} tolerance {TOLERANCE[d]:.0e}" for d in DTYPES
+        )
+        return dict(vector_width=None, block_bytes=None, msteps_per_s=None, failed=reason)
+    score = {w: sum(math.log(best[(w, d)]["msteps_per_s"]) for d in DTYPES) for w in ws}
     width = max(ws, key=lambda w: score[w])
     return dict(
         vector_width=width,
-        block_bytes={d: best[(width, d)]["block_bytes"] for d in ("float32", "float64")},
-        msteps_per_s={d: best[(width, d)]["msteps_per_s"] for d in ("float32", "float64")},
+        block_bytes={d: best[(width, d)]["block_bytes"] for d in DTYPES},
+        msteps_per_s={d: best[(width, d)]["msteps_per_s"] for d in DTYPES},
     )
 
 
@@ -128,8 +155,9 @@ def calibrate(
 ) -> dict:
     """Measure every candidate on this CPU; returns ``{"cpu_key", "version", "pfjax_version",
     "config_sha256", "vector_width", "block_bytes", "msteps_per_s", "rows", "machine", "sizes",
-    "units"}`` (the file :func:`pfjax.numerics.calibration.save` writes; ``config_sha256`` over what
-    was measured: the sizes, the blocks and the widths)."""
+    "iae_tolerance", "units"}`` (the file :func:`pfjax.numerics.calibration.save` writes;
+    ``config_sha256`` over what was measured: the sizes, the blocks and the widths), and ``failed``
+    where no candidate agrees (:func:`choose`: nothing to keep)."""
     import jax
 
     from pfjax.bench.report import MACHINE_UNITS
@@ -154,6 +182,7 @@ def calibrate(
         **choose(rows),
         rows=rows,
         sizes=dict(batch=batch, horizon_s=horizon, rounds=rounds, n_steps=P.n_steps(horizon)),
+        iae_tolerance={d: TOLERANCE[d] for d in DTYPES},
         machine=machine(),
         units={**UNITS, **MACHINE_UNITS},
     )

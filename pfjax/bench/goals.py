@@ -14,7 +14,10 @@ reference (run once per precision, on ``BenchConfig.ref_size`` runs of the large
 are measured whatever larger batches the run adds; the gradient costs are the value and gradient of
 the batch-mean IAE with respect to the gains over the forward pass, at the gradient's batch of 2,000
 runs. The goals are stated for the benchmark's problem at its full horizon (20 s), so a ``--quick``
-run measures none of them.
+run measures none of them. A goal read against a reference (the minimal implementation, Numba) is
+not measured where that reference disagrees with pfjax on the per-run IAE in the run
+(:func:`pfjax.bench.run.disagreeing`): a ratio to a program that solves another problem measures
+nothing. Each goal's ``not_measured`` says why it was not measured.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
-from pfjax.bench.problem import HORIZON
+from pfjax.bench.problem import HORIZON, RATE
 
 __all__ = ["GOALS", "Goal", "check"]
 
@@ -37,6 +40,8 @@ class Goal(NamedTuple):
     at_least: bool  # True: the value must reach the target; False: stay at or below it
     batch: int  # the batch size the goal is stated for (the gradient's batch for gradient costs)
     value: Callable[[dict, int], float | None]  # from the result (``rows``, ``summary``, ``config``)
+    unit: str = "1"  # of the target and the value
+    reference: str | None = None  # the agreement entry the value is measured against ("numba_float32")
 
 
 def _rate(impl: str, dtype: str):
@@ -82,8 +87,8 @@ def _over_reference(impl: str, dtype: str):
 
 #: The goals, in the order the report lists them.
 GOALS: tuple[Goal, ...] = (
-    Goal("throughput_f32", "pfjax float32, M rollout-steps/s", 150.0, True, 100_000, _rate("pfjax", "float32")),
-    Goal("throughput_f64", "pfjax float64, M rollout-steps/s", 70.0, True, 100_000, _rate("pfjax", "float64")),
+    Goal("throughput_f32", "pfjax float32, M rollout-steps/s", 150.0, True, 100_000, _rate("pfjax", "float32"), RATE),
+    Goal("throughput_f64", "pfjax float64, M rollout-steps/s", 70.0, True, 100_000, _rate("pfjax", "float64"), RATE),
     *(
         Goal(
             f"fraction_of_minimal_f{bits}_{batch}",
@@ -92,12 +97,23 @@ GOALS: tuple[Goal, ...] = (
             True,
             batch,
             _fraction(bits),
+            reference=f"jax_minimal_float{bits}",
         )
         for bits, target in ((32, 0.90), (64, 0.85))
         for batch in (10_000, 100_000)
     ),
-    Goal("numba_f32", "pfjax over Numba, float32", 12.0, True, 100_000, _over_reference("numba", "float32")),
-    Goal("numba_f64", "pfjax over Numba, float64", 8.0, True, 100_000, _over_reference("numba", "float64")),
+    *(
+        Goal(
+            f"numba_f{bits}",
+            f"pfjax over Numba, float{bits}",
+            target,
+            True,
+            100_000,
+            _over_reference("numba", f"float{bits}"),
+            reference=f"numba_float{bits}",
+        )
+        for bits, target in ((32, 12.0), (64, 8.0))
+    ),
     Goal(
         "gradient_forward_mode",
         "value and gradient over the forward pass, forward mode",
@@ -117,29 +133,45 @@ GOALS: tuple[Goal, ...] = (
 )
 
 
+def _measured(result: dict, g: Goal) -> tuple[float | None, str | None]:
+    """``(value, None)``, or ``(None, why it was not measured)``."""
+    agreement = (result["summary"].get("agreement") or {}).get(g.reference or "", {})
+    if agreement.get("ok") is False:  # first: what no other setting of the run would mend
+        return None, f"reference {g.reference} disagrees"
+    horizon = result["config"]["horizon"]
+    if horizon != HORIZON:
+        return None, f"{horizon:g} s horizon, the goals' is {HORIZON:g} s"
+    value = g.value(result, g.batch)
+    if value is None:
+        return None, "not in this run (its batch size, the gradient's batch or mode, or its reference)"
+    if not math.isfinite(value):
+        return None, "not finite (its reference not run)"
+    return value, None
+
+
 def check(result: dict, goals: tuple[Goal, ...] = GOALS) -> list[dict]:
     """Every goal against ``result`` (:func:`pfjax.bench.run.run`'s, with its ``rows``,
-    ``summary`` and ``config``): ``{"goal", "text", "target", "at_least", "batch", "value", "met"}``
-    per goal, ``value`` and ``met`` None where the run did not measure it: its batch size was not
-    run, the run's horizon is not the benchmark problem's (:data:`pfjax.bench.problem.HORIZON`,
-    e.g. ``--quick``), the number is not finite (Numba skipped), or, for the forward-mode gradient,
-    the tuner's mode was reverse."""
-    full = result["config"]["horizon"] == HORIZON
+    ``summary`` and ``config``): ``{"goal", "text", "target", "unit", "at_least", "batch", "value",
+    "met", "not_measured"}`` per goal, ``value`` and ``met`` None where the run did not measure it,
+    and ``not_measured`` then saying why: the goal's reference disagrees with pfjax (``"reference
+    numba_float32 disagrees"``), the run's horizon is not the benchmark problem's
+    (:data:`pfjax.bench.problem.HORIZON`, e.g. ``--quick``), its batch size was not run or, for the
+    forward-mode gradient, the tuner's mode was reverse, or the number is not finite (Numba skipped)."""
     out = []
     for g in goals:
-        value = g.value(result, g.batch) if full else None
-        if value is not None and not math.isfinite(value):
-            value = None
+        value, why = _measured(result, g)
         met = None if value is None else (value >= g.target if g.at_least else value <= g.target)
         out.append(
             {
                 "goal": g.name,
                 "text": g.text,
                 "target": g.target,
+                "unit": g.unit,
                 "at_least": g.at_least,
                 "batch": g.batch,
                 "value": value,
                 "met": met,
+                "not_measured": why,
             }
         )
     return out

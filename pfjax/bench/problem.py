@@ -22,6 +22,10 @@ K = (-2.7381, -2.0772)  # the source's published gain (pfjax.controllers.PAPER_K
 V, L, DELTA_MAX = 1.0, 0.2, math.radians(30.0)
 U_MIN, U_MAX = -10.0, 60.0
 DT, HORIZON, NEWTON_ITERS = 0.005, 20.0, 3
+#: The units of K's entries: the state feedback's ``k_d`` and ``k_theta`` (pfjax.controllers.gain_units).
+K_UNITS = ("rad/m", "rad/rad")
+#: The unit of a rate: million rollout-steps (runs x RK4 steps) per second.
+RATE = "1e6 rollout-steps/s"
 
 
 class Batch(NamedTuple):

@@ -15,24 +15,23 @@ import math
 from dataclasses import asdict
 
 import pfjax
+from pfjax.bench.problem import K_UNITS, RATE  # RATE: the unit of a rate (also report.RATE)
+from pfjax.bench.run import disagreeing, disagreement
 from pfjax.jsonio import dumps
 from pfjax.outputs import OutputDir
 from pfjax.provenance import config_hash, parquet_metadata
 from pfjax.report.markdown import table
 from pfjax.tables import write_parquet
 
-#: The unit of a rate: million rollout-steps (runs x RK4 steps) per second.
-RATE = "1e6 rollout-steps/s"
-
-#: ``bench.parquet``'s columns (``bench.json``'s rows): unit and description (unit "": text or a count).
+#: ``bench.parquet``'s columns (``bench.json``'s rows): unit and description (unit "": text).
 COLUMNS: dict[str, tuple[str, str]] = {
     "impl": ("", "implementation: pfjax, jax_minimal, numba, numpy or scipy"),
     "dtype": ("", "floating-point precision"),
-    "batch": ("", "runs in the batch (scipy: runs integrated one at a time)"),
+    "batch": ("runs", "runs in the batch (scipy: runs integrated one at a time)"),
     "seconds": ("s", "best wall-clock time of a call"),
     "compile_s": ("s", "first call's time less the best call's: compilation"),
     "msteps_per_s": (RATE, "million rollout-steps (runs x RK4 steps) per second"),
-    "failed_runs": ("", "runs whose status is not ok (pfjax's rows; null where not counted)"),
+    "failed_runs": ("runs", "runs whose status is not ok (pfjax's rows; null where not counted)"),
     "config_sha256": ("", "SHA-256 of the benchmark's config"),
     "pfjax_version": ("", "pfjax version"),
 }
@@ -40,8 +39,8 @@ COLUMNS: dict[str, tuple[str, str]] = {
 
 def summary_units(summary: dict, prefix: str = "") -> dict:
     """The unit of each number of a benchmark ``summary`` (keys under ``prefix``): rates, ratios,
-    seconds, memory, the agreement's IAE differences and the vehicle models' costs. Goals state
-    their own units in their text; the gradient's entries are in the gains' units."""
+    seconds, memory, the agreement's IAE differences, the gradient (:data:`GRADIENT`), the goals
+    (each in its own ``unit``) and the vehicle models' costs."""
     ratios = [
         *(f"ratio_vs_{impl}_{p}" for impl in ("numba", "numpy") for p in ("f32", "f64")),
         "ratio_vs_scipy_f64",
@@ -71,7 +70,11 @@ def summary_units(summary: dict, prefix: str = "") -> dict:
             "grad_block": "runs",
             "grad_blocks": "1",
             "reverse_segment": "samples",
+            "grad": GRADIENT,
+            "grad_reverse": GRADIENT,
         },
+        "goals.*": {"target": "the goal's unit (its 'unit')", "value": "the goal's unit (its 'unit')", "batch": "runs"},
+        "models.*": {"runs": "runs", "steps": "steps per run"},
     }
     for name in summary.get("agreement") or {}:
         table[f"agreement.{name}.*"] = {"max_abs_diff": "m s", "tolerance": "m s"}
@@ -83,20 +86,42 @@ def summary_units(summary: dict, prefix: str = "") -> dict:
     return {prefix + k: v for k, v in table.items()}
 
 
+#: The unit of the gradient of the batch-mean IAE (m s) with respect to K, per entry of K.
+GRADIENT = "m s per unit of K's entry: " + ", ".join(f"m s / ({u})" for u in K_UNITS)
+
 #: The units of :func:`pfjax.bench.run.machine`'s numbers, under ``machine.`` (every output that
 #: records the machine carries them).
-MACHINE_UNITS = {"machine.block_bytes.*": {"float32": "B", "float64": "B"}}
+LOAD = "runnable processes (1-minute load average)"
+MACHINE_UNITS = {
+    "machine.block_bytes.*": {"float32": "B", "float64": "B"},
+    "machine.compiler_options.*": {"xla_cpu_prefer_vector_width": "bits"},
+    "machine.cpus": "CPUs",
+    "machine.load_average_1m": LOAD,
+    "machine.load_average_1m_start": LOAD,
+}
+
+#: The units of :class:`pfjax.bench.run.BenchConfig`'s numbers, by field.
+CONFIG_UNITS = {
+    **dict.fromkeys(("sizes", "ref_size", "ref_numpy", "scipy_runs", "grad_size", "model_runs"), "runs"),
+    "horizon": "s",
+    "model_horizon": "s",
+    "repeats": "timed calls after the first",
+    "grad_rounds": "rounds",
+    "seed": "1 (the random seed)",
+}
 
 
 def result_units(result: dict) -> dict:
     """The unit of each number of ``bench.json`` (:func:`summary_units` under ``summary.``, the rows
-    by :data:`COLUMNS`, the horizons and the step)."""
+    by :data:`COLUMNS`, the config by :data:`CONFIG_UNITS`, the problem, the step count, the seed
+    and the machine by :data:`MACHINE_UNITS`)."""
     return {
         **summary_units(result["summary"], "summary."),
         "rows.*": {name: unit for name, (unit, _) in COLUMNS.items() if unit},
-        "config.horizon": "s",
-        "config.model_horizon": "s",
-        "problem.dt": "s",
+        "config.*": CONFIG_UNITS,
+        "problem.*": {"dt": "s", "newton_iters": "Newton steps per closest-point search"},
+        "n_steps": "RK4 steps per run",
+        "seed": CONFIG_UNITS["seed"],
         **MACHINE_UNITS,
     }
 
@@ -202,13 +227,17 @@ def _goals(goals: list[dict]) -> list[str]:
             return f"{100 * x:.1f} %"
         return f"{x:.3g}" + ("x" if name.startswith(("numba_", "gradient_")) else "")
 
+    def unmeasured(g: dict) -> str:
+        why = g.get("not_measured") or ""
+        return f"not measured ({why})" if why.startswith("reference ") else "not measured"
+
     rows = []
     for g in goals:
         rows.append(
             [
                 f"{g['text']} (B = {g['batch']:,})",
                 ("≥ " if g["at_least"] else "≤ ") + number(g["target"], g["goal"]),
-                "not measured" if g["value"] is None else number(g["value"], g["goal"]),
+                unmeasured(g) if g["value"] is None else number(g["value"], g["goal"]),
                 "–" if g["met"] is None else ("yes" if g["met"] else "no"),
             ]
         )
@@ -219,7 +248,7 @@ def _goals(goals: list[dict]) -> list[str]:
         + (f"{met} of the {measured} measured met" if measured else "none measured")
         + (
             f"; {len(goals) - measured} not measured in this run (a goal is measured at its batch size "
-            f"with the benchmark's {HORIZON:g} s horizon)"
+            f"with the benchmark's {HORIZON:g} s horizon, against a reference that agrees with pfjax)"
             if measured < len(goals)
             else ""
         )
@@ -230,12 +259,63 @@ def _goals(goals: list[dict]) -> list[str]:
     ]
 
 
+def _finite(x) -> bool:
+    return x is not None and math.isfinite(x)
+
+
+def _percent(x) -> str:
+    """A fraction in percent, ``–`` where it is not reported (null: its reference disagrees)."""
+    return f"{100 * x:.0f} %" if _finite(x) else "–"
+
+
 def _numba_clause(s: dict) -> str:
-    """The headline's ratios over Numba, or that Numba did not run (its ratios null)."""
+    """The headline's ratios over Numba (``–`` in a precision where Numba disagrees with pfjax),
+    or that Numba did not run (its ratios null)."""
+    bad = [name for name in disagreeing(s) if name.startswith("numba_")]
     r32, r64 = s.get("ratio_vs_numba_f32"), s.get("ratio_vs_numba_f64")
-    if r32 is None or r64 is None or not (math.isfinite(r32) and math.isfinite(r64)):
+    if bad:
+        ratios = " / ".join(f"{r:.3g}x" if _finite(r) else "–" for r in (r32, r64))
+        return f"; {ratios} Numba ({', '.join(bad)} disagrees with pfjax: not reported)."
+    if not (_finite(r32) and _finite(r64)):
         return "; Numba not run."
     return f"; {r32:.3g}x / {r64:.3g}x Numba."
+
+
+def _disagreement(s: dict) -> list[str]:
+    """The paragraph naming the references that disagree with pfjax, and by how much (none where
+    every reference agrees)."""
+    text = disagreement(s)
+    if not text:
+        return []
+    return [
+        f"**Disagreement**: these references disagree with pfjax on the per-run IAE: {text}. pfjax's "
+        "fractions of them and ratios over them are not reported (null in bench.json), and the goals read "
+        "against them are not measured.",
+        "",
+    ]
+
+
+def _minimal_sentence(s: dict) -> str:
+    """pfjax's throughput as a fraction of the minimal implementation's, at the largest batch and
+    every other; ``–`` in a precision where the minimal implementation disagrees with pfjax."""
+    what = (
+        "a minimal JAX implementation of the same problem (`jax_minimal`: IAE only, the same elementary functions, "
+        "devices, blocks and compiler options, no metrics, statuses or general interfaces), measured in the same process"
+    )
+    at = f"{_percent(s['fraction_of_minimal_f32'])} (float32) and {_percent(s['fraction_of_minimal_f64'])} (float64)"
+    bad = [name for name in disagreeing(s) if name.startswith("jax_minimal_")]
+    if bad:
+        head = (
+            f"pfjax's throughput as a fraction of that of {what}, not reported where it disagrees with pfjax "
+            f"({', '.join(bad)}): at B = {s['batch']} runs {at}"
+        )
+    else:
+        head = f"pfjax at B = {s['batch']} runs at {at} of the throughput of {what}"
+    return head + "".join(
+        f"; at B = {f['batch']}: {_percent(f['f32'])} / {_percent(f['f64'])}"
+        for f in s.get("fraction_of_minimal_by_batch", [])
+        if f["batch"] != s["batch"]
+    )
 
 
 def markdown(result: dict) -> str:
@@ -249,16 +329,8 @@ def markdown(result: dict) -> str:
         f"AVX-512: {'yes' if m.get('avx512') else 'no'} (flags: {', '.join(m.get('cpu_flags') or []) or 'unknown'}); "
         f"simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}.",
         "",
-        f"pfjax at B = {s['batch']} runs at {100 * s['fraction_of_minimal_f32']:.0f} % (float32) and "
-        f"{100 * s['fraction_of_minimal_f64']:.0f} % (float64) of the throughput of a minimal JAX implementation "
-        "of the same problem (`jax_minimal`: IAE only, the same elementary functions, devices, blocks and compiler "
-        "options, no metrics, statuses or general interfaces), measured in the same process"
-        + "".join(
-            f"; at B = {f['batch']}: {100 * f['f32']:.0f} % / {100 * f['f64']:.0f} %"
-            for f in s.get("fraction_of_minimal_by_batch", [])
-            if f["batch"] != s["batch"]
-        )
-        + _numba_clause(s),
+        *_disagreement(s),
+        _minimal_sentence(s) + _numba_clause(s),
         "",
         table(
             ["implementation", "dtype", "batch", "M rollout-steps/s", "compile s"],
@@ -270,7 +342,15 @@ def markdown(result: dict) -> str:
         "",
         table(
             ["agreement (max abs IAE difference vs pfjax, m s)", "value", "tolerance", "ok"],
-            [[k, f"{a['max_abs_diff']:.2e}", f"{a['tolerance']:.0e}", a["ok"]] for k, a in s["agreement"].items()],
+            [
+                [
+                    k,
+                    f"{a['max_abs_diff']:.2e}" if _finite(a["max_abs_diff"]) else "not finite",
+                    f"{a['tolerance']:.0e}",
+                    a["ok"],
+                ]
+                for k, a in s["agreement"].items()
+            ],
         ),
     ]
     g = s["gradient"]

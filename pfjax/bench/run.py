@@ -28,6 +28,12 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
   ``repeats + 1`` rounds timed by :func:`pfjax.bench.timing.interleaved`; ``model_runs = 0`` skips it);
 * the process's peak resident memory (``getrusage``);
 * pfjax's performance goals against these numbers (:mod:`pfjax.bench.goals`): ``summary["goals"]``.
+
+A reference that disagrees with pfjax on the per-run IAE (beyond :data:`TOLERANCE`, or not finite)
+is reported, never used: its agreement entry has ``ok`` false, ``summary["disagreeing"]`` names it,
+pfjax's fractions of it or ratios over it are null (its own rates stay: they were measured) and the
+goals read against it are not measured (:mod:`pfjax.bench.goals`). ``pfjax bench`` writes the
+outputs and exits with code 1 (:mod:`pfjax.cli.bench`).
 """
 
 from __future__ import annotations
@@ -198,15 +204,18 @@ def _grad(batch, dtype, cfg: BenchConfig):
 
 
 def machine() -> dict:
+    """The machine a benchmark ran on: the CPU (vendor, family, model, vector flags), the CPUs
+    this process may use, the 1-minute load average, JAX and its devices, and the CPU settings of
+    the simulator programs (compiler options, bytes per batched array in a CPU block, and where they
+    came from: :func:`settings_source`); units in :data:`pfjax.bench.report.MACHINE_UNITS`."""
     import jax
 
-    from pfjax.numerics import calibration, compiler
+    from pfjax.numerics import compiler
     from pfjax.numerics.cpu import VECTOR_FLAGS
     from pfjax.sim.sharding import cpu_block_bytes
 
     cpu = compiler.cpu_info()
     flags = set(cpu.get("flags", "").split())
-    calibrated, _ = calibration.vector_width()
     return dict(
         cpu_model=cpu.get("model name", ""),
         cpu_vendor=cpu.get("vendor_id", ""),
@@ -223,8 +232,22 @@ def machine() -> dict:
         avx512=compiler.has_avx512(),
         compiler_options=dict(compiler.OPTIONS),  # the simulator programs' (512-bit vectors on AVX-512)
         block_bytes={"float32": cpu_block_bytes(4), "float64": cpu_block_bytes(8)},
-        settings="calibrated" if calibrated else "rules",  # pfjax calibrate's file, or the stated rules
+        settings=settings_source(),
     )
+
+
+def settings_source(environ=None) -> str:
+    """Where the CPU settings of this process come from, in words: ``"calibrated"`` (this CPU's
+    calibration, :mod:`pfjax.numerics.calibration`) or ``"rules"`` (the stated defaults), then
+    ``"; vector width from PFJAX_VECTOR_WIDTH"`` where that variable sets the width (a whole number
+    of bits, as :func:`pfjax.numerics.compiler.vector_width` reads it); the blocks come from the first."""
+    from pfjax.numerics import calibration, compiler
+
+    environ = os.environ if environ is None else environ
+    base = "calibrated" if calibration.vector_width()[0] else "rules"
+    if environ.get(compiler.VECTOR_WIDTH_ENV, "").strip().isdigit():
+        return f"{base}; vector width from {compiler.VECTOR_WIDTH_ENV}"
+    return base
 
 
 def compile_time(first: float, best: float) -> float:
@@ -308,8 +331,39 @@ def _reference_rows(cfg: BenchConfig, n_steps: int, iae: dict, have_numba: bool,
     return rows, agree
 
 
+def disagreeing(summary: dict) -> list[str]:
+    """The agreement entries (``"<impl>_<dtype>"``, e.g. ``"numpy_float32"``) of a benchmark
+    ``summary`` whose reference disagrees with pfjax on the per-run IAE (``ok`` false: beyond the
+    tolerance, or not finite), in the summary's order; ``[]`` when every reference agrees."""
+    return [name for name, a in (summary.get("agreement") or {}).items() if a.get("ok") is False]
+
+
+def disagreement(summary: dict) -> str:
+    """The references of :func:`disagreeing`, each with its largest IAE difference and tolerance
+    (m s), in one line: ``"numpy_float32 (max |IAE difference| 1.0e-02 m s, tolerance 1e-04 m s)"``;
+    ``""`` when every reference agrees. A difference that is not finite (null in ``bench.json``)
+    reads ``NaN``."""
+
+    def diff(x) -> str:
+        return "NaN" if x is None or x != x else f"{x:.1e}"
+
+    agreement = summary.get("agreement") or {}
+    return "; ".join(
+        f"{name} (max |IAE difference| {diff(agreement[name].get('max_abs_diff'))} m s, "
+        f"tolerance {agreement[name]['tolerance']:.0e} m s)"
+        for name in disagreeing(summary)
+    )
+
+
 def _summary(rows: list[dict], top: int, g: dict, agreement: dict, notes: list[str], models: dict) -> dict:
-    """The headline rates and ratios (pfjax at the largest batch over each reference)."""
+    """The headline rates and ratios (pfjax at the largest batch over each reference); a fraction
+    or ratio against a reference that disagrees with pfjax (``agreement[...]["ok"]`` false) is None."""
+    bad = {name for name, a in agreement.items() if not a["ok"]}
+
+    def over(impl: str, dtype: str, value: float) -> float | None:
+        """pfjax's ``value`` (a fraction of, or ratio over, ``impl`` in ``dtype``), None where
+        ``impl`` disagrees with pfjax."""
+        return None if f"{impl}_{dtype}" in bad else value
 
     def rate(impl, dtype, batch=None):
         c = [r for r in rows if r["impl"] == impl and r["dtype"] == dtype and (batch is None or r["batch"] == batch)]
@@ -326,18 +380,22 @@ def _summary(rows: list[dict], top: int, g: dict, agreement: dict, notes: list[s
     out["scipy_msteps_per_s_f64"] = rate("scipy", "float64")
     for impl in ("numba", "numpy"):
         for p, dtype in (("f32", "float32"), ("f64", "float64")):
-            out[f"ratio_vs_{impl}_{p}"] = head[p] / rate(impl, dtype)
-    out["ratio_vs_scipy_f64"] = head["f64"] / rate("scipy", "float64")
+            out[f"ratio_vs_{impl}_{p}"] = over(impl, dtype, head[p] / rate(impl, dtype))
+    out["ratio_vs_scipy_f64"] = over("scipy", "float64", head["f64"] / rate("scipy", "float64"))
     for p, dtype in (("f32", "float32"), ("f64", "float64")):
         out[f"minimal_msteps_per_s_{p}"] = rate("jax_minimal", dtype)
     for p, dtype in (("f32", "float32"), ("f64", "float64")):
-        out[f"fraction_of_minimal_{p}"] = head[p] / rate("jax_minimal", dtype)
+        out[f"fraction_of_minimal_{p}"] = over("jax_minimal", dtype, head[p] / rate("jax_minimal", dtype))
     # the same fraction at every batch size
     out["fraction_of_minimal_by_batch"] = [
         {
             "batch": b,
             **{
-                f"f{bits}": rate("pfjax", f"float{bits}", b) / rate("jax_minimal", f"float{bits}", b)
+                f"f{bits}": over(
+                    "jax_minimal",
+                    f"float{bits}",
+                    rate("pfjax", f"float{bits}", b) / rate("jax_minimal", f"float{bits}", b),
+                )
                 for bits in (32, 64)
             },
         }
@@ -354,7 +412,8 @@ def _summary(rows: list[dict], top: int, g: dict, agreement: dict, notes: list[s
         models=models,
         peak_rss_mib=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         agreement=agreement,
-        all_agree=all(a["ok"] for a in agreement.values()),
+        all_agree=not bad,
+        disagreeing=[name for name in agreement if name in bad],
         failed_runs=sum(r["failed_runs"] or 0 for r in rows),
         notes=notes,
     )
@@ -400,7 +459,7 @@ def run(cfg: BenchConfig, progress=None) -> dict:
         for k, v in {**agree, **ref_agree}.items()
     }
     for a in agreement.values():
-        a["ok"] = a["max_abs_diff"] <= a["tolerance"]
+        a["ok"] = a["max_abs_diff"] <= a["tolerance"]  # False for NaN: a reference that is not finite
     m = machine()
     m["load_average_1m_start"] = load0
     result: dict = dict(

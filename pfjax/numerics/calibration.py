@@ -16,7 +16,8 @@ identity (vendor, family, model, model name, vector flags) and the same JAX vers
 import. ``PFJAX_CALIBRATION=off`` ignores the file; ``PFJAX_VECTOR_WIDTH`` still overrides the
 width. The directory is ``$PFJAX_CALIBRATION_DIR``, else ``$XDG_CACHE_HOME/pfjax/calibration``
 (default ``~/.cache/pfjax/calibration``), whatever ``PFJAX_CACHE_DIR`` says. A file that is
-unreadable or not a calibration is ignored with one warning line naming it.
+unreadable (not JSON, nested too deeply to parse), not a calibration, or not a file at all (a
+directory at its path) is ignored with one warning line naming it.
 
 Results depend on the block and the width only through rounding (each block shape is compiled
 into its own vector code; :mod:`pfjax.sim.sharding`); a study records the settings it ran with.
@@ -34,6 +35,7 @@ import tempfile
 import warnings
 from pathlib import Path
 
+from pfjax import errors
 from pfjax.numerics.cpu import VECTOR_FLAGS, cpu_info
 
 ENV = "PFJAX_CALIBRATION"
@@ -47,6 +49,10 @@ VERSION = 1
 #: of SSE, AVX and AVX-512, the values of XLA's ``xla_cpu_prefer_vector_width``
 #: (:mod:`pfjax.numerics.compiler`; :func:`pfjax.bench.calibrate.widths` measures 512).
 WIDTHS = (128, 256, 512)
+#: What reading a calibration file may raise besides a bad format: the file system's errors, JSON
+#: that does not parse or decode (``ValueError``), and JSON nested deeper than Python's recursion
+#: limit (``RecursionError``, e.g. ``[[[...]]]`` 100,000 deep).
+_UNREADABLE = (OSError, ValueError, RecursionError)
 
 
 def cpu_key(cpuinfo: str | None = None, jax_version: str | None = None) -> str:
@@ -112,12 +118,15 @@ def load(path: str | None = None) -> dict | None:
         file = where / f"{cpu_key()}.json"
     else:
         file = Path(path)
-    if not file.is_file():
+    if not file.exists():
+        return None
+    if not file.is_file():  # a directory (or a device, a socket) at the file's path
+        _warn(f"{file}: calibration ignored, not a file")
         return None
     try:
         data = json.loads(file.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
-        _warn(f"{file}: calibration ignored, unreadable ({e})")
+    except _UNREADABLE as e:
+        _warn(f"{file}: calibration ignored, unreadable ({errors.one_line(e)})")
         return None
     if not _valid(data):
         _warn(f"{file}: calibration ignored, not a pfjax calibration of version {VERSION}")
@@ -175,7 +184,7 @@ def _replaceable(file: Path) -> None:
         )
     try:
         data = json.loads(file.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    except _UNREADABLE:
         data = None
     if not _ours(data, file.stem):
         raise InputError(

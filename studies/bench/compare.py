@@ -1,19 +1,24 @@
 """Compare the benchmark of two revisions: ``python studies/bench/compare.py [BASE] [NEW] [--rounds 5]``.
 
 Each revision (a git commit, branch or tag, or ``.`` for the working tree) is checked out into a
-temporary git worktree and ``pfjax bench --json`` is run in it, the two alternately (``BASE``,
-``NEW``, ``BASE``, ``NEW``, ...) in one sitting, so that a slow period of the machine slows both
-alike. The summary gives, per precision, every round's million rollout-steps per second of both,
-the ratio NEW / BASE of each round, its median and its spread (min-max), and the same for the
+temporary git worktree and ``pfjax bench --json`` is run in it, the two alternately in one sitting,
+``BASE`` first in odd rounds and ``NEW`` first in even ones (``BASE NEW``, ``NEW BASE``, ``BASE
+NEW``, ...: :func:`order`), so that a slow period of the machine, or a trend in its load, slows
+both alike. The summary gives, per precision, every round's million rollout-steps per second of
+both, the ratio NEW / BASE of each round, its median and its spread (min-max), and the same for the
 gradient's cost over the forward pass; a change to the simulator states its effect with it.
 
-Writes ``results/bench_compare/`` (``compare.json``: every round's bench summary and the ratios,
-with the machine, both commits, the seed of the benchmark's batch, the comparing pfjax's version and
-the ``units`` of its numbers (:func:`result_units`); ``report.md``) through the one output writer.
+Writes ``results/bench_compare/`` (``compare.json``: every round's bench summary, the order the two
+ran in each round and the ratios, with the machine, both commits, the seed of the benchmark's batch,
+the comparing pfjax's version and the ``units`` of its numbers (:func:`result_units`);
+``report.md``) through the one output writer.
 Bad input (an unknown revision, a bad count, ``--sizes`` that ``pfjax bench`` would refuse) stops
 with one line and exit code 2 before anything runs; so does a ``pfjax bench`` of either revision
-that refuses its arguments. A benchmark that fails after some rounds are complete stops the
-comparison with one line (exit 1), and the complete rounds are written, marked ``incomplete``.
+that refuses its arguments. A benchmark that fails, or in which a reference disagrees with pfjax on
+the per-run IAE (its summary's ``agreement``, whatever the exit code of that revision's ``pfjax
+bench``: a ratio of rates of which one solves another problem compares nothing), stops the
+comparison with one line naming the round, the revision and the reference (exit 1); the complete
+rounds before it are written, marked ``incomplete`` (nothing is written when it is the first).
 """
 
 from __future__ import annotations
@@ -29,8 +34,9 @@ from pathlib import Path
 
 import pfjax  # noqa: F401  (before JAX: one CPU device per core)
 from pfjax import errors
-from pfjax.bench.report import RATE, summary_units
-from pfjax.bench.run import machine
+from pfjax.bench.report import CONFIG_UNITS, MACHINE_UNITS, RATE, summary_units
+from pfjax.bench.run import disagreement, machine
+from pfjax.cli.bench import EXIT_DISAGREE
 from pfjax.cli.bench import config as bench_config
 from pfjax.cli.common import Parser
 from pfjax.cli.records import units
@@ -100,7 +106,8 @@ class _Tree:
     def bench(self, args: list[str], out: Path) -> dict:
         """One ``pfjax bench --json`` of this checkout (its own code: ``PYTHONPATH``); its summary.
         :class:`~pfjax.errors.InputError` when it refuses its arguments (exit 2), :class:`BenchFailed`
-        when it fails otherwise."""
+        when a reference disagrees with pfjax (the summary's agreement, whatever the exit code: a
+        revision's pfjax bench may exit 0 on it) or it fails otherwise."""
         env = {**os.environ, "PYTHONPATH": str(self.path)}
         cmd = [sys.executable, "-m", "pfjax.cli", "bench", *args, "--out", str(out), "--json"]
         r = subprocess.run(cmd, cwd=self.path, env=env, capture_output=True, text=True)
@@ -108,13 +115,31 @@ class _Tree:
         tail = (r.stderr.strip().splitlines() or ["(no output)"])[-1]
         if r.returncode == errors.EXIT_USAGE:
             raise InputError(f"{tail.removeprefix(_BENCH_ERROR)} (pfjax bench of {where})")
-        if r.returncode != 0:
+        summary = _summary(r.stdout) if r.returncode in (0, EXIT_DISAGREE) else None
+        if summary is not None and disagreement(summary):
+            raise BenchFailed(f"pfjax bench of {where}: references disagree with pfjax: {disagreement(summary)}")
+        if r.returncode != 0 or summary is None:
             raise BenchFailed(f"pfjax bench of {where} failed (exit {r.returncode}): {tail}")
-        return json.loads(r.stdout)
+        return summary
 
     def remove(self) -> None:
         if self._temporary:
             _git("worktree", "remove", "--force", str(self.path))
+
+
+def _summary(stdout: str) -> dict | None:
+    """The summary ``pfjax bench --json`` printed (one JSON object), or None."""
+    try:
+        summary = json.loads(stdout)
+    except ValueError:
+        return None
+    return summary if isinstance(summary, dict) else None
+
+
+def order(i: int) -> tuple[str, str]:
+    """The order the two revisions run in round ``i`` (from 0): BASE first in even ``i`` (the odd
+    rounds counted from 1), NEW first in odd ``i``."""
+    return ("base", "new") if i % 2 == 0 else ("new", "base")
 
 
 def _spread(values: list[float]) -> dict:
@@ -140,8 +165,9 @@ def compare(rounds: list[dict]) -> dict:
 def result_units(result: dict) -> dict:
     """``compare.json``'s ``units`` (:func:`pfjax.cli.records.units`): the rates in
     :data:`~pfjax.bench.report.RATE`, the gradient's cost and every ratio ``"1"``, each round's bench
-    summaries by :func:`~pfjax.bench.report.summary_units`, the CPU blocks in bytes."""
-    table: dict = {"machine.block_bytes.*": {"float32": "B", "float64": "B"}}
+    summaries by :func:`~pfjax.bench.report.summary_units`, the machine's numbers by
+    :data:`~pfjax.bench.report.MACHINE_UNITS`, the round counts and the seed."""
+    table: dict = {**MACHINE_UNITS, "rounds": "rounds", "rounds_requested": "rounds", "seed": CONFIG_UNITS["seed"]}
     for key in RATES + COSTS:
         unit = RATE if key in RATES else "1"
         table[f"comparison.{key}.*"] = {"base": unit, "new": unit, "ratio_new_over_base": "1"}
@@ -149,7 +175,7 @@ def result_units(result: dict) -> dict:
     for r in result["bench_summaries"]:
         for name, summary in r.items():
             table.update(summary_units(summary, f"bench_summaries.{name}."))
-            table[f"bench_summaries.{name}.machine.block_bytes.*"] = table["machine.block_bytes.*"]
+            table.update({f"bench_summaries.{name}.{k}": u for k, u in MACHINE_UNITS.items()})
     return units(result, table)
 
 
@@ -174,8 +200,9 @@ def markdown(result: dict) -> str:
             "# Benchmark comparison",
             "",
             f"BASE `{result['base']['rev']}` ({result['base']['commit'][:12]}) against NEW `{result['new']['rev']}` "
-            f"({result['new']['commit'][:12]}), {result['rounds']} alternating rounds of `pfjax bench "
-            f"{' '.join(result['bench_args'])}` on {m.get('cpu_model') or m.get('processor')}, {m.get('cpus')} CPUs.",
+            f"({result['new']['commit'][:12]}), {result['rounds']} rounds of `pfjax bench "
+            f"{' '.join(result['bench_args'])}` on {m.get('cpu_model') or m.get('processor')}, {m.get('cpus')} CPUs, "
+            "BASE first in odd rounds and NEW first in even ones.",
             "",
             *(
                 [
@@ -236,9 +263,8 @@ def main_checked(args) -> int:
                 trees["base"] = _Tree(base, Path(tmp), "base")
                 trees["new"] = _Tree(new, Path(tmp), "new")
                 for i in range(args.rounds):
-                    rounds.append(
-                        {name: tree.bench(bench_args, Path(tmp) / f"bench-{name}-{i}") for name, tree in trees.items()}
-                    )
+                    ran = {name: trees[name].bench(bench_args, Path(tmp) / f"bench-{name}-{i}") for name in order(i)}
+                    rounds.append({name: ran[name] for name in ("base", "new")})
                     print(f"round {i + 1}/{args.rounds} done", file=sys.stderr, flush=True)
             except BenchFailed as e:
                 failure = f"round {len(rounds) + 1}/{args.rounds}: {e}"
@@ -262,6 +288,7 @@ def main_checked(args) -> int:
             "rounds_requested": args.rounds,
             **({"incomplete": failure} if failure is not None else {}),
             "bench_args": bench_args,
+            "order": [list(order(i)) for i in range(len(rounds))],  # the revisions of each round, in turn
             "comparison": compare(rounds),
             "bench_summaries": rounds,
             "machine": machine(),
