@@ -63,14 +63,15 @@ def cpu_settings() -> dict:
     """The CPU settings the simulator programs ran with: the vector width asked of XLA (None: its
     default), the bytes per batched array in a CPU block per precision, and where they came from
     (``"calibrated"``: ``pfjax calibrate``'s measurement on this CPU; ``"rules"``: the stated defaults;
-    ``PFJAX_VECTOR_WIDTH`` overrides the width). Results depend on them only through rounding."""
-    from pfjax.numerics import calibration, compiler
+    ``"; vector width from PFJAX_VECTOR_WIDTH"`` added where that variable sets the width:
+    :func:`pfjax.numerics.compiler.settings_source`). Results depend on them only through rounding."""
+    from pfjax.numerics import compiler
     from pfjax.sim.sharding import cpu_block_bytes
 
     return {
         "vector_width": compiler.OPTIONS.get("xla_cpu_prefer_vector_width"),
         "block_bytes": {"float32": cpu_block_bytes(4), "float64": cpu_block_bytes(8)},
-        "source": "calibrated" if calibration.vector_width()[0] else "rules",
+        "source": compiler.settings_source(),
     }
 
 

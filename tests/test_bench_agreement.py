@@ -266,8 +266,8 @@ def test_the_bench_help_states_the_exit_codes_and_what_quick_runs(capsys):
 
 
 def test_the_settings_label_says_where_the_vector_width_came_from(monkeypatch):
-    from pfjax.bench.run import settings_source
     from pfjax.numerics import calibration
+    from pfjax.numerics.compiler import settings_source
 
     for calibrated, base in ((True, "calibrated"), (False, "rules")):
         monkeypatch.setattr(calibration, "vector_width", lambda c=calibrated: (c, 256 if c else None))

@@ -207,7 +207,7 @@ def machine() -> dict:
     """The machine a benchmark ran on: the CPU (vendor, family, model, vector flags), the CPUs
     this process may use, the 1-minute load average, JAX and its devices, and the CPU settings of
     the simulator programs (compiler options, bytes per batched array in a CPU block, and where they
-    came from: :func:`settings_source`); units in :data:`pfjax.bench.report.MACHINE_UNITS`."""
+    came from: :func:`pfjax.numerics.compiler.settings_source`); units in :data:`pfjax.bench.report.MACHINE_UNITS`."""
     import jax
 
     from pfjax.numerics import compiler
@@ -232,22 +232,8 @@ def machine() -> dict:
         avx512=compiler.has_avx512(),
         compiler_options=dict(compiler.OPTIONS),  # the simulator programs' (512-bit vectors on AVX-512)
         block_bytes={"float32": cpu_block_bytes(4), "float64": cpu_block_bytes(8)},
-        settings=settings_source(),
+        settings=compiler.settings_source(),
     )
-
-
-def settings_source(environ=None) -> str:
-    """Where the CPU settings of this process come from, in words: ``"calibrated"`` (this CPU's
-    calibration, :mod:`pfjax.numerics.calibration`) or ``"rules"`` (the stated defaults), then
-    ``"; vector width from PFJAX_VECTOR_WIDTH"`` where that variable sets the width (a whole number
-    of bits, as :func:`pfjax.numerics.compiler.vector_width` reads it); the blocks come from the first."""
-    from pfjax.numerics import calibration, compiler
-
-    environ = os.environ if environ is None else environ
-    base = "calibrated" if calibration.vector_width()[0] else "rules"
-    if environ.get(compiler.VECTOR_WIDTH_ENV, "").strip().isdigit():
-        return f"{base}; vector width from {compiler.VECTOR_WIDTH_ENV}"
-    return base
 
 
 def compile_time(first: float, best: float) -> float:

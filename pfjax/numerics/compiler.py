@@ -36,6 +36,7 @@ import jax
 from pfjax.numerics import calibration
 from pfjax.numerics.cpu import CPUINFO, cpu_info, has_avx512
 
+
 __all__ = [
     "OPTIONS",
     "PROGRAMS",
@@ -44,6 +45,7 @@ __all__ = [
     "has_avx512",
     "jit",
     "options",
+    "settings_source",
     "vector_width",
 ]
 
@@ -130,3 +132,15 @@ def jit(fun=None, **kwargs):
     if not OPTIONS:
         return jax.jit(fun, **kwargs)
     return _Jitted(fun, dict(OPTIONS), kwargs)
+
+
+def settings_source(environ=None) -> str:
+    """Where the CPU settings of this process come from, in words: ``"calibrated"`` (this CPU's
+    calibration, :mod:`pfjax.numerics.calibration`) or ``"rules"`` (the stated defaults), then
+    ``"; vector width from PFJAX_VECTOR_WIDTH"`` where that variable sets the width (a whole number
+    of bits, as :func:`vector_width` reads it); the blocks come from the first."""
+    environ = os.environ if environ is None else environ
+    base = "calibrated" if calibration.vector_width()[0] else "rules"
+    if environ.get(VECTOR_WIDTH_ENV, "").strip().isdigit():
+        return f"{base}; vector width from {VECTOR_WIDTH_ENV}"
+    return base
