@@ -18,6 +18,10 @@ from typing import Literal, overload
 
 #: Exit code of a command refused for bad input (argparse's convention).
 EXIT_USAGE = 2
+#: Exit code of a command whose result is written and printed but counts as failed (``pfjax bench``
+#: with a reference that disagrees, ``pfjax calibrate`` with no candidate that agrees): one line on
+#: stderr says why.
+EXIT_FAILED = 1
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT).
 EXIT_INTERRUPTED = 130
 #: Exit code of a command whose standard output was closed by its reader (``pfjax ... | head``):

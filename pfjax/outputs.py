@@ -232,9 +232,14 @@ def target_path(target, flag: str) -> Path:
     given = Path(target)
     last = str(target).rstrip("/" + os.sep).rsplit(os.sep, 1)[-1].rsplit("/", 1)[-1]
     if str(target).strip() == "" or last in ("", ".", ".."):
+        if str(target).strip() and last == "":  # only separators: '/', '//'
+            raise InputError(
+                f"{flag}: {target} is a filesystem root; pfjax writes only into a directory of its own", flag
+            )
+        why = "it is empty" if not str(target).strip() else f"it ends in {last!r}"
         raise InputError(
-            f"{flag}: {str(target)!r} does not name a new directory (it ends in '.' or '..' or is "
-            f"empty); give a directory name such as results/my_study",
+            f"{flag}: {str(target)!r} does not name a new directory ({why}); give a directory name such as "
+            "results/my_study",
             flag,
         )
     path = Path(os.path.abspath(given))

@@ -5,6 +5,7 @@ range and the path keys a path's kind does not read."""
 
 from __future__ import annotations
 
+import argparse
 import ast
 import os
 import re
@@ -216,7 +217,7 @@ def test_every_output_marker_command_names_a_pfjax_subcommand_or_a_study_script(
     from pfjax.outputs import SCRIPTS as WRITERS
     from pfjax.outputs import _describe
 
-    sub = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     found = set()
     for path in [*ROOT.joinpath("pfjax").rglob("*.py"), *STUDIES.glob("*.py")]:
         found |= set(re.findall(r'command="([\w+-]+)"', path.read_text()))

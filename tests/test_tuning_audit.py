@@ -69,3 +69,22 @@ def test_check_names_a_field_mixed_with_gains_by_name(capsys):
     err = capsys.readouterr().err
     assert err.startswith("pfjax tune: error: --check: mixes the field K with gains by name (feedforward)")
     assert err.count("\n") == 1
+
+
+def test_a_scenario_tomls_contents_enter_the_config_hash(tmp_path, capsys):
+    """The same --scenario path with other contents is another config: its SHA-256 is recorded."""
+    import json
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "studies" / "tuning_heldout.toml").read_text()
+    toml = tmp_path / "h.toml"
+    out = []
+    for seed in (404, 405):
+        toml.write_text(text.replace("seed = 404", f"seed = {seed}"))
+        argv = ["tune", "--check", "10,0,2,0", "--controller", "pi", "--scenario", str(toml), "--n-runs", "1"]
+        assert main([*argv, "--json"]) == 0
+        out.append(json.loads(capsys.readouterr().out))
+    assert "seed = 404" in text
+    assert out[0]["arguments"]["scenario"] == out[1]["arguments"]["scenario"] == str(toml)
+    assert out[0]["arguments"]["scenario_sha256"] != out[1]["arguments"]["scenario_sha256"]
+    assert out[0]["config_sha256"] != out[1]["config_sha256"] and out[0]["cost"] != out[1]["cost"]

@@ -46,16 +46,14 @@ def synthesized(method: str, *, v: float, L: float, region=None, **weights):
     ``v/L`` and shown: a weight ratio of many decades can leave the solver without a design where
     the source's weights find one."""
     from pfjax.synthesis import SynthesisError, synthesize
+    from pfjax.synthesis.lmi import SOURCE_WEIGHTS
 
     try:
         return synthesize(method, v=v, L=L, region=region, **weights)
     except errors.NoDesignError:
         raise
     except SynthesisError as e:  # the operating point, the weights or the region: the solver found none
-        import inspect
-
-        source = {k: p.default for k, p in inspect.signature(synthesize).parameters.items()}  # its own defaults
-        changed = {k: w for k, w in weights.items() if w is not None and w != source.get(k)}
+        changed = {k: w for k, w in weights.items() if w is not None and w != SOURCE_WEIGHTS.get(k)}
         key = "region" if region is not None else "/".join(["v", "L", *changed])
         what = "with its closed-loop poles there" if region is not None else ""
         shown = "".join(f", {k} {w:g}" for k, w in changed.items())

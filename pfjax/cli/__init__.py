@@ -17,7 +17,12 @@ fails numerically is reported in its ``status``; it is not an error.
 One spelling per quantity in every subcommand: ``--horizon`` (s), ``--speed`` (m/s),
 ``--wheelbase`` (m), ``--x0 X Y THETA_DEG`` (m, m, deg). The old spellings (``--T``, ``--v``,
 ``--L``, ``--a``, ``--t-max``) are read for one release as deprecated aliases
-(:class:`pfjax.cli.common.Aliased`): each prints one ``PfjaxDeprecationWarning`` line on stderr.
+(:class:`pfjax.cli.common.Aliased`): each prints one line on stderr,
+``pfjax <command>: warning: --T is deprecated: ...``; every other warning is printed as one such
+line too (:func:`pfjax.cli.common.warnings_as_lines`).
+
+Flags are read exactly as written (``--hor`` is not ``--horizon``); a word a subcommand does not
+take is refused by that subcommand (``pfjax simulate: error: unrecognized arguments: ...``).
 
 Controllers and paths registered by plugin modules (:mod:`pfjax.plugins`: ``PFJAX_PLUGINS`` or
 the ``pfjax.plugins`` entry points) appear in every subcommand's choices.
@@ -29,8 +34,16 @@ import importlib
 import os
 import sys
 
-from pfjax.cli.common import EXIT_USAGE, Parser, UsageError, as_flags, join_negative_values, print_human
-from pfjax.errors import command_main
+from pfjax.cli.common import (
+    EXIT_USAGE,
+    Parser,
+    UsageError,
+    as_flags,
+    join_negative_values,
+    print_human,
+    warnings_as_lines,
+)
+from pfjax.errors import EXIT_FAILED, command_main
 from pfjax.jsonio import dumps
 
 __all__ = ["EXIT_USAGE", "UsageError", "as_flags", "build_parser", "main", "run"]
@@ -51,13 +64,23 @@ def build_parser():
 
 
 def main(argv=None) -> int:
+    with warnings_as_lines("pfjax") as shown:  # one line per warning, named by the subcommand once known
+        return _main(list(sys.argv[1:] if argv is None else argv), shown)
+
+
+def _main(argv: list[str], shown) -> int:
+    import argparse
+
     from pfjax import plugins
 
     loaded = command_main("pfjax", lambda: plugins.load() and 0)
     if loaded:  # a plugin that cannot be imported: one line, exit 2
         return loaded
     parser = build_parser()
-    args = parser.parse_args(join_negative_values(list(sys.argv[1:] if argv is None else argv)))
+    commands = next(a.choices for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    if argv and argv[0] in commands:  # the subcommand is the first word (the deprecations are read with it)
+        shown.prog = f"pfjax {argv[0]}"
+    args = parser.parse_args(join_negative_values(argv))
     import jax
 
     from pfjax import cache
@@ -76,6 +99,14 @@ def main(argv=None) -> int:
             print(dumps(stamped(out, args)))
         else:
             getattr(args, "human", print_human)(out)
+        # a result that is data but a failed run (a benchmark reference that disagrees): printed,
+        # then one line on stderr and exit 1 (set_defaults(failure=...): out -> message or None)
+        failed = getattr(args, "failure", None)
+        message = failed(out) if failed is not None else None
+        if message:
+            sys.stdout.flush()
+            print(f"pfjax {args.command}: error: {message}", file=sys.stderr, flush=True)
+            return EXIT_FAILED
         return 0
 
     code = command_main(f"pfjax {args.command}", body, interrupted=resume)

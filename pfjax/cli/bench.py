@@ -12,9 +12,10 @@ import sys
 import time
 
 from pfjax.cli.common import UsageError, as_flags
+from pfjax.errors import EXIT_FAILED
 
 #: The exit code of a benchmark in which a reference disagrees with pfjax on the per-run IAE.
-EXIT_DISAGREE = 1
+EXIT_DISAGREE = EXIT_FAILED
 EPILOG = (
     "Exit codes: 0, every reference agrees with pfjax on the per-run IAE; 1, a reference disagrees with pfjax "
     "(beyond its tolerance, or not finite): the outputs are written, pfjax's fractions of it and ratios over it "
@@ -60,7 +61,7 @@ def register(sub) -> None:
         help="replace a pfjax output of another config or command in --out (never anything else)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object (the summary)")
-    p.set_defaults(func=_cmd, human=_human)
+    p.set_defaults(func=_cmd, human=_human, failure=_failure)
 
 
 def _sizes(text: str):
@@ -94,8 +95,8 @@ def config(quick: bool = False, sizes: str | None = None, seed: int = 0):
 
 def _cmd(args) -> dict:
     """Run the benchmark and write its outputs; returns the summary as printed. Where a reference
-    disagrees with pfjax, prints it as ``pfjax`` prints a result, then one line on stderr naming the
-    reference(s), and exits with :data:`EXIT_DISAGREE`."""
+    disagrees with pfjax, :func:`_failure` gives the stderr line and the exit code is
+    :data:`EXIT_DISAGREE`."""
     from pfjax.cli.records import units
 
     cfg = config(args.quick, args.sizes, args.seed)
@@ -112,29 +113,20 @@ def _cmd(args) -> dict:
     # the summary with the provenance of the outputs (config_sha256, seed, pfjax_version) and its units
     printed = dict(result["summary"], out=str(out), machine=result["machine"], **report.provenance(result))
     printed["units"] = units(printed, {**report.summary_units(result["summary"]), **report.MACHINE_UNITS})
-    if run.disagreeing(result["summary"]):
-        _print(printed, args)
-        print(
-            f"pfjax bench: error: references disagree with pfjax on the per-run IAE: "
-            f"{run.disagreement(result['summary'])}; their fractions and ratios are not reported; "
-            f"the outputs are in {out}",
-            file=sys.stderr,
-            flush=True,
-        )
-        raise SystemExit(EXIT_DISAGREE)
     return printed
 
 
-def _print(out: dict, args) -> None:
-    """``out`` on stdout as ``pfjax`` prints a command's result: one JSON object with ``--json``
-    (a result with its own ``config_sha256``, stamped with nothing more), else :func:`_human`."""
-    from pfjax.jsonio import dumps
+def _failure(out: dict) -> str | None:
+    """The one stderr line of a benchmark whose reference disagrees with pfjax (the command then
+    exits :data:`EXIT_DISAGREE`, its outputs written); None when every reference agrees."""
+    from pfjax.bench import run
 
-    if args.json:
-        print(dumps(out))
-    else:
-        _human(out)
-    sys.stdout.flush()
+    if not run.disagreeing(out):
+        return None
+    return (
+        f"references disagree with pfjax on the per-run IAE: {run.disagreement(out)}; their fractions and "
+        f"ratios are not reported; the outputs are in {out['out']}"
+    )
 
 
 def _human(out: dict) -> None:

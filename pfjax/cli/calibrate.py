@@ -29,7 +29,7 @@ def register(sub) -> None:
     )
     p.add_argument("--dry-run", action="store_true", help="measure and print, but keep nothing")
     p.add_argument("--json", action="store_true", help="print one JSON object (the calibration)")
-    p.set_defaults(func=_cmd)
+    p.set_defaults(func=_cmd, failure=_failure)
 
 
 def _cmd(args) -> dict:
@@ -49,14 +49,10 @@ def _cmd(args) -> dict:
     shown = {k: v for k, v in result.items() if k != "machine"}  # the machine record stays in the file
     if isinstance(shown.get("units"), dict):  # and so do its units
         shown["units"] = {k: u for k, u in shown["units"].items() if not k.startswith("machine.")}
-    if failed:  # the measurement printed (data), as pfjax prints a result; nothing kept; exit 1
-        from pfjax.cli.common import print_human
-        from pfjax.jsonio import dumps
+    return dict(shown, file=out)  # failed: printed (data), nothing kept, then _failure's line and exit 1
 
-        if args.json:
-            print(dumps(dict(shown, file=None)))
-        else:
-            print_human(dict(shown, file=None))
-        print(f"pfjax calibrate: error: {failed}; nothing was kept", file=sys.stderr, flush=True)
-        raise SystemExit(1)
-    return dict(shown, file=out)
+
+def _failure(out: dict) -> str | None:
+    """The stderr line of a calibration in which no candidate agrees with the default settings
+    (nothing was kept; exit 1); None otherwise."""
+    return f"{out['failed']}; nothing was kept" if out.get("failed") else None

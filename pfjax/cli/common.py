@@ -6,10 +6,24 @@ from __future__ import annotations
 import argparse
 import contextlib
 import re
+import sys
+import warnings
 
 from pfjax.errors import EXIT_USAGE, InputError
 
-__all__ = ["EXIT_USAGE", "Aliased", "Parser", "UsageError", "as_flags", "finite", "join_negative_values", "print_human"]
+__all__ = [
+    "EXIT_USAGE",
+    "NULL",
+    "Aliased",
+    "Parser",
+    "UsageError",
+    "as_flags",
+    "controller_hint",
+    "finite",
+    "join_negative_values",
+    "print_human",
+    "warnings_as_lines",
+]
 
 
 class UsageError(InputError):
@@ -21,20 +35,105 @@ class UsageError(InputError):
 NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
+class Subcommands(argparse._SubParsersAction):
+    """The subcommands of a :class:`Parser`: a word or flag the subcommand does not take is refused
+    by the subcommand's parser (``pfjax simulate: error: unrecognized arguments: --bogus``), not by
+    the top-level one, so that the error names the subcommand."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        super().__call__(parser, namespace, values, option_string)
+        extra = getattr(namespace, argparse._UNRECOGNIZED_ARGS_ATTR, None)
+        if extra:
+            self._name_parser_map[values[0]].error(f"unrecognized arguments: {' '.join(extra)}")
+
+
+def underscore_hint(value, choices) -> str:
+    """``" (did you mean pure-pursuit?)"`` for a choice spelled with ``_`` where the choice has ``-``."""
+    spelled = str(value).replace("_", "-")
+    return f" (did you mean {spelled}?)" if spelled != value and spelled in choices else ""
+
+
 class Parser(argparse.ArgumentParser):
+    """pfjax's argument parser: one-line errors with exit code 2, exact flags only (no
+    abbreviations: ``--hor`` is not ``--horizon``), negative numbers in exponent form read as
+    values, an unknown word refused by the subcommand that got it, and a refused choice with the
+    choice it was probably meant as (``_`` for ``-``, or the action's own ``hint(value, choices)``)."""
+
     def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = NEGATIVE_NUMBER
+        self.register("action", "parsers", Subcommands)
 
     def error(self, message):  # one line, exit code 2 (argparse's own convention)
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
 
+    def _check_value(self, action, value):
+        try:
+            super()._check_value(action, value)
+        except argparse.ArgumentError as e:
+            hint = getattr(action, "hint", underscore_hint)(value, list(action.choices))
+            e.message += hint
+            raise
+
+
+def controller_hint(value: str, choices) -> str:
+    """``" (did you mean X?)"`` for a controller named by a spelling the command line does not take:
+    its config name (``pure_pursuit``, ``lmi``: :func:`pfjax.controllers.cli_names` are the
+    command line's), ``_`` for ``-``, or a design whose controller is a choice (``mixed`` designs
+    ``state-feedback``'s gains); empty if none is among ``choices``."""
+    from pfjax.controllers.designs import DESIGNS, design
+    from pfjax.controllers.registry import REGISTRY
+
+    cli = {e.name: e.cli_name for e in REGISTRY.values()} | {d.name: d.cli_name for d in DESIGNS.values()}
+    d = design(value)
+    made = None if d is None else REGISTRY[d.controller].cli_name
+    for candidate, why in (
+        (cli.get(value), ""),
+        (str(value).replace("_", "-"), ""),
+        (made, f" {value} designs its gains"),
+    ):
+        if candidate is not None and candidate != value and candidate in choices:
+            return f" (did you mean {candidate}?{why})"
+    return ""
+
+
+#: How a command's plain-text output (not ``--json``) shows a missing value (JSON's null).
+NULL = "none"
+
+
+@contextlib.contextmanager
+def warnings_as_lines(prog: str):
+    """While active, every warning shown is one line on stderr, ``<prog>: warning: <message>``
+    (the message's own line breaks folded), not Python's ``file:line: Category: message`` and
+    source line. Yields the namespace whose ``prog`` names the lines (set it once the command is
+    known). Installed by the command line's entry point only: importing pfjax leaves Python's
+    warning display as it is."""
+    import types
+
+    where = types.SimpleNamespace(prog=prog)
+    saved = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        try:
+            print(f"{where.prog}: warning: {text}", file=sys.stderr if file is None else file)
+        except (OSError, ValueError):  # stderr closed: a warning is not worth an error
+            pass
+
+    warnings.showwarning = show
+    try:
+        yield where
+    finally:
+        warnings.showwarning = saved
+
 
 class Aliased(argparse._StoreAction):
     """A flag with deprecated spellings, read for one release: the first option string is the
-    canonical flag, every later one an old spelling that sets the same ``dest`` and prints one
-    :class:`~pfjax.errors.PfjaxDeprecationWarning` line naming both (once per spelling, by
-    :func:`pfjax.errors.deprecated`)::
+    canonical flag, every later one an old spelling that sets the same ``dest`` and issues one
+    :class:`~pfjax.errors.PfjaxDeprecationWarning` naming both (once per spelling, by
+    :func:`pfjax.errors.deprecated`; the command line prints it as one line,
+    ``pfjax <command>: warning: ...``, :func:`warnings_as_lines`)::
 
         p.add_argument("--horizon", "--T", action=Aliased, dest="horizon", type=float, default=20.0,
                        help="horizon, s (default 20)")
@@ -118,9 +217,18 @@ def _human_lines(d: dict, depth: int):
             yield from _human_lines(v, depth + 1)
         elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
             yield f"{pad}{k}:"
-            yield from (f"{pad}  - " + ", ".join(f"{kk} {vv}" for kk, vv in x.items()) for x in v)
+            yield from (f"{pad}  - " + ", ".join(f"{kk} {_shown(vv)}" for kk, vv in x.items()) for x in v)
         else:
-            yield f"{pad}{k:{width}s} {v}"
+            yield f"{pad}{k:{width}s} {_shown(v)}"
+
+
+def _shown(v) -> str:
+    """A value of a plain-text listing: a missing one (None) as :data:`NULL`, in lists too."""
+    if v is None:
+        return NULL
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_shown(x) for x in v) + "]"
+    return str(v)
 
 
 def join_negative_values(argv: list[str]) -> list[str]:

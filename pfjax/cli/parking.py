@@ -100,7 +100,12 @@ def register(sub) -> None:
     )
     p.add_argument("--map", default="parallel", help="parallel, garage, or a TOML/JSON map file (default parallel)")
     add_pose(p, "start pose, m m deg (default: case A for parallel, (-0.9, 0.6, -85) for garage)")
-    p.add_argument("--direction", choices=("forward", "backward"), default="forward", help="first travel direction")
+    p.add_argument(
+        "--direction",
+        choices=("forward", "backward"),
+        default="forward",
+        help="first travel direction (default forward)",
+    )
     p.add_argument("--alpha-schedule", default="1", help="alpha at the start, then after each switch (default 1)")
     p.add_argument(
         "--xs", type=float, help="garage rule: switch back to forward when backing past x = XS, m (garage default -0.9)"
@@ -114,7 +119,13 @@ def register(sub) -> None:
         description="Search of the garage switching parameters (docs/reproductions/parking.md §5): the source's 24-bit GA "
         "(n = 20, N = 100) or an exhaustive N x N x N grid on the chromosome lattice.",
     )
-    s.add_argument("--method", choices=("ga", "grid"), required=True)
+    s.add_argument(
+        "--method",
+        choices=("ga", "grid"),
+        required=True,
+        help="ga: the source's 24-bit genetic algorithm; grid: every point of an N x N x N grid (--n) on the "
+        "chromosome lattice (required; no default)",
+    )
     s.add_argument("--map", default="garage", help="garage (default), parallel (with --x0), or a TOML/JSON map file")
     add_pose(s, "start pose, m m deg (default -0.9 0.6 -85)")
     s.add_argument("--n", type=int, default=None, help="grid: levels per parameter (default 32)")

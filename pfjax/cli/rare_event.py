@@ -1,8 +1,8 @@
 """``pfjax rare-event``: each controller's failure probability under a study's uncertain inputs,
 down to 1e-6 and below, with its 95 % interval (:func:`pfjax.rare_event`).
 
-    pfjax rare-event CONFIG.toml [--set key=value ...] [--controller NAME] [--method {is,subset,mc}]
-                     [--target-rel-error 0.1] [--max-rollouts N] [--seed S] [--json]
+    pfjax rare-event CONFIG.toml | --example NAME [--set key=value ...] [--controller NAME]
+                     [--method {is,subset,mc}] [--target-rel-error 0.1] [--max-rollouts N] [--seed S] [--json]
 
 With ``--json`` prints ``{"study", "pfjax_version", "config_sha256", "seed", "machine",
 "cpu_settings", "config", "units", "controllers": {name: {"p_fail", "ci95", "rel_error",
@@ -16,7 +16,8 @@ from __future__ import annotations
 import math
 import sys
 
-from pfjax.cli.common import as_flags
+from pfjax.cli.common import NULL, as_flags
+from pfjax.cli.study import add_study_flags, load_study_flags
 
 #: ``pfjax rare-event``'s flags by the library argument they set.
 FLAGS = {
@@ -37,10 +38,10 @@ def register(sub) -> None:
         "importance sampling (cross-entropy Gaussian mixture), subset simulation or plain Monte Carlo; "
         "prints the estimate, its 95 % interval, relative error and rollouts.",
     )
-    p.add_argument(
-        "config",
-        help="study TOML (its [rare_event] table sets the defaults; its enabled key only tells pfjax study "
-        "whether to estimate too)",
+    add_study_flags(
+        p,
+        "study TOML (its [rare_event] table sets the defaults; its enabled key only tells pfjax study whether to "
+        "estimate too)",
     )
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a config value")
     p.add_argument("--controller", default=None, help="only this controller of the study (default: all)")
@@ -57,7 +58,7 @@ def register(sub) -> None:
         type=int,
         default=None,
         help="rollouts per controller, split over the strata; subset simulation completes a run it has started "
-        "(default: the config's rare_event.max_rollouts, else 100000)",
+        "(default: the config's rare_event.max_rollouts, else 100000); at least 100, at most 100000000",
     )
     p.add_argument(
         "--seed",
@@ -75,7 +76,7 @@ def _human(out: dict) -> None:
     for name, c in out["controllers"].items():
         lo, hi = c["ci95"]
         r = c["rel_error"]  # infinite (null in JSON) where no failure was seen
-        rel = "-" if r is None or not math.isfinite(r) else f"{100 * r:.1f} %"
+        rel = NULL if r is None or not math.isfinite(r) else f"{100 * r:.1f} %"
         line = (
             f"  {name}: p_fail {c['p_fail']:.3g} [{lo:.3g}, {hi:.3g}], rel. error {rel}, "
             f"{c['n_rollouts']} rollouts ({c['method']}), status {c['status']}"
@@ -87,9 +88,8 @@ def _human(out: dict) -> None:
 def _cmd(args) -> dict:
 
     from pfjax.api import rare_event
-    from pfjax.montecarlo.config import load_study
 
-    spec, _ = load_study(args.config, args.set)  # a missing file or a directory: as pfjax study says it
+    spec = load_study_flags(args)  # a missing file or a directory, an unknown example: as pfjax study says it
     with as_flags(FLAGS):
         return rare_event(
             spec,

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 
-from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags, finite
+from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags, controller_hint, finite
 from pfjax.cli.synth import SYNTH_FLAGS
 from pfjax.tables import COLUMNS
 
@@ -139,6 +139,7 @@ SIMULATE_FLAGS = {
     "pose0": "--x0",
     "horizon": "--horizon",
     "dt": "--dt",
+    "horizon/dt": "--horizon/--dt",
     "control_every": "--control-every",
     "convention": "--convention",
     "gains": "--gains",
@@ -256,17 +257,21 @@ def _config(args, dt: float):
     """The run's :class:`~pfjax.sim.SimConfig`: ``--horizon``, the step ``dt`` and the control
     flags (``--control-every`` 1 unless ``--continuous``), ``dt`` and ``--control-every`` recorded
     as they ran (:mod:`pfjax.cli.records`: the same run gives one config hash, flags given or not)."""
+    from pfjax.errors import InputError, renamed
     from pfjax.sim import SimConfig
 
     args.dt = dt
     if not args.continuous and args.control_every is None:
         args.control_every = 1
-    return SimConfig(
-        dt=dt,
-        horizon=args.horizon,
-        record=False,
-        control_every=None if args.continuous else args.control_every,
-    )
+    try:
+        return SimConfig(
+            dt=dt,
+            horizon=args.horizon,
+            record=False,
+            control_every=None if args.continuous else args.control_every,
+        )
+    except InputError as e:  # too many steps: --horizon and --dt together (as pfjax track names them)
+        raise renamed(e, "dt", "horizon/dt") if "horizon / dt" in str(e) else e from None
 
 
 def _simulate_st(args, pose0) -> dict:
@@ -354,13 +359,15 @@ def register(sub) -> None:
     m.add_argument("--beta-f-deg", type=float, help="front slip angle, deg (default 5; kinematic model)")
     from pfjax import controllers as C
 
+    designs = "; ".join(f"{d.cli_name}: {d.style['label']}" for d in C.DESIGNS.values())
+    registered = ", ".join(e.cli_name for e in C.REGISTRY.values())
     m.add_argument(
         "--controller",
         choices=C.cli_names(),
         required=True,
-        help="mixed: the LMI design with the source's weights; paper-k: the source's published K; "
-        "integral-mixed: the LMI design with integral action; the others: registered controllers",
-    )
+        help=f"a design ({designs}; the LMI designs are made at --speed and --wheelbase) or a registered "
+        f"controller with its default gains ({registered})",
+    ).hint = controller_hint
     m.add_argument(
         "--gains",
         help="comma-separated gains in order (or name=value pairs, any of the controller's gains, e.g. "
@@ -401,7 +408,7 @@ def register(sub) -> None:
         choices=("kinematic", "st", "std"),
         default="kinematic",
         help="vehicle model: kinematic (declared slip), st (CommonRoad's single-track model, slip from linear "
-        "tyre forces) or std (its single-track drift model, Pacejka tyres and wheel speeds)",
+        "tyre forces) or std (its single-track drift model, Pacejka tyres and wheel speeds) (default kinematic)",
     )
     m.add_argument(
         "--vehicle", choices=PARAMETER_SETS, help="st, std: parameter set (default robot for st, vehicle2 for std)"

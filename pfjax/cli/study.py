@@ -108,6 +108,17 @@ def script_parser(doc: str | None, *, config: Path | None, out_default: str, qui
     return ap
 
 
+def add_study_flags(parser, config_help: str) -> None:
+    """The study a command reads: the positional CONFIG (``config_help``) or ``--example NAME``, a
+    study packaged with pfjax (:func:`load_study_flags` reads them)."""
+    parser.add_argument("config", nargs="?", help=f"{config_help}; or give --example NAME instead")
+    parser.add_argument(
+        "--example",
+        metavar="NAME",
+        help="a study packaged with pfjax instead of CONFIG (pfjax examples lists them: default, heldout, ...)",
+    )
+
+
 def _config(args):
     """The study TOML the flags name: the CONFIG path, or the packaged example ``--example NAME``
     (one of the two)."""
@@ -129,7 +140,8 @@ def _source(args) -> str:
     return f"--example {args.example}" if args.example is not None else str(args.config)
 
 
-def _load_study_or_usage(args):
+def load_study_flags(args):
+    """The study of :func:`add_study_flags`' CONFIG or ``--example``, with ``--set`` applied."""
     from pfjax.montecarlo.config import load_study
 
     spec, _ = load_study(_config(args), args.set)
@@ -238,7 +250,8 @@ def _study(args) -> dict:
     from pfjax.outputs import check_target
     from pfjax.report import figure_worker
 
-    spec = _load_study_or_usage(args)
+    spec = load_study_flags(args)
+    default_out(args.out, spec.name)  # --out checked as given (an empty one is not '.')
     check_resources(spec, report=not args.no_report)  # every process alike, before any joins
     # one process: --out refused before anything starts; several: by process 0 once all have joined,
     # which tells the others (pfjax.montecarlo.processes), so that none waits for a process that stopped
@@ -296,7 +309,7 @@ def _cmd_report(args) -> dict:
     from pfjax.montecarlo.config import study_hash
     from pfjax.montecarlo.study import rewrite_report, study_marker
 
-    spec = _load_study_or_usage(args)
+    spec = load_study_flags(args)
     out = default_out(args.out, spec.name)
     again = [*(a for kv in args.set for a in ("--set", kv)), *(("--out", str(args.out)) if args.out else ())]
     command = " ".join(["pfjax study", _source(args), *map(shlex.quote, again)])
@@ -316,16 +329,7 @@ def register(sub) -> None:
         ("report", "rebuild the report (report.md and report.html) of a finished study without re-simulating"),
     ):
         st = sub.add_parser(name, help=helptext, description=helptext)
-        st.add_argument(
-            "config",
-            nargs="?",
-            help="study TOML (e.g. studies/robustness_default.toml); or give --example NAME instead",
-        )
-        st.add_argument(
-            "--example",
-            metavar="NAME",
-            help="a study packaged with pfjax instead of CONFIG (pfjax examples lists them: default, heldout, ...)",
-        )
+        add_study_flags(st, "study TOML (e.g. studies/robustness_default.toml)")
         add_output_flags(
             st,
             set_help="override a config value; dotted keys, list items as controllers[0].gains.k (repeatable)",

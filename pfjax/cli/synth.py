@@ -3,6 +3,10 @@
     pfjax synth --method {mixed,hinf,h2} [--speed 1] [--wheelbase 0.2] [--alpha 10] [--beta 1]
                 [--max-real R] [--disk CENTER RADIUS] [--sector-deg DEG] [--json]
 
+A design whose fastest closed-loop pole is beyond 100 v/L (:func:`pfjax.synthesis.lmi.gain_warnings`),
+or whose solver status is not ``optimal``, is printed with a warning (one line on stderr, and in
+``warnings``).
+
 ``--alpha`` and ``--beta`` weigh the mixed design's objective and are refused with ``--method hinf``
 or ``h2``, which do not read them (nor record them in the output's ``arguments``).
 
@@ -111,7 +115,13 @@ def register(sub) -> None:
         help="design a state feedback by LMIs (docs/reproductions/path-following.md §4) and print K, bounds, true norms",
         description="State-feedback H-inf, H2 or mixed H2/H-inf design for the slip model (msfsyn convention).",
     )
-    s.add_argument("--method", choices=("mixed", "hinf", "h2"), default="mixed")
+    s.add_argument(
+        "--method",
+        choices=("mixed", "hinf", "h2"),
+        default="mixed",
+        help="mixed: minimise alpha gamma_inf^2 + beta gamma_2^2 (the source's design); hinf: minimise "
+        "gamma_inf; h2: minimise gamma_2 (default mixed)",
+    )
     s.add_argument(
         "--speed", "--v", action=Aliased, dest="speed", type=float, default=1.0, help="speed, m/s (default 1)"
     )

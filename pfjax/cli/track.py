@@ -29,12 +29,18 @@ def register(sub) -> None:
         "--mode",
         choices=("forward", "backward"),
         default="forward",
-        help="forward: f=+1, reference point P_f, follower drives forward; backward: f=-1, P_b, follower reverses",
+        help="forward: f=+1, reference point P_f, follower drives forward; backward: f=-1, P_b, follower reverses "
+        "(default forward)",
     )
     p.add_argument("--p", type=float, help="focus turning ratio p (default 1 forward, -1 backward; nonzero)")
     p.add_argument("--l", type=float, help="focus distance l, m, signed (default 1 forward, -1 backward; nonzero)")
     p.add_argument("--gamma-max-deg", type=float, default=30.0, help="steering limit, deg, in (0, 90) (default 30)")
-    p.add_argument("--leader", choices=LEADERS, default="line")
+    p.add_argument(
+        "--leader",
+        choices=LEADERS,
+        default="line",
+        help="the leader's motion: line, circle, sine or lane-change (default line)",
+    )
     p.add_argument("--speed", type=float, default=1.0, help="leader speed V0, m/s (default 1)")
     p.add_argument(
         "--stop-and-go",

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import sys
 
-from pfjax.cli.common import UsageError, as_flags
+from pfjax.cli.common import UsageError, as_flags, controller_hint
 
 
 def _controllers() -> dict:
@@ -62,7 +62,8 @@ def register(sub) -> None:
         "--scenario",
         default="paper-line",
         help="paper-line | paper-parabola | paper-sine | paper-all | "
-        "a registered path's name (one run from its start pose) | a study TOML (CONFIG)",
+        "a registered path's name (one run from its start pose) | a study TOML (CONFIG) | a study packaged "
+        "with pfjax, by its name (pfjax examples lists them: heldout, ...) (default paper-line)",
     )
     p.add_argument(
         "--model",
@@ -71,34 +72,43 @@ def register(sub) -> None:
         "(single-track drift, Pacejka tyres); a paper set runs st on the robot's parameters, std on CommonRoad's "
         "vehicle2; default: kinematic, or a CONFIG's [vehicle] model (which --model replaces)",
     )
-    p.add_argument("--cost", default="iae", help="iae | ise | itae (per run, plus --effort * int delta^2 dt)")
-    p.add_argument("--aggregate", default="mean", help="mean | quantile | cvar over the scenario batch")
-    p.add_argument("--level", type=float, default=None, help="quantile / CVaR level in (0, 1) (0.9)")
-    p.add_argument("--effort", type=float, default=0.0, help="control-effort weight (>= 0)")
-    p.add_argument("--seed", type=int, default=None, help="PRNG seed (GA population / gradient start; 0)")
-    p.add_argument("--generations", type=int, default=None, help="ga, ga+gradient: GA generations (source: 100)")
-    p.add_argument("--population", type=int, default=None, help="ga, ga+gradient: GA population (source: 50)")
+    p.add_argument(
+        "--cost", default="iae", help="iae | ise | itae, per run, plus --effort * int delta^2 dt (default iae)"
+    )
+    p.add_argument("--aggregate", default="mean", help="mean | quantile | cvar over the scenario batch (default mean)")
+    p.add_argument("--level", type=float, default=None, help="quantile / CVaR level in (0, 1) (default 0.9)")
+    p.add_argument("--effort", type=float, default=0.0, help="control-effort weight, >= 0 (default 0)")
+    p.add_argument(
+        "--seed", type=int, default=None, help="PRNG seed of the GA population / gradient starts (default 0)"
+    )
+    p.add_argument(
+        "--generations", type=int, default=None, help="ga, ga+gradient: GA generations (default 100, the source's)"
+    )
+    p.add_argument(
+        "--population", type=int, default=None, help="ga, ga+gradient: GA population (default 50, the source's)"
+    )
     p.add_argument(
         "--steps",
         type=int,
         default=None,
-        help="gradient: evaluations of a surviving chain (default 60); gradient-plain: steps (100); "
-        "ga+gradient: polishing steps (30)",
+        help="gradient: evaluations of a surviving chain (default 60); gradient-plain: steps (default 100); "
+        "ga+gradient: polishing steps (default 30)",
     )
     p.add_argument(
         "--starts",
         type=int,
         default=None,
-        help="gradient, gradient-plain: starts descended together (vmapped; gradient 8, gradient-plain 1)",
+        help="gradient, gradient-plain: starts descended together (vmapped; default: gradient 8, gradient-plain 1)",
     )
     p.add_argument(
         "--lr",
         type=float,
         default=None,
-        help="gradient: first BFGS trust radius (0.1); adam step (gradient-plain 0.05, ga+gradient 0.01); box units",
+        help="gradient: first BFGS trust radius (default 0.1); gradient-plain, ga+gradient: adam step (default 0.05, "
+        "0.01); box units",
     )
     _multistart_flags(p)
-    p.add_argument("--n-runs", type=int, default=None, help="runs per path sampled from a CONFIG study (16)")
+    p.add_argument("--n-runs", type=int, default=None, help="runs per path sampled from a CONFIG study (default 16)")
     p.add_argument("--dt", type=float, default=None, help="integrator step, s (default: 0.005 or the study's)")
     p.add_argument("--horizon", type=float, default=None, help="simulated time, s (default: 20 or the study's)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -107,26 +117,28 @@ def register(sub) -> None:
 
 def _multistart_flags(p) -> None:
     """The multi-start tuner's flags (``--method gradient``) and ``--from-default``."""
-    p.add_argument("--screen", type=int, default=None, help="gradient: space-filling points screened (64)")
-    p.add_argument("--sampler", default=None, help="gradient: sobol | lhs | uniform (sobol)")
+    p.add_argument("--screen", type=int, default=None, help="gradient: space-filling points screened (default 64)")
+    p.add_argument("--sampler", default=None, help="gradient: sobol | lhs | uniform (default sobol)")
     p.add_argument(
         "--rounds",
         type=int,
         default=None,
-        help="gradient: successive-halving rounds, at most --steps (3, or --steps when below 3; 1: none)",
+        help="gradient: successive-halving rounds, at most --steps (default 3, or --steps when below 3; 1: none)",
     )
-    p.add_argument("--restarts", type=int, default=None, help="gradient: perturbed restarts of the incumbent (3)")
+    p.add_argument(
+        "--restarts", type=int, default=None, help="gradient: perturbed restarts of the incumbent (default 3)"
+    )
     p.add_argument(
         "--polish",
         type=int,
         default=None,
-        help="gradient: value-only compass iterations around the incumbent (8; 0: none)",
+        help="gradient: value-only compass iterations around the incumbent (default 8; 0: none)",
     )
     p.add_argument(
         "--smoothing",
         type=float,
         default=None,
-        help="gradient: randomised-smoothing radius of the first round, box units in [0, 1] (0: off)",
+        help="gradient: randomised-smoothing radius of the first round, box units in [0, 1] (default 0: off)",
     )
     p.add_argument(
         "--from-default",
@@ -264,7 +276,7 @@ def _cmd(args) -> dict:
         try:  # the study's or the default settings with --dt and --horizon, checked as a whole
             problem = make_problem(
                 controllers[args.controller],
-                args.scenario,
+                _scenario(args.scenario),
                 cost=cost,
                 config=changes or None,
                 **({} if args.n_runs is None else {"n_runs": args.n_runs}),
@@ -272,9 +284,19 @@ def _cmd(args) -> dict:
             )
         except errors.InputError as e:  # named by the flags given (in_words_of), as the API names its arguments
             e = in_words_of(e, changes)
-            raise errors.renamed(errors.renamed(e, "config.dt", "--dt"), "config.horizon", "--horizon") from None
+            named = e.key or ""
+            setting = {"config.dt": "dt", "config.horizon": "horizon"}.get(named)
+            if setting is None:
+                raise e from None
+            if "whole number of steps" not in str(e) and "horizon / dt" not in str(e):
+                raise errors.renamed(e, named, f"--{setting}") from None
+            # the step count's dt and horizon by their flags too, as pfjax simulate words them
+            with as_flags({"dt": "--dt", "horizon": "--horizon"}):
+                raise errors.renamed(e, named, setting) from None
         # as they ran (the scenario set's): one config hash, given or not
         args.dt, args.horizon, args.model = problem.config.dt, problem.config.horizon, _model_of(problem)
+        # a study TOML's contents enter the record and its hash, not only its path
+        args.scenario_sha256 = _file_sha256(_scenario(args.scenario))
         args.units = gain_units(args.units, controllers[args.controller], problem.tunable)
         common = {
             "controller": args.controller,
@@ -348,6 +370,25 @@ def gain_units(table: dict, controller: str, tunable) -> dict:
     }
 
 
+def _scenario(name: str) -> str:
+    """``--scenario``: a study packaged with pfjax by its name (:mod:`pfjax.examples`) as the path of
+    its TOML; any other value as given (a scenario set, a path's name, a TOML path)."""
+    from pfjax import examples
+
+    return str(examples.path(name)) if name in examples.FILES else name
+
+
+def _file_sha256(scenario: str) -> str | None:
+    """The SHA-256 of a scenario given as a study TOML (its bytes), or None for a named set or path."""
+    import hashlib
+    from pathlib import Path
+
+    path = Path(scenario)
+    if path.suffix != ".toml" or not path.is_file():
+        return None
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
 def _model_of(problem) -> str:
     """The vehicle model a problem's runs simulate: ``kinematic``, ``st`` or ``std``."""
     from pfjax.models.single_track import STDParams
@@ -400,7 +441,10 @@ def _check_flags(args, controllers: dict) -> None:
     from pfjax.tuning.problem import METHODS, MODELS
 
     if args.controller not in controllers:
-        raise UsageError(f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}")
+        raise UsageError(
+            f"--controller: value {args.controller!r}, expected one of {', '.join(controllers)}"
+            + controller_hint(args.controller, controllers)
+        )
     if args.check is None and args.method is None:
         raise UsageError(f"--method: required unless --check is given; one of {', '.join(METHODS)}")
     if args.check is not None and args.method is not None:

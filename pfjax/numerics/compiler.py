@@ -36,7 +36,6 @@ import jax
 from pfjax.numerics import calibration
 from pfjax.numerics.cpu import CPUINFO, cpu_info, has_avx512
 
-
 __all__ = [
     "OPTIONS",
     "PROGRAMS",

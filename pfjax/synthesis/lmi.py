@@ -13,6 +13,8 @@ guaranteed bound on the true closed-loop norm; it moves the optimum by O(eps) on
 
 from __future__ import annotations
 
+import dataclasses
+
 import cvxpy as cp
 import numpy as np
 
@@ -31,14 +33,21 @@ from pfjax.synthesis.solver import (
 )
 
 __all__ = [
+    "MAX_POLE_RATIO",
+    "SOURCE_WEIGHTS",
     "Design",
     "SynthesisError",
+    "gain_warnings",
     "h2_state_feedback",
     "hinf_state_feedback",
     "mixed_bounds_for_gain",
     "mixed_h2_hinf",
     "synthesize",
 ]
+
+#: The mixed design's weights when not given: the source's (``alpha`` on ``gamma_inf^2``, ``beta`` on
+#: ``gamma_2^2``; docs/reproductions/path-following.md §4).
+SOURCE_WEIGHTS = {"alpha": 10.0, "beta": 1.0}
 
 
 def hinf_lmi(plant: Plant, X, Y, g_sq, eps: float):
@@ -140,8 +149,23 @@ def _solve(
         solver_status=status,
         alpha=None if alpha is None else float(alpha),
         beta=None if beta is None else float(beta),
-        warnings=bound_warnings(gamma_inf, gamma_2, hn, h2n, cond),
+        warnings=bound_warnings(gamma_inf, gamma_2, hn, h2n, cond) + _status_warnings(status, method),
     )
+
+
+def _status_warnings(status: str, method: str) -> tuple:
+    """A solver status short of ``optimal`` (``optimal_inaccurate``, which :func:`solve_or_raise`
+    accepts) as one message, also issued as a ``RuntimeWarning``; empty for ``optimal``."""
+    import warnings
+
+    if status == "optimal":
+        return ()
+    msg = (
+        f"{method} synthesis: solver {SOLVER} status {status!r}, not 'optimal': it stopped short of its accuracy "
+        "tolerances, so K and the LMI bounds are approximate (the true norms are those of K as returned)"
+    )
+    warnings.warn(msg, RuntimeWarning, stacklevel=4)
+    return (msg,)
 
 
 def hinf_state_feedback(plant: Plant, region: PoleRegion | None = None, eps: float = 1e-7) -> Design:
@@ -284,12 +308,45 @@ def mixed_bounds_for_gain(
 _METHODS = ("hinf", "h2", "mixed")
 
 
+#: A design whose fastest closed-loop pole exceeds this many times ``v / L`` is not a usable gain
+#: (:func:`gain_warnings`).
+MAX_POLE_RATIO = 100.0
+
+
+def gain_warnings(poles, v: float, L: float) -> list[str]:
+    """Whether K is too large to be a usable design, as a list of at most one message (also issued
+    as a ``RuntimeWarning``): its fastest closed-loop pole faster than :data:`MAX_POLE_RATIO`
+    times ``v / L``. ``v / L`` (1/s) is the yaw rate one radian of steering gives the slip plant
+    (its input gain), and the closed loop's rates in units of ``v / L`` depend on the gain alone
+    (``k_theta`` and ``k_d L``): a pole 100 times faster needs on the order of 100 rad of steering
+    per unit of error, so the steering saturates on any error worth correcting and the linear design
+    says nothing about the loop. The H-inf design of this plant is the limit of gains growing
+    without bound (its optimum is approached, not reached), which this catches, as it catches a
+    solve at a degenerate operating point."""
+    import warnings
+
+    import numpy as np
+
+    fastest, scale = float(np.max(np.abs(np.asarray(poles)))), v / L
+    if not fastest > MAX_POLE_RATIO * scale:
+        return []
+    msg = (
+        f"K is not a usable design: its fastest closed-loop pole, {fastest:.3g} 1/s, is {fastest / scale:.3g} v/L, "
+        f"beyond {MAX_POLE_RATIO:g} v/L = {MAX_POLE_RATIO * scale:.3g} 1/s (v/L: the yaw rate one radian of "
+        "steering gives), so the loop needs steering far past any limit on all but vanishing errors (the gain "
+        "grows without bound toward the optimum, or the operating point is degenerate); bound the poles with "
+        "a pole region (pfjax synth --disk CENTER RADIUS)"
+    )
+    warnings.warn(msg, RuntimeWarning, stacklevel=3)
+    return [msg]
+
+
 def synthesize(
     method: str,
     v: float = 1.0,
     L: float = 0.2,
-    alpha: float = 10.0,
-    beta: float = 1.0,
+    alpha: float | None = None,
+    beta: float | None = None,
     region: PoleRegion | None = None,
 ) -> Design:
     """Design a gain for the slip plant :func:`slip_design_plant` ``(v, L)`` (CLI entry point).
@@ -298,9 +355,14 @@ def synthesize(
         method: ``"hinf"``, ``"h2"`` or ``"mixed"``.
         v: speed, m/s.
         L: wheelbase, m.
-        alpha: mixed-objective weight on ``gamma_inf^2`` (``"mixed"`` only).
-        beta: mixed-objective weight on ``gamma_2^2`` (``"mixed"`` only).
+        alpha: mixed-objective weight on ``gamma_inf^2`` (``"mixed"`` only, default 10:
+            :data:`SOURCE_WEIGHTS`); refused with ``"hinf"`` and ``"h2"``, which do not read it.
+        beta: mixed-objective weight on ``gamma_2^2`` (``"mixed"`` only, default 1).
         region: optional pole region.
+
+    Returns:
+        The design; its ``warnings`` also say when its gain is too large to use
+        (:func:`gain_warnings`: the H-inf design without a pole region, a degenerate operating point).
 
     Raises:
         InputError: unknown ``method``, or a value out of range (the message names it).
@@ -312,11 +374,19 @@ def synthesize(
         raise errors.InputError(f"method: expected one of {', '.join(_METHODS)}, got {method!r}")
     errors.number("v", v, positive=True, unit=" m/s")
     errors.number("L", L, positive=True, unit=" m")
+    for name, w in (("alpha", alpha), ("beta", beta)):
+        if method != "mixed" and w is not None:
+            raise errors.InputError(f"{name}: only the mixed design reads it, not method {method!r}", name)
+    alpha = SOURCE_WEIGHTS["alpha"] if alpha is None else alpha
+    beta = SOURCE_WEIGHTS["beta"] if beta is None else beta
     if method == "mixed":
         check_weights(alpha, beta)
     plant = slip_design_plant(v=v, L=L)
     if method == "hinf":
-        return hinf_state_feedback(plant, region=region)
-    if method == "h2":
-        return h2_state_feedback(plant, region=region)
-    return mixed_h2_hinf(plant, alpha=alpha, beta=beta, region=region)
+        design = hinf_state_feedback(plant, region=region)
+    elif method == "h2":
+        design = h2_state_feedback(plant, region=region)
+    else:
+        design = mixed_h2_hinf(plant, alpha=alpha, beta=beta, region=region)
+    extra = gain_warnings(design.closed_loop_poles, v, L)  # a gain too large to use
+    return dataclasses.replace(design, warnings=tuple(design.warnings) + tuple(extra)) if extra else design

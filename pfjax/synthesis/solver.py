@@ -68,7 +68,9 @@ class Design:
         alpha: weight on ``gamma_inf^2`` in the mixed objective (None otherwise).
         beta: weight on ``gamma_2^2`` in the mixed objective (None otherwise).
         warnings: disagreements of the true norms with the LMI bounds, conditioning
-            (:func:`bound_warnings`; empty for a clean design).
+            (:func:`bound_warnings`), a solver status short of ``optimal``, and from
+            :func:`pfjax.synthesis.synthesize` a gain too large to use
+            (:func:`pfjax.synthesis.lmi.gain_warnings`); empty for a clean design.
     """
 
     method: str
