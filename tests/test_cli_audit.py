@@ -104,7 +104,7 @@ def test_help_states_the_default(command, flag, text):
     assert text in _help(command, flag)
 
 
-@pytest.mark.parametrize("command", [c for c in SUBCOMMANDS if c not in ("bench", "calibrate")])
+@pytest.mark.parametrize("command", SUBCOMMANDS)
 def test_every_flag_with_a_default_says_it_in_help(command):
     for action in subparsers()[command]._actions:
         d = action.default
@@ -132,6 +132,8 @@ def test_too_many_steps_names_horizon_and_dt(capsys):
     assert line.startswith("pfjax simulate: error: --horizon/--dt: --horizon / --dt"), line
     line = refused(capsys, ("track", "--horizon", "1e7"))
     assert line.startswith("pfjax track: error: --horizon/--dt: --horizon / --dt"), line
+    line = refused(capsys, ("tune", "--method", "ga", "--controller", "pi", "--horizon", "1e7"))
+    assert line.startswith("pfjax tune: error: --horizon/--dt: --horizon / --dt"), line
 
 
 def test_a_horizon_of_partial_steps_is_told_alike_by_simulate_and_tune(capsys):

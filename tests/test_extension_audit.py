@@ -165,7 +165,7 @@ def test_the_plugin_command_of_extending_md_runs_as_written(tmp_path):
 def test_synth_refuses_a_weight_the_method_does_not_read(capsys, method, flag):
     assert main(["synth", "--method", method, flag, "3", "--json"]) == 2
     out, err = capsys.readouterr()
-    assert out == "" and err == f"pfjax synth: error: {flag}: not with --method {method} (only with --method mixed)\n"
+    assert out == "" and err == f"pfjax synth: error: {flag}: only the mixed design reads it, not --method '{method}'\n"
 
 
 def test_synth_records_only_the_arguments_it_reads_and_their_units(capsys):

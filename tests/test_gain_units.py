@@ -45,7 +45,7 @@ def test_froude_exponent_of_a_unit(unit, exponent):
     assert froude_exponent(unit) == exponent
 
 
-@pytest.mark.parametrize("unit", [C.UNSTATED, "kg/s", "m^x", "rad/(m N)"])
+@pytest.mark.parametrize("unit", [C.UNSTATED, "kg/s", "m^x", "rad/(m N)", "m^nan", "m^inf", "1/s^"])
 def test_froude_exponent_of_a_unit_in_other_terms_is_none(unit):
     assert froude_exponent(unit) is None
 
@@ -96,6 +96,11 @@ def test_scaled_gains_of_a_study_controller():
     assert "K" not in sf and sf["gains"] == {"k_d": -0.5, "k_theta": -1.0, "feedforward": 0.0}
     design = {"name": "m", "type": "lmi"}
     assert scaled_gains(design, 4.0, "k") is design  # made at the car's speed and wheelbase
+    over = scaled_gains({"name": "m", "type": "lmi", "gains": {"k_d": -3.0}}, 4.0, "k")
+    assert over["gains"] == {"k_d": -0.75}  # a gain given over a design: in the robot's units, scaled
+    fixed = scaled_gains({"name": "p", "type": "paper_k"}, 4.0, "k")  # the source's fixed gain: scaled
+    assert fixed["type"] == "paper_k" and fixed["gains"]["k_d"] == C.PAPER_K[0] / 4.0
+    assert fixed["gains"]["k_theta"] == C.PAPER_K[1]
 
 
 def test_register_checks_units_and_records_a_missing_one_as_unstated():

@@ -173,11 +173,13 @@ def test_a_horizon_too_short_for_the_scenario_sets_windows_names_the_flag(capsys
 
 
 def test_too_many_steps_names_the_flag_given(capsys):
-    """A run of more integrator steps than a run may take names --horizon when only it was given,
-    --dt when the step was given too."""
+    """A run of more integrator steps than a run may take names the two flags together on the
+    command line (--horizon/--dt, as pfjax simulate and pfjax track); the API names the setting the
+    caller gave (config.horizon when only it was given, config.dt when the step was given too)."""
     base = ["tune", "--controller", "pi", "--method", "ga", "--horizon", "1e7"]
-    _refused_cli(base, "--horizon", capsys)
-    _refused_cli([*base, "--dt", "0.001"], "--dt", capsys)
+    _refused_cli(base, "--horizon/--dt", capsys)
+    _refused_cli([*base, "--dt", "0.001"], "--horizon/--dt", capsys)
+    _refused_cli(["tune", "--controller", "pi", "--method", "ga", "--dt", "1e-9"], "--horizon/--dt", capsys)
     # the API names its config fields as the command line names its flags
     for config, key in (({"horizon": 1e7}, "config.horizon"), ({"horizon": 1e7, "dt": 0.001}, "config.dt")):
         with pytest.raises(InputError, match=rf"^{key}: horizon / dt"):

@@ -53,7 +53,7 @@ def register(sub) -> None:
         "largest; the gradient's batch (2,000; --quick: 256) and the vehicle-model comparison (2,000 runs; "
         "--quick: 64) do not follow --sizes",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the random batch")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random batch (default 0)")
     p.add_argument("--out", default="results/bench", help="output directory (default results/bench)")
     p.add_argument(
         "--overwrite",

@@ -29,7 +29,7 @@ from pathlib import Path
 RECORD = ("units", "arguments", "pfjax_version", "config_sha256", "seed", "machine", "cpu_settings")
 
 #: Attributes of the parsed arguments that are the command's machinery, not its input.
-_INTERNAL = {"func", "human", "json", "units", "command"}
+_INTERNAL = {"func", "human", "failure", "json", "units", "command"}
 
 
 def _jsonable(v):

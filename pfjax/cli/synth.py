@@ -8,7 +8,8 @@ or whose solver status is not ``optimal``, is printed with a warning (one line o
 ``warnings``).
 
 ``--alpha`` and ``--beta`` weigh the mixed design's objective and are refused with ``--method hinf``
-or ``h2``, which do not read them (nor record them in the output's ``arguments``).
+or ``h2``, which do not read them (by :func:`pfjax.synthesis.synthesize`, as from Python; nor are
+they recorded in the output's ``arguments``).
 
 ``--v`` and ``--L`` are deprecated spellings of ``--speed`` and ``--wheelbase`` (read for one release).
 """
@@ -74,14 +75,12 @@ def cmd(args) -> dict:
 
     region = None
     with as_flags(SYNTH_FLAGS):
-        weights = {}  # the mixed design's weights, checked by the synthesis; refused where not read
-        for name in ("alpha", "beta"):
-            if args.method != "mixed":
-                if getattr(args, name) is not None:
-                    raise UsageError(f"--{name}: not with --method {args.method} (only with --method mixed)")
+        # the mixed design's weights, checked (and refused with hinf and h2, which do not read them) by
+        # the synthesis, as the library checks them
+        weights = {name: getattr(args, name) for name in ("alpha", "beta") if getattr(args, name) is not None}
+        if args.method != "mixed":
+            for name in ("alpha", "beta"):
                 delattr(args, name)  # not an argument of this design: not recorded, not hashed
-            elif getattr(args, name) is not None:
-                weights[name] = getattr(args, name)
         # PoleRegion's bound on sector_angle, (0, pi/2] rad, in the flag's degrees
         if args.sector_deg is not None and not 0 < finite("--sector-deg", args.sector_deg) <= 90:
             raise UsageError(f"--sector-deg: expected a half-angle in (0, 90], got {args.sector_deg:g}")

@@ -290,9 +290,11 @@ def _cmd(args) -> dict:
                 raise e from None
             if "whole number of steps" not in str(e) and "horizon / dt" not in str(e):
                 raise errors.renamed(e, named, f"--{setting}") from None
-            # the step count's dt and horizon by their flags too, as pfjax simulate words them
-            with as_flags({"dt": "--dt", "horizon": "--horizon"}):
-                raise errors.renamed(e, named, setting) from None
+            # the step count's dt and horizon by their flags too, as pfjax simulate words them; too many
+            # steps is the two flags' together (--horizon/--dt), as in pfjax simulate and pfjax track
+            both = "horizon / dt" in str(e)
+            with as_flags({"dt": "--dt", "horizon": "--horizon", "horizon/dt": "--horizon/--dt"}):
+                raise errors.renamed(e, named, "horizon/dt" if both else setting) from None
         # as they ran (the scenario set's): one config hash, given or not
         args.dt, args.horizon, args.model = problem.config.dt, problem.config.horizon, _model_of(problem)
         # a study TOML's contents enter the record and its hash, not only its path

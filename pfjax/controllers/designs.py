@@ -21,13 +21,16 @@ from pfjax.controllers.registry import reserve
 
 
 class DesignEntry(NamedTuple):
-    """One design: ``make(v, L, alpha, beta) -> scalar gains`` of ``controller`` (a registry name)."""
+    """One design: ``make(v, L, alpha, beta) -> scalar gains`` of ``controller`` (a registry name).
+    ``fixed``: its gains do not depend on the operating point (``paper_k``, the source's published
+    gain), so a study scaled to another vehicle scales them as it scales a registered controller's."""
 
     name: str
     controller: str
     cli_name: str
     make: Callable[..., dict]
     style: dict
+    fixed: bool = False
 
 
 def _mixed(v: float, L: float, alpha: float = 10.0, beta: float = 1.0) -> dict:
@@ -111,6 +114,7 @@ DESIGNS: dict[str, DesignEntry] = {
         "paper-k",
         _paper_k,
         {"color": "#17becf", "lw": 1.2, "ls": "--", "label": "mixed H2/H∞ (source K)"},
+        fixed=True,
     ),
     "integral_lmi": DesignEntry(
         "integral_lmi",

@@ -37,9 +37,13 @@ def _powers(product: str) -> tuple[float, float] | None:
         base, _, power = token.partition("^")
         if base not in _BASE:
             return None
+        if power == "" and "^" in token:  # 'm^' with no power
+            return None
         try:
             n = float(power) if power else 1.0
         except ValueError:
+            return None
+        if not math.isfinite(n):
             return None
         a, b = a + n * _BASE[base][0], b + n * _BASE[base][1]
     return a, b
@@ -60,31 +64,38 @@ def froude_exponent(unit: str) -> float | None:
 def scaled_gains(c: dict, s: float, key: str) -> dict:
     """A study's controller ``c`` (its config table) with its gains Froude-scaled by ``S = s``: every
     scalar gain of a registered controller (``K`` by its labels, ``gains``, the defaults) by its unit
-    (:func:`froude_exponent`), written as ``gains``. A design (``lmi``, ...) is unchanged: it is made
-    at the car's speed and wheelbase. A gain whose unit is not in m, s and rad raises an
-    :class:`~pfjax.errors.InputError` naming ``key``."""
-    from pfjax import errors
-
+    (:func:`froude_exponent`), written as ``gains``. A design made at the operating point (``lmi``,
+    ...) is made at the car's speed and wheelbase, so only the gains given over it are scaled; a
+    fixed design (``paper_k``) has all its gains scaled, written as ``gains`` over it. A gain whose
+    unit is not in m, s and rad raises an :class:`~pfjax.errors.InputError` naming ``key``."""
     e, d = C.resolve(c["type"], f"{key}.type")
-    if d is not None:
-        return c
-    flat = C.flat_gains(e)
+    if d is not None and not d.fixed:
+        given = c.get("gains", {})
+        return {**c, "gains": _scaled(e, given, s, key)} if given else c
+    flat = C.flat_gains(e) if d is None else {**C.flat_gains(e), **d.make(1.0, 1.0)}  # fixed: at any point
     K = c.get("K")
     if K is not None and "K" in e.labels and len(K) == len(e.labels["K"]):  # else the config refuses it
         flat.update(zip(e.labels["K"], K))
         c = {k: v for k, v in c.items() if k != "K"}
     flat.update(c.get("gains", {}))
+    return {**c, "gains": _scaled(e, flat, s, key)}
+
+
+def _scaled(e, gains: dict, s: float, key: str) -> dict:
+    """Scalar gains of the controller ``e`` Froude-scaled by ``S = s`` by their units."""
+    from pfjax import errors
+
     units, out = C.gain_units(e), {}
-    for k, v in flat.items():
-        x = froude_exponent(units[k])
+    for k, v in gains.items():
+        x = froude_exponent(units.get(k, C.UNSTATED))
         if x is None:
             raise errors.InputError(
-                f"{key}.type: the car arms scale {e.name}'s gains by their units, and {k}'s is {units[k]!r}, "
-                "not one in m, s and rad (pfjax.controllers.register(units=...))",
+                f"{key}.type: the car arms scale {e.name}'s gains by their units, and {k}'s is "
+                f"{units.get(k, C.UNSTATED)!r}, not one in m, s and rad (pfjax.controllers.register(units=...))",
                 f"{key}.type",
             )
         out[k] = v * s**x
-    return {**c, "gains": out}
+    return out
 
 
 def _dynamic(spec: dict, config: KinematicVsDynamic, mu=None) -> dict:

@@ -167,8 +167,7 @@ def part_ga_readings(cfg) -> dict:
     """Table 2's two readings of the GA's crossover: MATLAB's default scattered crossover with fraction
     0.8 (adopted) and no crossover (children by mutation only), the PI tuned on the same seeds
     (``seed``, ``seed + 1``, ...: ``ga.seeds`` of them). Besides each reading's best gains, each
-    seed's (``seed_gains``): a difference between the readings is an effect of the reading only
-    where it exceeds the spread over the seeds within each (``gain_change`` says which)."""
+    seed's (``seed_gains``), against which :func:`gain_change` weighs the readings' difference."""
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
     from pfjax.tuning.problem import make_problem, tune
@@ -207,7 +206,10 @@ def gain_change(a: dict, b: dict) -> str:
     """The largest relative difference between two readings' best gains, weighed against the
     seeds: that gain's range over each reading's seeds (``seed_gains``) and the exact two-sided
     Mann-Whitney test of the two samples. With p above 0.05 the difference is no evidence that the
-    reading moves the gain (three seeds each cannot give less than p = 0.1)."""
+    reading moves the gain; where the seeds cannot give p at or below 0.05 at all (the smallest
+    exact p, ``2 / C(n_a + n_b, n_a)``, is 0.1 for three seeds each), the text says so instead."""
+    from math import comb
+
     from scipy.stats import mannwhitneyu
 
     x, y = a["best_gains"], b["best_gains"]
@@ -215,11 +217,16 @@ def gain_change(a: dict, b: dict) -> str:
     k = max(change, key=lambda n: change[n])
     ra, rb = ([g[k] for g in r["seed_gains"]] for r in (a, b))
     p = float(mannwhitneyu(ra, rb, alternative="two-sided", method="exact").pvalue)
+    smallest = 2 / comb(len(ra) + len(rb), len(ra))
+    if smallest > 0.05:
+        said = f"{len(ra)} and {len(rb)} seeds cannot show an effect at the 5 % level: the smallest p they allow is {smallest:.2g}"
+    else:
+        said = f"{len(ra)} and {len(rb)} seeds: " + (
+            "no evidence that the reading moves it" if p > 0.05 else "the reading moves it"
+        )
     return (
         f"largest: {k} {x[k]:.4g} vs {y[k]:.4g} ({100 * change[k]:.0f} %); over the seeds {k} spans "
-        f"{min(ra):.4g} to {max(ra):.4g} and {min(rb):.4g} to {max(rb):.4g} (exact Mann-Whitney p = {p:.2g}, "
-        f"{len(ra)} and {len(rb)} seeds: "
-        + ("no evidence that the reading moves it)" if p > 0.05 else "the reading moves it)")
+        f"{min(ra):.4g} to {max(ra):.4g} and {min(rb):.4g} to {max(rb):.4g} (exact Mann-Whitney p = {p:.2g}; {said})"
     )
 
 

@@ -150,11 +150,15 @@ def paper_equilibrium(s: dict) -> str:
 def long_pi(lp: dict, cfg: dict) -> str:
     """The PI's line test at the long horizon, and whether |d| had settled by the study's horizon
     (settled: within 5 % of its final value from then on)."""
+    from pfjax.reproduce.run_claims import settled
+
     h, long_h, ts = cfg["sim"]["horizon"], lp["horizon_s"], lp["settle_time_s"]
     window = cfg["sim"]["steady_window"]
-    if not finite(ts):
+    if lp.get("status", "ok") != "ok":
+        run = f"Run for {long_h:g} s, the run ends with status {lp['status']}"
+    elif not finite(ts):
         run = f"Run for {long_h:g} s, |d| does not settle (it does not stay within 5 % of its final value)"
-    elif ts > long_h - window:  # too late for the final window to lie after it: still drifting
+    elif not settled(True, ts, long_h, window):  # too late for the final window to lie after it: still drifting
         run = (
             f"Run for {long_h:g} s, |d| is within 5 % of its final value only from t = {ts:.1f} s, later than "
             f"{long_h - window:g} s: it has not settled"

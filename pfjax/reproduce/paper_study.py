@@ -213,9 +213,19 @@ def run(config: PaperStudy, output, pbar) -> dict:
     """Run the study into ``output.staging``: ``summary.json``, ``runs.parquet``/``.csv``,
     ``pi_readings.csv``, ``stability.parquet``, ``figures/``, ``report.md`` and ``report.html``.
     Returns the summary (its ``verdicts`` as dicts). ``config`` is checked first as
-    :func:`pfjax.reproduce.paper_config.load` checks a file (:func:`~pfjax.reproduce.paper_config.check`)."""
-    t0 = time.time()
+    :func:`pfjax.reproduce.paper_config.load` checks a file (:func:`~pfjax.reproduce.paper_config.check`).
+    The study runs in float64 whether or not the caller enabled it (as its script does): the
+    eigenvalue scan and the reference comparisons need it (in float32 the slower eigenvalue's
+    maximum at the square's edge rounds to 0)."""
+    import jax
+
     check(config)
+    with jax.enable_x64(True):
+        return _run(config, output, pbar)
+
+
+def _run(config: PaperStudy, output, pbar) -> dict:
+    t0 = time.time()
     cfg = config.model_dump(mode="json")
     tmp = output.staging
     syn = part_synthesis(cfg)

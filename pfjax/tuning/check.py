@@ -122,7 +122,7 @@ def check_point(
     free = np.flatnonzero(active == 0)
     model, decrease = _quadratic_model(J, pg[free], H, eig)
     Zp, Jp = _probes(cost, z, radii, lo_j, span_j, dtype)
-    i = int(np.argmin(Jp))
+    i = int(np.argmin(Jp))  # a probe whose cost is not finite is inf (_probes): never the lowest
     jp = float(Jp[i])
     if J != 0 and np.isfinite(J) and np.isfinite(jp):
         probe_dec = (J - jp) / abs(J)

@@ -126,8 +126,9 @@ class MultistartOptions(NamedTuple):
         if (
             self.smoothing > 0 and rounds == 1
         ):  # the smoothed round is the first of several: the last sees the true cost
+            more = "rounds >= 2" if self.steps >= 2 else "steps >= 2 and rounds >= 2"  # rounds <= steps
             raise errors.InputError(
-                f"smoothing: smooths the first of several rounds, and rounds = 1; give rounds >= 2 or smoothing = 0, "
+                f"smoothing: smooths the first of several rounds, and rounds = 1; give {more} or smoothing = 0, "
                 f"got {self.smoothing:g}",
                 "smoothing",
             )
