@@ -181,7 +181,9 @@ def run(
 
     The follower steers its reference point towards the focus point
     ``P_r = P_ref + l (cos(theta + p gamma), sin(theta + p gamma))`` by input-output linearisation
-    with speed, steering and steering-rate limits, and the run is checked against Lemma 8.1. The
+    with speed, steering and steering-rate limits, and the run is checked against Lemma 8.1
+    (``lemma_consistent``: inside the lemma's bound, a run that ends ok has ``converged`` equal to
+    ``phi_converged``; null outside the bound or for a failed run, where the lemma says nothing). The
     simulation runs in float64 (as ``pfjax track`` does), whatever ``jax_enable_x64`` says.
     All arguments are checked first (see Raises).
 
@@ -219,7 +221,7 @@ def run(
         rad; ``iae``, m s; ``final_d``, m); the steering (``max_abs_gamma_deg``, deg;
         ``limit_fraction``; ``min_abs_factor``); Lemma 8.1 (``lemma_p_bound``,
         ``inside_lemma_bound``, ``input_matrix_invertible_for_all_gamma``,
-        ``zero_dynamics_stable_straight``); ``tolerances`` (``window_s``, s; ``tol_z_m``, m;
+        ``zero_dynamics_stable_straight``, ``lemma_consistent``); ``tolerances`` (``window_s``, s; ``tol_z_m``, m;
         ``tol_phi_rad``, rad); ``final`` (the follower's final state); ``T`` (the simulated time, s)
         and ``dt`` (s).
 
@@ -305,6 +307,13 @@ def _simulate(c: dict) -> dict:
         "lemma_p_bound": lemma_bound(gmax),
         "inside_lemma_bound": abs(pp) < lemma_bound(gmax),
         "input_matrix_invertible_for_all_gamma": bool(lo < pp < hi),
+        # the lemma on this run: inside its bound a run that ends ok has z~ -> 0 exactly when
+        # phi - p gamma -> 0 (false: a counterexample at these tolerances); null where it claims nothing
+        "lemma_consistent": (
+            bool(m.converged) == bool(m.phi_converged)
+            if abs(pp) < lemma_bound(gmax) and TRACK_STATUS_NAMES[status] == "ok"
+            else None
+        ),
         "zero_dynamics_stable_straight": zero_dynamics_stable(c["speed"], float(f), params),
         "tolerances": {"window_s": cfg.window, "tol_z_m": cfg.tol_z, "tol_phi_rad": cfg.tol_phi},
         "final": {key: float(v) for key, v in r.final._asdict().items()},

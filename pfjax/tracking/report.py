@@ -13,6 +13,7 @@ import pandas as pd
 
 from pfjax.report.document import Bullets, Document, Figure, Heading, Paragraph, Table
 from pfjax.report.figures import save
+from pfjax.reproduce.verdict import verdict_block
 from pfjax.tracking.lemma import outcomes
 
 OUTCOMES = ("both", "z_only", "phi_only", "neither", "failed")
@@ -171,6 +172,7 @@ def report(summary: dict, tables: dict[str, pd.DataFrame]) -> Document:
         f"{s['machine']}, {s['wall_s']:.0f} s" + (" (quick sizes)" if s["quick"] else "")
     )
     blocks: list = [Heading("Definitions"), Bullets([f"**{k}**: {v}" for k, v in s["definitions"].items()])]
+    blocks += [Heading("Verdicts on the source's claim"), verdict_block(s["verdicts"])]
     blocks += _lemma_blocks(s, tables) + _mc_blocks(s)
     return Document("Vehicle tracking with a focus point — Lemma 8.1 and robustness", subtitle, blocks)
 

@@ -21,6 +21,7 @@ from pfjax.montecarlo.summary import UNITS as MONTE_CARLO_UNITS
 from pfjax.numerics.random import seed_key
 from pfjax.provenance import STAMP_UNITS, config_hash, machine, parquet_metadata
 from pfjax.report import document
+from pfjax.reproduce.tracking import verdicts as tracking_verdicts
 from pfjax.tables import write_parquet
 from pfjax.tracking import batches as B
 from pfjax.tracking import report as R
@@ -216,6 +217,7 @@ def run(config: TrackingStudy, output, quick: bool = False) -> dict:
         "lemma_grid": {"n_runs": int(len(lemma_df)), "table": table.to_dict(orient="records")},
         "geometry": geometry,
         "monte_carlo": mc_summary,
+        "verdicts": [v._asdict() for v in tracking_verdicts(cfg, geometry, lemma_df)],
         "units": SUMMARY_UNITS,
     }
     tmp = output.staging

@@ -1,0 +1,63 @@
+"""The vehicle-tracking reproduction's verdict rows (pfjax.reproduce.tracking): each half of Lemma 8.1
+decided by the data, the closed-loop row read at the configured and at tighter tolerances."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from pfjax.reproduce.tracking import ROUNDING, TIGHTER, verdicts
+from pfjax.tracking.study_config import TrackingStudy
+
+GEOMETRY = {
+    "n_states_z_err_0": 100,
+    "max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2": 1e-15,
+    "n_counterexamples_abs_pgamma_gt_pi_2": 7,
+    "counterexample_abs_phi_minus_pgamma_range": [3.14159, 3.14159],
+    "wrong_distance_min_z_err": 0.2,
+}
+
+
+def _runs(z, phi, status="ok", inside=True):
+    return {"inside_bound": inside, "status": status, "window_max_z": z, "window_max_phi_err": phi}
+
+
+def _rows(runs, **geometry):
+    cfg = TrackingStudy().model_dump(mode="json")
+    return verdicts(cfg, {**GEOMETRY, **geometry}, pd.DataFrame(runs)), cfg
+
+
+def test_each_half_is_decided_by_the_data():
+    cfg = TrackingStudy().model_dump(mode="json")
+    tz, tp = cfg["sim"]["tol_z"], cfg["sim"]["tol_phi"]
+    runs = [_runs(tz / 100, tp / 100), _runs(1.0, 1.0), _runs(tz / 2, tp / 100), _runs(None, None, "singular")]
+    runs.append(_runs(tz / 100, 1.0, inside=False))  # outside the bound: not claimed, not counted
+    rows, _ = _rows(runs)
+    only_if, outside, if_half, loop, tight = rows
+    assert [r.verdict for r in rows] == ["holds", "holds", "does not hold", "holds", "does not hold"]
+    assert only_if.basis == outside.basis == "used to choose the convention"
+    assert outside.claim.startswith("pfjax's comparison, not a claim of the source")
+    assert loop.basis == tight.basis == "assumed" and loop.subject == "4 runs inside the bound"
+    assert loop.pfjax == "both 2, z̃ only 0, φ − pγ only 0, neither 1 of 3 (1 failed by status, testing neither half)"
+    # at tolerances TIGHTER times smaller, the run at tol_z / 2 no longer has z~ -> 0: phi - p gamma only
+    assert tight.pfjax.startswith("both 1, z̃ only 0, φ − pγ only 1") and f"{tz / TIGHTER:g} m" in tight.criterion
+    rows, _ = _rows(runs, max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2=10 * ROUNDING, wrong_distance_min_z_err=0.0)
+    assert rows[0].verdict == "does not hold" and rows[2].verdict == "holds"
+    rows, _ = _rows(runs, counterexample_abs_phi_minus_pgamma_range=None)
+    assert rows[1].verdict == "no verdict"
+    rows, _ = _rows([*runs, _runs(tz / 100, 1.0)])  # z~ -> 0 without phi - p gamma -> 0 inside: refuted
+    assert rows[3].verdict == "does not hold"
+
+
+def test_a_single_run_is_checked_against_the_lemma_and_the_check_can_fail():
+    """pfjax.tracking.run (pfjax track): inside the bound a run that ends ok is consistent with the
+    lemma when z~ -> 0 exactly when phi - p gamma -> 0. A follower held to half the leader's speed
+    keeps phi = p gamma but falls behind (f d != l): the "if" half fails on that run."""
+    import pfjax.tracking as T
+
+    ok = T.run(horizon=20.0)
+    assert ok["inside_lemma_bound"] and ok["converged"] and ok["lemma_consistent"] is True
+    slow = T.run(leader="line", v_max=0.5, horizon=20.0)
+    assert slow["status"] == "ok" and slow["phi_converged"] and not slow["converged"]
+    assert slow["lemma_consistent"] is False
+    outside = T.run(p=4.5, horizon=20.0)  # |p| >= pi / (2 gamma_max) at 30 deg: the lemma claims nothing
+    assert not outside["inside_lemma_bound"] and outside["lemma_consistent"] is None
