@@ -80,7 +80,7 @@ def test_sizes_beyond_the_memory_budget_are_refused_at_load(monkeypatch, setting
 def test_the_published_sizes_fit_a_small_budget(monkeypatch):
     monkeypatch.setenv("PFJAX_MEMORY_BUDGET", str(1 << 30))
     config = study_config.load()
-    assert study_config.sizes(config) == {"lemma_runs": 1944, "geometry_states": 108_000, "mc_runs": 4000}
+    assert study_config.sizes(config) == {"lemma_runs": 1944, "geometry_states": 432_000, "mc_runs": 4000}
 
 
 @pytest.mark.parametrize("setting", ["lemma.n_geometry=1000000000", "sim.horizon=1e9", "mc.p_forward=0.0"])

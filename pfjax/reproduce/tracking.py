@@ -38,7 +38,7 @@ def verdicts(cfg: dict, geometry: dict, lemma_df: pd.DataFrame) -> list[Verdict]
             CLAIM + ' (the "only if" half)',
             "—",
             "random states",
-            f"on {geometry['n_states_z_err_0']:,} random states with z̃ = 0 (forward, l = 1, every p and γ_max of the "
+            f"on {geometry['n_states_z_err_0']:,} random states with z̃ = 0 (both modes, every |l|, p and γ_max of the "
             f"grid), those with |pγ| < π/2, as every state inside the bound has, have |φ − pγ| ≤ {ROUNDING:g} rad "
             f"(rounding); {convention}",
             f"max |φ − pγ| = {inside_max:.1e} rad",
@@ -100,7 +100,7 @@ def _closed_loop(lemma_df: pd.DataFrame, s: dict, factor: float) -> Verdict:
     shown = ", ".join(f"{k} {v}" for k, v in counts.items())
     failed = len(runs) - len(ok)
     why = (
-        "the configured tolerances: tol_z, 1 % of |l| = 1 m, and tol_phi, the angle at which the focus "
+        "the configured tolerances: tol_z, 1 % of the default focus distance |l| = 1 m, and tol_phi, the angle at which the focus "
         "point moves by tol_z at the grid's smallest |l| (0.5 m); the window, five time constants of the "
         "gain k = 1 1/s"
         if factor == 1.0

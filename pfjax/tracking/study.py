@@ -7,6 +7,7 @@ simulations and by geometry, and a robustness Monte Carlo of the focus-point con
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 
@@ -141,12 +142,15 @@ def lemma_part(cfg: dict, key, chunk: int) -> tuple[pd.DataFrame, pd.DataFrame, 
 
 
 def geometry_part(cfg: dict, key) -> tuple[pd.DataFrame, dict]:
-    """Lemma 8.1 as geometry on random states: per-state rows and their summary."""
-    geo = []
-    for i, p in enumerate(sorted(set(cfg["lemma"]["p"]))):
-        for gdeg in cfg["lemma"]["gamma_max_deg"]:
-            g = sample_geometry(jax.random.fold_in(key, 100 + i), cfg["lemma"]["n_geometry"], math.radians(gdeg), p)
-            geo.append(g.assign(p=p, gamma_max_deg=gdeg))
+    """Lemma 8.1 as geometry on random states, for every ``p``, ``gamma_max``, mode and ``|l|`` of the
+    grid (``l = f |l|``, the grid's wheelbase): per-state rows and their summary."""
+    geo, lem = [], cfg["lemma"]
+    for i, p in enumerate(sorted(set(lem["p"]))):
+        for j, (f, la) in enumerate(itertools.product((1, -1), lem["l_abs"])):
+            k = jax.random.fold_in(jax.random.fold_in(key, 100 + i), j)
+            for gdeg in lem["gamma_max_deg"]:
+                g = sample_geometry(k, lem["n_geometry"], math.radians(gdeg), p, l=f * la, f=f, a=cfg["sim"]["a"])
+                geo.append(g.assign(p=p, gamma_max_deg=gdeg, mode="forward" if f > 0 else "backward", l=f * la))
     geo_df = pd.concat(geo, ignore_index=True)
     on = geo_df[geo_df.kind == "on_focus"]
     inside = on.p_gamma.abs() < math.pi / 2

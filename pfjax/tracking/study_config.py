@@ -96,7 +96,9 @@ class TrackLemma(ConfigModel):
     )
     circle_radius: Real = Field(2.5, ge=POSITIVE, description="radius of the circling leader [m]")
     n_geometry: int = Field(
-        4000, ge=1, description="random states per p and gamma_max for the geometric check (memory-checked) [-]"
+        4000,
+        ge=1,
+        description="random states per p, gamma_max, mode and |l| for the geometric check (memory-checked) [-]",
     )
 
     @model_validator(mode="after")
@@ -150,11 +152,12 @@ class TrackingStudy(ConfigModel):
 
 def sizes(config: TrackingStudy) -> dict[str, int]:
     """The study's sizes: runs of the Lemma grid (both modes, six leaders), random states of the
-    geometric check (``n_geometry`` per distinct ``p`` and ``gamma_max``) and Monte Carlo runs (both modes)."""
+    geometric check (``n_geometry`` per distinct ``p``, ``gamma_max``, mode and ``|l|``) and Monte Carlo
+    runs (both modes)."""
     g = config.lemma
     return {
         "lemma_runs": 2 * 6 * len(g.p) * len(g.l_abs) * len(g.gamma_max_deg) * len(g.offsets),
-        "geometry_states": g.n_geometry * len(set(g.p)) * len(g.gamma_max_deg),
+        "geometry_states": g.n_geometry * len(set(g.p)) * len(g.gamma_max_deg) * 2 * len(g.l_abs),
         "mc_runs": 2 * config.mc.n_runs,
     }
 
