@@ -117,6 +117,8 @@ def _verdict_inputs():
         name = f"GA solution ({xs:g}, {a1:g}, {a2:g})"
         outcomes[name] = outcomes[name + "+pause"] = _outcome()
     calibration = {"simulated_first_switch": {"x": 0.074, "y": 0.047}, "switch_x": 0.074, "y_source": 0.047}
+    calibration |= {"a_f": 0.1746, "front": 0.1746, "front_source": "calibrated", "scan_period": 0.1, "speed": 0.05}
+    calibration["tolerance_m"] = 0.005
     counts = {c: {"converged": 1} for c in "ABCD"}
     sweep = {
         "n_combinations": 1,
@@ -126,7 +128,8 @@ def _verdict_inputs():
         "all_four_reproduced": [],
     }
     runs = [dict(xs=-1.0, alpha1=4.57, alpha2=1.25, fitness_ratio_to_grid_best=0.95)]
-    return outcomes, calibration, sweep, {"runs": runs}
+    solutions = [dict(fitness_ratio_to_grid_best=0.9)] * 2
+    return outcomes, calibration, sweep, {"runs": runs, "source_solutions": solutions, "grid_n": 32}
 
 
 def test_verdicts_state_the_configured_stop_and_stuck_test_and_the_source_its_own():
@@ -134,7 +137,7 @@ def test_verdicts_state_the_configured_stop_and_stuck_test_and_the_source_its_ow
 
     rows = verdicts(*_verdict_inputs(), pause=2.5, stuck_travel=0.3, stuck_switches=3)
     text = " | ".join(" | ".join(map(str, v)) for v in rows)
-    assert "within 0.3 m of travel over 3 legs" in text and "0.1 m" not in text
+    assert "less than 0.3 m of travel over the last 3 legs" in text and "0.1 m" not in text
     assert "2.5 s stop at each reversal" in text
     assert "D: 47 s in the experiment, with a 1 s stop at each reversal" in text  # the source's stop
     scenarios = [v.subject for v in rows if "stop" in v.subject]
@@ -149,7 +152,7 @@ def test_the_report_attributes_the_stop_and_the_cut_off():
     header = report._header(s)[0].text
     assert "beyond 5 switches" in header and "cuts off beyond 10" in header and "0.3 m of travel" in header
     intro = report._verdicts(s)[1].text
-    assert "source's experiments stood 1 s" in intro and "2.5 s here" in intro
+    assert "source states a 1 s stop at each reversal for case D's experiment" in intro and "2.5 s here" in intro
 
 
 def test_the_search_figure_states_the_weight():
@@ -201,13 +204,20 @@ def test_scatter_and_weight_descriptions_match_the_sampling_and_the_fitness():
     assert "end error" in d and d.endswith("[s/m]")
 
 
-def test_ga_runs_differing_only_in_alpha2_are_distinct():
-    from pfjax.reproduce.parking import ga_runs_verdicts
+def test_ga_runs_are_distinct_when_a_grid_spacing_apart():
+    """Two good GA runs count as distinct solutions when some gene differs by at least the grid's
+    spacing in lattice steps (255 / (grid_n - 1)); adjacent lattice points do not."""
+    from pfjax.reproduce.parking import LATTICE_STEP, ga_runs_verdicts
 
     runs = [dict(xs=-1, alpha1=4.57, alpha2=a, fitness_ratio_to_grid_best=0.95) for a in (1.25, 3.28)]
-    assert ga_runs_verdicts(runs)[0].verdict == "reproduced"
-    same = [dict(xs=-1, alpha1=4.57, alpha2=a, fitness_ratio_to_grid_best=0.95) for a in (1.251, 1.249)]
-    assert ga_runs_verdicts(same)[0].verdict == "not reproduced"  # equal to 0.01
+    assert ga_runs_verdicts(runs, 32)[0].verdict == "reproduced"  # 52 steps apart in alpha2, spacing 8.2
+    near = [
+        dict(xs=-1, alpha1=4.57, alpha2=1.25 + k * LATTICE_STEP[1], fitness_ratio_to_grid_best=0.95) for k in (0, 8)
+    ]
+    assert ga_runs_verdicts(near, 32)[0].verdict == "not reproduced"  # 8 steps: one grid cell
+    assert ga_runs_verdicts(near, 33)[0].verdict == "reproduced"  # spacing 7.97 steps
+    weak = [dict(r, fitness_ratio_to_grid_best=0.8) if i else r for i, r in enumerate(runs)]
+    assert ga_runs_verdicts(weak, 32)[0].verdict == "not reproduced"  # one run below 85 % of the grid's best
 
 
 def test_the_documented_whole_rectangle_counts_are_the_sweeps():

@@ -12,6 +12,7 @@ import json
 import math
 import subprocess
 import sys
+from html import unescape
 from pathlib import Path
 
 import numpy as np
@@ -262,7 +263,8 @@ def test_study_quick(tmp_path):
         assert all(d["description"] for d in described.values()), name
     for f in ("cases_parallel", "garage_xs", "search", "start_map", "montecarlo", "histories_D"):
         assert (out / "figures" / f"{f}.png").stat().st_size > 1000 and (out / "figures" / f"{f}.svg").exists()
-    md, html = (out / "report.md").read_text(), (out / "report.html").read_text()
+    md, page = (out / "report.md").read_text(), (out / "report.html").read_text()
+    html = unescape(page)  # the page's text, entities decoded (pfjax's, not pfjax&#x27;s)
     headline = [f"a_f = {s['calibration']['a_f']:.4f} m", f"{s['assumptions']['n_combinations']} combinations"]
     headline += [f"{100 * r['success_rate']:.1f} %" for r in s["montecarlo"].values()]
     headline += [v["claim"] for v in s["verdicts"]]

@@ -99,8 +99,17 @@ def test_report_wording():
         "all_four_reproduced": [{"zone": "whole"}],
         "by_zone": {"middle": {"B": {"converged": 3}}, "whole": {"B": {"stuck": 3}}},
     }
-    text = report._b_verdict(a, "converged after 9 switches")
+    sim = {"scan_period": 0.1, "stuck_travel": 0.1, "stuck_switches": 4}
+    s = {
+        "assumptions": a,
+        "config": {"sim": sim},
+        "calibration": {"front": 0.1746, "front_source": "calibrated"},
+        "cases": [{"case": "B", "status": "converged", "switches": 9, "time_s": 63.9}],
+        "verdicts": [{"subject": "case B", "verdict": "not reproduced"}],
+    }
+    text = report._b_verdict(s)
     assert "not evidence" in text and "before" not in text
+    assert text.startswith("**Verdict on case B**: not reproduced") and "B parks after 9 switches" in text
     mc = {"n_runs": 2, "pos_scatter": 0.05, "theta_scatter_deg": 5.0, "scan_lo": 0.05, "scan_hi": 0.2}
     mc |= {"speed_lo": 0.04, "speed_hi": 0.06, "lag_probability": 0.5}
     row = {"success_ci95": [0.1, 0.9], "success_rate": 0.5, "status_counts": {"converged": 1, "timeout": 1}}
@@ -159,4 +168,5 @@ def test_rows_that_search_the_assumptions_for_the_outcome_are_not_independent():
         r for r in case_b_verdicts({"status": "stuck", "switches": 9, "time_s": 60.0}, sweep) if "every" in r.subject
     ]
     rows += all_four_verdicts(sweep)
-    assert len(rows) == 2 and all(r.basis == FILTERED for r in rows), rows
+    assert len(rows) == 2 and all(r.basis == FILTERED and r.verdict == "no verdict" for r in rows), rows
+    assert rows[1].claim.startswith("pfjax's comparison, not a claim of the source")

@@ -136,12 +136,14 @@ def run_many(
     return jax.tree_util.tree_map(lambda *a: np.concatenate(a), *outs)
 
 
-def simulated_first_switch(front: float) -> dict:
-    """Case A (:data:`pfjax.parking.schedules.CASES`) simulated with reach ``front`` (m): time (s)
-    and pose (m, m, deg) of its first sampled switch, to check the calibration of a_f
-    (:mod:`pfjax.parking.calibrate`) against the source's point."""
-    r = run_jit(
-        run_params((-0.4, 0.5, 0.0), 1, (1.0,), front=front), to_obstacle_map(list(PARALLEL.values())), ParkingConfig()
-    )
+def simulated_first_switch(
+    front: float, *, control=None, scan_period: float = 0.1, cfg: ParkingConfig = ParkingConfig()
+) -> dict:
+    """Case A (:data:`pfjax.parking.schedules.CASES`) simulated with reach ``front`` (m), the
+    controller ``control`` (default the source's), scanner period ``scan_period`` (s) and run
+    config ``cfg``: time (s) and pose (m, m, deg) of its first sampled switch, to check the
+    calibration of a_f (:mod:`pfjax.parking.calibrate`) against the source's point."""
+    p = run_params((-0.4, 0.5, 0.0), 1, (1.0,), front=front, scan_period=scan_period, control=control)
+    r = run_jit(p, to_obstacle_map(list(PARALLEL.values())), cfg)
     x, y, th = (float(v) for v in r.log_pose[0])
     return {"t": float(r.log_t[0]), "x": x, "y": y, "theta_deg": math.degrees(th)}

@@ -24,7 +24,7 @@ from pfjax.parking.report import write_report
 from pfjax.parking.simulate import simulated_first_switch
 from pfjax.parking.study_config import ParkingStudy, load
 from pfjax.parking.study_parts import part_assumptions, part_montecarlo, part_search, part_start_map
-from pfjax.parking.study_runs import part_cases, part_outcomes
+from pfjax.parking.study_runs import part_cases, part_outcomes, setup
 from pfjax.provenance import STAMP_UNITS, config_hash, parquet_metadata
 from pfjax.provenance import stamp as provenance_stamp
 from pfjax.reproduce.parking import verdicts as parking_verdicts
@@ -123,6 +123,7 @@ SUMMARY_UNITS: dict[str, str] = {
     "timings_s": "s (wall clock per part)",
     # calibration
     "a_f": "m",
+    "tolerance_m": "m (one scanner period of travel)",
     "reach_per_obstacle": "m (the reach a_f at which the corner touches each obstacle)",
     "theta_deg_at_switch": "deg",
     "y_closed_form_at_switch_x": "m",
@@ -160,6 +161,26 @@ def summary_units() -> dict[str, str]:
     return {**columns, **SUMMARY_UNITS}
 
 
+def calibration(cfg: ParkingStudy) -> dict:
+    """The a_f calibration (:func:`pfjax.parking.calibrate.calibrate_front`) and case A's first switch
+    simulated as the study's runs go: with their reach (``front``: the calibrated a_f, or
+    ``sim.front`` where set, ``front_source`` says which), controller and scanner period;
+    ``tolerance_m``: one scanner period of travel, |v₁| × the scanner period."""
+    control, front, pc, _ = setup(cfg)
+    cal = calibrate_front()
+    used = cal["a_f"] if front is None else front
+    scan, speed = cfg.sim.scan_period, cfg.controller.speed
+    cal.update(
+        front=used,
+        front_source="calibrated" if front is None else "sim.front",
+        scan_period=scan,
+        speed=speed,
+        tolerance_m=speed * scan,
+        simulated_first_switch=simulated_first_switch(used, control=control, scan_period=scan, cfg=pc),
+    )
+    return cal
+
+
 def _parts(cfg: ParkingStudy, fig_dir: Path, progress: bool) -> tuple[dict, dict, dict]:
     """Run every part; returns ``(results, tables, timings_s)``."""
     pmap, gmap = to_obstacle_map(list(PARALLEL.values())), to_obstacle_map(list(GARAGE.values()))
@@ -174,15 +195,14 @@ def _parts(cfg: ParkingStudy, fig_dir: Path, progress: bool) -> tuple[dict, dict
         steps.update(1)
         t0 = time.perf_counter()
 
-    cal = calibrate_front()
-    cal["simulated_first_switch"] = simulated_first_switch(cal["a_f"])
+    cal = calibration(cfg)
     tick("calibration")
     case_rows, _ = part_cases(cfg, fig_dir, pmap, gmap)
     tick("cases")
     outcomes = part_outcomes(cfg, pmap, gmap)
     sens, sweep = part_assumptions(cfg, pmap)
     tick("assumptions")
-    ga, ga_runs, grid, grid_df = part_search(cfg, fig_dir, gmap, k_ga)
+    ga, ga_runs, grid, grid_df, sources = part_search(cfg, fig_dir, gmap, k_ga)
     tick("search")
     smap = part_start_map(cfg, fig_dir, gmap)
     tick("start_map")
@@ -194,7 +214,7 @@ def _parts(cfg: ParkingStudy, fig_dir: Path, progress: bool) -> tuple[dict, dict
         "cases": case_rows,
         "assumptions": sweep,
         "source_outcomes": outcomes,
-        "search": {"ga": ga, "ga_runs": ga_runs, "grid": grid},
+        "search": {"ga": ga, "ga_runs": ga_runs, "grid": grid, "source_solutions": sources},
         "start_map": smap,
         "montecarlo": mc,
     }
@@ -238,7 +258,11 @@ def run_study(config: ParkingStudy, out: Path, quick: bool = False, progress: bo
         results["source_outcomes"],
         results["calibration"],
         results["assumptions"],
-        {"runs": results["search"]["ga_runs"]},
+        {
+            "runs": results["search"]["ga_runs"],
+            "source_solutions": results["search"]["source_solutions"],
+            "grid_n": config.search.grid_n,
+        },
         pause=config.experiment.pause,
         stuck_travel=config.sim.stuck_travel,
         stuck_switches=config.sim.stuck_switches,

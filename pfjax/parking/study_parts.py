@@ -17,8 +17,9 @@ from pfjax.parking.schedules import GARAGE_START
 from pfjax.parking.simulate import STATUS_NAMES, run_params
 from pfjax.parking.study_config import ParkingStudy
 from pfjax.parking.study_runs import setup
-from pfjax.parking.switch_search import garage_base, search_ga, search_grid, start_map
+from pfjax.parking.switch_search import evaluate, garage_base, search_ga, search_grid, start_map
 from pfjax.report.figures import save
+from pfjax.reproduce.parking import GA_SOLUTIONS
 from pfjax.tuning.ga import GAOptions
 
 
@@ -54,6 +55,9 @@ def search_base(cfg: ParkingStudy):
 
 
 def part_search(cfg: ParkingStudy, fig_dir, gmap, key):
+    """The grid, ``search.ga_seeds`` GA runs and the source's GA solutions (:data:`GA_SOLUTIONS`),
+    all with the search's fitness and cut-off: ``(best GA run, GA runs, grid best, grid table,
+    source solutions)``, each with its fitness ratio to the grid's best (null where none scores)."""
     _, _, _, pc = setup(cfg)
     se = cfg.search
     base = search_base(cfg)
@@ -89,7 +93,25 @@ def part_search(cfg: ParkingStudy, fig_dir, gmap, key):
     df = pd.DataFrame({k: v for k, v in table.items()})
     df["status"] = [STATUS_NAMES[int(s)] for s in df["status"]]
     df["converged_fraction"] = None
-    return ga, runs, grid, df
+    sources = evaluate(
+        gmap, base, *(list(v) for v in zip(*GA_SOLUTIONS)), cfg=pc, weight=se.weight, chunk=cfg.sim.chunk
+    )
+    solutions = [
+        {
+            "xs": float(sources["xs"][i]),
+            "alpha1": float(sources["alpha1"][i]),
+            "alpha2": float(sources["alpha2"][i]),
+            "status": STATUS_NAMES[int(sources["status"][i])],
+            "time_s": float(sources["time_s"][i]),
+            "switches": int(sources["switches"][i]),
+            "fitness": float(sources["fitness"][i]),
+            "fitness_ratio_to_grid_best": float(sources["fitness"][i]) / grid["fitness"]
+            if grid["fitness"] > 0
+            else None,
+        }
+        for i in range(len(GA_SOLUTIONS))
+    ]
+    return ga, runs, grid, df, solutions
 
 
 def part_start_map(cfg: ParkingStudy, fig_dir, gmap):
