@@ -18,6 +18,7 @@ KEYS = {
     "phi_converged",
     "inside_lemma_bound",
     "lemma_p_bound",
+    "lemma_consistent",
 }
 FAST = ["--horizon", "12", "--dt", "0.02"]
 

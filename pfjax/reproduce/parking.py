@@ -226,7 +226,7 @@ def case_d_verdicts(d: dict, d_pause: dict, pause: float = SOURCE_PAUSE_S) -> li
     ]
 
 
-def _with_and_without(op: dict, o: dict, pause: float) -> str:
+def _with_and_without(op: dict, o: dict) -> str:
     return f"{_outcome(op)} (without the stop: {_outcome(o)})"
 
 
@@ -249,7 +249,7 @@ def garage_verdicts(outcomes: dict, pause: float = SOURCE_PAUSE_S) -> list[Verdi
                 "garage",
                 f"X_s = {xs:g}, {pause:g} s stop at each reversal",
                 f"{criterion}; the stop {STOP_ASSUMED}",
-                _with_and_without(op, o, pause),
+                _with_and_without(op, o),
                 source,
                 verdict,
                 basis=ASSUMED,
@@ -289,7 +289,7 @@ def ga_solution_verdicts(outcomes: dict, solutions: list[dict], pause: float = S
             "garage",
             f"{pause:g} s stop at each reversal",
             f"parks with 2 switches, {WITHIN}; the stop {STOP_ASSUMED}",
-            _with_and_without(op, o, pause),
+            _with_and_without(op, o),
             "2 switches, 48 s",
             _says(_parks_in(op, 48.0) == "reproduced" and op["switches"] == 2),
             basis=ASSUMED,

@@ -19,7 +19,9 @@ VERDICTS = ("holds", "does not hold", "reproduced", "not reproduced", "no verdic
 #: filter chose it by, on the same simulation (it passes by construction). ``used to calibrate a parameter``: the
 #: source's number set one of pfjax's parameters (named in the criterion), so matching it is by
 #: construction. ``assumed``: the criterion rests on a parameter the source does not give (named in
-#: the criterion).
+#: the criterion): a threshold that defines the criterion where the source gives none (the horizon a
+#: quantity is read at, what "stuck" or "-> 0" means). A tolerance on matching a number the source
+#: does give (how close counts as reproduced) is stated with its reason and leaves a row independent.
 BASES = (
     "independent",
     "used to choose the convention",
