@@ -74,19 +74,7 @@ def test_the_directory_and_the_cpu_key(tmp_path):
 
 
 def test_the_choice_takes_each_precisions_best_block_at_the_best_width():
-    rows = [
-        dict(dtype=d, vector_width=w, block_bytes=b, msteps_per_s=r, max_abs_iae_diff=0.0)
-        for d, w, b, r in [
-            ("float32", None, 2500, 100.0),
-            ("float32", None, 5000, 120.0),
-            ("float32", 512, 2500, 200.0),
-            ("float32", 512, 5000, 150.0),
-            ("float64", None, 2500, 60.0),
-            ("float64", None, 5000, 50.0),
-            ("float64", 512, 2500, 40.0),
-            ("float64", 512, 5000, 45.0),
-        ]
-    ]
+    rows = _candidates()  # every candidate agrees with the default settings
     got = C.choose(rows)  # 512: 200 * 45 = 9000 > default: 120 * 60 = 7200
     assert got == dict(
         vector_width=512,
