@@ -11,7 +11,7 @@ import pandas as pd
 
 from pfjax.parking.runs import SEARCH_MAX_SWITCHES
 from pfjax.report import document as D
-from pfjax.reproduce.parking import SOURCE_PAUSE_S, TIME_TOL, TIME_TOL_REASON, stuck_test
+from pfjax.reproduce.parking import SOURCE_PAUSE_S, TIME_TOL, TIME_TOL_REASON, first_switch_distance, stuck_test
 from pfjax.reproduce.verdict import Verdict, verdict_cells
 
 
@@ -136,7 +136,7 @@ def _verdicts(s: dict) -> list[D.Block]:
 def _calibration(s: dict) -> list[D.Block]:
     cal = s["calibration"]
     sw, tol = cal["simulated_first_switch"], cal["tolerance_m"]
-    dist = math.hypot(sw["x"] - cal["switch_x"], sw["y"] - cal["y_source"])
+    dist = first_switch_distance(cal)
     if cal["front_source"] == "calibrated":
         used = "Simulated with this a_f"
     else:

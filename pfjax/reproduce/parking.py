@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import math
 
-from pfjax.parking.schedules import ALPHA_MAX, XS_MAX, XS_MIN
+import numpy as np
+
+from pfjax.parking.schedules import decoded_levels
 from pfjax.reproduce.run_claims import ADDED
 from pfjax.reproduce.verdict import ASSUMED, FILTERED, Verdict
 
@@ -33,8 +35,9 @@ SOURCE_PAUSE_S = 1.0
 #: (assumed: the source calls its solutions good without a measure). For a parked run J ≈ 1/t_e, so
 #: 85 % of the best J is a parking time at most 1/0.85 − 1 ≈ 18 % longer than the grid's best.
 GOOD_FRACTION = 0.85
-#: The GA's lattice step per gene (X_s m, α): 8 bits over X_s's range and α's.
-LATTICE_STEP = ((XS_MAX - XS_MIN) / 255.0, ALPHA_MAX / 256.0)
+#: The GA's lattice step per gene (X_s m, α): adjacent levels of the 8-bit decoding
+#: (:func:`pfjax.parking.schedules.decoded_levels`).
+LATTICE_STEP = tuple(float(np.diff(levels[:2])[0]) for levels in decoded_levels())
 
 
 #: The wording of a parking-time criterion.
@@ -68,6 +71,12 @@ def _row(*fields, **kw) -> Verdict:
     return Verdict(*fields, **kw).check()
 
 
+def first_switch_distance(calibration: dict) -> float:
+    """The distance (m) from case A's simulated first switch to the source's point."""
+    sw = calibration["simulated_first_switch"]
+    return math.hypot(sw["x"] - calibration["switch_x"], sw["y"] - calibration["y_source"])
+
+
 def calibration_verdicts(calibration: dict) -> list[Verdict]:
     """Case A's first switch against the source's point, simulated with the study's a_f, controller
     and scanner period. The tolerance is one scanner period of travel (``tolerance_m`` = |v₁| × the
@@ -75,7 +84,7 @@ def calibration_verdicts(calibration: dict) -> list[Verdict]:
     far past the contact. With the calibrated a_f the row agrees by construction; with ``sim.front``
     set, a_f is an assumed value and the row checks it."""
     sw, tol = calibration["simulated_first_switch"], calibration["tolerance_m"]
-    dist = math.hypot(sw["x"] - calibration["switch_x"], sw["y"] - calibration["y_source"])
+    dist = first_switch_distance(calibration)
     front, calibrated = calibration["front"], calibration["a_f"]
     if calibration["front_source"] == "calibrated":
         reach, basis = f"a_f = {front:.4f} m, calibrated from this point", "used to calibrate a parameter"
