@@ -66,6 +66,10 @@ def part_search(cfg: ParkingStudy, fig_dir, gmap, key):
     grid["wall_s"] = time.perf_counter() - t0
     table = grid.pop("table")
     f = table["fitness"]
+
+    def ratio(fitness: float) -> float | None:  # to the grid's best; null where no grid point scores
+        return float(fitness) / grid["fitness"] if grid["fitness"] > 0 else None
+
     runs = []
     for i in range(se.ga_seeds):  # independent GA runs: the source reports several good solutions
         t0 = time.perf_counter()
@@ -82,8 +86,7 @@ def part_search(cfg: ParkingStudy, fig_dir, gmap, key):
             seed_index=i,
             wall_s=time.perf_counter() - t0,
             grid_fraction_better=float(np.mean(f > r["fitness"])),
-            # null where no grid point scores (every candidate failed): no ratio to state
-            fitness_ratio_to_grid_best=r["fitness"] / grid["fitness"] if grid["fitness"] > 0 else None,
+            fitness_ratio_to_grid_best=ratio(r["fitness"]),
         )
         runs.append(r)
     ga = max(runs, key=lambda r: r["fitness"])
@@ -105,9 +108,7 @@ def part_search(cfg: ParkingStudy, fig_dir, gmap, key):
             "time_s": float(sources["time_s"][i]),
             "switches": int(sources["switches"][i]),
             "fitness": float(sources["fitness"][i]),
-            "fitness_ratio_to_grid_best": float(sources["fitness"][i]) / grid["fitness"]
-            if grid["fitness"] > 0
-            else None,
+            "fitness_ratio_to_grid_best": ratio(sources["fitness"][i]),
         }
         for i in range(len(GA_SOLUTIONS))
     ]
