@@ -60,11 +60,19 @@ STEPS_RTOL = 1e-9
 def whole_steps(horizon: float, dt: float, key: str = "horizon") -> int:
     """The number of integrator steps ``horizon / dt`` when it is a whole number (to a relative
     :data:`STEPS_RTOL`); :class:`~pfjax.errors.InputError` naming ``key`` otherwise, with the two
-    nearest horizons that are: a run is never silently lengthened or shortened to whole steps."""
+    nearest values of the named setting that are (horizons, or steps when ``key`` names the step,
+    ``dt`` or ``<prefix>.dt``): a run is never silently lengthened or shortened to whole steps."""
     n = horizon / dt
     if abs(n - round(n)) > STEPS_RTOL * n:
-        lo, hi = math.floor(n) * dt, math.ceil(n) * dt
         g = lambda x: f"{x:.15g}"  # every digit the value has (20.0000001 is not 20), not float noise
+        if key.rpartition(".")[2] == "dt":  # the step was given: the steps that divide the horizon
+            lo, hi = horizon / math.ceil(n), horizon / max(math.floor(n), 1)
+            raise InputError(
+                f"{key}: must divide horizon = {g(horizon)} s into whole steps, got {g(dt)} s = {n:.10g} steps "
+                f"(e.g. {lo:.6g} or {hi:.6g} s)",
+                key,
+            )
+        lo, hi = math.floor(n) * dt, math.ceil(n) * dt
         raise InputError(
             f"{key}: must be a whole number of steps dt = {g(dt)} s, got {g(horizon)} s = {n:.10g} steps "
             f"(e.g. {g(lo)} or {g(hi)} s)",

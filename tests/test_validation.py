@@ -422,12 +422,19 @@ def test_a_horizon_of_a_fraction_of_a_step_is_refused_everywhere(tmp_path, capsy
     assert "got 20.0000001 s = 4000.00002 steps (e.g. 20 or 20.005 s)" in str(e.value)
     assert SimConfig(dt=0.01, horizon=30.0).n_steps == 3000  # 30 / 0.01 = 2999.9999999999995
     assert SimConfig(dt=0.003, horizon=19.998).n_steps == 6666
-    assert main(["simulate", "--path", "line", "--controller", "pi", "--horizon", "20", "--dt", "0.003", "--json"]) == 2
+    assert main(["simulate", "--path", "line", "--controller", "pi", "--horizon", "19", "--dt", "0.003", "--json"]) == 2
     err = capsys.readouterr().err
     assert (
         err.startswith("pfjax simulate: error: --horizon: must be a whole number of steps")
-        and "19.998 or 20.001 s" in err
+        and "18.999 or 19.002 s" in err
     )
+    # the step alone changed (the horizon at its default): the step is named, with the steps that fit
+    with pytest.raises(InputError, match=r"^dt: must divide horizon = 20 s into whole steps, got 0.003 s = 6666.66"):
+        SimConfig(dt=0.003)
+    assert main(["simulate", "--path", "line", "--controller", "pi", "--dt", "0.003", "--json"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pfjax simulate: error: --dt: must divide --horizon = 20 s into whole steps")
+    assert "(e.g. 0.00299985 or 0.0030003 s)" in err  # 20 / 6667 and 20 / 6666
     out = tmp_path / "never"
     code = main(["study", "--example", "default", "--set", "sim.horizon=20.001", "--out", str(out)])
     assert code == 2 and not out.exists()

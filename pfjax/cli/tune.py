@@ -288,7 +288,9 @@ def _cmd(args) -> dict:
             setting = {"config.dt": "dt", "config.horizon": "horizon"}.get(named)
             if setting is None:
                 raise e from None
-            if "whole number of steps" not in str(e) and "horizon / dt" not in str(e):
+            # SimConfig's messages that name the other setting too
+            words = ("whole number of steps", "into whole steps", "horizon / dt", "must be <= horizon", "must be >= dt")
+            if not any(w in str(e) for w in words):
                 raise errors.renamed(e, named, f"--{setting}") from None
             # the step count's dt and horizon by their flags too, as pfjax simulate words them; too many
             # steps is the two flags' together (--horizon/--dt), as in pfjax simulate and pfjax track

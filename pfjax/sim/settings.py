@@ -52,10 +52,14 @@ class SimConfig:
         """Checks every setting (:class:`~pfjax.errors.InputError` naming it)."""
         errors.number("dt", self.dt, positive=True, unit=" s")
         errors.number("horizon", self.horizon, positive=True, unit=" s")
+        # a step that does not fit the horizon names the step when only the step was changed
+        only_step = self.horizon == _DEFAULT_HORIZON and self.dt != _DEFAULT_DT
         if not self.horizon >= self.dt:
+            if only_step:
+                raise InputError(f"dt: must be <= horizon ({self.horizon:g} s), got {errors.shown(self.dt)}")
             raise InputError(f"horizon: must be >= dt ({self.dt:g} s), got {errors.shown(self.horizon)}")
         resources.check_steps(self.horizon, self.dt)
-        resources.whole_steps(self.horizon, self.dt)  # never rounded to whole steps
+        resources.whole_steps(self.horizon, self.dt, "dt" if only_step else "horizon")  # never rounded to whole steps
         if self.control_every is not None:
             errors.integer("control_every", self.control_every, low=1, high=resources.MAX_STEPS)
             if self.control_every > self.n_steps:  # one command for the whole run: a mistake, not a controller
@@ -99,3 +103,7 @@ def changed(base: SimConfig, changes: dict, key: str = "config") -> SimConfig:
         return dataclasses.replace(base, **changes)
     except InputError as e:
         raise (errors.renamed(e, e.key, f"{key}.{e.key}") if e.key in names else e) from None
+
+
+_DEFAULT_DT = SimConfig.dt
+_DEFAULT_HORIZON = SimConfig.horizon

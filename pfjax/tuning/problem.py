@@ -67,12 +67,6 @@ def in_words_of(e: errors.InputError, changes: dict | None) -> errors.InputError
     integrator steps when only the horizon was changed, name ``config.horizon``, not a key the
     caller did not give."""
     changes = changes or {}
-    if e.key == "config.horizon" and "horizon" not in changes and "dt" in changes and "must be >= dt" in str(e):
-        # a step longer than the (default) horizon: the step is what the caller gave
-        horizon = str(e).rpartition("got ")[2]  # SimConfig's "must be >= dt (.. s), got <horizon>"
-        return errors.InputError(
-            f"config.dt: must be at most the horizon ({horizon} s), got {changes['dt']:g}", "config.dt"
-        )
     if "horizon" not in changes:
         return e
     if e.key in ("config.success_from", "config.steady_window"):
