@@ -21,6 +21,7 @@ from scipy.stats import beta
 from units_check import numbers_without_units
 
 from pfjax.provenance import config_hash
+from pfjax.tracking.lemma import read_at
 
 STUDY = Path(__file__).resolve().parents[1] / "studies" / "vehicle_tracking.py"
 TABLES = ("lemma_runs", "lemma_table", "geometry", "mc_runs")
@@ -78,6 +79,12 @@ def test_quick_study_outputs_consistent(out):
         runs[ok].window_max_z.notna().all()
         and (runs.inside_bound == (runs.p.abs() < math.pi / 2 / runs.gamma_max_deg.map(math.radians))).all()
     )
+
+    # the flags read again from the window maxima at the configured tolerances are the simulator's
+    # (the verdict's tighter reading, pfjax.tracking.lemma.read_at, applies the simulator's rule)
+    again = read_at(runs, s["config"]["sim"]["tol_z"], s["config"]["sim"]["tol_phi"])
+    assert (again.converged == runs.converged).all() and (again.phi_converged == runs.phi_converged).all()
+    assert runs.converged.any() and (~runs.converged).any()  # both outcomes occur: the comparison can fail
 
     geo = s["geometry"]
     assert geo["max_abs_phi_minus_pgamma_when_abs_pgamma_lt_pi_2"] < 1e-12

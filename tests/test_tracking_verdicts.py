@@ -18,7 +18,17 @@ GEOMETRY = {
 
 
 def _runs(z, phi, status="ok", inside=True):
-    return {"inside_bound": inside, "status": status, "window_max_z": z, "window_max_phi_err": phi}
+    """A grid run with its flags as the simulator sets them at the default config's tolerances."""
+    sim = TrackingStudy().model_dump(mode="json")["sim"]
+    ok = status == "ok"
+    return {
+        "inside_bound": inside,
+        "status": status,
+        "window_max_z": z,
+        "window_max_phi_err": phi,
+        "converged": ok and z <= sim["tol_z"],
+        "phi_converged": ok and phi <= sim["tol_phi"],
+    }
 
 
 def _rows(runs, **geometry):

@@ -129,6 +129,17 @@ def outcomes(df: pd.DataFrame) -> dict[str, pd.Series]:
     }
 
 
+def read_at(df: pd.DataFrame, tol_z: float, tol_phi: float) -> pd.DataFrame:
+    """``df`` with ``converged`` and ``phi_converged`` read again at the tolerances ``tol_z`` (m) and
+    ``tol_phi`` (rad), as the simulator reads them (:class:`pfjax.tracking.simulate.TrackMetrics`):
+    status ok and the largest value over the final window (``window_max_z``, ``window_max_phi_err``)
+    at most the tolerance; the same runs judged tighter or looser than they were simulated."""
+    ok = df["status"] == "ok"
+    return df.assign(
+        converged=ok & (df["window_max_z"] <= tol_z), phi_converged=ok & (df["window_max_phi_err"] <= tol_phi)
+    )
+
+
 def four_way(df: pd.DataFrame, by: list[str]) -> pd.DataFrame:
     """Counts of the :func:`outcomes` per group, with ``n`` and ``equivalence_holds`` (``z_only == phi_only == 0``)."""
     masks = pd.DataFrame(outcomes(df)).astype(int)

@@ -84,7 +84,10 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "phi_only": ("runs", "finished runs with phi - p gamma -> 0 only"),
     "neither": ("runs", "finished runs with neither limit"),
     "failed": ("runs", "runs that did not finish (status other than ok)"),
-    "equivalence_holds": ("", "z_only == phi_only == 0"),
+    "equivalence_holds": (
+        "",
+        "z_only == phi_only == 0, as observed (Lemma 8.1 claims it inside the bound only; outside, a row tells what ran)",
+    ),
     # the geometric check (pfjax.tracking.lemma.sample_geometry)
     "kind": ("", "on_focus (z_d the focus point) or wrong_distance (z_d on the focus direction, farther)"),
     "gamma": (UNITS["final.*"]["gamma"], "steering angle gamma of the random state"),
