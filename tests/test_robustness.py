@@ -332,8 +332,29 @@ def test_slip_margin_censored_and_failing_first():
     first_fails = slip_margin(a, np.array([300, 500, 500, 500]), n, eps=0.05)
     assert first_fails["margin"] == 0.0 and not first_fails["censored"]
     assert first_fails["margin_lo"] == 0.0 and first_fails["resolution"] == 2.0
+    assert first_fails["fails_at_smallest"] and first_fails["fails_at_smallest_lo"]
+    assert first_fails["fails_at_smallest_hi"] and first_fails["table"][0]["hi"] < 0.7  # 300 of 500
     single = slip_margin([5.0], [10], [10], eps=0.05)
     assert single["censored"] and math.isnan(single["resolution"]) and single["margin_lo"] == 0.0
+    assert not allpass["fails_at_smallest"] and not allpass["fails_at_smallest_lo"]
+
+
+def test_a_reading_that_fails_at_the_smallest_amplitude_is_flagged_not_told_by_its_zero():
+    """A sweep from 0 deg whose every amplitude passes 20 of 20: the point estimate is safe to 10 deg
+    (censored), but the lower CP bound at 20 of 20, (0.025)^(1/20) = 0.83, misses 0.95 already at
+    0 deg: margin_lo is 0 with its flag (no conservative margin), unlike a sweep that passes at 0 and
+    fails at the next amplitude, whose margin of 0 is a margin."""
+    a, n = np.array([0.0, 5.0, 10.0]), np.full(3, 20)
+    out = slip_margin(a, n, n, eps=0.05)
+    assert out["table"][0]["lo"] == pytest.approx(0.025 ** (1 / 20)) and out["table"][0]["lo"] < 0.95
+    assert out["margin"] == 10.0 and out["censored"] and not out["fails_at_smallest"]
+    assert out["margin_lo"] == 0.0 and out["fails_at_smallest_lo"] and not out["fails_at_smallest_hi"]
+    safe_at_0 = slip_margin(a, np.array([1000, 500, 500]), np.array([1000, 1000, 1000]), eps=0.05)
+    assert safe_at_0["margin"] == safe_at_0["margin_lo"] == 0.0
+    assert not safe_at_0["fails_at_smallest"] and not safe_at_0["fails_at_smallest_lo"]
+    from pfjax.report.study_format import fmt_margin
+
+    assert fmt_margin(out) == "≥ 10° [none, 10]" and fmt_margin(safe_at_0) == "0° [0, 0]"
 
 
 def test_slip_margin_sorts_and_validates():

@@ -60,8 +60,11 @@ def slip_margin(
 
     Because ``lo_j <= p_hat_j <= hi_j``, ``margin_lo <= margin <= margin_hi`` always.
 
-    Edge cases: if the smallest amplitude already fails, the margin is ``0`` (no tested amplitude
-    is known to be safe; amplitudes are magnitudes, ``a_1 >= 0``). If every amplitude passes,
+    Edge cases: if the smallest amplitude already fails, the margin is ``0`` and no tested
+    amplitude is known to be safe (amplitudes are magnitudes, ``a_1 >= 0``); ``0`` alone cannot
+    tell this from a sweep that passes at ``a_1 = 0`` and fails beyond, so each reading has its flag:
+    ``fails_at_smallest`` (the point estimate), ``fails_at_smallest_lo`` and ``fails_at_smallest_hi``
+    (the bounds): no margin in that reading. If every amplitude passes,
     the margin is the largest amplitude tested and ``censored`` is True: the true margin is at
     least that (right-censored).
 
@@ -78,8 +81,9 @@ def slip_margin(
         conf: two-sided confidence of the per-amplitude intervals.
 
     Returns:
-        ``{"margin", "margin_lo", "margin_hi", "resolution", "censored", "eps", "table"}`` with
-        ``table`` one dict ``{"amplitude", "n", "k", "rate", "lo", "hi"}`` per amplitude, ascending.
+        ``{"margin", "margin_lo", "margin_hi", "fails_at_smallest", "fails_at_smallest_lo",
+        "fails_at_smallest_hi", "resolution", "censored", "eps", "table"}`` with ``table`` one dict
+        ``{"amplitude", "n", "k", "rate", "lo", "hi"}`` per amplitude, ascending.
     """
     eps = check_open_unit("eps", eps)
     a, k, n = _sweep(amplitudes, successes, trials)
@@ -89,6 +93,9 @@ def slip_margin(
 
     def margin_of(r):
         return float(grid[_last_safe_index(r >= 1.0 - eps) + 1])
+
+    def fails_first(r) -> bool:  # no margin in this reading: the smallest amplitude already fails
+        return bool(r[0] < 1.0 - eps)
 
     j = _last_safe_index(rate >= 1.0 - eps)
     censored = j == a.size - 1
@@ -111,6 +118,9 @@ def slip_margin(
         "margin": margin_of(rate),
         "margin_lo": margin_of(lo),
         "margin_hi": margin_of(hi),
+        "fails_at_smallest": fails_first(rate),
+        "fails_at_smallest_lo": fails_first(lo),
+        "fails_at_smallest_hi": fails_first(hi),
         "resolution": resolution,
         "censored": bool(censored),
         "eps": eps,

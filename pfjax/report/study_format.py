@@ -90,9 +90,12 @@ def cell(text, *, cls: str = "", swatch: str | None = None) -> Cell:
 
 
 def fmt_margin(m: dict | None) -> str:
-    """A slip margin with its interval: ``"5° [2.5, 7.5]"``, ``"≥ 20° [20, 20]"`` when censored."""
+    """A slip margin with its interval: ``"5° [2.5, 7.5]"``, ``"≥ 20° [20, 20]"`` when censored,
+    ``"10° [none, 10]"`` when the conservative reading already fails at the smallest amplitude
+    (:func:`pfjax.metrics.margins.slip_margin`'s ``fails_at_smallest_lo``)."""
     if not m:
         return "—"
     if m.get("fails_at_smallest"):
         return f"none: fails at {m['table'][0]['amplitude']:g}°"
-    return f"{'≥ ' if m['censored'] else ''}{m['margin']:g}° [{m['margin_lo']:g}, {m['margin_hi']:g}]"
+    lo = "none" if m.get("fails_at_smallest_lo") else f"{m['margin_lo']:g}"
+    return f"{'≥ ' if m['censored'] else ''}{m['margin']:g}° [{lo}, {m['margin_hi']:g}]"
