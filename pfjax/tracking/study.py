@@ -129,11 +129,18 @@ def track_config(cfg: dict) -> TrackConfig:
     )
 
 
-def lemma_part(cfg: dict, key, chunk: int) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+def lemma_part(
+    cfg: dict, key, chunk: int, config: TrackConfig | None = None
+) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """The Lemma 8.1 grid: per-run rows, the four outcomes per mode and region, and the runs
-    outside the bound where exactly one limit holds (by mode, gamma_max and p)."""
+    outside the bound where exactly one limit holds (by mode, gamma_max and p).
+
+    ``cfg`` is a validated study config as a dict (``study_config.load(...).model_dump(mode="json")``),
+    ``key`` the study's key (:func:`pfjax.provenance.seed_key`), ``chunk`` the runs per jitted batch;
+    ``config`` the settings of the runs, :func:`track_config` of ``cfg`` unless given (one with
+    ``record=True`` and the same numbers gives the same rows and reuses a recording program)."""
     scs, rows = B.lemma_grid(cfg, jax.random.fold_in(key, 0))
-    lemma_df = B.frame(rows, B.run_chunks(scs, track_config(cfg), chunk, "lemma grid"))
+    lemma_df = B.frame(rows, B.run_chunks(scs, config or track_config(cfg), chunk, "lemma grid"))
     lemma_df["region"] = np.where(lemma_df["inside_bound"], "|p| < pi/(2 gamma_max)", "|p| >= pi/(2 gamma_max)")
     table = four_way(lemma_df, ["mode", "region"])
     outside = lemma_df[~lemma_df.inside_bound & (lemma_df.status == "ok")]
@@ -172,13 +179,14 @@ def geometry_part(cfg: dict, key) -> tuple[pd.DataFrame, dict]:
     return geo_df, summary
 
 
-def monte_carlo_part(cfg: dict, key, chunk: int) -> tuple[pd.DataFrame, dict]:
-    """The robustness Monte Carlo, forward then backward: per-run rows and per-mode summaries."""
+def monte_carlo_part(cfg: dict, key, chunk: int, config: TrackConfig | None = None) -> tuple[pd.DataFrame, dict]:
+    """The robustness Monte Carlo, forward then backward: per-run rows and per-mode summaries
+    (arguments as :func:`lemma_part`'s)."""
     mc, summary = [], {}
     for f in (1, -1):
         mode = "forward" if f > 0 else "backward"
         scs, rows = B.mc_sample(cfg, f, jax.random.fold_in(key, 10 + (f > 0)))
-        df = B.frame(rows, B.run_chunks(scs, track_config(cfg), chunk, f"Monte Carlo ({mode})"))
+        df = B.frame(rows, B.run_chunks(scs, config or track_config(cfg), chunk, f"Monte Carlo ({mode})"))
         ok = df[df.status == "ok"]
         summary[mode] = {
             **success_summary(df["success"].astype(bool).to_numpy()),
