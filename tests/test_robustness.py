@@ -505,3 +505,30 @@ def test_rho_iae_of_the_failure_drivers_leaves_failed_runs_out():
     assert row["rho_metric"] == pytest.approx(spearmanr(x[ok], iae[ok]).statistic, abs=1e-12)
     assert row["rho_metric"] > 0.5 and spearmanr(x, iae).statistic < 0
     assert row["rho_failure"] == pytest.approx(spearmanr(x, failed).statistic, abs=1e-12)
+
+
+def test_worst_first_orders_failures_by_time_then_late_error():
+    """The report's and notebook 02's order of the worst runs: failed first (earliest first), then
+    the largest |d| over the success window, stable on ties; checked against a sort by a key tuple."""
+    from pfjax.metrics.robustness import worst_first
+
+    rng = np.random.default_rng(5)
+    n = 200
+    runs = pd.DataFrame(
+        {
+            "status": rng.choice(["ok", "diverged", "singular"], n, p=[0.7, 0.2, 0.1]),
+            "fail_time": rng.choice([1.0, 2.5, 7.0], n),
+            "late_max_abs_d": rng.choice([0.01, 0.02, np.nan, 0.5], n),
+            "run": np.arange(n),
+        }
+    )
+    runs.loc[runs.status == "ok", "fail_time"] = np.nan
+    got = worst_first(runs)["run"].tolist()
+
+    def key(r):
+        late = np.inf if np.isnan(r.late_max_abs_d) else r.late_max_abs_d
+        ft = np.inf if np.isnan(r.fail_time) else r.fail_time
+        return (r.status == "ok", ft, -late, r.run)
+
+    assert got == [r.run for r in sorted(runs.itertuples(), key=key)]
+    assert runs.loc[got[0], "status"] != "ok" and worst_first(runs.iloc[:0]).empty

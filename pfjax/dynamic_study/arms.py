@@ -19,7 +19,7 @@ import numpy as np
 
 from pfjax import controllers as C
 from pfjax import paths
-from pfjax.dynamic_study.config import KinematicVsDynamic
+from pfjax.dynamic_study.config import KinematicVsDynamic, dynamic, kinematic_arm
 from pfjax.models import single_track as st
 from pfjax.montecarlo.dists import Dist
 from pfjax.montecarlo.scenario_config import NoiseSpec, SimSpec
@@ -99,8 +99,7 @@ def _scaled(e, gains: dict, s: float, key: str) -> dict:
 
 
 def _dynamic(spec: dict, config: KinematicVsDynamic, mu=None) -> dict:
-    out = copy.deepcopy(spec)
-    out["vehicle"] = {**out.get("vehicle", {}), "model": "st"}
+    out = dynamic(copy.deepcopy(spec))
     out["vehicle"]["mu"] = mu if mu is not None else {"dist": "uniform", "low": config.mu_low, "high": config.mu_high}
     return out
 
@@ -118,14 +117,13 @@ def arms(config: KinematicVsDynamic, designed: list[dict] | None = None) -> dict
     """Arm name -> its study config (pfjax's study schema)."""
     base = {**copy.deepcopy(config.study), "name": config.name}
     a_max = max(config.slip_ranges_deg)
-    grip = f"dynamic_mu{config.mu_grip:g}"
-    out = {"dynamic": _dynamic(base, config), grip: _dynamic(base, config, config.mu_grip)}
-    for a in config.slip_ranges_deg:
-        out[f"kinematic_{a:g}deg"] = _kinematic(base, a)
+    out = {"dynamic": _dynamic(base, config), config.grip_arm: _dynamic(base, config, config.mu_grip)}
+    for a in config.slip_ranges_deg:  # the config refuses ranges that name the same arm
+        out[kinematic_arm(a)] = _kinematic(base, a)
     if designed:
         with_designs = {**base, "controllers": designed}
         out["designs_dynamic"] = _dynamic(with_designs, config)
-        out[f"designs_kinematic_{a_max:g}deg"] = _kinematic(with_designs, a_max)
+        out[kinematic_arm(a_max, "designs_kinematic_")] = _kinematic(with_designs, a_max)
     if config.car.enabled:
         car = car_study(config)
         out["car_dynamic"] = _dynamic(car, config)
@@ -133,7 +131,7 @@ def arms(config: KinematicVsDynamic, designed: list[dict] | None = None) -> dict
         for key in ("L", "delta_max_deg", "delta_rate_max_deg"):
             out["car_dynamic"]["vehicle"].pop(key, None)
         for a in sorted({a_max, 0.0}, reverse=True):
-            out[f"car_kinematic_{a:g}deg"] = _kinematic(car, a)
+            out[kinematic_arm(a, "car_kinematic_")] = _kinematic(car, a)
     return out
 
 
@@ -152,8 +150,11 @@ def car_study(config: KinematicVsDynamic) -> dict:
     """The robot study scaled to the car (module docstring): lengths x S, speeds and times x sqrt(S)
     (the horizon rounded to whole steps of the car's ``dt``; the failure, settling and success bands
     and the lateral noise are lengths too), the paths as splines through the scaled source paths, the
-    controllers' gains Froude-scaled by their units (:func:`scaled_gains`)."""
+    controllers' gains Froude-scaled by their units (:func:`scaled_gains`); the steering actuator's
+    time constant (s) and the speed loop's gain (1/s) are the dynamic arms' (``study.vehicle``, the
+    schema's defaults where not given), times ``sqrt(S)`` and ``1 / sqrt(S)``."""
     p = st.parameter_set(config.car.params)
+    vehicle = config.dynamic_vehicle()
     s = float(p.l_f + p.l_r) / ROBOT_WHEELBASE
     rs = math.sqrt(s)
     spec = copy.deepcopy(config.study)
@@ -171,7 +172,11 @@ def car_study(config: KinematicVsDynamic) -> dict:
     spec["success"] = {"band": spec["success"]["band"] * s, "from_s": spec["success"]["from_s"] * rs}
     ini = spec["initial"]
     ini["start_along_m"], ini["lateral_offset"] = _scale(ini["start_along_m"], s), _scale(ini["lateral_offset"], s)
-    spec["vehicle"] = {"speed": _scale(spec["vehicle"]["speed"], rs), "tau_delta_s": 0.05 * rs, "k_v": 5.0 / rs}
+    spec["vehicle"] = {
+        "speed": _scale(spec["vehicle"]["speed"], rs),
+        "tau_delta_s": vehicle.tau_delta_s * rs,
+        "k_v": vehicle.k_v / rs,
+    }
     # the kinematic arms get the car's wheelbase, steering limit and steering-rate limit (0.4 rad/s for
     # CommonRoad's cars), so that the arms differ by the tyres only
     spec["vehicle"].update(
@@ -215,7 +220,7 @@ def check(config: KinematicVsDynamic) -> None:
     from pfjax.montecarlo.checks import check_resources
     from pfjax.montecarlo.config import StudySpec
 
-    grip = f"dynamic_mu{config.mu_grip:g}"
+    grip = config.grip_arm
     if config.car.enabled:
         for i, q in enumerate(config.study["paths"]):
             e = paths.PATHS.get(q.get("kind"))

@@ -111,7 +111,10 @@ class KinematicVsDynamic(ConfigModel):
         default_factory=lambda: copy.deepcopy(STUDY),
         description="the Monte Carlo study config the robot arms share: keys of a study config, given keys "
         "replacing those of pfjax.dynamic_study.config.STUDY (the [study] tables of "
-        "studies/kinematic_vs_dynamic.toml); not slip, vehicle.model or vehicle.mu, which the arms set [-]",
+        "studies/kinematic_vs_dynamic.toml), validated as the dynamic arms' (vehicle.model = \"st\"): "
+        "vehicle.tau_delta_s and vehicle.k_v set the dynamic arms' actuator and speed loop (and the designs'), "
+        "not the kinematic model's keys (vehicle.L, vehicle.delta_max_deg, vehicle.delta_rate_max_deg, "
+        "vehicle.convention) nor slip, vehicle.model, vehicle.mu and vehicle.params, which the arms set [-]",
     )
 
     @field_validator("study", mode="before")
@@ -133,14 +136,49 @@ class KinematicVsDynamic(ConfigModel):
         bad = [a for a in self.slip_ranges_deg if not 0 <= a < 90]
         if bad:
             raise ValueError(f"slip_ranges_deg: expected angles in [0, 90) deg, got {bad[0]:g}")
+        names = [kinematic_arm(a) for a in self.slip_ranges_deg]
+        repeated = sorted({x for x in names if names.count(x) > 1})
+        if repeated:
+            raise ValueError(
+                f"slip_ranges_deg: each range names its arm (kinematic_<A:g>deg, 6 significant digits), and "
+                f"{', '.join(repeated)} is given more than once ({self.slip_ranges_deg}); give distinct ranges"
+            )
         _refuse_arm_keys(self.study)
         try:
-            StudySpec.model_validate({**self.study, "name": self.name})
+            StudySpec.model_validate(dynamic({**self.study, "name": self.name}))
         except ValidationError as e:
-            raise ValueError(
-                "study." + format_error(e, StudySpec).replace("did you mean '", "did you mean 'study.")
-            ) from None
+            message = format_error(e, StudySpec).replace("did you mean '", "did you mean 'study.")
+            if f'model = "{DYNAMIC_MODEL}"' in message:
+                message += " (study is the dynamic arms' study config)"
+            raise ValueError("study." + message) from None
         return self
+
+    def dynamic_vehicle(self):
+        """The dynamic arms' vehicle (:class:`pfjax.montecarlo.scenario_config.VehicleSpec` of
+        ``study.vehicle`` with ``model`` = :data:`DYNAMIC_MODEL`): its speed range (m/s), steering
+        actuator ``tau_delta_s`` (s) and speed loop ``k_v`` (1/s), the schema's defaults where not given."""
+        from pfjax.montecarlo.config import VehicleSpec
+
+        return VehicleSpec.model_validate(dynamic(self.study)["vehicle"])  # valid: _check validated it
+
+    @property
+    def grip_arm(self) -> str:
+        """The high-friction arm's name (``dynamic_mu<mu_grip:g>``)."""
+        return f"dynamic_mu{self.mu_grip:g}"
+
+
+#: The dynamic arms' vehicle model (:class:`pfjax.montecarlo.scenario_config.VehicleSpec`'s ``model``).
+DYNAMIC_MODEL = "st"
+
+
+def dynamic(spec: dict) -> dict:
+    """A copy of the study config ``spec`` with the dynamic arms' vehicle model (:data:`DYNAMIC_MODEL`)."""
+    return {**spec, "vehicle": {**spec.get("vehicle", {}), "model": DYNAMIC_MODEL}}
+
+
+def kinematic_arm(a: float, prefix: str = "kinematic_") -> str:
+    """The name of the kinematic arm with constant slip uniform on ``+-a`` deg per axle."""
+    return f"{prefix}{a:g}deg"
 
 
 #: The ``study`` keys each arm sets itself (:mod:`pfjax.dynamic_study.arms`), and where they come from.
@@ -173,4 +211,4 @@ def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: b
     return load_model(KinematicVsDynamic, path, overrides, presets=[QUICK] if quick else [])[0]
 
 
-__all__ = ["ARM_KEYS", "QUICK", "STUDY", "Car", "Designs", "KinematicVsDynamic", "load"]
+__all__ = ["ARM_KEYS", "DYNAMIC_MODEL", "QUICK", "STUDY", "Car", "Designs", "KinematicVsDynamic", "dynamic", "kinematic_arm", "load"]

@@ -1,7 +1,7 @@
 """The mixed H2/H-inf, integral and polytopic gains designed on the kinematic model and redesigned on
 the dynamic model's linearised lateral-yaw dynamics (:mod:`pfjax.synthesis.dynamic_plant`) at the
 robot scale: the study's speed range (the support of its distribution; the operating point at its
-midpoint) and ``tau_delta``, friction range ``[mu_low, mu_high]``."""
+midpoint) and the dynamic arms' ``tau_delta_s`` (s), friction range ``[mu_low, mu_high]``."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ import numpy as np
 from pfjax.dynamic_study.arms import ROBOT_WHEELBASE
 from pfjax.dynamic_study.config import KinematicVsDynamic
 from pfjax.models import single_track as st
-from pfjax.montecarlo.config import VehicleSpec
 
 
 def _plants(p, tau: float, mus, speeds, integral: bool = False) -> list:
@@ -50,10 +49,11 @@ def designs(config: KinematicVsDynamic) -> tuple[list[dict], dict]:
 
     d = config.designs
     w: dict = {"alpha": d.alpha, "beta": d.beta}
-    v_lo, v_hi = VehicleSpec.model_validate(config.study["vehicle"]).speed.bounds()  # any kind of distribution
+    vehicle = config.dynamic_vehicle()
+    v_lo, v_hi = vehicle.speed.bounds()  # any kind of distribution
     v0, mu0 = 0.5 * (v_lo + v_hi), 0.5 * (config.mu_low + config.mu_high)
     p, L = st.robot_params(), ROBOT_WHEELBASE
-    tau = float(config.study["vehicle"].get("tau_delta_s", 0.05))
+    tau = float(vehicle.tau_delta_s)
     kin = {
         "mixed": mixed_h2_hinf(slip_design_plant(v0, L), **w).K,
         "integral": integral_mixed(v0, L, **w).K,

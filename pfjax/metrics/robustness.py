@@ -34,6 +34,7 @@ __all__ = [
     "metric_quantiles",
     "success_summary",
     "supported_statement",
+    "worst_first",
     "zero_failure_n",
 ]
 
@@ -345,3 +346,20 @@ def failure_drivers(
     )
     order = np.argsort(-np.nan_to_num(np.abs(out["rho_failure"].to_numpy()), nan=-1.0), kind="stable")
     return out.iloc[order].reset_index(drop=True)
+
+
+def worst_first(runs: pd.DataFrame) -> pd.DataFrame:
+    """``runs`` (rows of a run table: ``status``, ``fail_time`` s, ``late_max_abs_d`` m) ordered worst
+    first: the runs that failed (status other than ``ok``) first, the earliest failure first, then
+    the largest ``late_max_abs_d`` (|d| over the success window); ties keep their order (a stable
+    sort). The order of the report's worst runs and of a replay of the worst run."""
+    key = pd.DataFrame(
+        {
+            "failed": runs["status"] != "ok",
+            "fail_time": runs["fail_time"].fillna(np.inf),
+            "late": runs["late_max_abs_d"].fillna(np.inf),
+        },
+        index=runs.index,
+    )
+    order = key.sort_values(["failed", "fail_time", "late"], ascending=[False, True, False], kind="stable").index
+    return runs.loc[order]

@@ -5,9 +5,9 @@ beyond counting rows)."""
 
 from __future__ import annotations
 
-import numpy as np
 import pandas as pd
 
+from pfjax.metrics.robustness import worst_first
 from pfjax.report.study_format import DASH, cell, fmt_ci, fmt_margin, fmt_mm, fmt_num, fmt_p, fmt_pct
 from pfjax.sim.status import STATUS_NAMES
 
@@ -116,14 +116,11 @@ def precision_rows(summary: dict, colors: dict) -> list[list]:
 
 
 def worst_runs(runs: pd.DataFrame, params: list[str], n_show: int = 5) -> dict[str, list[list]]:
-    """Per controller, the worst sampled runs: failures first (earliest failure first), then the
-    largest late max |d|."""
+    """Per controller, the worst sampled runs (:func:`pfjax.metrics.robustness.worst_first`): failures
+    first (earliest failure first), then the largest late max |d|."""
     out = {}
     for name, g in runs.groupby("controller", sort=False):
-        g = g.assign(
-            _failed=(g["status"] != "ok"), _ft=g["fail_time"].fillna(np.inf), _late=g["late_max_abs_d"].fillna(np.inf)
-        )
-        g = g.sort_values(["_failed", "_ft", "_late"], ascending=[False, True, False], kind="stable").head(n_show)
+        g = worst_first(g).head(n_show)
         out[name] = [
             [
                 cell(r.path),

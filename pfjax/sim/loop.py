@@ -51,11 +51,14 @@ the focus-point tracker's, share the codes ``0-3``), ``-1`` for the parking robo
     0     ok: ran the whole horizon (live)            ok: ran the whole horizon      converged: |x| + sqrt(y² + tan²θ) < tol
     1     nonfinite: pose or measurement NaN/inf      nonfinite: follower NaN/inf    timeout: t ≥ t_max
     2     diverged: |d| > SimConfig.d_fail (m)        diverged: |z~| > z_fail (m)    too_many_switches: > max_switches
-    3     singular: 1 - kappa d <= 1e-6               singular: |det M / (l p)|      heading_limit: |θ| ≥ π/2
+    3     singular: 1 - kappa d <= SINGULAR_TOL       singular: |det M / (l p)|      heading_limit: |θ| ≥ π/2
                                                       < sing_tol (no inverse)
     4     path_end: closest point at the domain end   -                              nonfinite: state NaN/inf
     5     -                                           -                              stuck: reversing in place
     6     -                                           -                              start_overlap: body on an obstacle
+
+``SINGULAR_TOL`` is :data:`pfjax.sim.status.SINGULAR_TOL`, the tracker's ``sing_tol`` is
+``TrackConfig.sing_tol`` and the shared codes ``0-3`` of ``TrackStatus`` are :class:`~pfjax.sim.status.Status`'s.
 
 The dynamic vehicle (:mod:`pfjax.sim.dynamic`, CommonRoad's single-track model) uses the slip
 vehicle's :class:`~pfjax.sim.status.Status` with the same checks on its rear axle's measurement (and

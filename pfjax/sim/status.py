@@ -14,12 +14,16 @@ import jax.numpy as jnp
 from pfjax.numerics import elementary as E
 from pfjax.numerics.layout import first_true
 
+#: A sample is ``singular`` when ``1 - kappa d <= SINGULAR_TOL`` (dimensionless; ``kappa`` in 1/m,
+#: ``d`` in m): the Frenet model's valid region ends at or past the bend's centre, where ``1 - kappa d = 0``.
+SINGULAR_TOL = 1e-6
+
 
 class Status(IntEnum):
     OK = 0  #: ran the whole horizon
     NONFINITE = 1  #: a state or measurement became NaN or infinite
     DIVERGED = 2  #: |d| exceeded ``SimConfig.d_fail``
-    SINGULAR = 3  #: left the Frenet model's valid region, 1 - kappa d <= 1e-6 (at or past the bend's centre)
+    SINGULAR = 3  #: left the Frenet model's valid region, 1 - kappa d <= SINGULAR_TOL (at or past the bend's centre)
     PATH_END = 4  #: the closest point reached an end of the path's valid domain
 
 
@@ -30,9 +34,9 @@ def classify(finite, abs_d, one_minus_kd, at_end, d_fail: float):
     """Status of one sample (int32), the first that holds winning: non-finite; the path's end (the
     closest point held at the end of the path's domain, where ``d`` is the distance to that end
     point and ``kappa`` the end's, no longer Frenet quantities: a start beyond the end is
-    ``path_end``, not a divergence); diverged; singular."""
+    ``path_end``, not a divergence); diverged; singular (``one_minus_kd = 1 - kappa d <= SINGULAR_TOL``)."""
     return first_true(
-        [~finite, at_end, abs_d > d_fail, one_minus_kd <= 1e-6],
+        [~finite, at_end, abs_d > d_fail, one_minus_kd <= SINGULAR_TOL],
         [Status.NONFINITE, Status.PATH_END, Status.DIVERGED, Status.SINGULAR],
         jnp.int32(Status.OK),
     )

@@ -15,6 +15,9 @@ from pfjax import errors
 from pfjax.errors import InputError
 from pfjax.resources import MAX_STEPS, check_steps, whole_steps
 from pfjax.tables import TRACK_UNITS as UNITS
+from pfjax.tracking.controller import FocusGains
+from pfjax.tracking.model import FollowerParams
+from pfjax.tracking.simulate import TrackConfig
 
 __all__ = ["LEADERS", "MAX_STEPS", "MODES", "UNITS", "check_time", "nonzero", "run"]
 
@@ -29,8 +32,6 @@ def check_offset(key: str, distance: float, of: str = "") -> None:
     start point reaches ``TrackConfig.z_fail``: the run would end at once as diverged (``of``: what
     the distance is of, in the message). The one check of :func:`run`'s ``offset`` and the study
     config's (``lemma.offsets``, ``mc.offset_max``)."""
-    from pfjax.tracking.simulate import TrackConfig
-
     z_fail = TrackConfig.z_fail
     if distance >= z_fail:
         raise InputError(
@@ -59,14 +60,17 @@ def check_time(horizon: float, dt: float, window: float | None = None) -> int:
     """The number of integrator steps of a run of ``horizon`` s at step ``dt`` s (both > 0).
 
     :class:`InputError` naming ``dt`` when ``dt > horizon``; ``horizon/dt`` above
-    :data:`pfjax.resources.MAX_STEPS` steps; ``horizon`` when it is not a whole number of steps
-    (:func:`pfjax.resources.whole_steps`: a run is never rounded); ``window`` when the final window
-    over which the limits are checked is longer than the horizon.
+    :data:`pfjax.resources.MAX_STEPS` steps; when ``dt`` does not divide ``horizon`` into whole steps
+    (:func:`pfjax.resources.whole_steps`: a run is never rounded), ``dt`` if only the step differs
+    from its default (``horizon`` is ``TrackConfig.horizon``), else ``horizon`` (the rule of
+    :class:`pfjax.sim.settings.SimConfig`); ``window`` when the final window over which the limits
+    are checked is longer than the horizon.
     """
     if dt > horizon:
         raise InputError(f"dt: must be <= horizon ({horizon:g} s), got {dt:g}", "dt")
     check_steps(horizon, dt, "horizon/dt")  # names both: the command line shows it as --horizon/--dt
-    n = whole_steps(horizon, dt)
+    only_step = horizon == TrackConfig.horizon and dt != TrackConfig.dt
+    n = whole_steps(horizon, dt, "dt" if only_step else "horizon")
     if window is not None and window > horizon:
         raise InputError(f"window: must be <= horizon ({horizon:g} s), got {window:g}", "window")
     return n
@@ -166,16 +170,16 @@ def run(
     leader="line",
     speed=1.0,
     stop_and_go=0.0,
-    a=1.0,
-    k=1.0,
+    a=FollowerParams().a,
+    k=FocusGains().k,
     v_max=3.0,
     omega_max_deg=90.0,
     offset=(-0.5, 0.5),
     heading_error_deg=10.0,
     beta_r_deg=0.0,
     beta_f_deg=0.0,
-    horizon=30.0,
-    dt=0.01,
+    horizon=TrackConfig.horizon,
+    dt=TrackConfig.dt,
 ) -> dict:
     """One run of a car-like follower tracking a leader through its focus point.
 
@@ -197,8 +201,8 @@ def run(
         speed: the leader's speed V0, m/s, > 0.
         stop_and_go: depth of the leader's stop-and-go speed profile (period 10 s), dimensionless,
             in [0, 1] (0: constant speed; 1: the leader stops once a period).
-        a: the follower's wheelbase, m, > 0.
-        k: error decay rate of the linearised loop, 1/s, > 0.
+        a: the follower's wheelbase, m, > 0 (default ``FollowerParams.a``).
+        k: error decay rate of the linearised loop, 1/s, > 0 (default ``FocusGains.k``).
         v_max: the follower's speed limit, m/s, > 0.
         omega_max_deg: steering-rate limit, deg/s, > 0.
         offset: the follower's initial displacement ``(along, left)`` in the leader's frame, m
@@ -209,8 +213,10 @@ def run(
         beta_f_deg: constant front-wheel slip angle, deg, |beta_f_deg| < 90.
         horizon: simulated time, s, > 0 (the command line's ``--horizon``): a whole number of
             steps ``dt`` (to a relative 1e-9, :data:`pfjax.resources.STEPS_RTOL`), never rounded; the result's
-            ``T`` is ``round(horizon / dt) * dt``, equal to it up to float round-off.
-        dt: integrator step, s, in (0, horizon], at most 2e6 steps in ``horizon``.
+            ``T`` is ``round(horizon / dt) * dt``, equal to it up to float round-off (default
+            ``TrackConfig.horizon``).
+        dt: integrator step, s, in (0, horizon], at most 2e6 steps in ``horizon`` (default
+            ``TrackConfig.dt``).
 
     Returns:
         The dict ``pfjax track --json`` prints: the arguments used (``mode``, ``f``, ``p``, ``l``,
@@ -228,7 +234,8 @@ def run(
     Raises:
         InputError: a bad argument; the message starts with its name (``"p: must be nonzero ..."``),
             or ``horizon/dt`` when the run would take more than 2e6 steps; ``horizon`` when it is
-            not a whole number of steps.
+            not a whole number of steps, ``dt`` when only the step was changed from its default
+            (:func:`check_time`).
     """
     c = _check(**locals())  # exactly the arguments above, by name
     import jax
@@ -242,14 +249,11 @@ def _simulate(c: dict) -> dict:
     import numpy as np
 
     from pfjax.sim.slip_profiles import constant_slip
-    from pfjax.tracking.controller import FocusGains
     from pfjax.tracking.geometry import lemma_bound, p_bound
     from pfjax.tracking.leader import by_name
     from pfjax.tracking.lemma import zero_dynamics_stable
-    from pfjax.tracking.model import FollowerParams
     from pfjax.tracking.simulate import (
         TRACK_STATUS_NAMES,
-        TrackConfig,
         initial_states,
         scenario,
         simulate_one,
@@ -278,7 +282,7 @@ def _simulate(c: dict) -> dict:
     )
     slip = constant_slip(math.radians(c["beta_r_deg"]), math.radians(c["beta_f_deg"]))
     sc = scenario(params, ld, gains=FocusGains(k=c["k"]), init=init, slip=slip)
-    cfg = TrackConfig(dt=c["dt"], horizon=c["horizon"], window=min(5.0, c["horizon"] / 3))
+    cfg = TrackConfig(dt=c["dt"], horizon=c["horizon"], window=min(TrackConfig.window, c["horizon"] / 3))
     r = host(simulate_one(sc, config=cfg))
     m = r.metrics
     lo, hi = p_bound(gmax, f)

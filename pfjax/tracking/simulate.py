@@ -39,6 +39,7 @@ from pfjax.sim import batch, loop
 from pfjax.sim.integrators import rk4_step
 from pfjax.sim.loop import stack, unstack  # noqa: F401  (re-exported: a batch of runs, run i of a batch)
 from pfjax.sim.slip_profiles import SlipProfile, constant_slip, slip_at
+from pfjax.sim.status import Status
 from pfjax.tracking.controller import Command, FocusGains, focus_control, steering_stop
 from pfjax.tracking.geometry import Connection, connection, focus_point, tracking_error
 from pfjax.tracking.leader import Leader, position, position_velocity, start_heading
@@ -46,13 +47,13 @@ from pfjax.tracking.model import Follower, FollowerParams, as_arrays, follower_r
 
 
 class TrackStatus(IntEnum):
-    """The tracker's run status (codes shared with :class:`pfjax.sim.status.Status`; the one table is in
-    :mod:`pfjax.sim.loop`)."""
+    """The tracker's run status: the codes ``0-3`` of :class:`pfjax.sim.status.Status`, each read from
+    that member of the same name (the one table of their meanings is in :mod:`pfjax.sim.loop`)."""
 
-    OK = 0  #: ran the whole horizon
-    NONFINITE = 1  #: a state became NaN or infinite
-    DIVERGED = 2  #: |z~| exceeded TrackConfig.z_fail
-    SINGULAR = 3  #: |det M / (l p)| < sing_tol: the input matrix could not be inverted
+    OK = Status.OK.value  #: ran the whole horizon
+    NONFINITE = Status.NONFINITE.value  #: a state became NaN or infinite
+    DIVERGED = Status.DIVERGED.value  #: |z~| exceeded TrackConfig.z_fail
+    SINGULAR = Status.SINGULAR.value  #: |det M / (l p)| < sing_tol: the input matrix could not be inverted
 
 
 TRACK_STATUS_NAMES = {int(s): s.name.lower() for s in TrackStatus}
@@ -60,6 +61,10 @@ TRACK_STATUS_NAMES = {int(s): s.name.lower() for s in TrackStatus}
 
 @dataclasses.dataclass(frozen=True)
 class TrackConfig:
+    """Static settings of one tracking run (hashable: a jitted program's static argument). The
+    defaults are those of :func:`pfjax.tracking.run`, ``pfjax track`` and the study's ``[sim]`` section
+    (:class:`pfjax.tracking.study_config.TrackSim`), which read them from here."""
+
     dt: float = 0.01  # s
     horizon: float = 30.0  # s
     window: float = 5.0  # s, final window for the limits

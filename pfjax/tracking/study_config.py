@@ -22,6 +22,9 @@ from pfjax.config import POSITIVE, ConfigError, ConfigModel, Real, load_model
 from pfjax.errors import MAX_SEED, InputError
 from pfjax.resources import check_memory
 from pfjax.tracking.api import MAX_STEPS, check_offset, check_time, nonzero
+from pfjax.tracking.controller import FocusGains
+from pfjax.tracking.model import FollowerParams
+from pfjax.tracking.simulate import TrackConfig
 
 #: an (along, left) offset in metres
 Pair = Annotated[list[Real], Field(min_length=2, max_length=2)]
@@ -53,24 +56,26 @@ QUICK = {
 
 
 class TrackSim(ConfigModel):
-    """One run: fixed-step integration and the limits checked over the final window."""
+    """One run: fixed-step integration and the limits checked over the final window. The defaults are
+    :class:`pfjax.tracking.simulate.TrackConfig`'s, ``FocusGains.k`` and ``FollowerParams.a``
+    (those of :func:`pfjax.tracking.run`)."""
 
-    dt: Real = Field(0.01, ge=POSITIVE, description="integration step, in (0, horizon] [s]")
+    dt: Real = Field(TrackConfig.dt, ge=POSITIVE, description="integration step, in (0, horizon] [s]")
     horizon: Real = Field(
-        30.0,
+        TrackConfig.horizon,
         ge=POSITIVE,
         description=f"simulated time per run, a whole number of steps dt, at most {MAX_STEPS:.0e} of them [s]",
     )
     window: Real = Field(
-        5.0, ge=POSITIVE, description="final window over which the limits are checked, in (0, horizon] [s]"
+        TrackConfig.window, ge=POSITIVE, description="final window over which the limits are checked, in (0, horizon] [s]"
     )
-    tol_z: Real = Field(0.01, ge=POSITIVE, description="z~ -> 0 when max |z~| over the window <= tol_z [m]")
+    tol_z: Real = Field(TrackConfig.tol_z, ge=POSITIVE, description="z~ -> 0 when max |z~| over the window <= tol_z [m]")
     tol_phi: Real = Field(
-        0.02, ge=POSITIVE, description="phi - p gamma -> 0 when its max magnitude over the window <= tol_phi [rad]"
+        TrackConfig.tol_phi, ge=POSITIVE, description="phi - p gamma -> 0 when its max magnitude over the window <= tol_phi [rad]"
     )
-    band: Real = Field(0.1, ge=POSITIVE, description="Monte Carlo success band on max |z~| over the window [m]")
-    k: Real = Field(1.0, ge=POSITIVE, description="error decay rate of the controller [1/s]")
-    a: Real = Field(1.0, ge=POSITIVE, description="wheelbase of the follower [m]")
+    band: Real = Field(TrackConfig.band, ge=POSITIVE, description="Monte Carlo success band on max |z~| over the window [m]")
+    k: Real = Field(FocusGains().k, ge=POSITIVE, description="error decay rate of the controller [1/s]")
+    a: Real = Field(FollowerParams().a, ge=POSITIVE, description="wheelbase of the follower [m]")
 
     @model_validator(mode="after")
     def _check(self):
