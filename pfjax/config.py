@@ -231,6 +231,18 @@ def format_error(err: ValidationError, root: type[BaseModel]) -> str:
     return f"{key}: {msg} (got {_short(e.get('input'))})" if e["type"] != "value_error" else f"{key}: {msg}"
 
 
+def field_limits(model: type[BaseModel], name: str) -> dict[str, float]:
+    """The bounds a config model puts on its field ``name``, by their pydantic names (``ge``, ``gt``,
+    ``le``, ``lt``; those it has): a function that takes the same setting as an argument checks it
+    against these, not against a copy of them."""
+    out: dict[str, float] = {}
+    for m in model.model_fields[name].metadata:
+        for bound in ("ge", "gt", "le", "lt"):
+            if getattr(m, bound, None) is not None:
+                out[bound] = getattr(m, bound)
+    return out
+
+
 def set_nested(d: dict, update: dict, prefix: str = "") -> dict:
     """Apply a nested override to a raw config dict in place (a distribution table replaces the old
     one whole; ``name[i]`` keys address list items); ConfigError for a missing list element, naming

@@ -238,3 +238,39 @@ def test_a_subset_study_says_what_each_stratum_interval_rests_on():
     assert len(strata) == 3
     for s in strata:
         assert len(s["run_estimates"]) == 1 and s["error"] == "levels fully correlated", s
+
+
+@pytest.mark.parametrize("metric", ["iae", "ise"])
+def test_a_metric_not_in_metres_needs_its_own_threshold(metric, tmp_path, capsys):
+    """The default threshold is the success band, a distance in m: for IAE (m s) or ISE (m^2 s) it
+    would compare numbers of different units, so the config refuses no threshold for them, in the
+    command line, the Python API and a study alike (one check, in RareEventSpec)."""
+    import pfjax
+    from pfjax.cli import main
+    from pfjax.config import ConfigError
+    from pfjax.montecarlo.analysis_config import RareEventSpec
+
+    with pytest.raises(ValueError, match=rf"threshold: needed for metric = '{metric}'"):
+        RareEventSpec(metric=metric)
+    assert RareEventSpec(metric=metric, threshold=1.0).threshold == 1.0
+    assert RareEventSpec(metric="overshoot").threshold is None  # in m: the band serves
+    toml = Path(__file__).resolve().parents[1] / "studies" / "rare_events.toml"
+    text = toml.read_text().replace("threshold = 0.5", "")
+    assert text != toml.read_text()
+    config = tmp_path / "no_threshold.toml"
+    config.write_text(text)
+    args = ["rare-event", str(config), "--controller", "pi-table3", "--set", f'rare_event.metric="{metric}"']
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pfjax rare-event: error: rare_event.threshold: needed for metric") and err.count("\n") == 1
+    with pytest.raises(ConfigError, match=r"^rare_event\.threshold: needed for metric"):
+        pfjax.rare_event(str(config), controller="pi-table3", rare_event__metric=metric)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["no_threshold.toml"]  # nothing written
+
+
+def test_the_api_takes_the_budget_bounds_from_the_config_model():
+    from pfjax.config import field_limits
+    from pfjax.montecarlo.analysis_config import RareEventSpec
+
+    assert field_limits(RareEventSpec, "target_rel_error") == {"gt": 0, "le": 10}
+    assert field_limits(RareEventSpec, "max_rollouts") == {"ge": 100, "le": 100_000_000}

@@ -226,6 +226,8 @@ def rare_event(
             for a design that cannot be made. Its subclass :class:`pfjax.config.ConfigError` names
             the config key (an override by its dotted key) of a bad key or value.
     """
+    from pfjax.config import field_limits
+    from pfjax.montecarlo.analysis_config import RareEventSpec
     from pfjax.montecarlo.config import study_hash
     from pfjax.montecarlo.runner import controllers_of
     from pfjax.provenance import STAMP_UNITS, stamp
@@ -240,14 +242,18 @@ def rare_event(
         if method not in METHODS:
             raise errors.InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}", "method")
         values["rare_event.method"] = method
-    if target_rel_error is not None:
+    if target_rel_error is not None:  # the bounds of the config's rare_event table, by the argument's name
         values["rare_event.target_rel_error"] = errors.number("target_rel_error", target_rel_error, positive=True)
-        if target_rel_error > 10:
+        top = field_limits(RareEventSpec, "target_rel_error")["le"]
+        if target_rel_error > top:
             raise errors.InputError(
-                f"target_rel_error: must be <= 10, got {errors.shown(target_rel_error)}", "target_rel_error"
+                f"target_rel_error: must be <= {top:g}, got {errors.shown(target_rel_error)}", "target_rel_error"
             )
     if max_rollouts is not None:
-        values["rare_event.max_rollouts"] = errors.integer("max_rollouts", max_rollouts, low=100, high=100_000_000)
+        lim = field_limits(RareEventSpec, "max_rollouts")
+        values["rare_event.max_rollouts"] = errors.integer(
+            "max_rollouts", max_rollouts, low=int(lim["ge"]), high=int(lim["le"])
+        )
     if seed is not None:
         values["rare_event.seed"] = errors.seed("seed", seed)
     spec = _study_spec(config, values)

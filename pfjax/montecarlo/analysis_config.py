@@ -93,7 +93,10 @@ class RareEventSpec(ConfigModel):
         "late_max_abs_d", description="per-run metric whose excess over threshold is a failure"
     )
     threshold: Real | None = Field(
-        None, ge=0, description="failure where metric >= threshold (metric's unit; default success.band, m)"
+        None,
+        ge=0,
+        description="failure where metric >= threshold (metric's unit); default success.band (m), for a metric "
+        "in m only: iae and ise need one",
     )
     target_rel_error: Real = Field(
         0.1,
@@ -135,6 +138,14 @@ class RareEventSpec(ConfigModel):
 
     @model_validator(mode="after")
     def _check(self):
+        from pfjax.tables import COLUMNS
+
+        unit = COLUMNS[self.metric][0]
+        if self.threshold is None and unit != "m":  # the default, success.band, is a distance
+            raise ValueError(
+                f"threshold: needed for metric = {self.metric!r} ({unit}); the default, success.band, is in m "
+                "and serves only a metric in m"
+            )
         if (self.method == "subset" or self.check == "subset") and self.n_per_level % 10:
             raise ValueError(f"n_per_level: subset simulation needs a multiple of 10, got {self.n_per_level}")
         return self

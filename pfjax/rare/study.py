@@ -82,7 +82,9 @@ def units(spec: StudySpec) -> dict[str, str]:
 
 def failure_threshold(rare: dict, band: float) -> float:
     """The rare-event failure threshold, in its metric's unit: ``rare_event.threshold``, else the
-    success band (m). ``rare``: the ``[rare_event]`` table as a dict (a spec's ``model_dump()``)."""
+    success band (m; the config refuses no threshold for a metric in another unit,
+    :class:`~pfjax.montecarlo.analysis_config.RareEventSpec`). ``rare``: the ``[rare_event]`` table
+    as a dict (a spec's ``model_dump()``)."""
     return band if rare["threshold"] is None else rare["threshold"]
 
 
