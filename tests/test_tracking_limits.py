@@ -80,3 +80,36 @@ def test_a_flag_and_its_deprecated_spelling_together_are_refused(capsys, argv):
         main([*argv, "--json"])
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert e.value.code == 2 and "not with" in err and argv[1] in err and argv[3] in err, err
+
+
+def test_a_step_that_does_not_divide_the_default_horizon_names_the_step(monkeypatch, capsys):
+    """Only the step was changed: the error names ``dt`` (``--dt``), as pfjax.sim.settings.SimConfig
+    does, with the steps that divide the horizon; a horizon given too names ``horizon``. Reference:
+    30 s / 0.0031 s = 9677.419355 steps; 30/9678 = 0.00309981 s and 30/9677 = 0.00310013 s."""
+    _never(monkeypatch)
+    with pytest.raises(InputError) as e:
+        api.run(dt=0.0031)
+    assert e.value.key == "dt"
+    assert str(e.value) == (
+        "dt: must divide horizon = 30 s into whole steps, got 0.0031 s = 9677.419355 steps "
+        "(e.g. 0.00309981 or 0.00310013 s)"
+    )
+    with pytest.raises(InputError) as e:
+        api.run(horizon=20.0, dt=0.0031)
+    assert e.value.key == "horizon"
+    rc = main(["track", "--dt", "0.0031", "--json"])
+    out, err = capsys.readouterr()
+    assert (rc, out) == (2, "")
+    assert err == (
+        "pfjax track: error: --dt: must divide --horizon = 30 s into whole steps, got 0.0031 s = 9677.419355 "
+        "steps (e.g. 0.00309981 or 0.00310013 s)\n"
+    )
+
+
+def test_the_study_names_its_step_by_the_same_rule():
+    from pfjax.config import ConfigError
+    from pfjax.tracking.study_config import load
+
+    with pytest.raises(ConfigError) as e:
+        load(None, ["sim.dt=0.0031"])
+    assert str(e.value).startswith("sim.dt: must divide horizon = 30 s into whole steps"), str(e.value)

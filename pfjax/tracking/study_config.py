@@ -67,15 +67,23 @@ class TrackSim(ConfigModel):
         description=f"simulated time per run, a whole number of steps dt, at most {MAX_STEPS:.0e} of them [s]",
     )
     window: Real = Field(
-        TrackConfig.window, ge=POSITIVE, description="final window over which the limits are checked, in (0, horizon] [s]"
+        TrackConfig.window,
+        ge=POSITIVE,
+        description="final window over which the limits are checked, in (0, horizon] [s]",
     )
-    tol_z: Real = Field(TrackConfig.tol_z, ge=POSITIVE, description="z~ -> 0 when max |z~| over the window <= tol_z [m]")
+    tol_z: Real = Field(
+        TrackConfig.tol_z, ge=POSITIVE, description="z~ -> 0 when max |z~| over the window <= tol_z [m]"
+    )
     tol_phi: Real = Field(
-        TrackConfig.tol_phi, ge=POSITIVE, description="phi - p gamma -> 0 when its max magnitude over the window <= tol_phi [rad]"
+        TrackConfig.tol_phi,
+        ge=POSITIVE,
+        description="phi - p gamma -> 0 when its max magnitude over the window <= tol_phi [rad]",
     )
-    band: Real = Field(TrackConfig.band, ge=POSITIVE, description="Monte Carlo success band on max |z~| over the window [m]")
-    k: Real = Field(FocusGains().k, ge=POSITIVE, description="error decay rate of the controller [1/s]")
-    a: Real = Field(FollowerParams().a, ge=POSITIVE, description="wheelbase of the follower [m]")
+    band: Real = Field(
+        TrackConfig.band, ge=POSITIVE, description="Monte Carlo success band on max |z~| over the window [m]"
+    )
+    k: Real = Field(float(FocusGains().k), ge=POSITIVE, description="error decay rate of the controller [1/s]")
+    a: Real = Field(float(FollowerParams().a), ge=POSITIVE, description="wheelbase of the follower [m]")
 
     @model_validator(mode="after")
     def _check(self):
