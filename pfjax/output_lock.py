@@ -2,9 +2,10 @@
 ``fcntl.flock`` on the lock file ``.<name>.lock`` beside the target, recording the holder's pid,
 host, command and start time; the operating system releases it when the process ends.
 
-Only pfjax's own lock file is used, written and removed: a symbolic link (never followed), a
-directory or a file that does not hold a lock record (empty, or JSON with the holder's ``pid``) at
-that name is refused (:class:`~pfjax.errors.InputError` naming the flag), and left as it is."""
+Only pfjax's own lock file is used, written and removed: it appears at its name with its record
+already in it, and a symbolic link (never followed), a directory or a file that does not hold a
+whole lock record (:data:`RECORD_KEYS`; an empty file does not) at that name is refused
+(:class:`~pfjax.errors.InputError` naming the flag), and left as it is."""
 
 from __future__ import annotations
 
@@ -19,6 +20,10 @@ from pathlib import Path
 from pfjax.errors import InputError
 
 __all__ = ["OutputBusy", "OutputLock", "now_utc", "sibling"]
+
+
+#: What a lock file holds: the holder's pid, host, command and start time (UTC, ISO 8601).
+RECORD_KEYS = frozenset({"pid", "host", "command", "started"})
 
 
 class OutputBusy(InputError):
@@ -48,17 +53,19 @@ class OutputLock:
         import fcntl
 
         while self._fd is None:
-            try:  # O_NOFOLLOW: a link at the lock's name is refused, not followed
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
-            except OSError as e:
-                if e.errno in (errno.ELOOP, errno.EISDIR):
-                    raise self._foreign() from None
-                raise InputError(
-                    f"{self.flag}: cannot create pfjax's lock file {self.path}: {e.strerror}", self.flag
-                ) from None
-            if not stat.S_ISREG(os.fstat(fd).st_mode):
-                os.close(fd)
-                raise self._foreign()
+            created, fd = self._create()
+            if fd is None:  # the name is taken: a lock file of another pfjax process, or not pfjax's
+                try:  # O_NOFOLLOW: a link at the lock's name is refused, not followed
+                    fd = os.open(self.path, os.O_RDWR | getattr(os, "O_NOFOLLOW", 0))
+                except FileNotFoundError:  # removed by its holder meanwhile: try again
+                    continue
+                except OSError as e:
+                    if e.errno in (errno.ELOOP, errno.EISDIR):
+                        raise self._foreign() from None
+                    raise self._cannot(e) from None
+                if not stat.S_ISREG(os.fstat(fd).st_mode):
+                    os.close(fd)
+                    raise self._foreign()
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
@@ -77,13 +84,50 @@ class OutputLock:
             if not same:
                 os.close(fd)
                 continue
-            if not self._is_lock_record(fd):
+            if not created and not self._is_lock_record(fd):
                 os.close(fd)
                 raise self._foreign()
-            info = {"pid": os.getpid(), "host": socket.gethostname(), "command": self.command, "started": now_utc()}
-            os.ftruncate(fd, 0)
-            os.write(fd, (json.dumps(info) + "\n").encode())
+            if not created:  # a lock file left by a writer that was killed: this process's record now
+                os.ftruncate(fd, 0)
+                os.lseek(fd, 0, os.SEEK_SET)
+                os.write(fd, self._record())
             self._fd = fd
+
+    def _record(self) -> bytes:
+        info = {"pid": os.getpid(), "host": socket.gethostname(), "command": self.command, "started": now_utc()}
+        return (json.dumps(info) + "\n").encode()
+
+    def _create(self) -> tuple[bool, int | None]:
+        """``(True, fd)`` of a new lock file holding this process's record, or ``(False, None)``
+        when the name is taken. The file appears at its name with the record already in it (written
+        under a temporary name, then hard-linked, which fails when the name exists), so a lock file
+        is never empty: only a file with a whole record is ever taken over or removed. On a file
+        system without hard links, created in place (``O_EXCL``) and written at once."""
+        tmp = self.path.with_name(f"{self.path.name}.{os.getpid()}.{id(self):x}.tmp")
+        try:
+            fd = os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        except OSError as e:
+            raise self._cannot(e) from None
+        try:
+            os.write(fd, self._record())
+            try:
+                os.link(tmp, self.path)
+            except FileExistsError:
+                os.close(fd)
+                return False, None
+            except OSError:  # no hard links here
+                os.close(fd)
+                try:
+                    fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o644)
+                except FileExistsError:
+                    return False, None
+                os.write(fd, self._record())
+            return True, fd
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    def _cannot(self, e: OSError) -> InputError:
+        return InputError(f"{self.flag}: cannot create pfjax's lock file {self.path}: {e.strerror}", self.flag)
 
     def _foreign(self) -> InputError:
         return InputError(
@@ -94,16 +138,15 @@ class OutputLock:
 
     @staticmethod
     def _is_lock_record(fd: int) -> bool:
-        """Whether the file holds what a lock holder writes (or nothing yet)."""
+        """Whether the file holds the record a lock holder writes: a JSON object with its ``pid``,
+        ``host``, ``command`` and ``started`` (anything else, an empty file included, is not pfjax's)."""
         os.lseek(fd, 0, os.SEEK_SET)
         text = os.read(fd, 4097)
-        if not text:
-            return True
         try:
             data = json.loads(text.decode())
         except (UnicodeDecodeError, ValueError):
             return False
-        return isinstance(data, dict) and "pid" in data and len(text) <= 4096
+        return isinstance(data, dict) and data.keys() >= RECORD_KEYS and len(text) <= 4096
 
     @staticmethod
     def _holder(fd: int) -> dict:

@@ -323,13 +323,20 @@ def test_entries_beside_the_target_that_pfjax_did_not_make_are_left_as_they_are(
     assert {k: v for k, v in after.items() if not k.startswith("out")} == before
 
 
-@pytest.mark.parametrize("kind", ["file", "symlink", "directory"])
+@pytest.mark.parametrize("kind", ["file", "empty", "json with a pid", "symlink", "directory"])
 def test_a_lock_name_taken_by_something_pfjax_did_not_write_is_refused_and_kept(tmp_path, kind):
+    """Only a whole lock record (pid, host, command, started) is pfjax's: a user's file at the lock's
+    name, empty or JSON with a ``pid`` of its own, is refused and kept, never taken over or removed
+    (pfjax's lock file appears at its name with its record in it, so it is never empty)."""
     out, precious = tmp_path / "out", tmp_path / "precious.txt"
     precious.write_text("the user's")
     lock = sibling(out, "lock")
     if kind == "file":
         lock.write_text("the user's notes")
+    elif kind == "empty":
+        lock.write_text("")
+    elif kind == "json with a pid":
+        lock.write_text('{"pid": 1, "note": "mine"}')
     elif kind == "symlink":
         lock.symlink_to(precious)
     else:
@@ -343,9 +350,21 @@ def test_a_lock_name_taken_by_something_pfjax_did_not_write_is_refused_and_kept(
 
 def test_a_lock_file_left_by_a_killed_writer_is_taken_over(tmp_path):
     out = tmp_path / "out"
-    sibling(out, "lock").write_text(json.dumps({"pid": 1, "host": "h", "command": "study"}) + "\n")
+    record = {"pid": 1, "host": "h", "command": "study", "started": "2026-01-01T00:00:00+00:00"}
+    sibling(out, "lock").write_text(json.dumps(record) + "\n")
     _write(out, {"a": "1"})
     assert (out / "a").read_text() == "1" and not sibling(out, "lock").exists()
+
+
+def test_a_held_lock_file_holds_its_whole_record_and_nothing_is_left_beside_it(tmp_path):
+    out = tmp_path / "out"
+    with OutputDir(out, command="study", config_sha256="x") as o:
+        record = json.loads(sibling(out, "lock").read_text())
+        assert set(record) == {"pid", "host", "command", "started"} and record["pid"] == os.getpid()
+        assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".out.lock")) == [".out.lock"]
+        (o.staging / "a").write_text("1")
+        o.commit()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
 def test_the_lock_refuses_a_second_writer_in_another_process(tmp_path):
