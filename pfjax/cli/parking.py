@@ -15,6 +15,7 @@ import os
 
 from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags
 from pfjax.errors import InputError
+from pfjax.parking import defaults as D
 
 _POSE = {"x0.x": "m", "x0.y": "m", "x0.theta_deg": "deg"}
 #: The flags both parking commands take, by unit.
@@ -73,22 +74,31 @@ SEARCH_UNITS = {
 
 
 def _common(p):
-    p.add_argument("--k1", type=float, default=32.0, help="gain on y, 1/m^2 (default 32)")
-    p.add_argument("--k2", type=float, default=8.0, help="gain on tan(theta), 1/m (default 8)")
-    p.add_argument("--speed", type=float, default=0.05, help="|v1|, m/s (default 0.05)")
-    p.add_argument("--scan-period", type=float, default=0.1, help="scanner sampling period, s (default 0.1)")
+    p.add_argument("--k1", type=float, default=D.K1, help=f"gain on y, 1/m^2 (default {D.K1:g})")
+    p.add_argument("--k2", type=float, default=D.K2, help=f"gain on tan(theta), 1/m (default {D.K2:g})")
+    p.add_argument("--speed", type=float, default=D.SPEED, help=f"|v1|, m/s (default {D.SPEED:g})")
+    p.add_argument(
+        "--scan-period",
+        type=float,
+        default=D.SCAN_PERIOD,
+        help=f"scanner sampling period, s (default {D.SCAN_PERIOD:g})",
+    )
     p.add_argument("--front", type=float, help="a_f: reach of the rectangle ahead of the axle, m (default: calibrated)")
-    p.add_argument("--lag", action="store_true", help="yaw-rate PI loop (kP 0.8, kI 16) on")
+    p.add_argument("--lag", action="store_true", help=f"yaw-rate PI loop (kP {D.KP:g}, kI {D.KI:g} 1/s) on")
     p.add_argument(
         "--horizon",
         "--t-max",
         action=Aliased,
         dest="horizon",
         type=float,
-        default=200.0,
-        help="horizon: the run's timeout, s (default 200)",
+        default=D.T_MAX,
+        help=f"horizon: the run's timeout, s (default {D.T_MAX:g})",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+#: the garage's start pose as ``--x0`` spells it (x m, y m, theta deg)
+_GARAGE_START = " ".join(f"{v:g}" for v in D.GARAGE_START)
 
 
 def register(sub) -> None:
@@ -99,7 +109,7 @@ def register(sub) -> None:
         "prints the outcome, parking time and the log of direction switches.",
     )
     p.add_argument("--map", default="parallel", help="parallel, garage, or a TOML/JSON map file (default parallel)")
-    add_pose(p, "start pose, m m deg (default: case A for parallel, (-0.9, 0.6, -85) for garage)")
+    add_pose(p, f"start pose, m m deg (default: case A for parallel, {_GARAGE_START} for garage)")
     p.add_argument(
         "--direction",
         choices=("forward", "backward"),
@@ -108,7 +118,9 @@ def register(sub) -> None:
     )
     p.add_argument("--alpha-schedule", default="1", help="alpha at the start, then after each switch (default 1)")
     p.add_argument(
-        "--xs", type=float, help="garage rule: switch back to forward when backing past x = XS, m (garage default -0.9)"
+        "--xs",
+        type=float,
+        help=f"garage rule: switch back to forward when backing past x = XS, m (garage default {D.GARAGE_XS:g})",
     )
     _common(p)
     p.set_defaults(func=_cmd_parking, units=RUN_UNITS)
@@ -117,7 +129,7 @@ def register(sub) -> None:
         "parking-search",
         help="search (X_s, alpha1, alpha2) for the garage by the 24-bit GA or a grid",
         description="Search of the garage switching parameters (docs/reproductions/parking.md §5): the source's 24-bit GA "
-        "(n = 20, N = 100) or an exhaustive N x N x N grid on the chromosome lattice.",
+        f"(n = {D.POPULATION}, N = {D.GENERATIONS}) or an exhaustive N x N x N grid on the chromosome lattice.",
     )
     s.add_argument(
         "--method",
@@ -127,12 +139,17 @@ def register(sub) -> None:
         "chromosome lattice (required; no default)",
     )
     s.add_argument("--map", default="garage", help="garage (default), parallel (with --x0), or a TOML/JSON map file")
-    add_pose(s, "start pose, m m deg (default -0.9 0.6 -85)")
-    s.add_argument("--n", type=int, default=None, help="grid: levels per parameter (default 32)")
-    s.add_argument("--generations", type=int, default=None, help="ga: generations N (default 100)")
-    s.add_argument("--population", type=int, default=None, help="ga: population n (default 20)")
+    add_pose(s, f"start pose, m m deg (default {_GARAGE_START})")
+    s.add_argument("--n", type=int, default=None, help=f"grid: levels per parameter (default {D.GRID_N})")
+    s.add_argument("--generations", type=int, default=None, help=f"ga: generations N (default {D.GENERATIONS})")
+    s.add_argument("--population", type=int, default=None, help=f"ga: population n (default {D.POPULATION})")
     s.add_argument("--seed", type=int, default=None, help="ga: PRNG seed (default 0)")
-    s.add_argument("--weight", type=float, default=100.0, help="end-error weight w in J = 1/(t_e + w e) (default 100)")
+    s.add_argument(
+        "--weight",
+        type=float,
+        default=D.WEIGHT,
+        help=f"end-error weight w in J = 1/(t_e + w e), s/m (default {D.WEIGHT:g})",
+    )
     _common(s)
     s.set_defaults(func=_cmd_search, units=SEARCH_UNITS)
 

@@ -12,8 +12,9 @@ Nothing is simulated before every argument has been checked. Both check and simu
 as the command line does, whatever ``jax_enable_x64`` says: the same start pose is refused or run
 alike, and the numbers are the command line's.
 
-Only :mod:`pfjax.errors` and :mod:`pfjax.parking.limits` are imported here at module level:
-importing :mod:`pfjax.parking` stays cheap.
+Only :mod:`pfjax.errors`, :mod:`pfjax.parking.defaults` and :mod:`pfjax.parking.limits` are
+imported here at module level: importing :mod:`pfjax.parking` stays cheap. Every default is
+:mod:`pfjax.parking.defaults`'s.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from typing import Any, NamedTuple
 
 from pfjax import errors
 from pfjax.errors import InputError
+from pfjax.parking import defaults as D
 from pfjax.parking.limits import MAX_PERIODS, MAX_SCAN_PERIOD, check_periods
 
 __all__ = ["run", "search"]
@@ -41,9 +43,9 @@ METHODS = ("ga", "grid")
 #: 1,000 x 1,000 (2e9) are refused.
 MAX_SEARCH_PERIODS = 10**8
 #: The scanner period of :func:`run` and :func:`search` unless given, s (the source's).
-DEFAULT_SCAN_PERIOD = 0.1
+DEFAULT_SCAN_PERIOD = D.SCAN_PERIOD
 #: Garage rule of :func:`run` on the built-in garage: switch back to forward when backing past this x, m.
-GARAGE_XS = -0.9
+GARAGE_XS = D.GARAGE_XS
 
 
 class _Settings(NamedTuple):
@@ -143,7 +145,6 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     """The arguments :func:`run` and :func:`search` share, checked in the command line's order;
     the map loaded and the start pose checked against it."""
 
-    from pfjax.parking.geometry import L2_LENGTH
     from pfjax.parking.maps import MapError, check_start, load_map, to_obstacle_map
 
     k1, k2, speed, scan_period, t_max = (
@@ -153,9 +154,9 @@ def _checked(map, x0, settings: _Settings, default_start: dict) -> dict:
     front, lag = settings.front, settings.lag
     if front is not None:
         front = errors.number("front", front, positive=True)
-        if front >= L2_LENGTH:
+        if front >= D.L2_LENGTH:
             raise InputError(
-                f"front: must be < {L2_LENGTH:g} (the rectangle length), got {errors.shown(front)}", "front"
+                f"front: must be < {D.L2_LENGTH:g} (the rectangle length), got {errors.shown(front)}", "front"
             )
     if scan_period > MAX_SCAN_PERIOD:
         raise InputError(
@@ -201,13 +202,13 @@ def run(
     direction="forward",
     alpha_schedule=(1.0,),
     xs=None,
-    k1=32.0,
-    k2=8.0,
-    speed=0.05,
+    k1=D.K1,
+    k2=D.K2,
+    speed=D.SPEED,
     scan_period=DEFAULT_SCAN_PERIOD,
     front=None,
     lag=False,
-    t_max=200.0,
+    t_max=D.T_MAX,
 ) -> dict:
     """One run of the switching parking controller (``pfjax parking``): outcome, parking time and
     the log of direction switches. Checked and simulated in float64, as the command does, whatever
@@ -296,7 +297,7 @@ def _one_run(c: dict, direction: str, schedule, xs) -> dict:
 
 #: The settings each search method reads (:func:`search`), and their defaults.
 SEARCH_SETTINGS = {"grid": ("n",), "ga": ("generations", "population", "seed")}
-SEARCH_DEFAULTS = {"n": 32, "generations": 100, "population": 20, "seed": 0}
+SEARCH_DEFAULTS = {"n": D.GRID_N, "generations": D.GENERATIONS, "population": D.POPULATION, "seed": 0}
 
 
 @errors.arguments_checked
@@ -309,14 +310,14 @@ def search(
     generations=None,
     population=None,
     seed=None,
-    weight=100.0,
-    k1=32.0,
-    k2=8.0,
-    speed=0.05,
+    weight=D.WEIGHT,
+    k1=D.K1,
+    k2=D.K2,
+    speed=D.SPEED,
     scan_period=DEFAULT_SCAN_PERIOD,
     front=None,
     lag=False,
-    t_max=200.0,
+    t_max=D.T_MAX,
 ) -> dict:
     """Search of the garage's switching parameters (X_s, alpha1, alpha2) (``pfjax parking-search``):
     the source's 24-bit GA or an exhaustive ``n x n x n`` grid on the chromosome lattice
@@ -372,7 +373,7 @@ def search(
             raise InputError(f"{key}: not with method {method} (a setting of the other method)", key)
     n, generations, population, seed = (SEARCH_DEFAULTS[k] if v is None else v for k, v in given.items())
     weight = errors.number("weight", weight, nonnegative=True)
-    n = errors.integer("n", n, low=2, high=64)
+    n = errors.integer("n", n, low=2, high=D.MAX_GRID_N)
     from pfjax.tuning.ga import MAX_GENERATIONS, MAX_POPULATION
 
     population = errors.integer("population", population, low=2, high=MAX_POPULATION)
@@ -422,10 +423,10 @@ def _search(c: dict, method: str, *, n: int, generations: int, population: int, 
     import dataclasses
 
     from pfjax.numerics.random import seed_key
-    from pfjax.parking.simulate import STATUS_NAMES, run_params
-    from pfjax.parking.switch_search import SEARCH_CONFIG, search_ga, search_grid
+    from pfjax.parking.simulate import STATUS_NAMES
+    from pfjax.parking.switch_search import SEARCH_CONFIG, garage_base, search_ga, search_grid
 
-    base = run_params(c["x0"], 1, (1.0,), xs=-1.0, front=c["front"], scan_period=c["scan_period"], control=c["control"])
+    base = garage_base(c["x0"], front=c["front"], scan_period=c["scan_period"], control=c["control"])
     cfg = dataclasses.replace(SEARCH_CONFIG, t_max=c["t_max"])
     if method == "ga":
         from pfjax.tuning.ga import GAOptions
@@ -440,7 +441,7 @@ def _search(c: dict, method: str, *, n: int, generations: int, population: int, 
         )
         out["seed"] = seed
     else:
-        out = search_grid(c["omap"], n=n, base=base, weight=weight, cfg=cfg, chunk=min(1024, n**3))
+        out = search_grid(c["omap"], n=n, base=base, weight=weight, cfg=cfg, chunk=min(D.CHUNK, n**3))
         out.pop("table")
     out["status"] = STATUS_NAMES[int(out["status"])]
     out["converged"] = out["status"] == "converged"

@@ -25,6 +25,7 @@ import itertools
 import numpy as np
 import pandas as pd
 
+from pfjax.parking.defaults import ASSUMPTION_GRID
 from pfjax.parking.geometry import L2_LENGTH
 from pfjax.parking.model import control_params
 from pfjax.parking.schedules import CASES
@@ -33,14 +34,8 @@ from pfjax.parking.simulate import STATUS_NAMES, ParkingConfig, run_many, run_pa
 #: The source's outcome per case (docs/reproductions/parking.md §4): what a combination must give to reproduce it.
 SOURCE_OUTCOME = {"A": "converged", "B": "stuck", "C": "converged", "D": "converged"}
 ZONES = {"middle": {}, "axle": {"split": 0.0}, "whole": {"zone": L2_LENGTH}}
-DEFAULT_GRID = {
-    "front": [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25],
-    "zone": list(ZONES),
-    "scan_period": [0.05, 0.1, 0.2],
-    "decision_delay": [False, True],
-    "lag": [False, True],
-    "pause": [0.0, 1.0],
-}
+#: The sweep's default combinations (:data:`pfjax.parking.defaults.ASSUMPTION_GRID`; its zones are :data:`ZONES`'s keys).
+DEFAULT_GRID = {key: list(values) for key, values in ASSUMPTION_GRID.items()}
 KEYS = tuple(DEFAULT_GRID)
 
 

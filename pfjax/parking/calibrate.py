@@ -19,10 +19,20 @@ from __future__ import annotations
 
 import math
 
+from pfjax.parking.defaults import K1, K2, L1_WIDTH
+from pfjax.parking.maps import PARALLEL
+from pfjax.parking.schedules import CASES
+
 SOURCE_SWITCH = (0.074, 0.047)  # m, robot position at case A's first switch (source)
 
 
-def case_a_pose(x: float, x0=-0.4, y0=0.5, k1=32.0, k2=8.0) -> tuple[float, float]:
+_CASE_A_X0, _CASE_A_Y0, _ = CASES["A"]["x0"]
+#: m, the kerb's top edge and the car ahead's rear edge on the parallel map
+KERB_Y = max(y for _, y in PARALLEL["kerb"])
+CAR_X = min(x for x, _ in PARALLEL["car_ahead"])
+
+
+def case_a_pose(x: float, x0=_CASE_A_X0, y0=_CASE_A_Y0, k1=K1, k2=K2) -> tuple[float, float]:
     """Closed-form (y, θ) on case A's first leg at position x (α = 1, θ₀ = 0, underdamped roots)."""
     sr, si = -k2 / 2, math.sqrt(k1 - k2**2 / 4)
     u = x - x0
@@ -34,7 +44,7 @@ def case_a_pose(x: float, x0=-0.4, y0=0.5, k1=32.0, k2=8.0) -> tuple[float, floa
     return z1, math.atan(z2)
 
 
-def calibrate_front(switch_xy=SOURCE_SWITCH, width=0.370, kerb_y=-0.2, car_x=0.5) -> dict:
+def calibrate_front(switch_xy=SOURCE_SWITCH, width=L1_WIDTH, kerb_y=KERB_Y, car_x=CAR_X) -> dict:
     """a_f from the source's first-switch position of case A (closed form; see module docstring)."""
     x, y_src = switch_xy
     y, th = case_a_pose(x)

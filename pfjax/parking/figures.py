@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from pfjax.parking.defaults import WEIGHT
 from pfjax.parking.geometry import rectangle_corners
 from pfjax.parking.model import yaw_rate_command
 
@@ -104,7 +105,7 @@ def histories_figure(traj, result, control, title):
     return fig
 
 
-def search_figure(ga: dict, grid_table: dict, n: int, weight: float = 100.0):
+def search_figure(ga: dict, grid_table: dict, n: int, weight: float = WEIGHT):
     """GA best/mean fitness per generation, and the grid's best fitness over α₂ for each (X_s, α₁)
     (``weight``: w of J = 1/(t_e + w e), s/m)."""
     import matplotlib.pyplot as plt

@@ -23,12 +23,9 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from pfjax.numerics import elementary as E
+from pfjax.parking.defaults import L1_WIDTH, L2_LENGTH
 
 Array = jnp.ndarray
-
-#: Robot area of the source (docs/reproductions/parking.md §3), metres.
-L1_WIDTH = 0.370
-L2_LENGTH = 0.540
 
 
 class RobotShape(NamedTuple):

@@ -27,6 +27,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from pfjax.numerics import elementary as E
+from pfjax.parking.defaults import K1, K2, KI, KP, SPEED
 
 Array = jnp.ndarray
 
@@ -42,7 +43,9 @@ class ControlParams(NamedTuple):
     lag: Array  # -, 1.0 = yaw-rate PI loop on, 0.0 = ideal yaw rate
 
 
-def control_params(k1=32.0, k2=8.0, speed=0.05, kp=0.8, ki=16.0, lag=False) -> ControlParams:
+def control_params(k1=K1, k2=K2, speed=SPEED, kp=KP, ki=KI, lag=False) -> ControlParams:
+    """One run's controller (1/m², 1/m, m/s, -, 1/s; defaults the source's, :mod:`pfjax.parking.defaults`);
+    ``lag``: the yaw-rate PI loop on (bool, or 1.0/0.0)."""
     f = lambda v: jnp.asarray(v, dtype=float)
     return ControlParams(f(k1), f(k2), f(speed), f(kp), f(ki), f(1.0 if lag is True else 0.0 if lag is False else lag))
 

@@ -11,7 +11,6 @@ random numbers). Distributions (all uniform; ``lag_probability`` a Bernoulli):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
@@ -19,20 +18,10 @@ import numpy as np
 import pandas as pd
 
 from pfjax.metrics.robustness import metric_quantiles, success_summary
+from pfjax.parking.defaults import CHUNK, Scatter
 from pfjax.parking.simulate import STATUS_NAMES, ParkingConfig, RunParams, Status, run_many
 
 QUANTITIES = ("x0", "y0", "theta0", "scan", "speed", "lag")
-
-
-@dataclass(frozen=True)
-class Scatter:
-    pos_scatter: float = 0.05  # m
-    theta_scatter_deg: float = 5.0
-    scan_lo: float = 0.05  # s
-    scan_hi: float = 0.2
-    speed_lo: float = 0.04  # m/s
-    speed_hi: float = 0.06
-    lag_probability: float = 0.5
 
 
 def sample(key, n: int, base: RunParams, s: Scatter) -> RunParams:
@@ -56,7 +45,7 @@ def sample(key, n: int, base: RunParams, s: Scatter) -> RunParams:
 
 
 def monte_carlo(
-    omap, base: RunParams, *, key, n: int, scatter=Scatter(), cfg=ParkingConfig(), chunk=1024, progress=False, label=""
+    omap, base: RunParams, *, key, n: int, scatter=Scatter(), cfg=ParkingConfig(), chunk=CHUNK, progress=False, label=""
 ) -> pd.DataFrame:
     """One row per run: sampled quantities, status, parking time, switches."""
     p = sample(key, n, base, scatter)

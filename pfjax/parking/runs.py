@@ -14,6 +14,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from pfjax.parking import defaults as D
 from pfjax.parking.calibrate import A_F
 from pfjax.parking.geometry import L1_WIDTH, L2_LENGTH, RobotShape, robot_shape
 from pfjax.parking.limits import MAX_PERIODS
@@ -47,7 +48,8 @@ class SwitchCause(IntEnum):
 
 @dataclass(frozen=True)
 class ParkingConfig:
-    """Settings that fix shapes and loop lengths (static under jit).
+    """Settings that fix shapes and loop lengths (static under jit); defaults from
+    :mod:`pfjax.parking.defaults`.
 
     Attributes:
         t_max: timeout, s.
@@ -66,13 +68,13 @@ class ParkingConfig:
         log_capacity: switches logged when there is no cut-off.
     """
 
-    t_max: float = 200.0
+    t_max: float = D.T_MAX
     max_switches: int | None = None
-    tol: float = 0.02
-    n_sub: int = 2
+    tol: float = D.TOL
+    n_sub: int = D.N_SUB
     max_samples: int = MAX_PERIODS + 1
-    stuck_switches: int | None = 4
-    stuck_travel: float = 0.1
+    stuck_switches: int | None = D.STUCK_SWITCHES
+    stuck_travel: float = D.STUCK_TRAVEL
     log_capacity: int = 32
 
     @property
@@ -94,7 +96,7 @@ def periods_needed(t_max: float, scan_period: float) -> int:
 
 
 #: The GA search's cut-off (docs/reproductions/parking.md §5): more than 10 switches and the candidate counts as failed.
-SEARCH_MAX_SWITCHES = 10
+SEARCH_MAX_SWITCHES = D.SEARCH_MAX_SWITCHES
 
 
 class RunParams(NamedTuple):
@@ -141,7 +143,7 @@ def run_params(
     *,
     xs=None,
     front=None,
-    scan_period=0.1,
+    scan_period=D.SCAN_PERIOD,
     control=None,
     theta_in_degrees=True,
     width=None,

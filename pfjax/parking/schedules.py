@@ -15,6 +15,7 @@ import numpy as np
 
 from pfjax import errors
 from pfjax.errors import InputError
+from pfjax.parking.defaults import GARAGE_START  # noqa: F401  (re-exported)
 
 SCHEDULE_LEN = 8
 
@@ -25,7 +26,6 @@ CASES: dict[str, dict[str, Any]] = {
     "C": {"map": "parallel", "x0": (0.1, 0.5, 0.0), "direction": -1, "schedule": (1.0, 0.5)},
     "D": {"map": "parallel", "x0": (0.1, 0.5, 0.0), "direction": -1, "schedule": (1.0, 0.5, 8.0, 1.0)},
 }
-GARAGE_START = (-0.9, 0.6, -85.0)  # x m, y m, θ deg
 
 #: Decoding ranges of the 24-bit chromosome (docs/reproductions/parking.md §5, assumed).
 XS_MIN, XS_MAX, ALPHA_MAX = -1.2, -0.6, 10.0

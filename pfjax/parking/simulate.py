@@ -54,6 +54,7 @@ import numpy as np
 
 from pfjax.errors import InputError
 from pfjax.numerics import compiler
+from pfjax.parking.defaults import SCAN_PERIOD
 from pfjax.parking.geometry import ObstacleMap
 from pfjax.parking.maps import PARALLEL, to_obstacle_map
 from pfjax.parking.period import system
@@ -70,6 +71,7 @@ from pfjax.parking.runs import (  # noqa: F401  (re-exported: the run's types, s
     run_params,
     stack_params,
 )
+from pfjax.parking.schedules import CASES
 from pfjax.sim import loop
 
 
@@ -137,13 +139,14 @@ def run_many(
 
 
 def simulated_first_switch(
-    front: float, *, control=None, scan_period: float = 0.1, cfg: ParkingConfig = ParkingConfig()
+    front: float, *, control=None, scan_period: float = SCAN_PERIOD, cfg: ParkingConfig = ParkingConfig()
 ) -> dict:
     """Case A (:data:`pfjax.parking.schedules.CASES`) simulated with reach ``front`` (m), the
     controller ``control`` (default the source's), scanner period ``scan_period`` (s) and run
     config ``cfg``: time (s) and pose (m, m, deg) of its first sampled switch, to check the
     calibration of a_f (:mod:`pfjax.parking.calibrate`) against the source's point."""
-    p = run_params((-0.4, 0.5, 0.0), 1, (1.0,), front=front, scan_period=scan_period, control=control)
+    a = CASES["A"]
+    p = run_params(a["x0"], a["direction"], a["schedule"], front=front, scan_period=scan_period, control=control)
     r = run_jit(p, to_obstacle_map(list(PARALLEL.values())), cfg)
     x, y, th = (float(v) for v in r.log_pose[0])
     return {"t": float(r.log_t[0]), "x": x, "y": y, "theta_deg": math.degrees(th)}

@@ -1,7 +1,8 @@
 """The parking study's config (``studies/parking.toml``): one pydantic schema of the
 :class:`pfjax.config.ConfigModel` family, read by :func:`load` with ``--set key=value`` overrides and
 the ``--quick`` preset :data:`QUICK`. A bad key or value raises :class:`pfjax.config.ConfigError`,
-one line naming the key."""
+one line naming the key. Its defaults are :mod:`pfjax.parking.defaults`'s (the simulator's and the
+entry points')."""
 
 from __future__ import annotations
 
@@ -13,34 +14,39 @@ from pydantic import Field, model_validator
 
 from pfjax.config import POSITIVE, ConfigModel, Real, load_model
 from pfjax.errors import MAX_SEED
+from pfjax.parking import defaults as D
 from pfjax.parking.limits import MAX_SCAN_PERIOD
 from pfjax.resources import MAX_GENERATIONS, MAX_POPULATION
 
 #: a part of the robot's rectangle checked toward the travel direction (pfjax.parking.assumptions.ZONES)
 Zone = Literal["middle", "axle", "whole"]
+#: the assumptions sweep's and the Monte Carlo's defaults
+_GRID, S = D.ASSUMPTION_GRID, D.Scatter
 
 
 class Controller(ConfigModel):
     """The source's controller: gains k1, k2 (roots -4 ± 4i) and travel speed |v1|."""
 
-    k1: Real = Field(32.0, ge=POSITIVE, description="gain on the lateral error [1/m²]")
-    k2: Real = Field(8.0, ge=POSITIVE, description="gain on the heading error [1/m]")
-    speed: Real = Field(0.05, ge=POSITIVE, description="travel speed |v1| [m/s]")
+    k1: Real = Field(D.K1, ge=POSITIVE, description="gain on the lateral error [1/m²]")
+    k2: Real = Field(D.K2, ge=POSITIVE, description="gain on the heading error [1/m]")
+    speed: Real = Field(D.SPEED, ge=POSITIVE, description="travel speed |v1| [m/s]")
 
 
 class Sim(ConfigModel):
     """Single runs: scanner period, timeout, tolerance, integration and the stuck test."""
 
-    scan_period: Real = Field(0.1, ge=POSITIVE, le=MAX_SCAN_PERIOD, description="scanner sampling period [s]")
-    t_max: Real = Field(200.0, ge=POSITIVE, description="timeout of a run [s]")
-    tol: Real = Field(0.02, ge=POSITIVE, description="stop when |x| + sqrt(y² + tan²θ) < tol [m]")
-    n_sub: int = Field(2, ge=1, le=100, description="RK4 steps per scanner period, at most 100 [-]")
-    front: Real = Field(0.0, ge=0, lt=0.54, description="a_f, reach ahead of the axle; 0 = calibrated [m]")
-    chunk: int = Field(1024, ge=1, le=10_000_000, description="runs per jitted batch (memory-checked) [-]")
+    scan_period: Real = Field(D.SCAN_PERIOD, ge=POSITIVE, le=MAX_SCAN_PERIOD, description="scanner sampling period [s]")
+    t_max: Real = Field(D.T_MAX, ge=POSITIVE, description="timeout of a run [s]")
+    tol: Real = Field(D.TOL, ge=POSITIVE, description="stop when |x| + sqrt(y² + tan²θ) < tol [m]")
+    n_sub: int = Field(D.N_SUB, ge=1, le=100, description="RK4 steps per scanner period, at most 100 [-]")
+    front: Real = Field(0.0, ge=0, lt=D.L2_LENGTH, description="a_f, reach ahead of the axle; 0 = calibrated [m]")
+    chunk: int = Field(D.CHUNK, ge=1, le=10_000_000, description="runs per jitted batch (memory-checked) [-]")
     stuck_switches: int = Field(
-        4, ge=1, le=1000, description="legs over which stuck_travel is measured, at most 1000 [-]"
+        D.STUCK_SWITCHES, ge=1, le=1000, description="legs over which stuck_travel is measured, at most 1000 [-]"
     )
-    stuck_travel: Real = Field(0.1, ge=0, description="stuck: less travel than this over stuck_switches legs [m]")
+    stuck_travel: Real = Field(
+        D.STUCK_TRAVEL, ge=0, description="stuck: less travel than this over stuck_switches legs [m]"
+    )
 
     @model_validator(mode="after")
     def _steps(self):
@@ -55,20 +61,18 @@ class Sim(ConfigModel):
 class Assumptions(ConfigModel):
     """The open assumptions of docs/reproductions/parking.md §3, swept over cases A-D (every combination)."""
 
-    fronts: list[Real] = Field(
-        [0.10, 0.125, 0.15, 0.175, 0.20, 0.225, 0.25], min_length=1, description="reach ahead of the axle [m]"
-    )
-    zones: list[Zone] = Field(["middle", "axle", "whole"], min_length=1, description="part checked ahead [-]")
-    scan_periods: list[Real] = Field([0.05, 0.1, 0.2], min_length=1, description="scanner periods [s]")
+    fronts: list[Real] = Field(list(_GRID["front"]), min_length=1, description="reach ahead of the axle [m]")
+    zones: list[Zone] = Field(list(_GRID["zone"]), min_length=1, description="part checked ahead [-]")
+    scan_periods: list[Real] = Field(list(_GRID["scan_period"]), min_length=1, description="scanner periods [s]")
     decision_delays: list[bool] = Field(
-        [False, True], min_length=1, description="decide on the pose one period old [-]"
+        list(_GRID["decision_delay"]), min_length=1, description="decide on the pose one period old [-]"
     )
-    lags: list[bool] = Field([False, True], min_length=1, description="the experiments' yaw-rate PI loop [-]")
-    pauses: list[Real] = Field([0.0, 1.0], min_length=1, description="time standing at each reversal [s]")
+    lags: list[bool] = Field(list(_GRID["lag"]), min_length=1, description="the experiments' yaw-rate PI loop [-]")
+    pauses: list[Real] = Field(list(_GRID["pause"]), min_length=1, description="time standing at each reversal [s]")
 
     @model_validator(mode="after")
     def _ranges(self):
-        for key, vals, hi in (("fronts", self.fronts, 0.54), ("scan_periods", self.scan_periods, 1)):
+        for key, vals, hi in (("fronts", self.fronts, D.L2_LENGTH), ("scan_periods", self.scan_periods, 1)):
             for i, f in enumerate(vals):  # positive: at least 1e-12, as every positive length and step
                 if not POSITIVE <= f <= hi or (key == "fronts" and f >= hi):
                     close = ")" if key == "fronts" else "]"
@@ -83,25 +87,29 @@ class Experiment(ConfigModel):
     """The source's experiments, as pfjax models them."""
 
     pause: Real = Field(
-        1.0, ge=0, description="pfjax's stop at each reversal in the experiments' runs (the source: 1 s) [s]"
+        D.EXPERIMENT_PAUSE,
+        ge=0,
+        description="pfjax's stop at each reversal in the experiments' runs (the source: 1 s) [s]",
     )
 
 
 class Garage(ConfigModel):
     """The garage tries."""
 
-    xs_values: list[Real] = Field([-0.9, -1.2, -1.8], min_length=1, description="switch abscissae X_s tried [m]")
+    xs_values: list[Real] = Field(list(D.GARAGE_TRIES), min_length=1, description="switch abscissae X_s tried [m]")
 
 
 class Search(ConfigModel):
     """docs/reproductions/parking.md §5: 24-bit GA and a grid on the chromosome lattice."""
 
-    weight: Real = Field(100.0, ge=0, description="weight w of the end error in the fitness J = 1/(t_e + w e) [s/m]")
-    population: int = Field(20, ge=2, le=MAX_POPULATION, description="GA population size [-]")
-    generations: int = Field(100, ge=1, le=MAX_GENERATIONS, description="GA generations [-]")
-    grid_n: int = Field(32, ge=2, le=64, description="grid points per schedule parameter [-]")
+    weight: Real = Field(D.WEIGHT, ge=0, description="weight w of the end error in the fitness J = 1/(t_e + w e) [s/m]")
+    population: int = Field(D.POPULATION, ge=2, le=MAX_POPULATION, description="GA population size [-]")
+    generations: int = Field(D.GENERATIONS, ge=1, le=MAX_GENERATIONS, description="GA generations [-]")
+    grid_n: int = Field(D.GRID_N, ge=2, le=D.MAX_GRID_N, description="grid points per schedule parameter [-]")
     ga_seeds: int = Field(3, ge=1, le=1000, description="independent GA runs (work-checked) [-]")
-    max_switches: int = Field(10, ge=1, le=1000, description="a candidate switching more often fails, at most 1000 [-]")
+    max_switches: int = Field(
+        D.SEARCH_MAX_SWITCHES, ge=1, le=1000, description="a candidate switching more often fails, at most 1000 [-]"
+    )
 
 
 class StartMap(ConfigModel):
@@ -111,7 +119,7 @@ class StartMap(ConfigModel):
     theta0_deg: list[Real] = Field(
         [-80.0, -40.0, 0.0, 40.0, 80.0], min_length=1, description="start headings, magnitude < 90 [deg]"
     )
-    grid_n: int = Field(10, ge=2, le=64, description="grid points per schedule parameter [-]")
+    grid_n: int = Field(10, ge=2, le=D.MAX_GRID_N, description="grid points per schedule parameter [-]")
 
     @model_validator(mode="after")
     def _headings(self):
@@ -125,13 +133,15 @@ class MonteCarlo(ConfigModel):
     """Garage robustness: fixed schedule vs the GA's and the grid's best on the same sampled runs."""
 
     n_runs: int = Field(1000, ge=1, description="sampled runs per schedule (work-checked) [-]")
-    pos_scatter: Real = Field(0.05, ge=0, description="half-width of the uniform scatter of x0 and y0 [m]")
-    theta_scatter_deg: Real = Field(5.0, ge=0, description="half-width of the uniform scatter of θ0 [deg]")
-    scan_lo: Real = Field(0.05, ge=POSITIVE, description="smallest scanner period [s]")
-    scan_hi: Real = Field(0.2, ge=POSITIVE, le=MAX_SCAN_PERIOD, description="largest scanner period [s]")
-    speed_lo: Real = Field(0.04, ge=POSITIVE, description="smallest travel speed [m/s]")
-    speed_hi: Real = Field(0.06, ge=POSITIVE, description="largest travel speed [m/s]")
-    lag_probability: Real = Field(0.5, ge=0, le=1, description="probability of the yaw-rate lag [-]")
+    pos_scatter: Real = Field(S.pos_scatter, ge=0, description="half-width of the uniform scatter of x0 and y0 [m]")
+    theta_scatter_deg: Real = Field(
+        S.theta_scatter_deg, ge=0, description="half-width of the uniform scatter of θ0 [deg]"
+    )
+    scan_lo: Real = Field(S.scan_lo, ge=POSITIVE, description="smallest scanner period [s]")
+    scan_hi: Real = Field(S.scan_hi, ge=POSITIVE, le=MAX_SCAN_PERIOD, description="largest scanner period [s]")
+    speed_lo: Real = Field(S.speed_lo, ge=POSITIVE, description="smallest travel speed [m/s]")
+    speed_hi: Real = Field(S.speed_hi, ge=POSITIVE, description="largest travel speed [m/s]")
+    lag_probability: Real = Field(S.lag_probability, ge=0, le=1, description="probability of the yaw-rate lag [-]")
 
     @model_validator(mode="after")
     def _ranges(self):
@@ -192,7 +202,7 @@ class ParkingStudy(ConfigModel):
             "sim.chunk",
             self.sim.chunk * run_bytes(log_len),
             f"a batch of sim.chunk = {self.sim.chunk} runs",
-            "lower sim.chunk (1024 by default)",
+            f"lower sim.chunk ({D.CHUNK} by default)",
         )
         return self
 

@@ -12,6 +12,7 @@ import pandas as pd
 
 from pfjax.parking import figures as F
 from pfjax.parking.assumptions import case_sweep, sweep_summary
+from pfjax.parking.defaults import GARAGE_XS
 from pfjax.parking.montecarlo import Scatter, monte_carlo, summarise
 from pfjax.parking.schedules import GARAGE_START
 from pfjax.parking.simulate import STATUS_NAMES, run_params
@@ -158,7 +159,7 @@ def part_montecarlo(cfg: ParkingStudy, fig_dir, gmap, ga, grid, key):
         }
     )
     scan = cfg.sim.scan_period
-    schedules: list[tuple[str, float, tuple[float, ...]]] = [("fixed: α=1, X_s=-0.9", -0.9, (1.0,))]
+    schedules: list[tuple[str, float, tuple[float, ...]]] = [(f"fixed: α=1, X_s={GARAGE_XS:g}", GARAGE_XS, (1.0,))]
     for lab, d in (("GA best", ga), ("grid best", grid)):
         schedules.append(
             (

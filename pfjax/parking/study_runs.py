@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from pfjax.parking import figures as F
+from pfjax.parking.defaults import GARAGE_TRIES
 from pfjax.parking.maps import GARAGE, PARALLEL
 from pfjax.parking.model import control_params
 from pfjax.parking.schedules import CASES, GARAGE_START
@@ -171,7 +172,7 @@ def part_outcomes(cfg: ParkingStudy, pmap, gmap) -> dict:
         pmap,
         run_params(c["x0"], c["direction"], c["schedule"], front=front, scan_period=scan, control=control, pause=pause),
     )
-    for xs in (-0.9, -1.2, -1.8):
+    for xs in GARAGE_TRIES:
         for suffix, ps in (("", 0.0), ("+pause", pause)):
             runs[f"garage {xs:g}{suffix}"] = (
                 gmap,

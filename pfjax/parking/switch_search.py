@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from pfjax.parking.defaults import CHUNK, GENERATIONS, GRID_N, POPULATION, WEIGHT
 from pfjax.parking.schedules import ALPHA_MAX, GARAGE_START, XS_MAX, XS_MIN, decode_bits, three_phase
 from pfjax.parking.simulate import SEARCH_MAX_SWITCHES, ParkingConfig, RunParams, Status, run_many, run_params
 
@@ -36,7 +37,7 @@ FAILED = (
 SEARCH_CONFIG = ParkingConfig(max_switches=SEARCH_MAX_SWITCHES, stuck_switches=None)
 
 
-def fitness(status, time, error, weight: float = 100.0):
+def fitness(status, time, error, weight: float = WEIGHT):
     """J = 1 / (t_e + w e_e), 0 for failed runs (NumPy or JAX arrays)."""
     xp = jnp if isinstance(status, jax.Array) else np
     failed = xp.isin(status, xp.asarray(FAILED))
@@ -63,7 +64,7 @@ def search_ga(
     key,
     start=GARAGE_START,
     options=None,
-    weight=100.0,
+    weight=WEIGHT,
     cfg=SEARCH_CONFIG,
     progress=False,
     base: RunParams | None = None,
@@ -71,7 +72,7 @@ def search_ga(
     """The source's GA: 24 bits, n = 20, N = 100 by default; returns the best decoded parameters."""
     from pfjax.tuning.ga import GAOptions, ga_bits
 
-    options = options or GAOptions(population_size=20, generations=100)
+    options = options or GAOptions(population_size=POPULATION, generations=GENERATIONS)
     base = base if base is not None else garage_base(start)
 
     def cost_batch(bits):
@@ -104,9 +105,9 @@ def evaluate(
     alpha2,
     *,
     cfg=SEARCH_CONFIG,
-    weight=100.0,
+    weight=WEIGHT,
     pose0=None,
-    chunk=1024,
+    chunk=CHUNK,
     progress=False,
 ) -> dict:
     """Batched runs at the given parameters -> NumPy columns (status, time_s, switches, fitness, ...)."""
@@ -132,11 +133,11 @@ def lattice(n: int) -> tuple[np.ndarray, np.ndarray]:
 def search_grid(
     omap,
     *,
-    n=32,
+    n=GRID_N,
     start=GARAGE_START,
-    weight=100.0,
+    weight=WEIGHT,
     cfg=SEARCH_CONFIG,
-    chunk=1024,
+    chunk=CHUNK,
     progress=False,
     base: RunParams | None = None,
 ) -> dict:
@@ -169,9 +170,9 @@ def start_map(
     *,
     y0=GARAGE_START[1],
     n=12,
-    weight=100.0,
+    weight=WEIGHT,
     cfg=SEARCH_CONFIG,
-    chunk=1024,
+    chunk=CHUNK,
     progress=False,
     base: RunParams | None = None,
 ) -> list[dict]:
