@@ -19,7 +19,7 @@ import numpy as np
 
 from pfjax import controllers as C
 from pfjax import paths
-from pfjax.dynamic_study.config import KinematicVsDynamic, dynamic, kinematic_arm
+from pfjax.dynamic_study.config import KinematicVsDynamic, dynamic, kinematic, kinematic_arm
 from pfjax.models import single_track as st
 from pfjax.montecarlo.dists import Dist
 from pfjax.montecarlo.scenario_config import NoiseSpec, SimSpec
@@ -99,15 +99,11 @@ def _scaled(e, gains: dict, s: float, key: str) -> dict:
 
 
 def _dynamic(spec: dict, config: KinematicVsDynamic, mu=None) -> dict:
-    out = dynamic(copy.deepcopy(spec))
-    out["vehicle"]["mu"] = mu if mu is not None else {"dist": "uniform", "low": config.mu_low, "high": config.mu_high}
-    return out
+    return dynamic(copy.deepcopy(spec), config.dynamic_mu() if mu is None else mu)
 
 
 def _kinematic(spec: dict, a: float) -> dict:
-    out = copy.deepcopy(spec)
-    for key in ("tau_delta_s", "k_v"):  # the dynamic vehicle's actuator and speed loop
-        out.get("vehicle", {}).pop(key, None)
+    out = kinematic(spec)  # without the dynamic vehicle's actuator and speed loop
     slip = {"dist": "uniform", "low": -a, "high": a} if a > 0 else 0.0
     out["slip"] = {"kind": "constant", "beta_r_deg": slip, "beta_f_deg": slip}
     return out

@@ -4,7 +4,8 @@ Top-level keys set the arms (friction range, the high-friction arm, the kinemati
 the throughput comparison); ``designs`` the LMI redesigns; ``car`` the passenger-car scale; ``study``
 the Monte Carlo study config the robot arms share (keys of :class:`pfjax.montecarlo.config.StudySpec`,
 given keys merged into :data:`STUDY` the way ``--set`` merges into a file; not the keys each arm sets
-itself, :data:`ARM_KEYS`: the slip, the vehicle's model and its friction). Every key is optional;
+itself, :data:`ARM_KEYS`: the slip, the vehicle's model and its friction; ``study.vehicle`` is the
+dynamic arms' vehicle, so its ``tau_delta_s`` and ``k_v`` are theirs). Every key is optional;
 the defaults are the study's published sizes. Loaded by :func:`load` with the same ``--set
 key=value`` syntax and one-line :class:`pfjax.config.ConfigError` as the Monte Carlo study.
 """
@@ -111,10 +112,11 @@ class KinematicVsDynamic(ConfigModel):
         default_factory=lambda: copy.deepcopy(STUDY),
         description="the Monte Carlo study config the robot arms share: keys of a study config, given keys "
         "replacing those of pfjax.dynamic_study.config.STUDY (the [study] tables of "
-        "studies/kinematic_vs_dynamic.toml), validated as the dynamic arms' (vehicle.model = \"st\"): "
-        "vehicle.tau_delta_s and vehicle.k_v set the dynamic arms' actuator and speed loop (and the designs'), "
-        "not the kinematic model's keys (vehicle.L, vehicle.delta_max_deg, vehicle.delta_rate_max_deg, "
-        "vehicle.convention) nor slip, vehicle.model, vehicle.mu and vehicle.params, which the arms set [-]",
+        "studies/kinematic_vs_dynamic.toml); study.vehicle is the dynamic arms' vehicle (model st): "
+        "vehicle.tau_delta_s (s) and vehicle.k_v (1/s) set their steering actuator and speed loop (and the "
+        "designs' operating point; Froude-scaled for the car), the kinematic model's keys (vehicle.L, "
+        "vehicle.delta_max_deg, vehicle.delta_rate_max_deg, vehicle.convention) are refused; not slip, "
+        "vehicle.model, vehicle.mu or vehicle.params, which the arms set [-]",
     )
 
     @field_validator("study", mode="before")
@@ -126,7 +128,7 @@ class KinematicVsDynamic(ConfigModel):
 
     @model_validator(mode="after")
     def _check(self):
-        from pfjax.montecarlo.config import StudySpec
+        from pfjax.montecarlo.config import StudySpec, VehicleSpec
         from pfjax.outputs import NAME_PATTERN
 
         if not NAME_PATTERN.match(self.name):
@@ -141,16 +143,23 @@ class KinematicVsDynamic(ConfigModel):
         if repeated:
             raise ValueError(
                 f"slip_ranges_deg: each range names its arm (kinematic_<A:g>deg, 6 significant digits), and "
-                f"{', '.join(repeated)} is given more than once ({self.slip_ranges_deg}); give distinct ranges"
+                f"{self.slip_ranges_deg} names {', '.join(repeated)} more than once; give distinct ranges"
             )
         _refuse_arm_keys(self.study)
-        try:
-            StudySpec.model_validate(dynamic({**self.study, "name": self.name}))
-        except ValidationError as e:
-            message = format_error(e, StudySpec).replace("did you mean '", "did you mean 'study.")
-            if f'model = "{DYNAMIC_MODEL}"' in message:
-                message += " (study is the dynamic arms' study config)"
-            raise ValueError("study." + message) from None
+        # the vehicle as the dynamic arms' (its own keys), the rest as the kinematic arms' study config;
+        # the arms' full study configs (the simulation step at their friction) are checked before the
+        # runs, naming the arm (pfjax.dynamic_study.arms.check)
+        for schema, data, prefix in (
+            (VehicleSpec, dynamic(self.study, self.dynamic_mu())["vehicle"], "study.vehicle."),
+            (StudySpec, {**kinematic(self.study), "name": self.name}, "study."),
+        ):
+            try:
+                schema.model_validate(data)
+            except ValidationError as e:
+                message = format_error(e, schema).replace("did you mean '", f"did you mean '{prefix}")
+                if f'model = "{DYNAMIC_MODEL}"' in message:
+                    message += " (study.vehicle is the dynamic arms' vehicle)"
+                raise ValueError(prefix + message) from None
         return self
 
     def dynamic_vehicle(self):
@@ -160,6 +169,10 @@ class KinematicVsDynamic(ConfigModel):
         from pfjax.montecarlo.config import VehicleSpec
 
         return VehicleSpec.model_validate(dynamic(self.study)["vehicle"])  # valid: _check validated it
+
+    def dynamic_mu(self) -> dict:
+        """The dynamic arm's friction (a distribution table): uniform on ``[mu_low, mu_high]``."""
+        return {"dist": "uniform", "low": self.mu_low, "high": self.mu_high}
 
     @property
     def grip_arm(self) -> str:
@@ -171,9 +184,22 @@ class KinematicVsDynamic(ConfigModel):
 DYNAMIC_MODEL = "st"
 
 
-def dynamic(spec: dict) -> dict:
-    """A copy of the study config ``spec`` with the dynamic arms' vehicle model (:data:`DYNAMIC_MODEL`)."""
-    return {**spec, "vehicle": {**spec.get("vehicle", {}), "model": DYNAMIC_MODEL}}
+def dynamic(spec: dict, mu=None) -> dict:
+    """A copy of the study config ``spec`` with the dynamic arms' vehicle model (:data:`DYNAMIC_MODEL`)
+    and, if given, the friction ``mu`` (a number or a distribution table)."""
+    vehicle = {**spec.get("vehicle", {}), "model": DYNAMIC_MODEL}
+    return {**spec, "vehicle": vehicle if mu is None else {**vehicle, "mu": mu}}
+
+
+def kinematic(spec: dict) -> dict:
+    """A copy of the study config ``spec`` without the dynamic model's vehicle keys
+    (``tau_delta_s``, ``k_v``: the actuator and speed loop, :data:`pfjax.montecarlo.scenario_config.MODEL_SETTINGS`),
+    which the kinematic arms do not take."""
+    from pfjax.montecarlo.scenario_config import other_models_settings
+
+    drop = {m.key for m in other_models_settings("kinematic")}
+    vehicle = {k: v for k, v in spec.get("vehicle", {}).items() if k not in drop}
+    return {**copy.deepcopy(spec), "vehicle": copy.deepcopy(vehicle)}
 
 
 def kinematic_arm(a: float, prefix: str = "kinematic_") -> str:
@@ -211,4 +237,16 @@ def load(path: str | Path | None = None, overrides: Sequence[str] = (), quick: b
     return load_model(KinematicVsDynamic, path, overrides, presets=[QUICK] if quick else [])[0]
 
 
-__all__ = ["ARM_KEYS", "DYNAMIC_MODEL", "QUICK", "STUDY", "Car", "Designs", "KinematicVsDynamic", "dynamic", "kinematic_arm", "load"]
+__all__ = [
+    "ARM_KEYS",
+    "DYNAMIC_MODEL",
+    "QUICK",
+    "STUDY",
+    "Car",
+    "Designs",
+    "KinematicVsDynamic",
+    "dynamic",
+    "kinematic",
+    "kinematic_arm",
+    "load",
+]

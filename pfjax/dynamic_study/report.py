@@ -57,7 +57,7 @@ def slip_tables(s: dict) -> list[Block]:
         ),
         Table(
             ["path (max curvature at robot scale, 1/m)", *_SLIP_HEAD],
-            [_slip_row(f"{b['path']} ({b['max_curvature_robot']})", b) for b in s["by_path"]],
+            [_slip_row(f"{b['path']} ({_num(b['max_curvature_robot'], 3)})", b) for b in s["by_path"]],
         ),
         Paragraph(
             f"Runs (status ok) whose largest slip exceeds the declared +-{s['declared_range_deg']:g} deg: rear "
@@ -78,7 +78,7 @@ def _verdicts(c: dict) -> Table:
                 percent(x["success"][ref]),
                 f"{100 * p['diff']:+.1f} pp [{100 * p['ci95'][0]:+.1f}, {100 * p['ci95'][1]:+.1f}]",
                 f"{x['verdict_kinematic']} -> {x['verdict_dynamic']}",
-                "yes" if x["verdict_survives"] else "no",
+                x["verdict_survives"],
                 f"{x['equivalent_kinematic_arm']} (gap {100 * x['equivalent_gap']:.1f} pp)"
                 if x["equivalent_kinematic_arm"] is not None
                 else f"none (closest {x['closest_kinematic_arm']}, gap {100 * x['equivalent_gap']:.1f} pp)",
@@ -216,7 +216,8 @@ def report(s: dict) -> Document:
         Heading("Success rates (95 % Clopper-Pearson intervals) and verdicts, robot scale"),
         Paragraph(
             f"Verdict: robust if the interval lies above {100 * s['robust_line']:.0f} %, fragile if below, "
-            "undecided if it straddles; paired difference: dynamic - kinematic, same runs (95 % normal interval).",
+            "undecided if it straddles; survives: undecided where either verdict is; paired difference: dynamic - "
+            "kinematic, same runs (95 % Tango score interval).",
             style="note",
         ),
         *comparison(s["robot"], 1e-3, "mm"),

@@ -1,6 +1,6 @@
 """Summary of the kinematic-vs-dynamic study's runs (:mod:`pfjax.dynamic_study.runs`): slip
 distributions of the dynamic arms, success rates with 95 % Clopper-Pearson intervals, paired
-differences, verdicts and equivalent kinematic slip ranges per controller and scale.
+differences with 95 % Tango score intervals, verdicts and equivalent kinematic slip ranges per controller and scale.
 
 Success counts every run; the slip statistics and the late max |d| statistics are over the runs
 that ran the whole horizon (status ``ok``), as :func:`pfjax.montecarlo.summary.run_statistics`
@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pandas as pd
 
-from pfjax.dynamic_study.config import KinematicVsDynamic
-from pfjax.metrics.robustness import clopper_pearson
+from pfjax.dynamic_study.config import KinematicVsDynamic, kinematic_arm
+from pfjax.metrics.robustness import clopper_pearson, paired_interval
 from pfjax.provenance import STAMP_UNITS
 
 #: A verdict's line: a controller is robust in an arm if its success rate is at least this.
@@ -35,7 +35,9 @@ UNITS = {
     "max_curvature_robot": "1/m (the robot-scale path)",
     "robust_line": "1 (success rate)",
     "rate": "1 (success rate)",
-    "ci95": "1 (95 % interval of a rate or a paired difference of success rates)",
+    "ci95": "1 (95 % interval of a rate, Clopper-Pearson, or of a paired difference of success rates, Tango's score)",
+    "only_dynamic": "runs (a success in the dynamic arm only)",
+    "only_kinematic": "runs (a success in the reference kinematic arm only)",
     "diff": "1 (difference of success rates)",
     "equivalent_gap": "1 (difference of success rates)",
     "k": "runs",
@@ -64,8 +66,17 @@ UNITS = {
     "load_average": "processes (1, 5, 15 min)",
     **STAMP_UNITS,
 }
-#: The source paths' largest curvature, 1/m (pfjax.paths registry), for the slip-by-curvature table.
-PATH_CURVATURE = {"line": 0.0, "sine": 1.0, "parabola": 2.0}
+
+
+def path_curvatures(config: KinematicVsDynamic) -> dict[str, float]:
+    """Path label -> the robot-scale path's largest |curvature| (1/m) over the support of its
+    distributions (:func:`pfjax.montecarlo.checks.path_max_curvature`: the registry's bound for a
+    fixed path; NaN for a random path), for the slip-by-path tables."""
+    from pfjax.montecarlo.checks import path_max_curvature
+    from pfjax.montecarlo.config import PathSpec
+
+    specs = [PathSpec.model_validate(q) for q in config.study["paths"]]
+    return {p.label: path_max_curvature(p) for p in specs}
 
 
 def _rate(success: np.ndarray) -> dict:
@@ -75,17 +86,32 @@ def _rate(success: np.ndarray) -> dict:
 
 
 def _paired(a: np.ndarray, b: np.ndarray) -> dict:
-    """Mean of the paired differences ``a - b`` (success indicators) with its 95 % normal interval."""
-    d = a.astype(float) - b.astype(float)
-    se = float(np.std(d, ddof=1) / math.sqrt(len(d))) if len(d) > 1 else math.nan
-    m = float(np.mean(d))
-    return {"diff": m, "ci95": [m - 1.96 * se, m + 1.96 * se], "n": len(d)}
+    """The mean of the paired differences ``a - b`` of success indicators, with its 95 % Tango score
+    interval (:func:`paired_interval`)."""
+    a, b = a.astype(bool), b.astype(bool)
+    n, only_a, only_b = len(a), int(np.sum(a & ~b)), int(np.sum(~a & b))
+    return {
+        "diff": (only_a - only_b) / n if n else math.nan,
+        "ci95": list(paired_interval(only_a, only_b, n)),
+        "n": n,
+        "only_dynamic": only_a,
+        "only_kinematic": only_b,
+    }
 
 
 def _side(r: dict) -> str:
     """``robust`` (interval above the line), ``fragile`` (below) or ``undecided`` (straddles it)."""
     lo, hi = r["ci95"]
     return "robust" if lo >= ROBUST else "fragile" if hi < ROBUST else "undecided"
+
+
+def survives(kinematic: str, dynamic: str) -> str:
+    """Whether the kinematic verdict survives on the dynamic arm: ``undecided`` where either verdict
+    is (there is no claim to keep, or no evidence to keep or drop it), else ``yes`` if the two agree
+    and ``no`` if they differ."""
+    if "undecided" in (kinematic, dynamic):
+        return "undecided"
+    return "yes" if kinematic == dynamic else "no"
 
 
 def _q(s: pd.Series) -> dict:
@@ -123,14 +149,15 @@ def _binned(dyn: pd.DataFrame, col: str, n: int) -> list[dict]:
     return [{col: [lo, hi], **_slip_stats(dyn[mask])} for lo, hi, mask in bins(dyn[col], n)]
 
 
-def slip_summary(dyn: pd.DataFrame, declared: float, speed_scale: float = 1.0) -> dict:
+def slip_summary(dyn: pd.DataFrame, declared: float, curvature: dict[str, float] | None = None) -> dict:
     """The slip the dynamic arm ``dyn`` produced, over its runs with status ``ok`` (module
     docstring; ``n``: their number, ``n_failed``: the runs left out, in all and in each part): by
-    friction and speed (bins over the range of every run) and by path (curvature); quantiles NaN in a
-    part without an ok run."""
+    friction and speed (bins over the range of every run) and by path (with its robot-scale largest
+    curvature, 1/m, from ``curvature``: :func:`path_curvatures`; NaN where it has none); quantiles NaN in a part without an
+    ok run."""
     ok = dyn[dyn.status == "ok"]
     by_path = [
-        {"path": p, "max_curvature_robot": PATH_CURVATURE.get(p), **_slip_stats(part)}
+        {"path": p, "max_curvature_robot": (curvature or {}).get(p, math.nan), **_slip_stats(part)}
         for p, part in dyn.groupby("path")
     ]
     return {
@@ -152,7 +179,8 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
     """Per controller of ``dyn_arm``: success in it, in ``ref_arm`` and in every arm starting with
     ``kin_prefix``; the paired difference ``dyn_arm - ref_arm``; the verdicts; the equivalent
     kinematic arm; success by path and friction; the late max |d| over the runs with status ``ok``
-    (``n_ok`` per arm; NaN where none is); the failure statuses. The equivalent kinematic arm is
+    (``n_ok`` per arm; NaN where none is); the failure statuses. ``verdict_survives`` is ``yes``,
+    ``no`` or ``undecided`` (:func:`survives`). The equivalent kinematic arm is
     the one whose success rate is closest to the dynamic arm's (``closest_kinematic_arm``, the gap
     ``equivalent_gap``) if the dynamic rate lies in its 95 % interval, else None."""
     key = ["path", "controller", "run"]
@@ -185,7 +213,7 @@ def compare(runs: pd.DataFrame, dyn_arm: str, ref_arm: str, kin_prefix: str, ext
             "paired_dynamic_minus_kinematic": _paired(d.success.to_numpy(), k.success.to_numpy()),
             "verdict_kinematic": _side(rates[ref_arm]),
             "verdict_dynamic": _side(rates[dyn_arm]),
-            "verdict_survives": _side(rates[ref_arm]) == _side(rates[dyn_arm]),
+            "verdict_survives": survives(_side(rates[ref_arm]), _side(rates[dyn_arm])),
             "equivalent_kinematic_arm": equivalent,
             "closest_kinematic_arm": closest,
             "equivalent_gap": gap,
@@ -201,16 +229,16 @@ def summarise(config: KinematicVsDynamic, runs: pd.DataFrame) -> dict:
     """The study's summary: one comparison per scale (robot, designs, car) and the slip tables."""
     a_max = max(config.slip_ranges_deg)
     arms_ = set(runs.arm)
-    grip = f"dynamic_mu{config.mu_grip:g}"
+    curvature = path_curvatures(config)
     out = {
         "robust_line": ROBUST,
-        "slip": slip_summary(runs[runs.arm == "dynamic"], a_max),
-        "robot": compare(runs, "dynamic", f"kinematic_{a_max:g}deg", "kinematic_", extra_arms=(grip,)),
+        "slip": slip_summary(runs[runs.arm == "dynamic"], a_max, curvature),
+        "robot": compare(runs, "dynamic", kinematic_arm(a_max), "kinematic_", extra_arms=(config.grip_arm,)),
     }
     if "designs_dynamic" in arms_:
-        ref = f"designs_kinematic_{a_max:g}deg"
+        ref = kinematic_arm(a_max, "designs_kinematic_")
         out["designs_comparison"] = compare(runs, "designs_dynamic", ref, "designs_kinematic_")
     if "car_dynamic" in arms_:
-        out["car_slip"] = slip_summary(runs[runs.arm == "car_dynamic"], a_max)
-        out["car"] = compare(runs, "car_dynamic", f"car_kinematic_{a_max:g}deg", "car_kinematic_")
+        out["car_slip"] = slip_summary(runs[runs.arm == "car_dynamic"], a_max, curvature)
+        out["car"] = compare(runs, "car_dynamic", kinematic_arm(a_max, "car_kinematic_"), "car_kinematic_")
     return out
