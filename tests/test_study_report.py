@@ -533,15 +533,16 @@ def test_figure_worker_answers_can_be_collected_in_any_order(study, tmp_path):
         assert (tmp_path / d / "figures" / f"{name}.png").read_bytes() == (out / "figures" / f"{name}.png").read_bytes()
 
 
-def test_paired_comparison_is_mcnemars_exact_test_and_the_wald_interval():
+def test_paired_comparison_is_mcnemars_exact_test_and_tangos_interval():
     """:func:`pfjax.report.study_verdict.paired` against ``scipy.stats.binomtest`` (the exact
-    McNemar test: the runs where exactly one controller succeeds, at p = 1/2) and the paired Wald
-    interval written out with ``scipy.stats.norm``."""
-    import math
+    McNemar test: the runs where exactly one controller succeeds, at p = 1/2); its interval is
+    Tango's score interval of the same counts (checked against an independent solution in
+    ``tests/test_dynamic_study_audit.py``), with a width where the outcomes are identical."""
 
     import numpy as np
     from scipy import stats
 
+    from pfjax.metrics.robustness import paired_interval
     from pfjax.report.study_verdict import paired
 
     rng = np.random.default_rng(5)
@@ -561,9 +562,11 @@ def test_paired_comparison_is_mcnemars_exact_test_and_the_wald_interval():
         assert (got["n"], got["only_a"], got["only_b"]) == (n, b, c)
         want_p = stats.binomtest(b, b + c, 0.5).pvalue if b + c else 1.0
         assert got["p"] == pytest.approx(want_p, rel=1e-10)
-        half = stats.norm.ppf(0.975) * math.sqrt(max(b + c - (b - c) ** 2 / n, 0.0)) / n
         assert got["diff"] == (b - c) / n
-        assert got["ci"] == pytest.approx(((b - c) / n - half, (b - c) / n + half), rel=1e-15, abs=1e-15)
+        assert got["ci"] == paired_interval(b, c, n) and got["ci"][0] <= got["diff"] <= got["ci"][1]
+        z2 = stats.norm.ppf(0.975) ** 2
+        if b == c == 0:  # identical outcomes (n = 12 at 1.0 and 1.0): +-z^2 / (n + z^2), not a zero width
+            assert got["ci"] == pytest.approx((-z2 / (n + z2), z2 / (n + z2)), rel=1e-9)
 
 
 def test_a_study_with_its_report_does_not_import_scipy_stats(tmp_path):

@@ -3,11 +3,9 @@ compared with each other one *paired*.
 
 Every controller ran the same scenarios (common random numbers), so for two controllers A and B
 the runs where exactly one of them succeeds decide the comparison. With ``b`` runs where A succeeds
-and B fails and ``c`` the reverse, the difference in success rate is ``D = (b - c) / n``, with the
-paired (Wald) 95 % interval::
-
-    D +- 1.96 sqrt((b + c) - (b - c)^2 / n) / n
-
+and B fails and ``c`` the reverse, the difference in success rate is ``D = (b - c) / n``, with
+Tango's 95 % score interval for paired proportions (:func:`pfjax.metrics.robustness.paired_interval`,
+which keeps a width when the two controllers' outcomes are identical, where the Wald interval has none),
 and the exact McNemar test of "equally robust" is the two-sided binomial test of ``b`` successes
 in ``b + c`` trials at ``p = 1/2``. That distribution is symmetric, so its p-value is twice the
 smaller tail, ``min(1, 2 P(X <= min(b, c)))`` with ``X ~ Bin(b + c, 1/2)`` (``scipy.stats.binomtest``'s
@@ -22,6 +20,7 @@ import math
 import pandas as pd
 from scipy import special
 
+from pfjax.metrics.robustness import paired_interval
 from pfjax.report.document import Cell
 from pfjax.report.study_format import DASH, cell, fmt_ci, fmt_margin, fmt_num, fmt_p, fmt_pct, fmt_times, missing
 
@@ -37,10 +36,7 @@ def paired(runs: pd.DataFrame, a: str, b: str) -> dict:
     n, only_a, only_b = len(m), int((x & ~y).sum()), int((~x & y).sum())
     p = min(1.0, 2.0 * float(special.bdtr(min(only_a, only_b), only_a + only_b, 0.5))) if only_a + only_b else 1.0
     diff = (only_a - only_b) / n if n else math.nan
-    half = (
-        special.ndtri(0.975) * math.sqrt(max(only_a + only_b - (only_a - only_b) ** 2 / n, 0.0)) / n if n else math.nan
-    )
-    return {"n": n, "only_a": only_a, "only_b": only_b, "diff": diff, "ci": (diff - half, diff + half), "p": p}
+    return {"n": n, "only_a": only_a, "only_b": only_b, "diff": diff, "ci": paired_interval(only_a, only_b, n), "p": p}
 
 
 def verdict(summary: dict, runs: pd.DataFrame) -> tuple[str, list[str], list[list]]:
