@@ -476,12 +476,30 @@ class OutputDir:
             old = temporary_dir(self.target, _OLD)
         with interrupts.deferred():  # never between the two renames (a kill there: _restore_stranded)
             if old is not None:
-                os.replace(self.target, old / "output")
-            os.replace(staging, self.target)
+                try:
+                    os.replace(self.target, old / "output")
+                except OSError as e:  # e.g. an immutable target, another user's in a sticky directory
+                    remove_temporary(old)
+                    raise self._cannot_replace(e) from None
+            try:
+                os.replace(staging, self.target)
+            except OSError as e:
+                if old is not None:  # the previous output back into place, as it was
+                    os.replace(old / "output", self.target)
+                    remove_temporary(old)
+                raise self._cannot_replace(e) from None
             self.committed = True
         if old is not None:
             remove_temporary(old)
         return self.target
+
+    def _cannot_replace(self, e: OSError) -> InputError:
+        """The one-line error of a final rename the operating system refused: the new output is
+        not written, the previous one (if any) is as it was."""
+        return InputError(
+            f"{self.flag}: cannot move the new output into {self.target}: {e.strerror or e}; nothing there was changed",
+            self.flag,
+        )
 
 
 def _take_mode(staging: Path, target: Path) -> None:

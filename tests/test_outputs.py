@@ -911,3 +911,30 @@ def test_a_file_of_the_same_size_and_other_bytes_is_changed_whatever_its_time(tm
     os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
     assert as_written(listed, "summary.json", f.stat(), f)
     assert not as_written({"summary.json": listed["summary.json"][:2]}, "summary.json", f.stat(), f)
+
+
+@pytest.mark.parametrize("refused", ["setting the previous output aside", "moving the new one in", "a new output"])
+def test_a_final_rename_the_system_refuses_is_one_line_and_changes_nothing(tmp_path, monkeypatch, refused):
+    """A rename the operating system refuses at the end (an immutable target, another user's output
+    in a sticky directory): one line naming --out, the previous output as it was, nothing left
+    beside it (the set-aside directory removed, the previous output moved back)."""
+    import pfjax.outputs as outputs
+
+    out = tmp_path / "out"
+    if refused != "a new output":
+        _write(out, {"a": "previous"})
+    before = _tree(tmp_path)
+    real, calls = os.replace, []
+
+    def replace(src, dst):
+        calls.append((src, dst))
+        first = refused == "setting the previous output aside"
+        if len(calls) == (1 if first or refused == "a new output" else 2):
+            raise PermissionError(1, "Operation not permitted")
+        return real(src, dst)
+
+    monkeypatch.setattr(outputs.os, "replace", replace)
+    with pytest.raises(InputError, match=r"^--out: cannot move the new output into .*out: Operation not permitted; "):
+        _write(out, {"a": "new"})
+    monkeypatch.undo()
+    assert _tree(tmp_path) == before
