@@ -293,3 +293,17 @@ def test_warns_once_when_jax_started_first():
     out = _python("import jax, pfjax; print(jax.local_device_count())")
     assert out.returncode == 0 and "HostWarning" not in out.stderr
     assert int(out.stdout.split()[-1]) == len(os.sched_getaffinity(0))
+
+
+def test_scenarios_fields_and_table_columns_are_documented_with_units():
+    """pfjax.Scenarios' docstring names each field and property in an ``Attributes:`` section, and
+    every column of the kinematic and single-track tables with its unit."""
+    doc = pfjax.Scenarios.__doc__ or ""
+    attributes = doc.partition("Attributes:")[2]
+    for name in (*pfjax.Scenarios._fields, "n"):
+        assert re.search(rf"^\s+{name}: ", attributes, re.M), name
+    for model in ("kinematic", "st"):
+        for column in pfjax.scenarios("sine", 1, model=model).table.columns:
+            assert f"``{column}``" in attributes, column
+    for unit in ("(m/s)", "(m)", "(deg)", "(1)"):
+        assert unit in attributes, unit

@@ -8,6 +8,7 @@ than the steering limit allows, a user path shorter than the runs travel) are wa
 """
 
 import copy
+import re
 
 import pytest
 
@@ -59,8 +60,8 @@ CLI_CASES = [
     (["synth", "--method", "lqg"], "argument --method: invalid choice: 'lqg'"),
     (SIM + ["--beta-r-deg", "90"], "--beta-r-deg: magnitude must be < 90 deg, got 90"),
     (SIM + ["--beta-f-deg", "-120"], "--beta-f-deg: magnitude must be < 90 deg, got -120"),
-    (SIM + ["--delta-max-deg", "90"], "--delta-max-deg: magnitude must be < 90 deg, got 90"),
-    (SIM + ["--delta-max-deg", "0"], "--delta-max-deg: must be > 0 deg, got 0"),
+    (SIM + ["--delta-max-deg", "90"], "--delta-max-deg: must lie in (0, 90) deg, got 90"),
+    (SIM + ["--delta-max-deg", "0"], "--delta-max-deg: must lie in (0, 90) deg, got 0"),
     (SIM + ["--speed", "-1"], "--speed: must be > 0 m/s, got -1"),
     (SIM + ["--wheelbase", "0"], "--wheelbase: must be > 0 m, got 0"),
     # a design controller is made at --speed and --wheelbase: they are checked before the synthesis
@@ -97,14 +98,14 @@ CLI_CASES = [
     (["study", "CFG", "--set", "nokey"], "--set: expected key=value, got 'nokey'"),
     (["study", "CFG", "--set", "n_runs=1.5"], "n_runs: Input should be a valid integer"),
     (["study", "CFG", "--set", "seed='x'"], "seed: Input should be a valid integer"),
-    (["study", "CFG", "--set", "vehicle.L=0"], "vehicle.L: must be > 0 over its whole range, got a lower bound 0"),
+    (["study", "CFG", "--set", "vehicle.L=0"], "vehicle.L: must be > 0 m, got 0"),
     (
         ["study", "CFG", "--set", "vehicle.speed={dist='uniform', low=-1, high=1}"],
         "vehicle.speed: must be > 0 over its whole range",
     ),
     (
         ["study", "CFG", "--set", "vehicle.delta_max_deg=90"],
-        "vehicle.delta_max_deg: must lie in (0, 90) deg, got range [90, 90]",
+        "vehicle.delta_max_deg: must lie in (0, 90) deg, got 90",
     ),
     (["study", "CFG", "--set", "slip.beta_r_deg=-90"], "slip.beta_r_deg: slip magnitudes must stay below 90 deg"),
     # a label in tables and reports: not blank, one line
@@ -379,6 +380,35 @@ def test_the_python_api_rejects_what_the_cli_rejects():
         synthesize("mixed", v=0.0)
     with pytest.raises(InputError, match=r"^pose0\[2\]: expected a finite number, got nan$"):
         paper_scenario("line", pi, pose0=(0.0, 0.0, float("nan")))
+
+
+@pytest.mark.parametrize(
+    "kwargs,flags,expected",
+    [
+        ({"speed": 5e-324}, ["--speed", "5e-324"], "must be at least 1e-12 m/s, got 4.94066e-324"),
+        ({"L": 1e-13}, ["--wheelbase", "1e-13"], "must be at least 1e-12 m, got 1e-13"),
+        ({"delta_max_deg": 95}, ["--delta-max-deg", "95"], "must lie in (0, 90) deg, got 95"),
+        ({"delta_max_deg": 0}, ["--delta-max-deg", "0"], "must lie in (0, 90) deg, got 0"),
+        ({"model": "st", "k_v": -1}, ["--model", "st", "--k-v", "-1"], "must be > 0 1/s, got -1"),
+        ({"model": "st", "tau_delta_s": -1}, ["--model", "st", "--tau-delta", "-1"], "must be > 0 s, got -1"),
+    ],
+)
+def test_scenarios_and_simulate_refuse_a_vehicle_setting_in_the_same_words(kwargs, flags, expected, capsys):
+    """pfjax.scenarios (the study config's [vehicle] check) and pfjax simulate (the scenario
+    builders) refuse the same values with one check's words, named by the argument or the flag: a
+    speed of 5e-324 m/s, a robot that never moves, is not a run that succeeds."""
+    import pfjax
+    from pfjax.errors import InputError
+
+    name = next(k for k in kwargs if k != "model")
+    with pytest.raises(InputError) as e:
+        pfjax.scenarios("sine", 2, **kwargs)
+    assert str(e.value) == f"{name}: {expected}" and e.value.key == name
+    assert main(SIM + flags) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"pfjax simulate: error: {flags[-2]}: {expected}"], err
+    with pytest.raises(ConfigError, match=rf"^vehicle\.{name}: {re.escape(expected)}$"):
+        load_study(data={**copy.deepcopy(DATA), "vehicle": kwargs})
 
 
 def test_negative_numbers_in_exponent_form_are_values_not_options():

@@ -8,7 +8,6 @@ import numpy as np
 
 from pfjax import errors, resources
 from pfjax.errors import arguments_checked
-from pfjax.resources import MAX_STEPS
 
 #: :func:`scenarios`'s arguments -> the study config's keys.
 _SCENARIO_KEYS = {
@@ -29,14 +28,30 @@ _SCENARIO_KEYS = {
 
 
 class Scenarios(NamedTuple):
-    """A batch of runs of one path (:func:`scenarios`)."""
+    """A batch of runs of one path (:func:`scenarios`), for :func:`pfjax.simulate`.
 
-    batch: Any  # pfjax.sim.Scenario (model st: pfjax.sim.dynamic.DynamicScenario) with a leading run axis (gains None)
-    table: Any  # pandas DataFrame: one row per run, the sampled values (config units, in the simulation's precision)
-    spec: Any  # the study config that describes them (pfjax.montecarlo.config.StudySpec)
+    Attributes:
+        batch: the runs as the simulator takes them, every leaf with a leading run axis of length
+            :attr:`n` and no gains (the controller's are added by :func:`pfjax.simulate`): a
+            :class:`pfjax.sim.Scenario` (SI units, angles in rad) for the kinematic model, a
+            :class:`pfjax.sim.dynamic.DynamicScenario` for ``st`` and ``std``.
+        table: a pandas DataFrame, one row per run: ``run`` (its index) and the values drawn, in the
+            study config's units and the simulation's precision: ``speed`` (m/s), ``L`` (m),
+            ``delta_max_deg`` (deg), the slip columns (``beta_r_deg``, ``beta_f_deg``, deg; NaN on
+            ``st`` and ``std``, whose slip comes from the tyres), ``start_along_m`` (m),
+            ``lateral_offset`` (m), ``heading_error_deg`` (deg), and ``mu`` (1) on ``st`` and ``std``.
+        spec: the study config that describes the runs (:class:`pfjax.montecarlo.config.StudySpec`):
+            its ``vehicle`` section holds the model and its settings.
+        n: the number of runs (the table's rows).
+    """
+
+    batch: Any
+    table: Any
+    spec: Any
 
     @property
     def n(self) -> int:
+        """The number of runs."""
         return len(self.table)
 
 
@@ -83,7 +98,9 @@ def scenarios(
         L: wheelbase, m (kinematic model; default 0.2).
         delta_max_deg: steering limit, deg (kinematic model; default 30).
         convention: front-slip sign convention (``source`` or ``lenain``; kinematic model).
-        horizon: s, only to size slip sequences (the simulation's horizon is :func:`simulate`'s).
+        horizon: s, only to size slip sequences (the simulation's horizon and step are
+            :func:`simulate`'s, which checks the step against the ``st`` and ``std`` runs' tyre modes,
+            steering actuator and speed loop).
         key: an int seed or a JAX PRNG key. An int seed ``s`` draws the runs a study with
             ``seed = s`` draws on its first path (run ``i`` from
             ``fold_in(fold_in(seed_key(s), 0), i)``, :func:`pfjax.numerics.random.seed_key`); a key
@@ -151,9 +168,10 @@ def _refuse_other_models(model: str, given: dict) -> None:
     """:class:`~pfjax.errors.InputError` naming the first argument of ``given`` (not None) that only
     the other vehicle model reads (:data:`pfjax.montecarlo.config.MODEL_SETTINGS`, the table the
     study config and ``pfjax simulate`` refuse from); an unknown ``model`` is the config's to refuse."""
+    from pfjax.models import MODELS
     from pfjax.montecarlo.scenario_config import other_models_settings
 
-    if model not in ("kinematic", "st", "std"):
+    if model not in MODELS:
         return
     for setting in other_models_settings(model):
         name = setting.argument
@@ -198,13 +216,14 @@ def prng_key(key, name: str = "key"):
 def _checked_spec(path, n, seed, horizon, model, values, convention, vehicle_params, tau_delta_s, k_v):
     """The study spec of :func:`scenarios`'s arguments, checked as a study config is (the message naming
     the argument), and the per-run ``given`` arrays of ``values``."""
-    from pfjax.montecarlo.config import load_study
+    from pfjax.montecarlo.config import load_study, step_checked_by_simulate
 
     horizon = errors.number("horizon", horizon, positive=True, unit=" s")  # before it becomes the step too
     dists, given = _as_dists(values, n)
     data = _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params, tau_delta_s, k_v)
-    try:
-        spec, _ = load_study(data=data)
+    try:  # the step is simulate()'s, checked there against the tyre modes of the runs' worst case
+        with step_checked_by_simulate():
+            spec, _ = load_study(data=data)
     except errors.InputError as e:
         raise _renamed(e) from None
     return spec, given
@@ -248,7 +267,7 @@ def _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params
         "controllers": [{"name": "none", "type": "state_feedback"}],
         # the horizon only sizes the slip sequences: the rest of the run's timing is simulate()'s, so
         # the windows are kept inside any horizon, and the step is the default one, adjusted to divide
-        # it into whole steps (the step count's limit still bounds the horizon; the ST model's below)
+        # it into whole steps (the step count's limit still bounds the horizon)
         "sim": {
             "horizon": horizon,
             "dt": horizon / max(1, round(horizon / SimConfig.dt)),
@@ -272,10 +291,10 @@ def _study_data(path, n, seed, horizon, model, dists, convention, vehicle_params
         "slip": {k: dists[k] for k in ("beta_r_deg", "beta_f_deg") if k in dists},
         "initial": {k: dists[k] for k in ("start_along_m", "lateral_offset", "heading_error_deg")},
     }
-    if model in ("st", "std"):
+    from pfjax.models import DYNAMIC_MODELS
+
+    if model in DYNAMIC_MODELS:  # the slip-margin sweep declares slip, which these models do not take
         data["margin"] = {"enabled": False}
-        # the step is simulate()'s, which checks it against the tyre modes; here the finest allowed
-        data["sim"]["dt"] = horizon / MAX_STEPS
     return data
 
 

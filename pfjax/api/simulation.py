@@ -85,6 +85,26 @@ def sim_config(config, default=None):
     return config
 
 
+def _at_step(config: dict, dt: float):
+    """``config`` (a dict of :class:`pfjax.sim.SimConfig` fields) at the step ``dt`` (s) the runs'
+    tyre modes allow; :class:`~pfjax.errors.InputError` naming ``config.horizon`` when that step
+    makes a run of more integrator steps than :data:`pfjax.resources.MAX_STEPS`."""
+    from pfjax.resources import MAX_STEPS
+    from pfjax.sim import SimConfig
+
+    try:
+        return sim_config({**config, "dt": dt})
+    except errors.InputError as e:
+        if e.key != "config.dt" or "horizon / dt" not in str(e):
+            raise
+        horizon = config.get("horizon", SimConfig.horizon)
+        raise errors.InputError(
+            f"config.horizon: must be at most {MAX_STEPS * dt:g} s ({MAX_STEPS:.0e} steps of {dt:g} s, the "
+            f"stable step of the runs' worst case, pfjax.models.single_track.stable_step), got {errors.shown(horizon)} s",
+            "config.horizon",
+        ) from None
+
+
 @arguments_checked
 def simulate(
     scenarios: Scenarios, controller="state_feedback", gains=None, config=None, *, trajectories: bool = False
@@ -125,6 +145,7 @@ def simulate(
     import jax
 
     from pfjax import controllers as C
+    from pfjax.models import DYNAMIC_MODELS
     from pfjax.montecarlo.runner import add_results, batch_size, check_record, simulate_scenarios
     from pfjax.sim import SimConfig
 
@@ -141,16 +162,16 @@ def simulate(
     if isinstance(config, dict) and "record" in config:  # one way to ask for trajectories, not two
         raise errors.InputError("config.record: pass trajectories=True to record the runs", "config.record")
     t = scenarios.table
-    dynamic = scenarios.spec.vehicle.model in ("st", "std")
-    base = SimConfig()
+    dynamic = scenarios.spec.vehicle.model in DYNAMIC_MODELS
     if dynamic:  # the step pfjax simulate --model takes without --dt, for the runs' worst case
         from pfjax.models.single_track import check_step, stable_step, with_mu
 
         veh = scenarios.spec.vehicle
         st_params = with_mu(veh.model_params(), float(t["mu"].max()))
         v_lo = float(t["speed"].min())
-        base = SimConfig(dt=stable_step(st_params, v_lo, veh.tau_delta_s, veh.k_v))
-    config = dataclasses.replace(sim_config(config, base), record=trajectories)
+        if config is None or (isinstance(config, dict) and "dt" not in config):
+            config = _at_step({} if config is None else config, stable_step(st_params, v_lo, veh.tau_delta_s, veh.k_v))
+    config = dataclasses.replace(sim_config(config, SimConfig()), record=trajectories)
     if dynamic and config.control_every is None:
         raise errors.InputError(
             "config.control_every: the single-track models take a sampled controller (>= 1 steps); a "

@@ -48,6 +48,7 @@ import numpy as np
 
 from pfjax.bench import goals, timing
 from pfjax.bench import problem as P
+from pfjax.models import DYNAMIC_MODELS, MODELS
 
 #: max |IAE_ref - IAE_pfjax| (m s) accepted as agreement, per reference and dtype. float64: the
 #: implementations differ only by rounding (measured ~5e-15); float32: rounding amplified over
@@ -68,7 +69,7 @@ class BenchConfig:
     grad_rounds: int = 5  # interleaved rounds of forward / gradient / reverse-mode calls (best of each)
     model_runs: int = 2000  # runs per batch of the vehicle-model comparison (0: skipped)
     model_horizon: float = 10.0  # s, of the kinematic and ST runs at the benchmark's step (STD: the same steps)
-    models: tuple[str, ...] = ("kinematic", "st", "std")
+    models: tuple[str, ...] = MODELS
     seed: int = 0
     quick: bool = False
 
@@ -410,7 +411,7 @@ def _model_ratios(models: dict) -> dict:
     """``model_cost_ratio_<model>_<f32|f64>``: a dynamic model's cost per rollout-step over the
     kinematic model's (None where it was not run)."""
     out = {}
-    for m in ("st", "std"):
+    for m in DYNAMIC_MODELS:
         for p, dtype in (("f32", "float32"), ("f64", "float64")):
             out[f"model_cost_ratio_{m}_{p}"] = models.get(dtype, {}).get(f"ratio_{m}_over_kinematic")
     return out

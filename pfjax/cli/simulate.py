@@ -187,6 +187,7 @@ def cmd(args) -> dict:
     import numpy as np
 
     from pfjax.metrics import METRIC_NAMES
+    from pfjax.models import DYNAMIC_MODELS
     from pfjax.sim import STATUS_NAMES, SimConfig
     from pfjax.sim.scenario import paper_scenario
     from pfjax.sim.simulate import simulate_one
@@ -202,7 +203,7 @@ def cmd(args) -> dict:
         x, y, theta_deg = (finite(f"--x0[{i}]", v, unit=" deg" if i == 2 else "") for i, v in enumerate(args.x0))
         pose0 = (x, y, math.radians(theta_deg))
     with as_flags(SIMULATE_FLAGS):
-        if args.model in ("st", "std"):
+        if args.model in DYNAMIC_MODELS:
             return _simulate_st(args, pose0)
         cfg = _config(args, SimConfig().dt if args.dt is None else args.dt)  # the kinematic model's default
         controller, gains, shown = _controller_and_gains(args, args.wheelbase)
@@ -283,8 +284,8 @@ def _simulate_st(args, pose0) -> dict:
 
     from pfjax import paths
     from pfjax.metrics import METRIC_NAMES
+    from pfjax.models import DEFAULT_PARAMETER_SET
     from pfjax.models import single_track as st
-    from pfjax.montecarlo.scenario_config import DEFAULT_PARAMETER_SET
     from pfjax.sim import STATUS_NAMES
     from pfjax.sim import dynamic as dyn
     from pfjax.sim.scenario import make_dynamic_scenario
@@ -401,17 +402,21 @@ def register(sub) -> None:
         choices=("source", "lenain"),
         help="front-slip sign convention (default source; kinematic model)",
     )
-    from pfjax.models.single_track import PARAMETER_SETS
+    from pfjax.models import DEFAULT_PARAMETER_SET, MODELS, PARAMETER_SETS
 
     m.add_argument(
         "--model",
-        choices=("kinematic", "st", "std"),
+        choices=MODELS,
         default="kinematic",
         help="vehicle model: kinematic (declared slip), st (CommonRoad's single-track model, slip from linear "
         "tyre forces) or std (its single-track drift model, Pacejka tyres and wheel speeds) (default kinematic)",
     )
     m.add_argument(
-        "--vehicle", choices=PARAMETER_SETS, help="st, std: parameter set (default robot for st, vehicle2 for std)"
+        "--vehicle",
+        choices=PARAMETER_SETS,
+        help="st, std: parameter set (default "
+        + ", ".join(f"{name} for {model}" for model, name in DEFAULT_PARAMETER_SET.items())
+        + ")",
     )
     m.add_argument("--mu", type=float, help="st, std: friction coefficient (default the set's)")
     m.add_argument("--tau-delta", type=float, help="st, std: steering actuator time constant, s (default 0.05)")

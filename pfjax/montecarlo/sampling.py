@@ -18,6 +18,7 @@ import numpy as np
 import pydantic_core
 
 from pfjax import paths
+from pfjax.models import DYNAMIC_MODELS
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
 from pfjax.montecarlo.config import Dist, PathSpec, StudySpec
 from pfjax.montecarlo.scenario_config import InitialSpec, NoiseSpec, SlipSpec, VehicleSpec
@@ -144,7 +145,7 @@ def column_names(spec: StudySpec) -> list[str]:
     ]
     if any(p.kind == "circle" for p in spec.paths):
         cols.append("radius")
-    if spec.vehicle.model in ("st", "std"):
+    if spec.vehicle.model in DYNAMIC_MODELS:
         cols.append("mu")
     return cols
 
@@ -372,13 +373,13 @@ def _draw_one(design: _Design, key, given: dict, numbers: dict):
     d = lambda dist, name: given[name] if name in given else draw(dist, _q(key, name), numbers[name])
     speed, L, dmax = d(v.speed, "speed"), d(v.L, "L"), d(v.delta_max_deg, "delta_max_deg")
     extra = {}
-    if v.model in ("st", "std"):  # the set's wheelbase and steering limit; the friction drawn
+    if v.model in DYNAMIC_MODELS:  # the set's wheelbase and steering limit; the friction drawn
         st_nominal = v.st_params()
         L = jnp.asarray(st_nominal.l_f + st_nominal.l_r, float)
         dmax = jnp.asarray(math.degrees(st_nominal.delta_max), float)
         extra["mu"] = jnp.asarray(st_nominal.mu, float) if v.mu is None else d(v.mu, "mu")
     profile, cols = _slip(design, key, given, numbers)
-    if v.model in ("st", "std"):  # nothing declared: the tyres make the slip (max_abs_beta_* record it)
+    if v.model in DYNAMIC_MODELS:  # nothing declared: the tyres make the slip (max_abs_beta_* record it)
         cols = {k: jnp.full_like(c, jnp.nan) for k, c in cols.items()}
     start_along_m = d(design.initial.start_along_m, "start_along_m")
     offset = d(design.initial.lateral_offset, "lateral_offset")
@@ -416,7 +417,7 @@ def _scenarios(design: _Design, keys, cols: dict, profiles, params, path, pose0,
             jnp.full((n,), sensor.sigma_theta_e_deg * rad, float),
             jax.vmap(lambda k: jax.random.fold_in(k, Q["noise"]))(keys),
         )
-    if v.model in ("st", "std"):
+    if v.model in DYNAMIC_MODELS:
         from pfjax.models.single_track import with_mu
 
         per_run = lambda a: jnp.full((n,), a, params.v.dtype)

@@ -9,6 +9,14 @@ from typing import ClassVar, Literal, NamedTuple
 from pydantic import Field, field_validator, model_validator
 
 from pfjax.config import POSITIVE, ConfigModel, Label, Real
+from pfjax.models import (
+    DEFAULT_PARAMETER_SET,
+    DYNAMIC_MODELS,
+    MODELS,
+    PARAMETER_SETS,
+    check_setting,
+    check_setting_range,
+)
 from pfjax.montecarlo.dists import Dist, as_dist, dist_field, nominal
 
 
@@ -97,12 +105,6 @@ def slip_refusal(model: str) -> str:
     return _SLIP.format(model=model)
 
 
-#: The parameter set of each dynamic model when ``params`` is not given: the 0.2 m robot for ``"st"``;
-#: ``"std"`` has no robot set (no magic-formula tyre), so CommonRoad's vehicle2 (the command line's
-#: ``pfjax simulate --model std`` takes the same).
-DEFAULT_PARAMETER_SET = {"st": "robot", "std": "vehicle2"}
-
-
 class VehicleSpec(ConfigModel):
     """The vehicle: ``model = "kinematic"`` (the slip model, slip declared by ``[slip]``;
     :mod:`pfjax.sim.simulate`), ``"st"`` (CommonRoad's single-track model, slip from linear tyre
@@ -111,12 +113,12 @@ class VehicleSpec(ConfigModel):
     steering actuator ``tau_delta_s`` and speed loop ``k_v``; its wheelbase and steering limit are the
     set's."""
 
-    model: Literal["kinematic", "st", "std"] = Field(
+    model: Literal[MODELS] = Field(  # type: ignore[valid-type]
         "kinematic",
         description="vehicle model: kinematic (declared slip), st (single-track, linear tyres) or std "
         "(single-track drift, Pacejka tyres)",
     )
-    params: Literal["robot", "vehicle1", "vehicle2", "vehicle3"] = Field(
+    params: Literal[PARAMETER_SETS] = Field(  # type: ignore[valid-type]
         "robot",
         description="st, std: parameter set: robot (the 0.2 m robot) or CommonRoad's vehicle1-3 (default "
         "robot; vehicle2 for std)",
@@ -124,8 +126,8 @@ class VehicleSpec(ConfigModel):
     mu: Dist | None = Field(
         None, description="st: tyre-road friction coefficient (a distribution; default the parameter set's 1.0489)"
     )
-    tau_delta_s: Real = Field(0.05, ge=POSITIVE, description="st: steering actuator time constant, s")
-    k_v: Real = Field(5.0, ge=POSITIVE, description="st: speed loop gain, 1/s")
+    tau_delta_s: Real = Field(0.05, description="st: steering actuator time constant, s")
+    k_v: Real = Field(5.0, description="st: speed loop gain, 1/s")
     speed: Dist = dist_field(
         1.0, "rear-axle speed, m/s (a distribution; st, std: the reference of the centre of mass's speed loop)"
     )
@@ -149,20 +151,18 @@ class VehicleSpec(ConfigModel):
     @model_validator(mode="before")
     @classmethod
     def _model_default_set(cls, data):
-        """``params`` not given: the model's :data:`DEFAULT_PARAMETER_SET`."""
+        """``params`` not given: the model's :data:`pfjax.models.DEFAULT_PARAMETER_SET`."""
         if isinstance(data, dict) and data.get("params") is None and data.get("model") in DEFAULT_PARAMETER_SET:
             return {**data, "params": DEFAULT_PARAMETER_SET[data["model"]]}
         return data
 
     @model_validator(mode="after")
     def _check(self):
-        for name in ("speed", "L"):
-            lo, _ = getattr(self, name).bounds()
-            if not lo > 0:
-                raise ValueError(f"{name}: must be > 0 over its whole range, got a lower bound {lo:g}")
-        lo, hi = self.delta_max_deg.bounds()
-        if not (lo > 0 and hi < 90):
-            raise ValueError(f"delta_max_deg: must lie in (0, 90) deg, got range [{lo:g}, {hi:g}]")
+        # the rules of pfjax.scenarios' and the scenario builders' arguments (pfjax simulate's flags), one home
+        for name in ("speed", "L", "delta_max_deg"):
+            check_setting_range(name, name, *getattr(self, name).bounds())
+        for name in ("tau_delta_s", "k_v"):
+            check_setting(name, name, getattr(self, name))
         if self.mu is not None:
             lo, hi = self.mu.bounds()
             if not (lo > 0 and hi <= 10):
@@ -175,7 +175,7 @@ class VehicleSpec(ConfigModel):
                 raise ValueError(f'{name}: not with model = "{self.model}" ({setting.refusal(self.model)}); remove it')
         if self.model == "std" and self.params == "robot":
             raise ValueError('params: model = "std" has no robot set (no magic-formula tyre); use vehicle1-3')
-        if self.model != "kinematic":
+        if self.model in DYNAMIC_MODELS:
             from pfjax.models.single_track import check_speed
 
             check_speed("speed", self.speed.bounds()[1], self.model_params())

@@ -4,6 +4,7 @@ the paths, the controllers and their gains, the simulation and the success crite
 from __future__ import annotations
 
 from pfjax.controllers import style
+from pfjax.models import DYNAMIC_MODELS
 from pfjax.montecarlo.sampling import SLIP_COLUMNS
 from pfjax.report.study_format import fmt_dist, fmt_gains, missing
 
@@ -41,7 +42,7 @@ def uncertain_rows(cfg: dict) -> list[dict]:
         "ou_tau_s": "OU time constant [s]",
     }
     rows += [(units[k], slip[k]) for k in SLIP_COLUMNS[slip["kind"]]]
-    if veh.get("model", "kinematic") in ("st", "std"):  # slip from the tyre forces: the model's settings instead
+    if veh.get("model", "kinematic") in DYNAMIC_MODELS:  # slip from the tyre forces: the model's settings instead
         rows = [
             ("speed reference v [m/s]", veh["speed"]),
             ("vehicle model", f"single-track (CommonRoad {veh['model'].upper()}), parameter set {veh['params']}"),

@@ -21,6 +21,7 @@ import jax.numpy as jnp
 
 from pfjax import errors, paths
 from pfjax.errors import InputError
+from pfjax.models import DYNAMIC_MODELS, PARAMETER_SETS, check_setting
 from pfjax.models import single_track as st
 from pfjax.models.slip import CONVENTIONS, Pose, SlipParams
 from pfjax.sim.dynamic import DynamicScenario
@@ -58,9 +59,9 @@ def make_scenario(
     """
     if convention not in CONVENTIONS:
         raise InputError(f"convention: expected one of {sorted(CONVENTIONS)}, got {convention!r}")
-    errors.numbers("v", v, positive=True, unit=" m/s")
-    errors.numbers("L", L, positive=True, unit=" m")
-    errors.numbers("delta_max_deg", delta_max_deg, positive=True, below=90, unit=" deg")
+    check_setting("v", "speed", v)  # the study config's rules of its [vehicle] keys, one home
+    check_setting("L", "L", L)
+    check_setting("delta_max_deg", "delta_max_deg", delta_max_deg)
     if not errors.is_traced(pose0) and (not hasattr(pose0, "__len__") or len(pose0) != 3):
         raise InputError(f"pose0: expected (x, y, theta), got {pose0!r}")
     for name, value in zip(("pose0[0]", "pose0[1]", "pose0[2]"), pose0):
@@ -108,18 +109,18 @@ def make_dynamic_scenario(
         path: a path shape (:mod:`pfjax.paths.shapes`).
         pose0: rear-axle start pose ``(x, y, theta)``, m, m, rad.
         gains: the controller's parameter pytree.
-        params: the ST parameter set's name (:data:`pfjax.models.single_track.PARAMETER_SETS`: ``robot``,
+        params: the ST parameter set's name (:data:`pfjax.models.PARAMETER_SETS`: ``robot``,
             ``vehicle1``-``vehicle3``) or an :class:`~pfjax.models.single_track.STParams` (or, for the
             drift model, :class:`~pfjax.models.single_track.STDParams`).
         mu: friction coefficient in ``(0, 10]`` (default: the set's).
         v: reference speed, m/s. tau_delta: steering actuator time constant, s. k_v: speed loop gain, 1/s.
         model: ``"st"`` or ``"std"`` (the drift model; a named set then is one of CommonRoad's vehicles).
     """
-    if model not in ("st", "std"):
-        raise InputError(f"model: expected st or std, got {model!r}", "model")
+    if model not in DYNAMIC_MODELS:
+        raise InputError(f"model: expected {' or '.join(DYNAMIC_MODELS)}, got {model!r}", "model")
     if isinstance(params, str):
-        if params not in st.PARAMETER_SETS:
-            raise InputError(f"params: expected one of {', '.join(st.PARAMETER_SETS)}, got {params!r}", "params")
+        if params not in PARAMETER_SETS:
+            raise InputError(f"params: expected one of {', '.join(PARAMETER_SETS)}, got {params!r}", "params")
         params = st.model_parameter_set(model, params)
     elif not isinstance(params, (st.STParams, st.STDParams)):
         raise InputError(
@@ -129,9 +130,9 @@ def make_dynamic_scenario(
     if mu is not None:
         errors.numbers("mu", mu, positive=True, high=10)
         params = st.with_mu(params, mu)
-    errors.numbers("v", v, positive=True, unit=" m/s")
-    errors.numbers("tau_delta", tau_delta, positive=True, unit=" s")
-    errors.numbers("k_v", k_v, positive=True, unit=" 1/s")
+    check_setting("v", "speed", v)
+    check_setting("tau_delta", "tau_delta_s", tau_delta)
+    check_setting("k_v", "k_v", k_v)
     if not errors.is_traced(pose0) and (not hasattr(pose0, "__len__") or len(pose0) != 3):
         raise InputError(f"pose0: expected (x, y, theta), got {pose0!r}")
     for name, value in zip(("pose0[0]", "pose0[1]", "pose0[2]"), pose0):

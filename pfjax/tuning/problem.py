@@ -24,6 +24,7 @@ import numpy as np
 
 from pfjax import controllers as C
 from pfjax import errors
+from pfjax.models import DEFAULT_PARAMETER_SET, MODELS
 from pfjax.sim.simulate import SimConfig
 from pfjax.tuning.cost import CostSpec, Tunable, batch_cost, n_scenarios, population_cost
 from pfjax.tuning.ga import GAOptions
@@ -53,12 +54,6 @@ class Problem(NamedTuple):
     @property
     def n_per_eval(self) -> int:
         return n_scenarios(self.scenarios)
-
-
-#: Vehicle models a problem simulates (:func:`make_problem`'s ``model``).
-MODELS = ("kinematic", "st", "std")
-#: The parameter set of the paper sets and registered paths on the dynamic models (as ``pfjax simulate --model``).
-DYNAMIC_PARAMS = {"st": "robot", "std": "vehicle2"}
 
 
 def in_words_of(e: errors.InputError, changes: dict | None) -> errors.InputError:
@@ -106,10 +101,10 @@ def make_problem(
         n_runs: runs per path sampled from a study TOML; ``run_offset``: first run index.
         base_gains: gains pytree for the untuned fields (default: the registry's defaults).
         box: ``(fields, lower, upper)`` overriding the registry entry's ``box``.
-        model: the vehicle model, ``kinematic`` | ``st`` | ``std`` (:data:`MODELS`; ``None``: the
+        model: the vehicle model, ``kinematic`` | ``st`` | ``std`` (:data:`pfjax.models.MODELS`; ``None``: the
             kinematic model for a paper set, the study's ``[vehicle] model`` for a TOML, which
             ``model`` replaces when given). On ``st`` and ``std`` a paper set's runs start from the
-            same poses on the same paths with the parameter set of :data:`DYNAMIC_PARAMS` (the
+            same poses on the same paths with the parameter set of :data:`pfjax.models.DEFAULT_PARAMETER_SET` (the
             ``robot``; ``vehicle2`` for the drift model, CommonRoad's vehicles only) at 1 m/s, their
             slip coming from the tyre forces instead of the declared 5°.
     """
@@ -218,7 +213,9 @@ def _paper_batches(scenario: str, base, model: str) -> list:
         e = paths.entry(t)
         assert e.build is not None and e.start_pose is not None  # a paper set's paths are fixed paths
         out.append(
-            stack([make_dynamic_scenario(e.build(), e.start_pose, base, params=DYNAMIC_PARAMS[model], model=model)])
+            stack(
+                [make_dynamic_scenario(e.build(), e.start_pose, base, params=DEFAULT_PARAMETER_SET[model], model=model)]
+            )
         )
     return out
 
