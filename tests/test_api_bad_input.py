@@ -728,3 +728,37 @@ def test_a_design_the_solver_cannot_make_names_the_weights_given():
     )
     code = main(["synth", "--alpha", "1e12"])
     assert code == 2
+
+
+def test_scenarios_leave_the_single_track_step_to_simulate():
+    """pfjax.scenarios takes any positive steering time constant (its horizon only sizes slip
+    sequences, and it does not step the runs): it does not refuse one naming ``sim.dt``, a key no
+    caller passed. pfjax.simulate checks the step the runs take: its default, the stable step of
+    the runs' worst case, bounds the horizon (named ``config.horizon``), a ``dt`` given is checked
+    against the tyre modes and actuators (``config.dt``), and a horizon short enough runs."""
+    sc = pfjax.scenarios("sine", 1, model="st", tau_delta_s=1e-6)
+    assert sc.n == 1 and sc.spec.vehicle.tau_delta_s == 1e-6
+    msg = _refused(lambda: pfjax.simulate(sc, "pi"), "config.horizon")
+    assert msg.startswith("config.horizon: must be at most 4 s (2e+06 steps of 2e-06 s, the stable step of the runs'")
+    assert msg.endswith("got 20 s"), msg
+    msg = _refused(lambda: pfjax.simulate(sc, "pi", config={"dt": 1e-5}), "config.dt")
+    assert "needs dt <= 2.5e-06 s for a stable RK4 step, got 1e-05" in msg
+    r = pfjax.simulate(sc, "pi", config={"horizon": 0.02})
+    assert list(r.table["status"]) == ["ok"]
+
+
+@pytest.mark.parametrize("out", ["", "."])
+def test_run_study_judges_out_in_the_words_of_pfjax_study(out, tmp_path, monkeypatch, capsys):
+    """An output directory the command refuses is refused by the API with the same message, the
+    flag named as the argument (``--out`` as ``out``)."""
+    import pfjax
+    from pfjax.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    config = Path(__file__).resolve().parents[1] / "studies" / "robustness_default.toml"
+    with pytest.raises(pfjax.InputError) as e:
+        pfjax.run_study(str(config), out)
+    assert main(["study", str(config), "--out", out]) == 2
+    cli = capsys.readouterr().err.strip().removeprefix("pfjax study: error: ")
+    assert cli == "--" + str(e.value) and e.value.key == "out"
+    assert list(tmp_path.iterdir()) == []

@@ -151,7 +151,14 @@ def run_study(
     fresh = errors.boolean("fresh", fresh)
     progress = errors.boolean("progress", progress, or_none=True)
     report = errors.boolean("report", report)
-    out = None if out is None else _out_dir(out)
+    if out is not None:
+        import os
+
+        from pfjax.outputs import target_path
+
+        if isinstance(out, (str, os.PathLike)):  # judged as pfjax study --out is, by the same words
+            target_path(os.fspath(out), "out")
+        out = _out_dir(out)
     _misspelt(run_study, overrides)
     spec = _study_spec(config, {dotted(k): v for k, v in overrides.items()})
     out = study_target(spec, out)

@@ -361,15 +361,17 @@ def box_units(e: ControllerEntry, fields) -> list[str]:
     return [units[n] for f in fields for n in e.labels.get(f, (f,))]
 
 
-def check_gain_names(e: ControllerEntry, names, key: str = "gains") -> None:
+def check_gain_names(e: ControllerEntry, names, key: str = "gains", called: str | None = None) -> None:
     """:class:`~pfjax.errors.InputError` naming ``<key>.<name>`` for the first of ``names`` that is
     not one of the controller's scalar gains (:func:`gain_names`); nothing is built (a study config
-    checks its gains' names as it loads)."""
+    checks its gains' names as it loads). ``called``: the name the caller gave, when it is a design
+    of ``e`` (``lmi``, a ``state_feedback`` design), which the message then names first."""
     known = gain_names(e)
+    shown = repr(e.name) if called in (None, e.name) else f"{called!r} (a {e.name} design)"
     for k in names:
         if k not in known:
             raise errors.InputError(
-                f"{key}.{k}: unknown gain for controller {e.name!r}; expected one of {', '.join(known)}", key
+                f"{key}.{k}: unknown gain for controller {shown}; expected one of {', '.join(known)}", key
             )
 
 

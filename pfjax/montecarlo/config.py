@@ -14,7 +14,9 @@ expected (with a "did you mean" for unknown keys).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+import contextvars
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Literal
 
@@ -22,6 +24,7 @@ from pydantic import Field, field_validator, model_validator
 
 from pfjax.config import ConfigModel, Label, Real, load_model
 from pfjax.errors import MAX_SEED
+from pfjax.models import DYNAMIC_MODELS
 from pfjax.montecarlo.analysis_config import Axis, FalsifierSpec, MarginSpec, RareEventSpec
 from pfjax.montecarlo.dists import Dist, dist_field, nominal
 from pfjax.montecarlo.scenario_config import (
@@ -98,7 +101,7 @@ class ControllerSpec(ConfigModel):
         from pfjax.controllers.registry import check_gain_names
 
         e, d = resolve(self.type)
-        check_gain_names(e, self.gains)  # as it loads, like every other key (before --out is looked at)
+        check_gain_names(e, self.gains, called=self.type)  # as it loads, like every other key (before --out is looked at)
         if self.K is not None:
             if d is not None or "K" not in e.labels:
                 raise ValueError(
@@ -172,7 +175,7 @@ class StudySpec(ConfigModel):
             raise ValueError(
                 f"falsifier.path: no path labelled {self.falsifier.path!r}; paths are {[p.label for p in self.paths]}"
             )
-        if self.vehicle.model in ("st", "std"):
+        if self.vehicle.model in DYNAMIC_MODELS:
             changed = [k for k, v in self.slip if v != SlipSpec.model_fields[k].get_default(call_default_factory=True)]
             if changed:
                 key = changed[0]
@@ -186,9 +189,10 @@ class StudySpec(ConfigModel):
             mu_hi = veh.st_params().mu if veh.mu is None else veh.mu.bounds()[1]
             params = with_mu(veh.model_params(), mu_hi)
             v_lo = veh.speed.bounds()[0]
-            check_step(
-                "sim.dt", self.sim.dt, params, v_lo, veh.tau_delta_s, veh.k_v, worst_case="the ranges' worst case"
-            )
+            if _CHECK_STEP.get():
+                check_step(
+                    "sim.dt", self.sim.dt, params, v_lo, veh.tau_delta_s, veh.k_v, worst_case="the ranges' worst case"
+                )
             for key, section, what in (
                 ("margin.enabled", self.margin, "slip-margin sweep"),
                 ("falsifier.enabled", self.falsifier, "worst-case search"),
@@ -208,6 +212,23 @@ class StudySpec(ConfigModel):
 
 
 # ------------------------------------------------------------------------------- loading
+
+#: Whether a :class:`StudySpec` being validated checks ``sim.dt`` against the single-track models'
+#: tyre modes (off only inside :func:`step_checked_by_simulate`).
+_CHECK_STEP: contextvars.ContextVar[bool] = contextvars.ContextVar("pfjax_check_step", default=True)
+
+
+@contextlib.contextmanager
+def step_checked_by_simulate() -> Iterator[None]:
+    """Validate study configs without the single-track models' step check (``sim.dt`` against the
+    tyre modes, :func:`pfjax.models.single_track.check_step`): for :func:`pfjax.scenarios`, whose
+    ``sim`` section only sizes the slip sequences; :func:`pfjax.simulate` checks the step its runs
+    take (``config.dt``) against the same worst case."""
+    token = _CHECK_STEP.set(False)
+    try:
+        yield
+    finally:
+        _CHECK_STEP.reset(token)
 
 
 def load_study(
