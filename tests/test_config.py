@@ -336,3 +336,20 @@ def test_the_nominal_value_of_every_distribution_kind():
     ]
     for table, want in cases:
         assert nominal(Dist.model_validate(table)) == pytest.approx(want), table
+
+
+def test_an_unknown_gain_of_a_design_names_the_type_given():
+    """A design (type lmi) is a state_feedback controller: its unknown gain names the type the
+    config gave, then what it designs, not only the registry's name."""
+    from pfjax.config import ConfigError
+    from pfjax.montecarlo.config import load_study
+
+    data = {
+        "name": "g",
+        "seed": 1,
+        "n_runs": 10,
+        "paths": [{"kind": "line"}],
+        "controllers": [{"name": "m", "type": "lmi"}],
+    }
+    with pytest.raises(ConfigError, match=r"^controllers\[0\]\.gains\.k: unknown gain for controller 'lmi' \(a "):
+        load_study(data=data, values={"controllers[0].gains.k": 3.0})
