@@ -88,3 +88,23 @@ def test_a_scenario_tomls_contents_enter_the_config_hash(tmp_path, capsys):
     assert out[0]["arguments"]["scenario"] == out[1]["arguments"]["scenario"] == str(toml)
     assert out[0]["arguments"]["scenario_sha256"] != out[1]["arguments"]["scenario_sha256"]
     assert out[0]["config_sha256"] != out[1]["config_sha256"] and out[0]["cost"] != out[1]["cost"]
+
+
+def test_on_bound_names_the_tuned_gains_the_box_stopped():
+    """``on_bound``: the tuned gains (scalar names, the box's order) at a bound of the tuning box;
+    none inside it, every one at a corner, one where only it is clipped."""
+    import numpy as np
+
+    from pfjax.controllers import entry, gain_names
+    from pfjax.tuning.problem import make_problem, on_bound
+
+    problem = make_problem("pi", "paper-line")
+    names = gain_names(entry("pi"), problem.tunable.fields)
+    assert len(names) == problem.lower.size >= 2
+    mid = (problem.lower + problem.upper) / 2
+    assert on_bound("pi", problem, mid) == []
+    assert on_bound("pi", problem, problem.lower) == names == on_bound("pi", problem, problem.upper)
+    one = mid.copy()
+    one[1] = problem.upper[1]
+    assert on_bound("pi", problem, one) == [names[1]]
+    assert on_bound("pi", problem, np.clip(one + 1e9, problem.lower, problem.upper)) == names

@@ -84,8 +84,10 @@ def tune(
     as ``pfjax tune`` refuses its flag.
 
     Returns:
-        ``{"gains", "cost", "n_rollouts", "n_forward_passes", "wall_s", "compile_s", "history",
-        "history_rollouts", "result"}``; with ``check``: ``{"gains", "cost", "check", "result"}``.
+        ``{"gains", "on_bound", "cost", "n_rollouts", "n_forward_passes", "wall_s", "compile_s",
+        "history", "history_rollouts", "result"}`` (``on_bound``: the tuned gains that ended on a
+        bound of the tuning box, :func:`pfjax.tuning.problem.on_bound`); with ``check``:
+        ``{"gains", "cost", "check", "result"}``.
 
     Raises:
         pfjax.errors.InputError: a bad argument, named as here, before any run is simulated
@@ -104,6 +106,7 @@ def tune(
         check_settings_apply,
         in_words_of,
         make_problem,
+        on_bound,
         reported_gains,
         scenario_sets,
     )
@@ -174,7 +177,7 @@ def tune(
             multistart=multistart,
             progress=progress,
         )
-    return _tuned(reported_gains(name, problem, res.theta), res)
+    return _tuned(reported_gains(name, problem, res.theta), on_bound(name, problem, res.theta), res)
 
 
 @contextlib.contextmanager
@@ -194,10 +197,11 @@ def _named(given: set, multistart: bool):
         raise
 
 
-def _tuned(gains: dict, res) -> dict:
+def _tuned(gains: dict, bound: list[str], res) -> dict:
     """:func:`tune`'s result dict from the tuner's result."""
     return {
         "gains": gains,
+        "on_bound": bound,
         "cost": float(res.cost),
         "n_rollouts": int(res.n_rollouts),
         "n_forward_passes": int(res.n_forward_passes),

@@ -255,7 +255,7 @@ def _cmd(args) -> dict:
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import check, check_options, in_words_of, make_problem, reported_gains, tune
+    from pfjax.tuning.problem import check, check_options, in_words_of, make_problem, on_bound, reported_gains, tune
 
     controllers = _controllers()
     _check_flags(args, controllers)
@@ -342,6 +342,7 @@ def _cmd(args) -> dict:
     return {
         "method": args.method,
         "gains": reported_gains(controllers[args.controller], problem, r.theta),
+        "on_bound": on_bound(controllers[args.controller], problem, r.theta),
         "cost": r.cost,
         "n_rollouts_simulated": r.n_rollouts,
         "n_forward_passes": r.n_forward_passes,

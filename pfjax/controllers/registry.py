@@ -184,7 +184,7 @@ def register(
         _field("labels", k, make)
         if not isinstance(names, (tuple, list)) or not names or not all(isinstance(n, str) for n in names):
             raise errors.InputError(f"labels.{k}: expected a non-empty tuple of gain names, got {names!r}")
-    flat = tuple(n for f in make.gain_names for n in labels.get(f, (f,)))
+    flat = tuple(scalar_names(labels, make.gain_names))
     for k in gains or ():
         if k not in flat:
             raise errors.InputError(f"gains: unknown gain {k!r} of {name!r}; expected one of {', '.join(flat)}")
@@ -241,7 +241,7 @@ def check_box(box, make: CheckedFactory, labels: Mapping[str, tuple], key: str =
     for f in fields:
         _field(f"{key}.fields", f, make)
     errors.unique(f"{key}.fields", fields)
-    size = sum(len(labels.get(f, (f,))) for f in fields)
+    size = len(scalar_names(labels, fields))
     lo, hi = (_bounds(f"{key}.{side}", b, size, fields) for side, b in (("lower", lower), ("upper", upper)))
     if not np.all(lo < hi):
         i = int(np.argmin(lo < hi))
@@ -341,11 +341,17 @@ def params_from_flat(e: ControllerEntry, flat: Mapping[str, Any], key: str = "ga
     return e.make_params(**fields)
 
 
-def gain_names(e: ControllerEntry) -> list[str]:
+def scalar_names(labels: Mapping, fields) -> list[str]:
+    """The scalar gains of gain ``fields`` by name, in field order: a vector field by its ``labels``
+    (``K`` as ``k_d``, ``k_theta``), a scalar one by its own name."""
+    return [n for f in fields for n in labels.get(f, (f,))]
+
+
+def gain_names(e: ControllerEntry, fields=None) -> list[str]:
     """Every scalar gain of the controller by name (:func:`flat_gains`' names: every field, vector
-    fields by their labels), without building its parameters; ``e.gains``, those ``--gains``
-    takes by position, are some of them."""
-    return [n for f in e.make_params.gain_names for n in e.labels.get(f, (f,))]
+    fields by their labels), without building its parameters, or those of ``fields`` only (a
+    tuning box's, in its order); ``e.gains``, those ``--gains`` takes by position, are some of them."""
+    return scalar_names(e.labels, e.make_params.gain_names if fields is None else fields)
 
 
 def gain_units(e: ControllerEntry) -> dict[str, str]:
@@ -358,7 +364,7 @@ def box_units(e: ControllerEntry, fields) -> list[str]:
     """The unit of each element of a tuning box over ``fields`` (gain fields of ``e``), flat in field
     order (a vector field by its ``labels``): the units of a box's bounds and of a point in it."""
     units = gain_units(e)
-    return [units[n] for f in fields for n in e.labels.get(f, (f,))]
+    return [units[n] for n in gain_names(e, fields)]
 
 
 def check_gain_names(e: ControllerEntry, names, key: str = "gains", called: str | None = None) -> None:

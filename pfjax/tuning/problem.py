@@ -558,6 +558,15 @@ def reported_gains(controller: str, problem: Problem, theta) -> dict[str, float]
     return C.flat_gains(C.entry(controller), g)
 
 
+def on_bound(controller: str, problem: Problem, theta) -> list[str]:
+    """The tuned gains (scalar names, the box's order) that ``theta`` puts on a bound of the tuning
+    box (``problem.lower`` / ``problem.upper``): where the box, not the cost, stopped the tuner, so
+    a wider box may lower the cost further."""
+    names = C.gain_names(C.entry(controller), problem.tunable.fields)
+    th = np.ravel(np.asarray(theta, np.float64))
+    return [n for n, x, lo, hi in zip(names, th, problem.lower, problem.upper, strict=True) if x <= lo or x >= hi]
+
+
 def _tuned_fields(controller: str, problem: Problem, gains, key: str = "check"):
     """``gains`` given by scalar names (what :func:`reported_gains` reports; also as JSON text) as
     ``{tuned field: value}``: every tuned gain given, an untuned one left out or at the problem's
@@ -581,11 +590,11 @@ def _tuned_fields(controller: str, problem: Problem, gains, key: str = "check"):
         raise errors.InputError(
             f"{key}: mixes the field {vectors[0]} with gains by name ({', '.join(k for k in g if k not in vectors)}); "
             f"give the tuned fields ({', '.join(problem.tunable.fields)}) or every gain by name "
-            f"({', '.join(n for f in problem.tunable.fields for n in e.labels.get(f, (f,)))}, ...)",
+            f"({', '.join(C.gain_names(e, problem.tunable.fields))}, ...)",
             key,
         )
     params = C.params_from_flat(e, g, key)
-    tuned = [n for f in problem.tunable.fields for n in e.labels.get(f, (f,))]
+    tuned = C.gain_names(e, problem.tunable.fields)
     missing = [n for n in tuned if n not in g]
     if missing:
         raise errors.InputError(f"{key}: {', '.join(missing)} missing; the tuned gains are {', '.join(tuned)}", key)
