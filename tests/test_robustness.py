@@ -532,3 +532,24 @@ def test_worst_first_orders_failures_by_time_then_late_error():
 
     assert got == [r.run for r in sorted(runs.itertuples(), key=key)]
     assert runs.loc[got[0], "status"] != "ok" and worst_first(runs.iloc[:0]).empty
+
+
+@pytest.mark.parametrize("eps", [0.01, 0.05, 0.2])
+@pytest.mark.parametrize("delta", [0.05, 0.025])
+def test_certify_n_is_the_smallest_n_whose_cp_bound_reaches_the_claim(eps, delta):
+    """certify_n against a scan of n with scipy's beta quantile (the one-sided Clopper-Pearson lower
+    bound of n - k successes in n runs); k = 0 is zero_failure_n's closed form."""
+    from scipy.stats import beta
+
+    from pfjax.metrics.robustness import certify_n, zero_failure_n
+
+    def bound(n, k):
+        return beta.ppf(delta, n - k, k + 1)
+
+    for k in (0, 1, 2, 5):
+        n = certify_n(eps, delta, k)
+        assert bound(n, k) >= 1 - eps - 1e-12 and (n - 1 <= k or bound(n - 1, k) < 1 - eps + 1e-12)
+    assert certify_n(eps, delta) == zero_failure_n(eps, delta)
+    assert certify_n(0.01, 0.05, 1) == 473 and certify_n(0.01, 0.05, 10) == 1693
+    with pytest.raises(ValueError, match="k_fail"):
+        certify_n(eps, delta, -1)

@@ -596,3 +596,17 @@ def test_gains_are_shown_by_scalar_name_to_four_significant_digits():
     flat = C.flat_gains(C.entry("state_feedback"), C.state_feedback_params(C.PAPER_K))
     assert fmt_gains(flat) == "k_d = -2.738, k_theta = -2.077, feedforward = 0"
     assert fmt_gains({}) == "—" and fmt_gains({}, "defaults") == "defaults"
+
+
+def test_run_counts_are_what_the_study_ran(study):
+    """pfjax.montecarlo.checks.run_counts (the plan, before running) against the summary's counts
+    of what ran: the study's runs and the margin sweep's."""
+    from pfjax.montecarlo.checks import run_counts
+
+    spec, _, s = study
+    n = run_counts(spec)
+    assert n["study"] == s["n_runs_total"] and n["margin"] == s["n_margin_runs"] > 0
+    assert n["per_controller"] * len(spec.controllers) == n["study"]
+    assert (
+        run_counts(spec.model_copy(update={"margin": spec.margin.model_copy(update={"enabled": False})}))["margin"] == 0
+    )

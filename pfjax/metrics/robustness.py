@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 __all__ = [
+    "certify_n",
     "check_open_unit",
     "clopper_pearson",
     "failure_drivers",
@@ -201,6 +202,39 @@ def zero_failure_n(eps: float, delta: float) -> int:
     eps, delta = check_open_unit("eps", eps), check_open_unit("delta", delta)
     log1m = math.log1p(-eps)
     return _smallest_n(lambda n: n * log1m <= math.log(delta), math.log(delta) / log1m)
+
+
+def certify_n(eps: float, delta: float, k_fail: int = 0) -> int:
+    """Runs needed to claim ``P(success) >= 1 - eps`` at confidence ``1 - delta`` when ``k_fail`` of
+    them fail: the smallest ``n`` whose one-sided Clopper-Pearson lower bound
+    ``Beta^{-1}(delta; n - k_fail, k_fail + 1)`` (:func:`supported_statement`'s ``cp_lower``)
+    reaches ``1 - eps``. With ``k_fail = 0`` it is :func:`zero_failure_n` (the bound is then
+    ``delta^(1/n)``); each failure allowed costs runs. The bound grows with ``n`` at fixed
+    ``k_fail``: doubling, then bisection.
+
+    Args:
+        eps: tolerated failure probability in (0, 1).
+        delta: in (0, 1), one minus the confidence (the two-sided 95 % interval's lower end is
+            ``delta = 0.025``).
+        k_fail: failures the sample may hold, ``>= 0``.
+    """
+    eps, delta = check_open_unit("eps", eps), check_open_unit("delta", delta)
+    if isinstance(k_fail, bool) or not isinstance(k_fail, (int, np.integer)) or k_fail < 0:
+        raise ValueError(f"k_fail: expected an integer >= 0, got {k_fail!r}")
+    k = int(k_fail)
+    if k == 0:
+        return zero_failure_n(eps, delta)
+
+    def ok(n: int) -> bool:
+        return clopper_pearson(n - k, n, 1.0 - 2.0 * delta)[0] >= 1.0 - eps
+
+    lo = hi = k + 1
+    while not ok(hi):  # doubling: every n below lo fails, hi passes at the end
+        lo, hi = hi + 1, 2 * hi
+    while lo < hi:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if ok(mid) else (mid + 1, hi)
+    return hi
 
 
 def supported_statement(n: int, k_fail: int, delta: float = 0.05) -> dict:

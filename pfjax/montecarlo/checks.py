@@ -51,6 +51,22 @@ def path_length(p: PathSpec) -> float:
     return float(np.linalg.norm(np.diff(np.asarray(p.points, float), axis=0), axis=1).sum())
 
 
+def run_counts(spec: StudySpec) -> dict[str, int]:
+    """The runs a study simulates, before it runs: ``per_controller_and_path`` (``n_runs``),
+    ``per_controller`` (over its paths), ``study`` (every controller), ``margin_per_axis_and_path``
+    (amplitudes x ``n_per_amplitude``) and ``margin`` (the sweep, every axis, path and controller;
+    0 when it is off). The summary's ``n_runs_total`` and ``n_margin_runs`` count what ran."""
+    n_ctrl, n_path, m = len(spec.controllers), len(spec.paths), spec.margin
+    per_axis = m.n_per_amplitude * len(m.amplitudes_deg)
+    return {
+        "per_controller_and_path": spec.n_runs,
+        "per_controller": spec.n_runs * n_path,
+        "study": spec.n_runs * n_path * n_ctrl,
+        "margin_per_axis_and_path": per_axis,
+        "margin": per_axis * len(m.axes) * n_path * n_ctrl if m.enabled else 0,
+    }
+
+
 def check_resources(spec: StudySpec, *, report: bool = True, no_report: str = "pfjax study --no-report") -> None:
     """Refuse a study whose memory need exceeds :func:`pfjax.resources.memory_budget`, before it
     starts (:class:`~pfjax.errors.InputError` naming the key). The runs stream chunk by chunk, so
@@ -74,8 +90,9 @@ def check_resources(spec: StudySpec, *, report: bool = True, no_report: str = "p
         f"a chunk of {chunk} runs",
         "lower chunk_size (the runs stream chunk by chunk)",
     )
+    counts = run_counts(spec)
     if report:
-        rows = spec.n_runs * len(spec.paths) * len(spec.controllers)
+        rows = counts["study"]
         check_memory(
             "n_runs",
             8 * 64 * rows,
@@ -83,7 +100,7 @@ def check_resources(spec: StudySpec, *, report: bool = True, no_report: str = "p
             f"run without the report ({no_report}), or lower n_runs",
         )
     if spec.margin.enabled:
-        per_axis = spec.margin.n_per_amplitude * len(spec.margin.amplitudes_deg)
+        per_axis = counts["margin_per_axis_and_path"]
         check_memory(
             "margin.n_per_amplitude",
             8 * 6 * per_axis,
