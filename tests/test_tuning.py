@@ -134,10 +134,10 @@ def test_tune_cli_contract(capsys):
         )
         assert rc == 0
         out = json.loads(capsys.readouterr().out)
-        for k in ("gains", "cost", "n_rollouts_simulated", "wall_s", "history"):
+        for k in ("gains", "cost", "n_rollouts", "wall_s", "history"):
             assert k in out
         assert set(out["gains"]) == {"k_d", "k_theta", "feedforward"} and np.isfinite(out["cost"])
-        assert out["n_rollouts_simulated"] == (6 + 2 * 5 if method == "ga" else 3)
+        assert out["n_rollouts"] == (6 + 2 * 5 if method == "ga" else 3)
         assert out["history"] == sorted(out["history"], reverse=True) and out["cost"] == out["history"][-1]
 
 
@@ -190,7 +190,7 @@ def test_tune_cli_on_the_dynamic_model(capsys):
     argv += ["--population", "3", "--dt", "0.01", "--horizon", "5", "--json"]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["model"] == "st" and out["n_rollouts_simulated"] == 3 + 1 * 2
+    assert out["model"] == "st" and out["n_rollouts"] == 3 + 1 * 2
     from pfjax.tuning.problem import evaluate
 
     config = SimConfig(dt=0.01, horizon=5.0, record=False)

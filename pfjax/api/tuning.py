@@ -84,10 +84,11 @@ def tune(
     as ``pfjax tune`` refuses its flag.
 
     Returns:
-        ``{"gains", "on_bound", "cost", "n_rollouts", "n_forward_passes", "wall_s", "compile_s",
-        "history", "history_rollouts", "result"}`` (``on_bound``: the tuned gains that ended on a
-        bound of the tuning box, :func:`pfjax.tuning.problem.on_bound`); with ``check``:
-        ``{"gains", "cost", "check", "result"}``.
+        :func:`pfjax.tuning.problem.tuned_result`'s ``{"gains", "on_bound", "cost", "n_rollouts",
+        "n_forward_passes", "wall_s", "compile_s", "history", "history_rollouts",
+        "n_nonfinite_grad"}`` (``on_bound``: the tuned gains that ended on a bound of the tuning
+        box; ``history`` and ``history_rollouts`` as NumPy arrays) and ``"result"``, the tuner's
+        result; with ``check``: ``{"gains", "cost", "check", "result"}``.
 
     Raises:
         pfjax.errors.InputError: a bad argument, named as here, before any run is simulated
@@ -106,9 +107,9 @@ def tune(
         check_settings_apply,
         in_words_of,
         make_problem,
-        on_bound,
         reported_gains,
         scenario_sets,
+        tuned_result,
     )
     from pfjax.tuning.problem import check as run_check
     from pfjax.tuning.problem import tune as run_tune
@@ -177,7 +178,13 @@ def tune(
             multistart=multistart,
             progress=progress,
         )
-    return _tuned(reported_gains(name, problem, res.theta), on_bound(name, problem, res.theta), res)
+    out = tuned_result(name, problem, res)  # what pfjax tune --json prints, the history as arrays
+    return {
+        **out,
+        "history": np.asarray(out["history"]),
+        "history_rollouts": np.asarray(res.history_rollouts),
+        "result": res,
+    }
 
 
 @contextlib.contextmanager
@@ -195,22 +202,6 @@ def _named(given: set, multistart: bool):
         if multistart and e.key in MultistartOptions._fields and e.key not in given:
             raise errors.renamed(e, e.key, f"multistart.{e.key}") from None
         raise
-
-
-def _tuned(gains: dict, bound: list[str], res) -> dict:
-    """:func:`tune`'s result dict from the tuner's result."""
-    return {
-        "gains": gains,
-        "on_bound": bound,
-        "cost": float(res.cost),
-        "n_rollouts": int(res.n_rollouts),
-        "n_forward_passes": int(res.n_forward_passes),
-        "wall_s": float(res.wall_s),
-        "compile_s": float(res.compile_s),
-        "history": np.asarray(res.history),
-        "history_rollouts": np.asarray(res.history_rollouts),
-        "result": res,
-    }
 
 
 @arguments_checked

@@ -13,11 +13,9 @@ A flag the chosen method (or ``--check``), scenario or aggregate does not read i
 (:func:`method_flags`); ``--dt`` and ``--horizon`` change the default or the study's settings and
 the result is checked by :func:`pfjax.tuning.problem.make_problem` (a stable step on ``st`` and ``std``).
 
-Prints ``gains``, ``cost``, ``n_rollouts_simulated`` (every rollout evaluated, value-only or with a
-gradient; the padding of a shared program's batch not counted), ``n_forward_passes`` (a rollout
-with its gradient counted as ``1 + D`` forward passes in forward mode), ``wall_s`` (compilation
-excluded; ``compile_s``), ``history`` (best cost so far per generation / step) and
-``history_rollouts``; with ``--check``: the gains' cost and :mod:`pfjax.tuning.check`'s report. A progress bar on stderr when it is a terminal and ``--json``
+Prints the ``method``, the seed and :func:`pfjax.tuning.problem.tuned_result`: ``gains``,
+``on_bound``, ``cost``, ``n_rollouts``, ``n_forward_passes``, ``wall_s``, ``compile_s``,
+``history``, ``history_rollouts`` and ``n_nonfinite_grad``, as :func:`pfjax.tune` returns them; with ``--check``: the gains' cost and :mod:`pfjax.tuning.check`'s report. A progress bar on stderr when it is a terminal and ``--json``
 is not given.
 """
 
@@ -255,7 +253,7 @@ def _cmd(args) -> dict:
     from pfjax.tuning.check import as_dict
     from pfjax.tuning.cost import CostSpec
     from pfjax.tuning.ga import GAOptions
-    from pfjax.tuning.problem import check, check_options, in_words_of, make_problem, on_bound, reported_gains, tune
+    from pfjax.tuning.problem import check, check_options, in_words_of, make_problem, reported_gains, tune, tuned_result
 
     controllers = _controllers()
     _check_flags(args, controllers)
@@ -341,17 +339,8 @@ def _cmd(args) -> dict:
         )
     return {
         "method": args.method,
-        "gains": reported_gains(controllers[args.controller], problem, r.theta),
-        "on_bound": on_bound(controllers[args.controller], problem, r.theta),
-        "cost": r.cost,
-        "n_rollouts_simulated": r.n_rollouts,
-        "n_forward_passes": r.n_forward_passes,
-        "wall_s": r.wall_s,
-        "compile_s": r.compile_s,
-        "history": r.history.tolist(),
-        "history_rollouts": r.history_rollouts.tolist(),
+        **tuned_result(controllers[args.controller], problem, r),
         "seed": args.seed,
-        "n_nonfinite_grad": r.n_nonfinite_grad,
         **common,
     }
 

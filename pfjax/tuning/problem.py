@@ -558,6 +558,28 @@ def reported_gains(controller: str, problem: Problem, theta) -> dict[str, float]
     return C.flat_gains(C.entry(controller), g)
 
 
+def tuned_result(controller: str, problem: Problem, res) -> dict:
+    """What a tuning reports, the same in :func:`pfjax.tune` and ``pfjax tune --json``: ``gains``
+    (:func:`reported_gains`), ``on_bound`` (:func:`on_bound`), ``cost``, ``n_rollouts`` (every
+    rollout evaluated, value-only or with a gradient; the padding of a shared program's batch not
+    counted), ``n_forward_passes`` (a rollout with its gradient counted as ``1 + D`` forward passes
+    in forward mode), ``wall_s`` (s, compilation excluded), ``compile_s`` (s), ``history`` (best
+    cost so far per generation or step), ``history_rollouts`` and ``n_nonfinite_grad`` (gradient
+    components replaced by 0), from the tuner's result ``res``."""
+    return {
+        "gains": reported_gains(controller, problem, res.theta),
+        "on_bound": on_bound(controller, problem, res.theta),
+        "cost": float(res.cost),
+        "n_rollouts": int(res.n_rollouts),
+        "n_forward_passes": int(res.n_forward_passes),
+        "wall_s": float(res.wall_s),
+        "compile_s": float(res.compile_s),
+        "history": np.asarray(res.history, np.float64).tolist(),
+        "history_rollouts": np.asarray(res.history_rollouts).tolist(),
+        "n_nonfinite_grad": int(res.n_nonfinite_grad),
+    }
+
+
 def on_bound(controller: str, problem: Problem, theta) -> list[str]:
     """The tuned gains (scalar names, the box's order) that ``theta`` puts on a bound of the tuning
     box (``problem.lower`` / ``problem.upper``): where the box, not the cost, stopped the tuner, so
