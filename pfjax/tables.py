@@ -96,6 +96,64 @@ HINF_CHANNELS = f"from {_W} to {_Z_INF} (SI units: no one unit)"
 H2_CHANNELS = f"from {_W} to z_2 = [{_Z_INF}; delta rad] (SI units: no one unit)"
 
 
+_PARKING_POSE = {"x0.x": "m", "x0.y": "m", "x0.theta_deg": "deg"}
+#: The flags both parking commands take, by unit.
+_PARKING_ARGUMENTS = {
+    "x0": "m, m, deg",
+    "k1": "1/m^2",
+    "k2": "1/m",
+    "speed": "m/s",
+    "scan_period": "s",
+    "front": "m",
+    "horizon": "s",
+}
+#: The source's end error ``|x| + sqrt(y^2 + tan^2 theta)`` (m and the tangent's 1, as it defines it).
+_PARKING_ERROR = "m (|x| + sqrt(y^2 + tan^2 theta), the source's measure)"
+#: The unit of each number :func:`pfjax.parking.run` returns (``pfjax parking --json`` prints it with
+#: them, :func:`pfjax.cli.records.units`; ``"arguments.*"``: the command's flags). Here, not in
+#: :mod:`pfjax.parking`, so that the command line reads it without importing the simulator.
+PARKING_RUN_UNITS: dict[str, Any] = {
+    **_PARKING_POSE,
+    "alpha_schedule": "1",
+    "xs": "m",
+    "a_f": "m",
+    "time_s": "s",
+    "switches": "direction switches (count)",
+    "switch_log.*": {"t": "s", "x": "m", "y": "m", "theta_deg": "deg"},
+    "final.*": {"x": "m", "y": "m", "theta_deg": "deg"},
+    "error": _PARKING_ERROR,
+    "distance_m": "m",
+    "arguments.*": {**_PARKING_ARGUMENTS, "alpha_schedule": "1", "xs": "m"},
+}
+#: The search's fitness J = 1 / (t_e + w e): the inverse of a time (--weight w in s/m).
+_PARKING_FITNESS = "1/s (J = 1/(t_e + --weight x error))"
+#: The unit of each number :func:`pfjax.parking.search` returns (``pfjax parking-search --json``).
+PARKING_SEARCH_UNITS: dict[str, Any] = {
+    **_PARKING_POSE,
+    "xs": "m",
+    "alpha1": "1",
+    "alpha2": "1",
+    "fitness": _PARKING_FITNESS,
+    "history_best_fitness": _PARKING_FITNESS,
+    "history_mean_fitness": _PARKING_FITNESS,
+    "time_s": "s",
+    "switches": "direction switches (count)",
+    "n_simulations": "runs (simulated)",
+    "n": "levels per gene of the n x n x n grid",
+    "bits": "1 (the chromosome's 24 bits, each 0 or 1)",
+    "a_f": "m",
+    "error": _PARKING_ERROR,
+    "arguments.*": {
+        **_PARKING_ARGUMENTS,
+        "n": "levels per gene (count)",
+        "seed": "1 (the random seed)",
+        "generations": "GA generations (count)",
+        "population": "GA individuals (count)",
+        "weight": "s/m",
+    },
+}
+
+
 #: The unit of each number :func:`pfjax.tracking.run` returns (``pfjax track --json`` prints it
 #: with them, :func:`pfjax.cli.records.units`; the vehicle-tracking study's columns take their units
 #: from it, :data:`pfjax.tracking.study.COLUMNS`). ``"<parent>.*"``: the units under ``<parent>`` by

@@ -170,7 +170,7 @@ def test_the_search_figure_states_the_weight():
 
 
 def test_search_json_fitness_is_in_inverse_seconds():
-    from pfjax.cli.parking import SEARCH_UNITS
+    from pfjax.tables import PARKING_SEARCH_UNITS as SEARCH_UNITS
 
     for key in ("fitness", "history_best_fitness", "history_mean_fitness"):
         assert SEARCH_UNITS[key].startswith("1/s "), key

@@ -16,61 +16,7 @@ import os
 from pfjax.cli.common import Aliased, UsageError, add_pose, as_flags
 from pfjax.errors import InputError
 from pfjax.parking import defaults as D
-
-_POSE = {"x0.x": "m", "x0.y": "m", "x0.theta_deg": "deg"}
-#: The flags both parking commands take, by unit.
-_COMMON_ARGUMENTS = {
-    "x0": "m, m, deg",
-    "k1": "1/m^2",
-    "k2": "1/m",
-    "speed": "m/s",
-    "scan_period": "s",
-    "front": "m",
-    "horizon": "s",
-}
-#: The source's end error ``|x| + sqrt(y^2 + tan^2 theta)`` (m and the tangent's 1, as it defines it).
-_ERROR = "m (|x| + sqrt(y^2 + tan^2 theta), the source's measure)"
-#: The unit of each number ``pfjax parking --json`` prints (:func:`pfjax.cli.records.units`).
-RUN_UNITS = {
-    **_POSE,
-    "alpha_schedule": "1",
-    "xs": "m",
-    "a_f": "m",
-    "time_s": "s",
-    "switches": "direction switches (count)",
-    "switch_log.*": {"t": "s", "x": "m", "y": "m", "theta_deg": "deg"},
-    "final.*": {"x": "m", "y": "m", "theta_deg": "deg"},
-    "error": _ERROR,
-    "distance_m": "m",
-    "arguments.*": {**_COMMON_ARGUMENTS, "alpha_schedule": "1", "xs": "m"},
-}
-#: The search's fitness J = 1 / (t_e + w e): the inverse of a time (--weight w in s/m).
-_FITNESS = "1/s (J = 1/(t_e + --weight x error))"
-#: The unit of each number ``pfjax parking-search --json`` prints.
-SEARCH_UNITS = {
-    **_POSE,
-    "xs": "m",
-    "alpha1": "1",
-    "alpha2": "1",
-    "fitness": _FITNESS,
-    "history_best_fitness": _FITNESS,
-    "history_mean_fitness": _FITNESS,
-    "time_s": "s",
-    "switches": "direction switches (count)",
-    "n_simulations": "runs (simulated)",
-    "n": "levels per gene of the n x n x n grid",
-    "bits": "1 (the chromosome's 24 bits, each 0 or 1)",
-    "a_f": "m",
-    "error": _ERROR,
-    "arguments.*": {
-        **_COMMON_ARGUMENTS,
-        "n": "levels per gene (count)",
-        "seed": "1 (the random seed)",
-        "generations": "GA generations (count)",
-        "population": "GA individuals (count)",
-        "weight": "s/m",
-    },
-}
+from pfjax.tables import PARKING_RUN_UNITS, PARKING_SEARCH_UNITS
 
 
 def _common(p):
@@ -123,7 +69,7 @@ def register(sub) -> None:
         help=f"garage rule: switch back to forward when backing past x = XS, m (garage default {D.GARAGE_XS:g})",
     )
     _common(p)
-    p.set_defaults(func=_cmd_parking, units=RUN_UNITS)
+    p.set_defaults(func=_cmd_parking, units=PARKING_RUN_UNITS)
 
     s = sub.add_parser(
         "parking-search",
@@ -151,7 +97,7 @@ def register(sub) -> None:
         help=f"end-error weight w in J = 1/(t_e + w e), s/m (default {D.WEIGHT:g})",
     )
     _common(s)
-    s.set_defaults(func=_cmd_search, units=SEARCH_UNITS)
+    s.set_defaults(func=_cmd_search, units=PARKING_SEARCH_UNITS)
 
 
 #: the flags both commands share, by the argument of :func:`pfjax.parking.run` they set (``map`` aside:

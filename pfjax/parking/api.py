@@ -239,7 +239,9 @@ def run(
         t_max: timeout, s (> 0).
 
     Returns:
-        What ``pfjax parking --json`` prints: ``map`` (name), ``map_sha256`` (the obstacles'
+        The result ``pfjax parking --json`` prints, beside which the command records its arguments,
+        config hash, machine and the ``units`` of every number (:mod:`pfjax.cli.records`; the units
+        by key: :data:`pfjax.tables.PARKING_RUN_UNITS`): ``map`` (name), ``map_sha256`` (the obstacles'
         SHA-256, :func:`map_sha256`), ``x0`` ({x m, y m, theta_deg}),
         ``direction``, ``alpha_schedule`` (padded to 8 values), ``xs`` (m or None), ``a_f`` (m),
         then :func:`pfjax.parking.summary.run_summary`: ``converged``, ``status``, ``time_s``,
@@ -350,7 +352,8 @@ def search(
         t_max: timeout of each run, s (> 0).
 
     Returns:
-        What ``pfjax parking-search --json`` prints: ``map`` (name), ``map_sha256``, ``x0`` ({x m, y m,
+        The result ``pfjax parking-search --json`` prints beside the command's record (as
+        :func:`run`'s; units by key: :data:`pfjax.tables.PARKING_SEARCH_UNITS`): ``map`` (name), ``map_sha256``, ``x0`` ({x m, y m,
         theta_deg}), ``method``, the best ``xs`` (m), ``alpha1``, ``alpha2``, its ``fitness``,
         ``time_s``, ``status`` (name), ``converged``, ``switches`` and ``error``,
         ``n_simulations`` and ``a_f`` (m, the rectangle's reach ahead of the axle); the grid adds ``n``, the GA ``bits`` (its best chromosome: 24 values, each 0 or 1), ``history_best_fitness``,

@@ -219,7 +219,9 @@ def run(
             ``TrackConfig.dt``).
 
     Returns:
-        The dict ``pfjax track --json`` prints: the arguments used (``mode``, ``f``, ``p``, ``l``,
+        The result ``pfjax track --json`` prints, beside which the command records its arguments,
+        config hash, machine and the ``units`` of every number (:mod:`pfjax.cli.records`; the
+        units by key: :data:`pfjax.tables.TRACK_UNITS`): the arguments used (``mode``, ``f``, ``p``, ``l``,
         ``gamma_max_deg``, ``leader``); the outcome (``converged``, ``phi_converged``, ``status``,
         ``status_code``, ``fail_time`` in s or None); the errors, of a failed run at its last step
         before the failure, as every metric (``final_error_norm``, m;
