@@ -17,7 +17,7 @@ own; pfjax warns once if JAX had already started. The names load on first use, s
 itself is fast.
 """
 
-import importlib
+import importlib as _importlib
 
 from pfjax.host import (
     HOST_DEVICES_ENV,
@@ -92,13 +92,14 @@ def __getattr__(name):
     if name in _LAZY:
         where = _LAZY[name]
         module, attr = where if isinstance(where, tuple) else (where, name)
-        value = getattr(importlib.import_module(module), attr)
+        value = getattr(_importlib.import_module(module), attr)
         globals()[name] = value
         return value
     if name in _submodules():
-        return importlib.import_module(f"pfjax.{name}")
+        return _importlib.import_module(f"pfjax.{name}")
     raise AttributeError(f"module 'pfjax' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(__all__) | _submodules())
+    public = {n for n in globals() if not n.startswith("_")}  # the module's machinery left out
+    return sorted(public | set(__all__) | _submodules())

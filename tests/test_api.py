@@ -307,3 +307,11 @@ def test_scenarios_fields_and_table_columns_are_documented_with_units():
             assert f"``{column}``" in attributes, column
     for unit in ("(m/s)", "(m)", "(deg)", "(1)"):
         assert unit in attributes, unit
+
+
+def test_dir_lists_the_public_names_and_submodules_only():
+    import pfjax
+
+    names = dir(pfjax)
+    assert set(pfjax.__all__) <= set(names) and "sim" in names and "importlib" not in names
+    assert [n for n in names if n.startswith("_")] == ["__version__"]
