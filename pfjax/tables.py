@@ -12,6 +12,7 @@ mistaken for degrees, ``_hz``, ``_m``/``_s`` where the quantity could be mistake
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -94,6 +95,45 @@ _W = "w = [beta_r rad, beta_f rad, kappa 1/m]"
 _Z_INF = "z_inf = [d m, theta_e rad(, int d m s in the integral designs)]"
 HINF_CHANNELS = f"from {_W} to {_Z_INF} (SI units: no one unit)"
 H2_CHANNELS = f"from {_W} to z_2 = [{_Z_INF}; delta rad] (SI units: no one unit)"
+
+
+#: The base units a gain's unit is written in (:func:`unit_powers`): their powers of length and time.
+_BASE_UNITS = {"m": (1, 0), "s": (0, 1), "rad": (0, 0), "1": (0, 0)}
+
+
+def _product_powers(product: str) -> tuple[float, float] | None:
+    """The powers of m and s of a product of base units (``"m s"``, ``"m^2"``, ``"(m s)"``); None
+    if it has another unit."""
+    a = b = 0.0
+    for token in product.strip().removeprefix("(").removesuffix(")").split():
+        base, _, power = token.partition("^")
+        if base not in _BASE_UNITS:
+            return None
+        if power == "" and "^" in token:  # 'm^' with no power
+            return None
+        try:
+            n = float(power) if power else 1.0
+        except ValueError:
+            return None
+        if not math.isfinite(n):
+            return None
+        a, b = a + n * _BASE_UNITS[base][0], b + n * _BASE_UNITS[base][1]
+    return a, b
+
+
+def unit_powers(unit: str) -> tuple[float, float] | None:
+    """The powers ``(a, b)`` of a unit ``m^a s^b`` written as a product of ``m``, ``s``, ``rad``
+    and ``1`` with powers, over one such product (``rad/(m s)`` -> ``(-1, -1)``, ``1/m^2`` ->
+    ``(-2, 0)``; ``rad`` and ``1`` are dimensionless); None for a unit written otherwise. How a
+    controller's gain units are written (:func:`pfjax.controllers.register` refuses others), and
+    what the Froude scaling of a gain reads (:func:`pfjax.dynamic_study.arms.froude_exponent`)."""
+    if not isinstance(unit, str) or not unit.strip():
+        return None
+    num, _, den = unit.partition("/")
+    top, bottom = _product_powers(num), _product_powers(den) if den else (0.0, 0.0)
+    if top is None or bottom is None:
+        return None
+    return top[0] - bottom[0], top[1] - bottom[1]
 
 
 _PARKING_POSE = {"x0.x": "m", "x0.y": "m", "x0.theta_deg": "deg"}

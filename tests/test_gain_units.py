@@ -106,7 +106,13 @@ def test_scaled_gains_of_a_study_controller():
 def test_register_checks_units_and_records_a_missing_one_as_unstated():
     e = C.entry("stanley")
     try:
-        for units, say in (({"kk": "1/s"}, r"^units\.kk: unknown gain"), ({"k": ""}, r"^units\.k: expected a unit")):
+        refused = (
+            ({"kk": "1/s"}, r"^units\.kk: unknown gain"),
+            ({"k": ""}, r"^units\.k: expected a unit"),
+            ({"k": "furlong/fortnight"}, r"^units\.k: expected a product of m, s, rad and 1 with powers"),
+            ({"k": "deg/s"}, r"^units\.k: expected a product of m, s, rad and 1"),
+        )
+        for units, say in refused:
             with pytest.raises(InputError, match=say):
                 C.register(e.controller, e.make_params.factory, name="plug_units", units=units)
         plug = C.register(e.controller, e.make_params.factory, name="plug_units", units={"k": "1/s"})

@@ -15,6 +15,7 @@ from typing import Any, NamedTuple
 
 from pfjax import errors, plugins
 from pfjax.controllers.base import Controller
+from pfjax.tables import unit_powers
 
 
 class ControllerEntry(NamedTuple):
@@ -218,6 +219,12 @@ def _units(units, name: str, flat: tuple[str, ...]) -> dict[str, str]:
             raise errors.InputError(f"units.{k}: unknown gain of {name!r}; expected one of {', '.join(flat)}", "units")
         if not isinstance(u, str) or not u.strip():
             raise errors.InputError(f"units.{k}: expected a unit (a non-empty string), got {u!r}", "units")
+        if unit_powers(u) is None:  # the Froude scaling reads it, outputs record it
+            raise errors.InputError(
+                f"units.{k}: expected a product of m, s, rad and 1 with powers, over one such product "
+                f"(rad/(m s), 1/m^2), got {u!r}",
+                "units",
+            )
     return dict(units)
 
 

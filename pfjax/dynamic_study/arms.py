@@ -23,30 +23,9 @@ from pfjax.dynamic_study.config import KinematicVsDynamic, dynamic, kinematic, k
 from pfjax.models import single_track as st
 from pfjax.montecarlo.dists import Dist
 from pfjax.montecarlo.scenario_config import NoiseSpec, SimSpec
+from pfjax.tables import unit_powers
 
 ROBOT_WHEELBASE = 0.2  # m, the source robot's (the kinematic studies' L)
-#: The base units of a gain's unit (:func:`froude_exponent`): their powers of length and time.
-_BASE = {"m": (1, 0), "s": (0, 1), "rad": (0, 0), "1": (0, 0)}
-
-
-def _powers(product: str) -> tuple[float, float] | None:
-    """The powers of m and s of a product of base units (``"m s"``, ``"m^2"``, ``"(m s)"``); None
-    if it has another unit."""
-    a = b = 0.0
-    for token in product.strip().removeprefix("(").removesuffix(")").split():
-        base, _, power = token.partition("^")
-        if base not in _BASE:
-            return None
-        if power == "" and "^" in token:  # 'm^' with no power
-            return None
-        try:
-            n = float(power) if power else 1.0
-        except ValueError:
-            return None
-        if not math.isfinite(n):
-            return None
-        a, b = a + n * _BASE[base][0], b + n * _BASE[base][1]
-    return a, b
 
 
 def froude_exponent(unit: str) -> float | None:
@@ -54,11 +33,8 @@ def froude_exponent(unit: str) -> float | None:
     ``sqrt(S)``): for a unit ``m^a s^b`` (``rad`` and ``1`` dimensionless), ``e = a + b / 2``
     (``rad/(m s)`` -> -1.5, ``m/s`` -> 0.5). None for a unit written otherwise (a controller
     registered without units: :data:`pfjax.controllers.UNSTATED`)."""
-    num, _, den = unit.partition("/")
-    top, bottom = _powers(num), _powers(den) if den else (0.0, 0.0)
-    if top is None or bottom is None:
-        return None
-    return (top[0] - bottom[0]) + (top[1] - bottom[1]) / 2
+    powers = unit_powers(unit)
+    return None if powers is None else powers[0] + powers[1] / 2
 
 
 def scaled_gains(c: dict, s: float, key: str) -> dict:
