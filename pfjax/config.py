@@ -228,6 +228,8 @@ def format_error(err: ValidationError, root: type[BaseModel]) -> str:
     if bound is not None:  # pydantic writes 1e-12 as 0.000000000001
         limit = e["ctx"][bound[1]]
         msg = f"must be {bound[0]} {limit:g}" if isinstance(limit, float) else f"must be {bound[0]} {limit}"
+        if bound[0] == ">=" and limit == POSITIVE and isinstance(value, (int, float)) and value <= 0:
+            msg = "must be > 0"  # a positive setting, as errors.number words it (at least 1e-12 above 0)
     return f"{key}: {msg} (got {_short(e.get('input'))})" if e["type"] != "value_error" else f"{key}: {msg}"
 
 

@@ -334,6 +334,15 @@ def test_feasibility_warnings_name_the_path_and_the_numbers():
         "paths[0] (parabola): max curvature 2 1/m exceeds tan(delta_max)/L = tan(20 deg)/0.2 m = 1.82 1/m: "
         "the robot cannot follow it with its steering limit, even without slip"
     ]
+    # start offsets beyond the failure band: runs that start there end as diverged at t = 0
+    far = ["initial.lateral_offset={dist = 'uniform', low = -12.0, high = 12.0}", "sim.d_fail=3.0"]
+    spec, _ = load_study(data=copy.deepcopy(DATA), overrides=far)
+    assert study_warnings(spec) == [
+        "initial.lateral_offset: starts up to 12 m from the path, beyond sim.d_fail = 3 m: runs that start "
+        "beyond it end as diverged at t = 0"
+    ]
+    near = ["initial.lateral_offset={dist = 'normal', mean = 0.0, std = 0.05}", "sim.d_fail=3.0"]
+    assert study_warnings(load_study(data=copy.deepcopy(DATA), overrides=near)[0]) == []  # unbounded: no reach
 
 
 def test_a_config_that_is_not_utf8_is_one_line(files, tmp_path, capsys):

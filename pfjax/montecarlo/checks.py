@@ -111,12 +111,21 @@ def check_resources(spec: StudySpec, *, report: bool = True, no_report: str = "p
 
 def study_warnings(spec: StudySpec) -> list[str]:
     """One-line warnings: paths sharper than the steering limit allows, spline paths shorter than
-    the distance a run travels. Each names the path (``paths[i]``) and the numbers."""
+    the distance a run travels (each names the path, ``paths[i]``, and the numbers), and start
+    offsets beyond the failure band (``initial.lateral_offset`` against ``sim.d_fail``: such runs
+    end as diverged at t = 0)."""
     v = spec.vehicle
     dmax_lo, L_hi = v.delta_max_deg.bounds()[0], v.L.bounds()[1]
     kappa_follow = math.tan(math.radians(dmax_lo)) / L_hi
     travel = v.speed.bounds()[1] * spec.sim.horizon + spec.initial.start_along_m.bounds()[1]
     out = []
+    lo, hi = spec.initial.lateral_offset.bounds()
+    reach = max(abs(lo), abs(hi))
+    if math.isfinite(reach) and reach > spec.sim.d_fail:  # a bounded law; a normal one reaches any offset
+        out.append(
+            f"initial.lateral_offset: starts up to {reach:.4g} m from the path, beyond sim.d_fail = "
+            f"{spec.sim.d_fail:g} m: runs that start beyond it end as diverged at t = 0"
+        )
     for i, p in enumerate(spec.paths):
         k = path_max_curvature(p)
         if math.isfinite(k) and k > kappa_follow:
