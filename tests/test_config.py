@@ -353,3 +353,25 @@ def test_an_unknown_gain_of_a_design_names_the_type_given():
     }
     with pytest.raises(ConfigError, match=r"^controllers\[0\]\.gains\.k: unknown gain for controller 'lmi' \(a "):
         load_study(data=data, values={"controllers[0].gains.k": 3.0})
+
+
+@pytest.mark.parametrize(
+    ("value", "said"),
+    [(-1.0, "must be > 0 (got -1.0)"), (0.0, "must be > 0 (got 0.0)"), (1e-300, "must be >= 1e-12 (got 1e-300)")],
+)
+def test_a_positive_setting_is_told_as_errors_number_tells_it(value, said):
+    """A positive setting (``ge = MIN_POSITIVE``) given 0 or less is told "must be > 0", as
+    :func:`pfjax.errors.number` tells it; a positive value below the smallest is told that bound."""
+    from pfjax.config import ConfigError
+    from pfjax.montecarlo.config import load_study
+
+    data = {
+        "name": "g",
+        "seed": 1,
+        "n_runs": 10,
+        "paths": [{"kind": "line"}],
+        "controllers": [{"name": "m", "type": "pi"}],
+    }
+    with pytest.raises(ConfigError, match=r"^sim\.dt: ") as e:
+        load_study(data=data, values={"sim.dt": value})
+    assert str(e.value) == f"sim.dt: {said}"
