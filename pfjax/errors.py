@@ -24,6 +24,8 @@ EXIT_USAGE = 2
 EXIT_FAILED = 1
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT).
 EXIT_INTERRUPTED = 130
+#: Exit code of a command stopped by SIGTERM (128 + 15, as a shell reports a process it ended).
+EXIT_TERMINATED = 143
 #: Exit code of a command whose standard output was closed by its reader (``pfjax ... | head``):
 #: 128 + SIGPIPE, what a shell reports for a program that signal stopped.
 EXIT_BROKEN_PIPE = 141
@@ -306,7 +308,8 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
     """Run ``body()`` (which returns an exit code) as a command's main function: bad input
     (:class:`InputError`) prints one line ``<prog>: error: <message>`` on stderr and returns
     :data:`EXIT_USAGE`; Ctrl-C prints ``<prog>: interrupted; <interrupted>`` and returns
-    :data:`EXIT_INTERRUPTED`; standard output closed by its reader (``| head``) returns
+    :data:`EXIT_INTERRUPTED`, SIGTERM ``<prog>: terminated; <interrupted>`` and
+    :data:`EXIT_TERMINATED`; standard output closed by its reader (``| head``) returns
     :data:`EXIT_BROKEN_PIPE` quietly, the rest of the output going nowhere. No traceback in any
     case. Ctrl-C is never lost, even where Python drops its exception (:mod:`pfjax.interrupts`)."""
     import os
@@ -327,11 +330,12 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
     except InputError as e:
         print(f"{prog}: error: {one_line(e)}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         if sys.stderr.isatty():  # below a progress bar's partial line (bars are drawn on a terminal only)
             sys.stderr.write("\n")
-        print(f"{prog}: interrupted; {interrupted}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        term = isinstance(e, interrupts.Terminated)
+        print(f"{prog}: {'terminated' if term else 'interrupted'}; {interrupted}", file=sys.stderr)
+        return EXIT_TERMINATED if term else EXIT_INTERRUPTED
 
 
 def renamed(e: InputError, old: str, new: str) -> InputError:

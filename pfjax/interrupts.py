@@ -10,6 +10,11 @@ thread, so that it arrives in ordinary code; it also remembers every SIGINT for
 :func:`stop_if_interrupted`, which a study calls before each chunk (a backstop: the study stops
 at the next chunk, resumable). Once the command ends, nothing is sent again and nothing is
 remembered, so code after it (the Python API) never sees a late interrupt.
+
+SIGTERM (a batch system's time limit, ``kill``) stops a command as Ctrl-C does, where the process
+has Python's default SIGTERM action: within :func:`guard` it raises :class:`Terminated`, a
+``KeyboardInterrupt``, so the same clean-up runs (the staging directory removed, the lock released,
+a study's finished chunks kept for the resume) and the command exits 143 instead of being killed.
 """
 
 from __future__ import annotations
@@ -25,6 +30,10 @@ import threading
 RESEND_S = 0.05
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM within a command (:func:`guard`): handled as Ctrl-C is, told apart by its type."""
+
+
 class _Command:
     """The running command's interrupt state."""
 
@@ -32,6 +41,7 @@ class _Command:
         self.interrupted = False  # a SIGINT arrived
         self.closing = False  # the command is ending: nothing more is sent or raised
         self.timer: threading.Timer | None = None
+        self.signal = signal.SIGINT  # the last signal that stopped it: sent again if dropped
 
 
 _running: _Command | None = None
@@ -55,6 +65,9 @@ def guard():
     hook = sys.unraisablehook
     sys.unraisablehook = functools.partial(_unraisable, cmd, hook)
     signal.signal(signal.SIGINT, _on_sigint)
+    term = signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # else the process's own handler stays
+    if term:
+        signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         yield
     finally:
@@ -64,6 +77,8 @@ def guard():
             cmd.timer.join()
         # signal.signal runs a pending handler first (ours, which ignores it while closing)
         signal.signal(signal.SIGINT, signal.default_int_handler)
+        if term:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
         sys.unraisablehook = hook
         _running = None
 
@@ -73,8 +88,18 @@ def _on_sigint(signum, frame):
     cmd = _running
     if cmd is None or cmd.closing:
         return
-    cmd.interrupted = True
+    cmd.interrupted, cmd.signal = True, signal.SIGINT
     raise KeyboardInterrupt
+
+
+def _on_sigterm(signum, frame):
+    """SIGTERM within a command: :class:`Terminated`, remembered as SIGINT is; ignored while the
+    command ends."""
+    cmd = _running
+    if cmd is None or cmd.closing:
+        return
+    cmd.interrupted, cmd.signal = True, signal.SIGTERM
+    raise Terminated
 
 
 def _unraisable(cmd: _Command, hook, unraisable) -> None:
@@ -91,7 +116,7 @@ def _unraisable(cmd: _Command, hook, unraisable) -> None:
 
 def _send_again(cmd: _Command) -> None:
     if not cmd.closing:
-        os.kill(os.getpid(), signal.SIGINT)
+        os.kill(os.getpid(), cmd.signal)
 
 
 def stop_if_interrupted() -> None:
@@ -99,7 +124,7 @@ def stop_if_interrupted() -> None:
     docstring: called before each of a study's chunks)."""
     cmd = _running
     if cmd is not None and cmd.interrupted and threading.current_thread() is threading.main_thread():
-        raise KeyboardInterrupt
+        raise Terminated if cmd.signal == signal.SIGTERM else KeyboardInterrupt
 
 
 @contextlib.contextmanager
@@ -136,4 +161,4 @@ def finished(code):
     return code
 
 
-__all__ = ["RESEND_S", "deferred", "finished", "guard", "stop_if_interrupted"]
+__all__ = ["RESEND_S", "Terminated", "deferred", "finished", "guard", "stop_if_interrupted"]

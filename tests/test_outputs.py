@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 
 from pfjax import cli
-from pfjax.errors import EXIT_INTERRUPTED, EXIT_USAGE, InputError
+from pfjax.errors import EXIT_INTERRUPTED, EXIT_TERMINATED, EXIT_USAGE, InputError
 from pfjax.montecarlo.chunks import partial_dir
 from pfjax.montecarlo.config import load_study
 from pfjax.montecarlo.study import run
@@ -725,7 +725,15 @@ def test_two_concurrent_studies_on_one_out_never_mix(study_toml, tmp_path):
 
 
 @pytest.mark.slow
-def test_ctrl_c_is_one_line_exit_130_and_resumable(study_toml, tmp_path):
+@pytest.mark.parametrize(
+    ("sig", "code", "word"),
+    [(signal.SIGINT, EXIT_INTERRUPTED, "interrupted"), (signal.SIGTERM, EXIT_TERMINATED, "terminated")],
+    ids=["ctrl-c", "sigterm"],
+)
+def test_ctrl_c_and_sigterm_are_one_line_and_resumable(study_toml, tmp_path, sig, code, word):
+    """Ctrl-C (exit 130) and SIGTERM (a batch system's time limit; exit 143) stop a study alike:
+    one line, no traceback, the finished chunks kept, no staging and no lock left, and the same
+    command resumes."""
     out = tmp_path / "out"
     cmd = [
         sys.executable,
@@ -748,10 +756,10 @@ def test_ctrl_c_is_one_line_exit_130_and_resumable(study_toml, tmp_path):
     t0 = time.time()
     while time.time() - t0 < 300 and proc.poll() is None and len(list(partial_dir(out).glob("*.parquet"))) < 2:
         time.sleep(0.02)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=120)
-    assert proc.returncode == EXIT_INTERRUPTED, err[-2000:]
-    assert err.strip().splitlines()[-1] == "pfjax study: interrupted; re-run the same command to resume", err
+    assert proc.returncode == code, err[-2000:]
+    assert err.strip().splitlines()[-1] == f"pfjax study: {word}; re-run the same command to resume", err
     assert "Traceback" not in err
     done = len(list(partial_dir(out).glob("*.parquet")))
     assert done >= 2 and not out.exists()
