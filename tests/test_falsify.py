@@ -225,3 +225,58 @@ def test_a_search_compiles_few_programs():
     finally:
         jax.monitoring.unregister_event_duration_listener(listener)
     assert 0 < len(events) <= 30, len(events)  # 81 before (jax 0.10.2)
+
+
+def test_of_several_failed_runs_the_largest_objective_wins():
+    """A failed run ranks above every healthy run, and of failed runs the larger J wins (not the
+    first failed run found): random_search's reported run is the failed draw with the largest J,
+    checked against the same draws simulated in one batch, and the ranking helpers on a batch."""
+    import jax
+    import jax.numpy as jnp
+
+    from pfjax import controllers as C
+    from pfjax import paths
+    from pfjax.api.simulation import resolve_gains
+    from pfjax.falsification import random_search
+    from pfjax.falsification.search import _beats, _first_best, _rank, _scenarios, _setup
+    from pfjax.falsification.space import sample
+    from pfjax.models.slip import CONVENTIONS, SlipParams
+    from pfjax.sim import SimConfig
+    from pfjax.sim.simulate import simulate_batch
+
+    failed, score = _rank(jnp.array([0.3, 0.1, 0.2, jnp.nan, 0.5]), jnp.array([1, 1, 1, 1, 0]))
+    assert int(_first_best(failed, score)) == 0 and bool(_beats(True, 0.1, False, 9.0))
+    assert int(_first_best(*_rank(np.array([0.2, 0.2]), np.array([0, 0]), np), np)) == 0  # the first of equals
+
+    e, d = C.resolve("state_feedback")
+    gains, _ = resolve_gains(e, d, None, 1.0, 0.2)
+    path = paths.fixed_entry("sine").build()
+    cfg = SimConfig(dt=0.02, horizon=3.0, d_fail=0.15, record=False)
+    sp = SlipParams(
+        v=np.asarray(1.0),
+        L=np.asarray(0.2),
+        delta_max=np.asarray(np.radians(30.0)),
+        convention=np.asarray(CONVENTIONS["source"], np.int32),
+    )
+    ic = {"d": (-0.1, 0.1), "theta_e_deg": (-5, 5), "u": 0.0}
+    key, n = jax.random.PRNGKey(0), 200
+    r = random_search(
+        e.controller,
+        gains,
+        path,
+        config=cfg,
+        slip_bound_deg=20,
+        f_max_hz=1.0,
+        ic_bounds=ic,
+        n_samples=n,
+        key=key,
+        params=sp,
+    )
+    space, base, _ = _setup(
+        path, gains, cfg, 20, 1.0, ic, "iae", sp, None, dict(n_freq=8, with_constant=True, seq_dt=0.05)
+    )
+    seq, icv = sample(space, key, n)
+    res = simulate_batch(_scenarios(space, seq, icv, np.arange(n), base), controller=e.controller, config=cfg)
+    v, s = np.asarray(res.metrics.iae), np.asarray(res.status)
+    assert (s != 0).sum() >= 2 and np.unique(v[s != 0]).size >= 2  # several failed runs, of different J
+    assert r.status_name != "ok" and float(r.objective) == pytest.approx(v[s != 0].max(), rel=1e-6)

@@ -26,8 +26,11 @@ replaced by 0 and counted (``n_nonfinite_grad``): a failed run freezes its state
 metrics stay finite, but the derivative of a run through a singularity need not be.
 
 Ranking: a run whose status is not ``OK`` (diverged, singular, left the path's domain, non-finite)
-is a falsifying scenario in itself and ranks above every healthy run; among equals the larger
-``J`` wins. ``objective`` in the results is ``J`` of the chosen run.
+is a falsifying scenario in itself and ranks above every healthy run; among failed runs, and among
+healthy ones, the larger ``J`` wins (a NaN ``J`` ranks lowest), and of equals the first found.
+``objective`` in the results is ``J`` of the chosen run; ``history`` is ``J`` of the best run so
+far, which grows while the best run keeps its kind and may fall once, where the first failed run
+takes the lead from a healthy one.
 
 Budget: one *rollout* is one simulated scenario. The falsifier spends ``n_restarts * steps``
 rollouts, each a forward pass *and* its derivative (``n_gradients``; reverse mode through the
@@ -115,16 +118,28 @@ class FalsifierResult(NamedTuple):
 
 
 class _Best(NamedTuple):
-    score: Array  # () +inf for a failed run, J otherwise (-inf if NaN)
+    failed: Array  # () bool: the run's status is not OK
+    score: Array  # () J, -inf if NaN
     value: Array  # () J
     status: Array  # () int32
     raw: RawParams
 
 
-def _score(value: Leaf, status: Leaf, xp=jnp) -> Leaf:
-    """The ranking key (module docstring); ``xp``: ``jnp``, or ``np`` for host arrays."""
-    score = xp.where(status != Status.OK, xp.inf, value)
-    return xp.where(xp.isnan(score), -xp.inf, score)
+def _rank(value: Leaf, status: Leaf, xp=jnp) -> tuple[Leaf, Leaf]:
+    """The ranking key (module docstring) of runs: ``(failed, J)``, ``J`` -inf where NaN; ``xp``:
+    ``jnp``, or ``np`` for host arrays."""
+    return status != Status.OK, xp.where(xp.isnan(value), -xp.inf, value)
+
+
+def _beats(failed_new, score_new, failed_old, score_old):
+    """Whether a run ranks above another: failed above healthy, then the larger ``J``."""
+    return (failed_new & ~failed_old) | ((failed_new == failed_old) & (score_new > score_old))
+
+
+def _first_best(failed: Leaf, score: Leaf, xp=jnp):
+    """Index of the best run of a batch by :func:`_rank`'s key, the first of equals."""
+    index = xp.arange(score.shape[0])
+    return xp.lexsort((-index, score, failed.astype(xp.int32)))[-1]
 
 
 def check_settings(**settings) -> None:
@@ -241,11 +256,12 @@ def _ascent_step(
         return _objective(res.metrics, which), res.status
 
     (value, status), grad = jax.vmap(autodiff.value_and_grad(run, has_aux=True))(raw)
-    score = _score(value, status)
-    i = jnp.argmax(score)
-    better = score[i] > best.score
+    failed, score = _rank(value, status)
+    i = _first_best(failed, score)
+    better = _beats(failed[i], score[i], best.failed, best.score)
     pick = lambda new, old: jnp.where(better, new, old)
     best = _Best(
+        pick(failed[i], best.failed),
         pick(score[i], best.score),
         pick(value[i], best.value),
         pick(status[i], best.status),
@@ -322,7 +338,13 @@ def falsify(
     config = dataclasses.replace(config, record=False)
     raw = init_raw(space, key, int(n_restarts))
     dtype = space.basis.dtype
-    best = _Best(jnp.asarray(-jnp.inf, dtype), jnp.asarray(jnp.nan, dtype), jnp.int32(Status.OK), unstack(raw, 0))
+    best = _Best(
+        jnp.asarray(False),
+        jnp.asarray(-jnp.inf, dtype),
+        jnp.asarray(jnp.nan, dtype),
+        jnp.int32(Status.OK),
+        unstack(raw, 0),
+    )
     opt_state, history, nonfinite = _adam_init(raw), [], []
     which = jnp.int32(OBJECTIVES.index(objective))
     for lr_k in _cosine_lr(float(lr), int(steps)):
@@ -398,11 +420,12 @@ def random_search(
         values.append(np.asarray(getattr(res.metrics, objective))[:keep])
         statuses.append(np.asarray(res.status)[:keep])
     all_values, all_statuses = np.concatenate(values), np.concatenate(statuses)
-    score = _score(all_values, all_statuses, np)
-    # Running best: index of the first maximum of score[:k+1] for every k.
+    failed, score = _rank(all_values, all_statuses, np)
+    # Running best: index of the first best run of [:k+1] for every k.
     leader = np.zeros(n, dtype=int)
     for k in range(1, n):
-        leader[k] = k if score[k] > score[leader[k - 1]] else leader[k - 1]
+        j = leader[k - 1]
+        leader[k] = k if _beats(failed[k], score[k], failed[j], score[j]) else j
     i = leader[-1]
     seq_i, ic_i = unstack((seq, ic), i)
     return _result(
