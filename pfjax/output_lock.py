@@ -15,12 +15,18 @@ import json
 import os
 import socket
 import stat
+import time
 from pathlib import Path
 
 from pfjax.errors import InputError
 
 __all__ = ["OutputBusy", "OutputLock", "now_utc", "sibling"]
 
+
+#: An empty file at the lock's name is looked at again this many times, this far apart (s), before
+#: it is taken for something pfjax did not write: on a file system without hard links another
+#: pfjax creates its lock file empty and locks it an instant later.
+EMPTY_WAITS, EMPTY_WAIT_S = 20, 0.01
 
 #: What a lock file holds: the holder's pid, host, command and start time (UTC, ISO 8601).
 RECORD_KEYS = frozenset({"pid", "host", "command", "started"})
@@ -52,6 +58,7 @@ class OutputLock:
     def acquire(self) -> None:
         import fcntl
 
+        waits = 0
         while self._fd is None:
             created, fd = self._create()
             if fd is None:  # the name is taken: a lock file of another pfjax process, or not pfjax's
@@ -85,7 +92,12 @@ class OutputLock:
                 os.close(fd)
                 continue
             if not created and not self._is_lock_record(fd):
+                empty = os.fstat(fd).st_size == 0
                 os.close(fd)
+                if empty and waits < EMPTY_WAITS:  # another pfjax's, between its create and its lock
+                    waits += 1
+                    time.sleep(EMPTY_WAIT_S)
+                    continue
                 raise self._foreign()
             if not created:  # a lock file left by a writer that was killed: this process's record now
                 os.ftruncate(fd, 0)
@@ -99,16 +111,20 @@ class OutputLock:
 
     def _create(self) -> tuple[bool, int | None]:
         """``(True, fd)`` of a new lock file holding this process's record, or ``(False, None)``
-        when the name is taken. The file appears at its name with the record already in it (written
-        under a temporary name, then hard-linked, which fails when the name exists), so a lock file
-        is never empty: only a file with a whole record is ever taken over or removed. On a file
-        system without hard links, created in place (``O_EXCL``) and written at once."""
+        when the name is taken. The file appears at its name locked and with the record already in
+        it (written and locked under a temporary name, then hard-linked, which fails when the name
+        exists), so a lock file is never free and empty: only a file with a whole record is ever
+        taken over or removed. On a file system without hard links, created in place (``O_EXCL``),
+        locked and written at once (another process that opens it between the two finds it held)."""
+        import fcntl
+
         tmp = self.path.with_name(f"{self.path.name}.{os.getpid()}.{id(self):x}.tmp")
         try:
             fd = os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o644)
         except OSError as e:
             raise self._cannot(e) from None
-        try:
+        try:  # locked before its name appears: another process finds it held, never free and empty
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             os.write(fd, self._record())
             try:
                 os.link(tmp, self.path)
@@ -121,6 +137,9 @@ class OutputLock:
                     fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o644)
                 except FileExistsError:
                     return False, None
+                # at once, waiting out another pfjax that opened it meanwhile and is letting it go
+                # (an empty file is not a record: it closes it, EMPTY_WAITS)
+                fcntl.flock(fd, fcntl.LOCK_EX)
                 os.write(fd, self._record())
             return True, fd
         finally:

@@ -67,9 +67,9 @@ def whole_steps(horizon: float, dt: float, key: str = "horizon") -> int:
         g = lambda x: f"{x:.15g}"  # every digit the value has (20.0000001 is not 20), not float noise
         if key.rpartition(".")[2] == "dt":  # the step was given: the steps that divide the horizon
             lo, hi = horizon / math.ceil(n), horizon / max(math.floor(n), 1)
-            raise InputError(
+            raise InputError(  # every digit of the steps it suggests: each divides the horizon as written
                 f"{key}: must divide horizon = {g(horizon)} s into whole steps, got {g(dt)} s = {n:.10g} steps "
-                f"(e.g. {lo:.6g} or {hi:.6g} s)",
+                f"(e.g. {g(lo)} or {g(hi)} s)",
                 key,
             )
         lo, hi = math.floor(n) * dt, math.ceil(n) * dt

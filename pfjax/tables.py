@@ -12,7 +12,7 @@ mistaken for degrees, ``_hz``, ``_m``/``_s`` where the quantity could be mistake
 
 from __future__ import annotations
 
-import math
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -101,22 +101,24 @@ H2_CHANNELS = f"from {_W} to z_2 = [{_Z_INF}; delta rad] (SI units: no one unit)
 _BASE_UNITS = {"m": (1, 0), "s": (0, 1), "rad": (0, 0), "1": (0, 0)}
 
 
+#: A power of a base unit: an integer or a decimal, signed (``m^2``, ``s^-1``, ``m^0.5``).
+_POWER = re.compile(r"[+-]?\d+(\.\d+)?")
+
+
 def _product_powers(product: str) -> tuple[float, float] | None:
-    """The powers of m and s of a product of base units (``"m s"``, ``"m^2"``, ``"(m s)"``); None
-    if it has another unit."""
+    """The powers of m and s of a product of base units (``"m s"``, ``"m^2"``, ``"(m s)"``: one pair
+    of parentheses around the whole product at most); None if it is empty or has anything else."""
+    text = product.strip()
+    if text.startswith("(") and text.endswith(")"):
+        text = text[1:-1]
+    if not text.strip() or "(" in text or ")" in text:
+        return None
     a = b = 0.0
-    for token in product.strip().removeprefix("(").removesuffix(")").split():
-        base, _, power = token.partition("^")
-        if base not in _BASE_UNITS:
+    for token in text.split():
+        base, hat, power = token.partition("^")
+        if base not in _BASE_UNITS or (hat and not _POWER.fullmatch(power)):
             return None
-        if power == "" and "^" in token:  # 'm^' with no power
-            return None
-        try:
-            n = float(power) if power else 1.0
-        except ValueError:
-            return None
-        if not math.isfinite(n):
-            return None
+        n = float(power) if hat else 1.0
         a, b = a + n * _BASE_UNITS[base][0], b + n * _BASE_UNITS[base][1]
     return a, b
 
@@ -124,13 +126,15 @@ def _product_powers(product: str) -> tuple[float, float] | None:
 def unit_powers(unit: str) -> tuple[float, float] | None:
     """The powers ``(a, b)`` of a unit ``m^a s^b`` written as a product of ``m``, ``s``, ``rad``
     and ``1`` with powers, over one such product (``rad/(m s)`` -> ``(-1, -1)``, ``1/m^2`` ->
-    ``(-2, 0)``; ``rad`` and ``1`` are dimensionless); None for a unit written otherwise. How a
-    controller's gain units are written (:func:`pfjax.controllers.register` refuses others), and
-    what the Froude scaling of a gain reads (:func:`pfjax.dynamic_study.arms.froude_exponent`)."""
-    if not isinstance(unit, str) or not unit.strip():
+    ``(-2, 0)``; ``rad`` and ``1`` are dimensionless); None for a unit written otherwise (an empty
+    side of ``/``, unmatched parentheses, a power that is not a plain number). How a controller's
+    gain units are written (:func:`pfjax.controllers.register` refuses others), and what the
+    Froude scaling of a gain reads (:func:`pfjax.dynamic_study.arms.froude_exponent`)."""
+    if not isinstance(unit, str) or unit.count("/") > 1:
         return None
-    num, _, den = unit.partition("/")
-    top, bottom = _product_powers(num), _product_powers(den) if den else (0.0, 0.0)
+    num, slash, den = unit.partition("/")
+    top = _product_powers(num)
+    bottom = _product_powers(den) if slash else (0.0, 0.0)
     if top is None or bottom is None:
         return None
     return top[0] - bottom[0], top[1] - bottom[1]

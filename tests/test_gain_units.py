@@ -140,3 +140,19 @@ def test_tuning_study_units_name_each_controllers_gains():
     units = summary_units(cfg)
     assert units["gains"]["rear_wheel"]["k_d"] == "1/m^2" and units["gains"]["pi"]["kp_d"] == "rad/m"
     assert units["descent_gains"] == {"pi": C.gain_units(C.entry("pi"))}
+
+
+@pytest.mark.parametrize("unit", ["/", "m/", "1/", "(m", "()", "m)/s)", "m^1_000", "m^1e308", "a/b/c", "m^", "deg/s"])
+def test_a_malformed_unit_is_not_read(unit):
+    """The unit grammar reads only a product of m, s, rad and 1 with plain powers, over one such
+    product, each side non-empty and parenthesised as a whole at most: anything else is None, and
+    register refuses it."""
+    from pfjax.tables import unit_powers
+
+    assert unit_powers(unit) is None
+    e = C.entry("pi")
+    try:
+        with pytest.raises(InputError, match=r"^units\.kp_d: expected a product of m, s, rad and 1"):
+            C.register(e.controller, e.make_params.factory, name="plug_bad_unit", units={"kp_d": unit})
+    finally:
+        C.REGISTRY.pop("plug_bad_unit", None)

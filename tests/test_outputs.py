@@ -946,3 +946,45 @@ def test_a_final_rename_the_system_refuses_is_one_line_and_changes_nothing(tmp_p
         _write(out, {"a": "new"})
     monkeypatch.undo()
     assert _tree(tmp_path) == before
+
+
+def test_without_hard_links_a_lock_file_being_created_is_told_busy_not_foreign(tmp_path, monkeypatch):
+    """On a file system without hard links the lock file is created empty and locked an instant
+    later: a second writer that opens it in between waits for the record (EMPTY_WAITS) and is told
+    the output is busy, not that a file pfjax did not write is in the way."""
+    import fcntl
+    import threading
+
+    import pfjax.output_lock as lock_module
+    from pfjax.output_lock import OutputLock
+
+    def no_link(*a, **k):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(lock_module.os, "link", no_link)
+    real_flock, created, calls = fcntl.flock, threading.Event(), []
+
+    def slow_flock(fd, op):  # the first writer's lock of the file at the lock's name comes 50 ms late
+        if threading.current_thread().name == "first":
+            calls.append(op)
+            if len(calls) == 2:  # after its temporary file's: the file at the name exists, empty
+                created.set()
+                time.sleep(0.05)
+        return real_flock(fd, op)
+
+    monkeypatch.setattr(fcntl, "flock", slow_flock)
+    out, results = tmp_path / "out", {}
+
+    def first():
+        a = OutputLock(out, command="study")
+        a.acquire()
+        results["first"] = a
+
+    t = threading.Thread(target=first, name="first")
+    t.start()
+    assert created.wait(5)
+    with pytest.raises(OutputBusy, match=r"^--out: a pfjax study is running into "):
+        OutputLock(out, command="study").acquire()
+    t.join(5)
+    results["first"].release()
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

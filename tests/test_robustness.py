@@ -532,6 +532,9 @@ def test_worst_first_orders_failures_by_time_then_late_error():
 
     assert got == [r.run for r in sorted(runs.itertuples(), key=key)]
     assert runs.loc[got[0], "status"] != "ok" and worst_first(runs.iloc[:0]).empty
+    twice = pd.concat([runs, runs])  # repeated index labels: the rows themselves, each once
+    again = worst_first(twice)["run"]
+    assert len(again) == 2 * n and again.value_counts().eq(2).all() and again.iloc[0] == got[0]
 
 
 @pytest.mark.parametrize("eps", [0.01, 0.05, 0.2])

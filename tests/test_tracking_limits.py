@@ -85,15 +85,18 @@ def test_a_flag_and_its_deprecated_spelling_together_are_refused(capsys, argv):
 def test_a_step_that_does_not_divide_the_default_horizon_names_the_step(monkeypatch, capsys):
     """Only the step was changed: the error names ``dt`` (``--dt``), as pfjax.sim.settings.SimConfig
     does, with the steps that divide the horizon; a horizon given too names ``horizon``. Reference:
-    30 s / 0.0031 s = 9677.419355 steps; 30/9678 = 0.00309981 s and 30/9677 = 0.00310013 s."""
+    30 s / 0.0031 s = 9677.419355 steps; 30/9678 and 30/9677 s, with every digit (each accepted as given)."""
     _never(monkeypatch)
     with pytest.raises(InputError) as e:
         api.run(dt=0.0031)
     assert e.value.key == "dt"
     assert str(e.value) == (
         "dt: must divide horizon = 30 s into whole steps, got 0.0031 s = 9677.419355 steps "
-        "(e.g. 0.00309981 or 0.00310013 s)"
+        "(e.g. 0.00309981401115933 or 0.0031001343391547 s)"
     )
+    from pfjax.tracking.api import check_time
+
+    assert check_time(30.0, 0.00309981401115933) == 9678 and check_time(30.0, 0.0031001343391547) == 9677
     with pytest.raises(InputError) as e:
         api.run(horizon=20.0, dt=0.0031)
     assert e.value.key == "horizon"
@@ -102,7 +105,7 @@ def test_a_step_that_does_not_divide_the_default_horizon_names_the_step(monkeypa
     assert (rc, out) == (2, "")
     assert err == (
         "pfjax track: error: --dt: must divide --horizon = 30 s into whole steps, got 0.0031 s = 9677.419355 "
-        "steps (e.g. 0.00309981 or 0.00310013 s)\n"
+        "steps (e.g. 0.00309981401115933 or 0.0031001343391547 s)\n"
     )
 
 

@@ -473,7 +473,9 @@ def test_a_horizon_of_a_fraction_of_a_step_is_refused_everywhere(tmp_path, capsy
     assert main(["simulate", "--path", "line", "--controller", "pi", "--dt", "0.003", "--json"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("pfjax simulate: error: --dt: must divide --horizon = 20 s into whole steps")
-    assert "(e.g. 0.00299985 or 0.0030003 s)" in err  # 20 / 6667 and 20 / 6666
+    assert "(e.g. 0.00299985000749963 or 0.003000300030003 s)" in err  # 20 / 6667 and 20 / 6666, every digit
+    for suggested in (0.00299985000749963, 0.003000300030003):  # each is accepted as written
+        assert SimConfig(dt=suggested).n_steps in (6666, 6667)
     out = tmp_path / "never"
     code = main(["study", "--example", "default", "--set", "sim.horizon=20.001", "--out", str(out)])
     assert code == 2 and not out.exists()

@@ -388,16 +388,15 @@ def worst_first(runs: pd.DataFrame) -> pd.DataFrame:
     first: the runs that failed (status other than ``ok``) first, the earliest failure first, then
     the largest ``late_max_abs_d`` (|d| over the success window); ties keep their order (a stable
     sort). The order of the report's worst runs and of a replay of the worst run."""
-    key = pd.DataFrame(
+    key = pd.DataFrame(  # by position: an index with repeated labels (a concatenation) orders alike
         {
-            "failed": runs["status"] != "ok",
-            "fail_time": runs["fail_time"].fillna(np.inf),
-            "late": runs["late_max_abs_d"].fillna(np.inf),
-        },
-        index=runs.index,
+            "failed": (runs["status"] != "ok").to_numpy(),
+            "fail_time": runs["fail_time"].fillna(np.inf).to_numpy(),
+            "late": runs["late_max_abs_d"].fillna(np.inf).to_numpy(),
+        }
     )
     order = key.sort_values(["failed", "fail_time", "late"], ascending=[False, True, False], kind="stable").index
-    return runs.loc[order]
+    return runs.iloc[order.to_numpy()]
 
 
 def _tango_z(b: int, c: int, n: int, delta: float) -> float:
