@@ -556,3 +556,15 @@ def test_certify_n_is_the_smallest_n_whose_cp_bound_reaches_the_claim(eps, delta
     assert certify_n(0.01, 0.05, 1) == 473 and certify_n(0.01, 0.05, 10) == 1693
     with pytest.raises(ValueError, match="k_fail"):
         certify_n(eps, delta, -1)
+    for bad in (0.5, 0.6):  # a one-sided bound below 50 % confidence: refused naming delta, for every k
+        for k in (0, 2):
+            with pytest.raises(ValueError, match=r"^delta: must be < 0\.5"):
+                certify_n(eps, bad, k)
+
+
+@pytest.mark.parametrize(("b", "c", "n"), [(5, 0, 3), (-1, 0, 3), (2, 3, 4)])
+def test_paired_interval_refuses_counts_that_are_no_pairs(b, c, n):
+    from pfjax.metrics.robustness import paired_interval
+
+    with pytest.raises(ValueError, match=r"^need b, c >= 0 and b \+ c <= n"):
+        paired_interval(b, c, n)

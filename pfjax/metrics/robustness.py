@@ -204,6 +204,15 @@ def zero_failure_n(eps: float, delta: float) -> int:
     return _smallest_n(lambda n: n * log1m <= math.log(delta), math.log(delta) / log1m)
 
 
+def _one_sided_delta(delta: float) -> float:
+    """``delta`` of a one-sided bound at confidence ``1 - delta``: in (0, 0.5) (the bound is the
+    lower end of the two-sided interval at ``1 - 2 delta``); ValueError naming ``delta`` otherwise."""
+    delta = check_open_unit("delta", delta)
+    if delta >= 0.5:
+        raise ValueError(f"delta: must be < 0.5 (a one-sided bound at confidence 1 - delta), got {delta!r}")
+    return delta
+
+
 def certify_n(eps: float, delta: float, k_fail: int = 0) -> int:
     """Runs needed to claim ``P(success) >= 1 - eps`` at confidence ``1 - delta`` when ``k_fail`` of
     them fail: the smallest ``n`` whose one-sided Clopper-Pearson lower bound
@@ -214,11 +223,11 @@ def certify_n(eps: float, delta: float, k_fail: int = 0) -> int:
 
     Args:
         eps: tolerated failure probability in (0, 1).
-        delta: in (0, 1), one minus the confidence (the two-sided 95 % interval's lower end is
+        delta: in (0, 0.5), one minus the confidence (the two-sided 95 % interval's lower end is
             ``delta = 0.025``).
         k_fail: failures the sample may hold, ``>= 0``.
     """
-    eps, delta = check_open_unit("eps", eps), check_open_unit("delta", delta)
+    eps, delta = check_open_unit("eps", eps), _one_sided_delta(delta)
     if isinstance(k_fail, bool) or not isinstance(k_fail, (int, np.integer)) or k_fail < 0:
         raise ValueError(f"k_fail: expected an integer >= 0, got {k_fail!r}")
     k = int(k_fail)
@@ -253,7 +262,7 @@ def supported_statement(n: int, k_fail: int, delta: float = 0.05) -> dict:
     Args:
         n: number of runs, ``>= 1``.
         k_fail: number of failed runs, ``0 <= k_fail <= n``.
-        delta: one minus the confidence, in (0, 1).
+        delta: one minus the confidence, in (0, 0.5).
 
     Returns:
         ``{"n", "k_fail", "delta", "confidence", "success_rate", "hoeffding_eps",
@@ -262,7 +271,7 @@ def supported_statement(n: int, k_fail: int, delta: float = 0.05) -> dict:
         is one English sentence.
     """
     n, k_fail = int(n), int(k_fail)
-    delta = check_open_unit("delta", delta)
+    delta = _one_sided_delta(delta)
     if n < 1 or not 0 <= k_fail <= n:
         raise ValueError(f"need n >= 1 and 0 <= k_fail <= n, got n={n}, k_fail={k_fail}")
     p_hat = (n - k_fail) / n
@@ -419,6 +428,9 @@ def paired_interval(b: int, c: int, n: int, z: float = 1.959963984540054) -> tup
     for the paired-sample design", *Statistics in Medicine* 17, 891-908, 1998). ``Z`` falls with
     ``Delta``; its roots are found by bisection to 1e-12. Unlike the Wald interval it has a width
     when ``b = c = 0`` (identical outcomes): ``+-z^2 / (n + z^2)``. ``(nan, nan)`` for ``n = 0``."""
+    b, c, n = int(b), int(c), int(n)
+    if min(b, c, n) < 0 or b + c > n:
+        raise ValueError(f"need b, c >= 0 and b + c <= n, got b={b}, c={c}, n={n}")
     if n == 0:
         return math.nan, math.nan
     d = (b - c) / n

@@ -136,7 +136,7 @@ def lemma_part(
     outside the bound where exactly one limit holds (by mode, gamma_max and p).
 
     ``cfg`` is a validated study config as a dict (``study_config.load(...).model_dump(mode="json")``),
-    ``key`` the study's key (:func:`pfjax.provenance.seed_key`), ``chunk`` the runs per jitted batch;
+    ``key`` the study's key (:func:`pfjax.numerics.random.seed_key`), ``chunk`` the runs per jitted batch;
     ``config`` the settings of the runs, :func:`track_config` of ``cfg`` unless given (one with
     ``record=True`` and the same numbers gives the same rows and reuses a recording program)."""
     scs, rows = B.lemma_grid(cfg, jax.random.fold_in(key, 0))
