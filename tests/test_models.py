@@ -190,3 +190,18 @@ def test_frenet_rhs_matches_the_equations():
         ],
         rtol=1e-14,
     )
+
+
+@pytest.mark.parametrize("convention", ["source", "lenain"])
+def test_the_straight_line_steering_has_the_conventions_front_slip_sign(convention):
+    """FRONT_SLIP_SIGN: the steering delta* = beta_r + sign beta_f holds a straight line (zero yaw
+    rate) in each convention; the study's slip map draws its limit |delta*| = delta_max with it."""
+    import math
+
+    from pfjax.models.slip import CONVENTIONS, FRONT_SLIP_SIGN, SlipParams, yaw_rate
+
+    code = CONVENTIONS[convention]
+    p = SlipParams(1.0, 0.2, math.radians(30.0), code)
+    for br, bf in ((0.05, 0.03), (-0.04, 0.07)):
+        delta = br + FRONT_SLIP_SIGN[code] * bf
+        assert abs(float(yaw_rate(delta, br, bf, p))) < 1e-12

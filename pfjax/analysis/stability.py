@@ -117,3 +117,19 @@ def stability_map(K: Array, beta_r: Array, beta_f: Array, params: SlipParams) ->
     eq = jax.vmap(jax.vmap(lambda br, bf: equilibrium(K, br, bf, params)))(BR, BF)
     src = jax.vmap(jax.vmap(lambda br, bf: source_linearisation(K, br, bf, params)))(BR, BF)
     return eq, src
+
+
+def converged_to(status, d, theta_e, d_star, theta_e_star, *, tol_d: float, tol_theta_deg: float):
+    """Whether runs ended at an equilibrium (NumPy, elementwise): status ``OK`` (0), ``|d - d*| <
+    tol_d`` (m) and ``|theta_e - theta_e*| < tol_theta_deg`` (deg) at the end of the run, with
+    ``d*``, ``theta_e*`` the equilibrium's (:func:`equilibrium`, :func:`stability_map`). The
+    simulation cross-check of the paper reproduction's stability grid."""
+    import math
+
+    import numpy as np
+
+    return (
+        (np.asarray(status) == 0)
+        & (np.abs(np.asarray(d) - np.asarray(d_star)) < tol_d)
+        & (np.abs(np.asarray(theta_e) - np.asarray(theta_e_star)) < math.radians(tol_theta_deg))
+    )

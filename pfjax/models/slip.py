@@ -33,6 +33,9 @@ from pfjax.numerics import elementary as E
 SOURCE = 0
 LENAIN = 1
 CONVENTIONS = {"source": SOURCE, "lenain": LENAIN}
+#: The sign of ``beta_f`` in the steering that holds a straight line, ``delta* = beta_r + sign beta_f``
+#: (where :func:`yaw_rate` is 0): +1 in the source's convention, -1 in Lenain's.
+FRONT_SLIP_SIGN = {SOURCE: 1, LENAIN: -1}
 
 
 class SlipParams(NamedTuple):

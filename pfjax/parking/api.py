@@ -33,6 +33,8 @@ __all__ = ["run", "search"]
 
 #: Travel directions :func:`run` accepts, with their sign.
 DIRECTIONS = {"forward": 1, "backward": -1}
+#: A direction's name by its sign (:data:`DIRECTIONS` read back; the source's cases give the sign).
+DIRECTION_NAMES = {sign: name for name, sign in DIRECTIONS.items()}
 #: Search methods :func:`search` accepts.
 METHODS = ("ga", "grid")
 #: Most scanner periods one search may simulate: its runs (``n^3`` on the grid, at most

@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from pfjax.parking import figures as F
+from pfjax.parking.api import DIRECTION_NAMES
 from pfjax.parking.defaults import GARAGE_TRIES
 from pfjax.parking.maps import GARAGE, PARALLEL
 from pfjax.parking.model import control_params
@@ -108,7 +109,7 @@ def part_cases(cfg: ParkingStudy, fig_dir, pmap, gmap):
                 "case": name,
                 "map": "parallel",
                 "start": str(c["x0"]),
-                "direction": "forward" if c["direction"] > 0 else "backward",
+                "direction": DIRECTION_NAMES[c["direction"]],
                 "schedule": ",".join(f"{a:g}" for a in c["schedule"]),
                 "xs": math.nan,
                 **flat_summary(run_summary(r)),

@@ -232,7 +232,9 @@ def slip_map_figure(
         mesh = a.pcolormesh(ex, ey, rate.T, cmap="RdYlGn", vmin=0, vmax=1, edgecolors="face", lw=0)
         if delta_max_deg is not None:
             b = np.array([ex[0], ex[-1]])
-            sign = 1 if convention == "source" else -1
+            from pfjax.models.slip import CONVENTIONS, FRONT_SLIP_SIGN  # figure_set has imported them
+
+            sign = FRONT_SLIP_SIGN[CONVENTIONS[convention]]  # |delta*| = delta_max: its steering's limit
             for s_ in (-1, 1):
                 a.plot(b, sign * (s_ * delta_max_deg - b), "--", color="0.25", lw=1)
         if predicted and name in predicted:

@@ -13,8 +13,8 @@ import numpy as np
 import pandas as pd
 
 from pfjax import controllers as C
-from pfjax.analysis import equilibrium, stability_map
-from pfjax.models import SlipParams
+from pfjax.analysis import converged_to, equilibrium, stability_map
+from pfjax.models import CONVENTIONS, SlipParams
 from pfjax.numerics.random import seed_key
 from pfjax.paths import (
     curvature,
@@ -87,7 +87,7 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
     eigenvalues, and the line test simulated to check them (docs/reproductions/path-following.md §7).
     Returns one row per grid point and the summary (``grid``: the axis and shape, for the figure)."""
     st, m = cfg["stability"], cfg["model"]
-    params = SlipParams(m["v"], m["L"], math.radians(m["delta_max_deg"]), 0 if m["convention"] == "source" else 1)
+    params = SlipParams(m["v"], m["L"], math.radians(m["delta_max_deg"]), CONVENTIONS[m["convention"]])
     K = jnp.asarray(cfg["source"]["K"])
     grid = np.linspace(-st["grid_max_deg"], st["grid_max_deg"], st["n"])
     eq, src_eig = stability_map(K, jnp.radians(grid), jnp.radians(grid), params)
@@ -96,10 +96,8 @@ def part_stability(cfg, pbar) -> tuple[pd.DataFrame, dict]:
     r = _grid_runs(cfg, BR, BF)
     pbar.update(1)
     d_star, th_star = np.asarray(eq.d).ravel(), np.asarray(eq.theta_e).ravel()
-    conv = (
-        (np.asarray(r.status) == 0)
-        & (np.abs(np.asarray(r.final.d) - d_star) < st["tol_d"])
-        & (np.abs(np.asarray(r.final.theta_e) - th_star) < math.radians(st["tol_theta_deg"]))
+    conv = converged_to(
+        r.status, r.final.d, r.final.theta_e, d_star, th_star, tol_d=st["tol_d"], tol_theta_deg=st["tol_theta_deg"]
     )
     df = pd.DataFrame(
         {
