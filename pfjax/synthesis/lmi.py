@@ -7,8 +7,11 @@ conditions linear in ``(X, Y, gamma_inf^2, W)``. Solved with cvxpy + Clarabel. N
 out; never traced or jitted.
 
 Strict inequalities. An LMI ``F < 0`` is imposed as ``F <= -eps I`` and ``X > 0`` as
-``X >= eps I`` (``eps`` = 1e-7 by default). The margin makes every reported bound a strict,
-guaranteed bound on the true closed-loop norm; it moves the optimum by O(eps) only.
+``X >= eps I`` (``eps`` = 1e-7 by default). With the solver at ``optimal`` the margin makes every
+reported bound a strict, guaranteed bound on the true closed-loop norm; it moves the optimum by
+O(eps) only. At a status short of optimal (``optimal_inaccurate``) a bound can fall below the true
+norm: the design warns of the status, and the norms recomputed from K are checked against the
+bounds and warned of where one is exceeded.
 """
 
 from __future__ import annotations
