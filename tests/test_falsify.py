@@ -280,3 +280,34 @@ def test_of_several_failed_runs_the_largest_objective_wins():
     v, s = np.asarray(res.metrics.iae), np.asarray(res.status)
     assert (s != 0).sum() >= 2 and np.unique(v[s != 0]).size >= 2  # several failed runs, of different J
     assert r.status_name != "ok" and float(r.objective) == pytest.approx(v[s != 0].max(), rel=1e-6)
+
+
+def test_the_search_defaults_are_a_studys_falsifier_defaults():
+    """pfjax.falsify, pfjax.falsification.falsify and a study's [falsifier] table have one set of
+    defaults (FalsifierSpec's), and the objectives the search takes are the table's choices."""
+    import inspect
+    import typing
+
+    import pfjax
+    from pfjax.falsification import search
+    from pfjax.montecarlo.analysis_config import FalsifierSpec
+
+    spec = FalsifierSpec()
+    api = inspect.signature(pfjax.falsify).parameters
+    for arg, key in (
+        ("slip_bound_deg", "slip_bound_deg"),
+        ("f_max_hz", "f_max_hz"),
+        ("lateral_offset", "lateral_offset"),
+        ("heading_error_deg", "heading_error_deg"),
+        ("objective", "objective"),
+        ("restarts", "n_restarts"),
+        ("steps", "steps"),
+    ):
+        assert api[arg].default == getattr(spec, key), arg
+    lib = inspect.signature(search.falsify).parameters
+    assert (lib["n_restarts"].default, lib["steps"].default, lib["objective"].default) == (
+        spec.n_restarts,
+        spec.steps,
+        spec.objective,
+    )
+    assert search.OBJECTIVES == typing.get_args(FalsifierSpec.model_fields["objective"].annotation)

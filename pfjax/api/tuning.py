@@ -11,6 +11,10 @@ from pfjax import errors
 from pfjax.api.runs import prng_key
 from pfjax.api.simulation import resolve_gains, sim_config
 from pfjax.errors import arguments_checked
+from pfjax.montecarlo.analysis_config import FalsifierSpec
+
+#: A study's ``[falsifier]`` defaults, which :func:`falsify` takes too.
+_SEARCH = FalsifierSpec()
 
 
 @arguments_checked
@@ -210,13 +214,13 @@ def falsify(
     path: str = "sine",
     *,
     gains=None,
-    slip_bound_deg: float = 10.0,
-    f_max_hz: float = 0.5,
-    lateral_offset: float = 0.1,
-    heading_error_deg: float = 5.0,
-    objective: str = "iae",
-    restarts: int = 8,
-    steps: int = 50,
+    slip_bound_deg: float = _SEARCH.slip_bound_deg,
+    f_max_hz: float = _SEARCH.f_max_hz,
+    lateral_offset: float = _SEARCH.lateral_offset,
+    heading_error_deg: float = _SEARCH.heading_error_deg,
+    objective: str = _SEARCH.objective,
+    restarts: int = _SEARCH.n_restarts,
+    steps: int = _SEARCH.steps,
     key=0,
     config=None,
     speed: float = 1.0,
@@ -231,7 +235,8 @@ def falsify(
 
     ``slip_bound_deg``, ``f_max_hz``, ``lateral_offset``, ``heading_error_deg``, ``objective``,
     ``restarts`` and ``steps`` are checked as a study config's ``[falsifier]`` keys are (``restarts``
-    is its ``n_restarts``); ``config`` is a :class:`pfjax.sim.SimConfig` or a dict of its fields.
+    is its ``n_restarts``), and default to its defaults (10 deg, 0.5 Hz, 0.5 m, 30 deg, ``iae``, 8
+    starts of 40 steps: :class:`pfjax.montecarlo.analysis_config.FalsifierSpec`); ``config`` is a :class:`pfjax.sim.SimConfig` or a dict of its fields.
 
     Computed in the precision JAX is configured for (float32 unless ``jax_enable_x64``); a study's
     worst-case search (``[falsifier]`` of ``pfjax study``) runs in the study's ``dtype``.

@@ -44,7 +44,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from functools import partial
-from typing import NamedTuple
+from typing import NamedTuple, get_args
 
 import jax
 import jax.numpy as jnp
@@ -66,11 +66,15 @@ from pfjax.falsification.space import (
     slip_from_raw,
 )
 from pfjax.models.slip import Pose, SlipParams
+from pfjax.montecarlo.analysis_config import FalsifierSpec
 from pfjax.numerics import autodiff
 from pfjax.sim.simulate import Scenario, SimConfig, SimResult, simulate, simulate_batch, simulate_one, unstack
 from pfjax.sim.status import Status
 
-OBJECTIVES = ("iae", "ise", "itae", "max_abs_d", "late_max_abs_d")
+#: The metrics a search can maximise: a study's ``[falsifier] objective`` choices.
+OBJECTIVES = get_args(FalsifierSpec.model_fields["objective"].annotation)
+#: A study's ``[falsifier]`` defaults (objective, starts, steps), which :func:`falsify` takes too.
+_SEARCH = FalsifierSpec()
 
 
 class FalsifierResult(NamedTuple):
@@ -284,9 +288,9 @@ def falsify(
     slip_bound_deg: float,
     f_max_hz: float,
     ic_bounds: dict,
-    objective: str = "iae",
-    n_restarts: int = 8,
-    steps: int = 50,
+    objective: str = _SEARCH.objective,
+    n_restarts: int = _SEARCH.n_restarts,
+    steps: int = _SEARCH.steps,
     lr: float = 0.2,
     key: Array,
     params: SlipParams | None = None,
