@@ -57,6 +57,13 @@ def check_steps(horizon: float, dt: float, key: str = "dt") -> int:
 STEPS_RTOL = 1e-9
 
 
+def named_setting(horizon: float, dt: float, defaults: tuple[float, float]) -> str:
+    """Which setting a step that does not fit the horizon is told by: ``"dt"`` when only the step
+    differs from its default (``defaults``: the default horizon and step, s), else ``"horizon"``:
+    the error names what the caller changed."""
+    return "dt" if horizon == defaults[0] and dt != defaults[1] else "horizon"
+
+
 def whole_steps(horizon: float, dt: float, key: str = "horizon") -> int:
     """The number of integrator steps ``horizon / dt`` when it is a whole number (to a relative
     :data:`STEPS_RTOL`); :class:`~pfjax.errors.InputError` naming ``key`` otherwise, with the two

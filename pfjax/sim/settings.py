@@ -53,7 +53,7 @@ class SimConfig:
         errors.number("dt", self.dt, positive=True, unit=" s")
         errors.number("horizon", self.horizon, positive=True, unit=" s")
         # a step that does not fit the horizon names the step when only the step was changed
-        only_step = self.horizon == _DEFAULT_HORIZON and self.dt != _DEFAULT_DT
+        only_step = resources.named_setting(self.horizon, self.dt, (_DEFAULT_HORIZON, _DEFAULT_DT)) == "dt"
         if not self.horizon >= self.dt:
             if only_step:
                 raise InputError(f"dt: must be <= horizon ({self.horizon:g} s), got {errors.shown(self.dt)}")

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 
 from pfjax import errors
 from pfjax.errors import InputError
-from pfjax.resources import MAX_STEPS, check_steps, whole_steps
+from pfjax.resources import MAX_STEPS, check_steps, named_setting, whole_steps
 from pfjax.tables import TRACK_UNITS as UNITS
 from pfjax.tracking.controller import FocusGains
 from pfjax.tracking.model import FollowerParams
@@ -69,8 +69,7 @@ def check_time(horizon: float, dt: float, window: float | None = None) -> int:
     if dt > horizon:
         raise InputError(f"dt: must be <= horizon ({horizon:g} s), got {dt:g}", "dt")
     check_steps(horizon, dt, "horizon/dt")  # names both: the command line shows it as --horizon/--dt
-    only_step = horizon == TrackConfig.horizon and dt != TrackConfig.dt
-    n = whole_steps(horizon, dt, "dt" if only_step else "horizon")
+    n = whole_steps(horizon, dt, named_setting(horizon, dt, (TrackConfig.horizon, TrackConfig.dt)))
     if window is not None and window > horizon:
         raise InputError(f"window: must be <= horizon ({horizon:g} s), got {window:g}", "window")
     return n
