@@ -310,4 +310,4 @@ def test_the_search_defaults_are_a_studys_falsifier_defaults():
         spec.steps,
         spec.objective,
     )
-    assert search.OBJECTIVES == typing.get_args(FalsifierSpec.model_fields["objective"].annotation)
+    assert typing.get_args(FalsifierSpec.model_fields["objective"].annotation) == search.OBJECTIVES

@@ -11,12 +11,15 @@ from pfjax.metrics.running import METRIC_NAMES, Metrics
 
 #: Statistics this package re-exports, by the module that defines them (imported on first access).
 _LAZY = {
+    "certify_n": "robustness",
     "clopper_pearson": "robustness",
     "failure_drivers": "robustness",
     "hoeffding_n": "robustness",
     "metric_quantiles": "robustness",
+    "paired_interval": "robustness",
     "success_summary": "robustness",
     "supported_statement": "robustness",
+    "worst_first": "robustness",
     "zero_failure_n": "robustness",
     "slip_margin": "margins",
 }

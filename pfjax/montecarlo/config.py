@@ -101,7 +101,9 @@ class ControllerSpec(ConfigModel):
         from pfjax.controllers.registry import check_gain_names
 
         e, d = resolve(self.type)
-        check_gain_names(e, self.gains, called=self.type)  # as it loads, like every other key (before --out is looked at)
+        check_gain_names(
+            e, self.gains, called=self.type
+        )  # as it loads, like every other key (before --out is looked at)
         if self.K is not None:
             if d is not None or "K" not in e.labels:
                 raise ValueError(
