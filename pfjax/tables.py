@@ -102,7 +102,7 @@ _BASE_UNITS = {"m": (1, 0), "s": (0, 1), "rad": (0, 0), "1": (0, 0)}
 
 
 #: A power of a base unit: an integer or a decimal, signed (``m^2``, ``s^-1``, ``m^0.5``).
-_POWER = re.compile(r"[+-]?\d+(\.\d+)?")
+_POWER = re.compile(r"[+-]?[0-9]+(\.[0-9]+)?")
 
 
 def _product_powers(product: str) -> tuple[float, float] | None:

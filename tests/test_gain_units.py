@@ -142,7 +142,9 @@ def test_tuning_study_units_name_each_controllers_gains():
     assert units["descent_gains"] == {"pi": C.gain_units(C.entry("pi"))}
 
 
-@pytest.mark.parametrize("unit", ["/", "m/", "1/", "(m", "()", "m)/s)", "m^1_000", "m^1e308", "a/b/c", "m^", "deg/s"])
+@pytest.mark.parametrize(
+    "unit", ["/", "m/", "1/", "(m", "()", "m)/s)", "m^1_000", "m^1e308", "a/b/c", "m^", "deg/s", "m^\u0663"]
+)
 def test_a_malformed_unit_is_not_read(unit):
     """The unit grammar reads only a product of m, s, rad and 1 with plain powers, over one such
     product, each side non-empty and parenthesised as a whole at most: anything else is None, and

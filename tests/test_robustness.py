@@ -562,9 +562,20 @@ def test_certify_n_is_the_smallest_n_whose_cp_bound_reaches_the_claim(eps, delta
                 certify_n(eps, bad, k)
 
 
-@pytest.mark.parametrize(("b", "c", "n"), [(5, 0, 3), (-1, 0, 3), (2, 3, 4)])
-def test_paired_interval_refuses_counts_that_are_no_pairs(b, c, n):
+@pytest.mark.parametrize(
+    ("b", "c", "n", "said"),
+    [
+        (5, 0, 3, r"^need b, c >= 0 and b \+ c <= n"),
+        (2, 3, 4, r"^need b, c >= 0 and b \+ c <= n"),
+        (-1, 0, 3, r"^b: expected a whole number >= 0"),
+        (1.5, 0, 3, r"^b: expected a whole number >= 0"),
+        (True, 0, 3, r"^b: expected a whole number >= 0"),
+        (0, float("nan"), 3, r"^c: expected a whole number >= 0"),
+    ],
+)
+def test_paired_interval_refuses_counts_that_are_no_pairs(b, c, n, said):
     from pfjax.metrics.robustness import paired_interval
 
-    with pytest.raises(ValueError, match=r"^need b, c >= 0 and b \+ c <= n"):
+    with pytest.raises(ValueError, match=said):
         paired_interval(b, c, n)
+    assert paired_interval(2.0, 1, 4) == paired_interval(2, 1, 4)  # a whole float is a count

@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from pfjax.models.slip import FrenetState, SlipParams, frenet_rhs
+from pfjax.models.slip import FRONT_SLIP_SIGN, LENAIN, SOURCE, FrenetState, SlipParams, frenet_rhs
 
 
 class Equilibrium(NamedTuple):
@@ -78,8 +78,9 @@ def equilibrium(K: Array, beta_r, beta_f, params: SlipParams, kappa=0.0, iters: 
     (a call from Python took 5 s eagerly)."""
     K = jnp.asarray(K, float)
     theta = -jnp.asarray(beta_r, float)
-    lenain = jnp.asarray(params.convention) == 1
-    delta_line = jnp.where(lenain, beta_r - beta_f, beta_r + beta_f)
+    lenain = jnp.asarray(params.convention) == LENAIN
+    sign = jnp.where(lenain, FRONT_SLIP_SIGN[LENAIN], FRONT_SLIP_SIGN[SOURCE])
+    delta_line = beta_r + sign * beta_f  # the steering that holds a straight line
     d = (delta_line - K[1] * theta) / K[0]
 
     # Newton on theta_e' = 0 in d (theta_e fixed at -beta_r makes d' = 0 exactly).

@@ -379,7 +379,7 @@ def random_search(
     slip_bound_deg: float,
     f_max_hz: float,
     ic_bounds: dict,
-    objective: str = "iae",
+    objective: str = _SEARCH.objective,
     n_samples: int,
     key: Array,
     batch_size: int = 64,

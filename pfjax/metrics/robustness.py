@@ -408,6 +408,17 @@ def worst_first(runs: pd.DataFrame) -> pd.DataFrame:
     return runs.iloc[order.to_numpy()]
 
 
+def _count(name: str, x) -> int:
+    """``x`` as a count (a whole number >= 0, not a bool); ValueError naming ``name`` otherwise."""
+    if (
+        isinstance(x, bool)
+        or not isinstance(x, (int, np.integer, float, np.floating))
+        or not (math.isfinite(x) and x >= 0 and float(x).is_integer())
+    ):
+        raise ValueError(f"{name}: expected a whole number >= 0, got {x!r}")
+    return int(x)
+
+
 def _tango_z(b: int, c: int, n: int, delta: float) -> float:
     """Tango's score statistic of the paired difference ``delta`` (:func:`paired_interval`)."""
     w = -b - c + (2 * n - b + c) * delta
@@ -428,8 +439,8 @@ def paired_interval(b: int, c: int, n: int, z: float = 1.959963984540054) -> tup
     for the paired-sample design", *Statistics in Medicine* 17, 891-908, 1998). ``Z`` falls with
     ``Delta``; its roots are found by bisection to 1e-12. Unlike the Wald interval it has a width
     when ``b = c = 0`` (identical outcomes): ``+-z^2 / (n + z^2)``. ``(nan, nan)`` for ``n = 0``."""
-    b, c, n = int(b), int(c), int(n)
-    if min(b, c, n) < 0 or b + c > n:
+    b, c, n = (_count(name, x) for name, x in (("b", b), ("c", c), ("n", n)))
+    if b + c > n:
         raise ValueError(f"need b, c >= 0 and b + c <= n, got b={b}, c={c}, n={n}")
     if n == 0:
         return math.nan, math.nan
