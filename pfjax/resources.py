@@ -64,6 +64,17 @@ def named_setting(horizon: float, dt: float, defaults: tuple[float, float]) -> s
     return "dt" if horizon == defaults[0] and dt != defaults[1] else "horizon"
 
 
+def check_fits(horizon: float, dt: float, defaults: tuple[float, float]) -> str:
+    """``horizon >= dt`` (s), else :class:`~pfjax.errors.InputError` naming the setting the caller
+    changed (:func:`named_setting`); returns that setting's name, for the whole-steps check."""
+    key = named_setting(horizon, dt, defaults)
+    if not horizon >= dt:
+        if key == "dt":
+            raise InputError(f"dt: must be <= horizon ({horizon:g} s), got {shown(dt)}", "dt")
+        raise InputError(f"horizon: must be >= dt ({dt:g} s), got {shown(horizon)}", "horizon")
+    return key
+
+
 def whole_steps(horizon: float, dt: float, key: str = "horizon") -> int:
     """The number of integrator steps ``horizon / dt`` when it is a whole number (to a relative
     :data:`STEPS_RTOL`); :class:`~pfjax.errors.InputError` naming ``key`` otherwise, with the two

@@ -76,7 +76,8 @@ def test_run_equals_cli_json(capsys, mode, extra):
         ({"beta_f_deg": -91}, "beta_f_deg"),
         ({"horizon": 0}, "horizon"),
         ({"dt": 0}, "dt"),
-        ({"dt": 5.0}, "dt"),
+        ({"dt": 5.0}, "horizon"),  # the horizon given too (3 s): it is named, as SimConfig names it
+        ({"dt": 31.0, "horizon": 30.0}, "dt"),  # the default horizon: the step is named
         ({"horizon": 1e6, "dt": 0.1}, "horizon/dt"),
         ({"p": 1e-200}, "p"),  # 1 / p overflows: refused below 1e-12 in magnitude
         ({"p": -5e-324}, "p"),
@@ -97,7 +98,8 @@ def test_bad_argument_raises_input_error_naming_it(monkeypatch, kw, key):
     "kw,argv,line",
     [
         ({"p": 0}, ["--p", "0"], "--p: must be nonzero (M is singular at p = 0), got 0"),
-        ({"dt": 5.0}, ["--dt", "5"], "--dt: must be <= --horizon (3 s), got 5"),
+        # both changed (the horizon is 3 s here): the horizon is named, as SimConfig names it
+        ({"dt": 5.0}, ["--dt", "5"], "--horizon: must be >= --dt (5 s), got 3"),
         ({"stop_and_go": 1.5}, ["--stop-and-go", "1.5"], "--stop-and-go: expected a depth in [0, 1], got 1.5"),
         # a value just past the bound is shown with every digit, not rounded onto the bound
         (

@@ -19,7 +19,8 @@ STUDY = Path(__file__).resolve().parents[1] / "studies" / "vehicle_tracking.py"
 @pytest.mark.parametrize(
     "settings, key",
     [
-        (["sim.dt=100.0"], "sim.dt"),  # dt > horizon: no step at all
+        # dt > horizon: no step at all; the horizon is named, since the quick preset changed it (15 s)
+        (["sim.dt=100.0"], "sim.horizon"),
         (["sim.window=100.0"], "sim.window"),  # the final window longer than the run
         (["sim.dt=0.3", "sim.horizon=10.0"], "sim.horizon"),  # not a whole number of steps
         (["sim.horizon=1e9"], "sim.horizon/dt"),  # more steps than a run may take
@@ -101,3 +102,9 @@ def test_the_study_columns_take_the_command_lines_units():
     """The study's columns and ``pfjax track --json`` read one table (pfjax.tables.TRACK_UNITS)."""
     assert study.COLUMNS["window_max_z"][0] == api.UNITS["window_max_z"] == "m"
     assert study.COLUMNS["gamma"][0] == api.UNITS["final.*"]["gamma"] == "rad"
+
+
+def test_a_step_longer_than_the_default_horizon_names_the_step():
+    """At the schema's horizon (TrackConfig's, 30 s) only the step was changed: sim.dt is named."""
+    with pytest.raises(ConfigError, match=r"^sim\.dt: must be <= horizon \(30 s\), got 100"):
+        study_config.load(overrides=["sim.dt=100.0"])

@@ -96,6 +96,11 @@ def test_a_step_that_does_not_divide_the_default_horizon_names_the_step(monkeypa
     )
     from pfjax.tracking.api import check_time
 
+    assert main(["track", "--horizon", "0.001", "--json"]) == 2  # only the horizon changed: it is named
+    assert capsys.readouterr().err == "pfjax track: error: --horizon: must be >= --dt (0.01 s), got 0.001\n"
+    assert main(["track", "--dt", "31", "--json"]) == 2  # only the step: the step
+    assert capsys.readouterr().err == "pfjax track: error: --dt: must be <= --horizon (30 s), got 31\n"
+
     assert check_time(30.0, 0.00309981401115933) == 9678 and check_time(30.0, 0.0031001343391547) == 9677
     with pytest.raises(InputError) as e:
         api.run(horizon=20.0, dt=0.0031)

@@ -53,13 +53,9 @@ class SimConfig:
         errors.number("dt", self.dt, positive=True, unit=" s")
         errors.number("horizon", self.horizon, positive=True, unit=" s")
         # a step that does not fit the horizon names the step when only the step was changed
-        only_step = resources.named_setting(self.horizon, self.dt, (_DEFAULT_HORIZON, _DEFAULT_DT)) == "dt"
-        if not self.horizon >= self.dt:
-            if only_step:
-                raise InputError(f"dt: must be <= horizon ({self.horizon:g} s), got {errors.shown(self.dt)}")
-            raise InputError(f"horizon: must be >= dt ({self.dt:g} s), got {errors.shown(self.horizon)}")
+        named = resources.check_fits(self.horizon, self.dt, (_DEFAULT_HORIZON, _DEFAULT_DT))
         resources.check_steps(self.horizon, self.dt)
-        resources.whole_steps(self.horizon, self.dt, "dt" if only_step else "horizon")  # never rounded to whole steps
+        resources.whole_steps(self.horizon, self.dt, named)  # never rounded to whole steps
         if self.control_every is not None:
             errors.integer("control_every", self.control_every, low=1, high=resources.MAX_STEPS)
             if self.control_every > self.n_steps:  # one command for the whole run: a mistake, not a controller

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 
 from pfjax import errors
 from pfjax.errors import InputError
-from pfjax.resources import MAX_STEPS, check_steps, named_setting, whole_steps
+from pfjax.resources import MAX_STEPS, check_fits, check_steps, whole_steps
 from pfjax.tables import TRACK_UNITS as UNITS
 from pfjax.tracking.controller import FocusGains
 from pfjax.tracking.model import FollowerParams
@@ -59,17 +59,16 @@ def nonzero(key: str, value: float, symbol: str) -> float:
 def check_time(horizon: float, dt: float, window: float | None = None) -> int:
     """The number of integrator steps of a run of ``horizon`` s at step ``dt`` s (both > 0).
 
-    :class:`InputError` naming ``dt`` when ``dt > horizon``; ``horizon/dt`` above
+    :class:`InputError` when ``dt > horizon`` (:func:`pfjax.resources.check_fits`); ``horizon/dt`` above
     :data:`pfjax.resources.MAX_STEPS` steps; when ``dt`` does not divide ``horizon`` into whole steps
     (:func:`pfjax.resources.whole_steps`: a run is never rounded), ``dt`` if only the step differs
     from its default (``horizon`` is ``TrackConfig.horizon``), else ``horizon`` (the rule of
     :class:`pfjax.sim.settings.SimConfig`); ``window`` when the final window over which the limits
     are checked is longer than the horizon.
     """
-    if dt > horizon:
-        raise InputError(f"dt: must be <= horizon ({horizon:g} s), got {dt:g}", "dt")
+    named = check_fits(horizon, dt, (TrackConfig.horizon, TrackConfig.dt))
     check_steps(horizon, dt, "horizon/dt")  # names both: the command line shows it as --horizon/--dt
-    n = whole_steps(horizon, dt, named_setting(horizon, dt, (TrackConfig.horizon, TrackConfig.dt)))
+    n = whole_steps(horizon, dt, named)
     if window is not None and window > horizon:
         raise InputError(f"window: must be <= horizon ({horizon:g} s), got {window:g}", "window")
     return n
