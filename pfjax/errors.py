@@ -334,7 +334,11 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
         if sys.stderr.isatty():  # below a progress bar's partial line (bars are drawn on a terminal only)
             sys.stderr.write("\n")
         term = isinstance(e, interrupts.Terminated)
-        print(f"{prog}: {'terminated' if term else 'interrupted'}; {interrupted}", file=sys.stderr)
+        word, written = "terminated" if term else "interrupted", interrupts.last_written()
+        if written is not None:  # held over the final renames: the output is complete
+            print(f"{prog}: {word} after writing {written}; its output is complete", file=sys.stderr)
+        else:
+            print(f"{prog}: {word}; {interrupted}", file=sys.stderr)
         return EXIT_TERMINATED if term else EXIT_INTERRUPTED
 
 

@@ -42,6 +42,11 @@ class _Command:
         self.closing = False  # the command is ending: nothing more is sent or raised
         self.timer: threading.Timer | None = None
         self.signal = signal.SIGINT  # the last signal that stopped it: sent again if dropped
+        self.written: str | None = None  # the output it put in place (:func:`wrote`)
+
+
+#: The output the last guarded command put in place before it was stopped (:func:`last_written`).
+_last_written: str | None = None
 
 
 _running: _Command | None = None
@@ -61,7 +66,9 @@ def guard():
     ):
         yield
         return
+    global _last_written
     cmd = _running = _Command()
+    _last_written = None
     hook = sys.unraisablehook
     sys.unraisablehook = functools.partial(_unraisable, cmd, hook)
     signal.signal(signal.SIGINT, _on_sigint)
@@ -80,6 +87,7 @@ def guard():
         if term:
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
         sys.unraisablehook = hook
+        _last_written = cmd.written
         _running = None
 
 
@@ -119,6 +127,20 @@ def _send_again(cmd: _Command) -> None:
         os.kill(os.getpid(), cmd.signal)
 
 
+def wrote(target) -> None:
+    """Tell the running command that its output is in place (:meth:`pfjax.outputs.OutputDir.commit`,
+    within :func:`deferred`): a Ctrl-C or SIGTERM held over the final renames and acted on after them
+    then says that the output was written, not that nothing was."""
+    if _running is not None:
+        _running.written = str(target)
+
+
+def last_written() -> str | None:
+    """The output the last guarded command put in place (:func:`wrote`), or None: read by
+    :func:`pfjax.errors.command_main` for the message of a command stopped after it."""
+    return _last_written
+
+
 def stop_if_interrupted() -> None:
     """Raise ``KeyboardInterrupt`` in the main thread if the running command got SIGINT (module
     docstring: called before each of a study's chunks)."""
@@ -144,10 +166,19 @@ def deferred():
     try:
         yield
     finally:
-        for k, handler in before.items():
-            signal.signal(k, handler)
+        _restore(list(before.items()))
         for k in dict.fromkeys(held):
             signal.raise_signal(k)
+
+
+def _restore(handlers: list) -> None:
+    """Put ``handlers`` (signal, handler) back, each even if a signal that arrives while the one
+    before is put back raises in its handler (a Ctrl-C there): none stays held for good."""
+    if handlers:
+        try:
+            signal.signal(*handlers[0])
+        finally:
+            _restore(handlers[1:])
 
 
 def finished(code):
@@ -161,4 +192,4 @@ def finished(code):
     return code
 
 
-__all__ = ["RESEND_S", "Terminated", "deferred", "finished", "guard", "stop_if_interrupted"]
+__all__ = ["RESEND_S", "Terminated", "deferred", "finished", "guard", "last_written", "stop_if_interrupted", "wrote"]

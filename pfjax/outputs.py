@@ -489,8 +489,9 @@ class OutputDir:
                     remove_temporary(old)
                 raise self._cannot_replace(e) from None
             self.committed = True
-        if old is not None:
-            remove_temporary(old)
+            interrupts.wrote(self.target)
+            if old is not None:  # before a held signal is acted on: nothing left beside the output
+                remove_temporary(old)
         return self.target
 
     def _cannot_replace(self, e: OSError) -> InputError:

@@ -988,3 +988,62 @@ def test_without_hard_links_a_lock_file_being_created_is_told_busy_not_foreign(t
     t.join(5)
     results["first"].release()
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_deferred_puts_every_handler_back_even_when_a_signal_interrupts_it(monkeypatch):
+    """A Ctrl-C that arrives while deferred() puts the first handler back raises there: the other
+    handlers are put back all the same, so none stays held for good."""
+    from pfjax import interrupts
+
+    real, seen = signal.signal, []
+
+    def signal_(sig, handler):
+        out = real(sig, handler)
+        seen.append(sig)
+        if len(seen) == 3:  # the first handler put back (after the two held ones were installed)
+            raise KeyboardInterrupt
+        return out
+
+    user_term = lambda s, f: None
+    before = real(signal.SIGTERM, user_term)
+    try:
+        monkeypatch.setattr(interrupts.signal, "signal", signal_)
+        with pytest.raises(KeyboardInterrupt), interrupts.deferred():
+            pass
+        monkeypatch.undo()
+        assert signal.getsignal(signal.SIGTERM) is user_term and signal.getsignal(signal.SIGINT) is not None
+        assert len(seen) == 4
+    finally:
+        real(signal.SIGTERM, before)
+
+
+def test_a_signal_held_over_the_final_renames_says_the_output_was_written(tmp_path, monkeypatch, capsys):
+    """SIGTERM between the two final renames is acted on after them: the command says its output
+    was written (exit 143), and the previous output set aside is removed before."""
+    from pfjax import errors
+    from pfjax import outputs as outputs_module
+
+    out = tmp_path / "out"
+    _write(out, {"a": "v1"})
+    real, calls = os.replace, []
+
+    def replace(src, dst):
+        calls.append(src)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGTERM)  # arrives between the two renames
+        return real(src, dst)
+
+    def body():
+        with OutputDir(out, command="study", config_sha256="a" * 64, overwrite=True) as o:
+            (o.staging / "a").write_text("v2")
+            monkeypatch.setattr(outputs_module.os, "replace", replace)
+            o.commit()
+        return 0
+
+    before = signal.signal(signal.SIGTERM, signal.SIG_DFL)  # as in a fresh process (a test runner may set its own)
+    try:
+        assert errors.command_main("pfjax study", body) == EXIT_TERMINATED
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert capsys.readouterr().err == f"pfjax study: terminated after writing {out}; its output is complete\n"
+    assert (out / "a").read_text() == "v2" and sorted(p.name for p in tmp_path.iterdir()) == ["out"]
