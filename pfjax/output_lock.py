@@ -2,10 +2,13 @@
 ``fcntl.flock`` on the lock file ``.<name>.lock`` beside the target, recording the holder's pid,
 host, command and start time; the operating system releases it when the process ends.
 
-Only pfjax's own lock file is used, written and removed: it appears at its name with its record
-already in it, and a symbolic link (never followed), a directory or a file that does not hold a
-whole lock record (:data:`RECORD_KEYS`; an empty file does not) at that name is refused
-(:class:`~pfjax.errors.InputError` naming the flag), and left as it is."""
+Only pfjax's own lock file is used, written and removed: it appears at its name locked and with
+its record already in it (on a file system without hard links it is created empty and locked at
+once, and an empty file is looked at again for :data:`EMPTY_WAITS` x :data:`EMPTY_WAIT_S`); a
+symbolic link (never followed), a directory or a file that does not hold a whole lock record
+(:data:`RECORD_KEYS`) at that name is refused (:class:`~pfjax.errors.InputError` naming the flag),
+and left as it is. On a file system without hard links, a pfjax killed in the instant between
+creating its lock file and writing its record leaves an empty file, which is then refused so too."""
 
 from __future__ import annotations
 
