@@ -217,7 +217,9 @@ def cross_entropy_is(
 
     Returns:
         a :class:`~pfjax.rare.estimate.RareEstimate` with ``method="is"``; ``detail`` holds the
-        levels, the final mixture's distinct ``modes`` (means, weights: :func:`modes`), the effective sample size and
+        levels, the final mixture's distinct ``modes`` (means, weights: :func:`modes`), the final
+        ``proposal`` itself (its :class:`Mixture`'s weights, means and covariances, as lists) with its
+        ``defensive`` share of ``N(0, I)`` (what the estimate drew from), the effective sample size and
         the largest weight's share of the estimate (``max_weight_share``,
         :mod:`pfjax.rare.check`). ``p_fail`` is the weights' mean ``Σ w_i 1[g <= 0] / N`` capped at 1
         (where nearly every draw fails, the mean of the weights, about 1, can exceed it); a capped
@@ -264,6 +266,8 @@ def cross_entropy_is(
             "effective_sample_size": ess,
             "max_weight_share": wmax / s1 if s1 > 0 else 0.0,
             "modes": modes(mix),
+            "proposal": {"weights": mix.weights.tolist(), "means": mix.means.tolist(), "covs": mix.covs.tolist()},
+            "defensive": defensive,
         },
     )
 
