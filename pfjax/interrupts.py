@@ -182,13 +182,16 @@ def _restore(handlers: list) -> None:
 
 
 def finished(code):
-    """``code``, with Ctrl-C ignored from now on, for a process whose command has ended (its outputs
-    written, its result printed): a late interrupt then neither breaks into the exit handlers (JAX's
-    runtime teardown, with a traceback) nor turns a finished run's exit code into 130. The ``pfjax``
-    console script and the study scripts call it as their process ends; the Python API never does.
-    In the main thread only (elsewhere it changes nothing)."""
+    """``code``, with Ctrl-C and SIGTERM ignored from now on, for a process whose command has ended
+    (its outputs written, its result printed): a late interrupt then neither breaks into the exit
+    handlers (JAX's runtime teardown, with a traceback) nor turns a finished run's exit code into 130
+    or 143. The ``pfjax`` console script and the study scripts call it as their process ends; the
+    Python API never does. In the main thread only (elsewhere it changes nothing); a SIGTERM handler
+    of the process's own is left as it is."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
     return code
 
 

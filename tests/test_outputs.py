@@ -892,13 +892,14 @@ def test_ctrl_c_prints_one_line_and_a_blank_line_only_below_a_terminals_progress
     assert out == "" and err == ("\n" if tty else "") + "prog: interrupted; nothing was written\n"
 
 
-def test_a_ctrl_c_after_the_command_ended_changes_nothing():
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_ctrl_c_or_sigterm_after_the_command_ended_changes_nothing(sig):
     """``pfjax.interrupts.finished`` (the console script's and the study scripts' last step): a
-    SIGINT after it neither interrupts the exit handlers with a traceback nor changes the exit code."""
+    SIGINT or SIGTERM after it neither interrupts the exit handlers nor changes the exit code."""
     code = (
         "import atexit, os, signal, sys, time\n"
         "from pfjax.interrupts import finished\n"
-        "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(0.1), print('exit handler ran')))\n"
+        f"atexit.register(lambda: (os.kill(os.getpid(), signal.{sig}), time.sleep(0.1), print('exit handler ran')))\n"
         "sys.exit(finished(3))\n"
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
