@@ -280,3 +280,44 @@ def test_stability_map_is_right_in_float32_and_float64(grid_max):
             np.testing.assert_array_equal(np.asarray(eq.exists)[clear], exists[clear])
             np.testing.assert_array_equal(np.asarray(eq.hurwitz)[clear], hurwitz[clear])
     assert clear.mean() > 0.9 and hurwitz[clear].any()
+
+
+def test_the_pi_quasi_equilibrium_is_where_unsaturated_readings_settle():
+    """pi_quasi_equilibrium's offset d_q = ki_theta beta_r / ki_d against the line test simulated
+    with pfjax (5 deg of slip on each axle, the source's speed and wheelbase, continuous PI, 120 s or
+    the path's end): the readings of Table 3 whose linearised loop decays faster than 0.1 1/s and
+    whose steering ends off its limit end within 2 % of d_q (and 1e-5 m); the poles are those of the
+    3x3 matrix of its docstring (numpy)."""
+    import math
+
+    import jax
+    import numpy as np
+
+    from pfjax import controllers as C
+    from pfjax.analysis import pi_quasi_equilibrium
+    from pfjax.models import SlipParams
+    from pfjax.sim import SimConfig, simulate_batch, stack, unstack
+    from pfjax.sim.scenario import paper_scenario
+
+    with jax.enable_x64(True):
+        readings = C.table3_assignments()
+        params, br = SlipParams(1.0, 0.2, math.radians(30.0), 0), math.radians(5.0)
+        scs = [
+            paper_scenario("line", g, beta_r_deg=5.0, beta_f_deg=5.0, v=1.0, L=0.2, delta_max_deg=30.0)
+            for g in readings.values()
+        ]
+        res = simulate_batch(stack(scs), controller=C.pi, config=SimConfig(control_every=None, horizon=120.0))
+        checked = 0
+        for i, g in enumerate(readings.values()):
+            q = pi_quasi_equilibrium(g, br, params)
+            r = unstack(res, i)
+            saturated = abs(float(r.final.delta)) > math.radians(30.0) - 1e-6  # held at the limit
+            if q.poles.real.max() < -0.1 and not saturated:
+                assert float(r.final.d) == pytest.approx(q.d_q, rel=0.02, abs=1e-5)
+                checked += 1
+        assert checked >= 4
+    g = C.pi_params(kp_d=2.0, ki_d=0.5, kp_theta=1.0, ki_theta=0.1)
+    q = pi_quasi_equilibrium(g, br, params)
+    a, b = 1.0 / math.cos(br), 1.0 / (0.2 * math.cos(br) ** 2)
+    want = np.linalg.eigvals([[0, a, 0], [-b * 2.0, -b * 1.0, b], [-0.5, -0.1, 0]])
+    assert np.allclose(np.sort_complex(q.poles), np.sort_complex(want)) and q.d_q == pytest.approx(0.1 * br / 0.5)

@@ -2,11 +2,22 @@
 
 from pfjax.analysis.stability import (
     Equilibrium,
+    PIQuasiEquilibrium,
     closed_loop_field,
     converged_to,
     equilibrium,
+    pi_quasi_equilibrium,
     source_linearisation,
     stability_map,
 )
 
-__all__ = ["Equilibrium", "closed_loop_field", "converged_to", "equilibrium", "source_linearisation", "stability_map"]
+__all__ = [
+    "Equilibrium",
+    "PIQuasiEquilibrium",
+    "closed_loop_field",
+    "converged_to",
+    "equilibrium",
+    "pi_quasi_equilibrium",
+    "source_linearisation",
+    "stability_map",
+]

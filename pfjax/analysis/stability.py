@@ -30,7 +30,7 @@ jittable and vmap over slip grids.
 from __future__ import annotations
 
 from functools import partial
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -134,3 +134,47 @@ def converged_to(status, d, theta_e, d_star, theta_e_star, *, tol_d: float, tol_
         & (np.abs(np.asarray(d) - np.asarray(d_star)) < tol_d)
         & (np.abs(np.asarray(theta_e) - np.asarray(theta_e_star)) < math.radians(tol_theta_deg))
     )
+
+
+class PIQuasiEquilibrium(NamedTuple):
+    """The PI loop's quasi-equilibrium under constant rear slip (:func:`pi_quasi_equilibrium`)."""
+
+    d_q: float  # m, the standing lateral offset
+    poles: Any  # (3,) NumPy complex, 1/s, eigenvalues of the loop linearised there (e, phi, sigma)
+
+
+def pi_quasi_equilibrium(gains, beta_r: float, params: SlipParams) -> PIQuasiEquilibrium:
+    """The quasi-equilibrium of the source's PI (:func:`pfjax.controllers.pi`, gains ``kp_d``,
+    ``ki_d``, ``kp_theta``, ``ki_theta``) on a straight line under constant rear slip ``beta_r``
+    (rad), in the source's convention, unsaturated, and the poles of the loop linearised there.
+
+    With rear slip ``d' = 0`` needs ``theta_e = -beta_r``, so the integral on ``theta_e`` ramps at
+    ``ki_theta beta_r`` for ever and the loop has no equilibrium; the steering stays at its
+    straight-line value while the integral on ``d`` ramps the other way, which needs the standing
+    offset ``d_q = ki_theta beta_r / ki_d`` (m). With ``a = v / cos beta_r``,
+    ``b = v / (L cos^2 beta_r)``, ``e = d - d_q``, ``phi = theta_e + beta_r`` and ``sigma`` the sum
+    of the two integral terms, the loop linearised there is::
+
+        d/dt [e, phi, sigma] = [[0, a, 0], [-b kp_d, -b kp_theta, b], [-ki_d, -ki_theta, 0]] [e, phi, sigma - sigma_q]
+
+    NumPy, not traced. Holds while the steering is not saturated; a reading whose linearised loop
+    is not Hurwitz, or whose steering saturates, does not approach ``d_q``."""
+    import math
+
+    import numpy as np
+
+    from pfjax.errors import InputError
+
+    if int(np.asarray(params.convention)) != SOURCE:
+        raise InputError("params.convention: the quasi-equilibrium is derived in the source's convention", "params")
+    v, L, br = float(params.v), float(params.L), float(beta_r)
+    kp_d, ki_d, kp_t, ki_t = (float(_gain(gains, k)) for k in ("kp_d", "ki_d", "kp_theta", "ki_theta"))
+    if ki_d == 0:
+        raise InputError("gains.ki_d: the quasi-equilibrium needs an integral on d (ki_d != 0)", "gains.ki_d")
+    a, b = v / math.cos(br), v / (L * math.cos(br) ** 2)
+    jac = np.array([[0.0, a, 0.0], [-b * kp_d, -b * kp_t, b], [-ki_d, -ki_t, 0.0]])
+    return PIQuasiEquilibrium(ki_t * br / ki_d, np.linalg.eigvals(jac))
+
+
+def _gain(gains, name: str):
+    return gains[name] if isinstance(gains, dict) else getattr(gains, name)
