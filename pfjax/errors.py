@@ -317,8 +317,9 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
 
     from pfjax import interrupts
 
+    cmd = None
     try:
-        with interrupts.guard():
+        with interrupts.guard() as cmd:
             code = body()
             sys.stdout.flush()  # here, so that a closed pipe is met inside this try
             return code
@@ -334,7 +335,7 @@ def command_main(prog: str, body, *, interrupted: str = "nothing was written") -
         if sys.stderr.isatty():  # below a progress bar's partial line (bars are drawn on a terminal only)
             sys.stderr.write("\n")
         term = isinstance(e, interrupts.Terminated)
-        word, written = "terminated" if term else "interrupted", interrupts.last_written()
+        word, written = "terminated" if term else "interrupted", None if cmd is None else cmd.written
         if written is not None:  # held over the final renames: the output is complete
             print(f"{prog}: {word} after writing {written}; its output is complete", file=sys.stderr)
         else:

@@ -43,10 +43,7 @@ class _Command:
         self.timer: threading.Timer | None = None
         self.signal = signal.SIGINT  # the last signal that stopped it: sent again if dropped
         self.written: str | None = None  # the output it put in place (:func:`wrote`)
-
-
-#: The output the last guarded command put in place before it was stopped (:func:`last_written`).
-_last_written: str | None = None
+        self.nested = 0  # commands run inside it (their guards take no effect): their outputs are theirs
 
 
 _running: _Command | None = None
@@ -57,18 +54,24 @@ def guard():
     """Within: SIGINT raises ``KeyboardInterrupt`` as usual, is remembered, and is sent again if
     Python dropped its exception (module docstring). Takes effect only in the main thread, with
     Python's default SIGINT handler installed and no command already guarded; elsewhere it changes
-    nothing."""
+    nothing. Yields the command's state (what :func:`wrote` recorded is its ``written``), or None
+    where it takes no effect."""
     global _running
     if (
         _running is not None
         or threading.current_thread() is not threading.main_thread()
         or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
     ):
-        yield
+        outer = _running
+        if outer is not None:
+            outer.nested += 1
+        try:
+            yield None
+        finally:
+            if outer is not None:
+                outer.nested -= 1
         return
-    global _last_written
     cmd = _running = _Command()
-    _last_written = None
     hook = sys.unraisablehook
     sys.unraisablehook = functools.partial(_unraisable, cmd, hook)
     signal.signal(signal.SIGINT, _on_sigint)
@@ -76,19 +79,18 @@ def guard():
     if term:
         signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        yield
+        yield cmd
     finally:
         cmd.closing = True
         if cmd.timer is not None:
             cmd.timer.cancel()
             cmd.timer.join()
-        # signal.signal runs a pending handler first (ours, which ignores it while closing)
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-        if term:
-            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        # the module's state first, the handlers last (a Ctrl-C while they are put back raises
+        # there): signal.signal runs a pending handler first (ours, which ignores it while closing)
         sys.unraisablehook = hook
-        _last_written = cmd.written
         _running = None
+        handlers = [(signal.SIGTERM, signal.SIG_DFL)] if term else []
+        _restore([*handlers, (signal.SIGINT, signal.default_int_handler)])
 
 
 def _on_sigint(signum, frame):
@@ -130,15 +132,10 @@ def _send_again(cmd: _Command) -> None:
 def wrote(target) -> None:
     """Tell the running command that its output is in place (:meth:`pfjax.outputs.OutputDir.commit`,
     within :func:`deferred`): a Ctrl-C or SIGTERM held over the final renames and acted on after them
-    then says that the output was written, not that nothing was."""
-    if _running is not None:
+    then says that the output was written, not that nothing was. An output of a command run inside
+    it is that command's, not recorded."""
+    if _running is not None and _running.nested == 0:
         _running.written = str(target)
-
-
-def last_written() -> str | None:
-    """The output the last guarded command put in place (:func:`wrote`), or None: read by
-    :func:`pfjax.errors.command_main` for the message of a command stopped after it."""
-    return _last_written
 
 
 def stop_if_interrupted() -> None:
@@ -182,17 +179,15 @@ def _restore(handlers: list) -> None:
 
 
 def finished(code):
-    """``code``, with Ctrl-C and SIGTERM ignored from now on, for a process whose command has ended
-    (its outputs written, its result printed): a late interrupt then neither breaks into the exit
-    handlers (JAX's runtime teardown, with a traceback) nor turns a finished run's exit code into 130
-    or 143. The ``pfjax`` console script and the study scripts call it as their process ends; the
-    Python API never does. In the main thread only (elsewhere it changes nothing); a SIGTERM handler
-    of the process's own is left as it is."""
+    """``code``, with Ctrl-C ignored from now on, for a process whose command has ended (its outputs
+    written, its result printed): a late interrupt then neither breaks into the exit handlers (JAX's
+    runtime teardown, with a traceback) nor turns a finished run's exit code into 130. The ``pfjax``
+    console script and the study scripts call it as their process ends; the Python API never does.
+    In the main thread only (elsewhere it changes nothing). SIGTERM keeps its action: it still ends
+    a process that waits in its exit handlers (a multi-process study's shutdown barrier)."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)
     return code
 
 
-__all__ = ["RESEND_S", "Terminated", "deferred", "finished", "guard", "last_written", "stop_if_interrupted", "wrote"]
+__all__ = ["RESEND_S", "Terminated", "deferred", "finished", "guard", "stop_if_interrupted", "wrote"]

@@ -892,14 +892,14 @@ def test_ctrl_c_prints_one_line_and_a_blank_line_only_below_a_terminals_progress
     assert out == "" and err == ("\n" if tty else "") + "prog: interrupted; nothing was written\n"
 
 
-@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
-def test_a_ctrl_c_or_sigterm_after_the_command_ended_changes_nothing(sig):
+def test_a_ctrl_c_after_the_command_ended_changes_nothing():
     """``pfjax.interrupts.finished`` (the console script's and the study scripts' last step): a
-    SIGINT or SIGTERM after it neither interrupts the exit handlers nor changes the exit code."""
+    SIGINT after it neither interrupts the exit handlers nor changes the exit code (SIGTERM keeps
+    its action: it still ends a process waiting in its exit handlers)."""
     code = (
         "import atexit, os, signal, sys, time\n"
         "from pfjax.interrupts import finished\n"
-        f"atexit.register(lambda: (os.kill(os.getpid(), signal.{sig}), time.sleep(0.1), print('exit handler ran')))\n"
+        "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(0.1), print('exit handler ran')))\n"
         "sys.exit(finished(3))\n"
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
@@ -1048,3 +1048,47 @@ def test_a_signal_held_over_the_final_renames_says_the_output_was_written(tmp_pa
         signal.signal(signal.SIGTERM, before)
     assert capsys.readouterr().err == f"pfjax study: terminated after writing {out}; its output is complete\n"
     assert (out / "a").read_text() == "v2" and sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_a_commands_written_output_is_its_own(tmp_path, monkeypatch, capsys):
+    """What a command wrote belongs to that command: an interrupt of a later command, or of an outer
+    command after an inner one wrote, says nothing was written; and a Ctrl-C while the guard puts
+    its handlers back leaves no state behind (a later command is guarded again)."""
+    from pfjax import errors, interrupts
+
+    def commit(name):
+        with OutputDir(tmp_path / name, command="study", config_sha256="a" * 64) as o:
+            (o.staging / "a").write_text("1")
+            o.commit()
+
+    assert errors.command_main("first", lambda: (commit("out1"), 0)[1]) == 0
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    assert errors.command_main("second", interrupted) == EXIT_INTERRUPTED
+    assert capsys.readouterr().err == "second: interrupted; nothing was written\n"
+
+    def outer():
+        assert errors.command_main("inner", lambda: (commit("inner"), 0)[1]) == 0
+        raise KeyboardInterrupt
+
+    assert errors.command_main("outer", outer) == EXIT_INTERRUPTED
+    assert capsys.readouterr().err == "outer: interrupted; nothing was written\n"
+
+    real, calls = signal.signal, []
+
+    def signal_(sig, handler):  # a Ctrl-C arrives as the guard puts SIGINT's handler back
+        out = real(sig, handler)
+        calls.append(sig)
+        if sig == signal.SIGINT and handler is signal.default_int_handler:
+            raise KeyboardInterrupt
+        return out
+
+    monkeypatch.setattr(interrupts.signal, "signal", signal_)
+    with pytest.raises(KeyboardInterrupt), interrupts.guard():
+        pass
+    monkeypatch.undo()
+    assert interrupts._running is None and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    with interrupts.guard() as cmd:
+        assert cmd is not None  # guarded again

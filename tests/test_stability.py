@@ -291,7 +291,6 @@ def test_the_pi_quasi_equilibrium_is_where_unsaturated_readings_settle():
     import math
 
     import jax
-    import numpy as np
 
     from pfjax import controllers as C
     from pfjax.analysis import pi_quasi_equilibrium
@@ -316,8 +315,48 @@ def test_the_pi_quasi_equilibrium_is_where_unsaturated_readings_settle():
                 assert float(r.final.d) == pytest.approx(q.d_q, rel=0.02, abs=1e-5)
                 checked += 1
         assert checked >= 4
-    g = C.pi_params(kp_d=2.0, ki_d=0.5, kp_theta=1.0, ki_theta=0.1)
-    q = pi_quasi_equilibrium(g, br, params)
-    a, b = 1.0 / math.cos(br), 1.0 / (0.2 * math.cos(br) ** 2)
-    want = np.linalg.eigvals([[0, a, 0], [-b * 2.0, -b * 1.0, b], [-0.5, -0.1, 0]])
-    assert np.allclose(np.sort_complex(q.poles), np.sort_complex(want)) and q.d_q == pytest.approx(0.1 * br / 0.5)
+
+
+def test_the_pi_quasi_equilibrium_poles_are_the_models_jacobian():
+    """The poles against the Jacobian (jax.jacfwd) of the loop built from the model and the
+    controller themselves: frenet_rhs's d' and theta_e' under the PI's output (controllers.linear
+    ``_pi_output``, its two integral terms summed in sigma) and sigma' from ``_pi_rate`` (no
+    anti-windup), at (d_q, -beta_r, the sigma that steers beta_r + beta_f), where the field is 0;
+    random gains, slips, speeds and wheelbases."""
+    import math
+
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from pfjax import controllers as C
+    from pfjax.analysis import pi_quasi_equilibrium
+    from pfjax.controllers.base import Observation
+    from pfjax.controllers.linear import _pi_output, _pi_rate
+    from pfjax.models.slip import FrenetState, SlipParams, frenet_rhs
+
+    rng = np.random.default_rng(0)
+    with jax.enable_x64(True):
+        for _ in range(6):
+            g = C.pi_params(*(float(x) for x in rng.uniform([0.5, 0.02, 0.5, 0.01], [40, 12, 40, 12])))
+            br, bf = (math.radians(x) for x in rng.uniform(-12, 12, 2))
+            p = SlipParams(float(rng.uniform(0.3, 3)), float(rng.uniform(0.1, 1)), math.radians(30.0), 0)
+
+            def field(x, g=g, br=br, bf=bf, p=p):
+                d, th, sigma = x
+                obs = Observation(
+                    d=d, theta_e=th, kappa=0.0, s=0.0, u=0.0, pose=None, v=p.v, L=p.L, delta_max=p.delta_max, path=None
+                )
+                delta = _pi_output(g, jnp.stack([sigma, 0.0]), obs)
+                f = frenet_rhs(FrenetState(d, th, 0.0), delta, br, bf, 0.0, p)
+                return jnp.stack([f.d, f.theta_e, jnp.sum(_pi_rate(g, jnp.zeros(2), obs, delta, delta))])
+
+            q = pi_quasi_equilibrium(g, br, p)
+            sigma = br + bf + float(g.kp_d) * q.d_q - float(g.kp_theta) * br  # steers beta_r + beta_f
+            x0 = jnp.array([q.d_q, -br, sigma])
+            f0 = np.asarray(field(x0))
+            assert abs(f0[0]) < 1e-12 and abs(f0[1]) < 1e-12  # at rest in d and theta_e; sigma ramps...
+            assert abs(f0[2]) < 1e-12  # ...as a sum, not at all: the two integral terms cancel
+            jac = np.asarray(jax.jacfwd(field)(x0))
+            want, got = np.sort_complex(np.linalg.eigvals(jac)), np.sort_complex(q.poles)
+            assert np.max(np.abs(got - want)) <= 1e-9 * np.max(np.abs(want))

@@ -166,7 +166,9 @@ def pi_quasi_equilibrium(gains, beta_r: float, params: SlipParams) -> PIQuasiEqu
     from pfjax.errors import InputError
 
     if int(np.asarray(params.convention)) != SOURCE:
-        raise InputError("params.convention: the quasi-equilibrium is derived in the source's convention", "params")
+        raise InputError(
+            "params.convention: the quasi-equilibrium is derived in the source's convention", "params.convention"
+        )
     v, L, br = float(params.v), float(params.L), float(beta_r)
     kp_d, ki_d, kp_t, ki_t = (float(_gain(gains, k)) for k in ("kp_d", "ki_d", "kp_theta", "ki_theta"))
     if ki_d == 0:

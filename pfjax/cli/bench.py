@@ -3,8 +3,9 @@
 Exit codes (:data:`EPILOG`): 0 when every reference agrees with pfjax on the per-run IAE;
 :data:`EXIT_DISAGREE` (1) when one does not: the outputs are written (the measurement is data), the
 fractions and ratios against it are null and one line on stderr names it; 2 for bad input (one
-line naming the flag, nothing written); 130 when interrupted, 143 when terminated (SIGTERM;
-nothing written).
+line naming the flag, nothing written); 130 when interrupted, 143 when terminated (SIGTERM):
+nothing written, or, where the signal came during the final renames, the output complete (the
+line says so).
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ EPILOG = (
     "(beyond its tolerance, or not finite): the outputs are written, pfjax's fractions of it and ratios over it "
     "are null (the report names it and the difference instead), the goals read against it are not measured, "
     "and one line on stderr names it; 2, bad input (one line naming the flag, nothing written); 130, "
-    "interrupted (Ctrl-C; nothing written); 143, terminated (SIGTERM; nothing written)."
+    "interrupted (Ctrl-C; nothing written, or, during the final renames, the output complete and the line "
+    "says so); 143, terminated (SIGTERM; the same)."
 )
 
 
