@@ -61,16 +61,19 @@ STAMP_UNITS: dict[str, str] = {
 
 def cpu_settings() -> dict:
     """The CPU settings the simulator programs ran with: the vector width asked of XLA (None: its
-    default), the bytes per batched array in a CPU block per precision, and where they came from
+    default), the bytes per batched array in a CPU block per precision, how the sine-cosine pair is
+    shared between kernels per precision (:func:`pfjax.numerics.elementary.sincos_sharing`), and
+    where they came from
     (``"calibrated"``: ``pfjax calibrate``'s measurement on this CPU; ``"rules"``: the stated defaults;
     ``"; vector width from PFJAX_VECTOR_WIDTH"`` added where that variable sets the width:
     :func:`pfjax.numerics.compiler.settings_source`). Results depend on them only through rounding."""
-    from pfjax.numerics import compiler
+    from pfjax.numerics import compiler, elementary
     from pfjax.sim.sharding import cpu_block_bytes
 
     return {
         "vector_width": compiler.OPTIONS.get("xla_cpu_prefer_vector_width"),
         "block_bytes": {"float32": cpu_block_bytes(4), "float64": cpu_block_bytes(8)},
+        "sincos_sharing": {d: elementary.sincos_sharing(d) for d in ("float32", "float64")},
         "source": compiler.settings_source(),
     }
 

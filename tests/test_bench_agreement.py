@@ -272,6 +272,11 @@ def test_the_settings_label_says_where_the_vector_width_came_from(monkeypatch):
         assert settings_source({"PFJAX_VECTOR_WIDTH": "0"}) == f"{base}; vector width from PFJAX_VECTOR_WIDTH"
         assert settings_source({"PFJAX_VECTOR_WIDTH": " 512 "}) == f"{base}; vector width from PFJAX_VECTOR_WIDTH"
         assert settings_source({"PFJAX_VECTOR_WIDTH": "wide"}) == base  # ignored (with a warning) by the compiler
+        assert (
+            settings_source({"PFJAX_SINCOS_SHARING": "Real"})
+            == f"{base}; sine-cosine sharing from PFJAX_SINCOS_SHARING"
+        )
+        assert settings_source({"PFJAX_SINCOS_SHARING": "fast"}) == base  # ignored (with a warning) when traced
 
 
 # --------------------------------------------------------------------------- studies/bench/compare.py

@@ -28,7 +28,19 @@ def test_a_calibration_file_is_read_and_checked(tmp_path):
     calibration.load.cache_clear()
     cal = calibration.load(_file(tmp_path, vector_width=512))
     assert cal["vector_width"] == 512 and cal["block_bytes"]["float64"] == 10000
-    for bad in (dict(version=99), dict(vector_width=-1), dict(block_bytes={"float32": 8}), dict(block_bytes=3)):
+    calibration.load.cache_clear()
+    cal = calibration.load(_file(tmp_path, sincos_sharing={"float32": "none", "float64": "real"}))
+    assert cal["sincos_sharing"] == {"float32": "none", "float64": "real"}
+    calibration.load.cache_clear()
+    for bad in (
+        dict(version=99),
+        dict(vector_width=-1),
+        dict(block_bytes={"float32": 8}),
+        dict(block_bytes=3),
+        dict(sincos_sharing={"float32": "fast", "float64": "real"}),
+        dict(sincos_sharing={"float32": "real"}),
+        dict(sincos_sharing="real"),
+    ):
         calibration.load.cache_clear()
         with pytest.warns(UserWarning, match="calibration ignored"):
             assert calibration.load(_file(tmp_path, **bad)) is None
@@ -97,10 +109,20 @@ def test_a_small_calibration_measures_agrees_and_round_trips(tmp_path):
         # blocks change the result only by rounding
         assert r["max_abs_iae_diff"] <= (1e-5 if r["dtype"] == "float32" else 1e-12) and r["agrees"] is True
     assert result["iae_tolerance"] == {"float32": 1e-4, "float64": 1e-10} and "failed" not in result
+    # the second stage: every sharing of the sine-cosine pair at the chosen block, which changes no value
+    assert sorted((r["dtype"], r["sincos_sharing"]) for r in result["sharing_rows"]) == sorted(
+        (d, sh) for d in ("float32", "float64") for sh in calibration.SHARINGS
+    )
+    for r in result["sharing_rows"]:
+        assert r["block_bytes"] == result["block_bytes"][r["dtype"]] and r["agrees"] is True
+        assert r["max_abs_iae_diff"] <= (1e-5 if r["dtype"] == "float32" else 1e-12)
+    assert set(result["sincos_sharing"].values()) <= set(calibration.SHARINGS)
+    assert result["sincos_sharing"] == C.choose_sharing(result["sharing_rows"])
     path = calibration.save(result, tmp_path / "c.json")
     calibration.load.cache_clear()
     try:
         assert calibration.load(str(path))["block_bytes"] == result["block_bytes"]
+        assert calibration.load(str(path))["sincos_sharing"] == result["sincos_sharing"]
     finally:
         calibration.load.cache_clear()
     assert np.all([p.suffix == ".json" for p in tmp_path.iterdir()])  # written atomically, no temporary left
@@ -450,3 +472,39 @@ def test_the_calibrate_help_states_what_it_runs_not_how_long(capsys):
     text = " ".join(capsys.readouterr().out.split())
     assert "20,000 runs of 5 s (1,000 steps), best of 3 rounds" in text and "1,024 runs of 0.5 s" in text
     assert "minute" not in text and "float32 1e-4 m s, float64 1e-10 m s" in text
+
+
+def test_the_sharing_chosen_is_each_precisions_fastest_that_agrees():
+    """choose_sharing: per precision the fastest sharing of the sine-cosine pair among those whose
+    per-run IAE agrees; a precision where none agrees is left to the rule."""
+    rows = [
+        dict(dtype=d, sincos_sharing=sh, msteps_per_s=r, max_abs_iae_diff=e)
+        for d, sh, r, e in [
+            ("float32", "complex", 100.0, 0.0),
+            ("float32", "real", 110.0, 0.0),
+            ("float32", "none", 120.0, 1.0),  # fastest, but disagrees
+            ("float64", "complex", 40.0, math.nan),
+            ("float64", "real", 45.0, math.inf),
+        ]
+    ]
+    assert C.choose_sharing(rows) == {"float32": "real"}
+
+
+def test_each_candidate_program_is_traced_under_its_own_sharing():
+    """Every call of _program is a new function, so the sharing in force when it is first traced
+    decides its program, whatever was traced before (JAX keeps one trace per function)."""
+    from pfjax.bench import problem as P
+    from pfjax.controllers import state_feedback
+    from pfjax.numerics import elementary as E
+    from pfjax.sim import SimConfig
+
+    placed, _, layout = sharding.plan_batch(P.scenarios(P.random_batch(8), np.float32), None, None)
+    sim = SimConfig(dt=P.DT, horizon=0.02, newton_iters=P.NEWTON_ITERS, record=False)
+    texts = {}
+    for sharing in ("complex", "none", "complex"):
+        with E.sharing_mode(sharing):
+            program = C._program(None)
+            texts[sharing] = (
+                program.trace(placed, controller=state_feedback, config=sim, layout=layout).lower().as_text()
+            )
+    assert "complex" in texts["complex"] and "complex" not in texts["none"]

@@ -209,17 +209,79 @@ def test_computed_once_pair_is_an_exact_identity_and_cpu_only(dtype):
     x = np.concatenate([RNG.uniform(-1e3, 1e3, 500), [0.0, -0.0, np.inf, -np.inf, np.nan, 1e-30, -1e-30]]).astype(dtype)
     with np.errstate(invalid="ignore"):
         s, c = np.sin(x), np.cos(x)
-    for got, want in zip(jax.jit(E._divided_by_one)(s, c, x), (s, c)):
-        got = np.asarray(got)
-        assert got.dtype == dtype
-        np.testing.assert_array_equal(got, want)
-        np.testing.assert_array_equal(np.signbit(got), np.signbit(want))
+    for divided in (E._divided_by_one, E._each_divided_by_one):  # the "complex" and the "real" sharing
+        for got, want in zip(jax.jit(divided)(s, c, x), (s, c)):
+            got = np.asarray(got)
+            assert got.dtype == dtype
+            np.testing.assert_array_equal(got, want)
+            np.testing.assert_array_equal(np.signbit(got), np.signbit(want))
     zero = np.array([0.0, -0.0], dtype)
     for fn in (E.sin, E.tan):  # odd functions keep the sign of a zero, as NumPy
         np.testing.assert_array_equal(np.signbit(np.asarray(jax.jit(fn)(zero))), [False, True])
-    f = jax.jit(E.sincos)
-    lowered = {p: f.trace(x).lower(lowering_platforms=(p,)).as_text() for p in ("cpu", "cuda")}
-    assert "complex" in lowered["cpu"] and "complex" not in lowered["cuda"]
+    for sharing in E.SINCOS_SHARING:
+        with E.sharing_mode(sharing):
+            f = jax.jit(lambda x: E.sincos(x))  # a new function (JAX caches traces per function)
+            lowered = {p: f.trace(x).lower(lowering_platforms=(p,)).as_text() for p in ("cpu", "cuda")}
+        assert ("complex" in lowered["cpu"]) == (sharing == "complex"), sharing
+        assert ("divide" in lowered["cpu"]) == (sharing != "none"), sharing
+        assert "complex" not in lowered["cuda"] and "divide" not in lowered["cuda"], sharing
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_every_sincos_sharing_gives_the_same_values_and_derivatives(dtype):
+    """The three ways of sharing the sine-cosine pair between kernels (a CPU-dependent setting) change
+    no value of sin, cos, tan or their derivatives, in one program or under vmap."""
+    x = np.concatenate([RNG.uniform(-1e3, 1e3, 500), [0.0, -0.0, 1e-30, -1e-30, np.pi / 2]]).astype(dtype)
+    dx = RNG.uniform(-2, 2, x.size).astype(dtype)
+
+    def f(x, dx):
+        (s, c), (ds, dc) = jax.jvp(E.sincos, (x,), (dx,))
+        t, dt = jax.jvp(E.tan, (x,), (dx,))
+        return s, c, ds, dc, t, dt, jax.grad(lambda x: jnp.sum(E.sin(x) * E.cos(x)))(x)
+
+    outs = {}
+    for sharing in E.SINCOS_SHARING:
+        with E.sharing_mode(sharing):
+            outs[sharing] = [np.asarray(a) for a in jax.jit(lambda x, dx: f(x, dx))(x, dx)]
+    for sharing, got in outs.items():
+        for a, b in zip(got, outs["complex"]):
+            np.testing.assert_array_equal(a, b, err_msg=sharing)
+
+
+def test_the_sincos_sharing_setting_rule_environment_and_calibration(tmp_path, monkeypatch):
+    """The rule (Intel: two reals; others: one complex number), PFJAX_SINCOS_SHARING over a calibration
+    over the rule, a bad value warned about and ignored, and sharing_mode over all of them."""
+    from pfjax.numerics import calibration
+
+    info = tmp_path / "cpuinfo"
+    for vendor, want in (("GenuineIntel", "real"), ("AuthenticAMD", "complex"), ("", "complex")):
+        info.write_text(f"vendor_id\t: {vendor}\nflags\t: avx2\n\n")
+        assert E.sincos_sharing_rule(str(info)) == want
+    rule = E.sincos_sharing_rule()
+    cal = dict(sincos_sharing={"float32": "none", "float64": "real"})
+    monkeypatch.setattr(calibration, "load", lambda path=None: cal)
+    E._sharing_from_env.cache_clear()
+    try:
+        monkeypatch.delenv(E.SINCOS_SHARING_ENV, raising=False)
+        assert E.sincos_sharing(np.float32) == "none" and E.sincos_sharing(np.float64) == "real"
+        monkeypatch.setattr(calibration, "load", lambda path=None: {"sincos_sharing": None})
+        assert E.sincos_sharing(np.float32) == rule  # a calibration that did not measure it: the rule
+        E._sharing_from_env.cache_clear()
+        monkeypatch.setenv(E.SINCOS_SHARING_ENV, "Complex")
+        monkeypatch.setattr(calibration, "load", lambda path=None: cal)
+        assert E.sincos_sharing(np.float32) == "complex"  # the variable over the calibration
+        E._sharing_from_env.cache_clear()
+        monkeypatch.setenv(E.SINCOS_SHARING_ENV, "fast")
+        with pytest.warns(UserWarning, match="PFJAX_SINCOS_SHARING: value 'fast' ignored"):
+            assert E.sincos_sharing(np.float64) == "real"
+        with E.sharing_mode("none", dtypes=("float64",)):
+            assert E.sincos_sharing(np.float64) == "none" and E.sincos_sharing(np.float32) == "none"
+        assert E.sincos_sharing(np.float64) == "real"
+        with pytest.raises(ValueError, match="sharing mode 'fast'"):
+            with E.sharing_mode("fast"):
+                pass
+    finally:
+        E._sharing_from_env.cache_clear()
 
 
 @pytest.mark.parametrize("dtype", DTYPES)

@@ -48,52 +48,61 @@ def widths() -> tuple[int | None, ...]:
 
 
 def _program(width: int | None):
-    """pfjax's batched slip-model program compiled for ``width`` (a fresh jit each, so nothing of the
-    process's own settings leaks in)."""
+    """pfjax's batched slip-model program compiled for ``width``: a new function each call, so nothing
+    of the process's own settings leaks in and it is traced under the sharing in force at its first
+    call (:func:`pfjax.numerics.elementary.sharing_mode`)."""
     import importlib
 
     import jax
 
-    fun = importlib.import_module("pfjax.sim.simulate")._simulate_vmapped.__wrapped__
+    inner = importlib.import_module("pfjax.sim.simulate")._simulate_vmapped.__wrapped__
+
+    def fun(*args, **kwargs):  # a new function object: JAX keeps one trace per function, whatever the jit
+        return inner(*args, **kwargs)
+
     options = None if width is None else {_OPTION: width}
     return jax.jit(fun, static_argnames=("controller", "config", "layout"), compiler_options=options)
 
 
-def _rates(dtype, batch: int, horizon: float, blocks, width_set, rounds: int, say) -> list[dict]:
+def _rates(dtype, batch: int, horizon: float, cands, rounds: int, say, ref=None) -> list[dict]:
+    """Measured rows of the candidates ``cands``, ``(width, block bytes, sharing)`` each, for
+    ``dtype``; ``max_abs_iae_diff`` against ``ref`` (per-run IAE), else the first candidate's."""
     import jax
 
     from pfjax.controllers import state_feedback
+    from pfjax.numerics import elementary
     from pfjax.sim import SimConfig, sharding
 
     sc = P.scenarios(P.random_batch(batch, 0), dtype)
     sim = SimConfig(dt=P.DT, horizon=horizon, newton_iters=P.NEWTON_ITERS, record=False)
     n_steps = P.n_steps(horizon)
     itemsize = np.dtype(dtype).itemsize
-    cands = []
-    for width in width_set:
-        program = _program(width)
-        for bb in blocks:
-            placed, n, layout = sharding.plan_batch(sc, None, max(1, bb // itemsize))
-            call = lambda p=placed, lay=layout, f=program, n=n: jax.block_until_ready(
-                f(p, controller=state_feedback, config=sim, layout=lay).metrics.iae
-            )[:n]  # the padding cut off
-            say(f"{np.dtype(dtype).name} width {width or 'default'} block {bb} B: compiling")
+    measured: list[dict] = []
+    programs: dict = {}
+    for width, bb, sharing in cands:
+        program = programs.setdefault((width, sharing), _program(width))
+        placed, n, layout = sharding.plan_batch(sc, None, max(1, bb // itemsize))
+        call = lambda p=placed, lay=layout, f=program, n=n: jax.block_until_ready(
+            f(p, controller=state_feedback, config=sim, layout=lay).metrics.iae
+        )[:n]  # the padding cut off
+        say(f"{np.dtype(dtype).name} width {width or 'default'} block {bb} B sine-cosine {sharing}: compiling")
+        with elementary.sharing_mode(sharing):  # traced (and compiled) here, at the first call
             iae = np.asarray(call(), np.float64)
-            cands.append(dict(width=width, block_bytes=bb, call=call, iae=iae))
-    _, _, bests = timing.interleaved([c["call"] for c in cands], rounds, window=1)
-    for c, best in zip(cands, bests):
-        c["best"] = best
-    ref = cands[0]["iae"]
+        measured.append(dict(width=width, block_bytes=bb, sharing=sharing, call=call, iae=iae))
+    _, _, bests = timing.interleaved([c["call"] for c in measured], rounds, window=1)
+    ref = measured[0]["iae"] if ref is None else ref
     rows = [
         dict(
             dtype=np.dtype(dtype).name,
             vector_width=c["width"],
             block_bytes=c["block_bytes"],
-            seconds=c["best"],
-            msteps_per_s=batch * n_steps / c["best"] / 1e6,
+            sincos_sharing=c["sharing"],
+            seconds=best,
+            msteps_per_s=batch * n_steps / best / 1e6,
             max_abs_iae_diff=float(np.max(np.abs(c["iae"] - ref))),
+            iae=c["iae"],
         )
-        for c in cands
+        for c, best in zip(measured, bests)
     ]
     return [dict(r, agrees=agrees(r)) for r in rows]
 
@@ -145,6 +154,18 @@ def choose(rows: Sequence[dict]) -> dict:
     )
 
 
+def choose_sharing(rows: Sequence[dict]) -> dict:
+    """Per precision, the sine-cosine sharing of the fastest agreeing row among ``rows`` (the
+    second stage's: every sharing at the chosen width and block); a precision with none agreeing is
+    left out (the rule decides it)."""
+    best: dict = {}
+    for r in rows:
+        d = r["dtype"]
+        if agrees(r) and (d not in best or r["msteps_per_s"] > best[d]["msteps_per_s"]):
+            best[d] = r
+    return {d: r["sincos_sharing"] for d, r in best.items()}
+
+
 def calibrate(
     batch: int = 20_000,
     horizon: float = 5.0,
@@ -152,35 +173,60 @@ def calibrate(
     blocks: Sequence[int] = BLOCK_BYTES,
     width_set: Sequence[int | None] | None = None,
     progress=None,
+    sharings: Sequence[str] | None = None,
 ) -> dict:
     """Measure every candidate on this CPU; returns ``{"cpu_key", "version", "pfjax_version",
-    "config_sha256", "vector_width", "block_bytes", "msteps_per_s", "rows", "machine", "sizes",
-    "iae_tolerance", "units"}`` (the file :func:`pfjax.numerics.calibration.save` writes;
-    ``config_sha256`` over what was measured: the sizes, the blocks and the widths), and ``failed``
-    where no candidate agrees (:func:`choose`: nothing to keep)."""
+    "config_sha256", "vector_width", "block_bytes", "sincos_sharing", "msteps_per_s", "rows",
+    "machine", "sizes", "iae_tolerance", "units"}`` (the file :func:`pfjax.numerics.calibration.save`
+    writes; ``config_sha256`` over what was measured: the sizes, the blocks, the widths and the
+    sharings), and ``failed`` where no candidate agrees (:func:`choose`: nothing to keep).
+
+    Two stages: every width and block with the sine-cosine pair shared as the rule says
+    (:func:`pfjax.numerics.elementary.sincos_sharing_rule`), which :func:`choose` reads; then, per
+    precision at the chosen width and block, every sharing (``sharings``, default all of
+    :data:`pfjax.numerics.elementary.SINCOS_SHARING`), timed in turn, of which
+    :func:`choose_sharing` keeps the fastest that agrees with the first stage's first candidate."""
     import jax
 
     from pfjax.bench.report import MACHINE_UNITS
     from pfjax.bench.run import machine
-    from pfjax.numerics import calibration
+    from pfjax.numerics import calibration, elementary
 
     say = progress or (lambda msg: None)
     ws = tuple(widths() if width_set is None else width_set)
-    rows = []
-    for dtype, x64 in ((np.float32, False), (np.float64, True)):
-        with jax.enable_x64(x64):
-            rows += _rates(dtype, batch, horizon, blocks, ws, rounds, say)
+    rule = elementary.sincos_sharing_rule()
+    shs = tuple(elementary.SINCOS_SHARING if sharings is None else sharings)
+    x64 = {"float32": False, "float64": True}
+    rows, refs = [], {}
+    for d in DTYPES:
+        with jax.enable_x64(x64[d]):
+            stage = _rates(np.dtype(d), batch, horizon, [(w, bb, rule) for w in ws for bb in blocks], rounds, say)
+        refs[d] = stage[0]["iae"]
+        rows += stage
+    chosen = choose(rows)
+    second = []
+    if "failed" not in chosen:
+        for d in DTYPES:
+            cands = [(chosen["vector_width"], chosen["block_bytes"][d], sh) for sh in shs]
+            with jax.enable_x64(x64[d]):
+                second += _rates(np.dtype(d), batch, horizon, cands, rounds, say, ref=refs[d])
+        chosen["sincos_sharing"] = {**dict.fromkeys(DTYPES, rule), **choose_sharing(second)}
+    else:
+        chosen["sincos_sharing"] = None
     import pfjax
     from pfjax.provenance import config_hash
 
-    measured = dict(batch=batch, horizon_s=horizon, rounds=rounds, blocks=list(blocks), widths=list(ws))
+    measured = dict(
+        batch=batch, horizon_s=horizon, rounds=rounds, blocks=list(blocks), widths=list(ws), sharings=list(shs)
+    )
     return dict(
         version=calibration.VERSION,
         cpu_key=calibration.cpu_key(),
         pfjax_version=pfjax.__version__,
         config_sha256=config_hash(measured),
-        **choose(rows),
-        rows=rows,
+        **chosen,
+        rows=[{k: v for k, v in r.items() if k != "iae"} for r in rows],
+        sharing_rows=[{k: v for k, v in r.items() if k != "iae"} for r in second],
         sizes=dict(batch=batch, horizon_s=horizon, rounds=rounds, n_steps=P.n_steps(horizon)),
         iae_tolerance={d: TOLERANCE[d] for d in DTYPES},
         machine=machine(),

@@ -207,11 +207,11 @@ def _grad(batch, dtype, cfg: BenchConfig):
 def machine() -> dict:
     """The machine a benchmark ran on: the CPU (vendor, family, model, vector flags), the CPUs
     this process may use, the 1-minute load average, JAX and its devices, and the CPU settings of
-    the simulator programs (compiler options, bytes per batched array in a CPU block, and where they
-    came from: :func:`pfjax.numerics.compiler.settings_source`); units in :data:`pfjax.bench.report.MACHINE_UNITS`."""
+    the simulator programs (compiler options, bytes per batched array in a CPU block, the sharing of
+    the sine-cosine pair, and where they came from: :func:`pfjax.numerics.compiler.settings_source`); units in :data:`pfjax.bench.report.MACHINE_UNITS`."""
     import jax
 
-    from pfjax.numerics import compiler
+    from pfjax.numerics import compiler, elementary
     from pfjax.numerics.cpu import VECTOR_FLAGS
     from pfjax.sim.sharding import cpu_block_bytes
 
@@ -233,6 +233,7 @@ def machine() -> dict:
         avx512=compiler.has_avx512(),
         compiler_options=dict(compiler.OPTIONS),  # the simulator programs' (512-bit vectors on AVX-512)
         block_bytes={"float32": cpu_block_bytes(4), "float64": cpu_block_bytes(8)},
+        sincos_sharing={d: elementary.sincos_sharing(d) for d in ("float32", "float64")},
         settings=compiler.settings_source(),
     )
 

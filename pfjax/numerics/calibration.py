@@ -1,14 +1,20 @@
-"""CPU-dependent settings chosen by measurement: runs per CPU block and the vector width.
+"""CPU-dependent settings chosen by measurement: runs per CPU block, the vector width and the
+sharing of the sine-cosine pair.
 
-Two settings of pfjax's CPU programs depend on the CPU more than on anything else:
+Three settings of pfjax's CPU programs depend on the CPU more than on anything else:
 
 * the **block** of runs a device simulates at once (:mod:`pfjax.sim.sharding`), in bytes per
   batched array: small enough that a block's loop stays in the core's caches and under XLA's
   small-loop threshold, large enough to amortise the per-block work;
-* the **vector width** XLA's CPU backend generates code for (:mod:`pfjax.numerics.compiler`).
+* the **vector width** XLA's CPU backend generates code for (:mod:`pfjax.numerics.compiler`);
+* how the **sine-cosine pair** is handed to the fused kernels that read it, per precision
+  (:func:`pfjax.numerics.elementary.sincos_sharing`: divided by an exact 1 as one complex number,
+  as two reals, or not at all; a vector division costs more on some CPUs than recomputing).
 
 Without a calibration pfjax uses rules stated with their evidence in those modules (5,000 bytes
-per block; 512-bit vectors where the CPU has AVX-512). ``pfjax calibrate`` measures the
+per block; 512-bit vectors where the CPU has AVX-512; the pair as two reals on Intel CPUs, as one
+complex number on others). A calibration written before the sharing was measured has no
+``sincos_sharing`` and leaves it to the rule. ``pfjax calibrate`` measures the
 benchmark problem's throughput over the candidates on this CPU (:mod:`pfjax.bench.calibrate`) and
 writes the best to ``<directory>/<cpu key>.json`` (a file there that is not a pfjax calibration
 is never replaced); every later process on a CPU of the same
@@ -86,16 +92,25 @@ def directory(environ=None) -> Path | None:
     return Path(base).expanduser() / "pfjax" / "calibration"
 
 
+#: How the sine-cosine pair may be shared between kernels (:data:`pfjax.numerics.elementary.SINCOS_SHARING`;
+#: written out here, which :mod:`pfjax.numerics.elementary` imports).
+SHARINGS = ("complex", "real", "none")
+#: The variable that sets the sharing over a calibration and the rule.
+SHARING_ENV = "PFJAX_SINCOS_SHARING"
+
+
 def _valid(data) -> bool:
     try:
         width = data["vector_width"]
         blocks = data["block_bytes"]
+        sharing = data.get("sincos_sharing")  # absent in a calibration that did not measure it
         return (
             data["version"] == VERSION
             and (width is None or (type(width) is int and width in WIDTHS))
             and all(type(blocks[d]) is int and 64 <= blocks[d] <= 10**9 for d in ("float32", "float64"))
+            and (sharing is None or all(sharing[d] in SHARINGS for d in ("float32", "float64")))
         )
-    except (KeyError, TypeError):
+    except (KeyError, TypeError, AttributeError):
         return False
 
 
@@ -144,6 +159,14 @@ def block_bytes(itemsize: int) -> int | None:
     if cal is None:
         return None
     return int(cal["block_bytes"]["float64" if itemsize >= 8 else "float32"])
+
+
+def sincos_sharing(dtype_name: str) -> str | None:
+    """The calibrated sharing of the sine-cosine pair (one of :data:`SHARINGS`) for ``"float32"`` or
+    ``"float64"`` programs (None: no calibration, or one that did not measure it)."""
+    cal = load()
+    sharing = None if cal is None else cal.get("sincos_sharing")
+    return None if sharing is None else sharing.get("float64" if dtype_name == "float64" else "float32")
 
 
 def vector_width() -> tuple[bool, int | None]:

@@ -137,9 +137,12 @@ def settings_source(environ=None) -> str:
     """Where the CPU settings of this process come from, in words: ``"calibrated"`` (this CPU's
     calibration, :mod:`pfjax.numerics.calibration`) or ``"rules"`` (the stated defaults), then
     ``"; vector width from PFJAX_VECTOR_WIDTH"`` where that variable sets the width (a whole number
-    of bits, as :func:`vector_width` reads it); the blocks come from the first."""
+    of bits, as :func:`vector_width` reads it) and ``"; sine-cosine sharing from PFJAX_SINCOS_SHARING"``
+    where that one sets the sharing; the blocks come from the first."""
     environ = os.environ if environ is None else environ
     base = "calibrated" if calibration.vector_width()[0] else "rules"
     if environ.get(VECTOR_WIDTH_ENV, "").strip().isdigit():
-        return f"{base}; vector width from {VECTOR_WIDTH_ENV}"
+        base += f"; vector width from {VECTOR_WIDTH_ENV}"
+    if environ.get(calibration.SHARING_ENV, "").strip().lower() in calibration.SHARINGS:
+        base += f"; sine-cosine sharing from {calibration.SHARING_ENV}"
     return base

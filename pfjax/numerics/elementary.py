@@ -4,7 +4,10 @@ reciprocal square root), and a clip and a quotient whose derivatives cost no ext
 XLA's CPU ``sin``/``cos``/``tan``/``atan2`` cost several times a multiply-add chain per element and
 each call repeats its own range reduction. These versions are short polynomial chains that XLA
 fuses with their neighbours, and ``sin``, ``cos`` and ``tan`` of one argument share one reduction
-(:func:`sincos`), so a fused kernel that needs both pays once. They work under ``jit``, ``vmap``
+(:func:`sincos`), so a fused kernel that needs both pays once. On CPU the pair is computed once per
+fused program and read by the kernels that need it, as a CPU-dependent setting says
+(:func:`sincos_sharing`: divided by an exact 1 as one complex number or as two reals, or
+recomputed; ``pfjax calibrate`` measures which is fastest). They work under ``jit``, ``vmap``
 and ``grad`` (the derivative of the polynomial approximates the true derivative to a few ulp).
 
 Method (classic Cody-Waite / Cephes scheme):
@@ -41,14 +44,21 @@ ulp for ``|x| <= REDUCTION_LIMIT``
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import os
+import warnings
 from decimal import Decimal, getcontext
-from functools import cache
+from functools import cache, partial
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
 from jax.custom_derivatives import SymbolicZero
+
+from pfjax.numerics import calibration
+from pfjax.numerics.cpu import CPUINFO, cpu_info
 
 _PI_DIGITS = "3.14159265358979323846264338327950288419716939937510582097494459230781640628620899863"
 
@@ -155,12 +165,76 @@ def _const(x: Array) -> dict:
 
 
 def sincos(x) -> tuple[Array, Array]:
-    """``(sin x, cos x)`` with one shared range reduction (x in rad)."""
-    return _sincos_jit(_float(x))
+    """``(sin x, cos x)`` with one shared range reduction (x in rad); on CPU computed once per fused
+    program as :func:`sincos_sharing` says."""
+    x = _float(x)
+    return _sincos_jit(x, sincos_sharing(x.dtype))
 
 
-@jax.custom_jvp
-def _sincos(x):
+#: How :func:`sincos` hands its pair to the kernels that read it on CPU (:func:`sincos_sharing`):
+#: ``"complex"``: divided as one complex number by an exact ``1 + 0i`` (:func:`computed_once_pair`),
+#: ``"real"``: each divided by an exact 1 (:func:`computed_once`'s division), ``"none"``: no
+#: division, each kernel recomputes the pair. Values and derivatives are the same in all three.
+SINCOS_SHARING = calibration.SHARINGS
+SINCOS_SHARING_ENV = calibration.SHARING_ENV
+_SHARING_OVERRIDE: dict[str, str] = {}
+
+
+def sincos_sharing_rule(cpuinfo: str = CPUINFO) -> str:
+    """The sharing :func:`sincos` uses without a calibration or ``PFJAX_SINCOS_SHARING``: ``"real"``
+    on Intel CPUs, ``"complex"`` on others. Measured with the benchmark's simulator program
+    (``pfjax.bench``'s problem, 10^4 runs, million rollout-steps/s, float32 / float64; the minimal
+    implementation in parentheses): on a 2-core Intel Xeon (family 6, model 207, AVX-512) complex
+    101.7 / 42.4 (131.7 / 54.8), real 111.0 / 45.9 (149.3 / 58.1), none 110.7 / 43.1 (158.1 / 56.5);
+    on AMD EPYCs (Zen 3, AVX2) the complex division took float64 from 12.0 to 17.4 and two real ones
+    gained nothing in float32 and lost a little in float64 (docs/performance.md)."""
+    return "real" if cpu_info(cpuinfo).get("vendor_id") == "GenuineIntel" else "complex"
+
+
+@functools.cache
+def _sharing_from_env() -> str | None:
+    value = os.environ.get(SINCOS_SHARING_ENV, "").strip().lower()
+    if not value:
+        return None
+    if value not in SINCOS_SHARING:
+        warnings.warn(
+            f"{SINCOS_SHARING_ENV}: value {value!r} ignored, expected one of {', '.join(SINCOS_SHARING)}", stacklevel=3
+        )
+        return None
+    return value
+
+
+def sincos_sharing(dtype) -> str:
+    """How :func:`sincos` shares its pair in programs of ``dtype`` traced now (one of
+    :data:`SINCOS_SHARING`): :func:`sharing_mode`'s where one is active, else ``PFJAX_SINCOS_SHARING``,
+    else this CPU's calibration (:mod:`pfjax.numerics.calibration`, ``pfjax calibrate``), else
+    :func:`sincos_sharing_rule`. Read when a program is traced: a compiled program keeps its own.
+    Only CPU programs divide; elsewhere the pair is never divided."""
+    name = np.dtype(dtype).name
+    if name in _SHARING_OVERRIDE:
+        return _SHARING_OVERRIDE[name]
+    return _sharing_from_env() or calibration.sincos_sharing(name) or sincos_sharing_rule()
+
+
+@contextlib.contextmanager
+def sharing_mode(mode: str, dtypes=("float32", "float64")):
+    """Trace programs with ``mode`` (one of :data:`SINCOS_SHARING`) as :func:`sincos`'s sharing for
+    ``dtypes`` inside the ``with`` block (``pfjax calibrate`` measures each this way). JAX keeps one
+    trace per function whatever the jit wrapping it: a function traced before keeps its program, so
+    trace a new function object inside (``jax.jit(lambda x: f(x))``)."""
+    if mode not in SINCOS_SHARING:
+        raise ValueError(f"sharing mode {mode!r}: expected one of {', '.join(SINCOS_SHARING)}")
+    before = dict(_SHARING_OVERRIDE)
+    _SHARING_OVERRIDE.update(dict.fromkeys((np.dtype(d).name for d in dtypes), mode))
+    try:
+        yield
+    finally:
+        _SHARING_OVERRIDE.clear()
+        _SHARING_OVERRIDE.update(before)
+
+
+@partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _sincos(x, sharing="complex"):
     c = _const(x)
     p1, p2, p3, p4 = c["pio2"]
     k = jnp.round(x * (2.0 / np.pi))
@@ -178,14 +252,19 @@ def _sincos(x):
     sin = jnp.where(q >= 2, -sin, sin)
     sin = jnp.where(x == 0.0, x, sin)  # sin(+-0) = +-0 (the reduction and the polynomial give +0)
     cos = jnp.where((q == 1) | (q == 2), -cos, cos)
-    return computed_once_pair(sin, cos, x)
+    if sharing == "complex":
+        return computed_once_pair(sin, cos, x)
+    if sharing == "real":
+        return jax.lax.platform_dependent(sin, cos, x, cpu=_each_divided_by_one, default=lambda a, b, x: (a, b))
+    return sin, cos
 
 
 def computed_once_pair(a, b, x):
     """``(a, b)`` unchanged, but computed once per fused program (``a`` and ``b`` of one shape and
     float dtype; exact where both are finite or both NaN, since an infinite one makes the other
-    ``inf * 0 = NaN``). Used for the sine-cosine pair, the simulators' random draws and the ST model's
-    branch-selected rates (:func:`pfjax.models.single_track.vector_field`).
+    ``inf * 0 = NaN``). Used for the sine-cosine pair where its sharing is ``"complex"``
+    (:func:`sincos_sharing`), the simulators' random draws and the ST model's branch-selected rates
+    (:func:`pfjax.models.single_track.vector_field`).
 
     XLA's CPU backend never shares work between two fused kernels: every kernel that uses a cheap
     elementwise value (a polynomial sine) recomputes it from the last values held in memory, and a
@@ -195,7 +274,8 @@ def computed_once_pair(a, b, x):
     cannot fold it away (``x == x`` is false only for NaN, and then ``a`` and ``b`` are NaN anyway):
     one kernel computes both, the others read them. The division is exact (``r = 0/1``), so values
     and derivatives are unchanged; it costs one complex division. Measured on the benchmark (B = 10^5,
-    blocks of 10^4): float64 12.0 -> 17.4 M rollout-steps/s, float32 47.0 -> 49.8. CPU only: XLA's
+    blocks of 10^4, an AMD EPYC): float64 12.0 -> 17.4 M rollout-steps/s, float32 47.0 -> 49.8; on an
+    Intel Xeon two real divisions cost less (:func:`sincos_sharing_rule`). CPU only: XLA's
     GPU backend fuses several outputs into one kernel by itself, and there the complex division
     cost 14-19 % of the float64 throughput (H100; docs/performance.md, *On a GPU*).
     """
@@ -231,14 +311,20 @@ def _divided_by_one(sin, cos, x):
     return jnp.imag(z), jnp.real(z)
 
 
+def _each_divided_by_one(sin, cos, x):
+    """``(sin, cos)``, each divided by an exact 1 written from ``x`` (:func:`_one_from`)."""
+    one = _one_from(x).astype(sin.dtype)
+    return sin / one, cos / one
+
+
 @_sincos.defjvp
-def _sincos_jvp(primals, tangents):
+def _sincos_jvp(sharing, primals, tangents):
     (x,), (dx,) = primals, tangents
-    s, c = _sincos(x)
+    s, c = _sincos(x, sharing)
     return (s, c), (c * dx, -s * dx)
 
 
-_sincos_jit = jax.jit(_sincos)
+_sincos_jit = jax.jit(_sincos, static_argnums=1)
 
 
 def sin(x) -> Array:
@@ -255,23 +341,24 @@ def tan(x) -> Array:
     """``tan x = sin x / cos x`` (x in rad; one reduction, one division). Derivative
     ``d tan = (1 + tan^2 x) dx`` on the output: no division per tangent (the quotient's own rule
     takes two)."""
-    return _tan_jit(_float(x))
+    x = _float(x)
+    return _tan_jit(x, sincos_sharing(x.dtype))
 
 
-@jax.custom_jvp
-def _tan(x):
-    s, c = _sincos(x)
+@partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _tan(x, sharing="complex"):
+    s, c = _sincos(x, sharing)
     return s / c
 
 
 @_tan.defjvp
-def _tan_jvp(primals, tangents):
+def _tan_jvp(sharing, primals, tangents):
     (x,), (dx,) = primals, tangents
-    t = _tan(x)
+    t = _tan(x, sharing)
     return t, (1.0 + t * t) * dx
 
 
-_tan_jit = jax.jit(_tan)
+_tan_jit = jax.jit(_tan, static_argnums=1)
 
 
 def _atan_reduced(num, den, base):
