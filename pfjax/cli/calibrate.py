@@ -9,7 +9,7 @@ import time
 def register(sub) -> None:
     p = sub.add_parser(
         "calibrate",
-        help="measure this CPU's best CPU block size and vector width and keep them for later runs",
+        help="measure this CPU's best CPU block size, vector width and sine-cosine sharing and keep them for later runs",
         description="Simulate the benchmark problem (pfjax bench's) with pfjax's simulator program for every "
         "candidate vector width (XLA's default; 512 bits with AVX-512) and block size (2,500-20,000 bytes per "
         "batched array) in float32 and float64, and keep the fastest in the calibration directory "
@@ -18,7 +18,9 @@ def register(sub) -> None:
         "The directory is made and a file written and removed in it, and the calibration file is checked, before "
         "measuring: a file there that is not a pfjax calibration is never replaced. Each candidate simulates 20,000 runs "
         "of 5 s (1,000 steps), best of 3 rounds, after a compiling call: 8 candidates per precision with AVX-512 "
-        "(2 widths x 4 blocks), 4 without. A candidate whose per-run IAE differs from the first's by more than the "
+        "(2 widths x 4 blocks), 4 without; then, at the chosen width and block of each precision, the sine-cosine "
+        "pair shared between the simulator's kernels as one complex number and as two reals (PFJAX_SINCOS_SHARING "
+        "overrides the choice). A candidate whose per-run IAE differs from the first's by more than the "
         "benchmark's tolerance (float32 1e-4 m s, float64 1e-10 m s: rounding) is never chosen; when none agrees, "
         "nothing is kept (one line on stderr, exit 1).",
     )
