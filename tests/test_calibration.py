@@ -59,7 +59,11 @@ def test_the_settings_follow_the_calibration_and_the_environment_wins(tmp_path, 
     assert compiler.vector_width(environ={}) == 256
     assert compiler.vector_width(environ={"PFJAX_VECTOR_WIDTH": "0"}) is None  # the variable overrides
     monkeypatch.setattr(calibration, "load", lambda path=None: None)
-    assert sharding.cpu_block_bytes(8) == sharding.CPU_BLOCK_BYTES  # no calibration: the stated rule
+    assert sharding.cpu_block_bytes(8) == sharding.block_bytes_rule()  # no calibration: the stated rule
+    info = tmp_path / "cpuinfo"
+    for vendor, want in (("GenuineIntel", 2500), ("AuthenticAMD", 5000), ("", 5000)):
+        info.write_text(f"vendor_id\t: {vendor}\nflags\t: avx2\n\n")
+        assert sharding.block_bytes_rule(str(info)) == want
     assert compiler.vector_width(environ={}) == (512 if compiler.has_avx512() else None)
 
 

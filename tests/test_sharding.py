@@ -142,9 +142,10 @@ def test_plan_batch_splits_devices_into_blocks():
     per = placed["a"].shape[0] // k
     assert layout.blocks == 1 and per % sharding.ALIGN == 0 and 0 <= per - -(-1001 // k) < sharding.ALIGN
     assert sharding.plan_batch(tree, devices[:1], block=None)[2] == sharding.Layout(None, 1)  # placed: runs 0
-    # block sizes: CPU_BLOCK_BYTES per array on CPU, none on another platform
-    assert sharding.default_block({"x": np.zeros(3, np.float32)}, devices[:1]) == sharding.CPU_BLOCK_BYTES // 4
-    assert sharding.default_block({"x": np.zeros(3, np.float64)}, devices[:1]) == sharding.CPU_BLOCK_BYTES // 8
+    # block sizes: the rule's bytes per array on CPU, none on another platform
+    rule = sharding.block_bytes_rule()  # the tests run without a calibration (conftest)
+    assert sharding.default_block({"x": np.zeros(3, np.float32)}, devices[:1]) == rule // 4
+    assert sharding.default_block({"x": np.zeros(3, np.float64)}, devices[:1]) == rule // 8
     assert sharding.default_block({"x": np.zeros(3)}, [SimpleNamespace(platform="gpu")]) is None
 
 

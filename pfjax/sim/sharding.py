@@ -25,7 +25,8 @@ gradients run faster in blocks sized for a value and its tangents, :func:`defaul
 
 **Blocks (CPU).** XLA's CPU backend compiles one integrator step into a few dozen loop kernels,
 each a pass over the batch. On one device the runs are therefore simulated in blocks of
-:data:`CPU_BLOCK_BYTES` per array (1,250 runs in float32, 625 in float64), one block after
+:func:`cpu_block_bytes` per array (5,000 bytes: 1,250 runs in float32, 625 in float64; 2,500 bytes on
+Intel CPUs), one block after
 another (``lax.map``). A block's loop is then small enough for XLA to compile it into one function
 (the small-loop threshold that ``import pfjax`` raises, :data:`pfjax.SMALL_LOOP_BYTES`) and its
 arrays stay in the core's L1 and L2 caches: 1.3x the rollout-steps/s of 10,000-run blocks in
@@ -50,15 +51,23 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from pfjax import errors
 from pfjax.numerics import calibration
+from pfjax.numerics.cpu import CPUINFO, cpu_info
 
 AXIS = "runs"
-#: Bytes per batched array in one CPU block. Measured (2-core AMD EPYC with AVX-512, 512-bit vectors,
+#: Bytes per batched array in one CPU block (the rule for CPUs other than Intel's:
+#: :func:`block_bytes_rule`). Measured (2-core AMD EPYC with AVX-512, 512-bit vectors,
 #: 2 devices, the benchmark's slip model at 10^5 runs, M rollout-steps/s): float32 blocks of 312-3,750
 #: runs 195-207, 4,000-10,000 runs 150-165, 20,000 runs 154; float64 625 runs 91, 1,250 runs 89,
 #: 2,500-5,000 runs 73-76. Blocks past the small-loop threshold fall back to a kernel launch per
 #: kernel and step. On an AVX2 CPU with 40 kB blocks and XLA's default loop threshold, 5,000-10,000
 #: float32 runs were fastest and 2,500 slower (docs/performance.md).
 CPU_BLOCK_BYTES = 5_000
+#: Bytes per batched array in one CPU block on Intel CPUs (:func:`block_bytes_rule`). Measured on a
+#: 2-core Intel Xeon (family 6, model 207, AVX-512), 512-bit vectors, by ``pfjax calibrate`` (20,000
+#: runs of 5 s, M rollout-steps/s, float32 / float64): 2,500 bytes 99.9 / 44.6, 5,000 bytes 96.7 /
+#: 42.4, 10,000 bytes 94.8 / 42.0, 20,000 bytes 72.8 / 35.1; ``pfjax bench`` at 10^5 runs, one run
+#: each in turn: 114.1 / 47.5 against 107.3 / 44.9 with 5,000 bytes (docs/performance.md).
+INTEL_BLOCK_BYTES = 2_500
 #: Runs per block are rounded up to a multiple of this (blocks of more runs than this). XLA's CPU
 #: code for an odd number of runs per device is about 3x slower (measured, float32: 50,001 runs per
 #: device 10.8 M rollout-steps/s, 50,002 runs 34.5; 1,251 runs 14.6, 1,252 runs 44.3).
@@ -169,10 +178,16 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
     return max(1, cpu_block_bytes(itemsize) // (itemsize * (1 + int(tangents))))
 
 
+def block_bytes_rule(cpuinfo: str = CPUINFO) -> int:
+    """Bytes per batched array in one CPU block without a calibration: :data:`INTEL_BLOCK_BYTES` on
+    Intel CPUs, :data:`CPU_BLOCK_BYTES` on others (the evidence is in their comments)."""
+    return INTEL_BLOCK_BYTES if cpu_info(cpuinfo).get("vendor_id") == "GenuineIntel" else CPU_BLOCK_BYTES
+
+
 def cpu_block_bytes(itemsize: int) -> int:
     """Bytes per batched array in one CPU block: this CPU's calibration where ``pfjax calibrate``
-    measured one (:mod:`pfjax.numerics.calibration`), else :data:`CPU_BLOCK_BYTES`."""
-    return calibration.block_bytes(itemsize) or CPU_BLOCK_BYTES
+    measured one (:mod:`pfjax.numerics.calibration`), else the rule (:func:`block_bytes_rule`)."""
+    return calibration.block_bytes(itemsize) or block_bytes_rule()
 
 
 def plan_batch(tree, devices=None, block: int | str | None = "auto", align: int = ALIGN):
