@@ -125,6 +125,36 @@ def test_shard_batch_pads_and_unpad_restores():
     np.testing.assert_array_equal(back["b"], tree["b"])
 
 
+UNPAD_CHILD = """
+import pfjax  # before JAX: two host devices (PFJAX_HOST_DEVICES=2)
+import jax
+import numpy as np
+from pfjax.sim import sharding
+
+assert jax.device_count() == 2, jax.devices()
+tree = {"a": np.arange(9.0, dtype=np.float32), "b": np.arange(18.0).reshape(9, 2)}  # 9 runs: padded to 10
+placed, n, _ = sharding.plan_batch(tree, None, block=None)
+assert placed["a"].shape[0] > n and len(placed["a"].sharding.device_set) == 2
+def fail(*a):
+    raise AssertionError("cut in a program")
+sharding._head_jit = fail
+out = sharding.unpad(placed, n)
+for k in tree:
+    np.testing.assert_array_equal(np.asarray(out[k]), tree[k])
+    assert len(out[k].sharding.device_set) == 1
+print("ok")
+"""
+
+
+def test_a_padded_batch_over_several_devices_is_cut_without_a_collective():
+    """unpad cuts a batch spread over devices on the host (no program, so no rendezvous of the devices
+    that another thread's work could hold up) and gives the same runs, on one device."""
+    env = dict(os.environ, PFJAX_HOST_DEVICES="2")
+    env.pop("XLA_FLAGS", None)
+    out = subprocess.run([sys.executable, "-c", UNPAD_CHILD], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
+
+
 def test_plan_batch_splits_devices_into_blocks():
     tree = {"a": np.arange(11.0)}
     devices = jax.devices()

@@ -356,7 +356,11 @@ def falsify(
             raw, opt_state, best, jnp.asarray(lr_k, dtype), which, space, base, controller=controller, config=config
         )
         history.append(best.value)
-        nonfinite.append(bad)
+        # one step at a time: a study runs this search in a background thread on one device, where
+        # steps dispatched ahead would queue in front of the main thread's multi-device programs,
+        # whose other devices then wait for that device at a rendezvous that XLA's CPU runtime ends
+        # by aborting the process after 40 s (seen with the default study, compilation cache warm)
+        nonfinite.append(jax.block_until_ready(bad))
     n = int(n_restarts) * int(steps)
     seq, ic = _from_raw(space, best.raw)
     hist, hist_n = np.stack(jax.device_get(history)), int(n_restarts) * np.arange(1, int(steps) + 1)

@@ -319,13 +319,26 @@ def join_blocks(tree, interleaved: bool = False):
 
 
 def unpad(tree, n: int):
-    """The first ``n`` runs of a batched pytree (undoes :func:`shard_batch`'s padding)."""
+    """The first ``n`` runs of a batched pytree (undoes :func:`shard_batch`'s padding).
+
+    A batch spread over several devices is cut on the host and put back on JAX's default device:
+    cutting it in a program re-shards it, which takes a collective (every device meets at a
+    rendezvous), and a device busy with another thread's work (a study's side jobs) can keep the
+    others waiting there until XLA's CPU runtime aborts the process (40 s; seen with the default
+    study). Copying a shard is no such meeting."""
     leaves = jax.tree_util.tree_leaves(tree)
     if leaves[0].shape[0] == n:
         return tree
     if all(isinstance(a, np.ndarray) for a in leaves):
         return jax.tree_util.tree_map(lambda a: a[:n], tree)
+    if not _is_traced(tree) and any(_spans_devices(a) for a in leaves):
+        return jax.tree_util.tree_map(lambda a: jnp.asarray(np.asarray(a)[:n]), tree)
     return _head_jit(tree, n)
+
+
+def _spans_devices(a) -> bool:
+    sharding = getattr(a, "sharding", None)
+    return sharding is not None and len(sharding.device_set) > 1
 
 
 #: Seconds a process waits for the coordinator (and process 0 for the others) by default.
