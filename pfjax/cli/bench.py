@@ -35,7 +35,7 @@ def register(sub) -> None:
         description="Simulate one random batch of the slip model (sine path, 3 Newton steps, RK4 5 ms, 20 s, "
         "metrics on) with pfjax in float32 and float64 at several batch sizes, with a minimal JAX implementation "
         "of the same problem written for speed (the limit: IAE only, the same elementary functions, devices and "
-        "blocks), and with independent NumPy, Numba (prange) and SciPy solve_ivp references; check they agree on "
+        "blocks, and the problem's own shortcuts), and with independent NumPy, Numba (prange) and SciPy solve_ivp references; check they agree on "
         "the per-run IAE; report million rollout-steps/s, compile time, pfjax's fraction of the minimal "
         "implementation's throughput, ratios, gradient cost, peak memory and the CPU (vendor, family, model, flags). "
         "Writes bench.json, bench.parquet, report.md and figures/throughput.png|svg.",
