@@ -256,7 +256,9 @@ def test_the_sincos_sharing_setting_rule_environment_and_calibration(tmp_path, m
     info = tmp_path / "cpuinfo"
     for vendor, want in (("GenuineIntel", "real"), ("AuthenticAMD", "complex"), ("", "complex")):
         info.write_text(f"vendor_id\t: {vendor}\nflags\t: avx2\n\n")
+        E.sincos_sharing_rule.cache_clear()  # read once per file
         assert E.sincos_sharing_rule(str(info)) == want
+    E.sincos_sharing_rule.cache_clear()
     rule = E.sincos_sharing_rule()
     cal = dict(sincos_sharing={"float32": "none", "float64": "real"})
     monkeypatch.setattr(calibration, "load", lambda path=None: cal)

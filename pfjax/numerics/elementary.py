@@ -180,6 +180,7 @@ SINCOS_SHARING_ENV = calibration.SHARING_ENV
 _SHARING_OVERRIDE: dict[str, str] = {}
 
 
+@functools.cache  # read once per file: every sincos a simulator traces asks
 def sincos_sharing_rule(cpuinfo: str = CPUINFO) -> str:
     """The sharing :func:`sincos` uses without a calibration or ``PFJAX_SINCOS_SHARING``: ``"real"``
     on Intel CPUs, ``"complex"`` on others. Measured with the benchmark's simulator program

@@ -39,6 +39,7 @@ up to a few tens of ulp in float32 metrics, float64 bit-identical; tests/test_sh
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from functools import partial
@@ -178,6 +179,7 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
     return max(1, cpu_block_bytes(itemsize) // (itemsize * (1 + int(tangents))))
 
 
+@functools.cache  # read once per file
 def block_bytes_rule(cpuinfo: str = CPUINFO) -> int:
     """Bytes per batched array in one CPU block without a calibration: :data:`INTEL_BLOCK_BYTES` on
     Intel CPUs, :data:`CPU_BLOCK_BYTES` on others (the evidence is in their comments)."""
