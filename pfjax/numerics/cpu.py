@@ -31,3 +31,9 @@ def has_avx512(cpuinfo: str = CPUINFO) -> bool:
     """Whether the CPU has AVX-512 Foundation (``avx512f`` among the flags of ``/proc/cpuinfo``;
     False where that file does not exist or cannot be read)."""
     return "avx512f" in cpu_info(cpuinfo).get("flags", "").split()
+
+
+def is_intel(cpuinfo: str = CPUINFO) -> bool:
+    """Whether the CPU is Intel's (``vendor_id`` GenuineIntel), which some of pfjax's CPU rules tell
+    apart (:func:`pfjax.sim.sharding.block_bytes_rule`, :func:`pfjax.numerics.elementary.sincos_sharing_rule`)."""
+    return cpu_info(cpuinfo).get("vendor_id") == "GenuineIntel"

@@ -58,7 +58,7 @@ from jax import Array
 from jax.custom_derivatives import SymbolicZero
 
 from pfjax.numerics import calibration
-from pfjax.numerics.cpu import CPUINFO, cpu_info
+from pfjax.numerics.cpu import CPUINFO, is_intel
 
 _PI_DIGITS = "3.14159265358979323846264338327950288419716939937510582097494459230781640628620899863"
 
@@ -189,7 +189,7 @@ def sincos_sharing_rule(cpuinfo: str = CPUINFO) -> str:
     101.7 / 42.4 (131.7 / 54.8), real 111.0 / 45.9 (149.3 / 58.1), none 110.7 / 43.1 (158.1 / 56.5);
     on AMD EPYCs (Zen 3, AVX2) the complex division took float64 from 12.0 to 17.4 and two real ones
     gained nothing in float32 and lost a little in float64 (docs/performance.md)."""
-    return "real" if cpu_info(cpuinfo).get("vendor_id") == "GenuineIntel" else "complex"
+    return "real" if is_intel(cpuinfo) else "complex"
 
 
 @functools.cache

@@ -52,7 +52,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from pfjax import errors
 from pfjax.numerics import calibration
-from pfjax.numerics.cpu import CPUINFO, cpu_info
+from pfjax.numerics.cpu import CPUINFO, is_intel
 
 AXIS = "runs"
 #: Bytes per batched array in one CPU block (the rule for CPUs other than Intel's:
@@ -183,7 +183,7 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
 def block_bytes_rule(cpuinfo: str = CPUINFO) -> int:
     """Bytes per batched array in one CPU block without a calibration: :data:`INTEL_BLOCK_BYTES` on
     Intel CPUs, :data:`CPU_BLOCK_BYTES` on others (the evidence is in their comments)."""
-    return INTEL_BLOCK_BYTES if cpu_info(cpuinfo).get("vendor_id") == "GenuineIntel" else CPU_BLOCK_BYTES
+    return INTEL_BLOCK_BYTES if is_intel(cpuinfo) else CPU_BLOCK_BYTES
 
 
 def cpu_block_bytes(itemsize: int) -> int:
