@@ -294,3 +294,39 @@ def test_a_failed_command_in_a_joined_process_ends_without_the_shutdown_barrier(
     with pytest.raises(Ended) as e:
         main(["study", str(tmp_path / "missing.toml")])
     assert e.value.args == (EXIT_USAGE,) and "missing.toml" in capsys.readouterr().err
+
+
+UNPAD_CHILD = """
+import sys
+import pfjax
+import jax
+import numpy as np
+from pfjax.sim import sharding
+
+sharding.initialize_distributed(sys.argv[1], 2, int(sys.argv[2]))
+tree = {"a": np.arange(9.0, dtype=np.float32)}  # 9 runs over 2 processes' devices: padded to 10
+placed, n, _ = sharding.plan_batch(tree, None, block=None)
+assert placed["a"].shape[0] > n and not placed["a"].is_fully_addressable
+print(np.asarray(sharding.gather(sharding.unpad(placed, n))["a"]).tolist())
+"""
+
+
+def test_a_padded_batch_over_two_processes_is_cut_and_gathered():
+    """unpad of a padded batch that spans two processes' devices (which no process can read whole)
+    cuts it in a program, and gather gives every process the runs."""
+    coord = f"127.0.0.1:{_free_port()}"
+    env = {**os.environ, "PFJAX_HOST_DEVICES": "1"}
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", UNPAD_CHILD, coord, str(i)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        for i in (0, 1)
+    ]
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
+    for out, _ in outs:
+        assert out.strip().splitlines()[-1] == str([float(i) for i in range(9)])

@@ -227,6 +227,24 @@ def test_computed_once_pair_is_an_exact_identity_and_cpu_only(dtype):
         assert "complex" not in lowered["cuda"] and "divide" not in lowered["cuda"], sharing
 
 
+def test_derivatives_follow_the_sincos_sharing():
+    """The forward-mode and reverse-mode derivatives of sin, cos and tan are lowered with the sharing
+    in force: complex numbers only where it is "complex", more divisions where it is "real" than where
+    it is "none"."""
+    x = np.linspace(-3.0, 3.0, 64, dtype=np.float32)
+
+    def f(x):
+        s, ds = jax.jvp(lambda x: E.sin(x) * E.tan(x), (x,), (jnp.ones_like(x),))
+        return s, ds, jax.grad(lambda x: jnp.sum(E.cos(x) * E.tan(x)))(x)
+
+    texts = {}
+    for sharing in E.SINCOS_SHARING:
+        with E.sharing_mode(sharing):
+            texts[sharing] = jax.jit(lambda x: f(x)).trace(x).lower(lowering_platforms=("cpu",)).as_text()
+    assert "complex" in texts["complex"] and "complex" not in texts["real"] and "complex" not in texts["none"]
+    assert texts["real"].count("divide") > texts["none"].count("divide")
+
+
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_every_sincos_sharing_gives_the_same_values_and_derivatives(dtype):
     """The three ways of sharing the sine-cosine pair between kernels (a CPU-dependent setting) change
@@ -276,8 +294,8 @@ def test_the_sincos_sharing_setting_rule_environment_and_calibration(tmp_path, m
         monkeypatch.setenv(E.SINCOS_SHARING_ENV, "fast")
         with pytest.warns(UserWarning, match="PFJAX_SINCOS_SHARING: value 'fast' ignored"):
             assert E.sincos_sharing(np.float64) == "real"
-        with E.sharing_mode("none", dtypes=("float64",)):
-            assert E.sincos_sharing(np.float64) == "none" and E.sincos_sharing(np.float32) == "none"
+        with E.sharing_mode("complex", dtypes=("float64",)):  # float32 keeps the calibration's
+            assert E.sincos_sharing(np.float64) == "complex" and E.sincos_sharing(np.float32) == "none"
         assert E.sincos_sharing(np.float64) == "real"
         with pytest.raises(ValueError, match="sharing mode 'fast'"):
             with E.sharing_mode("fast"):

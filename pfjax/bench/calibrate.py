@@ -80,7 +80,9 @@ def _rates(dtype, batch: int, horizon: float, cands, rounds: int, say, ref=None)
     measured: list[dict] = []
     programs: dict = {}
     for width, bb, sharing in cands:
-        program = programs.setdefault((width, sharing), _program(width))
+        if (width, sharing) not in programs:
+            programs[(width, sharing)] = _program(width)
+        program = programs[(width, sharing)]
         placed, n, layout = sharding.plan_batch(sc, None, max(1, bb // itemsize))
         call = lambda p=placed, lay=layout, f=program, n=n: jax.block_until_ready(
             f(p, controller=state_feedback, config=sim, layout=lay).metrics.iae
@@ -218,6 +220,9 @@ def calibrate(
             with jax.enable_x64(x64[d]):
                 second += _rates(np.dtype(d), batch, horizon, cands, rounds, say, ref=refs[d])
         chosen["sincos_sharing"] = {**dict.fromkeys(DTYPES, rule), **choose_sharing(second)}
+        for r in second:  # the rates of the settings kept (the first stage measured the rule's sharing)
+            if r["sincos_sharing"] == chosen["sincos_sharing"][r["dtype"]] and r["agrees"]:
+                chosen["msteps_per_s"][r["dtype"]] = r["msteps_per_s"]
     else:
         chosen["sincos_sharing"] = None
     import pfjax

@@ -221,8 +221,12 @@ def sincos_sharing(dtype) -> str:
 def sharing_mode(mode: str, dtypes=("float32", "float64")):
     """Trace programs with ``mode`` (one of :data:`SINCOS_SHARING`) as :func:`sincos`'s sharing for
     ``dtypes`` inside the ``with`` block (``pfjax calibrate`` measures each this way). JAX keeps one
-    trace per function whatever the jit wrapping it: a function traced before keeps its program, so
-    trace a new function object inside (``jax.jit(lambda x: f(x))``)."""
+    trace per function whatever the jit wrapping it, and also caches the traces of loop bodies
+    (``lax.scan``, ``fori_loop``) and ``jax.checkpoint`` targets by their function: a program
+    traced before keeps its sharing, so trace new function objects inside (``jax.jit(lambda x:
+    f(x))``, whose loop bodies are closures made at trace time, as the simulators' are), or call
+    ``jax.clear_caches()``. The setting is the process's, not a thread's: use it where no other
+    thread traces."""
     if mode not in SINCOS_SHARING:
         raise ValueError(f"sharing mode {mode!r}: expected one of {', '.join(SINCOS_SHARING)}")
     before = dict(_SHARING_OVERRIDE)
@@ -235,7 +239,7 @@ def sharing_mode(mode: str, dtypes=("float32", "float64")):
 
 
 @partial(jax.custom_jvp, nondiff_argnums=(1,))
-def _sincos(x, sharing="complex"):
+def _sincos(x, sharing):
     c = _const(x)
     p1, p2, p3, p4 = c["pio2"]
     k = jnp.round(x * (2.0 / np.pi))
@@ -347,7 +351,7 @@ def tan(x) -> Array:
 
 
 @partial(jax.custom_jvp, nondiff_argnums=(1,))
-def _tan(x, sharing="complex"):
+def _tan(x, sharing):
     s, c = _sincos(x, sharing)
     return s / c
 

@@ -323,7 +323,8 @@ def join_blocks(tree, interleaved: bool = False):
 def unpad(tree, n: int):
     """The first ``n`` runs of a batched pytree (undoes :func:`shard_batch`'s padding).
 
-    A batch spread over several devices is cut on the host and put back on JAX's default device:
+    A batch spread over several CPU devices of this process is cut on the host and put back on JAX's
+    default device:
     cutting it in a program re-shards it, which takes a collective (every device meets at a
     rendezvous), and a device busy with another thread's work (a study's side jobs) can keep the
     others waiting there until XLA's CPU runtime aborts the process (40 s; seen with the default
@@ -333,7 +334,7 @@ def unpad(tree, n: int):
         return tree
     if all(isinstance(a, np.ndarray) for a in leaves):
         return jax.tree_util.tree_map(lambda a: a[:n], tree)
-    if not _is_traced(tree) and any(_spans_devices(a) for a in leaves):
+    if not _is_traced(tree) and any(_spans_devices(a) for a in leaves) and all(_on_this_host_cpu(a) for a in leaves):
         return jax.tree_util.tree_map(lambda a: jnp.asarray(np.asarray(a)[:n]), tree)
     return _head_jit(tree, n)
 
@@ -341,6 +342,19 @@ def unpad(tree, n: int):
 def _spans_devices(a) -> bool:
     sharding = getattr(a, "sharding", None)
     return sharding is not None and len(sharding.device_set) > 1
+
+
+def _on_this_host_cpu(a) -> bool:
+    """Whether ``a`` lies on this process's CPU devices only (the rendezvous abort is XLA's CPU
+    runtime's; an array spanning other processes' devices cannot be read here, and a GPU's result
+    stays on the GPUs)."""
+    sharding = getattr(a, "sharding", None)
+    return (
+        sharding is not None
+        and a.is_fully_addressable
+        and all(d.platform == "cpu" for d in sharding.device_set)
+        and not jax.dtypes.issubdtype(a.dtype, jax.dtypes.prng_key)
+    )
 
 
 #: Seconds a process waits for the coordinator (and process 0 for the others) by default.
