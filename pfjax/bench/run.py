@@ -211,17 +211,18 @@ def machine() -> dict:
     the sine-cosine pair, and where they came from: :func:`pfjax.numerics.compiler.settings_source`); units in :data:`pfjax.bench.report.MACHINE_UNITS`."""
     import jax
 
-    from pfjax.numerics import compiler, elementary
+    from pfjax.numerics import compiler
     from pfjax.numerics.cpu import VECTOR_FLAGS
-    from pfjax.sim.sharding import cpu_block_bytes
+    from pfjax.provenance import cpu_settings
 
-    cpu = compiler.cpu_info()
-    flags = set(cpu.get("flags", "").split())
+    cpu = cpu_settings()  # the settings a study records: one home
+    info = compiler.cpu_info()
+    flags = set(info.get("flags", "").split())
     return dict(
-        cpu_model=cpu.get("model name", ""),
-        cpu_vendor=cpu.get("vendor_id", ""),
-        cpu_family=cpu.get("cpu family", ""),
-        cpu_model_number=cpu.get("model", ""),
+        cpu_model=info.get("model name", ""),
+        cpu_vendor=info.get("vendor_id", ""),
+        cpu_family=info.get("cpu family", ""),
+        cpu_model_number=info.get("model", ""),
         cpu_flags=sorted(flags & VECTOR_FLAGS),
         platform=platform.platform(),
         processor=platform.processor() or platform.machine(),
@@ -232,9 +233,9 @@ def machine() -> dict:
         xla_flags=os.environ.get("XLA_FLAGS", ""),
         avx512=compiler.has_avx512(),
         compiler_options=dict(compiler.OPTIONS),  # the simulator programs' (512-bit vectors on AVX-512)
-        block_bytes={"float32": cpu_block_bytes(4), "float64": cpu_block_bytes(8)},
-        sincos_sharing={d: elementary.sincos_sharing(d) for d in ("float32", "float64")},
-        settings=compiler.settings_source(),
+        block_bytes=cpu["block_bytes"],
+        sincos_sharing=cpu["sincos_sharing"],
+        settings=cpu["source"],
     )
 
 
