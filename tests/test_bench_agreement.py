@@ -268,6 +268,7 @@ def test_the_settings_label_says_where_the_vector_width_came_from(monkeypatch):
 
     for calibrated, base in ((True, "calibrated"), (False, "rules")):
         monkeypatch.setattr(calibration, "vector_width", lambda c=calibrated: (c, 256 if c else None))
+        monkeypatch.setattr(calibration, "sincos_sharing", lambda name, c=calibrated: "real" if c else None)
         assert settings_source({}) == base
         assert settings_source({"PFJAX_VECTOR_WIDTH": "0"}) == f"{base}; vector width from PFJAX_VECTOR_WIDTH"
         assert settings_source({"PFJAX_VECTOR_WIDTH": " 512 "}) == f"{base}; vector width from PFJAX_VECTOR_WIDTH"
@@ -277,6 +278,25 @@ def test_the_settings_label_says_where_the_vector_width_came_from(monkeypatch):
             == f"{base}; sine-cosine sharing from PFJAX_SINCOS_SHARING"
         )
         assert settings_source({"PFJAX_SINCOS_SHARING": "fast"}) == base  # ignored (with a warning) when traced
+
+
+def test_the_settings_label_says_when_an_older_calibration_leaves_the_sharing_to_the_rule(monkeypatch):
+    """A calibration written before the sharing was measured has no ``sincos_sharing``: the label
+    says the sharing comes from the rules (unless PFJAX_SINCOS_SHARING sets it)."""
+    from pfjax.numerics import calibration
+    from pfjax.numerics.compiler import settings_source
+
+    monkeypatch.setattr(calibration, "vector_width", lambda: (True, 512))
+    monkeypatch.setattr(calibration, "sincos_sharing", lambda name: None)
+    assert settings_source({}) == "calibrated; sine-cosine sharing from the rules"
+    assert (
+        settings_source({"PFJAX_SINCOS_SHARING": "none"}) == "calibrated; sine-cosine sharing from PFJAX_SINCOS_SHARING"
+    )
+    monkeypatch.setattr(calibration, "sincos_sharing", lambda name: "real")
+    assert settings_source({}) == "calibrated"
+    monkeypatch.setattr(calibration, "vector_width", lambda: (False, None))
+    monkeypatch.setattr(calibration, "sincos_sharing", lambda name: None)
+    assert settings_source({}) == "rules"
 
 
 # --------------------------------------------------------------------------- studies/bench/compare.py

@@ -138,11 +138,16 @@ def settings_source(environ=None) -> str:
     calibration, :mod:`pfjax.numerics.calibration`) or ``"rules"`` (the stated defaults), then
     ``"; vector width from PFJAX_VECTOR_WIDTH"`` where that variable sets the width (a whole number
     of bits, as :func:`vector_width` reads it) and ``"; sine-cosine sharing from PFJAX_SINCOS_SHARING"``
-    where that one sets the sharing; the blocks come from the first."""
+    where that one sets the sharing, or ``"; sine-cosine sharing from the rules"`` where a
+    calibration written before the sharing was measured leaves it to the rule; the blocks come from
+    the first."""
     environ = os.environ if environ is None else environ
-    base = "calibrated" if calibration.vector_width()[0] else "rules"
+    calibrated = calibration.vector_width()[0]
+    base = "calibrated" if calibrated else "rules"
     if environ.get(VECTOR_WIDTH_ENV, "").strip().isdigit():
         base += f"; vector width from {VECTOR_WIDTH_ENV}"
     if environ.get(calibration.SHARING_ENV, "").strip().lower() in calibration.SHARINGS:
         base += f"; sine-cosine sharing from {calibration.SHARING_ENV}"
+    elif calibrated and calibration.sincos_sharing("float32") is None:
+        base += "; sine-cosine sharing from the rules"
     return base
