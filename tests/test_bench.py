@@ -667,3 +667,34 @@ def test_interleaved_timing_charges_each_function_its_own_release_and_not_the_pr
             timing.interleaved([forward], **{"rounds": 1, **bad})
     _, _, alone = timing.best_of(reverse, 2)
     assert alone == 3.5  # consecutive calls of one function: each pays the previous one's release
+    # in turn without the untimed calls: each call pays what the one before it left (the other's)
+    clock.debt = 0.0
+    calls = clock.now
+    _, firsts, in_turn = timing.interleaved([forward, reverse], rounds=3, window=1, settle=False)
+    assert firsts == [1.0, 3.0] and in_turn == [1.5, 3.0]
+    assert clock.now - calls == 4 * (1.0 + 3.0) + 3 * 0.5  # four calls each: no untimed ones
+
+
+def test_calls_in_turn_share_a_slow_period_of_the_machine(monkeypatch):
+    """pfjax and the minimal implementation are timed in turn: a slow period of the machine (here
+    calls 4-7 take twice as long) falls on both, and the best of each comes from the same fast
+    round, so the ratio stays that of the calls. Timed one after the other, the same period falls
+    on every timed call of the second and none of the first's, and the ratio is off by 2x."""
+    from pfjax.bench import timing
+
+    now, count = [0.0], [0]
+
+    def call(work):
+        def f():
+            now[0] += work * (2.0 if 4 <= count[0] <= 7 else 1.0)
+            count[0] += 1
+            return work
+
+        return f
+
+    monkeypatch.setattr(timing, "time", types.SimpleNamespace(perf_counter=lambda: now[0]))
+    _, _, bests = timing.interleaved([call(3.0), call(4.0)], rounds=3, window=1, settle=False)
+    assert bests == [3.0, 4.0]  # calls: p m (the first, untimed) | p m | p m (slow) | p m
+    count[0] = 0
+    best_p, best_m = timing.best_of(call(3.0), 3)[2], timing.best_of(call(4.0), 3)[2]  # p p p p | m m m m (slow)
+    assert (best_p, best_m) == (3.0, 8.0)

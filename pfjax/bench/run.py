@@ -6,8 +6,10 @@ Measured (all wall-clock, ``time.perf_counter``; "rollout-steps" = runs x RK4 st
 * pfjax ``simulate_batch`` (``record=False``: the running metrics) in float32 and float64 for each
   batch size: the first call (compile + run) and the best of ``repeats`` further calls; compile
   time = first call - best call;
-* after it at each batch size, the minimal JAX implementation of the same problem
-  (:mod:`pfjax.bench.minimal`), timed alike, with its agreement with pfjax on the per-run IAE;
+* beside it at each batch size, the minimal JAX implementation of the same problem
+  (:mod:`pfjax.bench.minimal`), timed alike, the two called in turn (pfjax, minimal, pfjax,
+  minimal, ...: :func:`pfjax.bench.timing.interleaved` without its untimed calls) so that a slow
+  period of the machine slows both, with its agreement with pfjax on the per-run IAE;
   ``summary["fraction_of_minimal_by_batch"]`` gives pfjax's throughput as a fraction of it at every
   size, ``fraction_of_minimal_f32`` / ``_f64`` at the largest;
 * the NumPy, Numba (``prange``) and SciPy references (:mod:`pfjax.bench.references`) on the
@@ -127,7 +129,8 @@ QUICK = BenchConfig(
 )
 
 
-def _pfjax(batch, dtype, n_steps, cfg: BenchConfig):
+def _pfjax(batch, dtype, cfg: BenchConfig):
+    """pfjax's simulator on ``batch`` in ``dtype``, as a call that returns its result when ready."""
     import jax
 
     from pfjax.controllers import state_feedback
@@ -135,9 +138,7 @@ def _pfjax(batch, dtype, n_steps, cfg: BenchConfig):
 
     sc = P.scenarios(batch, dtype)
     sim = SimConfig(dt=P.DT, horizon=cfg.horizon, newton_iters=P.NEWTON_ITERS, record=False)
-    run = lambda: jax.block_until_ready(simulate_batch(sc, controller=state_feedback, config=sim))
-    res, first, best = timing.best_of(run, cfg.repeats)
-    return res, first, best
+    return lambda: jax.block_until_ready(simulate_batch(sc, controller=state_feedback, config=sim))
 
 
 def _grad(batch, dtype, cfg: BenchConfig):
@@ -278,16 +279,17 @@ def _jax_rows(cfg: BenchConfig, n_steps: int, say) -> tuple[list[dict], dict, di
         with jax.enable_x64(x64):
             for b in cfg.sizes:
                 batch = P.random_batch(b, cfg.seed)
-                say(f"pfjax {name} B={b}")
-                res, first, best = _pfjax(batch, dtype, n_steps, cfg)
+                say(f"pfjax and minimal JAX {name} B={b}")
+                runs = M.runs(batch, dtype)
+                minimal = lambda: jax.block_until_ready(M.simulate(runs, n_steps))
+                (res, out), firsts, bests = timing.interleaved(
+                    [_pfjax(batch, dtype, cfg), minimal], cfg.repeats, window=1, settle=False
+                )
                 failed = int(np.sum(np.asarray(res.status) != 0))
-                rows.append(_row("pfjax", name, b, best, compile_time(first, best), n_steps, failed))
+                rows.append(_row("pfjax", name, b, bests[0], compile_time(firsts[0], bests[0]), n_steps, failed))
                 if b == top:
                     iae[name] = np.asarray(res.metrics.iae, np.float64)
-                say(f"minimal JAX {name} B={b}")
-                runs = M.runs(batch, dtype)
-                out, first, best = timing.best_of(lambda: jax.block_until_ready(M.simulate(runs, n_steps)), cfg.repeats)
-                rows.append(_row("jax_minimal", name, b, best, compile_time(first, best), n_steps))
+                rows.append(_row("jax_minimal", name, b, bests[1], compile_time(firsts[1], bests[1]), n_steps))
                 diffs.setdefault(f"jax_minimal_{name}", []).append(_max_diff(out, res.metrics.iae))
     return rows, iae, {k: float(np.max(v)) for k, v in diffs.items()}  # NaN if any difference is NaN
 

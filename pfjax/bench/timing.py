@@ -16,6 +16,11 @@ the untimed call absorbs what the previous function left, and the window holds a
 the function's own buffers as it holds calls (its first call's release falls in it, its last's
 outside) -- the steady state of a loop that calls the function again and again. Any window of
 one call or more does that; :data:`WINDOW` = 2 averages each round's time over two calls.
+
+Calls that leave little behind (a forward pass, whose results and temporaries are small) are timed
+in turn without the untimed call (``settle=False``): one timed call each per round, as many calls as
+:func:`best_of` each, and a slow period of the machine falls on all of them alike instead of on
+whichever ran then.
 """
 
 from __future__ import annotations
@@ -45,13 +50,14 @@ def best_of(f: Callable[[], Any], repeats: int) -> tuple[Any, float, float]:
 
 
 def interleaved(
-    fs: Sequence[Callable[[], Any]], rounds: int, window: int = WINDOW
+    fs: Sequence[Callable[[], Any]], rounds: int, window: int = WINDOW, settle: bool = True
 ) -> tuple[list[Any], list[float], list[float]]:
     """``(results, firsts, bests)`` of several functions timed in turn (module docstring).
 
     Each function is called once first (``firsts``: compilation and run). Then, ``rounds`` times,
-    each function in turn is called once untimed and ``window`` times timed back to back; ``bests``
-    are the fastest window's seconds per call (``firsts`` when ``rounds`` is 0)."""
+    each function in turn is called once untimed (``settle``; none with ``settle=False``) and
+    ``window`` times timed back to back; ``bests`` are the fastest window's seconds per call
+    (``firsts`` when ``rounds`` is 0)."""
     if rounds < 0 or window < 1:
         raise ValueError(f"rounds must be >= 0 and window >= 1, got {rounds} and {window}")
     fs = list(fs)
@@ -63,7 +69,8 @@ def interleaved(
     bests = list(firsts) if not rounds else [math.inf] * len(fs)
     for _ in range(rounds):
         for i, f in enumerate(fs):
-            outs[i] = f()  # absorbs what the previous function left
+            if settle:
+                outs[i] = f()  # absorbs what the previous function left
             t0 = time.perf_counter()
             for _ in range(window):
                 outs[i] = f()
