@@ -381,3 +381,16 @@ def test_compare_writes_nothing_when_the_first_round_disagrees(tmp_path, monkeyp
         "numpy_float32 (max |IAE difference| 1.0e-02 m s, tolerance 1e-04 m s); nothing was measured or written"
     ]
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_the_report_names_the_devices_kind_and_the_gpu_blocks():
+    """The report's machine line names the devices' kind (a GPU's card) and, on a GPU, its blocks."""
+    from pfjax.bench.report import markdown
+
+    result = _result({})
+    assert result["machine"]["gpu_block_bytes"] is None and result["machine"]["device_kinds"] == ["cpu"]
+    text = markdown(result)
+    assert " device(s) (cpu); " in text and "GPU blocks" not in text
+    result["machine"].update(devices=["CudaDevice(id=0)"], device_kinds=["NVIDIA H200"], gpu_block_bytes=1_000_000)
+    text = markdown(result)
+    assert "with 1 device(s) (NVIDIA H200); " in text and "; GPU blocks of 1000000 bytes per array." in text

@@ -176,7 +176,30 @@ def test_plan_batch_splits_devices_into_blocks():
     rule = sharding.block_bytes_rule()  # the tests run without a calibration (conftest)
     assert sharding.default_block({"x": np.zeros(3, np.float32)}, devices[:1]) == rule // 4
     assert sharding.default_block({"x": np.zeros(3, np.float64)}, devices[:1]) == rule // 8
-    assert sharding.default_block({"x": np.zeros(3)}, [SimpleNamespace(platform="gpu")]) is None
+    assert sharding.default_block({"x": np.zeros(3)}, [SimpleNamespace(platform="tpu")]) is None
+
+
+def test_gpu_blocks_hold_the_gpu_rules_bytes_per_array(monkeypatch):
+    """On a GPU a block holds :data:`GPU_BLOCK_BYTES` per array (1 MB: 250,000 float32 runs, 125,000
+    float64, fewer for forward-mode tangents); ``PFJAX_GPU_BLOCK_BYTES`` overrides it, ``0`` runs the
+    whole batch at once, and a value that is not a whole number is ignored with a warning naming it."""
+    gpu = [SimpleNamespace(platform="gpu")]
+    f32, f64 = {"x": np.zeros(3, np.float32)}, {"x": np.zeros(3, np.float64)}
+    monkeypatch.delenv(sharding.GPU_BLOCK_ENV, raising=False)
+    assert sharding.GPU_BLOCK_BYTES == 1_000_000 and sharding.gpu_block_bytes() == 1_000_000
+    assert sharding.default_block(f32, gpu) == 250_000 and sharding.default_block(f64, gpu) == 125_000
+    assert sharding.default_block(f32, gpu, tangents=2) == 83_333
+    monkeypatch.setenv(sharding.GPU_BLOCK_ENV, " 400000 ")
+    assert sharding.default_block(f32, gpu) == 100_000 and sharding.default_block(f64, gpu) == 50_000
+    monkeypatch.setenv(sharding.GPU_BLOCK_ENV, "0")
+    assert sharding.gpu_block_bytes() is None and sharding.default_block(f32, gpu) is None
+    monkeypatch.setenv(sharding.GPU_BLOCK_ENV, "1MB")
+    with pytest.warns(UserWarning, match=f"^{sharding.GPU_BLOCK_ENV}: value '1MB' ignored"):
+        assert sharding.default_block(f32, gpu) == 250_000
+    # the CPU's blocks do not read it
+    assert sharding.default_block(f32, jax.devices()[:1]) == sharding.block_bytes_rule() // 4
+    # a batch planned for a GPU in the rule's blocks: 10^6 float32 runs in 4 blocks (no device needed)
+    assert sharding.traced_layout(1_000_000, 250_000, 1).blocks == 4
 
 
 def test_a_traced_batch_is_split_into_interleaved_blocks_only_when_given_a_size():

@@ -96,6 +96,7 @@ MACHINE_UNITS = {
     "machine.block_bytes.*": {"float32": "B", "float64": "B"},
     "machine.compiler_options.*": {"xla_cpu_prefer_vector_width": "bits"},
     "machine.cpus": "CPUs",
+    "machine.gpu_block_bytes": "B",
     "machine.load_average_1m": LOAD,
     "machine.load_average_1m_start": LOAD,
 }
@@ -320,16 +321,27 @@ def _minimal_sentence(s: dict) -> str:
     )
 
 
+def _kinds(m: dict) -> str:
+    """`` (NVIDIA H200)``: the devices' kinds, where recorded."""
+    return f" ({', '.join(m['device_kinds'])})" if m.get("device_kinds") else ""
+
+
+def _gpu_blocks(m: dict) -> str:
+    """``; GPU blocks of 1000000 bytes per array``, where a GPU ran in blocks."""
+    return f"; GPU blocks of {m['gpu_block_bytes']} bytes per array" if m.get("gpu_block_bytes") else ""
+
+
 def markdown(result: dict) -> str:
     s, m = result["summary"], result["machine"]
     lines = [
         "# pfjax benchmark",
         "",
         f"Machine: {m['processor']}, {m.get('cpu_vendor') or 'vendor unknown'} {m.get('cpu_model') or 'CPU model unknown'}"
-        f"{' (family ' + m['cpu_family'] + ', model ' + m['cpu_model_number'] + ')' if m.get('cpu_family') else ''}, {m['cpus']} CPUs, JAX {m['jax']} with {len(m['devices'])} device(s); "
+        f"{' (family ' + m['cpu_family'] + ', model ' + m['cpu_model_number'] + ')' if m.get('cpu_family') else ''}, {m['cpus']} CPUs, JAX {m['jax']} with {len(m['devices'])} device(s){_kinds(m)}; "
         f"1-min load average {m['load_average_1m_start']:.1f} at the start, {m['load_average_1m']:.1f} at the end. "
         f"AVX-512: {'yes' if m.get('avx512') else 'no'} (flags: {', '.join(m.get('cpu_flags') or []) or 'unknown'}); "
-        f"simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}.",
+        f"simulator compiler options: {m.get('compiler_options') or 'XLA defaults'}"
+        f"{_gpu_blocks(m)}.",
         "",
         *_disagreement(s),
         _minimal_sentence(s) + _numba_clause(s),

@@ -209,12 +209,15 @@ def machine() -> dict:
     """The machine a benchmark ran on: the CPU (vendor, family, model, vector flags), the CPUs
     this process may use, the 1-minute load average, JAX and its devices, and the CPU settings of
     the simulator programs (compiler options, bytes per batched array in a CPU block, the sharing of
-    the sine-cosine pair, and where they came from: :func:`pfjax.numerics.compiler.settings_source`); units in :data:`pfjax.bench.report.MACHINE_UNITS`."""
+    the sine-cosine pair, and where they came from: :func:`pfjax.numerics.compiler.settings_source`) and,
+    on a GPU, the bytes per batched array in a GPU block (:func:`pfjax.sim.sharding.gpu_block_bytes`;
+    ``None`` off a GPU and for whole batches); units in :data:`pfjax.bench.report.MACHINE_UNITS`."""
     import jax
 
     from pfjax.numerics import compiler
     from pfjax.numerics.cpu import VECTOR_FLAGS
     from pfjax.provenance import cpu_settings
+    from pfjax.sim import sharding
 
     cpu = cpu_settings()  # the settings a study records: one home
     info = compiler.cpu_info()
@@ -231,12 +234,14 @@ def machine() -> dict:
         load_average_1m=os.getloadavg()[0],
         jax=jax.__version__,
         devices=[str(d) for d in jax.devices()],
+        device_kinds=sorted({d.device_kind for d in jax.devices()}),
         xla_flags=os.environ.get("XLA_FLAGS", ""),
         avx512=compiler.has_avx512(),
         compiler_options=dict(compiler.OPTIONS),  # the simulator programs' (512-bit vectors on AVX-512)
         block_bytes=cpu["block_bytes"],
         sincos_sharing=cpu["sincos_sharing"],
         settings=cpu["source"],
+        gpu_block_bytes=sharding.gpu_block_bytes() if jax.devices()[0].platform == "gpu" else None,
     )
 
 

@@ -30,8 +30,16 @@ Intel CPUs), one block after
 another (``lax.map``). A block's loop is then small enough for XLA to compile it into one function
 (the small-loop threshold that ``import pfjax`` raises, :data:`pfjax.SMALL_LOOP_BYTES`) and its
 arrays stay in the core's L1 and L2 caches: 1.3x the rollout-steps/s of 10,000-run blocks in
-float32 and 1.2x in float64 at 10^5 runs (README, Performance). A GPU takes the whole per-device
-batch at once (no blocks). Results do not depend on the blocking beyond rounding: every run is
+float32 and 1.2x in float64 at 10^5 runs (README, Performance).
+
+**Blocks (GPU).** On a GPU each step's kernels read and write the loop's state in device memory
+(about 190 bytes per run in float32 and 370 in float64 for the benchmark's slip model). Large
+batches are simulated in blocks of :func:`gpu_block_bytes` per array (:data:`GPU_BLOCK_BYTES`:
+1 MB, 250,000 runs in float32, 125,000 in float64), smaller ones at once. Measured on an H200 at
+10^6 runs: 1.2x the rollout-steps/s of the whole batch in float32 and 3.4x in float64; half that
+block size was slower than the whole batch in float32 (each block pays every step's launch
+latency). A reading that fits these numbers, not measured with counters: a 1 MB block's state
+(47 MB in float32) stays in the GPU's L2 cache between steps, the whole batch's does not. Results do not depend on the blocking beyond rounding: every run is
 computed by the same per-run code, but each block shape is compiled into its own vector code
 (measured: an ulp in a few runs' metrics with XLA's default vector width; with 512-bit vectors
 up to a few tens of ulp in float32 metrics, float64 bit-identical; tests/test_sharding.py).
@@ -41,6 +49,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 from collections.abc import Callable
 from functools import partial
 from typing import Any, NamedTuple
@@ -69,6 +78,16 @@ CPU_BLOCK_BYTES = 5_000
 #: 42.4, 10,000 bytes 94.8 / 42.0, 20,000 bytes 72.8 / 35.1; ``pfjax bench`` at 10^5 runs, one run
 #: each in turn: 114.1 / 47.5 against 107.3 / 44.9 with 5,000 bytes (docs/performance.md).
 INTEL_BLOCK_BYTES = 2_500
+#: Bytes per batched array in one GPU block (``None``: each device's whole batch in one block),
+#: :func:`gpu_block_bytes`; :data:`GPU_BLOCK_ENV` overrides it. Measured on one NVIDIA H200 (jax
+#: 0.11.2, the benchmark's slip model, 10^6 runs of 20 s, M rollout-steps/s float32 / float64, best
+#: of 3 calls): the whole batch 11,021 / 1,474; 4 MB per array 11,009 / 1,492; 2 MB 9,434 / 4,944;
+#: 1 MB 13,190 / 5,051; 0.5 MB 6,687 / 3,262. Every blocking gave the same per-run IAE to the bit.
+#: Measured on that GPU only: one with a smaller L2 cache may want smaller blocks (docs/performance.md).
+GPU_BLOCK_BYTES: int | None = 1_000_000
+#: Environment variable: bytes per batched array in one GPU block (``0``: each device's whole batch
+#: at once), read when a batch is planned.
+GPU_BLOCK_ENV = "PFJAX_GPU_BLOCK_BYTES"
 #: Runs per block are rounded up to a multiple of this (blocks of more runs than this). XLA's CPU
 #: code for an odd number of runs per device is about 3x slower (measured, float32: 50,001 runs per
 #: device 10.8 M rollout-steps/s, 50,002 runs 34.5; 1,251 runs 14.6, 1,252 runs 44.3).
@@ -148,7 +167,7 @@ def shard_batch(tree, devices=None):
 
 def default_block(tree, devices=None, tangents: int = 0) -> int | None:
     """Runs per block: :func:`cpu_block_bytes` per array of the tree's floating dtype on CPU devices,
-    ``None`` (no blocks) on any other platform.
+    :func:`gpu_block_bytes` on GPUs, ``None`` (no blocks) on any other platform.
 
     ``tangents``: forward-mode tangents each value carries (``D`` for the gradient in ``D``
     parameters, :func:`pfjax.numerics.autodiff.value_and_grad`). A value and its tangents share one
@@ -168,7 +187,8 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
     if int(tangents) < 0:
         raise ValueError(f"tangents: must be at least 0, got {tangents}")
     devices = jax.devices() if devices is None else list(devices)
-    if devices[0].platform != "cpu":
+    platform = devices[0].platform
+    if platform not in ("cpu", "gpu"):
         return None
     floats = [
         a.dtype
@@ -176,7 +196,23 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
         if hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating)
     ]
     itemsize = max((np.dtype(d).itemsize for d in floats), default=4)
-    return max(1, cpu_block_bytes(itemsize) // (itemsize * (1 + int(tangents))))
+    per_array = cpu_block_bytes(itemsize) if platform == "cpu" else gpu_block_bytes()
+    if not per_array:
+        return None
+    return max(1, per_array // (itemsize * (1 + int(tangents))))
+
+
+def gpu_block_bytes(environ=None) -> int | None:
+    """Bytes per batched array in one GPU block: :data:`GPU_BLOCK_ENV` where set (``0``: ``None``),
+    else :data:`GPU_BLOCK_BYTES`; ``None``: each device's whole batch at once. A value that is not
+    a whole number is ignored with a warning naming the variable."""
+    from pfjax.host import whole_number
+
+    environ = os.environ if environ is None else environ
+    n = whole_number(environ, GPU_BLOCK_ENV, "bytes", -1)
+    if n < 0:
+        return GPU_BLOCK_BYTES
+    return n or None
 
 
 @functools.cache  # read once per file
