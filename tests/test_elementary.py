@@ -304,6 +304,26 @@ def test_the_sincos_sharing_setting_rule_environment_and_calibration(tmp_path, m
         E._sharing_from_env.cache_clear()
 
 
+def test_one_parser_reads_the_sharing_variable_for_the_programs_and_the_settings_label():
+    """``calibration.sharing_from_env`` is the one reading of ``PFJAX_SINCOS_SHARING``: the
+    simulator's programs take it (with a warning for a value it ignores) and the settings label
+    names it only where it set the sharing (silently: the warning is the programs')."""
+    import warnings
+
+    from pfjax.numerics import calibration, compiler
+
+    env = lambda value: {calibration.SHARING_ENV: value}
+    assert calibration.sharing_from_env({}) is None and calibration.sharing_from_env(env(" ")) is None
+    assert calibration.sharing_from_env(env("  REAL ")) == "real"
+    with pytest.warns(UserWarning, match="^PFJAX_SINCOS_SHARING: value 'fast' ignored, expected one of complex, real"):
+        assert calibration.sharing_from_env(env("fast")) is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert calibration.sharing_from_env(env("fast"), warn=False) is None
+        assert compiler.settings_source(env(" None ")).endswith("; sine-cosine sharing from PFJAX_SINCOS_SHARING")
+        assert "PFJAX_SINCOS_SHARING" not in compiler.settings_source(env("fast"))
+
+
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_computed_once_is_an_exact_identity_with_exact_derivatives_and_cpu_only(dtype):
     """computed_once changes no value (signed zeros, infinities, NaN, tiny values included), its

@@ -99,6 +99,19 @@ SHARINGS = ("complex", "real", "none")
 SHARING_ENV = "PFJAX_SINCOS_SHARING"
 
 
+def sharing_from_env(environ=None, warn: bool = True) -> str | None:
+    """The sine-cosine sharing :data:`SHARING_ENV` sets: one of :data:`SHARINGS` (stripped, any
+    case), ``None`` where it is unset or empty. A value that is not one of them is ignored
+    (``None``), with a warning naming the variable unless ``warn`` is false."""
+    environ = os.environ if environ is None else environ
+    value = environ.get(SHARING_ENV, "").strip().lower()
+    if value in SHARINGS:
+        return value
+    if value and warn:
+        warnings.warn(f"{SHARING_ENV}: value {value!r} ignored, expected one of {', '.join(SHARINGS)}", stacklevel=4)
+    return None
+
+
 def _valid(data) -> bool:
     try:
         width = data["vector_width"]

@@ -146,7 +146,7 @@ def settings_source(environ=None) -> str:
     base = "calibrated" if calibrated else "rules"
     if environ.get(VECTOR_WIDTH_ENV, "").strip().isdigit():
         base += f"; vector width from {VECTOR_WIDTH_ENV}"
-    if environ.get(calibration.SHARING_ENV, "").strip().lower() in calibration.SHARINGS:
+    if calibration.sharing_from_env(environ, warn=False):
         base += f"; sine-cosine sharing from {calibration.SHARING_ENV}"
     elif calibrated and calibration.sincos_sharing("float32") is None:
         base += "; sine-cosine sharing from the rules"

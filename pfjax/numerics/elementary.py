@@ -46,8 +46,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import os
-import warnings
 from decimal import Decimal, getcontext
 from functools import cache, partial
 
@@ -192,17 +190,9 @@ def sincos_sharing_rule(cpuinfo: str = CPUINFO) -> str:
     return "real" if is_intel(cpuinfo) else "complex"
 
 
-@functools.cache
+@functools.cache  # read once per process, as it is asked at every trace
 def _sharing_from_env() -> str | None:
-    value = os.environ.get(SINCOS_SHARING_ENV, "").strip().lower()
-    if not value:
-        return None
-    if value not in SINCOS_SHARING:
-        warnings.warn(
-            f"{SINCOS_SHARING_ENV}: value {value!r} ignored, expected one of {', '.join(SINCOS_SHARING)}", stacklevel=3
-        )
-        return None
-    return value
+    return calibration.sharing_from_env()
 
 
 def sincos_sharing(dtype) -> str:
