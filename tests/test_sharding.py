@@ -177,6 +177,10 @@ def test_plan_batch_splits_devices_into_blocks():
     assert sharding.default_block({"x": np.zeros(3, np.float32)}, devices[:1]) == rule // 4
     assert sharding.default_block({"x": np.zeros(3, np.float64)}, devices[:1]) == rule // 8
     assert sharding.default_block({"x": np.zeros(3)}, [SimpleNamespace(platform="tpu")]) is None
+    # the one decision between the CPU's and the GPU's rule
+    assert sharding.block_platform(devices[:1]) == "cpu" and sharding.block_platform() == "cpu"
+    assert sharding.block_platform([SimpleNamespace(platform="gpu")]) == "gpu"
+    assert sharding.block_platform([SimpleNamespace(platform="tpu")]) is None
 
 
 def test_gpu_blocks_hold_the_gpu_rules_bytes_per_array(monkeypatch):

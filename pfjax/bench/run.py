@@ -241,7 +241,7 @@ def machine() -> dict:
         block_bytes=cpu["block_bytes"],
         sincos_sharing=cpu["sincos_sharing"],
         settings=cpu["source"],
-        gpu_block_bytes=sharding.gpu_block_bytes() if jax.devices()[0].platform == "gpu" else None,
+        gpu_block_bytes=sharding.gpu_block_bytes() if sharding.block_platform() == "gpu" else None,
     )
 
 

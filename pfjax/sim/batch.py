@@ -77,11 +77,11 @@ def programs(run_one: Callable[..., Any], *, module: str, static: tuple[str, ...
 
 
 def call(jitted, scenarios, *, devices=None, block: int | str | None = "auto", **static):
-    """``jitted`` (from :func:`program`) on a batch of scenarios (leading axis of every leaf), sharded
-    over ``devices`` (default: every device JAX sees) and in blocks of ``block`` runs (``"auto"``:
-    :func:`pfjax.sim.sharding.default_block`, or ``None`` for one block); the padding runs are cut off the result. Under
-    ``jit``/``grad`` the batch is not re-sharded, and is blocked only when ``block`` is a number of
-    runs (:func:`pfjax.sim.sharding.plan_batch`)."""
+    """``jitted`` (from :func:`program`) on a batch of scenarios (leading axis of every leaf),
+    sharded over ``devices`` (default: every device JAX sees) and in blocks of ``block`` runs
+    (``"auto"``: :func:`pfjax.sim.sharding.default_block`, or ``None`` for one block); the padding
+    runs are cut off the result. Under ``jit``/``grad`` the batch is not re-sharded, and is blocked
+    only when ``block`` is a number of runs (:func:`pfjax.sim.sharding.plan_batch`)."""
     placed, n, layout = sharding.plan_batch(scenarios, devices, block)
     return sharding.unpad(jitted(placed, layout=layout, **static), n)
 

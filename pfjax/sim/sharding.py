@@ -189,9 +189,8 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
     """
     if int(tangents) < 0:
         raise ValueError(f"tangents: must be at least 0, got {tangents}")
-    devices = jax.devices() if devices is None else list(devices)
-    platform = devices[0].platform
-    if platform not in ("cpu", "gpu"):
+    platform = block_platform(devices)
+    if platform is None:
         return None
     floats = [
         a.dtype
@@ -203,6 +202,16 @@ def default_block(tree, devices=None, tangents: int = 0) -> int | None:
     if not per_array:
         return None
     return max(1, per_array // (itemsize * (1 + int(tangents))))
+
+
+def block_platform(devices=None) -> str | None:
+    """The platform whose block rule applies to ``devices`` (default: every device JAX sees):
+    ``"cpu"`` (:func:`cpu_block_bytes`), ``"gpu"`` (:func:`gpu_block_bytes`), or ``None`` on any
+    other platform (no blocks). The one place that tells CPU and GPU blocks apart, for
+    :func:`default_block` and for the benchmark's machine record."""
+    devices = jax.devices() if devices is None else list(devices)
+    platform = devices[0].platform
+    return platform if platform in ("cpu", "gpu") else None
 
 
 def gpu_block_bytes(environ=None) -> int | None:
