@@ -232,6 +232,40 @@ def test_check_known_minimum_saddle_and_kink():
     assert kink.verdict == "local minimum" and abs(kink.gradient[0]) == pytest.approx(1.0)
 
 
+def test_a_checks_gradients_are_one_program_unless_unused_pairs_would_cost_much():
+    """The gradients at ``z`` and at ``z ± h e_i`` are one call of one program at a point inside the
+    box (every pair is used) and on a bound when ``rollout_steps`` says the pairs that may go unused
+    are cheap; otherwise (a bound, and no ``rollout_steps`` or too many) ``z``'s gradient first and
+    the free coordinates' pairs after, two programs. Both give the same check (1e-12; independent
+    lanes of a vmapped program) and count the same rollouts (the unused pairs not among them)."""
+    from pfjax.tuning import check as CK
+    from pfjax.tuning.gradient import PAD_FORWARD_PASSES
+
+    lo, hi = [-1.0, -1.0], [1.0, 1.0]
+
+    def programs(theta, **kw):
+        cost = lambda th: -th[0] + (th[1] - 0.3) ** 2 + 0.5 * th[0] * th[1]  # a new function: programs of its own
+        before = CK._values_and_gradients._cache_size()
+        r = check_point(cost, theta, lo, hi, **kw)
+        return r, CK._values_and_gradients._cache_size() - before
+
+    inside, n = programs([0.5, 0.2])
+    assert n == 1 and inside.active.tolist() == [0, 0] and inside.n_rollouts == 1 + 4 + 2 * len(probe_directions(2))
+    apart, n_apart = programs([1.0, 0.3])  # x on its upper bound, pushed against it: active
+    together, n_together = programs([1.0, 0.3], rollout_steps=10)
+    # the limit: 2 pairs' rows of one coordinate on a bound, 1 + D forward passes each
+    too_many, n_too_many = programs([1.0, 0.3], rollout_steps=PAD_FORWARD_PASSES // 6 + 1)
+    assert (n_apart, n_together, n_too_many) == (2, 1, 2)
+    assert apart.active.tolist() == together.active.tolist() == [1, 0]
+    assert apart.n_rollouts == together.n_rollouts == 1 + 2 + 2 * len(probe_directions(2))
+    assert apart.n_forward_passes == together.n_forward_passes
+    for a, b in zip(apart, together):
+        if isinstance(a, str):
+            assert a == b
+        else:
+            np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-15)
+
+
 def test_check_point_refuses_a_point_outside_its_box():
     """A point outside the box (or not finite), or a box that is not one, is an input error naming
     the argument: the check works in box units and would otherwise check the clipped point."""

@@ -9,7 +9,9 @@ width, :func:`pfjax.numerics.autodiff.value_and_grad`):
   point of the box-constrained problem);
 * the **Hessian** on the free coordinates is the central difference of gradients,
   ``H[:, i] = (g(z + h e_i) - g(z - h e_i)) / (2 h)``, symmetrised (``2 |F|`` more gradient
-  evaluations; ``h`` in box units); ``quadratic_model`` says whether it is positive definite
+  evaluations; ``h`` in box units; evaluated with the gradient at ``z`` in one program where no
+  coordinate can be active, or where the pairs of those that can cost little: ``rollout_steps`` of
+  :func:`check_point`); ``quadratic_model`` says whether it is positive definite
   (smallest eigenvalue above ``1e-8`` of the largest magnitude), ``indefinite`` or ``singular``,
   and the **Newton decrease** ``0.5 g_F^T H_F^{-1} g_F / |J|`` what one Newton step of that model
   would gain;
@@ -94,6 +96,7 @@ def check_point(
     rtol: float = 1e-4,
     n_per_eval: int = 1,
     mode: str = "auto",
+    rollout_steps: int | None = None,
 ) -> CheckResult:
     """First- and second-order check of ``theta`` as a minimiser of ``cost`` in the box (module docstring).
 
@@ -107,8 +110,18 @@ def check_point(
         rtol: a probe lower than ``J - rtol |J|`` refutes a local minimum.
         n_per_eval: rollouts per ``cost`` call, for the budget count.
         mode: differentiation mode.
+        rollout_steps: the simulated rollout-steps of one ``cost`` call (its runs times their
+            steps), when known. The gradients at ``z`` and at ``z ± h e_i`` are then evaluated in
+            one call of one program (traced and compiled once: seconds, where running a check's
+            batch takes milliseconds) if no coordinate of ``z`` is on a bound, or if the pairs of
+            the coordinates on a bound, which are not used when the gradient makes them active,
+            add at most :data:`~pfjax.tuning.gradient.PAD_FORWARD_PASSES` forward-pass
+            rollout-steps. Otherwise (and for ``None``, unless no coordinate is on a bound): the
+            gradient at ``z`` first, then the free coordinates' pairs, two programs. The unused
+            pairs are not counted in ``n_rollouts`` (as a tuner's padded chains are not).
     """
     from pfjax.numerics.autodiff import forward_passes_per_gradient
+    from pfjax.tuning.gradient import PAD_FORWARD_PASSES
 
     th, lo, hi = _checked_point(theta, lower, upper, h, rtol)
     radii = [errors.number("radii", r, positive=True, high=1.0) for r in np.ravel(radii)]
@@ -117,7 +130,10 @@ def check_point(
     lo_j, span_j = jnp.asarray(lo, dtype), jnp.asarray(span, dtype)
     vg = lambda Z: _values_and_gradients(Z, lo_j, span_j, cost=cost, mode=mode)
     z = np.clip((th - lo) / span, 0.0, 1.0)
-    J, g, active, H, eig = _gradient_and_hessian(vg, z, h, dtype)
+    fpp = forward_passes_per_gradient(lo.size, mode)
+    unused = 2 * int(np.sum(_on_bound(z))) * fpp  # forward passes of the pairs that may go unused
+    together = not unused or (rollout_steps is not None and unused * int(rollout_steps) <= PAD_FORWARD_PASSES)
+    J, g, active, H, eig = _gradient_and_hessian(vg, z, h, dtype, together)
     pg = np.where(active == 0, g, 0.0)
     free = np.flatnonzero(active == 0)
     model, decrease = _quadratic_model(J, pg[free], H, eig)
@@ -133,7 +149,6 @@ def check_point(
         verdict = "flat"
     if not np.isfinite(J):
         verdict, probe_dec = "non-finite cost", float("nan")
-    fpp = forward_passes_per_gradient(lo.size, mode)
     n_grad = 1 + 2 * free.size
     return CheckResult(
         th,
@@ -178,20 +193,44 @@ def _checked_point(theta, lower, upper, h: float, rtol: float) -> tuple[np.ndarr
     return th, lo, hi
 
 
-def _gradient_and_hessian(vg, z: np.ndarray, h: float, dtype):
+#: A coordinate within this of a bound (box units) is on it (:func:`_gradient_and_hessian`).
+_ON_BOUND = 1e-12
+
+
+def _on_bound(z: np.ndarray) -> np.ndarray:
+    """``(D,)`` bool: the coordinates on a bound of the box, the only ones that can be active."""
+    return (z <= _ON_BOUND) | (z >= 1 - _ON_BOUND)
+
+
+def _gradient_and_hessian(vg, z: np.ndarray, h: float, dtype, together: bool = False):
     """At ``z`` (box units): cost ``J``, gradient ``g``, active bounds (-1 lower, +1 upper, 0 free),
     and the Hessian on the free coordinates by central differences of the gradient,
-    ``H_ij = (g_j(z + h e_i) - g_j(z - h e_i)) / 2h`` (symmetrised), with its eigenvalues."""
-    J, g = vg(jnp.asarray(z[None], dtype))
-    J, g = float(J[0]), np.asarray(g[0], np.float64)
-    tiny = 1e-12
-    active = np.where((z <= tiny) & (g > 0), -1, np.where((z >= 1 - tiny) & (g < 0), 1, 0))
+    ``H_ij = (g_j(z + h e_i) - g_j(z - h e_i)) / 2h`` (symmetrised), with its eigenvalues.
+
+    ``together``: the gradients at ``z`` and at ``z ± h e_i`` of every coordinate in one call of
+    ``vg`` (one program), the pairs of the coordinates found active then dropped; else ``z``'s
+    first and the free coordinates' pairs after (two programs: the batches differ in size). Each
+    row is an independent lane of the vmapped program, so both give the same numbers up to the
+    rounding of a differently compiled program."""
+    D = z.size
+    if together:
+        E = np.eye(D) * h
+        J, G_all = vg(jnp.asarray(np.concatenate([z[None], z + E, z - E]), dtype))
+        G_all = np.asarray(G_all, np.float64)
+        J, g = float(J[0]), G_all[0]
+    else:
+        J, g = vg(jnp.asarray(z[None], dtype))
+        J, g = float(J[0]), np.asarray(g[0], np.float64)
+    active = np.where((z <= _ON_BOUND) & (g > 0), -1, np.where((z >= 1 - _ON_BOUND) & (g < 0), 1, 0))
     free = np.flatnonzero(active == 0)
     if not free.size:
         return J, g, active, np.zeros((0, 0)), np.zeros(0)
-    E = np.eye(z.size)[free] * h
-    _, G = vg(jnp.asarray(np.concatenate([z + E, z - E]), dtype))
-    G = np.asarray(G, np.float64)
+    if together:
+        G = np.concatenate([G_all[1 : 1 + D][free], G_all[1 + D :][free]])
+    else:
+        E = np.eye(D)[free] * h
+        _, G = vg(jnp.asarray(np.concatenate([z + E, z - E]), dtype))
+        G = np.asarray(G, np.float64)
     with np.errstate(invalid="ignore"):  # inf - inf where a gradient is not finite: nan, reported as data
         H = (G[: free.size, free] - G[free.size :, free]) / (2 * h)
         H = 0.5 * (H + H.T)

@@ -645,4 +645,13 @@ def check(problem: Problem, gains, *, h: float = 1e-4, rtol: float = 1e-4, contr
     # before anything is compiled or simulated
     check_memory("check", problem.n_per_eval, problem.lower.size, problem.config.n_steps)
     f_scalar, _ = cost_functions(problem)
-    return check_point(f_scalar, th, problem.lower, problem.upper, h=h, rtol=rtol, n_per_eval=problem.n_per_eval)
+    return check_point(
+        f_scalar,
+        th,
+        problem.lower,
+        problem.upper,
+        h=h,
+        rtol=rtol,
+        n_per_eval=problem.n_per_eval,
+        rollout_steps=problem.n_per_eval * problem.config.n_steps,
+    )
