@@ -338,6 +338,50 @@ def test_path_register_checks_its_arguments(kw, key):
     assert err.value.key == key and str(err.value).startswith(key) and "\n" not in str(err.value)
 
 
+def test_the_sampler_builds_a_registered_path_once_and_again_when_it_is_registered_again():
+    """A study's sampler builds a parameterless path once per build function (and precision), not
+    at every batch; registering the name again from its module (a re-run notebook cell) gives the
+    new path to the next batch."""
+    from pfjax.montecarlo.config import load_study
+    from pfjax.montecarlo.sampling import sample_runs
+
+    built = []
+
+    def slope(a):
+        def build():
+            built.append(a)
+            return paths.line(heading=a)
+
+        return build
+
+    data = {
+        "name": "x",
+        "n_runs": 4,
+        "seed": 0,
+        "paths": [{"kind": "test_path"}],
+        "controllers": [{"name": "a", "type": "pi"}],
+        "initial": {
+            "lateral_offset": {"dist": "constant", "value": 0.0},
+            "heading_error_deg": {"dist": "constant", "value": 0.0},
+        },
+    }
+    try:
+        paths.register("test_path", slope(0.5), start_pose=(0.0, 0.0, 0.0))
+        spec, _ = load_study(data=data)
+        first = [sample_runs(spec, 0, np.arange(4)) for _ in range(3)]
+        assert built == [0.5, 0.5]  # by register (its check), then by the first batch only
+        paths.register("test_path", slope(-0.5), start_pose=(0.0, 0.0, 0.0))
+        again = sample_runs(spec, 0, np.arange(4))
+    finally:
+        paths.PATHS.pop("test_path", None)
+    assert built == [0.5, 0.5, -0.5, -0.5]
+    # a start on the line with no heading error has the line's heading: the new path's, not the cached one
+    theta = lambda sampled: np.asarray(sampled.scenarios.pose0.theta)
+    np.testing.assert_array_equal(theta(first[0]), theta(first[2]))
+    np.testing.assert_allclose(theta(first[0]), 0.5, rtol=1e-6)
+    np.testing.assert_allclose(theta(again), -0.5, rtol=1e-6)
+
+
 def test_path_register_keeps_good_arguments():
     try:
         e = paths.register("test_path", paths.line, start_pose=np.array([1, 0, 0.5]), start_u=np.float32(2.0))

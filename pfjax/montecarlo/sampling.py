@@ -8,6 +8,7 @@ run's parameters do not depend on the chunk it falls in, and every controller se
 
 from __future__ import annotations
 
+import functools
 import math
 from functools import partial
 from typing import NamedTuple
@@ -270,12 +271,21 @@ def _fixed_path(spec: PathSpec):
     """The path every run of a non-random kind shares (``None`` for ``circle``: its radius is drawn per run)."""
     e = paths.entry(spec.kind)
     if not e.parametric and e.build is not None:
-        return e.build()
+        return _built_path(e.build, np.dtype(jnp.result_type(float)).name)
     if spec.kind == "spline":  # the same user-defined path for every run
         return shapes.spline_through(np.asarray(spec.points, float))
     if spec.kind == "circle":
         return None
     raise AssertionError(spec.kind)
+
+
+@functools.cache
+def _built_path(build, dtype: str):
+    """A registered path without parameters, ``build()``, once per build function (a path
+    registered again by its module has a new one) and precision (``dtype``: the floats JAX makes,
+    which the build follows): a rare-event estimate samples thousands of small batches, and each
+    build is a dozen array conversions."""
+    return build()
 
 
 #: Runs whose start poses the sampler computes at once (bounds its memory: about 4 MB per
@@ -326,10 +336,12 @@ def sample_runs(
     keys = (
         run_keys(spec.seed, path_index, runs) if key is None else _fold_runs(key, jnp.asarray(runs, dtype=jnp.uint32))
     )
-    f = jnp.result_type(float)
-    given = {k: jnp.asarray(v, f) for k, v in (given or {}).items()}
+    # the program's small arguments as NumPy arrays: the compiled call moves them to the device in
+    # one go, where a jnp.asarray each costs tens of microseconds of dispatch (dozens per call)
+    f = np.dtype(jnp.result_type(float))
+    given = {k: np.asarray(v, f) for k, v in (given or {}).items()}
     design, numbers, circle = _design(spec, pspec)
-    numbers = {q: {k: jnp.asarray(v, f) for k, v in d.items()} for q, d in numbers.items()}
+    numbers = {q: {k: np.asarray(v, f) for k, v in d.items()} for q, d in numbers.items()}
     if pspec.kind == "random":
         drawn = [
             random_path(jax.random.fold_in(k, Q["path"]), pspec, pspec.curvature_margin * _kappa_follow(spec))
@@ -340,12 +352,12 @@ def sample_runs(
         path = _fixed_path(pspec)
     # the override is always passed (zeros and a false flag when absent): one program for both
     over = (np.zeros(len(runs)),) * 2 if slip_override is None else slip_override
-    over = tuple(jnp.asarray(a, float) for a in over)
+    over = tuple(np.asarray(a, f) for a in over)
     cols, sc = _draw_runs(
         keys,
         given,
         path,
-        jnp.asarray(paths.entry(pspec.kind).start_u, float),
+        np.asarray(paths.entry(pspec.kind).start_u, f),
         over,
         slip_override is not None,
         numbers,
