@@ -121,7 +121,7 @@ def check_point(
             pairs are not counted in ``n_rollouts`` (as a tuner's padded chains are not).
     """
     from pfjax.numerics.autodiff import forward_passes_per_gradient
-    from pfjax.tuning.gradient import PAD_FORWARD_PASSES
+    from pfjax.tuning.gradient import pads_cheaply
 
     th, lo, hi = _checked_point(theta, lower, upper, h, rtol)
     radii = [errors.number("radii", r, positive=True, high=1.0) for r in np.ravel(radii)]
@@ -132,7 +132,7 @@ def check_point(
     z = np.clip((th - lo) / span, 0.0, 1.0)
     fpp = forward_passes_per_gradient(lo.size, mode)
     unused = 2 * int(np.sum(_on_bound(z))) * fpp  # forward passes of the pairs that may go unused
-    together = not unused or (rollout_steps is not None and unused * int(rollout_steps) <= PAD_FORWARD_PASSES)
+    together = not unused or pads_cheaply(unused, rollout_steps)
     J, g, active, H, eig = _gradient_and_hessian(vg, z, h, dtype, together)
     pg = np.where(active == 0, g, 0.0)
     free = np.flatnonzero(active == 0)

@@ -66,6 +66,13 @@ from pfjax.numerics import autodiff
 PAD_FORWARD_PASSES = 10_000_000
 
 
+def pads_cheaply(forward_passes: int, rollout_steps: int | None) -> bool:
+    """Whether ``forward_passes`` padded rollouts (charged as in ``n_forward_passes``) of
+    ``rollout_steps`` steps each cost at most :data:`PAD_FORWARD_PASSES` rollout-steps, so a shared
+    compiled program is worth them; never for a cost of unknown size (``rollout_steps`` None)."""
+    return rollout_steps is not None and int(forward_passes) * int(rollout_steps) <= PAD_FORWARD_PASSES
+
+
 def pad_rows(a, n: int) -> np.ndarray:
     """``a`` (rows along its first axis) followed by copies of its first row up to ``n`` rows: the
     places of a shared compiled program's extra points or chains, whose results are dropped."""
@@ -237,7 +244,7 @@ def ga_tune(
     options = options or GAOptions()
     P, E = options.population_size, options.elite_count
     compiled = hasattr(cost_batch, "compile")  # a pfjax.tuning.cost.PopulationCost
-    pad = compiled and rollout_steps is not None and E * options.generations * int(rollout_steps) <= PAD_FORWARD_PASSES
+    pad = compiled and pads_cheaply(E * options.generations, rollout_steps)
     t_c = time.perf_counter()
     if compiled:
         for n in ({P} if pad else {P, P - E}) - {0}:

@@ -71,7 +71,7 @@ import optax
 from pfjax import errors
 from pfjax.numerics import autodiff
 from pfjax.tuning import local as L
-from pfjax.tuning.gradient import PAD_FORWARD_PASSES, TuneResult, adam, pad_rows
+from pfjax.tuning.gradient import TuneResult, adam, pad_rows, pads_cheaply
 
 SAMPLERS = ("sobol", "lhs", "uniform")
 LOCALS = L.LOCALS
@@ -298,9 +298,8 @@ class _Plan(NamedTuple):
         # budget left after the steps' padding covers theirs
         pad_p = n_screen if (polish and n_screen >= 2 * D) else 2 * D
         value_padding = (pad_p - 2 * D) * o.polish_steps if polish else 0
-        steps = rollout_steps or 0
-        share = rollout_steps is not None and padding * fpp * steps <= PAD_FORWARD_PASSES  # unknown: none
-        share_p = share and (padding * fpp + value_padding) * steps <= PAD_FORWARD_PASSES
+        share = pads_cheaply(padding * fpp, rollout_steps)  # unknown: none
+        share_p = share and pads_cheaply(padding * fpp + value_padding, rollout_steps)
         return cls(
             tuple(sizes),
             tuple(per_round),
