@@ -34,6 +34,12 @@ class SideJobs:
     differently on each device and deadlock (seen: XLA's CPU rendezvous aborted the process).
     Only the main thread launches multi-device programs.
 
+    The tasks see the study's controllers as one, their union (:func:`pfjax.controllers.union.shared`):
+    each searches and re-simulates its own controller, selected by its parameters, and the search's
+    gradient step, the random search, the replay and the float64 simulation are each compiled once
+    for the study instead of once per controller kind. The study's runs keep a program per kind (a
+    batch of one kind runs that kind's code alone).
+
     When the main thread asks for a result, it first takes over every task the background thread
     has not started (the latest first; the background thread works from the front): it cancels the
     task there and computes it itself, the same function on the same device, so the same result.
@@ -52,6 +58,7 @@ class SideJobs:
     ):
         from concurrent.futures import ThreadPoolExecutor
 
+        from pfjax.controllers.union import shared
         from pfjax.montecarlo.checks import float64_runs
         from pfjax.montecarlo.runner import precision
         from pfjax.montecarlo.worst_case import worst_case
@@ -89,13 +96,13 @@ class SideJobs:
             self.report_warmup = task(
                 "report_warmup", warm_predictions, spec, {k: v[2] for k, v in controllers.items()}, pinned=False
             )
+        # one controller for all (their union): one program per search and check, not one per kind
+        searched = shared(controllers)
         self.worst_figure = WorstFigure(worker, spec, list(controllers)) if report and spec.falsifier.enabled else None
         found = (lambda name, value: value) if self.worst_figure is None else self.worst_figure.found
         self.worst = (
             {
-                name: task(
-                    "worst_case", lambda *a, name=name, **k: found(name, worst_case(*a, **k)), spec, controllers, i
-                )
+                name: task("worst_case", lambda *a, name=name, **k: found(name, worst_case(*a, **k)), spec, searched, i)
                 for i, name in enumerate(controllers)
             }
             if spec.falsifier.enabled
@@ -104,7 +111,7 @@ class SideJobs:
         checked = spec.dtype != "float64" and spec.f64_check_runs > 0
         self.float64 = (
             [
-                task("float64_check", float64_runs, spec, controllers, spec.f64_check_runs, p)
+                task("float64_check", float64_runs, spec, searched, spec.f64_check_runs, p)
                 for p in range(len(spec.paths))
             ]
             if checked
