@@ -1,6 +1,6 @@
-"""The union of controllers (pfjax.controllers.union): each run steered exactly as by its own
-controller, in a batch that mixes them and in one run, and a study's side jobs compiled once for
-all its controllers.
+"""The union of controllers (pfjax.controllers.union): each run steered by its own controller's
+law, in a batch that mixes them, in one run and in continuous mode; its parameters checked; a
+study's side jobs compiled once for all its controllers.
 
 Tolerances: 1e-12 relative for the same run in two programs (the same arithmetic; the compiler may
 contract a multiply-add differently); 1e-9 between a batch and one run (pfjax.sim.simulate_one: the
@@ -15,9 +15,11 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from pfjax import controllers as C
 from pfjax.controllers.union import UnionParams, shared, union, union_params
+from pfjax.errors import InputError
 from pfjax.models import Pose
 from pfjax.sim import SimConfig, simulate_batch, stack
 from pfjax.sim.scenario import paper_scenario
@@ -31,11 +33,30 @@ GAINS = (
     C.stanley_params(k=2.0),
     C.integral_params(),
 )
+#: A second run of each kind with other gains (two controllers of one kind in a batch, as a study's
+#: state feedback and PI), and the unselected parts' parameters, unlike either.
+OTHER = (
+    C.linear_params(C.state_feedback_params()),
+    C.stanley_params(k=4.0, k_soft=0.3),
+    C.integral_params(K=(-2.0, -1.5, -0.8)),
+)
+FILL = (
+    C.linear_params(C.pi_params(kp_d=3.0, ki_d=0.1, kp_theta=0.5, ki_theta=0.0)),
+    C.stanley_params(k=0.7, k_soft=1.0),
+    C.integral_params(K=(-1.0, -3.0, -0.2)),
+)
 POSES = [(0.0, 0.5, 0.3), (0.5, -0.4, -0.2)]
 
 
-def _rows(part: int, gains):
-    return [paper_scenario("sine", gains, beta_r_deg=4.0, beta_f_deg=-3.0, pose0=p) for p in POSES]
+def _rows(k: int, wrap=lambda k, g: g):
+    """Run ``k``'s two scenarios (its gains, then the other gains of its kind), each gains set
+    passed through ``wrap(k, gains)``."""
+    gains = (GAINS[k], OTHER[k])
+    return [paper_scenario("sine", wrap(k, g), beta_r_deg=4.0, beta_f_deg=-3.0, pose0=p) for p, g in zip(POSES, gains)]
+
+
+def _selecting(k, g):
+    return union_params(PARTS, k, g, FILL)
 
 
 def _leaves(res):
@@ -43,14 +64,15 @@ def _leaves(res):
 
 
 def test_a_mixed_batch_and_one_run_steer_as_each_part():
-    """Runs of three controllers in one batch of the union (every part evaluated, each run's own
-    kept) give each controller's own metrics, final state and status; one run of the union (only
-    its part evaluated) gives the batch's."""
+    """Runs of three controllers, two of each kind with different gains, in one batch of the union
+    (every part evaluated, each run's own kept; the unselected parts with other gains) give each
+    controller's own metrics, final state and status; one run of the union (only its part
+    evaluated) gives the batch's."""
     u = union(PARTS)
-    mixed = [r for k, g in enumerate(GAINS) for r in _rows(k, union_params(PARTS, k, g, GAINS))]
+    mixed = [r for k in range(len(PARTS)) for r in _rows(k, _selecting)]
     got = jax.device_get(simulate_batch(stack(mixed), controller=u, config=CFG))
-    for k, (part, g) in enumerate(zip(PARTS, GAINS)):
-        want = jax.device_get(simulate_batch(stack(_rows(k, g)), controller=part, config=CFG))
+    for k, part in enumerate(PARTS):
+        want = jax.device_get(simulate_batch(stack(_rows(k)), controller=part, config=CFG))
         rows = slice(len(POSES) * k, len(POSES) * (k + 1))
         np.testing.assert_array_equal(got.status[rows], want.status)
         for a, b in zip(_leaves(got), _leaves(want)):
@@ -61,6 +83,34 @@ def test_a_mixed_batch_and_one_run_steer_as_each_part():
         assert int(one.status) == int(got.status[i])
         for a, b in zip(_leaves(one), _leaves(got)):
             np.testing.assert_allclose(a, b[i], rtol=1e-9, atol=1e-12)
+
+
+def test_a_union_in_continuous_mode_integrates_only_the_selected_state():
+    """With the controller evaluated inside every RK4 stage (``control_every=None``), a PI run of
+    the union (its integrators integrated with the plant) and a Stanley run give their own
+    controllers' numbers."""
+    cfg = SimConfig(dt=0.01, horizon=3.0, control_every=None)
+    u = union(PARTS[:2])
+    fill = FILL[:2]
+    rows = [paper_scenario("sine", union_params(PARTS[:2], k, GAINS[k], fill), pose0=POSES[0]) for k in (0, 1)]
+    got = jax.device_get(simulate_batch(stack(rows), controller=u, config=cfg))
+    for k in (0, 1):
+        plain = paper_scenario("sine", GAINS[k], pose0=POSES[0])
+        want = jax.device_get(simulate_batch(stack([plain]), controller=PARTS[k], config=cfg))
+        assert int(got.status[k]) == int(want.status[0])
+        for a, b in zip(_leaves(got), _leaves(want)):
+            np.testing.assert_allclose(a[k], b[0], rtol=1e-12, atol=1e-14)
+
+
+def test_union_params_refuses_what_its_parts_do_not_take():
+    """An index out of the parts, a fill of another length or gains of another kind: an InputError
+    naming the argument, before anything is traced."""
+    with pytest.raises(InputError, match=r"^which: must be <= 2"):
+        union_params(PARTS, 3, GAINS[0], FILL)
+    with pytest.raises(InputError, match=r"^fill: 2 parameter sets for 3 parts"):
+        union_params(PARTS, 0, GAINS[0], FILL[:2])
+    with pytest.raises(InputError, match=r"^gains: controller 'stanley' takes StanleyParams, got LinearParams"):
+        union_params(PARTS, 1, GAINS[0], FILL)
 
 
 def test_unselected_parts_keep_their_initial_state():
@@ -82,7 +132,7 @@ def test_unselected_parts_keep_their_initial_state():
         path=path,
     )
     for k, part in enumerate(PARTS):
-        p = union_params(PARTS, k, GAINS[k], GAINS)
+        p = union_params(PARTS, k, GAINS[k], FILL)
         c = jax.tree_util.tree_map(lambda a: a + 0.01, u.init(p))  # away from 0, so an own rate shows
         cmd = u.output(p, c, obs)
         np.testing.assert_allclose(cmd, part.output(GAINS[k], c[k], obs), rtol=1e-14)

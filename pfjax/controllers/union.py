@@ -11,11 +11,18 @@ parameters (:class:`UnionParams`)::
     delta_cmd = output_k(params_k, c_k, obs),   k = which,
     c_k' = rate_k(params_k, c_k, obs, delta_cmd, delta),   c_j' = 0 for j != k.
 
-The selection is exact (no arithmetic mixes the parts), and every part's state starts at its own
-``init`` and stays there unless selected. For one run (and a batch whose runs share ``which``, as a
-vmapped search over starting points does) ``which`` is a single number and the step runs only the
-selected part (:func:`jax.lax.switch`); where each run of a batch carries its own ``which``, JAX
-evaluates every part and keeps the selected one, so a run costs the sum of the parts. The study's
+No arithmetic mixes the parts: a run follows its own controller's control law, and its numbers
+agree with that controller's own program to rounding (the two programs are compiled apart, so a
+multiply-add may round differently; tests/test_union.py). Every part's state starts at its own
+``init`` and stays there unless selected.
+
+Where ``which`` is not batched (one run, or a batch vmapped with ``which`` held fixed, as the
+falsifier's gradient steps vmap over their starting points only) the step runs the selected part
+alone (:func:`jax.lax.switch`). Where every run of a batch carries its own ``which`` (a batch of
+scenarios, as the random search and the float64 check simulate), JAX evaluates every part on every
+run and keeps the selected one: a run then costs the sum of the parts, and every part must be safe
+on any run's observation (no loop whose end depends on the data, no host callback). A value the
+unselected parts compute, even a NaN, reaches neither the result nor its gradients. The study's
 runs therefore keep one program per kind.
 """
 
@@ -35,7 +42,8 @@ __all__ = ["UnionParams", "shared", "union", "union_params"]
 
 class UnionParams(NamedTuple):
     """The parameters of a :func:`union`: the selected part's index and every part's parameters
-    (those of the unselected parts are evaluated, never used: any finite values of their shapes)."""
+    (those of the unselected parts set their states' ``init`` and, where ``which`` is batched, are
+    evaluated but never used: any values of the types and shapes their parts take)."""
 
     which: Array  # int32, index of the part that steers
     parts: tuple  # each part's parameter pytree, in the union's order
@@ -73,10 +81,22 @@ def _rate_of(part: Controller, k: int, p: UnionParams, c, obs, delta_cmd, delta)
 
 def union_params(parts: tuple[Controller, ...], which: int, params, fill: tuple) -> UnionParams:
     """:class:`UnionParams` selecting ``parts[which]`` with ``params``; ``fill[j]``: parameters of
-    ``parts[j]`` for the unselected parts (finite values of the shapes that part takes)."""
-    return UnionParams(
-        jnp.asarray(which, jnp.int32), tuple(params if j == which else fill[j] for j in range(len(parts)))
-    )
+    ``parts[j]`` for the unselected parts (values of the type and shapes that part takes).
+
+    Raises:
+        InputError: ``which`` not an index of ``parts``, ``fill`` not one entry per part, or
+            ``params`` (or a ``fill`` entry) not its part's parameter type, naming ``which``,
+            ``fill`` or ``gains``.
+    """
+    from pfjax.errors import InputError, integer
+
+    which = integer("which", which, low=0, high=len(parts) - 1)
+    if len(fill) != len(parts):
+        raise InputError(f"fill: {len(fill)} parameter sets for {len(parts)} parts", "fill")
+    given = tuple(params if j == which else fill[j] for j in range(len(parts)))
+    for part, q in zip(parts, given):
+        part.check_params(q)
+    return UnionParams(jnp.asarray(which, jnp.int32), given)
 
 
 def shared(controllers: dict) -> dict:
