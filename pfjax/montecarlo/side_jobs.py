@@ -11,10 +11,11 @@ from pathlib import Path
 
 import jax
 
+from pfjax.background import Background, Deferred, Stealable, last_device
 from pfjax.montecarlo.config import StudySpec
 from pfjax.report import figure_worker
 
-__all__ = ["Deferred", "SideJobs", "Stealable", "WorstFigure"]
+__all__ = ["Background", "Deferred", "SideJobs", "Stealable", "WorstFigure", "last_device"]
 
 
 class SideJobs:
@@ -56,18 +57,14 @@ class SideJobs:
         report: bool = True,
         worker: figure_worker.FigureWorker | None = None,
     ):
-        from concurrent.futures import ThreadPoolExecutor
-
         from pfjax.controllers.union import shared
         from pfjax.montecarlo.checks import float64_runs
         from pfjax.montecarlo.runner import precision
         from pfjax.montecarlo.worst_case import worst_case
 
         self.seconds = {"worst_case": 0.0, "float64_check": 0.0}
-        self._queued: list = []  # tasks the main thread may take over, in submission order
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="pfjax-study") if overlap else None
-
-        device = jax.local_devices()[-1]
+        self._thread = Background("pfjax-study", overlap=overlap)
+        device = last_device()
 
         def task(phase, fn, *args, pinned=True):
             def timed():
@@ -81,11 +78,7 @@ class SideJobs:
                 self.seconds[phase] = self.seconds.get(phase, 0.0) + time.perf_counter() - t
                 return value
 
-            if self._pool is None:
-                return Deferred(timed)
-            job = Stealable(self._pool.submit(timed), timed)
-            self._queued.append(job)
-            return job
+            return self._thread.submit(timed)
 
         # first, as the report needs it soonest: compile the slip map's linearised prediction (1-2 s),
         # with JAX's default device as the report has it, so that the report's call finds it compiled
@@ -120,8 +113,7 @@ class SideJobs:
 
     def take_over(self) -> None:
         """Compute here every task the background thread has not started, the latest first."""
-        for job in reversed(self._queued):
-            job.take_over()
+        self._thread.take_over()
 
     def worst_cases(self) -> tuple[dict, dict]:
         """``(summary blocks, trajectories)`` per controller, as :func:`pfjax.montecarlo.worst_case.worst_cases`."""
@@ -137,8 +129,7 @@ class SideJobs:
 
     def close(self) -> None:
         """Cancel the tasks not yet started (the running one finishes: at most one task's time)."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+        self._thread.close()
 
 
 class WorstFigure:
@@ -188,32 +179,3 @@ class WorstFigure:
         was not asked of a worker."""
         self._maybe_submit()
         return None if self._request is None else self._request.result()
-
-
-class Stealable:
-    """A task submitted to the background thread that the calling thread can take over."""
-
-    def __init__(self, future, fn):
-        self._future, self._fn = future, fn
-
-    def take_over(self) -> None:
-        """Compute the task here, now, if the background thread has not started it."""
-        if not isinstance(self._future, Deferred) and self._future.cancel():
-            self._future = Deferred(self._fn)
-            self._future.result()
-
-    def result(self):
-        self.take_over()
-        return self._future.result()
-
-
-class Deferred:
-    """A task computed in the calling thread when its result is first asked for."""
-
-    def __init__(self, fn):
-        self._fn, self._done, self._value = fn, False, None
-
-    def result(self):
-        if not self._done:
-            self._value, self._done = self._fn(), True
-        return self._value
