@@ -115,7 +115,10 @@ def test_the_source_runs_use_the_configured_K_and_table3(monkeypatch):
     """``source.K`` and ``source.table3`` reach the source's K, the Table 3 PI and its 24 readings
     (the simulator replaced by a stub that hands the gains back)."""
     cfg = _config(K=[-5.0, -1.0], table3=[1.0, 2.0, 3.0, 4.0])
-    monkeypatch.setattr(paper_runs, "run_batch", lambda ctrl, gains, test, cfg, config: gains[0])
+    # the runs go through the union of the controller kinds: hand back the selected part's gains
+    monkeypatch.setattr(
+        paper_runs, "run_batch", lambda ctrl, gains, test, cfg, config: gains[0].parts[int(gains[0].which)]
+    )
     monkeypatch.setattr(paper_runs, "unstack", lambda r, i: r)
     monkeypatch.setattr(paper_runs, "traj_dict", lambda r: None)
     monkeypatch.setattr(paper_runs, "row_of", lambda r, test, name, shown, dmax: {"name": name, "gains": r, **shown})

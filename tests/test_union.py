@@ -218,3 +218,24 @@ def test_a_studys_side_jobs_search_and_check_every_controller_through_one(monkey
     for name, (ctrl, gains, _) in plain.items():
         p = seen[0][0][name][1]
         assert p.parts[int(p.which)] is gains
+
+
+def test_the_paper_reproductions_runs_are_one_program_for_all_controllers():
+    """The paper reproduction runs its six controllers (two state feedbacks, the PI and three
+    trackers: five kinds) through their union, one compiled program, each run's numbers its own
+    controller's to rounding."""
+    from types import SimpleNamespace
+
+    from pfjax.reproduce import paper_config, paper_runs
+    from pfjax.sim.simulate import _simulate_vmapped
+
+    cfg = paper_config.load(None, ["trackers=true"], quick=True).model_dump(mode="json")
+    before = _simulate_vmapped._cache_size()
+    rows, _ = paper_runs.part_paper_runs(cfg, list(C.PAPER_K), SimpleNamespace(update=lambda n: None))
+    assert _simulate_vmapped._cache_size() - before <= 1
+    assert len({r["controller"] for r in rows}) == 6
+    row = next(r for r in rows if r["controller"] == "stanley" and r["path"] == "sine")
+    own = jax.device_get(paper_runs.run_batch(C.stanley, [C.stanley_params()], "sine", cfg, paper_runs.sim_config(cfg)))
+    assert row["status"] == "ok" and int(own.status[0]) == 0
+    for name in ("iae", "late_max_abs_d", "steer_energy"):
+        np.testing.assert_allclose(row[name], float(getattr(own.metrics, name)[0]), rtol=1e-12)

@@ -4,9 +4,9 @@ share one compiled simulator program.
 A study compiles each of its simulator programs once per controller kind (the compiled program
 holds the controller's code). For its small side computations (the worst-case search's gradient
 steps and random search, the float64 re-simulation, the replay of one run), where compilation costs
-seconds and the simulation milliseconds, :func:`shared` gives every controller of the study the
-same controller, :func:`union` of the study's kinds, and selects each one's part through its
-parameters (:class:`UnionParams`)::
+seconds and the simulation milliseconds (and for the paper reproduction's single runs of its six
+controllers), :func:`shared` gives every controller the same controller, :func:`union` of their
+kinds, and selects each one's part through its parameters (:class:`UnionParams`)::
 
     delta_cmd = output_k(params_k, c_k, obs),   k = which,
     c_k' = rate_k(params_k, c_k, obs, delta_cmd, delta),   c_j' = 0 for j != k.

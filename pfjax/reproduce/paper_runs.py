@@ -18,6 +18,7 @@ import pandas as pd
 
 from pfjax import controllers as C
 from pfjax import paths
+from pfjax.controllers.union import shared
 from pfjax.paths import global_parameter, tangent_angle
 from pfjax.reproduce.paper_config import sim_config
 from pfjax.reproduce.run_claims import PI_THRESHOLDS, settled
@@ -216,9 +217,11 @@ def part_paper_runs(cfg, K_ours, pbar) -> tuple[list[dict], dict]:
     rows: list[dict] = []
     trajs: dict[str, dict] = {t: {} for t in PAPER_TESTS}
     tests = {t: source_test(t, cfg["model"]["direction"]) for t in PAPER_TESTS}
-    for name, (gains, shown) in entries.items():
+    # every controller through the union of their kinds: one compiled program for all the runs
+    runs = shared({name: (C.resolve(name)[0].controller, gains, shown) for name, (gains, shown) in entries.items()})
+    for name, (controller, gains, shown) in runs.items():
         for test in PAPER_TESTS:
-            r = unstack(run_batch(C.resolve(name)[0].controller, [gains], test, cfg, config), 0)
+            r = unstack(run_batch(controller, [gains], test, cfg, config), 0)
             rows.append(row_of(r, test, name, shown, dmax))
             trajs[test][name] = to_world(traj_dict(r), tests[test])
             pbar.update(1)
