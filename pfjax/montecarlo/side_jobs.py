@@ -22,18 +22,12 @@ class SideJobs:
     """The parts of a study that do not depend on its runs: the worst-case search (one task per
     controller) and the float64 re-simulation (one task per path).
 
-    With ``overlap=True`` they run in one background thread while the main thread simulates the
-    runs and the margin sweep. The XLA compiler and the simulations release the GIL, so the
-    background compiles run on the core that the main thread's single-threaded work (compiling,
-    tracing, sampling, writing Parquet) leaves idle. Every task computes exactly what it computes
-    alone (its own PRNG streams, its own precision context, which JAX keeps per thread), so the
-    results do not depend on ``overlap`` (tests/test_montecarlo.py). With ``overlap=False`` each
-    task runs in the main thread when its result is first asked for.
-
-    The tasks run on one device (the last local one), never on several: programs that span devices
-    synchronise them (all-gathers), and two threads launching such programs can interleave them
-    differently on each device and deadlock (seen: XLA's CPU rendezvous aborted the process).
-    Only the main thread launches multi-device programs.
+    With ``overlap=True`` they run in one background thread (:class:`pfjax.background.Background`,
+    on the last local device; why one device: :mod:`pfjax.background`) while the main thread
+    simulates the runs and the margin sweep. Every task computes exactly what it computes alone
+    (its own PRNG streams, its own precision context, which JAX keeps per thread), so the results
+    do not depend on ``overlap`` (tests/test_montecarlo.py). With ``overlap=False`` each task runs
+    in the main thread when its result is first asked for.
 
     The tasks see the study's controllers as one, their union (:func:`pfjax.controllers.union.shared`):
     each searches and re-simulates its own controller, selected by its parameters, and the search's
@@ -42,10 +36,9 @@ class SideJobs:
     batch of one kind runs that kind's code alone).
 
     When the main thread asks for a result, it first takes over every task the background thread
-    has not started (the latest first; the background thread works from the front): it cancels the
-    task there and computes it itself, the same function on the same device, so the same result.
-    Whichever thread is free works, and the study does not wait for a queue that one thread would
-    work through alone.
+    has not started (the latest first; the background thread works from the front), the same
+    function on the same device, so the same result: the study does not wait for a queue that one
+    thread would work through alone.
     """
 
     def __init__(
