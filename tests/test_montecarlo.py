@@ -380,7 +380,7 @@ def test_main_thread_takes_over_side_jobs_not_started():
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
-    from pfjax.montecarlo.side_jobs import Stealable
+    from pfjax.background import Stealable
 
     pool, gate, ran = ThreadPoolExecutor(1), threading.Event(), []
 

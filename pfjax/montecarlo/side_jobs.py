@@ -11,11 +11,11 @@ from pathlib import Path
 
 import jax
 
-from pfjax.background import Background, Deferred, Stealable, last_device
+from pfjax.background import Background, last_device
 from pfjax.montecarlo.config import StudySpec
 from pfjax.report import figure_worker
 
-__all__ = ["Background", "Deferred", "SideJobs", "Stealable", "WorstFigure", "last_device"]
+__all__ = ["SideJobs", "WorstFigure"]
 
 
 class SideJobs:
